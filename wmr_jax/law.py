@@ -1,0 +1,283 @@
+"""The Shim–Sung asymptotic pose controller, one equation per function (SPEC §2–3).
+
+Every function here is pure, unjitted and elementwise: it takes single-pose
+quantities (or arrays that broadcast together) and returns the same. Batching
+is done once, in ``wmr_jax.simulation``.
+
+The angles ``φ_e`` and ``θ_e`` travel as their cosine and sine. This is the
+same law as the paper's, only stated without ``atan2``:
+
+* ``cos φ_e = e_x / r_e``, ``sin φ_e = e_y / r_e`` (and ``φ_e = 0`` at ``r_e = 0``);
+* ``|φ_e| ≤ Φ_m``  ⇔ ``cos φ_e ≥ cos Φ_m`` and ``|φ_e| > π − Φ_m`` ⇔
+  ``cos φ_e < −cos Φ_m``, for ``φ_e ∈ (−π, π]``;
+* ``fold(a)`` shifts by ``±π`` exactly when ``|a| > π/2``, i.e. when
+  ``cos a < 0``, and a shift by ``π`` flips the signs of both cosine and sine.
+
+It saves the transcendental calls that dominate a rollout's cost, and it keeps
+the values and gradients finite at ``r_e = 0``. ``wmr_jax.reference`` states the
+same law literally with angles and ``atan2``; the tests hold the two equal.
+
+Smooth relaxation: every switching function takes ``temperature``. ``None``
+(the default) is the hard law of the paper. A positive temperature replaces
+each switch by a smooth one (sigmoid for a step, ``tanh`` for a sign, a
+soft minimum for the saturation), which tends to the hard law as the
+temperature goes to zero. Arguments of the relaxed switches are made
+dimensionless first (distances relative to their threshold radius, angles as
+cosines), so one temperature fits them all.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from wmr_jax.params import Gains, Robot
+
+__all__ = [
+    "Diagnostics",
+    "PolarError",
+    "blend",
+    "commands",
+    "control",
+    "control_diagnostics",
+    "direction_flag",
+    "error_angles",
+    "fold",
+    "lyapunov",
+    "polar_error",
+    "region_label",
+    "saturated_distance",
+    "sgn",
+    "wheel_speeds",
+    "wrap_angle",
+]
+
+
+class PolarError(NamedTuple):
+    """Error coordinates of SPEC §2 (Eq. 3), angles as cosine and sine.
+
+    Attributes:
+        r: ``r_e ≥ 0``, distance to the reference, cm.
+        cos_phi: ``cos φ_e``; 1 when ``r_e = 0`` (choice: ``φ_e = 0`` there).
+        sin_phi: ``sin φ_e``; 0 when ``r_e = 0``.
+        cos_theta: ``cos θ_e`` with ``θ_e = θ_r − θ_c``.
+        sin_theta: ``sin θ_e``.
+    """
+
+    r: jax.Array
+    cos_phi: jax.Array
+    sin_phi: jax.Array
+    cos_theta: jax.Array
+    sin_theta: jax.Array
+
+
+class Diagnostics(NamedTuple):
+    """Everything the law computes for one pose (see ``control_diagnostics``)."""
+
+    v: jax.Array
+    omega: jax.Array
+    region: jax.Array
+    d: jax.Array
+    eps: jax.Array
+    lyapunov: jax.Array
+    r_e: jax.Array
+    phi_e: jax.Array
+    theta_e: jax.Array
+
+
+def wrap_angle(angle: jax.Array) -> jax.Array:
+    """Wrap an angle in rad to ``[−π, π)``."""
+    return jnp.mod(angle + jnp.pi, 2 * jnp.pi) - jnp.pi
+
+
+def polar_error(pose: jax.Array, ref: jax.Array) -> PolarError:
+    """Return the error of ``pose`` with respect to ``ref`` in the robot frame (Eq. 3).
+
+    Args:
+        pose: ``(..., 3)`` current pose ``[x cm, y cm, θ rad]``.
+        ref: ``(..., 3)`` reference pose, broadcastable against ``pose``.
+
+    Returns:
+        A ``PolarError`` whose fields have the broadcast leading shape.
+    """
+    cos_c, sin_c = jnp.cos(pose[..., 2]), jnp.sin(pose[..., 2])
+    cos_r, sin_r = jnp.cos(ref[..., 2]), jnp.sin(ref[..., 2])
+    dx, dy = ref[..., 0] - pose[..., 0], ref[..., 1] - pose[..., 1]
+    e_x = cos_c * dx + sin_c * dy
+    e_y = -sin_c * dx + cos_c * dy
+    # Double-where keeps both the value and the gradient finite at r_e = 0;
+    # hypot rather than sqrt(e_x² + e_y²), which underflows to 0 for tiny r_e.
+    positive = (e_x != 0) | (e_y != 0)
+    safe_r = jnp.hypot(jnp.where(positive, e_x, 1.0), jnp.where(positive, e_y, 0.0))
+    r = jnp.where(positive, safe_r, 0.0)
+    cos_phi = jnp.where(positive, e_x / safe_r, 1.0)
+    sin_phi = jnp.where(positive, e_y / safe_r, 0.0)
+    # θ_e = θ_r − θ_c by the angle-difference identities; its 2π wrap is implicit.
+    cos_theta = cos_r * cos_c + sin_r * sin_c
+    sin_theta = sin_r * cos_c - cos_r * sin_c
+    return PolarError(r, cos_phi, sin_phi, cos_theta, sin_theta)
+
+
+def error_angles(err: PolarError) -> tuple[jax.Array, jax.Array]:
+    """Return ``(φ_e, θ_e)`` in rad, ``φ_e ∈ (−π, π]`` and ``θ_e ∈ [−π, π)``.
+
+    For diagnostics and plots only; the law itself never needs the angles.
+    """
+    phi = jnp.arctan2(err.sin_phi, err.cos_phi)
+    theta = wrap_angle(jnp.arctan2(err.sin_theta, err.cos_theta))
+    return phi, theta
+
+
+def _step(x: jax.Array, *, strict: bool, temperature: float | None) -> jax.Array:
+    """Return the indicator of ``x > 0`` (strict) or ``x ≥ 0``, or its sigmoid relaxation."""
+    if temperature is None:
+        return jnp.where(x > 0 if strict else x >= 0, 1.0, 0.0).astype(x.dtype)
+    return jax.nn.sigmoid(x / temperature)
+
+
+def sgn(x: jax.Array, *, temperature: float | None = None) -> jax.Array:
+    """Return the paper's ``Sgn(x)``: 1 if ``x > 0``, else −1 (so ``Sgn(0) = −1``) (Eq. 8)."""
+    if temperature is None:
+        return jnp.where(x > 0, 1.0, -1.0).astype(x.dtype)
+    return jnp.tanh(x / temperature)
+
+
+def saturated_distance(r: jax.Array, r_m: jax.Array, *, temperature: float | None = None):
+    """Return ``r̄_e = min(π r_e / (2 R_m), π/2)`` in rad (SPEC §3, before Eq. 6).
+
+    The relaxed form is a soft minimum with width ``temperature`` in rad.
+    """
+    linear = (jnp.pi / 2) * r / r_m
+    if temperature is None:
+        return jnp.minimum(linear, jnp.pi / 2)
+    excess = linear - jnp.pi / 2
+    return linear - temperature * jax.nn.softplus(excess / temperature)
+
+
+def direction_flag(err: PolarError, phi_m: jax.Array, *, temperature: float | None = None):
+    """Return the direction ``d`` (SPEC §3): 1 ahead, −1 behind, 0 turn in place.
+
+    ``d = 1`` if ``|φ_e| ≤ Φ_m``; ``d = −1`` if ``|φ_e| > π − Φ_m``; else 0.
+    """
+    cos_m = jnp.cos(phi_m)
+    ahead = _step(err.cos_phi - cos_m, strict=False, temperature=temperature)
+    behind = _step(-cos_m - err.cos_phi, strict=True, temperature=temperature)
+    return ahead - behind
+
+
+def fold(cos_a: jax.Array, sin_a: jax.Array, *, temperature: float | None = None):
+    """Return ``(cos ā, sin ā)`` of ``ā = fold(a)``, front and back alike (SPEC §3).
+
+    ``fold(a) = a ∓ π`` when ``|a| > π/2``, which flips both signs; so
+    ``cos ā = |cos a|`` and ``sin ā = sign(cos a) sin a`` (no flip at
+    ``cos a = 0``). The relaxed sign is ``tanh(cos a / temperature)``.
+    """
+    if temperature is None:
+        flip = jnp.where(cos_a < 0, -1.0, 1.0).astype(cos_a.dtype)
+    else:
+        flip = jnp.tanh(cos_a / temperature)
+    return flip * cos_a, flip * sin_a
+
+
+def blend(
+    err: PolarError,
+    d: jax.Array,
+    gains: Gains,
+    *,
+    temperature: float | None = None,
+) -> jax.Array:
+    """Return the blend ``ε`` of Eq. 8, with the region tests in SPEC §3 order.
+
+    1. ``r_e ≤ R_e`` (Region 0): ``ε = 0``.
+    2. ``d = 0`` (Region 3): ``ε = 1``. choice (SPEC §3): the paper's proof
+       (Case 1) sets ``ε = 1`` here; its Eq. 8 would mix ``θ̄_e`` into ``ω``
+       while ``v = 0`` and can stall the robot for ever.
+    3. ``r_e < R_a`` (Region 1): ``ε = 0.5 − α Sgn(sin θ̄_e) Sgn(sin θ̄_e + sin φ̄_e)``.
+    4. otherwise (Region 2): ``ε = 1``.
+
+    Written as ``ε = (1 − [0]) (1 − d² [1] (1 − ε₁))`` with ``[k]`` the
+    indicator of the region test, which is exact for ``d ∈ {−1, 0, 1}`` and
+    smooth when the indicators are relaxed.
+    """
+    _, sin_phi_bar = fold(err.cos_phi, err.sin_phi, temperature=temperature)
+    _, sin_theta_bar = fold(err.cos_theta, err.sin_theta, temperature=temperature)
+    in_region_0 = _step((gains.r_e - err.r) / gains.r_e, strict=False, temperature=temperature)
+    inside_r_a = _step((gains.r_a - err.r) / gains.r_a, strict=True, temperature=temperature)
+    eps_1 = 0.5 - gains.alpha * sgn(sin_theta_bar, temperature=temperature) * sgn(
+        sin_theta_bar + sin_phi_bar, temperature=temperature
+    )
+    return (1 - in_region_0) * (1 - d * d * inside_r_a * (1 - eps_1))
+
+
+def commands(
+    err: PolarError, gains: Gains, *, temperature: float | None = None
+) -> tuple[jax.Array, jax.Array]:
+    """Return the velocity command ``(v_m cm/s, ω_m rad/s)`` of Eq. 6 and 7.
+
+    ``v_m = k_r d sin(r̄_e) cos φ̄_e`` and
+    ``ω_m = k_θ (ε sin φ̄_e + (1 − ε) sin θ̄_e)``.
+    """
+    d = direction_flag(err, gains.phi_m, temperature=temperature)
+    eps = blend(err, d, gains, temperature=temperature)
+    r_bar = saturated_distance(err.r, gains.r_m, temperature=temperature)
+    cos_phi_bar, sin_phi_bar = fold(err.cos_phi, err.sin_phi, temperature=temperature)
+    _, sin_theta_bar = fold(err.cos_theta, err.sin_theta, temperature=temperature)
+    v = gains.kr * d * jnp.sin(r_bar) * cos_phi_bar
+    omega = gains.k_theta * (eps * sin_phi_bar + (1 - eps) * sin_theta_bar)
+    return v, omega
+
+
+def region_label(err: PolarError, gains: Gains) -> jax.Array:
+    """Return the region 0–3 of SPEC §3, by the same order of tests as ``blend``."""
+    d = direction_flag(err, gains.phi_m)
+    return jnp.where(
+        err.r <= gains.r_e, 0, jnp.where(d == 0, 3, jnp.where(err.r < gains.r_a, 1, 2))
+    ).astype(jnp.int32)
+
+
+def lyapunov(err: PolarError) -> jax.Array:
+    """Return ``V = r_e²/2 + (1 − cos φ̄_e) + (1 − cos θ̄_e)`` (proof of Theorem 1)."""
+    cos_phi_bar, _ = fold(err.cos_phi, err.sin_phi)
+    cos_theta_bar, _ = fold(err.cos_theta, err.sin_theta)
+    return 0.5 * err.r**2 + (1 - cos_phi_bar) + (1 - cos_theta_bar)
+
+
+def wheel_speeds(v: jax.Array, omega: jax.Array, robot: Robot) -> jax.Array:
+    """Return rim speeds ``[v_L, v_R] = [v − L ω, v + L ω]`` in cm/s, shape ``(..., 2)``."""
+    return jnp.stack([v - robot.half_track * omega, v + robot.half_track * omega], axis=-1)
+
+
+def control(
+    pose: jax.Array, ref: jax.Array, gains: Gains, *, temperature: float | None = None
+) -> tuple[jax.Array, jax.Array]:
+    """Return the command ``(v cm/s, ω rad/s)`` of the asymptotic controller.
+
+    Args:
+        pose: ``(..., 3)`` current pose ``[x cm, y cm, θ rad]``.
+        ref: ``(..., 3)`` reference pose.
+        gains: controller gains.
+        temperature: ``None`` for the paper's law; positive for its smooth
+            relaxation (see the module docstring).
+    """
+    return commands(polar_error(pose, ref), gains, temperature=temperature)
+
+
+def control_diagnostics(pose: jax.Array, ref: jax.Array, gains: Gains) -> Diagnostics:
+    """Return the command with the region, ``d``, ``ε``, ``V`` and error coordinates."""
+    err = polar_error(pose, ref)
+    d = direction_flag(err, gains.phi_m)
+    v, omega = commands(err, gains)
+    phi, theta = error_angles(err)
+    return Diagnostics(
+        v=v,
+        omega=omega,
+        region=region_label(err, gains),
+        d=d,
+        eps=blend(err, d, gains),
+        lyapunov=lyapunov(err),
+        r_e=err.r,
+        phi_e=phi,
+        theta_e=theta,
+    )
