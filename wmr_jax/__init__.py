@@ -1,5 +1,6 @@
 """wmr_jax: a differentiable, batched simulator of the Shim–Sung (2003) pose controller."""
 
+from wmr_jax.controllers import SHIM_SUNG, Controller, get_controller, register_controller
 from wmr_jax.law import (
     Diagnostics,
     PolarError,
@@ -26,11 +27,16 @@ from wmr_jax.params import (
     wheel_speed_bound,
 )
 from wmr_jax.reference import reference_control, reference_diagnostics, reference_rollout
-from wmr_jax.simulation import Trajectory, batch_rollout, final_poses, rollout
+from wmr_jax.simulation import Options, Trajectory, batch_rollout, final_poses, rollout
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "SHIM_SUNG",
+    "Controller",
+    "Options",
+    "get_controller",
+    "register_controller",
     "Diagnostics",
     "Gains",
     "PolarError",

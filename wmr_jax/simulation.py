@@ -8,6 +8,7 @@ shapes and options reuses the compiled code.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from typing import Any, NamedTuple
@@ -16,18 +17,26 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax import dynamics, law
-from wmr_jax.params import Gains, Robot, check_feasible, validate_gains, validate_robot
+from wmr_jax import dynamics, law, velocity_loop
+from wmr_jax.controllers import SHIM_SUNG, Controller, get_controller
+from wmr_jax.params import Robot, check_feasible, validate_robot
 
 __all__ = [
     "VELOCITY_LOOPS",
+    "Options",
+    "StepOutput",
     "Trajectory",
     "batch_rollout",
+    "batched",
+    "closed_loop_step",
+    "initial_state",
     "final_poses",
     "rollout",
 ]
 
-VELOCITY_LOOPS = ("ideal",)
+VELOCITY_LOOPS = ("ideal", "nonideal")
+WHEEL_LIMITS = ("clip", "scale")
+DEFAULT_SUBSTEPS = velocity_loop.DEFAULT_SUBSTEPS
 
 DEFAULT_DT = 0.033
 DEFAULT_STEPS = 150
@@ -59,76 +68,93 @@ class Trajectory(NamedTuple):
 # ---------------------------------------------------------------- single pose
 
 
-def _initial_state(init: jax.Array) -> dynamics.RobotState:
+@dataclasses.dataclass(frozen=True)
+class Options:
+    """Shape- and code-deciding options of a rollout: static under ``jit``.
+
+    Attributes:
+        steps: number of control periods.
+        velocity: ``"ideal"`` or ``"nonideal"`` velocity loop (SPEC §4).
+        controller: the pose controller (``wmr_jax.controllers.SHIM_SUNG``).
+        temperature: ``None`` for the hard law, else its smooth relaxation.
+        substeps: inner integration steps per period (non-ideal loop).
+        wheel_limit: ``"clip"`` each wheel command at ``±v_max`` or ``"scale"``
+            both by one factor, keeping the curvature (non-ideal loop).
+    """
+
+    steps: int = DEFAULT_STEPS
+    velocity: str = "ideal"
+    controller: Controller = SHIM_SUNG
+    temperature: float | None = None
+    substeps: int = DEFAULT_SUBSTEPS
+    wheel_limit: str = "clip"
+
+
+def initial_state(init: jax.Array) -> dynamics.RobotState:
+    """Return the robot at rest at ``init`` ``(3,)``."""
     zeros = jnp.zeros((2,), init.dtype)
     return dynamics.RobotState(pose=init, velocity=zeros, integral=zeros)
 
 
-def _closed_loop_step(
+class StepOutput(NamedTuple):
+    """What one control period reports (one sample of a ``Trajectory``)."""
+
+    v: jax.Array
+    omega: jax.Array
+    region: jax.Array
+    wheel_speeds: jax.Array
+    distance: jax.Array
+
+
+def closed_loop_step(
     state: dynamics.RobotState,
     ref: jax.Array,
-    gains: Gains,
+    params: Any,
     robot: Robot,
     dt: jax.Array,
-    *,
-    velocity: str,
-    temperature: float | None,
-):
-    """Sample the controller at ``state`` and move the robot over one ``dt``."""
-    err = law.polar_error(state.pose, ref)
-    v, omega = law.commands(err, gains, temperature=temperature)
-    if velocity == "ideal":
+    options: Options,
+) -> tuple[dynamics.RobotState, StepOutput]:
+    """Sample the controller at ``state`` and move the robot over one ``dt`` (SPEC §4).
+
+    The single-pose building block of every rollout; scans of other kinds
+    (streaming metrics, waypoints) are built from it.
+    """
+    control = options.controller
+    v, omega = control.command(state.pose, ref, params, temperature=options.temperature)
+    region = control.region_of(state.pose, ref, params)
+    if options.velocity == "ideal":
         pose = dynamics.arc_step(state.pose, v, omega, dt)
         new_state = dynamics.RobotState(pose, jnp.stack([v, omega]), state.integral)
         distance = jnp.abs(v) * dt
-    else:  # pragma: no cover - the option is checked at the boundary
-        raise ValueError(velocity)
-    rims = law.wheel_speeds(new_state.velocity[0], new_state.velocity[1], robot)
-    return new_state, (v, omega, law.region_label(err, gains), rims, distance)
-
-
-def _simulate(
-    ref, gains, init, robot, dt, *, steps, velocity, temperature, record
-) -> tuple[dynamics.RobotState, Any]:
-    def body(state, _):
-        new_state, outputs = _closed_loop_step(
-            state, ref, gains, robot, dt, velocity=velocity, temperature=temperature
+    else:
+        new_state, distance = velocity_loop.advance(
+            state,
+            jnp.stack([v, omega]),
+            robot,
+            dt,
+            substeps=options.substeps,
+            wheel_limit=options.wheel_limit,
         )
-        if record:
-            return new_state, (new_state.pose, *outputs)
-        return new_state, None
-
-    return jax.lax.scan(body, _initial_state(init), None, length=steps)
+    rims = law.wheel_speeds(new_state.velocity[0], new_state.velocity[1], robot)
+    return new_state, StepOutput(v, omega, region, rims, distance)
 
 
-def _trajectory(ref, gains, init, robot, dt, *, steps, velocity, temperature) -> Trajectory:
-    _, (poses, v, omega, region, rims, distance) = _simulate(
-        ref,
-        gains,
-        init,
-        robot,
-        dt,
-        steps=steps,
-        velocity=velocity,
-        temperature=temperature,
-        record=True,
-    )
+def _simulate(ref, params, init, robot, dt, options: Options, *, record: bool):
+    def body(state, _):
+        new_state, out = closed_loop_step(state, ref, params, robot, dt, options)
+        return new_state, ((new_state.pose, out) if record else None)
+
+    return jax.lax.scan(body, initial_state(init), None, length=options.steps)
+
+
+def _trajectory(ref, params, init, robot, dt, options: Options) -> Trajectory:
+    _, (poses, out) = _simulate(ref, params, init, robot, dt, options, record=True)
     poses = jnp.concatenate([init[None], poses], axis=0)
-    return Trajectory(poses, v, omega, region, rims, distance)
+    return Trajectory(poses, out.v, out.omega, out.region, out.wheel_speeds, out.distance)
 
 
-def _final_pose(ref, gains, init, robot, dt, *, steps, velocity, temperature) -> jax.Array:
-    final, _ = _simulate(
-        ref,
-        gains,
-        init,
-        robot,
-        dt,
-        steps=steps,
-        velocity=velocity,
-        temperature=temperature,
-        record=False,
-    )
+def _final_pose(ref, params, init, robot, dt, options: Options) -> jax.Array:
+    final, _ = _simulate(ref, params, init, robot, dt, options, record=False)
     return final.pose
 
 
@@ -141,32 +167,31 @@ def _batch_axes(tree: Any, single_ndim: int) -> Any:
 
 
 def batched(single: Callable) -> Callable:
-    """Lift ``single(ref, gains, init, robot, dt, **options)`` to batched inputs.
+    """Lift ``single(ref, params, init, robot, dt, options)`` to batched inputs.
 
     A leading axis on ``ref``/``init`` (beyond ``(3,)``) or on any leaf of
-    ``gains``/``robot`` (beyond a scalar) is mapped over; the others are
+    ``params``/``robot`` (beyond a scalar) is mapped over; the others are
     shared. This is the one place where ``vmap`` is applied.
     """
 
-    def run(ref, gains, init, robot, dt, **options):
+    def run(ref, params, init, robot, dt, options):
         in_axes = (
             _batch_axes(ref, 1),
-            _batch_axes(gains, 0),
+            _batch_axes(params, 0),
             _batch_axes(init, 1),
             _batch_axes(robot, 0),
             None,
         )
-        return jax.vmap(lambda *a: single(*a, **options), in_axes=in_axes)(
-            ref, gains, init, robot, dt
+        return jax.vmap(lambda *a: single(*a, options), in_axes=in_axes)(
+            ref, params, init, robot, dt
         )
 
     return run
 
 
-_STATIC = ("steps", "velocity", "temperature")
-_rollout_jit = jax.jit(_trajectory, static_argnames=_STATIC)
-_batch_rollout_jit = jax.jit(batched(_trajectory), static_argnames=_STATIC)
-_final_poses_jit = jax.jit(batched(_final_pose), static_argnames=_STATIC)
+_rollout_jit = jax.jit(_trajectory, static_argnames=("options",))
+_batch_rollout_jit = jax.jit(batched(_trajectory), static_argnames=("options",))
+_final_poses_jit = jax.jit(batched(_final_pose), static_argnames=("options",))
 
 
 # ---------------------------------------------------------------- boundary checks
@@ -213,38 +238,71 @@ def as_poses(name: str, value: Any, *, batch: bool | None) -> jax.Array:
     return arr if arr is not None else jnp.asarray(host, dtype=float_dtype())
 
 
-def _check_options(dt: Any, steps: Any, velocity: Any) -> float:
-    if not isinstance(steps, (int, np.integer)) or isinstance(steps, bool) or steps < 1:
-        raise ValueError(f"steps = {steps!r} is not allowed; allowed: an integer >= 1")
+def _check_int(name: str, value: Any, minimum: int = 1) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f"{name} = {value!r} is not allowed; allowed: an integer >= {minimum}")
+    return int(value)
+
+
+def make_options(
+    *,
+    steps: Any = DEFAULT_STEPS,
+    velocity: Any = "ideal",
+    controller: Any = SHIM_SUNG,
+    temperature: Any = None,
+    substeps: Any = DEFAULT_SUBSTEPS,
+    wheel_limit: Any = "clip",
+) -> Options:
+    """Check the static options of a rollout and return them as ``Options``.
+
+    Raises:
+        ValueError: naming the option, its value and what is allowed.
+    """
+    steps = _check_int("steps", steps)
+    substeps = _check_int("substeps", substeps)
     if velocity not in VELOCITY_LOOPS:
         raise ValueError(f"velocity = {velocity!r} is not allowed; allowed: {VELOCITY_LOOPS}")
+    if wheel_limit not in WHEEL_LIMITS:
+        raise ValueError(f"wheel_limit = {wheel_limit!r} is not allowed; allowed: {WHEEL_LIMITS}")
+    controller = get_controller(controller)
+    if temperature is not None:
+        try:
+            value = float(temperature)
+        except (TypeError, ValueError):
+            value = float("nan")
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(
+                f"temperature = {temperature!r} is not allowed; allowed: None or a number > 0"
+            )
+        if not controller.smooth:
+            raise ValueError(
+                f"temperature = {temperature!r} is not allowed for controller "
+                f"{controller.name!r}; allowed: None (it has no smooth relaxation)"
+            )
+        temperature = value
+    return Options(steps, velocity, controller, temperature, substeps, wheel_limit)
+
+
+def check_dt(dt: Any) -> float:
+    """Return ``dt`` as a float after checking it is finite and positive."""
+    if isinstance(dt, jax.core.Tracer):
+        return dt
     try:
-        dt_value = float(dt)
+        value = float(dt)
     except (TypeError, ValueError) as err:
         raise ValueError(f"dt = {dt!r} is not allowed; allowed: a number > 0 s") from err
-    if not (math.isfinite(dt_value) and dt_value > 0):
-        raise ValueError(f"dt = {dt!r} is not allowed; allowed: a finite number > 0 s")
-    return dt_value
-
-
-def _check_temperature(temperature: Any) -> float | None:
-    if temperature is None:
-        return None
-    value = float(temperature)
     if not (math.isfinite(value) and value > 0):
-        raise ValueError(
-            f"temperature = {temperature!r} is not allowed; allowed: None or a number > 0"
-        )
+        raise ValueError(f"dt = {dt!r} is not allowed; allowed: a finite number > 0 s")
     return value
 
 
-def _batch_size(refs: jax.Array, gains: Gains, init: jax.Array, robot: Robot) -> int:
+def _batch_size(refs: jax.Array, params: Any, init: jax.Array, robot: Robot) -> int:
     sizes = {}
     if refs.ndim == 2:
         sizes["refs"] = refs.shape[0]
     if init.ndim == 2:
         sizes["init"] = init.shape[0]
-    for prefix, tree in (("gains", gains), ("robot", robot)):
+    for prefix, tree in (("gains", params), ("robot", robot)):
         for key, leaf in jax.tree_util.tree_leaves_with_path(tree):
             if jnp.ndim(leaf) == 1:
                 sizes[f"{prefix}{jax.tree_util.keystr(key)}"] = jnp.shape(leaf)[0]
@@ -271,110 +329,166 @@ def as_float_tree(tree: Any) -> Any:
     )
 
 
-def prepare(refs, gains, init, robot, dt, steps, velocity, *, batch: bool | None):
-    """Check and convert every argument of a rollout entry point (before tracing)."""
-    gains = as_float_tree(validate_gains(Gains() if gains is None else gains))
+def prepare(refs, params, init, robot, dt, options: Options, *, batch: bool | None):
+    """Check and convert every argument of a rollout entry point (before tracing).
+
+    Args:
+        batch: ``False`` for one run (``refs`` and ``init`` ``(3,)``), ``None``
+            for a batch over any of refs/init/params/robot.
+
+    Returns:
+        ``(refs, params, init, robot, dt)`` ready for the jitted cores.
+    """
+    control = options.controller
+    params = control.default_params() if params is None else params
+    if not isinstance(params, control.params_type):
+        raise ValueError(
+            f"gains is a {type(params).__name__}; allowed: a {control.params_type.__name__} "
+            f"for controller {control.name!r}"
+        )
+    params = as_float_tree(control.validate(params))
     robot = as_float_tree(validate_robot(Robot() if robot is None else robot))
-    dt = _check_options(dt, steps, velocity)
+    dt = check_dt(dt)
     refs = as_poses("refs" if batch is not False else "ref", refs, batch=batch)
     init = as_poses("init", init, batch=None if batch is not False else False)
     if batch is not False:
-        _batch_size(refs, gains, init, robot)
-    leaves = jax.tree.leaves((gains, robot))
-    if not any(isinstance(leaf, jax.core.Tracer) for leaf in leaves):
-        check_feasible(gains, robot, warn=True, stacklevel=4)  # legal, but warned (SPEC §3, Fig. 8)
-    return refs, gains, init, robot, jnp.asarray(dt, dtype=float_dtype())
+        _batch_size(refs, params, init, robot)
+    leaves = jax.tree.leaves((params, robot))
+    concrete = not any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
+    if concrete and control is SHIM_SUNG:
+        check_feasible(params, robot, warn=True, stacklevel=4)  # legal, but warned (SPEC §3)
+    return refs, params, init, robot, jnp.asarray(dt, dtype=float_dtype())
 
 
 # ---------------------------------------------------------------- entry points
 
+_OPTIONS_DOC = """
+        init: ``(3,)`` initial pose, or ``(N, 3)`` for a batch.
+        dt: control period in s; commands are held over it (SPEC §4).
+        steps: number of control periods (static).
+        robot: robot parameters; default ``Robot()``.
+        velocity: velocity loop between command and robot (static):
+            ``"ideal"`` or ``"nonideal"`` (SPEC §4).
+        controller: a ``Controller`` or its name (static); default Shim–Sung.
+        temperature: ``None`` for the paper's law, or a smooth relaxation
+            (see ``wmr_jax.law``).
+        substeps: inner integration steps per period, non-ideal loop (static).
+        wheel_limit: ``"clip"`` (per wheel) or ``"scale"`` (keep the curvature),
+            non-ideal loop (static)."""
+
 
 def rollout(
     ref: Any,
-    gains: Gains | None = None,
+    gains: Any = None,
     *,
     init: Any = (0.0, 0.0, 0.0),
     dt: float = DEFAULT_DT,
     steps: int = DEFAULT_STEPS,
     robot: Robot | None = None,
     velocity: str = "ideal",
+    controller: Controller | str = SHIM_SUNG,
     temperature: float | None = None,
+    substeps: int = DEFAULT_SUBSTEPS,
+    wheel_limit: str = "clip",
 ) -> Trajectory:
     """Drive the robot from ``init`` towards ``ref`` and record the whole run.
 
     Args:
         ref: ``(3,)`` reference pose ``[x cm, y cm, θ rad]``.
-        gains: controller gains; default ``Gains()`` (the paper's Fig. 7).
-        init: ``(3,)`` initial pose.
-        dt: control period in s; commands are held over it (SPEC §4).
-        steps: number of control periods (static).
-        robot: robot parameters; default ``Robot()``.
-        velocity: velocity loop between command and robot (static): ``"ideal"``.
-        temperature: ``None`` for the paper's law, or a smooth relaxation
-            (see ``wmr_jax.law``).
+        gains: the controller's parameters; default ``Gains()`` (Fig. 7).
+    {options}
 
     Returns:
         A ``Trajectory`` with ``steps + 1`` poses.
 
     Raises:
         ValueError: for out-of-range gains, non-finite or misshapen poses,
-            ``steps < 1``, ``dt ≤ 0`` or an unknown ``velocity``.
+            ``steps < 1``, ``dt ≤ 0`` or an unknown option.
     """
-    ref, gains, init, robot, dt = prepare(ref, gains, init, robot, dt, steps, velocity, batch=False)
-    temperature = _check_temperature(temperature)
-    return _rollout_jit(
-        ref, gains, init, robot, dt, steps=steps, velocity=velocity, temperature=temperature
+    options = make_options(
+        steps=steps,
+        velocity=velocity,
+        controller=controller,
+        temperature=temperature,
+        substeps=substeps,
+        wheel_limit=wheel_limit,
     )
+    args = prepare(ref, gains, init, robot, dt, options, batch=False)
+    return _rollout_jit(*args, options=options)
 
 
 def batch_rollout(
     refs: Any,
-    gains: Gains | None = None,
+    gains: Any = None,
     *,
     init: Any = (0.0, 0.0, 0.0),
     dt: float = DEFAULT_DT,
     steps: int = DEFAULT_STEPS,
     robot: Robot | None = None,
     velocity: str = "ideal",
+    controller: Controller | str = SHIM_SUNG,
     temperature: float | None = None,
+    substeps: int = DEFAULT_SUBSTEPS,
+    wheel_limit: str = "clip",
 ) -> Trajectory:
     """Run ``rollout`` for a batch, in one call.
 
     Any of ``refs (N, 3)``, ``init (N, 3)`` and the leaves of ``gains`` or
     ``robot`` with shape ``(N,)`` are mapped over together; the rest are
-    shared by every run. Options as for ``rollout``.
+    shared by every run. Sharded ``jax.Array`` inputs give sharded outputs.
+
+    Args:
+        refs: ``(N, 3)`` reference poses (or ``(3,)`` if something else is batched).
+        gains: the controller's parameters, leaves scalar or ``(N,)``.
+    {options}
 
     Returns:
         A ``Trajectory`` whose fields have a leading axis ``N``.
     """
-    refs, gains, init, robot, dt = prepare(
-        refs, gains, init, robot, dt, steps, velocity, batch=None
+    options = make_options(
+        steps=steps,
+        velocity=velocity,
+        controller=controller,
+        temperature=temperature,
+        substeps=substeps,
+        wheel_limit=wheel_limit,
     )
-    temperature = _check_temperature(temperature)
-    return _batch_rollout_jit(
-        refs, gains, init, robot, dt, steps=steps, velocity=velocity, temperature=temperature
-    )
+    args = prepare(refs, gains, init, robot, dt, options, batch=None)
+    return _batch_rollout_jit(*args, options=options)
 
 
 def final_poses(
     refs: Any,
-    gains: Gains | None = None,
+    gains: Any = None,
     *,
     init: Any = (0.0, 0.0, 0.0),
     dt: float = DEFAULT_DT,
     steps: int = DEFAULT_STEPS,
     robot: Robot | None = None,
     velocity: str = "ideal",
+    controller: Controller | str = SHIM_SUNG,
     temperature: float | None = None,
+    substeps: int = DEFAULT_SUBSTEPS,
+    wheel_limit: str = "clip",
 ) -> jax.Array:
     """Return only the last pose of each run, ``(N, 3)``; memory O(N), not O(N·steps).
 
-    Batching and options as for ``batch_rollout``.
+    Args:
+        refs: ``(N, 3)`` reference poses (or ``(3,)`` if something else is batched).
+        gains: the controller's parameters, leaves scalar or ``(N,)``.
+    {options}
     """
-    refs, gains, init, robot, dt = prepare(
-        refs, gains, init, robot, dt, steps, velocity, batch=None
+    options = make_options(
+        steps=steps,
+        velocity=velocity,
+        controller=controller,
+        temperature=temperature,
+        substeps=substeps,
+        wheel_limit=wheel_limit,
     )
-    temperature = _check_temperature(temperature)
-    return _final_poses_jit(
-        refs, gains, init, robot, dt, steps=steps, velocity=velocity, temperature=temperature
-    )
+    args = prepare(refs, gains, init, robot, dt, options, batch=None)
+    return _final_poses_jit(*args, options=options)
+
+
+for _entry in (rollout, batch_rollout, final_poses):
+    _entry.__doc__ = _entry.__doc__.replace("    {options}", _OPTIONS_DOC)
