@@ -87,9 +87,10 @@ class Robot:
         wheel_mass: ``m``, kg (each wheel a uniform disc of radius ``r``).
         com_offset: ``a``, distance of the centre of mass ahead of the axle, cm.
         torque_max: largest torque magnitude per wheel motor, kg·cm²/s².
-        speed_gain: bandwidth of the wheel-speed loop, 1/s (see
-            ``wmr_jax.dynamics``).
-        integral_gain: integral action of the wheel-speed loop, 1/s².
+        speed_gain: proportional gain ``k_p`` of the wheel-speed loop, 1/s: its
+            velocity time constant is ``1/k_p`` (see ``wmr_jax.velocity_loop``).
+        integral_gain: integral gain ``k_i`` of the wheel-speed loop, 1/s²
+            (0: none; useful when the loop's model differs from the robot).
     """
 
     # choice (SPEC §1): L = D/2.
@@ -100,8 +101,10 @@ class Robot:
     wheel_radius: Any = _WHEEL_RADIUS
     wheel_mass: Any = _WHEEL_MASS
     com_offset: Any = 0.0
-    torque_max: Any = 5.0e3
-    speed_gain: Any = 200.0
+    # choice: ~0.08 N·m per motor, about 2 g of linear acceleration for Table 1.
+    torque_max: Any = 800.0
+    # choice: a 10 ms velocity time constant, well inside the 33 ms period.
+    speed_gain: Any = 100.0
     integral_gain: Any = 0.0
 
     def replace(self, **changes: Any) -> Robot:

@@ -125,6 +125,74 @@ def _arc(x: float, y: float, th: float, v: float, w: float, h: float):
     )
 
 
+class _Loop:
+    """The non-ideal loop of SPEC §4 for one robot, in plain floats."""
+
+    def __init__(self, robot: Robot):
+        f = {k: float(v) for k, v in vars(robot).items()}
+        self.L, self.v_max, self.r = f["half_track"], f["v_max"], f["wheel_radius"]
+        self.kp, self.ki, self.tau_max = f["speed_gain"], f["integral_gain"], f["torque_max"]
+        M, m, r, a = f["body_mass"], f["wheel_mass"], f["wheel_radius"], f["com_offset"]
+        # Kinetic energy of body (disc of diameter D, centre of mass a ahead of
+        # the axle) and two disc wheels rolling without slip, in (v, ω).
+        self.m11 = M + 2 * m + m  # 2 wheels' translation + 2 × (m r²/2)/r² of spin
+        self.m22 = (
+            M * f["body_diameter"] ** 2 / 8
+            + M * a * a
+            + 2 * m * self.L**2
+            + 2 * (m * r * r / 4)
+            + 2 * (m * r * r / 2) * self.L**2 / (r * r)
+        )
+        self.ma = M * a
+
+    def rims_limited(self, v, w, mode):
+        left, right = v - self.L * w, v + self.L * w
+        if mode == "clip":
+            left = min(max(left, -self.v_max), self.v_max)
+            right = min(max(right, -self.v_max), self.v_max)
+        else:
+            excess = max(abs(left) / self.v_max, abs(right) / self.v_max, 1.0)
+            left, right = left / excess, right / excess
+        return 0.5 * (left + right), 0.5 * (right - left) / self.L
+
+    def rates(self, y, target):
+        v, w, zv, zw = y
+        # Computed torque: wanted accelerations through the model, then per-wheel limits.
+        acc_v = self.kp * (target[0] - v) + self.ki * zv
+        acc_w = self.kp * (target[1] - w) + self.ki * zw
+        force = self.m11 * acc_v - self.ma * w * w
+        moment = self.m22 * acc_w + self.ma * v * w
+        tau_r = 0.5 * self.r * (force + moment / self.L)
+        tau_l = 0.5 * self.r * (force - moment / self.L)
+        tau_r = min(max(tau_r, -self.tau_max), self.tau_max)
+        tau_l = min(max(tau_l, -self.tau_max), self.tau_max)
+        # Eq. 5: H q̇ = B τ − G(q).
+        v_dot = ((tau_l + tau_r) / self.r + self.ma * w * w) / self.m11
+        w_dot = (self.L * (tau_r - tau_l) / self.r - self.ma * v * w) / self.m22
+        return [v_dot, w_dot, target[0] - v, target[1] - w]
+
+    def period(self, pose, y, command, dt, substeps, mode):
+        target = self.rims_limited(command[0], command[1], mode)
+        h = dt / substeps
+        x, yy, th = pose
+        travelled = 0.0
+        for _ in range(substeps):
+            k1 = self.rates(y, target)
+            k2 = self.rates([a + 0.5 * h * b for a, b in zip(y, k1, strict=True)], target)
+            k3 = self.rates([a + 0.5 * h * b for a, b in zip(y, k2, strict=True)], target)
+            k4 = self.rates([a + h * b for a, b in zip(y, k3, strict=True)], target)
+            new = [
+                a + h / 6 * (b1 + 2 * b2 + 2 * b3 + b4)
+                for a, b1, b2, b3, b4 in zip(y, k1, k2, k3, k4, strict=True)
+            ]
+            new[0], new[1] = self.rims_limited(new[0], new[1], "clip")
+            v_mean, w_mean = 0.5 * (y[0] + new[0]), 0.5 * (y[1] + new[1])
+            x, yy, th = _arc(x, yy, th, v_mean, w_mean, h)
+            travelled += abs(v_mean) * h
+            y = new
+        return (x, yy, th), y, travelled
+
+
 def reference_rollout(
     ref: Any,
     gains: Gains | None = None,
@@ -134,8 +202,14 @@ def reference_rollout(
     steps: int = 150,
     robot: Robot | None = None,
     velocity: str = "ideal",
+    substeps: int = 10,
+    wheel_limit: str = "clip",
 ) -> dict[str, np.ndarray]:
     """Simulate one closed-loop run with a Python loop (SPEC §4).
+
+    Args:
+        ref, gains, init, dt, steps, robot, velocity, substeps, wheel_limit:
+            as for ``wmr_jax.rollout`` (Shim–Sung controller only).
 
     Returns:
         A dict with the fields of ``wmr_jax.Trajectory`` as float64 NumPy
@@ -144,10 +218,11 @@ def reference_rollout(
     """
     gains = Gains() if gains is None else gains
     robot = Robot() if robot is None else robot
-    if velocity != "ideal":
-        raise ValueError(f"velocity = {velocity!r} is not allowed; allowed: ('ideal',)")
-    half_track = float(robot.half_track)
+    if velocity not in ("ideal", "nonideal"):
+        raise ValueError(f"velocity = {velocity!r} is not allowed; allowed: ('ideal', 'nonideal')")
+    loop = _Loop(robot)
     x, y, th = (float(u) for u in init)
+    state = [0.0, 0.0, 0.0, 0.0]  # v, ω and the wheel loop's integrals
     poses = np.empty((steps + 1, 3))
     v_out, w_out, region = np.empty(steps), np.empty(steps), np.empty(steps, dtype=np.int32)
     rims, dist = np.empty((steps, 2)), np.empty(steps)
@@ -155,11 +230,16 @@ def reference_rollout(
     for k in range(steps):
         out = reference_diagnostics((x, y, th), ref, gains)
         v, w = out["v"], out["omega"]
-        x, y, th = _arc(x, y, th, v, w, dt)
+        if velocity == "ideal":
+            x, y, th = _arc(x, y, th, v, w, dt)
+            state, dist[k] = [v, w, 0.0, 0.0], abs(v) * dt
+        else:
+            (x, y, th), state, dist[k] = loop.period(
+                (x, y, th), state, (v, w), dt, substeps, wheel_limit
+            )
         poses[k + 1] = x, y, th
         v_out[k], w_out[k], region[k] = v, w, out["region"]
-        rims[k] = v - half_track * w, v + half_track * w
-        dist[k] = abs(v) * dt
+        rims[k] = state[0] - loop.L * state[1], state[0] + loop.L * state[1]
     return {
         "poses": poses,
         "v": v_out,

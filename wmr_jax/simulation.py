@@ -349,6 +349,8 @@ def prepare(refs, params, init, robot, dt, options: Options, *, batch: bool | No
     params = as_float_tree(control.validate(params))
     robot = as_float_tree(validate_robot(Robot() if robot is None else robot))
     dt = check_dt(dt)
+    if options.velocity == "nonideal":
+        velocity_loop.check_stability(robot, dt, options.substeps)
     refs = as_poses("refs" if batch is not False else "ref", refs, batch=batch)
     init = as_poses("init", init, batch=None if batch is not False else False)
     if batch is not False:
