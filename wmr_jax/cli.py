@@ -84,6 +84,23 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_paper(args: argparse.Namespace) -> int:
+    from wmr_jax import paper
+
+    out = Path(args.out)
+    result = paper.paper_figures(out)
+    print(f"Figs. 6-10, wheel speeds and the table -> {out}/")
+    for case in ("kr=120", "kr=60"):
+        s = result["summary"][case]
+        print(
+            f"  {case}: k_r + L k_theta = {s['k_r + L k_theta']:g} cm/s ({s['condition']}); "
+            f"ideal vs non-ideal path gap: max {s['max_deviation_cm']:.2f} cm, "
+            f"mean {s['mean_deviation_cm']:.2f} cm; zig-zag ideal {s['ideal_zigzag']:.1f}, "
+            f"non-ideal {s['nonideal_zigzag']:.1f}"
+        )
+    return 0
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     from wmr_jax import paper
 
@@ -91,7 +108,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     rows = paper.figure_7(out)
     print(f"Fig. 7 (ideal velocity loop, paper gains) -> {out / 'fig7.png'}")
     print(paper.markdown_table(rows), end="")
-    return 0
+    return _cmd_paper(args)
 
 
 def _positive_int(text: str) -> int:
@@ -124,14 +141,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sim.add_argument("--dt", type=float, default=0.033, help="control period, s (default 0.033)")
     sim.add_argument("--steps", type=_positive_int, default=150, help="control periods (150)")
-    sim.add_argument("--velocity", default="ideal", help="velocity loop: ideal (default)")
+    sim.add_argument(
+        "--velocity", default="ideal", help="velocity loop: ideal (default) or nonideal"
+    )
     sim.add_argument("--plot", metavar="FILE.png", help="save the path to this image")
     _add_gain_flags(sim)
     sim.set_defaults(func=_cmd_simulate)
 
-    demo = sub.add_parser("demo", help="reproduce the paper's figures into a folder and tabulate")
+    demo = sub.add_parser("demo", help="the main job: reproduce the paper into a folder, tabulate")
     demo.add_argument("--out", default="results", help="output folder (default results/)")
     demo.set_defaults(func=_cmd_demo)
+
+    paper = sub.add_parser("paper", help="Figs. 6-10, wheel speeds and the paper table")
+    paper.add_argument("--out", default="results", help="output folder (default results/)")
+    paper.set_defaults(func=_cmd_paper)
     return parser
 
 

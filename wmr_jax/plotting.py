@@ -14,8 +14,12 @@ import numpy as np  # noqa: E402
 __all__ = ["plot_paths", "plot_wheel_speeds", "plt"]
 
 
-def _heading_arrows(ax, poses: np.ndarray, every: int, color, length: float, **kw) -> None:
-    picked = poses[::every]
+def _heading_arrows(ax, poses: np.ndarray, spacing: float, color, length: float, **kw) -> None:
+    """Draw the heading every ``spacing`` cm of travel, and at the last pose."""
+    step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+    travelled = np.concatenate([[0.0], np.cumsum(step)])
+    marks = np.flatnonzero(np.diff(np.floor(travelled / spacing), prepend=-1.0) > 0)
+    picked = poses[np.union1d(marks, [len(poses) - 1])]
     ax.quiver(
         picked[:, 0],
         picked[:, 1],
@@ -38,7 +42,7 @@ def plot_paths(
     color: Any = None,
     label: str | None = None,
     linestyle: str = "-",
-    heading_every: int = 3,
+    heading_spacing: float = 6.0,
     arrow_length: float = 3.0,
     mark_refs: bool = True,
 ) -> None:
@@ -51,7 +55,7 @@ def plot_paths(
         color: one colour for all paths (default: one per path).
         label: legend label for the first path.
         linestyle: matplotlib line style.
-        heading_every: draw the heading every this many samples.
+        heading_spacing: draw the heading every this many cm of travel.
         arrow_length: heading arrow length, cm.
         mark_refs: draw the references (a cross and a heading arrow).
     """
@@ -62,11 +66,21 @@ def plot_paths(
         ax.plot(
             poses[:, 0], poses[:, 1], linestyle, color=c, lw=1.3, label=label if i == 0 else None
         )
-        _heading_arrows(ax, poses, heading_every, c, arrow_length, alpha=0.8)
+        _heading_arrows(ax, poses, heading_spacing, c, arrow_length, alpha=0.8)
     if mark_refs:
         refs = np.asarray(refs)
         ax.plot(refs[:, 0], refs[:, 1], "kx", ms=8, mew=2, label="reference" if label else None)
-        _heading_arrows(ax, refs, 1, "k", 2.5 * arrow_length)
+        ax.quiver(
+            refs[:, 0],
+            refs[:, 1],
+            2.5 * arrow_length * np.cos(refs[:, 2]),
+            2.5 * arrow_length * np.sin(refs[:, 2]),
+            angles="xy",
+            scale_units="xy",
+            scale=1,
+            color="k",
+            width=0.004,
+        )
     ax.set_aspect("equal")
     ax.set_xlabel("x [cm]")
     ax.set_ylabel("y [cm]")

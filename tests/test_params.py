@@ -1,0 +1,101 @@
+"""Bad input is refused before tracing, with the field, its value and what is allowed."""
+
+import math
+
+import jax
+import numpy as np
+import pytest
+
+import wmr_jax as w
+
+BAD_GAINS = [
+    ({"kr": 0.0}, "gains.kr"),
+    ({"kr": -5.0}, "gains.kr"),
+    ({"k_theta": -1.0}, "gains.k_theta"),
+    ({"phi_m": 0.0}, "gains.phi_m"),
+    ({"phi_m": math.pi / 2}, "gains.phi_m"),
+    ({"alpha": 0.0}, "gains.alpha"),
+    ({"alpha": 0.5}, "gains.alpha"),
+    ({"r_e": 0.0}, "gains.r_e"),
+    ({"r_e": 25.0}, "gains.r_e"),  # r_e > r_a
+    ({"r_a": 30.0}, "gains.r_a"),  # r_a > r_m
+    ({"kr": float("nan")}, "gains.kr"),
+    ({"kr": float("inf")}, "gains.kr"),
+    ({"alpha": np.array([0.1, 0.7])}, "gains.alpha"),  # one bad member of a batch
+    ({"kr": np.ones((2, 2))}, "gains.kr"),
+]
+
+
+@pytest.mark.parametrize(("change", "field"), BAD_GAINS)
+def test_bad_gains_name_the_field(change, field):
+    with pytest.raises(ValueError, match=field.replace(".", r"\.") + r".*allowed"):
+        w.rollout([10.0, 0.0, 0.0], w.Gains(**change), steps=2)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "pattern"),
+    [
+        ({"ref": [1.0, float("nan"), 0.0]}, r"ref = \[1\.0, nan, 0\.0\] is not finite"),
+        ({"ref": [1.0, 2.0]}, r"ref has shape \(2,\); allowed: \(3,\)"),
+        ({"ref": [[1.0, 2.0, 3.0]]}, r"ref has shape \(1, 3\)"),
+        ({"ref": "abc"}, r"ref must be numbers"),
+        ({"init": [0.0, float("inf"), 0.0]}, r"init = .* is not finite"),
+        ({"steps": 0}, r"steps = 0 is not allowed; allowed: an integer >= 1"),
+        ({"steps": 2.5}, r"steps = 2\.5"),
+        ({"dt": 0.0}, r"dt = 0\.0 is not allowed"),
+        ({"dt": -0.1}, r"dt = -0\.1"),
+        ({"dt": float("nan")}, r"dt = nan"),
+        ({"velocity": "perfect"}, r"velocity = 'perfect' is not allowed; allowed: \('ideal'"),
+        ({"temperature": -1.0}, r"temperature = -1\.0"),
+        ({"controller": "pid"}, r"controller = 'pid' is not known"),
+    ],
+)
+def test_bad_rollout_arguments(kwargs, pattern):
+    kwargs = {"ref": [10.0, 0.0, 0.0], **kwargs}
+    ref = kwargs.pop("ref")
+    with pytest.raises(ValueError, match=pattern):
+        w.rollout(ref, **kwargs)
+
+
+def test_bad_batch_arguments():
+    with pytest.raises(ValueError, match=r"refs\[1\] = .* is not finite"):
+        w.batch_rollout(np.array([[1.0, 2.0, 0.0], [np.nan, 0.0, 0.0]]))
+    with pytest.raises(ValueError, match="batch sizes differ"):
+        w.final_poses(np.zeros((4, 3)), init=np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="nothing else is batched"):
+        w.final_poses(np.zeros(3))
+    with pytest.raises(ValueError, match=r"refs has shape \(0, 3\)"):
+        w.final_poses(np.zeros((0, 3)))
+    with pytest.raises(ValueError, match="gains is a Robot"):
+        w.final_poses(np.ones((2, 3)), w.Robot())
+
+
+def test_errors_come_before_tracing(monkeypatch):
+    from wmr_jax import simulation
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("traced or ran before validation")
+
+    monkeypatch.setattr(simulation, "_rollout_jit", forbidden)
+    with pytest.raises(ValueError):
+        w.rollout([10.0, 0.0, 0.0], w.Gains(alpha=0.9))
+
+
+def test_infeasible_gains_warn_but_run():
+    with pytest.warns(w.WheelSpeedWarning, match=r"138\.5 cm/s exceeds v_max = 125"):
+        w.rollout([10.0, 0.0, 0.0], w.Gains(kr=120.0), steps=2)
+    assert w.check_feasible(w.Gains(kr=60.0))
+    assert not w.check_feasible(w.Gains(kr=120.0))
+    bound = w.wheel_speed_bound(w.Gains(kr=60.0), w.Robot())
+    assert float(bound) == pytest.approx(60.0 + 1.85 * 10.0)
+    batch = w.check_feasible(w.Gains(kr=np.array([60.0, 120.0])))
+    np.testing.assert_array_equal(batch, [True, False])
+
+
+def test_tracers_skip_validation_inside_user_transforms():
+    """Inside a user's jit/grad the values are unknown; the call still works."""
+
+    def loss(kr):
+        return w.rollout([20.0, 5.0, 0.0], w.Gains(kr=kr), steps=5).poses[-1, 0]
+
+    assert np.isfinite(float(jax.jit(jax.grad(loss))(60.0)))
