@@ -1,4 +1,7 @@
-"""Reproduce the paper's Figs. 6–10 and their table: ``python experiments/paper_figures.py [DIR]``."""
+"""Reproduce the paper's Figs. 6–10 and their table.
+
+Usage: ``python experiments/paper_figures.py [DIR]`` (default ``results/``).
+"""
 
 import sys
 
