@@ -16,6 +16,9 @@ same law as the paper's, only stated without ``atan2``:
 It saves the transcendental calls that dominate a rollout's cost, and it keeps
 the values and gradients finite at ``r_e = 0``. ``wmr_jax.reference`` states the
 same law literally with angles and ``atan2``; the tests hold the two equal.
+The few sines and cosines left are ``dynamics.sin_cos`` (see there why), and a
+rollout that carries the robot's heading as ``(cos θ, sin θ)`` passes the pose
+as ``frame=(x, y, cos θ, sin θ)`` so that not even those are recomputed.
 
 Smooth relaxation: every switching function takes ``temperature``. ``None``
 (the default) is the hard law of the paper. A positive temperature replaces
@@ -33,6 +36,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from wmr_jax.dynamics import sin_cos, sin_small
 from wmr_jax.params import Gains, Robot
 
 __all__ = [
@@ -92,28 +96,54 @@ def wrap_angle(angle: jax.Array) -> jax.Array:
     return jnp.mod(angle + jnp.pi, 2 * jnp.pi) - jnp.pi
 
 
-def polar_error(pose: jax.Array, ref: jax.Array) -> PolarError:
+def polar_error(
+    pose: jax.Array,
+    ref: jax.Array,
+    *,
+    frame: tuple[jax.Array, jax.Array, jax.Array, jax.Array] | None = None,
+) -> PolarError:
     """Return the error of ``pose`` with respect to ``ref`` in the robot frame (Eq. 3).
 
     Args:
-        pose: ``(..., 3)`` current pose ``[x cm, y cm, θ rad]``.
+        pose: ``(..., 3)`` current pose ``[x cm, y cm, θ rad]``; not read
+            (may be ``None``) when ``frame`` is given.
         ref: ``(..., 3)`` reference pose, broadcastable against ``pose``.
+        frame: the same pose as ``(x, y, cos θ, sin θ)`` when the caller
+            carries it that way (the rollouts do), so that no step recomputes
+            ``cos θ`` and ``sin θ``.
 
     Returns:
         A ``PolarError`` whose fields have the broadcast leading shape.
     """
-    cos_c, sin_c = jnp.cos(pose[..., 2]), jnp.sin(pose[..., 2])
-    cos_r, sin_r = jnp.cos(ref[..., 2]), jnp.sin(ref[..., 2])
-    dx, dy = ref[..., 0] - pose[..., 0], ref[..., 1] - pose[..., 1]
-    e_x = cos_c * dx + sin_c * dy
-    e_y = -sin_c * dx + cos_c * dy
-    # Double-where keeps both the value and the gradient finite at r_e = 0;
-    # hypot rather than sqrt(e_x² + e_y²), which underflows to 0 for tiny r_e.
-    positive = (e_x != 0) | (e_y != 0)
-    safe_r = jnp.hypot(jnp.where(positive, e_x, 1.0), jnp.where(positive, e_y, 0.0))
+    if frame is None:
+        x, y = pose[..., 0], pose[..., 1]
+        cos_c, sin_c = sin_cos(pose[..., 2])
+    else:
+        x, y, cos_c, sin_c = frame
+    cos_r, sin_r = sin_cos(ref[..., 2])
+    dx, dy = ref[..., 0] - x, ref[..., 1] - y
+    # e_x + i e_y = (cos θ_c − i sin θ_c)(Δx + i Δy): the rotation into the
+    # robot frame as one complex product. It is the same arithmetic as
+    # e_x = cos θ_c Δx + sin θ_c Δy, e_y = −sin θ_c Δx + cos θ_c Δy, but XLA then
+    # keeps it inside the law's loop instead of storing e_x and e_y between loops.
+    dtype = jnp.result_type(cos_c, sin_c, dx, dy, float)
+    e = jax.lax.complex(jnp.asarray(cos_c, dtype), -jnp.asarray(sin_c, dtype)) * jax.lax.complex(
+        jnp.asarray(dx, dtype), jnp.asarray(dy, dtype)
+    )
+    e_x, e_y = e.real, e.imag
+    # Double-where keeps both the value and the gradient finite at r_e = 0.
+    # r_e² underflows to 0 below r_e ≈ 1e-19 cm (float32) or 1e-154 cm
+    # (float64); such a robot is taken to be on the reference (φ_e = 0). It is
+    # in Region 0 either way, and v differs from the exact law by less than
+    # k_r r_e. (hypot would avoid the underflow at a division and a
+    # comparison more per step, in the hottest loop of the package.)
+    r_sq = e_x * e_x + e_y * e_y
+    positive = r_sq > 0
+    safe_r = jnp.sqrt(jnp.where(positive, r_sq, 1.0))
+    inv_r = 1.0 / safe_r  # one division shared by cos φ_e and sin φ_e
     r = jnp.where(positive, safe_r, 0.0)
-    cos_phi = jnp.where(positive, e_x / safe_r, 1.0)
-    sin_phi = jnp.where(positive, e_y / safe_r, 0.0)
+    cos_phi = jnp.where(positive, e_x * inv_r, 1.0)
+    sin_phi = e_y * inv_r  # 0 where r_e = 0
     # θ_e = θ_r − θ_c by the angle-difference identities; its 2π wrap is implicit.
     cos_theta = cos_r * cos_c + sin_r * sin_c
     sin_theta = sin_r * cos_c - cos_r * sin_c
@@ -130,11 +160,17 @@ def error_angles(err: PolarError) -> tuple[jax.Array, jax.Array]:
     return phi, theta
 
 
-def _step(x: jax.Array, *, strict: bool, temperature: float | None) -> jax.Array:
-    """Return the indicator of ``x > 0`` (strict) or ``x ≥ 0``, or its sigmoid relaxation."""
+def _step(
+    x: jax.Array, *, strict: bool, temperature: float | None, scale: jax.Array = 1.0
+) -> jax.Array:
+    """Return the indicator of ``x > 0`` (strict) or ``x ≥ 0``, or its sigmoid relaxation.
+
+    ``scale > 0`` makes ``x`` dimensionless for the relaxation,
+    ``sigmoid(x / (scale · temperature))``; the hard test does not need it.
+    """
     if temperature is None:
         return jnp.where(x > 0 if strict else x >= 0, 1.0, 0.0).astype(x.dtype)
-    return jax.nn.sigmoid(x / temperature)
+    return jax.nn.sigmoid(x / (scale * temperature))
 
 
 def sgn(x: jax.Array, *, temperature: float | None = None) -> jax.Array:
@@ -149,7 +185,7 @@ def saturated_distance(r: jax.Array, r_m: jax.Array, *, temperature: float | Non
 
     The relaxed form is a soft minimum with width ``temperature`` in rad.
     """
-    linear = (jnp.pi / 2) * r / r_m
+    linear = r * ((jnp.pi / 2) / r_m)  # the factor is per gain set, not per step
     if temperature is None:
         return jnp.minimum(linear, jnp.pi / 2)
     excess = linear - jnp.pi / 2
@@ -203,8 +239,8 @@ def blend(
     """
     _, sin_phi_bar = fold(err.cos_phi, err.sin_phi, temperature=temperature)
     _, sin_theta_bar = fold(err.cos_theta, err.sin_theta, temperature=temperature)
-    in_region_0 = _step((gains.r_e - err.r) / gains.r_e, strict=False, temperature=temperature)
-    inside_r_a = _step((gains.r_a - err.r) / gains.r_a, strict=True, temperature=temperature)
+    in_region_0 = _step(gains.r_e - err.r, strict=False, temperature=temperature, scale=gains.r_e)
+    inside_r_a = _step(gains.r_a - err.r, strict=True, temperature=temperature, scale=gains.r_a)
     eps_1 = 0.5 - gains.alpha * sgn(sin_theta_bar, temperature=temperature) * sgn(
         sin_theta_bar + sin_phi_bar, temperature=temperature
     )
@@ -224,7 +260,9 @@ def commands(
     r_bar = saturated_distance(err.r, gains.r_m, temperature=temperature)
     cos_phi_bar, sin_phi_bar = fold(err.cos_phi, err.sin_phi, temperature=temperature)
     _, sin_theta_bar = fold(err.cos_theta, err.sin_theta, temperature=temperature)
-    v = gains.kr * d * jnp.sin(r_bar) * cos_phi_bar
+    # The hard r̄_e lies in [0, π/2]; the relaxed one can leave it slightly.
+    sin_r_bar = sin_small(r_bar) if temperature is None else sin_cos(r_bar)[1]
+    v = gains.kr * d * sin_r_bar * cos_phi_bar
     omega = gains.k_theta * (eps * sin_phi_bar + (1 - eps) * sin_theta_bar)
     return v, omega
 
@@ -250,7 +288,12 @@ def wheel_speeds(v: jax.Array, omega: jax.Array, robot: Robot) -> jax.Array:
 
 
 def control(
-    pose: jax.Array, ref: jax.Array, gains: Gains, *, temperature: float | None = None
+    pose: jax.Array,
+    ref: jax.Array,
+    gains: Gains,
+    *,
+    temperature: float | None = None,
+    frame: tuple[jax.Array, jax.Array, jax.Array, jax.Array] | None = None,
 ) -> tuple[jax.Array, jax.Array]:
     """Return the command ``(v cm/s, ω rad/s)`` of the asymptotic controller.
 
@@ -260,8 +303,9 @@ def control(
         gains: controller gains.
         temperature: ``None`` for the paper's law; positive for its smooth
             relaxation (see the module docstring).
+        frame: optional ``(x, y, cos θ, sin θ)`` of the pose (see ``polar_error``).
     """
-    return commands(polar_error(pose, ref), gains, temperature=temperature)
+    return commands(polar_error(pose, ref, frame=frame), gains, temperature=temperature)
 
 
 def control_diagnostics(pose: jax.Array, ref: jax.Array, gains: Gains) -> Diagnostics:

@@ -9,6 +9,7 @@ shapes and options reuses the compiled code.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
 from collections.abc import Callable
 from typing import Any, NamedTuple
@@ -31,7 +32,9 @@ __all__ = [
     "closed_loop_step",
     "initial_state",
     "final_poses",
+    "jit_top_level",
     "rollout",
+    "scan_closed_loop",
 ]
 
 VELOCITY_LOOPS = ("ideal", "nonideal")
@@ -139,23 +142,158 @@ def closed_loop_step(
     return new_state, StepOutput(v, omega, region, rims, distance)
 
 
-def _simulate(ref, params, init, robot, dt, options: Options, *, record: bool):
-    def body(state, _):
-        new_state, out = closed_loop_step(state, ref, params, robot, dt, options)
-        return new_state, ((new_state.pose, out) if record else None)
+Fold = Callable[[Any, jax.Array, StepOutput], Any]
 
-    return jax.lax.scan(body, initial_state(init), None, length=options.steps)
+
+def scan_closed_loop(
+    ref: jax.Array,
+    params: Any,
+    init: jax.Array,
+    robot: Robot,
+    dt: jax.Array,
+    options: Options,
+    *,
+    fold: Fold | None = None,
+    acc: Any = None,
+    record: bool = False,
+) -> tuple[jax.Array, Any, Any]:
+    """Run ``options.steps`` control periods for one pose, streaming or recording.
+
+    The same closed loop as scanning ``closed_loop_step``; the ideal velocity
+    loop takes a faster route to it (see ``_ideal_loop``).
+
+    Args:
+        ref: ``(3,)`` reference pose.
+        params: the controller's parameters.
+        init: ``(3,)`` initial pose.
+        robot: robot parameters.
+        dt: control period, s.
+        options: static rollout options.
+        fold: ``fold(acc, pose, out) -> acc``, called after every period with
+            the pose ``(3,)`` at its end and its ``StepOutput``: metrics that
+            stream through the scan instead of storing the trajectory.
+        acc: the initial value of the fold's accumulator (a pytree).
+        record: also return every pose and ``StepOutput`` (stacked over steps).
+
+    Returns:
+        ``(final pose (3,), acc, (poses (steps, 3), StepOutput) or None)``.
+    """
+    if options.velocity == "ideal":
+        return _ideal_loop(ref, params, init, robot, dt, options, fold, acc, record)
+    return _generic_loop(ref, params, init, robot, dt, options, fold, acc, record)
+
+
+def _remat(body: Callable) -> Callable:
+    """Differentiate ``body`` by recomputing it, not by storing its intermediates.
+
+    Reverse-mode through a scan otherwise keeps every intermediate of every
+    step (some fifty arrays of ``N × steps`` for the ideal loop, gigabytes at
+    ``N = 10⁵``); with this only the carry is kept per step and the backward
+    pass recomputes the step, which is cheaper than writing it all to memory.
+    No effect on evaluation without differentiation.
+    """
+    return jax.checkpoint(body, prevent_cse=False)
+
+
+def _generic_loop(ref, params, init, robot, dt, options, fold, acc, record):
+    def body(carry, _):
+        (x, y, theta), velocity, integral, acc = carry
+        state = dynamics.RobotState(jnp.stack([x, y, theta]), velocity, integral)
+        new_state, out = closed_loop_step(state, ref, params, robot, dt, options)
+        pose = new_state.pose
+        if fold is not None:
+            acc = fold(acc, pose, out)
+        # The pose rides in the carry as three scalars: a batched (N, 3) carry
+        # is rebuilt column by column every step, the law evaluated once per column.
+        carry = ((pose[0], pose[1], pose[2]), new_state.velocity, new_state.integral, acc)
+        return carry, ((pose, out) if record else None)
+
+    start = initial_state(init)
+    carry = ((init[0], init[1], init[2]), start.velocity, start.integral, acc)
+    (final, _, _, acc), ys = jax.lax.scan(_remat(body), carry, None, length=options.steps)
+    return jnp.stack(final), acc, ys
+
+
+def _takes_frame(controller: Controller) -> bool:
+    """Whether ``controller.command`` accepts ``frame=(x, y, cos θ, sin θ)``."""
+    try:
+        return "frame" in inspect.signature(controller.command).parameters
+    except (TypeError, ValueError):
+        return False
+
+
+def _ideal_loop(ref, params, init, robot, dt, options, fold, acc, record):
+    """The ideal velocity loop, arranged for speed; equal to scanning ``closed_loop_step``.
+
+    Three things make it several times faster than the plain scan:
+
+    * The position and heading ride as complex numbers ``x + i y`` and
+      ``cos θ + i sin θ`` (``dynamics.arc_advance``), so no step recomputes
+      the heading's cosine and sine for the law (``frame=`` of
+      ``law.control``) or the arc. θ itself is carried too, for the pose.
+    * The command of the next period is computed at the end of each period
+      and carried as ``v + i ω``. XLA on the CPU compiles a step into one
+      loop per output of the step and repeats in each whatever they share;
+      carried this way, the law is evaluated in one loop only, and the
+      step's outputs are four arrays, not nine.
+    * The heading is renormalised every step by one Newton step towards
+      ``|heading| = 1``, so rounding does not make it drift over long runs.
+    """
+    control = options.controller
+    frame_kw = _takes_frame(control)
+
+    def frame(position, heading):
+        return position.real, position.imag, heading.real, heading.imag
+
+    def command(position, heading, theta):
+        pose = jnp.stack([position.real, position.imag, theta])
+        extra = {"frame": frame(position, heading)} if frame_kw else {}
+        v, omega = control.command(pose, ref, params, temperature=options.temperature, **extra)
+        return jax.lax.complex(v, omega)
+
+    def region(position, heading, theta):
+        if control is SHIM_SUNG:
+            err = law.polar_error(None, ref, frame=frame(position, heading))
+            return law.region_label(err, params)
+        return control.region_of(jnp.stack([position.real, position.imag, theta]), ref, params)
+
+    def body(carry, _):
+        position, heading, theta, cmd, acc = carry
+        v, omega = cmd.real, cmd.imag
+        if fold is not None or record:
+            out = StepOutput(
+                v,
+                omega,
+                region(position, heading, theta),
+                law.wheel_speeds(v, omega, robot),
+                jnp.abs(v) * dt,
+            )
+        position, heading = dynamics.arc_advance(position, heading, v, omega, dt)
+        heading = heading * (1.5 - 0.5 * (heading.real**2 + heading.imag**2))
+        theta = theta + omega * dt
+        pose = jnp.stack([position.real, position.imag, theta])
+        if fold is not None:
+            acc = fold(acc, pose, out)
+        carry = (position, heading, theta, command(position, heading, theta), acc)
+        return carry, ((pose, out) if record else None)
+
+    cos_0, sin_0 = dynamics.sin_cos(init[2])
+    position = jax.lax.complex(init[0], init[1])
+    heading = jax.lax.complex(cos_0, sin_0)
+    carry = (position, heading, init[2], command(position, heading, init[2]), acc)
+    (position, _, theta, _, acc), ys = jax.lax.scan(_remat(body), carry, None, length=options.steps)
+    return jnp.stack([position.real, position.imag, theta]), acc, ys
 
 
 def _trajectory(ref, params, init, robot, dt, options: Options) -> Trajectory:
-    _, (poses, out) = _simulate(ref, params, init, robot, dt, options, record=True)
+    _, _, (poses, out) = scan_closed_loop(ref, params, init, robot, dt, options, record=True)
     poses = jnp.concatenate([init[None], poses], axis=0)
     return Trajectory(poses, out.v, out.omega, out.region, out.wheel_speeds, out.distance)
 
 
 def _final_pose(ref, params, init, robot, dt, options: Options) -> jax.Array:
-    final, _ = _simulate(ref, params, init, robot, dt, options, record=False)
-    return final.pose
+    final, _, _ = scan_closed_loop(ref, params, init, robot, dt, options)
+    return final
 
 
 # ---------------------------------------------------------------- batching
@@ -189,9 +327,51 @@ def batched(single: Callable) -> Callable:
     return run
 
 
-_rollout_jit = jax.jit(_trajectory, static_argnames=("options",))
-_batch_rollout_jit = jax.jit(batched(_trajectory), static_argnames=("options",))
-_final_poses_jit = jax.jit(batched(_final_pose), static_argnames=("options",))
+# XLA:CPU targets 256-bit vectors unless told otherwise; on a CPU with AVX-512
+# the rollouts run about 20 % faster with 512-bit ones (measured on AMD Zen 4).
+# Other backends ignore the option, and a CPU without AVX-512 uses what it has.
+COMPILER_OPTIONS = {"xla_cpu_prefer_vector_width": "512"}
+
+
+def jit_top_level(fn: Callable, **kwargs: Any) -> Callable:
+    """Return ``jax.jit(fn, **kwargs)`` compiled with ``COMPILER_OPTIONS``.
+
+    For a function of the caller's that runs rollouts inside (a loss, its
+    gradient): only the outermost ``jit`` can carry compiler options.
+    """
+    try:
+        return jax.jit(fn, compiler_options=COMPILER_OPTIONS, **kwargs)
+    except TypeError:  # a JAX without per-function compiler options
+        return jax.jit(fn, **kwargs)
+
+
+class EntryJit:
+    """A jitted entry point, compiled with ``COMPILER_OPTIONS`` when called at top level.
+
+    JAX accepts compiler options only on a top-level ``jit``; inside a
+    caller's own ``jit``/``grad``/``vmap`` (traced arguments) the same
+    function runs as a plain nested ``jit``.
+    """
+
+    def __init__(self, fn: Callable, **kwargs: Any):
+        self.nested = jax.jit(fn, **kwargs)
+        self.top = jit_top_level(fn, **kwargs)
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        traced = any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(args))
+        return (self.nested if traced else self.top)(*args, **kwargs)
+
+    def lower(self, *args: Any, **kwargs: Any) -> Any:
+        """Lower the top-level version (for inspecting the compiled program)."""
+        return self.top.lower(*args, **kwargs)
+
+    def _cache_size(self) -> int:
+        return self.top._cache_size() + self.nested._cache_size()
+
+
+_rollout_jit = EntryJit(_trajectory, static_argnames=("options",))
+_batch_rollout_jit = EntryJit(batched(_trajectory), static_argnames=("options",))
+_final_poses_jit = EntryJit(batched(_final_pose), static_argnames=("options",))
 
 
 # ---------------------------------------------------------------- boundary checks
@@ -229,7 +409,12 @@ def as_poses(name: str, value: Any, *, batch: bool | None) -> jax.Array:
     ok_ndim = {False: (1,), True: (2,), None: (1, 2)}[batch]
     if len(shape) not in ok_ndim or shape[-1] != 3 or (len(shape) == 2 and shape[0] == 0):
         raise ValueError(f"{name} has shape {shape}; allowed: {allowed} [x cm, y cm, theta rad]")
-    finite = bool(jnp.all(jnp.isfinite(arr))) if arr is not None else bool(np.isfinite(host).all())
+    if arr is not None:
+        # Concrete, but maybe closed over by a caller's jit: check it eagerly.
+        with jax.ensure_compile_time_eval():
+            finite = bool(jnp.all(jnp.isfinite(arr)))
+    else:
+        finite = bool(np.isfinite(host).all())
     if not finite:
         flat = np.asarray(arr if arr is not None else host).reshape(-1, 3)
         row = int(np.flatnonzero(~np.isfinite(flat).all(axis=1))[0])
@@ -324,9 +509,17 @@ def as_float_tree(tree: Any) -> Any:
     signature, so changing a gain's type does not recompile.
     """
     dtype = float_dtype()
-    return jax.tree.map(
-        lambda leaf: leaf if isinstance(leaf, jax.core.Tracer) else jnp.asarray(leaf, dtype), tree
-    )
+
+    def convert(leaf):
+        if isinstance(leaf, jax.core.Tracer):
+            return leaf
+        if isinstance(leaf, jax.Array):
+            return leaf if leaf.dtype == dtype else leaf.astype(dtype)
+        # Host values stay NumPy: jit transfers them with the call, which is
+        # much cheaper than one device transfer per leaf here.
+        return np.asarray(leaf, dtype)
+
+    return jax.tree.map(convert, tree)
 
 
 def prepare(refs, params, init, robot, dt, options: Options, *, batch: bool | None):
