@@ -1,5 +1,7 @@
 """wmr_jax: a differentiable, batched simulator of the Shim–Sung (2003) pose controller."""
 
+from wmr_jax import baselines as _baselines  # noqa: F401  (registers the baselines)
+from wmr_jax.baselines import AicardiGains, AstolfiGains
 from wmr_jax.controllers import SHIM_SUNG, Controller, get_controller, register_controller
 from wmr_jax.law import (
     Diagnostics,
@@ -27,11 +29,17 @@ from wmr_jax.params import (
     wheel_speed_bound,
 )
 from wmr_jax.reference import reference_control, reference_diagnostics, reference_rollout
+from wmr_jax.sharding import ShardedBatch, shard, unpad
 from wmr_jax.simulation import Options, Trajectory, batch_rollout, final_poses, rollout
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "AicardiGains",
+    "AstolfiGains",
+    "ShardedBatch",
+    "shard",
+    "unpad",
     "SHIM_SUNG",
     "Controller",
     "Options",

@@ -7,6 +7,7 @@ ends in one line on stderr and exit status 2, never a traceback.
 from __future__ import annotations
 
 import argparse
+import importlib
 import math
 import sys
 import warnings
@@ -155,13 +156,38 @@ def build_parser() -> argparse.ArgumentParser:
     paper = sub.add_parser("paper", help="Figs. 6-10, wheel speeds and the paper table")
     paper.add_argument("--out", default="results", help="output folder (default results/)")
     paper.set_defaults(func=_cmd_paper)
+
+    for name, module, summary in _MODULE_COMMANDS:
+        command = sub.add_parser(name, help=summary)
+        module = importlib.import_module(f"wmr_jax.{module}")
+        module.configure_parser(command)
+        command.set_defaults(func=module.run_cli)
     return parser
+
+
+# Sweep-like commands spread their batches over every local device; on a CPU
+# that means splitting it into several JAX devices first (wmr_jax.sharding).
+_ALL_DEVICE_COMMANDS = ("sweep", "bench")
+
+# Commands whose flags and work live with the library module that does the work.
+_MODULE_COMMANDS = (
+    ("tune", "tuning", "tune gains by gradient descent under k_r + L k_theta <= V_max"),
+    ("sweep", "maps", "map success, arrival, path, wheel speed and zig-zag over a pose space"),
+    ("waypoints", "waypoints", "consecutive motions through a chain of waypoints"),
+    ("robustness", "robustness", "Monte Carlo of noise, model mismatch and latency"),
+    ("animate", "animation", "animated GIF of a batch of robots driving to their poses"),
+    ("bench", "bench", "robot-steps per second against NumPy baselines"),
+)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.command in _ALL_DEVICE_COMMANDS:
+        from wmr_jax.sharding import use_cpu_devices
+
+        use_cpu_devices()  # before any JAX computation; a no-op on accelerators
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("always")
