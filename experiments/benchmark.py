@@ -5,13 +5,12 @@ Usage: ``python experiments/benchmark.py [--sizes N ...] [--json FILE] ...``
 float32, writes ``results/benchmark.json``).
 """
 
-import argparse
 import sys
 
-from wmr_jax import bench
+from wmr_jax.cli import main
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    bench.configure_parser(parser)
-    parser.set_defaults(json="results/benchmark.json")
-    sys.exit(bench.run_cli(parser.parse_args()))
+    argv = sys.argv[1:]
+    if "--json" not in argv:
+        argv += ["--json", "results/benchmark.json"]
+    sys.exit(main(["bench", *argv]))

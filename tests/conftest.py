@@ -1,39 +1,24 @@
 """Test configuration: float64 for reference comparisons.
 
 JAX's default float32 path is exercised by tests that wrap themselves in
-``jax.enable_x64(False)`` (see ``test_rollout.py::test_float32_*``).
+``jax.enable_x64(False)`` (e.g. ``test_rollout.py::test_float32_default_path_*``).
 """
-
-import math
 
 import jax
 import numpy as np
 import pytest
 
-jax.config.update("jax_enable_x64", True)
+import wmr_jax as w
 
-PAPER_REFS_DEG = [
-    (40.0, 0.0, -45.0),
-    (30.0, 30.0, 0.0),
-    (0.0, 40.0, 90.0),
-    (-30.0, 30.0, 135.0),
-    (-30.0, -30.0, 0.0),
-    (0.0, -40.0, 0.0),
-    (30.0, -30.0, 90.0),
-]
+jax.config.update("jax_enable_x64", True)
 
 
 @pytest.fixture
 def paper_refs() -> np.ndarray:
     """The seven references of Fig. 7, ``(7, 3)`` in cm, cm, rad."""
-    refs = np.array(PAPER_REFS_DEG)
-    refs[:, 2] = np.radians(refs[:, 2])
-    return refs
+    return w.paper_refs()
 
 
-def random_refs(rng: np.random.Generator, n: int, r_min=5.0, r_max=80.0) -> np.ndarray:
-    """References at distance ``r_min``–``r_max`` cm, any bearing, any heading (SPEC §6)."""
-    dist = rng.uniform(r_min, r_max, n)
-    bearing = rng.uniform(-math.pi, math.pi, n)
-    heading = rng.uniform(-math.pi, math.pi, n)
-    return np.stack([dist * np.cos(bearing), dist * np.sin(bearing), heading], axis=-1)
+def random_refs(seed: int, n: int, r_min: float = 5.0, r_max: float = 80.0) -> np.ndarray:
+    """``n`` references of the evaluation set (``docs/model.md §6``), as float64 NumPy."""
+    return np.asarray(w.sample_poses(seed, n, r_min=r_min, r_max=r_max, dtype=np.float64))

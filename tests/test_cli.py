@@ -26,51 +26,112 @@ def test_simulate_prints_report(capsys, tmp_path):
 
 
 def test_simulate_nonideal(capsys):
-    assert (
-        main(["simulate", "--ref", "20", "-10", "45", "--kr", "60", "--velocity", "nonideal"]) == 0
-    )
+    argv = ["simulate", "--ref", "20", "-10", "45", "--kr", "60", "--velocity", "nonideal"]
+    assert main(argv) == 0
     assert "arrival time" in capsys.readouterr().out
+
+
+def test_simulate_takes_gains_from_a_file(capsys, tmp_path):
+    """A tuned_gains.json (Gains field names, phi_m in radians) stands for the gain flags."""
+    path = tmp_path / "tuned_gains.json"
+    gains = w.Gains(kr=60.0, k_theta=8.0, phi_m=math.radians(60.0))
+    path.write_text(json.dumps({k: float(v) for k, v in vars(gains).items()}))
+    ref = ["25", "-10", "30"]
+    assert main(["simulate", "--ref", *ref, "--gains", str(path)]) == 0
+    from_file = capsys.readouterr().out
+    flags = ["--kr", "60", "--k-theta", "8", "--phi-m", "60"]
+    assert main(["simulate", "--ref", *ref, *flags]) == 0
+    assert from_file == capsys.readouterr().out
+
+
+def _write(tmp_path, name, text):
+    path = tmp_path / name
+    path.write_text(text)
+    return str(path)
 
 
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["simulate", "--ref", "1", "nan", "0"], "is not finite"),
-        (["simulate", "--ref", "1", "2", "0", "--alpha", "0.7"], "gains.alpha = 0.7"),
-        (["simulate", "--ref", "1", "2", "0", "--dt", "0"], "dt = 0.0"),
-        (["simulate", "--ref", "1", "2", "0", "--velocity", "warp"], "velocity = 'warp'"),
-        (["simulate", "--ref", "1", "2", "0", "--phi-m", "95"], "gains.phi_m"),
+        (["simulate", "--ref", "1", "nan", "0"], "--ref Y 'nan' is not allowed"),
+        (["simulate", "--ref", "1", "2", "0", "--alpha", "0.7"], "--alpha: gains.alpha = 0.7"),
+        (["simulate", "--ref", "1", "2", "0", "--dt", "0"], "--dt '0' is not allowed"),
+        (["simulate", "--ref", "1", "2", "0", "--velocity", "warp"], "--velocity 'warp'"),
+        # A flag given in degrees is judged in degrees.
+        (["simulate", "--ref", "1", "2", "0", "--phi-m", "95"], "--phi-m 95 is not allowed"),
+        (["simulate", "--ref", "1", "2", "0", "--steps", "0"], "--steps '0' is not allowed"),
+        (["simulate", "--ref", "1", "2", "0", "--plot", "/dev/null/x.png"], "is a file"),
+        (["simulate", "--ref", "1", "2", "0", "--gains", "{missing}"], "cannot be read"),
+        (["simulate", "--ref", "1", "2", "0", "--gains", "{bad_key}"], "keys among kr"),
+        (["simulate", "--ref", "1", "2", "0", "--gains", "{bad_value}"], "gains.alpha = 0.7"),
+        (["simulate", "--ref", "1", "2", "0", "--gains", "{good}", "--kr", "60"], "--kr is not"),
+        (["bench", "--sizes", "0"], "--sizes '0' is not allowed"),
+        (["bench", "--dtype", "float16"], "allowed: float32, float64"),
+        (["bench", "--cases", "warp_drive"], "--cases 'warp_drive' is not allowed"),
+        (["bench", "--wait-idle", "-1"], "--wait-idle '-1' is not allowed"),
+        # Checked before the benchmark runs: these sizes would take hours.
+        (["bench", "--sizes", "100000000", "--json", "/dev/null/b.json"], "is a file"),
+        (["paper", "--out", "/dev/null/results"], "is a file"),
+        (["demo", "--out", "/dev/null"], "a folder (it is a file)"),
     ],
 )
-def test_bad_values_give_one_line_and_status_2(capsys, argv, message):
-    assert main(argv) == 2
+def test_bad_values_give_one_line_and_status_2(capsys, tmp_path, argv, message):
+    files = {
+        "missing": str(tmp_path / "nothing.json"),
+        "bad_key": _write(tmp_path, "k.json", '{"kr": 60, "warp": 1}'),
+        "bad_value": _write(tmp_path, "v.json", '{"alpha": 0.7}'),
+        "good": _write(tmp_path, "g.json", '{"kr": 60}'),
+    }
+    assert main([arg.format(**files) for arg in argv]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("wmr-jax: error:") and message in err[0]
 
 
-def test_argparse_errors_are_status_2():
+def test_argparse_errors_are_one_line_and_status_2(capsys):
     with pytest.raises(SystemExit) as info:
         main(["simulate", "--ref", "1", "2"])
     assert info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--ref" in err[0]
+
+
+def test_help_shows_the_defaults(capsys):
     with pytest.raises(SystemExit) as info:
-        main(["simulate", "--ref", "1", "2", "3", "--steps", "0"])
-    assert info.value.code == 2
+        main(["bench", "--help"])
+    assert info.value.code == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert "(default: 100)" in out and "(default: [1000, 10000, 100000])" in out
+    assert "grad_tuning_loss" in out  # the cases one may choose
 
 
-def test_paper_command_writes_figures_and_table(tmp_path, capsys):
-    assert main(["paper", "--out", str(tmp_path)]) == 0
+def test_demo_writes_the_paper_figures_and_tables(tmp_path, capsys):
+    """End to end: Fig. 7 and its table, then Figs. 6-10 and the paper table."""
+    assert main(["demo", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
     for name in ("fig6", "fig7", "fig8", "fig9", "fig10", "wheels_k120", "wheels_k60"):
         assert (tmp_path / f"{name}.png").stat().st_size > 5000
+    fig7 = json.loads((tmp_path / "fig7.json").read_text())
+    assert len(fig7["runs"]) == 7 and fig7["gains"]["kr"] == 120.0
+    assert "| ref | arrival_s |" in (tmp_path / "fig7.md").read_text()
     table = json.loads((tmp_path / "paper_table.json").read_text())
     assert len(table["runs"]) == 28  # 7 references × 2 gains × 2 loops
-    assert table["summary"]["kr=120"]["condition"] == "violated"
-    assert table["summary"]["kr=60"]["condition"] == "holds"
+    assert table["summary"]["fig6"]["bound_cm"] == pytest.approx(1.61, abs=0.005)
+    k120, k60 = table["summary"]["kr=120"], table["summary"]["kr=60"]
+    assert (k120["condition"], k60["condition"]) == ("violated", "holds")
+    # The README's path gaps between the ideal and the non-ideal loop (cm).
+    assert (k120["max_deviation_cm"], k120["mean_deviation_cm"]) == pytest.approx(
+        (4.11, 3.39), abs=0.01
+    )
+    assert (k60["max_deviation_cm"], k60["mean_deviation_cm"]) == pytest.approx(
+        (1.13, 1.03), abs=0.01
+    )
+    assert "max 4.11 cm, mean 3.39 cm" in out and "max 1.13 cm, mean 1.03 cm" in out
     assert "| kr | loop | ref |" in (tmp_path / "paper_table.md").read_text()
     assert not list(tmp_path.glob(".*.tmp"))  # no half-written files left
 
 
 def test_console_script_help():
     out = subprocess.run(
-        [sys.executable, "-m", "wmr_jax.cli", "--help"], capture_output=True, text=True, check=True
+        [sys.executable, "-m", "wmr_jax", "--help"], capture_output=True, text=True, check=True
     ).stdout
-    assert "simulate" in out and "demo" in out and "paper" in out
+    assert "simulate" in out and "demo" in out and "paper" in out and "bench" in out

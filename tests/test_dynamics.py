@@ -1,4 +1,4 @@
-"""Exact arc integration (SPEC §4)."""
+"""Exact arc integration (docs/model.md §4)."""
 
 import math
 

@@ -71,7 +71,7 @@ def test_bad_batch_arguments():
 
 
 def test_errors_come_before_tracing(monkeypatch):
-    from wmr_jax import simulation
+    from wmr_jax._src import rollout as simulation
 
     def forbidden(*args, **kwargs):
         raise AssertionError("traced or ran before validation")

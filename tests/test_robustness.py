@@ -1,53 +1,56 @@
-"""Robustness Monte Carlo: reproducible draws, and the nominal run when undisturbed."""
+"""Robustness Monte Carlo (docs/model.md §7): reproducible draws; undisturbed, the nominal run."""
 
-import argparse
+import json
 
 import jax
 import numpy as np
 import pytest
 
 import wmr_jax as w
-from wmr_jax import baselines, metrics, robustness
-from wmr_jax.robustness import Disturbance, draw_disturbances, monte_carlo, perturbed_metrics
+from wmr_jax import studies
+from wmr_jax.cli import main
 
 DT = 0.033
-# One batch shape for every run here (and in test_maps): compiled programs are reused.
+# One batch shape for every run here: N poses over the docs/model.md §6 horizon
+# (182 periods), so that monte_carlo(n_runs=N) and the command reuse the
+# programs compiled for the first tests.
 N, STEPS = 23, 182
 
 
-def nominal(refs, controller, steps, params=None, velocity="ideal"):
-    traj = w.batch_rollout(refs, params, steps=steps, controller=controller, velocity=velocity)
-    return traj
-
-
 def quiet(refs, steps, *, delay=0.0):
+    """A disturbance that disturbs nothing (one-sample latency if ``delay``)."""
     n = len(refs)
-    return Disturbance(refs, np.zeros((n, steps, 3)), np.ones((n, 3)), np.float64(delay))
+    return studies.Disturbance(refs, np.zeros((n, steps, 3)), np.ones((n, 3)), np.float64(delay))
+
+
+def draw_refs(seed, n=N):
+    refs, _, _ = studies.draw_disturbances(jax.random.PRNGKey(seed), n, 1)
+    return refs
 
 
 @pytest.mark.parametrize("controller", ["shim-sung", "aicardi", "astolfi-corke"])
 def test_zero_disturbance_is_the_nominal_run(controller):
-    refs, _, _ = draw_disturbances(jax.random.PRNGKey(3), N, 1)
-    m = perturbed_metrics(quiet(refs, STEPS), controller=controller)
-    traj = nominal(refs, controller, STEPS)
+    refs = draw_refs(3)
+    m = studies.perturbed_metrics(quiet(refs, STEPS), controller=controller)
+    traj = w.batch_rollout(refs, steps=STEPS, controller=controller)
     # The same closed loop and the same arithmetic on the pose: arrival times
     # and counts agree exactly, the sums to rounding.
-    np.testing.assert_array_equal(m.arrival, np.asarray(metrics.arrival_time(traj, refs, dt=DT)))
-    np.testing.assert_array_equal(m.zigzag, np.asarray(metrics.zigzag_count(traj)))
-    np.testing.assert_allclose(m.path, np.asarray(metrics.path_length(traj)), rtol=1e-12)
+    np.testing.assert_array_equal(m.arrival, np.asarray(w.arrival_time(traj, refs, dt=DT)))
+    np.testing.assert_array_equal(m.zigzag, np.asarray(w.zigzag_count(traj)))
+    np.testing.assert_allclose(m.path, np.asarray(w.path_length(traj)), rtol=1e-12)
     peak = np.abs(np.asarray(traj.wheel_speeds)).max(axis=(-1, -2))
     np.testing.assert_allclose(m.peak_wheel, peak, rtol=1e-12)
-    ok = np.asarray(metrics.arrived(traj.poses[:, 1:], refs[:, None, :]))
+    ok = np.asarray(w.arrived(traj.poses[:, 1:], refs[:, None, :]))
     first = np.where(ok.any(axis=1), (np.argmax(ok, axis=1) + 1) * DT, np.inf)
     np.testing.assert_allclose(m.first_arrival, first, rtol=1e-12)
-    assert np.all(m.first_arrival <= m.arrival)
+    assert np.all(m.first_arrival <= m.arrival) and np.isfinite(m.arrival).any()
 
 
 def test_zero_disturbance_is_the_nominal_run_nonideal():
-    refs, _, _ = draw_disturbances(jax.random.PRNGKey(4), 6, 1)
-    m = perturbed_metrics(quiet(refs, 40), controller="aicardi", velocity="nonideal")
-    traj = nominal(refs, "aicardi", 40, velocity="nonideal")
-    np.testing.assert_allclose(m.path, np.asarray(metrics.path_length(traj)), rtol=1e-10)
+    refs = draw_refs(4, 4)
+    m = studies.perturbed_metrics(quiet(refs, 20), controller="aicardi", velocity="nonideal")
+    traj = w.batch_rollout(refs, steps=20, controller="aicardi", velocity="nonideal")
+    np.testing.assert_allclose(m.path, np.asarray(w.path_length(traj)), rtol=1e-10)
     final = np.asarray(traj.poses[:, -1, :2])
     np.testing.assert_allclose(m.final_distance, np.hypot(*(final - refs[:, :2]).T), atol=1e-9)
 
@@ -55,58 +58,59 @@ def test_zero_disturbance_is_the_nominal_run_nonideal():
 def test_equal_wheel_factors_scale_the_gains():
     # Both rims s times as fast as commanded: for v = k_ρ ρ, ω = k_α α + k_β β
     # that is the same law with every gain times s.
-    refs, _, _ = draw_disturbances(jax.random.PRNGKey(5), N, 1)
+    refs = draw_refs(3)
     s = 1.05
     spec = quiet(refs, STEPS)._replace(mismatch=np.tile([s, s, 1.0], (N, 1)))
-    m = perturbed_metrics(spec, controller="astolfi-corke")
-    gains = baselines.AstolfiGains(k_rho=3.0 * s, k_alpha=8.0 * s, k_beta=-3.0 * s)
-    traj = nominal(refs, "astolfi-corke", STEPS, params=gains)
-    np.testing.assert_array_equal(m.arrival, np.asarray(metrics.arrival_time(traj, refs, dt=DT)))
-    np.testing.assert_allclose(m.path, np.asarray(metrics.path_length(traj)), rtol=1e-9)
+    m = studies.perturbed_metrics(spec, controller="astolfi-corke")
+    gains = w.AstolfiGains(k_rho=3.0 * s, k_alpha=8.0 * s, k_beta=-3.0 * s)
+    traj = w.batch_rollout(refs, gains, steps=STEPS, controller="astolfi-corke")
+    np.testing.assert_array_equal(m.arrival, np.asarray(w.arrival_time(traj, refs, dt=DT)))
+    np.testing.assert_allclose(m.path, np.asarray(w.path_length(traj)), rtol=1e-9)
 
 
 def test_latency_changes_the_run():
-    refs, _, _ = draw_disturbances(jax.random.PRNGKey(6), N, 1)
-    prompt = perturbed_metrics(quiet(refs, STEPS), controller="aicardi")
-    late = perturbed_metrics(quiet(refs, STEPS, delay=1.0), controller="aicardi")
+    refs = draw_refs(3)
+    prompt = studies.perturbed_metrics(quiet(refs, STEPS), controller="aicardi")
+    late = studies.perturbed_metrics(quiet(refs, STEPS, delay=1.0), controller="aicardi")
     # One period at rest first: the late runs are not the prompt ones.
     assert np.all(late.path != prompt.path)
 
 
 def test_same_seed_same_numbers():
-    kwargs = dict(n_runs=12, noise_xy=(0.0, 1.0), noise_deg=(0.0, 2.0), radius_mismatch=0.03)
-    a = monte_carlo(jax.random.PRNGKey(11), controller="aicardi", latency=True, **kwargs)
-    b = monte_carlo(jax.random.PRNGKey(11), controller="aicardi", latency=True, **kwargs)
-    c = monte_carlo(jax.random.PRNGKey(12), controller="aicardi", latency=True, **kwargs)
+    kwargs = dict(n_runs=N, noise_xy=(0.0, 1.0), noise_deg=(0.0, 2.0), radius_mismatch=0.03)
+    a = studies.monte_carlo(jax.random.PRNGKey(11), controller="aicardi", latency=True, **kwargs)
+    b = studies.monte_carlo(jax.random.PRNGKey(11), controller="aicardi", latency=True, **kwargs)
+    c = studies.monte_carlo(jax.random.PRNGKey(12), controller="aicardi", latency=True, **kwargs)
     assert a == b
     assert a != c
     assert [r["noise xy cm"] for r in a] == [0.0, 1.0]
-    assert all(0.0 <= r["success"] <= 1.0 for r in a)
+    assert all(0.0 <= r["success"] <= 1.0 and r["runs"] == N for r in a)
 
 
-def test_draws_are_spec_poses_and_bounded_mismatch():
-    refs, unit, mismatch = draw_disturbances(
-        jax.random.PRNGKey(0), 500, 7, radius_mismatch=0.03, mass_mismatch=0.2
+def test_draws_are_evaluation_poses_and_bounded_mismatch():
+    refs, unit, mismatch = studies.draw_disturbances(
+        jax.random.PRNGKey(0), 400, 10, radius_mismatch=0.03, mass_mismatch=0.2
     )
     dist = np.hypot(refs[:, 0], refs[:, 1])
-    assert dist.min() >= 5.0 and dist.max() <= 80.0 and unit.shape == (500, 7, 3)
+    assert dist.min() >= 5.0 and dist.max() <= 80.0 and unit.shape == (400, 10, 3)
+    assert np.abs(refs[:, 2]).max() <= np.pi
     assert np.abs(mismatch[:, :2] - 1).max() <= 0.03 and np.abs(mismatch[:, 2] - 1).max() <= 0.2
-    assert abs(unit.mean()) < 0.05 and abs(unit.std() - 1) < 0.05  # 10500 N(0, 1) draws
+    assert abs(unit.mean()) < 0.05 and abs(unit.std() - 1) < 0.05  # 12000 N(0, 1) draws
 
 
 @pytest.mark.parametrize(
     ("change", "message"),
     [
         ({"delay": np.float64(0.5)}, "disturbance.delay"),
-        ({"mismatch": np.zeros((4, 3))}, "mismatch > 0"),
+        ({"mismatch": np.zeros((4, 3))}, "disturbance.mismatch = array of shape (4, 3)"),
         ({"noise": np.zeros((4, 10, 2))}, "disturbance.noise has shape (4, 10, 2)"),
         ({"ref": np.zeros((4, 2))}, "disturbance.ref has shape (4, 2)"),
     ],
 )
 def test_bad_disturbances_are_rejected(change, message):
     spec = quiet(np.zeros((4, 3)) + [10.0, 0.0, 0.0], 10)._replace(**change)
-    with pytest.raises(ValueError) as info:
-        perturbed_metrics(spec)
+    with pytest.raises(ValueError, match="allowed") as info:
+        studies.perturbed_metrics(spec)
     assert message in str(info.value)
 
 
@@ -114,39 +118,42 @@ def test_bad_disturbances_are_rejected(change, message):
     ("kwargs", "message"),
     [
         ({"n_runs": 0}, "n_runs = 0"),
-        ({"noise_xy": (0.0, -1.0), "noise_deg": (0.0, 1.0)}, "noise_xy level -1.0"),
+        ({"noise_xy": (0.0, -1.0), "noise_deg": (0.0, 1.0)}, "noise_xy[1] = -1.0"),
         ({"noise_xy": (0.0,), "noise_deg": (0.0, 1.0)}, "the same number"),
         ({"radius_mismatch": 1.5}, "radius_mismatch = 1.5"),
     ],
 )
 def test_bad_monte_carlo_options(kwargs, message):
-    with pytest.raises(ValueError) as info:
-        monte_carlo(jax.random.PRNGKey(0), **kwargs)
+    with pytest.raises(ValueError, match="allowed") as info:
+        studies.monte_carlo(jax.random.PRNGKey(0), **kwargs)
     assert message in str(info.value)
 
 
-@pytest.mark.parametrize(
-    ("argv", "message"),
-    [
-        (["--runs", "0"], "--runs = 0"),
-        (["--controller", "nope"], "--controller = 'nope'"),
-        (["--velocity", "warp"], "--velocity = 'warp'"),
-        (["--seed", "-1"], "--seed = -1"),
-    ],
-)
-def test_cli_bad_values(tmp_path, argv, message):
-    parser = argparse.ArgumentParser()
-    robustness.configure_parser(parser)
-    args = parser.parse_args(["--out", str(tmp_path), *argv])
-    with pytest.raises(ValueError) as info:
-        args.func(args)
-    assert message in str(info.value) and "\n" not in str(info.value)
+# Each flag with a value it refuses: one line on stderr, exit status 2.
+BAD_FLAGS = {"--runs": "0", "--controller": "nope", "--velocity": "warp", "--seed": "-1"}
 
 
-def test_study_writes_figure_and_tables(tmp_path):
-    rows = robustness.robustness_study(
-        tmp_path, controller_names=["aicardi"], n_runs=8, noise_xy=(0.0, 1.0), noise_deg=(0.0, 2.0)
+@pytest.mark.parametrize("flag", BAD_FLAGS)
+def test_command_rejects_bad_values_in_one_line(tmp_path, capsys, flag):
+    assert main(["robustness", "--out", str(tmp_path), flag, BAD_FLAGS[flag]]) == 2
+    err = capsys.readouterr().err
+    assert (
+        err.startswith(f"wmr-jax: error: {flag} '{BAD_FLAGS[flag]}' is not ") and "allowed" in err
     )
-    assert len(rows) == 3 * 2
+    assert err.count("\n") == 1
+
+
+def test_command_writes_what_the_study_returns(tmp_path, capsys):
+    out = tmp_path / "rob"
+    assert main(["robustness", "--out", str(out), "--runs", str(N), "--controller", "aicardi"]) == 0
+    assert "| noise + mismatch + latency | aicardi |" in capsys.readouterr().out
     for name in ("robustness.png", "robustness.md", "robustness.json"):
-        assert (tmp_path / name).stat().st_size > 100
+        assert (out / name).stat().st_size > 100
+    saved = json.loads((out / "robustness.json").read_text())
+    rows = studies.robustness_study(controller_names=["aicardi"], n_runs=N)
+    assert len(rows) == 3 * len(studies.DEFAULT_NOISE_XY) == len(saved["rows"])
+    assert [r["success"] for r in saved["rows"]] == [r["success"] for r in rows]
+    assert [r["condition"] for r in rows[::5]] == [c[0] for c in studies.ROBUSTNESS_CONDITIONS]
+    # The output folder is checked before any computation.
+    (tmp_path / "file").write_text("")
+    assert main(["robustness", "--out", str(tmp_path / "file"), "--runs", "1"]) == 2

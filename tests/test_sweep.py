@@ -1,28 +1,34 @@
-"""Chunked sweeps: the streamed metrics equal those of stored trajectories (SPEC §6)."""
+"""Chunked sweeps: the streamed metrics equal those of stored trajectories (docs/model.md §6),
+and an interrupted sweep resumes from its checked chunk files."""
 
 import math
+import warnings
 
 import numpy as np
 import pytest
-from conftest import random_refs
 
 import wmr_jax as w
-from wmr_jax import metrics, sweep
 
 DT = 0.033
+STEPS = 40
+N, HORIZON = 40, 182  # as in test_maps.py: the reference metrics compile once for both
+
+
+def _poses(seed, n):
+    return np.array(w.sample_poses(seed, n))  # a writable NumPy copy
 
 
 def _expected(refs, gains, **kwargs):
-    """The SPEC §6 metrics from whole trajectories, as the rest of the package computes them."""
+    """The docs/model.md §6 metrics from whole trajectories, as the rest of the package has them."""
     traj = w.batch_rollout(refs, gains, dt=DT, **kwargs)
     return {
         "final_x": np.asarray(traj.poses[:, -1, 0]),
         "final_y": np.asarray(traj.poses[:, -1, 1]),
         "final_theta": np.asarray(traj.poses[:, -1, 2]),
-        "arrival_time": np.asarray(metrics.arrival_time(traj, refs, dt=DT)),
-        "path_length": np.asarray(metrics.path_length(traj)),
+        "arrival_time": np.asarray(w.arrival_time(traj, refs, dt=DT)),
+        "path_length": np.asarray(w.path_length(traj)),
         "peak_wheel_speed": np.abs(np.asarray(traj.wheel_speeds)).max(axis=(1, 2)),
-        "zigzags": np.asarray(metrics.zigzag_count(traj)),
+        "zigzags": np.asarray(w.zigzag_count(traj)),
     }
 
 
@@ -37,46 +43,50 @@ def _assert_matches(got, want):
     np.testing.assert_allclose(got["path_length"], want["path_length"], rtol=1e-12)
 
 
-def _refs_with_failures(n, seed):
-    """SPEC §6 references, a few too far to reach within the horizon."""
-    refs = random_refs(np.random.default_rng(seed), n)
-    refs[:3, :2] *= 4.0
-    return refs
-
-
 def test_streamed_metrics_equal_trajectory_metrics():
-    refs = _refs_with_failures(40, 0)
+    refs = _poses(0, N)
+    refs[:3, :2] *= 10.0  # a few too far to reach within the horizon
     gains = w.Gains(kr=60.0)
-    got = sweep.sweep(refs, gains, dt=DT, steps=90, chunk_size=16)  # 3 chunks, the last padded
-    assert set(got) == set(sweep.FIELDS)
-    assert all(v.shape == (40,) for v in got.values())
-    want = _expected(refs, gains, steps=90)
-    assert 0 < np.isfinite(want["arrival_time"]).sum() < 40  # both outcomes occur
+    got = w.sweep(refs, gains, dt=DT, steps=HORIZON, chunk_size=16)  # 3 chunks, the last padded
+    assert set(got) == set(w.SWEEP_FIELDS)
+    assert all(v.shape == (N,) for v in got.values())
+    want = _expected(refs, gains, steps=HORIZON)
+    assert 0 < np.isfinite(want["arrival_time"]).sum() < N  # both outcomes occur
     assert want["zigzags"].max() > 0
     _assert_matches(got, want)
 
 
 def test_nonideal_loop_and_per_pose_gains():
-    refs = random_refs(np.random.default_rng(1), 6)
-    gains = w.Gains(kr=np.linspace(40.0, 100.0, 6))
-    got = sweep.sweep(
-        refs, gains, dt=DT, steps=40, velocity="nonideal", controller="shim-sung", chunk_size=4
+    refs = _poses(1, N)
+    gains = w.Gains(kr=np.linspace(40.0, 100.0, N))
+    got = w.sweep(
+        refs,
+        gains,
+        dt=DT,
+        steps=HORIZON,
+        velocity="nonideal",
+        controller="shim-sung",
+        chunk_size=16,
     )
-    _assert_matches(got, _expected(refs, gains, steps=40, velocity="nonideal"))
+    _assert_matches(got, _expected(refs, gains, steps=HORIZON, velocity="nonideal"))
 
 
 def test_chunking_does_not_change_results():
-    refs = random_refs(np.random.default_rng(2), 30)
-    whole = sweep.sweep(refs, steps=60, chunk_size=1000)
-    for chunk in (1, 7, 16):
-        part = sweep.sweep(refs, steps=60, chunk_size=chunk)
-        for name in sweep.FIELDS:
-            np.testing.assert_allclose(part[name], whole[name], rtol=0, atol=1e-12, err_msg=name)
+    refs = _poses(2, 30)
+    whole = w.sweep(refs, steps=STEPS, chunk_size=1000)
+    part = w.sweep(refs, steps=STEPS, chunk_size=7)  # 5 chunks, the last padded
+    for name in w.SWEEP_FIELDS:
+        np.testing.assert_allclose(part[name], whole[name], rtol=0, atol=1e-12, err_msg=name)
 
 
-def test_resume_after_interruption(tmp_path, monkeypatch):
-    refs = random_refs(np.random.default_rng(3), 50)
-    full = sweep.sweep(refs, steps=40, chunk_size=10)
+def _inodes(folder):
+    """Chunk file -> inode: a chunk that is computed again is written anew (a new inode)."""
+    return {p.name: p.stat().st_ino for p in sorted(folder.glob("chunk_*.npz"))}
+
+
+def test_resume_after_interruption(tmp_path):
+    refs = _poses(3, 50)
+    full = w.sweep(refs, steps=STEPS, chunk_size=10)
 
     class Stop(Exception):
         pass
@@ -85,53 +95,71 @@ def test_resume_after_interruption(tmp_path, monkeypatch):
         if done == 3:
             raise Stop
 
+    (tmp_path / ".chunk_000004.npz.x1y2.tmp").write_bytes(b"left by a killed run")
     with pytest.raises(Stop):
-        sweep.sweep(refs, steps=40, chunk_size=10, out=tmp_path, on_chunk=interrupt)
+        w.sweep(refs, steps=STEPS, chunk_size=10, out=tmp_path, on_chunk=interrupt)
     # Chunks finished before the interruption are on disk; nothing half-written.
-    assert sorted(p.name for p in tmp_path.glob("chunk_*.npz")) == [
-        f"chunk_{i:06d}.npz" for i in range(3)
-    ]
+    first = _inodes(tmp_path)
+    assert list(first) == [f"chunk_{i:06d}.npz" for i in range(3)]
     assert not list(tmp_path.glob(".*.tmp"))
 
-    launched = []
-    real = sweep._sweep_jit
-
-    def counting(*args, **kwargs):
-        launched.append(1)
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(sweep, "_sweep_jit", counting)
-    resumed = sweep.sweep(refs, steps=40, chunk_size=10, out=tmp_path)
-    assert len(launched) == 2  # only the two chunks that had not finished
-    for name in sweep.FIELDS:
+    resumed = w.sweep(refs, steps=STEPS, chunk_size=10, out=tmp_path)
+    after = _inodes(tmp_path)
+    assert len(after) == 5
+    assert all(after[name] == ino for name, ino in first.items())  # reused, not recomputed
+    for name in w.SWEEP_FIELDS:
         np.testing.assert_array_equal(resumed[name], full[name], err_msg=name)
     with np.load(tmp_path / "results.npz") as saved:
         np.testing.assert_array_equal(saved["arrival_time"], full["arrival_time"])
 
-    # Other settings, or other poses: the stored chunks are not reused.
-    launched.clear()
-    sweep.sweep(refs, steps=41, chunk_size=10, out=tmp_path)
-    assert len(launched) == 5
-    launched.clear()
+    # Other poses: only the chunk holding the changed pose is computed again.
     moved = refs.copy()
     moved[12] += 1.0
-    sweep.sweep(moved, steps=41, chunk_size=10, out=tmp_path)
-    assert len(launched) == 1  # only the chunk holding the changed pose
+    w.sweep(moved, steps=STEPS, chunk_size=10, out=tmp_path)
+    changed = [name for name, ino in _inodes(tmp_path).items() if after[name] != ino]
+    assert changed == ["chunk_000001.npz"]
+    # Other settings: none is reused.
+    before = _inodes(tmp_path)
+    w.sweep(refs, steps=STEPS + 1, chunk_size=10, out=tmp_path)
+    assert all(before[name] != ino for name, ino in _inodes(tmp_path).items())
+
+
+def test_damaged_or_altered_chunks_are_recomputed_with_a_warning(tmp_path):
+    refs = _poses(3, 50)
+    full = w.sweep(refs, steps=STEPS, chunk_size=10, out=tmp_path)
+    damaged = tmp_path / "chunk_000001.npz"
+    damaged.write_bytes(damaged.read_bytes()[:-40])  # truncated
+    altered = tmp_path / "chunk_000003.npz"
+    with np.load(altered) as data:
+        arrays = {name: data[name] for name in data.files}
+    arrays["arrival_time"] = arrays["arrival_time"] + 1.0  # edited, checksum left as it was
+    np.savez(altered, **arrays)
+    before = _inodes(tmp_path)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        again = w.sweep(refs, steps=STEPS, chunk_size=10, out=tmp_path)
+    messages = [str(c.message) for c in caught if "recomputing" in str(c.message)]
+    assert len(messages) == 2 and all("\n" not in m for m in messages), messages
+    assert "chunk_000001.npz" in messages[0] and "chunk_000003.npz" in messages[1]
+    changed = [name for name, ino in _inodes(tmp_path).items() if before[name] != ino]
+    assert changed == ["chunk_000001.npz", "chunk_000003.npz"]
+    for name in w.SWEEP_FIELDS:
+        np.testing.assert_array_equal(again[name], full[name], err_msg=name)
 
 
 def test_bad_inputs_are_named_before_tracing():
-    refs = random_refs(np.random.default_rng(4), 5)
+    refs = _poses(4, 5)
     with pytest.raises(ValueError, match=r"refs has shape \(5, 2\)"):
-        sweep.sweep(refs[:, :2])
+        w.sweep(refs[:, :2])
     with pytest.raises(ValueError, match="chunk_size = 0"):
-        sweep.sweep(refs, chunk_size=0)
+        w.sweep(refs, chunk_size=0)
     with pytest.raises(ValueError, match="tol_theta"):
-        sweep.sweep(refs, tol_theta=math.pi / 2)
+        w.sweep(refs, tol_theta=math.pi / 2)
     with pytest.raises(ValueError, match="gains.kr"):
-        sweep.sweep(refs, w.Gains(kr=-1.0))
+        w.sweep(refs, w.Gains(kr=-1.0))
     with pytest.raises(ValueError, match="velocity"):
-        sweep.sweep(refs, velocity="fast")
+        w.sweep(refs, velocity="fast")
     bad = refs.copy()
     bad[3, 1] = np.nan
     with pytest.raises(ValueError, match=r"refs\[3\]"):
-        sweep.sweep(bad, chunk_size=2)
+        w.sweep(bad, chunk_size=2)

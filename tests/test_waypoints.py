@@ -1,68 +1,76 @@
 """Consecutive motions: waypoint chains and moving references."""
 
-import argparse
+import json
 import math
 
 import numpy as np
 import pytest
 
 import wmr_jax as w
-from wmr_jax import baselines, metrics, waypoints
-from wmr_jax.waypoints import (
-    batch_chain_rollout,
-    batch_track_rollout,
-    chain_rollout,
-    soccer_waypoints,
-    track_rollout,
-)
+from wmr_jax import studies
+from wmr_jax.cli import main
 
 DT = 0.033
+# Every run here lasts STEPS periods (the command's default), so that the
+# compiled chains, tracks and rollouts are shared between the tests.
+STEPS = 450
+WP = studies.soccer_waypoints()
+
+
+def chain(controller="shim-sung", **kwargs):
+    return studies.chain_rollout(WP, controller=controller, steps=STEPS, **kwargs)
+
+
+def switch_samples(run):
+    """The sample at which each waypoint counted as reached (its arrival, in periods)."""
+    return [round(t / DT) for t in np.asarray(run.arrival)]
 
 
 @pytest.mark.parametrize("controller", ["shim-sung", "astolfi-corke"])
 def test_chain_visits_the_waypoints_in_order(controller):
-    wp = soccer_waypoints()
-    run = chain_rollout(wp, controller=controller, steps=450)
+    run = chain(controller)
     arrival = np.asarray(run.arrival)
     assert np.isfinite(arrival).all() and np.all(np.diff(arrival) > 0)
     leg = np.asarray(run.leg)
-    assert leg[0] == 0 and np.all(np.diff(leg) >= 0) and set(leg) == set(range(len(wp)))
+    assert leg[0] == 0 and np.all(np.diff(leg) >= 0) and set(leg) == set(range(len(WP)))
     poses = np.asarray(run.trajectory.poses)
-    for i, t in enumerate(arrival):
-        k = round(t / DT)  # the sample at which waypoint i counted as reached
-        assert np.all(leg[k:] >= i + 1) if i < len(wp) - 1 else True
-        assert bool(metrics.arrived(poses[k], wp[i]))
+    for i, k in enumerate(switch_samples(run)):
+        if i < len(WP) - 1:
+            assert np.all(leg[k:] >= i + 1)
+        assert bool(w.arrived(poses[k], WP[i]))
         # Before it, the robot was still heading for this or an earlier waypoint.
         assert leg[k - 1] <= i
 
 
-def test_single_waypoint_chain_is_a_rollout():
-    ref = np.array([30.0, -20.0, 2.0])
-    run = chain_rollout(ref[None], steps=150)
-    traj = w.rollout(ref, steps=150)
-    # The same closed loop by two arrangements of the same arithmetic.
-    np.testing.assert_allclose(np.asarray(run.trajectory.poses), np.asarray(traj.poses), atol=1e-9)
-    assert float(run.arrival[0]) == float(metrics.arrival_time(traj, ref, dt=DT))
+def test_each_leg_is_a_rollout_from_where_the_last_one_ended():
+    run = chain()
+    poses = np.asarray(run.trajectory.poses)
+    start = 0
+    for i, k in enumerate(switch_samples(run)[:-1]):
+        traj = w.rollout(WP[i], init=poses[start], steps=STEPS)
+        # The same closed loop by two arrangements of the same arithmetic.
+        leg = np.asarray(traj.poses[: k - start + 1])
+        np.testing.assert_allclose(poses[start : k + 1], leg, atol=1e-9)
+        start = k
+    last = w.rollout(WP[-1], init=poses[start], steps=STEPS)
+    settled = float(w.arrival_time(last, WP[-1], dt=DT))
+    assert float(run.arrival[-1]) == pytest.approx(start * DT + settled, abs=1e-9)
 
 
 def test_pass_through_is_faster_than_stopping():
-    wp = soccer_waypoints()
-    stop = chain_rollout(wp, controller="aicardi", steps=450)
-    through = chain_rollout(
-        wp, controller="aicardi", steps=450, pass_tol_r=5.0, pass_tol_theta=math.pi / 2
-    )
+    stop = chain()
+    through = chain(pass_tol_r=5.0, pass_tol_theta=math.pi / 2)
     assert np.isfinite(np.asarray(through.arrival)).all()
     assert float(through.arrival[-1]) < float(stop.arrival[-1])
     assert np.all(np.asarray(through.arrival[:-1]) <= np.asarray(stop.arrival[:-1]))
 
 
 def test_batched_chain_rows_equal_single_chains():
-    wp = soccer_waypoints()[:3]
     inits = np.array([[0.0, 0.0, 0.0], [-10.0, 5.0, 1.0], [10.0, -5.0, -2.0]])
-    batch = batch_chain_rollout(wp, init=inits, controller="aicardi", steps=300)
-    assert batch.arrival.shape == (3, 3) and batch.trajectory.poses.shape == (3, 301, 3)
+    batch = studies.batch_chain_rollout(WP, init=inits, steps=STEPS)
+    assert batch.arrival.shape == (3, len(WP)) and batch.trajectory.poses.shape == (3, 451, 3)
     for i in (0, 2):
-        one = chain_rollout(wp, init=inits[i], controller="aicardi", steps=300)
+        one = chain(init=inits[i])
         # vmap may fuse differently from the unbatched program: a few ulps.
         np.testing.assert_allclose(
             np.asarray(batch.trajectory.poses[i]), np.asarray(one.trajectory.poses), atol=1e-9
@@ -71,24 +79,24 @@ def test_batched_chain_rows_equal_single_chains():
 
 
 def test_constant_moving_reference_is_a_rollout():
-    ref = np.array([-25.0, 35.0, -1.0])
-    run = track_rollout(np.tile(ref, (120, 1)), controller="astolfi-corke")
-    traj = w.rollout(ref, steps=120, controller="astolfi-corke")
+    ref = WP[1]
+    run = studies.track_rollout(np.tile(ref, (STEPS, 1)))
+    traj = w.rollout(ref, init=np.zeros(3), steps=STEPS)
     np.testing.assert_allclose(np.asarray(run.trajectory.poses), np.asarray(traj.poses), atol=1e-9)
-    assert float(run.arrival) == float(metrics.arrival_time(traj, ref, dt=DT))
-    assert run.error.shape == (120,)
+    assert float(run.arrival) == float(w.arrival_time(traj, ref, dt=DT))
+    assert run.error.shape == (STEPS,)
 
 
 def test_moving_reference_batched():
-    t = np.arange(150) * DT
+    t = np.arange(STEPS) * DT
     # A reference gliding along x at 10 cm/s, and one standing still.
     gliding = np.stack([20 + 10 * t, np.full_like(t, 10.0), np.zeros_like(t)], axis=-1)
-    still = np.tile([30.0, -10.0, 0.5], (150, 1))
+    still = np.tile([30.0, -10.0, 0.5], (STEPS, 1))
     refs = np.stack([gliding, still])
-    batch = batch_track_rollout(refs, controller="shim-sung")
-    assert batch.error.shape == (2, 150) and batch.arrival.shape == (2,)
+    batch = studies.batch_track_rollout(refs)
+    assert batch.error.shape == (2, STEPS) and batch.arrival.shape == (2,)
     for i in range(2):
-        one = track_rollout(refs[i], controller="shim-sung")
+        one = studies.track_rollout(refs[i])
         np.testing.assert_allclose(np.asarray(batch.error[i]), np.asarray(one.error), atol=1e-9)
     # The robot catches the gliding reference and follows it closely.
     assert float(np.max(batch.error[0, -30:])) < 3.0
@@ -99,44 +107,76 @@ def test_moving_reference_batched():
     ("kwargs", "message"),
     [
         ({"waypoints": np.zeros((3, 2))}, "waypoints has shape (3, 2)"),
-        ({"waypoints": [[1.0, np.inf, 0.0]]}, "waypoints has a non-finite value"),
+        ({"waypoints": [[1.0, np.inf, 0.0]]}, "waypoints[0] = [1.0, inf, 0.0] is not finite"),
         ({"pass_tol_theta": 2.0}, "pass_tol_theta = 2.0"),
         ({"tol_theta": math.pi / 2}, "tol_theta"),
         ({"tol_r": 0.0}, "tol_r = 0.0"),
         ({"controller": "nope"}, "controller = 'nope'"),
-        ({"params": baselines.AicardiGains(k=0.0), "controller": "aicardi"}, "gains.k = 0.0"),
+        ({"params": w.AicardiGains(k=0.0), "controller": "aicardi"}, "gains.k = 0.0"),
     ],
 )
-def test_bad_inputs_raise_before_tracing(kwargs, message):
-    kwargs = {"waypoints": soccer_waypoints(), **kwargs}
-    with pytest.raises(ValueError) as info:
-        chain_rollout(kwargs.pop("waypoints"), steps=5, **kwargs)
+def test_bad_chain_inputs_raise_before_tracing(kwargs, message):
+    kwargs = {"waypoints": WP, **kwargs}
+    with pytest.raises(ValueError, match="allowed") as info:
+        studies.chain_rollout(kwargs.pop("waypoints"), steps=5, **kwargs)
     assert message in str(info.value)
 
 
-def test_demo_writes_figure_and_tables(tmp_path):
-    rows = waypoints.soccer_demo(tmp_path, controller_names=["shim-sung", "aicardi"], steps=400)
-    assert len(rows) == 4 and {r["mode"] for r in rows} == {"stop", "pass"}
-    assert all(f"leg {i + 1} s" in rows[0] for i in range(len(soccer_waypoints())))
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        pytest.param(
+            lambda: studies.track_rollout(np.zeros((5, 3, 3))),
+            "refs has shape (5, 3, 3)",
+            id="track",
+        ),
+        pytest.param(
+            lambda: studies.batch_track_rollout(np.zeros((5, 3))),
+            "refs has shape (5, 3)",
+            id="batch",
+        ),
+        pytest.param(
+            lambda: studies.batch_chain_rollout(WP), "allowed: waypoints (N, K, 3)", id="no-batch"
+        ),
+        pytest.param(
+            lambda: studies.batch_chain_rollout(WP, init=np.zeros((2, 4))),
+            "init has shape",
+            id="init",
+        ),
+        pytest.param(
+            lambda: studies.batch_chain_rollout(np.zeros((2, 4, 3)), init=np.zeros((3, 3))),
+            "init has 3 rows; allowed: 2",
+            id="rows",
+        ),
+    ],
+)
+def test_bad_batch_and_track_inputs_raise(call, message):
+    with pytest.raises(ValueError, match="allowed") as info:
+        call()
+    assert message in str(info.value)
+
+
+def test_command_writes_the_soccer_tables(tmp_path, capsys):
+    argv = ["waypoints", "--out", str(tmp_path), "--controller", "shim-sung", "astolfi-corke"]
+    assert main(argv) == 0
+    assert "| astolfi-corke | pass |" in capsys.readouterr().out
     for name in ("soccer.png", "soccer.md", "soccer.json"):
         assert (tmp_path / name).stat().st_size > 100
     assert not list(tmp_path.glob(".*tmp"))  # no temporary files left behind
+    saved = json.loads((tmp_path / "soccer.json").read_text())
+    rows, runs, *_ = studies.soccer_study(controller_names=["shim-sung", "astolfi-corke"])
+    assert saved["rows"] == rows and [r.mode for r in runs] == ["stop", "pass"] * 2
+    assert all(f"leg {i + 1} s" in rows[0] for i in range(len(WP)))
+    assert rows[0]["leg 6 s"] == float(runs[0].run.arrival[-1])
 
 
-@pytest.mark.parametrize(
-    ("argv", "message"),
-    [
-        (["--controller", "nope"], "--controller = 'nope'"),
-        (["--velocity", "warp"], "--velocity = 'warp'"),
-        (["--pass-tol-deg", "120"], "--pass-tol-deg = 120.0"),
-        (["--steps", "0"], "--steps = 0"),
-    ],
-)
-def test_cli_bad_values(tmp_path, argv, message):
-    parser = argparse.ArgumentParser()
-    waypoints.configure_parser(parser)
-    args = parser.parse_args(["--out", str(tmp_path), *argv])
-    with pytest.raises(ValueError) as info:
-        args.func(args)
-    assert message in str(info.value) and "allowed" in str(info.value)
-    assert "\n" not in str(info.value)
+# Values the command refuses, each with a one-line error and exit status 2.
+REFUSED = [("--controller", "nope"), ("--velocity", "warp"), ("--pass-tol-deg", "120")]
+REFUSED += [("--pass-tol", "-1"), ("--steps", "0"), ("--steps", "1.5")]
+
+
+@pytest.mark.parametrize(("flag", "value"), REFUSED)
+def test_command_rejects_bad_values_in_one_line(tmp_path, capsys, flag, value):
+    assert main(["waypoints", "--out", str(tmp_path), flag, value]) == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"wmr-jax: error: {flag} '{value}' is not ")

@@ -1,74 +1,76 @@
-"""wmr_jax: a differentiable, batched simulator of the Shim–Sung (2003) pose controller."""
+"""wmr_jax: a differentiable, batched simulator of the Shim–Sung (2003) pose controller.
 
-from wmr_jax import baselines as _baselines  # noqa: F401  (registers the baselines)
-from wmr_jax.baselines import AicardiGains, AstolfiGains
-from wmr_jax.controllers import SHIM_SUNG, Controller, get_controller, register_controller
-from wmr_jax.law import (
-    Diagnostics,
-    PolarError,
-    control,
-    control_diagnostics,
-    lyapunov,
-    polar_error,
-    region_label,
-    wheel_speeds,
-)
-from wmr_jax.metrics import (
-    arrival_time,
-    arrived,
-    path_length,
-    region_time,
-    success_rate,
-    zigzag_count,
-)
-from wmr_jax.params import (
-    Gains,
-    Robot,
-    WheelSpeedWarning,
-    check_feasible,
-    wheel_speed_bound,
-)
-from wmr_jax.reference import reference_control, reference_diagnostics, reference_rollout
-from wmr_jax.sharding import ShardedBatch, shard, unpad
-from wmr_jax.simulation import Options, Trajectory, batch_rollout, final_poses, rollout
+The curated surface: users import ``wmr_jax`` (and the families
+``wmr_jax.controllers``, ``wmr_jax.dynamics``, ``wmr_jax.tuning``,
+``wmr_jax.studies``, ``wmr_jax.report``), never the private ``wmr_jax._src``.
+The model every function implements is ``docs/model.md``.
+"""
+
+from wmr_jax._src.checks import float_dtype as float_dtype
+from wmr_jax._src.controllers import AICARDI as AICARDI
+from wmr_jax._src.controllers import ASTOLFI as ASTOLFI
+from wmr_jax._src.controllers import SHIM_SUNG as SHIM_SUNG
+from wmr_jax._src.controllers import Controller as Controller
+from wmr_jax._src.controllers import get_controller as get_controller
+from wmr_jax._src.controllers import register_controller as register_controller
+from wmr_jax._src.controllers import registered_names as registered_names
+from wmr_jax._src.controllers.aicardi import AicardiGains as AicardiGains
+from wmr_jax._src.controllers.astolfi import AstolfiGains as AstolfiGains
+from wmr_jax._src.controllers.shim_sung import Diagnostics as Diagnostics
+from wmr_jax._src.controllers.shim_sung import PolarError as PolarError
+from wmr_jax._src.controllers.shim_sung import control as control
+from wmr_jax._src.controllers.shim_sung import control_diagnostics as control_diagnostics
+from wmr_jax._src.controllers.shim_sung import lyapunov as lyapunov
+from wmr_jax._src.controllers.shim_sung import polar_error as polar_error
+from wmr_jax._src.controllers.shim_sung import region_label as region_label
+from wmr_jax._src.controllers.shim_sung import wheel_speeds as wheel_speeds
+from wmr_jax._src.loops import Options as Options
+from wmr_jax._src.metrics import DEFAULT_TOL_R as DEFAULT_TOL_R
+from wmr_jax._src.metrics import DEFAULT_TOL_THETA as DEFAULT_TOL_THETA
+from wmr_jax._src.metrics import arrival_time as arrival_time
+from wmr_jax._src.metrics import arrived as arrived
+from wmr_jax._src.metrics import path_length as path_length
+from wmr_jax._src.metrics import region_time as region_time
+from wmr_jax._src.metrics import success_rate as success_rate
+from wmr_jax._src.metrics import zigzag_count as zigzag_count
+from wmr_jax._src.params import Gains as Gains
+from wmr_jax._src.params import Robot as Robot
+from wmr_jax._src.params import WheelSpeedWarning as WheelSpeedWarning
+from wmr_jax._src.params import check_feasible as check_feasible
+from wmr_jax._src.params import wheel_speed_bound as wheel_speed_bound
+from wmr_jax._src.poses import EVAL_R_MAX as EVAL_R_MAX
+from wmr_jax._src.poses import EVAL_R_MIN as EVAL_R_MIN
+from wmr_jax._src.poses import HORIZON_S as HORIZON_S
+from wmr_jax._src.poses import PAPER_REFS_DEG as PAPER_REFS_DEG
+from wmr_jax._src.poses import horizon_steps as horizon_steps
+from wmr_jax._src.poses import paper_refs as paper_refs
+from wmr_jax._src.poses import sample_poses as sample_poses
+from wmr_jax._src.reference import reference_control as reference_control
+from wmr_jax._src.reference import reference_diagnostics as reference_diagnostics
+from wmr_jax._src.reference import reference_rollout as reference_rollout
+from wmr_jax._src.rollout import DEFAULT_DT as DEFAULT_DT
+from wmr_jax._src.rollout import Trajectory as Trajectory
+from wmr_jax._src.rollout import batch_rollout as batch_rollout
+from wmr_jax._src.rollout import final_poses as final_poses
+from wmr_jax._src.rollout import rollout as rollout
+from wmr_jax._src.sharding import ShardedBatch as ShardedBatch
+from wmr_jax._src.sharding import shard as shard
+from wmr_jax._src.sharding import unpad as unpad
+from wmr_jax._src.sharding import use_cpu_devices as use_cpu_devices
+from wmr_jax._src.sweep import SWEEP_FIELDS as SWEEP_FIELDS
+from wmr_jax._src.sweep import sweep as sweep
 
 __version__ = "0.1.0"
 
-__all__ = [
-    "AicardiGains",
-    "AstolfiGains",
-    "ShardedBatch",
-    "shard",
-    "unpad",
-    "SHIM_SUNG",
-    "Controller",
-    "Options",
-    "get_controller",
-    "register_controller",
-    "Diagnostics",
-    "Gains",
-    "PolarError",
-    "Robot",
-    "Trajectory",
-    "WheelSpeedWarning",
-    "arrival_time",
-    "arrived",
-    "batch_rollout",
-    "check_feasible",
-    "control",
-    "control_diagnostics",
-    "final_poses",
-    "lyapunov",
-    "path_length",
-    "polar_error",
-    "reference_control",
-    "reference_diagnostics",
-    "reference_rollout",
-    "region_label",
-    "region_time",
-    "rollout",
-    "success_rate",
-    "wheel_speed_bound",
-    "wheel_speeds",
-    "zigzag_count",
-]
+from wmr_jax import controllers as controllers  # noqa: E402  (the public families)
+from wmr_jax import dynamics as dynamics  # noqa: E402
+
+_LAZY = ("report", "studies", "tuning")  # they import optax or matplotlib: on first use
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return importlib.import_module(f"wmr_jax.{name}")
+    raise AttributeError(f"module 'wmr_jax' has no attribute {name!r}")

@@ -1,89 +1,36 @@
-"""Controllers as values: a pure command law plus the type of its parameter pytree.
+"""The controller family and the building blocks of the Shim–Sung law.
 
-A ``Controller`` bundles ``command(pose, ref, params, *, temperature)`` →
-``(v cm/s, ω rad/s)`` with the things a rollout needs around it: a region label
-for diagnostics, a boundary check of its parameters and their defaults.
-Rollouts, batching, metrics and tuning take any ``Controller``; the
-Shim–Sung controller of the paper is the default.
+``wmr_jax.controllers`` holds the ``Controller`` value type, its registry, the
+three controllers (Shim–Sung, Aicardi et al. 1995, Astolfi/Corke) and, one
+function per equation, the pieces of the Shim–Sung law (``docs/model.md §2–3``)
+for users who build their own variants.
 """
 
-from __future__ import annotations
-
-import dataclasses
-from collections.abc import Callable
-from typing import Any
-
-import jax
-import jax.numpy as jnp
-
-from wmr_jax import law
-from wmr_jax.params import Gains, validate_gains
-
-__all__ = ["SHIM_SUNG", "Controller", "get_controller", "register_controller"]
-
-
-@dataclasses.dataclass(frozen=True)
-class Controller:
-    """A pose controller as a value (hashable, so it can be a static ``jit`` argument).
-
-    Attributes:
-        name: short name used by the CLI and in tables.
-        command: ``(pose (…,3), ref (…,3), params, *, temperature) -> (v, ω)``.
-        params_type: the class of its parameter pytree (built with defaults
-            when a rollout gets ``None``).
-        validate: checks a parameter pytree before tracing; returns it.
-        region: ``(pose, ref, params) -> int32`` diagnostic label, or ``None``
-            for a controller without regions (labels are then −1).
-        smooth: whether ``command`` accepts a positive ``temperature``.
-    """
-
-    name: str
-    command: Callable[..., tuple[jax.Array, jax.Array]]
-    params_type: type
-    validate: Callable[[Any], Any]
-    region: Callable[..., jax.Array] | None = None
-    smooth: bool = False
-
-    def default_params(self) -> Any:
-        """Return the controller's default parameters."""
-        return self.params_type()
-
-    def region_of(self, pose: jax.Array, ref: jax.Array, params: Any) -> jax.Array:
-        """Return the region label of the command at ``pose`` (−1 if it has none)."""
-        if self.region is None:
-            return jnp.full(jnp.shape(pose)[:-1], -1, jnp.int32)
-        return self.region(pose, ref, params)
-
-
-def _shim_sung_region(pose: jax.Array, ref: jax.Array, gains: Gains) -> jax.Array:
-    return law.region_label(law.polar_error(pose, ref), gains)
-
-
-SHIM_SUNG = Controller(
-    name="shim-sung",
-    command=law.control,
-    params_type=Gains,
-    validate=validate_gains,
-    region=_shim_sung_region,
-    smooth=True,
-)
-
-_REGISTRY: dict[str, Controller] = {SHIM_SUNG.name: SHIM_SUNG}
-
-
-def register_controller(controller: Controller) -> Controller:
-    """Make ``controller`` known by name to the CLI and ``get_controller``."""
-    _REGISTRY[controller.name] = controller
-    return controller
-
-
-def get_controller(name: str | Controller) -> Controller:
-    """Return the controller called ``name`` (a ``Controller`` is returned as is)."""
-    if isinstance(name, Controller):
-        return name
-    try:
-        return _REGISTRY[name]
-    except KeyError:
-        raise ValueError(
-            f"controller = {name!r} is not known; allowed: {sorted(_REGISTRY)}"
-        ) from None
+from wmr_jax._src.controllers import AICARDI as AICARDI
+from wmr_jax._src.controllers import ASTOLFI as ASTOLFI
+from wmr_jax._src.controllers import SHIM_SUNG as SHIM_SUNG
+from wmr_jax._src.controllers import Controller as Controller
+from wmr_jax._src.controllers import get_controller as get_controller
+from wmr_jax._src.controllers import register_controller as register_controller
+from wmr_jax._src.controllers import registered_names as registered_names
+from wmr_jax._src.controllers.aicardi import AicardiGains as AicardiGains
+from wmr_jax._src.controllers.aicardi import aicardi_control as aicardi_control
+from wmr_jax._src.controllers.astolfi import AstolfiGains as AstolfiGains
+from wmr_jax._src.controllers.astolfi import astolfi_control as astolfi_control
+from wmr_jax._src.controllers.polar import driving_error as driving_error
+from wmr_jax._src.controllers.shim_sung import Diagnostics as Diagnostics
+from wmr_jax._src.controllers.shim_sung import PolarError as PolarError
+from wmr_jax._src.controllers.shim_sung import blend as blend
+from wmr_jax._src.controllers.shim_sung import commands as commands
+from wmr_jax._src.controllers.shim_sung import control as control
+from wmr_jax._src.controllers.shim_sung import control_diagnostics as control_diagnostics
+from wmr_jax._src.controllers.shim_sung import direction_flag as direction_flag
+from wmr_jax._src.controllers.shim_sung import error_angles as error_angles
+from wmr_jax._src.controllers.shim_sung import fold as fold
+from wmr_jax._src.controllers.shim_sung import lyapunov as lyapunov
+from wmr_jax._src.controllers.shim_sung import polar_error as polar_error
+from wmr_jax._src.controllers.shim_sung import region_label as region_label
+from wmr_jax._src.controllers.shim_sung import saturated_distance as saturated_distance
+from wmr_jax._src.controllers.shim_sung import sgn as sgn
+from wmr_jax._src.controllers.shim_sung import wheel_speeds as wheel_speeds
+from wmr_jax._src.controllers.shim_sung import wrap_angle as wrap_angle

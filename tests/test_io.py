@@ -1,0 +1,83 @@
+"""Result files: atomic writes, checksummed arrays, damaged files refused in one line."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from wmr_jax import report
+
+
+def test_atomic_json_round_trip_keeps_infinities_readable(tmp_path):
+    path = report.atomic_write_json(tmp_path / "sub" / "a.json", {"t": [1.0, math.inf]})
+    assert json.loads(path.read_text()) == {"t": [1.0, "inf"]}
+    assert list(path.parent.iterdir()) == [path]  # no temporary file left behind
+
+
+def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path):
+    path = tmp_path / "a.npz"
+    report.save_arrays(path, {"x": np.arange(3.0)}, {"run": 1})
+
+    class Unsaveable:
+        def __array__(self, *args, **kwargs):
+            raise RuntimeError("disk full")
+
+    with pytest.raises(RuntimeError):
+        report.save_arrays(path, {"x": Unsaveable()}, {"run": 2})
+    arrays, meta = report.load_arrays(path)
+    np.testing.assert_array_equal(arrays["x"], np.arange(3.0))
+    assert meta == {"run": 1}
+    assert [p.name for p in tmp_path.iterdir()] == ["a.npz"]
+
+
+def test_arrays_and_meta_round_trip(tmp_path):
+    arrays = {"z": np.linspace(0, 1, 7), "i": np.arange(4, dtype=np.int32)}
+    report.save_arrays(tmp_path / "c.npz", arrays, {"seed": 3, "name": "x", "t": math.inf})
+    loaded, meta = report.load_arrays(tmp_path / "c.npz")
+    assert meta == {"seed": 3, "name": "x", "t": "inf"}
+    for name, value in arrays.items():
+        np.testing.assert_array_equal(loaded[name], value)
+        assert loaded[name].dtype == value.dtype
+
+
+def damage(path, how):
+    data = bytearray(path.read_bytes())
+    if how == "truncated":
+        data = data[: len(data) // 2]
+    elif how == "empty":
+        data = bytearray()
+    elif how == "flipped byte":
+        data[len(data) // 3] ^= 0xFF
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("how", ["truncated", "empty", "flipped byte"])
+def test_damaged_files_are_refused_in_one_line(tmp_path, how):
+    path = tmp_path / "c.npz"
+    report.save_arrays(path, {"z": np.arange(100.0)}, {"k": 1})
+    damage(path, how)
+    with pytest.raises(report.DamagedFileError, match="c.npz is damaged") as info:
+        report.load_arrays(path)
+    assert "\n" not in str(info.value)
+    assert isinstance(info.value, ValueError)
+
+
+def test_well_formed_but_altered_values_are_refused(tmp_path):
+    path = tmp_path / "c.npz"
+    report.save_arrays(path, {"z": np.arange(5.0)}, {"k": 1})
+    with np.load(path) as data:
+        stored = {name: data[name] for name in data.files}
+    stored["z"] = stored["z"] + 1.0  # a valid .npz, with other numbers in it
+    np.savez(path, **stored)
+    with pytest.raises(report.DamagedFileError, match="checksum"):
+        report.load_arrays(path)
+
+
+def test_stale_temporaries_are_removed(tmp_path):
+    (tmp_path / ".chunk_000001.npz.abc123.tmp").write_bytes(b"half")
+    keep = tmp_path / "chunk_000000.npz"
+    keep.write_bytes(b"x")
+    removed = report.remove_stale_temporaries(tmp_path)
+    assert [p.name for p in removed] == [".chunk_000001.npz.abc123.tmp"]
+    assert [p.name for p in tmp_path.iterdir()] == [keep.name]

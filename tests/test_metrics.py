@@ -1,0 +1,102 @@
+"""The metrics of docs/model.md §6, pinned on hand-made runs whose answers are known."""
+
+import math
+
+import numpy as np
+import pytest
+
+import wmr_jax as w
+
+DT = 0.1
+REF = np.array([10.0, 0.0, 0.0])
+
+
+def run_through(poses, v=None, omega=None, regions=None):
+    """A ``Trajectory`` that visits ``poses`` (the first is the initial pose)."""
+    poses = np.asarray(poses, dtype=float)
+    steps = len(poses) - 1
+    v = np.zeros(steps) if v is None else np.asarray(v, dtype=float)
+    omega = np.zeros(steps) if omega is None else np.asarray(omega, dtype=float)
+    regions = np.zeros(steps, np.int32) if regions is None else np.asarray(regions, np.int32)
+    distance = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+    wheels = np.stack([v - 1.85 * omega, v + 1.85 * omega], axis=-1)
+    return w.Trajectory(poses, v, omega, regions, wheels, distance)
+
+
+def at(dx=0.0, heading_deg=0.0):
+    """A pose ``dx`` cm beyond the reference with the given heading error."""
+    return [REF[0] + dx, REF[1], math.radians(heading_deg)]
+
+
+def test_heading_tolerance_is_in_radians_and_five_degrees_by_default():
+    # 4° off arrives, 6° off does not: the default tolerance is 5° given in rad.
+    for heading, arrives in ((4.0, True), (6.0, False), (-4.0, True), (184.0, True)):
+        traj = run_through([[0, 0, 0], at(0.5, heading), at(0.5, heading)])
+        time = float(w.arrival_time(traj, REF, dt=DT))
+        assert math.isfinite(time) == arrives, heading
+    assert w.DEFAULT_TOL_THETA == pytest.approx(math.radians(5.0))
+
+
+def test_distance_tolerance_is_one_cm_by_default():
+    for dx, arrives in ((0.99, True), (1.01, False), (-0.99, True)):
+        traj = run_through([[0, 0, 0], at(dx), at(dx)])
+        assert math.isfinite(float(w.arrival_time(traj, REF, dt=DT))) == arrives, dx
+
+
+def test_arrival_is_the_settled_one_not_the_first():
+    # Samples are the poses after each period: arrived after period 1, away
+    # after period 2, arrived again from period 3 on. The first arrival
+    # would be 1 dt; the settled one is 3 dt.
+    traj = run_through([[0, 0, 0], at(), at(3.0), at(), at(), at()])
+    assert float(w.arrival_time(traj, REF, dt=DT)) == pytest.approx(3 * DT)
+    # Leaving at the very end means it never arrived.
+    traj = run_through([[0, 0, 0], at(), at(), at(3.0)])
+    assert math.isinf(float(w.arrival_time(traj, REF, dt=DT)))
+    # The initial pose is not a sample: starting on the goal arrives at dt.
+    traj = run_through([at(), at(), at()])
+    assert float(w.arrival_time(traj, REF, dt=DT)) == pytest.approx(DT)
+
+
+def test_arrived_and_success_rate():
+    poses = np.array([at(), at(2.0), at(0.0, 10.0)])
+    np.testing.assert_array_equal(np.asarray(w.arrived(poses, REF)), [True, False, False])
+    assert w.success_rate([1.0, np.inf, 2.0, 3.0]) == pytest.approx(0.75)
+
+
+def test_path_length_sums_the_distance_travelled():
+    traj = run_through([[0, 0, 0], [3, 4, 0], [3, 4, 0], [6, 8, 0]])
+    assert float(w.path_length(traj)) == pytest.approx(10.0)
+
+
+def test_zigzag_counts_sign_changes_beyond_the_dead_bands():
+    v = [5.0, 0.5, -5.0, -0.5, 5.0, 5.0]  # 0.5 is inside the 1 cm/s band: 2 changes
+    omega = [0.2, -0.05, 0.3, -0.2, -0.2, 0.2]  # -0.05 inside the band: 2 changes
+    traj = run_through(np.zeros((7, 3)), v=v, omega=omega)
+    assert int(w.zigzag_count(traj)) == 4
+    assert int(w.zigzag_count(traj, v_dead_band=10.0, omega_dead_band=10.0)) == 0
+
+
+def test_region_time_counts_samples_per_region():
+    traj = run_through(np.zeros((6, 3)), regions=[2, 2, 1, 3, 0])
+    np.testing.assert_allclose(np.asarray(w.region_time(traj, dt=DT)), [0.1, 0.1, 0.2, 0.1])
+
+
+def test_batched_trajectories():
+    a = run_through([[0, 0, 0], at(), at()])
+    b = run_through([[0, 0, 0], at(5.0), at()])
+    batch = w.Trajectory(*(np.stack(pair) for pair in zip(a, b, strict=True)))
+    np.testing.assert_allclose(np.asarray(w.arrival_time(batch, REF, dt=DT)), [DT, 2 * DT])
+
+
+def test_streamed_metrics_equal_the_trajectory_metrics():
+    refs = np.asarray(w.sample_poses(11, 24))
+    gains = w.Gains(kr=60.0)
+    traj = w.batch_rollout(refs, gains, steps=120)
+    streamed = w.sweep(refs, gains, steps=120)
+    np.testing.assert_array_equal(
+        streamed["arrival_time"], np.asarray(w.arrival_time(traj, refs, dt=0.033))
+    )
+    np.testing.assert_allclose(streamed["path_length"], np.asarray(w.path_length(traj)), rtol=1e-12)
+    np.testing.assert_array_equal(streamed["zigzags"], np.asarray(w.zigzag_count(traj)))
+    peak = np.abs(np.asarray(traj.wheel_speeds)).max(axis=(1, 2))
+    np.testing.assert_allclose(streamed["peak_wheel_speed"], peak, rtol=1e-12)

@@ -1,0 +1,48 @@
+"""Reference poses: the one sampler of the evaluation set, the paper's poses, the horizon."""
+
+import math
+
+import jax
+import numpy as np
+import pytest
+
+import wmr_jax as w
+
+
+def test_samples_lie_in_the_evaluation_set():
+    poses = np.asarray(w.sample_poses(0, 5000))
+    dist = np.hypot(poses[:, 0], poses[:, 1])
+    # Drawn in float32, so the bounds hold to float32 rounding.
+    assert dist.min() >= 5.0 - 1e-4 and dist.max() <= 80.0 + 1e-4
+    assert np.abs(poses[:, 2]).max() <= math.pi + 1e-6
+    # Uniform in distance: its mean is (5 + 80) / 2 within a few standard errors.
+    assert abs(dist.mean() - 42.5) < 4 * 75 / math.sqrt(12 * 5000)
+
+
+def test_same_seed_same_poses_in_any_precision():
+    a = np.asarray(w.sample_poses(3, 10, dtype=np.float64))
+    b = np.asarray(w.sample_poses(jax.random.key(3), 10, dtype=np.float32))
+    np.testing.assert_array_equal(a, b.astype(np.float64))
+    assert not np.array_equal(a, np.asarray(w.sample_poses(4, 10, dtype=np.float64)))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"key": -1, "n": 3}, "seed = -1"),
+        ({"key": 0, "n": 2.5}, "n = 2.5"),
+        ({"key": 0, "n": 3, "r_min": -1.0}, "r_min = -1.0"),
+        ({"key": 0, "n": 3, "r_min": 10.0, "r_max": 5.0}, "r_max = 5.0"),
+    ],
+)
+def test_bad_arguments_name_themselves(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        w.sample_poses(**kwargs)
+
+
+def test_paper_references_and_horizon():
+    refs = w.paper_refs()
+    assert refs.shape == (7, 3)
+    np.testing.assert_allclose(refs[0], [40.0, 0.0, math.radians(-45.0)])
+    assert w.horizon_steps(0.033) == 182  # 6 s / 33 ms = 181.8 periods
+    assert w.horizon_steps(0.1, 1.0) == 10

@@ -1,0 +1,148 @@
+"""Gain tuning end to end: the trainer's callback, ``wmr-jax tune``, checkpoints and resume."""
+
+import json
+import logging
+
+import jax
+import numpy as np
+import pytest
+
+import wmr_jax as w
+from wmr_jax import tuning
+from wmr_jax.cli import main
+
+# One small setting shared by every run here, so that they compile once:
+# 8 poses, a 1 s horizon (31 steps), 8 held-out poses, no random search.
+SMALL = tuning.TuneConfig(
+    iters=6,
+    poses=8,
+    horizon=1.0,
+    checkpoint_every=2,
+    eval_poses=8,
+    random_search=False,
+)
+# The same settings as flags of `wmr-jax tune`.
+SMALL_FLAGS = [
+    "--iters=6",
+    "--poses=8",
+    "--horizon=1",
+    "--checkpoint-every=2",
+    "--eval-poses=8",
+    "--no-random-search",
+]
+
+
+class _Stop(Exception):
+    pass
+
+
+def _stop_after(iterations: int):
+    def progress_fn(state):
+        if state.iteration == iterations:
+            raise _Stop
+
+    return progress_fn
+
+
+def test_train_reports_every_feasible_iterate_and_annealing_does_not_recompile(caplog):
+    tuning.train(SMALL)  # compiles, if nothing before did
+    seen = []
+    caplog.set_level(logging.WARNING)
+    with jax.log_compiles(True):
+        result = tuning.train(SMALL.replace(temperature_end=0.02), progress_fn=seen.append)
+    # The temperature is traced, not static: another schedule compiles nothing.
+    assert not [r.message for r in caplog.records if "Compiling" in r.message]
+    assert [state.iteration for state in seen] == list(range(1, SMALL.iters + 1))
+    for state in seen:
+        assert np.all(w.check_feasible(tuning.gains_from_logits(state.z)))
+    np.testing.assert_array_equal(result.history["gains"], np.asarray(seen[-1].gains))
+    assert result.history["temperature"][-1] == pytest.approx(0.02)
+    assert set(result.evaluation) == {"paper_feasible", "tuned"} and result.search is None
+    assert np.all(np.isfinite(result.history["loss"]))
+
+
+def test_cli_writes_the_results_and_a_resumed_run_gives_the_same_gains(tmp_path, capsys):
+    whole, cut = tmp_path / "whole", tmp_path / "cut"
+    assert main(["tune", "--out", str(whole), *SMALL_FLAGS]) == 0
+    printed = capsys.readouterr().out
+    assert "| paper feasible | " in printed and "| tuned | " in printed
+    saved = json.loads((whole / "tuned_gains.json").read_text())
+    assert list(saved) == list(tuning.GAIN_FIELDS)
+    assert np.all(w.check_feasible(w.Gains(**saved)))
+    report = json.loads((whole / "evaluation.json").read_text())
+    assert set(report["rows"]) == {"paper_feasible", "tuned"}
+    assert report["feasible"] is True and report["random_search_candidates"] is None
+    assert (whole / "tuning_curve.png").stat().st_size > 0
+
+    # A real interruption after 3 iterations: the checkpoint holds the first 2.
+    with pytest.raises(_Stop):
+        tuning.tune(cut, SMALL, progress=False, progress_fn=_stop_after(3))
+    with np.load(cut / tuning.CHECKPOINT_NAME) as data:
+        assert int(data["iteration"]) == 2
+    assert not (cut / "tuned_gains.json").exists()
+    assert main(["tune", "--out", str(cut), *SMALL_FLAGS, "--resume"]) == 0
+    # The same computation on the same inputs, restored bit for bit.
+    assert (cut / "tuned_gains.json").read_bytes() == (whole / "tuned_gains.json").read_bytes()
+    resumed = json.loads((cut / "evaluation.json").read_text())
+    assert resumed["rows"] == report["rows"]
+
+
+def test_resume_refuses_other_settings_and_damaged_checkpoints(tmp_path, capsys):
+    every = SMALL.replace(checkpoint_every=1)
+    with pytest.raises(_Stop):
+        tuning.tune(tmp_path, every, progress=False, progress_fn=_stop_after(1))
+    checkpoint = tmp_path / tuning.CHECKPOINT_NAME
+    with pytest.raises(ValueError, match="poses = 8 there, 9 now"):
+        tuning.tune(tmp_path, every.replace(poses=9), resume=True)
+
+    # Truncated (a disk full, a copy cut short): one clean line, never a traceback.
+    checkpoint.write_bytes(checkpoint.read_bytes()[:-100])
+    stale = tmp_path / ".checkpoint.npz.x1y2.tmp"  # what a killed write leaves
+    stale.write_bytes(b"partial")
+    with pytest.raises(ValueError, match="damaged") as info:
+        tuning.tune(tmp_path, every, resume=True)
+    assert "\n" not in str(info.value) and "remove it" in str(info.value)
+    assert not stale.exists()
+    assert main(["tune", "--out", str(tmp_path), *SMALL_FLAGS, "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("wmr-jax: error: --resume: checkpoint") and err.count("\n") == 1
+
+
+@pytest.mark.parametrize(
+    ("argv", "flag"),
+    [
+        (["--iters", "0"], "--iters"),
+        (["--iters", "many"], "--iters"),
+        (["--poses", "1.5"], "--poses"),
+        (["--seed", "-3"], "--seed"),
+        (["--velocity", "warp"], "--velocity"),
+        (["--horizon", "0"], "--horizon"),
+        (["--eval-poses", "0"], "--eval-poses"),
+        (["--checkpoint-every", "x"], "--checkpoint-every"),
+    ],
+)
+def test_bad_flags_give_one_line_errors(tmp_path, capsys, argv, flag):
+    assert main(["tune", "--out", str(tmp_path), *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"wmr-jax: error: {flag} ") and "allowed" in err
+    assert err.count("\n") == 1
+
+
+def test_out_must_be_a_folder_and_help_shows_the_defaults(tmp_path, capsys):
+    afile = tmp_path / "file"
+    afile.write_text("")
+    assert main(["tune", "--out", str(afile)]) == 2
+    assert "--out" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["tune", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    defaults = tuning.TuneConfig()
+    for flag, value in [
+        ("--iters", defaults.iters),
+        ("--poses", defaults.poses),
+        ("--seed", defaults.seed),
+        ("--velocity", defaults.velocity),
+        ("--horizon", defaults.horizon),
+        ("--eval-poses", defaults.eval_poses),
+    ]:
+        assert flag in text and f"(default: {value})" in text, flag

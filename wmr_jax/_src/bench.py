@@ -1,0 +1,621 @@
+"""Throughput of the simulator in robot-steps per second (the engine of ``wmr-jax bench``).
+
+One robot-step is one robot simulated over one control period. For each batch
+size ``run_benchmark`` times
+
+* ``final_poses`` with the ideal velocity loop, and with the non-ideal one;
+  with several local devices also the ideal one on a batch spread over all of
+  them (``wmr_jax.shard``); the command splits the CPU into two devices per
+  core first (``--cpu-devices``), which is faster on the CPU;
+* ``batch_rollout`` (whole trajectories), ideal loop;
+* the gradient of a batched loss with respect to the gains: the mean squared
+  final-pose error through ``final_poses``, and ``wmr_jax.tuning``'s loss;
+  each against its own forward evaluation;
+
+and, in the same run, two baselines of the ideal loop:
+
+* the package's scalar NumPy reference (``wmr_jax.reference_rollout``), one
+  pose at a time in a Python loop: a few poses are timed and the rate is per
+  robot-step;
+* ``numpy_final_poses``, the law and the exact arc of ``docs/model.md §2–4``
+  written for NumPy arrays the way a user would without JAX: vectorised over
+  the batch, one Python iteration per control period, angles and ``atan2``.
+
+Each time is the median of ``repeats`` calls after a first call, whose extra
+time is reported apart as the compile time (tracing and XLA compilation).
+Cases compared with each other (``final_poses`` and the baselines, a loss and
+its gradient) are timed in alternation, so that they share the machine's load;
+each timed JAX call follows an untimed one, so that it measures the steady
+state of a loop of calls rather than the wake-up of XLA's threads.
+The device, JAX version and the machine's load during the run are recorded,
+since a shared machine makes every timing noisy: compare ratios taken in the
+same run rather than absolute rates across runs. ``wmr_jax.report.bench_table``
+formats the result; the command prints it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import platform
+import resource
+import statistics
+import time
+import warnings
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from wmr_jax._src.checks import check_int, check_number
+
+__all__ = ["CASES", "BenchConfig", "numpy_final_poses", "run_benchmark"]
+
+DEFAULT_SIZES = (1_000, 10_000, 100_000)
+DEFAULT_STEPS = 100
+DEFAULT_REPEATS = 5
+DEFAULT_REFERENCE_POSES = 20
+DTYPES = ("float32", "float64")
+# The smooth law used for the gradient of the tuning loss, as tuning anneals it.
+TUNING_TEMPERATURE = 0.05
+
+
+# ---------------------------------------------------------------- NumPy baseline
+
+
+def numpy_final_poses(
+    refs: Any,
+    gains: Any = None,
+    *,
+    init: Sequence[float] = (0.0, 0.0, 0.0),
+    dt: float = 0.033,
+    steps: int = 150,
+) -> np.ndarray:
+    """Return the final poses of the ideal closed loop, vectorised with NumPy.
+
+    The baseline a user would write without JAX: the law with angles and
+    ``atan2`` as ``docs/model.md §3`` states it, the exact arc of
+    ``docs/model.md §4``, arrays over the batch and one Python iteration per
+    control period. The arithmetic is in the dtype of ``refs`` (float32 or
+    float64).
+
+    Args:
+        refs: ``(N, 3)`` reference poses ``[x cm, y cm, θ rad]``.
+        gains: ``wmr_jax.Gains`` with scalar fields; default ``Gains()``.
+        init: ``(3,)`` initial pose shared by every run, ``[x cm, y cm, θ rad]``.
+        dt: control period, s.
+        steps: number of control periods.
+
+    Returns:
+        ``(N, 3)`` final poses ``[x cm, y cm, θ rad]``, dtype of ``refs``.
+    """
+    from wmr_jax._src.params import Gains
+
+    refs = np.asarray(refs)
+    if refs.dtype not in (np.float32, np.float64):
+        refs = refs.astype(np.float64)
+    dtype = refs.dtype.type
+    g = Gains() if gains is None else gains
+    law = _NumpyLaw(dtype, g)
+    one, h = dtype(1), dtype(dt)
+    n = refs.shape[0]
+    x = np.full(n, init[0], dtype)
+    y = np.full(n, init[1], dtype)
+    th = np.full(n, init[2], dtype)
+    for _ in range(steps):
+        v, omega = law(refs, x, y, th)
+        # Exact arc over dt (docs/model.md §4), sinc by its series near 0.
+        half = dtype(0.5) * omega * h
+        small = np.abs(half) < 1e-3
+        sinc = np.where(
+            small,
+            one - half * half / dtype(6),
+            np.sin(half) / np.where(small, one, half),
+        )
+        chord = v * h * sinc
+        heading = th + half
+        x = x + chord * np.cos(heading)
+        y = y + chord * np.sin(heading)
+        th = th + omega * h
+    return np.stack([x, y, th], axis=-1)
+
+
+class _NumpyLaw:
+    """The Shim–Sung law (paper Eqs. 3–8) on NumPy arrays of one dtype."""
+
+    def __init__(self, dtype: Any, g: Any) -> None:
+        self.dtype = dtype
+        self.kr, self.k_theta, self.phi_m = dtype(g.kr), dtype(g.k_theta), dtype(g.phi_m)
+        self.r_m, self.r_a, self.r_e = dtype(g.r_m), dtype(g.r_a), dtype(g.r_e)
+        self.alpha = dtype(g.alpha)
+        self.pi, self.half_pi = dtype(math.pi), dtype(math.pi / 2)
+
+    def fold(self, a: np.ndarray) -> np.ndarray:
+        pi, half_pi = self.pi, self.half_pi
+        return np.where(a > half_pi, a - pi, np.where(a < -half_pi, a + pi, a))
+
+    def __call__(self, refs: np.ndarray, x, y, th) -> tuple[np.ndarray, np.ndarray]:
+        """Return the commands ``(v cm/s, ω rad/s)`` at poses ``(x, y, th)``."""
+        dtype, pi, half_pi = self.dtype, self.pi, self.half_pi
+        one, zero = dtype(1), dtype(0)
+        # Error coordinates (Eq. 3, 4).
+        cos_c, sin_c = np.cos(th), np.sin(th)
+        dx, dy = refs[:, 0] - x, refs[:, 1] - y
+        e_x = cos_c * dx + sin_c * dy
+        e_y = cos_c * dy - sin_c * dx
+        r = np.hypot(e_x, e_y)
+        phi = np.arctan2(e_y, e_x)  # atan2(0, 0) = 0: the model's choice at r_e = 0
+        theta_e = np.mod(refs[:, 2] - th + pi, 2 * pi) - pi
+        # The law (Eq. 6–8), regions tested in the order of docs/model.md §3.
+        r_bar = np.minimum(r * (half_pi / self.r_m), half_pi)
+        abs_phi = np.abs(phi)
+        d = np.where(abs_phi <= self.phi_m, one, np.where(abs_phi > pi - self.phi_m, -one, zero))
+        phi_bar = self.fold(phi)
+        sin_phi_bar, cos_phi_bar = np.sin(phi_bar), np.cos(phi_bar)
+        sin_theta_bar = np.sin(self.fold(theta_e))
+        sgn_t = np.where(sin_theta_bar > 0, one, -one)
+        sgn_sum = np.where(sin_theta_bar + sin_phi_bar > 0, one, -one)
+        eps_1 = dtype(0.5) - self.alpha * sgn_t * sgn_sum
+        eps = np.where(
+            r <= self.r_e, zero, np.where(d == 0, one, np.where(r < self.r_a, eps_1, one))
+        )
+        v = self.kr * d * np.sin(r_bar) * cos_phi_bar
+        omega = self.k_theta * (eps * sin_phi_bar + (one - eps) * sin_theta_bar)
+        return v, omega
+
+
+# ---------------------------------------------------------------- timing
+
+
+def _cpu_busy_seconds() -> float | None:
+    """Return the CPU seconds all processes have used (Linux), or ``None``."""
+    try:
+        with open("/proc/stat", encoding="ascii") as f:
+            fields = [int(v) for v in f.readline().split()[1:]]
+    except (OSError, ValueError):
+        return None
+    # user, nice, system, irq, softirq, steal
+    busy = fields[0] + fields[1] + fields[2] + sum(fields[5:8])
+    return busy / os.sysconf("SC_CLK_TCK")
+
+
+def _own_cpu_seconds() -> float:
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+
+@dataclasses.dataclass
+class Timing:
+    """Timing of one benchmark case.
+
+    Attributes:
+        run_s: median wall time of one call, s.
+        compile_s: extra time of the first call (trace and compile), s.
+        runs_s: every timed call, s.
+        others_cpu: CPU other processes used while the case was timed, in
+            cores (0 on an idle machine; Linux only, else ``None``).
+    """
+
+    run_s: float
+    compile_s: float | None
+    runs_s: list[float]
+    others_cpu: float | None
+
+
+def _wait_for_idle(limit_s: float, *, threshold: float = 0.1, window_s: float = 0.3) -> None:
+    """Wait up to ``limit_s`` until other processes use under ``threshold`` cores."""
+    deadline = time.monotonic() + limit_s
+    while time.monotonic() < deadline:
+        busy0, own0 = _cpu_busy_seconds(), _own_cpu_seconds()
+        if busy0 is None:
+            return
+        time.sleep(window_s)
+        busy1, own1 = _cpu_busy_seconds(), _own_cpu_seconds()
+        if max(0.0, (busy1 - busy0) - (own1 - own0)) / window_s < threshold:
+            return
+
+
+def _time_group(
+    calls: dict[str, tuple[Callable[[], Any], bool]], repeats: int, *, wait_idle: float = 0.0
+) -> dict:
+    """Time several calls, interleaved, so that they see the same machine load.
+
+    Args:
+        calls: ``name -> (call, compiled)``; a ``compiled`` call gets a first,
+            untimed call whose extra time is reported as its compile time.
+        repeats: timed calls of each.
+        wait_idle: before each round of calls, wait up to this many seconds
+            for the machine to be idle (0: do not wait).
+
+    Returns:
+        ``name -> Timing``.
+    """
+    import jax
+
+    first: dict[str, float | None] = {}
+    for name, (call, compiled) in calls.items():
+        first[name] = None
+        if compiled:
+            start = time.perf_counter()
+            jax.block_until_ready(call())
+            first[name] = time.perf_counter() - start
+    runs: dict[str, list[float]] = {name: [] for name in calls}
+    # CPU time of other processes while each case ran, summed over its calls:
+    # /proc/stat counts in 10 ms ticks, too coarse for one short call.
+    others: dict[str, list[float]] = {name: [0.0, 0.0] for name in calls}
+    for _ in range(repeats):
+        if wait_idle > 0:
+            _wait_for_idle(wait_idle)
+        for name, (call, compiled) in calls.items():
+            if compiled:
+                # Steady state, as in a loop of calls: right after another
+                # case (NumPy's half second, say) XLA's worker threads are
+                # asleep, and waking them costs a JAX call up to 30 %.
+                jax.block_until_ready(call())
+            busy0, own0, start = _cpu_busy_seconds(), _own_cpu_seconds(), time.perf_counter()
+            jax.block_until_ready(call())
+            wall = time.perf_counter() - start
+            busy1, own1 = _cpu_busy_seconds(), _own_cpu_seconds()
+            runs[name].append(wall)
+            if busy0 is not None and busy1 is not None:
+                others[name][0] += max(0.0, (busy1 - busy0) - (own1 - own0))
+                others[name][1] += wall
+    cores = os.cpu_count() or 1
+    timings = {}
+    for name in calls:
+        run = statistics.median(runs[name])
+        compile_s = None if first[name] is None else max(0.0, first[name] - run)
+        cpu, wall = others[name]
+        share = min(cores, cpu / wall) if wall > 0 and _cpu_busy_seconds() is not None else None
+        timings[name] = Timing(run, compile_s, runs[name], share)
+    return timings
+
+
+# ---------------------------------------------------------------- the benchmark
+
+
+@dataclasses.dataclass(frozen=True)
+class BenchConfig:
+    """What ``run_benchmark`` measures.
+
+    Attributes:
+        sizes: batch sizes N.
+        steps: control periods per run.
+        repeats: timed calls per case (the median is reported).
+        dtype: ``"float32"`` or ``"float64"``.
+        reference_poses: poses the scalar reference is timed on.
+        cases: which cases to run, from ``CASES``; empty: every case.
+        seed: seed of the reference poses (``wmr_jax.sample_poses``, the
+            evaluation set of ``docs/model.md §6``).
+        wait_idle: before each round of timed calls, wait up to this many
+            seconds for other processes to leave the CPU (shared machines).
+    """
+
+    sizes: tuple[int, ...] = DEFAULT_SIZES
+    steps: int = DEFAULT_STEPS
+    repeats: int = DEFAULT_REPEATS
+    dtype: str = "float32"
+    reference_poses: int = DEFAULT_REFERENCE_POSES
+    cases: tuple[str, ...] = ()
+    seed: int = 0
+    wait_idle: float = 0.0
+
+
+CASES = (
+    "final_poses",
+    "final_poses_sharded",
+    "final_poses_nonideal",
+    "batch_rollout",
+    "grad_final_pose_loss",
+    "grad_tuning_loss",
+    "numpy_batch",
+    "scalar_reference",
+)
+
+
+def _check_config(config: BenchConfig) -> BenchConfig:
+    """Validate ``config`` (before any tracing); return it with ``cases`` filled in."""
+    if not config.sizes:
+        raise ValueError("sizes = () is not allowed; allowed: one or more integers >= 1")
+    for i, n in enumerate(config.sizes):
+        check_int(f"sizes[{i}]", n)
+    for name in ("steps", "repeats", "reference_poses"):
+        check_int(name, getattr(config, name))
+    check_int("seed", config.seed, 0, 2**32 - 1 - max(config.sizes))
+    check_number("wait_idle", config.wait_idle, closed=True, unit="s")
+    if config.dtype not in DTYPES:
+        raise ValueError(f"dtype = {config.dtype!r} is not allowed; allowed: {DTYPES}")
+    unknown = [c for c in config.cases if c not in CASES]
+    if unknown:
+        raise ValueError(f"cases = {unknown!r} are not known; allowed: {CASES}")
+    return dataclasses.replace(config, cases=tuple(config.cases) or CASES)
+
+
+def _environment() -> dict[str, Any]:
+    import jax
+    import jaxlib
+
+    devices = jax.devices()
+    cpu_model = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    cpu_model = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    return {
+        "jax": jax.__version__,
+        "jaxlib": jaxlib.__version__,
+        "numpy": np.__version__,
+        "python": platform.python_version(),
+        "backend": jax.default_backend(),
+        "device": str(devices[0].device_kind),
+        "devices": len(devices),
+        "cpu": cpu_model,
+        "cpu_cores": os.cpu_count(),
+        "x64": bool(jax.config.jax_enable_x64),
+        "xla_flags": os.environ.get("XLA_FLAGS", ""),
+    }
+
+
+def _row(case: str, n: int | None, steps: int, timing: Timing | None, **extra: Any) -> dict:
+    row: dict[str, Any] = {"case": case, "n": n, "steps": steps}
+    if timing is not None:
+        count = (n or 0) * steps
+        row.update(
+            run_s=timing.run_s,
+            compile_s=timing.compile_s,
+            robot_steps_per_s=count / timing.run_s if timing.run_s > 0 else None,
+            runs_s=timing.runs_s,
+            others_cpu=timing.others_cpu,
+        )
+    row.update(extra)
+    return row
+
+
+def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = None) -> dict:
+    """Run the benchmark and return its results as a JSON-ready dict.
+
+    Args:
+        config: what to measure.
+        log: called with one line per finished case (progress).
+
+    Returns:
+        ``{"environment": ..., "config": ..., "rows": [...], "ratios": {...},
+        "peak_rss_mb": ...}``; each row has ``case``, ``n``, ``steps``,
+        ``run_s`` (s), ``compile_s`` (s), ``robot_steps_per_s``, ``runs_s``,
+        ``others_cpu`` (cores), or ``skipped`` with a reason; ``ratios`` maps
+        ``"N=<n>"`` to the speed-ups of ``final_poses`` over the baselines and
+        the cost of each gradient over its forward pass.
+
+    Raises:
+        ValueError: for a bad ``config``.
+    """
+    config = _check_config(config)
+    import jax
+
+    if config.dtype == "float64" and not jax.config.jax_enable_x64:
+        jax.config.update("jax_enable_x64", True)
+    if config.dtype == "float32" and jax.config.jax_enable_x64:
+        raise ValueError(
+            "dtype = 'float32' is not allowed while jax_enable_x64 is on; "
+            "allowed: 'float64', or turn jax_enable_x64 off"
+        )
+    from wmr_jax._src.params import Gains
+
+    say = log or (lambda line: None)
+    rows: list[dict] = []
+    with warnings.catch_warnings():
+        # The paper's gains trip the wheel-speed warning on every call.
+        warnings.simplefilter("ignore")
+        for n in config.sizes:
+            bench = _SizeBench(config, n, Gains())
+            for row in bench.rows(scalar=n == max(config.sizes)):
+                rows.append(row)
+                rate = row.get("robot_steps_per_s")
+                text = row.get("skipped") or (f"{rate:.3e} robot-steps/s" if rate else "")
+                say(f"{row['case']:<22} N={row['n']!s:<8} {text}")
+    return {
+        "environment": _environment(),
+        "config": dataclasses.asdict(config),
+        "rows": rows,
+        "ratios": _ratios(rows),
+        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    }
+
+
+class _SizeBench:
+    """The cases of one batch size ``n``, each a step that returns its rows."""
+
+    def __init__(self, config: BenchConfig, n: int, gains: Any) -> None:
+        import jax.numpy as jnp
+
+        from wmr_jax._src.poses import sample_poses
+
+        self.config, self.n, self.gains, self.steps = config, n, gains, config.steps
+        dtype = np.float32 if config.dtype == "float32" else np.float64
+        self.refs_np = np.asarray(sample_poses(config.seed + n, n), dtype=dtype)
+        self.refs = jnp.asarray(self.refs_np)
+
+    def time(self, calls: dict[str, tuple[Callable[[], Any], bool]]) -> dict[str, Timing]:
+        return _time_group(calls, self.config.repeats, wait_idle=self.config.wait_idle)
+
+    def row(self, case: str, timing: Timing | None, **extra: Any) -> dict:
+        return _row(case, self.n, self.steps, timing, **extra)
+
+    def rows(self, *, scalar: bool) -> list[dict]:
+        """Return the rows of every chosen case, in the order of the table."""
+        cases = self.config.cases
+        baselines = self.baselines(scalar=scalar and "scalar_reference" in cases)
+        rows = baselines[0]
+        for case, step in (
+            ("final_poses_nonideal", self.nonideal),
+            ("batch_rollout", self.batch_rollout),
+            ("grad_final_pose_loss", self.final_pose_loss),
+            ("grad_tuning_loss", self.tuning_loss),
+        ):
+            if case in cases:
+                rows += step()
+        return rows + baselines[1]
+
+    def baselines(self, *, scalar: bool) -> tuple[list[dict], list[dict]]:
+        """Time ``final_poses`` against both baselines, interleaved: their ratio counts.
+
+        Returns:
+            The rows of ``final_poses`` (and sharded), then those of the baselines.
+        """
+        import jax
+
+        from wmr_jax._src import reference
+        from wmr_jax._src.rollout import final_poses
+
+        cases, gains, steps, refs = self.config.cases, self.gains, self.steps, self.refs
+        group: dict[str, tuple[Callable[[], Any], bool]] = {}
+        if "final_poses" in cases:
+            group["final_poses"] = (lambda: final_poses(refs, gains, steps=steps), True)
+        if "numpy_batch" in cases:
+            group["numpy_batch"] = (
+                lambda: numpy_final_poses(self.refs_np, gains, steps=steps),
+                False,
+            )
+        k = self.config.reference_poses
+        if scalar:
+            from wmr_jax._src.poses import sample_poses
+
+            scalar_refs = np.asarray(sample_poses(self.config.seed, k), dtype=np.float64)
+
+            def scalar_runs():
+                for ref in scalar_refs:
+                    reference.reference_rollout(ref, gains, steps=steps)
+
+            group["scalar_reference"] = (scalar_runs, False)
+        devices = jax.local_devices()
+        if "final_poses_sharded" in cases and len(devices) > 1:
+            from wmr_jax._src.sharding import shard
+
+            spread = shard(self.refs_np, devices)
+            group["final_poses_sharded"] = (
+                lambda: final_poses(spread.array, gains, steps=steps),
+                True,
+            )
+        t = self.time(group) if group else {}
+        first, last = [], []
+        if "final_poses" in t:
+            first.append(self.row("final_poses", t["final_poses"], velocity="ideal"))
+        if "final_poses_sharded" in t:
+            sharded = t["final_poses_sharded"]
+            first.append(self.row("final_poses_sharded", sharded, devices=len(devices)))
+        if "numpy_batch" in t:
+            last.append(self.row("numpy_batch", t["numpy_batch"], dtype=self.config.dtype))
+        if "scalar_reference" in t:
+            note = "float64, one pose at a time"
+            last.append(_row("scalar_reference", k, steps, t["scalar_reference"], note=note))
+        return first, last
+
+    def nonideal(self) -> list[dict]:
+        from wmr_jax._src.rollout import final_poses
+
+        gains, steps, refs = self.gains, self.steps, self.refs
+
+        def call():
+            return final_poses(refs, gains, steps=steps, velocity="nonideal")
+
+        try:
+            t = self.time({"nonideal": (call, True)})["nonideal"]
+        except NotImplementedError as err:
+            return [self.row("final_poses_nonideal", None, skipped=f"skipped: {err}")]
+        return [self.row("final_poses_nonideal", t, velocity="nonideal")]
+
+    def batch_rollout(self) -> list[dict]:
+        from wmr_jax._src.rollout import batch_rollout
+
+        gains, steps, refs = self.gains, self.steps, self.refs
+        t = self.time({"rollout": (lambda: batch_rollout(refs, gains, steps=steps), True)})
+        return [self.row("batch_rollout", t["rollout"], velocity="ideal")]
+
+    def loss_rows(self, loss: Callable, forward_row: tuple[str, dict], case: str) -> list[dict]:
+        """Time ``loss(gains, refs)`` and its gradient, interleaved; return both rows."""
+        import jax
+
+        from wmr_jax._src import loops
+
+        forward = loops.jit_top_level(loss)
+        gradient = loops.jit_top_level(jax.value_and_grad(loss))
+        gains, refs = self.gains, self.refs
+        t = self.time(
+            {
+                "forward": (lambda: forward(gains, refs), True),
+                "gradient": (lambda: gradient(gains, refs), True),
+            }
+        )
+        ratio = t["gradient"].run_s / t["forward"].run_s
+        return [
+            self.row(forward_row[0], t["forward"], **forward_row[1]),
+            self.row(case, t["gradient"], grad_over_forward=ratio),
+        ]
+
+    def final_pose_loss(self) -> list[dict]:
+        """The mean squared final-pose error through ``final_poses``, and its gradient."""
+        import jax.numpy as jnp
+
+        from wmr_jax._src.rollout import final_poses
+
+        steps = self.steps
+
+        def loss(gains, refs):
+            final = final_poses(refs, gains, steps=steps)
+            err = final - refs
+            return jnp.mean(err[:, 0] ** 2 + err[:, 1] ** 2 + (1.0 - jnp.cos(err[:, 2])))
+
+        row = ("final_pose_loss", {"of": "mean squared error"})
+        return self.loss_rows(loss, row, "grad_final_pose_loss")
+
+    def tuning_loss(self) -> list[dict]:
+        """``wmr_jax.tuning.tuning_loss`` and its gradient, or a row saying why not."""
+        from wmr_jax._src.rollout import DEFAULT_DT
+
+        try:
+            from wmr_jax._src import tuning
+
+            horizon = self.steps * DEFAULT_DT
+
+            def loss(g, r):
+                return tuning.tuning_loss(g, r, temperature=TUNING_TEMPERATURE, horizon=horizon)
+
+            row = ("tuning_loss", {"temperature": TUNING_TEMPERATURE})
+            return self.loss_rows(loss, row, "grad_tuning_loss")
+        except (ImportError, AttributeError, TypeError, NotImplementedError) as err:
+            return [self.row("grad_tuning_loss", None, skipped=f"skipped: {err}")]
+
+
+def _ratios(rows: list[dict]) -> dict[str, Any]:
+    """Speed-ups of ``final_poses`` over the baselines, per batch size."""
+
+    def rate(case: str, n: int | None = None) -> float | None:
+        for row in rows:
+            if row["case"] == case and (n is None or row["n"] == n):
+                return row.get("robot_steps_per_s")
+        return None
+
+    scalar = rate("scalar_reference")
+    out: dict[str, Any] = {}
+    sizes = sorted({row["n"] for row in rows if row["case"] != "scalar_reference"})
+    for n in sizes:
+        entry: dict[str, Any] = {}
+        numpy_rate = rate("numpy_batch", n)
+        jax_rates = (("", rate("final_poses", n)), ("sharded_", rate("final_poses_sharded", n)))
+        for name, value in jax_rates:
+            if value and numpy_rate:
+                entry[f"{name}vs_numpy_batch"] = value / numpy_rate
+            if value and scalar:
+                entry[f"{name}vs_scalar_reference"] = value / scalar
+        for case in ("grad_final_pose_loss", "grad_tuning_loss"):
+            for r in rows:
+                if r["case"] == case and r["n"] == n and "grad_over_forward" in r:
+                    entry[f"{case}_over_forward"] = r["grad_over_forward"]
+        if entry:
+            out[f"N={n}"] = entry
+    return out

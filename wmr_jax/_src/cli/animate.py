@@ -1,0 +1,82 @@
+"""``wmr-jax animate``: animated GIF of a batch of robots driving to their poses.
+
+The references are ``--robots`` random docs/model.md §6 poses drawn with
+``wmr_jax.sample_poses(--seed, --robots)``, or with ``--paper`` the seven of
+the paper's Fig. 7 (``wmr_jax.paper_refs``); ``wmr_jax.report.animate``
+records the runs and draws them.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from wmr_jax._src.cli import flags
+
+__all__ = ["SUBCOMMANDS"]
+
+
+def _flags() -> dict[str, dict[str, Any]]:
+    """Flag -> ``add_argument`` keywords, in ``--help`` order (values are checked in ``run``)."""
+    from wmr_jax._src.controllers import SHIM_SUNG, registered_names
+
+    return {
+        "--out": {"required": True, "metavar": "FILE.gif", "help": "GIF to write"},
+        "--controller": {
+            "default": SHIM_SUNG.name,
+            "metavar": "NAME",
+            "help": "controller: " + ", ".join(registered_names()),
+        },
+        "--robots": {"default": 8, "metavar": "N", "help": "number of random references"},
+        "--seed": {"default": 0, "metavar": "S", "help": "seed of the random references"},
+        "--paper": {
+            "action": "store_true",
+            "help": "use the paper's seven Fig. 7 references instead of random ones",
+        },
+        "--velocity": {"default": "ideal", "help": "velocity loop: ideal or nonideal"},
+        "--seconds": {"default": 4.0, "metavar": "S", "help": "simulated time, s"},
+        "--fps": {"default": 15, "metavar": "N", "help": "frames per second"},
+    }
+
+
+def add_arguments(parser: Any) -> None:
+    """Add the flags of ``wmr-jax animate``."""
+    for flag, options in _flags().items():
+        parser.add_argument(flag, **options)
+
+
+def run(args: Any) -> int:
+    """Run ``wmr-jax animate``; return the exit status."""
+    from wmr_jax._src.poses import horizon_steps, paper_refs
+    from wmr_jax._src.report.animation import animate
+    from wmr_jax._src.rollout import DEFAULT_DT
+
+    out = flags.output_file("--out", args.out)
+    if out.suffix.lower() != ".gif":
+        raise ValueError(f"--out {args.out!r} is not allowed; allowed: a path ending in .gif")
+    name = flags.controller_names([args.controller])[0]
+    velocity = flags.velocity_loop(args.velocity)
+    robots = flags.positive_int("--robots", args.robots)
+    seed = flags.positive_int("--seed", args.seed, 0, 2**32 - 1)
+    seconds = flags.number("--seconds", args.seconds, low=0.0, closed=False, unit="s")
+    fps = flags.positive_int("--fps", args.fps)
+    path = animate(
+        out,
+        paper_refs() if args.paper else None,
+        n_robots=robots,
+        seed=seed,
+        controller=name,
+        velocity=velocity,
+        steps=max(1, horizon_steps(DEFAULT_DT, seconds)),
+        fps=fps,
+    )
+    print(f"animation -> {path}")
+    return 0
+
+
+SUBCOMMANDS = {
+    "animate": {
+        "help": "animated GIF of a batch of robots driving to their poses",
+        "add_arguments": add_arguments,
+        "run": run,
+    },
+}

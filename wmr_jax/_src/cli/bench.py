@@ -1,0 +1,103 @@
+"""``wmr-jax bench``: robot-steps per second against NumPy baselines."""
+
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+from wmr_jax._src import bench
+from wmr_jax._src.cli import flags
+
+__all__ = ["SUBCOMMANDS"]
+
+# The integer flags: (flag, attribute, default, metavar, help).
+_INT_FLAGS = (
+    ("--steps", "steps", bench.DEFAULT_STEPS, "N", "control periods per run"),
+    ("--repeats", "repeats", bench.DEFAULT_REPEATS, "N", "timed calls per case (the median)"),
+    (
+        "--reference-poses",
+        "reference_poses",
+        bench.DEFAULT_REFERENCE_POSES,
+        "K",
+        "poses the scalar NumPy reference is timed on",
+    ),
+)
+
+
+def add_arguments(parser: Any) -> None:
+    """Add the flags of ``wmr-jax bench``."""
+    parser.add_argument(
+        "--sizes",
+        nargs="+",
+        default=list(bench.DEFAULT_SIZES),
+        metavar="N",
+        help="batch sizes",
+    )
+    for flag, _, default, metavar, text in _INT_FLAGS:
+        parser.add_argument(flag, default=default, metavar=metavar, help=text)
+    parser.add_argument("--dtype", default="float32", help=" or ".join(bench.DTYPES))
+    parser.add_argument(
+        "--cases",
+        nargs="+",
+        default=None,
+        metavar="CASE",
+        help="only these cases, among " + ", ".join(bench.CASES) + " (None: all of them)",
+    )
+    parser.add_argument(
+        "--cpu-devices",
+        default=None,
+        metavar="K",
+        help="split the CPU into K JAX devices for the sharded case (None: two per "
+        "core; 1 keeps one). Only before JAX starts; see wmr_jax.use_cpu_devices",
+    )
+    parser.add_argument(
+        "--wait-idle",
+        default=0.0,
+        metavar="S",
+        help="on a shared machine: before each round of timed calls, wait up to S s "
+        "for other processes to leave the CPU (0: do not wait)",
+    )
+    parser.add_argument(
+        "--json", default=None, metavar="FILE", help="also write the results here (atomically)"
+    )
+
+
+def _config_from(args: Any) -> bench.BenchConfig:
+    """Return the ``BenchConfig`` of the flags, each checked (one line naming a bad one)."""
+    ints = {name: flags.positive_int(flag, getattr(args, name)) for flag, name, *_ in _INT_FLAGS}
+    return bench.BenchConfig(
+        sizes=tuple(flags.positive_int("--sizes", n) for n in args.sizes),
+        dtype=flags.choice("--dtype", args.dtype, bench.DTYPES),
+        cases=tuple(flags.choice("--cases", c, bench.CASES) for c in args.cases or ()),
+        wait_idle=flags.number("--wait-idle", args.wait_idle, low=0.0, unit="s"),
+        **ints,
+    )
+
+
+def run(args: Any) -> int:
+    """Run ``wmr-jax bench``: print the table (progress on stderr); return 0."""
+    from wmr_jax._src.io import atomic_write_json
+    from wmr_jax._src.report.bench import bench_table
+    from wmr_jax._src.sharding import use_cpu_devices
+
+    out = None if args.json is None else flags.output_file("--json", args.json)
+    config = _config_from(args)
+    cpu_devices = (
+        None if args.cpu_devices is None else flags.positive_int("--cpu-devices", args.cpu_devices)
+    )
+    use_cpu_devices(cpu_devices)
+    result = bench.run_benchmark(config, log=lambda line: print(line, file=sys.stderr, flush=True))
+    print(bench_table(result), end="")
+    if out is not None:
+        atomic_write_json(out, result)
+        print(f"results: {args.json}")
+    return 0
+
+
+SUBCOMMANDS = {
+    "bench": {
+        "help": "robot-steps per second against NumPy baselines",
+        "add_arguments": add_arguments,
+        "run": run,
+    },
+}

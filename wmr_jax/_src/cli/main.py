@@ -1,0 +1,102 @@
+"""The ``wmr-jax`` command line: the one place that parses arguments.
+
+Each command lives in its own module of this package with ``HELP``,
+``add_arguments(parser)`` and ``run(args) -> int``; the engines it calls
+return values, and the command writes the files and prints. Every user
+error (a bad flag value, out-of-range gains, an unwritable output path) ends
+in one line on stderr and exit status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+import warnings
+from collections.abc import Sequence
+
+__all__ = ["COMMANDS", "build_parser", "main"]
+
+# Command name -> module of this package that implements it, in --help order.
+COMMANDS = {
+    "simulate": "simulate",
+    "demo": "paper",
+    "paper": "paper",
+    "tune": "tune",
+    "sweep": "sweep",
+    "waypoints": "waypoints",
+    "robustness": "robustness",
+    "animate": "animate",
+    "bench": "bench",
+}
+
+# Sweep-like commands spread their batches over every local device; on a CPU
+# that means splitting it into several JAX devices first (wmr_jax.use_cpu_devices).
+_ALL_DEVICE_COMMANDS = ("sweep", "bench")
+
+
+class _Parser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose errors are one line, like every other error."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the argument parser of ``wmr-jax``."""
+    parser = _Parser(
+        prog="wmr-jax",
+        description="Differentiable, batched simulator of the Shim–Sung (2003) pose controller.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name, module_name in COMMANDS.items():
+        module = importlib.import_module(f"wmr_jax._src.cli.{module_name}")
+        spec = module.SUBCOMMANDS[name]
+        command = sub.add_parser(
+            name,
+            help=spec["help"],
+            description=spec["help"],
+            formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        )
+        spec["add_arguments"](command)
+        command.set_defaults(func=spec["run"])
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; return the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command in _ALL_DEVICE_COMMANDS and getattr(args, "cpu_devices", None) is None:
+        from wmr_jax._src.sharding import use_cpu_devices
+
+        # Before any JAX computation; a no-op on accelerators. A command with
+        # its own --cpu-devices flag splits the CPU itself, after checking it.
+        use_cpu_devices()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("always")
+            warnings.showwarning = _one_line_warning
+            return args.func(args)
+    except ValueError as err:
+        print(f"wmr-jax: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("wmr-jax: interrupted", file=sys.stderr)
+        return 130
+
+
+_shown_warnings: set[str] = set()
+
+
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Print each distinct warning once, in one line."""
+    text = str(message)
+    if text not in _shown_warnings:
+        _shown_warnings.add(text)
+        print(f"wmr-jax: warning: {text}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,91 @@
+"""``wmr-jax simulate``: drive the robot to one reference pose and report."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from wmr_jax._src.cli import flags
+
+__all__ = ["SUBCOMMANDS"]
+
+
+def add_arguments(parser: Any) -> None:
+    """Add the flags of ``wmr-jax simulate``."""
+    parser.add_argument(
+        "--ref",
+        nargs=3,
+        required=True,
+        metavar=("X", "Y", "THETA_DEG"),
+        help="reference pose: cm, cm, degrees",
+    )
+    parser.add_argument(
+        "--init",
+        nargs=3,
+        default=["0", "0", "0"],
+        metavar=("X", "Y", "THETA_DEG"),
+        help="initial pose: cm, cm, degrees",
+    )
+    parser.add_argument("--dt", default=0.033, metavar="S", help="control period, s")
+    parser.add_argument("--steps", default=150, metavar="N", help="control periods")
+    parser.add_argument("--velocity", default="ideal", help="velocity loop: ideal or nonideal")
+    parser.add_argument(
+        "--plot", default=None, metavar="FILE.png", help="save the path to this image"
+    )
+    parser.add_argument(
+        "--gains",
+        default=None,
+        metavar="FILE.json",
+        help="take the gains from this file (tuned_gains.json of wmr-jax tune: Gains field "
+        "names, phi_m in radians) instead of the gain flags",
+    )
+    flags.add_gain_flags(parser)
+
+
+def run(args: Any) -> int:
+    """Run ``wmr-jax simulate``; return the exit status."""
+    import numpy as np
+
+    from wmr_jax._src import metrics
+    from wmr_jax._src.rollout import rollout
+
+    plot = None if args.plot is None else flags.output_file("--plot", args.plot)
+    ref = flags.pose_from_degrees("--ref", args.ref)
+    init = flags.pose_from_degrees("--init", args.init)
+    dt = flags.number("--dt", args.dt, low=0.0, closed=False, unit="s")
+    steps = flags.positive_int("--steps", args.steps, 1, 10**7)
+    velocity = flags.velocity_loop(args.velocity)
+    gains = flags.gains_from(args)
+    traj = rollout(ref, gains, init=init, dt=dt, steps=steps, velocity=velocity)
+    t_arrive = float(metrics.arrival_time(traj, np.asarray(ref), dt=dt))
+    per_region = np.asarray(metrics.region_time(traj, dt=dt))
+    final = np.asarray(traj.poses[-1])
+    print(f"reference      : x={ref[0]:.3f} cm  y={ref[1]:.3f} cm  θ={math.degrees(ref[2]):.2f}°")
+    print(
+        f"final pose     : x={final[0]:.3f} cm  y={final[1]:.3f} cm  "
+        f"θ={math.degrees(final[2]):.2f}° after {steps * dt:.3f} s"
+    )
+    arrival = "never (not arrived at the end)" if math.isinf(t_arrive) else f"{t_arrive:.3f} s"
+    print(f"arrival time   : {arrival}")
+    print(
+        "time per region: "
+        + "  ".join(f"R{k}={per_region[k]:.3f} s" for k in range(4))
+        + f"  (peak wheel speed {float(np.abs(np.asarray(traj.wheel_speeds)).max()):.1f} cm/s)"
+    )
+    if plot is not None:
+        from wmr_jax._src.report.figures import path_figure
+
+        path_figure(
+            plot, traj, ref, title=f"ref = ({ref[0]:g}, {ref[1]:g}, {math.degrees(ref[2]):g}°)"
+        )
+        print(f"plot           : {plot}")
+    return 0
+
+
+SUBCOMMANDS = {
+    "simulate": {
+        "help": "drive the robot to one reference pose and report",
+        "add_arguments": add_arguments,
+        "run": run,
+    },
+}

@@ -1,0 +1,302 @@
+"""``wmr-jax tune``: tune gains by gradient descent under k_r + L k_θ ≤ V_max.
+
+The engine (``wmr_jax.tuning.train``) writes nothing; this command shows a
+progress bar, checkpoints from the engine's progress callback, and writes
+``tuned_gains.json``, ``random_search_gains.json``, ``evaluation.json`` and
+``tuning_curve.png``. ``tune`` is the same as a function.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from wmr_jax._src.cli import flags
+
+__all__ = ["CHECKPOINT_NAME", "SUBCOMMANDS", "tune"]
+
+CHECKPOINT_NAME = "checkpoint.npz"
+_CHECKPOINT_FORMAT = 2  # 1: the unchecked .npz before the checksummed files
+
+
+# ---------------------------------------------------------------- checkpoints
+
+
+def _save_checkpoint(path: Path, state: Any, identity: dict[str, Any]) -> None:
+    from wmr_jax._src import io, tuning
+
+    meta = {"format": _CHECKPOINT_FORMAT, "identity": identity}
+    io.save_arrays(path, tuning.state_arrays(state), meta)
+
+
+def _identity_diff(saved: Any, now: dict[str, Any]) -> str:
+    """Name the settings in which a checkpoint's run differs from this one."""
+    saved_config = saved.get("config", {}) if isinstance(saved, dict) else {}
+    diffs = [
+        f"{key} = {saved_config.get(key)!r} there, {value!r} now"
+        for key, value in now["config"].items()
+        if saved_config.get(key) != value
+    ]
+    return "; ".join(diffs) or "the robot differs"
+
+
+def _load_checkpoint(path: Path, fresh: Any, identity: dict[str, Any]) -> Any:
+    """Restore a checkpoint into the structure of ``fresh``.
+
+    Raises:
+        ValueError: one line, if it is damaged or belongs to another run.
+    """
+    import json
+
+    from wmr_jax._src import io, tuning
+
+    advice = "remove it to start over"
+    try:
+        arrays, meta = io.load_arrays(path)
+    except io.DamagedFileError as err:
+        raise ValueError(f"--resume: checkpoint {' '.join(str(err).split())}; {advice}") from None
+    if not isinstance(meta, dict) or meta.get("format") != _CHECKPOINT_FORMAT:
+        raise ValueError(f"--resume: checkpoint {path} has an unknown format; {advice}")
+    # Compare as JSON, the way the identity was stored.
+    now = json.loads(json.dumps(identity))
+    if meta.get("identity") != now:
+        raise ValueError(
+            f"--resume: checkpoint {path} is of another run "
+            f"({_identity_diff(meta.get('identity'), now)}); "
+            "allowed: the same settings, or a fresh --out"
+        )
+    try:
+        return tuning.restore_state(arrays, fresh)
+    except ValueError as err:
+        raise ValueError(f"--resume: checkpoint {path}: {err}; {advice}") from None
+
+
+# ---------------------------------------------------------------- the run
+
+
+def _progress(
+    config: Any, checkpoint: Path, identity: dict[str, Any], bar: Any, user_fn: Callable | None
+) -> Callable[[Any], None]:
+    """The training's progress callback: the bar, the checkpoint, then the caller's."""
+
+    def report(state: Any) -> None:
+        bar.update(1)
+        bar.set_postfix(
+            loss=f"{state.losses[-1]:.3f}s", T=f"{state.temperatures[-1]:.3g}", refresh=False
+        )
+        last = state.iteration == config.iters
+        if last or state.iteration % config.checkpoint_every == 0:
+            _save_checkpoint(checkpoint, state, identity)
+        if last:
+            bar.close()  # before the random search and the evaluation
+        if user_fn is not None:
+            user_fn(state)
+
+    return report
+
+
+def _write_results(out: Path, config: Any, robot: Any, result: Any) -> None:
+    """Write the gains, the evaluation and the tuning curve of ``result`` to ``out``."""
+    from wmr_jax._src import io, tuning
+    from wmr_jax._src.params import check_feasible
+    from wmr_jax._src.report.tuning import tuning_curve
+
+    tuned = tuning.gains_as_dict(result.gains)
+    io.atomic_write_json(out / "tuned_gains.json", tuned)
+    search = result.search
+    if search is not None:
+        io.atomic_write_json(out / "random_search_gains.json", tuning.gains_as_dict(search.gains))
+    paper = result.evaluation["paper_feasible"].mean_arrival
+    rows = {name: dict(ev._asdict()) for name, ev in result.evaluation.items()}
+    for row in rows.values():
+        row["speedup_vs_paper"] = paper / row["mean_arrival"]
+    report = {
+        "velocity": config.velocity,
+        "held_out_poses": config.eval_poses,
+        "horizon_s": config.horizon,
+        "law": "hard (temperature None)",
+        "rows": rows,
+        "tuned_gains": tuned,
+        "feasible": bool(check_feasible(result.gains, robot)),
+        "wall_time_s": {
+            "tuning": result.tune_wall_s,
+            "random_search": None if search is None else search.wall_s,
+        },
+        "random_search_candidates": None if search is None else search.candidates,
+        "config": config.as_dict(),
+    }
+    io.atomic_write_json(out / "evaluation.json", report)
+    tuning_curve(out / "tuning_curve.png", result.history, velocity=config.velocity)
+
+
+def tune(
+    out_dir: str | os.PathLike,
+    config: Any = None,
+    *,
+    robot: Any = None,
+    resume: bool = False,
+    progress: bool = True,
+    progress_fn: Callable[[Any], Any] | None = None,
+) -> Any:
+    """Run ``wmr_jax.tuning.train`` and write its results and checkpoints to ``out_dir``.
+
+    Files in ``out_dir``: ``tuned_gains.json`` (exactly the ``Gains`` field
+    names), ``evaluation.json``, ``tuning_curve.png``,
+    ``random_search_gains.json`` and ``checkpoint.npz`` (checksummed, written
+    atomically every ``config.checkpoint_every`` iterations and at the end).
+
+    Args:
+        out_dir: output folder (created if needed).
+        config: a ``TuneConfig``; default ``TuneConfig()``.
+        robot: robot parameters; default ``Robot()``.
+        resume: continue from ``out_dir/checkpoint.npz`` if present (it must
+            come from the same settings); the result is the same as that of
+            an uninterrupted run. Without it, any checkpoint is overwritten.
+        progress: show a progress bar with the loss.
+        progress_fn: called with the ``TrainState`` after each iteration,
+            after the checkpoint; an exception it raises stops the run (the
+            checkpoint of the last ``checkpoint_every`` boundary stays).
+
+    Returns:
+        The ``TuneResult`` of ``train``.
+
+    Raises:
+        ValueError: one line, for bad settings or a damaged checkpoint or one
+            of another run.
+    """
+    from tqdm.auto import tqdm
+
+    from wmr_jax._src import io, tuning
+    from wmr_jax._src.checks import as_float_tree
+    from wmr_jax._src.params import Robot, validate_robot
+
+    out = Path(out_dir)
+    io.remove_stale_temporaries(out)
+    config = (tuning.TuneConfig() if config is None else config).validate()
+    robot = Robot() if robot is None else robot
+    identity = tuning.run_identity(config, robot)
+    state = tuning.init_state(config, robot)
+    checkpoint = out / CHECKPOINT_NAME
+    if resume and checkpoint.exists():
+        state = _load_checkpoint(checkpoint, state, identity)
+    bar = tqdm(
+        total=config.iters,
+        initial=state.iteration,
+        desc=f"tune ({config.velocity})",
+        disable=not progress,
+        dynamic_ncols=True,
+    )
+    report = _progress(config, checkpoint, identity, bar, progress_fn)
+    try:
+        result = tuning.train(config, robot=robot, state=state, progress_fn=report)
+    finally:
+        bar.close()
+    _write_results(out, config, as_float_tree(validate_robot(robot)), result)
+    return result
+
+
+# ---------------------------------------------------------------- the command
+
+# flag, TuneConfig field (or None), metavar, help
+_FLAGS = (
+    ("--velocity", "velocity", "ideal|nonideal", "velocity loop the gains are tuned for"),
+    ("--iters", "iters", "N", "gradient iterations"),
+    ("--poses", "poses", "N", "reference poses per iteration"),
+    ("--seed", "seed", "S", "seed of the training poses and the random search"),
+    ("--horizon", "horizon", "S", "simulated time per run, s"),
+    ("--eval-poses", "eval_poses", "N", "held-out poses of the before/after table"),
+    ("--checkpoint-every", "checkpoint_every", "N", "iterations between checkpoints"),
+)
+
+
+def add_arguments(parser: Any) -> None:
+    """Add the flags of ``wmr-jax tune``."""
+    from wmr_jax._src.tuning.training import TuneConfig
+
+    defaults = TuneConfig()
+    parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    for flag, field, metavar, text in _FLAGS:
+        parser.add_argument(flag, default=getattr(defaults, field), metavar=metavar, help=text)
+    parser.add_argument(
+        "--no-random-search",
+        action="store_true",
+        help="skip the random-search baseline (same wall time as the tuning)",
+    )
+    parser.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue from DIR/checkpoint.npz (same settings) instead of starting over",
+    )
+    parser.add_argument(
+        "--gradient-cost",
+        action="store_true",
+        help="instead of tuning, measure the gradient's time and peak memory "
+        "(4096 poses x 150 steps, with and without remat) into DIR/gradient_cost.json",
+    )
+
+
+def _config_from(args: Any) -> Any:
+    """The ``TuneConfig`` of the flags, each checked (one line naming a bad one)."""
+    from wmr_jax._src.tuning.training import TuneConfig
+
+    return TuneConfig(
+        velocity=flags.velocity_loop(args.velocity),
+        iters=flags.positive_int("--iters", args.iters, 1),
+        poses=flags.positive_int("--poses", args.poses, 1),
+        seed=flags.positive_int("--seed", args.seed, 0, 2**32 - 1),
+        horizon=flags.number("--horizon", args.horizon, low=0.0, closed=False, unit="s"),
+        eval_poses=flags.positive_int("--eval-poses", args.eval_poses, 1),
+        checkpoint_every=flags.positive_int("--checkpoint-every", args.checkpoint_every, 1),
+        random_search=not args.no_random_search,
+    )
+
+
+def _gradient_cost(out: Path) -> int:
+    from wmr_jax._src import io, tuning
+
+    costs = [tuning.gradient_cost(remat=remat) for remat in (True, False)]
+    io.atomic_write_json(out / "gradient_cost.json", [c._asdict() for c in costs])
+    for c in costs:
+        print(
+            f"{c.poses} poses x {c.steps} steps, remat={c.remat}: forward {c.forward_s:.3f} s, "
+            f"gradient {c.gradient_s:.3f} s ({c.gradient_s / c.forward_s:.1f}x); peak memory "
+            f"forward {c.forward_peak_bytes / 2**20:.1f} MiB, "
+            f"gradient {c.gradient_peak_bytes / 2**20:.1f} MiB"
+        )
+    return 0
+
+
+def run(args: Any) -> int:
+    """Run ``wmr-jax tune``; return the exit status."""
+    out = flags.output_dir("--out", args.out)
+    config = _config_from(args)
+    if args.gradient_cost:
+        return _gradient_cost(out)
+    from wmr_jax._src import tuning
+    from wmr_jax._src.report.tuning import evaluation_table
+
+    result = tune(out, config, resume=args.resume)
+    tuned = tuning.gains_as_dict(result.gains)
+    print(f"tuned gains ({config.velocity} loop) -> {out / 'tuned_gains.json'}")
+    print("  " + "  ".join(f"{name}={value:.4g}" for name, value in tuned.items()))
+    print(
+        f"held-out evaluation, {config.eval_poses} poses (docs/model.md §6), hard law "
+        f"-> {out / 'evaluation.json'}"
+    )
+    print(evaluation_table(result.evaluation), end="")
+    search = result.search
+    extra = "" if search is None else f"; random search {search.candidates} candidates"
+    print(f"tuning wall time {result.tune_wall_s:.1f} s{extra}")
+    print(f"curve -> {out / 'tuning_curve.png'}")
+    return 0
+
+
+SUBCOMMANDS = {
+    "tune": {
+        "help": "tune gains by gradient descent under k_r + L k_theta <= V_max",
+        "add_arguments": add_arguments,
+        "run": run,
+    },
+}

@@ -1,0 +1,89 @@
+"""Controllers as values: a pure command law plus the type of its parameter pytree.
+
+A ``Controller`` bundles ``command(pose, ref, params, *, temperature, frame)``
+→ ``(v cm/s, ω rad/s)`` with what a rollout needs around it: a region label
+for diagnostics, a boundary check of its parameters, their defaults, and
+what it supports (a smooth relaxation, a check against the robot). Rollouts,
+batching, metrics, sweeps and tuning take any ``Controller`` and ask it, never
+which one it is.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+__all__ = ["Controller", "get_controller", "register_controller", "registered_names"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Controller:
+    """A pose controller as a value (hashable, so it can be a static ``jit`` argument).
+
+    Attributes:
+        name: short name used by the CLI and in tables.
+        command: ``(pose (…,3), ref (…,3), params, *, temperature, frame) -> (v, ω)``.
+            ``frame`` is ``None`` or the pose as ``(x, y, cos θ, sin θ)``, for
+            rollouts that carry the heading that way; the law reads it instead
+            of ``pose`` when given.
+        params_type: the class of its parameter pytree (built with defaults
+            when a rollout gets ``None``).
+        validate: checks a parameter pytree before tracing; returns it.
+        region: ``(pose, ref, params, *, frame) -> int32`` diagnostic label, or
+            ``None`` for a controller without regions (labels are then −1).
+        smooth: whether ``command`` accepts a positive ``temperature``.
+        check_robot: ``(params, robot) -> None``, called with concrete values
+            before a rollout, to warn about parameters that are legal but
+            unsuited to the robot (Shim–Sung: ``k_r + L k_θ > V_max``); or ``None``.
+    """
+
+    name: str
+    command: Callable[..., tuple[jax.Array, jax.Array]]
+    params_type: type
+    validate: Callable[[Any], Any]
+    region: Callable[..., jax.Array] | None = None
+    smooth: bool = False
+    check_robot: Callable[[Any, Any], None] | None = None
+
+    def default_params(self) -> Any:
+        """Return the controller's default parameters."""
+        return self.params_type()
+
+    def region_of(
+        self, pose: jax.Array, ref: jax.Array, params: Any, *, frame: Any = None
+    ) -> jax.Array:
+        """Return the region label of the command at ``pose`` (−1 if it has none)."""
+        if self.region is None:
+            shape = jnp.shape(frame[0]) if frame is not None else jnp.shape(pose)[:-1]
+            return jnp.full(shape, -1, jnp.int32)
+        return self.region(pose, ref, params, frame=frame)
+
+
+_REGISTRY: dict[str, Controller] = {}
+
+
+def register_controller(controller: Controller) -> Controller:
+    """Make ``controller`` known by name to the CLI and ``get_controller``."""
+    _REGISTRY[controller.name] = controller
+    return controller
+
+
+def registered_names() -> list[str]:
+    """Return the names of the registered controllers, in registration order."""
+    return list(_REGISTRY)
+
+
+def get_controller(name: str | Controller) -> Controller:
+    """Return the controller called ``name`` (a ``Controller`` is returned as is)."""
+    if isinstance(name, Controller):
+        return name
+    try:
+        return _REGISTRY[name]
+    except (KeyError, TypeError):
+        raise ValueError(
+            f"controller = {name!r} is not known; allowed: {sorted(_REGISTRY)}"
+        ) from None

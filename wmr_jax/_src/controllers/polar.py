@@ -1,0 +1,79 @@
+"""Two classic polar-coordinate pose controllers, as baselines for Shim–Sung.
+
+Both steer a unicycle to a pose from the same three error coordinates, which
+are restated here in the terms of docs/model.md §2 (robot-frame bearing ``φ_e`` of the
+reference and heading error ``θ_e = θ_r − θ_c``):
+
+* ``ρ = r_e``, the distance to the reference, cm;
+* ``α``, the bearing of the reference from the direction of travel: ``φ_e``
+  when driving forwards, ``φ_e + π`` (wrapped) when driving backwards;
+* ``θ_A = α − θ_e`` (wrapped), the bearing of the line robot→reference
+  measured from the reference's own heading (Aicardi's ``θ``); Astolfi's and
+  Corke's ``β`` is ``−θ_A`` (``β = −θ − α`` with the reference at the origin,
+  plus the reference heading).
+
+Backward driving follows one rule for both laws: a robot driving backwards is
+a robot turned by ``π`` whose reference is turned by ``π`` too. Its ``α`` is
+then ``φ_e + π`` (the bearing from its rear), ``θ_e`` is unchanged, ``v``
+changes sign and ``ω`` does not. choice: the direction is decided afresh at
+every sample, backwards when the reference lies in the rear half-plane
+(``cos φ_e < 0``). Corke's block diagram decides once, at the start; for the
+default gains both rules agree, since Astolfi (1999) shows ``α`` then stays
+within ``(−π/2, π/2]`` once it starts there (``k_α + 5/3 k_β − 2/π k_ρ > 0``).
+
+The laws are pure and elementwise, like the Shim–Sung law; the ``backward`` flag
+is a static field, so it picks code, not values. At ``ρ = 0`` (robot on the
+reference) ``polar_error`` sets ``φ_e = 0`` with finite gradients, the only
+division (``sin α / α``) goes through the NaN-safe ``dynamics.sinc``, and the
+commands and their gradients are finite.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from wmr_jax._src.checks import field_values
+from wmr_jax._src.controllers import shim_sung as law
+
+__all__ = ["driving_error", "gain_values"]
+
+
+def driving_error(
+    pose: jax.Array, ref: jax.Array, *, backward: bool, frame: Any = None
+) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
+    """Return ``(ρ cm, α rad, θ_A rad, direction)`` of the polar laws (module docstring).
+
+    Args:
+        pose: ``(..., 3)`` current pose ``[x cm, y cm, θ rad]``.
+        ref: ``(..., 3)`` reference pose.
+        backward: static; drive backwards when the reference is behind.
+        frame: the pose as ``(x, y, cos θ, sin θ)`` (see ``shim_sung.polar_error``).
+
+    Returns:
+        ``ρ ≥ 0``; ``α ∈ [−π, π]`` (within ``[−π/2, π/2]`` when ``backward``);
+        ``θ_A ∈ [−π, π)``; ``direction`` ``+1`` forwards or ``−1`` backwards.
+        Each has the broadcast leading shape of ``pose`` and ``ref``.
+    """
+    err = law.polar_error(pose, ref, frame=frame)
+    phi, theta_e = law.error_angles(err)
+    if backward:
+        behind = err.cos_phi < 0
+        alpha = jnp.where(behind, law.wrap_angle(phi + jnp.pi), phi)
+        direction = jnp.where(behind, -1.0, 1.0).astype(phi.dtype)
+    else:
+        alpha = phi
+        direction = jnp.ones_like(phi)
+    theta_a = law.wrap_angle(alpha - theta_e)
+    return err.r, alpha, theta_a, direction
+
+
+def gain_values(params: Any, cls: type) -> dict[str, np.ndarray | None]:
+    """Check the fields of polar-law gains (finite numbers; ``backward`` a bool)."""
+    backward = getattr(params, "backward", None) if isinstance(params, cls) else None
+    if isinstance(params, cls) and not isinstance(backward, (bool, np.bool_)):
+        raise ValueError(f"gains.backward = {backward!r} is not allowed; allowed: True or False")
+    return field_values(params, cls, "gains", skip=("backward",))

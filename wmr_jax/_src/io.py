@@ -1,0 +1,165 @@
+"""Output files: atomic writes, and checksummed array files for chunks and checkpoints.
+
+A crash or a kill never leaves a half-written result (every write goes
+through a temporary file and a rename), and a results file that was damaged
+or edited afterwards is detected by its checksum, never trusted.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "DamagedFileError",
+    "atomic_write_bytes",
+    "atomic_write_json",
+    "atomic_write_npz",
+    "atomic_write_text",
+    "load_arrays",
+    "remove_stale_temporaries",
+    "save_arrays",
+    "save_figure",
+]
+
+
+def _write_atomically(path: str | os.PathLike, write: Callable[[Any], None]) -> Path:
+    """Call ``write(file)`` on a temporary file beside ``path``, then rename it over ``path``.
+
+    A kill at any moment leaves either the old file or the new one, never a
+    half-written one; the temporary file is removed if ``write`` fails.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        # mkstemp creates the file private (0600); give it the usual permissions.
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        with os.fdopen(fd, "wb") as f:
+            write(f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
+    """Write ``data`` to ``path`` through a temporary file and an atomic rename."""
+    return _write_atomically(path, lambda f: f.write(data))
+
+
+def atomic_write_npz(path: str | os.PathLike, **arrays: Any) -> Path:
+    """Write arrays as an ``.npz`` atomically, streamed to disk (not built in memory)."""
+    return _write_atomically(path, lambda f: np.savez(f, **arrays))
+
+
+def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
+    """Write UTF-8 ``text`` to ``path`` atomically."""
+    return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, float) and not (obj == obj and abs(obj) != float("inf")):
+        return None if obj != obj else ("inf" if obj > 0 else "-inf")
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if hasattr(obj, "tolist"):
+        return _jsonable(obj.tolist())
+    return obj
+
+
+def atomic_write_json(path: str | os.PathLike, obj: Any) -> Path:
+    """Write ``obj`` as indented JSON atomically; ``inf`` becomes the string "inf"."""
+    return atomic_write_text(path, json.dumps(_jsonable(obj), indent=2, sort_keys=False) + "\n")
+
+
+def save_figure(fig: Any, path: str | os.PathLike, **kwargs: Any) -> Path:
+    """Render a matplotlib figure to ``path`` atomically (format from the suffix)."""
+    buffer = io.BytesIO()
+    fmt = Path(path).suffix.lstrip(".") or "png"
+    fig.savefig(buffer, format=fmt, **kwargs)
+    return atomic_write_bytes(path, buffer.getvalue())
+
+
+# ---------------------------------------------------------------- checked array files
+
+
+class DamagedFileError(ValueError):
+    """A results file that cannot be trusted: unreadable, truncated or altered."""
+
+
+_META = "__meta__"
+_CHECKSUM = "__sha256__"
+
+
+def _checksum(arrays: dict[str, np.ndarray], meta_text: str) -> str:
+    digest = hashlib.sha256(meta_text.encode())
+    for name in sorted(arrays):
+        arr = np.ascontiguousarray(arrays[name])
+        digest.update(f"{name}:{arr.dtype.str}:{arr.shape}".encode())
+        digest.update(arr.tobytes())
+    return digest.hexdigest()
+
+
+def save_arrays(path: str | os.PathLike, arrays: dict[str, Any], meta: dict[str, Any]) -> Path:
+    """Write arrays and a JSON-able ``meta`` dict as a checksummed ``.npz``, atomically.
+
+    ``load_arrays`` refuses the file if any byte of the arrays or the meta
+    data changed since, so a damaged or edited file is never trusted.
+    """
+    arrays = {name: np.asarray(value) for name, value in arrays.items()}
+    meta_text = json.dumps(_jsonable(meta), sort_keys=True)
+    stored = dict(arrays)
+    stored[_META] = np.asarray(meta_text)
+    stored[_CHECKSUM] = np.asarray(_checksum(arrays, meta_text))
+    return atomic_write_npz(path, **stored)
+
+
+def load_arrays(path: str | os.PathLike) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Read a file of ``save_arrays``: ``(arrays, meta)``.
+
+    Raises:
+        DamagedFileError: the file is unreadable, truncated, not of
+            ``save_arrays``, or its checksum does not match (one line, naming it).
+        FileNotFoundError: there is no such file.
+    """
+    path = Path(path)
+    try:
+        with open(path, "rb") as f, np.load(f, allow_pickle=False) as data:
+            stored = {name: data[name] for name in data.files}
+        meta_text = str(stored.pop(_META))
+        checksum = str(stored.pop(_CHECKSUM))
+        meta = json.loads(meta_text)
+    except FileNotFoundError:
+        raise
+    except Exception as err:  # zip, zlib, EOF, key and format errors alike
+        raise DamagedFileError(f"{path} is damaged ({type(err).__name__}: {err})") from None
+    if _checksum(stored, meta_text) != checksum:
+        raise DamagedFileError(f"{path} is damaged (its checksum does not match its contents)")
+    return stored, meta
+
+
+def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
+    """Remove the temporary files a killed atomic write left in ``folder``; return them."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    stale = [p for p in folder.glob(".*.tmp") if p.is_file()]
+    for p in stale:
+        p.unlink(missing_ok=True)
+    return stale

@@ -1,0 +1,353 @@
+"""Pose-space maps: docs/model.md §6 metrics over grids of reference poses, per controller.
+
+For a grid of reference positions ``(x_r, y_r)`` at several headings ``θ_r``,
+with the robot starting at the origin, every pose is run to the
+docs/model.md §6 horizon by ``wmr_jax.sweep``, which reduces each run to its
+metrics inside the time loop (success, arrival time, path length, peak wheel
+speed, zig-zag count) and feeds the poses in fixed-size chunks: no trajectory
+is stored, memory grows with the number of poses only (a few numbers each),
+and one compiled program serves any count. A million poses is an ordinary run.
+
+``map_study`` runs the grid for every controller and returns the metrics and
+a side-by-side summary table; ``summarize`` gives the same table for any set
+of poses (the comparison over random docs/model.md §6 poses uses it). This
+module returns values and writes no files: ``wmr_jax.report.save_map_study``
+draws the heat maps and the first-to-arrive map and writes the summary.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import jax
+import numpy as np
+
+from wmr_jax._src import checks, controllers, metrics
+from wmr_jax._src.params import Robot
+from wmr_jax._src.poses import EVAL_R_MAX, EVAL_R_MIN, HORIZON_S, horizon_steps
+from wmr_jax._src.rollout import DEFAULT_DT
+from wmr_jax._src.sweep import sweep
+
+__all__ = [
+    "DEFAULT_HEADINGS_DEG",
+    "MapStudy",
+    "PoseGrid",
+    "PoseMetrics",
+    "evaluate_poses",
+    "map_study",
+    "pose_grid",
+    "summarize",
+]
+
+DEFAULT_HEADINGS_DEG = (-90.0, 0.0, 90.0, 180.0)
+DEFAULT_CHUNK = 16384
+
+
+class PoseMetrics(NamedTuple):
+    """docs/model.md §6 metrics of ``N`` runs, each a NumPy ``(N,)`` array.
+
+    Attributes:
+        arrival: arrival time, s; ``inf`` where the robot is not arrived at
+            the end of the horizon.
+        path: distance travelled by the centre, cm.
+        peak_wheel: largest rim speed ``|v ± L ω|`` over the run, cm/s.
+        zigzag: sign changes of ``v`` plus those of ``ω`` beyond the dead bands.
+        final_distance: distance to the reference at the end, cm.
+        first_arrival: ``(k + 1) dt`` for the first sample ``k`` at which the
+            robot is arrived, whether or not it stays, s; ``inf`` if never
+            (``None`` where not computed: ``evaluate_poses`` does not).
+    """
+
+    arrival: np.ndarray
+    path: np.ndarray
+    peak_wheel: np.ndarray
+    zigzag: np.ndarray
+    final_distance: np.ndarray
+    first_arrival: np.ndarray | None = None
+
+    @property
+    def success(self) -> np.ndarray:
+        """Whether each run arrived (finite arrival time)."""
+        return np.isfinite(self.arrival)
+
+
+# ---------------------------------------------------------------- the grid
+
+
+class PoseGrid(NamedTuple):
+    """A grid of references: ``G × G`` positions at ``H`` headings, inside the evaluation annulus.
+
+    Attributes:
+        xs: ``(G,)`` x_r, cm (also the y_r values).
+        headings: ``(H,)`` θ_r, rad.
+        inside: ``(G, G)`` bool, ``[iy, ix]``: position within ``r_min..r_max``.
+        refs: ``(H · n_inside, 3)`` the references run, heading-major.
+    """
+
+    xs: np.ndarray
+    headings: np.ndarray
+    inside: np.ndarray
+    refs: np.ndarray
+
+
+def pose_grid(
+    n_poses: int,
+    headings_deg: Sequence[float] = DEFAULT_HEADINGS_DEG,
+    *,
+    r_min: float = EVAL_R_MIN,
+    r_max: float = EVAL_R_MAX,
+) -> PoseGrid:
+    """Return a square grid over ``[−r_max, r_max]²`` with about ``n_poses`` references.
+
+    Only positions at distance ``r_min``–``r_max`` from the origin are run (the
+    docs/model.md §6 set); the grid side is chosen so that their number times
+    the number of headings is close to ``n_poses``.
+
+    Args:
+        n_poses: about how many references in all, ``>= 1``.
+        headings_deg: the reference headings θ_r, degrees (at least one, finite).
+        r_min: least distance from the origin, cm.
+        r_max: largest distance, cm, ``> r_min``.
+
+    Raises:
+        ValueError: for a bad count, heading or distance range.
+    """
+    n_poses = checks.check_int("n_poses", n_poses)
+    r_min = checks.check_number("r_min", r_min, closed=True, unit="cm")
+    r_max = checks.check_number("r_max", r_max, low=r_min, unit="cm")
+    degrees = np.asarray(headings_deg, dtype=float).reshape(-1)
+    if degrees.size == 0:
+        raise ValueError("headings_deg = () is not allowed; allowed: at least one heading")
+    checks.require("headings_deg", degrees, np.isfinite(degrees), "finite degrees")
+    headings = np.radians(degrees)
+    annulus = math.pi * (r_max**2 - r_min**2) / (2 * r_max) ** 2
+    side = max(2, round(math.sqrt(n_poses / (len(headings) * annulus))))
+    xs = np.linspace(-r_max, r_max, side)
+    gx, gy = np.meshgrid(xs, xs)  # [iy, ix]
+    dist = np.hypot(gx, gy)
+    inside = (dist >= r_min) & (dist <= r_max)
+    pos = np.stack([gx[inside], gy[inside]], axis=-1)
+    refs = np.concatenate(
+        [np.concatenate([pos, np.full((len(pos), 1), h)], axis=-1) for h in headings]
+    )
+    return PoseGrid(xs, headings, inside, refs)
+
+
+# ---------------------------------------------------------------- evaluation
+
+
+def evaluate_poses(
+    refs: Any,
+    params: Any = None,
+    *,
+    controller: Any = controllers.SHIM_SUNG,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = DEFAULT_DT,
+    steps: int | None = None,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    chunk: int = DEFAULT_CHUNK,
+    progress: bool = False,
+    x64: bool = True,
+    cache: str | Path | None = None,
+) -> PoseMetrics:
+    """Return the docs/model.md §6 metrics of every reference, in bounded memory.
+
+    Args:
+        refs: ``(N, 3)`` reference poses ``[x cm, y cm, θ rad]``.
+        params: the controller's parameters (its defaults if ``None``); leaves
+            scalar, or ``(N,)`` for one value per pose.
+        controller: a ``Controller`` or its registered name.
+        init: ``(3,)`` initial pose shared by every run.
+        dt: control period, s.
+        steps: control periods; default the docs/model.md §6 horizon of 6 s.
+        robot: robot parameters; default ``Robot()``.
+        velocity: ``"ideal"`` or ``"nonideal"``.
+        chunk: poses per compiled call (the last chunk is padded to it).
+        progress: show a progress bar (stderr).
+        x64: compute in float64 (default), whatever JAX's default dtype.
+            The polar-coordinate baselines are singular at their goal: in
+            float32 the rounding of positions (about 4e-6 cm at 40 cm) makes
+            their bearing ``α`` random once ``ρ`` gets that small, within the
+            6 s horizon, and their heading drifts off again; ``False`` shows it.
+        cache: a folder where each finished chunk is kept, so that a run
+            interrupted and started again with the same arguments resumes
+            (``wmr_jax.sweep``'s ``out``); ``None`` keeps nothing.
+
+    Returns:
+        ``PoseMetrics`` of ``(N,)`` NumPy arrays, in the order of ``refs``.
+
+    Raises:
+        ValueError: for misshapen or non-finite poses and bad options.
+    """
+    refs_host = np.asarray(checks.as_poses("refs", refs, batch=True))
+    chunk = checks.check_int("chunk", chunk)
+    if np.ndim(init) != 1:
+        raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,), shared by every run")
+    with jax.enable_x64(bool(x64)):
+        out = sweep(
+            refs_host,
+            params,
+            init=init,
+            dt=dt,
+            steps=horizon_steps(dt) if steps is None else steps,
+            robot=robot,
+            velocity=velocity,
+            controller=controller,
+            chunk_size=chunk,
+            progress=progress,
+            out=cache,
+        )
+    final = np.stack([out["final_x"], out["final_y"]], axis=-1)
+    return PoseMetrics(
+        arrival=out["arrival_time"],
+        path=out["path_length"],
+        peak_wheel=out["peak_wheel_speed"],
+        zigzag=out["zigzags"],
+        final_distance=np.hypot(*(final - refs_host[:, :2]).T),
+    )
+
+
+# ---------------------------------------------------------------- summaries
+
+
+def _arrival_stats(t: np.ndarray) -> dict[str, float]:
+    """Mean, median and 90th percentile of the arrival times of the successful runs, s."""
+    if not t.size:
+        return {"mean arrival s": math.inf, "median arrival s": math.inf, "p90 arrival s": math.inf}
+    return {
+        "mean arrival s": float(t.mean()),
+        "median arrival s": float(np.median(t)),
+        "p90 arrival s": float(np.percentile(t, 90)),
+    }
+
+
+def summarize(
+    results: dict[str, PoseMetrics], *, v_max: float = 125.0, reference: str | None = None
+) -> list[dict[str, Any]]:
+    """Return one row of summary statistics per controller, side by side.
+
+    Args:
+        results: controller name → its ``PoseMetrics`` over the same poses.
+        v_max: wheel-speed limit for the "over V_max" column, cm/s.
+        reference: the controller the others are compared with pose by pose
+            (default: Shim–Sung if present).
+
+    Returns:
+        Rows with: poses, success rate, mean/median/90th-percentile arrival
+        time of the successful runs, mean path length, mean and largest peak
+        wheel speed, fraction of runs over ``v_max``, mean zig-zag count,
+        fraction of runs with any zig-zag, and against ``reference``: the
+        fraction of poses where this controller arrives strictly earlier.
+    """
+    if reference is None and controllers.SHIM_SUNG.name in results:
+        reference = controllers.SHIM_SUNG.name
+    rows = []
+    for name, m in results.items():
+        ok = m.success
+        row: dict[str, Any] = {
+            "controller": name,
+            "poses": int(len(m.arrival)),
+            "success": float(ok.mean()),
+            **_arrival_stats(m.arrival[ok]),
+            "mean path cm": float(m.path.mean()),
+            "mean peak wheel cm/s": float(m.peak_wheel.mean()),
+            "max peak wheel cm/s": float(m.peak_wheel.max()),
+            "over V_max": float((m.peak_wheel > v_max * (1 + 1e-9)).mean()),
+            "mean zigzag": float(m.zigzag.mean()),
+            "any zigzag": float((m.zigzag > 0).mean()),
+        }
+        if reference is not None and reference in results:
+            ref_t = results[reference].arrival
+            row[f"faster than {reference}"] = float((m.arrival < ref_t).mean())
+        rows.append(row)
+    return rows
+
+
+# ---------------------------------------------------------------- the study
+
+
+class MapStudy(NamedTuple):
+    """What ``map_study`` returns.
+
+    Attributes:
+        grid: the references run (``PoseGrid``).
+        results: controller name → its ``PoseMetrics`` over ``grid.refs``.
+        summary: JSON-ready description of the run (``poses``, ``grid_side``,
+            ``headings_deg``, ``velocity``, ``dtype``, ``horizon_s``, ``dt_s``,
+            ``tolerances``) and its ``rows`` (``summarize``).
+    """
+
+    grid: PoseGrid
+    results: dict[str, PoseMetrics]
+    summary: dict[str, Any]
+
+    @property
+    def rows(self) -> list[dict[str, Any]]:
+        """The summary table, one row per controller."""
+        return self.summary["rows"]
+
+
+def map_study(
+    n_poses: int = 20000,
+    *,
+    controller_names: Sequence[str] | None = None,
+    velocity: str = "ideal",
+    headings_deg: Sequence[float] = DEFAULT_HEADINGS_DEG,
+    chunk: int = DEFAULT_CHUNK,
+    progress: bool = False,
+    x64: bool = True,
+    cache: str | Path | None = None,
+) -> MapStudy:
+    """Run the pose-space maps of every controller; return the metrics and the summary.
+
+    Every controller runs the same grid (``pose_grid``) from ``(0, 0, 0)`` to
+    the docs/model.md §6 horizon, with its default parameters.
+
+    Args:
+        n_poses: about how many reference poses in all (grid × headings).
+        controller_names: controllers to run; default every registered one.
+        velocity: ``"ideal"`` or ``"nonideal"``.
+        headings_deg: the reference headings θ_r of the maps, degrees.
+        chunk: poses per compiled call.
+        progress: show a progress bar per controller.
+        x64: compute in float64 (see ``evaluate_poses``).
+        cache: a folder where each controller's finished chunks are kept
+            (``cache/<controller>``) and reused when run again, so that an
+            interrupted study goes on; ``None`` keeps nothing.
+
+    Returns:
+        A ``MapStudy``.
+
+    Raises:
+        ValueError: for a bad count, heading, controller or option.
+    """
+    names = list(controller_names) if controller_names else controllers.registered_names()
+    grid = pose_grid(n_poses, headings_deg)
+    results = {
+        name: evaluate_poses(
+            grid.refs,
+            controller=name,
+            velocity=velocity,
+            chunk=chunk,
+            progress=progress,
+            x64=x64,
+            cache=None if cache is None else Path(cache) / name,
+        )
+        for name in names
+    }
+    summary = {
+        "poses": int(len(grid.refs)),
+        "grid_side": int(len(grid.xs)),
+        "headings_deg": [float(h) for h in headings_deg],
+        "velocity": velocity,
+        "dtype": "float64" if x64 else "float32",
+        "horizon_s": HORIZON_S,
+        "dt_s": DEFAULT_DT,
+        "tolerances": {"r_cm": metrics.DEFAULT_TOL_R, "theta_deg": 5.0},
+        "rows": summarize(results, v_max=float(Robot().v_max)),
+    }
+    return MapStudy(grid, results, summary)

@@ -1,0 +1,251 @@
+"""Metrics of docs/model.md §6, so that every experiment measures the same thing.
+
+All functions broadcast over leading batch axes of the trajectory: a
+``Trajectory`` from ``rollout`` or one from ``batch_rollout`` alike.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from wmr_jax._src.controllers import shim_sung as law
+
+__all__ = [
+    "DEFAULT_OMEGA_DEAD_BAND",
+    "DEFAULT_TOL_R",
+    "DEFAULT_V_DEAD_BAND",
+    "RunMetrics",
+    "Thresholds",
+    "stream_result",
+    "stream_start",
+    "stream_update",
+    "DEFAULT_TOL_THETA",
+    "arrival_time",
+    "arrived",
+    "path_length",
+    "region_time",
+    "success_rate",
+    "zigzag_count",
+]
+
+DEFAULT_TOL_R = 1.0  # cm
+DEFAULT_TOL_THETA = math.radians(5.0)
+DEFAULT_V_DEAD_BAND = 1.0  # cm/s
+DEFAULT_OMEGA_DEAD_BAND = 0.1  # rad/s
+
+
+def _check_tolerances(tol_r: Any, tol_theta: Any) -> None:
+    if isinstance(tol_r, jax.core.Tracer) or isinstance(tol_theta, jax.core.Tracer):
+        return
+    if not (np.isfinite(tol_r) and tol_r > 0):
+        raise ValueError(f"tol_r = {tol_r!r} is not allowed; allowed: a number > 0 cm")
+    if not (np.isfinite(tol_theta) and 0 < tol_theta < math.pi / 2):
+        raise ValueError(f"tol_theta = {tol_theta!r} is not allowed; allowed: 0 < tol_theta < pi/2")
+
+
+def arrived(
+    poses: jax.Array,
+    refs: jax.Array,
+    *,
+    tol_r: float = DEFAULT_TOL_R,
+    tol_theta: float = DEFAULT_TOL_THETA,
+) -> jax.Array:
+    """Return whether each pose is arrived: ``r_e ≤ tol_r`` and ``|θ̄_e| ≤ tol_theta``.
+
+    Args:
+        poses: ``(..., 3)`` poses.
+        refs: ``(..., 3)`` references, broadcastable against ``poses``.
+        tol_r: distance tolerance, cm.
+        tol_theta: folded-heading tolerance, rad, ``< π/2``.
+    """
+    err = law.polar_error(poses, refs)
+    cos_theta_bar, _ = law.fold(err.cos_theta, err.sin_theta)
+    # |θ̄_e| ≤ tol ⇔ cos θ̄_e ≥ cos tol, since |θ̄_e| ≤ π/2.
+    return (err.r <= tol_r) & (cos_theta_bar >= jnp.cos(tol_theta))
+
+
+def arrival_time(
+    traj: Any,
+    refs: Any,
+    *,
+    dt: float,
+    tol_r: float = DEFAULT_TOL_R,
+    tol_theta: float = DEFAULT_TOL_THETA,
+) -> jax.Array:
+    """Return the arrival time of each run in s, ``inf`` where it never settles (docs/model.md §6).
+
+    The arrival time is ``(k + 1) dt`` for the smallest ``k`` such that the
+    robot is arrived at every sample from ``k`` to the end of the horizon; the
+    samples are the poses after each control period (``traj.poses[..., 1:, :]``).
+
+    Args:
+        traj: a ``Trajectory`` (poses ``(..., steps + 1, 3)``).
+        refs: ``(..., 3)`` the references of the runs.
+        dt: control period, s.
+        tol_r: distance tolerance, cm.
+        tol_theta: folded-heading tolerance, rad.
+
+    Returns:
+        ``(...)`` arrival times, s.
+    """
+    _check_tolerances(tol_r, tol_theta)
+    samples = traj.poses[..., 1:, :]
+    ok = arrived(samples, jnp.asarray(refs)[..., None, :], tol_r=tol_r, tol_theta=tol_theta)
+    # Length of the run of arrived samples that ends the horizon.
+    settled = jnp.sum(jnp.cumprod(ok[..., ::-1], axis=-1), axis=-1)
+    steps = ok.shape[-1]
+    first = steps - settled
+    return jnp.where(settled > 0, (first + 1) * dt, jnp.inf)
+
+
+def success_rate(times: Any) -> float:
+    """Return the fraction of finite arrival times."""
+    return float(jnp.mean(jnp.isfinite(jnp.asarray(times))))
+
+
+def path_length(traj: Any) -> jax.Array:
+    """Return the distance the centre travelled over the run, cm (docs/model.md §6).
+
+    The sum of ``|v| dt`` for the ideal loop; the integrated centre speed over
+    the inner sub-steps for the non-ideal one (``Trajectory.distance``).
+    """
+    return jnp.sum(traj.distance, axis=-1)
+
+
+def _sign_changes(x: jax.Array, dead_band: float) -> jax.Array:
+    """Count sign changes along the last axis, ignoring samples with ``|x| ≤ dead_band``."""
+    signs = jnp.where(x > dead_band, 1, jnp.where(x < -dead_band, -1, 0))
+    signs = jnp.moveaxis(signs, -1, 0)
+
+    def body(carry, s):
+        last, count = carry
+        flipped = (s != 0) & (last != 0) & (s != last)
+        return (jnp.where(s != 0, s, last), count + flipped), None
+
+    init = (jnp.zeros(signs.shape[1:], signs.dtype), jnp.zeros(signs.shape[1:], jnp.int32))
+    (_, count), _ = jax.lax.scan(body, init, signs)
+    return count
+
+
+def zigzag_count(
+    traj: Any,
+    *,
+    v_dead_band: float = DEFAULT_V_DEAD_BAND,
+    omega_dead_band: float = DEFAULT_OMEGA_DEAD_BAND,
+) -> jax.Array:
+    """Return the number of sign changes of ``v`` plus those of ``ω`` (docs/model.md §6).
+
+    Args:
+        traj: a ``Trajectory``.
+        v_dead_band: speeds with ``|v| ≤`` this (cm/s) carry no sign.
+        omega_dead_band: turn rates with ``|ω| ≤`` this (rad/s) carry no sign.
+    """
+    return _sign_changes(traj.v, v_dead_band) + _sign_changes(traj.omega, omega_dead_band)
+
+
+def region_time(traj: Any, *, dt: float) -> jax.Array:
+    """Return the time spent in each region 0–3, s, shape ``(..., 4)``."""
+    one_hot = traj.region[..., None] == jnp.arange(4)
+    return jnp.sum(one_hot, axis=-2) * dt
+
+
+# ---------------------------------------------------------------- streamed metrics
+# The same metrics folded period by period into a few scalars per run, so that
+# sweeps and Monte Carlo runs never store a trajectory. Each agrees with its
+# function above on the same run (tested).
+
+
+class Thresholds(NamedTuple):
+    """The metrics' tolerances, traced (changing them does not recompile)."""
+
+    tol_r: Any = DEFAULT_TOL_R
+    tol_theta: Any = DEFAULT_TOL_THETA
+    v_dead_band: Any = DEFAULT_V_DEAD_BAND
+    omega_dead_band: Any = DEFAULT_OMEGA_DEAD_BAND
+
+
+class RunMetrics(NamedTuple):
+    """Running metrics of one run (all scalars), see ``stream_update``."""
+
+    step: jax.Array  # periods folded so far
+    settled_from: jax.Array  # first sample of the current run of arrived samples, or −1
+    first: jax.Array  # first arrived sample, or −1
+    path: jax.Array
+    peak_wheel: jax.Array
+    v_sign: jax.Array  # last sign of v outside its dead band (0: none yet)
+    omega_sign: jax.Array
+    zigzag: jax.Array
+
+
+def stream_start(dtype: Any) -> RunMetrics:
+    """Return the metrics of a run before its first control period."""
+    zero, izero = jnp.zeros((), dtype), jnp.zeros((), jnp.int32)
+    none = jnp.full((), -1, jnp.int32)
+    return RunMetrics(izero, none, none, zero, zero, izero, izero, izero)
+
+
+def _flip(last: jax.Array, x: jax.Array, dead_band: Any) -> tuple[jax.Array, jax.Array]:
+    """Return the updated last sign and 1 if ``x`` flipped it, else 0 (as ``_sign_changes``)."""
+    sign = jnp.where(x > dead_band, 1, jnp.where(x < -dead_band, -1, 0)).astype(jnp.int32)
+    flipped = (sign != 0) & (last != 0) & (sign != last)
+    return jnp.where(sign != 0, sign, last), flipped.astype(jnp.int32)
+
+
+def stream_update(
+    acc: RunMetrics, pose: jax.Array, ref: jax.Array, out: Any, thresholds: Thresholds
+) -> RunMetrics:
+    """Fold one control period into the metrics (``docs/model.md §6``).
+
+    Args:
+        acc: the metrics so far.
+        pose: ``(3,)`` true pose at the end of the period.
+        ref: ``(3,)`` reference.
+        out: what the period reported (a ``StepOutput``: ``v``, ``omega``,
+            ``wheel_speeds (2,)``, ``distance``).
+        thresholds: tolerances and dead bands.
+    """
+    ok = arrived(pose, ref, tol_r=thresholds.tol_r, tol_theta=thresholds.tol_theta)
+    k = acc.step
+    v_sign, v_flip = _flip(acc.v_sign, out.v, thresholds.v_dead_band)
+    omega_sign, omega_flip = _flip(acc.omega_sign, out.omega, thresholds.omega_dead_band)
+    rims = jnp.abs(out.wheel_speeds)
+    return RunMetrics(
+        step=k + 1,
+        settled_from=jnp.where(ok, jnp.where(acc.settled_from < 0, k, acc.settled_from), -1),
+        first=jnp.where(ok & (acc.first < 0), k, acc.first),
+        path=acc.path + out.distance,
+        # Two wheels: an elementwise maximum, not a reduction (XLA would run a
+        # reduction over a length-2 axis as a slow library call).
+        peak_wheel=jnp.maximum(acc.peak_wheel, jnp.maximum(rims[..., 0], rims[..., 1])),
+        v_sign=v_sign,
+        omega_sign=omega_sign,
+        zigzag=acc.zigzag + v_flip + omega_flip,
+    )
+
+
+def stream_result(acc: RunMetrics, dt: jax.Array) -> dict[str, jax.Array]:
+    """Return the finished metrics of a run.
+
+    Returns:
+        ``arrival_time`` (s, ``inf`` if not arrived at the last sample, as
+        ``arrival_time``), ``first_arrival`` (s, the first arrived sample
+        whether or not the robot stays), ``success``, ``path_length`` (cm),
+        ``peak_wheel_speed`` (cm/s) and ``zigzags``.
+    """
+
+    def time_of(sample):
+        return jnp.where(sample >= 0, (sample + 1).astype(acc.path.dtype) * dt, jnp.inf)
+
+    return {
+        "arrival_time": time_of(acc.settled_from),
+        "first_arrival": time_of(acc.first),
+        "success": acc.settled_from >= 0,
+        "path_length": acc.path,
+        "peak_wheel_speed": acc.peak_wheel,
+        "zigzags": acc.zigzag,
+    }

@@ -1,0 +1,217 @@
+"""Controller gains and robot parameters as immutable pytrees, with boundary checks.
+
+Both classes are frozen dataclasses registered with ``jax.tree_util`` so that
+every field is a traced leaf: gains and robot parameters can be differentiated,
+vmapped (give a field a leading batch axis) and passed through ``jax.jit``
+without retracing when only their values change.
+
+Validation happens here, in plain Python, before any tracing (docs/model.md §3). Leaves
+that are tracers (a user calling the library inside their own ``jit`` or
+``grad``) cannot be inspected and are skipped.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+from typing import Any
+
+import jax
+import numpy as np
+
+from wmr_jax._src.checks import field_values, require
+
+__all__ = [
+    "Gains",
+    "Robot",
+    "WheelSpeedWarning",
+    "check_feasible",
+    "validate_gains",
+    "validate_robot",
+    "wheel_speed_bound",
+]
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Gains:
+    """Gains of the Shim–Sung asymptotic controller (docs/model.md §3, Eq. 6–8).
+
+    Every field may be a Python float, a scalar array, or an array with one
+    leading batch axis (a population of gain sets for ``batch_rollout``).
+
+    Attributes:
+        kr: linear-velocity gain ``k_r`` in cm/s, ``> 0``.
+        k_theta: angular-velocity gain ``k_θ`` in rad/s, ``> 0``.
+        phi_m: direction threshold ``Φ_m`` in rad, ``0 < Φ_m < π/2``.
+        r_m: distance at which the speed saturates, ``R_m`` in cm.
+        r_a: outer radius of Region 1, ``R_a`` in cm.
+        r_e: radius of Region 0, ``R_e`` in cm; ``0 < R_e ≤ R_a ≤ R_m``.
+        alpha: Region-1 blend offset ``α``, ``0 < α < 0.5``.
+    """
+
+    kr: Any = 120.0
+    k_theta: Any = 10.0
+    phi_m: Any = math.radians(70.0)
+    r_m: Any = 20.0
+    r_a: Any = 20.0
+    # choice (docs/model.md §3): the paper gives neither R_e nor α.
+    r_e: Any = 1.0
+    alpha: Any = 0.25
+
+    def replace(self, **changes: Any) -> Gains:
+        """Return a copy with the given fields changed."""
+        return dataclasses.replace(self, **changes)
+
+
+# Table 1 of the paper; lengths in cm, masses in kg, time in s. Torques are then
+# in kg·cm²/s² (1 N·m = 1e4 kg·cm²/s²).
+_BODY_MASS = 0.5
+_BODY_DIAMETER = 3.7
+_WHEEL_RADIUS = 1.5
+_WHEEL_MASS = 0.010
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Robot:
+    """Differential-drive robot of the paper's Table 1 (docs/model.md §1, §4).
+
+    Units: cm, kg, s; torques in kg·cm²/s² (1 N·m = 1e4 kg·cm²/s²).
+
+    Attributes:
+        half_track: ``L``, distance from the centre C to each wheel, cm.
+        v_max: wheel rim-speed limit ``V_max``, cm/s.
+        body_mass: ``M``, kg.
+        body_diameter: ``D``, cm (inertia of the body as a uniform disc).
+        wheel_radius: ``r``, cm.
+        wheel_mass: ``m``, kg (each wheel a uniform disc of radius ``r``).
+        com_offset: ``a``, distance of the centre of mass ahead of the axle, cm.
+        torque_max: largest torque magnitude per wheel motor, kg·cm²/s².
+        speed_gain: proportional gain ``k_p`` of the wheel-speed loop, 1/s: its
+            velocity time constant is ``1/k_p`` (``docs/model.md §4``).
+        integral_gain: integral gain ``k_i`` of the wheel-speed loop, 1/s²
+            (0: none; useful when the loop's model differs from the robot).
+    """
+
+    # choice (docs/model.md §1): L = D/2.
+    half_track: Any = _BODY_DIAMETER / 2
+    v_max: Any = 125.0
+    body_mass: Any = _BODY_MASS
+    body_diameter: Any = _BODY_DIAMETER
+    wheel_radius: Any = _WHEEL_RADIUS
+    wheel_mass: Any = _WHEEL_MASS
+    com_offset: Any = 0.0
+    # choice: ~0.08 N·m per motor, about 2 g of linear acceleration for Table 1.
+    torque_max: Any = 800.0
+    # choice: a 10 ms velocity time constant, well inside the 33 ms period.
+    speed_gain: Any = 100.0
+    integral_gain: Any = 0.0
+
+    def replace(self, **changes: Any) -> Robot:
+        """Return a copy with the given fields changed."""
+        return dataclasses.replace(self, **changes)
+
+
+class WheelSpeedWarning(UserWarning):
+    """Gains for which ``k_r + L k_θ > V_max``: a wheel may be asked for too much."""
+
+
+def validate_gains(gains: Gains) -> Gains:
+    """Check ``gains`` against the ranges of docs/model.md §3; return it unchanged.
+
+    Raises:
+        ValueError: naming the field, its value and the allowed range.
+    """
+    g = field_values(gains, Gains, "gains")
+    for name, unit in (("kr", "cm/s"), ("k_theta", "rad/s"), ("r_e", "cm")):
+        if g[name] is not None:
+            require(f"gains.{name}", g[name], g[name] > 0, f"{name} > 0 {unit}")
+    if g["phi_m"] is not None:
+        ok = (g["phi_m"] > 0) & (g["phi_m"] < math.pi / 2)
+        require("gains.phi_m", g["phi_m"], ok, "0 < phi_m < pi/2 rad")
+    if g["alpha"] is not None:
+        ok = (g["alpha"] > 0) & (g["alpha"] < 0.5)
+        require("gains.alpha", g["alpha"], ok, "0 < alpha < 0.5")
+    if g["r_e"] is not None and g["r_a"] is not None:
+        require(
+            "gains.r_e",
+            g["r_e"],
+            g["r_e"] <= g["r_a"],
+            f"0 < r_e <= r_a (r_a = {g['r_a']})",
+        )
+    if g["r_a"] is not None and g["r_m"] is not None:
+        require("gains.r_a", g["r_a"], g["r_a"] <= g["r_m"], f"r_a <= r_m (r_m = {g['r_m']})")
+    return gains
+
+
+_POSITIVE_ROBOT_FIELDS = (
+    "half_track",
+    "v_max",
+    "body_mass",
+    "body_diameter",
+    "wheel_radius",
+    "wheel_mass",
+    "torque_max",
+    "speed_gain",
+)
+
+
+def validate_robot(robot: Robot) -> Robot:
+    """Check the robot's parameters are physical; return it unchanged.
+
+    Raises:
+        ValueError: naming the field, its value and the allowed range.
+    """
+    r = field_values(robot, Robot, "robot")
+    for name in _POSITIVE_ROBOT_FIELDS:
+        if r[name] is not None:
+            require(f"robot.{name}", r[name], r[name] > 0, "> 0")
+    if r["integral_gain"] is not None:
+        require("robot.integral_gain", r["integral_gain"], r["integral_gain"] >= 0, ">= 0")
+    if r["com_offset"] is not None and r["body_diameter"] is not None:
+        ok = np.abs(r["com_offset"]) < r["body_diameter"] / 2
+        require(
+            "robot.com_offset",
+            r["com_offset"],
+            ok,
+            "|com_offset| < body_diameter / 2 (inside the body)",
+        )
+    return robot
+
+
+def wheel_speed_bound(gains: Gains, robot: Robot | None = None) -> Any:
+    """Return ``k_r + L k_θ``, the largest rim speed the law can command (docs/model.md §3).
+
+    Since ``|v_m| ≤ k_r`` and ``|ω_m| ≤ k_θ``, no wheel command ``v ± L ω``
+    exceeds this bound. Works on scalars, batches and tracers.
+    """
+    robot = Robot() if robot is None else robot
+    return gains.kr + robot.half_track * gains.k_theta
+
+
+def check_feasible(
+    gains: Gains, robot: Robot | None = None, *, warn: bool = False, stacklevel: int = 2
+) -> np.ndarray:
+    """Return whether ``k_r + L k_θ ≤ V_max`` (elementwise for batched gains).
+
+    Args:
+        gains: controller gains (concrete values).
+        robot: the robot; default ``Robot()``.
+        warn: if true, emit a ``WheelSpeedWarning`` when the condition fails.
+        stacklevel: passed to ``warnings.warn`` (which caller the warning names).
+    """
+    robot = Robot() if robot is None else robot
+    bound = np.asarray(wheel_speed_bound(gains, robot), dtype=float)
+    v_max = np.asarray(robot.v_max, dtype=float)
+    feasible = bound <= v_max * (1 + 1e-12)
+    if warn and not np.all(feasible):
+        worst = float(np.max(bound))
+        warnings.warn(
+            f"k_r + L*k_theta = {worst:.4g} cm/s exceeds v_max = {float(np.max(v_max)):.4g} cm/s: "
+            "wheel commands may saturate (docs/model.md §3)",
+            WheelSpeedWarning,
+            stacklevel=stacklevel,
+        )
+    return feasible

@@ -1,0 +1,98 @@
+"""Reference poses: the evaluation set of ``docs/model.md §6``, the paper's seven, the horizon.
+
+``sample_poses`` is the one sampler of evaluation poses in the package:
+tuning, sweeps, maps, robustness, the benchmark and the tests all draw from
+it, so "the same seed" means the same poses everywhere.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from wmr_jax._src.checks import check_dt, check_int, check_number, float_dtype
+
+__all__ = [
+    "EVAL_R_MAX",
+    "EVAL_R_MIN",
+    "HORIZON_S",
+    "PAPER_REFS_DEG",
+    "horizon_steps",
+    "paper_refs",
+    "sample_poses",
+]
+
+# docs/model.md §6: the default evaluation set and horizon.
+EVAL_R_MIN = 5.0  # cm
+EVAL_R_MAX = 80.0  # cm
+HORIZON_S = 6.0  # s
+
+# docs/model.md §5: the references of the paper's Fig. 7, [x cm, y cm, θ degrees].
+PAPER_REFS_DEG = (
+    (40.0, 0.0, -45.0),
+    (30.0, 30.0, 0.0),
+    (0.0, 40.0, 90.0),
+    (-30.0, 30.0, 135.0),
+    (-30.0, -30.0, 0.0),
+    (0.0, -40.0, 0.0),
+    (30.0, -30.0, 90.0),
+)
+
+
+def paper_refs() -> np.ndarray:
+    """Return the seven references of Fig. 7, ``(7, 3)`` in cm, cm, rad."""
+    refs = np.array(PAPER_REFS_DEG)
+    refs[:, 2] = np.radians(refs[:, 2])
+    return refs
+
+
+def sample_poses(
+    key: Any,
+    n: int,
+    *,
+    r_min: float = EVAL_R_MIN,
+    r_max: float = EVAL_R_MAX,
+    dtype: Any = None,
+) -> jax.Array:
+    """Draw ``n`` reference poses of the evaluation set, for a robot at ``(0, 0, 0)``.
+
+    Distance uniform in ``[r_min, r_max]`` cm; bearing and heading uniform in
+    ``[−π, π)`` (``docs/model.md §6``). The draw is made in float32 and then
+    cast, so a key gives the same poses whatever the precision.
+
+    Args:
+        key: a JAX PRNG key, or an integer seed.
+        n: number of poses.
+        r_min: least distance, cm, ``>= 0``.
+        r_max: largest distance, cm, ``>= r_min``.
+        dtype: of the result; default JAX's default float dtype.
+
+    Returns:
+        ``(n, 3)`` poses ``[x cm, y cm, θ rad]``.
+
+    Raises:
+        ValueError: for a bad seed, count or distance range.
+    """
+    if not isinstance(key, jax.Array):
+        key = jax.random.key(check_int("seed", key, 0, 2**32 - 1))
+    n = check_int("n", n, 0)
+    r_min = check_number("r_min", r_min, closed=True, unit="cm")
+    r_max = check_number("r_max", r_max, low=r_min, closed=True, unit="cm")
+    k_dist, k_bearing, k_heading = jax.random.split(key, 3)
+    dist = jax.random.uniform(k_dist, (n,), jnp.float32, r_min, r_max)
+    bearing = jax.random.uniform(k_bearing, (n,), jnp.float32, -jnp.pi, jnp.pi)
+    heading = jax.random.uniform(k_heading, (n,), jnp.float32, -jnp.pi, jnp.pi)
+    poses = jnp.stack([dist * jnp.cos(bearing), dist * jnp.sin(bearing), heading], axis=-1)
+    return poses.astype(float_dtype() if dtype is None else dtype)
+
+
+def horizon_steps(dt: float, horizon: float = HORIZON_S) -> int:
+    """Return the number of control periods that cover ``horizon`` s (default 6 s)."""
+    dt = check_dt(dt)
+    horizon = check_number("horizon", horizon, unit="s")
+    # The slack keeps 6.0 / 0.033 = 181.8… at 182 despite rounding.
+    return math.ceil(horizon / dt - 1e-9)

@@ -1,0 +1,250 @@
+"""A plain NumPy/``math`` reference of docs/model.md §2–4, one pose at a time, no JAX.
+
+It is written straight from ``docs/model.md`` with angles and ``atan2``, independently of
+``wmr_jax.controllers`` (the Shim–Sung law there avoids angles for speed and differentiability). The
+tests hold the JAX rollouts equal to it in float64, and the benchmark uses it
+as the honest baseline of what a scalar simulator costs.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from wmr_jax._src.params import Gains, Robot
+
+__all__ = ["reference_control", "reference_diagnostics", "reference_rollout"]
+
+
+# π as a sum of two floats: shifting an angle by PI_HI and then PI_LO gives the
+# correctly rounded a ∓ π, so that e.g. fold(−float(π)) is the tiny positive
+# number it is in exact arithmetic rather than 0. Sgn(sin θ̄_e) depends on it.
+_PI_HI = math.pi
+_PI_LO = 1.2246467991473532e-16
+
+
+def _wrap(a: float) -> float:
+    """Wrap an angle to [−π, π), with π exact to two floats."""
+    turns = round(a / (2 * math.pi))
+    a = (a - turns * 2 * _PI_HI) - turns * 2 * _PI_LO
+    if a > _PI_HI:  # a ≥ π: no float lies between π and the next float above it
+        a = (a - 2 * _PI_HI) - 2 * _PI_LO
+    elif a < -_PI_HI:  # a < −π
+        a = (a + 2 * _PI_HI) + 2 * _PI_LO
+    return a
+
+
+def _fold(a: float) -> float:
+    """Fold an angle of [−π, π] into [−π/2, π/2] (docs/model.md §3): front and back alike."""
+    if a > math.pi / 2:
+        return (a - _PI_HI) - _PI_LO
+    if a < -math.pi / 2:
+        return (a + _PI_HI) + _PI_LO
+    return a
+
+
+def _sgn(x: float) -> float:
+    return 1.0 if x > 0 else -1.0
+
+
+def reference_diagnostics(pose: Any, ref: Any, gains: Gains) -> dict[str, float]:
+    """Return the command and every intermediate of the law for one pose (docs/model.md §2–3)."""
+    x_c, y_c, th_c = (float(u) for u in pose)
+    x_r, y_r, th_r = (float(u) for u in ref)
+    kr, k_th = float(gains.kr), float(gains.k_theta)
+    phi_m, r_m, r_a, r_e_lim, alpha = (
+        float(gains.phi_m),
+        float(gains.r_m),
+        float(gains.r_a),
+        float(gains.r_e),
+        float(gains.alpha),
+    )
+    e_x = math.cos(th_c) * (x_r - x_c) + math.sin(th_c) * (y_r - y_c)
+    e_y = -math.sin(th_c) * (x_r - x_c) + math.cos(th_c) * (y_r - y_c)
+    r_e = math.hypot(e_x, e_y)
+    phi_e = math.atan2(e_y, e_x) if r_e > 0 else 0.0
+    theta_e = _wrap(th_r - th_c)
+
+    r_bar = math.pi / 2 if r_e >= r_m else math.pi * r_e / (2 * r_m)
+    if abs(phi_e) <= phi_m:
+        d = 1.0
+    elif phi_e < -math.pi + phi_m or phi_e > math.pi - phi_m:
+        d = -1.0
+    else:
+        d = 0.0
+    phi_bar, theta_bar = _fold(phi_e), _fold(theta_e)
+    if r_e <= r_e_lim:
+        eps, region = 0.0, 0
+    elif d == 0.0:
+        eps, region = 1.0, 3
+    elif r_e < r_a:
+        s_th = math.sin(theta_bar)
+        eps, region = 0.5 - alpha * _sgn(s_th) * _sgn(s_th + math.sin(phi_bar)), 1
+    else:
+        eps, region = 1.0, 2
+    v = kr * d * math.sin(r_bar) * math.cos(phi_bar)
+    omega = k_th * (eps * math.sin(phi_bar) + (1 - eps) * math.sin(theta_bar))
+    lyap = 0.5 * r_e**2 + (1 - math.cos(phi_bar)) + (1 - math.cos(theta_bar))
+    return {
+        "v": v,
+        "omega": omega,
+        "region": region,
+        "d": d,
+        "eps": eps,
+        "lyapunov": lyap,
+        "r_e": r_e,
+        "phi_e": phi_e,
+        "theta_e": theta_e,
+    }
+
+
+def reference_control(pose: Any, ref: Any, gains: Gains) -> tuple[float, float]:
+    """Return the command ``(v cm/s, ω rad/s)`` for one pose (Eq. 6, 7)."""
+    out = reference_diagnostics(pose, ref, gains)
+    return out["v"], out["omega"]
+
+
+def _arc(x: float, y: float, th: float, v: float, w: float, h: float):
+    """Exact unicycle motion at constant (v, ω) over h (docs/model.md §4)."""
+    turn = w * h
+    if abs(turn) < 1e-3:
+        # Chord of the arc, sin(u)/u by its series (error < u⁶/5040) where the
+        # closed form below would cancel.
+        half = 0.5 * turn
+        chord = v * h * (1 - half * half / 6 + half**4 / 120)
+        return x + chord * math.cos(th + half), y + chord * math.sin(th + half), th + turn
+    # Closed-form integral of Eq. 2 along a circle of radius v/ω.
+    th_new = th + turn
+    radius = v / w
+    return (
+        x + radius * (math.sin(th_new) - math.sin(th)),
+        y - radius * (math.cos(th_new) - math.cos(th)),
+        th_new,
+    )
+
+
+class _Loop:
+    """The non-ideal loop of docs/model.md §4 for one robot, in plain floats."""
+
+    def __init__(self, robot: Robot):
+        f = {k: float(v) for k, v in vars(robot).items()}
+        self.L, self.v_max, self.r = f["half_track"], f["v_max"], f["wheel_radius"]
+        self.kp, self.ki, self.tau_max = f["speed_gain"], f["integral_gain"], f["torque_max"]
+        M, m, r, a = f["body_mass"], f["wheel_mass"], f["wheel_radius"], f["com_offset"]
+        # Kinetic energy of body (disc of diameter D, centre of mass a ahead of
+        # the axle) and two disc wheels rolling without slip, in (v, ω).
+        self.m11 = M + 2 * m + m  # 2 wheels' translation + 2 × (m r²/2)/r² of spin
+        self.m22 = (
+            M * f["body_diameter"] ** 2 / 8
+            + M * a * a
+            + 2 * m * self.L**2
+            + 2 * (m * r * r / 4)
+            + 2 * (m * r * r / 2) * self.L**2 / (r * r)
+        )
+        self.ma = M * a
+
+    def rims_limited(self, v, w, mode):
+        left, right = v - self.L * w, v + self.L * w
+        if mode == "clip":
+            left = min(max(left, -self.v_max), self.v_max)
+            right = min(max(right, -self.v_max), self.v_max)
+        else:
+            excess = max(abs(left) / self.v_max, abs(right) / self.v_max, 1.0)
+            left, right = left / excess, right / excess
+        return 0.5 * (left + right), 0.5 * (right - left) / self.L
+
+    def rates(self, y, target):
+        v, w, zv, zw = y
+        # Computed torque: wanted accelerations through the model, then per-wheel limits.
+        acc_v = self.kp * (target[0] - v) + self.ki * zv
+        acc_w = self.kp * (target[1] - w) + self.ki * zw
+        force = self.m11 * acc_v - self.ma * w * w
+        moment = self.m22 * acc_w + self.ma * v * w
+        tau_r = 0.5 * self.r * (force + moment / self.L)
+        tau_l = 0.5 * self.r * (force - moment / self.L)
+        tau_r = min(max(tau_r, -self.tau_max), self.tau_max)
+        tau_l = min(max(tau_l, -self.tau_max), self.tau_max)
+        # Eq. 5: H q̇ = B τ − G(q).
+        v_dot = ((tau_l + tau_r) / self.r + self.ma * w * w) / self.m11
+        w_dot = (self.L * (tau_r - tau_l) / self.r - self.ma * v * w) / self.m22
+        return [v_dot, w_dot, target[0] - v, target[1] - w]
+
+    def period(self, pose, y, command, dt, substeps, mode):
+        target = self.rims_limited(command[0], command[1], mode)
+        h = dt / substeps
+        x, yy, th = pose
+        travelled = 0.0
+        for _ in range(substeps):
+            k1 = self.rates(y, target)
+            k2 = self.rates([a + 0.5 * h * b for a, b in zip(y, k1, strict=True)], target)
+            k3 = self.rates([a + 0.5 * h * b for a, b in zip(y, k2, strict=True)], target)
+            k4 = self.rates([a + h * b for a, b in zip(y, k3, strict=True)], target)
+            new = [
+                a + h / 6 * (b1 + 2 * b2 + 2 * b3 + b4)
+                for a, b1, b2, b3, b4 in zip(y, k1, k2, k3, k4, strict=True)
+            ]
+            new[0], new[1] = self.rims_limited(new[0], new[1], "clip")
+            v_mean, w_mean = 0.5 * (y[0] + new[0]), 0.5 * (y[1] + new[1])
+            x, yy, th = _arc(x, yy, th, v_mean, w_mean, h)
+            travelled += abs(v_mean) * h
+            y = new
+        return (x, yy, th), y, travelled
+
+
+def reference_rollout(
+    ref: Any,
+    gains: Gains | None = None,
+    *,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = 0.033,
+    steps: int = 150,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    substeps: int = 10,
+    wheel_limit: str = "clip",
+) -> dict[str, np.ndarray]:
+    """Simulate one closed-loop run with a Python loop (docs/model.md §4).
+
+    Args:
+        ref, gains, init, dt, steps, robot, velocity, substeps, wheel_limit:
+            as for ``wmr_jax.rollout`` (Shim–Sung controller only).
+
+    Returns:
+        A dict with the fields of ``wmr_jax.Trajectory`` as float64 NumPy
+        arrays: ``poses (steps + 1, 3)``, ``v``, ``omega``, ``region``,
+        ``wheel_speeds (steps, 2)``, ``distance``.
+    """
+    gains = Gains() if gains is None else gains
+    robot = Robot() if robot is None else robot
+    if velocity not in ("ideal", "nonideal"):
+        raise ValueError(f"velocity = {velocity!r} is not allowed; allowed: ('ideal', 'nonideal')")
+    loop = _Loop(robot)
+    x, y, th = (float(u) for u in init)
+    state = [0.0, 0.0, 0.0, 0.0]  # v, ω and the wheel loop's integrals
+    poses = np.empty((steps + 1, 3))
+    v_out, w_out, region = np.empty(steps), np.empty(steps), np.empty(steps, dtype=np.int32)
+    rims, dist = np.empty((steps, 2)), np.empty(steps)
+    poses[0] = x, y, th
+    for k in range(steps):
+        out = reference_diagnostics((x, y, th), ref, gains)
+        v, w = out["v"], out["omega"]
+        if velocity == "ideal":
+            x, y, th = _arc(x, y, th, v, w, dt)
+            state, dist[k] = [v, w, 0.0, 0.0], abs(v) * dt
+        else:
+            (x, y, th), state, dist[k] = loop.period(
+                (x, y, th), state, (v, w), dt, substeps, wheel_limit
+            )
+        poses[k + 1] = x, y, th
+        v_out[k], w_out[k], region[k] = v, w, out["region"]
+        rims[k] = state[0] - loop.L * state[1], state[0] + loop.L * state[1]
+    return {
+        "poses": poses,
+        "v": v_out,
+        "omega": w_out,
+        "region": region,
+        "wheel_speeds": rims,
+        "distance": dist,
+    }

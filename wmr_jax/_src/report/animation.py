@@ -1,0 +1,221 @@
+"""Animated GIF of a batch of robots driving to their reference poses (matplotlib only).
+
+Each robot is drawn as its body (a disc of the robot's diameter, scaled up so
+it shows at the pitch's scale) with a heading tick and a fading trail; its
+reference is a cross with a heading arrow, green while the robot is within
+the docs/model.md §6 arrival tolerances. Frames come from
+``matplotlib.animation`` and are encoded by its ``PillowWriter`` (Pillow is a
+dependency of matplotlib) into a temporary file that then atomically replaces
+the target. ``animate`` records the runs itself (``wmr_jax.batch_rollout``):
+drawing a run is reporting; ``wmr-jax animate`` is the command.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+
+from wmr_jax._src import checks, controllers, metrics
+from wmr_jax._src import rollout as simulation
+from wmr_jax._src.io import atomic_write_bytes
+from wmr_jax._src.params import Robot
+from wmr_jax._src.poses import horizon_steps, sample_poses
+from wmr_jax._src.report.figures import plt
+from wmr_jax._src.rollout import DEFAULT_DT
+
+__all__ = ["animate", "write_gif"]
+
+
+def _pitch(poses: np.ndarray, refs: np.ndarray, title: str, arrow: float) -> tuple[Any, Any]:
+    """Return ``(fig, ax)`` framing the runs, with the references' heading arrows (``arrow`` cm)."""
+    span = np.concatenate([poses[..., :2].reshape(-1, 2), refs[:, :2]])
+    lo, hi = span.min(axis=0) - 8, span.max(axis=0) + 8
+    fig, ax = plt.subplots(figsize=(6, 6 * (hi[1] - lo[1]) / max(hi[0] - lo[0], 1e-9) + 0.3))
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal")
+    ax.grid(alpha=0.3)
+    ax.set_xlabel("x [cm]")
+    ax.set_ylabel("y [cm]")
+    ax.set_title(title, fontsize=9)
+    ends = arrow * np.stack([np.cos(refs[:, 2]), np.sin(refs[:, 2])])
+    ax.quiver(*refs[:, :2].T, *ends, angles="xy", scale_units="xy", scale=1, color="k", width=0.004)
+    return fig, ax
+
+
+def _frames(samples: int, stride: int) -> list[int]:
+    """Every ``stride``-th sample, and the last one."""
+    frames = list(range(0, samples, stride))
+    if frames[-1] != samples - 1:
+        frames.append(samples - 1)
+    return frames
+
+
+def _save(anim: Any, fig: Any, path: str | os.PathLike, fps: int) -> Path:
+    """Encode the animation into a temporary file, then atomically replace ``path``."""
+    from wmr_jax._src.report.figures import mpl_animation
+
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=target.parent, prefix=f".{target.name}.") as tmp:
+        tmp_path = Path(tmp) / "frames.gif"
+        anim.save(tmp_path, writer=mpl_animation.PillowWriter(fps=fps))
+        plt.close(fig)
+        atomic_write_bytes(target, tmp_path.read_bytes())
+    return target
+
+
+def write_gif(
+    path: str | os.PathLike,
+    poses: np.ndarray,
+    refs: np.ndarray,
+    *,
+    dt: float = DEFAULT_DT,
+    title: str = "",
+    fps: int = 15,
+    stride: int = 2,
+    trail: int = 30,
+    body_radius: float = 2.5,
+    tol_r: float = metrics.DEFAULT_TOL_R,
+    tol_theta: float = metrics.DEFAULT_TOL_THETA,
+) -> Path:
+    """Write an animated GIF of recorded runs, atomically.
+
+    Args:
+        path: the ``.gif`` to write.
+        poses: ``(N, steps + 1, 3)`` recorded poses ``[x cm, y cm, θ rad]``.
+        refs: ``(N, 3)`` their references.
+        dt: control period of the samples, s (for the clock).
+        title: text above the pitch.
+        fps: frames per second of the GIF.
+        stride: samples per frame (2 at 33 ms and 15 fps is real time).
+        trail: samples of path drawn behind each robot.
+        body_radius: drawn radius of each robot, cm.
+        tol_r: arrival distance for the reference marker, cm.
+        tol_theta: arrival folded-heading error, rad.
+
+    Returns:
+        The path written.
+
+    Raises:
+        ValueError: for misshapen poses or references, or a bad ``fps``/``stride``.
+    """
+    from wmr_jax._src.report.figures import mpl_animation
+
+    poses = np.asarray(poses, dtype=float)
+    refs = np.asarray(refs, dtype=float)
+    if poses.ndim != 3 or poses.shape[2] != 3 or refs.shape != (poses.shape[0], 3):
+        raise ValueError(
+            f"poses has shape {poses.shape} and refs {refs.shape}; "
+            "allowed: poses (N, steps + 1, 3) with refs (N, 3)"
+        )
+    fps, stride = checks.check_int("fps", fps), checks.check_int("stride", stride)
+    n, samples, _ = poses.shape
+    arrived = np.asarray(metrics.arrived(poses, refs[:, None, :], tol_r=tol_r, tol_theta=tol_theta))
+    colours = [plt.get_cmap("tab10")(i % 10) for i in range(n)]
+    fig, ax = _pitch(poses, refs, title, 2.5 * body_radius)
+    markers = ax.scatter(refs[:, 0], refs[:, 1], marker="x", s=50, c="k", zorder=6)
+    trails = [ax.plot([], [], "-", lw=1.0, color=c, alpha=0.6)[0] for c in colours]
+    bodies = [plt.Circle((0, 0), body_radius, fc=c, ec="k", lw=0.6, zorder=4) for c in colours]
+    for body in bodies:
+        ax.add_patch(body)
+    ticks = [ax.plot([], [], "k-", lw=1.4, zorder=5)[0] for _ in range(n)]
+    clock = ax.text(0.02, 0.97, "", transform=ax.transAxes, va="top", fontsize=9)
+
+    def draw(k: int):
+        for i in range(n):
+            x, y, th = poses[i, k]
+            bodies[i].center = (x, y)
+            ticks[i].set_data(
+                [x, x + body_radius * math.cos(th)], [y, y + body_radius * math.sin(th)]
+            )
+            start = max(0, k - trail)
+            trails[i].set_data(poses[i, start : k + 1, 0], poses[i, start : k + 1, 1])
+        done = arrived[:, k]
+        markers.set_color(["tab:green" if d else "k" for d in done])
+        clock.set_text(f"t = {k * dt:.2f} s   arrived {int(done.sum())}/{n}")
+        return [*bodies, *ticks, *trails, markers, clock]
+
+    frames = _frames(samples, stride)
+    anim = mpl_animation.FuncAnimation(fig, draw, frames=frames, blit=False)
+    return _save(anim, fig, path, fps)
+
+
+def animate(
+    path: str | os.PathLike,
+    refs: Any = None,
+    params: Any = None,
+    *,
+    n_robots: int = 8,
+    seed: int = 0,
+    controller: Any = controllers.SHIM_SUNG,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = DEFAULT_DT,
+    steps: int | None = None,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    fps: int = 15,
+    stride: int = 2,
+) -> Path:
+    """Simulate a batch of robots and write the GIF of them driving to their poses.
+
+    The runs are recorded whole (``wmr_jax.batch_rollout``), in float64 like
+    the maps (see ``wmr_jax.studies.evaluate_poses`` why).
+
+    Args:
+        path: the ``.gif`` to write (atomically).
+        refs: ``(N, 3)`` references; default ``n_robots`` random docs/model.md §6
+            poses (``wmr_jax.sample_poses(seed, n_robots)``).
+        params: the controller's parameters (its defaults if ``None``).
+        n_robots: number of random references when ``refs`` is ``None``.
+        seed: seed of the random references.
+        controller: a ``Controller`` or its registered name.
+        init: ``(3,)`` or ``(N, 3)`` initial poses.
+        dt: control period, s.
+        steps: control periods; default the docs/model.md §6 horizon (6 s).
+        robot: robot parameters; default ``Robot()``.
+        velocity: ``"ideal"`` or ``"nonideal"``.
+        fps: frames per second.
+        stride: samples per frame.
+
+    Returns:
+        The path written.
+
+    Raises:
+        ValueError: for a bad count, seed, option or pose, before anything runs.
+    """
+    if refs is None:
+        refs = np.asarray(sample_poses(seed, checks.check_int("n_robots", n_robots)), dtype=float)
+    checks.check_int("fps", fps)
+    checks.check_int("stride", stride)
+    steps = horizon_steps(dt) if steps is None else steps
+    name = controllers.get_controller(controller).name
+    with jax.enable_x64(True):
+        traj = simulation.batch_rollout(
+            refs,
+            params,
+            init=init,
+            dt=dt,
+            steps=steps,
+            robot=robot,
+            velocity=velocity,
+            controller=name,
+        )
+    refs = np.asarray(refs, dtype=float)
+    if refs.ndim == 1:
+        refs = np.broadcast_to(refs, (traj.poses.shape[0], 3))
+    return write_gif(
+        path,
+        np.asarray(traj.poses),
+        refs,
+        dt=dt,
+        title=f"{name}, {velocity} loop: {len(refs)} robots from (0, 0, 0°)",
+        fps=fps,
+        stride=stride,
+    )

@@ -1,0 +1,134 @@
+"""Figures: the one module that imports matplotlib (the reporting layer draws with its ``plt``).
+
+Paths with the robot's heading and the references marked, wheel speeds
+against time, and ``path_figure`` for one run. The other report modules
+draw with ``plt`` from here; nothing else in the package imports matplotlib.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only; no display is assumed
+import matplotlib.animation as mpl_animation  # noqa: E402
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.colors import ListedColormap  # noqa: E402
+
+from wmr_jax._src.io import save_figure  # noqa: E402
+
+__all__ = [
+    "ListedColormap",
+    "mpl_animation",
+    "path_figure",
+    "plot_paths",
+    "plot_wheel_speeds",
+    "plt",
+]
+
+
+def _heading_arrows(ax, poses: np.ndarray, spacing: float, color, length: float, **kw) -> None:
+    """Draw the heading every ``spacing`` cm of travel, and at the last pose."""
+    step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+    travelled = np.concatenate([[0.0], np.cumsum(step)])
+    marks = np.flatnonzero(np.diff(np.floor(travelled / spacing), prepend=-1.0) > 0)
+    picked = poses[np.union1d(marks, [len(poses) - 1])]
+    ax.quiver(
+        picked[:, 0],
+        picked[:, 1],
+        length * np.cos(picked[:, 2]),
+        length * np.sin(picked[:, 2]),
+        angles="xy",
+        scale_units="xy",
+        scale=1,
+        color=color,
+        width=0.004,
+        **kw,
+    )
+
+
+def plot_paths(
+    ax: Any,
+    paths: Sequence[np.ndarray],
+    refs: np.ndarray,
+    *,
+    color: Any = None,
+    label: str | None = None,
+    linestyle: str = "-",
+    heading_spacing: float = 6.0,
+    arrow_length: float = 3.0,
+    mark_refs: bool = True,
+) -> None:
+    """Draw robot paths with heading arrows, and the references as marked poses.
+
+    Args:
+        ax: a matplotlib Axes.
+        paths: each ``(steps + 1, 3)`` poses in cm, cm, rad.
+        refs: ``(len(paths), 3)`` reference poses.
+        color: one colour for all paths (default: one per path).
+        label: legend label for the first path.
+        linestyle: matplotlib line style.
+        heading_spacing: draw the heading every this many cm of travel.
+        arrow_length: heading arrow length, cm.
+        mark_refs: draw the references (a cross and a heading arrow).
+    """
+    cmap = plt.get_cmap("tab10")
+    for i, poses in enumerate(paths):
+        poses = np.asarray(poses)
+        c = color if color is not None else cmap(i % 10)
+        ax.plot(
+            poses[:, 0], poses[:, 1], linestyle, color=c, lw=1.3, label=label if i == 0 else None
+        )
+        _heading_arrows(ax, poses, heading_spacing, c, arrow_length, alpha=0.8)
+    if mark_refs:
+        refs = np.asarray(refs)
+        ax.plot(refs[:, 0], refs[:, 1], "kx", ms=8, mew=2, label="reference" if label else None)
+        ax.quiver(
+            refs[:, 0],
+            refs[:, 1],
+            2.5 * arrow_length * np.cos(refs[:, 2]),
+            2.5 * arrow_length * np.sin(refs[:, 2]),
+            angles="xy",
+            scale_units="xy",
+            scale=1,
+            color="k",
+            width=0.004,
+        )
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [cm]")
+    ax.set_ylabel("y [cm]")
+    ax.grid(alpha=0.3)
+
+
+def plot_wheel_speeds(
+    ax: Any,
+    wheel_speeds: np.ndarray,
+    *,
+    dt: float,
+    v_max: float | None = None,
+    labels: Sequence[str] = ("left", "right"),
+    linestyle: str = "-",
+) -> None:
+    """Plot rim speeds ``(steps, 2)`` against time, with the ``±v_max`` limits."""
+    t = (np.arange(len(wheel_speeds)) + 1) * dt
+    for j, name in enumerate(labels):
+        ax.plot(t, wheel_speeds[:, j], linestyle, lw=1.2, label=name)
+    if v_max is not None:
+        for sign in (1, -1):
+            ax.axhline(sign * v_max, color="r", ls="--", lw=1)
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("rim speed [cm/s]")
+    ax.grid(alpha=0.3)
+
+
+def path_figure(path: Any, traj: Any, ref: Sequence[float], *, title: str) -> None:
+    """Save the path of one run (a ``Trajectory``) to its reference as an image."""
+    fig, ax = plt.subplots(figsize=(6, 6))
+    plot_paths(ax, [np.asarray(traj.poses)], np.asarray([ref]), label="robot path")
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    save_figure(fig, path, dpi=120, bbox_inches="tight")
+    plt.close(fig)

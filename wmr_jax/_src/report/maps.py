@@ -1,0 +1,250 @@
+"""Figures and files of a pose-space study: heat maps, the first-to-arrive map, the summary.
+
+``save_map_study(out_dir, study)`` writes what ``wmr-jax sweep`` leaves in
+its folder: ``maps_<controller>.png`` (metrics × headings, with one colour
+range per metric shared by every controller so that their maps compare),
+``winner.png`` (which controller arrives first) and the summary table as
+``summary.md`` and ``summary.json``. Every file is written atomically.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wmr_jax._src.io import atomic_write_json, atomic_write_text, save_figure
+from wmr_jax._src.maps import MapStudy, PoseGrid, PoseMetrics
+from wmr_jax._src.params import Robot
+from wmr_jax._src.report.figures import plt
+from wmr_jax._src.report.tables import markdown_table
+
+__all__ = ["map_figure", "save_map_study", "winner_figure"]
+
+# metric (a PoseMetrics field, or "success"), colour-bar label, colour map
+_MAP_FIELDS = (
+    ("success", "success", "RdYlGn"),
+    ("arrival", "arrival time [s]", "viridis"),
+    ("path", "path length [cm]", "magma"),
+    ("peak_wheel", "peak wheel speed [cm/s]", "plasma"),
+    ("zigzag", "zig-zag count", "cividis"),
+)
+
+
+def _metric_values(m: PoseMetrics, field: str) -> np.ndarray:
+    """The values of one metric as floats, NaN where not finite (drawn blank)."""
+    if field == "success":
+        return m.success.astype(float)
+    values = np.asarray(getattr(m, field), dtype=float)
+    return np.where(np.isfinite(values), values, np.nan)
+
+
+def _to_image(grid: PoseGrid, values: np.ndarray, h: int) -> np.ndarray:
+    """Return the ``[iy, ix]`` image of heading ``h`` (NaN outside the annulus)."""
+    per_heading = int(grid.inside.sum())
+    image = np.full(grid.inside.shape, np.nan)
+    image[grid.inside] = values[h * per_heading : (h + 1) * per_heading]
+    return image
+
+
+def _ranges(results: dict[str, PoseMetrics]) -> dict[str, tuple[float, float]]:
+    """Colour ranges shared by every controller, so that their maps compare."""
+    out = {}
+    for field, _, _ in _MAP_FIELDS:
+        values = np.concatenate([_metric_values(m, field) for m in results.values()])
+        finite = values[np.isfinite(values)]
+        if field == "success" or finite.size == 0:
+            out[field] = (0.0, 1.0)
+        else:
+            hi = float(np.percentile(finite, 99.5)) if field != "zigzag" else float(finite.max())
+            out[field] = (float(finite.min()) if field != "zigzag" else 0.0, max(hi, 1e-9))
+    return out
+
+
+def _describe(summary: dict[str, Any]) -> str:
+    """The run in words, for the titles and the summary's first line."""
+    what = (
+        f"{summary['poses']} poses, {summary['velocity']} loop, "
+        f"horizon {summary['horizon_s']:g} s, start (0, 0, 0°)"
+    )
+    return what + ("" if summary["dtype"] == "float64" else ", float32")
+
+
+def _decorate(ax: Any, grid: PoseGrid, *, ticks: bool) -> None:
+    """Mark the robot at the origin (facing +x); small tick labels, at ±80 cm with ``ticks``."""
+    ax.plot(0, 0, marker=(3, 0, -90), color="k", ms=6)
+    if ticks:
+        ax.set_xticks([-80, 0, 80] if grid.xs[-1] >= 80 else [])
+        ax.set_yticks([-80, 0, 80] if grid.xs[-1] >= 80 else [])
+    ax.tick_params(labelsize=7)
+
+
+def _heading_title(grid: PoseGrid, h: int) -> str:
+    return f"θ_r = {math.degrees(grid.headings[h]):g}°"
+
+
+def _draw_metric(ax, grid: PoseGrid, m: PoseMetrics, field: str, cmap, vrange, h, v_max):
+    """Draw one metric at heading ``h``; failures in red on the arrival map."""
+    extent = (grid.xs[0], grid.xs[-1], grid.xs[0], grid.xs[-1])
+    img = _to_image(grid, _metric_values(m, field), h)
+    image = ax.imshow(
+        img,
+        origin="lower",
+        extent=extent,
+        cmap=cmap,
+        vmin=vrange[0],
+        vmax=vrange[1],
+        interpolation="nearest",
+    )
+    if field == "arrival":
+        failed = _to_image(grid, (~m.success).astype(float), h)
+        overlay = np.zeros((*failed.shape, 4))  # transparent but where it failed
+        overlay[failed == 1] = (0.85, 0.1, 0.1, 1.0)
+        ax.imshow(overlay, origin="lower", extent=extent, interpolation="nearest")
+    if field == "peak_wheel" and np.nanmax(img) > v_max:
+        ax.contour(grid.xs, grid.xs, np.nan_to_num(img), levels=[v_max], colors="w", linewidths=0.6)
+    _decorate(ax, grid, ticks=True)
+    return image
+
+
+def map_figure(
+    path: str | Path,
+    grid: PoseGrid,
+    m: PoseMetrics,
+    ranges: dict[str, tuple[float, float]] | None = None,
+    *,
+    v_max: float | None = None,
+    title: str = "",
+) -> Path:
+    """Save the heat maps of one controller: a row per metric, a column per heading.
+
+    Args:
+        path: the image to write (atomically).
+        grid: the references run.
+        m: the controller's metrics over ``grid.refs``.
+        ranges: metric → (low, high) colour range; default from ``m`` alone.
+        v_max: wheel-speed limit drawn as a white contour, cm/s; default ``Robot().v_max``.
+        title: text above the figure.
+
+    Returns:
+        The path written.
+    """
+    ranges = _ranges({"": m}) if ranges is None else ranges
+    v_max = float(Robot().v_max) if v_max is None else float(v_max)
+    n_h = len(grid.headings)
+    fig, axes = plt.subplots(
+        len(_MAP_FIELDS), n_h, figsize=(2.6 * n_h + 1.2, 2.45 * len(_MAP_FIELDS)), squeeze=False
+    )
+    for row, (field, label, cmap_name) in enumerate(_MAP_FIELDS):
+        cmap = plt.get_cmap(cmap_name).with_extremes(bad=(1, 1, 1, 0))
+        image = None
+        for h in range(n_h):
+            ax = axes[row, h]
+            image = _draw_metric(ax, grid, m, field, cmap, ranges[field], h, v_max)
+            if row == 0:
+                ax.set_title(_heading_title(grid, h), fontsize=9)
+        fig.colorbar(image, ax=axes[row, :].tolist(), shrink=0.85, pad=0.01).set_label(
+            label, fontsize=8
+        )
+    fig.suptitle(title, fontsize=10)
+    save_figure(fig, path, dpi=100, bbox_inches="tight")
+    plt.close(fig)
+    return Path(path)
+
+
+def winner_figure(
+    path: str | Path, grid: PoseGrid, results: dict[str, PoseMetrics], *, title: str = ""
+) -> Path:
+    """Save the map of the controller that arrives first at each pose (grey: none arrives).
+
+    Args:
+        path: the image to write (atomically).
+        grid: the references run.
+        results: controller name → its metrics over ``grid.refs``.
+        title: text above the figure.
+
+    Returns:
+        The path written.
+    """
+    from wmr_jax._src.report.figures import ListedColormap
+
+    names = list(results)
+    times = np.stack([results[n].arrival for n in names])  # (C, N)
+    best = np.argmin(times, axis=0).astype(float)
+    best[~np.isfinite(times.min(axis=0))] = len(names)
+    colours = [plt.get_cmap("tab10")(i) for i in range(len(names))] + [(0.6, 0.6, 0.6, 1)]
+    cmap = ListedColormap(colours).with_extremes(bad=(1, 1, 1, 0))
+    n_h = len(grid.headings)
+    fig, axes = plt.subplots(1, n_h, figsize=(2.8 * n_h, 3.2), squeeze=False)
+    extent = (grid.xs[0], grid.xs[-1], grid.xs[0], grid.xs[-1])
+    for h in range(n_h):
+        ax = axes[0, h]
+        ax.imshow(
+            _to_image(grid, best, h),
+            origin="lower",
+            extent=extent,
+            cmap=cmap,
+            vmin=-0.5,
+            vmax=len(names) + 0.5,
+            interpolation="nearest",
+        )
+        _decorate(ax, grid, ticks=False)
+        ax.set_title(_heading_title(grid, h), fontsize=9)
+    handles = [
+        plt.Line2D([], [], marker="s", ls="", color=c, label=lab)
+        for c, lab in zip(colours, [*names, "none arrives"], strict=True)
+    ]
+    fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    save_figure(fig, path, dpi=100)
+    plt.close(fig)
+    return Path(path)
+
+
+def save_map_study(out_dir: str | Path, study: MapStudy) -> list[Path]:
+    """Write the figures and the summary of a ``map_study`` into ``out_dir``.
+
+    Writes ``maps_<controller>.png`` (metrics × headings), ``winner.png``
+    (which controller arrives first; only with two controllers or more),
+    ``summary.md`` and ``summary.json``, each atomically.
+
+    Args:
+        out_dir: output folder (created if needed).
+        study: what ``wmr_jax.studies.map_study`` returned.
+
+    Returns:
+        The paths written.
+    """
+    out = Path(out_dir)
+    what = _describe(study.summary)
+    ranges = _ranges(study.results)
+    v_max = float(Robot().v_max)
+    written = [
+        map_figure(
+            out / f"maps_{name}.png",
+            study.grid,
+            m,
+            ranges,
+            v_max=v_max,
+            title=f"{name}: {what} (red: not arrived)",
+        )
+        for name, m in study.results.items()
+    ]
+    if len(study.results) > 1:
+        written.append(
+            winner_figure(
+                out / "winner.png", study.grid, study.results, title=f"First to arrive ({what})"
+            )
+        )
+    written.append(atomic_write_json(out / "summary.json", study.summary))
+    written.append(
+        atomic_write_text(
+            out / "summary.md",
+            f"Pose-space sweep: {what}; docs/model.md §6 metrics "
+            "(arrival statistics over the successful runs)\n\n" + markdown_table(study.rows),
+        )
+    )
+    return written

@@ -1,0 +1,186 @@
+"""The paper's figures and tables (``docs/model.md §5``) from ``wmr_jax.studies.paper_runs``.
+
+``save_paper`` writes ``fig6.png`` … ``fig10.png``, ``wheels_k120.png``,
+``wheels_k60.png`` and ``paper_table.md``/``.json``; ``save_fig7`` writes
+``fig7.png``, ``fig7.md`` and ``fig7.json``. Every file is written atomically.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wmr_jax._src.io import atomic_write_json, atomic_write_text, save_figure
+from wmr_jax._src.report.figures import plot_paths, plot_wheel_speeds, plt
+from wmr_jax._src.report.tables import markdown_table
+from wmr_jax._src.rollout import DEFAULT_DT
+
+__all__ = ["save_fig7", "save_paper"]
+
+# k_r (cm/s) -> numbers of its figures: ideal paths, non-ideal paths, the two compared.
+_FIGURES = {120.0: (7, 8, 9), 60.0: (None, None, 10)}
+_TABLE_COLUMNS = [
+    "kr",
+    "loop",
+    "ref",
+    "arrival_s",
+    "path_cm",
+    "peak_wheel_cm_s",
+    "saturated_fraction",
+    "zigzag",
+    "max_deviation_cm",
+]
+
+
+def _fig6(path: Path, curve: dict[str, Any]) -> None:
+    """Fig. 6: the residual distance bound against ``Φ_m``, log scale, 70° marked."""
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.semilogy(curve["phi_m_deg"], curve["bound_cm"])
+    mark_deg, mark_cm = curve["mark_deg"], curve["mark_cm"]
+    ax.plot([mark_deg], [mark_cm], "ro")
+    ax.annotate(
+        f"Φ_m = {mark_deg:g}°: {mark_cm:.2f} cm",
+        (mark_deg, mark_cm),
+        textcoords="offset points",
+        xytext=(-110, 10),
+    )
+    ax.set_xlabel("Φ_m [deg]")
+    ax.set_ylabel("residual distance bound [cm]")
+    # V of docs/model.md §3.6 adds r_e² in cm² to dimensionless terms: the
+    # bound's factor is the length unit, 1 cm; it does not scale with R_e.
+    ax.set_title(
+        "Fig. 6: residual error bound sqrt(sin Φ_m tan Φ_m) · 1 cm\n"
+        "(V̇ ≤ 0 is proven for r_e above it: the paper's error range for R_e)",
+        fontsize=10,
+    )
+    ax.grid(alpha=0.3, which="both")
+    save_figure(fig, path, dpi=120, bbox_inches="tight")
+    plt.close(fig)
+
+
+def _paths_figure(path: Path, title: str, refs: np.ndarray, runs: list[tuple]) -> None:
+    """Draw several sets of paths ``(label, trajectory, line style, colour)`` on one plot."""
+    fig, ax = plt.subplots(figsize=(6.5, 6.5))
+    for i, (label, traj, style, color) in enumerate(runs):
+        plot_paths(
+            ax,
+            np.asarray(traj.poses),
+            refs,
+            label=label,
+            linestyle=style,
+            color=color,
+            mark_refs=i == len(runs) - 1,
+        )
+    ax.plot([0], [0], "ko", ms=5)
+    ax.set_title(title, fontsize=10)
+    ax.legend(loc="lower left", fontsize=8)
+    save_figure(fig, path, dpi=120, bbox_inches="tight")
+    plt.close(fig)
+
+
+def _wheels_figure(path: Path, title: str, refs: np.ndarray, case: Any, v_max: float) -> None:
+    """Rim speeds against time per reference, non-ideal (solid) and ideal (dotted)."""
+    n = len(refs)
+    fig, axes = plt.subplots(2, (n + 1) // 2, figsize=(3.2 * ((n + 1) // 2), 5.6), sharey=True)
+    for i, ax in enumerate(axes.flat):
+        if i >= n:
+            ax.axis("off")
+            continue
+        plot_wheel_speeds(
+            ax,
+            np.asarray(case.nonideal.wheel_speeds[i]),
+            dt=DEFAULT_DT,
+            v_max=v_max,
+            labels=("left (non-ideal)", "right (non-ideal)"),
+        )
+        ax.set_prop_cycle(None)
+        plot_wheel_speeds(
+            ax,
+            np.asarray(case.ideal.wheel_speeds[i]),
+            dt=DEFAULT_DT,
+            labels=("left (ideal)", "right (ideal)"),
+            linestyle=":",
+        )
+        x, y, th = refs[i]
+        ax.set_title(f"ref ({x:g}, {y:g}, {math.degrees(th):g}°)", fontsize=9)
+        if i:
+            ax.set_ylabel("")
+    axes.flat[0].legend(fontsize=6, loc="lower right")
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    save_figure(fig, path, dpi=110)
+    plt.close(fig)
+
+
+def _case_figures(out_dir: Path, refs: np.ndarray, case: Any, v_max: float) -> None:
+    """Figs. 7–10 and the wheel speeds of one gain (``PaperCase``)."""
+    kr = case.kr
+    cond = f"k_r + L k_θ = {case.speed_bound:g} cm/s, V_max = {v_max:g}: condition {case.condition}"
+    fig_ideal, fig_nonideal, fig_compare = _FIGURES[kr]
+    ideal = ("ideal loop", case.ideal, "-", None)
+    nonideal = ("non-ideal loop", case.nonideal, "-", None)
+    both = [("ideal", case.ideal, "--", "tab:blue"), ("non-ideal", case.nonideal, "-", "tab:red")]
+    figures = (
+        (fig_ideal, f"ideal velocity loop, k_r = {kr:g}", [ideal]),
+        (fig_nonideal, f"non-ideal loop, wheels ≤ {v_max:g} cm/s, k_r = {kr:g}", [nonideal]),
+        (fig_compare, f"ideal (dashed) vs non-ideal (solid), k_r = {kr:g}\n{cond}", both),
+    )
+    for number, title, runs in figures:
+        if number is not None:
+            _paths_figure(out_dir / f"fig{number}.png", f"Fig. {number}: {title}", refs, runs)
+    _wheels_figure(
+        out_dir / f"wheels_k{kr:g}.png", f"Rim speeds, k_r = {kr:g} ({cond})", refs, case, v_max
+    )
+
+
+def save_paper(out_dir: str | Path, runs: Any) -> dict[str, Any]:
+    """Write the paper's figures and table into ``out_dir`` (created if missing).
+
+    Writes ``fig6.png`` … ``fig10.png``, ``wheels_k120.png``, ``wheels_k60.png``
+    and ``paper_table.md`` / ``paper_table.json``: one row per reference and
+    case (k_r = 120 and 60, ideal and non-ideal) with arrival time, path
+    length, peak wheel speed, fraction of samples saturated, zig-zag count and
+    the largest distance between the ideal and non-ideal paths.
+
+    Args:
+        out_dir: the folder.
+        runs: what ``wmr_jax.studies.paper_runs`` returned.
+
+    Returns:
+        The table as written to ``paper_table.json``.
+    """
+    out_dir = Path(out_dir)
+    _fig6(out_dir / "fig6.png", runs.fig6)
+    v_max = float(runs.robot.v_max)
+    for case in runs.cases:
+        _case_figures(out_dir, runs.refs, case, v_max)
+    text = "# Paper runs (docs/model.md §5): seven references, two gains, two velocity loops\n\n"
+    text += markdown_table(runs.runs, _TABLE_COLUMNS)
+    text += "\n## Summary per gain (means over the seven references)\n\n"
+    summary = [{"case": k, **v} for k, v in runs.summary.items() if k.startswith("kr=")]
+    text += markdown_table(summary)
+    atomic_write_text(out_dir / "paper_table.md", text)
+    table = runs.table()
+    atomic_write_json(out_dir / "paper_table.json", table)
+    return table
+
+
+def save_fig7(out_dir: str | Path, fig7: Any) -> None:
+    """Write ``fig7.png``, ``fig7.md`` and ``fig7.json`` of ``wmr_jax.studies.fig7_runs``."""
+    out_dir = Path(out_dir)
+    gains = fig7.gains
+    fig, ax = plt.subplots(figsize=(6.5, 6.5))
+    plot_paths(ax, np.asarray(fig7.trajectory.poses), fig7.refs, label="robot path (ideal loop)")
+    ax.plot([0], [0], "ko", ms=5)
+    ax.set_title(
+        f"Fig. 7: ideal velocity loop, k_r = {float(gains.kr):g}, k_θ = {float(gains.k_theta):g}, "
+        f"Φ_m = {math.degrees(float(gains.phi_m)):g}°"
+    )
+    ax.legend(loc="lower left", fontsize=8)
+    save_figure(fig, out_dir / "fig7.png", dpi=120, bbox_inches="tight")
+    plt.close(fig)
+    atomic_write_text(out_dir / "fig7.md", markdown_table(fig7.rows))
+    atomic_write_json(out_dir / "fig7.json", fig7.table())

@@ -1,0 +1,104 @@
+"""The robustness study's figure, tables and result file (``docs/model.md §7``)."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from wmr_jax._src.io import atomic_write_json, atomic_write_text, save_figure
+from wmr_jax._src.poses import HORIZON_S
+from wmr_jax._src.report.figures import plt
+from wmr_jax._src.report.tables import markdown_table
+
+__all__ = ["ROBUSTNESS_COLUMNS", "robustness_figure", "write_robustness"]
+
+# The columns of robustness.md, in order.
+ROBUSTNESS_COLUMNS = [
+    "condition",
+    "controller",
+    "noise xy cm",
+    "noise theta deg",
+    "success",
+    "mean arrival s",
+    "median arrival s",
+    "reached",
+    "median first arrival s",
+    "mean final distance cm",
+    "mean zigzag",
+]
+
+_STYLES = ("-", "--", ":", "-.")
+
+
+def write_robustness(
+    out_dir: str | os.PathLike,
+    rows: Sequence[dict[str, Any]],
+    *,
+    seed: int,
+    velocity: str,
+    n_runs: int,
+) -> list[Path]:
+    """Write ``robustness.png``, ``robustness.md`` and ``robustness.json`` into ``out_dir``.
+
+    Args:
+        out_dir: the folder (created if missing).
+        rows: ``robustness_study`` rows.
+        seed: the study's seed.
+        velocity: its velocity loop.
+        n_runs: its runs per noise level.
+
+    Returns:
+        The paths written.
+    """
+    out, rows = Path(out_dir), list(rows)
+    head = f"Robustness Monte Carlo ({velocity} loop, seed {seed}, {n_runs} runs per row)\n\n"
+    md = atomic_write_text(out / "robustness.md", head + markdown_table(rows, ROBUSTNESS_COLUMNS))
+    meta = {"seed": seed, "velocity": velocity, "runs": n_runs, "horizon_s": HORIZON_S}
+    record = atomic_write_json(out / "robustness.json", {**meta, "rows": rows})
+    title = (
+        f"Robustness, {velocity} loop: {n_runs} random poses (docs/model.md §6) per point, "
+        f"seed {seed}; mismatch ±3 % wheel radius, ±20 % mass; latency one sample"
+    )
+    fig = robustness_figure(rows, title=title)
+    try:
+        return [save_figure(fig, out / "robustness.png", dpi=110), md, record]
+    finally:
+        plt.close(fig)
+
+
+def robustness_figure(rows: Sequence[dict[str, Any]], *, title: str) -> Any:
+    """Draw success rate and median arrival against noise level, one line per row group.
+
+    Args:
+        rows: ``robustness_study`` rows: one colour per controller, one line
+            style per condition.
+        title: the figure's title.
+
+    Returns:
+        The matplotlib ``Figure`` (the caller saves and closes it).
+    """
+    names = list(dict.fromkeys(r["controller"] for r in rows))
+    conditions = list(dict.fromkeys(r["condition"] for r in rows))
+    first = [r for r in rows if (r["controller"], r["condition"]) == (names[0], conditions[0])]
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    for c, name in enumerate(names):
+        colour = plt.get_cmap("tab10")(c)
+        for i, label in enumerate(conditions):
+            sel = [r for r in rows if r["controller"] == name and r["condition"] == label]
+            x = [r["noise xy cm"] for r in sel]
+            style = dict(linestyle=_STYLES[i % len(_STYLES)], marker="o", color=colour)
+            axes[0].plot(x, [r["success"] for r in sel], label=f"{name}, {label}", **style)
+            axes[1].plot(x, [r["median arrival s"] for r in sel], **style)
+    axes[0].set_ylabel("success rate")
+    axes[1].set_ylabel("median arrival time of successes [s]")
+    degrees = ", ".join(f"{r['noise theta deg']:g}" for r in first)
+    for ax in axes:
+        ax.set_xlabel(f"measurement noise σ_xy [cm] (σ_θ = {degrees}°)")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylim(-0.02, 1.02)
+    axes[0].legend(fontsize=7, loc="lower left")
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    return fig

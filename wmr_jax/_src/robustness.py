@@ -1,0 +1,433 @@
+"""Robustness Monte Carlo: noisy pose measurements, a robot unlike its model, latency.
+
+The protocol is ``docs/model.md §7``. One closed loop per run, with four
+departures from the nominal one, all drawn from a PRNG key (same key, same
+numbers):
+
+* **Pose-measurement noise.** The controller sees ``pose + n_k`` with
+  ``n_k ~ N(0, diag(σ_xy², σ_xy², σ_θ²))``, independent at every sample.
+  Arrival is judged on the true pose.
+* **Wheel-radius mismatch.** The controller converts rim speeds to wheel
+  turns with the nominal radius, so a wheel of radius ``r (1 + δ)`` moves its
+  rim ``1 + δ`` times as fast as commanded; each wheel has its own ``δ``.
+  choice: in the non-ideal loop the scaled rim set points go to the wheel-speed
+  controller, as if it regulated the speeds it believes it measures; the
+  ``±V_max`` limit is then applied to the scaled set points.
+* **Mass mismatch** (non-ideal loop only; the ideal loop has no dynamics): the
+  robot's body mass is ``M (1 + μ)`` while the wheel-speed controller's model
+  keeps ``M`` (``velocity_loop.advance(model=...)``).
+* **One-sample latency.** The command computed at sample ``k`` is applied over
+  period ``k + 1`` (zero over the first period).
+
+With no noise, no mismatch and no latency the run is the nominal rollout, and
+its metrics those of ``docs/model.md §6`` (tested). The metrics stream through
+the scan (``metrics.stream_update``), so batches are bounded in memory. The
+engine returns values; ``wmr_jax.report`` draws and writes them.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from wmr_jax._src import checks, controllers, dynamics, loops, metrics, velocity_loop
+from wmr_jax._src import rollout as simulation
+from wmr_jax._src.controllers import shim_sung as law
+from wmr_jax._src.loops import Options, StepOutput
+from wmr_jax._src.maps import PoseMetrics
+from wmr_jax._src.params import Robot
+from wmr_jax._src.poses import horizon_steps, sample_poses
+from wmr_jax._src.rollout import DEFAULT_DT
+
+__all__ = [
+    "DEFAULT_NOISE_DEG",
+    "DEFAULT_NOISE_XY",
+    "ROBUSTNESS_CONDITIONS",
+    "Disturbance",
+    "draw_disturbances",
+    "monte_carlo",
+    "perturbed_metrics",
+    "robustness_study",
+]
+
+DEFAULT_NOISE_XY = (0.0, 0.25, 0.5, 1.0, 2.0)  # σ of x and y, cm
+DEFAULT_NOISE_DEG = (0.0, 0.5, 1.0, 2.0, 4.0)  # σ of θ, degrees, paired with the above
+
+# The study's conditions (docs/model.md §7):
+# (label, wheel-radius mismatch bound, body-mass mismatch bound, one-sample latency).
+ROBUSTNESS_CONDITIONS = (
+    ("noise", 0.0, 0.0, False),
+    ("noise + mismatch", 0.03, 0.2, False),
+    ("noise + mismatch + latency", 0.03, 0.2, True),
+)
+
+
+class Disturbance(NamedTuple):
+    """What makes one run differ from the nominal one (leading batch axes first).
+
+    Attributes:
+        ref: ``(3,)`` reference pose ``[cm, cm, rad]``.
+        noise: ``(steps, 3)`` measurement error added to the pose at each
+            sample, ``[cm, cm, rad]``.
+        mismatch: ``(3,)`` ``[left rim factor, right rim factor, mass factor]``:
+            realised over commanded rim speed per wheel, and true over model
+            body mass (1: no mismatch).
+        delay: ``()`` 1.0 for a one-sample latency, 0.0 for none.
+    """
+
+    ref: jax.Array
+    noise: jax.Array
+    mismatch: jax.Array
+    delay: jax.Array
+
+
+# ---------------------------------------------------------------- one disturbed run
+
+
+def _realised(command: jax.Array, mismatch: jax.Array, robot: Robot) -> jax.Array:
+    """Return the body velocity ``[v, ω]`` whose rims are the commanded ones, scaled."""
+    rims = law.wheel_speeds(command[0], command[1], robot)  # [v_L, v_R]
+    # Written as a correction of the command, so that factors of exactly 1
+    # return it bit for bit (no rounding from the round trip through the rims).
+    extra_left, extra_right = rims[0] * (mismatch[0] - 1), rims[1] * (mismatch[1] - 1)
+    v = command[0] + 0.5 * (extra_left + extra_right)
+    omega = command[1] + 0.5 * (extra_right - extra_left) / robot.half_track
+    return jnp.stack([v, omega])
+
+
+def _move(state, target, true_robot, robot, dt, options: Options):
+    """Advance the true robot one period towards the body velocity ``target``.
+
+    Returns:
+        ``(new state, distance travelled by the centre, cm)``.
+    """
+    if options.velocity == "ideal":
+        pose = dynamics.arc_step(state.pose, target[0], target[1], dt)
+        return dynamics.RobotState(pose, target, state.integral), jnp.abs(target[0]) * dt
+    return velocity_loop.advance(
+        state,
+        target,
+        true_robot,
+        dt,
+        substeps=options.substeps,
+        wheel_limit=options.wheel_limit,
+        model=robot,
+    )
+
+
+def _perturbed_single(spec: Disturbance, params, init, robot, dt, options: Options):
+    """Run one pose under its ``Disturbance``, streaming the ``docs/model.md §6`` metrics."""
+    control = options.controller
+    ref = spec.ref
+    true_robot = robot.replace(body_mass=robot.body_mass * spec.mismatch[2])
+    thresholds = metrics.Thresholds()
+
+    def body(carry, noise):
+        state, held, acc = carry
+        v, omega = control.command(state.pose + noise, ref, params, temperature=None)
+        fresh = jnp.stack([v, omega])
+        applied = jnp.where(spec.delay > 0, held, fresh)
+        target = _realised(applied, spec.mismatch, robot)
+        new_state, distance = _move(state, target, true_robot, robot, dt, options)
+        rims = law.wheel_speeds(new_state.velocity[0], new_state.velocity[1], robot)
+        out = StepOutput(applied[0], applied[1], jnp.int32(-1), rims, distance)
+        acc = metrics.stream_update(acc, new_state.pose, ref, out, thresholds)
+        return (new_state, fresh, acc), None
+
+    carry = (
+        loops.initial_state(init),
+        jnp.zeros((2,), init.dtype),
+        metrics.stream_start(ref.dtype),
+    )
+    (state, _, acc), _ = jax.lax.scan(body, carry, spec.noise)
+    result = metrics.stream_result(acc, dt)
+    d = state.pose[:2] - ref[:2]
+    return {
+        "arrival": result["arrival_time"],
+        "path": result["path_length"],
+        "peak_wheel": result["peak_wheel_speed"],
+        "zigzag": result["zigzags"],
+        "final_distance": jnp.sqrt(jnp.sum(d * d)),
+        "first_arrival": result["first_arrival"],
+    }
+
+
+_perturbed_jit = loops.EntryJit(loops.batched(_perturbed_single), static_argnames=("options",))
+
+
+def perturbed_metrics(
+    disturbance: Disturbance,
+    params: Any = None,
+    *,
+    controller: Any = controllers.SHIM_SUNG,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = DEFAULT_DT,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    x64: bool = True,
+) -> PoseMetrics:
+    """Return the ``docs/model.md §6`` metrics of a batch of disturbed runs.
+
+    Args:
+        disturbance: a ``Disturbance`` with a leading batch axis ``N`` on
+            every field but ``delay`` (a scalar); ``noise`` is
+            ``(N, steps, 3)`` and sets the number of periods.
+        params: the controller's parameters (its defaults if ``None``).
+        controller: a ``Controller`` or its registered name.
+        init: ``(3,)`` initial pose (true and measured alike), ``[cm, cm, rad]``.
+        dt: control period, s.
+        robot: the nominal robot (the controller's model); default ``Robot()``.
+        velocity: ``"ideal"`` or ``"nonideal"``.
+        x64: compute in float64 (default): the polar baselines' bearing is
+            rounding noise near the goal in float32.
+
+    Returns:
+        ``PoseMetrics`` of ``(N,)`` NumPy arrays, ``first_arrival`` included.
+
+    Raises:
+        ValueError: for misshapen or non-finite inputs and bad options.
+    """
+    with jax.enable_x64(bool(x64)):
+        return _perturbed_metrics(disturbance, params, controller, init, dt, robot, velocity)
+
+
+def _checked_disturbance(disturbance: Disturbance) -> tuple[np.ndarray, ...]:
+    """Return the fields of ``disturbance`` as float arrays after checking them."""
+    refs, noise, mismatch, delay = (np.asarray(f, dtype=float) for f in disturbance)
+    if refs.ndim != 2 or refs.shape[1] != 3:
+        raise ValueError(f"disturbance.ref has shape {refs.shape}; allowed: (N, 3)")
+    n = refs.shape[0]
+    if noise.ndim != 3 or noise.shape[0] != n or noise.shape[2] != 3 or noise.shape[1] < 1:
+        raise ValueError(f"disturbance.noise has shape {noise.shape}; allowed: ({n}, steps, 3)")
+    if mismatch.shape != (n, 3):
+        raise ValueError(f"disturbance.mismatch has shape {mismatch.shape}; allowed: ({n}, 3)")
+    checks.require("disturbance.noise", noise, np.isfinite(noise), "finite numbers")
+    checks.require(
+        "disturbance.mismatch", mismatch, np.isfinite(mismatch) & (mismatch > 0), "finite, > 0"
+    )
+    if delay.shape != () or float(delay) not in (0.0, 1.0):
+        raise ValueError(f"disturbance.delay = {delay!r} is not allowed; allowed: 0.0 or 1.0")
+    return refs, noise, mismatch, delay
+
+
+def _perturbed_metrics(disturbance, params, controller, init, dt, robot, velocity) -> PoseMetrics:
+    refs, noise, mismatch, delay = _checked_disturbance(disturbance)
+    options = simulation.make_options(
+        steps=noise.shape[1], velocity=velocity, controller=controller
+    )
+    refs_j, params, init, robot, dt = simulation.prepare(
+        refs, params, init, robot, dt, options, batch=None
+    )
+    if np.ndim(init) != 1:
+        raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,)")
+    dtype = dt.dtype
+    spec = Disturbance(
+        refs_j,
+        jnp.asarray(noise, dtype),
+        jnp.asarray(mismatch, dtype),
+        jnp.asarray(delay, dtype),
+    )
+    out = _perturbed_jit(spec, params, init, robot, dt, options=options)
+    return PoseMetrics(**{f: np.asarray(out[f]) for f in PoseMetrics._fields})
+
+
+# ---------------------------------------------------------------- Monte Carlo
+
+
+def draw_disturbances(
+    key: jax.Array,
+    n: int,
+    steps: int,
+    *,
+    radius_mismatch: float = 0.0,
+    mass_mismatch: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Draw references, unit noise and mismatch factors from ``key``.
+
+    Args:
+        key: a ``jax.random`` key.
+        n: number of runs.
+        steps: control periods per run.
+        radius_mismatch: each wheel's radius error ``δ ~ U(−m, m)``.
+        mass_mismatch: the body-mass error ``μ ~ U(−m, m)``.
+
+    Returns:
+        ``(refs (n, 3), unit noise (n, steps, 3) ~ N(0, 1), mismatch (n, 3))``;
+        the references follow the evaluation set of ``docs/model.md §6``
+        (distance 5–80 cm, any bearing, any heading), drawn by ``sample_poses``.
+    """
+    n = checks.check_int("n", n)
+    steps = checks.check_int("steps", steps)
+    k_ref, k_noise, k_mis = jax.random.split(key, 3)
+    refs = np.asarray(sample_poses(k_ref, n, dtype=jnp.float32), dtype=float)
+    unit = np.asarray(jax.random.normal(k_noise, (n, steps, 3), dtype=jnp.float32), dtype=float)
+    m = np.asarray(jax.random.uniform(k_mis, (n, 3), dtype=jnp.float32), dtype=float) * 2 - 1
+    mismatch = 1.0 + m * np.array([radius_mismatch, radius_mismatch, mass_mismatch])
+    return refs, unit, mismatch
+
+
+def _check_levels(noise_xy: Sequence[float], noise_deg: Sequence[float]) -> None:
+    if len(noise_xy) != len(noise_deg) or not noise_xy:
+        raise ValueError(
+            f"noise_xy has {len(noise_xy)} levels and noise_deg {len(noise_deg)}; "
+            "allowed: the same number, at least one"
+        )
+    for name, seq, unit in (("noise_xy", noise_xy, "cm"), ("noise_deg", noise_deg, "degrees")):
+        for i, value in enumerate(seq):
+            checks.check_number(f"{name}[{i}]", value, closed=True, unit=unit)
+
+
+def _summary_row(m: PoseMetrics) -> dict[str, Any]:
+    """Return success, arrival, first arrival, final distance and zig-zag of a batch."""
+    ok = m.success
+    t = m.arrival[ok]
+    return {
+        "success": float(ok.mean()),
+        "mean arrival s": float(t.mean()) if t.size else math.inf,
+        "median arrival s": float(np.median(t)) if t.size else math.inf,
+        "reached": float(np.isfinite(m.first_arrival).mean()),
+        "median first arrival s": _median_finite(m.first_arrival),
+        "mean final distance cm": float(m.final_distance.mean()),
+        "mean zigzag": float(m.zigzag.mean()),
+    }
+
+
+def _median_finite(times: np.ndarray) -> float:
+    finite = times[np.isfinite(times)]
+    return float(np.median(finite)) if finite.size else math.inf
+
+
+def monte_carlo(
+    key: jax.Array,
+    *,
+    controller: Any = controllers.SHIM_SUNG,
+    params: Any = None,
+    n_runs: int = 256,
+    noise_xy: Sequence[float] = DEFAULT_NOISE_XY,
+    noise_deg: Sequence[float] = DEFAULT_NOISE_DEG,
+    radius_mismatch: float = 0.0,
+    mass_mismatch: float = 0.0,
+    latency: bool = False,
+    velocity: str = "ideal",
+    dt: float = DEFAULT_DT,
+    x64: bool = True,
+) -> list[dict[str, Any]]:
+    """Return success and arrival against noise level for one controller and condition.
+
+    Every noise level reuses the same references, unit noise and mismatch
+    (common random numbers), so differences between levels are the noise's.
+    Each run lasts the ``docs/model.md §6`` horizon (6 s).
+
+    Args:
+        key: ``jax.random`` key; the same key gives the same numbers.
+        controller: a ``Controller`` or its registered name.
+        params: its parameters (defaults if ``None``).
+        n_runs: Monte Carlo runs per noise level.
+        noise_xy: σ of the x and y measurement noise per level, cm.
+        noise_deg: σ of the heading measurement noise per level, degrees.
+        radius_mismatch: bound of each wheel's relative radius error, ``[0, 1)``.
+        mass_mismatch: bound of the relative body-mass error (non-ideal loop),
+            ``[0, 1)``.
+        latency: apply each command one sample late.
+        velocity: ``"ideal"`` or ``"nonideal"``.
+        dt: control period, s.
+        x64: compute in float64 (see ``perturbed_metrics``).
+
+    Returns:
+        One row per noise level: success rate, mean and median arrival of the
+        successful runs (s), the fraction of runs ever arrived (if only for a
+        sample) and their median first arrival (s), mean final distance (cm),
+        mean zig-zag count.
+
+    Raises:
+        ValueError: for a bad count, noise level, mismatch bound or option.
+    """
+    n_runs = checks.check_int("n_runs", n_runs)
+    _check_levels(noise_xy, noise_deg)
+    for name, value in (("radius_mismatch", radius_mismatch), ("mass_mismatch", mass_mismatch)):
+        checks.check_number(name, value, high=1.0, closed=True)
+    name = controllers.get_controller(controller).name
+    refs, unit, mismatch = draw_disturbances(
+        key, n_runs, horizon_steps(dt), radius_mismatch=radius_mismatch, mass_mismatch=mass_mismatch
+    )
+    delay = np.float64(1.0 if latency else 0.0)
+    rows = []
+    for sxy, sdeg in zip(noise_xy, noise_deg, strict=True):
+        scale = np.array([sxy, sxy, math.radians(sdeg)])
+        m = perturbed_metrics(
+            Disturbance(refs, unit * scale, mismatch, delay),
+            params,
+            controller=name,
+            dt=dt,
+            velocity=velocity,
+            x64=x64,
+        )
+        condition = {
+            "controller": name,
+            "noise xy cm": float(sxy),
+            "noise theta deg": float(sdeg),
+            "radius mismatch": float(radius_mismatch),
+            "mass mismatch": float(mass_mismatch),
+            "latency": bool(latency),
+            "runs": int(n_runs),
+        }
+        rows.append({**condition, **_summary_row(m)})
+    return rows
+
+
+def robustness_study(
+    *,
+    seed: int = 0,
+    controller_names: Sequence[str] | None = None,
+    n_runs: int = 256,
+    velocity: str = "ideal",
+    noise_xy: Sequence[float] = DEFAULT_NOISE_XY,
+    noise_deg: Sequence[float] = DEFAULT_NOISE_DEG,
+    x64: bool = True,
+) -> list[dict[str, Any]]:
+    """Run the Monte Carlo for each controller and condition (``docs/model.md §7``).
+
+    Conditions (``ROBUSTNESS_CONDITIONS``): measurement noise alone; noise
+    with ±3 % wheel-radius and ±20 % body-mass mismatch; and the same with
+    one-sample latency. Each controller sees the same draws (one key per
+    condition, from ``seed``). ``wmr_jax.report.write_robustness`` draws and
+    writes the rows.
+
+    Args:
+        seed: PRNG seed, an integer ``>= 0``.
+        controller_names: registered controllers; default every one.
+        n_runs: Monte Carlo runs per noise level.
+        velocity: ``"ideal"`` or ``"nonideal"``.
+        noise_xy: σ of the x and y measurement noise per level, cm.
+        noise_deg: σ of the heading measurement noise per level, degrees.
+        x64: compute in float64 (see ``perturbed_metrics``).
+
+    Returns:
+        The rows of every condition, controller and noise level (in that
+        order), each ``monte_carlo``'s row with its ``"condition"`` first.
+    """
+    seed = checks.check_int("seed", seed, 0)
+    names = list(controller_names) if controller_names else controllers.registered_names()
+    keys = jax.random.split(jax.random.PRNGKey(seed), len(ROBUSTNESS_CONDITIONS))
+    rows = []
+    for (label, radius, mass, latency), key in zip(ROBUSTNESS_CONDITIONS, keys, strict=True):
+        for name in names:
+            for row in monte_carlo(
+                key,
+                controller=name,
+                n_runs=n_runs,
+                noise_xy=noise_xy,
+                noise_deg=noise_deg,
+                radius_mismatch=radius,
+                mass_mismatch=mass,
+                latency=latency,
+                velocity=velocity,
+                x64=x64,
+            ):
+                rows.append({"condition": label, **row})
+    return rows

@@ -1,0 +1,298 @@
+"""Closed-loop rollouts: the entry points ``rollout``, ``batch_rollout``, ``final_poses``.
+
+The entry points check their inputs in plain Python (``docs/model.md §3``
+ranges, shapes, finiteness, options) and then call a jitted core whose static
+arguments are the shape-deciding options. Calling them again with the same
+shapes and options reuses the compiled code. The loop itself is in
+``loops.py``; the checks in ``checks.py``.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from wmr_jax._src import velocity_loop
+from wmr_jax._src.checks import (
+    as_float_tree,
+    as_poses,
+    check_dt,
+    check_int,
+    check_number,
+    float_dtype,
+    is_traced,
+)
+from wmr_jax._src.controllers.base import Controller, get_controller
+from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
+from wmr_jax._src.loops import (
+    DEFAULT_STEPS,
+    DEFAULT_SUBSTEPS,
+    VELOCITY_LOOPS,
+    WHEEL_LIMITS,
+    EntryJit,
+    Options,
+    batched,
+    scan_closed_loop,
+)
+from wmr_jax._src.params import Robot, validate_robot
+
+__all__ = [
+    "DEFAULT_DT",
+    "Trajectory",
+    "batch_rollout",
+    "final_poses",
+    "make_options",
+    "prepare",
+    "rollout",
+]
+
+DEFAULT_DT = 0.033
+
+
+class Trajectory(NamedTuple):
+    """A closed-loop run, sampled once per control period.
+
+    Leading batch axes, if any, come first in every field.
+
+    Attributes:
+        poses: ``(steps + 1, 3)`` poses ``[x cm, y cm, θ rad]``, the initial one first.
+        v: ``(steps,)`` linear-velocity command applied over each period, cm/s.
+        omega: ``(steps,)`` angular-velocity command, rad/s.
+        region: ``(steps,)`` int32 region label 0–3 of the command (docs/model.md §3).
+        wheel_speeds: ``(steps, 2)`` rim speeds ``[v_L, v_R]`` of the robot
+            at the end of each period, cm/s.
+        distance: ``(steps,)`` distance the centre travelled over each period, cm.
+    """
+
+    poses: jax.Array
+    v: jax.Array
+    omega: jax.Array
+    region: jax.Array
+    wheel_speeds: jax.Array
+    distance: jax.Array
+
+
+def _trajectory(ref, params, init, robot, dt, options: Options) -> Trajectory:
+    _, _, (poses, out) = scan_closed_loop(ref, params, init, robot, dt, options, record=True)
+    poses = jnp.concatenate([init[None], poses], axis=0)
+    return Trajectory(poses, out.v, out.omega, out.region, out.wheel_speeds, out.distance)
+
+
+def _final_pose(ref, params, init, robot, dt, options: Options) -> jax.Array:
+    final, _, _ = scan_closed_loop(ref, params, init, robot, dt, options)
+    return final
+
+
+_rollout_jit = EntryJit(_trajectory, static_argnames=("options",))
+_batch_rollout_jit = EntryJit(batched(_trajectory), static_argnames=("options",))
+_final_poses_jit = EntryJit(batched(_final_pose), static_argnames=("options",))
+
+
+# ---------------------------------------------------------------- boundary checks
+
+
+def make_options(
+    *,
+    steps: Any = DEFAULT_STEPS,
+    velocity: Any = "ideal",
+    controller: Any = SHIM_SUNG,
+    temperature: Any = None,
+    substeps: Any = DEFAULT_SUBSTEPS,
+    wheel_limit: Any = "clip",
+) -> Options:
+    """Check the static options of a rollout and return them as ``Options``.
+
+    Raises:
+        ValueError: naming the option, its value and what is allowed.
+    """
+    steps = check_int("steps", steps)
+    substeps = check_int("substeps", substeps)
+    if velocity not in VELOCITY_LOOPS:
+        raise ValueError(f"velocity = {velocity!r} is not allowed; allowed: {VELOCITY_LOOPS}")
+    if wheel_limit not in WHEEL_LIMITS:
+        raise ValueError(f"wheel_limit = {wheel_limit!r} is not allowed; allowed: {WHEEL_LIMITS}")
+    controller = get_controller(controller)
+    if temperature is not None:
+        value = check_number("temperature", temperature)
+        if not controller.smooth:
+            raise ValueError(
+                f"temperature = {temperature!r} is not allowed for controller "
+                f"{controller.name!r}; allowed: None (it has no smooth relaxation)"
+            )
+        temperature = value
+    return Options(steps, velocity, controller, temperature, substeps, wheel_limit)
+
+
+def _batch_size(refs: jax.Array, params: Any, init: jax.Array, robot: Robot) -> int:
+    sizes = {}
+    if refs.ndim == 2:
+        sizes["refs"] = refs.shape[0]
+    if init.ndim == 2:
+        sizes["init"] = init.shape[0]
+    for prefix, tree in (("gains", params), ("robot", robot)):
+        for key, leaf in jax.tree_util.tree_leaves_with_path(tree):
+            if jnp.ndim(leaf) == 1:
+                sizes[f"{prefix}{jax.tree_util.keystr(key)}"] = jnp.shape(leaf)[0]
+    if not sizes:
+        raise ValueError(
+            "refs has shape (3,) and nothing else is batched; allowed: refs (N, 3), "
+            "init (N, 3) or gains/robot fields of shape (N,)"
+        )
+    if len(set(sizes.values())) > 1:
+        listed = ", ".join(f"{k}: {v}" for k, v in sizes.items())
+        raise ValueError(f"batch sizes differ ({listed}); allowed: one common N")
+    return next(iter(sizes.values()))
+
+
+def prepare(refs, params, init, robot, dt, options: Options, *, batch: bool | None):
+    """Check and convert every argument of a rollout entry point (before tracing).
+
+    Args:
+        batch: ``False`` for one run (``refs`` and ``init`` ``(3,)``), ``None``
+            for a batch over any of refs/init/params/robot.
+
+    Returns:
+        ``(refs, params, init, robot, dt)`` ready for the jitted cores.
+    """
+    control = options.controller
+    params = control.default_params() if params is None else params
+    if not isinstance(params, control.params_type):
+        raise ValueError(
+            f"gains is a {type(params).__name__}; allowed: a {control.params_type.__name__} "
+            f"for controller {control.name!r}"
+        )
+    params = as_float_tree(control.validate(params))
+    robot = as_float_tree(validate_robot(Robot() if robot is None else robot))
+    dt = check_dt(dt)
+    if options.velocity == "nonideal":
+        velocity_loop.check_stability(robot, dt, options.substeps)
+    refs = as_poses("refs" if batch is not False else "ref", refs, batch=batch)
+    init = as_poses("init", init, batch=None if batch is not False else False)
+    if batch is not False:
+        _batch_size(refs, params, init, robot)
+    if control.check_robot is not None and not is_traced((params, robot)):
+        control.check_robot(params, robot)
+    return refs, params, init, robot, jnp.asarray(dt, dtype=float_dtype())
+
+
+# ---------------------------------------------------------------- entry points
+
+_STATIC = ("steps", "velocity", "controller", "temperature", "substeps", "wheel_limit")
+
+
+def _static_options(arguments: dict[str, Any]) -> dict[str, Any]:
+    """Pick the static options out of an entry point's arguments."""
+    return {name: arguments[name] for name in _STATIC}
+
+
+_OPTIONS_DOC = """
+        init: ``(3,)`` initial pose, or ``(N, 3)`` for a batch.
+        dt: control period in s; commands are held over it (docs/model.md §4).
+        steps: number of control periods (static).
+        robot: robot parameters; default ``Robot()``.
+        velocity: velocity loop between command and robot (static):
+            ``"ideal"`` or ``"nonideal"`` (docs/model.md §4).
+        controller: a ``Controller`` or its name (static); default Shim–Sung.
+        temperature: ``None`` for the paper's law, or a smooth relaxation
+            (``docs/model.md §3``).
+        substeps: inner integration steps per period, non-ideal loop (static).
+        wheel_limit: ``"clip"`` (per wheel) or ``"scale"`` (keep the curvature),
+            non-ideal loop (static)."""
+
+
+def rollout(
+    ref: Any,
+    gains: Any = None,
+    *,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = DEFAULT_DT,
+    steps: int = DEFAULT_STEPS,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    controller: Controller | str = SHIM_SUNG,
+    temperature: float | None = None,
+    substeps: int = DEFAULT_SUBSTEPS,
+    wheel_limit: str = "clip",
+) -> Trajectory:
+    """Drive the robot from ``init`` towards ``ref`` and record the whole run.
+
+    Args:
+        ref: ``(3,)`` reference pose ``[x cm, y cm, θ rad]``.
+        gains: the controller's parameters; default ``Gains()`` (Fig. 7).
+    {options}
+
+    Returns:
+        A ``Trajectory`` with ``steps + 1`` poses.
+
+    Raises:
+        ValueError: for out-of-range gains, non-finite or misshapen poses,
+            ``steps < 1``, ``dt ≤ 0`` or an unknown option.
+    """
+    options = make_options(**_static_options(locals()))
+    args = prepare(ref, gains, init, robot, dt, options, batch=False)
+    return _rollout_jit(*args, options=options)
+
+
+def batch_rollout(
+    refs: Any,
+    gains: Any = None,
+    *,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = DEFAULT_DT,
+    steps: int = DEFAULT_STEPS,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    controller: Controller | str = SHIM_SUNG,
+    temperature: float | None = None,
+    substeps: int = DEFAULT_SUBSTEPS,
+    wheel_limit: str = "clip",
+) -> Trajectory:
+    """Run ``rollout`` for a batch, in one call.
+
+    Any of ``refs (N, 3)``, ``init (N, 3)`` and the leaves of ``gains`` or
+    ``robot`` with shape ``(N,)`` are mapped over together; the rest are
+    shared by every run. Sharded ``jax.Array`` inputs give sharded outputs.
+
+    Args:
+        refs: ``(N, 3)`` reference poses (or ``(3,)`` if something else is batched).
+        gains: the controller's parameters, leaves scalar or ``(N,)``.
+    {options}
+
+    Returns:
+        A ``Trajectory`` whose fields have a leading axis ``N``.
+    """
+    options = make_options(**_static_options(locals()))
+    args = prepare(refs, gains, init, robot, dt, options, batch=None)
+    return _batch_rollout_jit(*args, options=options)
+
+
+def final_poses(
+    refs: Any,
+    gains: Any = None,
+    *,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = DEFAULT_DT,
+    steps: int = DEFAULT_STEPS,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    controller: Controller | str = SHIM_SUNG,
+    temperature: float | None = None,
+    substeps: int = DEFAULT_SUBSTEPS,
+    wheel_limit: str = "clip",
+) -> jax.Array:
+    """Return only the last pose of each run, ``(N, 3)``; memory O(N), not O(N·steps).
+
+    Args:
+        refs: ``(N, 3)`` reference poses (or ``(3,)`` if something else is batched).
+        gains: the controller's parameters, leaves scalar or ``(N,)``.
+    {options}
+    """
+    options = make_options(**_static_options(locals()))
+    args = prepare(refs, gains, init, robot, dt, options, batch=None)
+    return _final_poses_jit(*args, options=options)
+
+
+for _entry in (rollout, batch_rollout, final_poses):
+    _entry.__doc__ = _entry.__doc__.replace("    {options}", _OPTIONS_DOC)

@@ -1,0 +1,534 @@
+"""Final poses and docs/model.md §6 metrics for millions of poses, in bounded memory.
+
+``sweep(refs, gains, ...)`` runs the closed loop for every reference pose and
+returns, per pose, the final pose and the metrics of docs/model.md §6: arrival
+time, success, path length, peak wheel speed and zig-zag count. The metrics
+are streamed through the time loop (``loops.scan_closed_loop`` with the fold
+of ``metrics.stream_*``), so no trajectory is ever stored, and the poses are
+processed in chunks of a fixed size, so device memory does not grow with
+``N`` and one compiled program serves every chunk. Each chunk is spread over
+all local devices.
+
+With ``out=DIR`` every finished chunk is written to ``DIR`` atomically as soon
+as it is done, as a checksummed array file (``io.save_arrays``) carrying a
+fingerprint of the settings and of its reference poses; a later call with the
+same arguments and ``resume=True`` (the default) loads the finished chunks
+instead of recomputing them, so an interrupted sweep loses nothing it had
+finished. A chunk file that is damaged or was altered is recomputed, with a
+one-line warning, never trusted; temporary files that a killed sweep left in
+``DIR`` are removed first. Host memory holds the inputs and the results
+(about 30 bytes per pose in float32) and little else; ``refs`` may be a NumPy
+memmap.
+
+The steps of a sweep: check the inputs and plan the chunks (``_check``), open
+the chunk folder (``_ChunkStore``), then for each chunk either load it or
+launch it on the devices and finish it (copy back, store) while the next one
+runs (``_run_chunks``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import hashlib
+import json
+import math
+import warnings
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+
+from wmr_jax._src import checks, io, loops, metrics
+from wmr_jax._src import rollout as simulation
+from wmr_jax._src.controllers import SHIM_SUNG, Controller
+from wmr_jax._src.params import Robot
+
+__all__ = ["DEFAULT_CHUNK_SIZE", "SWEEP_FIELDS", "sweep"]
+
+DEFAULT_CHUNK_SIZE = 131_072
+
+SWEEP_FIELDS = (
+    "final_x",
+    "final_y",
+    "final_theta",
+    "arrival_time",
+    "success",
+    "path_length",
+    "peak_wheel_speed",
+    "zigzags",
+)
+"""Keys of the dict ``sweep`` returns, each an ``(N,)`` array:
+
+* ``final_x``, ``final_y`` (cm), ``final_theta`` (rad, not wrapped): the pose
+  after the last period;
+* ``arrival_time``: s, ``inf`` where the robot is not arrived at the end
+  (docs/model.md §6, as ``wmr_jax.arrival_time``);
+* ``success``: bool, ``arrival_time`` is finite;
+* ``path_length``: cm, as ``wmr_jax.path_length``;
+* ``peak_wheel_speed``: cm/s, the largest ``|v_L|``, ``|v_R|`` over the run;
+* ``zigzags``: int32, as ``wmr_jax.zigzag_count``.
+"""
+_MANIFEST = "sweep.json"
+_RESULTS = "results.npz"
+
+
+def _sweep_one(ref, params, init, robot, dt, options: loops.Options):
+    """Return the final pose and the streamed metrics of one run (single pose)."""
+    gains, thresholds = params
+
+    def fold(acc, pose, out):
+        return metrics.stream_update(acc, pose, ref, out, thresholds)
+
+    acc = metrics.stream_start(init.dtype)
+    final, acc, _ = loops.scan_closed_loop(ref, gains, init, robot, dt, options, fold=fold, acc=acc)
+    result = metrics.stream_result(acc, dt)
+    return {
+        "final_x": final[0],
+        "final_y": final[1],
+        "final_theta": final[2],
+        **{name: result[name] for name in SWEEP_FIELDS[3:]},
+    }
+
+
+_sweep_jit = loops.EntryJit(loops.batched(_sweep_one), static_argnames=("options",))
+
+
+# ---------------------------------------------------------------- checking and planning
+
+
+@dataclasses.dataclass(frozen=True)
+class _Job:
+    """A checked sweep: its inputs, options, and how it is cut into chunks.
+
+    ``*_mask`` trees say which leaves carry the batch axis ``(n, ...)``.
+    """
+
+    refs: Any
+    n: int
+    gains: Any
+    gains_mask: Any
+    robot: Any
+    robot_mask: Any
+    init: Any
+    batched_init: bool
+    dt: float
+    options: loops.Options
+    thresholds: metrics.Thresholds
+    dtype: np.dtype
+    chunk: int
+    devices: tuple[Any, ...]
+
+    @property
+    def chunks(self) -> int:
+        return math.ceil(self.n / self.chunk)
+
+    def bounds(self, i: int) -> tuple[int, int]:
+        return i * self.chunk, min(self.n, (i + 1) * self.chunk)
+
+
+def _pose_count(refs: Any) -> int:
+    """Return ``N`` of ``(N, 3)`` references from their shape alone (a memmap stays on disk).
+
+    Their values are checked chunk by chunk as they are read (``_chunk_inputs``).
+    """
+    shape = np.shape(refs) if getattr(refs, "shape", None) is None else refs.shape
+    if len(shape) != 2 or shape[1] != 3 or shape[0] < 1:
+        raise ValueError(
+            f"refs has shape {tuple(shape)}; allowed: (N, 3) with N >= 1 [x cm, y cm, theta rad]"
+        )
+    return int(shape[0])
+
+
+def _thresholds(tol_r, tol_theta, v_dead_band, omega_dead_band) -> metrics.Thresholds:
+    return metrics.Thresholds(
+        tol_r=checks.check_number("tol_r", tol_r, low=0.0, unit="cm"),
+        tol_theta=checks.check_number("tol_theta", tol_theta, high=math.pi / 2, unit="rad"),
+        v_dead_band=checks.check_number("v_dead_band", v_dead_band, closed=True, unit="cm/s"),
+        omega_dead_band=checks.check_number(
+            "omega_dead_band", omega_dead_band, closed=True, unit="rad/s"
+        ),
+    )
+
+
+def _batched_leaves(tree: Any, n: int) -> Any:
+    """Map each leaf to True if it carries the batch axis ``(n, ...)``."""
+    return jax.tree.map(lambda leaf: np.ndim(leaf) >= 1 and np.shape(leaf)[0] == n, tree)
+
+
+def _take(tree: Any, mask: Any, lo: int, hi: int, pad: int) -> Any:
+    """Slice the batched leaves of ``tree`` to rows ``lo:hi``, padded by repeating the last."""
+
+    def cut(leaf, batched):
+        if not batched:
+            return leaf
+        part = np.asarray(leaf[lo:hi])
+        if pad:
+            part = np.concatenate([part, np.repeat(part[-1:], pad, axis=0)])
+        return part
+
+    return jax.tree.map(cut, tree, mask)
+
+
+def _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, devices) -> _Job:
+    """Check every input (on a one-pose sample of the batch) and plan the chunks.
+
+    Every message then names the bad argument or field before anything is traced.
+    """
+    n = _pose_count(refs)
+    chunk_size = checks.check_int("chunk_size", chunk_size)
+    devices = tuple(jax.local_devices() if devices is None else devices)
+    if not devices:
+        raise ValueError("devices = () is not allowed; allowed: at least one device")
+    gains = options.controller.default_params() if gains is None else gains
+    robot = Robot() if robot is None else robot
+    init = np.asarray(init, dtype=float) if not isinstance(init, jax.Array) else init
+    batched_init = np.ndim(init) == 2
+    if batched_init and np.shape(init)[0] != n:
+        raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,) or ({n}, 3)")
+    gains_mask, robot_mask = _batched_leaves(gains, n), _batched_leaves(robot, n)
+    simulation.prepare(
+        np.asarray(refs[:1], dtype=float),
+        _take(gains, gains_mask, 0, 1, 0),
+        init[:1] if batched_init else init,
+        _take(robot, robot_mask, 0, 1, 0),
+        dt,
+        options,
+        batch=None,
+    )
+    return _Job(
+        refs=refs,
+        n=n,
+        gains=gains,
+        gains_mask=gains_mask,
+        robot=robot,
+        robot_mask=robot_mask,
+        init=init,
+        batched_init=batched_init,
+        dt=float(dt),
+        options=options,
+        thresholds=thresholds,
+        dtype=np.dtype(checks.float_dtype()),
+        chunk=math.ceil(min(chunk_size, n) / len(devices)) * len(devices),
+        devices=devices,
+    )
+
+
+# ---------------------------------------------------------------- fingerprints
+
+
+def _digest(*arrays: Any) -> str:
+    h = hashlib.sha256()
+    for a in arrays:
+        a = np.ascontiguousarray(a)
+        h.update(str((a.dtype.str, a.shape)).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()[:16]
+
+
+def _tree_description(tree: Any) -> dict[str, Any]:
+    """Scalars by value, batched leaves by shape and digest (for the fingerprint)."""
+    out = {}
+    for path, leaf in jax.tree_util.tree_leaves_with_path(tree):
+        arr = np.asarray(leaf)
+        key = jax.tree_util.keystr(path) or "."
+        out[key] = (
+            float(arr) if arr.ndim == 0 else {"shape": list(arr.shape), "digest": _digest(arr)}
+        )
+    return out
+
+
+def _settings(job: _Job) -> dict[str, Any]:
+    """Everything but the reference poses that decides a chunk's results."""
+    options = job.options
+    return {
+        "n": job.n,
+        "chunk": job.chunk,
+        "dtype": job.dtype.name,
+        "options": {
+            "steps": options.steps,
+            "velocity": options.velocity,
+            "controller": options.controller.name,
+            "temperature": options.temperature,
+            "substeps": options.substeps,
+            "wheel_limit": options.wheel_limit,
+        },
+        "dt": job.dt,
+        "gains": _tree_description(job.gains),
+        "robot": _tree_description(job.robot),
+        "init": "per pose" if job.batched_init else _tree_description(job.init),
+        "thresholds": [float(t) for t in job.thresholds],
+    }
+
+
+def _fingerprint(settings: dict[str, Any]) -> str:
+    text = json.dumps(settings, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+# ---------------------------------------------------------------- chunk files
+
+
+class _ChunkStore:
+    """The folder of a resumable sweep: its settings, one checked file per chunk, the results."""
+
+    def __init__(self, folder: Path, settings: dict[str, Any]):
+        if folder.exists() and not folder.is_dir():
+            raise ValueError(f"out = {str(folder)!r} is not allowed; allowed: a folder")
+        folder.mkdir(parents=True, exist_ok=True)
+        io.remove_stale_temporaries(folder)  # left by a sweep killed mid-write
+        self.folder = folder
+        self.fingerprint = _fingerprint(settings)
+        io.atomic_write_json(folder / _MANIFEST, {"fingerprint": self.fingerprint, **settings})
+
+    def path(self, i: int) -> Path:
+        return self.folder / f"chunk_{i:06d}.npz"
+
+    def load(self, i: int, digest: str, size: int) -> dict[str, np.ndarray] | None:
+        """Return chunk ``i``'s results if its file is intact and was made from these inputs.
+
+        A file from other settings or poses is silently not used; a damaged or
+        altered one is not used either, with a one-line warning.
+        """
+        try:
+            values, meta = io.load_arrays(self.path(i))
+        except FileNotFoundError:
+            return None
+        except io.DamagedFileError as err:
+            warnings.warn(f"{' '.join(str(err).split())}; recomputing that chunk", stacklevel=4)
+            return None
+        if meta.get("fingerprint") != self.fingerprint or meta.get("refs_digest") != digest:
+            return None
+        if set(values) != set(SWEEP_FIELDS) or any(v.shape != (size,) for v in values.values()):
+            warnings.warn(f"{self.path(i)} has unexpected contents; recomputing it", stacklevel=4)
+            return None
+        return values
+
+    def save(self, i: int, digest: str, values: dict[str, np.ndarray]) -> None:
+        meta = {"fingerprint": self.fingerprint, "refs_digest": digest}
+        io.save_arrays(self.path(i), values, meta)
+
+    def save_results(self, results: dict[str, np.ndarray]) -> None:
+        io.save_arrays(self.folder / _RESULTS, results, {"fingerprint": self.fingerprint})
+
+
+# ---------------------------------------------------------------- running the chunks
+
+
+@dataclasses.dataclass(frozen=True)
+class _Chunk:
+    """The host inputs of chunk ``i``: rows ``lo:hi`` padded by ``pad`` copies of the last."""
+
+    i: int
+    lo: int
+    hi: int
+    pad: int
+    refs: np.ndarray
+    init: Any
+    digest: str
+
+
+def _chunk_inputs(job: _Job, i: int) -> _Chunk:
+    """Read chunk ``i``'s inputs and the digest of everything per pose in it."""
+    lo, hi = job.bounds(i)
+    pad = job.chunk - (hi - lo)
+    refs = _take(job.refs, True, lo, hi, pad)
+    init = _take(job.init, True, lo, hi, pad) if job.batched_init else job.init
+    per_pose = [refs, init if job.batched_init else np.zeros(0)]
+    for tree, mask in ((job.gains, job.gains_mask), (job.robot, job.robot_mask)):
+        per_pose += jax.tree.leaves(_take(tree, mask, lo, hi, pad))
+    return _Chunk(i, lo, hi, pad, refs, init, _digest(*per_pose))
+
+
+def _check_finite(job: _Job, chunk: _Chunk) -> None:
+    bad = ~np.isfinite(chunk.refs[: chunk.hi - chunk.lo]).all(axis=1)
+    if bad.any():
+        row = chunk.lo + int(np.flatnonzero(bad)[0])
+        raise ValueError(
+            f"refs[{row}] = {np.asarray(job.refs[row]).tolist()} is not finite; "
+            "allowed: finite numbers"
+        )
+
+
+def _launcher(job: _Job) -> Callable[[_Chunk], Any]:
+    """Return ``launch(chunk)``: place a chunk on the devices and dispatch it (asynchronously)."""
+    mesh = jax.sharding.Mesh(np.asarray(job.devices), ("batch",))
+    spread = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
+    shared = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
+
+    def place(tree: Any, mask: Any) -> Any:
+        return jax.tree.map(
+            lambda leaf, batched: jax.device_put(
+                np.asarray(leaf, job.dtype), spread if batched else shared
+            ),
+            tree,
+            mask,
+        )
+
+    def launch(chunk: _Chunk) -> Any:
+        lo, hi, pad = chunk.lo, chunk.hi, chunk.pad
+        params = (_take(job.gains, job.gains_mask, lo, hi, pad), job.thresholds)
+        params_mask = (job.gains_mask, metrics.Thresholds(False, False, False, False))
+        return _sweep_jit(
+            place(chunk.refs, True),
+            place(params, params_mask),
+            place(chunk.init, job.batched_init),
+            place(_take(job.robot, job.robot_mask, lo, hi, pad), job.robot_mask),
+            jax.device_put(np.asarray(job.dt, job.dtype), shared),
+            options=job.options,
+        )
+
+    return launch
+
+
+def _empty_results(job: _Job) -> dict[str, np.ndarray]:
+    kinds = {"success": bool, "zigzags": np.int32}
+    return {name: np.empty(job.n, dtype=kinds.get(name, job.dtype)) for name in SWEEP_FIELDS}
+
+
+def _run_chunks(
+    job: _Job,
+    results: dict[str, np.ndarray],
+    store: _ChunkStore | None,
+    resume: bool,
+    done: Callable[[int], None],
+) -> None:
+    """Fill ``results`` chunk by chunk, loading finished chunks from ``store`` if ``resume``.
+
+    One chunk is in flight while the previous one is copied back and saved:
+    JAX dispatches asynchronously, so the host work overlaps the next chunk.
+    """
+    launch = _launcher(job)
+
+    def keep(chunk: _Chunk, values: dict[str, Any], *, computed: bool) -> None:
+        host = {name: np.asarray(values[name])[: chunk.hi - chunk.lo] for name in SWEEP_FIELDS}
+        for name in SWEEP_FIELDS:
+            results[name][chunk.lo : chunk.hi] = host[name]
+        if computed and store is not None:
+            store.save(chunk.i, chunk.digest, host)
+        done(chunk.i)
+
+    pending = None
+    for i in range(job.chunks):
+        chunk = _chunk_inputs(job, i)
+        loaded = None
+        if store is not None and resume:
+            loaded = store.load(i, chunk.digest, chunk.hi - chunk.lo)
+        if loaded is not None:
+            keep(chunk, loaded, computed=False)
+            continue
+        _check_finite(job, chunk)
+        launched = (chunk, launch(chunk))
+        if pending is not None:
+            keep(*pending, computed=True)
+        pending = launched
+    if pending is not None:
+        keep(*pending, computed=True)
+
+
+@contextlib.contextmanager
+def _progress(job: _Job, bar: bool, on_chunk: Callable[[int, int], None] | None):
+    """Yield ``done(i)``, called as chunk ``i`` is done: it moves the bar, calls ``on_chunk``."""
+    shown = None
+    if bar:
+        from tqdm.auto import tqdm
+
+        shown = tqdm(total=job.chunks, unit="chunk", desc=f"sweep {job.n} poses")
+
+    def done(i: int) -> None:
+        if shown is not None:
+            shown.update(1)
+        if on_chunk is not None:
+            on_chunk(i + 1, job.chunks)
+
+    try:
+        yield done
+    finally:
+        if shown is not None:
+            shown.close()
+
+
+# ---------------------------------------------------------------- the sweep
+
+
+def sweep(
+    refs: Any,
+    gains: Any = None,
+    *,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = simulation.DEFAULT_DT,
+    steps: int = loops.DEFAULT_STEPS,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    controller: Controller | str = SHIM_SUNG,
+    temperature: float | None = None,
+    substeps: int = loops.DEFAULT_SUBSTEPS,
+    wheel_limit: str = "clip",
+    tol_r: float = metrics.DEFAULT_TOL_R,
+    tol_theta: float = metrics.DEFAULT_TOL_THETA,
+    v_dead_band: float = 1.0,
+    omega_dead_band: float = 0.1,
+    chunk_size: int = DEFAULT_CHUNK_SIZE,
+    devices: Sequence[Any] | None = None,
+    out: str | Path | None = None,
+    resume: bool = True,
+    progress: bool = False,
+    on_chunk: Callable[[int, int], None] | None = None,
+) -> dict[str, np.ndarray]:
+    """Run the closed loop for every reference pose; return final poses and metrics.
+
+    Args:
+        refs: ``(N, 3)`` reference poses ``[x cm, y cm, θ rad]``: an array,
+            or a memmap (read a chunk at a time).
+        gains: the controller's parameters (default: its defaults); leaves
+            scalar, or ``(N,)`` for one value per pose.
+        init: ``(3,)`` initial pose, or ``(N, 3)``.
+        dt: control period, s.
+        steps: control periods per run (static).
+        robot: robot parameters (leaves scalar or ``(N,)``); default ``Robot()``.
+        velocity: ``"ideal"`` or ``"nonideal"`` velocity loop (docs/model.md §4).
+        controller: a ``Controller`` or its name; default Shim–Sung.
+        temperature: ``None`` for the hard law, else its smooth relaxation.
+        substeps: inner steps per period (non-ideal loop).
+        wheel_limit: ``"clip"`` or ``"scale"`` (non-ideal loop).
+        tol_r: arrival distance tolerance, cm (docs/model.md §6).
+        tol_theta: arrival heading tolerance, rad, ``< π/2``.
+        v_dead_band: speeds with ``|v| ≤`` this (cm/s) carry no sign (zig-zags).
+        omega_dead_band: turn rates with ``|ω| ≤`` this (rad/s) carry no sign.
+        chunk_size: poses per chunk, rounded up to a multiple of the number
+            of devices; the last chunk is padded to the same size.
+        devices: devices each chunk is spread over; default all local ones.
+        out: folder for the chunk files (checksummed, each written atomically
+            when done), the settings (``sweep.json``) and all results
+            (``results.npz``, also checked; ``np.load`` reads it); ``None``
+            keeps everything in memory.
+        resume: with ``out``, load the chunks finished with the same settings
+            and poses instead of computing them again (see the module docs).
+        progress: show a tqdm progress bar over the chunks.
+        on_chunk: called as ``on_chunk(done, total)`` after every chunk.
+
+    Returns:
+        A dict of ``(N,)`` NumPy arrays keyed by ``SWEEP_FIELDS``.
+
+    Raises:
+        ValueError: naming the argument, its value and what is allowed (before tracing).
+    """
+    options = simulation.make_options(
+        steps=steps,
+        velocity=velocity,
+        controller=controller,
+        temperature=temperature,
+        substeps=substeps,
+        wheel_limit=wheel_limit,
+    )
+    thresholds = _thresholds(tol_r, tol_theta, v_dead_band, omega_dead_band)
+    job = _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, devices)
+    store = None if out is None else _ChunkStore(Path(out), _settings(job))
+    results = _empty_results(job)
+    with _progress(job, progress, on_chunk) as done:
+        _run_chunks(job, results, store, resume, done)
+    if store is not None:
+        store.save_results(results)
+    return results

@@ -1,0 +1,148 @@
+"""The feasible set that tuning and random search share: gains as an image of the unit cube.
+
+Every point ``u ∈ [0, 1]^7`` maps (``gains_from_unit``) to gains that meet
+``k_r + L k_θ ≤ V_max`` and every range of ``docs/model.md §3`` by
+construction, so every iterate of the tuner is feasible, not only the last.
+Adam works on the logits ``z`` (``u = σ(z)``, ``gains_from_logits``); random
+search samples ``u`` uniformly: both search the same set.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from wmr_jax._src.params import Gains, Robot, validate_gains
+
+__all__ = [
+    "GAIN_FIELDS",
+    "PAPER_FEASIBLE_GAINS",
+    "gains_as_dict",
+    "gains_from_logits",
+    "gains_from_unit",
+    "logits_from_gains",
+    "unit_from_gains",
+]
+
+GAIN_FIELDS = tuple(f.name for f in dataclasses.fields(Gains))
+
+# The paper's Fig. 10 gains, the ones that meet k_r + L k_θ ≤ V_max
+# (60 + 1.85 · 10 = 78.5 cm/s); every other field at its default.
+PAPER_FEASIBLE_GAINS = Gains(kr=60.0)
+
+# choice: the box that tuning and random search share. The wheel budget
+# k_r + L k_θ, the share of it given to k_r, Φ_m and α are linear in u; the
+# radii are log-uniform (R_m over 0.5–200 cm, R_a/R_m and R_e/R_a over
+# 0.01–1), since their effect is on a log scale. The margins keep strict
+# inequalities strict after float32 rounding: k_r + L k_θ ≤ (1 − 1e-4) V_max.
+_BUDGET = (1e-3, 1.0 - 1e-4)  # fraction of V_max spent on k_r + L k_θ
+_SHARE = (1e-3, 1.0 - 1e-3)  # fraction of that budget given to k_r
+_PHI_M = (1e-3, math.pi / 2 - 1e-3)  # rad
+_ALPHA = (1e-3, 0.5 - 1e-3)
+_LOG_R_M = (math.log(0.5), math.log(200.0))  # log cm
+_LOG_RATIO = (math.log(0.01), 0.0)  # log of R_a/R_m and of R_e/R_a
+# How close to a face of the cube a starting point may sit: the logit of a
+# point on a face is infinite (the paper's R_a = R_m is one).
+_UNIT_CLIP = 1e-3
+
+
+def _lerp(u: Any, bounds: tuple[float, float]) -> Any:
+    lo, hi = bounds
+    return lo + (hi - lo) * u
+
+
+def _unlerp(x: float, bounds: tuple[float, float]) -> float:
+    lo, hi = bounds
+    return (x - lo) / (hi - lo)
+
+
+def gains_from_unit(u: jax.Array, robot: Robot | None = None) -> Gains:
+    """Map a point of the unit cube to feasible gains (``docs/model.md §3``).
+
+    Every ``u ∈ [0, 1]^7`` gives ``k_r + L k_θ < V_max`` with ``k_r, k_θ > 0``,
+    ``0 < Φ_m < π/2``, ``0 < α < 0.5`` and ``0 < R_e ≤ R_a ≤ R_m``.
+
+    Args:
+        u: ``(..., 7)`` ``[budget, k_r share, Φ_m, α, R_m, R_a/R_m, R_e/R_a]``,
+            each in ``[0, 1]``.
+        robot: gives ``L`` (cm) and ``V_max`` (cm/s); default ``Robot()``.
+
+    Returns:
+        ``Gains`` whose fields have the leading shape of ``u``.
+    """
+    robot = Robot() if robot is None else robot
+    u = jnp.asarray(u)
+    budget = robot.v_max * _lerp(u[..., 0], _BUDGET)  # cm/s
+    share = _lerp(u[..., 1], _SHARE)
+    r_m = jnp.exp(_lerp(u[..., 4], _LOG_R_M))
+    # exp(·) ≤ 1 here, so the products keep R_e ≤ R_a ≤ R_m after rounding.
+    r_a = r_m * jnp.exp(_lerp(u[..., 5], _LOG_RATIO))
+    r_e = r_a * jnp.exp(_lerp(u[..., 6], _LOG_RATIO))
+    return Gains(
+        kr=budget * share,
+        k_theta=budget * (1.0 - share) / robot.half_track,
+        phi_m=_lerp(u[..., 2], _PHI_M),
+        r_m=r_m,
+        r_a=r_a,
+        r_e=r_e,
+        alpha=_lerp(u[..., 3], _ALPHA),
+    )
+
+
+def unit_from_gains(gains: Gains, robot: Robot | None = None) -> np.ndarray:
+    """Return the point of the unit cube that ``gains_from_unit`` maps to ``gains``.
+
+    Gains outside the cube's box, or on its faces (the paper's ``R_a = R_m``
+    is one), are moved just inside, ``1e-3`` from the faces, so that their
+    logits are finite.
+
+    Args:
+        gains: feasible gains with scalar fields.
+        robot: gives ``L`` (cm) and ``V_max`` (cm/s); default ``Robot()``.
+
+    Returns:
+        ``(7,)`` float64 array in ``[1e-3, 1 − 1e-3]``.
+
+    Raises:
+        ValueError: for gains outside the ranges of ``docs/model.md §3``.
+    """
+    robot = Robot() if robot is None else robot
+    validate_gains(gains)
+    g = gains_as_dict(gains)
+    budget = g["kr"] + float(robot.half_track) * g["k_theta"]
+    u = [
+        _unlerp(budget / float(robot.v_max), _BUDGET),
+        _unlerp(g["kr"] / budget, _SHARE),
+        _unlerp(g["phi_m"], _PHI_M),
+        _unlerp(g["alpha"], _ALPHA),
+        _unlerp(math.log(g["r_m"]), _LOG_R_M),
+        _unlerp(math.log(g["r_a"] / g["r_m"]), _LOG_RATIO),
+        _unlerp(math.log(g["r_e"] / g["r_a"]), _LOG_RATIO),
+    ]
+    return np.clip(np.asarray(u, dtype=float), _UNIT_CLIP, 1.0 - _UNIT_CLIP)
+
+
+def gains_as_dict(gains: Gains) -> dict[str, float]:
+    """Return scalar gains as ``{field: float}`` in ``GAIN_FIELDS`` order (JSON-ready)."""
+    return {name: float(getattr(gains, name)) for name in GAIN_FIELDS}
+
+
+def gains_from_logits(z: jax.Array, robot: Robot | None = None) -> Gains:
+    """Map logits ``z`` (``u = σ(z)``, any real ``(..., 7)``) to feasible gains.
+
+    Args:
+        z: ``(..., 7)`` logits of a point of the unit cube.
+        robot: gives ``L`` (cm) and ``V_max`` (cm/s); default ``Robot()``.
+    """
+    return gains_from_unit(jax.nn.sigmoid(z), robot)
+
+
+def logits_from_gains(gains: Gains, robot: Robot | None = None) -> np.ndarray:
+    """Return the logits of ``unit_from_gains(gains, robot)``: ``(7,)`` float64, finite."""
+    u = unit_from_gains(gains, robot)
+    return np.log(u) - np.log1p(-u)

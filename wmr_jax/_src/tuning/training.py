@@ -1,0 +1,434 @@
+"""The tuner: Adam on the logits of the feasible set, with an annealed smooth law.
+
+``train`` starts from the paper's feasible gains (``PAPER_FEASIBLE_GAINS``,
+moved just inside the search box), runs ``config.iters`` iterations of
+``optax.chain(clip_by_global_norm, adam)`` on the robust batch gradient of
+``tuning_loss`` over a fresh batch of ``config.poses`` references each,
+annealing the smooth law's temperature, and then, with the hard law, runs
+``random_search`` for the same wall time and evaluates the paper's, the
+tuned and the random search's gains on held-out poses.
+
+Like brax's ``train``, it reports through a callback and returns a result:
+``progress_fn(state)`` is called after every iteration with a ``TrainState``
+that holds everything needed to continue (``state=``) from there, bit for
+bit. It writes no files; ``wmr-jax tune`` checkpoints from the callback.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from wmr_jax._src import loops
+from wmr_jax._src import rollout as simulation
+from wmr_jax._src.checks import as_float_tree, check_int, check_number, float_dtype
+from wmr_jax._src.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
+from wmr_jax._src.params import Gains, Robot, validate_robot
+from wmr_jax._src.poses import HORIZON_S, sample_poses
+from wmr_jax._src.tuning.evaluation import (
+    EVAL_POSES,
+    EVAL_SEED,
+    RUN_OPTIONS,
+    Evaluation,
+    evaluate,
+    held_out_poses,
+)
+from wmr_jax._src.tuning.loss import LossSpec, LossWeights, make_spec, robust_value_and_grad
+from wmr_jax._src.tuning.parametrisation import (
+    GAIN_FIELDS,
+    PAPER_FEASIBLE_GAINS,
+    gains_from_logits,
+    logits_from_gains,
+)
+from wmr_jax._src.tuning.search import SearchResult, random_search
+
+__all__ = [
+    "TrainState",
+    "TuneConfig",
+    "TuneResult",
+    "init_state",
+    "restore_state",
+    "run_identity",
+    "state_arrays",
+    "train",
+    "training_poses",
+]
+
+
+@dataclasses.dataclass(frozen=True)
+class _OptimHyper:
+    """Static optimiser settings (part of the train step's compile key)."""
+
+    learning_rate: float
+    iters: int
+    grad_clip: float
+    pose_clip: float | None
+
+
+@dataclasses.dataclass(frozen=True)
+class TuneConfig:
+    """Everything that decides the result of ``train`` (saved with each checkpoint).
+
+    Attributes:
+        velocity: ``"ideal"`` or ``"nonideal"`` velocity loop (``docs/model.md §4``).
+        iters: Adam iterations.
+        poses: reference poses per iteration, a fresh batch each time
+            (``docs/model.md §6``).
+        seed: seed of the training poses and of the random search.
+        learning_rate: Adam's initial step in logit space (cosine-decayed).
+        grad_clip: ``clip_by_global_norm`` threshold of the batch gradient.
+        pose_clip: cap of each pose's gradient norm, in multiples of the
+            batch median; ``None`` for a plain mean.
+        temperature_start: smooth-law temperature of the first iteration.
+        temperature_end: temperature of the last (annealed geometrically).
+        horizon: simulated time per run, s.
+        dt: control period, s.
+        checkpoint_every: iterations between checkpoints (of ``wmr-jax tune``).
+        eval_poses: held-out poses of the before/after table.
+        eval_seed: seed of the held-out poses (the same for every ``seed``).
+        random_search: also run random search for the tuning's wall time.
+        weights: terms of the loss (see ``tuning_loss``).
+        substeps: inner steps per period (non-ideal loop).
+        wheel_limit: ``"clip"`` or ``"scale"`` (non-ideal loop).
+    """
+
+    velocity: str = "ideal"
+    iters: int = 400
+    poses: int = 256
+    seed: int = 0
+    learning_rate: float = 0.1
+    grad_clip: float = 1.0
+    pose_clip: float | None = 1.0
+    temperature_start: float = 0.1
+    temperature_end: float = 0.01
+    horizon: float = HORIZON_S
+    dt: float = simulation.DEFAULT_DT
+    checkpoint_every: int = 25
+    eval_poses: int = EVAL_POSES
+    eval_seed: int = EVAL_SEED
+    random_search: bool = True
+    weights: LossWeights = LossWeights()
+    substeps: int = loops.DEFAULT_SUBSTEPS
+    wheel_limit: str = "clip"
+
+    def replace(self, **changes: Any) -> TuneConfig:
+        """Return a copy with the given fields changed."""
+        return dataclasses.replace(self, **changes)
+
+    def validate(self) -> TuneConfig:
+        """Check every field; return ``self``.
+
+        Raises:
+            ValueError: naming the field, its value and what is allowed.
+        """
+        for name, minimum, maximum in _INT_FIELDS:
+            check_int(name, getattr(self, name), minimum, maximum)
+        for name in _POSITIVE_FIELDS:
+            check_number(name, getattr(self, name))
+        if self.pose_clip is not None:
+            check_number("pose_clip", self.pose_clip)
+        if not isinstance(self.random_search, bool):
+            raise ValueError(
+                f"random_search = {self.random_search!r} is not allowed; allowed: True or False"
+            )
+        self.spec()
+        return self
+
+    def spec(self) -> LossSpec:
+        """The static loss settings of this configuration (checked)."""
+        return make_spec(
+            horizon=self.horizon,
+            dt=self.dt,
+            velocity=self.velocity,
+            substeps=self.substeps,
+            wheel_limit=self.wheel_limit,
+            tol_r=DEFAULT_TOL_R,
+            tol_theta=DEFAULT_TOL_THETA,
+            weights=self.weights,
+            remat=True,
+        )
+
+    def hyper(self) -> _OptimHyper:
+        """The static optimiser settings of this configuration."""
+        pose_clip = None if self.pose_clip is None else float(self.pose_clip)
+        return _OptimHyper(
+            float(self.learning_rate), int(self.iters), float(self.grad_clip), pose_clip
+        )
+
+    def as_dict(self) -> dict[str, Any]:
+        """Return the fields as JSON-ready values."""
+        out = dataclasses.asdict(self)
+        out["weights"] = dataclasses.asdict(self.weights)
+        return out
+
+
+# name, minimum, maximum of the integer fields of TuneConfig.
+_INT_FIELDS = (
+    ("iters", 1, None),
+    ("poses", 1, None),
+    ("seed", 0, 2**32 - 1),
+    ("checkpoint_every", 1, None),
+    ("eval_poses", 1, None),
+    ("eval_seed", 0, 2**32 - 1),
+)
+_POSITIVE_FIELDS = ("learning_rate", "grad_clip", "temperature_start", "temperature_end")
+
+
+class TrainState(NamedTuple):
+    """The whole state of a tuning run after ``iteration`` iterations.
+
+    Attributes:
+        iteration: iterations done.
+        z: ``(7,)`` logits of the current gains (``gains_from_logits``).
+        opt_state: the optax state.
+        losses: loss of each iteration done, s.
+        temperatures: smooth-law temperature of each iteration done.
+        gains: the gains after each iteration, rows in ``GAIN_FIELDS`` order.
+        elapsed_s: wall time of the iterations done (all sessions), s.
+    """
+
+    iteration: int
+    z: jax.Array
+    opt_state: Any
+    losses: tuple[float, ...]
+    temperatures: tuple[float, ...]
+    gains: tuple[tuple[float, ...], ...]
+    elapsed_s: float
+
+
+class TuneResult(NamedTuple):
+    """What ``train`` returns.
+
+    Attributes:
+        gains: the tuned gains (feasible; floats).
+        evaluation: hard-law ``Evaluation`` on the held-out poses, keyed
+            ``"paper_feasible"``, ``"tuned"`` and, if run, ``"random_search"``.
+        history: per-iteration ``loss`` (s), ``temperature`` and ``gains``
+            ``(iters, 7)`` in ``GAIN_FIELDS`` order, as NumPy arrays.
+        tune_wall_s: wall time of the gradient iterations (all sessions), s.
+        search: the random search's result, or ``None``.
+    """
+
+    gains: Gains
+    evaluation: dict[str, Evaluation]
+    history: dict[str, np.ndarray]
+    tune_wall_s: float
+    search: SearchResult | None
+
+
+# ---------------------------------------------------------------- optimiser
+
+
+def _optimizer(hyper: _OptimHyper) -> optax.GradientTransformation:
+    # Cosine decay to a tenth: large steps while the temperature is high and
+    # the landscape smooth, small ones once it is close to the hard law.
+    schedule = optax.cosine_decay_schedule(hyper.learning_rate, hyper.iters, alpha=0.1)
+    return optax.chain(optax.clip_by_global_norm(hyper.grad_clip), optax.adam(schedule))
+
+
+def _train_step(z, opt_state, refs, temperature, init, robot, dt, *, spec, hyper):
+    loss, grad, stats = robust_value_and_grad(
+        z, refs, init, robot, dt, spec, temperature, hyper.pose_clip
+    )
+    updates, opt_state = _optimizer(hyper).update(grad, opt_state, z)
+    # Feasibility needs no projection: every z maps into the feasible set.
+    z = optax.apply_updates(z, updates)
+    stats = dict(stats, grad_norm=jnp.linalg.norm(grad))
+    return z, opt_state, loss, stats
+
+
+_train_step_jit = jax.jit(_train_step, static_argnames=("spec", "hyper"))
+
+
+def _temperature(config: TuneConfig, iteration: int) -> float:
+    """Geometric annealing from ``temperature_start`` to ``temperature_end``."""
+    frac = iteration / max(config.iters - 1, 1)
+    return config.temperature_start * (config.temperature_end / config.temperature_start) ** frac
+
+
+def training_poses(seed: int, iteration: int, n: int) -> jax.Array:
+    """The batch of iteration ``iteration``: a pure function of ``(seed, iteration)``, resumable."""
+    stream = jax.random.fold_in(jax.random.key(seed), 0)
+    return sample_poses(jax.random.fold_in(stream, iteration), n)
+
+
+# ---------------------------------------------------------------- state
+
+
+def _checked(config: TuneConfig | None, robot: Robot | None) -> tuple[TuneConfig, Robot]:
+    config = (TuneConfig() if config is None else config).validate()
+    return config, as_float_tree(validate_robot(Robot() if robot is None else robot))
+
+
+def init_state(config: TuneConfig | None = None, robot: Robot | None = None) -> TrainState:
+    """Return the state before the first iteration: the paper's feasible gains, Adam at rest.
+
+    Raises:
+        ValueError: for bad settings, naming the field.
+    """
+    config, robot = _checked(config, robot)
+    z0 = jnp.asarray(logits_from_gains(PAPER_FEASIBLE_GAINS, robot), float_dtype())
+    return TrainState(0, z0, _optimizer(config.hyper()).init(z0), (), (), (), 0.0)
+
+
+def run_identity(config: TuneConfig | None = None, robot: Robot | None = None) -> dict[str, Any]:
+    """What a saved state must match to be resumed: the settings and the robot (JSON-ready)."""
+    config, robot = _checked(config, robot)
+    fields = (f.name for f in dataclasses.fields(Robot))
+    return {
+        "config": config.as_dict(),
+        "robot": {name: float(getattr(robot, name)) for name in fields},
+    }
+
+
+def state_arrays(state: TrainState) -> dict[str, np.ndarray]:
+    """Return ``state`` as named NumPy arrays, exactly (for a checkpoint file)."""
+    leaves = jax.tree.leaves(state.opt_state)
+    return {
+        "iteration": np.asarray(state.iteration),
+        "z": np.asarray(state.z),
+        "losses": np.asarray(state.losses, dtype=float),
+        "temperatures": np.asarray(state.temperatures, dtype=float),
+        "gains": np.asarray(state.gains, dtype=float).reshape(-1, len(GAIN_FIELDS)),
+        "elapsed_s": np.asarray(state.elapsed_s, dtype=float),
+        **{f"opt_{i}": np.asarray(leaf) for i, leaf in enumerate(leaves)},
+    }
+
+
+def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainState:
+    """Rebuild the state of ``state_arrays`` in the structure of ``fresh`` (``init_state``).
+
+    Raises:
+        ValueError: if an array is missing or of the wrong shape.
+    """
+    leaves, treedef = jax.tree.flatten(fresh.opt_state)
+    try:
+        restored = [
+            jnp.asarray(arrays[f"opt_{i}"], dtype=jnp.asarray(leaf).dtype).reshape(jnp.shape(leaf))
+            for i, leaf in enumerate(leaves)
+        ]
+        gains = np.asarray(arrays["gains"], dtype=float).reshape(-1, len(GAIN_FIELDS))
+        return TrainState(
+            iteration=int(arrays["iteration"]),
+            z=jnp.asarray(arrays["z"], dtype=fresh.z.dtype).reshape(fresh.z.shape),
+            opt_state=jax.tree.unflatten(treedef, restored),
+            losses=tuple(float(x) for x in arrays["losses"]),
+            temperatures=tuple(float(x) for x in arrays["temperatures"]),
+            gains=tuple(tuple(float(x) for x in row) for row in gains),
+            elapsed_s=float(arrays["elapsed_s"]),
+        )
+    except (KeyError, TypeError, ValueError) as err:
+        raise ValueError(f"the saved state is incomplete ({type(err).__name__}: {err})") from None
+
+
+# ---------------------------------------------------------------- the loop
+
+
+def _iterate(config, robot, state, progress_fn) -> TrainState:
+    """Run the iterations from ``state.iteration`` to ``config.iters``."""
+    spec, hyper, dtype = config.spec(), config.hyper(), float_dtype()
+    dt = jnp.asarray(config.dt, dtype)
+    init = jnp.zeros((3,), dtype)
+    for iteration in range(state.iteration, config.iters):
+        began = time.perf_counter()
+        temperature = _temperature(config, iteration)
+        refs = training_poses(config.seed, iteration, config.poses)
+        z, opt_state, loss, _ = _train_step_jit(
+            state.z,
+            state.opt_state,
+            refs,
+            jnp.asarray(temperature, dtype),
+            init,
+            robot,
+            dt,
+            spec=spec,
+            hyper=hyper,
+        )
+        loss = float(loss)
+        gains = gains_from_logits(z, robot)
+        row = tuple(float(getattr(gains, name)) for name in GAIN_FIELDS)
+        state = TrainState(
+            iteration + 1,
+            z,
+            opt_state,
+            state.losses + (loss,),
+            state.temperatures + (temperature,),
+            state.gains + (row,),
+            state.elapsed_s + time.perf_counter() - began,
+        )
+        if progress_fn is not None:
+            progress_fn(state)
+    return state
+
+
+def _compare(config: TuneConfig, robot: Robot, tuned: Gains, tune_wall_s: float) -> tuple:
+    """Random search for the tuning's wall time, then the hard-law table on held-out poses."""
+    run = {name: getattr(config, name) for name in RUN_OPTIONS if name != "robot"}
+    run["robot"] = robot
+    search = None
+    if config.random_search:
+        stream = jax.random.fold_in(jax.random.key(config.seed), 2)
+        refs = sample_poses(jax.random.fold_in(jax.random.key(config.seed), 3), config.poses)
+        search = random_search(stream, refs, budget_s=tune_wall_s, **run)
+    held_out = held_out_poses(config.eval_poses, config.eval_seed)
+    evaluation = {
+        "paper_feasible": evaluate(PAPER_FEASIBLE_GAINS, held_out, **run),
+        "tuned": evaluate(tuned, held_out, **run),
+    }
+    if search is not None:
+        evaluation["random_search"] = evaluate(search.gains, held_out, **run)
+    return evaluation, search
+
+
+def train(
+    config: TuneConfig | None = None,
+    *,
+    robot: Robot | None = None,
+    state: TrainState | None = None,
+    progress_fn: Callable[[TrainState], Any] | None = None,
+) -> TuneResult:
+    """Tune the gains by gradient descent, then judge them with the hard law.
+
+    Writes no files and draws nothing: ``progress_fn(state)`` is called after
+    each iteration (an exception it raises stops the run), and the returned
+    result holds the gains, the history and the before/after evaluation.
+
+    Args:
+        config: the settings; default ``TuneConfig()``.
+        robot: robot parameters; default ``Robot()``.
+        state: continue from this state (from ``init_state`` or a
+            ``progress_fn`` call of a run with the same ``config`` and
+            ``robot``); the result is that of an uninterrupted run.
+        progress_fn: called with the ``TrainState`` after each iteration.
+
+    Returns:
+        A ``TuneResult``.
+
+    Raises:
+        ValueError: for bad settings, naming the field.
+    """
+    config, robot = _checked(config, robot)
+    state = init_state(config, robot) if state is None else state
+    if not 0 <= state.iteration <= config.iters:
+        raise ValueError(
+            f"state.iteration = {state.iteration!r} is not allowed; "
+            f"allowed: 0 to iters = {config.iters}"
+        )
+    state = _iterate(config, robot, state, progress_fn)
+    if not state.gains:
+        raise ValueError("state holds no iteration; allowed: a state after at least one")
+    tuned = Gains(**dict(zip(GAIN_FIELDS, state.gains[-1], strict=True)))
+    history = {
+        "loss": np.asarray(state.losses),
+        "temperature": np.asarray(state.temperatures),
+        "gains": np.asarray(state.gains).reshape(-1, len(GAIN_FIELDS)),
+    }
+    evaluation, search = _compare(config, robot, tuned, state.elapsed_s)
+    return TuneResult(tuned, evaluation, history, state.elapsed_s, search)

@@ -1,0 +1,48 @@
+"""Engines of the experiments; each returns values and writes no files.
+
+The paper's figures (``paper_runs``, ``fig7_runs``, ``fig6_curve``), pose-space
+maps (``map_study``, ``evaluate_poses``), waypoint chains (``chain_rollout``,
+``soccer_study``), robustness Monte Carlo (``monte_carlo``,
+``robustness_study``) and the benchmark (``run_benchmark``). ``wmr_jax.report``
+draws and saves their results; the ``wmr-jax`` commands do both.
+"""
+
+from wmr_jax._src.bench import CASES as CASES
+from wmr_jax._src.bench import BenchConfig as BenchConfig
+from wmr_jax._src.bench import numpy_final_poses as numpy_final_poses
+from wmr_jax._src.bench import run_benchmark as run_benchmark
+from wmr_jax._src.maps import DEFAULT_HEADINGS_DEG as DEFAULT_HEADINGS_DEG
+from wmr_jax._src.maps import MapStudy as MapStudy
+from wmr_jax._src.maps import PoseGrid as PoseGrid
+from wmr_jax._src.maps import PoseMetrics as PoseMetrics
+from wmr_jax._src.maps import evaluate_poses as evaluate_poses
+from wmr_jax._src.maps import map_study as map_study
+from wmr_jax._src.maps import pose_grid as pose_grid
+from wmr_jax._src.maps import summarize as summarize
+from wmr_jax._src.paper import Fig7Runs as Fig7Runs
+from wmr_jax._src.paper import PaperCase as PaperCase
+from wmr_jax._src.paper import PaperRuns as PaperRuns
+from wmr_jax._src.paper import fig6_curve as fig6_curve
+from wmr_jax._src.paper import fig7_runs as fig7_runs
+from wmr_jax._src.paper import paper_runs as paper_runs
+from wmr_jax._src.paper import residual_bound as residual_bound
+from wmr_jax._src.paper import run_table as run_table
+from wmr_jax._src.robustness import DEFAULT_NOISE_DEG as DEFAULT_NOISE_DEG
+from wmr_jax._src.robustness import DEFAULT_NOISE_XY as DEFAULT_NOISE_XY
+from wmr_jax._src.robustness import ROBUSTNESS_CONDITIONS as ROBUSTNESS_CONDITIONS
+from wmr_jax._src.robustness import Disturbance as Disturbance
+from wmr_jax._src.robustness import draw_disturbances as draw_disturbances
+from wmr_jax._src.robustness import monte_carlo as monte_carlo
+from wmr_jax._src.robustness import perturbed_metrics as perturbed_metrics
+from wmr_jax._src.robustness import robustness_study as robustness_study
+from wmr_jax._src.waypoints import SOCCER_WAYPOINTS_DEG as SOCCER_WAYPOINTS_DEG
+from wmr_jax._src.waypoints import ChainRun as ChainRun
+from wmr_jax._src.waypoints import SoccerRun as SoccerRun
+from wmr_jax._src.waypoints import SoccerStudy as SoccerStudy
+from wmr_jax._src.waypoints import TrackRun as TrackRun
+from wmr_jax._src.waypoints import batch_chain_rollout as batch_chain_rollout
+from wmr_jax._src.waypoints import batch_track_rollout as batch_track_rollout
+from wmr_jax._src.waypoints import chain_rollout as chain_rollout
+from wmr_jax._src.waypoints import soccer_study as soccer_study
+from wmr_jax._src.waypoints import soccer_waypoints as soccer_waypoints
+from wmr_jax._src.waypoints import track_rollout as track_rollout
