@@ -38,7 +38,7 @@ def test_bad_gains_name_the_field(change, field):
         ({"ref": [1.0, float("nan"), 0.0]}, r"ref = \[1\.0, nan, 0\.0\] is not finite"),
         ({"ref": [1.0, 2.0]}, r"ref has shape \(2,\); allowed: \(3,\)"),
         ({"ref": [[1.0, 2.0, 3.0]]}, r"ref has shape \(1, 3\)"),
-        ({"ref": "abc"}, r"ref must be numbers"),
+        ({"ref": "abc"}, r"ref = 'abc' is not allowed; allowed: real numbers"),
         ({"init": [0.0, float("inf"), 0.0]}, r"init = .* is not finite"),
         ({"steps": 0}, r"steps = 0 is not allowed; allowed: an integer >= 1"),
         ({"steps": 2.5}, r"steps = 2\.5"),

@@ -35,8 +35,11 @@ from wmr_jax._src.metrics import success_rate as success_rate
 from wmr_jax._src.metrics import zigzag_count as zigzag_count
 from wmr_jax._src.params import Gains as Gains
 from wmr_jax._src.params import Robot as Robot
+from wmr_jax._src.params import SamplingWarning as SamplingWarning
 from wmr_jax._src.params import WheelSpeedWarning as WheelSpeedWarning
 from wmr_jax._src.params import check_feasible as check_feasible
+from wmr_jax._src.params import check_sampling as check_sampling
+from wmr_jax._src.params import sampling_margins as sampling_margins
 from wmr_jax._src.params import wheel_speed_bound as wheel_speed_bound
 from wmr_jax._src.poses import EVAL_R_MAX as EVAL_R_MAX
 from wmr_jax._src.poses import EVAL_R_MIN as EVAL_R_MIN

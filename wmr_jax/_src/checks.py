@@ -25,7 +25,11 @@ __all__ = [
     "field_values",
     "float_dtype",
     "is_traced",
+    "lists_to_arrays",
+    "position_limit",
+    "reduce_heading",
     "require",
+    "require_representable",
 ]
 
 
@@ -144,8 +148,38 @@ def field_values(
                 f"{name} has shape {arr.shape}; allowed: a scalar or one leading batch axis"
             )
         require(name, arr, np.isfinite(arr), "a finite number")
+        require_representable(name, arr)
         out[field.name] = arr
     return out
+
+
+def require_representable(name: str, value: np.ndarray) -> None:
+    """Raise unless ``value`` stays finite in the compute dtype (float32 by default)."""
+    dtype = np.dtype(float_dtype())
+    largest = float(np.finfo(dtype).max)
+    ok = np.abs(value) <= largest
+    if not np.all(ok):
+        raise ValueError(
+            f"{name} = {_shown(value, ~ok)} is beyond {dtype.name} (largest {largest:.3g}); "
+            "allowed: a smaller number, or float64 (jax.config.update('jax_enable_x64', True))"
+        )
+
+
+def lists_to_arrays(params: Any) -> None:
+    """Store the list or tuple fields of a frozen parameter dataclass as NumPy arrays.
+
+    Called from ``__post_init__``: a Python list would otherwise be a pytree
+    node with one leaf per element, not one batched field. Lists that are not
+    numbers stay as they are, for ``field_values`` to name.
+    """
+    for field in dataclasses.fields(params):
+        value = getattr(params, field.name)
+        if isinstance(value, (list, tuple)):
+            try:
+                array = np.asarray(value, dtype=float)
+            except (TypeError, ValueError):
+                continue
+            object.__setattr__(params, field.name, array)
 
 
 def as_poses(name: str, value: Any, *, batch: bool | None) -> jax.Array:
@@ -168,7 +202,9 @@ def as_poses(name: str, value: Any, *, batch: bool | None) -> jax.Array:
         try:
             host = np.asarray(value, dtype=float)
         except (TypeError, ValueError) as err:
-            raise ValueError(f"{name} must be numbers [x cm, y cm, theta rad]: {err}") from err
+            raise ValueError(
+                f"{name} = {value!r} is not allowed; allowed: real numbers [x cm, y cm, theta rad]"
+            ) from err
         arr = None
     shape = tuple((arr if arr is not None else host).shape)
     allowed = {False: "(3,)", True: "(N, 3) with N >= 1", None: "(3,) or (N, 3)"}[batch]
@@ -182,11 +218,71 @@ def as_poses(name: str, value: Any, *, batch: bool | None) -> jax.Array:
     else:
         finite = bool(np.isfinite(host).all())
     if not finite:
-        flat = np.asarray(arr if arr is not None else host).reshape(-1, 3)
-        row = int(np.flatnonzero(~np.isfinite(flat).all(axis=1))[0])
-        where = f"{name}[{row}]" if len(shape) == 2 else name
-        raise ValueError(f"{where} = {flat[row].tolist()} is not finite; allowed: finite numbers")
-    return arr if arr is not None else jnp.asarray(host, dtype=float_dtype())
+        _raise_row(
+            name,
+            shape,
+            arr,
+            host,
+            lambda rows: ~np.isfinite(rows),
+            "is not finite; allowed: finite numbers",
+        )
+    limit = position_limit()
+    if arr is not None:
+        with jax.ensure_compile_time_eval():
+            too_far = bool(jnp.any(jnp.abs(arr[..., :2]) > limit))
+    else:
+        too_far = bool(np.any(np.abs(host[..., :2]) > limit))
+    if too_far:
+        dtype = np.dtype(float_dtype()).name
+        _raise_row(
+            name,
+            shape,
+            arr,
+            host,
+            lambda rows: np.abs(rows[:, :2]) > limit,
+            f"is too far for {dtype}; allowed: |x|, |y| <= {limit:.0e} cm (squared distances "
+            "must stay finite), or float64 (jax.config.update('jax_enable_x64', True))",
+        )
+    if arr is not None:
+        with jax.ensure_compile_time_eval():
+            return arr.at[..., 2].set(reduce_heading(arr[..., 2]))
+    host = host.copy()
+    host[..., 2] = reduce_heading(host[..., 2])
+    return jnp.asarray(host, dtype=float_dtype())
+
+
+def _raise_row(name, shape, arr, host, bad, message: str):
+    """Raise ``message`` naming the first pose (row) for which ``bad`` holds."""
+    flat = np.asarray(arr if arr is not None else host, dtype=float).reshape(-1, 3)
+    row = int(np.flatnonzero(np.asarray(bad(flat)).any(axis=1))[0])
+    where = f"{name}[{row}]" if len(shape) == 2 else name
+    raise ValueError(f"{where} = {flat[row].tolist()} {message}")
+
+
+# Headings beyond this many radians are reduced modulo 2π on the way in (in
+# float64 on the host): the fast sine and cosine of the rollouts are accurate
+# only up to about 1e5 rad in float32. Smaller headings are kept as given.
+HEADING_REDUCE_ABOVE = 1e4
+
+
+def reduce_heading(theta: Any) -> Any:
+    """Return headings with ``|θ| > HEADING_REDUCE_ABOVE`` reduced to ``[−π, π)``."""
+    if isinstance(theta, np.ndarray):
+        wrapped = np.remainder(theta + np.pi, 2 * np.pi) - np.pi
+        return np.where(np.abs(theta) > HEADING_REDUCE_ABOVE, wrapped, theta)
+    wrapped = jnp.remainder(theta + jnp.pi, 2 * jnp.pi) - jnp.pi
+    return jnp.where(jnp.abs(theta) > HEADING_REDUCE_ABOVE, wrapped, theta)
+
+
+def position_limit() -> float:
+    """Return the largest ``|x|``, ``|y|`` (cm) a pose may have in the compute dtype.
+
+    Squared distances must stay finite: ``(2 limit)² · 2`` below the dtype's
+    largest number, rounded down to a power of ten (1e18 cm in float32,
+    1e153 cm in float64).
+    """
+    largest = float(np.finfo(np.dtype(float_dtype())).max)
+    return float(10.0 ** math.floor(math.log10(math.sqrt(largest / 8))))
 
 
 def as_float_tree(tree: Any) -> Any:

@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from wmr_jax._src.checks import check_dt, check_number, float_dtype, is_traced
 from wmr_jax._src.controllers import shim_sung as law
 
 __all__ = [
@@ -40,12 +41,48 @@ DEFAULT_OMEGA_DEAD_BAND = 0.1  # rad/s
 
 
 def _check_tolerances(tol_r: Any, tol_theta: Any) -> None:
-    if isinstance(tol_r, jax.core.Tracer) or isinstance(tol_theta, jax.core.Tracer):
+    if is_traced((tol_r, tol_theta)):
         return
-    if not (np.isfinite(tol_r) and tol_r > 0):
-        raise ValueError(f"tol_r = {tol_r!r} is not allowed; allowed: a number > 0 cm")
-    if not (np.isfinite(tol_theta) and 0 < tol_theta < math.pi / 2):
-        raise ValueError(f"tol_theta = {tol_theta!r} is not allowed; allowed: 0 < tol_theta < pi/2")
+    check_number("tol_r", tol_r, unit="cm")
+    check_number("tol_theta", tol_theta, high=math.pi / 2, unit="rad")
+
+
+def _pose_array(name: str, value: Any) -> Any:
+    """Return ``value`` as a float array ``(..., 3)`` of finite poses (tracers pass)."""
+    if is_traced(value):
+        return value
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"{name} = {value!r} is not allowed; allowed: real numbers (..., 3) "
+            "[x cm, y cm, theta rad]"
+        ) from None
+    if arr.ndim == 0 or arr.shape[-1] != 3:
+        raise ValueError(f"{name} has shape {arr.shape}; allowed: (..., 3) [x cm, y cm, theta rad]")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} has a value that is not finite; allowed: finite numbers")
+    return jnp.asarray(arr, dtype=float_dtype())
+
+
+def _poses_of(traj: Any) -> Any:
+    """Return ``traj.poses`` after checking ``traj`` is a trajectory."""
+    poses = getattr(traj, "poses", None)
+    if poses is None:
+        raise ValueError(
+            f"traj is a {type(traj).__name__}; allowed: a Trajectory (from rollout or "
+            "batch_rollout), whose poses have shape (..., steps + 1, 3)"
+        )
+    if not is_traced(poses) and (jnp.ndim(poses) < 2 or jnp.shape(poses)[-1] != 3):
+        raise ValueError(f"traj.poses has shape {jnp.shape(poses)}; allowed: (..., steps + 1, 3)")
+    return poses
+
+
+def _is_arrived(poses: jax.Array, refs: jax.Array, tol_r: Any, tol_theta: Any) -> jax.Array:
+    err = law.polar_error(poses, refs)
+    cos_theta_bar, _ = law.fold(err.cos_theta, err.sin_theta)
+    # |θ̄_e| ≤ tol ⇔ cos θ̄_e ≥ cos tol, since |θ̄_e| ≤ π/2.
+    return (err.r <= tol_r) & (cos_theta_bar >= jnp.cos(tol_theta))
 
 
 def arrived(
@@ -62,11 +99,24 @@ def arrived(
         refs: ``(..., 3)`` references, broadcastable against ``poses``.
         tol_r: distance tolerance, cm.
         tol_theta: folded-heading tolerance, rad, ``< π/2``.
+
+    Raises:
+        ValueError: for misshapen or non-finite poses, or tolerances out of range.
     """
-    err = law.polar_error(poses, refs)
-    cos_theta_bar, _ = law.fold(err.cos_theta, err.sin_theta)
-    # |θ̄_e| ≤ tol ⇔ cos θ̄_e ≥ cos tol, since |θ̄_e| ≤ π/2.
-    return (err.r <= tol_r) & (cos_theta_bar >= jnp.cos(tol_theta))
+    _check_tolerances(tol_r, tol_theta)
+    poses, refs = _pose_array("poses", poses), _pose_array("refs", refs)
+    _check_broadcast("poses", jnp.shape(poses)[:-1], "refs", jnp.shape(refs)[:-1])
+    return _is_arrived(poses, refs, tol_r, tol_theta)
+
+
+def _check_broadcast(a: str, shape_a: tuple, b: str, shape_b: tuple) -> None:
+    try:
+        np.broadcast_shapes(shape_a, shape_b)
+    except ValueError:
+        raise ValueError(
+            f"{b} has batch shape {shape_b} and {a} {shape_a}; allowed: shapes that broadcast "
+            "(one reference per run, or one for all)"
+        ) from None
 
 
 def arrival_time(
@@ -92,10 +142,19 @@ def arrival_time(
 
     Returns:
         ``(...)`` arrival times, s.
+
+    Raises:
+        ValueError: for something that is not a trajectory, references that
+            are misshapen, non-finite or of another batch, ``dt ≤ 0`` or
+            tolerances out of range.
     """
     _check_tolerances(tol_r, tol_theta)
-    samples = traj.poses[..., 1:, :]
-    ok = arrived(samples, jnp.asarray(refs)[..., None, :], tol_r=tol_r, tol_theta=tol_theta)
+    dt = check_dt(dt)
+    poses = _poses_of(traj)
+    refs = _pose_array("refs", refs)
+    _check_broadcast("traj", jnp.shape(poses)[:-2], "refs", jnp.shape(refs)[:-1])
+    samples = poses[..., 1:, :]
+    ok = _is_arrived(samples, refs[..., None, :], tol_r, tol_theta)
     # Length of the run of arrived samples that ends the horizon.
     settled = jnp.sum(jnp.cumprod(ok[..., ::-1], axis=-1), axis=-1)
     steps = ok.shape[-1]
@@ -209,7 +268,7 @@ def stream_update(
             ``wheel_speeds (2,)``, ``distance``).
         thresholds: tolerances and dead bands.
     """
-    ok = arrived(pose, ref, tol_r=thresholds.tol_r, tol_theta=thresholds.tol_theta)
+    ok = _is_arrived(pose, ref, thresholds.tol_r, thresholds.tol_theta)
     k = acc.step
     v_sign, v_flip = _flip(acc.v_sign, out.v, thresholds.v_dead_band)
     omega_sign, omega_flip = _flip(acc.omega_sign, out.omega, thresholds.omega_dead_band)

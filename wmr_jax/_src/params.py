@@ -20,13 +20,16 @@ from typing import Any
 import jax
 import numpy as np
 
-from wmr_jax._src.checks import field_values, require
+from wmr_jax._src.checks import field_values, lists_to_arrays, require
 
 __all__ = [
     "Gains",
     "Robot",
+    "SamplingWarning",
     "WheelSpeedWarning",
     "check_feasible",
+    "check_sampling",
+    "sampling_margins",
     "validate_gains",
     "validate_robot",
     "wheel_speed_bound",
@@ -59,6 +62,9 @@ class Gains:
     # choice (docs/model.md §3): the paper gives neither R_e nor α.
     r_e: Any = 1.0
     alpha: Any = 0.25
+
+    def __post_init__(self) -> None:
+        lists_to_arrays(self)  # a list is one batched field, not a pytree of leaves
 
     def replace(self, **changes: Any) -> Gains:
         """Return a copy with the given fields changed."""
@@ -109,6 +115,9 @@ class Robot:
     speed_gain: Any = 100.0
     integral_gain: Any = 0.0
 
+    def __post_init__(self) -> None:
+        lists_to_arrays(self)  # a list is one batched field, not a pytree of leaves
+
     def replace(self, **changes: Any) -> Robot:
         """Return a copy with the given fields changed."""
         return dataclasses.replace(self, **changes)
@@ -116,6 +125,10 @@ class Robot:
 
 class WheelSpeedWarning(UserWarning):
     """Gains for which ``k_r + L k_θ > V_max``: a wheel may be asked for too much."""
+
+
+class SamplingWarning(UserWarning):
+    """Gains the sampled law cannot follow: ``k_θ dt ≥ 2`` or ``k_r π dt / (2 R_m) ≥ 2``."""
 
 
 def validate_gains(gains: Gains) -> Gains:
@@ -215,3 +228,28 @@ def check_feasible(
             stacklevel=stacklevel,
         )
     return feasible
+
+
+def sampling_margins(gains: Gains, dt: Any) -> tuple[Any, Any]:
+    """Return ``(k_θ dt, k_r π dt / (2 R_m))``, the per-period gains of the sampled law.
+
+    Near the goal the law is ``θ_e ← θ_e − k_θ dt sin θ_e`` for the heading and
+    ``r_e ← r_e − (k_r π dt / 2 R_m) r_e`` for the distance (docs/model.md §4):
+    each settles only while its factor stays below 2, and overshoots
+    without settling above it.
+    """
+    return gains.k_theta * dt, gains.kr * (math.pi / 2) * dt / gains.r_m
+
+
+def check_sampling(gains: Gains, dt: Any, *, stacklevel: int = 2) -> bool:
+    """Warn (``SamplingWarning``) and return False if either sampling margin is 2 or more."""
+    heading, distance = (np.max(np.asarray(m, dtype=float)) for m in sampling_margins(gains, dt))
+    if heading < 2 and distance < 2:
+        return True
+    warnings.warn(
+        f"k_theta*dt = {heading:.3g} and k_r*pi*dt/(2*R_m) = {distance:.3g}: the sampled law "
+        "overshoots and cannot settle unless both are below 2 (docs/model.md §4)",
+        SamplingWarning,
+        stacklevel=stacklevel,
+    )
+    return False

@@ -13,6 +13,7 @@ from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from wmr_jax._src import velocity_loop
 from wmr_jax._src.checks import (
@@ -40,15 +41,20 @@ from wmr_jax._src.params import Robot, validate_robot
 
 __all__ = [
     "DEFAULT_DT",
+    "MAX_STEPS",
+    "MAX_TEMPERATURE",
     "Trajectory",
     "batch_rollout",
     "final_poses",
+    "finite_result",
     "make_options",
     "prepare",
     "rollout",
 ]
 
 DEFAULT_DT = 0.033
+MAX_STEPS = 2**31 - 1  # a scan's length is an int32
+MAX_TEMPERATURE = 10.0
 
 
 class Trajectory(NamedTuple):
@@ -107,15 +113,17 @@ def make_options(
     Raises:
         ValueError: naming the option, its value and what is allowed.
     """
-    steps = check_int("steps", steps)
-    substeps = check_int("substeps", substeps)
+    steps = check_int("steps", steps, 1, MAX_STEPS)
+    substeps = check_int("substeps", substeps, 1, MAX_STEPS)
     if velocity not in VELOCITY_LOOPS:
         raise ValueError(f"velocity = {velocity!r} is not allowed; allowed: {VELOCITY_LOOPS}")
     if wheel_limit not in WHEEL_LIMITS:
         raise ValueError(f"wheel_limit = {wheel_limit!r} is not allowed; allowed: {WHEEL_LIMITS}")
     controller = get_controller(controller)
     if temperature is not None:
-        value = check_number("temperature", temperature)
+        # The relaxed switches act on dimensionless arguments of order one;
+        # far above 1 the relaxation no longer resembles the law (docs/model.md §3).
+        value = check_number("temperature", temperature, high=MAX_TEMPERATURE)
         if not controller.smooth:
             raise ValueError(
                 f"temperature = {temperature!r} is not allowed for controller "
@@ -125,7 +133,8 @@ def make_options(
     return Options(steps, velocity, controller, temperature, substeps, wheel_limit)
 
 
-def _batch_size(refs: jax.Array, params: Any, init: jax.Array, robot: Robot) -> int:
+def _batch_sizes(refs: jax.Array, params: Any, init: jax.Array, robot: Robot) -> dict[str, int]:
+    """Return the leading size of every batched argument, by name."""
     sizes = {}
     if refs.ndim == 2:
         sizes["refs"] = refs.shape[0]
@@ -135,15 +144,46 @@ def _batch_size(refs: jax.Array, params: Any, init: jax.Array, robot: Robot) -> 
         for key, leaf in jax.tree_util.tree_leaves_with_path(tree):
             if jnp.ndim(leaf) == 1:
                 sizes[f"{prefix}{jax.tree_util.keystr(key)}"] = jnp.shape(leaf)[0]
+    return sizes
+
+
+def _common_batch(refs, params, init, robot):
+    """Check the batch sizes agree; an axis of size 1 is shared by every run.
+
+    Returns:
+        ``(refs, params, init, robot)`` with the size-1 axes removed.
+    """
+    sizes = _batch_sizes(refs, params, init, robot)
     if not sizes:
         raise ValueError(
             "refs has shape (3,) and nothing else is batched; allowed: refs (N, 3), "
             "init (N, 3) or gains/robot fields of shape (N,)"
         )
-    if len(set(sizes.values())) > 1:
+    n = max(sizes.values())
+    if any(size not in (1, n) for size in sizes.values()):
         listed = ", ".join(f"{k}: {v}" for k, v in sizes.items())
-        raise ValueError(f"batch sizes differ ({listed}); allowed: one common N")
-    return next(iter(sizes.values()))
+        raise ValueError(f"batch sizes differ ({listed}); allowed: one common N, or 1")
+    if n == 1:
+        return refs, params, init, robot
+
+    def shared(leaf):
+        return leaf[0] if jnp.ndim(leaf) >= 1 and jnp.shape(leaf)[0] == 1 else leaf
+
+    refs = refs[0] if refs.ndim == 2 and refs.shape[0] == 1 else refs
+    init = init[0] if init.ndim == 2 and init.shape[0] == 1 else init
+    return refs, jax.tree.map(shared, params), init, jax.tree.map(shared, robot)
+
+
+def _single_run(params: Any, robot: Robot) -> None:
+    """Refuse batched parameters in ``rollout``, which runs one robot."""
+    for prefix, tree in (("gains", params), ("robot", robot)):
+        for key, leaf in jax.tree_util.tree_leaves_with_path(tree):
+            if jnp.ndim(leaf) >= 1:
+                raise ValueError(
+                    f"{prefix}{jax.tree_util.keystr(key)} has shape {jnp.shape(leaf)}; "
+                    "allowed: a scalar in rollout (one run); use batch_rollout or "
+                    "final_poses for a batch"
+                )
 
 
 def prepare(refs, params, init, robot, dt, options: Options, *, batch: bool | None):
@@ -170,11 +210,40 @@ def prepare(refs, params, init, robot, dt, options: Options, *, batch: bool | No
         velocity_loop.check_stability(robot, dt, options.substeps)
     refs = as_poses("refs" if batch is not False else "ref", refs, batch=batch)
     init = as_poses("init", init, batch=None if batch is not False else False)
-    if batch is not False:
-        _batch_size(refs, params, init, robot)
-    if control.check_robot is not None and not is_traced((params, robot)):
-        control.check_robot(params, robot)
+    if batch is False:
+        _single_run(params, robot)
+    else:
+        refs, params, init, robot = _common_batch(refs, params, init, robot)
+    if not is_traced((params, robot, dt)):
+        if control.check_robot is not None:
+            control.check_robot(params, robot)
+        if control.check_sampling is not None:
+            control.check_sampling(params, dt)
     return refs, params, init, robot, jnp.asarray(dt, dtype=float_dtype())
+
+
+def finite_result(poses: Any, result: Any) -> Any:
+    """Return ``result``, or raise if a pose of the run left the floating-point range.
+
+    The inputs passed their checks, but some gains or periods drive the robot
+    (or its heading) beyond what the compute dtype can hold; a run with an
+    ``inf`` or ``NaN`` pose is reported, not returned (as diffrax throws on a
+    failed solve). Skipped inside a caller's own transformations.
+    """
+    if is_traced(poses):
+        return result
+    finite = np.asarray(jnp.isfinite(poses).all(axis=-1))
+    while finite.ndim > 1:
+        finite = finite.all(axis=-1)
+    if not finite.all():
+        bad = np.flatnonzero(~finite.reshape(-1))
+        where = "the run" if finite.ndim == 0 else f"{bad.size} run(s), e.g. run {int(bad[0])},"
+        dtype = np.dtype(poses.dtype).name
+        raise ValueError(
+            f"{where} left the range of {dtype} (a pose became inf or NaN); allowed: gains "
+            "and dt that keep the sampled law stable (docs/model.md §4), or float64"
+        )
+    return result
 
 
 # ---------------------------------------------------------------- entry points
@@ -232,7 +301,8 @@ def rollout(
     """
     options = make_options(**_static_options(locals()))
     args = prepare(ref, gains, init, robot, dt, options, batch=False)
-    return _rollout_jit(*args, options=options)
+    traj = _rollout_jit(*args, options=options)
+    return finite_result(traj.poses, traj)
 
 
 def batch_rollout(
@@ -265,7 +335,8 @@ def batch_rollout(
     """
     options = make_options(**_static_options(locals()))
     args = prepare(refs, gains, init, robot, dt, options, batch=None)
-    return _batch_rollout_jit(*args, options=options)
+    traj = _batch_rollout_jit(*args, options=options)
+    return finite_result(traj.poses, traj)
 
 
 def final_poses(
@@ -291,7 +362,8 @@ def final_poses(
     """
     options = make_options(**_static_options(locals()))
     args = prepare(refs, gains, init, robot, dt, options, batch=None)
-    return _final_poses_jit(*args, options=options)
+    final = _final_poses_jit(*args, options=options)
+    return finite_result(final, final)
 
 
 for _entry in (rollout, batch_rollout, final_poses):

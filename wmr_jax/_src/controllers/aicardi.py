@@ -11,9 +11,9 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from wmr_jax._src.checks import require
+from wmr_jax._src.checks import lists_to_arrays, require
 from wmr_jax._src.controllers.base import Controller, register_controller
-from wmr_jax._src.controllers.polar import driving_error, gain_values
+from wmr_jax._src.controllers.polar import driving_error, gain_values, hold_at_goal
 from wmr_jax._src.dynamics import sinc
 
 __all__ = ["AICARDI", "AicardiGains", "aicardi_control", "validate_aicardi_gains"]
@@ -43,6 +43,9 @@ class AicardiGains:
     h: Any = 1.0
     backward: bool = dataclasses.field(default=False, metadata={"static": True})
 
+    def __post_init__(self) -> None:
+        lists_to_arrays(self)  # a list is one batched field, not a pytree of leaves
+
     def replace(self, **changes: Any) -> AicardiGains:
         """Return a copy with the given fields changed."""
         return dataclasses.replace(self, **changes)
@@ -61,6 +64,7 @@ def aicardi_control(
     With ``V = (λ ρ² + α² + h θ_A²)/2`` the paper chooses
     ``v = γ ρ cos α`` and ``ω = k α + γ (cos α sin α / α)(α + h θ_A)``, so that
     ``V̇ = −λ γ ρ² cos² α − k α² ≤ 0``; ``v`` changes sign when driving backwards.
+    Within ``AT_GOAL`` of the reference it only turns, ``ω = k θ_e`` (``polar.py``).
 
     Args:
         pose: ``(..., 3)`` current pose ``[x cm, y cm, θ rad]``.
@@ -74,7 +78,7 @@ def aicardi_control(
     cos_alpha = jnp.cos(alpha)
     v = direction * gains.gamma * rho * cos_alpha
     omega = gains.k * alpha + gains.gamma * cos_alpha * sinc(alpha) * (alpha + gains.h * theta_a)
-    return v, omega
+    return hold_at_goal(rho, alpha, theta_a, v, omega, gains.k)
 
 
 def validate_aicardi_gains(gains: AicardiGains) -> AicardiGains:

@@ -12,9 +12,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks import require
+from wmr_jax._src.checks import lists_to_arrays, require
 from wmr_jax._src.controllers.base import Controller, register_controller
-from wmr_jax._src.controllers.polar import driving_error, gain_values
+from wmr_jax._src.controllers.polar import driving_error, gain_values, hold_at_goal
 
 __all__ = ["ASTOLFI", "AstolfiGains", "astolfi_control", "validate_astolfi_gains"]
 
@@ -44,6 +44,9 @@ class AstolfiGains:
     k_beta: Any = -3.0
     backward: bool = dataclasses.field(default=True, metadata={"static": True})
 
+    def __post_init__(self) -> None:
+        lists_to_arrays(self)  # a list is one batched field, not a pytree of leaves
+
     def replace(self, **changes: Any) -> AstolfiGains:
         """Return a copy with the given fields changed."""
         return dataclasses.replace(self, **changes)
@@ -62,7 +65,8 @@ def astolfi_control(
     ``v = k_ρ ρ`` and ``ω = k_α α + k_β β`` with ``β = −θ_A`` (Corke's "moving to
     a pose"); ``v`` changes sign when driving backwards. choice: ``α`` is held
     within ``[−π/2, π/2]`` as the Toolbox's polar-coordinate block does, which
-    matters only when backward driving is off.
+    matters only when backward driving is off. Within ``AT_GOAL`` of the
+    reference it only turns, ``ω = k_α θ_e`` (``polar.py``).
 
     Args:
         pose: ``(..., 3)`` current pose ``[x cm, y cm, θ rad]``.
@@ -76,7 +80,7 @@ def astolfi_control(
     alpha = jnp.clip(alpha, -jnp.pi / 2, jnp.pi / 2)
     v = direction * gains.k_rho * rho
     omega = gains.k_alpha * alpha - gains.k_beta * theta_a
-    return v, omega
+    return hold_at_goal(rho, alpha, theta_a, v, omega, gains.k_alpha)
 
 
 # ---------------------------------------------------------------- boundary checks

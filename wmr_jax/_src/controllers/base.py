@@ -39,6 +39,9 @@ class Controller:
         check_robot: ``(params, robot) -> None``, called with concrete values
             before a rollout, to warn about parameters that are legal but
             unsuited to the robot (Shim–Sung: ``k_r + L k_θ > V_max``); or ``None``.
+        check_sampling: ``(params, dt) -> None``, called likewise, to warn
+            about gains the sampled law cannot follow at the period ``dt``
+            (Shim–Sung: ``k_θ dt ≥ 2``); or ``None``.
     """
 
     name: str
@@ -48,6 +51,7 @@ class Controller:
     region: Callable[..., jax.Array] | None = None
     smooth: bool = False
     check_robot: Callable[[Any, Any], None] | None = None
+    check_sampling: Callable[[Any, Any], None] | None = None
 
     def default_params(self) -> Any:
         """Return the controller's default parameters."""

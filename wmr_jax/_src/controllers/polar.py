@@ -39,7 +39,13 @@ import numpy as np
 from wmr_jax._src.checks import field_values
 from wmr_jax._src.controllers import shim_sung as law
 
-__all__ = ["driving_error", "gain_values"]
+__all__ = ["AT_GOAL", "driving_error", "gain_values", "hold_at_goal"]
+
+# choice (docs/model.md §3): within this distance of the reference, cm, the
+# polar laws stop driving and only turn to the reference heading. Their
+# bearing α is undefined at ρ = 0, and once ρ is down to rounding it is noise
+# that ω would follow (PythonRobotics' move_to_pose stops at 0.001 too).
+AT_GOAL = 1e-3
 
 
 def driving_error(
@@ -77,3 +83,21 @@ def gain_values(params: Any, cls: type) -> dict[str, np.ndarray | None]:
     if isinstance(params, cls) and not isinstance(backward, (bool, np.bool_)):
         raise ValueError(f"gains.backward = {backward!r} is not allowed; allowed: True or False")
     return field_values(params, cls, "gains", skip=("backward",))
+
+
+def hold_at_goal(
+    rho: jax.Array,
+    alpha: jax.Array,
+    theta_a: jax.Array,
+    v: jax.Array,
+    omega: jax.Array,
+    rate: jax.Array,
+) -> tuple[jax.Array, jax.Array]:
+    """Return ``(v, ω)``, or ``(0, rate · θ_e)`` where ``ρ < AT_GOAL``.
+
+    At the goal the robot holds its position and turns to the reference
+    heading, ``θ_e = α − θ_A`` (wrapped), at the law's own heading rate.
+    """
+    near = rho < AT_GOAL
+    theta_e = law.wrap_angle(alpha - theta_a)
+    return jnp.where(near, 0.0, v), jnp.where(near, rate * theta_e, omega)

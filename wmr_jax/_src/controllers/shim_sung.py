@@ -38,7 +38,7 @@ import jax.numpy as jnp
 
 from wmr_jax._src.controllers.base import Controller, register_controller
 from wmr_jax._src.dynamics import sin_cos, sin_small
-from wmr_jax._src.params import Gains, Robot, check_feasible, validate_gains
+from wmr_jax._src.params import Gains, Robot, check_feasible, check_sampling, validate_gains
 
 __all__ = [
     "SHIM_SUNG",
@@ -172,14 +172,30 @@ def _step(
     """
     if temperature is None:
         return jnp.where(x > 0 if strict else x >= 0, 1.0, 0.0).astype(x.dtype)
-    return jax.nn.sigmoid(x / (scale * temperature))
+    tie = _tie_break(temperature)
+    return jax.nn.sigmoid(x / (scale * temperature) + (-tie if strict else tie))
+
+
+def _tie_break(temperature: float) -> float:
+    """Return the offset that makes a relaxed switch decide its tie as the hard one does.
+
+    A relaxed switch centred on its threshold sits half-way there at every
+    temperature, so at a pose exactly on a threshold (e.g. a reference
+    straight to the side, ``cos φ_e = 0``) the relaxed law could stall where
+    the hard law drives. Shifting the argument by ``log(1 + 1/T)`` towards the
+    hard law's side keeps the switch smooth and makes it tend to the hard law
+    everywhere as ``T → 0``, ties included: the shift in the threshold,
+    ``T log(1 + 1/T)``, vanishes, while the switch's value at the tie tends to
+    the hard one (docs/model.md §3).
+    """
+    return jnp.log1p(1.0 / temperature)
 
 
 def sgn(x: jax.Array, *, temperature: float | None = None) -> jax.Array:
     """Return the paper's ``Sgn(x)``: 1 if ``x > 0``, else −1 (so ``Sgn(0) = −1``) (Eq. 8)."""
     if temperature is None:
         return jnp.where(x > 0, 1.0, -1.0).astype(x.dtype)
-    return jnp.tanh(x / temperature)
+    return jnp.tanh(x / temperature - _tie_break(temperature))  # Sgn(0) = −1
 
 
 def saturated_distance(r: jax.Array, r_m: jax.Array, *, temperature: float | None = None):
@@ -210,12 +226,13 @@ def fold(cos_a: jax.Array, sin_a: jax.Array, *, temperature: float | None = None
 
     ``fold(a) = a ∓ π`` when ``|a| > π/2``, which flips both signs; so
     ``cos ā = |cos a|`` and ``sin ā = sign(cos a) sin a`` (no flip at
-    ``cos a = 0``). The relaxed sign is ``tanh(cos a / temperature)``.
+    ``cos a = 0``). The relaxed sign is ``tanh(cos a / T + log(1 + 1/T))``,
+    which keeps that tie (see ``_tie_break``).
     """
     if temperature is None:
         flip = jnp.where(cos_a < 0, -1.0, 1.0).astype(cos_a.dtype)
     else:
-        flip = jnp.tanh(cos_a / temperature)
+        flip = jnp.tanh(cos_a / temperature + _tie_break(temperature))  # no flip at 0
     return flip * cos_a, flip * sin_a
 
 
@@ -338,6 +355,10 @@ def _warn_infeasible(gains: Gains, robot: Robot) -> None:
     check_feasible(gains, robot, warn=True, stacklevel=5)
 
 
+def _warn_unsampled(gains: Gains, dt) -> None:
+    check_sampling(gains, dt, stacklevel=5)
+
+
 SHIM_SUNG = register_controller(
     Controller(
         name="shim-sung",
@@ -347,6 +368,7 @@ SHIM_SUNG = register_controller(
         region=_region,
         smooth=True,
         check_robot=_warn_infeasible,
+        check_sampling=_warn_unsampled,
     )
 )
 """The Shim–Sung asymptotic controller of the paper, the default everywhere."""

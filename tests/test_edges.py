@@ -1,0 +1,216 @@
+"""Edges of the public API: every input gives a correct result or one clear error.
+
+Each test here pins one way a careful user can go wrong (docs/model.md §3–§6):
+values beyond the compute dtype, huge headings, malformed arguments to the
+metrics, batched and list-valued gains, ties of the smooth law, the polar
+baselines at their goal, and the boundaries of the checks themselves.
+"""
+
+import math
+import warnings
+
+import jax
+import numpy as np
+import pytest
+
+import wmr_jax as w
+from wmr_jax import tuning
+
+REF = [30.0, 30.0, 0.0]
+
+
+# ---------------------------------------------------------------- the dtype's range
+
+
+@pytest.mark.parametrize("ref", [[1e39, 0.0, 0.0], [1e20, 0.0, 0.0], [0.0, -1e19, 0.0]])
+def test_positions_beyond_float32_are_refused(ref):
+    with jax.enable_x64(False), pytest.raises(ValueError, match=r"ref = .* is too far for float32"):
+        w.rollout(ref, steps=3)
+    with jax.enable_x64(False), pytest.raises(ValueError, match=r"init = .* is too far"):
+        w.rollout(REF, init=ref, steps=3)
+
+
+def test_float64_reaches_further():
+    traj = w.rollout([1e20, 0.0, 0.0], w.Gains(kr=60.0), steps=5)
+    assert np.all(np.isfinite(np.asarray(traj.poses)))
+    assert float(traj.poses[-1, 0]) > 0  # it drives towards the reference
+
+
+@pytest.mark.parametrize("field", ["kr", "k_theta", "r_m"])
+def test_gains_beyond_float32_are_refused(field):
+    with (
+        jax.enable_x64(False),
+        pytest.raises(ValueError, match=f"gains.{field} = 1e\\+39 is beyond"),
+    ):
+        w.rollout(REF, w.Gains(**{field: 1e39}), steps=3)
+
+
+def test_a_run_that_leaves_the_range_is_an_error_not_nans():
+    with warnings.catch_warnings(), jax.enable_x64(False):
+        warnings.simplefilter("ignore")
+        # 3e38 cm/s for 10 s: the robot's position overflows float32.
+        with pytest.raises(ValueError, match="left the range of float32"):
+            w.rollout([1e3, 0.0, 0.0], w.Gains(kr=3e38), dt=10.0, steps=3)
+        with pytest.raises(ValueError, match=r"run\(s\), e.g. run 1"):
+            w.final_poses([[1.0, 0.0, 0.0], [1e3, 0.0, 0.0]], w.Gains(kr=3e38), dt=10.0, steps=3)
+
+
+def test_gains_the_sampled_law_cannot_follow_warn():
+    with pytest.warns(w.SamplingWarning, match=r"k_theta\*dt = 3\.3"):
+        w.rollout(REF, w.Gains(k_theta=100.0), steps=3)
+    with pytest.warns(w.SamplingWarning, match=r"k_theta\*dt = 1e\+03"):
+        w.rollout(REF, dt=100.0, steps=3)
+    # The paper's gains and the tuned ones of the README are well inside.
+    assert w.check_sampling(w.Gains(), 0.033) and w.check_sampling(w.Gains(kr=60.0), 0.033)
+    heading, distance = w.sampling_margins(w.Gains(kr=89.7, r_m=2.79), 0.033)
+    assert float(heading) < 2 and 1.6 < float(distance) < 2
+
+
+def test_temperature_and_steps_have_upper_bounds():
+    with pytest.raises(ValueError, match=r"temperature = 1e\+30 is not allowed"):
+        w.rollout(REF, temperature=1e30, steps=3)
+    with pytest.raises(ValueError, match=r"steps = 2147483648 is not allowed"):
+        w.rollout(REF, steps=2**31)
+
+
+# ---------------------------------------------------------------- headings
+
+
+def test_huge_headings_are_reduced_on_the_way_in():
+    theta = 1e10
+    reduced = math.remainder(theta, 2 * math.pi)  # float64 on the host
+    for kwargs, same in (
+        ({"ref": [20.0, 5.0, theta]}, {"ref": [20.0, 5.0, reduced]}),
+        ({"ref": REF, "init": [0.0, 0.0, theta]}, {"ref": REF, "init": [0.0, 0.0, reduced]}),
+    ):
+        a = np.asarray(w.rollout(steps=60, **kwargs).poses[1:])
+        b = np.asarray(w.rollout(steps=60, **same).poses[1:])
+        assert np.all(np.isfinite(a))
+        # 1e10 rad is itself only known to ulp(1e10) ≈ 2e-6 rad: reductions by
+        # different float64 formulas agree to that, and so do the runs.
+        np.testing.assert_allclose(a, b, atol=1e-4)
+
+
+# ---------------------------------------------------------------- metrics
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (
+            lambda t: w.arrival_time(t, [np.nan, 30.0, 0.0], dt=0.033),
+            "refs has a value that is not finite",
+        ),
+        (lambda t: w.arrival_time(t, REF, dt=-1.0), "dt = -1.0 is not allowed"),
+        (lambda t: w.arrival_time(t, [30.0, 30.0], dt=0.033), r"refs has shape \(2,\)"),
+        (lambda t: w.arrival_time(t, [30.0, 30.0, 0.0, 1.0], dt=0.033), r"refs has shape \(4,\)"),
+        (lambda t: w.arrival_time(np.zeros((5, 3)), REF, dt=0.033), "traj is a ndarray"),
+        (lambda t: w.arrival_time(t, np.zeros((4, 3)), dt=0.033), "refs has batch shape"),
+        (lambda t: w.arrival_time(t, REF, dt=0.033, tol_theta=5.0), "tol_theta = 5.0"),
+        (lambda t: w.arrived(np.zeros((2, 3)), np.zeros((3, 3))), "refs has batch shape"),
+    ],
+)
+def test_bad_metric_arguments_are_named(call, message):
+    traj = w.batch_rollout(np.array([REF, REF, [10.0, 0.0, 0.0]]), steps=4)
+    with pytest.raises(ValueError, match=message):
+        call(traj)
+
+
+# ---------------------------------------------------------------- batched gains
+
+
+def test_rollout_runs_one_robot_and_says_where_batches_go():
+    with pytest.raises(ValueError, match=r"gains.kr has shape \(4,\).*use batch_rollout"):
+        w.rollout(REF, w.Gains(kr=np.linspace(30, 120, 4)), steps=3)
+
+
+def test_lists_are_fields_and_size_one_axes_are_shared():
+    kr = [40.0, 80.0, 120.0]
+    as_list = w.batch_rollout(REF, w.Gains(kr=kr), steps=20)
+    as_array = w.batch_rollout(REF, w.Gains(kr=np.array(kr)), steps=20)
+    one_ref = w.batch_rollout([REF], w.Gains(kr=kr), steps=20)
+    final = w.final_poses([REF], w.Gains(kr=kr), steps=20)
+    for traj in (as_list, one_ref):
+        np.testing.assert_array_equal(np.asarray(traj.poses), np.asarray(as_array.poses))
+    np.testing.assert_array_equal(np.asarray(final), np.asarray(as_array.poses[:, -1]))
+    assert w.AicardiGains(k=(1.0, 2.0)).k.shape == (2,)
+    with pytest.raises(ValueError, match=r"batch sizes differ \(refs: 2, gains\['kr'\]: 3\)|gains"):
+        w.batch_rollout([REF, REF], w.Gains(kr=kr), steps=3)
+
+
+@pytest.mark.parametrize("value", ["abc", 1 + 2j, {"a": 1}, None, ["x", "y"]])
+def test_gain_values_that_are_not_numbers_name_the_field(value):
+    with pytest.raises(ValueError, match=r"gains\.kr"):
+        w.rollout(REF, w.Gains(kr=value), steps=3)
+
+
+# ---------------------------------------------------------------- the smooth law's ties
+
+
+def test_relaxed_law_drives_from_a_tie_as_the_hard_law_does():
+    """Straight to the side (cos φ_e = 0): the relaxation used to stall there."""
+    ref = [0.0, 30.0, 0.0]
+    hard = np.asarray(w.rollout(ref, steps=90).poses[-1])
+    errors = [
+        float(np.abs(np.asarray(w.rollout(ref, temperature=t, steps=90).poses[-1]) - hard).max())
+        for t in (1e-2, 1e-4, 1e-8)
+    ]
+    assert errors[-1] < 1e-6 and errors[0] < 1.0, errors
+    first = w.rollout(ref, temperature=0.05, steps=1)
+    assert float(first.omega[0]) > 9.0  # the hard law commands k_θ = 10 rad/s
+
+
+def test_relaxed_gradient_from_a_tie_is_finite_and_alive_in_float32():
+    with jax.enable_x64(False):
+
+        def final_y(kr):
+            return w.rollout([0.0, 30.0, 0.0], w.Gains(kr=kr), temperature=0.05, steps=60).poses[
+                -1, 1
+            ]
+
+        grad = float(jax.grad(final_y)(60.0))
+    assert math.isfinite(grad) and grad != 0.0
+
+
+# ---------------------------------------------------------------- the baselines at their goal
+
+
+@pytest.mark.parametrize("x64", [False, True])
+@pytest.mark.parametrize("controller", ["aicardi", "astolfi-corke"])
+def test_polar_baselines_stay_at_the_goal_over_long_horizons(controller, x64):
+    dist, bearing, heading = np.meshgrid(
+        [10.0, 75.0], np.arange(4) * math.pi / 2 + 0.3, [-math.pi / 2, 0.0, math.pi], indexing="ij"
+    )
+    refs = np.stack([dist * np.cos(bearing), dist * np.sin(bearing), heading], -1).reshape(-1, 3)
+    refs = np.concatenate([refs, [[10.0, 0.0, math.pi / 2]]])
+    with jax.enable_x64(x64):
+        traj = w.batch_rollout(refs, controller=controller, steps=364)  # 12 s
+        times = np.asarray(w.arrival_time(traj, refs, dt=0.033))
+    assert np.all(np.isfinite(times)), refs[~np.isfinite(times)]
+    assert times.max() < 6.0  # arrived within the usual horizon and stayed for the rest
+
+
+# ---------------------------------------------------------------- boundaries of the checks
+
+
+def test_wheel_condition_holds_exactly_at_its_boundary():
+    robot = w.Robot()
+    k_theta = 10.0
+    at = float(robot.v_max) - float(robot.half_track) * k_theta  # k_r + L k_θ = V_max
+    assert bool(w.check_feasible(w.Gains(kr=at - 1e-6, k_theta=k_theta)))
+    assert bool(w.check_feasible(w.Gains(kr=at, k_theta=k_theta)))
+    assert not bool(w.check_feasible(w.Gains(kr=at + 1e-6, k_theta=k_theta)))
+
+
+def test_the_tuners_box_reaches_the_wheel_limit():
+    robot = w.Robot()
+    top = tuning.gains_from_unit(np.ones(7))
+    bound = float(top.kr) + float(robot.half_track) * float(top.k_theta)
+    assert float(robot.v_max) * 0.999 <= bound <= float(robot.v_max)
+
+
+def test_com_offset_is_allowed_up_to_the_body_edge():
+    edge = float(w.Robot().body_diameter) / 2
+    w.rollout(REF, robot=w.Robot(com_offset=edge - 1e-9), velocity="nonideal", steps=2)
+    with pytest.raises(ValueError, match="robot.com_offset"):
+        w.rollout(REF, robot=w.Robot(com_offset=edge), velocity="nonideal", steps=2)
