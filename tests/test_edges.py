@@ -99,7 +99,7 @@ def test_huge_headings_are_reduced_on_the_way_in():
     [
         (
             lambda t: w.arrival_time(t, [np.nan, 30.0, 0.0], dt=0.033),
-            "refs has a value that is not finite",
+            "refs = .* is not finite",
         ),
         (lambda t: w.arrival_time(t, REF, dt=-1.0), "dt = -1.0 is not allowed"),
         (lambda t: w.arrival_time(t, [30.0, 30.0], dt=0.033), r"refs has shape \(2,\)"),

@@ -18,6 +18,7 @@ import numpy as np
 
 __all__ = [
     "as_float_tree",
+    "as_pose_array",
     "as_poses",
     "check_dt",
     "check_int",
@@ -138,6 +139,8 @@ def field_values(
             out[field.name] = None
             continue
         try:
+            if value is None or isinstance(value, (str, bytes)):
+                raise TypeError(value)  # NumPy would read None as NaN and "1.5" as 1.5
             arr = np.asarray(value, dtype=float)
         except (TypeError, ValueError):
             raise ValueError(
@@ -283,6 +286,28 @@ def position_limit() -> float:
     """
     largest = float(np.finfo(np.dtype(float_dtype())).max)
     return float(10.0 ** math.floor(math.log10(math.sqrt(largest / 8))))
+
+
+def as_pose_array(name: str, value: Any) -> Any:
+    """Return ``value`` as checked float poses of any batch shape ``(..., 3)`` (tracers pass).
+
+    The same checks as ``as_poses`` (finite, within the dtype's range, huge
+    headings reduced), for functions that broadcast poses against each other.
+    """
+    if is_traced(value):
+        return value
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"{name} = {value!r} is not allowed; allowed: real numbers (..., 3) "
+            "[x cm, y cm, theta rad]"
+        ) from None
+    if arr.ndim == 0 or arr.shape[-1] != 3:
+        raise ValueError(f"{name} has shape {arr.shape}; allowed: (..., 3) [x cm, y cm, theta rad]")
+    flat = arr.reshape(-1, 3)
+    poses = as_poses(name, flat, batch=True) if flat.size else jnp.asarray(flat, float_dtype())
+    return poses.reshape(arr.shape)
 
 
 def as_float_tree(tree: Any) -> Any:

@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks import check_dt, check_number, float_dtype, is_traced
+from wmr_jax._src.checks import as_pose_array, check_dt, check_number, is_traced
 from wmr_jax._src.controllers import shim_sung as law
 
 __all__ = [
@@ -40,29 +40,12 @@ DEFAULT_V_DEAD_BAND = 1.0  # cm/s
 DEFAULT_OMEGA_DEAD_BAND = 0.1  # rad/s
 
 
-def _check_tolerances(tol_r: Any, tol_theta: Any) -> None:
+def _check_tolerances(tol_r: Any, tol_theta: Any) -> tuple[Any, Any]:
+    """Return the tolerances as floats after checking their ranges (tracers pass)."""
     if is_traced((tol_r, tol_theta)):
-        return
-    check_number("tol_r", tol_r, unit="cm")
-    check_number("tol_theta", tol_theta, high=math.pi / 2, unit="rad")
-
-
-def _pose_array(name: str, value: Any) -> Any:
-    """Return ``value`` as a float array ``(..., 3)`` of finite poses (tracers pass)."""
-    if is_traced(value):
-        return value
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(
-            f"{name} = {value!r} is not allowed; allowed: real numbers (..., 3) "
-            "[x cm, y cm, theta rad]"
-        ) from None
-    if arr.ndim == 0 or arr.shape[-1] != 3:
-        raise ValueError(f"{name} has shape {arr.shape}; allowed: (..., 3) [x cm, y cm, theta rad]")
-    if not np.isfinite(arr).all():
-        raise ValueError(f"{name} has a value that is not finite; allowed: finite numbers")
-    return jnp.asarray(arr, dtype=float_dtype())
+        return tol_r, tol_theta
+    tol_r = check_number("tol_r", tol_r, unit="cm")
+    return tol_r, check_number("tol_theta", tol_theta, high=math.pi / 2, unit="rad")
 
 
 def _poses_of(traj: Any) -> Any:
@@ -103,8 +86,8 @@ def arrived(
     Raises:
         ValueError: for misshapen or non-finite poses, or tolerances out of range.
     """
-    _check_tolerances(tol_r, tol_theta)
-    poses, refs = _pose_array("poses", poses), _pose_array("refs", refs)
+    tol_r, tol_theta = _check_tolerances(tol_r, tol_theta)
+    poses, refs = as_pose_array("poses", poses), as_pose_array("refs", refs)
     _check_broadcast("poses", jnp.shape(poses)[:-1], "refs", jnp.shape(refs)[:-1])
     return _is_arrived(poses, refs, tol_r, tol_theta)
 
@@ -148,10 +131,10 @@ def arrival_time(
             are misshapen, non-finite or of another batch, ``dt ≤ 0`` or
             tolerances out of range.
     """
-    _check_tolerances(tol_r, tol_theta)
+    tol_r, tol_theta = _check_tolerances(tol_r, tol_theta)
     dt = check_dt(dt)
     poses = _poses_of(traj)
-    refs = _pose_array("refs", refs)
+    refs = as_pose_array("refs", refs)
     _check_broadcast("traj", jnp.shape(poses)[:-2], "refs", jnp.shape(refs)[:-1])
     samples = poses[..., 1:, :]
     ok = _is_arrived(samples, refs[..., None, :], tol_r, tol_theta)

@@ -138,7 +138,8 @@ def validate_gains(gains: Gains) -> Gains:
         ValueError: naming the field, its value and the allowed range.
     """
     g = field_values(gains, Gains, "gains")
-    for name, unit in (("kr", "cm/s"), ("k_theta", "rad/s"), ("r_e", "cm")):
+    positive = (("kr", "cm/s"), ("k_theta", "rad/s"), ("r_m", "cm"), ("r_a", "cm"), ("r_e", "cm"))
+    for name, unit in positive:
         if g[name] is not None:
             require(f"gains.{name}", g[name], g[name] > 0, f"{name} > 0 {unit}")
     if g["phi_m"] is not None:
@@ -152,10 +153,10 @@ def validate_gains(gains: Gains) -> Gains:
             "gains.r_e",
             g["r_e"],
             g["r_e"] <= g["r_a"],
-            f"0 < r_e <= r_a (r_a = {g['r_a']})",
+            f"0 < r_e <= r_a (gains.r_a = {g['r_a']})",
         )
     if g["r_a"] is not None and g["r_m"] is not None:
-        require("gains.r_a", g["r_a"], g["r_a"] <= g["r_m"], f"r_a <= r_m (r_m = {g['r_m']})")
+        require("gains.r_a", g["r_a"], g["r_a"] <= g["r_m"], f"r_a <= r_m (gains.r_m = {g['r_m']})")
     return gains
 
 
@@ -215,8 +216,8 @@ def check_feasible(
         warn: if true, emit a ``WheelSpeedWarning`` when the condition fails.
         stacklevel: passed to ``warnings.warn`` (which caller the warning names).
     """
-    robot = Robot() if robot is None else robot
-    bound = np.asarray(wheel_speed_bound(gains, robot), dtype=float)
+    robot = validate_robot(Robot() if robot is None else robot)
+    bound = np.asarray(wheel_speed_bound(validate_gains(gains), robot), dtype=float)
     v_max = np.asarray(robot.v_max, dtype=float)
     feasible = bound <= v_max * (1 + 1e-12)
     if warn and not np.all(feasible):

@@ -7,6 +7,7 @@ it, so "the same seed" means the same poses everywhere.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -30,6 +31,9 @@ __all__ = [
 EVAL_R_MIN = 5.0  # cm
 EVAL_R_MAX = 80.0  # cm
 HORIZON_S = 6.0  # s
+# One draw holds every pose in memory (12 bytes each in float32); larger sets
+# are drawn in pieces, e.g. from jax.random.fold_in(key, i).
+MAX_SAMPLES = 2**27
 
 # docs/model.md §5: the references of the paper's Fig. 7, [x cm, y cm, θ degrees].
 PAPER_REFS_DEG = (
@@ -79,15 +83,20 @@ def sample_poses(
     """
     if not isinstance(key, jax.Array):
         key = jax.random.key(check_int("seed", key, 0, 2**32 - 1))
-    n = check_int("n", n, 0)
+    n = check_int("n", n, 0, MAX_SAMPLES)
     r_min = check_number("r_min", r_min, closed=True, unit="cm")
     r_max = check_number("r_max", r_max, low=r_min, closed=True, unit="cm")
+    poses = _draw(key, n, jnp.float32(r_min), jnp.float32(r_max))
+    return poses.astype(float_dtype() if dtype is None else dtype)
+
+
+@functools.partial(jax.jit, static_argnums=1)
+def _draw(key: jax.Array, n: int, r_min: jax.Array, r_max: jax.Array) -> jax.Array:
     k_dist, k_bearing, k_heading = jax.random.split(key, 3)
     dist = jax.random.uniform(k_dist, (n,), jnp.float32, r_min, r_max)
     bearing = jax.random.uniform(k_bearing, (n,), jnp.float32, -jnp.pi, jnp.pi)
     heading = jax.random.uniform(k_heading, (n,), jnp.float32, -jnp.pi, jnp.pi)
-    poses = jnp.stack([dist * jnp.cos(bearing), dist * jnp.sin(bearing), heading], axis=-1)
-    return poses.astype(float_dtype() if dtype is None else dtype)
+    return jnp.stack([dist * jnp.cos(bearing), dist * jnp.sin(bearing), heading], axis=-1)
 
 
 def horizon_steps(dt: float, horizon: float = HORIZON_S) -> int:

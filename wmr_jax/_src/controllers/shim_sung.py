@@ -31,11 +31,13 @@ cosines), so one temperature fits them all.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
+from wmr_jax._src.checks import as_float_tree, as_pose_array, is_traced
 from wmr_jax._src.controllers.base import Controller, register_controller
 from wmr_jax._src.dynamics import sin_cos, sin_small
 from wmr_jax._src.params import Gains, Robot, check_feasible, check_sampling, validate_gains
@@ -323,12 +325,48 @@ def control(
         temperature: ``None`` for the paper's law; positive for its smooth
             relaxation (see the module docstring).
         frame: optional ``(x, y, cos θ, sin θ)`` of the pose (see ``polar_error``).
+
+    Raises:
+        ValueError: for concrete poses or gains out of range (called from a
+            rollout, the arguments are traced and were checked before).
     """
+    if frame is None and not is_traced((pose, ref, gains)):
+        # Called by a user with values: check them, and run the law as one
+        # compiled program rather than op by op.
+        return _control_jit(*_checked(pose, ref, gains), temperature=temperature)
     return commands(polar_error(pose, ref, frame=frame), gains, temperature=temperature)
+
+
+def _control(pose, ref, gains, *, temperature):
+    return commands(polar_error(pose, ref), gains, temperature=temperature)
+
+
+_control_jit = jax.jit(_control, static_argnames=("temperature",))
+
+
+def _checked(pose: Any, ref: Any, gains: Gains) -> tuple[Any, Any, Gains]:
+    """Check concrete arguments of the public law functions (tracers pass)."""
+    if is_traced((pose, ref, gains)):
+        return pose, ref, gains
+    pose, ref = as_pose_array("pose", pose), as_pose_array("ref", ref)
+    try:
+        np.broadcast_shapes(pose.shape[:-1], ref.shape[:-1])
+    except ValueError:
+        raise ValueError(
+            f"pose has batch shape {pose.shape[:-1]} and ref {ref.shape[:-1]}; "
+            "allowed: shapes that broadcast"
+        ) from None
+    return pose, ref, as_float_tree(validate_gains(gains))
 
 
 def control_diagnostics(pose: jax.Array, ref: jax.Array, gains: Gains) -> Diagnostics:
     """Return the command with the region, ``d``, ``ε``, ``V`` and error coordinates."""
+    if not is_traced((pose, ref, gains)):
+        return _diagnostics_jit(*_checked(pose, ref, gains))
+    return _diagnostics(pose, ref, gains)
+
+
+def _diagnostics(pose: jax.Array, ref: jax.Array, gains: Gains) -> Diagnostics:
     err = polar_error(pose, ref)
     d = direction_flag(err, gains.phi_m)
     v, omega = commands(err, gains)
@@ -372,3 +410,6 @@ SHIM_SUNG = register_controller(
     )
 )
 """The Shim–Sung asymptotic controller of the paper, the default everywhere."""
+
+
+_diagnostics_jit = jax.jit(_diagnostics)
