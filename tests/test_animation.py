@@ -19,12 +19,35 @@ def test_animate_command_and_function(tmp_path, capsys):
     argv = ["animate", "--out", str(gif), "--robots", "3", "--seconds", "0.66"]
     assert main([*argv, "--controller", "aicardi"]) == 0
     assert str(gif) in capsys.readouterr().out
-    assert _frames(gif) == 11  # 0.66 s = 20 periods; every 2nd sample, 0 to 20
+    # 0.66 s = 20 periods; real time at 33 ms takes every 3rd sample (100 ms a frame).
+    assert _frames(gif) == 8  # samples 0, 3, ..., 18 and the last, 20
     assert [p.name for p in tmp_path.iterdir()] == ["robots.gif"]  # no temporary left
 
     # The same runs (3 random poses, seed 0, 20 periods) with 5 samples per frame.
     path = animate(tmp_path / "again.gif", n_robots=3, steps=20, stride=5, controller="aicardi")
     assert _frames(path) == 5  # samples 0, 5, 10, 15 and the last, 20
+
+
+def _delays_ms(path):
+    with Image.open(path) as image:
+        delays = []
+        for i in range(image.n_frames):
+            image.seek(i)
+            delays.append(image.info["duration"])
+    return delays
+
+
+@pytest.mark.parametrize(("dt", "speed"), [(0.033, 1.0), (0.01, 1.0), (0.033, 2.0)])
+def test_gif_plays_in_real_time(tmp_path, dt, speed):
+    """Each frame lasts the simulated time it spans (÷ speed), within 2 %."""
+    poses = np.zeros((2, 61, 3))
+    poses[:, :, 0] = np.linspace(0.0, 10.0, 61)
+    path = write_gif(tmp_path / "t.gif", poses, np.zeros((2, 3)), dt=dt, speed=speed)
+    delays = _delays_ms(path)
+    n = len(delays)
+    stride = 60 // (n - 1) if 60 % (n - 1) == 0 else 60 // (n - 2)
+    assert set(delays) == {delays[0]}
+    assert abs(delays[0] - 1000 * stride * dt / speed) <= 0.02 * 1000 * stride * dt / speed
 
 
 def test_write_gif_checks_shapes(tmp_path):
@@ -44,7 +67,7 @@ def test_write_gif_checks_shapes(tmp_path):
         (["--out", "a.gif", "--seed", "-1"], "--seed '-1'"),
         (["--out", "a.gif", "--seconds", "-1"], "--seconds '-1'"),
         (["--out", "a.gif", "--velocity", "warp"], "--velocity 'warp'"),
-        (["--out", "a.gif", "--fps", "0"], "--fps '0'"),
+        (["--out", "a.gif", "--speed", "0"], "--speed '0'"),
     ],
 )
 def test_animate_command_bad_values(tmp_path, monkeypatch, capsys, argv, message):

@@ -38,14 +38,15 @@ def test_streamed_metrics_equal_rollouts_and_metrics(controller, params):
     assert m.success.mean() == 1.0
 
 
-def test_float32_shows_the_baselines_singular_goal():
-    # In float32 the polar laws lose their heading once ρ reaches the rounding
-    # of the positions: the reason the maps compute in float64.
+def test_baselines_hold_their_goal_in_float32_too():
+    # Once ρ is down to the rounding of the positions the polar laws' bearing
+    # is noise; holding the goal within 1e-3 cm (docs/model.md §3) keeps them
+    # arrived in float32 as in float64, with the same arrival times.
     params = AicardiGains(backward=True)
     m64 = evaluate_poses(REFS, params, controller="aicardi", chunk=16)
     m32 = evaluate_poses(REFS, params, controller="aicardi", chunk=16, x64=False)
-    assert m64.success.all()
-    assert m32.success.mean() < 1.0
+    assert m64.success.all() and m32.success.all()
+    np.testing.assert_allclose(m32.arrival, m64.arrival, atol=0.034)  # a sample at most
 
 
 def test_pose_grid_covers_the_evaluation_annulus():

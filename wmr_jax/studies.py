@@ -11,10 +11,12 @@ from wmr_jax._src.bench import CASES as CASES
 from wmr_jax._src.bench import BenchConfig as BenchConfig
 from wmr_jax._src.bench import numpy_final_poses as numpy_final_poses
 from wmr_jax._src.bench import run_benchmark as run_benchmark
+from wmr_jax._src.maps import COMPARISON_RUNS as COMPARISON_RUNS
 from wmr_jax._src.maps import DEFAULT_HEADINGS_DEG as DEFAULT_HEADINGS_DEG
 from wmr_jax._src.maps import MapStudy as MapStudy
 from wmr_jax._src.maps import PoseGrid as PoseGrid
 from wmr_jax._src.maps import PoseMetrics as PoseMetrics
+from wmr_jax._src.maps import compare_controllers as compare_controllers
 from wmr_jax._src.maps import evaluate_poses as evaluate_poses
 from wmr_jax._src.maps import map_study as map_study
 from wmr_jax._src.maps import pose_grid as pose_grid

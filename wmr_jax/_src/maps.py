@@ -32,10 +32,12 @@ from wmr_jax._src.rollout import DEFAULT_DT
 from wmr_jax._src.sweep import sweep
 
 __all__ = [
+    "COMPARISON_RUNS",
     "DEFAULT_HEADINGS_DEG",
     "MapStudy",
     "PoseGrid",
     "PoseMetrics",
+    "compare_controllers",
     "evaluate_poses",
     "map_study",
     "pose_grid",
@@ -351,3 +353,83 @@ def map_study(
         "rows": summarize(results, v_max=float(Robot().v_max)),
     }
     return MapStudy(grid, results, summary)
+
+
+# ---------------------------------------------------------------- random-pose comparison
+
+
+def _comparison_runs() -> dict[str, tuple[str, Any]]:
+    """Label -> (controller name, parameters): each baseline also with its other driving mode."""
+    from wmr_jax._src.controllers.aicardi import AicardiGains
+    from wmr_jax._src.controllers.astolfi import AstolfiGains
+
+    return {
+        "shim-sung": ("shim-sung", None),
+        "aicardi": ("aicardi", None),
+        "aicardi, backward allowed": ("aicardi", AicardiGains(backward=True)),
+        "astolfi-corke": ("astolfi-corke", None),
+        "astolfi-corke, forward only": ("astolfi-corke", AstolfiGains(backward=False)),
+    }
+
+
+COMPARISON_RUNS = tuple(_comparison_runs())
+
+
+def compare_controllers(
+    n_poses: int = 200_000,
+    *,
+    seed: int = 0,
+    velocity: str = "ideal",
+    chunk: int = DEFAULT_CHUNK,
+    progress: bool = False,
+    x64: bool = True,
+) -> dict[str, Any]:
+    """Compare every controller over the same random docs/model.md §6 poses.
+
+    The poses are ``wmr_jax.sample_poses(seed, n_poses)`` (distance 5–80 cm,
+    any bearing and heading, from ``(0, 0, 0)``), unlike ``map_study``'s
+    grid, so the two report different means. Each controller runs with its
+    published defaults, and the baselines also with their other driving mode
+    (``COMPARISON_RUNS``).
+
+    Args:
+        n_poses: number of random reference poses.
+        seed: seed of ``sample_poses``.
+        velocity: ``"ideal"`` or ``"nonideal"``.
+        chunk: poses per compiled call.
+        progress: show a progress bar per controller.
+        x64: compute in float64 (see ``evaluate_poses``).
+
+    Returns:
+        A JSON-ready dict: ``poses``, ``seed``, ``velocity``, ``dtype``,
+        ``horizon_s``, ``dt_s`` and ``rows`` (``summarize``, one per run).
+
+    Raises:
+        ValueError: for a bad count, seed or option.
+    """
+    from wmr_jax._src.poses import sample_poses
+
+    n_poses = checks.check_int("n_poses", n_poses)
+    seed = checks.check_int("seed", seed, minimum=0)
+    refs = np.asarray(sample_poses(seed, n_poses), dtype=float)
+    results = {
+        label: evaluate_poses(
+            refs,
+            params,
+            controller=name,
+            velocity=velocity,
+            chunk=chunk,
+            progress=progress,
+            x64=x64,
+        )
+        for label, (name, params) in _comparison_runs().items()
+    }
+    return {
+        "poses": n_poses,
+        "seed": seed,
+        "velocity": velocity,
+        "dtype": "float64" if x64 else "float32",
+        "horizon_s": HORIZON_S,
+        "dt_s": DEFAULT_DT,
+        "rows": summarize(results, v_max=float(Robot().v_max)),
+    }

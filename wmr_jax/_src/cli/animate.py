@@ -34,7 +34,11 @@ def _flags() -> dict[str, dict[str, Any]]:
         },
         "--velocity": {"default": "ideal", "help": "velocity loop: ideal or nonideal"},
         "--seconds": {"default": 4.0, "metavar": "S", "help": "simulated time, s"},
-        "--fps": {"default": 15, "metavar": "N", "help": "frames per second"},
+        "--speed": {
+            "default": 1.0,
+            "metavar": "X",
+            "help": "playback speed, 1 = real time (each frame lasts its simulated time)",
+        },
     }
 
 
@@ -58,7 +62,9 @@ def run(args: Any) -> int:
     robots = flags.positive_int("--robots", args.robots)
     seed = flags.positive_int("--seed", args.seed, 0, 2**32 - 1)
     seconds = flags.number("--seconds", args.seconds, low=0.0, closed=False, unit="s")
-    fps = flags.positive_int("--fps", args.fps)
+    speed = flags.number(
+        "--speed", args.speed, low=0.0, closed=False, high=100.0, unit="× real time"
+    )
     path = animate(
         out,
         paper_refs() if args.paper else None,
@@ -67,7 +73,7 @@ def run(args: Any) -> int:
         controller=name,
         velocity=velocity,
         steps=max(1, horizon_steps(DEFAULT_DT, seconds)),
-        fps=fps,
+        speed=speed,
     )
     print(f"animation -> {path}")
     return 0

@@ -24,6 +24,7 @@ COMMANDS = {
     "paper": "paper",
     "tune": "tune",
     "sweep": "sweep",
+    "compare": "compare",
     "waypoints": "waypoints",
     "robustness": "robustness",
     "animate": "animate",
@@ -32,7 +33,19 @@ COMMANDS = {
 
 # Sweep-like commands spread their batches over every local device; on a CPU
 # that means splitting it into several JAX devices first (wmr_jax.use_cpu_devices).
-_ALL_DEVICE_COMMANDS = ("sweep", "bench")
+_ALL_DEVICE_COMMANDS = ("sweep", "compare", "bench")
+
+
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Show every default that is a value; mark required flags; leave switches alone."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if action.required:
+            return text + " (required)"
+        if action.default in (None, False, argparse.SUPPRESS) or "%(default)" in text:
+            return text
+        return super()._get_help_string(action)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -47,7 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="wmr-jax",
         description="Differentiable, batched simulator of the Shim–Sung (2003) pose controller.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=_HelpFormatter,
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, module_name in COMMANDS.items():
@@ -57,7 +70,7 @@ def build_parser() -> argparse.ArgumentParser:
             name,
             help=spec["help"],
             description=spec["help"],
-            formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+            formatter_class=_HelpFormatter,
         )
         spec["add_arguments"](command)
         command.set_defaults(func=spec["run"])

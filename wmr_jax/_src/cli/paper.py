@@ -27,7 +27,7 @@ def _summary_line(case: str, s: dict[str, Any]) -> str:
 def run_paper(args: Any) -> int:
     """Run ``wmr-jax paper``: simulate, write the figures and table, print the summary."""
     from wmr_jax._src import paper
-    from wmr_jax._src.report.paper import save_paper
+    from wmr_jax._src.report.paper import paper_summary_table, save_paper
 
     out = flags.output_dir("--out", args.out)
     runs = paper.paper_runs()
@@ -35,6 +35,8 @@ def run_paper(args: Any) -> int:
     print(f"Figs. 6-10, wheel speeds and the table -> {out}/")
     for kr in paper.PAPER_KR:
         print(_summary_line(f"kr={kr:g}", runs.summary[f"kr={kr:g}"]))
+    print("\nMeans over the seven references (the README's table):\n")
+    print(paper_summary_table(runs.summary, float(runs.robot.v_max)), end="")
     return 0
 
 

@@ -1,9 +1,11 @@
 """``wmr-jax sweep``: map success, arrival, path, wheel speed and zig-zag over a pose space.
 
 Runs ``wmr_jax.studies.map_study`` on a grid of reference poses for every
-controller asked for, then writes ``maps_<controller>.png``, ``winner.png``,
-``summary.md`` and ``summary.json`` into ``--out``
-(``wmr_jax.report.save_map_study``) and prints the summary table.
+controller asked for (a square grid inside the 5–80 cm annulus at a few
+headings: its means differ from ``wmr-jax compare``'s random poses), then
+writes ``maps_<controller>.png``, ``winner.png``, ``summary.md`` and
+``summary.json`` into ``--out`` (``wmr_jax.report.save_map_study``) and
+prints the summary table.
 """
 
 from __future__ import annotations
@@ -65,8 +67,7 @@ def add_arguments(parser: Any) -> None:
 def run(args: Any) -> int:
     """Run ``wmr-jax sweep``; return the exit status."""
     from wmr_jax._src.maps import map_study
-    from wmr_jax._src.report.maps import save_map_study
-    from wmr_jax._src.report.tables import markdown_table
+    from wmr_jax._src.report.maps import comparison_table, save_map_study
 
     out = flags.output_dir("--out", args.out)
     n_poses = flags.positive_int("--poses", args.poses)
@@ -86,7 +87,7 @@ def run(args: Any) -> int:
     )
     save_map_study(out, study)
     print(f"{study.summary['poses']} poses -> {out}/maps_*.png, summary.md, summary.json")
-    print(markdown_table(study.rows), end="")
+    print(comparison_table(study.rows), end="")
     return 0
 
 

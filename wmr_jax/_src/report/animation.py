@@ -29,7 +29,7 @@ from wmr_jax._src.poses import horizon_steps, sample_poses
 from wmr_jax._src.report.figures import plt
 from wmr_jax._src.rollout import DEFAULT_DT
 
-__all__ = ["animate", "write_gif"]
+__all__ = ["animate", "frame_timing", "write_gif"]
 
 
 def _pitch(poses: np.ndarray, refs: np.ndarray, title: str, arrow: float) -> tuple[Any, Any]:
@@ -43,7 +43,7 @@ def _pitch(poses: np.ndarray, refs: np.ndarray, title: str, arrow: float) -> tup
     ax.grid(alpha=0.3)
     ax.set_xlabel("x [cm]")
     ax.set_ylabel("y [cm]")
-    ax.set_title(title, fontsize=9)
+    ax.set_title(title, fontsize=9, pad=16)
     ends = arrow * np.stack([np.cos(refs[:, 2]), np.sin(refs[:, 2])])
     ax.quiver(*refs[:, :2].T, *ends, angles="xy", scale_units="xy", scale=1, color="k", width=0.004)
     return fig, ax
@@ -57,7 +57,35 @@ def _frames(samples: int, stride: int) -> list[int]:
     return frames
 
 
-def _save(anim: Any, fig: Any, path: str | os.PathLike, fps: int) -> Path:
+def frame_timing(dt: float, stride: int | None = None, speed: float = 1.0) -> tuple[int, int]:
+    """Return ``(stride, frame_ms)``: samples per frame and the GIF's delay per frame, ms.
+
+    A GIF stores each frame's delay in whole hundredths of a second (and
+    browsers play delays under 20 ms at 100 ms), so the delay cannot be any
+    ``stride · dt``: with ``stride=None`` the smallest stride whose delay is
+    within 2 % of ``stride · dt / speed`` is chosen (3 samples, 100 ms at
+    ``dt = 0.033 s``: 1 % slow). A given ``stride`` gets the nearest delay.
+
+    Args:
+        dt: control period, s.
+        stride: samples per frame; ``None`` picks one as above.
+        speed: playback speed, 1 for real time.
+
+    Raises:
+        ValueError: for a non-positive ``dt``, ``stride`` or ``speed``.
+    """
+    dt = checks.check_dt(dt)
+    speed = checks.check_number("speed", speed, unit="× real time")
+    candidates = range(1, 10_000) if stride is None else [checks.check_int("stride", stride)]
+    for k in candidates:
+        want_ms = 1000.0 * k * dt / speed
+        delay_ms = 10 * max(2, round(want_ms / 10))
+        if stride is not None or abs(delay_ms - want_ms) <= 0.02 * want_ms:
+            return k, delay_ms
+    raise ValueError(f"no frame stride plays dt = {dt} s at speed {speed} within 2 %")
+
+
+def _save(anim: Any, fig: Any, path: str | os.PathLike, frame_ms: int) -> Path:
     """Encode the animation into a temporary file, then atomically replace ``path``."""
     from wmr_jax._src.report.figures import mpl_animation
 
@@ -65,7 +93,8 @@ def _save(anim: Any, fig: Any, path: str | os.PathLike, fps: int) -> Path:
     target.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=target.parent, prefix=f".{target.name}.") as tmp:
         tmp_path = Path(tmp) / "frames.gif"
-        anim.save(tmp_path, writer=mpl_animation.PillowWriter(fps=fps))
+        # PillowWriter gives Pillow a delay of int(1000 / fps) ms per frame.
+        anim.save(tmp_path, writer=mpl_animation.PillowWriter(fps=1000.0 / frame_ms))
         plt.close(fig)
         atomic_write_bytes(target, tmp_path.read_bytes())
     return target
@@ -78,8 +107,8 @@ def write_gif(
     *,
     dt: float = DEFAULT_DT,
     title: str = "",
-    fps: int = 15,
-    stride: int = 2,
+    speed: float = 1.0,
+    stride: int | None = None,
     trail: int = 30,
     body_radius: float = 2.5,
     tol_r: float = metrics.DEFAULT_TOL_R,
@@ -93,8 +122,9 @@ def write_gif(
         refs: ``(N, 3)`` their references.
         dt: control period of the samples, s (for the clock).
         title: text above the pitch.
-        fps: frames per second of the GIF.
-        stride: samples per frame (2 at 33 ms and 15 fps is real time).
+        speed: playback speed, 1 (default) for real time: each frame shows
+            for ``stride · dt / speed`` to within 2 % (``frame_timing``).
+        stride: samples per frame; default the smallest that plays at ``speed``.
         trail: samples of path drawn behind each robot.
         body_radius: drawn radius of each robot, cm.
         tol_r: arrival distance for the reference marker, cm.
@@ -104,7 +134,7 @@ def write_gif(
         The path written.
 
     Raises:
-        ValueError: for misshapen poses or references, or a bad ``fps``/``stride``.
+        ValueError: for misshapen poses or references, or a bad ``speed``/``stride``.
     """
     from wmr_jax._src.report.figures import mpl_animation
 
@@ -115,7 +145,7 @@ def write_gif(
             f"poses has shape {poses.shape} and refs {refs.shape}; "
             "allowed: poses (N, steps + 1, 3) with refs (N, 3)"
         )
-    fps, stride = checks.check_int("fps", fps), checks.check_int("stride", stride)
+    stride, frame_ms = frame_timing(dt, stride, speed)
     n, samples, _ = poses.shape
     arrived = np.asarray(metrics.arrived(poses, refs[:, None, :], tol_r=tol_r, tol_theta=tol_theta))
     colours = [plt.get_cmap("tab10")(i % 10) for i in range(n)]
@@ -126,7 +156,8 @@ def write_gif(
     for body in bodies:
         ax.add_patch(body)
     ticks = [ax.plot([], [], "k-", lw=1.4, zorder=5)[0] for _ in range(n)]
-    clock = ax.text(0.02, 0.97, "", transform=ax.transAxes, va="top", fontsize=9)
+    # Above the pitch, where no robot can cover it.
+    clock = ax.text(0.0, 1.01, "", transform=ax.transAxes, va="bottom", fontsize=9)
 
     def draw(k: int):
         for i in range(n):
@@ -139,12 +170,14 @@ def write_gif(
             trails[i].set_data(poses[i, start : k + 1, 0], poses[i, start : k + 1, 1])
         done = arrived[:, k]
         markers.set_color(["tab:green" if d else "k" for d in done])
-        clock.set_text(f"t = {k * dt:.2f} s   arrived {int(done.sum())}/{n}")
+        clock.set_text(
+            f"t = {k * dt:.2f} s (real time × {speed:g})   arrived {int(done.sum())}/{n}"
+        )
         return [*bodies, *ticks, *trails, markers, clock]
 
     frames = _frames(samples, stride)
     anim = mpl_animation.FuncAnimation(fig, draw, frames=frames, blit=False)
-    return _save(anim, fig, path, fps)
+    return _save(anim, fig, path, frame_ms)
 
 
 def animate(
@@ -160,8 +193,8 @@ def animate(
     steps: int | None = None,
     robot: Robot | None = None,
     velocity: str = "ideal",
-    fps: int = 15,
-    stride: int = 2,
+    speed: float = 1.0,
+    stride: int | None = None,
 ) -> Path:
     """Simulate a batch of robots and write the GIF of them driving to their poses.
 
@@ -181,8 +214,8 @@ def animate(
         steps: control periods; default the docs/model.md §6 horizon (6 s).
         robot: robot parameters; default ``Robot()``.
         velocity: ``"ideal"`` or ``"nonideal"``.
-        fps: frames per second.
-        stride: samples per frame.
+        speed: playback speed, 1 for real time (see ``write_gif``).
+        stride: samples per frame; default the smallest that plays at ``speed``.
 
     Returns:
         The path written.
@@ -192,8 +225,7 @@ def animate(
     """
     if refs is None:
         refs = np.asarray(sample_poses(seed, checks.check_int("n_robots", n_robots)), dtype=float)
-    checks.check_int("fps", fps)
-    checks.check_int("stride", stride)
+    frame_timing(dt, stride, speed)  # bad values fail before anything runs
     steps = horizon_steps(dt) if steps is None else steps
     name = controllers.get_controller(controller).name
     with jax.enable_x64(True):
@@ -216,6 +248,6 @@ def animate(
         refs,
         dt=dt,
         title=f"{name}, {velocity} loop: {len(refs)} robots from (0, 0, 0°)",
-        fps=fps,
+        speed=speed,
         stride=stride,
     )

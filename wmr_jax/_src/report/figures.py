@@ -17,11 +17,13 @@ import matplotlib.animation as mpl_animation  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
 
 from wmr_jax._src.io import save_figure  # noqa: E402
 
 __all__ = [
     "ListedColormap",
+    "Patch",
     "mpl_animation",
     "path_figure",
     "plot_paths",
@@ -86,21 +88,48 @@ def plot_paths(
     if mark_refs:
         refs = np.asarray(refs)
         ax.plot(refs[:, 0], refs[:, 1], "kx", ms=8, mew=2, label="reference" if label else None)
+        tips = 2.5 * arrow_length * np.stack([np.cos(refs[:, 2]), np.sin(refs[:, 2])], axis=-1)
         ax.quiver(
-            refs[:, 0],
-            refs[:, 1],
-            2.5 * arrow_length * np.cos(refs[:, 2]),
-            2.5 * arrow_length * np.sin(refs[:, 2]),
+            *refs[:, :2].T,
+            *tips.T,
             angles="xy",
             scale_units="xy",
             scale=1,
             color="k",
             width=0.004,
         )
+        # quiver does not widen the data limits: take the arrow tips in, or they are clipped.
+        ax.update_datalim(refs[:, :2] + tips)
+        ax.autoscale_view()
+        _mark_backwards(ax, paths, refs)
     ax.set_aspect("equal")
     ax.set_xlabel("x [cm]")
     ax.set_ylabel("y [cm]")
     ax.grid(alpha=0.3)
+
+
+def _mark_backwards(ax: Any, paths: Sequence[np.ndarray], refs: np.ndarray) -> None:
+    """Circle the references reached facing backwards (``θ = θ_r ± 180°``, docs/model.md §6).
+
+    Folding makes front and back alike, so such runs count as arrived; the
+    circle tells them apart from the ones that end facing ``θ_r``.
+    """
+    from wmr_jax._src.metrics import DEFAULT_TOL_R
+
+    ends = np.asarray([np.asarray(p)[-1] for p in paths])
+    close = np.hypot(*(ends[:, :2] - refs[: len(ends), :2]).T) <= DEFAULT_TOL_R
+    turn = np.angle(np.exp(1j * (ends[:, 2] - refs[: len(ends), 2])))
+    back = close & (np.abs(turn) > np.pi / 2)
+    if back.any():
+        ax.plot(
+            *refs[: len(ends)][back, :2].T,
+            "o",
+            mfc="none",
+            mec="tab:purple",
+            ms=16,
+            mew=1.5,
+            label="arrived backwards (θ = θ_r ± 180°)",
+        )
 
 
 def plot_wheel_speeds(
@@ -118,7 +147,13 @@ def plot_wheel_speeds(
         ax.plot(t, wheel_speeds[:, j], linestyle, lw=1.2, label=name)
     if v_max is not None:
         for sign in (1, -1):
-            ax.axhline(sign * v_max, color="r", ls="--", lw=1)
+            ax.axhline(
+                sign * v_max,
+                color="r",
+                ls="--",
+                lw=1,
+                label=f"±V_max = ±{v_max:g} cm/s" if sign > 0 else None,
+            )
     ax.set_xlabel("t [s]")
     ax.set_ylabel("rim speed [cm/s]")
     ax.grid(alpha=0.3)

@@ -19,9 +19,9 @@ from wmr_jax._src.io import atomic_write_json, atomic_write_text, save_figure
 from wmr_jax._src.maps import MapStudy, PoseGrid, PoseMetrics
 from wmr_jax._src.params import Robot
 from wmr_jax._src.report.figures import plt
-from wmr_jax._src.report.tables import markdown_table
+from wmr_jax._src.report.tables import markdown_table, number, percent
 
-__all__ = ["map_figure", "save_map_study", "winner_figure"]
+__all__ = ["comparison_table", "map_figure", "save_comparison", "save_map_study", "winner_figure"]
 
 # metric (a PoseMetrics field, or "success"), colour-bar label, colour map
 _MAP_FIELDS = (
@@ -63,22 +63,105 @@ def _ranges(results: dict[str, PoseMetrics]) -> dict[str, tuple[float, float]]:
     return out
 
 
+def comparison_table(rows: list[dict[str, Any]]) -> str:
+    """The Markdown table of ``summarize`` rows that the README shows, success in percent.
+
+    Args:
+        rows: what ``wmr_jax.studies.summarize`` returned (or its JSON).
+
+    Returns:
+        One line per controller: success, mean / median / p90 arrival of the
+        successful runs, mean path, mean / largest peak wheel speed, share of
+        runs over V_max, mean zig-zag count and, where present, the share of
+        poses where it arrives strictly before the reference controller.
+    """
+    ahead = [k for k in rows[0] if k.startswith("faster than ")]
+    table = []
+    for r in rows:
+        row = {
+            "controller": r["controller"],
+            "success": percent(r["success"]),
+            "mean / median / p90 arrival (s)": " / ".join(
+                number(r[f"{k} arrival s"]) for k in ("mean", "median", "p90")
+            ),
+            "mean path (cm)": number(r["mean path cm"]),
+            "mean / max peak wheel (cm/s)": (
+                f"{r['mean peak wheel cm/s']:.0f} / {r['max peak wheel cm/s']:.0f}"
+            ),
+            "runs over V_max": percent(r["over V_max"]),
+            "mean zig-zag": number(r["mean zigzag"]),
+        }
+        for key in ahead:
+            row[f"arrives before {key.removeprefix('faster than ')}"] = percent(r[key])
+        table.append(row)
+    return markdown_table(table)
+
+
+def save_comparison(out_dir: str | Path, comparison: dict[str, Any]) -> list[Path]:
+    """Write ``comparison.md`` and ``comparison.json`` of ``wmr_jax.studies.compare_controllers``.
+
+    Args:
+        out_dir: output folder (created if needed).
+        comparison: what ``compare_controllers`` returned.
+
+    Returns:
+        The paths written.
+    """
+    out = Path(out_dir)
+    head = (
+        f"{comparison['poses']} random docs/model.md §6 poses (sample_poses seed "
+        f"{comparison['seed']}), {comparison['velocity']} loop, horizon "
+        f"{comparison['horizon_s']:g} s, {comparison['dtype']}\n\n"
+    )
+    return [
+        atomic_write_json(out / "comparison.json", comparison),
+        atomic_write_text(out / "comparison.md", head + comparison_table(comparison["rows"])),
+    ]
+
+
 def _describe(summary: dict[str, Any]) -> str:
     """The run in words, for the titles and the summary's first line."""
     what = (
-        f"{summary['poses']} poses, {summary['velocity']} loop, "
+        f"{summary['poses']:,} poses, {summary['velocity']} loop, "
         f"horizon {summary['horizon_s']:g} s, start (0, 0, 0°)"
     )
     return what + ("" if summary["dtype"] == "float64" else ", float32")
 
 
-def _decorate(ax: Any, grid: PoseGrid, *, ticks: bool) -> None:
-    """Mark the robot at the origin (facing +x); small tick labels, at ±80 cm with ``ticks``."""
+def _decorate(ax: Any, grid: PoseGrid, *, bottom: bool, left: bool) -> None:
+    """Mark the robot at the origin (facing +x); axis labels on the outer panels only."""
     ax.plot(0, 0, marker=(3, 0, -90), color="k", ms=6)
-    if ticks:
-        ax.set_xticks([-80, 0, 80] if grid.xs[-1] >= 80 else [])
-        ax.set_yticks([-80, 0, 80] if grid.xs[-1] >= 80 else [])
-    ax.tick_params(labelsize=7)
+    reach = float(grid.xs[-1])
+    ticks = [-80, 0, 80] if reach >= 80 else [round(-reach), 0, round(reach)]
+    ax.set_xticks(ticks)
+    ax.set_yticks(ticks)
+    ax.tick_params(labelsize=7, labelbottom=bottom, labelleft=left)
+    if bottom:
+        ax.set_xlabel("x_r [cm]", fontsize=8)
+    if left:
+        ax.set_ylabel("y_r [cm]", fontsize=8)
+
+
+# Side of the square cells over which the V_max contour is drawn, cm: the peak
+# wheel speed of neighbouring poses alternates across V_max in thin streaks
+# (sampled-time switching), so the contour follows the share of poses over
+# V_max per cell, not the poses themselves.
+_CONTOUR_CELL_CM = 8.0
+
+
+def _over_vmax_share(grid: PoseGrid, img: np.ndarray, v_max: float) -> tuple:
+    """Return cell centres ``(cx, cy)`` and the share of poses over ``v_max`` in each cell."""
+    step = float(grid.xs[1] - grid.xs[0]) if len(grid.xs) > 1 else 1.0
+    k = max(1, int(round(_CONTOUR_CELL_CM / step)))
+    n = len(grid.xs) // k * k
+    over = np.where(np.isfinite(img), img > v_max, np.nan)[:n, :n]
+    cells = over.reshape(n // k, k, n // k, k)
+    counted = np.isfinite(cells).sum(axis=(1, 3))
+    with np.errstate(invalid="ignore"):
+        share = np.nansum(cells, axis=(1, 3)) / counted
+    share[counted < k * k / 2] = np.nan  # cells mostly outside the annulus
+    centres = grid.xs[:n].reshape(-1, k).mean(axis=1)
+    return centres, centres, share
 
 
 def _heading_title(grid: PoseGrid, h: int) -> str:
@@ -104,8 +187,12 @@ def _draw_metric(ax, grid: PoseGrid, m: PoseMetrics, field: str, cmap, vrange, h
         overlay[failed == 1] = (0.85, 0.1, 0.1, 1.0)
         ax.imshow(overlay, origin="lower", extent=extent, interpolation="nearest")
     if field == "peak_wheel" and np.nanmax(img) > v_max:
-        ax.contour(grid.xs, grid.xs, np.nan_to_num(img), levels=[v_max], colors="w", linewidths=0.6)
-    _decorate(ax, grid, ticks=True)
+        cx, cy, share = _over_vmax_share(grid, img, v_max)
+        if np.nanmax(share) > 0.5:
+            with plt.rc_context({"hatch.color": "w", "hatch.linewidth": 0.6}):
+                ax.contourf(cx, cy, share, levels=[0.5, 1.01], colors="none", hatches=["////"])
+            if np.nanmin(share) < 0.5:
+                ax.contour(cx, cy, share, levels=[0.5], colors="w", linewidths=1.2)
     return image
 
 
@@ -133,9 +220,13 @@ def map_figure(
     """
     ranges = _ranges({"": m}) if ranges is None else ranges
     v_max = float(Robot().v_max) if v_max is None else float(v_max)
-    n_h = len(grid.headings)
+    n_h, n_rows = len(grid.headings), len(_MAP_FIELDS)
     fig, axes = plt.subplots(
-        len(_MAP_FIELDS), n_h, figsize=(2.6 * n_h + 1.2, 2.45 * len(_MAP_FIELDS)), squeeze=False
+        n_rows,
+        n_h,
+        figsize=(2.5 * n_h + 1.3, 2.4 * n_rows + 0.9),
+        squeeze=False,
+        layout="constrained",
     )
     for row, (field, label, cmap_name) in enumerate(_MAP_FIELDS):
         cmap = plt.get_cmap(cmap_name).with_extremes(bad=(1, 1, 1, 0))
@@ -143,13 +234,36 @@ def map_figure(
         for h in range(n_h):
             ax = axes[row, h]
             image = _draw_metric(ax, grid, m, field, cmap, ranges[field], h, v_max)
+            _decorate(ax, grid, bottom=row == n_rows - 1, left=h == 0)
             if row == 0:
                 ax.set_title(_heading_title(grid, h), fontsize=9)
         fig.colorbar(image, ax=axes[row, :].tolist(), shrink=0.85, pad=0.01).set_label(
             label, fontsize=8
         )
+    from wmr_jax._src.report.figures import Patch
+
+    legend = [
+        Patch(
+            facecolor="0.55",
+            edgecolor="w",
+            hatch="////",
+            label=f"peak wheel speed > V_max = {v_max:g} cm/s on most poses "
+            f"({_CONTOUR_CELL_CM:g} cm cells)",
+        ),
+        plt.Line2D([], [], marker="s", ls="", color=(0.85, 0.1, 0.1), label="not arrived"),
+        plt.Line2D([], [], marker=(3, 0, -90), ls="", color="k", label="robot at (0, 0, 0°)"),
+    ]
+    fig.legend(
+        handles=legend,
+        loc="outside lower center",
+        ncol=3,
+        fontsize=7,
+        facecolor="0.55",
+        labelcolor="k",
+        framealpha=1,
+    )
     fig.suptitle(title, fontsize=10)
-    save_figure(fig, path, dpi=100, bbox_inches="tight")
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
     return Path(path)
 
@@ -177,7 +291,7 @@ def winner_figure(
     colours = [plt.get_cmap("tab10")(i) for i in range(len(names))] + [(0.6, 0.6, 0.6, 1)]
     cmap = ListedColormap(colours).with_extremes(bad=(1, 1, 1, 0))
     n_h = len(grid.headings)
-    fig, axes = plt.subplots(1, n_h, figsize=(2.8 * n_h, 3.2), squeeze=False)
+    fig, axes = plt.subplots(1, n_h, figsize=(2.9 * n_h, 3.8), squeeze=False, layout="constrained")
     extent = (grid.xs[0], grid.xs[-1], grid.xs[0], grid.xs[-1])
     for h in range(n_h):
         ax = axes[0, h]
@@ -190,15 +304,14 @@ def winner_figure(
             vmax=len(names) + 0.5,
             interpolation="nearest",
         )
-        _decorate(ax, grid, ticks=False)
+        _decorate(ax, grid, bottom=True, left=h == 0)
         ax.set_title(_heading_title(grid, h), fontsize=9)
     handles = [
         plt.Line2D([], [], marker="s", ls="", color=c, label=lab)
         for c, lab in zip(colours, [*names, "none arrives"], strict=True)
     ]
-    fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8)
+    fig.legend(handles=handles, loc="outside lower center", ncol=len(handles), fontsize=8)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout(rect=(0, 0.08, 1, 1))
     save_figure(fig, path, dpi=100)
     plt.close(fig)
     return Path(path)
@@ -244,7 +357,7 @@ def save_map_study(out_dir: str | Path, study: MapStudy) -> list[Path]:
         atomic_write_text(
             out / "summary.md",
             f"Pose-space sweep: {what}; docs/model.md §6 metrics "
-            "(arrival statistics over the successful runs)\n\n" + markdown_table(study.rows),
+            "(arrival statistics over the successful runs)\n\n" + comparison_table(study.rows),
         )
     )
     return written

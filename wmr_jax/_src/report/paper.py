@@ -14,11 +14,12 @@ from typing import Any
 import numpy as np
 
 from wmr_jax._src.io import atomic_write_json, atomic_write_text, save_figure
+from wmr_jax._src.params import Gains
 from wmr_jax._src.report.figures import plot_paths, plot_wheel_speeds, plt
-from wmr_jax._src.report.tables import markdown_table
+from wmr_jax._src.report.tables import markdown_table, number, percent
 from wmr_jax._src.rollout import DEFAULT_DT
 
-__all__ = ["save_fig7", "save_paper"]
+__all__ = ["paper_summary_table", "save_fig7", "save_paper"]
 
 # k_r (cm/s) -> numbers of its figures: ideal paths, non-ideal paths, the two compared.
 _FIGURES = {120.0: (7, 8, 9), 60.0: (None, None, 10)}
@@ -35,8 +36,14 @@ _TABLE_COLUMNS = [
 ]
 
 
-def _fig6(path: Path, curve: dict[str, Any]) -> None:
-    """Fig. 6: the residual distance bound against ``Φ_m``, log scale, 70° marked."""
+def _fig6(path: Path, curve: dict[str, Any], r_e: float = 1.0) -> None:
+    """Fig. 6: the least ``R_e`` the proof covers against ``Φ_m``, log scale, 70° marked.
+
+    Args:
+        path: the image to write.
+        curve: ``wmr_jax.studies.fig6_curve()``.
+        r_e: the ``R_e`` in use, cm, drawn as a dashed line.
+    """
     fig, ax = plt.subplots(figsize=(6, 4))
     ax.semilogy(curve["phi_m_deg"], curve["bound_cm"])
     mark_deg, mark_cm = curve["mark_deg"], curve["mark_cm"]
@@ -47,18 +54,27 @@ def _fig6(path: Path, curve: dict[str, Any]) -> None:
         textcoords="offset points",
         xytext=(-110, 10),
     )
+    ax.axhline(r_e, color="0.4", ls="--", lw=1, label=f"default R_e = {r_e:g} cm (a choice)")
+    ax.legend(loc="lower right", fontsize=8)
     ax.set_xlabel("Φ_m [deg]")
-    ax.set_ylabel("residual distance bound [cm]")
-    # V of docs/model.md §3.6 adds r_e² in cm² to dimensionless terms: the
-    # bound's factor is the length unit, 1 cm; it does not scale with R_e.
+    ax.set_ylabel("least R_e = √(sin Φ_m tan Φ_m) [cm]")
+    # The paper's Fig. 6 is the "error range of R_e": V̇ ≤ 0 (docs/model.md §3.6)
+    # is proven only for r_e ≥ √(sin Φ_m tan Φ_m), so a Region 0 of radius R_e at
+    # least that large covers every distance the proof leaves out. V adds r_e² in
+    # cm² to dimensionless terms, so the bound is in cm and does not scale with R_e.
     ax.set_title(
-        "Fig. 6: residual error bound sqrt(sin Φ_m tan Φ_m) · 1 cm\n"
-        "(V̇ ≤ 0 is proven for r_e above it: the paper's error range for R_e)",
+        "Fig. 6: error range of R_e: R_e ≥ √(sin Φ_m tan Φ_m) cm\n"
+        "(V̇ ≤ 0 is proven only for r_e above the curve, docs/model.md §3.6)",
         fontsize=10,
     )
     ax.grid(alpha=0.3, which="both")
     save_figure(fig, path, dpi=120, bbox_inches="tight")
     plt.close(fig)
+
+
+def _legend_below(ax: Any) -> None:
+    """The legend under the axes, where it covers no path."""
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8)
 
 
 def _paths_figure(path: Path, title: str, refs: np.ndarray, runs: list[tuple]) -> None:
@@ -76,7 +92,7 @@ def _paths_figure(path: Path, title: str, refs: np.ndarray, runs: list[tuple]) -
         )
     ax.plot([0], [0], "ko", ms=5)
     ax.set_title(title, fontsize=10)
-    ax.legend(loc="lower left", fontsize=8)
+    _legend_below(ax)
     save_figure(fig, path, dpi=120, bbox_inches="tight")
     plt.close(fig)
 
@@ -108,7 +124,11 @@ def _wheels_figure(path: Path, title: str, refs: np.ndarray, case: Any, v_max: f
         ax.set_title(f"ref ({x:g}, {y:g}, {math.degrees(th):g}°)", fontsize=9)
         if i:
             ax.set_ylabel("")
-    axes.flat[0].legend(fontsize=6, loc="lower right")
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    if n < axes.size:  # one shared legend, readable, in the first empty panel
+        axes.flat[n].legend(handles, labels, loc="center", fontsize=9, title="rim speed")
+    else:
+        fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=9)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     save_figure(fig, path, dpi=110)
@@ -128,12 +148,52 @@ def _case_figures(out_dir: Path, refs: np.ndarray, case: Any, v_max: float) -> N
         (fig_nonideal, f"non-ideal loop, wheels ≤ {v_max:g} cm/s, k_r = {kr:g}", [nonideal]),
         (fig_compare, f"ideal (dashed) vs non-ideal (solid), k_r = {kr:g}\n{cond}", both),
     )
-    for number, title, runs in figures:
-        if number is not None:
-            _paths_figure(out_dir / f"fig{number}.png", f"Fig. {number}: {title}", refs, runs)
+    for fig_number, title, runs in figures:
+        if fig_number is not None:
+            path = out_dir / f"fig{fig_number}.png"
+            _paths_figure(path, f"Fig. {fig_number}: {title}", refs, runs)
     _wheels_figure(
         out_dir / f"wheels_k{kr:g}.png", f"Rim speeds, k_r = {kr:g} ({cond})", refs, case, v_max
     )
+
+
+def paper_summary_table(summary: dict[str, Any], v_max: float) -> str:
+    """The README's table of the paper runs: one line per gain, means over the references.
+
+    Args:
+        summary: ``PaperRuns.summary`` (or ``paper_table.json``'s ``"summary"``).
+        v_max: the wheel-speed limit, cm/s.
+
+    Returns:
+        Markdown: ``k_r``, ``k_r + L k_θ``, the condition, the ideal vs
+        non-ideal path gap (max / mean), arrival, zig-zag count and the share
+        of samples with a wheel command over ``v_max``, ideal / non-ideal.
+    """
+    rows = []
+    for case, s in summary.items():
+        if not case.startswith("kr="):
+            continue
+        rows.append(
+            {
+                "k_r": case.removeprefix("kr="),
+                "k_r + L k_θ (cm/s)": f"{s['k_r + L k_theta']:g}",
+                "condition": s["condition"],
+                "ideal vs non-ideal path gap, max / mean (cm)": (
+                    f"{number(s['max_deviation_cm'])} / {number(s['mean_deviation_cm'])}"
+                ),
+                "arrival ideal / non-ideal (s)": (
+                    f"{number(s['ideal_arrival_s'])} / {number(s['nonideal_arrival_s'])}"
+                ),
+                "zig-zag ideal / non-ideal": (
+                    f"{number(s['ideal_zigzag'])} / {number(s['nonideal_zigzag'])}"
+                ),
+                f"samples with a wheel command > {v_max:g} cm/s": (
+                    f"{percent(s['ideal_saturated_fraction'])} / "
+                    f"{percent(s['nonideal_saturated_fraction'])}"
+                ),
+            }
+        )
+    return markdown_table(rows)
 
 
 def save_paper(out_dir: str | Path, runs: Any) -> dict[str, Any]:
@@ -153,13 +213,14 @@ def save_paper(out_dir: str | Path, runs: Any) -> dict[str, Any]:
         The table as written to ``paper_table.json``.
     """
     out_dir = Path(out_dir)
-    _fig6(out_dir / "fig6.png", runs.fig6)
+    _fig6(out_dir / "fig6.png", runs.fig6, float(Gains().r_e))
     v_max = float(runs.robot.v_max)
     for case in runs.cases:
         _case_figures(out_dir, runs.refs, case, v_max)
     text = "# Paper runs (docs/model.md §5): seven references, two gains, two velocity loops\n\n"
     text += markdown_table(runs.runs, _TABLE_COLUMNS)
     text += "\n## Summary per gain (means over the seven references)\n\n"
+    text += paper_summary_table(runs.summary, v_max) + "\n"
     summary = [{"case": k, **v} for k, v in runs.summary.items() if k.startswith("kr=")]
     text += markdown_table(summary)
     atomic_write_text(out_dir / "paper_table.md", text)
@@ -179,7 +240,7 @@ def save_fig7(out_dir: str | Path, fig7: Any) -> None:
         f"Fig. 7: ideal velocity loop, k_r = {float(gains.kr):g}, k_θ = {float(gains.k_theta):g}, "
         f"Φ_m = {math.degrees(float(gains.phi_m)):g}°"
     )
-    ax.legend(loc="lower left", fontsize=8)
+    _legend_below(ax)
     save_figure(fig, out_dir / "fig7.png", dpi=120, bbox_inches="tight")
     plt.close(fig)
     atomic_write_text(out_dir / "fig7.md", markdown_table(fig7.rows))

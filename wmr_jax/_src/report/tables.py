@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-__all__ = ["markdown_table"]
+__all__ = ["markdown_table", "number", "percent"]
 
 
 def markdown_table(rows: list[dict[str, Any]], columns: list[str] | None = None) -> str:
@@ -24,3 +24,14 @@ def markdown_table(rows: list[dict[str, Any]], columns: list[str] | None = None)
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     lines += ["| " + " | ".join(fmt(row[c]) for c in columns) + " |" for row in rows]
     return "\n".join(lines) + "\n"
+
+
+def number(value: float) -> str:
+    """A float with three significant digits, as every table prints it (``inf`` for no value)."""
+    return "inf" if math.isinf(value) else f"{value:.3g}"
+
+
+def percent(fraction: float) -> str:
+    """A fraction in ``[0, 1]`` as a percentage with three significant digits (``'99.9 %'``)."""
+    value = 100.0 * float(fraction)
+    return f"{value:.0f} %" if value in (0.0, 100.0) else f"{value:.3g} %"

@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# Regenerate every table and figure of README.md (and of the docs/ pages).
+#
+#   experiments/reproduce_readme.sh [OUT] [STAGE ...]
+#
+# OUT (default results/readme) receives every command's output; the figures
+# the README shows are then copied to docs/*.png and the results the README
+# quotes to docs/data/*.json, which tests/test_readme.py holds the README's
+# tables against. STAGE is any of: paper compare maps waypoints animate
+# robustness tune bench (default: all, about 10 minutes on 2 CPU cores).
+# Every command is seeded (the seed is its default unless named here), so a
+# rerun prints the same tables; bench timings are the exception.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+OUT=${1:-results/readme}
+shift || true
+STAGES=${*:-paper compare maps waypoints animate robustness tune bench}
+mkdir -p "$OUT" docs/data
+
+for stage in $STAGES; do
+  echo "== $stage" >&2
+  case $stage in
+    paper)  # Figs. 6-10, wheel speeds, the paper table (deterministic: no random poses)
+      wmr-jax demo --out "$OUT/paper"
+      for fig in fig6 fig7 fig8 fig9 fig10 wheels_k120; do cp "$OUT/paper/$fig.png" docs/; done
+      cp "$OUT/paper/paper_table.json" docs/data/paper_table.json ;;
+    compare)  # the controller table: 200,000 random poses, sample_poses seed 0
+      wmr-jax compare --out "$OUT/compare" --poses 200000 --seed 0 --no-progress
+      cp "$OUT/compare/comparison.json" docs/data/comparison.json ;;
+    maps)  # the grid maps: 1000 x 1000 positions x 4 headings, 995,200 inside 5-80 cm
+      wmr-jax sweep --out "$OUT/maps" --poses 1000000 --no-progress \
+        --controller shim-sung aicardi astolfi-corke
+      cp "$OUT/maps/maps_shim-sung.png" "$OUT/maps/winner.png" docs/
+      cp "$OUT/maps/summary.json" docs/data/maps_summary.json ;;
+    waypoints)
+      wmr-jax waypoints --out "$OUT/waypoints"
+      cp "$OUT/waypoints/soccer.png" docs/
+      cp "$OUT/waypoints/soccer.json" docs/data/soccer.json ;;
+    animate)  # real-time GIF of the paper's seven references
+      wmr-jax animate --out "$OUT/robots.gif" --paper --seconds 2.5
+      cp "$OUT/robots.gif" docs/robots.gif ;;
+    # The commands below are those of their owners' sections; seeds are their defaults.
+    robustness)
+      wmr-jax robustness --out "$OUT/robustness" --runs 512 ;;
+    tune)
+      wmr-jax tune --out "$OUT/tune"
+      wmr-jax tune --out "$OUT/tune-ni" --velocity nonideal
+      cp "$OUT/tune/tuning_curve.png" docs/ ;;
+    bench)
+      wmr-jax bench --json "$OUT/bench.json" ;;
+    *) echo "unknown stage $stage" >&2; exit 2 ;;
+  esac
+done

@@ -1,0 +1,68 @@
+"""``wmr-jax compare``: every controller over the same random docs/model.md §6 poses.
+
+Runs ``wmr_jax.studies.compare_controllers`` (``sample_poses(--seed,
+--poses)``; Shim–Sung with the paper's gains, each baseline with its
+published gains and also with its other driving mode), writes
+``comparison.md`` and ``comparison.json`` into ``--out`` and prints the table
+the README shows. ``wmr-jax sweep`` is the grid map, not these random poses.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from wmr_jax._src.cli import flags
+
+__all__ = ["SUBCOMMANDS"]
+
+
+def add_arguments(parser: Any) -> None:
+    """Add the flags of ``wmr-jax compare``."""
+    from wmr_jax._src.maps import COMPARISON_RUNS, DEFAULT_CHUNK
+
+    parser.description = (
+        "Compare the controllers over random docs/model.md §6 poses (not the grid of "
+        "`wmr-jax sweep`); the runs, each with its published gains: " + "; ".join(COMPARISON_RUNS)
+    )
+    parser.add_argument("--out", default="results/compare", metavar="DIR", help="output folder")
+    parser.add_argument("--poses", default=200_000, metavar="N", help="random reference poses")
+    parser.add_argument("--seed", default=0, metavar="S", help="seed of wmr_jax.sample_poses")
+    parser.add_argument("--velocity", default="ideal", help="velocity loop: ideal or nonideal")
+    parser.add_argument("--chunk", default=DEFAULT_CHUNK, metavar="N", help="poses per call")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument(
+        "--float32",
+        action="store_true",
+        help="compute in float32 (default float64; the polar baselines need it, see README)",
+    )
+
+
+def run(args: Any) -> int:
+    """Run ``wmr-jax compare``; return the exit status."""
+    from wmr_jax._src.maps import compare_controllers
+    from wmr_jax._src.report.maps import comparison_table, save_comparison
+
+    out = flags.output_dir("--out", args.out)
+    comparison = compare_controllers(
+        flags.positive_int("--poses", args.poses),
+        seed=flags.positive_int("--seed", args.seed, 0, 2**32 - 1),
+        velocity=flags.velocity_loop(args.velocity),
+        chunk=flags.positive_int("--chunk", args.chunk),
+        progress=not args.no_progress,
+        x64=not args.float32,
+    )
+    save_comparison(out, comparison)
+    print(
+        f"{comparison['poses']:,} random poses (seed {comparison['seed']}) -> {out}/comparison.md"
+    )
+    print(comparison_table(comparison["rows"]), end="")
+    return 0
+
+
+SUBCOMMANDS = {
+    "compare": {
+        "help": "compare the controllers over random poses (the README's comparison table)",
+        "add_arguments": add_arguments,
+        "run": run,
+    },
+}
