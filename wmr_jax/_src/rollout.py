@@ -222,7 +222,7 @@ def prepare(refs, params, init, robot, dt, options: Options, *, batch: bool | No
     return refs, params, init, robot, jnp.asarray(dt, dtype=float_dtype())
 
 
-def finite_result(poses: Any, result: Any) -> Any:
+def finite_result(poses: Any, result: Any, *, pose_axes: int = 1) -> Any:
     """Return ``result``, or raise if a pose of the run left the floating-point range.
 
     The inputs passed their checks, but some gains or periods drive the robot
@@ -232,9 +232,9 @@ def finite_result(poses: Any, result: Any) -> Any:
     """
     if is_traced(poses):
         return result
-    finite = np.asarray(jnp.isfinite(poses).all(axis=-1))
-    while finite.ndim > 1:
-        finite = finite.all(axis=-1)
+    # One flag per run: the trailing axes (the pose, and the time axis of a
+    # trajectory) are reduced, the leading batch axes kept.
+    finite = np.asarray(jnp.isfinite(poses).all(axis=tuple(range(-pose_axes, 0))))
     if not finite.all():
         bad = np.flatnonzero(~finite.reshape(-1))
         where = "the run" if finite.ndim == 0 else f"{bad.size} run(s), e.g. run {int(bad[0])},"
@@ -302,7 +302,7 @@ def rollout(
     options = make_options(**_static_options(locals()))
     args = prepare(ref, gains, init, robot, dt, options, batch=False)
     traj = _rollout_jit(*args, options=options)
-    return finite_result(traj.poses, traj)
+    return finite_result(traj.poses, traj, pose_axes=2)
 
 
 def batch_rollout(
@@ -336,7 +336,7 @@ def batch_rollout(
     options = make_options(**_static_options(locals()))
     args = prepare(refs, gains, init, robot, dt, options, batch=None)
     traj = _batch_rollout_jit(*args, options=options)
-    return finite_result(traj.poses, traj)
+    return finite_result(traj.poses, traj, pose_axes=2)
 
 
 def final_poses(
