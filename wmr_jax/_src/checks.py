@@ -305,6 +305,8 @@ def as_pose_array(name: str, value: Any) -> Any:
         ) from None
     if arr.ndim == 0 or arr.shape[-1] != 3:
         raise ValueError(f"{name} has shape {arr.shape}; allowed: (..., 3) [x cm, y cm, theta rad]")
+    if arr.ndim == 1:
+        return as_poses(name, arr, batch=False)
     flat = arr.reshape(-1, 3)
     poses = as_poses(name, flat, batch=True) if flat.size else jnp.asarray(flat, float_dtype())
     return poses.reshape(arr.shape)
