@@ -239,9 +239,10 @@ def finite_result(poses: Any, result: Any, *, pose_axes: int = 1) -> Any:
         bad = np.flatnonzero(~finite.reshape(-1))
         where = "the run" if finite.ndim == 0 else f"{bad.size} run(s), e.g. run {int(bad[0])},"
         dtype = np.dtype(poses.dtype).name
+        wider = ", or float64" if dtype != "float64" else ""
         raise ValueError(
             f"{where} left the range of {dtype} (a pose became inf or NaN); allowed: gains "
-            "and dt that keep the sampled law stable (docs/model.md §4), or float64"
+            f"and dt that keep the sampled law stable (docs/model.md §4){wider}"
         )
     return result
 
