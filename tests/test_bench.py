@@ -56,21 +56,32 @@ def test_bench_command_writes_table_and_json(tmp_path, capsys):
 
 
 def test_both_losses_and_their_gradients_are_timed():
-    """Each loss is timed with its gradient, not skipped, and their ratio is reported."""
-    cases = ("grad_final_pose_loss", "grad_tuning_loss")
+    """Each loss is timed with its gradient, not skipped, and their ratios are reported."""
+    cases = ("final_poses", "final_poses_nonideal", "grad_final_pose_loss", "grad_tuning_loss")
     config = w.studies.BenchConfig(sizes=(4,), steps=2, repeats=1, dtype="float64", cases=cases)
     result = w.studies.run_benchmark(config)
     rows = result["rows"]
     assert [row["case"] for row in rows] == [
+        "final_poses",
+        "final_poses_nonideal",
         "final_pose_loss",
         "grad_final_pose_loss",
+        "final_poses_relaxed",
         "tuning_loss",
         "grad_tuning_loss",
     ]
     assert all(row["robot_steps_per_s"] > 0 for row in rows)
     ratios = result["ratios"]["N=4"]
-    assert ratios["grad_final_pose_loss_over_forward"] > 0
-    assert ratios["grad_tuning_loss_over_forward"] > 0
+    for key in (
+        "grad_final_pose_loss_over_forward",
+        "grad_tuning_loss_over_forward",
+        "tuning_loss_over_final_poses",
+        "tuning_loss_over_relaxed",
+        "relaxed_over_final_poses",
+        "nonideal_over_ideal",
+    ):
+        assert ratios[key] > 0, key
+    assert "non-ideal / ideal final_poses" in w.report.bench_table(result)
 
 
 @pytest.mark.parametrize(

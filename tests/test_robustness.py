@@ -130,7 +130,13 @@ def test_bad_monte_carlo_options(kwargs, message):
 
 
 # Each flag with a value it refuses: one line on stderr, exit status 2.
-BAD_FLAGS = {"--runs": "0", "--controller": "nope", "--velocity": "warp", "--seed": "-1"}
+BAD_FLAGS = {
+    "--runs": "0",
+    "--controller": "nope",
+    "--velocity": "warp",
+    "--seed": "-1",
+    "--robust-gains": "missing.json",
+}
 
 
 @pytest.mark.parametrize("flag", BAD_FLAGS)
@@ -147,7 +153,8 @@ def test_command_writes_what_the_study_returns(tmp_path, capsys):
     out = tmp_path / "rob"
     assert main(["robustness", "--out", str(out), "--runs", str(N), "--controller", "aicardi"]) == 0
     assert "| noise + mismatch + latency | aicardi |" in capsys.readouterr().out
-    for name in ("robustness.png", "robustness.md", "robustness.json"):
+    names = ("robustness.png", "robustness.md", "robustness.json", "standard_conditions.md")
+    for name in names:
         assert (out / name).stat().st_size > 100
     saved = json.loads((out / "robustness.json").read_text())
     rows = studies.robustness_study(controller_names=["aicardi"], n_runs=N)
@@ -157,3 +164,76 @@ def test_command_writes_what_the_study_returns(tmp_path, capsys):
     # The output folder is checked before any computation.
     (tmp_path / "file").write_text("")
     assert main(["robustness", "--out", str(tmp_path / "file"), "--runs", "1"]) == 2
+
+
+# ---------------------------------------------------------------- the disturbance model (§7)
+
+
+def test_sample_disturbance_is_reproducible_from_its_key():
+    refs = draw_refs(5, 8)
+    kwargs = dict(noise_xy=0.5, noise_theta=np.radians(1.0), latency=0.5, radius_mismatch=0.03)
+    a = studies.sample_disturbance(jax.random.PRNGKey(1), refs, 30, **kwargs)
+    b = studies.sample_disturbance(jax.random.PRNGKey(1), refs, 30, **kwargs)
+    c = studies.sample_disturbance(jax.random.PRNGKey(2), refs, 30, **kwargs)
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+    assert not np.array_equal(np.asarray(a.noise), np.asarray(c.noise))
+    assert set(np.unique(np.asarray(a.delay))) <= {0.0, 1.0}
+
+
+def test_noise_statistics_match_the_standard_condition():
+    sxy, sth = 0.5, np.radians(1.0)
+    n, steps = 64, 100  # 6400 draws per component
+    d = studies.sample_disturbance(
+        jax.random.PRNGKey(7),
+        np.tile([30.0, 0.0, 0.0], (n, 1)),
+        steps,
+        noise_xy=sxy,
+        noise_theta=sth,
+    )
+    noise = np.asarray(d.noise, dtype=float).reshape(-1, 3)
+    for column, sigma in zip(noise.T, (sxy, sxy, sth), strict=True):
+        k = column.size
+        # Within 4 standard errors of 0 and of σ (the std's is σ / √(2k)).
+        assert abs(column.mean()) < 4 * sigma / np.sqrt(k)
+        assert abs(column.std() - sigma) < 4 * sigma / np.sqrt(2 * k)
+    # Independent at every sample: lag-one correlation near zero.
+    x = np.asarray(d.noise)[:, :, 0]
+    assert abs(np.corrcoef(x[:, 1:].ravel(), x[:, :-1].ravel())[0, 1]) < 4 / np.sqrt(x.size)
+
+
+@pytest.mark.parametrize("velocity", ["ideal", "nonideal"])
+def test_latency_applies_the_previous_samples_command(velocity):
+    refs = draw_refs(6, 4)
+    rng = np.random.default_rng(0)
+    noise = rng.normal(0.0, 0.5, (4, 12, 3)) * [1.0, 1.0, 0.02]
+    spec = studies.Disturbance(refs, noise, np.ones((4, 3)), np.float64(1.0))
+    late = studies.disturbed_rollout(spec, velocity=velocity)
+    prompt = studies.disturbed_rollout(spec._replace(delay=np.float64(0.0)), velocity=velocity)
+    gains = w.Gains()
+    # The first period: no command, the robot stays at rest where it started.
+    np.testing.assert_array_equal(late["v"][:, 0], 0.0)
+    np.testing.assert_array_equal(late["omega"][:, 0], 0.0)
+    np.testing.assert_allclose(late["poses"][:, 1], 0.0, atol=1e-12)
+    for i in range(4):
+        v0, w0 = w.control(noise[i, 0], refs[i], gains)  # measured at sample 0
+        # Without latency it is applied over period 0, with latency over period 1.
+        assert prompt["v"][i, 0] == pytest.approx(float(v0), abs=1e-9)
+        assert late["v"][i, 1] == pytest.approx(float(v0), abs=1e-9)
+        assert late["omega"][i, 1] == pytest.approx(float(w0), abs=1e-9)
+        # Period k + 1 applies the command measured at sample k.
+        measured = late["poses"][i, 3] + noise[i, 3]
+        v3, _ = w.control(measured, refs[i], gains)
+        assert late["v"][i, 4] == pytest.approx(float(v3), abs=1e-9)
+
+
+def test_standard_conditions_compare_gain_sets_on_the_same_draws():
+    refs = draw_refs(8)
+    sets = {"paper": w.Gains(kr=60.0), "paper again": w.Gains(kr=60.0)}
+    rows = studies.standard_conditions(sets, refs, jax.random.PRNGKey(3))
+    assert [r["condition"] for r in rows[::2]] == [c[0] for c in studies.STANDARD_CONDITIONS]
+    # The same gains under the same draws: the same numbers, condition by condition.
+    for a, b in zip(rows[::2], rows[1::2], strict=True):
+        assert a["success"] == b["success"] and a["gains"] == "paper"
+    nominal = rows[0]
+    assert nominal["success"] == 1.0 and nominal["mean arrival s"] < 6.0

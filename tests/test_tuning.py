@@ -170,7 +170,7 @@ def test_robust_gradient_caps_outliers_and_drops_non_finite_runs():
     assert 0.0 < float(stats["clipped"]) <= 0.5
     assert np.linalg.norm(capped) < np.linalg.norm(uncapped)
     # A run whose loss overflows (r² = inf) contributes nothing, and the rest still count.
-    far = refs.at[0].set(jnp.array([1e200, 0.0, 0.0]))
+    far = refs.at[0].set(jnp.array([1e152, 0.0, 0.0]))
     loss, grad, stats = tuning.robust_gradient(Z_MIDDLE, far, temperature=0.1, **SHORT)
     assert np.isfinite(float(loss)) and np.all(np.isfinite(grad)) and np.any(grad != 0)
     np.testing.assert_allclose(float(stats["dropped"]), 1 / N)

@@ -67,8 +67,12 @@ def test_cli_writes_the_results_and_a_resumed_run_gives_the_same_gains(tmp_path,
     printed = capsys.readouterr().out
     assert "| paper feasible | " in printed and "| tuned | " in printed
     saved = json.loads((whole / "tuned_gains.json").read_text())
-    assert list(saved) == list(tuning.GAIN_FIELDS)
-    assert np.all(w.check_feasible(w.Gains(**saved)))
+    assert list(saved) == ["controller", "kind", *tuning.GAIN_FIELDS]
+    controller, gains = tuning.load_tuned(whole / "tuned_gains.json")
+    assert controller.name == saved["controller"] == "shim-sung"
+    assert np.all(w.check_feasible(gains))
+    # Every tuning report gives the ratio of each mean arrival to the §8 yardsticks.
+    assert "vs turn–drive–turn" in printed and "| lower bound (§8) |" in printed
     report = json.loads((whole / "evaluation.json").read_text())
     assert set(report["rows"]) == {"paper_feasible", "tuned"}
     assert report["feasible"] is True and report["random_search_candidates"] is None

@@ -33,6 +33,8 @@ from wmr_jax._src.metrics import path_length as path_length
 from wmr_jax._src.metrics import region_time as region_time
 from wmr_jax._src.metrics import success_rate as success_rate
 from wmr_jax._src.metrics import zigzag_count as zigzag_count
+from wmr_jax._src.optimal import TimeBounds as TimeBounds
+from wmr_jax._src.optimal import time_bounds as time_bounds
 from wmr_jax._src.params import Gains as Gains
 from wmr_jax._src.params import Robot as Robot
 from wmr_jax._src.params import SamplingWarning as SamplingWarning
@@ -62,6 +64,7 @@ from wmr_jax._src.sharding import unpad as unpad
 from wmr_jax._src.sharding import use_cpu_devices as use_cpu_devices
 from wmr_jax._src.sweep import SWEEP_FIELDS as SWEEP_FIELDS
 from wmr_jax._src.sweep import sweep as sweep
+from wmr_jax._src.tuning.saved import load_tuned as load_tuned
 
 __version__ = "0.1.0"
 

@@ -18,6 +18,10 @@ from wmr_jax._src.controllers.aicardi import aicardi_control as aicardi_control
 from wmr_jax._src.controllers.astolfi import AstolfiGains as AstolfiGains
 from wmr_jax._src.controllers.astolfi import astolfi_control as astolfi_control
 from wmr_jax._src.controllers.polar import driving_error as driving_error
+from wmr_jax._src.controllers.schedule import SCHEDULE as SCHEDULE
+from wmr_jax._src.controllers.schedule import ScheduleParams as ScheduleParams
+from wmr_jax._src.controllers.schedule import knot_radii as knot_radii
+from wmr_jax._src.controllers.schedule import schedule_commands as schedule_commands
 from wmr_jax._src.controllers.shim_sung import Diagnostics as Diagnostics
 from wmr_jax._src.controllers.shim_sung import PolarError as PolarError
 from wmr_jax._src.controllers.shim_sung import blend as blend

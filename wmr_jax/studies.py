@@ -32,11 +32,15 @@ from wmr_jax._src.paper import run_table as run_table
 from wmr_jax._src.robustness import DEFAULT_NOISE_DEG as DEFAULT_NOISE_DEG
 from wmr_jax._src.robustness import DEFAULT_NOISE_XY as DEFAULT_NOISE_XY
 from wmr_jax._src.robustness import ROBUSTNESS_CONDITIONS as ROBUSTNESS_CONDITIONS
+from wmr_jax._src.robustness import STANDARD_CONDITIONS as STANDARD_CONDITIONS
 from wmr_jax._src.robustness import Disturbance as Disturbance
+from wmr_jax._src.robustness import disturbed_rollout as disturbed_rollout
 from wmr_jax._src.robustness import draw_disturbances as draw_disturbances
 from wmr_jax._src.robustness import monte_carlo as monte_carlo
 from wmr_jax._src.robustness import perturbed_metrics as perturbed_metrics
 from wmr_jax._src.robustness import robustness_study as robustness_study
+from wmr_jax._src.robustness import sample_disturbance as sample_disturbance
+from wmr_jax._src.robustness import standard_conditions as standard_conditions
 from wmr_jax._src.waypoints import SOCCER_WAYPOINTS_DEG as SOCCER_WAYPOINTS_DEG
 from wmr_jax._src.waypoints import ChainRun as ChainRun
 from wmr_jax._src.waypoints import SoccerRun as SoccerRun

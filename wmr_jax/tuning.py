@@ -5,12 +5,24 @@ relaxation and judges the result with the hard law against the paper's
 feasible gains and a random search of the same wall time; it reports through
 ``progress_fn`` and writes no files. ``tune`` (the ``wmr-jax tune`` command
 as a function) also writes the results and resumable checkpoints to a folder.
-See ``docs/model.md §3`` (the gains and their ranges) and ``§6`` (the poses
-and the arrival time).
+See ``docs/model.md §3`` (the gains, their ranges and the gain schedules),
+``§6`` (the poses and the arrival time) and ``§8`` (the time-optimal
+yardsticks every tuning report compares with). ``TuneConfig(schedule=True)``
+tunes the gain-scheduled law (``ScheduleParams``) instead of the fixed gains;
+``load_tuned`` reads either kind of ``tuned_gains.json``; ``compare`` runs
+the gradient against CMA-ES and random search at equal wall time.
 """
 
 from wmr_jax._src.cli.tune import CHECKPOINT_NAME as CHECKPOINT_NAME
 from wmr_jax._src.cli.tune import tune as tune
+from wmr_jax._src.controllers.schedule import SCHEDULE as SCHEDULE
+from wmr_jax._src.controllers.schedule import ScheduleParams as ScheduleParams
+from wmr_jax._src.controllers.schedule import knot_radii as knot_radii
+from wmr_jax._src.optimal import TimeBounds as TimeBounds
+from wmr_jax._src.optimal import bound_ratios as bound_ratios
+from wmr_jax._src.optimal import time_bounds as time_bounds
+from wmr_jax._src.tuning.compare import cma_es_search as cma_es_search
+from wmr_jax._src.tuning.compare import compare as compare
 from wmr_jax._src.tuning.cost import GradientCost as GradientCost
 from wmr_jax._src.tuning.cost import gradient_cost as gradient_cost
 from wmr_jax._src.tuning.evaluation import EVAL_POSES as EVAL_POSES
@@ -30,6 +42,16 @@ from wmr_jax._src.tuning.parametrisation import gains_from_logits as gains_from_
 from wmr_jax._src.tuning.parametrisation import gains_from_unit as gains_from_unit
 from wmr_jax._src.tuning.parametrisation import logits_from_gains as logits_from_gains
 from wmr_jax._src.tuning.parametrisation import unit_from_gains as unit_from_gains
+from wmr_jax._src.tuning.problems import FIXED as FIXED
+from wmr_jax._src.tuning.problems import SCHEDULED as SCHEDULED
+from wmr_jax._src.tuning.problems import Problem as Problem
+from wmr_jax._src.tuning.problems import get_problem as get_problem
+from wmr_jax._src.tuning.robust import RobustConfig as RobustConfig
+from wmr_jax._src.tuning.robust import robust_gains as robust_gains
+from wmr_jax._src.tuning.robust import robust_score as robust_score
+from wmr_jax._src.tuning.robust import tune_robust as tune_robust
+from wmr_jax._src.tuning.saved import load_tuned as load_tuned
+from wmr_jax._src.tuning.saved import tuned_json as tuned_json
 from wmr_jax._src.tuning.search import SearchResult as SearchResult
 from wmr_jax._src.tuning.search import random_search as random_search
 from wmr_jax._src.tuning.training import TrainState as TrainState

@@ -536,8 +536,17 @@ class _SizeBench:
         t = self.time({"rollout": (lambda: batch_rollout(refs, gains, steps=steps), True)})
         return [self.row("batch_rollout", t["rollout"], velocity="ideal")]
 
-    def loss_rows(self, loss: Callable, forward_row: tuple[str, dict], case: str) -> list[dict]:
-        """Time ``loss(gains, refs)`` and its gradient, interleaved; return both rows."""
+    def loss_rows(
+        self,
+        loss: Callable,
+        forward_row: tuple[str, dict],
+        case: str,
+        beside: tuple[str, Callable[[], Any]] | None = None,
+    ) -> list[dict]:
+        """Time ``loss(gains, refs)`` and its gradient, interleaved; return both rows.
+
+        ``beside``: ``(case, call)`` timed in the same group, its row first.
+        """
         import jax
 
         from wmr_jax._src import loops
@@ -545,14 +554,16 @@ class _SizeBench:
         forward = loops.jit_top_level(loss)
         gradient = loops.jit_top_level(jax.value_and_grad(loss))
         gains, refs = self.gains, self.refs
-        t = self.time(
-            {
-                "forward": (lambda: forward(gains, refs), True),
-                "gradient": (lambda: gradient(gains, refs), True),
-            }
-        )
+        group = {
+            "forward": (lambda: forward(gains, refs), True),
+            "gradient": (lambda: gradient(gains, refs), True),
+        }
+        if beside is not None:
+            group["beside"] = (beside[1], True)
+        t = self.time(group)
         ratio = t["gradient"].run_s / t["forward"].run_s
-        return [
+        rows = [] if beside is None else [self.row(beside[0], t["beside"])]
+        return rows + [
             self.row(forward_row[0], t["forward"], **forward_row[1]),
             self.row(case, t["gradient"], grad_over_forward=ratio),
         ]
@@ -585,8 +596,18 @@ class _SizeBench:
             def loss(g, r):
                 return tuning.tuning_loss(g, r, temperature=TUNING_TEMPERATURE, horizon=horizon)
 
+            from wmr_jax._src.rollout import final_poses
+
+            gains, refs, steps = self.gains, self.refs, self.steps
+
+            def relaxed():
+                return final_poses(refs, gains, steps=steps, temperature=TUNING_TEMPERATURE)
+
             row = ("tuning_loss", {"temperature": TUNING_TEMPERATURE})
-            return self.loss_rows(loss, row, "grad_tuning_loss")
+            # final_poses through the same relaxed law, timed beside the loss:
+            # what the loss adds to the law it differentiates.
+            beside = ("final_poses_relaxed", relaxed)
+            return self.loss_rows(loss, row, "grad_tuning_loss", beside)
         except (ImportError, AttributeError, TypeError, NotImplementedError) as err:
             return [self.row("grad_tuning_loss", None, skipped=f"skipped: {err}")]
 
@@ -616,6 +637,19 @@ def _ratios(rows: list[dict]) -> dict[str, Any]:
             for r in rows:
                 if r["case"] == case and r["n"] == n and "grad_over_forward" in r:
                     entry[f"{case}_over_forward"] = r["grad_over_forward"]
+        relaxed, loss = rate("final_poses_relaxed", n), rate("tuning_loss", n)
+        if relaxed and loss:
+            entry["tuning_loss_over_relaxed"] = relaxed / loss
+        # Costs per robot-step against final_poses (ideal loop), measured in this run.
+        ideal = rate("final_poses", n)
+        for case, key in (
+            ("tuning_loss", "tuning_loss_over_final_poses"),
+            ("final_poses_nonideal", "nonideal_over_ideal"),
+            ("final_poses_relaxed", "relaxed_over_final_poses"),
+        ):
+            value = rate(case, n)
+            if ideal and value:
+                entry[key] = ideal / value
         if entry:
             out[f"N={n}"] = entry
     return out

@@ -3,8 +3,9 @@
 ``closed_loop_step`` samples the controller and moves the robot over one
 control period (``docs/model.md §4``); ``scan_closed_loop`` runs it for a
 number of periods, recording the run or folding it into streamed metrics;
-``batched`` lifts any single-pose function to batches. The ideal velocity
-loop takes a faster, equal route (``_ideal_loop``). Nothing here checks its
+``batched`` lifts any single-pose function to batches. The scan itself takes
+a faster, equal route (``_split_loop``) built from ``advance_period``, which
+the disturbed loops of ``robustness`` share. Nothing here checks its
 inputs: the entry points do that first (``wmr_jax._src.checks``).
 """
 
@@ -29,14 +30,21 @@ __all__ = [
     "DEFAULT_SUBSTEPS",
     "EntryJit",
     "Options",
+    "SplitPose",
     "StepOutput",
     "VELOCITY_LOOPS",
     "WHEEL_LIMITS",
+    "advance_period",
+    "batch_axes",
     "batched",
     "closed_loop_step",
     "initial_state",
+    "initial_wheel",
     "jit_top_level",
+    "remat",
     "scan_closed_loop",
+    "split_command",
+    "split_region",
 ]
 
 VELOCITY_LOOPS = ("ideal", "nonideal")
@@ -136,8 +144,8 @@ def scan_closed_loop(
 ) -> tuple[jax.Array, Any, Any]:
     """Run ``options.steps`` control periods for one pose, streaming or recording.
 
-    The same closed loop as scanning ``closed_loop_step``; the ideal velocity
-    loop takes a faster route to it (see ``_ideal_loop``).
+    The same closed loop as scanning ``closed_loop_step``, arranged for
+    speed (see ``_split_loop``).
 
     Args:
         ref: ``(3,)`` reference pose.
@@ -155,12 +163,10 @@ def scan_closed_loop(
     Returns:
         ``(final pose (3,), acc, (poses (steps, 3), StepOutput) or None)``.
     """
-    if options.velocity == "ideal":
-        return _ideal_loop(ref, params, init, robot, dt, options, fold, acc, record)
-    return _generic_loop(ref, params, init, robot, dt, options, fold, acc, record)
+    return _split_loop(ref, params, init, robot, dt, options, fold, acc, record)
 
 
-def _remat(body: Callable) -> Callable:
+def remat(body: Callable) -> Callable:
     """Differentiate ``body`` by recomputing it, not by storing its intermediates.
 
     Reverse-mode through a scan otherwise keeps every intermediate of every
@@ -172,90 +178,147 @@ def _remat(body: Callable) -> Callable:
     return jax.checkpoint(body, prevent_cse=False)
 
 
-def _generic_loop(ref, params, init, robot, dt, options, fold, acc, record):
-    def body(carry, _):
-        (x, y, theta), velocity, integral, acc = carry
-        state = dynamics.RobotState(jnp.stack([x, y, theta]), velocity, integral)
-        new_state, out = closed_loop_step(state, ref, params, robot, dt, options)
-        pose = new_state.pose
-        if fold is not None:
-            acc = fold(acc, pose, out)
-        # The pose rides in the carry as three scalars: a batched (N, 3) carry
-        # is rebuilt column by column every step, the law evaluated once per column.
-        carry = ((pose[0], pose[1], pose[2]), new_state.velocity, new_state.integral, acc)
-        return carry, ((pose, out) if record else None)
+class SplitPose(NamedTuple):
+    """A pose as the fast loops carry it (leading batch axes allowed).
 
-    start = initial_state(init)
-    carry = ((init[0], init[1], init[2]), start.velocity, start.integral, acc)
-    (final, _, _, acc), ys = jax.lax.scan(_remat(body), carry, None, length=options.steps)
-    return jnp.stack(final), acc, ys
+    Attributes:
+        position: complex ``x + i y``, cm.
+        heading: complex ``cos θ + i sin θ``.
+        theta: θ, rad (not wrapped).
+    """
+
+    position: jax.Array
+    heading: jax.Array
+    theta: jax.Array
+
+    @classmethod
+    def of(cls, pose: jax.Array) -> SplitPose:
+        """Split a ``(3,)`` pose ``[x, y, θ]``."""
+        cos_theta, sin_theta = dynamics.sin_cos(pose[2])
+        return cls(
+            jax.lax.complex(pose[0], pose[1]), jax.lax.complex(cos_theta, sin_theta), pose[2]
+        )
+
+    def stacked(self) -> jax.Array:
+        """Return the pose as ``(3,)`` ``[x, y, θ]``."""
+        return jnp.stack([self.position.real, self.position.imag, self.theta])
+
+    def frame(self) -> tuple[jax.Array, ...]:
+        """The pose as ``(x, y, cos θ, sin θ)``, the ``frame=`` of ``Controller.command``."""
+        return self.position.real, self.position.imag, self.heading.real, self.heading.imag
 
 
-def _ideal_loop(ref, params, init, robot, dt, options, fold, acc, record):
-    """The ideal velocity loop, arranged for speed; equal to scanning ``closed_loop_step``.
+def split_command(pose: SplitPose, ref, params, options: Options) -> jax.Array:
+    """Return the controller's command at ``pose`` as the complex ``v + i ω``."""
+    v, omega = options.controller.command(
+        pose.stacked(), ref, params, temperature=options.temperature, frame=pose.frame()
+    )
+    return jax.lax.complex(v, omega)
+
+
+def split_region(pose: SplitPose, ref, params, options: Options) -> jax.Array:
+    """Return the controller's region label at ``pose`` (−1 if it has none)."""
+    return options.controller.region_of(pose.stacked(), ref, params, frame=pose.frame())
+
+
+def initial_wheel(init: jax.Array, options: Options) -> velocity_loop.WheelState | None:
+    """The wheel loop at rest (``None`` for the ideal loop, which has none)."""
+    if options.velocity == "ideal":
+        return None
+    zero = jnp.zeros((), init.dtype)
+    return velocity_loop.WheelState(zero, zero, zero, zero)
+
+
+def advance_period(
+    pose: SplitPose,
+    wheel: velocity_loop.WheelState | None,
+    command: tuple[jax.Array, jax.Array],
+    robot: Robot,
+    dt: jax.Array,
+    options: Options,
+    *,
+    model: Robot | None = None,
+) -> tuple[SplitPose, velocity_loop.WheelState | None, jax.Array, jax.Array]:
+    """Move the robot over one period under the held ``command = (v, ω)`` (docs/model.md §4).
+
+    Args:
+        pose: the pose at the sample.
+        wheel: the wheel loop's state (``None`` for the ideal loop).
+        command: ``(v cm/s, ω rad/s)``, held over the period.
+        robot: the robot that moves.
+        dt: control period, s.
+        options: ``velocity``, ``substeps`` and ``wheel_limit`` are used.
+        model: the robot the wheel controller believes in (non-ideal loop;
+            default ``robot``).
+
+    Returns:
+        ``(pose, wheel, rim speeds (2,) [v_L, v_R] cm/s, distance cm)`` at the
+        end of the period.
+    """
+    v, omega = command
+    if options.velocity == "ideal":
+        position, heading = dynamics.arc_advance(pose.position, pose.heading, v, omega, dt)
+        # One Newton step towards |heading| = 1, so that rounding does not drift.
+        heading = heading * (1.5 - 0.5 * (heading.real**2 + heading.imag**2))
+        new = SplitPose(position, heading, pose.theta + omega * dt)
+        return new, wheel, law.wheel_speeds(v, omega, robot), jnp.abs(v) * dt
+    position, heading, theta, wheel, distance = velocity_loop.advance_split(
+        pose.position,
+        pose.heading,
+        pose.theta,
+        wheel,
+        command,
+        robot,
+        dt,
+        substeps=options.substeps,
+        wheel_limit=options.wheel_limit,
+        model=model,
+    )
+    rims = law.wheel_speeds(wheel.v, wheel.omega, robot)
+    return SplitPose(position, heading, theta), wheel, rims, distance
+
+
+def _split_loop(ref, params, init, robot, dt, options, fold, acc, record):
+    """The closed loop, arranged for speed; equal to scanning ``closed_loop_step``.
 
     Three things make it several times faster than the plain scan:
 
     * The position and heading ride as complex numbers ``x + i y`` and
-      ``cos θ + i sin θ`` (``dynamics.arc_advance``), so no step recomputes
-      the heading's cosine and sine for the law (``frame=`` of
-      ``Controller.command``) or the arc. θ itself is carried too, for the pose.
+      ``cos θ + i sin θ`` (``SplitPose``), so no step recomputes the
+      heading's cosine and sine for the law (``frame=`` of
+      ``Controller.command``) or the arc. θ itself is carried too, for the
+      pose; the non-ideal wheel loop rides as four scalars
+      (``velocity_loop.WheelState``), never as ``(N, 2)`` arrays.
     * The command of the next period is computed at the end of each period
       and carried as ``v + i ω``. XLA on the CPU compiles a step into one
       loop per output of the step and repeats in each whatever they share;
-      carried this way, the law is evaluated in one loop only, and the
-      step's outputs are four arrays, not nine.
-    * The heading is renormalised every step by one Newton step towards
+      carried this way, the law is evaluated in one loop only.
+    * The heading is renormalised every period by one Newton step towards
       ``|heading| = 1``, so rounding does not make it drift over long runs.
     """
-    control = options.controller
-
-    def frame(position, heading):
-        return position.real, position.imag, heading.real, heading.imag
-
-    def command(position, heading, theta):
-        pose = jnp.stack([position.real, position.imag, theta])
-        v, omega = control.command(
-            pose, ref, params, temperature=options.temperature, frame=frame(position, heading)
-        )
-        return jax.lax.complex(v, omega)
-
-    def region(position, heading, theta):
-        pose = jnp.stack([position.real, position.imag, theta])
-        return control.region_of(pose, ref, params, frame=frame(position, heading))
 
     def body(carry, _):
-        position, heading, theta, cmd, acc = carry
+        pose, wheel, cmd, acc = carry
         v, omega = cmd.real, cmd.imag
-        if fold is not None or record:
-            out = StepOutput(
-                v,
-                omega,
-                region(position, heading, theta),
-                law.wheel_speeds(v, omega, robot),
-                jnp.abs(v) * dt,
-            )
-        position, heading = dynamics.arc_advance(position, heading, v, omega, dt)
-        heading = heading * (1.5 - 0.5 * (heading.real**2 + heading.imag**2))
-        theta = theta + omega * dt
-        pose = jnp.stack([position.real, position.imag, theta])
+        region = split_region(pose, ref, params, options) if fold or record else None
+        pose, wheel, rims, distance = advance_period(pose, wheel, (v, omega), robot, dt, options)
+        out = StepOutput(v, omega, region, rims, distance)
+        stacked = pose.stacked()
         if fold is not None:
-            acc = fold(acc, pose, out)
-        carry = (position, heading, theta, command(position, heading, theta), acc)
-        return carry, ((pose, out) if record else None)
+            acc = fold(acc, stacked, out)
+        carry = (pose, wheel, split_command(pose, ref, params, options), acc)
+        return carry, ((stacked, out) if record else None)
 
-    cos_0, sin_0 = dynamics.sin_cos(init[2])
-    position = jax.lax.complex(init[0], init[1])
-    heading = jax.lax.complex(cos_0, sin_0)
-    carry = (position, heading, init[2], command(position, heading, init[2]), acc)
-    (position, _, theta, _, acc), ys = jax.lax.scan(_remat(body), carry, None, length=options.steps)
-    return jnp.stack([position.real, position.imag, theta]), acc, ys
+    pose = SplitPose.of(init)
+    carry = (pose, initial_wheel(init, options), split_command(pose, ref, params, options), acc)
+    (pose, _, _, acc), ys = jax.lax.scan(remat(body), carry, None, length=options.steps)
+    return pose.stacked(), acc, ys
 
 
 # ---------------------------------------------------------------- batching
 
 
-def _batch_axes(tree: Any, single_ndim: int) -> Any:
+def batch_axes(tree: Any, single_ndim: int) -> Any:
     """Map each leaf to 0 if it carries a leading batch axis, else ``None``."""
     return jax.tree.map(lambda leaf: 0 if jnp.ndim(leaf) > single_ndim else None, tree)
 
@@ -270,10 +333,10 @@ def batched(single: Callable) -> Callable:
 
     def run(ref, params, init, robot, dt, options):
         in_axes = (
-            _batch_axes(ref, 1),
-            _batch_axes(params, 0),
-            _batch_axes(init, 1),
-            _batch_axes(robot, 0),
+            batch_axes(ref, 1),
+            batch_axes(params, 0),
+            batch_axes(init, 1),
+            batch_axes(robot, 0),
             None,
         )
         return jax.vmap(lambda *a: single(*a, options), in_axes=in_axes)(

@@ -35,7 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src import checks, controllers, dynamics, loops, metrics, velocity_loop
+from wmr_jax._src import checks, controllers, dynamics, loops, metrics
 from wmr_jax._src import rollout as simulation
 from wmr_jax._src.controllers import shim_sung as law
 from wmr_jax._src.loops import Options, StepOutput
@@ -45,6 +45,7 @@ from wmr_jax._src.poses import horizon_steps, sample_poses
 from wmr_jax._src.rollout import DEFAULT_DT
 
 __all__ = [
+    "STANDARD_CONDITIONS",
     "DEFAULT_NOISE_DEG",
     "DEFAULT_NOISE_XY",
     "ROBUSTNESS_CONDITIONS",
@@ -53,6 +54,10 @@ __all__ = [
     "monte_carlo",
     "perturbed_metrics",
     "robustness_study",
+    "sample_disturbance",
+    "standard_conditions",
+    "disturbed_rollout",
+    "disturbed_run",
 ]
 
 DEFAULT_NOISE_XY = (0.0, 0.25, 0.5, 1.0, 2.0)  # σ of x and y, cm
@@ -67,6 +72,16 @@ ROBUSTNESS_CONDITIONS = (
 )
 
 
+# The standard conditions of docs/model.md §7, with the nominal model first:
+# (label, σ_xy cm, σ_θ degrees, one-sample latency). Ideal loop.
+STANDARD_CONDITIONS = (
+    ("nominal", 0.0, 0.0, False),
+    ("latency", 0.0, 0.0, True),
+    ("noise", 0.5, 1.0, False),
+    ("both", 0.5, 1.0, True),
+)
+
+
 class Disturbance(NamedTuple):
     """What makes one run differ from the nominal one (leading batch axes first).
 
@@ -77,7 +92,8 @@ class Disturbance(NamedTuple):
         mismatch: ``(3,)`` ``[left rim factor, right rim factor, mass factor]``:
             realised over commanded rim speed per wheel, and true over model
             body mass (1: no mismatch).
-        delay: ``()`` 1.0 for a one-sample latency, 0.0 for none.
+        delay: ``()`` 1.0 for a one-sample latency, 0.0 for none (per run,
+            or one value shared by a batch).
     """
 
     ref: jax.Array
@@ -89,64 +105,105 @@ class Disturbance(NamedTuple):
 # ---------------------------------------------------------------- one disturbed run
 
 
-def _realised(command: jax.Array, mismatch: jax.Array, robot: Robot) -> jax.Array:
-    """Return the body velocity ``[v, ω]`` whose rims are the commanded ones, scaled."""
-    rims = law.wheel_speeds(command[0], command[1], robot)  # [v_L, v_R]
+def _realised(command: jax.Array, mismatch: jax.Array, robot: Robot) -> tuple[jax.Array, ...]:
+    """Return the body velocity ``(v, ω)`` whose rims are the commanded ``v + i ω``, scaled."""
+    v, omega = command.real, command.imag
+    rims = law.wheel_speeds(v, omega, robot)  # [v_L, v_R]
     # Written as a correction of the command, so that factors of exactly 1
     # return it bit for bit (no rounding from the round trip through the rims).
     extra_left, extra_right = rims[0] * (mismatch[0] - 1), rims[1] * (mismatch[1] - 1)
-    v = command[0] + 0.5 * (extra_left + extra_right)
-    omega = command[1] + 0.5 * (extra_right - extra_left) / robot.half_track
-    return jnp.stack([v, omega])
+    return (
+        v + 0.5 * (extra_left + extra_right),
+        omega + 0.5 * (extra_right - extra_left) / robot.half_track,
+    )
 
 
-def _move(state, target, true_robot, robot, dt, options: Options):
-    """Advance the true robot one period towards the body velocity ``target``.
+def _measured(pose: loops.SplitPose, noise: jax.Array) -> loops.SplitPose:
+    """The pose the controller sees: ``pose + noise`` (exactly ``pose`` for zero noise)."""
+    cos_n, sin_n = dynamics.sin_cos(noise[2])
+    return loops.SplitPose(
+        pose.position + jax.lax.complex(noise[0], noise[1]),
+        pose.heading * jax.lax.complex(cos_n, sin_n),
+        pose.theta + noise[2],
+    )
+
+
+def disturbed_run(
+    spec: Disturbance,
+    params: Any,
+    init: jax.Array,
+    robot: Robot,
+    dt: jax.Array,
+    options: Options,
+    *,
+    fold: loops.Fold | None = None,
+    acc: Any = None,
+    record: bool = False,
+) -> tuple[jax.Array, Any, Any]:
+    """Run one pose under its ``Disturbance`` (``docs/model.md §7``); the one disturbed loop.
+
+    The robustness Monte Carlo and the robust tuner both run this. Over
+    period ``k`` the robot moves under the command computed from the
+    measurement at sample ``k`` (``delay`` 0) or ``k − 1`` (``delay`` 1; zero
+    over the first period), its rims scaled by the wheel-radius factors; in
+    the non-ideal loop the true robot's mass is ``M`` times the mass factor
+    while the wheel controller keeps the nominal model. Arrival is judged
+    on the true pose.
+
+    Args:
+        spec: the disturbance of this run (no batch axes; ``noise (steps, 3)``).
+        params: the controller's parameters.
+        init: ``(3,)`` initial pose.
+        robot: the nominal robot (the controller's model).
+        dt: control period, s.
+        options: static options; ``options.temperature`` selects the relaxed law.
+        fold: ``fold(acc, true pose (3,), StepOutput) -> acc`` after every period.
+        acc: the fold's initial accumulator.
+        record: also return every true pose ``(steps, 3)`` and ``StepOutput``.
 
     Returns:
-        ``(new state, distance travelled by the centre, cm)``.
+        ``(final true pose (3,), acc, (poses, outputs) or None)``.
     """
-    if options.velocity == "ideal":
-        pose = dynamics.arc_step(state.pose, target[0], target[1], dt)
-        return dynamics.RobotState(pose, target, state.integral), jnp.abs(target[0]) * dt
-    return velocity_loop.advance(
-        state,
-        target,
-        true_robot,
-        dt,
-        substeps=options.substeps,
-        wheel_limit=options.wheel_limit,
-        model=robot,
-    )
+    ref = spec.ref
+    true_robot = robot.replace(body_mass=robot.body_mass * spec.mismatch[2])
+
+    def body(carry, noise_next):
+        pose, wheel, fresh, held, acc = carry
+        applied = jnp.where(spec.delay > 0, held, fresh)
+        target = _realised(applied, spec.mismatch, robot)
+        pose, wheel, rims, distance = loops.advance_period(
+            pose, wheel, target, true_robot, dt, options, model=robot
+        )
+        out = StepOutput(applied.real, applied.imag, jnp.int32(-1), rims, distance)
+        stacked = pose.stacked()
+        if fold is not None:
+            acc = fold(acc, stacked, out)
+        command = loops.split_command(_measured(pose, noise_next), ref, params, options)
+        return (pose, wheel, command, fresh, acc), ((stacked, out) if record else None)
+
+    pose = loops.SplitPose.of(init)
+    first = loops.split_command(_measured(pose, spec.noise[0]), ref, params, options)
+    # The measurement at sample k + 1 is taken at the end of period k; the
+    # last period's is never used.
+    later = jnp.concatenate([spec.noise[1:], jnp.zeros_like(spec.noise[:1])])
+    carry = (pose, loops.initial_wheel(init, options), first, jnp.zeros_like(first), acc)
+    (pose, _, _, _, acc), ys = jax.lax.scan(loops.remat(body), carry, later)
+    return pose.stacked(), acc, ys
 
 
 def _perturbed_single(spec: Disturbance, params, init, robot, dt, options: Options):
     """Run one pose under its ``Disturbance``, streaming the ``docs/model.md §6`` metrics."""
-    control = options.controller
     ref = spec.ref
-    true_robot = robot.replace(body_mass=robot.body_mass * spec.mismatch[2])
     thresholds = metrics.Thresholds()
 
-    def body(carry, noise):
-        state, held, acc = carry
-        v, omega = control.command(state.pose + noise, ref, params, temperature=None)
-        fresh = jnp.stack([v, omega])
-        applied = jnp.where(spec.delay > 0, held, fresh)
-        target = _realised(applied, spec.mismatch, robot)
-        new_state, distance = _move(state, target, true_robot, robot, dt, options)
-        rims = law.wheel_speeds(new_state.velocity[0], new_state.velocity[1], robot)
-        out = StepOutput(applied[0], applied[1], jnp.int32(-1), rims, distance)
-        acc = metrics.stream_update(acc, new_state.pose, ref, out, thresholds)
-        return (new_state, fresh, acc), None
+    def fold(acc, pose, out):
+        return metrics.stream_update(acc, pose, ref, out, thresholds)
 
-    carry = (
-        loops.initial_state(init),
-        jnp.zeros((2,), init.dtype),
-        metrics.stream_start(ref.dtype),
+    final, acc, _ = disturbed_run(
+        spec, params, init, robot, dt, options, fold=fold, acc=metrics.stream_start(ref.dtype)
     )
-    (state, _, acc), _ = jax.lax.scan(body, carry, spec.noise)
     result = metrics.stream_result(acc, dt)
-    d = state.pose[:2] - ref[:2]
+    d = final[:2] - ref[:2]
     return {
         "arrival": result["arrival_time"],
         "path": result["path_length"],
@@ -157,7 +214,24 @@ def _perturbed_single(spec: Disturbance, params, init, robot, dt, options: Optio
     }
 
 
-_perturbed_jit = loops.EntryJit(loops.batched(_perturbed_single), static_argnames=("options",))
+def batched_disturbed(single):
+    """Lift ``single(spec, params, init, robot, dt, options)`` over a batch of disturbances.
+
+    Every field of ``spec`` carries the batch axis, except a scalar ``delay``
+    (shared); ``params`` and ``robot`` leaves may carry it too.
+    """
+
+    def run(spec, params, init, robot, dt, options):
+        spec_axes = Disturbance(0, 0, 0, 0 if jnp.ndim(spec.delay) == 1 else None)
+        in_axes = (spec_axes, loops.batch_axes(params, 0), None, loops.batch_axes(robot, 0), None)
+        return jax.vmap(lambda *a: single(*a, options), in_axes=in_axes)(
+            spec, params, init, robot, dt
+        )
+
+    return run
+
+
+_perturbed_jit = loops.EntryJit(batched_disturbed(_perturbed_single), static_argnames=("options",))
 
 
 def perturbed_metrics(
@@ -210,12 +284,15 @@ def _checked_disturbance(disturbance: Disturbance) -> tuple[np.ndarray, ...]:
     checks.require(
         "disturbance.mismatch", mismatch, np.isfinite(mismatch) & (mismatch > 0), "finite, > 0"
     )
-    if delay.shape != () or float(delay) not in (0.0, 1.0):
-        raise ValueError(f"disturbance.delay = {delay!r} is not allowed; allowed: 0.0 or 1.0")
+    if delay.shape not in ((), (n,)) or not np.all((delay == 0.0) | (delay == 1.0)):
+        raise ValueError(
+            f"disturbance.delay = {delay!r} is not allowed; allowed: 0.0 or 1.0, or ({n},) of them"
+        )
     return refs, noise, mismatch, delay
 
 
-def _perturbed_metrics(disturbance, params, controller, init, dt, robot, velocity) -> PoseMetrics:
+def _prepared(disturbance, params, controller, init, dt, robot, velocity) -> tuple:
+    """Check a batch of disturbances and the run's settings; return the jitted core's arguments."""
     refs, noise, mismatch, delay = _checked_disturbance(disturbance)
     options = simulation.make_options(
         steps=noise.shape[1], velocity=velocity, controller=controller
@@ -232,11 +309,101 @@ def _perturbed_metrics(disturbance, params, controller, init, dt, robot, velocit
         jnp.asarray(mismatch, dtype),
         jnp.asarray(delay, dtype),
     )
-    out = _perturbed_jit(spec, params, init, robot, dt, options=options)
+    return (spec, params, init, robot, dt), options
+
+
+def _perturbed_metrics(disturbance, params, controller, init, dt, robot, velocity) -> PoseMetrics:
+    args, options = _prepared(disturbance, params, controller, init, dt, robot, velocity)
+    out = _perturbed_jit(*args, options=options)
     return PoseMetrics(**{f: np.asarray(out[f]) for f in PoseMetrics._fields})
 
 
+def _disturbed_trajectory(spec, params, init, robot, dt, options):
+    _, _, (poses, out) = disturbed_run(spec, params, init, robot, dt, options, record=True)
+    return {"poses": jnp.concatenate([init[None], poses]), "v": out.v, "omega": out.omega}
+
+
+_trajectory_jit = loops.EntryJit(
+    batched_disturbed(_disturbed_trajectory), static_argnames=("options",)
+)
+
+
+def disturbed_rollout(
+    disturbance: Disturbance,
+    params: Any = None,
+    *,
+    controller: Any = controllers.SHIM_SUNG,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = DEFAULT_DT,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    x64: bool = True,
+) -> dict[str, np.ndarray]:
+    """Return the true poses and applied commands of disturbed runs (``docs/model.md §7``).
+
+    Args: as for ``perturbed_metrics``.
+
+    Returns:
+        ``{"poses": (N, steps + 1, 3) true poses, the initial one first,
+        "v": (N, steps) cm/s, "omega": (N, steps) rad/s}``: the command
+        applied over each period (zero over the first one under latency).
+    """
+    with jax.enable_x64(bool(x64)):
+        args, options = _prepared(disturbance, params, controller, init, dt, robot, velocity)
+        out = _trajectory_jit(*args, options=options)
+        return {name: np.asarray(value) for name, value in out.items()}
+
+
 # ---------------------------------------------------------------- Monte Carlo
+
+
+def sample_disturbance(
+    key: jax.Array,
+    refs: jax.Array,
+    steps: int,
+    *,
+    noise_xy: Any = 0.0,
+    noise_theta: Any = 0.0,
+    latency: Any = 0.0,
+    radius_mismatch: Any = 0.0,
+    mass_mismatch: Any = 0.0,
+) -> Disturbance:
+    """Draw one ``Disturbance`` per reference from ``key`` (``docs/model.md §7``); traceable.
+
+    The one source of disturbances: the Monte Carlo and the robust tuner's
+    loss (inside ``jit``) both draw here. Each level may be a scalar or one
+    value per run ``(N,)``.
+
+    Args:
+        key: a ``jax.random`` key.
+        refs: ``(N, 3)`` reference poses.
+        steps: control periods per run (static).
+        noise_xy: σ of the x and y measurement noise, cm.
+        noise_theta: σ of the heading measurement noise, rad.
+        latency: probability that a run has a one-sample latency (0 or 1:
+            none or all).
+        radius_mismatch: each wheel's radius error ``δ ~ U(−m, m)``.
+        mass_mismatch: the body-mass error ``μ ~ U(−m, m)``.
+
+    Returns:
+        A ``Disturbance`` with ``noise (N, steps, 3) ~ N(0, diag(σ_xy², σ_xy², σ_θ²))``
+        drawn independently at every sample, ``mismatch (N, 3)`` and
+        ``delay (N,)`` in {0, 1}.
+    """
+    refs = jnp.asarray(refs)
+    n, dtype = refs.shape[0], refs.dtype
+    k_noise, k_mis, k_delay = jax.random.split(key, 3)
+
+    def per_run(level):
+        return jnp.broadcast_to(jnp.asarray(level, dtype), (n,))
+
+    sxy, sth = per_run(noise_xy), per_run(noise_theta)
+    scale = jnp.stack([sxy, sxy, sth], axis=-1)[:, None, :]
+    noise = jax.random.normal(k_noise, (n, steps, 3), dtype) * scale
+    bounds = jnp.stack([per_run(radius_mismatch)] * 2 + [per_run(mass_mismatch)], axis=-1)
+    mismatch = 1.0 + jax.random.uniform(k_mis, (n, 3), dtype, -1.0, 1.0) * bounds
+    delay = jax.random.bernoulli(k_delay, per_run(latency)).astype(dtype)
+    return Disturbance(refs, noise, mismatch, delay)
 
 
 def draw_disturbances(
@@ -247,7 +414,7 @@ def draw_disturbances(
     radius_mismatch: float = 0.0,
     mass_mismatch: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Draw references, unit noise and mismatch factors from ``key``.
+    """Draw references, unit noise and mismatch factors from ``key`` (via ``sample_disturbance``).
 
     Args:
         key: a ``jax.random`` key.
@@ -263,12 +430,18 @@ def draw_disturbances(
     """
     n = checks.check_int("n", n)
     steps = checks.check_int("steps", steps)
-    k_ref, k_noise, k_mis = jax.random.split(key, 3)
-    refs = np.asarray(sample_poses(k_ref, n, dtype=jnp.float32), dtype=float)
-    unit = np.asarray(jax.random.normal(k_noise, (n, steps, 3), dtype=jnp.float32), dtype=float)
-    m = np.asarray(jax.random.uniform(k_mis, (n, 3), dtype=jnp.float32), dtype=float) * 2 - 1
-    mismatch = 1.0 + m * np.array([radius_mismatch, radius_mismatch, mass_mismatch])
-    return refs, unit, mismatch
+    k_ref, k_rest = jax.random.split(key)
+    refs = sample_poses(k_ref, n, dtype=jnp.float32)
+    d = sample_disturbance(
+        k_rest,
+        refs,
+        steps,
+        noise_xy=1.0,
+        noise_theta=1.0,
+        radius_mismatch=radius_mismatch,
+        mass_mismatch=mass_mismatch,
+    )
+    return tuple(np.asarray(a, dtype=float) for a in (refs, d.noise, d.mismatch))
 
 
 def _check_levels(noise_xy: Sequence[float], noise_deg: Sequence[float]) -> None:
@@ -430,4 +603,57 @@ def robustness_study(
                 x64=x64,
             ):
                 rows.append({"condition": label, **row})
+    return rows
+
+
+def standard_conditions(
+    params_by_name: dict[str, Any],
+    refs: Any,
+    key: jax.Array,
+    *,
+    controller: Any = controllers.SHIM_SUNG,
+    dt: float = DEFAULT_DT,
+    x64: bool = True,
+) -> list[dict[str, Any]]:
+    """Judge parameter sets under the standard conditions of ``docs/model.md §7`` (hard law).
+
+    Every set and condition sees the same unit noise (common random numbers,
+    drawn from ``key`` by ``sample_disturbance``); ideal loop, horizon 6 s.
+
+    Args:
+        params_by_name: ``{label: params}`` of ``controller``.
+        refs: ``(N, 3)`` reference poses (held-out poses of ``docs/model.md §6``).
+        key: ``jax.random`` key of the noise.
+        controller: a ``Controller`` or its registered name.
+        dt: control period, s.
+        x64: compute in float64.
+
+    Returns:
+        One row per (condition, set): ``condition``, ``gains``, ``success``,
+        ``mean arrival s`` and ``median arrival s`` of the successful runs
+        (``inf`` if none), ``mean final distance cm``, ``runs``.
+    """
+    refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
+    steps = horizon_steps(dt)
+    unit = sample_disturbance(key, refs, steps, noise_xy=1.0, noise_theta=1.0)
+    noise = np.asarray(unit.noise, dtype=float)
+    ones = np.ones((len(refs), 3))
+    rows = []
+    for label, sxy, sdeg, latency in STANDARD_CONDITIONS:
+        scale = np.array([sxy, sxy, math.radians(sdeg)])
+        spec = Disturbance(refs, noise * scale, ones, np.float64(1.0 if latency else 0.0))
+        for name, params in params_by_name.items():
+            m = perturbed_metrics(spec, params, controller=controller, dt=dt, x64=x64)
+            summary = _summary_row(m)
+            rows.append(
+                {
+                    "condition": label,
+                    "gains": name,
+                    "success": summary["success"],
+                    "mean arrival s": summary["mean arrival s"],
+                    "median arrival s": summary["median arrival s"],
+                    "mean final distance cm": summary["mean final distance cm"],
+                    "runs": len(refs),
+                }
+            )
     return rows

@@ -234,7 +234,13 @@ def finite_result(poses: Any, result: Any, *, pose_axes: int = 1) -> Any:
         return result
     # One flag per run: the trailing axes (the pose, and the time axis of a
     # trajectory) are reduced, the leading batch axes kept.
-    finite = np.asarray(jnp.isfinite(poses).all(axis=tuple(range(-pose_axes, 0))))
+    axes = tuple(range(-pose_axes, 0))
+    if isinstance(poses, jax.Array) and not poses.is_fully_addressable:
+        # Spread over several processes: each checks the runs it holds.
+        local = [np.asarray(jnp.isfinite(s.data).all(axis=axes)) for s in poses.addressable_shards]
+        finite = np.concatenate([f.reshape(-1) for f in local])
+    else:
+        finite = np.asarray(jnp.isfinite(poses).all(axis=axes))
     if not finite.all():
         bad = np.flatnonzero(~finite.reshape(-1))
         where = "the run" if finite.ndim == 0 else f"{bad.size} run(s), e.g. run {int(bad[0])},"

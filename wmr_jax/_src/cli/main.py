@@ -43,7 +43,9 @@ class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
         text = action.help or ""
         if action.required:
             return text + " (required)"
-        if action.default in (None, False, argparse.SUPPRESS) or "%(default)" in text:
+        # Identity, not equality: a default of 0 is worth showing, False is not.
+        hidden = action.default is None or action.default is False
+        if hidden or action.default is argparse.SUPPRESS or "%(default)" in text:
             return text
         return super()._get_help_string(action)
 

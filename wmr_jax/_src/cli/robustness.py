@@ -37,6 +37,18 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument(
         "--float32", action="store_true", help="compute in float32 instead of float64"
     )
+    parser.add_argument(
+        "--nominal-gains",
+        default=None,
+        metavar="PATH",
+        help="tuned_gains.json of `wmr-jax tune`, shown beside the paper's gains",
+    )
+    parser.add_argument(
+        "--robust-gains",
+        default=None,
+        metavar="PATH",
+        help="tuned_gains.json of `wmr-jax tune --robust`, shown beside them",
+    )
 
 
 def run(args: Any) -> int:
@@ -46,6 +58,7 @@ def run(args: Any) -> int:
     n_runs = flags.positive_int("--runs", args.runs, 1)
     names = flags.controller_names(args.controller)
     velocity = flags.velocity_loop(args.velocity)
+    sets = _gain_sets(args)
 
     from wmr_jax._src.report.robustness import write_robustness
     from wmr_jax._src.report.tables import markdown_table
@@ -57,7 +70,45 @@ def run(args: Any) -> int:
     write_robustness(out, rows, seed=seed, velocity=velocity, n_runs=n_runs)
     print(f"robustness -> {out}/robustness.png, robustness.md, robustness.json")
     print(markdown_table(rows, _PRINTED), end="")
+    _standard(out, sets, seed, x64=not args.float32)
     return 0
+
+
+def _gain_sets(args: Any) -> dict[str, Any]:
+    """The paper's gains and those of the files given (checked before any computation)."""
+    from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS
+    from wmr_jax._src.tuning.saved import load_tuned
+
+    sets = {"paper (k_r = 60)": PAPER_FEASIBLE_GAINS}
+    for flag, label in (("--nominal-gains", "nominal-tuned"), ("--robust-gains", "robust-tuned")):
+        path = getattr(args, flag[2:].replace("-", "_"), None)
+        if path is None:
+            continue
+        try:
+            controller, params = load_tuned(path)
+        except ValueError as err:
+            raise ValueError(f"{flag} {path!r} is not allowed: {err}") from None
+        if controller.name != "shim-sung":
+            raise ValueError(f"{flag} {path!r} is not allowed; allowed: fixed Shim-Sung gains")
+        sets[label] = params
+    return sets
+
+
+def _standard(out: Any, sets: dict[str, Any], seed: int, *, x64: bool) -> None:
+    """Judge the gain sets under the standard conditions; write and print the table."""
+    import jax
+
+    from wmr_jax._src.report.robustness import STANDARD_COLUMNS, write_standard_conditions
+    from wmr_jax._src.report.tables import markdown_table
+    from wmr_jax._src.robustness import standard_conditions
+    from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
+
+    refs = held_out_poses(EVAL_POSES, EVAL_SEED)
+    rows = standard_conditions(sets, refs, jax.random.key(seed), x64=x64)
+    meta = {"seed": seed, "held_out_poses": EVAL_POSES, "eval_seed": EVAL_SEED}
+    write_standard_conditions(out, rows, meta=meta)
+    print(f"standard conditions -> {out}/standard_conditions.png, .md, .json")
+    print(markdown_table(rows, STANDARD_COLUMNS[:5]), end="")
 
 
 SUBCOMMANDS = {

@@ -36,10 +36,29 @@ def add_arguments(parser: Any) -> None:
         "--gains",
         default=None,
         metavar="FILE.json",
-        help="take the gains from this file (tuned_gains.json of wmr-jax tune: Gains field "
-        "names, phi_m in radians) instead of the gain flags",
+        help="take the controller and its parameters from this file (tuned_gains.json of "
+        "wmr-jax tune: fixed gains or a gain schedule) instead of the gain flags",
     )
     flags.add_gain_flags(parser)
+
+
+def _controller_and_gains(args: Any) -> tuple[Any, Any]:
+    """The law and parameters of ``--gains FILE`` (``load_tuned``), else of the gain flags."""
+    from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
+    from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS
+    from wmr_jax._src.tuning.saved import load_tuned
+
+    if args.gains is None:
+        return SHIM_SUNG, flags.gains_from(args)
+    # A gain flag given on the command line is text; one left alone keeps its float default.
+    given = [name for name in GAIN_FIELDS if isinstance(getattr(args, name, None), str)]
+    if given:
+        flag = "--" + given[0].replace("_", "-")
+        raise ValueError(f"{flag} is not allowed with --gains; allowed: one or the other")
+    try:
+        return load_tuned(args.gains)
+    except ValueError as err:
+        raise ValueError(f"--gains {err}") from None
 
 
 def run(args: Any) -> int:
@@ -55,8 +74,10 @@ def run(args: Any) -> int:
     dt = flags.number("--dt", args.dt, low=0.0, closed=False, unit="s")
     steps = flags.positive_int("--steps", args.steps, 1, 10**7)
     velocity = flags.velocity_loop(args.velocity)
-    gains = flags.gains_from(args)
-    traj = rollout(ref, gains, init=init, dt=dt, steps=steps, velocity=velocity)
+    controller, gains = _controller_and_gains(args)
+    traj = rollout(
+        ref, gains, init=init, dt=dt, steps=steps, velocity=velocity, controller=controller
+    )
     t_arrive = float(metrics.arrival_time(traj, np.asarray(ref), dt=dt))
     per_region = np.asarray(metrics.region_time(traj, dt=dt))
     final = np.asarray(traj.poses[-1])

@@ -10,4 +10,6 @@ from wmr_jax._src.controllers.base import Controller as Controller
 from wmr_jax._src.controllers.base import get_controller as get_controller
 from wmr_jax._src.controllers.base import register_controller as register_controller
 from wmr_jax._src.controllers.base import registered_names as registered_names
+from wmr_jax._src.controllers.schedule import SCHEDULE as SCHEDULE
+from wmr_jax._src.controllers.schedule import ScheduleParams as ScheduleParams
 from wmr_jax._src.controllers.shim_sung import SHIM_SUNG as SHIM_SUNG

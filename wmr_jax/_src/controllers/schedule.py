@@ -19,7 +19,8 @@ So ``|v| + L|ω| ≤ V_max``: every wheel command ``v ± L ω`` is within
 most), constant beyond the last. With constant tables (``k_turn = k_θ``) that
 meet ``k_r + L k_θ ≤ V_max`` neither cap is active and the command equals
 the fixed-gain law's exactly: the regions, blend, fold and saturation are
-the building blocks of ``shim_sung``, not a copy of them.
+``shim_sung.commands`` itself, evaluated with the gains of the state, not a
+copy of the law.
 """
 
 from __future__ import annotations
@@ -37,14 +38,11 @@ from wmr_jax._src.checks import require
 from wmr_jax._src.controllers.base import Controller, register_controller
 from wmr_jax._src.controllers.shim_sung import (
     PolarError,
-    blend,
+    commands,
     direction_flag,
-    fold,
     polar_error,
     region_label,
-    saturated_distance,
 )
-from wmr_jax._src.dynamics import sin_cos, sin_small
 from wmr_jax._src.params import Gains, Robot, WheelSpeedWarning, validate_gains
 
 __all__ = [
@@ -145,20 +143,19 @@ def schedule_commands(
             they are continuous).
     """
     d = direction_flag(err, params.phi_m, temperature=temperature)
-    # blend reads r_e, r_a and alpha, which the schedule shares with Gains.
-    eps = blend(err, d, params, temperature=temperature)
-    r_bar = saturated_distance(err.r, params.r_m, temperature=temperature)
-    cos_phi_bar, sin_phi_bar = fold(err.cos_phi, err.sin_phi, temperature=temperature)
-    _, sin_theta_bar = fold(err.cos_theta, err.sin_theta, temperature=temperature)
-    sin_r_bar = sin_small(r_bar) if temperature is None else sin_cos(r_bar)[1]
     k_theta = _table(params.k_theta, err.r)
     # Where d = 0 the robot does not drive (v = 0), so its turn gain may be other.
     k_theta = k_theta + (1 - d * d) * (_table(params.k_turn, err.r) - k_theta)
-    omega_max = params.v_max / params.half_track
-    omega = jnp.clip(
-        k_theta * (eps * sin_phi_bar + (1 - eps) * sin_theta_bar), -omega_max, omega_max
+    # The fixed-gain law itself, with the gains of this state (blend reads
+    # r_e, r_a and alpha, which the schedule shares with Gains).
+    gains = Gains(
+        kr=_table(params.kr, err.r),
+        k_theta=k_theta,
+        **{name: getattr(params, name) for name in SHAPE_FIELDS},
     )
-    v = _table(params.kr, err.r) * d * sin_r_bar * cos_phi_bar
+    v, omega = commands(err, gains, temperature=temperature)
+    omega_max = params.v_max / params.half_track
+    omega = jnp.clip(omega, -omega_max, omega_max)
     budget = params.v_max - params.half_track * jnp.abs(omega)  # ≥ 0 by the clip above
     return jnp.clip(v, -budget, budget), omega
 

@@ -14,6 +14,10 @@ _RATIO_COLUMNS = {
     "sharded_vs_scalar_reference": "sharded / scalar reference",
     "grad_final_pose_loss_over_forward": "grad / forward (final-pose loss)",
     "grad_tuning_loss_over_forward": "grad / forward (tuning loss)",
+    "tuning_loss_over_final_poses": "tuning loss / final_poses (time per robot-step)",
+    "nonideal_over_ideal": "non-ideal / ideal final_poses (time per robot-step)",
+    "relaxed_over_final_poses": "relaxed / hard-law final_poses (time per robot-step)",
+    "tuning_loss_over_relaxed": "tuning loss / relaxed final_poses (time per robot-step)",
 }
 
 
@@ -23,7 +27,7 @@ def _fmt(value: float | None, spec: str, unit: str = "") -> str:
 
 def _ratio(entry: dict[str, float], key: str) -> str:
     """A speed-up as ``12.3×`` (``1234×`` over the scalar reference); a cost as ``2.50``."""
-    if key.endswith("_over_forward"):
+    if key.endswith(("_over_forward", "_over_final_poses", "_over_ideal", "_over_relaxed")):
         return _fmt(entry.get(key), ".2f")
     return _fmt(entry.get(key), ".0f" if key.endswith("scalar_reference") else ".1f", "×")
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -12,7 +13,14 @@ from wmr_jax._src.poses import HORIZON_S
 from wmr_jax._src.report.figures import plt
 from wmr_jax._src.report.tables import markdown_table
 
-__all__ = ["ROBUSTNESS_COLUMNS", "robustness_figure", "write_robustness"]
+__all__ = [
+    "ROBUSTNESS_COLUMNS",
+    "STANDARD_COLUMNS",
+    "robustness_figure",
+    "standard_figure",
+    "write_robustness",
+    "write_standard_conditions",
+]
 
 # The columns of robustness.md, in order.
 ROBUSTNESS_COLUMNS = [
@@ -27,6 +35,17 @@ ROBUSTNESS_COLUMNS = [
     "median first arrival s",
     "mean final distance cm",
     "mean zigzag",
+]
+
+# The columns of standard_conditions.md, in order.
+STANDARD_COLUMNS = [
+    "condition",
+    "gains",
+    "success",
+    "mean arrival s",
+    "median arrival s",
+    "mean final distance cm",
+    "runs",
 ]
 
 _STYLES = ("-", "--", ":", "-.")
@@ -90,7 +109,9 @@ def robustness_figure(rows: Sequence[dict[str, Any]], *, title: str) -> Any:
             x = [r["noise xy cm"] for r in sel]
             style = dict(linestyle=_STYLES[i % len(_STYLES)], marker="o", color=colour)
             axes[0].plot(x, [r["success"] for r in sel], label=f"{name}, {label}", **style)
-            axes[1].plot(x, [r["median arrival s"] for r in sel], **style)
+            # Over the successful runs only; absent (not drawn) where none succeeds.
+            medians = [r["median arrival s"] if r["success"] > 0 else math.nan for r in sel]
+            axes[1].plot(x, medians, **style)
     axes[0].set_ylabel("success rate")
     axes[1].set_ylabel("median arrival time of successes [s]")
     degrees = ", ".join(f"{r['noise theta deg']:g}" for r in first)
@@ -98,7 +119,69 @@ def robustness_figure(rows: Sequence[dict[str, Any]], *, title: str) -> Any:
         ax.set_xlabel(f"measurement noise σ_xy [cm] (σ_θ = {degrees}°)")
         ax.grid(alpha=0.3)
     axes[0].set_ylim(-0.02, 1.02)
-    axes[0].legend(fontsize=7, loc="lower left")
+    axes[1].set_ylim(0.0, HORIZON_S)
     fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 0.75, 1))
+    # Outside the axes, so that it never hides a line.
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=7, loc="center left", bbox_to_anchor=(0.75, 0.5))
+    return fig
+
+
+def write_standard_conditions(
+    out_dir: str | os.PathLike, rows: Sequence[dict[str, Any]], *, meta: dict[str, Any]
+) -> list[Path]:
+    """Write ``standard_conditions.png``, ``.md`` and ``.json`` (``docs/model.md §7``).
+
+    Args:
+        out_dir: the folder (created if missing).
+        rows: ``standard_conditions`` rows.
+        meta: what produced them (seed, runs, where the gains came from).
+
+    Returns:
+        The paths written.
+    """
+    out, rows = Path(out_dir), list(rows)
+    head = (
+        "Gain sets under the standard conditions of docs/model.md §7 (hard law, ideal loop, "
+        f"{rows[0]['runs']} held-out poses of docs/model.md §6, horizon {HORIZON_S:g} s)\n\n"
+    )
+    md = atomic_write_text(
+        out / "standard_conditions.md", head + markdown_table(rows, STANDARD_COLUMNS)
+    )
+    record = atomic_write_json(out / "standard_conditions.json", {**meta, "rows": rows})
+    fig = standard_figure(rows)
+    try:
+        return [save_figure(fig, out / "standard_conditions.png", dpi=110), md, record]
+    finally:
+        plt.close(fig)
+
+
+def standard_figure(rows: Sequence[dict[str, Any]]) -> Any:
+    """Draw success and mean arrival per condition, one bar per gain set (legend outside)."""
+    conditions = list(dict.fromkeys(r["condition"] for r in rows))
+    sets = list(dict.fromkeys(r["gains"] for r in rows))
+    width = 0.8 / len(sets)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.0))
+    for j, name in enumerate(sets):
+        got = {r["condition"]: r for r in rows if r["gains"] == name}
+        x = [i + (j - (len(sets) - 1) / 2) * width for i in range(len(conditions))]
+        colour = plt.get_cmap("tab10")(j)
+        axes[0].bar(x, [got[c]["success"] for c in conditions], width, color=colour, label=name)
+        # Mean arrival of the successful runs; no bar where none succeeds.
+        means = [got[c]["mean arrival s"] if got[c]["success"] > 0 else 0.0 for c in conditions]
+        axes[1].bar(x, means, width, color=colour)
+    for ax, label in zip(axes, ("success rate", "mean arrival of successes [s]"), strict=True):
+        ax.set_xticks(range(len(conditions)), conditions)
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3, axis="y")
+    axes[0].set_ylim(0, 1.05)
+    fig.suptitle(
+        "docs/model.md §7 standard conditions: latency = 1 sample; noise σ_xy = 0.5 cm, "
+        "σ_θ = 1°; hard law, ideal loop",
+        fontsize=9,
+    )
+    fig.tight_layout(rect=(0, 0, 0.82, 1))
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=8, loc="center left", bbox_to_anchor=(0.82, 0.5))
     return fig

@@ -9,11 +9,13 @@ from typing import Any
 
 import numpy as np
 
+from wmr_jax._src.controllers.schedule import KNOTS, SHAPE_FIELDS, knot_radii
 from wmr_jax._src.io import save_figure
+from wmr_jax._src.optimal import bound_ratios
 from wmr_jax._src.report.tables import markdown_table
 from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS, PAPER_FEASIBLE_GAINS, gains_as_dict
 
-__all__ = ["evaluation_table", "tuning_curve"]
+__all__ = ["comparison_table", "evaluation_table", "tuning_curve"]
 
 _GAIN_LABELS = {
     "kr": "k_r (cm/s)",
@@ -28,40 +30,118 @@ _GAIN_LABELS = {
 _TABLE_COLUMNS = ["gains", "mean arrival (s)", "vs paper", "success", "peak wheel speed (cm/s)"]
 
 
-def evaluation_table(evaluation: dict[str, Any]) -> str:
+_BOUND_COLUMNS = ["vs turn–drive–turn", "vs lower bound"]
+
+
+def _right_aligned(rows: list[dict[str, str]], columns: list[str]) -> str:
+    rows = [{**dict.fromkeys(columns, ""), **row} for row in rows]
+    lines = markdown_table(rows, columns).splitlines()
+    # The numeric columns are right-aligned.
+    lines[1] = "|---|" + "---:|" * (len(columns) - 1)
+    return "\n".join(lines) + "\n"
+
+
+def evaluation_table(evaluation: dict[str, Any], bounds: Any = None) -> str:
     """Return the before/after table as Markdown (mean arrival, success, peak wheel speed).
 
     Args:
         evaluation: ``Evaluation`` rows keyed by name; ``"paper_feasible"``
             is the reference of the "vs paper" column.
+        bounds: ``time_bounds`` of the same poses (docs/model.md §8): adds the
+            ratio of each mean arrival to the mean turn–drive–turn time and
+            to the mean lower bound, and a row for each yardstick.
     """
     paper = evaluation["paper_feasible"].mean_arrival
-    rows = [
-        {
+    columns = _TABLE_COLUMNS + (_BOUND_COLUMNS if bounds is not None else [])
+    rows = []
+    for name, ev in evaluation.items():
+        row = {
             "gains": name.replace("_", " "),
             "mean arrival (s)": f"{ev.mean_arrival:.3f}",
             "vs paper": f"{paper / ev.mean_arrival:.2f}×",
             "success": f"{100 * ev.success_rate:.2f} %",
             "peak wheel speed (cm/s)": f"{ev.peak_wheel_speed:.1f}",
         }
-        for name, ev in evaluation.items()
-    ]
-    lines = markdown_table(rows, _TABLE_COLUMNS).splitlines()
-    # The numeric columns are right-aligned.
-    lines[1] = "|---|" + "---:|" * (len(_TABLE_COLUMNS) - 1)
-    return "\n".join(lines) + "\n"
+        if bounds is not None:
+            ratios = bound_ratios(ev.mean_arrival, bounds)
+            row["vs turn–drive–turn"] = f"{ratios['vs_turn_drive_turn']:.3f}×"
+            row["vs lower bound"] = f"{ratios['vs_lower_bound']:.3f}×"
+        rows.append(row)
+    if bounds is not None:
+        for label, values in (
+            ("turn–drive–turn (§8)", bounds.turn_drive_turn),
+            ("lower bound (§8)", bounds.lower_bound),
+        ):
+            rows.append({"gains": label, "mean arrival (s)": f"{float(np.mean(values)):.3f}"})
+    return _right_aligned(rows, columns)
+
+
+_COMPARE_COLUMNS = [
+    "problem",
+    "method",
+    "mean arrival (s), seeds 0/1/2",
+    "success",
+    "mean − lower bound (s)",
+    "vs turn–drive–turn",
+    "wall time (s)",
+]
+
+
+def comparison_table(rows: list[dict[str, Any]]) -> str:
+    """Return gradient vs CMA-ES vs random search as Markdown, one line per problem and method.
+
+    Args:
+        rows: the rows of ``wmr_jax.tuning.compare`` (one per problem, seed and method).
+    """
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for row in rows:
+        groups.setdefault((row["problem"], row["method"]), []).append(row)
+    lines = []
+    for (problem, method), group in groups.items():
+        arrival = [r["mean_arrival"] for r in group]
+        gap = [r["mean_arrival"] - r["lower_bound_s"] for r in group]
+        lines.append(
+            {
+                "problem": problem,
+                "method": method,
+                "mean arrival (s), seeds 0/1/2": " / ".join(f"{a:.3f}" for a in arrival),
+                "success": f"{100 * min(r['success_rate'] for r in group):.1f} %",
+                "mean − lower bound (s)": f"{float(np.mean(gap)):.3f}",
+                "vs turn–drive–turn": f"{np.mean(arrival) / group[0]['turn_drive_turn_s']:.3f}×",
+                "wall time (s)": " / ".join(f"{r['wall_s']:.0f}" for r in group),
+            }
+        )
+    first = rows[0]
+    lines.append(
+        {
+            "problem": "—",
+            "method": "turn–drive–turn / lower bound (§8)",
+            "mean arrival (s), seeds 0/1/2": (
+                f"{first['turn_drive_turn_s']:.3f} / {first['lower_bound_s']:.3f}"
+            ),
+        }
+    )
+    return _right_aligned(lines, _COMPARE_COLUMNS)
 
 
 def tuning_curve(
-    path: str | os.PathLike, history: dict[str, np.ndarray], *, velocity: str = "ideal"
+    path: str | os.PathLike,
+    history: dict[str, np.ndarray],
+    *,
+    velocity: str = "ideal",
+    problem: str = "fixed",
 ) -> Path:
-    """Save the loss (with the temperature) and each gain against the iteration.
+    """Save the loss (with the temperature) and the parameters against the iteration.
+
+    For a schedule, the three tables are drawn against ``r_e`` (first and
+    last iteration) and the shape gains against the iteration.
 
     Args:
         path: the image file to write (atomically).
         history: ``TuneResult.history``: ``loss`` (s), ``temperature`` and
-            ``gains`` ``(iters, 7)`` in ``GAIN_FIELDS`` order.
+            ``gains`` ``(iters, columns)`` (``Problem.columns``).
         velocity: the velocity loop tuned for, for the title.
+        problem: ``"fixed"`` or ``"schedule"``.
 
     Returns:
         ``path``.
@@ -80,10 +160,21 @@ def tuning_curve(
     twin.set_yscale("log")
     twin.set_ylabel("temperature", color="C3")
     ax.set_title(f"loss ({velocity} loop)")
+    if problem == "schedule":
+        _schedule_panels(axes, steps, history["gains"])
+    else:
+        _gain_panels(axes, steps, history["gains"])
+    try:
+        return save_figure(fig, path, dpi=110)
+    finally:
+        plt.close(fig)
+
+
+def _gain_panels(axes: Any, steps: np.ndarray, gains: np.ndarray) -> None:
     paper = gains_as_dict(PAPER_FEASIBLE_GAINS)
     for k, name in enumerate(GAIN_FIELDS):
         ax = axes.flat[k + 1]
-        values = history["gains"][:, k]
+        values = gains[:, k]
         start = paper[name]
         if name == "phi_m":
             values, start = np.degrees(values), math.degrees(start)
@@ -92,7 +183,23 @@ def tuning_curve(
         ax.set_title(_GAIN_LABELS[name])
         ax.set_xlabel("iteration")
     axes.flat[1].legend(fontsize=8)
-    try:
-        return save_figure(fig, path, dpi=110)
-    finally:
-        plt.close(fig)
+
+
+def _schedule_panels(axes: Any, steps: np.ndarray, rows: np.ndarray) -> None:
+    radii = knot_radii(KNOTS)
+    titles = ("k_r(r_e) (cm/s)", "k_θ(r_e), d ≠ 0 (rad/s)", "k_θ(r_e), d = 0 (rad/s)")
+    for k, title in enumerate(titles):
+        ax = axes.flat[k + 1]
+        table = rows[:, k * KNOTS : (k + 1) * KNOTS]
+        ax.plot(radii, table[0], "o--", ms=3, lw=0.8, color="gray", label="iteration 1")
+        ax.plot(radii, table[-1], "o-", ms=3, lw=1.2, label="tuned")
+        ax.set_xscale("symlog", linthresh=1.0)
+        ax.set_xlabel("r_e (cm)")
+        ax.set_title(title)
+    axes.flat[1].legend(fontsize=8)
+    for k, name in enumerate(("phi_m", "r_m", "r_a", "r_e")):
+        ax = axes.flat[k + 4]
+        values = rows[:, 3 * KNOTS + SHAPE_FIELDS.index(name)]
+        ax.plot(steps, np.degrees(values) if name == "phi_m" else values, lw=1.0)
+        ax.set_title(_GAIN_LABELS[name])
+        ax.set_xlabel("iteration")

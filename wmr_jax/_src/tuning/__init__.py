@@ -17,6 +17,9 @@ One concept per module:
 * ``search``: ``random_search``, the baseline.
 * ``evaluation``: ``Evaluation`` and ``evaluate`` with the hard law.
 * ``cost``: ``gradient_cost``, the gradient's time and memory.
+* ``problems``: the fixed-gain and gain-schedule problems as values.
+* ``saved``: ``tuned_gains.json`` and ``load_tuned``.
+* ``compare``: CMA-ES (``evosax``) and the equal-wall-time comparison.
 """
 
 from wmr_jax._src.tuning.cost import GradientCost as GradientCost
@@ -38,6 +41,12 @@ from wmr_jax._src.tuning.parametrisation import gains_from_logits as gains_from_
 from wmr_jax._src.tuning.parametrisation import gains_from_unit as gains_from_unit
 from wmr_jax._src.tuning.parametrisation import logits_from_gains as logits_from_gains
 from wmr_jax._src.tuning.parametrisation import unit_from_gains as unit_from_gains
+from wmr_jax._src.tuning.problems import FIXED as FIXED
+from wmr_jax._src.tuning.problems import SCHEDULED as SCHEDULED
+from wmr_jax._src.tuning.problems import Problem as Problem
+from wmr_jax._src.tuning.problems import get_problem as get_problem
+from wmr_jax._src.tuning.saved import load_tuned as load_tuned
+from wmr_jax._src.tuning.saved import tuned_json as tuned_json
 from wmr_jax._src.tuning.search import SearchResult as SearchResult
 from wmr_jax._src.tuning.search import random_search as random_search
 from wmr_jax._src.tuning.training import TrainState as TrainState

@@ -17,6 +17,8 @@ import numpy as np
 
 from wmr_jax._src import loops
 from wmr_jax._src import rollout as simulation
+from wmr_jax._src.controllers.schedule import SCHEDULE, ScheduleParams
+from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
 from wmr_jax._src.metrics import arrival_time
 from wmr_jax._src.params import Gains, Robot
 from wmr_jax._src.poses import HORIZON_S, horizon_steps, sample_poses
@@ -68,6 +70,7 @@ def hard_runs(
     velocity: str,
     substeps: int,
     wheel_limit: str,
+    controller: Any = SHIM_SUNG,
 ) -> tuple[simulation.Trajectory, jax.Array, int]:
     """Run ``gains`` with the hard law from the origin to each reference.
 
@@ -84,6 +87,7 @@ def hard_runs(
         velocity=velocity,
         substeps=substeps,
         wheel_limit=wheel_limit,
+        controller=controller,
     )
     return traj, arrival_time(traj, jnp.asarray(refs), dt=dt), steps
 
@@ -98,6 +102,7 @@ def evaluate(
     velocity: str = "ideal",
     substeps: int = loops.DEFAULT_SUBSTEPS,
     wheel_limit: str = "clip",
+    controller: Any = None,
 ) -> Evaluation:
     """Run ``gains`` with the hard law from ``(0, 0, 0)`` to each reference; summarise.
 
@@ -110,11 +115,15 @@ def evaluate(
         velocity: ``"ideal"`` or ``"nonideal"``.
         substeps: inner steps per period (non-ideal loop).
         wheel_limit: ``"clip"`` or ``"scale"`` (non-ideal loop).
+        controller: the law; default: the gain-scheduled one for a
+            ``ScheduleParams``, else Shim–Sung.
 
     Raises:
         ValueError: for out-of-range gains, poses or options, naming the value.
     """
-    traj, times, _ = hard_runs(refs, gains, **run_options(locals()))
+    if controller is None:
+        controller = SCHEDULE if isinstance(gains, ScheduleParams) else SHIM_SUNG
+    traj, times, _ = hard_runs(refs, gains, **run_options(locals()), controller=controller)
     times = np.asarray(times)
     arrived = np.isfinite(times)
     return Evaluation(

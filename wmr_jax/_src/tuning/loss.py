@@ -28,14 +28,14 @@ from wmr_jax._src import rollout as simulation
 from wmr_jax._src.checks import as_float_tree, check_number, float_dtype
 from wmr_jax._src.controllers import SHIM_SUNG
 from wmr_jax._src.controllers import shim_sung as law
+from wmr_jax._src.controllers.base import Controller
+from wmr_jax._src.controllers.schedule import SCHEDULE, ScheduleParams
+from wmr_jax._src.dynamics import sin_cos
 from wmr_jax._src.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
 from wmr_jax._src.params import Gains, Robot
 from wmr_jax._src.poses import HORIZON_S, horizon_steps
-from wmr_jax._src.tuning.parametrisation import (
-    GAIN_FIELDS,
-    PAPER_FEASIBLE_GAINS,
-    gains_from_logits,
-)
+from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS
+from wmr_jax._src.tuning.problems import FIXED, Problem, get_problem
 
 __all__ = ["LossTerms", "LossWeights", "loss_terms", "robust_gradient", "tuning_loss"]
 
@@ -68,13 +68,14 @@ class LossSpec:
     tol_theta: float
     weights: LossWeights
     remat: bool
+    controller: Controller = SHIM_SUNG
 
     def options(self, temperature: Any = None) -> loops.Options:
-        """The rollout options of this loss with the Shim–Sung law at ``temperature``."""
+        """The rollout options of this loss with its law at ``temperature``."""
         return loops.Options(
             steps=self.steps,
             velocity=self.velocity,
-            controller=SHIM_SUNG,
+            controller=self.controller,
             temperature=temperature,
             substeps=self.substeps,
             wheel_limit=self.wheel_limit,
@@ -106,6 +107,7 @@ def make_spec(
     tol_theta: Any,
     weights: Any,
     remat: bool,
+    controller: Any = SHIM_SUNG,
 ) -> LossSpec:
     """Check the loss options (before tracing) and return them as a static spec.
 
@@ -117,6 +119,7 @@ def make_spec(
         velocity=velocity,
         substeps=substeps,
         wheel_limit=wheel_limit,
+        controller=controller,
     )
     if not isinstance(weights, LossWeights):
         raise ValueError(f"weights = {weights!r} is not allowed; allowed: a LossWeights")
@@ -132,6 +135,7 @@ def make_spec(
         tol_theta=check_number("tol_theta", tol_theta, high=math.pi / 2, unit="rad"),
         weights=weights,
         remat=bool(remat),
+        controller=options.controller,
     )
 
 
@@ -143,43 +147,52 @@ def _pose_loss_terms(ref, gains, init, robot, dt, spec: LossSpec, temperature):
 
     ``ref``, ``init``: ``(3,)``; ``gains``, ``robot``: scalar leaves;
     ``temperature``: traced scalar, or ``None`` for the hard law.
+
+    The terms stream through the rollout's own scan (``loops.scan_closed_loop``
+    with ``fold=``), so the loss runs in the fast layout of ``final_poses``
+    and stores no trajectory; the loop recomputes each step in the backward
+    pass instead of storing its intermediates.
     """
     # The temperature is a traced value rather than a static option so that
     # annealing it does not recompile; Options is therefore built in the trace.
     options = spec.options(temperature)
     sin_tol_sq = math.sin(spec.tol_theta) ** 2
+    inv_tol_r_sq = 1.0 / spec.tol_r**2
     softness = spec.weights.arrival_softness
+    cos_r, sin_r = sin_cos(ref[2])
 
-    def body(state, _):
-        new_state, out = loops.closed_loop_step(state, ref, gains, robot, dt, options)
-        err = law.polar_error(new_state.pose, ref)
+    nonideal = spec.velocity == "nonideal"
+
+    def fold(acc, pose, out):
+        dx, dy = ref[0] - pose[0], ref[1] - pose[1]
+        cos_c, sin_c = sin_cos(pose[2])
+        sin_theta = sin_r * cos_c - cos_r * sin_c
         # Squared, tolerance-normalised errors; arrived ⇔ both ≤ 1 (docs/model.md §6),
         # since |θ̄_e| ≤ tol ⇔ sin²θ_e ≤ sin²tol when |θ̄_e| ≤ π/2.
-        dist = err.r**2 / spec.tol_r**2
-        head = err.sin_theta**2 / sin_tol_sq
-        log_arrived = jax.nn.log_sigmoid((1.0 - dist) / softness) + jax.nn.log_sigmoid(
-            (1.0 - head) / softness
-        )
-        log_error = jnp.log1p(dist + head)
+        dist = (dx * dx + dy * dy) * inv_tol_r_sq
+        head = sin_theta * sin_theta / sin_tol_sq
+        arrived = jax.nn.sigmoid((1.0 - dist) / softness) * jax.nn.sigmoid((1.0 - head) / softness)
+        # Σ_k Π_{j≥k} a_j over the samples so far, by S ← a (S + 1): the reversed
+        # cumulative product of the "settled from k on" test, streamed forwards.
+        # It rides with the log-error as one complex number: XLA:CPU computes
+        # each output of a step in a loop of its own, so one output is cheaper.
+        sums = acc[0]
+        sums = jax.lax.complex(arrived * (sums.real + 1.0), sums.imag + jnp.log1p(dist + head))
+        if not nonideal:
+            return (sums,)
         # Ideal loop: the rims follow the command exactly, so this is zero.
         commanded = law.wheel_speeds(out.v, out.omega, robot)
-        shortfall = jnp.sum((commanded - out.wheel_speeds) ** 2) / robot.v_max**2
-        return new_state, (log_arrived, log_error, shortfall)
+        return sums, acc[1] + jnp.sum((commanded - out.wheel_speeds) ** 2) / robot.v_max**2
 
-    if spec.remat:
-        # Store only the carry (pose, velocity, integral: 7 numbers) per step
-        # for the backward pass and recompute the law from it: the law's
-        # intermediates would otherwise dominate the gradient's memory.
-        body = jax.checkpoint(body)
-    _, (log_arrived, log_error, shortfall) = jax.lax.scan(
-        body, loops.initial_state(init), None, length=spec.steps
-    )
-    # Π_{j≥k} a_j (arrived at every sample from k on) by a reversed cumulative
-    # sum of logs; its complement, summed over k, counts the samples before
-    # the final settled run, as the hard arrival time does (docs/model.md §6).
-    settled = jnp.exp(jnp.cumsum(log_arrived[::-1])[::-1])
-    soft_arrival = dt * (1.0 + jnp.sum(1.0 - settled))
-    return soft_arrival, dt * jnp.sum(log_error), dt * jnp.sum(shortfall)
+    zero = jnp.zeros((), init.dtype)
+    acc = (jax.lax.complex(zero, zero), zero) if nonideal else (jax.lax.complex(zero, zero),)
+    _, acc, _ = loops.scan_closed_loop(ref, gains, init, robot, dt, options, fold=fold, acc=acc)
+    settled, log_error = acc[0].real, acc[0].imag
+    shortfall = acc[1] if nonideal else zero
+    # 1 + Σ_k (1 − settled_k) counts the samples before the final settled run,
+    # as the hard arrival time does (docs/model.md §6).
+    soft_arrival = dt * (1.0 + spec.steps - settled)
+    return soft_arrival, dt * log_error, dt * shortfall
 
 
 def _pose_objective(ref, gains, init, robot, dt, spec: LossSpec, temperature):
@@ -219,24 +232,22 @@ _batch_terms_jit = jax.jit(_batch_terms, static_argnames=("spec",))
 # ---------------------------------------------------------------- robust gradient
 
 
-def robust_value_and_grad(z, refs, init, robot, dt, spec: LossSpec, temperature, pose_clip):
-    """Return ``(mean loss, gradient (7,) w.r.t. the logits, stats)`` over a prepared batch.
+def robust_value_and_grad(
+    z, refs, init, robot, dt, spec: LossSpec, temperature, pose_clip, problem: Problem = FIXED
+):
+    """Return ``(mean loss, gradient (dim,) w.r.t. the logits, stats)`` over a prepared batch.
 
     Each pose's gradient is capped at ``pose_clip`` times the batch median
     norm (``None``: no cap) and non-finite ones are dropped, then averaged.
     """
 
-    def gain_vector(z):
-        gains = gains_from_logits(z, robot)
-        return jnp.stack([getattr(gains, name) for name in GAIN_FIELDS])
+    def single(ref, z):
+        params = problem.from_logits(z, robot)
+        return _pose_objective(ref, params, init, robot, dt, spec, temperature)
 
-    single = jax.value_and_grad(_pose_objective, argnums=1)
-    gains = gains_from_logits(z, robot)
-    values, gain_grads = _per_pose(single, spec, temperature)(refs, gains, init, robot, dt, None)
-    # Chain rule to the logits for all poses at once: the per-pose gradients
-    # (N, 7), in field order, times the Jacobian ∂gains/∂z (7, 7).
-    grads = jnp.stack([getattr(gain_grads, name) for name in GAIN_FIELDS], axis=-1)
-    grads = grads @ jax.jacobian(gain_vector)(z)
+    # One vmap over the references; the logits are shared, so the map from
+    # them to the parameters runs once and each pose's gradient is (dim,).
+    values, grads = jax.vmap(jax.value_and_grad(single, argnums=1), in_axes=(0, None))(refs, z)
     norms = jnp.linalg.norm(grads, axis=-1)
     finite = jnp.isfinite(norms) & jnp.isfinite(values)
     if pose_clip is None:
@@ -256,7 +267,7 @@ def robust_value_and_grad(z, refs, init, robot, dt, spec: LossSpec, temperature,
     return loss, grad, stats
 
 
-_robust_jit = jax.jit(robust_value_and_grad, static_argnames=("spec",))
+_robust_jit = loops.jit_top_level(robust_value_and_grad, static_argnames=("spec", "problem"))
 
 
 # ---------------------------------------------------------------- public entry points
@@ -281,16 +292,18 @@ def _prepared(gains: Any, refs: Any, temperature: Any, options: dict[str, Any]) 
     """Check every argument (before tracing); return ``(spec, temperature, prepared args)``.
 
     ``gains`` ``None`` (``robust_gradient``, which has logits instead) checks
-    the rest against the paper's feasible gains.
+    the rest against the paper's feasible gains. A ``ScheduleParams`` selects
+    the gain-scheduled law, ``Gains`` the fixed one.
     """
     unknown = sorted(set(options) - set(_OPTION_DEFAULTS))
     if unknown:
         raise ValueError(f"unknown option {unknown[0]!r}; allowed: {', '.join(_OPTION_DEFAULTS)}")
     o = {**_OPTION_DEFAULTS, **options}
     gains = PAPER_FEASIBLE_GAINS if gains is None else gains
+    controller = SCHEDULE if isinstance(gains, ScheduleParams) else SHIM_SUNG
     if temperature is not None:
         temperature = check_number("temperature", temperature)
-    spec = make_spec(**{name: o[name] for name in _STATIC_OPTIONS})
+    spec = make_spec(**{name: o[name] for name in _STATIC_OPTIONS}, controller=controller)
     args = simulation.prepare(
         refs, gains, o["init"], o["robot"], o["dt"], spec.options(), batch=True
     )
@@ -364,8 +377,10 @@ def tuning_loss(
         tol_r: arrival distance tolerance, cm.
         tol_theta: arrival heading tolerance, rad.
         weights: the terms' weights and the relaxed test's width.
-        remat: recompute the law in the backward pass (``jax.checkpoint`` on
-            the scan body) instead of storing it: same values, less memory.
+        remat: kept for compatibility and without effect: the loss streams
+            through the rollout's own loop, which always recomputes each step
+            in the backward pass (``jax.checkpoint`` on the scan body)
+            instead of storing its intermediates.
 
     Returns:
         Scalar loss, s.
@@ -402,6 +417,7 @@ def robust_gradient(
     *,
     temperature: float | None,
     pose_clip: float | None = 1.0,
+    problem: str = "fixed",
     **options: Any,
 ) -> tuple[jax.Array, jax.Array, dict[str, jax.Array]]:
     """Return the tuner's robust batch gradient with respect to the logits ``z``.
@@ -417,14 +433,20 @@ def robust_gradient(
         temperature: smooth-law temperature ``> 0``, or ``None`` for the hard law.
         pose_clip: cap in multiples of the batch median norm; ``None`` caps
             nothing.
+        problem: ``"fixed"`` (``z`` ``(7,)``, ``gains_from_logits``) or
+            ``"schedule"`` (``z`` ``(35,)``, the gain schedule).
         **options: as for ``loss_terms``.
 
     Returns:
-        ``(loss s, gradient (7,), stats)`` where ``stats`` holds the fractions
+        ``(loss s, gradient (dim,), stats)`` where ``stats`` holds the fractions
         of the poses ``"dropped"`` (non-finite) and ``"clipped"``.
     """
-    spec, temperature, (refs, _, init, robot, dt) = _prepared(None, refs, temperature, options)
+    problem = get_problem(problem)
+    start = problem.controller.default_params()
+    spec, temperature, (refs, _, init, robot, dt) = _prepared(start, refs, temperature, options)
     z = as_float_tree(jnp.asarray(z))
+    if z.shape != (problem.dim,):
+        raise ValueError(f"z has shape {z.shape}; allowed: ({problem.dim},) for {problem.name!r}")
     if pose_clip is not None:
         pose_clip = jnp.asarray(check_number("pose_clip", pose_clip), float_dtype())
-    return _robust_jit(z, refs, init, robot, dt, spec, temperature, pose_clip)
+    return _robust_jit(z, refs, init, robot, dt, spec, temperature, pose_clip, problem)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from typing import Any, NamedTuple
 
 import jax
@@ -16,13 +17,10 @@ from wmr_jax._src.checks import as_poses, check_int, float_dtype
 from wmr_jax._src.params import Gains, Robot, validate_robot
 from wmr_jax._src.poses import HORIZON_S
 from wmr_jax._src.tuning.evaluation import hard_runs, run_options
-from wmr_jax._src.tuning.parametrisation import (
-    PAPER_FEASIBLE_GAINS,
-    gains_from_unit,
-    unit_from_gains,
-)
+from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS, unit_from_gains
+from wmr_jax._src.tuning.problems import FIXED, Problem, get_problem
 
-__all__ = ["SearchResult", "random_search"]
+__all__ = ["SearchResult", "population_scores", "random_search"]
 
 # Random search scores a run that never arrives as twice the horizon: worse
 # than any arrival, but finite, so that candidates' means stay comparable.
@@ -59,22 +57,28 @@ def random_search(
     velocity: str = "ideal",
     substeps: int = loops.DEFAULT_SUBSTEPS,
     wheel_limit: str = "clip",
+    problem: Any = "fixed",
+    progress: Any = None,
 ) -> SearchResult:
     """Search the feasible set of ``gains_from_unit`` at random for ``budget_s`` seconds.
 
-    Candidates are ``u ~ U[0, 1]^7``, scored ``chunk`` at a time with the hard
-    law on ``refs`` (mean arrival time, failures counted as twice the
-    horizon); ``start`` is the first candidate, so the result is never worse
-    than it on ``refs``. At least one chunk is scored whatever the budget.
+    Candidates are ``u ~ U[0, 1]^dim`` of the problem's feasible set, scored
+    ``chunk`` at a time with the hard law on ``refs`` (mean arrival time,
+    failures counted as twice the horizon); ``start`` is the first
+    candidate, so the result is never worse than it on ``refs``. At least
+    one chunk is scored whatever the budget.
 
     Args:
         key: PRNG key of the candidates.
         refs: ``(N, 3)`` reference poses the candidates are scored on.
         budget_s: wall-time budget, s.
         robot: robot parameters; default ``Robot()``.
-        start: gains scored first.
+        start: gains scored first (fixed problem); the schedule starts from
+            its own starting point.
         chunk: candidates per batched rollout.
         dt, horizon, velocity, substeps, wheel_limit: as for ``evaluate``.
+        problem: ``"fixed"`` or ``"schedule"`` (``wmr_jax.tuning`` problems).
+        progress: called with the number of candidates after each chunk.
 
     Raises:
         ValueError: for out-of-range options or poses, naming the value.
@@ -86,21 +90,40 @@ def random_search(
     run = run_options(locals())
     n = refs.shape[0]
     tiled = jnp.tile(refs, (chunk, 1))
-    first = jnp.asarray(unit_from_gains(start, robot), float_dtype())
+    problem = get_problem(problem)
+    first = problem.start(robot) if problem is not FIXED else unit_from_gains(start, robot)
+    first = jnp.asarray(first, float_dtype())
     best_score, best_u, count = math.inf, first, 0
     began = time.perf_counter()
     while count == 0 or time.perf_counter() - began < budget_s:
-        u = jax.random.uniform(jax.random.fold_in(key, count), (chunk, 7), float_dtype())
+        u = jax.random.uniform(jax.random.fold_in(key, count), (chunk, problem.dim), float_dtype())
         if count == 0:
             u = u.at[0].set(first)
-        # Candidate i runs on poses i·N … (i+1)·N − 1: one flat batch.
-        population = jax.tree.map(lambda leaf: jnp.repeat(leaf, n), gains_from_unit(u, robot))
-        _, times, steps = hard_runs(tiled, population, **run)
-        times = times.reshape(chunk, n)
-        scores = np.asarray(jnp.mean(jnp.minimum(times, _FAILURE_FACTOR * steps * dt), axis=1))
+        scores = np.asarray(population_scores(problem, u, tiled, n, robot, run))
         i = int(np.argmin(scores))
         if scores[i] < best_score:
             best_score, best_u = float(scores[i]), u[i]
         count += chunk
-    best = jax.tree.map(float, gains_from_unit(best_u, robot))
+        if progress is not None:
+            progress(chunk)
+    best = jax.tree.map(float, problem.from_unit(best_u, robot))
     return SearchResult(best, best_score, count, time.perf_counter() - began)
+
+
+def population_scores(problem: Problem, u: jax.Array, tiled: jax.Array, n: int, robot, run):
+    """Hard-law score of each candidate ``u (P, dim)`` on ``n`` poses tiled ``P`` times, s.
+
+    The mean arrival time, failures counted as twice the horizon.
+    """
+    # Candidate i runs on poses i·N … (i+1)·N − 1: one flat batch.
+    params = problem.from_unit(u, robot)
+    # Leaves the same for every candidate (the robot's V_max, L) are repeated too.
+    size = u.shape[0]
+    population = jax.tree.map(lambda leaf: jnp.repeat(jnp.broadcast_to(leaf, (size,)), n), params)
+    with warnings.catch_warnings():
+        # Candidates are scored, not reported: a candidate's warnings (wheel
+        # saturation, sampling margins) are the search's business, not the user's.
+        warnings.simplefilter("ignore")
+        _, times, steps = hard_runs(tiled, population, **run, controller=problem.controller)
+    times = times.reshape(u.shape[0], n)
+    return jnp.mean(jnp.minimum(times, _FAILURE_FACTOR * steps * run["dt"]), axis=1)

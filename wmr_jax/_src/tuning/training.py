@@ -42,11 +42,9 @@ from wmr_jax._src.tuning.evaluation import (
 )
 from wmr_jax._src.tuning.loss import LossSpec, LossWeights, make_spec, robust_value_and_grad
 from wmr_jax._src.tuning.parametrisation import (
-    GAIN_FIELDS,
     PAPER_FEASIBLE_GAINS,
-    gains_from_logits,
-    logits_from_gains,
 )
+from wmr_jax._src.tuning.problems import FIXED, SCHEDULED, Problem
 from wmr_jax._src.tuning.search import SearchResult, random_search
 
 __all__ = [
@@ -97,6 +95,8 @@ class TuneConfig:
         weights: terms of the loss (see ``tuning_loss``).
         substeps: inner steps per period (non-ideal loop).
         wheel_limit: ``"clip"`` or ``"scale"`` (non-ideal loop).
+        schedule: tune the gain-scheduled law (``ScheduleParams``, 35
+            parameters) instead of the seven fixed gains.
     """
 
     velocity: str = "ideal"
@@ -117,6 +117,12 @@ class TuneConfig:
     weights: LossWeights = LossWeights()
     substeps: int = loops.DEFAULT_SUBSTEPS
     wheel_limit: str = "clip"
+    schedule: bool = False
+
+    @property
+    def problem(self) -> Problem:
+        """The tuning problem: gain schedules if ``schedule``, else fixed gains."""
+        return SCHEDULED if self.schedule else FIXED
 
     def replace(self, **changes: Any) -> TuneConfig:
         """Return a copy with the given fields changed."""
@@ -134,10 +140,11 @@ class TuneConfig:
             check_number(name, getattr(self, name))
         if self.pose_clip is not None:
             check_number("pose_clip", self.pose_clip)
-        if not isinstance(self.random_search, bool):
-            raise ValueError(
-                f"random_search = {self.random_search!r} is not allowed; allowed: True or False"
-            )
+        for name in ("random_search", "schedule"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(
+                    f"{name} = {getattr(self, name)!r} is not allowed; allowed: True or False"
+                )
         self.spec()
         return self
 
@@ -153,6 +160,7 @@ class TuneConfig:
             tol_theta=DEFAULT_TOL_THETA,
             weights=self.weights,
             remat=True,
+            controller=self.problem.controller,
         )
 
     def hyper(self) -> _OptimHyper:
@@ -186,11 +194,11 @@ class TrainState(NamedTuple):
 
     Attributes:
         iteration: iterations done.
-        z: ``(7,)`` logits of the current gains (``gains_from_logits``).
+        z: ``(dim,)`` logits of the current parameters (``Problem.from_logits``).
         opt_state: the optax state.
         losses: loss of each iteration done, s.
         temperatures: smooth-law temperature of each iteration done.
-        gains: the gains after each iteration, rows in ``GAIN_FIELDS`` order.
+        gains: the parameters after each iteration, as flat rows (``Problem.columns``).
         elapsed_s: wall time of the iterations done (all sessions), s.
     """
 
@@ -207,11 +215,12 @@ class TuneResult(NamedTuple):
     """What ``train`` returns.
 
     Attributes:
-        gains: the tuned gains (feasible; floats).
+        gains: the tuned parameters (feasible; floats): ``Gains``, or
+            ``ScheduleParams`` for a schedule.
         evaluation: hard-law ``Evaluation`` on the held-out poses, keyed
             ``"paper_feasible"``, ``"tuned"`` and, if run, ``"random_search"``.
         history: per-iteration ``loss`` (s), ``temperature`` and ``gains``
-            ``(iters, 7)`` in ``GAIN_FIELDS`` order, as NumPy arrays.
+            ``(iters, columns)`` (``Problem.columns``), as NumPy arrays.
         tune_wall_s: wall time of the gradient iterations (all sessions), s.
         search: the random search's result, or ``None``.
     """
@@ -221,6 +230,7 @@ class TuneResult(NamedTuple):
     history: dict[str, np.ndarray]
     tune_wall_s: float
     search: SearchResult | None
+    problem: str = "fixed"
 
 
 # ---------------------------------------------------------------- optimiser
@@ -233,9 +243,9 @@ def _optimizer(hyper: _OptimHyper) -> optax.GradientTransformation:
     return optax.chain(optax.clip_by_global_norm(hyper.grad_clip), optax.adam(schedule))
 
 
-def _train_step(z, opt_state, refs, temperature, init, robot, dt, *, spec, hyper):
+def _train_step(z, opt_state, refs, temperature, init, robot, dt, *, spec, hyper, problem):
     loss, grad, stats = robust_value_and_grad(
-        z, refs, init, robot, dt, spec, temperature, hyper.pose_clip
+        z, refs, init, robot, dt, spec, temperature, hyper.pose_clip, problem
     )
     updates, opt_state = _optimizer(hyper).update(grad, opt_state, z)
     # Feasibility needs no projection: every z maps into the feasible set.
@@ -244,7 +254,7 @@ def _train_step(z, opt_state, refs, temperature, init, robot, dt, *, spec, hyper
     return z, opt_state, loss, stats
 
 
-_train_step_jit = jax.jit(_train_step, static_argnames=("spec", "hyper"))
+_train_step_jit = loops.jit_top_level(_train_step, static_argnames=("spec", "hyper", "problem"))
 
 
 def _temperature(config: TuneConfig, iteration: int) -> float:
@@ -270,11 +280,13 @@ def _checked(config: TuneConfig | None, robot: Robot | None) -> tuple[TuneConfig
 def init_state(config: TuneConfig | None = None, robot: Robot | None = None) -> TrainState:
     """Return the state before the first iteration: the paper's feasible gains, Adam at rest.
 
+    For a schedule, the paper's feasible gains as constant tables.
+
     Raises:
         ValueError: for bad settings, naming the field.
     """
     config, robot = _checked(config, robot)
-    z0 = jnp.asarray(logits_from_gains(PAPER_FEASIBLE_GAINS, robot), float_dtype())
+    z0 = jnp.asarray(config.problem.start_logits(robot), float_dtype())
     return TrainState(0, z0, _optimizer(config.hyper()).init(z0), (), (), (), 0.0)
 
 
@@ -296,7 +308,7 @@ def state_arrays(state: TrainState) -> dict[str, np.ndarray]:
         "z": np.asarray(state.z),
         "losses": np.asarray(state.losses, dtype=float),
         "temperatures": np.asarray(state.temperatures, dtype=float),
-        "gains": np.asarray(state.gains, dtype=float).reshape(-1, len(GAIN_FIELDS)),
+        "gains": np.asarray(state.gains, dtype=float) if state.gains else np.zeros((0, 0)),
         "elapsed_s": np.asarray(state.elapsed_s, dtype=float),
         **{f"opt_{i}": np.asarray(leaf) for i, leaf in enumerate(leaves)},
     }
@@ -305,8 +317,12 @@ def state_arrays(state: TrainState) -> dict[str, np.ndarray]:
 def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainState:
     """Rebuild the state of ``state_arrays`` in the structure of ``fresh`` (``init_state``).
 
+    A saved state is never trusted: one whose values are not all finite, or
+    whose iteration count and history lengths disagree, is refused.
+
     Raises:
-        ValueError: if an array is missing or of the wrong shape.
+        ValueError: one line, if an array is missing, of the wrong shape,
+            non-finite, or the lengths disagree.
     """
     leaves, treedef = jax.tree.flatten(fresh.opt_state)
     try:
@@ -314,18 +330,30 @@ def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainStat
             jnp.asarray(arrays[f"opt_{i}"], dtype=jnp.asarray(leaf).dtype).reshape(jnp.shape(leaf))
             for i, leaf in enumerate(leaves)
         ]
-        gains = np.asarray(arrays["gains"], dtype=float).reshape(-1, len(GAIN_FIELDS))
-        return TrainState(
+        gains = np.asarray(arrays["gains"], dtype=float)
+        state = TrainState(
             iteration=int(arrays["iteration"]),
             z=jnp.asarray(arrays["z"], dtype=fresh.z.dtype).reshape(fresh.z.shape),
             opt_state=jax.tree.unflatten(treedef, restored),
             losses=tuple(float(x) for x in arrays["losses"]),
             temperatures=tuple(float(x) for x in arrays["temperatures"]),
-            gains=tuple(tuple(float(x) for x in row) for row in gains),
+            gains=tuple(tuple(float(x) for x in row) for row in gains.reshape(-1, gains.shape[-1]))
+            if gains.size
+            else (),
             elapsed_s=float(arrays["elapsed_s"]),
         )
     except (KeyError, TypeError, ValueError) as err:
         raise ValueError(f"the saved state is incomplete ({type(err).__name__}: {err})") from None
+    lengths = {len(state.losses), len(state.temperatures), len(state.gains)}
+    if lengths != {state.iteration}:
+        raise ValueError(
+            f"the saved state is inconsistent: iteration {state.iteration} with histories of "
+            f"{len(state.losses)}, {len(state.temperatures)} and {len(state.gains)} rows"
+        )
+    values = [state.z, *restored, np.asarray(state.losses), gains, np.asarray(state.elapsed_s)]
+    if not all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in values):
+        raise ValueError("the saved state holds non-finite values (NaN or inf)")
+    return state
 
 
 # ---------------------------------------------------------------- the loop
@@ -334,6 +362,7 @@ def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainStat
 def _iterate(config, robot, state, progress_fn) -> TrainState:
     """Run the iterations from ``state.iteration`` to ``config.iters``."""
     spec, hyper, dtype = config.spec(), config.hyper(), float_dtype()
+    problem = config.problem
     dt = jnp.asarray(config.dt, dtype)
     init = jnp.zeros((3,), dtype)
     for iteration in range(state.iteration, config.iters):
@@ -350,10 +379,10 @@ def _iterate(config, robot, state, progress_fn) -> TrainState:
             dt,
             spec=spec,
             hyper=hyper,
+            problem=problem,
         )
         loss = float(loss)
-        gains = gains_from_logits(z, robot)
-        row = tuple(float(getattr(gains, name)) for name in GAIN_FIELDS)
+        row = problem.row(problem.from_logits(z, robot))
         state = TrainState(
             iteration + 1,
             z,
@@ -368,7 +397,14 @@ def _iterate(config, robot, state, progress_fn) -> TrainState:
     return state
 
 
-def _compare(config: TuneConfig, robot: Robot, tuned: Gains, tune_wall_s: float) -> tuple:
+def _compare(
+    config: TuneConfig,
+    robot: Robot,
+    tuned: Any,
+    tune_wall_s: float,
+    search_progress: Any,
+    eval_progress: Any,
+) -> tuple:
     """Random search for the tuning's wall time, then the hard-law table on held-out poses."""
     run = {name: getattr(config, name) for name in RUN_OPTIONS if name != "robot"}
     run["robot"] = robot
@@ -376,14 +412,23 @@ def _compare(config: TuneConfig, robot: Robot, tuned: Gains, tune_wall_s: float)
     if config.random_search:
         stream = jax.random.fold_in(jax.random.key(config.seed), 2)
         refs = sample_poses(jax.random.fold_in(jax.random.key(config.seed), 3), config.poses)
-        search = random_search(stream, refs, budget_s=tune_wall_s, **run)
+        search = random_search(
+            stream,
+            refs,
+            budget_s=tune_wall_s,
+            problem=config.problem,
+            progress=search_progress,
+            **run,
+        )
     held_out = held_out_poses(config.eval_poses, config.eval_seed)
-    evaluation = {
-        "paper_feasible": evaluate(PAPER_FEASIBLE_GAINS, held_out, **run),
-        "tuned": evaluate(tuned, held_out, **run),
-    }
+    candidates = {"paper_feasible": PAPER_FEASIBLE_GAINS, "tuned": tuned}
     if search is not None:
-        evaluation["random_search"] = evaluate(search.gains, held_out, **run)
+        candidates["random_search"] = search.gains
+    evaluation = {}
+    for name, params in candidates.items():
+        evaluation[name] = evaluate(params, held_out, **run)
+        if eval_progress is not None:
+            eval_progress(name)
     return evaluation, search
 
 
@@ -393,6 +438,8 @@ def train(
     robot: Robot | None = None,
     state: TrainState | None = None,
     progress_fn: Callable[[TrainState], Any] | None = None,
+    search_progress: Callable[[int], Any] | None = None,
+    eval_progress: Callable[[str], Any] | None = None,
 ) -> TuneResult:
     """Tune the gains by gradient descent, then judge them with the hard law.
 
@@ -407,6 +454,9 @@ def train(
             ``progress_fn`` call of a run with the same ``config`` and
             ``robot``); the result is that of an uninterrupted run.
         progress_fn: called with the ``TrainState`` after each iteration.
+        search_progress: called with the number of candidates the random
+            search scored, after each chunk of them.
+        eval_progress: called with the row's name after each hard-law evaluation.
 
     Returns:
         A ``TuneResult``.
@@ -424,11 +474,14 @@ def train(
     state = _iterate(config, robot, state, progress_fn)
     if not state.gains:
         raise ValueError("state holds no iteration; allowed: a state after at least one")
-    tuned = Gains(**dict(zip(GAIN_FIELDS, state.gains[-1], strict=True)))
+    problem = config.problem
+    tuned = problem.from_row(state.gains[-1])
     history = {
         "loss": np.asarray(state.losses),
         "temperature": np.asarray(state.temperatures),
-        "gains": np.asarray(state.gains).reshape(-1, len(GAIN_FIELDS)),
+        "gains": np.asarray(state.gains).reshape(len(state.gains), -1),
     }
-    evaluation, search = _compare(config, robot, tuned, state.elapsed_s)
-    return TuneResult(tuned, evaluation, history, state.elapsed_s, search)
+    evaluation, search = _compare(
+        config, robot, tuned, state.elapsed_s, search_progress, eval_progress
+    )
+    return TuneResult(tuned, evaluation, history, state.elapsed_s, search, problem.name)

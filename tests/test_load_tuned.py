@@ -1,0 +1,86 @@
+"""tuned_gains.json of either kind: load_tuned, simulate --gains, refused checkpoints."""
+
+import json
+
+import numpy as np
+import pytest
+
+import wmr_jax as w
+from wmr_jax import tuning
+from wmr_jax.cli import main
+
+
+def _schedule() -> tuning.ScheduleParams:
+    k = len(tuning.knot_radii())
+    return tuning.ScheduleParams(
+        kr=tuple(np.linspace(70.0, 125.0, k)),
+        k_theta=tuple(np.linspace(30.0, 12.0, k)),
+        k_turn=(40.0,) * k,
+        phi_m=1.3,
+        r_m=2.5,
+        r_a=2.3,
+        r_e=0.3,
+        alpha=0.4,
+    )
+
+
+def test_a_schedule_round_trips_through_tuned_gains_json(tmp_path, capsys):
+    params = _schedule()
+    path = tmp_path / "tuned_gains.json"
+    path.write_text(json.dumps(tuning.tuned_json(params)))
+    controller, loaded = tuning.load_tuned(path)
+    assert controller is tuning.SCHEDULE and loaded == params
+    refs = w.sample_poses(1, 16, dtype=np.float64)
+    np.testing.assert_array_equal(
+        np.asarray(w.final_poses(refs, loaded, controller=controller)),
+        np.asarray(w.batch_rollout(refs, params, controller=tuning.SCHEDULE).poses[:, -1]),
+    )
+    assert main(["simulate", "--ref", "30", "20", "45", "--gains", str(path)]) == 0
+    assert "arrival time" in capsys.readouterr().out
+
+
+def test_fixed_gains_old_and_new_files_load(tmp_path):
+    gains = w.Gains(kr=80.0, k_theta=15.0, alpha=0.4)
+    new, old = tmp_path / "new.json", tmp_path / "old.json"
+    new.write_text(json.dumps(tuning.tuned_json(gains)))
+    old.write_text(json.dumps({"kr": 80.0, "k_theta": 15.0, "alpha": 0.4}))
+    assert json.loads(new.read_text())["kind"] == "fixed"
+    for path in (new, old):
+        controller, loaded = tuning.load_tuned(path)
+        assert controller.name == "shim-sung" and loaded == gains
+        w.rollout([20.0, 5.0, 0.0], loaded, controller=controller)
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        ('{"kind": "schedule", "kr": [1, 2]}', "missing"),
+        ('{"kind": "warp"}', "kind 'warp' is not allowed"),
+        ('{"kr": [60, 60]}', "kr = \\[60, 60\\] is not allowed"),
+        ('{"kr": 60, "speed": 3}', "key 'speed' is not allowed"),
+        ("[1, 2]", "a JSON object"),
+        ("{", "cannot be read"),
+    ],
+)
+def test_bad_files_are_refused_in_one_line(tmp_path, content, message):
+    path = tmp_path / "tuned_gains.json"
+    path.write_text(content)
+    with pytest.raises(ValueError, match=message) as err:
+        tuning.load_tuned(path)
+    assert "\n" not in str(err.value)
+
+
+def test_non_finite_parameters_are_never_written():
+    with pytest.raises(ValueError, match="not all finite"):
+        tuning.tuned_json(w.Gains(kr=float("nan")))
+
+
+def test_a_checkpoint_with_nan_or_wrong_lengths_is_refused():
+    config = tuning.TuneConfig(iters=3, poses=4)
+    fresh = tuning.init_state(config)
+    good = tuning.state_arrays(fresh)
+    assert tuning.restore_state(good, fresh).iteration == 0
+    with pytest.raises(ValueError, match="non-finite"):
+        tuning.restore_state({**good, "z": np.full_like(good["z"], np.nan)}, fresh)
+    with pytest.raises(ValueError, match="inconsistent"):
+        tuning.restore_state({**good, "iteration": np.asarray(2)}, fresh)

@@ -1,0 +1,49 @@
+"""The time-optimal yardsticks of docs/model.md §8 on hand-checked references."""
+
+import math
+
+import numpy as np
+import pytest
+
+import wmr_jax as w
+from wmr_jax import tuning
+
+DT = 0.033
+V_MAX, L = 125.0, 1.85  # cm/s, cm: the paper's robot
+OMEGA_MAX = V_MAX / L  # rad/s, spinning in place at full wheel speed
+
+
+def _samples(seconds: float) -> float:
+    return math.ceil(seconds / DT) * DT
+
+
+@pytest.mark.parametrize(
+    ("ref", "turns"),
+    [
+        ([30.0, 0.0, 0.0], 0.0),  # straight ahead: drive only
+        ([-30.0, 0.0, 0.0], 0.0),  # behind: reverse, no turn (heading counts modulo π)
+        ([0.0, 30.0, 0.0], math.pi),  # sideways: a quarter turn, drive, a quarter turn back
+        ([0.0, -30.0, math.pi / 2], 0.5 * math.pi),  # sideways, facing the way it drives
+        ([30.0, 0.0, math.pi / 2], 0.5 * math.pi),  # ahead, then a quarter turn
+        ([30.0, 30.0, 0.0], 0.5 * math.pi),  # 45° there, 45° back
+    ],
+)
+def test_turn_drive_turn_time_and_lower_bound(ref, turns):
+    r = math.hypot(ref[0], ref[1])
+    bounds = tuning.time_bounds(np.array([ref]), dt=DT)
+    assert bounds.turn_drive_turn[0] == pytest.approx(_samples(turns / OMEGA_MAX + r / V_MAX))
+    assert bounds.lower_bound[0] == pytest.approx(_samples((r - 1.0) / V_MAX))
+
+
+def test_bounds_order_and_ratios():
+    refs = w.sample_poses(0, 500)
+    b = tuning.time_bounds(refs)
+    assert np.all(b.lower_bound <= b.turn_drive_turn)
+    ratios = tuning.bound_ratios(0.5, b)
+    assert ratios["vs_lower_bound"] == pytest.approx(0.5 / np.mean(b.lower_bound))
+    # A slower robot has a larger bound; within the tolerance it is zero.
+    slow = tuning.time_bounds(refs, robot=w.Robot(v_max=60.0))
+    assert np.all(slow.lower_bound >= b.lower_bound)
+    assert tuning.time_bounds([0.5, 0.0, 0.0]).lower_bound == 0.0
+    with pytest.raises(ValueError, match="dt"):
+        tuning.time_bounds(refs, dt=0.0)

@@ -1,0 +1,106 @@
+"""The gain-scheduled Shim–Sung law: the wheel bound, the fixed law as a special case."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import wmr_jax as w
+from wmr_jax import tuning
+from wmr_jax.controllers import SHIM_SUNG
+
+SCHEDULE = tuning.SCHEDULE
+ROBOT = w.Robot()
+V_MAX, L = float(ROBOT.v_max), float(ROBOT.half_track)
+
+
+def _random_states(seed: int, n: int):
+    rng = np.random.default_rng(seed)
+    poses = np.column_stack([rng.uniform(-100, 100, (n, 2)), rng.uniform(-10, 10, n)])
+    # Many states near the reference, where the law switches most.
+    refs = poses + np.column_stack(
+        [rng.standard_normal((n, 2)) * rng.choice([0.3, 3.0, 60.0], (n, 1)), rng.uniform(-4, 4, n)]
+    )
+    return jnp.asarray(poses), jnp.asarray(refs)
+
+
+def _wild_schedule(seed: int) -> tuning.ScheduleParams:
+    """Knots far beyond the wheel budget: only the construction keeps the bound."""
+    rng = np.random.default_rng(seed)
+    k = len(tuning.knot_radii())
+    return tuning.ScheduleParams(
+        kr=tuple(rng.uniform(1.0, 400.0, k)),
+        k_theta=tuple(rng.uniform(0.5, 300.0, k)),
+        k_turn=tuple(rng.uniform(0.5, 300.0, k)),
+        phi_m=1.3,
+        r_m=3.0,
+        r_a=2.0,
+        r_e=0.4,
+        alpha=0.45,
+    )
+
+
+@pytest.mark.parametrize("temperature", [None, 0.05])
+def test_every_command_obeys_the_wheel_bound_at_1e5_random_states(temperature):
+    poses, refs = _random_states(0, 100_000)
+    params = _wild_schedule(1)
+    v, omega = SCHEDULE.command(poses, refs, params, temperature=temperature)
+    wheel = np.abs(np.asarray(v)) + L * np.abs(np.asarray(omega))
+    assert wheel.max() <= V_MAX * (1 + 1e-12)
+    # The bound is reached (the budget is used), not met by standing still.
+    assert wheel.max() > 0.99 * V_MAX and np.mean(np.abs(np.asarray(v)) > 1.0) > 0.3
+
+
+def test_whole_rollouts_keep_every_wheel_within_v_max():
+    refs = w.sample_poses(3, 64, dtype=np.float64)
+    traj = w.batch_rollout(refs, _wild_schedule(2), controller=SCHEDULE, steps=120)
+    assert np.abs(np.asarray(traj.wheel_speeds)).max() <= V_MAX * (1 + 1e-12)
+
+
+def test_constant_knots_are_the_fixed_law_exactly():
+    gains = w.Gains(kr=60.0, k_theta=12.0, phi_m=1.2, r_m=15.0, r_a=8.0, r_e=0.8, alpha=0.3)
+    params = tuning.ScheduleParams.from_gains(gains)
+    poses, refs = _random_states(4, 20_000)
+    for temperature in (None, 0.05):
+        # Both compiled, as rollouts run them (XLA and op-by-op rounding may differ).
+        fixed = jax.jit(lambda p, r, g, t=temperature: SHIM_SUNG.command(p, r, g, temperature=t))(
+            poses, refs, gains
+        )
+        scheduled = jax.jit(
+            lambda p, r, g, t=temperature: SCHEDULE.command(p, r, g, temperature=t)
+        )(poses, refs, params)
+        # The same operations on the same values: equal up to the rounding of
+        # XLA's fusion of two different programs (a few ulp), never more.
+        for a, b in zip(fixed, scheduled, strict=True):
+            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-13, atol=1e-13)
+    refs = w.sample_poses(5, 200, dtype=np.float64)
+    # Inside the rollout loop XLA compiles both alike: bit for bit.
+    np.testing.assert_array_equal(
+        np.asarray(w.final_poses(refs, gains)),
+        np.asarray(w.final_poses(refs, params, controller=SCHEDULE)),
+    )
+    one = w.rollout([30.0, -20.0, 2.0], params, controller=SCHEDULE)
+    assert np.array_equal(
+        np.asarray(one.region), np.asarray(w.rollout([30.0, -20.0, 2.0], gains).region)
+    )
+
+
+def test_the_relaxed_schedule_has_finite_gradients_for_every_knot():
+    refs = w.sample_poses(6, 4, dtype=np.float64)
+    params = tuning.ScheduleParams.from_gains(w.Gains(kr=60.0))
+    grad = jax.grad(lambda p: tuning.tuning_loss(p, refs, temperature=0.05, horizon=0.7))(params)
+    for name in ("kr", "k_theta", "k_turn"):
+        values = np.asarray(getattr(grad, name))
+        assert np.all(np.isfinite(values)), name
+    assert np.any(np.asarray(grad.kr) != 0) and np.any(np.asarray(grad.k_turn) != 0)
+
+
+def test_bad_schedules_are_refused_in_one_line():
+    with pytest.raises(ValueError, match="one length"):
+        w.rollout([10.0, 0.0, 0.0], tuning.ScheduleParams(kr=(60.0,) * 4), controller=SCHEDULE)
+    with pytest.raises(ValueError, match=r"k_theta\[2\]"):
+        bad = tuning.ScheduleParams(k_theta=(10.0, 10.0, -1.0) + (10.0,) * 7)
+        w.rollout([10.0, 0.0, 0.0], bad, controller=SCHEDULE)
+    assert math.isclose(tuning.knot_radii()[-1], 81.0)

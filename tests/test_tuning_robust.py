@@ -1,0 +1,50 @@
+"""Robust tuning through the disturbances of docs/model.md §7 (``tune --robust``)."""
+
+import json
+
+import numpy as np
+import pytest
+
+import wmr_jax as w
+from wmr_jax import tuning
+from wmr_jax.cli import main
+
+
+def small_config(**changes):
+    base = dict(iters=3, poses=3, nonideal_poses=0, eval_poses=6, compare=False)
+    return tuning.RobustConfig(**{**base, **changes})
+
+
+def test_robust_tuning_moves_feasible_gains_and_judges_them_under_every_condition(tmp_path):
+    seen = []
+    result = tuning.tune_robust(small_config(), progress_fn=lambda i, loss: seen.append(loss))
+    gains = result["gains"]
+    assert len(seen) == 3 and np.all(np.isfinite(seen))
+    assert np.array_equal(result["history"]["loss"], seen)
+    robot = w.Robot()
+    # Feasible by construction, R_e within the arrival tolerance, and moved from the start.
+    assert gains.kr + float(robot.half_track) * gains.k_theta <= float(robot.v_max)
+    assert 0 < gains.r_e <= 1.0
+    assert gains != tuning.PAPER_FEASIBLE_GAINS
+    conditions = [r["condition"] for r in result["rows"]]
+    assert conditions == [c for c in ("nominal", "latency", "noise", "both") for _ in range(2)]
+    assert all(0.0 <= r["success"] <= 1.0 and r["runs"] == 6 for r in result["rows"])
+    # Reproducible: the same settings give the same gains and losses.
+    again = tuning.tune_robust(small_config())
+    assert again["gains"] == gains and again["rows"] == result["rows"]
+    np.testing.assert_array_equal(again["history"]["loss"], seen)
+    # The saved file loads as fixed Shim-Sung gains.
+    path = tmp_path / "tuned_gains.json"
+    path.write_text(json.dumps(tuning.tuned_json(gains)))
+    controller, params = tuning.load_tuned(path)
+    assert controller.name == "shim-sung" and params.kr == pytest.approx(gains.kr)
+
+
+@pytest.mark.parametrize(
+    ("flag", "value"), [("--iters", "0"), ("--poses", "-3"), ("--velocity", "nonideal")]
+)
+def test_command_rejects_bad_values_in_one_line(tmp_path, capsys, flag, value):
+    assert main(["tune", "--robust", "--out", str(tmp_path), flag, value]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"wmr-jax: error: {flag} ") and err.count("\n") == 1
+    assert not (tmp_path / "tuned_gains.json").exists()

@@ -1,0 +1,180 @@
+"""Gradient descent against black-box search at equal wall time, on both tuning problems.
+
+``cma_es_search`` runs CMA-ES (``evosax``, the optional extra ``[search]``)
+on the logits of a problem's feasible set, so every candidate is feasible;
+``compare`` gives CMA-ES and random search the gradient tuner's wall time,
+compile included, per problem and seed, and judges all three with the hard
+law on the same held-out poses, with the time-optimal yardsticks of
+``docs/model.md §8``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from wmr_jax._src.checks import as_poses, float_dtype
+from wmr_jax._src.optimal import bound_ratios, time_bounds
+from wmr_jax._src.params import Robot, validate_robot
+from wmr_jax._src.poses import sample_poses
+from wmr_jax._src.tuning.evaluation import RUN_OPTIONS, evaluate, held_out_poses
+from wmr_jax._src.tuning.problems import get_problem
+from wmr_jax._src.tuning.search import SearchResult, population_scores, random_search
+from wmr_jax._src.tuning.training import TuneConfig, train
+
+__all__ = ["cma_es_search", "compare"]
+
+
+def _evosax_cma_es() -> Any:
+    try:
+        from evosax.algorithms import CMA_ES
+    except ImportError:
+        raise ValueError(
+            "CMA-ES needs evosax; allowed: pip install 'wmr-jax[search]' (evosax >= 0.3)"
+        ) from None
+    return CMA_ES
+
+
+def cma_es_search(
+    key: jax.Array,
+    refs: Any,
+    *,
+    budget_s: float,
+    problem: Any = "fixed",
+    robot: Robot | None = None,
+    population: int = 16,
+    std_init: float = 1.0,
+    progress: Callable[[int], Any] | None = None,
+    **run: Any,
+) -> SearchResult:
+    """CMA-ES on the logits of ``problem``'s feasible set for ``budget_s`` seconds.
+
+    Candidates are scored as by ``random_search`` (hard law, mean arrival on
+    ``refs``, failures counted as twice the horizon); the search starts at
+    the problem's starting point with step ``std_init`` in logit space. At
+    least one generation runs whatever the budget.
+
+    Args:
+        key: PRNG key.
+        refs: ``(N, 3)`` reference poses the candidates are scored on.
+        budget_s: wall-time budget, s, compile included.
+        problem: ``"fixed"`` or ``"schedule"``.
+        robot: robot parameters; default ``Robot()``.
+        population: candidates per generation.
+        std_init: initial step size in logit space.
+        progress: called with the number of candidates after each generation.
+        **run: ``dt``, ``horizon``, ``velocity``, ``substeps``, ``wheel_limit``.
+
+    Raises:
+        ValueError: if evosax is missing (one line) or for bad options.
+    """
+    cma_class = _evosax_cma_es()
+    problem = get_problem(problem)
+    robot = validate_robot(Robot() if robot is None else robot)
+    refs = as_poses("refs", refs, batch=True)
+    run = {**_run_defaults(), **run, "robot": robot}
+    n = refs.shape[0]
+    tiled = jnp.tile(refs, (population, 1))
+    start = jnp.asarray(problem.start_logits(robot), float_dtype())
+    strategy = cma_class(population_size=population, solution=start)
+    params = dataclasses.replace(strategy.default_params, std_init=std_init)
+    began = time.perf_counter()
+    state = strategy.init(jax.random.fold_in(key, 0), start, params)
+    best_score, best_z, count, generation = math.inf, start, 0, 0
+    while generation == 0 or time.perf_counter() - began < budget_s:
+        ask_key, tell_key = jax.random.split(jax.random.fold_in(key, generation + 1))
+        z, state = strategy.ask(ask_key, state, params)
+        u = jax.nn.sigmoid(z)
+        scores = population_scores(problem, u, tiled, n, robot, run)
+        state, _ = strategy.tell(tell_key, z, scores, state, params)
+        host = np.asarray(scores)
+        i = int(np.argmin(host))
+        if host[i] < best_score:
+            best_score, best_z = float(host[i]), z[i]
+        count += population
+        generation += 1
+        if progress is not None:
+            progress(population)
+    best = jax.tree.map(float, problem.from_logits(best_z, robot))
+    return SearchResult(best, best_score, count, time.perf_counter() - began)
+
+
+def _run_defaults() -> dict[str, Any]:
+    config = TuneConfig()
+    return {name: getattr(config, name) for name in RUN_OPTIONS if name != "robot"}
+
+
+def compare(
+    *,
+    seeds: tuple[int, ...] = (0, 1, 2),
+    problems: tuple[str, ...] = ("fixed", "schedule"),
+    configs: dict[str, TuneConfig] | None = None,
+    robot: Robot | None = None,
+    progress: Callable[[str], Any] | None = None,
+) -> list[dict[str, Any]]:
+    """Gradient vs CMA-ES vs random search at equal wall time, per problem and seed.
+
+    The gradient tuner runs first (``configs[problem]``, its seed replaced);
+    its wall time, compile included, is the budget of the other two, which
+    score candidates on a batch of ``config.poses`` training poses. All are
+    judged with the hard law on the same held-out poses.
+
+    Args:
+        seeds: seeds of the training poses and the searches.
+        problems: ``"fixed"`` and/or ``"schedule"``.
+        configs: the ``TuneConfig`` per problem; default ``TuneConfig()``
+            (with ``schedule=True`` for the schedule).
+        robot: robot parameters; default ``Robot()``.
+        progress: called with a line after each method's run.
+
+    Returns:
+        One row per (problem, seed, method): ``problem``, ``seed``, ``method``,
+        ``wall_s``, ``candidates`` (``None`` for the gradient), the hard-law
+        ``mean_arrival``, ``success_rate``, ``peak_wheel_speed`` and the
+        ratios of ``bound_ratios``.
+    """
+    robot = validate_robot(Robot() if robot is None else robot)
+    configs = dict(configs or {})
+    rows = []
+    for name in problems:
+        problem = get_problem(name)
+        base = configs.get(name, TuneConfig(schedule=problem.name == "schedule"))
+        held_out = held_out_poses(base.eval_poses, base.eval_seed)
+        bounds = time_bounds(held_out, robot=robot, dt=base.dt)
+        run = {k: getattr(base, k) for k in RUN_OPTIONS if k != "robot"}
+        for seed in seeds:
+            config = base.replace(seed=seed, random_search=False)
+            result = train(config, robot=robot)
+            budget = result.tune_wall_s
+            refs = sample_poses(jax.random.fold_in(jax.random.key(seed), 3), config.poses)
+            key = jax.random.fold_in(jax.random.key(seed), 2)
+            found = {"gradient": (result.gains, budget, None)}
+            for method, search in (("cma-es", cma_es_search), ("random search", random_search)):
+                s = search(key, refs, budget_s=budget, problem=problem, robot=robot, **run)
+                found[method] = (s.gains, s.wall_s, s.candidates)
+            for method, (params, wall, candidates) in found.items():
+                ev = evaluate(params, held_out, robot=robot, **run)
+                rows.append(
+                    {
+                        "problem": problem.name,
+                        "seed": seed,
+                        "method": method,
+                        "wall_s": wall,
+                        "candidates": candidates,
+                        **ev._asdict(),
+                        **bound_ratios(ev.mean_arrival, bounds),
+                    }
+                )
+                if progress is not None:
+                    progress(
+                        f"{problem.name} seed {seed} {method}: {ev.mean_arrival:.3f} s, "
+                        f"{100 * ev.success_rate:.1f} %, {wall:.0f} s"
+                    )
+    return rows

@@ -1,0 +1,169 @@
+"""The two tuning problems as values: fixed gains (7 parameters) and gain schedules (37).
+
+A ``Problem`` is the controller, its feasible set as an image of the unit
+cube (every point meets the wheel condition by construction), the starting
+point, and how its parameters become a flat row (history, checkpoints) and
+JSON (``tuned_gains.json``). The tuner, random search and CMA-ES take any.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+
+from wmr_jax._src.controllers.base import Controller
+from wmr_jax._src.controllers.schedule import (
+    KNOTS,
+    SCHEDULE,
+    SHAPE_FIELDS,
+    TABLES,
+    ScheduleParams,
+)
+from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
+from wmr_jax._src.params import Gains, Robot
+from wmr_jax._src.tuning import parametrisation as fixed
+
+__all__ = ["FIXED", "PROBLEMS", "SCHEDULED", "Problem", "get_problem", "params_json"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Problem:
+    """A tuning problem (hashable: a static ``jit`` argument).
+
+    Attributes:
+        name: ``"fixed"`` or ``"schedule"``.
+        controller: the law being tuned.
+        dim: dimension of the unit cube searched.
+        from_unit: ``(u (..., dim), robot) -> params``, feasible for every ``u``.
+        start: ``robot -> u₀`` ``(dim,)`` strictly inside the cube.
+        columns: names of the entries of a flat row.
+        row: ``params -> tuple of floats`` (scalar params).
+        from_row: ``(row) -> params``.
+    """
+
+    name: str
+    controller: Controller
+    dim: int
+    from_unit: Callable[[Any, Robot], Any]
+    start: Callable[[Robot], np.ndarray]
+    columns: tuple[str, ...]
+    row: Callable[[Any], tuple[float, ...]]
+    from_row: Callable[[Any], Any]
+
+    def from_logits(self, z: Any, robot: Robot) -> Any:
+        """Params of the logits ``z`` (``u = σ(z)``, any real ``(..., dim)``)."""
+        return self.from_unit(1.0 / (1.0 + jnp.exp(-jnp.asarray(z))), robot)
+
+    def start_logits(self, robot: Robot) -> np.ndarray:
+        """Logits of ``start(robot)``, finite."""
+        u = self.start(robot)
+        return np.log(u) - np.log1p(-u)
+
+
+FIXED = Problem(
+    name="fixed",
+    controller=SHIM_SUNG,
+    dim=7,
+    from_unit=fixed.gains_from_unit,
+    start=lambda robot: fixed.unit_from_gains(fixed.PAPER_FEASIBLE_GAINS, robot),
+    columns=fixed.GAIN_FIELDS,
+    row=lambda gains: tuple(fixed.gains_as_dict(gains).values()),
+    from_row=lambda row: Gains(**dict(zip(fixed.GAIN_FIELDS, map(float, row), strict=True))),
+)
+
+# choice: the box of the schedule. k_r knots may reach V_max (the cap
+# |v| ≤ V_max − L|ω| keeps the wheels within it), the turn gains V_max / L;
+# the shape gains share the fixed problem's box.
+_KR = (1e-3, 1.0)  # fraction of V_max
+_K_THETA = (1e-3, 1.0)  # fraction of V_max / L
+_SCHEDULE_COLUMNS = (
+    tuple(f"{table}[{k}]" for table in TABLES for k in range(KNOTS))
+    + SHAPE_FIELDS
+    + ("v_max", "half_track")
+)
+
+
+def _schedule_from_unit(u: Any, robot: Robot | None = None) -> ScheduleParams:
+    robot = Robot() if robot is None else robot
+    u = jnp.asarray(u)
+    omega_max = robot.v_max / robot.half_track
+    tables = {
+        "kr": robot.v_max * fixed._lerp(u[..., 0:KNOTS], _KR),
+        "k_theta": omega_max * fixed._lerp(u[..., KNOTS : 2 * KNOTS], _K_THETA),
+        "k_turn": omega_max * fixed._lerp(u[..., 2 * KNOTS : 3 * KNOTS], _K_THETA),
+    }
+    # The shape gains reuse the fixed map: its columns 2–6 are Φ_m, α and the radii.
+    shape_u = jnp.concatenate([jnp.zeros_like(u[..., :2]), u[..., 3 * KNOTS :]], axis=-1)
+    shape = fixed.gains_from_unit(shape_u, robot)
+    return ScheduleParams(
+        **{name: tuple(values[..., k] for k in range(KNOTS)) for name, values in tables.items()},
+        **{name: getattr(shape, name) for name in SHAPE_FIELDS},
+        v_max=robot.v_max,
+        half_track=robot.half_track,
+    )
+
+
+def _schedule_start(robot: Robot) -> np.ndarray:
+    """The paper's feasible gains as constant tables (the fixed law's start)."""
+    gains = fixed.PAPER_FEASIBLE_GAINS
+    omega_max = float(robot.v_max) / float(robot.half_track)
+    unit = fixed.unit_from_gains(gains, robot)
+
+    def inside(value: float, bounds: tuple[float, float]) -> float:
+        return float(np.clip((value - bounds[0]) / (bounds[1] - bounds[0]), 1e-3, 1 - 1e-3))
+
+    kr = inside(gains.kr / float(robot.v_max), _KR)
+    kt = inside(gains.k_theta / omega_max, _K_THETA)
+    return np.concatenate([[kr] * KNOTS, [kt] * KNOTS, [kt] * KNOTS, unit[2:]])
+
+
+def _schedule_row(params: ScheduleParams) -> tuple[float, ...]:
+    values = [float(x) for table in TABLES for x in getattr(params, table)]
+    return tuple(values + [float(getattr(params, name)) for name in _SCHEDULE_COLUMNS[-7:]])
+
+
+def _schedule_from_row(row: Any) -> ScheduleParams:
+    row = [float(x) for x in row]
+    tables = {t: tuple(row[i * KNOTS : (i + 1) * KNOTS]) for i, t in enumerate(TABLES)}
+    rest = dict(zip(_SCHEDULE_COLUMNS[-7:], row[3 * KNOTS :], strict=True))
+    return ScheduleParams(**tables, **rest)
+
+
+SCHEDULED = Problem(
+    name="schedule",
+    controller=SCHEDULE,
+    dim=3 * KNOTS + 5,
+    from_unit=_schedule_from_unit,
+    start=_schedule_start,
+    columns=_SCHEDULE_COLUMNS,
+    row=_schedule_row,
+    from_row=_schedule_from_row,
+)
+
+PROBLEMS = {problem.name: problem for problem in (FIXED, SCHEDULED)}
+
+
+def get_problem(name: str | Problem) -> Problem:
+    """Return the problem called ``name`` (``"fixed"`` or ``"schedule"``)."""
+    if isinstance(name, Problem):
+        return name
+    if name not in PROBLEMS:
+        raise ValueError(f"problem = {name!r} is not allowed; allowed: {sorted(PROBLEMS)}")
+    return PROBLEMS[name]
+
+
+def params_json(problem: Problem, params: Any) -> dict[str, Any]:
+    """``tuned_gains.json`` content: ``{"controller": name, "kind": problem, fields…}``."""
+    values: dict[str, Any] = {"controller": problem.controller.name, "kind": problem.name}
+    if problem is FIXED:
+        values.update(fixed.gains_as_dict(params))
+        return values
+    for table in TABLES:
+        values[table] = [float(x) for x in getattr(params, table)]
+    for name in (*SHAPE_FIELDS, "v_max", "half_track"):
+        values[name] = float(getattr(params, name))
+    return values

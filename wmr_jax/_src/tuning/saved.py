@@ -1,0 +1,119 @@
+"""Tuned parameters as files: ``tuned_gains.json`` and ``load_tuned``.
+
+A ``tuned_gains.json`` of ``wmr-jax tune`` names its controller and kind
+(``"controller": "shim-sung"`` or ``"shim-sung-schedule"``, ``"kind": "fixed"``
+or ``"schedule"``) beside the parameters. Files from before the schedules,
+which hold only ``Gains`` field names, load as fixed gains.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+from wmr_jax._src.controllers.base import Controller
+from wmr_jax._src.controllers.schedule import SCHEDULE, SHAPE_FIELDS, TABLES, ScheduleParams
+from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
+from wmr_jax._src.params import Gains
+from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS
+from wmr_jax._src.tuning.problems import FIXED, SCHEDULED, params_json
+
+__all__ = ["load_tuned", "tuned_json"]
+
+_KINDS = {"fixed": (SHIM_SUNG, Gains), "schedule": (SCHEDULE, ScheduleParams)}
+_SCHEDULE_FIELDS = (*TABLES, *SHAPE_FIELDS, "v_max", "half_track")
+
+
+def tuned_json(params: Any) -> dict[str, Any]:
+    """Return the ``tuned_gains.json`` content of ``Gains`` or ``ScheduleParams``.
+
+    Raises:
+        ValueError: if a value is not finite (a file of nulls is never written).
+    """
+    problem = SCHEDULED if isinstance(params, ScheduleParams) else FIXED
+    values = params_json(problem, params)
+    numbers = [x for v in values.values() if not isinstance(v, str) for x in _flat(v)]
+    if not all(math.isfinite(x) for x in numbers):
+        raise ValueError("the tuned parameters are not all finite; nothing was written")
+    return values
+
+
+def _flat(value: Any) -> list[float]:
+    return [float(x) for x in value] if isinstance(value, list) else [float(value)]
+
+
+def _kind_of(values: dict[str, Any], where: str) -> str:
+    kind = values.get("kind")
+    controller = values.get("controller")
+    if kind is None and controller is None:
+        return "fixed"  # a file from before the schedules: Gains field names only
+    by_name = {c.name: k for k, (c, _) in _KINDS.items()}
+    if kind is None:
+        kind = by_name.get(controller)
+    if kind not in _KINDS or (controller is not None and by_name.get(controller) != kind):
+        raise ValueError(
+            f"{where}: controller {controller!r} / kind {kind!r} is not allowed; allowed: "
+            f"kind 'fixed' (controller 'shim-sung') or 'schedule' ('shim-sung-schedule')"
+        )
+    return kind
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def load_tuned(path: str | os.PathLike) -> tuple[Controller, Any]:
+    """Load a ``tuned_gains.json`` of ``wmr-jax tune`` (fixed gains or a schedule).
+
+    ``rollout(ref, params, controller=controller)``, ``batch_rollout`` and
+    ``final_poses`` run the result. A fixed-gain file may leave fields out
+    (they keep the paper's values) and may be of the old form, ``Gains``
+    field names only (``phi_m`` in radians).
+
+    Args:
+        path: the JSON file.
+
+    Returns:
+        ``(controller, params)``: ``(SHIM_SUNG, Gains)`` or
+        ``(SCHEDULE, ScheduleParams)``, checked.
+
+    Raises:
+        ValueError: one line naming the file and what is wrong with it.
+    """
+    where = f"{os.fspath(path)!r}"
+    try:
+        values = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as err:
+        raise ValueError(f"{where} cannot be read: {' '.join(str(err).split())}") from None
+    if not isinstance(values, dict):
+        raise ValueError(f"{where} is not allowed; allowed: a JSON object")
+    kind = _kind_of(values, where)
+    controller, cls = _KINDS[kind]
+    fields = GAIN_FIELDS if kind == "fixed" else _SCHEDULE_FIELDS
+    numbers = {k: v for k, v in values.items() if k not in ("kind", "controller")}
+    bad = sorted(set(numbers) - set(fields))
+    if bad:
+        raise ValueError(
+            f"{where}: key {bad[0]!r} is not allowed; allowed: keys among {', '.join(fields)}"
+        )
+    for name, value in numbers.items():
+        table = kind == "schedule" and name in TABLES
+        if table:
+            ok = isinstance(value, list) and len(value) >= 2 and all(map(_is_number, value))
+        else:
+            ok = _is_number(value)
+        if not ok:
+            shape = "a list of >= 2 numbers" if table else "a number"
+            raise ValueError(f"{where}: {name} = {value!r} is not allowed; allowed: {shape}")
+    if kind == "schedule":
+        missing = [name for name in TABLES if name not in numbers]
+        if missing:
+            raise ValueError(f"{where}: the table {missing[0]!r} is missing")
+        numbers = {k: tuple(v) if isinstance(v, list) else v for k, v in numbers.items()}
+    try:
+        return controller, controller.validate(cls(**numbers))
+    except ValueError as err:
+        raise ValueError(f"{where}: {err}") from None
