@@ -7,14 +7,14 @@
 # the README shows are then copied to docs/*.png and the results the README
 # quotes to docs/data/*.json, which tests/test_readme.py holds the README's
 # tables against. STAGE is any of: paper compare maps waypoints animate
-# robustness tune bench (default: all, about 10 minutes on 2 CPU cores).
+# tune robustness compare-tuning bench (default: all, about 20 minutes on 2 CPU cores).
 # Every command is seeded (the seed is its default unless named here), so a
 # rerun prints the same tables; bench timings are the exception.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-results/readme}
 shift || true
-STAGES=${*:-paper compare maps waypoints animate robustness tune bench}
+STAGES=${*:-paper compare maps waypoints animate tune robustness compare-tuning bench}
 mkdir -p "$OUT" docs/data
 
 for stage in $STAGES; do
@@ -39,13 +39,18 @@ for stage in $STAGES; do
     animate)  # real-time GIF of the paper's seven references
       wmr-jax animate --out "$OUT/robots.gif" --paper --seconds 2.5
       cp "$OUT/robots.gif" docs/robots.gif ;;
-    # The commands below are those of their owners' sections; seeds are their defaults.
-    robustness)
-      wmr-jax robustness --out "$OUT/robustness" --runs 512 ;;
-    tune)
+    tune)  # fixed gains, the gain schedule and the robust gains (seed 0)
       wmr-jax tune --out "$OUT/tune"
-      wmr-jax tune --out "$OUT/tune-ni" --velocity nonideal
+      wmr-jax tune --out "$OUT/tune-schedule" --schedule
+      wmr-jax tune --out "$OUT/tune-robust" --robust
       cp "$OUT/tune/tuning_curve.png" docs/ ;;
+    robustness)  # after tune: the standard conditions need its two gain files
+      wmr-jax robustness --out "$OUT/robustness" --runs 512
+      wmr-jax robustness --out "$OUT/robustness-standard" --runs 256 --controller shim-sung \
+        --nominal-gains "$OUT/tune/tuned_gains.json" \
+        --robust-gains "$OUT/tune-robust/tuned_gains.json" ;;
+    compare-tuning)  # gradient vs CMA-ES vs random search, 3 seeds (about 7 minutes)
+      wmr-jax tune --out "$OUT/tune-compare" --compare ;;
     bench)
       wmr-jax bench --json "$OUT/bench.json" ;;
     *) echo "unknown stage $stage" >&2; exit 2 ;;
