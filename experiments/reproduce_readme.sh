@@ -46,9 +46,11 @@ for stage in $STAGES; do
       cp "$OUT/tune/tuning_curve.png" docs/ ;;
     robustness)  # after tune: the standard conditions need its two gain files
       wmr-jax robustness --out "$OUT/robustness" --runs 512
+      cp "$OUT/robustness/robustness.png" docs/
       wmr-jax robustness --out "$OUT/robustness-standard" --runs 256 --controller shim-sung \
         --nominal-gains "$OUT/tune/tuned_gains.json" \
-        --robust-gains "$OUT/tune-robust/tuned_gains.json" ;;
+        --robust-gains "$OUT/tune-robust/tuned_gains.json"
+      cp "$OUT/robustness-standard/standard_conditions.png" docs/ ;;
     compare-tuning)  # gradient vs CMA-ES vs random search, 3 seeds (about 7 minutes)
       wmr-jax tune --out "$OUT/tune-compare" --compare ;;
     bench)
