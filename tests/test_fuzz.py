@@ -76,7 +76,11 @@ def _leaves(result):
     field=st.sampled_from(GAIN_FIELDS),
     value=st.one_of(ODD_NUMBERS, st.floats(min_value=0.01, max_value=200)),
     dt=st.one_of(st.just(0.033), ODD_NUMBERS),
-    temperature=st.one_of(st.none(), st.just(0.05), ODD_NUMBERS),
+    # The temperature is static (each value compiles): two good ones, any bad one.
+    temperature=st.one_of(
+        st.sampled_from([None, 0.05]),
+        st.sampled_from([0.0, -1.0, 10.5, 1e30, math.nan, math.inf, "0.1", [0.1], True]),
+    ),
 )
 def test_rollout(ref, init, field, value, dt, temperature):
     names = ["ref", "init", f"gains.{field}", "dt", "temperature", "left the range"]
@@ -93,7 +97,7 @@ def test_rollout(ref, init, field, value, dt, temperature):
     refs=st.one_of(
         st.lists(GOOD_POSE, min_size=3, max_size=3),
         st.lists(POSE, min_size=3, max_size=3),
-        st.lists(GOOD_POSE, min_size=0, max_size=4),
+        st.just([]),  # the batch size is static too: 3 or nothing
         ODD_NUMBERS,
     ),
     kr=st.one_of(st.just(60.0), ODD_NUMBERS, st.lists(ODD_NUMBERS, min_size=3, max_size=3)),
