@@ -33,7 +33,7 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument(
         "--float32",
         action="store_true",
-        help="compute in float32 (default float64; the polar baselines need it, see README)",
+        help="compute in float32, JAX's default (default: float64)",
     )
 
 

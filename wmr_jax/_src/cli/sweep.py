@@ -49,7 +49,7 @@ def _flags() -> dict[str, dict[str, Any]]:
         "--no-progress": {"action": "store_true", "help": "no progress bar"},
         "--float32": {
             "action": "store_true",
-            "help": "compute in float32 (default float64; the polar baselines need it, see README)",
+            "help": "compute in float32, JAX's default (default: float64)",
         },
         "--resume": {
             "action": "store_true",
