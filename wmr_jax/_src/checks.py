@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 __all__ = [
+    "Parameters",
     "as_float_tree",
     "as_pose_array",
     "as_poses",
@@ -166,6 +167,21 @@ def require_representable(name: str, value: np.ndarray) -> None:
             f"{name} = {_shown(value, ~ok)} is beyond {dtype.name} (largest {largest:.3g}); "
             "allowed: a smaller number, or float64 (jax.config.update('jax_enable_x64', True))"
         )
+
+
+class Parameters:
+    """What every parameter dataclass shares (``Gains``, ``Robot``, the baselines' gains).
+
+    A list or tuple given for a field becomes one NumPy array (one batched
+    field, not a pytree of leaves), and ``replace`` returns a changed copy.
+    """
+
+    def __post_init__(self) -> None:
+        lists_to_arrays(self)
+
+    def replace(self, **changes: Any) -> Any:
+        """Return a copy with the given fields changed."""
+        return dataclasses.replace(self, **changes)
 
 
 def lists_to_arrays(params: Any) -> None:

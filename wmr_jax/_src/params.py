@@ -20,7 +20,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from wmr_jax._src.checks import field_values, lists_to_arrays, require
+from wmr_jax._src.checks import Parameters, field_values, require
 
 __all__ = [
     "Gains",
@@ -38,7 +38,7 @@ __all__ = [
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
-class Gains:
+class Gains(Parameters):
     """Gains of the Shim–Sung asymptotic controller (docs/model.md §3, Eq. 6–8).
 
     Every field may be a Python float, a scalar array, or an array with one
@@ -63,13 +63,6 @@ class Gains:
     r_e: Any = 1.0
     alpha: Any = 0.25
 
-    def __post_init__(self) -> None:
-        lists_to_arrays(self)  # a list is one batched field, not a pytree of leaves
-
-    def replace(self, **changes: Any) -> Gains:
-        """Return a copy with the given fields changed."""
-        return dataclasses.replace(self, **changes)
-
 
 # Table 1 of the paper; lengths in cm, masses in kg, time in s. Torques are then
 # in kg·cm²/s² (1 N·m = 1e4 kg·cm²/s²).
@@ -81,7 +74,7 @@ _WHEEL_MASS = 0.010
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
-class Robot:
+class Robot(Parameters):
     """Differential-drive robot of the paper's Table 1 (docs/model.md §1, §4).
 
     Units: cm, kg, s; torques in kg·cm²/s² (1 N·m = 1e4 kg·cm²/s²).
@@ -114,13 +107,6 @@ class Robot:
     # choice: a 10 ms velocity time constant, well inside the 33 ms period.
     speed_gain: Any = 100.0
     integral_gain: Any = 0.0
-
-    def __post_init__(self) -> None:
-        lists_to_arrays(self)  # a list is one batched field, not a pytree of leaves
-
-    def replace(self, **changes: Any) -> Robot:
-        """Return a copy with the given fields changed."""
-        return dataclasses.replace(self, **changes)
 
 
 class WheelSpeedWarning(UserWarning):

@@ -42,12 +42,6 @@ def _flags() -> dict[str, dict[str, Any]]:
     }
 
 
-def add_arguments(parser: Any) -> None:
-    """Add the flags of ``wmr-jax animate``."""
-    for flag, options in _flags().items():
-        parser.add_argument(flag, **options)
-
-
 def run(args: Any) -> int:
     """Run ``wmr-jax animate``; return the exit status."""
     from wmr_jax._src.poses import horizon_steps, paper_refs
@@ -82,7 +76,7 @@ def run(args: Any) -> int:
 SUBCOMMANDS = {
     "animate": {
         "help": "animated GIF of a batch of robots driving to their poses",
-        "add_arguments": add_arguments,
+        "flags": _flags,
         "run": run,
     },
 }

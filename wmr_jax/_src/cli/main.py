@@ -17,19 +17,10 @@ from collections.abc import Sequence
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
-# Command name -> module of this package that implements it, in --help order.
-COMMANDS = {
-    "simulate": "simulate",
-    "demo": "paper",
-    "paper": "paper",
-    "tune": "tune",
-    "sweep": "sweep",
-    "compare": "compare",
-    "waypoints": "waypoints",
-    "robustness": "robustness",
-    "animate": "animate",
-    "bench": "bench",
-}
+# The commands in --help order. Each lives in the module of this package of
+# the same name, except demo, which shares the paper's.
+COMMANDS = ("simulate demo paper tune sweep compare waypoints robustness animate bench").split()
+_MODULE_OF = {"demo": "paper"}
 
 # Sweep-like commands spread their batches over every local device; on a CPU
 # that means splitting it into several JAX devices first (wmr_jax.use_cpu_devices).
@@ -65,7 +56,8 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=_HelpFormatter,
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name, module_name in COMMANDS.items():
+    for name in COMMANDS:
+        module_name = _MODULE_OF.get(name, name)
         module = importlib.import_module(f"wmr_jax._src.cli.{module_name}")
         spec = module.SUBCOMMANDS[name]
         command = sub.add_parser(
@@ -74,7 +66,11 @@ def build_parser() -> argparse.ArgumentParser:
             description=spec["help"],
             formatter_class=_HelpFormatter,
         )
-        spec["add_arguments"](command)
+        if "flags" in spec:  # a table {flag: add_argument options}
+            for flag, options in spec["flags"]().items():
+                command.add_argument(flag, **options)
+        else:
+            spec["add_arguments"](command)
         command.set_defaults(func=spec["run"])
     return parser
 

@@ -58,12 +58,6 @@ def _flags() -> dict[str, dict[str, Any]]:
     }
 
 
-def add_arguments(parser: Any) -> None:
-    """Add the flags of ``wmr-jax sweep``."""
-    for flag, options in _flags().items():
-        parser.add_argument(flag, **options)
-
-
 def run(args: Any) -> int:
     """Run ``wmr-jax sweep``; return the exit status."""
     from wmr_jax._src.maps import map_study
@@ -94,7 +88,7 @@ def run(args: Any) -> int:
 SUBCOMMANDS = {
     "sweep": {
         "help": "map success, arrival, path, wheel speed and zig-zag over a pose space",
-        "add_arguments": add_arguments,
+        "flags": _flags,
         "run": run,
     },
 }

@@ -11,7 +11,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from wmr_jax._src.checks import lists_to_arrays, require
+from wmr_jax._src.checks import Parameters, require
 from wmr_jax._src.controllers.base import Controller, register_controller
 from wmr_jax._src.controllers.polar import driving_error, gain_values, hold_at_goal
 from wmr_jax._src.dynamics import sinc
@@ -21,7 +21,7 @@ __all__ = ["AICARDI", "AicardiGains", "aicardi_control", "validate_aicardi_gains
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
-class AicardiGains:
+class AicardiGains(Parameters):
     """Gains of the Aicardi et al. (1995) controller.
 
     Defaults are the gains of the paper's simulations, ``γ = 3``, ``h = 1``,
@@ -42,13 +42,6 @@ class AicardiGains:
     k: Any = 6.0
     h: Any = 1.0
     backward: bool = dataclasses.field(default=False, metadata={"static": True})
-
-    def __post_init__(self) -> None:
-        lists_to_arrays(self)  # a list is one batched field, not a pytree of leaves
-
-    def replace(self, **changes: Any) -> AicardiGains:
-        """Return a copy with the given fields changed."""
-        return dataclasses.replace(self, **changes)
 
 
 def aicardi_control(

@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks import lists_to_arrays, require
+from wmr_jax._src.checks import Parameters, require
 from wmr_jax._src.controllers.base import Controller, register_controller
 from wmr_jax._src.controllers.polar import driving_error, gain_values, hold_at_goal
 
@@ -21,7 +21,7 @@ __all__ = ["ASTOLFI", "AstolfiGains", "astolfi_control", "validate_astolfi_gains
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
-class AstolfiGains:
+class AstolfiGains(Parameters):
     """Gains of the Astolfi polar law as given by Corke, *Robotics, Vision and Control*.
 
     Defaults ``k_ρ = 3``, ``k_α = 8``, ``k_β = −3`` are the gains of the book's
@@ -43,13 +43,6 @@ class AstolfiGains:
     k_alpha: Any = 8.0
     k_beta: Any = -3.0
     backward: bool = dataclasses.field(default=True, metadata={"static": True})
-
-    def __post_init__(self) -> None:
-        lists_to_arrays(self)  # a list is one batched field, not a pytree of leaves
-
-    def replace(self, **changes: Any) -> AstolfiGains:
-        """Return a copy with the given fields changed."""
-        return dataclasses.replace(self, **changes)
 
 
 def astolfi_control(

@@ -34,7 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks import require
+from wmr_jax._src.checks import Parameters, require
 from wmr_jax._src.controllers.base import Controller, register_controller
 from wmr_jax._src.controllers.shim_sung import (
     PolarError,
@@ -65,7 +65,7 @@ _ROBOT = Robot()
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
-class ScheduleParams:
+class ScheduleParams(Parameters):
     """Parameters of the gain-scheduled Shim–Sung law (docs/model.md §3).
 
     Each table is a tuple of ``K ≥ 2`` knot values (each a scalar, or with one
@@ -91,6 +91,9 @@ class ScheduleParams:
     v_max: Any = float(_ROBOT.v_max)
     half_track: Any = float(_ROBOT.half_track)
 
+    def __post_init__(self) -> None:
+        """Keep the tables as given: a tuple of knots is one leaf per knot here."""
+
     @classmethod
     def from_gains(
         cls, gains: Gains, *, knots: int = KNOTS, robot: Robot | None = None
@@ -105,10 +108,6 @@ class ScheduleParams:
             v_max=robot.v_max,
             half_track=robot.half_track,
         )
-
-    def replace(self, **changes: Any) -> ScheduleParams:
-        """Return a copy with the given fields changed."""
-        return dataclasses.replace(self, **changes)
 
 
 def knot_radii(knots: int = KNOTS) -> np.ndarray:
