@@ -142,6 +142,21 @@ def make_spec(
 # ---------------------------------------------------------------- one run
 
 
+def arrival_terms(dist: jax.Array, head: jax.Array, softness: Any) -> tuple[jax.Array, jax.Array]:
+    """Return the relaxed "arrived" test and the shaping term of one sample.
+
+    Args:
+        dist: ``q = (r_e / tol_r)²``.
+        head: ``p = (sin θ_e / sin tol_θ)²``; arrived exactly when ``q, p ≤ 1``.
+        softness: width ``s`` of the relaxed test.
+
+    Returns:
+        ``(a, log(1 + q + p))`` with ``a = σ((1 − q)/s) σ((1 − p)/s)``.
+    """
+    arrived = jax.nn.sigmoid((1.0 - dist) / softness) * jax.nn.sigmoid((1.0 - head) / softness)
+    return arrived, jnp.log1p(dist + head)
+
+
 def _pose_loss_terms(ref, gains, init, robot, dt, spec: LossSpec, temperature):
     """Return ``(relaxed arrival s, integrated log-error s, saturation s)`` of one run.
 
@@ -171,13 +186,13 @@ def _pose_loss_terms(ref, gains, init, robot, dt, spec: LossSpec, temperature):
         # since |θ̄_e| ≤ tol ⇔ sin²θ_e ≤ sin²tol when |θ̄_e| ≤ π/2.
         dist = (dx * dx + dy * dy) * inv_tol_r_sq
         head = sin_theta * sin_theta / sin_tol_sq
-        arrived = jax.nn.sigmoid((1.0 - dist) / softness) * jax.nn.sigmoid((1.0 - head) / softness)
+        arrived, log_error = arrival_terms(dist, head, softness)
         # Σ_k Π_{j≥k} a_j over the samples so far, by S ← a (S + 1): the reversed
         # cumulative product of the "settled from k on" test, streamed forwards.
         # It rides with the log-error as one complex number: XLA:CPU computes
         # each output of a step in a loop of its own, so one output is cheaper.
         sums = acc[0]
-        sums = jax.lax.complex(arrived * (sums.real + 1.0), sums.imag + jnp.log1p(dist + head))
+        sums = jax.lax.complex(arrived * (sums.real + 1.0), sums.imag + log_error)
         if not nonideal:
             return (sums,)
         # Ideal loop: the rims follow the command exactly, so this is zero.

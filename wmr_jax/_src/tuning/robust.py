@@ -34,6 +34,7 @@ from wmr_jax._src.params import Gains, Robot
 from wmr_jax._src.poses import HORIZON_S, horizon_steps, sample_poses
 from wmr_jax._src.rollout import DEFAULT_DT
 from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
+from wmr_jax._src.tuning.loss import LossWeights, arrival_terms
 from wmr_jax._src.tuning.parametrisation import (
     PAPER_FEASIBLE_GAINS,
     gains_from_logits,
@@ -42,7 +43,6 @@ from wmr_jax._src.tuning.parametrisation import (
 
 __all__ = ["RobustConfig", "robust_gains", "robust_loss", "robust_score", "tune_robust"]
 
-_SOFTNESS, _SHAPING = 0.1, 0.05  # as LossWeights(): arrival_softness, shaping
 _FAILURE_S = 2.0 * HORIZON_S  # black-box score of a run that never arrives
 
 
@@ -101,15 +101,15 @@ def robust_gains(z: jax.Array, robot: Robot) -> Gains:
 
 def _relaxed_arrival(poses: jax.Array, ref: jax.Array, dt: jax.Array) -> jax.Array:
     """Relaxed arrival time plus log-error shaping of one recorded run, s (as ``tuning_loss``)."""
+    weights = LossWeights()
     err = law.polar_error(poses, ref)
     dist = err.r**2 / DEFAULT_TOL_R**2
     head = err.sin_theta**2 / math.sin(DEFAULT_TOL_THETA) ** 2
-    log_arrived = jax.nn.log_sigmoid((1.0 - dist) / _SOFTNESS) + jax.nn.log_sigmoid(
-        (1.0 - head) / _SOFTNESS
-    )
-    settled = jnp.exp(jnp.cumsum(log_arrived[::-1])[::-1])
-    soft = dt * (1.0 + jnp.sum(1.0 - settled))
-    return soft + _SHAPING * dt * jnp.sum(jnp.log1p(dist + head))
+    arrived, log_error = arrival_terms(dist, head, weights.arrival_softness)
+    # Σ_k Π_{j≥k} a_j: the runs of arrived samples that last to the end.
+    settled = jnp.sum(jnp.cumprod(arrived[::-1]))
+    soft = dt * (1.0 + arrived.shape[0] - settled)
+    return soft + weights.shaping * dt * jnp.sum(log_error)
 
 
 def _group_grads(z, spec, robot, dt, options):
