@@ -174,8 +174,30 @@ def sinc(u: jax.Array) -> jax.Array:
     return _sinc_of(u, sin_cos(u)[1])
 
 
+def _half_turn_small(u: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """Return ``(cos u, sin u, sin(u)/u)`` for ``|u| ≤ π/4``: ``sin_cos`` without its reduction.
+
+    On ``[−π/4, π/4]`` the kernels of ``sin_cos`` apply directly, and
+    ``sin(u)/u = 1 + u² S(u²)`` needs neither a division nor a branch at 0.
+    """
+    dtype = np.dtype(u.dtype)
+    if dtype not in _SIN:
+        cos_u, sin_u = sin_cos(u)
+        return cos_u, sin_u, _sinc_of(u, sin_u)
+    z = u * u
+    sinc_u = 1 + z * _polynomial(z, _SIN[dtype])
+    cos_u = (1 - 0.5 * z) + z * z * _polynomial(z, _COS[dtype])
+    return cos_u, u * sinc_u, sinc_u
+
+
 def arc_advance(
-    position: jax.Array, heading: jax.Array, v: jax.Array, omega: jax.Array, h: jax.Array
+    position: jax.Array,
+    heading: jax.Array,
+    v: jax.Array,
+    omega: jax.Array,
+    h: jax.Array,
+    *,
+    small_turn: bool = False,
 ) -> tuple[jax.Array, jax.Array]:
     """Advance the robot by ``h`` seconds at constant ``(v, ω)``, exactly (docs/model.md §4).
 
@@ -190,16 +212,26 @@ def arc_advance(
         v: linear velocity, cm/s.
         omega: angular velocity, rad/s.
         h: duration, s.
+        small_turn: the caller guarantees ``|ω h| ≤ π/2`` (static): the
+            turn's cosine and sine then need no range reduction.
 
     Returns:
         ``(position, heading)`` after ``h``, complex, broadcast shape.
     """
     half_turn = 0.5 * omega * h
-    cos_half, sin_half = sin_cos(half_turn)
+    if small_turn:
+        cos_half, sin_half, sinc_half = _half_turn_small(half_turn)
+    else:
+        cos_half, sin_half = sin_cos(half_turn)
+        sinc_half = _sinc_of(half_turn, sin_half)
     turn = jax.lax.complex(cos_half, sin_half)
     mid_heading = heading * turn
-    chord = v * h * _sinc_of(half_turn, sin_half)
-    return position + chord * mid_heading, mid_heading * turn
+    chord = v * h * sinc_half
+    # A real times a complex, on the parts (not a full complex product).
+    position = jax.lax.complex(
+        position.real + chord * mid_heading.real, position.imag + chord * mid_heading.imag
+    )
+    return position, mid_heading * turn
 
 
 def arc_step(pose: jax.Array, v: jax.Array, omega: jax.Array, h: jax.Array) -> jax.Array:

@@ -17,6 +17,7 @@ from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from wmr_jax._src import dynamics, velocity_loop
 from wmr_jax._src.controllers import shim_sung as law
@@ -38,6 +39,7 @@ __all__ = [
     "batch_axes",
     "batched",
     "closed_loop_step",
+    "for_robot",
     "initial_state",
     "initial_wheel",
     "jit_top_level",
@@ -68,6 +70,16 @@ class Options:
         substeps: inner integration steps per period (non-ideal loop).
         wheel_limit: ``"clip"`` each wheel command at ``±v_max`` or ``"scale"``
             both by one factor, keeping the curvature (non-ideal loop).
+        wheel_integral: integrate the wheel loop's velocity error (non-ideal
+            loop). ``for_robot`` turns it off for robots whose
+            ``integral_gain`` is zero, where the integral has no effect.
+        wheel_coriolis: include the Coriolis terms ``G(q)`` (non-ideal loop);
+            ``for_robot`` turns them off for robots whose ``com_offset`` is
+            zero, where they vanish.
+        small_turn: every sub-step turns by at most ``π/2``, because
+            ``V_max h / L ≤ π/2`` (``h = dt / substeps``; the rim speeds are
+            held within ``±V_max``), so the arcs need no range reduction
+            (non-ideal loop; set by ``for_robot``).
     """
 
     steps: int = DEFAULT_STEPS
@@ -76,6 +88,44 @@ class Options:
     temperature: float | None = None
     substeps: int = DEFAULT_SUBSTEPS
     wheel_limit: str = "clip"
+    wheel_integral: bool = True
+    wheel_coriolis: bool = True
+    small_turn: bool = False
+
+
+def for_robot(options: Options, robot: Robot, dt: Any) -> Options:
+    """Return ``options`` with the wheel-loop terms that vanish for ``robot`` left out.
+
+    A computed-torque loop with ``integral_gain = 0`` is a proportional loop:
+    its integral state changes nothing but costs a second RK4 step per
+    sub-step. With ``com_offset = 0`` the Coriolis terms ``G(q)`` are zero.
+    Leaving them out gives the same results, faster. When ``V_max dt /
+    (L substeps) ≤ π/2`` no sub-step can turn further than that
+    (``small_turn``). Decided on the concrete robot and ``dt`` before
+    tracing; traced values keep the general loop. Only for runs where the
+    wheel controller's model is ``robot`` itself.
+    """
+
+    def concrete(value: Any) -> np.ndarray | None:
+        traced = isinstance(value, jax.core.Tracer)
+        return None if traced else np.asarray(value, dtype=float)
+
+    def vanishes(value: Any) -> bool:
+        value = concrete(value)
+        return value is not None and not np.any(value != 0)
+
+    if options.velocity != "nonideal":
+        return options
+    v_max, half_track, period = (concrete(x) for x in (robot.v_max, robot.half_track, dt))
+    small = not any(x is None for x in (v_max, half_track, period)) and bool(
+        np.all(v_max * period / (half_track * options.substeps) <= np.pi / 2)
+    )
+    return dataclasses.replace(
+        options,
+        wheel_integral=options.wheel_integral and not vanishes(robot.integral_gain),
+        wheel_coriolis=options.wheel_coriolis and not vanishes(robot.com_offset),
+        small_turn=options.small_turn or small,
+    )
 
 
 def initial_state(init: jax.Array) -> dynamics.RobotState:
@@ -273,6 +323,9 @@ def advance_period(
         substeps=options.substeps,
         wheel_limit=options.wheel_limit,
         model=model,
+        integral=options.wheel_integral,
+        coriolis=options.wheel_coriolis,
+        small_turn=options.small_turn,
     )
     rims = law.wheel_speeds(wheel.v, wheel.omega, robot)
     return SplitPose(position, heading, theta), wheel, rims, distance

@@ -35,6 +35,7 @@ from wmr_jax._src.loops import (
     EntryJit,
     Options,
     batched,
+    for_robot,
     scan_closed_loop,
 )
 from wmr_jax._src.params import Robot, validate_robot
@@ -308,6 +309,7 @@ def rollout(
     """
     options = make_options(**_static_options(locals()))
     args = prepare(ref, gains, init, robot, dt, options, batch=False)
+    options = for_robot(options, args[3], args[4])
     traj = _rollout_jit(*args, options=options)
     return finite_result(traj.poses, traj, pose_axes=2)
 
@@ -342,6 +344,7 @@ def batch_rollout(
     """
     options = make_options(**_static_options(locals()))
     args = prepare(refs, gains, init, robot, dt, options, batch=None)
+    options = for_robot(options, args[3], args[4])
     traj = _batch_rollout_jit(*args, options=options)
     return finite_result(traj.poses, traj, pose_axes=2)
 
@@ -369,6 +372,7 @@ def final_poses(
     """
     options = make_options(**_static_options(locals()))
     args = prepare(refs, gains, init, robot, dt, options, batch=None)
+    options = for_robot(options, args[3], args[4])
     final = _final_poses_jit(*args, options=options)
     return finite_result(final, final)
 

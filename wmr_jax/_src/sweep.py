@@ -208,7 +208,7 @@ def _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, device
         init=init,
         batched_init=batched_init,
         dt=float(dt),
-        options=options,
+        options=loops.for_robot(options, robot, dt),
         thresholds=thresholds,
         dtype=np.dtype(checks.float_dtype()),
         chunk=math.ceil(min(chunk_size, n) / len(devices)) * len(devices),

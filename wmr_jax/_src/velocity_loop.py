@@ -33,6 +33,11 @@ can only do so much. Over each control period ``dt``:
    at the mean of the sub-step's start and end velocities, which is second
    order and exact once the velocity has settled. After each sub-step each
    wheel's rim speed is held within ``±V_max`` (the motors cannot go faster).
+
+The rollouts leave out what vanishes for the robot at hand (``integral``,
+``coriolis`` and ``small_turn`` of ``advance_split``, chosen by
+``loops.for_robot``): with ``k_i = 0`` and ``a = 0`` a sub-step is one RK4
+step of the velocity alone, which XLA:CPU computes once and stores.
 """
 
 from __future__ import annotations
@@ -177,8 +182,14 @@ def _limit_split(v, w, robot: Robot, mode: str):
     return 0.5 * (left + right), 0.5 * (right - left) / L
 
 
-def _loop_rates(target, robot: Robot, model: Robot):
+def _loop_rates(target, robot: Robot, model: Robot, with_integral: bool, with_coriolis: bool):
     """Return ``f(wheel) -> d wheel/dt`` of the closed wheel loop (Eq. 5 and its controller).
+
+    ``wheel`` is the velocity ``v + i ω``, with the integral ``z_v + i z_ω``
+    beside it if ``with_integral``; without, the integral term is left out
+    (exactly what it contributes when ``integral_gain`` is zero). Likewise
+    ``with_coriolis=False`` leaves out ``G(q)``, which is zero when both
+    robots have their centre of mass on the axle.
 
     The arithmetic of ``wheel_torques`` followed by ``body_acceleration``,
     written on separate scalars so that a batched rollout carries no
@@ -200,37 +211,53 @@ def _loop_rates(target, robot: Robot, model: Robot):
     inv_m11, inv_m22 = 1.0 / true_m11, 1.0 / true_m22
 
     def rates(y):
-        # y = (v + i ω, z_v + i z_ω): complex pairs, so that XLA computes both
-        # parts of each in one loop (it compiles one loop per output array and
-        # repeats in each the work they share).
-        velocity, integral = y
+        # y = v + i ω, or (v + i ω, z_v + i z_ω) with the integral: complex
+        # pairs, so that XLA computes both parts of each in one loop (it
+        # compiles one loop per output array and repeats in each the work
+        # they share).
+        velocity, integral = y if with_integral else (y, None)
         v, w = velocity.real, velocity.imag
         error_v, error_w = target_v - v, target_w - w
-        force = m11 * (model.speed_gain * error_v + model.integral_gain * integral.real) - (
-            model_ma * w * w
-        )
-        moment = m22 * (model.speed_gain * error_w + model.integral_gain * integral.imag) + (
-            model_ma * v * w
-        )
+        demand_v, demand_w = model.speed_gain * error_v, model.speed_gain * error_w
+        if with_integral:
+            demand_v = demand_v + model.integral_gain * integral.real
+            demand_w = demand_w + model.integral_gain * integral.imag
+        force, moment = m11 * demand_v, m22 * demand_w
+        if with_coriolis:
+            force, moment = force - model_ma * w * w, moment + model_ma * v * w
         tau_r = jnp.clip(0.5 * r * (force + moment * inv_l), -limit, limit)
         tau_l = jnp.clip(0.5 * r * (force - moment * inv_l), -limit, limit)
-        accel_v = to_v * (tau_l + tau_r) + inv_m11 * true_ma * w * w
-        accel_w = to_w * (tau_r - tau_l) - inv_m22 * true_ma * v * w
-        return jax.lax.complex(accel_v, accel_w), jax.lax.complex(error_v, error_w)
+        accel_v, accel_w = to_v * (tau_l + tau_r), to_w * (tau_r - tau_l)
+        if with_coriolis:
+            accel_v = accel_v + inv_m11 * true_ma * w * w
+            accel_w = accel_w - inv_m22 * true_ma * v * w
+        accel = jax.lax.complex(accel_v, accel_w)
+        return (accel, jax.lax.complex(error_v, error_w)) if with_integral else accel
 
     return rates
 
 
+def _along(y, c, k):
+    """Return ``y + c k`` for complex ``y``, ``k`` and a real ``c``.
+
+    Written on the parts: ``c`` times a complex number is otherwise a full
+    complex product (``c`` promoted to complex), three times the work.
+    """
+    return jax.lax.complex(y.real + c * k.real, y.imag + c * k.imag)
+
+
 def _rk4(f, y, h):
-    """One classical RK4 step of ``ẏ = f(y)``, ``y`` a pytree."""
+    """One classical RK4 step of ``ẏ = f(y)``, ``y`` a pytree of complex arrays."""
+
+    def along(c, k):
+        return jax.tree.map(lambda a, b: _along(a, c, b), y, k)
 
     k1 = f(y)
-    k2 = f(jax.tree.map(lambda a, b: a + 0.5 * h * b, y, k1))
-    k3 = f(jax.tree.map(lambda a, b: a + 0.5 * h * b, y, k2))
-    k4 = f(jax.tree.map(lambda a, b: a + h * b, y, k3))
-    return jax.tree.map(
-        lambda a, b1, b2, b3, b4: a + h / 6.0 * (b1 + 2 * b2 + 2 * b3 + b4), y, k1, k2, k3, k4
-    )
+    k2 = f(along(0.5 * h, k1))
+    k3 = f(along(0.5 * h, k2))
+    k4 = f(along(h, k3))
+    total = jax.tree.map(lambda b1, b2, b3, b4: (b1 + b4) + 2 * (b2 + b3), k1, k2, k3, k4)
+    return along(h / 6.0, total)
 
 
 def advance_split(
@@ -245,6 +272,9 @@ def advance_split(
     substeps: int = DEFAULT_SUBSTEPS,
     wheel_limit: str = "clip",
     model: Robot | None = None,
+    integral: bool = True,
+    coriolis: bool = True,
+    small_turn: bool = False,
 ) -> tuple[jax.Array, jax.Array, jax.Array, WheelState, jax.Array]:
     """Move the robot over one control period under the non-ideal loop (docs/model.md §4).
 
@@ -264,6 +294,13 @@ def advance_split(
         substeps: inner steps (static).
         wheel_limit: ``"clip"`` or ``"scale"`` the rim-speed set points (static).
         model: the robot the wheel controller believes in (default ``robot``).
+        integral: carry the loop's integral (static); ``False`` is exact only
+            when ``model.integral_gain`` is zero, and leaves ``z`` unchanged.
+        coriolis: include ``G(q)`` (static); ``False`` is exact only when
+            ``robot.com_offset`` and ``model.com_offset`` are zero.
+        small_turn: ``robot.v_max · dt / (robot.half_track · substeps) ≤ π/2``
+            holds (static), so no sub-step turns further than ``π/2``
+            (``dynamics.arc_advance``).
 
     Returns:
         ``(position, heading, theta, wheel, distance cm)`` at the next sample;
@@ -271,30 +308,42 @@ def advance_split(
     """
     model = robot if model is None else model
     target = _limit_split(command[0], command[1], model, wheel_limit)
-    rates = _loop_rates(target, robot, model)
+    rates = _loop_rates(target, robot, model, integral, coriolis)
     h = dt / substeps
 
     def substep(carry, _):
-        position, heading, theta, velocity, integral, travelled = carry
-        new_velocity, integral = _rk4(rates, (velocity, integral), h)
-        new_v, new_w = _limit_split(new_velocity.real, new_velocity.imag, robot, "clip")
-        mean_v, mean_w = 0.5 * (velocity.real + new_v), 0.5 * (velocity.imag + new_w)
-        position, heading = dynamics.arc_advance(position, heading, mean_v, mean_w, h)
-        theta, travelled = theta + mean_w * h, travelled + jnp.abs(mean_v) * h
-        return (position, heading, theta, jax.lax.complex(new_v, new_w), integral, travelled), None
+        position, heading, wheel, covered = carry
+        velocity = wheel[0] if integral else wheel
+        wheel = _rk4(rates, wheel, h)
+        new = wheel[0] if integral else wheel
+        new_v, new_w = _limit_split(new.real, new.imag, robot, "clip")
+        new = jax.lax.complex(new_v, new_w)
+        wheel = (new, wheel[1]) if integral else new
+        # Stored once: XLA:CPU compiles one loop per output of the sub-step
+        # and would otherwise repeat the whole RK4 step in each of them.
+        wheel = jax.lax.optimization_barrier(wheel)
+        new = wheel[0] if integral else wheel  # the stored one (not new_v, new_w)
+        mean_v, mean_w = 0.5 * (velocity.real + new.real), 0.5 * (velocity.imag + new.imag)
+        position, heading = dynamics.arc_advance(
+            position, heading, mean_v, mean_w, h, small_turn=small_turn
+        )
+        # Distance and turn in one accumulator |v| h + i ω h: one loop, not two.
+        covered = jax.lax.complex(covered.real + jnp.abs(mean_v) * h, covered.imag + mean_w * h)
+        return (position, heading, wheel, covered), None
 
     velocity = jax.lax.complex(wheel.v, wheel.omega)
-    integral = jax.lax.complex(wheel.z_v, wheel.z_omega)
-    carry = (position, heading, theta, velocity, integral, jnp.zeros_like(theta))
+    z = jax.lax.complex(wheel.z_v, wheel.z_omega)
+    start = (velocity, z) if integral else velocity
+    carry = (position, heading, start, jnp.zeros_like(position))
     # An inner scan, not an unrolled chain: unrolled, XLA fuses the stages
     # of consecutive sub-steps into each other and repeats their shared work
     # in every output (measured 1.5-2x slower at 10 sub-steps).
-    carry, _ = jax.lax.scan(substep, carry, None, length=substeps)
-    position, heading, theta, velocity, integral, travelled = carry
-    wheel = WheelState(velocity.real, velocity.imag, integral.real, integral.imag)
+    (position, heading, state, covered), _ = jax.lax.scan(substep, carry, None, length=substeps)
+    velocity, z = state if integral else (state, z)
+    wheel = WheelState(velocity.real, velocity.imag, z.real, z.imag)
     # One Newton step towards |heading| = 1, so that rounding does not drift.
     heading = heading * (1.5 - 0.5 * (heading.real**2 + heading.imag**2))
-    return position, heading, theta, wheel, travelled
+    return position, heading, theta + covered.imag, wheel, covered.real
 
 
 def advance(
