@@ -205,7 +205,9 @@ def scan_closed_loop(
         dt: control period, s.
         options: static rollout options.
         fold: ``fold(acc, pose, out) -> acc``, called after every period with
-            the pose ``(3,)`` at its end and its ``StepOutput``: metrics that
+            the pose at its end as a ``SplitPose`` (``pose.stacked()`` is
+            ``[x, y, θ]``, ``pose.frame()`` gives ``cos θ`` and ``sin θ``
+            without computing them) and its ``StepOutput``: metrics that
             stream through the scan instead of storing the trajectory.
         acc: the initial value of the fold's accumulator (a pytree).
         record: also return every pose and ``StepOutput`` (stacked over steps).
@@ -356,11 +358,10 @@ def _split_loop(ref, params, init, robot, dt, options, fold, acc, record):
         region = split_region(pose, ref, params, options) if fold or record else None
         pose, wheel, rims, distance = advance_period(pose, wheel, (v, omega), robot, dt, options)
         out = StepOutput(v, omega, region, rims, distance)
-        stacked = pose.stacked()
         if fold is not None:
-            acc = fold(acc, stacked, out)
+            acc = fold(acc, pose, out)
         carry = (pose, wheel, split_command(pose, ref, params, options), acc)
-        return carry, ((stacked, out) if record else None)
+        return carry, ((pose.stacked(), out) if record else None)
 
     pose = SplitPose.of(init)
     carry = (pose, initial_wheel(init, options), split_command(pose, ref, params, options), acc)

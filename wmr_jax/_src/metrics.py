@@ -61,8 +61,10 @@ def _poses_of(traj: Any) -> Any:
     return poses
 
 
-def _is_arrived(poses: jax.Array, refs: jax.Array, tol_r: Any, tol_theta: Any) -> jax.Array:
-    err = law.polar_error(poses, refs)
+def _is_arrived(
+    poses: jax.Array, refs: jax.Array, tol_r: Any, tol_theta: Any, frame: Any = None
+) -> jax.Array:
+    err = law.polar_error(poses, refs, frame=frame)
     cos_theta_bar, _ = law.fold(err.cos_theta, err.sin_theta)
     # |θ̄_e| ≤ tol ⇔ cos θ̄_e ≥ cos tol, since |θ̄_e| ≤ π/2.
     return (err.r <= tol_r) & (cos_theta_bar >= jnp.cos(tol_theta))
@@ -239,7 +241,13 @@ def _flip(last: jax.Array, x: jax.Array, dead_band: Any) -> tuple[jax.Array, jax
 
 
 def stream_update(
-    acc: RunMetrics, pose: jax.Array, ref: jax.Array, out: Any, thresholds: Thresholds
+    acc: RunMetrics,
+    pose: jax.Array,
+    ref: jax.Array,
+    out: Any,
+    thresholds: Thresholds,
+    *,
+    frame: Any = None,
 ) -> RunMetrics:
     """Fold one control period into the metrics (``docs/model.md §6``).
 
@@ -250,8 +258,10 @@ def stream_update(
         out: what the period reported (a ``StepOutput``: ``v``, ``omega``,
             ``wheel_speeds (2,)``, ``distance``).
         thresholds: tolerances and dead bands.
+        frame: the pose as ``(x, y, cos θ, sin θ)`` if the caller has it
+            (``SplitPose.frame()``), so that no step recomputes the cosine.
     """
-    ok = _is_arrived(pose, ref, thresholds.tol_r, thresholds.tol_theta)
+    ok = _is_arrived(pose, ref, thresholds.tol_r, thresholds.tol_theta, frame)
     k = acc.step
     v_sign, v_flip = _flip(acc.v_sign, out.v, thresholds.v_dead_band)
     omega_sign, omega_flip = _flip(acc.omega_sign, out.omega, thresholds.omega_dead_band)

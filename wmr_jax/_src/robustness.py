@@ -157,7 +157,8 @@ def disturbed_run(
         robot: the nominal robot (the controller's model).
         dt: control period, s.
         options: static options; ``options.temperature`` selects the relaxed law.
-        fold: ``fold(acc, true pose (3,), StepOutput) -> acc`` after every period.
+        fold: ``fold(acc, true pose (a loops.SplitPose), StepOutput) -> acc``
+            after every period.
         acc: the fold's initial accumulator.
         record: also return every true pose ``(steps, 3)`` and ``StepOutput``.
 
@@ -175,11 +176,10 @@ def disturbed_run(
             pose, wheel, target, true_robot, dt, options, model=robot
         )
         out = StepOutput(applied.real, applied.imag, jnp.int32(-1), rims, distance)
-        stacked = pose.stacked()
         if fold is not None:
-            acc = fold(acc, stacked, out)
+            acc = fold(acc, pose, out)
         command = loops.split_command(_measured(pose, noise_next), ref, params, options)
-        return (pose, wheel, command, fresh, acc), ((stacked, out) if record else None)
+        return (pose, wheel, command, fresh, acc), ((pose.stacked(), out) if record else None)
 
     pose = loops.SplitPose.of(init)
     first = loops.split_command(_measured(pose, spec.noise[0]), ref, params, options)
@@ -197,7 +197,7 @@ def _perturbed_single(spec: Disturbance, params, init, robot, dt, options: Optio
     thresholds = metrics.Thresholds()
 
     def fold(acc, pose, out):
-        return metrics.stream_update(acc, pose, ref, out, thresholds)
+        return metrics.stream_update(acc, pose.stacked(), ref, out, thresholds, frame=pose.frame())
 
     final, acc, _ = disturbed_run(
         spec, params, init, robot, dt, options, fold=fold, acc=metrics.stream_start(ref.dtype)

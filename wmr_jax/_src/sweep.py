@@ -80,7 +80,7 @@ def _sweep_one(ref, params, init, robot, dt, options: loops.Options):
     gains, thresholds = params
 
     def fold(acc, pose, out):
-        return metrics.stream_update(acc, pose, ref, out, thresholds)
+        return metrics.stream_update(acc, pose.stacked(), ref, out, thresholds, frame=pose.frame())
 
     acc = metrics.stream_start(init.dtype)
     final, acc, _ = loops.scan_closed_loop(ref, gains, init, robot, dt, options, fold=fold, acc=acc)
