@@ -4,7 +4,10 @@ JAX's default float32 path is exercised by tests that wrap themselves in
 ``jax.enable_x64(False)`` (e.g. ``test_rollout.py::test_float32_default_path_*``).
 """
 
+import functools
+
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -19,6 +22,94 @@ def paper_refs() -> np.ndarray:
     return w.paper_refs()
 
 
+# Every draw of n ≤ _POOL poses is the first n rows of one draw of _POOL (JAX's
+# threefry draws element by element), so the tests share one compiled sampler
+# instead of compiling one per n.
+_POOL = 1024
+
+
+@functools.cache
+def _pool(seed: int, r_min: float, r_max: float) -> np.ndarray:
+    with jax.enable_x64(True):  # float64 even when first asked inside a float32 test
+        pool = w.sample_poses(seed, _POOL, r_min=r_min, r_max=r_max, dtype=np.float64)
+        pool = np.asarray(pool, dtype=np.float64)
+    pool.setflags(write=False)
+    return pool
+
+
 def random_refs(seed: int, n: int, r_min: float = 5.0, r_max: float = 80.0) -> np.ndarray:
-    """``n`` references of the evaluation set (``docs/model.md §6``), as float64 NumPy."""
-    return np.asarray(w.sample_poses(seed, n, r_min=r_min, r_max=r_max, dtype=np.float64))
+    """``n`` references of the evaluation set (``docs/model.md §6``), as float64 NumPy.
+
+    Equal to ``w.sample_poses(seed, n, r_min=r_min, r_max=r_max, dtype=np.float64)``.
+    """
+    if n > _POOL:
+        return np.asarray(w.sample_poses(seed, n, r_min=r_min, r_max=r_max, dtype=np.float64))
+    return _pool(seed, float(r_min), float(r_max))[:n].copy()
+
+
+@functools.partial(jax.jit, static_argnames=("dt",))
+def _run_metrics(traj, refs, dt):
+    refs = jnp.asarray(refs)
+    return {
+        "arrival": w.arrival_time(traj, refs, dt=dt),
+        "zigzag": w.zigzag_count(traj),
+        "path": w.path_length(traj),
+        # Whether each sample (the pose after each period) is arrived.
+        "arrived": w.arrived(traj.poses[..., 1:, :], refs[..., None, :]),
+    }
+
+
+def run_metrics(traj, refs, dt=0.033) -> dict:
+    """Arrival times, zigzag counts, path lengths and arrived samples of recorded runs (§6).
+
+    The public metrics, compiled as one program. Called directly they run op
+    by op and compile every operation again for each new shape, several times
+    the cost of this; ``test_metrics.py`` and ``test_fuzz.py`` call them so.
+    For the tests that only need their values.
+    """
+    return {name: np.asarray(value) for name, value in _run_metrics(traj, refs, dt).items()}
+
+
+# ---------------------------------------------------------------- test order
+#
+# The suite runs one worker per core with ``--dist loadfile --no-loadscope-reorder``:
+# each file goes whole to one worker (its compiled programs are reused within
+# it), in the order below. Handing out the longest files first keeps both
+# workers busy to the end, where a long file handed out last would leave one
+# idle. Approximate CPU seconds per file (2-core machine); a file not listed
+# counts as middling.
+FILE_SECONDS = {
+    "test_fuzz.py": 27,
+    "test_robustness.py": 24,
+    "test_tuning.py": 23,
+    "test_velocity_loop.py": 19,
+    "test_schedule.py": 15,
+    "test_readme.py": 14,
+    "test_edges.py": 14,
+    "test_controllers.py": 13,
+    "test_tuning_robust.py": 12,
+    "test_sharding.py": 12,  # in subprocesses
+    "test_shim_sung.py": 11,
+    "test_cli.py": 11,
+    "test_bench.py": 11,
+    "test_sweep.py": 11,
+    "test_rollout.py": 11,
+    "test_waypoints.py": 10,
+    "test_maps.py": 9,
+    "test_tuning_train.py": 8,
+    "test_velocity_loop_paths.py": 7,
+    "test_metrics.py": 6,
+    "test_animation.py": 5,
+    "test_reference.py": 3,
+    "test_load_tuned.py": 3,
+    "test_params.py": 2,
+    "test_dynamics.py": 1,
+    "test_poses.py": 1,
+    "test_optimal.py": 1,
+    "test_io.py": 0,
+}
+
+
+def pytest_collection_modifyitems(items):
+    """Longest files first; within a file, the written order."""
+    items.sort(key=lambda item: -FILE_SECONDS.get(item.path.name, 5))

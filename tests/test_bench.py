@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import random_refs
 
 import wmr_jax as w
 from wmr_jax.cli import main
@@ -11,7 +12,7 @@ from wmr_jax.cli import main
 
 def test_numpy_baseline_is_the_same_closed_loop():
     """The vectorised NumPy baseline simulates what final_poses does (float64)."""
-    refs = np.asarray(w.sample_poses(0, 50, dtype=np.float64))
+    refs = random_refs(0, 50)
     gains = w.Gains(kr=60.0)
     got = w.studies.numpy_final_poses(refs, gains, steps=120)
     want = np.asarray(w.final_poses(refs, gains, steps=120))
@@ -28,7 +29,7 @@ def test_bench_command_writes_table_and_json(tmp_path, capsys):
         "--sizes", "8", "16",
         "--steps", "4",
         "--repeats", "1",
-        "--reference-poses", "2",
+        "--reference-poses", "8",  # as many as the first size: one pose sampler compiled
         "--dtype", "float64",  # the test session runs with x64 on
         "--cpu-devices", "1",
         "--cases", "final_poses", "numpy_batch", "scalar_reference",
@@ -47,7 +48,7 @@ def test_bench_command_writes_table_and_json(tmp_path, capsys):
         ("numpy_batch", 8),
         ("final_poses", 16),
         ("numpy_batch", 16),
-        ("scalar_reference", 2),
+        ("scalar_reference", 8),
     ]
     for row in result["rows"]:
         assert row["robot_steps_per_s"] > 0 and row["run_s"] > 0
@@ -58,7 +59,8 @@ def test_bench_command_writes_table_and_json(tmp_path, capsys):
 def test_both_losses_and_their_gradients_are_timed():
     """Each loss is timed with its gradient, not skipped, and their ratios are reported."""
     cases = ("final_poses", "final_poses_nonideal", "grad_final_pose_loss", "grad_tuning_loss")
-    config = w.studies.BenchConfig(sizes=(4,), steps=2, repeats=1, dtype="float64", cases=cases)
+    # The first size and the steps of the command above: its poses and final_poses are reused.
+    config = w.studies.BenchConfig(sizes=(8,), steps=4, repeats=1, dtype="float64", cases=cases)
     result = w.studies.run_benchmark(config)
     rows = result["rows"]
     assert [row["case"] for row in rows] == [
@@ -71,7 +73,7 @@ def test_both_losses_and_their_gradients_are_timed():
         "grad_tuning_loss",
     ]
     assert all(row["robot_steps_per_s"] > 0 for row in rows)
-    ratios = result["ratios"]["N=4"]
+    ratios = result["ratios"]["N=8"]
     for key in (
         "grad_final_pose_loss_over_forward",
         "grad_tuning_loss_over_forward",

@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import run_metrics
 
 import wmr_jax as w
 from wmr_jax import controllers as baselines
@@ -43,7 +44,7 @@ def test_registered_by_name():
 def test_reaches_every_grid_reference_within_the_horizon(controller, params):
     refs = grid_refs()
     traj = w.batch_rollout(refs, params, steps=STEPS, controller=controller)
-    times = np.asarray(w.arrival_time(traj, refs, dt=0.033))
+    times = run_metrics(traj, refs)["arrival"]
     assert np.isfinite(times).all(), refs[~np.isfinite(times)]
     # Both laws stabilise the full heading, not only the folded one.
     final = np.asarray(traj.poses[:, -1])
@@ -80,6 +81,9 @@ def literal_corke(pose, ref, g: AstolfiGains):
 
 
 def test_laws_equal_their_published_coordinates():
+    # Compiled, as rollouts run them: one program each instead of op by op.
+    aicardi_control = jax.jit(baselines.aicardi_control)
+    astolfi_control = jax.jit(baselines.astolfi_control)
     rng = np.random.default_rng(7)
     g_a, g_c = AicardiGains(), AstolfiGains(backward=False)
     checked = 0
@@ -99,10 +103,10 @@ def test_laws_equal_their_published_coordinates():
         ):
             continue
         # Within float64 rounding of a few trigonometric evaluations.
-        got = baselines.aicardi_control(jnp.asarray(pose), jnp.asarray(ref), g_a)
+        got = aicardi_control(jnp.asarray(pose), jnp.asarray(ref), g_a)
         np.testing.assert_allclose(np.asarray(got), [v_a, w_a], rtol=1e-9, atol=1e-9)
         if abs(alpha) < math.pi / 2:
-            got = baselines.astolfi_control(jnp.asarray(pose), jnp.asarray(ref), g_c)
+            got = astolfi_control(jnp.asarray(pose), jnp.asarray(ref), g_c)
             np.testing.assert_allclose(np.asarray(got), [v_c, w_c], rtol=1e-9, atol=1e-9)
         checked += 1
     assert checked > 150
@@ -133,21 +137,30 @@ def test_finite_values_and_gradients_at_rho_zero(command, gains, heading):
         assert np.isfinite(np.asarray(leaf)).all()
 
 
+# The single runs' horizon (3 s): the tests below share their compiled programs.
+SINGLE_STEPS = 90
+
+
 def test_rollout_started_on_the_reference_stays_finite():
     for controller in ("aicardi", "astolfi-corke"):
-        traj = w.rollout([5.0, 5.0, 1.0], init=[5.0, 5.0, 1.0], steps=20, controller=controller)
+        traj = w.rollout(
+            [5.0, 5.0, 1.0], init=[5.0, 5.0, 1.0], steps=SINGLE_STEPS, controller=controller
+        )
         assert np.isfinite(np.asarray(traj.poses)).all()
 
 
 def test_backward_flag_picks_the_driving_direction():
     behind = np.array([-40.0, 5.0, 0.0])  # in the rear half-plane of (0, 0, 0)
+    steps = SINGLE_STEPS
     runs = {
-        "aicardi fwd": w.rollout(behind, AicardiGains(), steps=90, controller="aicardi"),
+        "aicardi fwd": w.rollout(behind, AicardiGains(), steps=steps, controller="aicardi"),
         "aicardi bwd": w.rollout(
-            behind, AicardiGains(backward=True), steps=90, controller="aicardi"
+            behind, AicardiGains(backward=True), steps=steps, controller="aicardi"
         ),
-        "corke fwd": w.rollout(behind, AstolfiGains(backward=False), steps=90, controller=ASTOLFI),
-        "corke bwd": w.rollout(behind, AstolfiGains(), steps=90, controller=ASTOLFI),
+        "corke fwd": w.rollout(
+            behind, AstolfiGains(backward=False), steps=steps, controller=ASTOLFI
+        ),
+        "corke bwd": w.rollout(behind, AstolfiGains(), steps=steps, controller=ASTOLFI),
     }
     travelled = {k: float(np.sum(np.asarray(t.v)) * 0.033) for k, t in runs.items()}
     # Net signed distance: forwards turns round and drives ahead, backwards reverses.

@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import random_refs
 
 import wmr_jax as w
 from wmr_jax import tuning
@@ -30,7 +31,7 @@ def test_a_schedule_round_trips_through_tuned_gains_json(tmp_path, capsys):
     path.write_text(json.dumps(tuning.tuned_json(params)))
     controller, loaded = tuning.load_tuned(path)
     assert controller is tuning.SCHEDULE and loaded == params
-    refs = w.sample_poses(1, 16, dtype=np.float64)
+    refs = random_refs(1, 16)
     np.testing.assert_array_equal(
         np.asarray(w.final_poses(refs, loaded, controller=controller)),
         np.asarray(w.batch_rollout(refs, params, controller=tuning.SCHEDULE).poses[:, -1]),

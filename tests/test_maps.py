@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import random_refs, run_metrics
 
 import wmr_jax as w
 from wmr_jax.cli import main
@@ -16,35 +17,41 @@ from wmr_jax.controllers import AicardiGains
 from wmr_jax.studies import PoseMetrics, evaluate_poses, map_study, pose_grid, summarize
 
 DT = 0.033
-REFS = np.asarray(w.sample_poses(1, 40))
+
+
+@pytest.fixture(scope="module")
+def refs():
+    """The 40 poses of every run here (drawn when first needed, not at collection)."""
+    return random_refs(1, 40)
 
 
 @pytest.mark.parametrize(
     ("controller", "params"), [("aicardi", AicardiGains(backward=True)), ("astolfi-corke", None)]
 )
-def test_streamed_metrics_equal_rollouts_and_metrics(controller, params):
+def test_streamed_metrics_equal_rollouts_and_metrics(refs, controller, params):
     """Shim–Sung's streamed metrics are checked against rollouts in test_sweep.py."""
-    m = evaluate_poses(REFS, params, controller=controller, chunk=16)  # 3 calls, the last padded
-    traj = w.batch_rollout(REFS, params, steps=w.horizon_steps(DT), controller=controller)
+    m = evaluate_poses(refs, params, controller=controller, chunk=16)  # 3 calls, the last padded
+    traj = w.batch_rollout(refs, params, steps=w.horizon_steps(DT), controller=controller)
+    want = run_metrics(traj, refs, DT)
     # Arrival times and counts are decided by the same comparisons on the same
     # poses: exact. Sums and maxima agree to rounding.
-    np.testing.assert_array_equal(m.arrival, np.asarray(w.arrival_time(traj, REFS, dt=DT)))
-    np.testing.assert_array_equal(m.zigzag, np.asarray(w.zigzag_count(traj)))
-    np.testing.assert_allclose(m.path, np.asarray(w.path_length(traj)), rtol=1e-12)
+    np.testing.assert_array_equal(m.arrival, want["arrival"])
+    np.testing.assert_array_equal(m.zigzag, want["zigzag"])
+    np.testing.assert_allclose(m.path, want["path"], rtol=1e-12)
     peak = np.abs(np.asarray(traj.wheel_speeds)).max(axis=(-1, -2))
     np.testing.assert_allclose(m.peak_wheel, peak, rtol=1e-12)
     final = np.asarray(traj.poses[:, -1, :2])
-    np.testing.assert_allclose(m.final_distance, np.hypot(*(final - REFS[:, :2]).T), atol=1e-12)
+    np.testing.assert_allclose(m.final_distance, np.hypot(*(final - refs[:, :2]).T), atol=1e-12)
     assert m.success.mean() == 1.0
 
 
-def test_baselines_hold_their_goal_in_float32_too():
+def test_baselines_hold_their_goal_in_float32_too(refs):
     # Once ρ is down to the rounding of the positions the polar laws' bearing
     # is noise; holding the goal within 1e-3 cm (docs/model.md §3) keeps them
     # arrived in float32 as in float64, with the same arrival times.
     params = AicardiGains(backward=True)
-    m64 = evaluate_poses(REFS, params, controller="aicardi", chunk=16)
-    m32 = evaluate_poses(REFS, params, controller="aicardi", chunk=16, x64=False)
+    m64 = evaluate_poses(refs, params, controller="aicardi", chunk=16)
+    m32 = evaluate_poses(refs, params, controller="aicardi", chunk=16, x64=False)
     assert m64.success.all() and m32.success.all()
     np.testing.assert_allclose(m32.arrival, m64.arrival, atol=0.034)  # a sample at most
 

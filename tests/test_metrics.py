@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import random_refs, run_metrics
 
 import wmr_jax as w
 
@@ -28,10 +29,18 @@ def at(dx=0.0, heading_deg=0.0):
     return [REF[0] + dx, REF[1], math.radians(heading_deg)]
 
 
+# The single runs whose arrival is measured below are all 5 periods long: the
+# metrics run op by op, and each new trajectory shape compiles their operations again.
+def start_then(*poses):
+    """From the origin through ``poses``, holding the last one to the end of 5 periods."""
+    poses = list(poses)
+    return [[0.0, 0.0, 0.0]] + poses + poses[-1:] * (5 - len(poses))
+
+
 def test_heading_tolerance_is_in_radians_and_five_degrees_by_default():
     # 4° off arrives, 6° off does not: the default tolerance is 5° given in rad.
     for heading, arrives in ((4.0, True), (6.0, False), (-4.0, True), (184.0, True)):
-        traj = run_through([[0, 0, 0], at(0.5, heading), at(0.5, heading)])
+        traj = run_through(start_then(at(0.5, heading)))
         time = float(w.arrival_time(traj, REF, dt=DT))
         assert math.isfinite(time) == arrives, heading
     assert w.DEFAULT_TOL_THETA == pytest.approx(math.radians(5.0))
@@ -39,7 +48,7 @@ def test_heading_tolerance_is_in_radians_and_five_degrees_by_default():
 
 def test_distance_tolerance_is_one_cm_by_default():
     for dx, arrives in ((0.99, True), (1.01, False), (-0.99, True)):
-        traj = run_through([[0, 0, 0], at(dx), at(dx)])
+        traj = run_through(start_then(at(dx)))
         assert math.isfinite(float(w.arrival_time(traj, REF, dt=DT))) == arrives, dx
 
 
@@ -50,16 +59,18 @@ def test_arrival_is_the_settled_one_not_the_first():
     traj = run_through([[0, 0, 0], at(), at(3.0), at(), at(), at()])
     assert float(w.arrival_time(traj, REF, dt=DT)) == pytest.approx(3 * DT)
     # Leaving at the very end means it never arrived.
-    traj = run_through([[0, 0, 0], at(), at(), at(3.0)])
+    traj = run_through([[0, 0, 0], at(), at(), at(), at(), at(3.0)])
     assert math.isinf(float(w.arrival_time(traj, REF, dt=DT)))
     # The initial pose is not a sample: starting on the goal arrives at dt.
-    traj = run_through([at(), at(), at()])
+    traj = run_through([at()] * 6)
     assert float(w.arrival_time(traj, REF, dt=DT)) == pytest.approx(DT)
 
 
 def test_arrived_and_success_rate():
-    poses = np.array([at(), at(2.0), at(0.0, 10.0)])
-    np.testing.assert_array_equal(np.asarray(w.arrived(poses, REF)), [True, False, False])
+    poses = np.array([at(), at(2.0), at(0.0, 10.0), at(-0.5), at(0.0, -4.0)])
+    np.testing.assert_array_equal(
+        np.asarray(w.arrived(poses, REF)), [True, False, False, True, True]
+    )
     assert w.success_rate([1.0, np.inf, 2.0, 3.0]) == pytest.approx(0.75)
 
 
@@ -89,14 +100,13 @@ def test_batched_trajectories():
 
 
 def test_streamed_metrics_equal_the_trajectory_metrics():
-    refs = np.asarray(w.sample_poses(11, 24))
+    refs = random_refs(11, 24)
     gains = w.Gains(kr=60.0)
     traj = w.batch_rollout(refs, gains, steps=120)
     streamed = w.sweep(refs, gains, steps=120)
-    np.testing.assert_array_equal(
-        streamed["arrival_time"], np.asarray(w.arrival_time(traj, refs, dt=0.033))
-    )
-    np.testing.assert_allclose(streamed["path_length"], np.asarray(w.path_length(traj)), rtol=1e-12)
-    np.testing.assert_array_equal(streamed["zigzags"], np.asarray(w.zigzag_count(traj)))
+    want = run_metrics(traj, refs, 0.033)  # the trajectory metrics, compiled as one program
+    np.testing.assert_array_equal(streamed["arrival_time"], want["arrival"])
+    np.testing.assert_allclose(streamed["path_length"], want["path"], rtol=1e-12)
+    np.testing.assert_array_equal(streamed["zigzags"], want["zigzag"])
     peak = np.abs(np.asarray(traj.wheel_speeds)).max(axis=(1, 2))
     np.testing.assert_allclose(streamed["peak_wheel_speed"], peak, rtol=1e-12)

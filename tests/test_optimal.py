@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import random_refs
 
 import wmr_jax as w
 from wmr_jax import tuning
@@ -36,7 +37,7 @@ def test_turn_drive_turn_time_and_lower_bound(ref, turns):
 
 
 def test_bounds_order_and_ratios():
-    refs = w.sample_poses(0, 500)
+    refs = random_refs(0, 500)
     b = tuning.time_bounds(refs)
     assert np.all(b.lower_bound <= b.turn_drive_turn)
     ratios = tuning.bound_ratios(0.5, b)

@@ -1,10 +1,12 @@
 """Robustness Monte Carlo (docs/model.md §7): reproducible draws; undisturbed, the nominal run."""
 
+import functools
 import json
 
 import jax
 import numpy as np
 import pytest
+from conftest import run_metrics
 
 import wmr_jax as w
 from wmr_jax import studies
@@ -23,9 +25,21 @@ def quiet(refs, steps, *, delay=0.0):
     return studies.Disturbance(refs, np.zeros((n, steps, 3)), np.ones((n, 3)), np.float64(delay))
 
 
-def draw_refs(seed, n=N):
-    refs, _, _ = studies.draw_disturbances(jax.random.PRNGKey(seed), n, 1)
+@functools.cache
+def _drawn_refs(seed):
+    refs, _, _ = studies.draw_disturbances(jax.random.PRNGKey(seed), N, 1)
+    refs.setflags(write=False)
     return refs
+
+
+def draw_refs(seed, n=N):
+    """The references of ``draw_disturbances(PRNGKey(seed), n, 1)``, for ``n ≤ N``.
+
+    The first ``n`` of the draw of ``N``: the same values (poses are drawn one
+    by one from the key), from programs compiled once for ``N``.
+    """
+    assert n <= N
+    return _drawn_refs(seed)[:n].copy()
 
 
 @pytest.mark.parametrize("controller", ["shim-sung", "aicardi", "astolfi-corke"])
@@ -33,14 +47,15 @@ def test_zero_disturbance_is_the_nominal_run(controller):
     refs = draw_refs(3)
     m = studies.perturbed_metrics(quiet(refs, STEPS), controller=controller)
     traj = w.batch_rollout(refs, steps=STEPS, controller=controller)
+    want = run_metrics(traj, refs, DT)
     # The same closed loop and the same arithmetic on the pose: arrival times
     # and counts agree exactly, the sums to rounding.
-    np.testing.assert_array_equal(m.arrival, np.asarray(w.arrival_time(traj, refs, dt=DT)))
-    np.testing.assert_array_equal(m.zigzag, np.asarray(w.zigzag_count(traj)))
-    np.testing.assert_allclose(m.path, np.asarray(w.path_length(traj)), rtol=1e-12)
+    np.testing.assert_array_equal(m.arrival, want["arrival"])
+    np.testing.assert_array_equal(m.zigzag, want["zigzag"])
+    np.testing.assert_allclose(m.path, want["path"], rtol=1e-12)
     peak = np.abs(np.asarray(traj.wheel_speeds)).max(axis=(-1, -2))
     np.testing.assert_allclose(m.peak_wheel, peak, rtol=1e-12)
-    ok = np.asarray(w.arrived(traj.poses[:, 1:], refs[:, None, :]))
+    ok = want["arrived"]
     first = np.where(ok.any(axis=1), (np.argmax(ok, axis=1) + 1) * DT, np.inf)
     np.testing.assert_allclose(m.first_arrival, first, rtol=1e-12)
     assert np.all(m.first_arrival <= m.arrival) and np.isfinite(m.arrival).any()
@@ -64,8 +79,9 @@ def test_equal_wheel_factors_scale_the_gains():
     m = studies.perturbed_metrics(spec, controller="astolfi-corke")
     gains = w.AstolfiGains(k_rho=3.0 * s, k_alpha=8.0 * s, k_beta=-3.0 * s)
     traj = w.batch_rollout(refs, gains, steps=STEPS, controller="astolfi-corke")
-    np.testing.assert_array_equal(m.arrival, np.asarray(w.arrival_time(traj, refs, dt=DT)))
-    np.testing.assert_allclose(m.path, np.asarray(w.path_length(traj)), rtol=1e-9)
+    want = run_metrics(traj, refs, DT)
+    np.testing.assert_array_equal(m.arrival, want["arrival"])
+    np.testing.assert_allclose(m.path, want["path"], rtol=1e-9)
 
 
 def test_latency_changes_the_run():
@@ -170,11 +186,11 @@ def test_command_writes_what_the_study_returns(tmp_path, capsys):
 
 
 def test_sample_disturbance_is_reproducible_from_its_key():
-    refs = draw_refs(5, 8)
+    refs = draw_refs(5)  # N poses over STEPS: the shapes the standard conditions draw
     kwargs = dict(noise_xy=0.5, noise_theta=np.radians(1.0), latency=0.5, radius_mismatch=0.03)
-    a = studies.sample_disturbance(jax.random.PRNGKey(1), refs, 30, **kwargs)
-    b = studies.sample_disturbance(jax.random.PRNGKey(1), refs, 30, **kwargs)
-    c = studies.sample_disturbance(jax.random.PRNGKey(2), refs, 30, **kwargs)
+    a = studies.sample_disturbance(jax.random.PRNGKey(1), refs, STEPS, **kwargs)
+    b = studies.sample_disturbance(jax.random.PRNGKey(1), refs, STEPS, **kwargs)
+    c = studies.sample_disturbance(jax.random.PRNGKey(2), refs, STEPS, **kwargs)
     for x, y in zip(a, b, strict=True):
         np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
     assert not np.array_equal(np.asarray(a.noise), np.asarray(c.noise))

@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import random_refs
 
 import wmr_jax as w
 from wmr_jax import tuning
@@ -54,7 +55,7 @@ def test_every_command_obeys_the_wheel_bound_at_1e5_random_states(temperature):
 
 
 def test_whole_rollouts_keep_every_wheel_within_v_max():
-    refs = w.sample_poses(3, 64, dtype=np.float64)
+    refs = random_refs(3, 64)
     traj = w.batch_rollout(refs, _wild_schedule(2), controller=SCHEDULE, steps=120)
     assert np.abs(np.asarray(traj.wheel_speeds)).max() <= V_MAX * (1 + 1e-12)
 
@@ -75,7 +76,7 @@ def test_constant_knots_are_the_fixed_law_exactly():
         # XLA's fusion of two different programs (a few ulp), never more.
         for a, b in zip(fixed, scheduled, strict=True):
             np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-13, atol=1e-13)
-    refs = w.sample_poses(5, 200, dtype=np.float64)
+    refs = random_refs(5, 200)
     # Inside the rollout loop XLA compiles both alike: bit for bit.
     np.testing.assert_array_equal(
         np.asarray(w.final_poses(refs, gains)),
@@ -88,9 +89,11 @@ def test_constant_knots_are_the_fixed_law_exactly():
 
 
 def test_the_relaxed_schedule_has_finite_gradients_for_every_knot():
-    refs = w.sample_poses(6, 4, dtype=np.float64)
+    refs = random_refs(6, 4)
     params = tuning.ScheduleParams.from_gains(w.Gains(kr=60.0))
-    grad = jax.grad(lambda p: tuning.tuning_loss(p, refs, temperature=0.05, horizon=0.7))(params)
+    # Compiled as the tuner runs it: one program for the loss and its gradient.
+    loss = lambda p: tuning.tuning_loss(p, refs, temperature=0.05, horizon=0.7)  # noqa: E731
+    grad = jax.jit(jax.grad(loss))(params)
     for name in ("kr", "k_theta", "k_turn"):
         values = np.asarray(getattr(grad, name))
         assert np.all(np.isfinite(values)), name

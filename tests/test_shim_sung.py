@@ -154,6 +154,9 @@ def _near_switch(exp, gains, tol):
 
 def test_law_gradient_matches_central_differences():
     """Away from switches, d(v, ω)/d(pose) equals float64 central differences."""
+    # Each component and its gradient compiled once, for every pose and reference.
+    law_of = [jax.jit(lambda p, ref, c=c: w.control(p, ref, GAINS)[c]) for c in (0, 1)]
+    grad_of = [jax.jit(jax.grad(f)) for f in law_of]
     rng = np.random.default_rng(0)
     for _ in range(20):
         r = rng.uniform(2.0, 40.0)
@@ -162,13 +165,13 @@ def test_law_gradient_matches_central_differences():
         th = float(pose[2])
         ref = pose + jnp.array([r * math.cos(th + phi), r * math.sin(th + phi), 0.0])
         ref = ref.at[2].set(th + rng.uniform(-1.4, 1.4))
-        for component in (0, 1):
-            f = lambda p, c=component, ref=ref: w.control(p, ref, GAINS)[c]  # noqa: E731
-            grad = np.asarray(jax.grad(f)(pose))
+        for f, grad_f in zip(law_of, grad_of, strict=True):
+            grad = np.asarray(grad_f(pose, ref))
             step = 1e-6
             fd = np.array(
                 [
-                    (float(f(pose.at[i].add(step))) - float(f(pose.at[i].add(-step)))) / (2 * step)
+                    (float(f(pose.at[i].add(step), ref)) - float(f(pose.at[i].add(-step), ref)))
+                    / (2 * step)
                     for i in range(3)
                 ]
             )
@@ -183,8 +186,13 @@ def test_region_3_turns_in_place_and_phi_bar_shrinks():
     dist = rng.uniform(2.0, 60.0, n)
     refs = np.stack([dist * np.cos(bearing), dist * np.sin(bearing), rng.uniform(-3, 3, n)], -1)
     traj = w.batch_rollout(refs, GAINS, steps=60)
-    err = law.polar_error(traj.poses, jnp.asarray(refs)[:, None, :])
-    _, sin_phi_bar = law.fold(err.cos_phi, err.sin_phi)
+
+    @jax.jit  # one program, not the error coordinates op by op
+    def error_and_fold(poses, refs):
+        err = law.polar_error(poses, refs[:, None, :])
+        return err, law.fold(err.cos_phi, err.sin_phi)[1]
+
+    err, sin_phi_bar = error_and_fold(traj.poses, jnp.asarray(refs))
     phi_bar = np.abs(np.arcsin(np.clip(np.asarray(sin_phi_bar), -1, 1)))
     region = np.asarray(traj.region)
     in_3 = region == 3

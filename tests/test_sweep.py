@@ -6,6 +6,7 @@ import warnings
 
 import numpy as np
 import pytest
+from conftest import random_refs, run_metrics
 
 import wmr_jax as w
 
@@ -15,20 +16,22 @@ N, HORIZON = 40, 182  # as in test_maps.py: the reference metrics compile once f
 
 
 def _poses(seed, n):
-    return np.array(w.sample_poses(seed, n))  # a writable NumPy copy
+    return random_refs(seed, n)  # w.sample_poses(seed, n) as a writable NumPy copy
 
 
 def _expected(refs, gains, **kwargs):
     """The docs/model.md §6 metrics from whole trajectories, as the rest of the package has them."""
     traj = w.batch_rollout(refs, gains, dt=DT, **kwargs)
+    metrics = run_metrics(traj, refs, DT)
+    final = np.asarray(traj.poses[:, -1])
     return {
-        "final_x": np.asarray(traj.poses[:, -1, 0]),
-        "final_y": np.asarray(traj.poses[:, -1, 1]),
-        "final_theta": np.asarray(traj.poses[:, -1, 2]),
-        "arrival_time": np.asarray(w.arrival_time(traj, refs, dt=DT)),
-        "path_length": np.asarray(w.path_length(traj)),
+        "final_x": final[:, 0],
+        "final_y": final[:, 1],
+        "final_theta": final[:, 2],
+        "arrival_time": metrics["arrival"],
+        "path_length": metrics["path"],
         "peak_wheel_speed": np.abs(np.asarray(traj.wheel_speeds)).max(axis=(1, 2)),
-        "zigzags": np.asarray(w.zigzag_count(traj)),
+        "zigzags": metrics["zigzag"],
     }
 
 

@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import random_refs
 
 import wmr_jax as w
 from wmr_jax import tuning
@@ -106,7 +107,7 @@ def _hard_value_and_grad(gains, refs):
 
 
 def test_robust_gradient_without_cap_matches_central_differences_of_the_loss():
-    refs = w.sample_poses(3, N)
+    refs = jnp.asarray(random_refs(3, N))
     loss, grad, stats = tuning.robust_gradient(
         Z_MIDDLE, refs, temperature=0.1, pose_clip=NO_CAP, **SHORT
     )
@@ -150,7 +151,7 @@ def test_gradients_are_finite_at_awkward_poses():
 
 
 def test_relaxed_loss_tends_to_the_hard_loss():
-    refs = w.sample_poses(5, N)
+    refs = jnp.asarray(random_refs(5, N))
     hard = float(_hard_value_and_grad(MIDDLE, refs)[0])
     soft = [float(tuning.tuning_loss(MIDDLE, refs, temperature=t, **SHORT)) for t in (1e-3, 1e-6)]
     # At 1e-6 every switch is resolved unless a sample lies within ~1e-5 of a
@@ -160,7 +161,7 @@ def test_relaxed_loss_tends_to_the_hard_loss():
 
 
 def test_robust_gradient_caps_outliers_and_drops_non_finite_runs():
-    refs = w.sample_poses(8, N)
+    refs = jnp.asarray(random_refs(8, N))
     _, uncapped, _ = tuning.robust_gradient(
         Z_MIDDLE, refs, temperature=0.1, pose_clip=NO_CAP, **SHORT
     )
@@ -184,8 +185,8 @@ def test_ideal_loop_has_no_saturation_and_nonideal_gradients_are_finite():
     assert float(ideal.arrival[0]) > 0.0 and float(ideal.log_error[0]) > 0.0
     # The non-ideal loop: finite gradients for every gain.
     nonideal = {"horizon": 0.5, "velocity": "nonideal", "substeps": 10}
-    value, grad = jax.value_and_grad(
-        lambda g: tuning.tuning_loss(g, refs, temperature=0.05, **nonideal)
+    value, grad = jax.jit(  # one program for the loss and its gradient, as the tuner runs it
+        jax.value_and_grad(lambda g: tuning.tuning_loss(g, refs, temperature=0.05, **nonideal))
     )(fast)
     assert np.isfinite(float(value))
     for name in tuning.GAIN_FIELDS:
@@ -198,7 +199,10 @@ def test_float32_robust_gradient_is_finite_and_steps_stay_feasible():
     # where a plain float32 mean may overflow.
     with jax.enable_x64(False):
         refs = jnp.concatenate(
-            [jnp.asarray(list(AWKWARD.values()), jnp.float32), w.sample_poses(11, 4)]
+            [
+                jnp.asarray(list(AWKWARD.values()), jnp.float32),
+                jnp.asarray(random_refs(11, 4), jnp.float32),
+            ]
         )
         z = jnp.asarray(tuning.logits_from_gains(MIDDLE), jnp.float32)
         loss, grad, _ = tuning.robust_gradient(z, refs, temperature=0.1, **SHORT)
@@ -209,7 +213,7 @@ def test_float32_robust_gradient_is_finite_and_steps_stay_feasible():
 
 
 def test_random_search_scores_its_start_first():
-    refs = w.sample_poses(9, 8)
+    refs = jnp.asarray(random_refs(9, 8))
     # A zero budget still scores one chunk; a chunk of one is the start alone.
     search = tuning.random_search(jax.random.key(0), refs, budget_s=0.0, chunk=1, **SHORT)
     assert search.candidates == 1

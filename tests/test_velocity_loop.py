@@ -82,10 +82,14 @@ def test_kinetic_energy_conserved_with_offset_under_zero_torque():
     assert energy == pytest.approx(energy0, rel=1e-7)
 
 
-def _stiff(speed_gain):
-    """A loop with the given stiffness and no limits, and enough sub-steps for RK4."""
+def _stiff(speed_gain, stiffest):
+    """A loop with the given stiffness and no limits, and enough sub-steps for RK4.
+
+    The sub-steps suit the ``stiffest`` loop of the series, so that every loop
+    of a series runs one compiled program (the number of sub-steps is static).
+    """
     robot = w.Robot(speed_gain=float(speed_gain), v_max=1e6, torque_max=1e12)
-    return robot, max(10, math.ceil(speed_gain * 0.033))
+    return robot, max(10, math.ceil(stiffest * 0.033))
 
 
 def test_one_period_tends_to_the_exact_arc():
@@ -93,7 +97,7 @@ def test_one_period_tends_to_the_exact_arc():
     ideal = dynamics.arc_step(pose, 80.0, -6.0, 0.033)
     errors = []
     for gain in (100, 400, 1600, 6400):  # lags 10 ms down to 0.16 ms
-        robot, substeps = _stiff(gain)
+        robot, substeps = _stiff(gain, 6400)
         state = dynamics.initial_state(pose)._replace(velocity=jnp.array([40.0, 2.0]))
         state, _ = dynamics.advance(state, jnp.array([80.0, -6.0]), robot, 0.033, substeps=substeps)
         errors.append(float(jnp.max(jnp.abs(state.pose - ideal))))
@@ -111,7 +115,7 @@ def test_rollout_tends_to_ideal_as_loop_stiffens(paper_refs):
     ideal = np.asarray(w.batch_rollout(paper_refs, gains, steps=91, temperature=0.3).poses)
     errors = []
     for gain in (25, 100, 400, 1600):  # time constants 40 ms down to 0.6 ms
-        robot, substeps = _stiff(gain)
+        robot, substeps = _stiff(gain, 1600)
         traj = w.batch_rollout(
             paper_refs,
             gains,
@@ -127,8 +131,12 @@ def test_rollout_tends_to_ideal_as_loop_stiffens(paper_refs):
     assert errors[-1] < 0.1  # 0.05 cm measured at 1600/s, 4× less per 4× stiffer
 
 
+# The horizon of the single non-ideal runs below, which share one compiled program.
+SINGLE_STEPS = 50
+
+
 def test_velocity_state_carries_over_between_samples():
-    traj = w.rollout([30.0, 0.0, 0.0], w.Gains(kr=60.0), velocity="nonideal", steps=3)
+    traj = w.rollout([30.0, 0.0, 0.0], w.Gains(kr=60.0), velocity="nonideal", steps=SINGLE_STEPS)
     # From rest the robot cannot reach the first command within one period.
     v_actual = 0.5 * np.asarray(traj.wheel_speeds).sum(axis=-1)
     assert 0 < v_actual[0] < float(traj.v[0])
@@ -137,8 +145,8 @@ def test_velocity_state_carries_over_between_samples():
 
 def test_batch_row_equals_single_nonideal():
     refs = random_refs(9, 6)
-    batch = w.batch_rollout(refs, velocity="nonideal", steps=50)
-    single = w.rollout(refs[4], velocity="nonideal", steps=50)
+    batch = w.batch_rollout(refs, velocity="nonideal", steps=SINGLE_STEPS)
+    single = w.rollout(refs[4], velocity="nonideal", steps=SINGLE_STEPS)
     np.testing.assert_allclose(np.asarray(batch.poses[4]), np.asarray(single.poses), atol=1e-12)
 
 
@@ -152,14 +160,17 @@ def test_gradients_wrt_robot_parameters_match_differences():
         )
         return traj.poses[-1, 0] + 2.0 * traj.poses[-1, 1]
 
-    grad = jax.grad(final_x, argnums=(0, 1))(0.5, 100.0)
+    # One compiled program gives the gradient and the values the differences need.
+    value_and_grad = jax.jit(jax.value_and_grad(final_x, argnums=(0, 1)))
+    _, grad = value_and_grad(0.5, 100.0)
     for i, (args_plus, args_minus, step) in enumerate(
         [
             ((0.5 + 1e-6, 100.0), (0.5 - 1e-6, 100.0), 1e-6),
             ((0.5, 100.0 + 1e-4), (0.5, 100.0 - 1e-4), 1e-4),
         ]
     ):
-        fd = (float(final_x(*args_plus)) - float(final_x(*args_minus))) / (2 * step)
+        plus, minus = value_and_grad(*args_plus)[0], value_and_grad(*args_minus)[0]
+        fd = (float(plus) - float(minus)) / (2 * step)
         # Central differences in float64; torque clipping makes kinks, hence 1e-4.
         assert float(grad[i]) == pytest.approx(fd, rel=1e-4, abs=1e-7)
         assert np.isfinite(float(grad[i]))

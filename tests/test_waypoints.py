@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import run_metrics
 
 import wmr_jax as w
 from wmr_jax import studies
@@ -53,7 +54,7 @@ def test_each_leg_is_a_rollout_from_where_the_last_one_ended():
         np.testing.assert_allclose(poses[start : k + 1], leg, atol=1e-9)
         start = k
     last = w.rollout(WP[-1], init=poses[start], steps=STEPS)
-    settled = float(w.arrival_time(last, WP[-1], dt=DT))
+    settled = float(run_metrics(last, WP[-1], DT)["arrival"])
     assert float(run.arrival[-1]) == pytest.approx(start * DT + settled, abs=1e-9)
 
 
@@ -83,7 +84,7 @@ def test_constant_moving_reference_is_a_rollout():
     run = studies.track_rollout(np.tile(ref, (STEPS, 1)))
     traj = w.rollout(ref, init=np.zeros(3), steps=STEPS)
     np.testing.assert_allclose(np.asarray(run.trajectory.poses), np.asarray(traj.poses), atol=1e-9)
-    assert float(run.arrival) == float(w.arrival_time(traj, ref, dt=DT))
+    assert float(run.arrival) == float(run_metrics(traj, ref, DT)["arrival"])
     assert run.error.shape == (STEPS,)
 
 
