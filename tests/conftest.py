@@ -70,6 +70,22 @@ def run_metrics(traj, refs, dt=0.033) -> dict:
     return {name: np.asarray(value) for name, value in _run_metrics(traj, refs, dt).items()}
 
 
+def assert_metrics_of_runs(m, traj, refs, dt=0.033) -> dict:
+    """Assert that streamed metrics ``m`` are those of the recorded runs ``traj``.
+
+    Arrival times and zigzag counts are decided by the same comparisons on the
+    same poses, so they must agree exactly; path lengths and peak wheel speeds
+    are sums and maxima, equal to rounding. Returns ``run_metrics`` of ``traj``.
+    """
+    want = run_metrics(traj, refs, dt)
+    np.testing.assert_array_equal(m.arrival, want["arrival"])
+    np.testing.assert_array_equal(m.zigzag, want["zigzag"])
+    np.testing.assert_allclose(m.path, want["path"], rtol=1e-12)
+    peak = np.abs(np.asarray(traj.wheel_speeds)).max(axis=(-1, -2))
+    np.testing.assert_allclose(m.peak_wheel, peak, rtol=1e-12)
+    return want
+
+
 # ---------------------------------------------------------------- test order
 #
 # The suite runs one worker per core with ``--dist loadfile --no-loadscope-reorder``:

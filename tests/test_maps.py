@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import random_refs, run_metrics
+from conftest import assert_metrics_of_runs, random_refs
 
 import wmr_jax as w
 from wmr_jax.cli import main
@@ -32,14 +32,7 @@ def test_streamed_metrics_equal_rollouts_and_metrics(refs, controller, params):
     """Shim–Sung's streamed metrics are checked against rollouts in test_sweep.py."""
     m = evaluate_poses(refs, params, controller=controller, chunk=16)  # 3 calls, the last padded
     traj = w.batch_rollout(refs, params, steps=w.horizon_steps(DT), controller=controller)
-    want = run_metrics(traj, refs, DT)
-    # Arrival times and counts are decided by the same comparisons on the same
-    # poses: exact. Sums and maxima agree to rounding.
-    np.testing.assert_array_equal(m.arrival, want["arrival"])
-    np.testing.assert_array_equal(m.zigzag, want["zigzag"])
-    np.testing.assert_allclose(m.path, want["path"], rtol=1e-12)
-    peak = np.abs(np.asarray(traj.wheel_speeds)).max(axis=(-1, -2))
-    np.testing.assert_allclose(m.peak_wheel, peak, rtol=1e-12)
+    assert_metrics_of_runs(m, traj, refs, DT)
     final = np.asarray(traj.poses[:, -1, :2])
     np.testing.assert_allclose(m.final_distance, np.hypot(*(final - refs[:, :2]).T), atol=1e-12)
     assert m.success.mean() == 1.0

@@ -6,7 +6,7 @@ import json
 import jax
 import numpy as np
 import pytest
-from conftest import run_metrics
+from conftest import assert_metrics_of_runs, run_metrics
 
 import wmr_jax as w
 from wmr_jax import studies
@@ -47,14 +47,8 @@ def test_zero_disturbance_is_the_nominal_run(controller):
     refs = draw_refs(3)
     m = studies.perturbed_metrics(quiet(refs, STEPS), controller=controller)
     traj = w.batch_rollout(refs, steps=STEPS, controller=controller)
-    want = run_metrics(traj, refs, DT)
-    # The same closed loop and the same arithmetic on the pose: arrival times
-    # and counts agree exactly, the sums to rounding.
-    np.testing.assert_array_equal(m.arrival, want["arrival"])
-    np.testing.assert_array_equal(m.zigzag, want["zigzag"])
-    np.testing.assert_allclose(m.path, want["path"], rtol=1e-12)
-    peak = np.abs(np.asarray(traj.wheel_speeds)).max(axis=(-1, -2))
-    np.testing.assert_allclose(m.peak_wheel, peak, rtol=1e-12)
+    # The same closed loop and the same arithmetic on the pose.
+    want = assert_metrics_of_runs(m, traj, refs, DT)
     ok = want["arrived"]
     first = np.where(ok.any(axis=1), (np.argmax(ok, axis=1) + 1) * DT, np.inf)
     np.testing.assert_allclose(m.first_arrival, first, rtol=1e-12)
