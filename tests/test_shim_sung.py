@@ -261,3 +261,17 @@ def test_relaxed_law_tends_to_hard_law(temperature):
     clear = margin > (10 + math.log1p(1 / temperature)) * temperature
     assert clear.mean() > 0.5
     np.testing.assert_allclose(soft[:, clear], hard[:, clear], atol=200 * temperature)
+
+
+@pytest.mark.parametrize("r", [20.0, 20.0 * (1 + 1e-9), 20.0 * (1 - 1e-9), 5.0, 200.0])
+def test_relaxed_saturation_slope_is_the_logistic_one(r):
+    # r̄ = ℓ − T softplus((ℓ − π/2)/T) with ℓ = π r / (2 R_m), so dr̄/dr is
+    # (π / 2 R_m)(1 − σ((ℓ − π/2)/T)): at r = R_m exactly (ℓ = π/2 with no
+    # rounding, since R_m = 20 and π/2 / 20 * 20 == π/2 in float64) it is half
+    # the linear slope, and the slope is continuous through that point.
+    r_m, t = 20.0, 0.05
+    assert (math.pi / 2) / r_m * r_m == math.pi / 2
+    slope = jax.grad(lambda x: law.saturated_distance(x, r_m, temperature=t))(r)
+    excess = (r * ((math.pi / 2) / r_m) - math.pi / 2) / t
+    want = (math.pi / 2) / r_m * (1.0 - 1.0 / (1.0 + math.exp(-excess)))
+    np.testing.assert_allclose(float(slope), want, rtol=1e-12, atol=1e-15)
