@@ -73,9 +73,13 @@ def run_metrics(traj, refs, dt=0.033) -> dict:
 def assert_metrics_of_runs(m, traj, refs, dt=0.033) -> dict:
     """Assert that streamed metrics ``m`` are those of the recorded runs ``traj``.
 
-    Arrival times and zigzag counts are decided by the same comparisons on the
-    same poses, so they must agree exactly; path lengths and peak wheel speeds
-    are sums and maxima, equal to rounding. Returns ``run_metrics`` of ``traj``.
+    Arrival times and zigzag counts are decided by the same comparisons on
+    poses that agree to rounding (the streamed metrics read the heading's
+    cosine and sine as the loop carries them, the recorded ones recompute them
+    from θ, about 1e-14 apart), so they agree exactly unless a pose lies
+    within that of a tolerance, which none of the tests' poses does; path
+    lengths and peak wheel speeds are sums and maxima, equal to rounding.
+    Returns ``run_metrics`` of ``traj``.
     """
     want = run_metrics(traj, refs, dt)
     np.testing.assert_array_equal(m.arrival, want["arrival"])

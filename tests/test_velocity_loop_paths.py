@@ -64,3 +64,45 @@ def test_large_turns_per_substep_keep_the_reduced_arc():
     for i, ref in enumerate(refs):
         exp = w.reference_rollout(ref, gains, **kwargs)
         np.testing.assert_allclose(np.asarray(traj.poses[i]), exp["poses"], rtol=0, atol=1e-9)
+
+
+def _program_size(fn, *args):
+    """Number of operations in the traced program of ``fn(*args)``, sub-programs included."""
+
+    def size(jaxpr):
+        total = 0
+        for eqn in jaxpr.eqns:
+            total += 1
+            for param in eqn.params.values():
+                inner = getattr(param, "jaxpr", param)
+                if hasattr(inner, "eqns"):
+                    total += size(inner)
+        return total
+
+    return size(jax.make_jaxpr(fn)(*args).jaxpr)
+
+
+def test_the_fast_paths_are_taken_only_where_the_terms_vanish():
+    refs = REFS[:4]
+
+    def concrete(robot):  # the robot is a constant of the trace: the entry point sees its values
+        return _program_size(
+            lambda: w.final_poses(refs, GAINS, robot=robot, velocity="nonideal", steps=5)
+        )
+
+    def traced(robot):  # the robot is traced: the general loop
+        return _program_size(
+            lambda r: w.final_poses(refs, GAINS, robot=r, velocity="nonideal", steps=5), robot
+        )
+
+    plain = concrete(w.Robot())
+    # Both terms kept; only the sub-steps' small turns (V_max h / L ≤ π/2) are used.
+    full = concrete(w.Robot(com_offset=0.8, integral_gain=2000.0))
+    assert plain < concrete(w.Robot(com_offset=0.8)) < full < traced(w.Robot())
+    assert plain < concrete(w.Robot(integral_gain=2000.0)) < full
+    # One robot per pose: a term stays if any pose's robot needs it.
+    n = len(refs)
+    mixed = w.Robot(com_offset=np.array([0.0, 0.8, 0.0, 0.0]), integral_gain=np.full(n, 2000.0))
+    assert concrete(mixed) == full
+    zeros = w.Robot(com_offset=np.zeros(n), integral_gain=np.zeros(n))
+    assert concrete(zeros) == plain
