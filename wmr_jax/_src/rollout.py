@@ -3,8 +3,10 @@
 The entry points check their inputs in plain Python (``docs/model.md §3``
 ranges, shapes, finiteness, options) and then call a jitted core whose static
 arguments are the shape-deciding options. Calling them again with the same
-shapes and options reuses the compiled code. The loop itself is in
-``loops.py``; the checks in ``checks.py``.
+shapes and options reuses the compiled code; for the non-ideal loop the
+robot's vanishing terms are options too (``loops.for_robot``,
+``docs/model.md §4.3``), so a robot that crosses one compiles anew. The loop
+itself is in ``loops.py``; the checks in ``checks.py``.
 """
 
 from __future__ import annotations
