@@ -150,3 +150,16 @@ def test_out_must_be_a_folder_and_help_shows_the_defaults(tmp_path, capsys):
         ("--eval-poses", defaults.eval_poses),
     ]:
         assert flag in text and f"(default: {value})" in text, flag
+
+
+def test_each_problem_has_its_own_recommended_settings():
+    fixed, schedule = tuning.TuneConfig.for_problem(), tuning.TuneConfig.for_problem("schedule")
+    assert fixed == tuning.TuneConfig() and not fixed.schedule
+    assert schedule.schedule and schedule.problem.name == "schedule"
+    # More, longer steps and a colder end for 35 parameters than for 7.
+    assert schedule.iters > fixed.iters and schedule.learning_rate > fixed.learning_rate
+    assert schedule.temperature_end < fixed.temperature_end
+    schedule.validate()
+    assert tuning.TuneConfig.for_problem("schedule", iters=5, seed=3).iters == 5
+    with pytest.raises(ValueError, match=r"problem = 'sched'.*'fixed', 'schedule'"):
+        tuning.TuneConfig.for_problem("sched")

@@ -19,10 +19,6 @@ __all__ = ["CHECKPOINT_NAME", "SUBCOMMANDS", "tune"]
 
 CHECKPOINT_NAME = "checkpoint.npz"
 _CHECKPOINT_FORMAT = 2  # 1: the unchecked .npz before the checksummed files
-# Iterations and Adam step of --schedule: 35 parameters need more steps than 7
-# (measured, seed 0, held-out poses: 400 at 0.1 reach 0.45 s; 600 and 800 at 0.2, 0.41 s).
-SCHEDULE_ITERS = 600
-SCHEDULE_LEARNING_RATE = 0.2
 
 
 # ---------------------------------------------------------------- checkpoints
@@ -280,7 +276,8 @@ def add_arguments(parser: Any) -> None:
         "--schedule",
         action="store_true",
         help="tune the gain-scheduled law (35 parameters, docs/model.md §3) instead of the "
-        f"7 fixed gains; --iters defaults to {SCHEDULE_ITERS} then",
+        "7 fixed gains, with the schedule's own defaults for --iters, the step and the "
+        "annealing (wmr_jax.tuning.TuneConfig.for_problem)",
     )
     parser.add_argument(
         "--robust",
@@ -305,11 +302,10 @@ def _config_from(args: Any, *, schedule: bool) -> Any:
     """The ``TuneConfig`` of the flags, each checked (one line naming a bad one)."""
     from wmr_jax._src.tuning.training import TuneConfig
 
-    # A flag given on the command line is text; one left alone keeps its default.
-    iters = SCHEDULE_ITERS if schedule and not isinstance(args.iters, str) else args.iters
-    return TuneConfig(
-        schedule=schedule,
-        learning_rate=SCHEDULE_LEARNING_RATE if schedule else TuneConfig().learning_rate,
+    base = TuneConfig.for_problem("schedule" if schedule else "fixed")
+    # A flag given on the command line is text; one left alone keeps the problem's default.
+    iters = args.iters if isinstance(args.iters, str) else base.iters
+    return base.replace(
         velocity=flags.velocity_loop(args.velocity),
         iters=flags.positive_int("--iters", iters, 1),
         poses=flags.positive_int("--poses", args.poses, 1),

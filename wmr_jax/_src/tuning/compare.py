@@ -129,8 +129,8 @@ def compare(
     Args:
         seeds: seeds of the training poses and the searches.
         problems: ``"fixed"`` and/or ``"schedule"``.
-        configs: the ``TuneConfig`` per problem; default ``TuneConfig()``
-            (with ``schedule=True`` for the schedule).
+        configs: the ``TuneConfig`` per problem; default
+            ``TuneConfig.for_problem(problem)``.
         robot: robot parameters; default ``Robot()``.
         progress: called with a line after each method's run.
 
@@ -145,7 +145,7 @@ def compare(
     rows = []
     for name in problems:
         problem = get_problem(name)
-        base = configs.get(name, TuneConfig(schedule=problem.name == "schedule"))
+        base = configs.get(name, TuneConfig.for_problem(problem.name))
         held_out = held_out_poses(base.eval_poses, base.eval_seed)
         bounds = time_bounds(held_out, robot=robot, dt=base.dt)
         run = {k: getattr(base, k) for k in RUN_OPTIONS if k != "robot"}
