@@ -7,8 +7,10 @@ feasible gains and a random search of the same wall time; it reports through
 as a function) also writes the results and resumable checkpoints to a folder.
 See ``docs/model.md §3`` (the gains, their ranges and the gain schedules),
 ``§6`` (the poses and the arrival time) and ``§8`` (the time-optimal
-yardsticks every tuning report compares with). ``TuneConfig(schedule=True)``
-tunes the gain-scheduled law (``ScheduleParams``) instead of the fixed gains;
+yardsticks every tuning report compares with).
+``TuneConfig.for_problem("schedule")`` tunes the gain-scheduled law
+(``ScheduleParams``) instead of the fixed gains, with its own recommended
+iterations, step and annealing;
 ``load_tuned`` reads either kind of ``tuned_gains.json``; ``compare`` runs
 the gradient against CMA-ES and random search at equal wall time.
 """
