@@ -1,6 +1,7 @@
 """The gain-scheduled Shim–Sung law: the wheel bound, the fixed law as a special case."""
 
 import math
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -54,6 +55,7 @@ def test_every_command_obeys_the_wheel_bound_at_1e5_random_states(temperature):
     assert wheel.max() > 0.99 * V_MAX and np.mean(np.abs(np.asarray(v)) > 1.0) > 0.3
 
 
+@pytest.mark.filterwarnings("ignore::wmr_jax.SamplingWarning")  # wild on purpose
 def test_whole_rollouts_keep_every_wheel_within_v_max():
     refs = random_refs(3, 64)
     traj = w.batch_rollout(refs, _wild_schedule(2), controller=SCHEDULE, steps=120)
@@ -107,3 +109,16 @@ def test_bad_schedules_are_refused_in_one_line():
         bad = tuning.ScheduleParams(k_theta=(10.0, 10.0, -1.0) + (10.0,) * 7)
         w.rollout([10.0, 0.0, 0.0], bad, controller=SCHEDULE)
     assert math.isclose(tuning.knot_radii()[-1], 81.0)
+
+
+def test_a_schedule_the_sampled_law_cannot_settle_with_warns():
+    # At the goal the tables take their first knots: k_θ dt = 200 * 0.033 = 6.6.
+    fast = tuning.ScheduleParams(kr=(100.0,) * 10, k_theta=(200.0,) * 10, k_turn=(200.0,) * 10)
+    with pytest.warns(w.SamplingWarning, match=r"k_theta\*dt = 6\.6"):
+        w.final_poses(random_refs(0, 4), fast, controller=SCHEDULE, steps=3)
+    # Large knots away from the goal are the schedule's point and do not warn.
+    far = (10.0,) * 5 + (60.0,) * 5
+    wide = tuning.ScheduleParams(kr=(60.0,) * 10, k_theta=far, k_turn=far)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", w.SamplingWarning)
+        w.final_poses(random_refs(0, 4), wide, controller=SCHEDULE, steps=3)

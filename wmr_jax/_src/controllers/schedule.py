@@ -43,7 +43,7 @@ from wmr_jax._src.controllers.shim_sung import (
     polar_error,
     region_label,
 )
-from wmr_jax._src.params import Gains, Robot, WheelSpeedWarning, validate_gains
+from wmr_jax._src.params import Gains, Robot, WheelSpeedWarning, check_sampling, validate_gains
 
 __all__ = [
     "KNOTS",
@@ -217,6 +217,19 @@ def _check_robot(params: ScheduleParams, robot: Robot) -> None:
         )
 
 
+def _check_sampling(params: ScheduleParams, dt: Any) -> None:
+    # Settling is decided at the goal, r_e -> 0, where the tables take their
+    # first knots: there the law is the fixed-gain one with those gains, and
+    # the same condition applies (docs/model.md §4). The caps cannot rescue
+    # it: near the goal the commands are small and no cap is active.
+    at_goal = Gains(
+        kr=params.kr[0],
+        k_theta=params.k_theta[0],
+        **{name: getattr(params, name) for name in SHAPE_FIELDS},
+    )
+    check_sampling(at_goal, dt, stacklevel=5)
+
+
 SCHEDULE = register_controller(
     Controller(
         name="shim-sung-schedule",
@@ -226,6 +239,7 @@ SCHEDULE = register_controller(
         region=_region,
         smooth=True,
         check_robot=_check_robot,
+        check_sampling=_check_sampling,
     )
 )
 """The gain-scheduled Shim–Sung law (``ScheduleParams``), registered by name."""
