@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 __all__ = [
+    "MAX_STEPS",
     "Parameters",
     "as_float_tree",
     "as_pose_array",
@@ -33,6 +34,10 @@ __all__ = [
     "require",
     "require_representable",
 ]
+
+
+MAX_STEPS = 2**31 - 1  # a scan's length is an int32
+_FLOAT64_HINT = ", or float64 (jax.config.update('jax_enable_x64', True))"
 
 
 def float_dtype() -> Any:
@@ -75,6 +80,10 @@ def check_number(
         ValueError: for a non-number, NaN or a value out of range.
     """
     try:
+        # A bool, a string or a complex number is not a number here, though
+        # Python would read True as 1 and "0.5" as 0.5.
+        if isinstance(value, (bool, np.bool_, str, bytes)) or np.iscomplexobj(value):
+            raise TypeError(value)
         number = float(value)
     except (TypeError, ValueError):
         number = math.nan
@@ -90,10 +99,21 @@ def check_number(
 
 
 def check_dt(dt: Any) -> Any:
-    """Return the control period ``dt`` as a float after checking it is finite and > 0."""
+    """Return the control period ``dt`` as a float: finite, > 0, and so in the compute dtype.
+
+    A period the compute dtype rounds to zero or to infinity (``1e-46`` or
+    ``1e39`` s in float32) is refused here, not found after the run.
+    """
     if isinstance(dt, jax.core.Tracer):
         return dt
-    return check_number("dt", dt, unit="s")
+    value = check_number("dt", dt, unit="s")
+    info = np.finfo(np.dtype(float_dtype()))
+    if not float(info.tiny) <= value <= float(info.max):
+        raise ValueError(
+            f"dt = {dt!r} is not allowed in {info.dtype.name}; allowed: a number "
+            f"between {float(info.tiny):.3g} and {float(info.max):.3g} s"
+        )
+    return value
 
 
 def _shown(arr: np.ndarray, bad: np.ndarray) -> str:
@@ -142,6 +162,9 @@ def field_values(
         try:
             if value is None or isinstance(value, (str, bytes)):
                 raise TypeError(value)  # NumPy would read None as NaN and "1.5" as 1.5
+            raw = np.asarray(value)
+            if raw.dtype.kind in "bcUS":
+                raise TypeError(value)  # True as 1, and 1 + 2j as 1, are not gains
             arr = np.asarray(value, dtype=float)
         except (TypeError, ValueError):
             raise ValueError(
@@ -163,9 +186,10 @@ def require_representable(name: str, value: np.ndarray) -> None:
     largest = float(np.finfo(dtype).max)
     ok = np.abs(value) <= largest
     if not np.all(ok):
+        wider = _FLOAT64_HINT if dtype != np.float64 else ""
         raise ValueError(
             f"{name} = {_shown(value, ~ok)} is beyond {dtype.name} (largest {largest:.3g}); "
-            "allowed: a smaller number, or float64 (jax.config.update('jax_enable_x64', True))"
+            f"allowed: a smaller number{wider}"
         )
 
 
@@ -195,6 +219,8 @@ def lists_to_arrays(params: Any) -> None:
         value = getattr(params, field.name)
         if isinstance(value, (list, tuple)):
             try:
+                if np.asarray(value).dtype.kind not in "iuf":
+                    continue  # bools, strings: left for field_values to name
                 array = np.asarray(value, dtype=float)
             except (TypeError, ValueError):
                 continue
@@ -214,16 +240,19 @@ def as_poses(name: str, value: Any, *, batch: bool | None) -> jax.Array:
     """
     if isinstance(value, jax.core.Tracer):
         return value
+    real = "real numbers [x cm, y cm, theta rad]"
     if isinstance(value, jax.Array):
+        if value.dtype.kind in "bc":
+            raise ValueError(f"{name} has dtype {value.dtype}; allowed: {real}")
         arr = value.astype(float_dtype()) if value.dtype != float_dtype() else value
         host = None
     else:
         try:
+            if np.asarray(value).dtype.kind in "bcUS":
+                raise TypeError(value)  # True as 1, or 1 + 2j as 1, is no coordinate
             host = np.asarray(value, dtype=float)
         except (TypeError, ValueError) as err:
-            raise ValueError(
-                f"{name} = {value!r} is not allowed; allowed: real numbers [x cm, y cm, theta rad]"
-            ) from err
+            raise ValueError(f"{name} = {value!r} is not allowed; allowed: {real}") from err
         arr = None
     shape = tuple((arr if arr is not None else host).shape)
     allowed = {False: "(3,)", True: "(N, 3) with N >= 1", None: "(3,) or (N, 3)"}[batch]
@@ -260,7 +289,7 @@ def as_poses(name: str, value: Any, *, batch: bool | None) -> jax.Array:
             host,
             lambda rows: np.abs(rows[:, :2]) > limit,
             f"is too far for {dtype}; allowed: |x|, |y| <= {limit:.0e} cm (squared distances "
-            "must stay finite), or float64 (jax.config.update('jax_enable_x64', True))",
+            f"must stay finite){_FLOAT64_HINT if dtype != 'float64' else ''}",
         )
     if arr is not None:
         with jax.ensure_compile_time_eval():
@@ -313,6 +342,8 @@ def as_pose_array(name: str, value: Any) -> Any:
     if is_traced(value):
         return value
     try:
+        if np.asarray(value).dtype.kind in "bcUS":
+            raise TypeError(value)
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         raise ValueError(

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks import check_dt, check_int, check_number, float_dtype
+from wmr_jax._src.checks import MAX_STEPS, check_dt, check_int, check_number, float_dtype
 
 __all__ = [
     "EVAL_R_MAX",
@@ -104,4 +104,10 @@ def horizon_steps(dt: float, horizon: float = HORIZON_S) -> int:
     dt = check_dt(dt)
     horizon = check_number("horizon", horizon, unit="s")
     # The slack keeps 6.0 / 0.033 = 181.8… at 182 despite rounding.
-    return math.ceil(horizon / dt - 1e-9)
+    steps = math.ceil(horizon / dt - 1e-9)
+    if not 1 <= steps <= MAX_STEPS:
+        raise ValueError(
+            f"horizon = {horizon!r} s at dt = {dt!r} s is {steps} control periods; allowed: "
+            f"1 to {MAX_STEPS} periods (horizon >= dt, and not over 2^31 - 1 periods)"
+        )
+    return steps

@@ -19,6 +19,7 @@ import numpy as np
 
 from wmr_jax._src import velocity_loop
 from wmr_jax._src.checks import (
+    MAX_STEPS,
     as_float_tree,
     as_poses,
     check_dt,
@@ -48,6 +49,7 @@ __all__ = [
     "MAX_TEMPERATURE",
     "Trajectory",
     "batch_rollout",
+    "check_temperature",
     "final_poses",
     "finite_result",
     "make_options",
@@ -56,8 +58,10 @@ __all__ = [
 ]
 
 DEFAULT_DT = 0.033
-MAX_STEPS = 2**31 - 1  # a scan's length is an int32
 MAX_TEMPERATURE = 10.0
+# Below this the relaxed law equals the hard one to the last bit of float64;
+# far below it its switches' arguments would leave the float32 range.
+MIN_TEMPERATURE = 1e-12
 
 
 class Trajectory(NamedTuple):
@@ -102,6 +106,15 @@ _final_poses_jit = EntryJit(batched(_final_pose), static_argnames=("options",))
 # ---------------------------------------------------------------- boundary checks
 
 
+def check_temperature(name: str, value: Any) -> float:
+    """Return a smooth-law temperature as a float in ``[MIN_TEMPERATURE, MAX_TEMPERATURE)``.
+
+    The relaxed switches act on dimensionless arguments of order one; far
+    above 1 the relaxation no longer resembles the law (docs/model.md §3).
+    """
+    return check_number(name, value, low=MIN_TEMPERATURE, closed=True, high=MAX_TEMPERATURE)
+
+
 def make_options(
     *,
     steps: Any = DEFAULT_STEPS,
@@ -124,9 +137,7 @@ def make_options(
         raise ValueError(f"wheel_limit = {wheel_limit!r} is not allowed; allowed: {WHEEL_LIMITS}")
     controller = get_controller(controller)
     if temperature is not None:
-        # The relaxed switches act on dimensionless arguments of order one;
-        # far above 1 the relaxation no longer resembles the law (docs/model.md §3).
-        value = check_number("temperature", temperature, high=MAX_TEMPERATURE)
+        value = check_temperature("temperature", temperature)
         if not controller.smooth:
             raise ValueError(
                 f"temperature = {temperature!r} is not allowed for controller "
