@@ -1,6 +1,7 @@
 """Gain tuning: the feasible set, the loss and its gradients, the robust gradient, bad input."""
 
 import math
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -239,6 +240,9 @@ def test_random_search_scores_its_start_first():
         ("temperature_end", float("nan")),
         ("horizon", -1.0),
         ("random_search", "yes"),
+        ("temperature_start", 1e6),
+        ("eval_poses", 10**12),
+        ("horizon", 1e-12),
     ],
 )
 def test_bad_settings_name_the_field(field, value):
@@ -266,3 +270,33 @@ def test_bad_settings_name_the_field(field, value):
 def test_loss_rejects_bad_input_before_tracing(call, name):
     with pytest.raises(ValueError, match=name):
         call(np.zeros((2, 3)))
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        # The temperatures the rollouts allow, no others.
+        ({"temperature": 1e-38}, r"temperature = 1e-38 is not allowed; allowed: a number >= 1e-12"),
+        ({"temperature": 1000.0}, r"temperature = 1000.0 is not allowed"),
+        # The loss divides by tol_r² and sin²(tol_θ).
+        ({"tol_r": 1e-50}, r"tol_r = 1e-50 is too small for float32"),
+        ({"tol_theta": 1e-50}, r"tol_theta = 1e-50 is too small for float32"),
+        ({"weights": tuning.LossWeights(shaping=1e39)}, r"weights.shaping = 1e\+39 is beyond"),
+        ({"horizon": 1e-12}, r"horizon = 1e-12 s at dt = 0.033 s is 0 control periods"),
+    ],
+)
+def test_loss_options_that_would_give_nan_or_inf_are_refused(options, message):
+    options = {"temperature": 0.05, **options}
+    with jax.enable_x64(False), pytest.raises(ValueError, match=message):
+        tuning.tuning_loss(MIDDLE, random_refs(0, 4), **options)
+
+
+def test_robust_gradient_refuses_non_finite_logits_and_warns_only_about_its_own_gains():
+    refs = random_refs(0, 4)
+    with pytest.raises(ValueError, match=r"z = .*nan.* allowed: finite logits"):
+        tuning.robust_gradient(np.full(7, np.nan), refs, temperature=0.05)
+    # Every z maps to feasible gains: no WheelSpeedWarning about others.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", w.WheelSpeedWarning)
+        loss, grad, _ = tuning.robust_gradient(np.zeros(7), refs, temperature=0.05)
+    assert np.isfinite(float(loss)) and np.all(np.isfinite(np.asarray(grad)))

@@ -22,10 +22,17 @@ from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from wmr_jax._src import loops
 from wmr_jax._src import rollout as simulation
-from wmr_jax._src.checks import as_float_tree, check_number, float_dtype
+from wmr_jax._src.checks import (
+    as_float_tree,
+    check_number,
+    float_dtype,
+    require,
+    require_representable,
+)
 from wmr_jax._src.controllers import SHIM_SUNG
 from wmr_jax._src.controllers import shim_sung as law
 from wmr_jax._src.controllers.base import Controller
@@ -123,16 +130,30 @@ def make_spec(
     )
     if not isinstance(weights, LossWeights):
         raise ValueError(f"weights = {weights!r} is not allowed; allowed: a LossWeights")
-    check_number("weights.arrival_softness", weights.arrival_softness)
-    check_number("weights.shaping", weights.shaping, closed=True)
-    check_number("weights.saturation", weights.saturation, closed=True)
+    for name, closed in (("arrival_softness", False), ("shaping", True), ("saturation", True)):
+        value = check_number(f"weights.{name}", getattr(weights, name), closed=closed)
+        require_representable(f"weights.{name}", np.asarray(value))
+    tol_r = check_number("tol_r", tol_r, unit="cm")
+    tol_theta = check_number("tol_theta", tol_theta, high=math.pi / 2, unit="rad")
+    # The loss divides by tol_r² and sin²(tol_θ): both must stay finite.
+    largest = float(np.finfo(np.dtype(float_dtype())).max)
+    smallest = largest**-0.5
+    for name, value, scale, unit in (
+        ("tol_r", tol_r, tol_r, "cm"),
+        ("tol_theta", tol_theta, math.sin(tol_theta), "rad"),
+    ):
+        if scale < smallest:
+            raise ValueError(
+                f"{name} = {value!r} is too small for {np.dtype(float_dtype()).name}, whose "
+                f"1 / {name}² overflows; allowed: a number >= {smallest:.3g} {unit}"
+            )
     return LossSpec(
         steps=options.steps,
         velocity=options.velocity,
         substeps=options.substeps,
         wheel_limit=options.wheel_limit,
-        tol_r=check_number("tol_r", tol_r, unit="cm"),
-        tol_theta=check_number("tol_theta", tol_theta, high=math.pi / 2, unit="rad"),
+        tol_r=tol_r,
+        tol_theta=tol_theta,
         weights=weights,
         remat=bool(remat),
         controller=options.controller,
@@ -320,7 +341,7 @@ def _prepared(gains: Any, refs: Any, temperature: Any, options: dict[str, Any]) 
     gains = PAPER_FEASIBLE_GAINS if gains is None else gains
     controller = SCHEDULE if isinstance(gains, ScheduleParams) else SHIM_SUNG
     if temperature is not None:
-        temperature = check_number("temperature", temperature)
+        temperature = simulation.check_temperature("temperature", temperature)
     spec = make_spec(**{name: o[name] for name in _STATIC_OPTIONS}, controller=controller)
     args = simulation.prepare(
         refs, gains, o["init"], o["robot"], o["dt"], spec.options(), batch=True
@@ -460,8 +481,14 @@ def robust_gradient(
         of the poses ``"dropped"`` (non-finite) and ``"clipped"``.
     """
     problem = get_problem(problem)
-    start = problem.controller.default_params()
+    # The options are checked with parameters the logits can reach (None: the
+    # paper's feasible gains), so that no warning is about gains not in use.
+    start = None if problem is FIXED else problem.controller.default_params()
     spec, temperature, (refs, _, init, robot, dt) = _prepared(start, refs, temperature, options)
+    if not isinstance(z, jax.core.Tracer):
+        if np.asarray(z).dtype.kind not in "iuf":
+            raise ValueError(f"z = {z!r} is not allowed; allowed: ({problem.dim},) real logits")
+        require("z", np.asarray(z, dtype=float), np.isfinite(np.asarray(z, float)), "finite logits")
     z = as_float_tree(jnp.asarray(z))
     if z.shape != (problem.dim,):
         raise ValueError(f"z has shape {z.shape}; allowed: ({problem.dim},) for {problem.name!r}")

@@ -32,7 +32,7 @@ from wmr_jax._src.controllers import shim_sung as law
 from wmr_jax._src.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
 from wmr_jax._src.params import Gains, Robot
 from wmr_jax._src.poses import HORIZON_S, horizon_steps, sample_poses
-from wmr_jax._src.rollout import DEFAULT_DT
+from wmr_jax._src.rollout import DEFAULT_DT, check_temperature
 from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
 from wmr_jax._src.tuning.loss import LossWeights, arrival_terms
 from wmr_jax._src.tuning.parametrisation import (
@@ -81,8 +81,9 @@ class RobustConfig:
             check_int(name, getattr(self, name), 1)
         check_int("nonideal_poses", self.nonideal_poses, 0)
         check_int("seed", self.seed, 0, 2**32 - 1)
-        for name in ("learning_rate", "temperature_start", "temperature_end"):
-            check_number(name, getattr(self, name))
+        check_number("learning_rate", self.learning_rate)
+        for name in ("temperature_start", "temperature_end"):
+            check_temperature(name, getattr(self, name))
         return self
 
 

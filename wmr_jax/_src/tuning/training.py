@@ -31,7 +31,7 @@ from wmr_jax._src import rollout as simulation
 from wmr_jax._src.checks import as_float_tree, check_int, check_number, float_dtype
 from wmr_jax._src.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
 from wmr_jax._src.params import Gains, Robot, validate_robot
-from wmr_jax._src.poses import HORIZON_S, sample_poses
+from wmr_jax._src.poses import HORIZON_S, MAX_SAMPLES, sample_poses
 from wmr_jax._src.tuning.evaluation import (
     EVAL_POSES,
     EVAL_SEED,
@@ -166,6 +166,8 @@ class TuneConfig:
             check_int(name, getattr(self, name), minimum, maximum)
         for name in _POSITIVE_FIELDS:
             check_number(name, getattr(self, name))
+        for name in ("temperature_start", "temperature_end"):
+            simulation.check_temperature(name, getattr(self, name))
         if self.pose_clip is not None:
             check_number("pose_clip", self.pose_clip)
         for name in ("random_search", "schedule"):
@@ -208,10 +210,10 @@ class TuneConfig:
 # name, minimum, maximum of the integer fields of TuneConfig.
 _INT_FIELDS = (
     ("iters", 1, None),
-    ("poses", 1, None),
+    ("poses", 1, MAX_SAMPLES),
     ("seed", 0, 2**32 - 1),
     ("checkpoint_every", 1, None),
-    ("eval_poses", 1, None),
+    ("eval_poses", 1, MAX_SAMPLES),
     ("eval_seed", 0, 2**32 - 1),
 )
 _POSITIVE_FIELDS = ("learning_rate", "grad_clip", "temperature_start", "temperature_end")
