@@ -2,6 +2,7 @@
 
 import json
 
+import jax
 import numpy as np
 import pytest
 from conftest import random_refs
@@ -61,6 +62,9 @@ def test_fixed_gains_old_and_new_files_load(tmp_path):
         ('{"kr": 60, "speed": 3}', "key 'speed' is not allowed"),
         ("[1, 2]", "a JSON object"),
         ("{", "cannot be read"),
+        ('{"kr": 1' + "0" * 400 + "}", "kr = 10* is not allowed; allowed: a number"),
+        ('{"kind": [1]}', "kind = \\[1\\] is not allowed; allowed: a string"),
+        ('{"kr": true}', "kr = True is not allowed"),
     ],
 )
 def test_bad_files_are_refused_in_one_line(tmp_path, content, message):
@@ -85,3 +89,17 @@ def test_a_checkpoint_with_nan_or_wrong_lengths_is_refused():
         tuning.restore_state({**good, "z": np.full_like(good["z"], np.nan)}, fresh)
     with pytest.raises(ValueError, match="inconsistent"):
         tuning.restore_state({**good, "iteration": np.asarray(2)}, fresh)
+
+
+def test_a_schedule_file_must_be_whole_and_integers_load_as_floats(tmp_path):
+    schedule = tuning.tuned_json(tuning.ScheduleParams())
+    del schedule["phi_m"]
+    path = tmp_path / "tuned_gains.json"
+    path.write_text(json.dumps(schedule))
+    with pytest.raises(ValueError, match="the field 'phi_m' is missing"):
+        tuning.load_tuned(path)
+    # JSON integers become floats, so the loaded gains can be differentiated.
+    path.write_text('{"kr": 60, "k_theta": 10}')
+    controller, gains = tuning.load_tuned(path)
+    grad = jax.grad(lambda g: w.rollout([30.0, 30.0, 0.0], g, steps=5).poses[-1, 0])(gains)
+    assert np.isfinite(float(grad.kr)) and float(grad.kr) != 0.0

@@ -48,6 +48,9 @@ def _flat(value: Any) -> list[float]:
 def _kind_of(values: dict[str, Any], where: str) -> str:
     kind = values.get("kind")
     controller = values.get("controller")
+    for name, value in (("kind", kind), ("controller", controller)):
+        if value is not None and not isinstance(value, str):
+            raise ValueError(f"{where}: {name} = {value!r} is not allowed; allowed: a string")
     if kind is None and controller is None:
         return "fixed"  # a file from before the schedules: Gains field names only
     by_name = {c.name: k for k, (c, _) in _KINDS.items()}
@@ -62,7 +65,13 @@ def _kind_of(values: dict[str, Any], where: str) -> str:
 
 
 def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    try:
+        float(value)  # an integer of 400 digits is beyond any float
+    except OverflowError:
+        return False
+    return True
 
 
 def load_tuned(path: str | os.PathLike) -> tuple[Controller, Any]:
@@ -109,10 +118,14 @@ def load_tuned(path: str | os.PathLike) -> tuple[Controller, Any]:
             shape = "a list of >= 2 numbers" if table else "a number"
             raise ValueError(f"{where}: {name} = {value!r} is not allowed; allowed: {shape}")
     if kind == "schedule":
-        missing = [name for name in TABLES if name not in numbers]
+        # A schedule is saved whole; a missing field is a damaged file, not a default.
+        missing = [name for name in fields if name not in numbers]
         if missing:
-            raise ValueError(f"{where}: the table {missing[0]!r} is missing")
-        numbers = {k: tuple(v) if isinstance(v, list) else v for k, v in numbers.items()}
+            raise ValueError(f"{where}: the field {missing[0]!r} is missing")
+    # Floats, not JSON's integers: the gains must be differentiable.
+    numbers = {
+        k: tuple(map(float, v)) if isinstance(v, list) else float(v) for k, v in numbers.items()
+    }
     try:
         return controller, controller.validate(cls(**numbers))
     except ValueError as err:
