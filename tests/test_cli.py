@@ -72,6 +72,14 @@ def _write(tmp_path, name, text):
         # Checked before the benchmark runs: these sizes would take hours.
         (["bench", "--sizes", "100000000", "--json", "/dev/null/b.json"], "is a file"),
         (["paper", "--out", "/dev/null/results"], "is a file"),
+        # tune: a flag its mode would ignore, and sizes, before any work.
+        (["tune", "--out", "{dir}", "--robust", "--schedule"], "--schedule is not allowed with"),
+        (["tune", "--out", "{dir}", "--compare", "--gradient-cost"], "allowed: one of them"),
+        (["tune", "--out", "{dir}", "--gradient-cost", "--iters", "5"], "--iters is not allowed"),
+        (["tune", "--out", "{dir}", "--eval-poses", "1000000000000"], "--eval-poses '1000"),
+        (["tune", "--out", "{dir}", "--poses", "1e12"], "--poses '1e12' is not allowed"),
+        (["tune", "--out", "{dir}", "--horizon", "1e-12"], "horizon = 1e-12 s at dt"),
+        (["sweep", "--out", "{dir}", "--poses", "100000000000000"], "n_poses = 100000000000000"),
         (["demo", "--out", "/dev/null"], "a folder (it is a file)"),
     ],
 )
@@ -81,6 +89,7 @@ def test_bad_values_give_one_line_and_status_2(capsys, tmp_path, argv, message):
         "bad_key": _write(tmp_path, "k.json", '{"kr": 60, "warp": 1}'),
         "bad_value": _write(tmp_path, "v.json", '{"alpha": 0.7}'),
         "good": _write(tmp_path, "g.json", '{"kr": 60}'),
+        "dir": str(tmp_path / "out"),
     }
     assert main([arg.format(**files) for arg in argv]) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -49,6 +49,14 @@ def test_baselines_hold_their_goal_in_float32_too(refs):
     np.testing.assert_allclose(m32.arrival, m64.arrival, atol=0.034)  # a sample at most
 
 
+@pytest.mark.parametrize("n", [1, 19])
+def test_a_small_pose_grid_still_has_poses_in_the_annulus(n):
+    # Two points a side would be the corners, all outside the annulus.
+    grid = pose_grid(n)
+    dist = np.hypot(grid.refs[:, 0], grid.refs[:, 1])
+    assert len(grid.refs) >= 1 and np.all((dist >= 5.0) & (dist <= 80.0))
+
+
 def test_pose_grid_covers_the_evaluation_annulus():
     grid = pose_grid(4000, (0.0, 90.0))
     dist = np.hypot(grid.refs[:, 0], grid.refs[:, 1])
@@ -139,5 +147,7 @@ def test_bad_inputs():
         map_study(0)
     with pytest.raises(ValueError, match=r"headings_deg = .*nan.*allowed: finite degrees"):
         pose_grid(100, (0.0, math.nan))
+    with pytest.raises(ValueError, match=r"n_poses = 100000000000000 is not allowed"):
+        pose_grid(10**14)
     with pytest.raises(ValueError, match="not known|allowed"):
         map_study(10, controller_names=["nope"])

@@ -27,7 +27,7 @@ import numpy as np
 
 from wmr_jax._src import checks, controllers, metrics
 from wmr_jax._src.params import Robot
-from wmr_jax._src.poses import EVAL_R_MAX, EVAL_R_MIN, HORIZON_S, horizon_steps
+from wmr_jax._src.poses import EVAL_R_MAX, EVAL_R_MIN, HORIZON_S, MAX_SAMPLES, horizon_steps
 from wmr_jax._src.rollout import DEFAULT_DT
 from wmr_jax._src.sweep import sweep
 
@@ -95,6 +95,9 @@ class PoseGrid(NamedTuple):
     refs: np.ndarray
 
 
+_MAX_SIDE = 4096  # grid points per side that pose_grid tries before giving up
+
+
 def pose_grid(
     n_poses: int,
     headings_deg: Sequence[float] = DEFAULT_HEADINGS_DEG,
@@ -117,7 +120,7 @@ def pose_grid(
     Raises:
         ValueError: for a bad count, heading or distance range.
     """
-    n_poses = checks.check_int("n_poses", n_poses)
+    n_poses = checks.check_int("n_poses", n_poses, 1, MAX_SAMPLES)
     r_min = checks.check_number("r_min", r_min, closed=True, unit="cm")
     r_max = checks.check_number("r_max", r_max, low=r_min, unit="cm")
     degrees = np.asarray(headings_deg, dtype=float).reshape(-1)
@@ -127,10 +130,19 @@ def pose_grid(
     headings = np.radians(degrees)
     annulus = math.pi * (r_max**2 - r_min**2) / (2 * r_max) ** 2
     side = max(2, round(math.sqrt(n_poses / (len(headings) * annulus))))
-    xs = np.linspace(-r_max, r_max, side)
-    gx, gy = np.meshgrid(xs, xs)  # [iy, ix]
-    dist = np.hypot(gx, gy)
-    inside = (dist >= r_min) & (dist <= r_max)
+    while True:  # a coarse grid can miss a thin annulus: refine until it has a point
+        xs = np.linspace(-r_max, r_max, side)
+        gx, gy = np.meshgrid(xs, xs)  # [iy, ix]
+        dist = np.hypot(gx, gy)
+        inside = (dist >= r_min) & (dist <= r_max)
+        if inside.any():
+            break
+        if side >= _MAX_SIDE:
+            raise ValueError(
+                f"r_min = {r_min!r}, r_max = {r_max!r}: no point of a {side} x {side} grid lies "
+                "between them; allowed: a wider range"
+            )
+        side += 1
     pos = np.stack([gx[inside], gy[inside]], axis=-1)
     refs = np.concatenate(
         [np.concatenate([pos, np.full((len(pos), 1), h)], axis=-1) for h in headings]
@@ -409,7 +421,7 @@ def compare_controllers(
     """
     from wmr_jax._src.poses import sample_poses
 
-    n_poses = checks.check_int("n_poses", n_poses)
+    n_poses = checks.check_int("n_poses", n_poses, 1, MAX_SAMPLES)
     seed = checks.check_int("seed", seed, minimum=0)
     refs = np.asarray(sample_poses(seed, n_poses), dtype=float)
     results = {

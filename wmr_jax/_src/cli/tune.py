@@ -256,12 +256,19 @@ _FLAGS = (
 
 def add_arguments(parser: Any) -> None:
     """Add the flags of ``wmr-jax tune``."""
+    from wmr_jax._src.tuning.robust import RobustConfig
     from wmr_jax._src.tuning.training import TuneConfig
 
     defaults = TuneConfig()
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
     for flag, field, metavar, text in _FLAGS:
-        parser.add_argument(flag, default=getattr(defaults, field), metavar=metavar, help=text)
+        # None stands for "not given": --schedule and --robust have defaults of their own.
+        default = getattr(defaults, field)
+        if field in ("iters", "poses"):
+            robust = getattr(RobustConfig(), field)
+            scheduled = getattr(TuneConfig.for_problem("schedule"), field)
+            default = f"{default}, {scheduled} with --schedule, {robust} with --robust"
+        parser.add_argument(flag, metavar=metavar, help=f"{text} (default: {default})")
     parser.add_argument(
         "--no-random-search",
         action="store_true",
@@ -300,21 +307,45 @@ def add_arguments(parser: Any) -> None:
 
 def _config_from(args: Any, *, schedule: bool) -> Any:
     """The ``TuneConfig`` of the flags, each checked (one line naming a bad one)."""
+    from wmr_jax._src.poses import MAX_SAMPLES
     from wmr_jax._src.tuning.training import TuneConfig
 
     base = TuneConfig.for_problem("schedule" if schedule else "fixed")
-    # A flag given on the command line is text; one left alone keeps the problem's default.
-    iters = args.iters if isinstance(args.iters, str) else base.iters
-    return base.replace(
-        velocity=flags.velocity_loop(args.velocity),
-        iters=flags.positive_int("--iters", iters, 1),
-        poses=flags.positive_int("--poses", args.poses, 1),
-        seed=flags.positive_int("--seed", args.seed, 0, 2**32 - 1),
-        horizon=flags.number("--horizon", args.horizon, low=0.0, closed=False, unit="s"),
-        eval_poses=flags.positive_int("--eval-poses", args.eval_poses, 1),
-        checkpoint_every=flags.positive_int("--checkpoint-every", args.checkpoint_every, 1),
+
+    def given(name: str) -> Any:
+        # A flag left alone keeps the problem's default.
+        value = getattr(args, name)
+        return getattr(base, name) if value is None else value
+
+    config = base.replace(
+        velocity=flags.velocity_loop(given("velocity")),
+        iters=flags.positive_int("--iters", given("iters"), 1),
+        poses=flags.positive_int("--poses", given("poses"), 1, MAX_SAMPLES),
+        seed=flags.positive_int("--seed", given("seed"), 0, 2**32 - 1),
+        horizon=flags.number("--horizon", given("horizon"), low=0.0, closed=False, unit="s"),
+        eval_poses=flags.positive_int("--eval-poses", given("eval_poses"), 1, MAX_SAMPLES),
+        checkpoint_every=flags.positive_int("--checkpoint-every", given("checkpoint_every"), 1),
         random_search=not args.no_random_search,
     )
+    return config.validate()  # the horizon against dt, before any work
+
+
+def _check_modes(args: Any) -> None:
+    """Refuse flags the chosen mode would ignore (one line naming them)."""
+    modes = [m for m in ("robust", "compare", "gradient_cost") if getattr(args, m)]
+    if len(modes) > 1:
+        a, b = (f"--{m.replace('_', '-')}" for m in modes[:2])
+        raise ValueError(f"{a} is not allowed with {b}; allowed: one of them")
+    mode = modes[0] if modes else None
+    unused = {
+        "robust": ("schedule", "horizon", "eval_poses", "checkpoint_every", "no_random_search"),
+        "compare": ("schedule", "resume", "checkpoint_every", "no_random_search"),
+        "gradient_cost": (*(field for _, field, _, _ in _FLAGS), "schedule", "resume"),
+    }.get(mode, ())
+    for name in unused:
+        if getattr(args, name) not in (None, False):
+            flag, other = f"--{name.replace('_', '-')}", f"--{mode.replace('_', '-')}"
+            raise ValueError(f"{flag} is not allowed with {other}, which does not use it")
 
 
 def _gradient_cost(out: Path) -> int:
@@ -367,6 +398,7 @@ def run(args: Any) -> int:
     """Run ``wmr-jax tune``; return the exit status."""
     from wmr_jax._src.params import Robot
 
+    _check_modes(args)
     if args.robust:
         from wmr_jax._src.cli import tune_robust
 

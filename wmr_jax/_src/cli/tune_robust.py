@@ -21,28 +21,22 @@ _COLUMNS = ["condition", "gains", "success", "mean arrival s", "median arrival s
 
 
 def _counts(args: Any) -> tuple[int, int]:
-    """``--iters`` and ``--poses``; the plain tune's defaults stand for the robust ones.
-
-    ``wmr-jax tune`` fills both with its own defaults (400 × 256), which would
-    make the robust run (4 conditions and a non-ideal group per iteration)
-    take far longer than its ~5 minutes.
-    """
+    """``--iters`` and ``--poses``, or the robust tuner's own defaults where not given."""
     from wmr_jax._src.tuning.robust import RobustConfig
-    from wmr_jax._src.tuning.training import TuneConfig
 
-    plain, robust = TuneConfig(), RobustConfig()
+    robust = RobustConfig()
     counts = []
     for flag, name in (("--iters", "iters"), ("--poses", "poses")):
         value = getattr(args, name, None)
-        given = value is not None and str(value) != str(getattr(plain, name))
-        counts.append(flags.positive_int(flag, value) if given else getattr(robust, name))
+        counts.append(getattr(robust, name) if value is None else flags.positive_int(flag, value))
     return counts[0], counts[1]
 
 
 def run(args: Any) -> int:
     """Run ``wmr-jax tune --robust``; return the exit status."""
     out = flags.output_dir("--out", getattr(args, "out", None))
-    seed = flags.positive_int("--seed", getattr(args, "seed", 0), 0, 2**32 - 1)
+    seed = getattr(args, "seed", None)
+    seed = flags.positive_int("--seed", 0 if seed is None else seed, 0, 2**32 - 1)
     iters, poses = _counts(args)
     velocity = getattr(args, "velocity", None)
     if velocity is not None and flags.velocity_loop(velocity) != "ideal":
