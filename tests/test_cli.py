@@ -69,6 +69,8 @@ def _write(tmp_path, name, text):
         (["bench", "--dtype", "float16"], "allowed: float32, float64"),
         (["bench", "--cases", "warp_drive"], "--cases 'warp_drive' is not allowed"),
         (["bench", "--wait-idle", "-1"], "--wait-idle '-1' is not allowed"),
+        (["bench", "--sizes", "10000000000000"], "--sizes '10000000000000' is not allowed"),
+        (["bench", "--cpu-devices", "100000"], "allowed: an integer >= 1 and <= 1024"),
         # Checked before the benchmark runs: these sizes would take hours.
         (["bench", "--sizes", "100000000", "--json", "/dev/null/b.json"], "is a file"),
         (["paper", "--out", "/dev/null/results"], "is a file"),

@@ -48,3 +48,21 @@ def test_bounds_order_and_ratios():
     assert tuning.time_bounds([0.5, 0.0, 0.0]).lower_bound == 0.0
     with pytest.raises(ValueError, match="dt"):
         tuning.time_bounds(refs, dt=0.0)
+
+
+def test_one_robot_per_reference_and_the_edges_of_the_bounds():
+    refs = np.array([[30.0, 0.0, 0.0], [0.0, 30.0, 0.0]])
+    # Each reference with its own robot: the one-robot bounds, row by row.
+    both = tuning.time_bounds(refs, robot=w.Robot(v_max=[125.0, 60.0]))
+    for i, v_max in enumerate((125.0, 60.0)):
+        one = tuning.time_bounds(refs[i], robot=w.Robot(v_max=v_max))
+        assert both.turn_drive_turn[i] == pytest.approx(float(one.turn_drive_turn))
+    with pytest.raises(ValueError, match=r"robot.v_max has 3 values; allowed: one, or one per"):
+        tuning.time_bounds(refs, robot=w.Robot(v_max=[1.0, 2.0, 3.0]))
+    # Zero is 0 samples, never −0, and a zero bound cannot be a yardstick.
+    zero = tuning.time_bounds([0.5, 0.0, 0.0])
+    assert math.copysign(1.0, float(zero.lower_bound)) == 1.0
+    with pytest.raises(ValueError, match="bounds > 0"):
+        tuning.bound_ratios(0.5, zero)
+    with pytest.raises(ValueError, match="a finite time"):
+        tuning.bound_ratios(float("nan"), tuning.time_bounds(refs))

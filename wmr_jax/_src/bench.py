@@ -49,6 +49,7 @@ from typing import Any
 import numpy as np
 
 from wmr_jax._src.checks import check_int, check_number
+from wmr_jax._src.poses import MAX_SAMPLES
 
 __all__ = ["CASES", "BenchConfig", "numpy_final_poses", "run_benchmark"]
 
@@ -319,7 +320,7 @@ def _check_config(config: BenchConfig) -> BenchConfig:
     if not config.sizes:
         raise ValueError("sizes = () is not allowed; allowed: one or more integers >= 1")
     for i, n in enumerate(config.sizes):
-        check_int(f"sizes[{i}]", n)
+        check_int(f"sizes[{i}]", n, 1, MAX_SAMPLES)
     for name in ("steps", "repeats", "reference_poses"):
         check_int(name, getattr(config, name))
     check_int("seed", config.seed, 0, 2**32 - 1 - max(config.sizes))

@@ -48,7 +48,19 @@ def _folded_magnitude(angle: np.ndarray) -> np.ndarray:
 
 
 def _ceil_samples(seconds: np.ndarray, dt: float) -> np.ndarray:
-    return np.ceil(seconds / dt - _ROUNDING) * dt
+    # max with 0: a zero time is 0 samples, not the −0 that the slack gives.
+    return np.maximum(np.ceil(seconds / dt - _ROUNDING), 0.0) * dt
+
+
+def _per_reference(robot: Robot, name: str, refs: np.ndarray) -> np.ndarray:
+    """A robot field as one value, or one per reference (``(N,)`` against ``(N, 3)``)."""
+    value = np.asarray(getattr(robot, name), dtype=float)
+    n = refs.shape[0] if refs.ndim == 2 else 1
+    if value.ndim and value.shape[0] not in (1, n):
+        raise ValueError(
+            f"robot.{name} has {value.shape[0]} values; allowed: one, or one per reference ({n})"
+        )
+    return value.reshape(()) if value.size == 1 else value
 
 
 def time_bounds(
@@ -77,7 +89,7 @@ def time_bounds(
     refs = np.asarray(as_poses("refs", refs, batch=None), dtype=float)
     dt = float(check_dt(dt))
     tol_r = check_number("tol_r", tol_r, unit="cm")
-    v_max, half_track = float(robot.v_max), float(robot.half_track)
+    v_max, half_track = (_per_reference(robot, name, refs) for name in ("v_max", "half_track"))
     omega_max = v_max / half_track  # rad/s, spinning with the wheels at ±V_max
     x, y, theta = refs[..., 0], refs[..., 1], refs[..., 2]
     r = np.hypot(x, y)
@@ -100,6 +112,11 @@ def bound_ratios(mean_arrival: float, bounds: TimeBounds) -> dict[str, float]:
     """
     tdt = float(np.mean(bounds.turn_drive_turn))
     lower = float(np.mean(bounds.lower_bound))
+    if not (math.isfinite(mean_arrival) and tdt > 0 and lower > 0):
+        raise ValueError(
+            f"mean_arrival = {mean_arrival!r} s against bounds {tdt:.4g} / {lower:.4g} s is not "
+            "allowed; allowed: a finite time, and references beyond tol_r (bounds > 0)"
+        )
     return {
         "turn_drive_turn_s": tdt,
         "lower_bound_s": lower,

@@ -31,6 +31,7 @@ __all__ = [
     "check_sampling",
     "sampling_margins",
     "validate_gains",
+    "validate_one_robot",
     "validate_robot",
     "wheel_speed_bound",
 ]
@@ -178,6 +179,23 @@ def validate_robot(robot: Robot) -> Robot:
             ok,
             "|com_offset| < body_diameter / 2 (inside the body)",
         )
+    return robot
+
+
+def validate_one_robot(robot: Robot | None, purpose: str) -> Robot:
+    """``validate_robot`` for code that needs one robot, not a batch (default ``Robot()``).
+
+    Raises:
+        ValueError: naming a batched field and ``purpose``.
+    """
+    robot = validate_robot(Robot() if robot is None else robot)
+    for field in dataclasses.fields(Robot):
+        value = getattr(robot, field.name)
+        if np.ndim(value) > 0:
+            raise ValueError(
+                f"robot.{field.name} has shape {np.shape(value)}; allowed: one robot (a number "
+                f"per field) for {purpose}"
+            )
     return robot
 
 

@@ -65,6 +65,9 @@ class ShardedBatch(NamedTuple):
         return int(jax.tree.leaves(self.array)[0].shape[0])
 
 
+MAX_CPU_DEVICES = 1024
+
+
 def use_cpu_devices(count: int | None = None) -> int:
     """Split the CPU into ``count`` JAX devices; return the number of local devices.
 
@@ -89,7 +92,9 @@ def use_cpu_devices(count: int | None = None) -> int:
         except AttributeError:  # not Linux
             cores = os.cpu_count() or 1
         count = 2 * cores
-    count = check_int("count", count)
+    # Each device holds threads and buffers of its own: far beyond the cores it
+    # only slows the start (100,000 of them did not start in minutes).
+    count = check_int("count", count, 1, MAX_CPU_DEVICES)
     try:
         jax.config.update("jax_num_cpu_devices", count)
     except (RuntimeError, AttributeError):  # JAX is up already, or has no such option

@@ -7,6 +7,7 @@ from typing import Any
 
 from wmr_jax._src import bench
 from wmr_jax._src.cli import flags
+from wmr_jax._src.poses import MAX_SAMPLES
 
 __all__ = ["SUBCOMMANDS"]
 
@@ -66,7 +67,7 @@ def _config_from(args: Any) -> bench.BenchConfig:
     """Return the ``BenchConfig`` of the flags, each checked (one line naming a bad one)."""
     ints = {name: flags.positive_int(flag, getattr(args, name)) for flag, name, *_ in _INT_FLAGS}
     return bench.BenchConfig(
-        sizes=tuple(flags.positive_int("--sizes", n) for n in args.sizes),
+        sizes=tuple(flags.positive_int("--sizes", n, 1, MAX_SAMPLES) for n in args.sizes),
         dtype=flags.choice("--dtype", args.dtype, bench.DTYPES),
         cases=tuple(flags.choice("--cases", c, bench.CASES) for c in args.cases or ()),
         wait_idle=flags.number("--wait-idle", args.wait_idle, low=0.0, unit="s"),
@@ -78,12 +79,14 @@ def run(args: Any) -> int:
     """Run ``wmr-jax bench``: print the table (progress on stderr); return 0."""
     from wmr_jax._src.io import atomic_write_json
     from wmr_jax._src.report.bench import bench_table
-    from wmr_jax._src.sharding import use_cpu_devices
+    from wmr_jax._src.sharding import MAX_CPU_DEVICES, use_cpu_devices
 
     out = None if args.json is None else flags.output_file("--json", args.json)
     config = _config_from(args)
     cpu_devices = (
-        None if args.cpu_devices is None else flags.positive_int("--cpu-devices", args.cpu_devices)
+        None
+        if args.cpu_devices is None
+        else flags.positive_int("--cpu-devices", args.cpu_devices, 1, MAX_CPU_DEVICES)
     )
     use_cpu_devices(cpu_devices)
     result = bench.run_benchmark(config, log=lambda line: print(line, file=sys.stderr, flush=True))

@@ -22,7 +22,7 @@ import numpy as np
 
 from wmr_jax._src.checks import as_poses, float_dtype
 from wmr_jax._src.optimal import bound_ratios, time_bounds
-from wmr_jax._src.params import Robot, validate_robot
+from wmr_jax._src.params import Robot, validate_one_robot
 from wmr_jax._src.poses import sample_poses
 from wmr_jax._src.tuning.evaluation import RUN_OPTIONS, evaluate, held_out_poses
 from wmr_jax._src.tuning.problems import get_problem
@@ -77,7 +77,7 @@ def cma_es_search(
     """
     cma_class = _evosax_cma_es()
     problem = get_problem(problem)
-    robot = validate_robot(Robot() if robot is None else robot)
+    robot = validate_one_robot(robot, "tuning")
     refs = as_poses("refs", refs, batch=True)
     run = {**_run_defaults(), **run, "robot": robot}
     n = refs.shape[0]
@@ -140,7 +140,7 @@ def compare(
         ``mean_arrival``, ``success_rate``, ``peak_wheel_speed`` and the
         ratios of ``bound_ratios``.
     """
-    robot = validate_robot(Robot() if robot is None else robot)
+    robot = validate_one_robot(robot, "tuning")
     configs = dict(configs or {})
     rows = []
     for name in problems:

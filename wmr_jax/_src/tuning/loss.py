@@ -39,7 +39,7 @@ from wmr_jax._src.controllers.base import Controller
 from wmr_jax._src.controllers.schedule import SCHEDULE, ScheduleParams
 from wmr_jax._src.dynamics import sin_cos
 from wmr_jax._src.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
-from wmr_jax._src.params import Gains, Robot
+from wmr_jax._src.params import Gains, Robot, validate_one_robot
 from wmr_jax._src.poses import HORIZON_S, horizon_steps
 from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS
 from wmr_jax._src.tuning.problems import FIXED, Problem, get_problem
@@ -484,6 +484,8 @@ def robust_gradient(
     # The options are checked with parameters the logits can reach (None: the
     # paper's feasible gains), so that no warning is about gains not in use.
     start = None if problem is FIXED else problem.controller.default_params()
+    # The logits map to gains through the robot: one robot for the batch.
+    validate_one_robot(options.get("robot"), "robust_gradient")
     spec, temperature, (refs, _, init, robot, dt) = _prepared(start, refs, temperature, options)
     if not isinstance(z, jax.core.Tracer):
         if np.asarray(z).dtype.kind not in "iuf":

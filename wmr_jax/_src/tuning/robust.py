@@ -30,7 +30,7 @@ from wmr_jax._src.checks import check_int, check_number, float_dtype
 from wmr_jax._src.controllers import SHIM_SUNG
 from wmr_jax._src.controllers import shim_sung as law
 from wmr_jax._src.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
-from wmr_jax._src.params import Gains, Robot
+from wmr_jax._src.params import Gains, Robot, validate_one_robot
 from wmr_jax._src.poses import HORIZON_S, horizon_steps, sample_poses
 from wmr_jax._src.rollout import DEFAULT_DT, check_temperature
 from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
@@ -271,7 +271,7 @@ def tune_robust(
         rows of the paper's, the robust-tuned and the searches' gains}``.
     """
     config = (RobustConfig() if config is None else config).validate()
-    robot = Robot() if robot is None else robot
+    robot = validate_one_robot(robot, "tuning")
     dtype, dt, steps = float_dtype(), DEFAULT_DT, horizon_steps(DEFAULT_DT)
     z = jnp.asarray(logits_from_gains(PAPER_FEASIBLE_GAINS, robot), dtype)
     hyper = (float(config.learning_rate), int(config.iters))

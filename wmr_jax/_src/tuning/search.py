@@ -14,7 +14,7 @@ import numpy as np
 from wmr_jax._src import loops
 from wmr_jax._src import rollout as simulation
 from wmr_jax._src.checks import as_poses, check_int, float_dtype
-from wmr_jax._src.params import Gains, Robot, validate_robot
+from wmr_jax._src.params import Gains, Robot, validate_one_robot
 from wmr_jax._src.poses import HORIZON_S
 from wmr_jax._src.tuning.evaluation import hard_runs, run_options
 from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS, unit_from_gains
@@ -83,7 +83,7 @@ def random_search(
     Raises:
         ValueError: for out-of-range options or poses, naming the value.
     """
-    robot = validate_robot(Robot() if robot is None else robot)
+    robot = validate_one_robot(robot, "tuning")
     budget_s = float(budget_s)
     chunk = check_int("chunk", chunk, 1)
     refs = as_poses("refs", refs, batch=True)

@@ -30,7 +30,7 @@ from wmr_jax._src import loops
 from wmr_jax._src import rollout as simulation
 from wmr_jax._src.checks import as_float_tree, check_int, check_number, float_dtype
 from wmr_jax._src.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
-from wmr_jax._src.params import Gains, Robot, validate_robot
+from wmr_jax._src.params import Gains, Robot, validate_one_robot
 from wmr_jax._src.poses import HORIZON_S, MAX_SAMPLES, sample_poses
 from wmr_jax._src.tuning.evaluation import (
     EVAL_POSES,
@@ -304,7 +304,7 @@ def training_poses(seed: int, iteration: int, n: int) -> jax.Array:
 
 def _checked(config: TuneConfig | None, robot: Robot | None) -> tuple[TuneConfig, Robot]:
     config = (TuneConfig() if config is None else config).validate()
-    return config, as_float_tree(validate_robot(Robot() if robot is None else robot))
+    return config, as_float_tree(validate_one_robot(robot, "tuning"))
 
 
 def init_state(config: TuneConfig | None = None, robot: Robot | None = None) -> TrainState:
