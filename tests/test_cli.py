@@ -61,6 +61,7 @@ def _write(tmp_path, name, text):
         (["simulate", "--ref", "1", "2", "0", "--phi-m", "95"], "--phi-m 95 is not allowed"),
         (["simulate", "--ref", "1", "2", "0", "--steps", "0"], "--steps '0' is not allowed"),
         (["simulate", "--ref", "1", "2", "0", "--plot", "/dev/null/x.png"], "is a file"),
+        (["simulate", "--ref", "1", "2", "0", "--plot", "{dir}.txt"], "allowed: a path ending in"),
         (["simulate", "--ref", "1", "2", "0", "--gains", "{missing}"], "cannot be read"),
         (["simulate", "--ref", "1", "2", "0", "--gains", "{bad_key}"], "keys among kr"),
         (["simulate", "--ref", "1", "2", "0", "--gains", "{bad_value}"], "gains.alpha = 0.7"),

@@ -149,7 +149,13 @@ def test_out_must_be_a_folder_and_help_shows_the_defaults(tmp_path, capsys):
         ("--horizon", defaults.horizon),
         ("--eval-poses", defaults.eval_poses),
     ]:
-        assert flag in text and f"(default: {value})" in text, flag
+        shown = f"(default: {value})"
+        if flag in ("--iters", "--poses"):  # the other modes' own defaults beside
+            name = flag.lstrip("-")
+            scheduled = getattr(tuning.TuneConfig.for_problem("schedule"), name)
+            robust = getattr(tuning.RobustConfig(), name)
+            shown = f"(default: {value}, {scheduled} with --schedule, {robust} with --robust)"
+        assert flag in text and shown in text, flag
 
 
 def test_each_problem_has_its_own_recommended_settings():

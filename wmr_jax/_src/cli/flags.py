@@ -95,6 +95,20 @@ def output_file(flag: str, text: str) -> Path:
     return _writable(flag, text, folder=False)
 
 
+def image_file(flag: str, text: str) -> Path:
+    """Return a writable path whose ending names an image format matplotlib can save."""
+    from wmr_jax._src.report.figures import image_formats
+
+    path = output_file(flag, text)
+    formats = image_formats()
+    if path.suffix.lower().lstrip(".") not in formats:
+        raise ValueError(
+            f"{flag} {text!r} is not allowed; allowed: a path ending in "
+            + ", ".join(f".{f}" for f in formats)
+        )
+    return path
+
+
 def choice(flag: str, text: str, allowed: Sequence[str]) -> str:
     """Return ``text`` if it is one of ``allowed``."""
     if text not in allowed:

@@ -68,7 +68,7 @@ def run(args: Any) -> int:
     from wmr_jax._src import metrics
     from wmr_jax._src.rollout import rollout
 
-    plot = None if args.plot is None else flags.output_file("--plot", args.plot)
+    plot = None if args.plot is None else flags.image_file("--plot", args.plot)
     ref = flags.pose_from_degrees("--ref", args.ref)
     init = flags.pose_from_degrees("--init", args.init)
     dt = flags.number("--dt", args.dt, low=0.0, closed=False, unit="s")

@@ -22,6 +22,7 @@ from matplotlib.patches import Patch  # noqa: E402
 from wmr_jax._src.io import save_figure  # noqa: E402
 
 __all__ = [
+    "image_formats",
     "ListedColormap",
     "Patch",
     "mpl_animation",
@@ -30,6 +31,13 @@ __all__ = [
     "plot_wheel_speeds",
     "plt",
 ]
+
+
+def image_formats() -> list[str]:
+    """The file endings a figure can be saved as (``png``, ``pdf``, ``svg``, ...)."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    return sorted(FigureCanvasBase.get_supported_filetypes())
 
 
 def _heading_arrows(ax, poses: np.ndarray, spacing: float, color, length: float, **kw) -> None:

@@ -1,4 +1,4 @@
-"""The two tuning problems as values: fixed gains (7 parameters) and gain schedules (37).
+"""The two tuning problems as values: fixed gains (7 parameters) and gain schedules (35).
 
 A ``Problem`` is the controller, its feasible set as an image of the unit
 cube (every point meets the wheel condition by construction), the starting

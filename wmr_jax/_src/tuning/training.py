@@ -141,6 +141,10 @@ class TuneConfig:
         Raises:
             ValueError: for another ``problem``, naming it.
         """
+        problem = getattr(problem, "name", problem)  # a Problem, or its name
+        unknown = sorted(set(changes) - {f.name for f in dataclasses.fields(cls)})
+        if unknown:
+            raise ValueError(f"{unknown[0]!r} is not allowed; allowed: the fields of TuneConfig")
         if problem == "fixed":
             return cls(**changes)
         if problem == "schedule":
