@@ -36,14 +36,14 @@ def _table(text, first_column):
 
 
 def _agrees(text, value):
-    """Whether a printed cell is ``value`` to the digits printed (3 significant, or whole)."""
+    """Whether a printed cell is ``value`` to the digits printed (3 significant, or all)."""
     text = text.strip("* ")
     if text.endswith("%"):
         text, value = text[:-1].strip(), 100.0 * value
     shown = float(text)
     if math.isinf(value):
         return math.isinf(shown)
-    return shown in (float(f"{value:.3g}"), float(round(value)), float(f"{value:g}"))
+    return shown in (float(f"{value:.3g}"), float(f"{value:g}"))
 
 
 def _check_cells(cells, values):

@@ -67,7 +67,9 @@ def test_paper_start_lies_just_inside_the_cube():
     for name in ("kr", "k_theta", "phi_m", "r_m", "alpha"):
         np.testing.assert_allclose(start[name], paper[name], rtol=1e-12)
     for name in ("r_a", "r_e"):
-        np.testing.assert_allclose(start[name], paper[name] * 0.9954, rtol=1e-4)
+        # R_a / R_m = 0.01 ** (1 − u) on a log scale, and u is held 1e-3 inside
+        # the face u = 1: R_a moves in by 0.01 ** 1e-3 = 0.99540.
+        np.testing.assert_allclose(start[name], paper[name] * 0.01**1e-3, rtol=1e-4)
 
 
 # ---------------------------------------------------------------- gradients
@@ -159,6 +161,21 @@ def test_relaxed_loss_tends_to_the_hard_loss():
     # surface, which these 12 × 31 samples do not: the rollouts coincide.
     np.testing.assert_allclose(soft[1], hard, rtol=1e-6)
     assert abs(soft[0] - hard) < 0.1 * hard  # s; only near switching surfaces
+
+
+def test_hard_arrival_term_is_the_arrival_time_of_docs_model_6():
+    # With the law hard and the "arrived" test sharp, T̃ is the §6 arrival
+    # time, from metrics on the recorded runs, or the horizon's cap,
+    # dt (steps + 1), for a run that has not settled by its end.
+    refs = random_refs(5, 64)
+    sharp = tuning.LossWeights(arrival_softness=1e-9)
+    terms = tuning.loss_terms(MIDDLE, refs, temperature=None, weights=sharp, horizon=1.5)
+    steps = 46  # periods of 0.033 s that cover 1.5 s
+    arrival = np.asarray(w.arrival_time(w.batch_rollout(refs, MIDDLE, steps=steps), refs, dt=0.033))
+    settled = np.isfinite(arrival)
+    assert 0.2 < settled.mean() < 0.8  # both kinds of run are here
+    np.testing.assert_allclose(np.asarray(terms.arrival)[settled], arrival[settled], rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(terms.arrival)[~settled], 0.033 * (steps + 1))
 
 
 def test_robust_gradient_caps_outliers_and_drops_non_finite_runs():

@@ -45,7 +45,15 @@ def _stop_after(iterations: int):
 
 
 def test_train_reports_every_feasible_iterate_and_annealing_does_not_recompile(caplog):
-    tuning.train(SMALL)  # compiles, if nothing before did
+    first = tuning.train(SMALL)  # compiles, if nothing before did
+    # It descends: six steps lower the loss on poses it never trained on
+    # (1.289 -> 1.229 s measured; gradient ascent would raise it).
+    refs = w.sample_poses(99, 64)
+    loss = {
+        name: float(tuning.tuning_loss(g, refs, temperature=SMALL.temperature_end, horizon=1.0))
+        for name, g in (("start", tuning.PAPER_FEASIBLE_GAINS), ("tuned", first.gains))
+    }
+    assert loss["tuned"] < 0.98 * loss["start"], loss
     seen = []
     caplog.set_level(logging.WARNING)
     with jax.log_compiles(True):
