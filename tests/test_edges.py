@@ -119,6 +119,14 @@ def test_huge_headings_are_reduced_on_the_way_in():
         np.testing.assert_allclose(a, b, atol=1e-4)
 
 
+def test_headings_beyond_what_float64_resolves_are_refused():
+    # ulp(1e30) ≈ 1e14 rad: such a heading is no angle at all.
+    with pytest.raises(ValueError, match=r"ref = .* has a heading beyond 1e\+12 rad"):
+        w.rollout([30.0, 30.0, 1e30], steps=3)
+    with pytest.raises(ValueError, match=r"init\[1\] = .* has a heading beyond"):
+        w.final_poses([REF, REF], init=[[0.0, 0.0, 0.0], [0.0, 0.0, -1e13]], steps=3)
+
+
 # ---------------------------------------------------------------- metrics
 
 

@@ -274,6 +274,21 @@ def as_poses(name: str, value: Any, *, batch: bool | None) -> jax.Array:
             lambda rows: ~np.isfinite(rows),
             "is not finite; allowed: finite numbers",
         )
+    if arr is not None:
+        with jax.ensure_compile_time_eval():
+            spun = bool(jnp.any(jnp.abs(arr[..., 2]) > MAX_HEADING))
+    else:
+        spun = bool(np.any(np.abs(host[..., 2]) > MAX_HEADING))
+    if spun:
+        _raise_row(
+            name,
+            shape,
+            arr,
+            host,
+            lambda rows: np.abs(rows[:, 2:]) > MAX_HEADING,
+            f"has a heading beyond {MAX_HEADING:.0e} rad, where float64 no longer holds "
+            "the angle modulo 2π; allowed: |theta| <= 1e+12 rad",
+        )
     limit = position_limit()
     if arr is not None:
         with jax.ensure_compile_time_eval():
@@ -311,6 +326,8 @@ def _raise_row(name, shape, arr, host, bad, message: str):
 # float64 on the host): the fast sine and cosine of the rollouts are accurate
 # only up to about 1e5 rad in float32. Smaller headings are kept as given.
 HEADING_REDUCE_ABOVE = 1e4
+# Beyond this a float64 heading is a multiple of 2π only to ±1e-4 rad and worse.
+MAX_HEADING = 1e12
 
 
 def reduce_heading(theta: Any) -> Any:
