@@ -155,6 +155,13 @@ def test_bad_metric_arguments_are_named(call, message):
 # ---------------------------------------------------------------- batched gains
 
 
+def test_an_empty_batch_of_gains_or_robots_is_refused():
+    with pytest.raises(ValueError, match=r"gains.kr has shape \(0,\); allowed: a scalar"):
+        w.final_poses(REF, w.Gains(kr=np.zeros(0)), steps=3)
+    with pytest.raises(ValueError, match=r"robot.v_max has shape \(0,\)"):
+        w.final_poses(REF, robot=w.Robot(v_max=[]), steps=3)
+
+
 def test_rollout_runs_one_robot_and_says_where_batches_go():
     with pytest.raises(ValueError, match=r"gains.kr has shape \(4,\).*use batch_rollout"):
         w.rollout(REF, w.Gains(kr=np.linspace(30, 120, 4)), steps=3)

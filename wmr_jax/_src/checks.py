@@ -170,9 +170,10 @@ def field_values(
             raise ValueError(
                 f"{name} = {value!r} is not allowed; allowed: a finite number"
             ) from None
-        if arr.ndim > 1:
+        if arr.ndim > 1 or arr.size == 0:
             raise ValueError(
-                f"{name} has shape {arr.shape}; allowed: a scalar or one leading batch axis"
+                f"{name} has shape {arr.shape}; allowed: a scalar or one leading batch axis "
+                "of size >= 1"
             )
         require(name, arr, np.isfinite(arr), "a finite number")
         require_representable(name, arr)
