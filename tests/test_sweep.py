@@ -4,6 +4,7 @@ and an interrupted sweep resumes from its checked chunk files."""
 import math
 import warnings
 
+import jax
 import numpy as np
 import pytest
 from conftest import random_refs, run_metrics
@@ -166,3 +167,40 @@ def test_bad_inputs_are_named_before_tracing():
     bad[3, 1] = np.nan
     with pytest.raises(ValueError, match=r"refs\[3\]"):
         w.sweep(bad, chunk_size=2)
+
+
+def test_every_run_is_checked_as_final_poses_checks_it():
+    refs = _poses(4, 6)
+    # Per-run values beyond the first chunk, named with their rows in the batch.
+    kr = np.full(6, 60.0)
+    kr[4] = -5.0
+    with pytest.raises(ValueError, match=r"gains.kr = .*-5.0.* \(among runs 4 to 5\)"):
+        w.sweep(refs, w.Gains(kr=kr), chunk_size=2)
+    v_max = np.full(6, 125.0)
+    v_max[5] = -1.0
+    with pytest.raises(ValueError, match=r"robot.v_max = .*-1.0.*among runs 4 to 5"):
+        w.sweep(refs, robot=w.Robot(v_max=v_max), chunk_size=2)
+    init = np.zeros((6, 3))
+    init[3, 0] = np.nan
+    with pytest.raises(ValueError, match=r"init\[3\] = \[nan, 0.0, 0.0\] is not finite"):
+        w.sweep(refs, init=init, chunk_size=2)
+    far = refs.copy()
+    far[5, 2] = 1e13
+    with pytest.raises(ValueError, match=r"refs\[5\] = .* has a heading beyond"):
+        w.sweep(far, chunk_size=2)
+    # A batch axis of size one is shared; another size is named.
+    shared = w.sweep(refs, w.Gains(kr=np.array([60.0])), chunk_size=2)
+    plain = w.sweep(refs.tolist(), w.Gains(kr=60.0), chunk_size=2)  # a list works as an array
+    np.testing.assert_array_equal(shared["final_x"], plain["final_x"])
+    with pytest.raises(ValueError, match=r"gains.kr has 2 values; allowed: one, or one per"):
+        w.sweep(refs, w.Gains(kr=np.array([60.0, 70.0])))
+
+
+def test_a_run_that_leaves_the_range_is_an_error_not_nans():
+    # γ dt = 3.3: the sampled Aicardi law diverges, past float32 within 300 periods.
+    with warnings.catch_warnings(), jax.enable_x64(False):
+        warnings.simplefilter("ignore")
+        with pytest.raises(ValueError, match=r"1 run\(s\), e.g. run 0, left the range"):
+            w.sweep(
+                [[30.0, 30.0, 0.0]], w.AicardiGains(gamma=100.0), controller="aicardi", steps=300
+            )

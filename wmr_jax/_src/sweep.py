@@ -33,6 +33,7 @@ import dataclasses
 import hashlib
 import json
 import math
+import re
 import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -44,7 +45,7 @@ import numpy as np
 from wmr_jax._src import checks, io, loops, metrics
 from wmr_jax._src import rollout as simulation
 from wmr_jax._src.controllers import SHIM_SUNG, Controller
-from wmr_jax._src.params import Robot
+from wmr_jax._src.params import Robot, validate_robot
 
 __all__ = ["DEFAULT_CHUNK_SIZE", "SWEEP_FIELDS", "sweep"]
 
@@ -153,6 +154,26 @@ def _thresholds(tol_r, tol_theta, v_dead_band, omega_dead_band) -> metrics.Thres
     )
 
 
+def _per_run_or_shared(tree: Any, n: int, name: str) -> Any:
+    """Leaves with one value per run stay; a batch axis of size 1 is shared (dropped).
+
+    Raises:
+        ValueError: for a batch axis of another size, naming the field.
+    """
+
+    def leaf_of(path, leaf):
+        if np.ndim(leaf) == 0 or np.shape(leaf)[0] == n:
+            return leaf
+        if np.shape(leaf)[0] == 1:
+            return leaf[0]
+        raise ValueError(
+            f"{name}{jax.tree_util.keystr(path, simple=True, separator='.')} has "
+            f"{np.shape(leaf)[0]} values; allowed: one, or one per reference ({n})"
+        )
+
+    return jax.tree_util.tree_map_with_path(leaf_of, tree)
+
+
 def _batched_leaves(tree: Any, n: int) -> Any:
     """Map each leaf to True if it carries the batch axis ``(n, ...)``."""
     return jax.tree.map(lambda leaf: np.ndim(leaf) >= 1 and np.shape(leaf)[0] == n, tree)
@@ -177,6 +198,8 @@ def _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, device
 
     Every message then names the bad argument or field before anything is traced.
     """
+    if isinstance(refs, (list, tuple)):
+        refs = np.asarray(refs)  # lists work as arrays (a memmap stays as it is)
     n = _pose_count(refs)
     chunk_size = checks.check_int("chunk_size", chunk_size)
     devices = tuple(jax.local_devices() if devices is None else devices)
@@ -184,6 +207,9 @@ def _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, device
         raise ValueError("devices = () is not allowed; allowed: at least one device")
     gains = options.controller.default_params() if gains is None else gains
     robot = Robot() if robot is None else robot
+    if n > 1:
+        gains = _per_run_or_shared(gains, n, "gains.")
+        robot = _per_run_or_shared(robot, n, "robot.")
     init = np.asarray(init, dtype=float) if not isinstance(init, jax.Array) else init
     batched_init = np.ndim(init) == 2
     if batched_init and np.shape(init)[0] != n:
@@ -342,13 +368,50 @@ def _chunk_inputs(job: _Job, i: int) -> _Chunk:
     return _Chunk(i, lo, hi, pad, refs, init, _digest(*per_pose))
 
 
-def _check_finite(job: _Job, chunk: _Chunk) -> None:
-    bad = ~np.isfinite(chunk.refs[: chunk.hi - chunk.lo]).all(axis=1)
+def _check_chunk(job: _Job, chunk: _Chunk) -> None:
+    """Check every row of a chunk as ``final_poses`` checks a batch (before it runs).
+
+    ``_check`` judged one pose; the rest are judged here, chunk by chunk as
+    they are read, so a memory-mapped batch is never loaded whole. Messages
+    give rows of the whole batch.
+    """
+    size = chunk.hi - chunk.lo
+
+    def offset(err: ValueError) -> ValueError:
+        # "refs[3] = ..." within the chunk is row lo + 3 of the batch.
+        text = re.sub(
+            r"^(refs|init)\[(\d+)\]", lambda m: f"{m[1]}[{chunk.lo + int(m[2])}]", str(err)
+        )
+        return ValueError(text)
+
+    try:
+        checks.as_poses("refs", np.asarray(chunk.refs[:size]), batch=True)
+        if job.batched_init:
+            checks.as_poses("init", np.asarray(chunk.init[:size]), batch=True)
+    except ValueError as err:
+        raise offset(err) from None
+    lo, hi = chunk.lo, chunk.hi
+    try:
+        if any(jax.tree.leaves(job.gains_mask)):
+            job.options.controller.validate(_take(job.gains, job.gains_mask, lo, hi, 0))
+        if any(jax.tree.leaves(job.robot_mask)):
+            validate_robot(_take(job.robot, job.robot_mask, lo, hi, 0))
+    except ValueError as err:
+        raise ValueError(f"{err} (among runs {lo} to {hi - 1})") from None
+
+
+def _check_result(job: _Job, chunk: _Chunk, host: dict[str, np.ndarray]) -> None:
+    """Raise, as ``final_poses`` does, if a run of the chunk left the floating-point range."""
+    pose = np.stack([host[name] for name in ("final_x", "final_y", "final_theta")], axis=1)
+    bad = ~np.isfinite(pose).all(axis=1)
     if bad.any():
         row = chunk.lo + int(np.flatnonzero(bad)[0])
+        dtype = job.dtype.name
+        wider = ", or float64" if dtype != "float64" else ""
         raise ValueError(
-            f"refs[{row}] = {np.asarray(job.refs[row]).tolist()} is not finite; "
-            "allowed: finite numbers"
+            f"{int(bad.sum())} run(s), e.g. run {row}, left the range of {dtype} (a pose became "
+            "inf or NaN); allowed: gains and dt that keep the sampled law stable "
+            f"(docs/model.md §4){wider}"
         )
 
 
@@ -404,6 +467,8 @@ def _run_chunks(
 
     def keep(chunk: _Chunk, values: dict[str, Any], *, computed: bool) -> None:
         host = {name: np.asarray(values[name])[: chunk.hi - chunk.lo] for name in SWEEP_FIELDS}
+        if computed:
+            _check_result(job, chunk, host)
         for name in SWEEP_FIELDS:
             results[name][chunk.lo : chunk.hi] = host[name]
         if computed and store is not None:
@@ -419,7 +484,7 @@ def _run_chunks(
         if loaded is not None:
             keep(chunk, loaded, computed=False)
             continue
-        _check_finite(job, chunk)
+        _check_chunk(job, chunk)
         launched = (chunk, launch(chunk))
         if pending is not None:
             keep(*pending, computed=True)
