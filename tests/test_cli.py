@@ -75,6 +75,11 @@ def _write(tmp_path, name, text):
         # Checked before the benchmark runs: these sizes would take hours.
         (["bench", "--sizes", "100000000", "--json", "/dev/null/b.json"], "is a file"),
         (["paper", "--out", "/dev/null/results"], "is a file"),
+        (["robustness", "--out", "{dir}", "--seed", "18446744073709551616"], "--seed '1844"),
+        (["robustness", "--out", "{dir}", "--runs", "10000000"], "--runs '10000000'"),
+        (["animate", "--out", "{dir}.gif", "--seconds", "100000"], "--seconds"),
+        # Tried before the work, not found unwritable after it.
+        (["sweep", "--out", "/proc/wmr-x", "--poses", "10"], "a place this process can write"),
         # tune: a flag its mode would ignore, and sizes, before any work.
         (["tune", "--out", "{dir}", "--robust", "--schedule"], "--schedule is not allowed with"),
         (["tune", "--out", "{dir}", "--compare", "--gradient-cost"], "allowed: one of them"),

@@ -572,7 +572,7 @@ def robustness_study(
     writes the rows.
 
     Args:
-        seed: PRNG seed, an integer ``>= 0``.
+        seed: PRNG seed, an integer in ``[0, 2³² − 1]``.
         controller_names: registered controllers; default every one.
         n_runs: Monte Carlo runs per noise level.
         velocity: ``"ideal"`` or ``"nonideal"``.
@@ -584,7 +584,7 @@ def robustness_study(
         The rows of every condition, controller and noise level (in that
         order), each ``monte_carlo``'s row with its ``"condition"`` first.
     """
-    seed = checks.check_int("seed", seed, 0)
+    seed = checks.check_int("seed", seed, 0, 2**32 - 1)
     names = list(controller_names) if controller_names else controllers.registered_names()
     keys = jax.random.split(jax.random.PRNGKey(seed), len(ROBUSTNESS_CONDITIONS))
     rows = []

@@ -53,9 +53,10 @@ def run(args: Any) -> int:
         raise ValueError(f"--out {args.out!r} is not allowed; allowed: a path ending in .gif")
     name = flags.controller_names([args.controller])[0]
     velocity = flags.velocity_loop(args.velocity)
-    robots = flags.positive_int("--robots", args.robots)
+    # A GIF holds every frame in memory: a few minutes of a few thousand robots at most.
+    robots = flags.positive_int("--robots", args.robots, 1, 10_000)
     seed = flags.positive_int("--seed", args.seed, 0, 2**32 - 1)
-    seconds = flags.number("--seconds", args.seconds, low=0.0, closed=False, unit="s")
+    seconds = flags.number("--seconds", args.seconds, low=0.0, closed=False, high=600.0, unit="s")
     speed = flags.number(
         "--speed", args.speed, low=0.0, closed=False, high=100.0, unit="× real time"
     )

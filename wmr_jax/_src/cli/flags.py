@@ -9,6 +9,7 @@ own unit (degrees stay degrees).
 from __future__ import annotations
 
 import math
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -82,11 +83,22 @@ def _writable(flag: str, text: str, *, folder: bool) -> Path:
                     f"{flag} {text!r} is not allowed; {str(parent)!r} is a file, not a folder"
                 )
             break
+    # Try it now, not after minutes of work: make the folder and write a file there.
+    folder_path = path if folder else path.parent
+    try:
+        folder_path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder_path):
+            pass
+    except OSError as err:
+        raise ValueError(
+            f"{flag} {text!r} is not allowed; allowed: a place this process can write "
+            f"({err.strerror or err})"
+        ) from None
     return path
 
 
 def output_dir(flag: str, text: str) -> Path:
-    """Return a folder the command may write to (created later), or say why not."""
+    """Return a folder the command may write to (created now, if missing), or say why not."""
     return _writable(flag, text, folder=True)
 
 

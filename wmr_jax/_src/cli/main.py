@@ -93,6 +93,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as err:
         print(f"wmr-jax: error: {err}", file=sys.stderr)
         return 2
+    except OSError as err:  # a disk that fills or a folder that vanishes mid-run
+        print(f"wmr-jax: error: {' '.join(str(err).split())}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print("wmr-jax: interrupted", file=sys.stderr)
         return 130

@@ -54,8 +54,9 @@ def add_arguments(parser: Any) -> None:
 def run(args: Any) -> int:
     """Run ``wmr-jax robustness``; return the exit status."""
     out = flags.output_dir("--out", args.out)
-    seed = flags.positive_int("--seed", args.seed, 0)
-    n_runs = flags.positive_int("--runs", args.runs, 1)
+    seed = flags.positive_int("--seed", args.seed, 0, 2**32 - 1)
+    # Each run keeps its noise for the whole horizon: 10^6 runs are ~4 GB a level.
+    n_runs = flags.positive_int("--runs", args.runs, 1, 10**6)
     names = flags.controller_names(args.controller)
     velocity = flags.velocity_loop(args.velocity)
     sets = _gain_sets(args)
