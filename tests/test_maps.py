@@ -49,12 +49,16 @@ def test_baselines_hold_their_goal_in_float32_too(refs):
     np.testing.assert_allclose(m32.arrival, m64.arrival, atol=0.034)  # a sample at most
 
 
-@pytest.mark.parametrize("n", [1, 19])
-def test_a_small_pose_grid_still_has_poses_in_the_annulus(n):
-    # Two points a side would be the corners, all outside the annulus.
-    grid = pose_grid(n)
+@pytest.mark.parametrize(
+    ("n", "r_min", "r_max"), [(1, 5.0, 80.0), (19, 5.0, 80.0), (100, 50.0, 50.000001)]
+)
+def test_a_small_pose_grid_or_a_thin_annulus_still_has_poses(n, r_min, r_max):
+    # Two points a side would be the corners, all outside the annulus; a thin
+    # annulus asks for a grid finer than memory holds, and is capped.
+    grid = pose_grid(n, r_min=r_min, r_max=r_max)
     dist = np.hypot(grid.refs[:, 0], grid.refs[:, 1])
-    assert len(grid.refs) >= 1 and np.all((dist >= 5.0) & (dist <= 80.0))
+    assert len(grid.refs) >= 1 and np.all((dist >= r_min) & (dist <= r_max))
+    assert len(grid.xs) <= 4098
 
 
 def test_pose_grid_covers_the_evaluation_annulus():

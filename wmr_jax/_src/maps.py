@@ -95,7 +95,15 @@ class PoseGrid(NamedTuple):
     refs: np.ndarray
 
 
-_MAX_SIDE = 4096  # grid points per side that pose_grid tries before giving up
+_MAX_SIDE = 4097  # grid points per side at most: 16.8 million positions
+
+
+def _grid(side: int, r_min: float, r_max: float) -> tuple:
+    """The grid's axis, the mask of its points in the annulus, and their coordinates."""
+    xs = np.linspace(-r_max, r_max, side)
+    gx, gy = np.meshgrid(xs, xs)  # [iy, ix]
+    dist = np.hypot(gx, gy)
+    return xs, (dist >= r_min) & (dist <= r_max), gx, gy
 
 
 def pose_grid(
@@ -127,22 +135,19 @@ def pose_grid(
     if degrees.size == 0:
         raise ValueError("headings_deg = () is not allowed; allowed: at least one heading")
     checks.require("headings_deg", degrees, np.isfinite(degrees), "finite degrees")
+    checks.require(
+        "headings_deg",
+        degrees,
+        np.abs(np.radians(degrees)) <= checks.MAX_HEADING,
+        f"|heading| <= {math.degrees(checks.MAX_HEADING):.3g} degrees",
+    )
     headings = np.radians(degrees)
-    annulus = math.pi * (r_max**2 - r_min**2) / (2 * r_max) ** 2
-    side = max(2, round(math.sqrt(n_poses / (len(headings) * annulus))))
-    while True:  # a coarse grid can miss a thin annulus: refine until it has a point
-        xs = np.linspace(-r_max, r_max, side)
-        gx, gy = np.meshgrid(xs, xs)  # [iy, ix]
-        dist = np.hypot(gx, gy)
-        inside = (dist >= r_min) & (dist <= r_max)
-        if inside.any():
-            break
-        if side >= _MAX_SIDE:
-            raise ValueError(
-                f"r_min = {r_min!r}, r_max = {r_max!r}: no point of a {side} x {side} grid lies "
-                "between them; allowed: a wider range"
-            )
-        side += 1
+    annulus = math.pi * (1.0 - (r_min / r_max) ** 2) / 4  # its share of the square
+    side = min(max(2, round(math.sqrt(n_poses / (len(headings) * annulus)))), _MAX_SIDE)
+    xs, inside, gx, gy = _grid(side, r_min, r_max)
+    if not inside.any():
+        # An even grid can miss a thin annulus; an odd one has (r_max, 0) on it.
+        xs, inside, gx, gy = _grid(side + 1, r_min, r_max)
     pos = np.stack([gx[inside], gy[inside]], axis=-1)
     refs = np.concatenate(
         [np.concatenate([pos, np.full((len(pos), 1), h)], axis=-1) for h in headings]
