@@ -122,10 +122,13 @@ def test_resume_after_interruption(tmp_path):
     w.sweep(moved, steps=STEPS, chunk_size=10, out=tmp_path)
     changed = [name for name, ino in _inodes(tmp_path).items() if after[name] != ino]
     assert changed == ["chunk_000001.npz"]
-    # Other settings: none is reused.
+    # Other settings: none is reused, and the user is told why.
     before = _inodes(tmp_path)
-    w.sweep(refs, steps=STEPS + 1, chunk_size=10, out=tmp_path)
+    with pytest.warns(UserWarning, match=r"holds 5 chunk file\(s\) of a sweep with other"):
+        w.sweep(refs, steps=STEPS + 1, chunk_size=10, out=tmp_path)
     assert all(before[name] != ino for name, ino in _inodes(tmp_path).items())
+    with pytest.warns(UserWarning, match=r"other settings \(chunk 10 -> 20"):
+        w.sweep(refs, steps=STEPS + 1, chunk_size=20, out=tmp_path)
 
 
 def test_damaged_or_altered_chunks_are_recomputed_with_a_warning(tmp_path):

@@ -307,7 +307,32 @@ class _ChunkStore:
         io.remove_stale_temporaries(folder)  # left by a sweep killed mid-write
         self.folder = folder
         self.fingerprint = _fingerprint(settings)
+        self._warn_if_other(settings)
         io.atomic_write_json(folder / _MANIFEST, {"fingerprint": self.fingerprint, **settings})
+
+    def _warn_if_other(self, settings: dict[str, Any]) -> None:
+        """Say so when the folder's chunks are of other settings: none of them will be used."""
+        try:
+            before = json.loads((self.folder / _MANIFEST).read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return
+        chunks = len(list(self.folder.glob("chunk_*.npz")))
+        if not isinstance(before, dict) or before.get("fingerprint") == self.fingerprint:
+            return
+        if chunks:
+            changed = [k for k in settings if before.get(k) != json.loads(json.dumps(settings[k]))]
+            shown = ", ".join(
+                f"{k} {before.get(k)!r} -> {settings[k]!r}"
+                if k in ("n", "chunk", "dtype", "dt")
+                else k
+                for k in changed
+            )
+            warnings.warn(
+                f"{self.folder} holds {chunks} chunk file(s) of a sweep with other settings "
+                f"({shown or 'its fingerprint'}): none of them is used (a resume needs the "
+                "same settings, chunk size and number of devices included)",
+                stacklevel=4,
+            )
 
     def path(self, i: int) -> Path:
         return self.folder / f"chunk_{i:06d}.npz"
