@@ -1,5 +1,6 @@
 """Baseline controllers: Aicardi et al. (1995) and the Astolfi/Corke polar law."""
 
+import dataclasses
 import math
 
 import jax
@@ -229,3 +230,14 @@ def test_a_new_controller_needs_no_special_case():
     w.register_controller(custom)
     assert "test-proportional" in w.registered_names()
     assert w.get_controller("test-proportional") is custom
+    # A built-in name is not taken over by accident, and a name must be a CLI word.
+    with pytest.raises(ValueError, match="'shim-sung' is registered already"):
+        w.register_controller(dataclasses.replace(custom, name="shim-sung"))
+    assert w.get_controller("shim-sung") is w.SHIM_SUNG
+    for bad in ("../evil", 7, "Two Words"):
+        with pytest.raises(ValueError, match=r"controller.name = .* is not allowed"):
+            w.register_controller(dataclasses.replace(custom, name=bad))
+    with pytest.raises(ValueError, match=r"controller.command = 42 is not allowed"):
+        w.register_controller(dataclasses.replace(custom, name="test-bad", command=42))
+    with pytest.raises(ValueError, match="allowed: a wmr_jax.Controller"):
+        w.register_controller(lambda pose, ref, params: (0.0, 0.0))

@@ -11,6 +11,7 @@ which one it is.
 from __future__ import annotations
 
 import dataclasses
+import re
 from collections.abc import Callable
 from typing import Any
 
@@ -70,9 +71,47 @@ class Controller:
 _REGISTRY: dict[str, Controller] = {}
 
 
-def register_controller(controller: Controller) -> Controller:
-    """Make ``controller`` known by name to the CLI and ``get_controller``."""
-    _REGISTRY[controller.name] = controller
+_NAME = re.compile(r"[a-z0-9][a-z0-9_-]*")  # a CLI word, and safe in a file name
+
+
+def register_controller(controller: Controller, *, replace: bool = False) -> Controller:
+    """Make ``controller`` known by name to the CLI and ``get_controller``.
+
+    Args:
+        controller: the controller; its name must be lower-case letters,
+            digits, ``-`` and ``_`` (it appears on the command line and in
+            file names).
+        replace: allow a name already registered to another controller.
+
+    Raises:
+        ValueError: for something that is not a ``Controller``, a bad name or
+            field, or a name taken (without ``replace``).
+    """
+    if not isinstance(controller, Controller):
+        raise ValueError(
+            f"controller is a {type(controller).__name__}; allowed: a wmr_jax.Controller"
+        )
+    name = controller.name
+    if not isinstance(name, str) or not _NAME.fullmatch(name):
+        raise ValueError(
+            f"controller.name = {name!r} is not allowed; allowed: lower-case letters, digits, "
+            "'-' and '_', starting with a letter or digit"
+        )
+    for field in ("command", "validate", "region", "check_robot", "check_sampling"):
+        value = getattr(controller, field)
+        if not callable(value) and not (value is None and field not in ("command", "validate")):
+            raise ValueError(f"controller.{field} = {value!r} is not allowed; allowed: a function")
+    if not isinstance(controller.params_type, type):
+        raise ValueError(
+            f"controller.params_type = {controller.params_type!r} is not allowed; allowed: a class"
+        )
+    known = _REGISTRY.get(name)
+    if known is not None and known != controller and not replace:
+        raise ValueError(
+            f"controller.name = {name!r} is registered already; allowed: another name, or "
+            "replace=True"
+        )
+    _REGISTRY[name] = controller
     return controller
 
 
