@@ -181,3 +181,10 @@ def test_command_rejects_bad_values_in_one_line(tmp_path, capsys, flag, value):
     assert main(["waypoints", "--out", str(tmp_path), flag, value]) == 2
     lines = capsys.readouterr().err.splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"wmr-jax: error: {flag} '{value}' is not ")
+
+
+def test_waypoints_never_reached_make_the_slowest_leg_infinite():
+    # Ten periods reach no waypoint: every leg, and the slowest, is inf (not NaN).
+    rows, *_ = studies.soccer_study(controller_names=["shim-sung"], steps=10)
+    for row in rows:
+        assert row["slowest leg s"] == math.inf and row[f"leg {len(WP)} s"] == math.inf
