@@ -144,6 +144,12 @@ def test_headings_beyond_what_float64_resolves_are_refused():
         (lambda t: w.arrival_time(t, np.zeros((4, 3)), dt=0.033), "refs has batch shape"),
         (lambda t: w.arrival_time(t, REF, dt=0.033, tol_theta=5.0), "tol_theta = 5.0"),
         (lambda t: w.arrived(np.zeros((2, 3)), np.zeros((3, 3))), "refs has batch shape"),
+        (lambda t: w.region_time(t, dt=-1.0), "dt = -1.0 is not allowed"),
+        (lambda t: w.zigzag_count(t, v_dead_band=-1.0), "v_dead_band = -1.0 is not allowed"),
+        (lambda t: w.zigzag_count(t, omega_dead_band=np.nan), "omega_dead_band = nan"),
+        (lambda t: w.path_length(np.zeros((5, 3))), "traj is a ndarray"),
+        (lambda t: w.success_rate([]), "allowed: one or more arrival times"),
+        (lambda t: w.success_rate(t), "times = Trajectory is not allowed"),
     ],
 )
 def test_bad_metric_arguments_are_named(call, message):

@@ -148,8 +148,24 @@ def arrival_time(
 
 
 def success_rate(times: Any) -> float:
-    """Return the fraction of finite arrival times."""
+    """Return the fraction of finite arrival times (of ``arrival_time``, say)."""
+    if not is_traced(times):
+        try:
+            size = np.asarray(times, dtype=float).size
+        except (TypeError, ValueError):
+            size = None
+        if not size:
+            raise ValueError(
+                f"times = {type(times).__name__} is not allowed; allowed: one or more arrival "
+                "times, s (from arrival_time)"
+            )
     return float(jnp.mean(jnp.isfinite(jnp.asarray(times))))
+
+
+def _field_of(traj: Any, name: str) -> Any:
+    """Return ``traj.<name>`` after checking ``traj`` is a trajectory."""
+    _poses_of(traj)
+    return getattr(traj, name)
 
 
 def path_length(traj: Any) -> jax.Array:
@@ -158,7 +174,7 @@ def path_length(traj: Any) -> jax.Array:
     The sum of ``|v| dt`` for the ideal loop; the integrated centre speed over
     the inner sub-steps for the non-ideal one (``Trajectory.distance``).
     """
-    return jnp.sum(traj.distance, axis=-1)
+    return jnp.sum(_field_of(traj, "distance"), axis=-1)
 
 
 def _sign_changes(x: jax.Array, dead_band: float) -> jax.Array:
@@ -189,12 +205,22 @@ def zigzag_count(
         v_dead_band: speeds with ``|v| ≤`` this (cm/s) carry no sign.
         omega_dead_band: turn rates with ``|ω| ≤`` this (rad/s) carry no sign.
     """
-    return _sign_changes(traj.v, v_dead_band) + _sign_changes(traj.omega, omega_dead_band)
+    v, omega = _field_of(traj, "v"), _field_of(traj, "omega")
+    if not is_traced((v_dead_band, omega_dead_band)):
+        v_dead_band = check_number("v_dead_band", v_dead_band, closed=True, unit="cm/s")
+        omega_dead_band = check_number(
+            "omega_dead_band", omega_dead_band, closed=True, unit="rad/s"
+        )
+    return _sign_changes(v, v_dead_band) + _sign_changes(omega, omega_dead_band)
 
 
 def region_time(traj: Any, *, dt: float) -> jax.Array:
-    """Return the time spent in each region 0–3, s, shape ``(..., 4)``."""
-    one_hot = traj.region[..., None] == jnp.arange(4)
+    """Return the time spent in each region 0–3, s, shape ``(..., 4)``.
+
+    Zero everywhere for a controller without regions (its labels are −1).
+    """
+    dt = check_dt(dt)
+    one_hot = _field_of(traj, "region")[..., None] == jnp.arange(4)
     return jnp.sum(one_hot, axis=-2) * dt
 
 
