@@ -115,6 +115,8 @@ def test_draws_are_evaluation_poses_and_bounded_mismatch():
         ({"mismatch": np.zeros((4, 3))}, "disturbance.mismatch = array of shape (4, 3)"),
         ({"noise": np.zeros((4, 10, 2))}, "disturbance.noise has shape (4, 10, 2)"),
         ({"ref": np.zeros((4, 2))}, "disturbance.ref has shape (4, 2)"),
+        # A heading noise of 1e15 rad is no angle, and would become NaN.
+        ({"noise": np.full((4, 10, 3), 1e15)}, "heading noise <= 1e+12 rad"),
     ],
 )
 def test_bad_disturbances_are_rejected(change, message):
@@ -131,12 +133,35 @@ def test_bad_disturbances_are_rejected(change, message):
         ({"noise_xy": (0.0, -1.0), "noise_deg": (0.0, 1.0)}, "noise_xy[1] = -1.0"),
         ({"noise_xy": (0.0,), "noise_deg": (0.0, 1.0)}, "the same number"),
         ({"radius_mismatch": 1.5}, "radius_mismatch = 1.5"),
+        ({"noise_xy": [0.0], "noise_deg": [1e300]}, "noise_deg[0] = 1e+300"),
+        ({"noise_xy": 0.5, "noise_deg": 1.0}, "noise_xy = 0.5 is not allowed"),
+        ({"latency": "no"}, "latency = 'no' is not allowed"),
     ],
 )
 def test_bad_monte_carlo_options(kwargs, message):
     with pytest.raises(ValueError, match="allowed") as info:
         studies.monte_carlo(jax.random.PRNGKey(0), **kwargs)
     assert message in str(info.value)
+
+
+def test_levels_may_be_arrays_and_keys_must_be_keys():
+    key = jax.random.key(0)
+    rows = studies.monte_carlo(key, n_runs=2, noise_xy=np.array([0.0]), noise_deg=np.array([1.0]))
+    assert len(rows) == 1 and rows[0]["noise theta deg"] == 1.0
+    with pytest.raises(ValueError, match=r"key = 0 is not allowed; allowed: a jax.random key"):
+        studies.monte_carlo(0, n_runs=2)
+    refs = w.sample_poses(0, 3)
+    for kwargs, message in (
+        ({"radius_mismatch": 5.0}, "radius_mismatch = 5.0 is not allowed"),
+        ({"latency": 7.0}, "latency = 7.0 is not allowed"),
+        ({"noise_xy": -1.0}, "noise_xy = -1.0 is not allowed"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            studies.sample_disturbance(key, refs, 5, **kwargs)
+    with pytest.raises(ValueError, match=r"steps = -1 is not allowed"):
+        studies.sample_disturbance(key, refs, -1)
+    with pytest.raises(ValueError, match=r"radius_mismatch = 2.0 is not allowed"):
+        studies.draw_disturbances(key, 2, 5, radius_mismatch=2.0)
 
 
 # Each flag with a value it refuses: one line on stderr, exit status 2.
@@ -247,3 +272,12 @@ def test_standard_conditions_compare_gain_sets_on_the_same_draws():
         assert a["success"] == b["success"] and a["gains"] == "paper"
     nominal = rows[0]
     assert nominal["success"] == 1.0 and nominal["mean arrival s"] < 6.0
+
+
+def test_a_disturbed_run_that_leaves_the_range_is_an_error_not_nans():
+    # γ dt = 3.3: the sampled Aicardi law diverges, past float32 within 300 periods.
+    spec = studies.sample_disturbance(jax.random.key(0), np.array([[30.0, 30.0, 0.0]]), 300)
+    with pytest.raises(ValueError, match=r"1 run\(s\), e.g. run 0, left the range of float32"):
+        studies.perturbed_metrics(
+            spec, w.AicardiGains(gamma=100.0), controller="aicardi", x64=False
+        )

@@ -281,6 +281,13 @@ def _checked_disturbance(disturbance: Disturbance) -> tuple[np.ndarray, ...]:
     if mismatch.shape != (n, 3):
         raise ValueError(f"disturbance.mismatch has shape {mismatch.shape}; allowed: ({n}, 3)")
     checks.require("disturbance.noise", noise, np.isfinite(noise), "finite numbers")
+    limit = checks.position_limit()
+    checks.require(
+        "disturbance.noise",
+        noise,
+        np.abs(noise) <= np.array([limit, limit, checks.MAX_HEADING]),
+        f"|x|, |y| noise <= {limit:.0e} cm and heading noise <= {checks.MAX_HEADING:.0e} rad",
+    )
     checks.require(
         "disturbance.mismatch", mismatch, np.isfinite(mismatch) & (mismatch > 0), "finite, > 0"
     )
@@ -315,7 +322,16 @@ def _prepared(disturbance, params, controller, init, dt, robot, velocity) -> tup
 def _perturbed_metrics(disturbance, params, controller, init, dt, robot, velocity) -> PoseMetrics:
     args, options = _prepared(disturbance, params, controller, init, dt, robot, velocity)
     out = _perturbed_jit(*args, options=options)
-    return PoseMetrics(**{f: np.asarray(out[f]) for f in PoseMetrics._fields})
+    metrics = PoseMetrics(**{f: np.asarray(out[f]) for f in PoseMetrics._fields})
+    bad = ~np.isfinite(metrics.final_distance)
+    if bad.any():
+        dtype = np.dtype(args[-1].dtype).name
+        raise ValueError(
+            f"{int(bad.sum())} run(s), e.g. run {int(np.flatnonzero(bad)[0])}, left the range of "
+            f"{dtype} (a pose became inf or NaN); allowed: disturbances, gains and dt that "
+            "keep the sampled law stable (docs/model.md §4, §7)"
+        )
+    return metrics
 
 
 def _disturbed_trajectory(spec, params, init, robot, dt, options):
@@ -357,6 +373,44 @@ def disturbed_rollout(
 # ---------------------------------------------------------------- Monte Carlo
 
 
+# Beyond these a level no longer describes a sensor: σ_θ of 2π already makes
+# the measured heading uniform, and σ_xy of 10 km is far beyond any workspace.
+_LEVEL_LIMITS = {"noise_xy": 1e6, "noise_theta": 2 * math.pi, "latency": 1.0}
+_MISMATCH_FIELDS = ("radius_mismatch", "mass_mismatch")
+
+
+def _check_key(key: Any) -> None:
+    """Raise unless ``key`` is a ``jax.random`` key (new style, or a legacy ``uint32[2]``)."""
+    if checks.is_traced(key):
+        return
+    typed = isinstance(key, jax.Array) and jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)
+    legacy = np.shape(key) == (2,) and np.asarray(key).dtype == np.uint32
+    if not (typed or legacy):
+        raise ValueError(
+            f"key = {key!r} is not allowed; allowed: a jax.random key (jax.random.key(seed))"
+        )
+
+
+def _check_draw(key: Any, steps: Any, **levels: Any) -> None:
+    """Check a draw's key, length and levels where they are concrete (traced ones pass)."""
+    _check_key(key)
+    checks.check_int("steps", steps)
+    for name, value in levels.items():
+        if checks.is_traced(value):
+            continue
+        try:
+            if np.asarray(value).dtype.kind not in "iuf":
+                raise TypeError(value)
+            arr = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name} = {value!r} is not allowed; allowed: a number") from None
+        high = _LEVEL_LIMITS.get(name, 1.0)
+        closed_high = name in _LEVEL_LIMITS
+        ok = np.isfinite(arr) & (arr >= 0) & ((arr <= high) if closed_high else (arr < high))
+        upper = f"<= {high:g}" if closed_high else f"< {high:g}"
+        checks.require(name, arr, ok, f"a number >= 0 and {upper}")
+
+
 def sample_disturbance(
     key: jax.Array,
     refs: jax.Array,
@@ -390,6 +444,17 @@ def sample_disturbance(
         drawn independently at every sample, ``mismatch (N, 3)`` and
         ``delay (N,)`` in {0, 1}.
     """
+    _check_draw(
+        key,
+        steps,
+        noise_xy=noise_xy,
+        noise_theta=noise_theta,
+        latency=latency,
+        radius_mismatch=radius_mismatch,
+        mass_mismatch=mass_mismatch,
+    )
+    if not checks.is_traced(refs) and (np.ndim(refs) != 2 or np.shape(refs)[1] != 3):
+        raise ValueError(f"refs has shape {np.shape(refs)}; allowed: (N, 3)")
     refs = jnp.asarray(refs)
     n, dtype = refs.shape[0], refs.dtype
     k_noise, k_mis, k_delay = jax.random.split(key, 3)
@@ -429,7 +494,7 @@ def draw_disturbances(
         (distance 5–80 cm, any bearing, any heading), drawn by ``sample_poses``.
     """
     n = checks.check_int("n", n)
-    steps = checks.check_int("steps", steps)
+    _check_draw(key, steps, radius_mismatch=radius_mismatch, mass_mismatch=mass_mismatch)
     k_ref, k_rest = jax.random.split(key)
     refs = sample_poses(k_ref, n, dtype=jnp.float32)
     d = sample_disturbance(
@@ -444,15 +509,26 @@ def draw_disturbances(
     return tuple(np.asarray(a, dtype=float) for a in (refs, d.noise, d.mismatch))
 
 
-def _check_levels(noise_xy: Sequence[float], noise_deg: Sequence[float]) -> None:
+def _check_levels(noise_xy: Any, noise_deg: Any) -> tuple[list[float], list[float]]:
+    """Return the noise levels as lists of floats after checking them."""
+    levels = []
+    for name, seq in (("noise_xy", noise_xy), ("noise_deg", noise_deg)):
+        if isinstance(seq, (str, bytes)) or np.ndim(seq) != 1:
+            raise ValueError(
+                f"{name} = {seq!r} is not allowed; allowed: a sequence of levels, one per row"
+            )
+        levels.append(list(seq))
+    noise_xy, noise_deg = levels
     if len(noise_xy) != len(noise_deg) or not noise_xy:
         raise ValueError(
             f"noise_xy has {len(noise_xy)} levels and noise_deg {len(noise_deg)}; "
             "allowed: the same number, at least one"
         )
-    for name, seq, unit in (("noise_xy", noise_xy, "cm"), ("noise_deg", noise_deg, "degrees")):
+    limits = (("noise_xy", noise_xy, "cm", 1e6), ("noise_deg", noise_deg, "degrees", 360.0))
+    for name, seq, unit, high in limits:
         for i, value in enumerate(seq):
-            checks.check_number(f"{name}[{i}]", value, closed=True, unit=unit)
+            checks.check_number(f"{name}[{i}]", value, closed=True, high=high, unit=unit)
+    return [float(x) for x in noise_xy], [float(x) for x in noise_deg]
 
 
 def _summary_row(m: PoseMetrics) -> dict[str, Any]:
@@ -521,7 +597,10 @@ def monte_carlo(
         ValueError: for a bad count, noise level, mismatch bound or option.
     """
     n_runs = checks.check_int("n_runs", n_runs)
-    _check_levels(noise_xy, noise_deg)
+    _check_key(key)
+    noise_xy, noise_deg = _check_levels(noise_xy, noise_deg)
+    if not isinstance(latency, (bool, np.bool_)):
+        raise ValueError(f"latency = {latency!r} is not allowed; allowed: True or False")
     for name, value in (("radius_mismatch", radius_mismatch), ("mass_mismatch", mass_mismatch)):
         checks.check_number(name, value, high=1.0, closed=True)
     name = controllers.get_controller(controller).name
