@@ -155,3 +155,8 @@ def test_bad_inputs():
         pose_grid(10**14)
     with pytest.raises(ValueError, match="not known|allowed"):
         map_study(10, controller_names=["nope"])
+    # Every name is known before the first controller runs.
+    with pytest.raises(ValueError, match="controller = 'typo' is not known"):
+        map_study(10, controller_names=["shim-sung", "typo"])
+    with pytest.raises(ValueError, match=r"controller_names = \[\] is not allowed"):
+        map_study(10, controller_names=[])

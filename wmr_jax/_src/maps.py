@@ -262,6 +262,17 @@ def summarize(
         fraction of runs with any zig-zag, and against ``reference``: the
         fraction of poses where this controller arrives strictly earlier.
     """
+    v_max = checks.check_number("v_max", v_max, unit="cm/s")
+    sizes = {name: len(m.arrival) for name, m in results.items()}
+    if not results or min(sizes.values()) == 0 or len(set(sizes.values())) > 1:
+        raise ValueError(
+            f"results of {sizes} runs are not allowed; allowed: one or more controllers, each "
+            "over the same poses (at least one)"
+        )
+    if reference is not None and reference not in results:
+        raise ValueError(
+            f"reference = {reference!r} is not allowed; allowed: one of {list(results)}"
+        )
     if reference is None and controllers.SHIM_SUNG.name in results:
         reference = controllers.SHIM_SUNG.name
     rows = []
@@ -344,7 +355,7 @@ def map_study(
     Raises:
         ValueError: for a bad count, heading, controller or option.
     """
-    names = list(controller_names) if controller_names else controllers.registered_names()
+    names = controllers.controller_names(controller_names)
     grid = pose_grid(n_poses, headings_deg)
     results = {
         name: evaluate_poses(

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from wmr_jax._src import metrics
+from wmr_jax._src.checks import check_int, require
 from wmr_jax._src.controllers.shim_sung import wheel_speeds
 from wmr_jax._src.params import Gains, Robot, WheelSpeedWarning
 from wmr_jax._src.poses import paper_refs
@@ -90,8 +91,13 @@ def residual_bound(phi_m: Any) -> Any:
 
     Args:
         phi_m: ``Φ_m`` in rad, ``0 ≤ Φ_m < π/2``; any array shape.
+
+    Raises:
+        ValueError: for a ``Φ_m`` outside ``[0, π/2)`` (the bound has no meaning there).
     """
-    return np.sqrt(np.sin(phi_m) * np.tan(phi_m))
+    arr = np.asarray(phi_m, dtype=float)
+    require("phi_m", arr, (arr >= 0) & (arr < math.pi / 2), "0 <= phi_m < pi/2 rad")
+    return np.sqrt(np.sin(arr) * np.tan(arr))
 
 
 def fig6_curve(points: int = 400) -> dict[str, Any]:
@@ -99,6 +105,7 @@ def fig6_curve(points: int = 400) -> dict[str, Any]:
 
     Also ``mark_deg`` (70°, the paper's ``Φ_m``) and ``mark_cm``, the bound there.
     """
+    points = check_int("points", points, 2, 10**6)
     phi_deg = np.linspace(1.0, 89.0, points)
     return {
         "phi_m_deg": phi_deg,

@@ -664,7 +664,7 @@ def robustness_study(
         order), each ``monte_carlo``'s row with its ``"condition"`` first.
     """
     seed = checks.check_int("seed", seed, 0, 2**32 - 1)
-    names = list(controller_names) if controller_names else controllers.registered_names()
+    names = controllers.controller_names(controller_names)
     keys = jax.random.split(jax.random.PRNGKey(seed), len(ROBUSTNESS_CONDITIONS))
     rows = []
     for (label, radius, mass, latency), key in zip(ROBUSTNESS_CONDITIONS, keys, strict=True):

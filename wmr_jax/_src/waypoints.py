@@ -450,7 +450,7 @@ def soccer_study(
         A ``SoccerStudy``: a row and a run per controller and mode, with the
         settings they were run with.
     """
-    names = list(controller_names) if controller_names else controllers.registered_names()
+    names = controllers.controller_names(controller_names)
     wp = soccer_waypoints()
     modes = (("stop", None, None), ("pass", pass_tol_r, pass_tol_theta))
     rows, runs = [], []

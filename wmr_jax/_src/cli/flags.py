@@ -83,11 +83,12 @@ def _writable(flag: str, text: str, *, folder: bool) -> Path:
                     f"{flag} {text!r} is not allowed; {str(parent)!r} is a file, not a folder"
                 )
             break
-    # Try it now, not after minutes of work: make the folder and write a file there.
-    folder_path = path if folder else path.parent
+    # Try it now, not after minutes of work, and create nothing: write (and
+    # remove) a file in the deepest folder of the path that exists.
+    existing = next(p for p in (path, *path.parents) if p.exists() or p == Path(p.anchor))
+    existing = existing if existing.is_dir() else existing.parent
     try:
-        folder_path.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=folder_path):
+        with tempfile.TemporaryFile(dir=existing):
             pass
     except OSError as err:
         raise ValueError(
@@ -98,7 +99,7 @@ def _writable(flag: str, text: str, *, folder: bool) -> Path:
 
 
 def output_dir(flag: str, text: str) -> Path:
-    """Return a folder the command may write to (created now, if missing), or say why not."""
+    """Return a folder the command may write to (created later), or say why not."""
     return _writable(flag, text, folder=True)
 
 

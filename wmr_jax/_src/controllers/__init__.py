@@ -7,6 +7,7 @@ import the Shim–Sung error coordinates, so Shim–Sung is registered first.
 from wmr_jax._src.controllers.aicardi import AICARDI as AICARDI
 from wmr_jax._src.controllers.astolfi import ASTOLFI as ASTOLFI
 from wmr_jax._src.controllers.base import Controller as Controller
+from wmr_jax._src.controllers.base import controller_names as controller_names
 from wmr_jax._src.controllers.base import get_controller as get_controller
 from wmr_jax._src.controllers.base import register_controller as register_controller
 from wmr_jax._src.controllers.base import registered_names as registered_names

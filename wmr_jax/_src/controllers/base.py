@@ -18,7 +18,13 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-__all__ = ["Controller", "get_controller", "register_controller", "registered_names"]
+__all__ = [
+    "Controller",
+    "controller_names",
+    "get_controller",
+    "register_controller",
+    "registered_names",
+]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -130,3 +136,30 @@ def get_controller(name: str | Controller) -> Controller:
         raise ValueError(
             f"controller = {name!r} is not known; allowed: {sorted(_REGISTRY)}"
         ) from None
+
+
+def controller_names(names: Any) -> list[str]:
+    """Return the registered names a study runs, checked before any runs.
+
+    ``names``: names or ``Controller`` values (registered), one name alone, or
+    ``None`` for every registered controller.
+
+    Raises:
+        ValueError: naming the first one that is not registered.
+    """
+    if names is None:
+        return registered_names()
+    if isinstance(names, (str, Controller)):
+        names = [names]
+    out = []
+    for name in names:
+        controller = get_controller(name)
+        if _REGISTRY.get(controller.name) != controller:
+            raise ValueError(
+                f"controller {controller.name!r} is not registered; allowed: a registered "
+                "controller (wmr_jax.register_controller)"
+            )
+        out.append(controller.name)
+    if not out:
+        raise ValueError("controller_names = [] is not allowed; allowed: at least one controller")
+    return out
