@@ -176,3 +176,14 @@ def test_shard_validates_its_input():
     one = w.shard(np.zeros((5, 3)), devices=jax.devices()[:1])  # one device: no padding
     assert one.n == one.n_padded == 5
     np.testing.assert_array_equal(w.unpad(np.arange(8), 5), np.arange(5))
+    for n in (-1, 9, True):
+        with pytest.raises(ValueError, match=f"n = {n!r} is not allowed"):
+            w.unpad(np.arange(8), n)
+    rows = [[30.0, 30.0, 0.0], [20.0, -10.0, 1.0]]
+    assert w.shard(rows, devices=jax.devices()[:1]).n == 2  # a list of rows is an array
+    with pytest.raises(ValueError, match="allowed: JAX devices"):
+        w.shard(np.zeros((4, 3)), devices=[0])
+    with pytest.raises(ValueError, match="names a device twice"):
+        w.shard(np.zeros((4, 3)), devices=jax.devices()[:1] * 2)
+    with pytest.raises(ValueError, match="allowed: numbers"):
+        w.shard(np.array(["a", "b"]))

@@ -170,6 +170,10 @@ def test_bad_inputs_are_named_before_tracing():
     bad[3, 1] = np.nan
     with pytest.raises(ValueError, match=r"refs\[3\]"):
         w.sweep(bad, chunk_size=2)
+    with pytest.raises(ValueError, match="on_chunk = 5 is not allowed"):
+        w.sweep(refs, on_chunk=5)
+    with pytest.raises(ValueError, match="allowed: JAX devices"):
+        w.sweep(refs, devices=[0])
 
 
 def test_every_run_is_checked_as_final_poses_checks_it():

@@ -33,11 +33,13 @@ from typing import Any, NamedTuple
 import jax
 import numpy as np
 
+from wmr_jax._src import checks
 from wmr_jax._src.checks import check_int
 
 __all__ = [
     "ShardedBatch",
     "batch_sharding",
+    "checked_devices",
     "multihost_recipe",
     "shard",
     "unpad",
@@ -109,11 +111,29 @@ def batch_sharding(devices: Sequence[Any] | None = None) -> jax.sharding.NamedSh
         devices: devices in order; default ``jax.devices()`` (every device of
             every process).
     """
-    devices = list(jax.devices() if devices is None else devices)
-    if not devices:
-        raise ValueError("devices = [] is not allowed; allowed: at least one device")
+    devices = checked_devices(jax.devices() if devices is None else devices)
     mesh = jax.sharding.Mesh(np.asarray(devices), (BATCH_AXIS,))
     return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec(BATCH_AXIS))
+
+
+def checked_devices(devices: Sequence[Any]) -> list[Any]:
+    """Return ``devices`` as a list after checking each is a JAX device, once.
+
+    Raises:
+        ValueError: for none, something else than a device, or a repeat.
+    """
+    devices = list(devices)
+    if not devices:
+        raise ValueError("devices = [] is not allowed; allowed: at least one device")
+    for device in devices:
+        if not isinstance(device, jax.Device):
+            raise ValueError(
+                f"devices holds {device!r}; allowed: JAX devices "
+                "(jax.devices(), jax.local_devices())"
+            )
+    if len(set(devices)) != len(devices):
+        raise ValueError("devices names a device twice; allowed: each device once")
+    return devices
 
 
 def shard(batch: Any, devices: Sequence[Any] | None = None) -> ShardedBatch:
@@ -137,6 +157,8 @@ def shard(batch: Any, devices: Sequence[Any] | None = None) -> ShardedBatch:
     """
     sharding = batch_sharding(devices)
     count = len(sharding.mesh.devices.flat)
+    if isinstance(batch, list) and all(isinstance(row, (list, tuple, float, int)) for row in batch):
+        batch = np.asarray(batch)  # a nested list of numbers works as an array
     leaves = jax.tree.leaves(batch)
     if not leaves:
         raise ValueError("batch is empty; allowed: an array or a pytree of arrays")
@@ -151,6 +173,10 @@ def shard(batch: Any, devices: Sequence[Any] | None = None) -> ShardedBatch:
 
     def place(leaf: Any) -> jax.Array:
         host = np.asarray(leaf)
+        if host.dtype.kind not in "biufc":
+            raise ValueError(f"batch holds {host.dtype} values; allowed: numbers")
+        if host.dtype.kind == "f" and not isinstance(leaf, jax.Array):
+            checks.require_representable("batch", host)
         if padded > n:
             host = np.concatenate([host, np.repeat(host[-1:], padded - n, axis=0)])
         if isinstance(leaf, jax.Array):
@@ -163,7 +189,15 @@ def shard(batch: Any, devices: Sequence[Any] | None = None) -> ShardedBatch:
 
 
 def unpad(result: Any, n: int) -> Any:
-    """Return ``result`` (an array or pytree) without the rows ``shard`` added: ``[:n]``."""
+    """Return ``result`` (an array or pytree) without the rows ``shard`` added: ``[:n]``.
+
+    Raises:
+        ValueError: unless ``1 <= n <=`` the leading length of every leaf.
+    """
+    longest = min(
+        (np.shape(leaf)[0] for leaf in jax.tree.leaves(result) if np.ndim(leaf)), default=0
+    )
+    n = check_int("n", n, 1, max(longest, 1))
     return jax.tree.map(lambda leaf: leaf[:n], result)
 
 

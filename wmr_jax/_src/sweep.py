@@ -46,6 +46,7 @@ from wmr_jax._src import checks, io, loops, metrics
 from wmr_jax._src import rollout as simulation
 from wmr_jax._src.controllers import SHIM_SUNG, Controller
 from wmr_jax._src.params import Robot, validate_robot
+from wmr_jax._src.sharding import checked_devices
 
 __all__ = ["DEFAULT_CHUNK_SIZE", "SWEEP_FIELDS", "sweep"]
 
@@ -202,9 +203,7 @@ def _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, device
         refs = np.asarray(refs)  # lists work as arrays (a memmap stays as it is)
     n = _pose_count(refs)
     chunk_size = checks.check_int("chunk_size", chunk_size)
-    devices = tuple(jax.local_devices() if devices is None else devices)
-    if not devices:
-        raise ValueError("devices = () is not allowed; allowed: at least one device")
+    devices = tuple(checked_devices(jax.local_devices() if devices is None else devices))
     gains = options.controller.default_params() if gains is None else gains
     robot = Robot() if robot is None else robot
     if n > 1:
@@ -614,6 +613,8 @@ def sweep(
         wheel_limit=wheel_limit,
     )
     thresholds = _thresholds(tol_r, tol_theta, v_dead_band, omega_dead_band)
+    if on_chunk is not None and not callable(on_chunk):
+        raise ValueError(f"on_chunk = {on_chunk!r} is not allowed; allowed: a function or None")
     job = _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, devices)
     store = None if out is None else _ChunkStore(Path(out), _settings(job))
     results = _empty_results(job)
