@@ -474,10 +474,11 @@ def _leg_summary(run: ChainRun) -> dict[str, Any]:
     """Return the arrival at each waypoint, the slowest leg, path and zig-zag of a run."""
     arrival = np.asarray(run.arrival, dtype=float)
     row: dict[str, Any] = {f"leg {i + 1} s": float(t) for i, t in enumerate(arrival)}
-    legs = np.diff(np.concatenate([[0.0], arrival]))
     # A waypoint never reached makes its leg, and every later one, infinite
     # (inf − inf would be NaN).
-    legs[np.flatnonzero(~np.isfinite(arrival))] = np.inf
+    with np.errstate(invalid="ignore"):
+        legs = np.diff(np.concatenate([[0.0], arrival]))
+    legs[~np.isfinite(arrival)] = np.inf
     row["slowest leg s"] = float(np.max(legs))
     row["path cm"] = float(np.sum(np.asarray(run.trajectory.distance)))
     row["zigzag"] = int(metrics.zigzag_count(run.trajectory))
