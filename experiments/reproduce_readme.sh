@@ -27,7 +27,7 @@ for stage in $STAGES; do
     compare)  # the controller table: 200,000 random poses, sample_poses seed 0
       wmr-jax compare --out "$OUT/compare" --poses 200000 --seed 0 --no-progress
       cp "$OUT/compare/comparison.json" docs/data/comparison.json ;;
-    maps)  # the grid maps: 1000 x 1000 positions x 4 headings, 995,200 inside 5-80 cm
+    maps)  # the grid maps: 565 x 565 positions x 4 headings, 995,200 inside 5-80 cm
       wmr-jax sweep --out "$OUT/maps" --poses 1000000 --no-progress \
         --controller shim-sung aicardi astolfi-corke
       cp "$OUT/maps/maps_shim-sung.png" "$OUT/maps/winner.png" docs/
@@ -54,7 +54,7 @@ for stage in $STAGES; do
     compare-tuning)  # gradient vs CMA-ES vs random search, 3 seeds (about 7 minutes)
       wmr-jax tune --out "$OUT/tune-compare" --compare ;;
     bench)
-      wmr-jax bench --json "$OUT/bench.json" ;;
+      wmr-jax bench --json "$OUT/bench.json" --wait-idle 60 ;;
     *) echo "unknown stage $stage" >&2; exit 2 ;;
   esac
 done
