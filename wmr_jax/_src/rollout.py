@@ -59,8 +59,9 @@ __all__ = [
 
 DEFAULT_DT = 0.033
 MAX_TEMPERATURE = 10.0
-# Below this the relaxed law equals the hard one to the last bit of float64;
-# far below it its switches' arguments would leave the float32 range.
+# At 1e-12 the relaxed law is the hard one except within ~1e-10 of a switch
+# (in its dimensionless arguments); far below, those arguments divided by the
+# temperature would leave the float32 range.
 MIN_TEMPERATURE = 1e-12
 
 
