@@ -275,3 +275,14 @@ def test_relaxed_saturation_slope_is_the_logistic_one(r):
     excess = (r * ((math.pi / 2) / r_m) - math.pi / 2) / t
     want = (math.pi / 2) / r_m * (1.0 - 1.0 / (1.0 + math.exp(-excess)))
     np.testing.assert_allclose(float(slope), want, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("x64", [False, True])
+def test_relaxed_saturation_holds_for_far_references(x64):
+    # π r / (2 R_m) far above π/2: the soft minimum must not cancel to noise
+    # (it gave v = -20 cm/s at 3e8 cm in float32, 118 cm/s > k_r at 1e17).
+    gains = w.Gains(kr=60.0)
+    with jax.enable_x64(x64):
+        for x in (1e7, 3e8, 1e9, 1e17):
+            v, _ = w.control([0.0, 0.0, 0.0], [x, 0.0, 0.0], gains, temperature=0.01)
+            assert float(v) == pytest.approx(60.0, rel=1e-6), x

@@ -203,28 +203,24 @@ def sgn(x: jax.Array, *, temperature: float | None = None) -> jax.Array:
 def saturated_distance(r: jax.Array, r_m: jax.Array, *, temperature: float | None = None):
     """Return ``r̄_e = min(π r_e / (2 R_m), π/2)`` in rad (docs/model.md §3, before Eq. 6).
 
-    The relaxed form is a soft minimum with width ``temperature`` in rad.
+    The relaxed form is a soft minimum with width ``temperature`` in rad,
+    ``ℓ − T softplus((ℓ − π/2)/T)`` for ``ℓ = π r_e / (2 R_m)``, evaluated as
+    ``min(ℓ, π/2) − T log(1 + e^{−|ℓ − π/2|/T})``. That equal form never
+    subtracts two large numbers: written as the first, a reference
+    3e8 cm away (float32) gave ``r̄_e`` as rounding noise and ``|v| > k_r``.
+    ``min`` and ``|·|`` are selections on ``ℓ > π/2``, so the slope is
+    ``1 − σ((ℓ − π/2)/T)`` everywhere, ``1/2`` at the tie included. ``log`` of
+    a number in ``[1, 2]`` rather than ``log1p``, which XLA:CPU evaluates
+    several times slower: the absolute error is about an ulp of 1.
     """
     linear = r * ((jnp.pi / 2) / r_m)  # the factor is per gain set, not per step
     if temperature is None:
         return jnp.minimum(linear, jnp.pi / 2)
     excess = linear - jnp.pi / 2
-    return linear - temperature * _softplus(excess / temperature)
-
-
-def _softplus(x: jax.Array) -> jax.Array:
-    """Return ``log(1 + eˣ)``, as ``max(x, 0) + log(1 + e^{−|x|})``.
-
-    Not ``jax.nn.softplus``: it takes the last term with ``log1p``, which
-    XLA:CPU evaluates several times slower than ``log``. ``1 + e^{−|x|}``
-    lies in ``[1, 2]``, so ``log`` of it is within half an ulp of 1 of the
-    exact value (an absolute error, about 1e-16 in float64 and 6e-8 in
-    float32). ``max`` and ``|x|`` are written as selections on ``x > 0`` so
-    that the derivative is ``σ(x)`` everywhere, ``1/2`` at ``x = 0`` included
-    (``jnp.maximum`` and ``jnp.abs`` would each take a one-sided slope there).
-    """
-    positive = x > 0
-    return jnp.where(positive, x, 0.0) + jnp.log(1.0 + jnp.exp(jnp.where(positive, -x, x)))
+    above = excess > 0
+    nearest = jnp.where(above, jnp.pi / 2, linear)
+    gap = jnp.where(above, -excess, excess)  # −|excess|
+    return nearest - temperature * jnp.log(1.0 + jnp.exp(gap / temperature))
 
 
 def direction_flag(err: PolarError, phi_m: jax.Array, *, temperature: float | None = None):
