@@ -18,6 +18,8 @@ import numpy as np
 
 __all__ = [
     "MAX_STEPS",
+    "MAX_TEMPERATURE",
+    "MIN_TEMPERATURE",
     "Parameters",
     "as_float_tree",
     "as_pose_array",
@@ -25,6 +27,7 @@ __all__ = [
     "check_dt",
     "check_int",
     "check_number",
+    "check_temperature",
     "field_values",
     "float_dtype",
     "is_traced",
@@ -37,6 +40,11 @@ __all__ = [
 
 
 MAX_STEPS = 2**31 - 1  # a scan's length is an int32
+MAX_TEMPERATURE = 10.0
+# At 1e-12 the relaxed law is the hard one except within ~1e-10 of a switch
+# (in its dimensionless arguments); far below, those arguments divided by the
+# temperature would leave the float32 range.
+MIN_TEMPERATURE = 1e-12
 _FLOAT64_HINT = ", or float64 (jax.config.update('jax_enable_x64', True))"
 
 
@@ -96,6 +104,15 @@ def check_number(
             f"{name} = {value!r} is not allowed; allowed: a number {sign} {low:g}{upper}{suffix}"
         )
     return number
+
+
+def check_temperature(name: str, value: Any) -> float:
+    """Return a smooth-law temperature as a float in ``[MIN_TEMPERATURE, MAX_TEMPERATURE)``.
+
+    The relaxed switches act on dimensionless arguments of order one; far
+    above 1 the relaxation no longer resembles the law (docs/model.md §3).
+    """
+    return check_number(name, value, low=MIN_TEMPERATURE, closed=True, high=MAX_TEMPERATURE)
 
 
 def check_dt(dt: Any) -> Any:

@@ -20,11 +20,12 @@ import numpy as np
 from wmr_jax._src import velocity_loop
 from wmr_jax._src.checks import (
     MAX_STEPS,
+    MAX_TEMPERATURE,
     as_float_tree,
     as_poses,
     check_dt,
     check_int,
-    check_number,
+    check_temperature,
     float_dtype,
     is_traced,
 )
@@ -58,11 +59,6 @@ __all__ = [
 ]
 
 DEFAULT_DT = 0.033
-MAX_TEMPERATURE = 10.0
-# At 1e-12 the relaxed law is the hard one except within ~1e-10 of a switch
-# (in its dimensionless arguments); far below, those arguments divided by the
-# temperature would leave the float32 range.
-MIN_TEMPERATURE = 1e-12
 
 
 class Trajectory(NamedTuple):
@@ -105,15 +101,6 @@ _final_poses_jit = EntryJit(batched(_final_pose), static_argnames=("options",))
 
 
 # ---------------------------------------------------------------- boundary checks
-
-
-def check_temperature(name: str, value: Any) -> float:
-    """Return a smooth-law temperature as a float in ``[MIN_TEMPERATURE, MAX_TEMPERATURE)``.
-
-    The relaxed switches act on dimensionless arguments of order one; far
-    above 1 the relaxation no longer resembles the law (docs/model.md §3).
-    """
-    return check_number(name, value, low=MIN_TEMPERATURE, closed=True, high=MAX_TEMPERATURE)
 
 
 def make_options(

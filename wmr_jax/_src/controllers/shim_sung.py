@@ -37,7 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks import as_float_tree, as_pose_array, is_traced
+from wmr_jax._src.checks import as_float_tree, as_pose_array, check_temperature, is_traced
 from wmr_jax._src.controllers.base import Controller, register_controller
 from wmr_jax._src.dynamics import sin_cos, sin_small
 from wmr_jax._src.params import Gains, Robot, check_feasible, check_sampling, validate_gains
@@ -120,6 +120,9 @@ def polar_error(
         A ``PolarError`` whose fields have the broadcast leading shape.
     """
     if frame is None:
+        if not is_traced((pose, ref)):
+            # Called with values: NaN must not read as "at the goal" (r_e = 0).
+            pose, ref = _checked_pair(pose, ref)
         x, y = pose[..., 0], pose[..., 1]
         cos_c, sin_c = sin_cos(pose[..., 2])
     else:
@@ -301,6 +304,8 @@ def commands(
 
 def region_label(err: PolarError, gains: Gains) -> jax.Array:
     """Return the region 0–3 of docs/model.md §3, by the same order of tests as ``blend``."""
+    if isinstance(gains, Gains) and not is_traced(gains):
+        validate_gains(gains)
     d = direction_flag(err, gains.phi_m)
     return jnp.where(
         err.r <= gains.r_e, 0, jnp.where(d == 0, 3, jnp.where(err.r < gains.r_a, 1, 2))
@@ -344,6 +349,8 @@ def control(
     if frame is None and not is_traced((pose, ref, gains)):
         # Called by a user with values: check them, and run the law as one
         # compiled program rather than op by op.
+        if temperature is not None:
+            temperature = check_temperature("temperature", temperature)
         return _control_jit(*_checked(pose, ref, gains), temperature=temperature)
     return commands(polar_error(pose, ref, frame=frame), gains, temperature=temperature)
 
@@ -355,10 +362,8 @@ def _control(pose, ref, gains, *, temperature):
 _control_jit = jax.jit(_control, static_argnames=("temperature",))
 
 
-def _checked(pose: Any, ref: Any, gains: Gains) -> tuple[Any, Any, Gains]:
-    """Check concrete arguments of the public law functions (tracers pass)."""
-    if is_traced((pose, ref, gains)):
-        return pose, ref, gains
+def _checked_pair(pose: Any, ref: Any) -> tuple[Any, Any]:
+    """Check concrete poses ``(..., 3)`` that must broadcast against each other."""
     pose, ref = as_pose_array("pose", pose), as_pose_array("ref", ref)
     try:
         np.broadcast_shapes(pose.shape[:-1], ref.shape[:-1])
@@ -367,6 +372,14 @@ def _checked(pose: Any, ref: Any, gains: Gains) -> tuple[Any, Any, Gains]:
             f"pose has batch shape {pose.shape[:-1]} and ref {ref.shape[:-1]}; "
             "allowed: shapes that broadcast"
         ) from None
+    return pose, ref
+
+
+def _checked(pose: Any, ref: Any, gains: Gains) -> tuple[Any, Any, Gains]:
+    """Check concrete arguments of the public law functions (tracers pass)."""
+    if is_traced((pose, ref, gains)):
+        return pose, ref, gains
+    pose, ref = _checked_pair(pose, ref)
     return pose, ref, as_float_tree(validate_gains(gains))
 
 
