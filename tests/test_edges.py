@@ -268,10 +268,22 @@ def test_com_offset_is_allowed_up_to_the_body_edge():
 @pytest.mark.parametrize(
     ("call", "message"),
     [
-        (lambda: w.control([0.0, 0.0, 0.0], REF, temperature=-1.0), "temperature = -1.0"),
-        (lambda: w.control([0.0, 0.0, 0.0], REF, temperature=10.0), "temperature = 10.0"),
-        (lambda: w.control([0.0, 0.0, 0.0], REF, temperature=np.nan), "temperature = nan"),
-        (lambda: w.control([0.0, 0.0, 0.0], REF, temperature=True), "temperature = True"),
+        (
+            lambda: w.control([0.0, 0.0, 0.0], REF, w.Gains(), temperature=-1.0),
+            "temperature = -1.0",
+        ),
+        (
+            lambda: w.control([0.0, 0.0, 0.0], REF, w.Gains(), temperature=10.0),
+            "temperature = 10.0",
+        ),
+        (
+            lambda: w.control([0.0, 0.0, 0.0], REF, w.Gains(), temperature=np.nan),
+            "temperature = nan",
+        ),
+        (
+            lambda: w.control([0.0, 0.0, 0.0], REF, w.Gains(), temperature=True),
+            "temperature = True",
+        ),
         # A NaN pose is not "at the goal" (r_e = 0), and a (2,) ref is no pose.
         (lambda: w.polar_error(jax.numpy.array([np.nan, 0.0, 0.0]), REF), "pose = .* not finite"),
         (lambda: w.polar_error([0.0, 0.0, 0.0], [30.0, 30.0]), r"ref has shape \(2,\)"),
