@@ -102,3 +102,20 @@ def test_tracers_skip_validation_inside_user_transforms():
         return w.rollout([20.0, 5.0, 0.0], w.Gains(kr=kr), steps=5).poses[-1, 0]
 
     assert np.isfinite(float(jax.jit(jax.grad(loss))(60.0)))
+
+
+def test_batch_sizes_underflow_and_sampling_checks_name_the_field():
+    with pytest.raises(ValueError, match=r"batch sizes differ \(gains.kr: 4, gains.k_theta: 5\)"):
+        w.control_diagnostics(
+            [0.0, 0.0, 0.0], [30.0, 30.0, 0.0], w.Gains(kr=[10.0, 20, 30, 40], k_theta=[1.0] * 5)
+        )
+    with pytest.raises(ValueError, match=r"batch sizes differ \(gains.kr: 3, robot.v_max: 2\)"):
+        w.check_feasible(w.Gains(kr=[10.0, 20, 30]), w.Robot(v_max=[100.0, 200]))
+    # 1e-46 cm is 0 in float32: refused as such, not found as NaN after the run.
+    with jax.enable_x64(False), pytest.raises(ValueError, match=r"gains.r_m = 1e-46 is below"):
+        w.control([0.0, 0.0, 0.0], [0.0, 0.0, 0.0], w.Gains(r_m=1e-46, r_a=1e-46, r_e=1e-46))
+    for dt in (-1.0, 0, True):
+        with pytest.raises(ValueError, match=f"dt = {dt!r} is not allowed"):
+            w.check_sampling(w.Gains(), dt)
+    with pytest.raises(ValueError, match="gains.kr = -1.0"):
+        w.check_sampling(w.Gains(kr=-1.0), 0.033)

@@ -195,13 +195,28 @@ def field_values(
         require(name, arr, np.isfinite(arr), "a finite number")
         require_representable(name, arr)
         out[field.name] = arr
+    sizes = {f"{prefix}.{k}": v.shape[0] for k, v in out.items() if v is not None and v.ndim}
+    if len(set(sizes.values())) > 1:
+        shown = ", ".join(f"{k}: {n}" for k, n in sizes.items())
+        raise ValueError(f"batch sizes differ ({shown}); allowed: one common N")
     return out
 
 
 def require_representable(name: str, value: np.ndarray) -> None:
-    """Raise unless ``value`` stays finite in the compute dtype (float32 by default)."""
+    """Raise unless ``value`` stays finite, and nonzero if it is, in the compute dtype.
+
+    A value below the dtype's smallest normal number (``1e-46`` in float32)
+    would become 0 or lose its precision there.
+    """
     dtype = np.dtype(float_dtype())
-    largest = float(np.finfo(dtype).max)
+    largest, tiny = float(np.finfo(dtype).max), float(np.finfo(dtype).tiny)
+    small = (value != 0) & (np.abs(value) < tiny)
+    if np.any(small):
+        raise ValueError(
+            f"{name} = {_shown(value, small)} is below {dtype.name}'s smallest normal number "
+            f"({tiny:.3g}); allowed: 0 or a larger magnitude"
+            + (_FLOAT64_HINT if dtype != np.float64 else "")
+        )
     ok = np.abs(value) <= largest
     if not np.all(ok):
         wider = _FLOAT64_HINT if dtype != np.float64 else ""

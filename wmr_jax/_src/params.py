@@ -20,7 +20,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from wmr_jax._src.checks import Parameters, field_values, require
+from wmr_jax._src.checks import Parameters, check_dt, field_values, require
 
 __all__ = [
     "Gains",
@@ -221,7 +221,17 @@ def check_feasible(
         stacklevel: passed to ``warnings.warn`` (which caller the warning names).
     """
     robot = validate_robot(Robot() if robot is None else robot)
-    bound = np.asarray(wheel_speed_bound(validate_gains(gains), robot), dtype=float)
+    gains = validate_gains(gains)
+    sizes = {
+        f"{name}.{f.name}": np.shape(getattr(obj, f.name))[0]
+        for name, obj in (("gains", gains), ("robot", robot))
+        for f in dataclasses.fields(obj)
+        if np.ndim(getattr(obj, f.name)) == 1 and np.shape(getattr(obj, f.name))[0] != 1
+    }
+    if len(set(sizes.values())) > 1:
+        shown = ", ".join(f"{k}: {n}" for k, n in sizes.items())
+        raise ValueError(f"batch sizes differ ({shown}); allowed: one common N, or 1")
+    bound = np.asarray(wheel_speed_bound(gains, robot), dtype=float)
     v_max = np.asarray(robot.v_max, dtype=float)
     feasible = bound <= v_max * (1 + 1e-12)
     if warn and not np.all(feasible):
@@ -247,7 +257,12 @@ def sampling_margins(gains: Gains, dt: Any) -> tuple[Any, Any]:
 
 
 def check_sampling(gains: Gains, dt: Any, *, stacklevel: int = 2) -> bool:
-    """Warn (``SamplingWarning``) and return False if either sampling margin is 2 or more."""
+    """Warn (``SamplingWarning``) and return False if either sampling margin is 2 or more.
+
+    Raises:
+        ValueError: for gains out of range or a ``dt`` that is not a period.
+    """
+    gains, dt = validate_gains(gains), check_dt(dt)
     heading, distance = (np.max(np.asarray(m, dtype=float)) for m in sampling_margins(gains, dt))
     if heading < 2 and distance < 2:
         return True
