@@ -203,3 +203,9 @@ def test_bad_substeps_are_rejected():
         )
     with pytest.raises(ValueError, match="wheel_limit"):
         w.rollout([10.0, 0.0, 0.0], velocity="nonideal", wheel_limit="squash")
+    # The integral gain stiffens the loop too: k_i = 1e6 s⁻² is a 1000 s⁻¹ mode,
+    # which needs 1000 * 0.033 / 2.5 = 13.2, so 14 sub-steps.
+    with pytest.raises(ValueError, match=r"substeps = 10 .*integral_gain.*substeps >= 14"):
+        w.rollout([10.0, 0.0, 0.0], velocity="nonideal", robot=w.Robot(integral_gain=1e6))
+    with pytest.raises(ValueError, match=r"allowed: a smaller speed_gain or integral_gain"):
+        w.rollout([10.0, 0.0, 0.0], velocity="nonideal", robot=w.Robot(speed_gain=1e30))

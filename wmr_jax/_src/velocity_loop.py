@@ -69,6 +69,7 @@ DEFAULT_SUBSTEPS = 10
 
 # RK4 is stable on ẏ = −k y for k h < 2.785; keep a margin, the loop is
 # nonlinear once torques saturate.
+MAX_SUBSTEPS = 2**31 - 1  # a scan's length is an int32
 _MAX_STIFFNESS = 2.5
 
 
@@ -394,16 +395,28 @@ def advance(
 def check_stability(robot: Robot, dt: float, substeps: int) -> None:
     """Raise ``ValueError`` if the inner sub-step is too long for the loop's stiffness.
 
-    RK4 on the wheel loop needs ``speed_gain · dt / substeps ≤ 2.5``.
+    The wheel loop's error obeys ``ë + k_p ė + k_i e = 0``; its fastest mode
+    has ``|λ| = max((k_p + √(k_p² − 4 k_i)) / 2, √k_i)`` (``k_p`` when
+    ``k_i = 0``), and RK4 needs ``|λ| dt / substeps ≤ 2.5``.
     """
-    gain = robot.speed_gain
-    if isinstance(gain, jax.core.Tracer) or isinstance(dt, jax.core.Tracer):
+    gain, integral = robot.speed_gain, robot.integral_gain
+    if any(isinstance(x, jax.core.Tracer) for x in (gain, integral, dt)):
         return
-    stiffness = float(np.max(np.asarray(gain, dtype=float))) * float(dt) / substeps
-    if stiffness > _MAX_STIFFNESS:
-        need = math.ceil(float(np.max(np.asarray(gain))) * float(dt) / _MAX_STIFFNESS)
+    k_p = np.asarray(gain, dtype=float)
+    k_i = np.asarray(integral, dtype=float)
+    fastest = float(
+        np.max(np.maximum((k_p + np.sqrt(np.maximum(k_p**2 - 4 * k_i, 0.0))) / 2, np.sqrt(k_i)))
+    )
+    if fastest * float(dt) / substeps > _MAX_STIFFNESS:
+        need = math.ceil(fastest * float(dt) / _MAX_STIFFNESS)
+        allowed = (
+            f"substeps >= {need}"
+            if need <= MAX_SUBSTEPS
+            else f"a smaller speed_gain or integral_gain ({need:.3g} substeps, beyond 2^31 - 1)"
+        )
         raise ValueError(
             f"substeps = {substeps} is not allowed for robot.speed_gain = "
-            f"{float(np.max(np.asarray(gain))):g} 1/s and dt = {float(dt):g} s; allowed: "
-            f"substeps >= {need} (speed_gain * dt / substeps <= {_MAX_STIFFNESS})"
+            f"{float(np.max(k_p)):g} 1/s, robot.integral_gain = {float(np.max(k_i)):g} 1/s² "
+            f"and dt = {float(dt):g} s (fastest wheel-loop mode {fastest:.4g} 1/s); allowed: "
+            f"{allowed} (|lambda| * dt / substeps <= {_MAX_STIFFNESS})"
         )
