@@ -65,3 +65,24 @@ def test_diagnostics_match_reference():
             for key in ("v", "omega", "d", "eps", "lyapunov", "r_e", "phi_e", "theta_e"):
                 # Same law, float64; a few ulps of reordering.
                 assert float(getattr(diag, key)[i]) == pytest.approx(exp[key], abs=1e-11), key
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"gains": w.Gains(kr=-60.0)}, "gains.kr = -60.0"),
+        ({"gains": w.Gains(kr=[60.0, 70.0])}, r"gains.kr has shape \(2,\)"),
+        ({"dt": 0.0}, "dt = 0.0"),
+        ({"steps": -1}, "steps = -1"),
+        ({"ref": [30.0, 30.0]}, r"ref has shape \(2,\)"),
+        ({"init": [float("nan"), 0.0, 0.0]}, r"init = \[nan, 0.0, 0.0\]"),
+        ({"robot": w.Robot(half_track=0.0)}, "robot.half_track = 0.0"),
+        ({"velocity": "nonideal", "substeps": 0}, "substeps = 0"),
+        ({"velocity": "nonideal", "wheel_limit": "bogus"}, "wheel_limit = 'bogus'"),
+        ({"velocity": "nonideal", "robot": w.Robot(speed_gain=1e4)}, "substeps = 10"),
+    ],
+)
+def test_the_reference_checks_its_inputs_as_rollout_does(kwargs, message):
+    args = {"ref": [30.0, 30.0, 0.0], "steps": 3, **kwargs}
+    with pytest.raises(ValueError, match=message):
+        w.reference_rollout(args.pop("ref"), **args)

@@ -13,7 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from wmr_jax._src.params import Gains, Robot
+from wmr_jax._src.checks import MAX_HEADING, MAX_STEPS, check_dt, check_int
+from wmr_jax._src.params import Gains, Robot, validate_gains, validate_robot
+from wmr_jax._src.velocity_loop import check_stability
 
 __all__ = ["reference_control", "reference_diagnostics", "reference_rollout"]
 
@@ -51,8 +53,14 @@ def _sgn(x: float) -> float:
 
 def reference_diagnostics(pose: Any, ref: Any, gains: Gains) -> dict[str, float]:
     """Return the command and every intermediate of the law for one pose (docs/model.md §2–3)."""
-    x_c, y_c, th_c = (float(u) for u in pose)
-    x_r, y_r, th_r = (float(u) for u in ref)
+    gains = _one_set(gains, validate_gains, "gains")
+    return _diagnostics(_one_pose("pose", pose), _one_pose("ref", ref), gains)
+
+
+def _diagnostics(pose: tuple, ref: tuple, gains: Gains) -> dict[str, float]:
+    """``reference_diagnostics`` on checked arguments (the rollout's inner call)."""
+    x_c, y_c, th_c = pose
+    x_r, y_r, th_r = ref
     kr, k_th = float(gains.kr), float(gains.k_theta)
     phi_m, r_m, r_a, r_e_lim, alpha = (
         float(gains.phi_m),
@@ -98,6 +106,38 @@ def reference_diagnostics(pose: Any, ref: Any, gains: Gains) -> dict[str, float]
         "phi_e": phi_e,
         "theta_e": theta_e,
     }
+
+
+def _one_pose(name: str, value: Any) -> tuple[float, float, float]:
+    """A checked pose ``[x, y, θ]`` as three floats (float64: this is the reference)."""
+    try:
+        if np.asarray(value).dtype.kind not in "iuf":
+            raise TypeError(value)
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"{name} = {value!r} is not allowed; allowed: [x cm, y cm, theta rad]"
+        ) from None
+    if arr.shape != (3,):
+        raise ValueError(f"{name} has shape {arr.shape}; allowed: (3,) [x cm, y cm, theta rad]")
+    if not np.all(np.isfinite(arr)) or abs(arr[2]) > MAX_HEADING:
+        raise ValueError(
+            f"{name} = {arr.tolist()} is not allowed; allowed: finite numbers, "
+            f"|theta| <= {MAX_HEADING:.0e} rad"
+        )
+    return float(arr[0]), float(arr[1]), float(arr[2])
+
+
+def _one_set(params: Any, validate: Any, name: str) -> Any:
+    """Validated scalar parameters: the reference runs one pose with one gain set and robot."""
+    params = validate(params)
+    for field, value in vars(params).items():
+        if np.ndim(value) != 0:
+            raise ValueError(
+                f"{name}.{field} has shape {np.shape(value)}; allowed: a number (the "
+                "reference runs one pose; batch with wmr_jax.batch_rollout)"
+            )
+    return params
 
 
 def reference_control(pose: Any, ref: Any, gains: Gains) -> tuple[float, float]:
@@ -216,19 +256,28 @@ def reference_rollout(
         arrays: ``poses (steps + 1, 3)``, ``v``, ``omega``, ``region``,
         ``wheel_speeds (steps, 2)``, ``distance``.
     """
-    gains = Gains() if gains is None else gains
-    robot = Robot() if robot is None else robot
+    gains = _one_set(Gains() if gains is None else gains, validate_gains, "gains")
+    robot = _one_set(Robot() if robot is None else robot, validate_robot, "robot")
     if velocity not in ("ideal", "nonideal"):
         raise ValueError(f"velocity = {velocity!r} is not allowed; allowed: ('ideal', 'nonideal')")
+    if wheel_limit not in ("clip", "scale"):
+        raise ValueError(
+            f"wheel_limit = {wheel_limit!r} is not allowed; allowed: ('clip', 'scale')"
+        )
+    dt, steps = float(check_dt(dt)), check_int("steps", steps, 1, MAX_STEPS)
+    substeps = check_int("substeps", substeps, 1, MAX_STEPS)
+    if velocity == "nonideal":
+        check_stability(robot, dt, substeps)  # the same bound as the JAX loop's
+    ref = _one_pose("ref", ref)
     loop = _Loop(robot)
-    x, y, th = (float(u) for u in init)
+    x, y, th = _one_pose("init", init)
     state = [0.0, 0.0, 0.0, 0.0]  # v, ω and the wheel loop's integrals
     poses = np.empty((steps + 1, 3))
     v_out, w_out, region = np.empty(steps), np.empty(steps), np.empty(steps, dtype=np.int32)
     rims, dist = np.empty((steps, 2)), np.empty(steps)
     poses[0] = x, y, th
     for k in range(steps):
-        out = reference_diagnostics((x, y, th), ref, gains)
+        out = _diagnostics((x, y, th), ref, gains)
         v, w = out["v"], out["omega"]
         if velocity == "ideal":
             x, y, th = _arc(x, y, th, v, w, dt)
