@@ -46,3 +46,16 @@ def test_paper_references_and_horizon():
     np.testing.assert_allclose(refs[0], [40.0, 0.0, math.radians(-45.0)])
     assert w.horizon_steps(0.033) == 182  # 6 s / 33 ms = 181.8 periods
     assert w.horizon_steps(0.1, 1.0) == 10
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"r_max": 1e39}, r"r_max = 1e\+39 is not allowed; allowed: a distance <= 1e\+18 cm"),
+        ({"dtype": "int32"}, "dtype = 'int32' is not allowed; allowed: float32 or float64"),
+        ({"dtype": bool}, "allowed: float32 or float64"),
+    ],
+)
+def test_sampler_refuses_what_it_cannot_draw(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        w.sample_poses(0, 2, **kwargs)

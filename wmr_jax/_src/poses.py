@@ -15,7 +15,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks import MAX_STEPS, check_dt, check_int, check_number, float_dtype
+from wmr_jax._src.checks import (
+    MAX_STEPS,
+    check_dt,
+    check_int,
+    check_number,
+    float_dtype,
+)
 
 __all__ = [
     "EVAL_R_MAX",
@@ -86,8 +92,20 @@ def sample_poses(
     n = check_int("n", n, 0, MAX_SAMPLES)
     r_min = check_number("r_min", r_min, closed=True, unit="cm")
     r_max = check_number("r_max", r_max, low=r_min, closed=True, unit="cm")
+    # Drawn in float32: positions within float32's position limit (1e18 cm;
+    # checks.position_limit), whatever the result's dtype.
+    limit = 10.0 ** math.floor(math.log10(math.sqrt(float(np.finfo(np.float32).max) / 8)))
+    if r_max > limit:
+        raise ValueError(f"r_max = {r_max!r} is not allowed; allowed: a distance <= {limit:.0e} cm")
+    dtype = float_dtype() if dtype is None else dtype
+    try:
+        ok = np.dtype(dtype) in (np.dtype(np.float32), np.dtype(np.float64))
+    except TypeError:
+        ok = False
+    if not ok:
+        raise ValueError(f"dtype = {dtype!r} is not allowed; allowed: float32 or float64")
     poses = _draw(key, n, jnp.float32(r_min), jnp.float32(r_max))
-    return poses.astype(float_dtype() if dtype is None else dtype)
+    return poses.astype(dtype)
 
 
 @functools.partial(jax.jit, static_argnums=1)
