@@ -241,3 +241,14 @@ def test_a_new_controller_needs_no_special_case():
         w.register_controller(dataclasses.replace(custom, name="test-bad", command=42))
     with pytest.raises(ValueError, match="allowed: a wmr_jax.Controller"):
         w.register_controller(lambda pose, ref, params: (0.0, 0.0))
+
+
+@pytest.mark.parametrize("law", ["aicardi_control", "astolfi_control"])
+def test_the_baselines_refuse_a_temperature_they_would_ignore(law):
+    from wmr_jax import controllers
+
+    params = w.AicardiGains() if law == "aicardi_control" else w.AstolfiGains()
+    with pytest.raises(ValueError, match="temperature = 0.5 is not allowed; allowed: None"):
+        getattr(controllers, law)(
+            jnp.zeros(3), jnp.array([30.0, 30.0, 0.0]), params, temperature=0.5
+        )

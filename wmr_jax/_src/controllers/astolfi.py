@@ -68,7 +68,11 @@ def astolfi_control(
         temperature: must be ``None``; the law has no smooth relaxation.
         frame: the pose as ``(x, y, cos θ, sin θ)`` (see ``shim_sung.polar_error``).
     """
-    del temperature  # no smooth relaxation: Controller.smooth is False
+    if temperature is not None:  # no smooth relaxation: Controller.smooth is False
+        raise ValueError(
+            f"temperature = {temperature!r} is not allowed; allowed: None (this law has no "
+            "smooth relaxation)"
+        )
     rho, alpha, theta_a, direction = driving_error(pose, ref, backward=gains.backward, frame=frame)
     alpha = jnp.clip(alpha, -jnp.pi / 2, jnp.pi / 2)
     v = direction * gains.k_rho * rho
