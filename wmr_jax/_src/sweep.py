@@ -319,7 +319,8 @@ class _ChunkStore:
         if not isinstance(before, dict) or before.get("fingerprint") == self.fingerprint:
             return
         if chunks:
-            changed = [k for k in settings if before.get(k) != json.loads(json.dumps(settings[k]))]
+            now = json.loads(json.dumps(settings, default=str))
+            changed = [k for k in settings if before.get(k) != now[k]]
             shown = ", ".join(
                 f"{k} {before.get(k)!r} -> {settings[k]!r}"
                 if k in ("n", "chunk", "dtype", "dt")
