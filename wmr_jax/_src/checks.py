@@ -202,15 +202,16 @@ def field_values(
     return out
 
 
-def require_representable(name: str, value: np.ndarray) -> None:
+def require_representable(name: str, value: np.ndarray, *, tiny_ok: bool = False) -> None:
     """Raise unless ``value`` stays finite, and nonzero if it is, in the compute dtype.
 
-    A value below the dtype's smallest normal number (``1e-46`` in float32)
-    would become 0 or lose its precision there.
+    A parameter below the dtype's smallest normal number (``1e-46`` in
+    float32) would become 0 or lose its precision there; ``tiny_ok`` allows
+    such values (data rather than parameters).
     """
     dtype = np.dtype(float_dtype())
     largest, tiny = float(np.finfo(dtype).max), float(np.finfo(dtype).tiny)
-    small = (value != 0) & (np.abs(value) < tiny)
+    small = (value != 0) & (np.abs(value) < tiny) & (not tiny_ok)
     if np.any(small):
         raise ValueError(
             f"{name} = {_shown(value, small)} is below {dtype.name}'s smallest normal number "

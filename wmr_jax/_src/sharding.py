@@ -176,7 +176,7 @@ def shard(batch: Any, devices: Sequence[Any] | None = None) -> ShardedBatch:
         if host.dtype.kind not in "biufc":
             raise ValueError(f"batch holds {host.dtype} values; allowed: numbers")
         if host.dtype.kind == "f" and not isinstance(leaf, jax.Array):
-            checks.require_representable("batch", host)
+            checks.require_representable("batch", host, tiny_ok=True)
         if padded > n:
             host = np.concatenate([host, np.repeat(host[-1:], padded - n, axis=0)])
         if isinstance(leaf, jax.Array):
