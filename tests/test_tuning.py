@@ -227,12 +227,6 @@ def test_float32_robust_gradient_is_finite_and_steps_stay_feasible():
         loss, grad, _ = tuning.robust_gradient(z, refs, temperature=0.1, **SHORT)
         assert grad.dtype == jnp.float32
         assert np.isfinite(float(loss)) and np.all(np.isfinite(np.asarray(grad)))
-    # The logits become gains through one robot, not one per pose.
-    robots = w.Robot(v_max=[100.0, 125.0, 110.0, 120.0])
-    with pytest.raises(ValueError, match=r"robot.v_max has shape \(4,\); allowed: one robot"):
-        tuning.robust_gradient(np.zeros(7), refs, temperature=0.05, robot=robots)
-    with pytest.raises(ValueError, match=r"robot.v_max has shape \(4,\); allowed: one robot"):
-        tuning.init_state(robot=robots)
         # A large step in logit space still lands on feasible gains.
         assert_feasible(tuning.gains_from_logits(z - 1e3 * jnp.sign(grad)))
 
