@@ -35,7 +35,10 @@ __all__ = [
     "position_limit",
     "reduce_heading",
     "require",
+    "require_finite_runs",
+    "require_one_batch_size",
     "require_representable",
+    "require_unbatched",
 ]
 
 
@@ -195,11 +198,59 @@ def field_values(
         require(name, arr, np.isfinite(arr), "a finite number")
         require_representable(name, arr)
         out[field.name] = arr
-    sizes = {f"{prefix}.{k}": v.shape[0] for k, v in out.items() if v is not None and v.ndim}
-    if len(set(sizes.values())) > 1:
-        shown = ", ".join(f"{k}: {n}" for k, n in sizes.items())
-        raise ValueError(f"batch sizes differ ({shown}); allowed: one common N")
+    require_one_batch_size(
+        {f"{prefix}.{k}": v.shape[0] for k, v in out.items() if v is not None and v.ndim}
+    )
     return out
+
+
+def require_one_batch_size(sizes: dict[str, int]) -> int | None:
+    """Return the common batch size ``N`` of ``sizes`` (name → leading size), or ``None``.
+
+    An axis of size 1 is shared by every run.
+
+    Raises:
+        ValueError: listing the sizes when two of them, neither 1, differ.
+    """
+    if not sizes:
+        return None
+    n = max(sizes.values())
+    if any(size not in (1, n) for size in sizes.values()):
+        listed = ", ".join(f"{k}: {v}" for k, v in sizes.items())
+        raise ValueError(f"batch sizes differ ({listed}); allowed: one common N, or 1")
+    return n
+
+
+def require_unbatched(tree: Any, prefix: str, allowed: str) -> None:
+    """Raise unless every leaf of ``tree`` is a scalar, naming the first that is not."""
+    for key, leaf in jax.tree_util.tree_leaves_with_path(tree):
+        if np.ndim(leaf) >= 1:
+            where = f"{prefix}{jax.tree_util.keystr(key)}"
+            raise ValueError(f"{where} has shape {np.shape(leaf)}; allowed: {allowed}")
+
+
+def require_finite_runs(
+    finite: Any,
+    dtype: Any,
+    *,
+    first: int = 0,
+    allowed: str = "gains and dt that keep the sampled law stable (docs/model.md §4)",
+) -> None:
+    """Raise unless every run's flag in ``finite`` is set (a run that left the dtype's range).
+
+    ``finite``: one flag per run (a scalar for a single run); ``first``: the
+    batch row of its first flag, for the message.
+    """
+    finite = np.asarray(finite)
+    if finite.all():
+        return
+    bad = np.flatnonzero(~finite.reshape(-1))
+    where = "the run" if finite.ndim == 0 else f"{bad.size} run(s), e.g. run {first + int(bad[0])},"
+    name = np.dtype(dtype).name
+    wider = ", or float64" if name != "float64" else ""
+    raise ValueError(
+        f"{where} left the range of {name} (a pose became inf or NaN); allowed: {allowed}{wider}"
+    )
 
 
 def require_representable(name: str, value: np.ndarray, *, tiny_ok: bool = False) -> None:
@@ -373,14 +424,14 @@ def reduce_heading(theta: Any) -> Any:
     return jnp.where(jnp.abs(theta) > HEADING_REDUCE_ABOVE, wrapped, theta)
 
 
-def position_limit() -> float:
-    """Return the largest ``|x|``, ``|y|`` (cm) a pose may have in the compute dtype.
+def position_limit(dtype: Any = None) -> float:
+    """Return the largest ``|x|``, ``|y|`` (cm) a pose may have in ``dtype`` (default: compute).
 
     Squared distances must stay finite: ``(2 limit)² · 2`` below the dtype's
     largest number, rounded down to a power of ten (1e18 cm in float32,
     1e153 cm in float64).
     """
-    largest = float(np.finfo(np.dtype(float_dtype())).max)
+    largest = float(np.finfo(np.dtype(float_dtype() if dtype is None else dtype)).max)
     return float(10.0 ** math.floor(math.log10(math.sqrt(largest / 8))))
 
 

@@ -20,7 +20,14 @@ from typing import Any
 import jax
 import numpy as np
 
-from wmr_jax._src.checks import Parameters, check_dt, field_values, require
+from wmr_jax._src.checks import (
+    Parameters,
+    check_dt,
+    field_values,
+    require,
+    require_one_batch_size,
+    require_unbatched,
+)
 
 __all__ = [
     "Gains",
@@ -189,13 +196,7 @@ def validate_one_robot(robot: Robot | None, purpose: str) -> Robot:
         ValueError: naming a batched field and ``purpose``.
     """
     robot = validate_robot(Robot() if robot is None else robot)
-    for field in dataclasses.fields(Robot):
-        value = getattr(robot, field.name)
-        if np.ndim(value) > 0:
-            raise ValueError(
-                f"robot.{field.name} has shape {np.shape(value)}; allowed: one robot (a number "
-                f"per field) for {purpose}"
-            )
+    require_unbatched(robot, "robot", f"one robot (a number per field) for {purpose}")
     return robot
 
 
@@ -222,15 +223,14 @@ def check_feasible(
     """
     robot = validate_robot(Robot() if robot is None else robot)
     gains = validate_gains(gains)
-    sizes = {
-        f"{name}.{f.name}": np.shape(getattr(obj, f.name))[0]
-        for name, obj in (("gains", gains), ("robot", robot))
-        for f in dataclasses.fields(obj)
-        if np.ndim(getattr(obj, f.name)) == 1 and np.shape(getattr(obj, f.name))[0] != 1
-    }
-    if len(set(sizes.values())) > 1:
-        shown = ", ".join(f"{k}: {n}" for k, n in sizes.items())
-        raise ValueError(f"batch sizes differ ({shown}); allowed: one common N, or 1")
+    require_one_batch_size(
+        {
+            f"{name}.{f.name}": np.shape(getattr(obj, f.name))[0]
+            for name, obj in (("gains", gains), ("robot", robot))
+            for f in dataclasses.fields(obj)
+            if np.ndim(getattr(obj, f.name)) == 1
+        }
+    )
     bound = np.asarray(wheel_speed_bound(gains, robot), dtype=float)
     v_max = np.asarray(robot.v_max, dtype=float)
     feasible = bound <= v_max * (1 + 1e-12)

@@ -21,6 +21,7 @@ from wmr_jax._src.checks import (
     check_int,
     check_number,
     float_dtype,
+    position_limit,
 )
 
 __all__ = [
@@ -92,9 +93,7 @@ def sample_poses(
     n = check_int("n", n, 0, MAX_SAMPLES)
     r_min = check_number("r_min", r_min, closed=True, unit="cm")
     r_max = check_number("r_max", r_max, low=r_min, closed=True, unit="cm")
-    # Drawn in float32: positions within float32's position limit (1e18 cm;
-    # checks.position_limit), whatever the result's dtype.
-    limit = 10.0 ** math.floor(math.log10(math.sqrt(float(np.finfo(np.float32).max) / 8)))
+    limit = position_limit(np.float32)  # drawn in float32, whatever the result's dtype
     if r_max > limit:
         raise ValueError(f"r_max = {r_max!r} is not allowed; allowed: a distance <= {limit:.0e} cm")
     dtype = float_dtype() if dtype is None else dtype

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from wmr_jax._src.checks import MAX_HEADING, MAX_STEPS, check_dt, check_int
+from wmr_jax._src.checks import MAX_HEADING, MAX_STEPS, check_dt, check_int, require_unbatched
 from wmr_jax._src.params import Gains, Robot, validate_gains, validate_robot
 from wmr_jax._src.velocity_loop import check_stability
 
@@ -131,12 +131,9 @@ def _one_pose(name: str, value: Any) -> tuple[float, float, float]:
 def _one_set(params: Any, validate: Any, name: str) -> Any:
     """Validated scalar parameters: the reference runs one pose with one gain set and robot."""
     params = validate(params)
-    for field, value in vars(params).items():
-        if np.ndim(value) != 0:
-            raise ValueError(
-                f"{name}.{field} has shape {np.shape(value)}; allowed: a number (the "
-                "reference runs one pose; batch with wmr_jax.batch_rollout)"
-            )
+    require_unbatched(
+        params, name, "a number (the reference runs one pose; batch with wmr_jax.batch_rollout)"
+    )
     return params
 
 

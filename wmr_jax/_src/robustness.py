@@ -323,14 +323,12 @@ def _perturbed_metrics(disturbance, params, controller, init, dt, robot, velocit
     args, options = _prepared(disturbance, params, controller, init, dt, robot, velocity)
     out = _perturbed_jit(*args, options=options)
     metrics = PoseMetrics(**{f: np.asarray(out[f]) for f in PoseMetrics._fields})
-    bad = ~np.isfinite(metrics.final_distance)
-    if bad.any():
-        dtype = np.dtype(args[-1].dtype).name
-        raise ValueError(
-            f"{int(bad.sum())} run(s), e.g. run {int(np.flatnonzero(bad)[0])}, left the range of "
-            f"{dtype} (a pose became inf or NaN); allowed: disturbances, gains and dt that "
-            "keep the sampled law stable (docs/model.md §4, §7)"
-        )
+    checks.require_finite_runs(
+        np.isfinite(metrics.final_distance),
+        args[-1].dtype,
+        allowed="disturbances, gains and dt that keep the sampled law stable "
+        "(docs/model.md §4, §7)",
+    )
     return metrics
 
 
@@ -376,7 +374,6 @@ def disturbed_rollout(
 # Beyond these a level no longer describes a sensor: σ_θ of 2π already makes
 # the measured heading uniform, and σ_xy of 10 km is far beyond any workspace.
 _LEVEL_LIMITS = {"noise_xy": 1e6, "noise_theta": 2 * math.pi, "latency": 1.0}
-_MISMATCH_FIELDS = ("radius_mismatch", "mass_mismatch")
 
 
 def _check_key(key: Any) -> None:

@@ -28,6 +28,9 @@ from wmr_jax._src.checks import (
     check_temperature,
     float_dtype,
     is_traced,
+    require_finite_runs,
+    require_one_batch_size,
+    require_unbatched,
 )
 from wmr_jax._src.controllers.base import Controller, get_controller
 from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
@@ -155,16 +158,12 @@ def _common_batch(refs, params, init, robot):
     Returns:
         ``(refs, params, init, robot)`` with the size-1 axes removed.
     """
-    sizes = _batch_sizes(refs, params, init, robot)
-    if not sizes:
+    n = require_one_batch_size(_batch_sizes(refs, params, init, robot))
+    if n is None:
         raise ValueError(
             "refs has shape (3,) and nothing else is batched; allowed: refs (N, 3), "
             "init (N, 3) or gains/robot fields of shape (N,)"
         )
-    n = max(sizes.values())
-    if any(size not in (1, n) for size in sizes.values()):
-        listed = ", ".join(f"{k}: {v}" for k, v in sizes.items())
-        raise ValueError(f"batch sizes differ ({listed}); allowed: one common N, or 1")
     if n == 1:
         return refs, params, init, robot
 
@@ -179,13 +178,11 @@ def _common_batch(refs, params, init, robot):
 def _single_run(params: Any, robot: Robot) -> None:
     """Refuse batched parameters in ``rollout``, which runs one robot."""
     for prefix, tree in (("gains", params), ("robot", robot)):
-        for key, leaf in jax.tree_util.tree_leaves_with_path(tree):
-            if jnp.ndim(leaf) >= 1:
-                raise ValueError(
-                    f"{prefix}{jax.tree_util.keystr(key)} has shape {jnp.shape(leaf)}; "
-                    "allowed: a scalar in rollout (one run); use batch_rollout or "
-                    "final_poses for a batch"
-                )
+        require_unbatched(
+            tree,
+            prefix,
+            "a scalar in rollout (one run); use batch_rollout or final_poses for a batch",
+        )
 
 
 def prepare(refs, params, init, robot, dt, options: Options, *, batch: bool | None):
@@ -243,15 +240,7 @@ def finite_result(poses: Any, result: Any, *, pose_axes: int = 1) -> Any:
         finite = np.concatenate([f.reshape(-1) for f in local])
     else:
         finite = np.asarray(jnp.isfinite(poses).all(axis=axes))
-    if not finite.all():
-        bad = np.flatnonzero(~finite.reshape(-1))
-        where = "the run" if finite.ndim == 0 else f"{bad.size} run(s), e.g. run {int(bad[0])},"
-        dtype = np.dtype(poses.dtype).name
-        wider = ", or float64" if dtype != "float64" else ""
-        raise ValueError(
-            f"{where} left the range of {dtype} (a pose became inf or NaN); allowed: gains "
-            f"and dt that keep the sampled law stable (docs/model.md §4){wider}"
-        )
+    require_finite_runs(finite, poses.dtype)
     return result
 
 

@@ -428,16 +428,7 @@ def _check_chunk(job: _Job, chunk: _Chunk) -> None:
 def _check_result(job: _Job, chunk: _Chunk, host: dict[str, np.ndarray]) -> None:
     """Raise, as ``final_poses`` does, if a run of the chunk left the floating-point range."""
     pose = np.stack([host[name] for name in ("final_x", "final_y", "final_theta")], axis=1)
-    bad = ~np.isfinite(pose).all(axis=1)
-    if bad.any():
-        row = chunk.lo + int(np.flatnonzero(bad)[0])
-        dtype = job.dtype.name
-        wider = ", or float64" if dtype != "float64" else ""
-        raise ValueError(
-            f"{int(bad.sum())} run(s), e.g. run {row}, left the range of {dtype} (a pose became "
-            "inf or NaN); allowed: gains and dt that keep the sampled law stable "
-            f"(docs/model.md §4){wider}"
-        )
+    checks.require_finite_runs(np.isfinite(pose).all(axis=1), job.dtype, first=chunk.lo)
 
 
 def _launcher(job: _Job) -> Callable[[_Chunk], Any]:
