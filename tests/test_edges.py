@@ -83,6 +83,10 @@ def test_a_period_float32_cannot_hold_is_refused_before_the_run(dt):
         ({"dt": "0.033"}, r"dt = '0.033' is not allowed"),
         ({"temperature": "0.1"}, r"temperature = '0.1' is not allowed"),
         ({"ref": [True, False, True]}, r"ref = \[True, False, True\] is not allowed"),
+        # NumPy reads a bool among numbers as 0 or 1, and the array no longer shows it.
+        ({"ref": [30, 30, True]}, r"ref = \[30, 30, True\] is not allowed"),
+        ({"init": [0, 0, False]}, r"init = \[0, 0, False\] is not allowed"),
+        ({"ref": np.array([30, 30, True], dtype=object)}, r"ref = .* allowed: real numbers"),
         ({"ref": np.array([30 + 1j, 30, 0])}, r"ref = .* allowed: real numbers"),
         ({"ref": jax.numpy.array([30 + 1j, 30, 0])}, r"ref has dtype complex"),
     ],
@@ -188,7 +192,8 @@ def test_lists_are_fields_and_size_one_axes_are_shared():
 
 
 @pytest.mark.parametrize(
-    "value", ["abc", 1 + 2j, {"a": 1}, None, ["x", "y"], True, [True, False], np.array([1j])]
+    "value",
+    ["abc", 1 + 2j, {"a": 1}, None, ["x", "y"], True, [True, False], [60.0, True], np.array([1j])],
 )
 def test_gain_values_that_are_not_numbers_name_the_field(value):
     with pytest.raises(ValueError, match=r"gains\.kr"):
@@ -296,3 +301,12 @@ def test_com_offset_is_allowed_up_to_the_body_edge():
 def test_the_law_functions_check_what_users_pass(call, message):
     with pytest.raises(ValueError, match=message):
         call()
+
+
+def test_a_bool_among_numbers_is_refused_by_the_batch_and_reference_entry_points():
+    with pytest.raises(ValueError, match=r"refs = \[\[30, 30, True\]\] is not allowed"):
+        w.final_poses([[30, 30, True]], w.Gains(kr=60.0), steps=3)
+    with pytest.raises(ValueError, match=r"ref = \[30, 30, True\] is not allowed"):
+        w.reference_rollout([30, 30, True], w.Gains(kr=60.0), steps=3)
+    with pytest.raises(ValueError, match=r"pose = \[0, 0, True\] is not allowed"):
+        w.control([0, 0, True], REF, w.Gains(kr=60.0))

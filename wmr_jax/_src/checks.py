@@ -61,6 +61,30 @@ def is_traced(tree: Any) -> bool:
     return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(tree))
 
 
+def array_kind(value: Any) -> str:
+    """Return the dtype kind NumPy gives ``value``, ``"b"`` if any element is a bool.
+
+    ``np.asarray([30, 30, True])`` is an integer array: the bool is read as 1
+    and no longer seen. A list (nested or not), or an object array, holding a
+    bool among numbers is therefore reported as kind ``"b"``, so that the
+    checks refuse it as they refuse an array of bools.
+    """
+    kind = np.asarray(value).dtype.kind
+    if kind in "iufO" and _holds_bool(value):
+        return "b"
+    return kind
+
+
+def _holds_bool(value: Any) -> bool:
+    if isinstance(value, (bool, np.bool_)):
+        return True
+    if isinstance(value, (list, tuple)):
+        return any(_holds_bool(item) for item in value)
+    if isinstance(value, np.ndarray) and value.dtype.kind == "O":
+        return any(_holds_bool(item) for item in value.flat)
+    return False
+
+
 def check_int(name: str, value: Any, minimum: int = 1, maximum: int | None = None) -> int:
     """Return ``value`` as an ``int`` in ``[minimum, maximum]``.
 
@@ -182,8 +206,7 @@ def field_values(
         try:
             if value is None or isinstance(value, (str, bytes)):
                 raise TypeError(value)  # NumPy would read None as NaN and "1.5" as 1.5
-            raw = np.asarray(value)
-            if raw.dtype.kind in "bcUS":
+            if array_kind(value) in "bcUS":
                 raise TypeError(value)  # True as 1, and 1 + 2j as 1, are not gains
             arr = np.asarray(value, dtype=float)
         except (TypeError, ValueError):
@@ -304,7 +327,7 @@ def lists_to_arrays(params: Any) -> None:
         value = getattr(params, field.name)
         if isinstance(value, (list, tuple)):
             try:
-                if np.asarray(value).dtype.kind not in "iuf":
+                if array_kind(value) not in "iuf":
                     continue  # bools, strings: left for field_values to name
                 array = np.asarray(value, dtype=float)
             except (TypeError, ValueError):
@@ -333,7 +356,7 @@ def as_poses(name: str, value: Any, *, batch: bool | None) -> jax.Array:
         host = None
     else:
         try:
-            if np.asarray(value).dtype.kind in "bcUS":
+            if array_kind(value) in "bcUS":
                 raise TypeError(value)  # True as 1, or 1 + 2j as 1, is no coordinate
             host = np.asarray(value, dtype=float)
         except (TypeError, ValueError) as err:
@@ -444,7 +467,7 @@ def as_pose_array(name: str, value: Any) -> Any:
     if is_traced(value):
         return value
     try:
-        if np.asarray(value).dtype.kind in "bcUS":
+        if array_kind(value) in "bcUS":
             raise TypeError(value)
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):

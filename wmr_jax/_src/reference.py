@@ -13,7 +13,14 @@ from typing import Any
 
 import numpy as np
 
-from wmr_jax._src.checks import MAX_HEADING, MAX_STEPS, check_dt, check_int, require_unbatched
+from wmr_jax._src.checks import (
+    MAX_HEADING,
+    MAX_STEPS,
+    array_kind,
+    check_dt,
+    check_int,
+    require_unbatched,
+)
 from wmr_jax._src.params import Gains, Robot, validate_gains, validate_robot
 from wmr_jax._src.velocity_loop import check_stability
 
@@ -111,7 +118,7 @@ def _diagnostics(pose: tuple, ref: tuple, gains: Gains) -> dict[str, float]:
 def _one_pose(name: str, value: Any) -> tuple[float, float, float]:
     """A checked pose ``[x, y, θ]`` as three floats (float64: this is the reference)."""
     try:
-        if np.asarray(value).dtype.kind not in "iuf":
+        if array_kind(value) not in "iuf":
             raise TypeError(value)
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):

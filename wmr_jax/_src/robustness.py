@@ -396,7 +396,7 @@ def _check_draw(key: Any, steps: Any, **levels: Any) -> None:
         if checks.is_traced(value):
             continue
         try:
-            if np.asarray(value).dtype.kind not in "iuf":
+            if checks.array_kind(value) not in "iuf":
                 raise TypeError(value)
             arr = np.asarray(value, dtype=float)
         except (TypeError, ValueError):

@@ -27,6 +27,7 @@ import numpy as np
 from wmr_jax._src import loops
 from wmr_jax._src import rollout as simulation
 from wmr_jax._src.checks import (
+    array_kind,
     as_float_tree,
     check_number,
     float_dtype,
@@ -488,7 +489,7 @@ def robust_gradient(
     validate_one_robot(options.get("robot"), "robust_gradient")
     spec, temperature, (refs, _, init, robot, dt) = _prepared(start, refs, temperature, options)
     if not isinstance(z, jax.core.Tracer):
-        if np.asarray(z).dtype.kind not in "iuf":
+        if array_kind(z) not in "iuf":
             raise ValueError(f"z = {z!r} is not allowed; allowed: ({problem.dim},) real logits")
         require("z", np.asarray(z, dtype=float), np.isfinite(np.asarray(z, float)), "finite logits")
     z = as_float_tree(jnp.asarray(z))
