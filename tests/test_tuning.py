@@ -132,6 +132,24 @@ def test_robust_gradient_without_cap_matches_central_differences_of_the_loss():
         np.testing.assert_allclose(float(grad[k]), central, rtol=1e-5, atol=1e-9)
 
 
+def test_remat_changes_what_the_gradient_stores_not_what_it_is():
+    refs = jnp.asarray(random_refs(4, N))
+
+    def grad(remat):
+        def loss(gains):
+            return tuning.tuning_loss(gains, refs, temperature=0.1, remat=remat, **SHORT)
+
+        return jax.grad(loss)(MIDDLE)
+
+    with_remat, without = grad(True), grad(False)
+    for a, b in zip(jax.tree.leaves(with_remat), jax.tree.leaves(without), strict=True):
+        np.testing.assert_allclose(float(a), float(b), rtol=1e-9, atol=1e-12)
+    # Compile-time sizes, not timings: storing the steps' intermediates
+    # needs several times the buffers of recomputing them.
+    costs = {r: tuning.gradient_cost(poses=64, steps=20, remat=r, repeats=1) for r in (True, False)}
+    assert costs[False].gradient_peak_bytes > 3 * costs[True].gradient_peak_bytes
+
+
 def test_gradients_are_finite_at_awkward_poses():
     refs = jnp.asarray(list(AWKWARD.values()))
     # The smooth law: the tuner's gradient drops no pose, so every pose's

@@ -80,6 +80,10 @@ class Options:
             ``V_max h / L ≤ π/2`` (``h = dt / substeps``; the rim speeds are
             held within ``±V_max``), so the arcs need no range reduction
             (non-ideal loop; set by ``for_robot``).
+        remat: in reverse-mode differentiation, recompute each step in the
+            backward pass instead of storing its intermediates (see
+            ``remat``). ``False`` stores them: more memory, and on XLA:CPU
+            slower too; no effect on evaluation.
     """
 
     steps: int = DEFAULT_STEPS
@@ -91,6 +95,7 @@ class Options:
     wheel_integral: bool = True
     wheel_coriolis: bool = True
     small_turn: bool = False
+    remat: bool = True
 
 
 def for_robot(options: Options, robot: Robot, dt: Any) -> Options:
@@ -365,7 +370,8 @@ def _split_loop(ref, params, init, robot, dt, options, fold, acc, record):
 
     pose = SplitPose.of(init)
     carry = (pose, initial_wheel(init, options), split_command(pose, ref, params, options), acc)
-    (pose, _, _, acc), ys = jax.lax.scan(remat(body), carry, None, length=options.steps)
+    step = remat(body) if options.remat else body
+    (pose, _, _, acc), ys = jax.lax.scan(step, carry, None, length=options.steps)
     return pose.stacked(), acc, ys
 
 
