@@ -91,8 +91,19 @@ def numpy_final_poses(
     Returns:
         ``(N, 3)`` final poses ``[x cm, y cm, θ rad]``, dtype of ``refs``.
     """
-    from wmr_jax._src.params import Gains
+    from wmr_jax._src.checks import MAX_STEPS, as_poses, check_dt, check_int, require_unbatched
+    from wmr_jax._src.params import Gains, validate_gains
 
+    # The same checks as final_poses; the arithmetic stays in the refs' dtype.
+    as_poses("refs", refs, batch=True)
+    init = np.asarray(as_poses("init", init, batch=False), dtype=np.float64)
+    dt = check_dt(dt)
+    steps = check_int("steps", steps, 1, MAX_STEPS)
+    if gains is not None:
+        if not isinstance(gains, Gains):
+            raise ValueError(f"gains = {gains!r} is not allowed; allowed: a wmr_jax.Gains")
+        validate_gains(gains)
+        require_unbatched(gains, "gains", "a number per field (one gain set for the batch)")
     refs = np.asarray(refs)
     if refs.dtype not in (np.float32, np.float64):
         refs = refs.astype(np.float64)

@@ -177,6 +177,8 @@ def _limit_split(v, w, robot: Robot, mode: str):
     left, right = v - L * w, v + L * w
     if mode == "clip":
         left, right = jnp.clip(left, -v_max, v_max), jnp.clip(right, -v_max, v_max)
+    elif mode != "scale":
+        raise ValueError(f"mode = {mode!r} is not allowed; allowed: 'clip' or 'scale'")
     else:
         excess = jnp.maximum(jnp.maximum(jnp.abs(left), jnp.abs(right)) / v_max, 1.0)
         left, right = left / excess, right / excess
@@ -404,11 +406,12 @@ def check_stability(robot: Robot, dt: float, substeps: int) -> None:
         return
     k_p = np.asarray(gain, dtype=float)
     k_i = np.asarray(integral, dtype=float)
-    fastest = float(
-        np.max(np.maximum((k_p + np.sqrt(np.maximum(k_p**2 - 4 * k_i, 0.0))) / 2, np.sqrt(k_i)))
-    )
-    if fastest * float(dt) / substeps > _MAX_STIFFNESS:
-        need = math.ceil(fastest * float(dt) / _MAX_STIFFNESS)
+    with np.errstate(over="ignore"):  # k_p² of a huge gain: inf, then refused below
+        discriminant = np.maximum(k_p**2 - 4 * k_i, 0.0)
+    fastest = float(np.max(np.maximum((k_p + np.sqrt(discriminant)) / 2, np.sqrt(k_i))))
+    if not fastest * float(dt) / substeps <= _MAX_STIFFNESS:
+        need = fastest * float(dt) / _MAX_STIFFNESS
+        need = math.ceil(need) if math.isfinite(need) else math.inf
         allowed = (
             f"substeps >= {need}"
             if need <= MAX_SUBSTEPS

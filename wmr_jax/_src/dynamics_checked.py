@@ -1,0 +1,251 @@
+"""The ``wmr_jax.dynamics`` functions as users call them: inputs checked first.
+
+The rollouts call the functions of ``dynamics`` and ``velocity_loop``
+directly, inside their own traces, on values the entry points have already
+checked. Called by hand with concrete values, the same functions would read a
+``(2,)`` pose as ``(3,)`` (JAX clamps an index past the end), run a negative
+period or an unstable wheel loop, or give the fast sine of ``3e9`` rad as
+``9.7e11``. The versions here check their concrete arguments (naming the
+argument, its value and what is allowed) and then call the same function;
+traced arguments pass unchecked, as everywhere in the package.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from wmr_jax._src import dynamics, loops, velocity_loop
+from wmr_jax._src.checks import (
+    array_kind,
+    as_poses,
+    check_dt,
+    check_int,
+    float_dtype,
+    is_traced,
+    require,
+    require_unbatched,
+)
+from wmr_jax._src.params import Robot, validate_robot
+
+__all__ = [
+    "advance",
+    "arc_step",
+    "body_acceleration",
+    "check_stability",
+    "initial_state",
+    "inertia",
+    "kinetic_energy",
+    "limit_wheels",
+    "sin_cos",
+    "sinc",
+    "wheel_torques",
+]
+
+# The fast sine and cosine are accurate up to about this many radians
+# (docstring of ``dynamics.sin_cos``); angles beyond are reduced on the host.
+_REDUCE_ABOVE = 1e4
+
+
+def _real(name: str, value: Any, *, finite: bool = True, last: int | None = None) -> np.ndarray:
+    """``value`` as a float array of the compute dtype: real numbers, optionally ``(..., last)``."""
+    try:
+        if value is None or array_kind(value) not in "iuf":
+            raise TypeError(value)
+        arr = np.asarray(value, dtype=np.dtype(float_dtype()))
+    except (TypeError, ValueError):
+        shape = "" if last is None else f" of shape (..., {last})"
+        raise ValueError(
+            f"{name} = {value!r} is not allowed; allowed: real numbers{shape}"
+        ) from None
+    if last is not None and (arr.ndim == 0 or arr.shape[-1] != last):
+        raise ValueError(f"{name} has shape {arr.shape}; allowed: (..., {last})")
+    if finite:
+        require(name, arr, np.isfinite(arr), "finite numbers")
+    return arr
+
+
+def _robot(robot: Any, name: str = "robot") -> Robot:
+    if not isinstance(robot, Robot):
+        raise ValueError(f"{name} = {robot!r} is not allowed; allowed: a wmr_jax.Robot")
+    return validate_robot(robot)
+
+
+def _broadcast(shapes: dict[str, tuple[int, ...]]) -> None:
+    try:
+        np.broadcast_shapes(*shapes.values())
+    except ValueError:
+        listed = ", ".join(f"{name} {shape}" for name, shape in shapes.items())
+        raise ValueError(f"shapes that do not broadcast: {listed}; allowed: ones that do") from None
+
+
+def _reduced(angle: np.ndarray) -> jax.Array:
+    """Angles beyond ``_REDUCE_ABOVE`` rad reduced to ``[−π, π]`` on the host.
+
+    Through NumPy's own sine and cosine, whose range reduction is exact for
+    any float64: a remainder by the float64 nearest 2π would be off by about
+    ``angle · 4e-17`` rad.
+    """
+    wide = angle.astype(np.float64)
+    with np.errstate(invalid="ignore"):  # ±inf gives NaN, as sin and cos of it do
+        wrapped = np.arctan2(np.sin(wide), np.cos(wide))
+    return jnp.asarray(np.where(np.abs(wide) > _REDUCE_ABOVE, wrapped, wide), angle.dtype)
+
+
+def _wraps(raw: Callable) -> Callable[[Callable], Callable]:
+    """Give a checked version the name and docstring of the function it checks."""
+
+    def decorate(checked: Callable) -> Callable:
+        checked = functools.wraps(raw)(checked)
+        checked.__doc__ = (raw.__doc__ or "") + (
+            "\n\n    Concrete arguments are checked first (``ValueError`` naming the "
+            "argument); traced ones are not.\n"
+        )
+        del checked.__wrapped__  # inspect.signature: the checked one's
+        return checked
+
+    return decorate
+
+
+@_wraps(dynamics.sin_cos)
+def sin_cos(angle: Any) -> tuple[jax.Array, jax.Array]:
+    if is_traced(angle):
+        return dynamics.sin_cos(angle)
+    return dynamics.sin_cos(_reduced(_real("angle", angle, finite=False)))
+
+
+@_wraps(dynamics.sinc)
+def sinc(u: Any) -> jax.Array:
+    if is_traced(u):
+        return dynamics.sinc(u)
+    u = _real("u", u, finite=False)
+    return dynamics._sinc_of(jnp.asarray(u), dynamics.sin_cos(_reduced(u))[1])
+
+
+@_wraps(dynamics.arc_step)
+def arc_step(pose: Any, v: Any, omega: Any, h: Any) -> jax.Array:
+    if is_traced((pose, v, omega, h)):
+        return dynamics.arc_step(pose, v, omega, h)
+    arr = _real("pose", pose, finite=False, last=3)
+    pose = jnp.reshape(as_poses("pose", arr.reshape(-1, 3), batch=True), arr.shape)
+    v, omega, h = _real("v", v), _real("omega", omega), _real("h", h)
+    require("h", h, h >= 0, "a duration >= 0 s")
+    _broadcast({"pose[..., 0]": arr.shape[:-1], "v": v.shape, "omega": omega.shape, "h": h.shape})
+    turn = np.abs(omega.astype(np.float64) * h)
+    require("omega * h", turn, turn <= _REDUCE_ABOVE, f"a turn of at most {_REDUCE_ABOVE:g} rad")
+    return dynamics.arc_step(pose, v, omega, h)
+
+
+@_wraps(loops.initial_state)
+def initial_state(init: Any) -> dynamics.RobotState:
+    if is_traced(init):
+        return loops.initial_state(init)
+    return loops.initial_state(as_poses("init", init, batch=False))
+
+
+@_wraps(velocity_loop.limit_wheels)
+def limit_wheels(velocity: Any, robot: Robot, *, mode: str = "clip") -> jax.Array:
+    _check_mode("mode", mode)
+    if not is_traced((velocity, robot)):
+        velocity, robot = _real("velocity", velocity, last=2), _robot(robot)
+    return velocity_loop.limit_wheels(velocity, robot, mode=mode)
+
+
+@_wraps(velocity_loop.inertia)
+def inertia(robot: Robot) -> tuple[jax.Array, jax.Array]:
+    if not is_traced(robot):
+        robot = _robot(robot)
+    return velocity_loop.inertia(robot)
+
+
+@_wraps(velocity_loop.kinetic_energy)
+def kinetic_energy(velocity: Any, robot: Robot) -> jax.Array:
+    if not is_traced((velocity, robot)):
+        velocity, robot = _real("velocity", velocity, last=2), _robot(robot)
+    return velocity_loop.kinetic_energy(velocity, robot)
+
+
+@_wraps(velocity_loop.body_acceleration)
+def body_acceleration(velocity: Any, torques: Any, robot: Robot) -> jax.Array:
+    if not is_traced((velocity, torques, robot)):
+        velocity, torques = _real("velocity", velocity, last=2), _real("torques", torques, last=2)
+        _broadcast({"velocity": velocity.shape, "torques": torques.shape})
+        robot = _robot(robot)
+    return velocity_loop.body_acceleration(velocity, torques, robot)
+
+
+@_wraps(velocity_loop.wheel_torques)
+def wheel_torques(velocity: Any, target: Any, integral: Any, model: Robot) -> jax.Array:
+    if not is_traced((velocity, target, integral, model)):
+        arrays = {
+            name: _real(name, value, last=2)
+            for name, value in (("velocity", velocity), ("target", target), ("integral", integral))
+        }
+        _broadcast({name: arr.shape for name, arr in arrays.items()})
+        velocity, target, integral = arrays.values()
+        model = _robot(model, "model")
+    return velocity_loop.wheel_torques(velocity, target, integral, model)
+
+
+@_wraps(velocity_loop.check_stability)
+def check_stability(robot: Robot, dt: Any, substeps: int) -> None:
+    if is_traced((robot, dt)):
+        return None
+    robot = _robot(robot)
+    dt = check_dt(dt)
+    substeps = check_int("substeps", substeps, 1, velocity_loop.MAX_SUBSTEPS)
+    return velocity_loop.check_stability(robot, dt, substeps)
+
+
+@_wraps(velocity_loop.advance)
+def advance(
+    state: dynamics.RobotState,
+    command: Any,
+    robot: Robot,
+    dt: Any,
+    *,
+    substeps: int = velocity_loop.DEFAULT_SUBSTEPS,
+    wheel_limit: str = "clip",
+    model: Robot | None = None,
+) -> tuple[dynamics.RobotState, jax.Array]:
+    _check_mode("wheel_limit", wheel_limit)
+    substeps = check_int("substeps", substeps, 1, velocity_loop.MAX_SUBSTEPS)
+    if not isinstance(state, dynamics.RobotState):
+        raise ValueError(
+            f"state = {state!r} is not allowed; allowed: a wmr_jax.dynamics.RobotState "
+            "(e.g. from initial_state)"
+        )
+    if not is_traced((state, command, robot, dt, model)):
+        pose = as_poses("state.pose", state.pose, batch=False)
+        velocity = _real("state.velocity", state.velocity)
+        integral = _real("state.integral", state.integral)
+        command = _real("command", command)
+        for name, arr, allowed in (
+            ("state.velocity", velocity, "(2,) [v cm/s, omega rad/s]"),
+            ("state.integral", integral, "(2,)"),
+            ("command", command, "(2,) [v cm/s, omega rad/s]"),
+        ):
+            if arr.shape != (2,):
+                raise ValueError(f"{name} has shape {arr.shape}; allowed: {allowed}")
+        state = dynamics.RobotState(pose, jnp.asarray(velocity), jnp.asarray(integral))
+        one = "one robot (a number per field): advance moves one robot"
+        robot = _robot(robot)
+        require_unbatched(robot, "robot", one)
+        if model is not None:
+            model = _robot(model, "model")
+            require_unbatched(model, "model", one)
+        dt = check_dt(dt)
+        velocity_loop.check_stability(robot if model is None else model, dt, substeps)
+    return velocity_loop.advance(
+        state, command, robot, dt, substeps=substeps, wheel_limit=wheel_limit, model=model
+    )
+
+
+def _check_mode(name: str, mode: Any) -> None:
+    if not isinstance(mode, str) or mode not in loops.WHEEL_LIMITS:
+        raise ValueError(f"{name} = {mode!r} is not allowed; allowed: {loops.WHEEL_LIMITS}")
