@@ -310,3 +310,52 @@ def test_a_bool_among_numbers_is_refused_by_the_batch_and_reference_entry_points
         w.reference_rollout([30, 30, True], w.Gains(kr=60.0), steps=3)
     with pytest.raises(ValueError, match=r"pose = \[0, 0, True\] is not allowed"):
         w.control([0, 0, True], REF, w.Gains(kr=60.0))
+
+
+# ---------------------------------------------------------------- the laws' building blocks
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (
+            lambda: w.controllers.saturated_distance(5.0, 10.0, temperature=-1.0),
+            r"temperature = -1.0 is not allowed",
+        ),
+        (lambda: w.controllers.sgn(0.5, temperature=0), r"temperature = 0 is not allowed"),
+        (
+            lambda: w.controllers.commands(
+                w.controllers.polar_error([0, 0, 0], REF), w.Gains(kr=-100.0)
+            ),
+            r"gains\.kr = -100",
+        ),
+        (
+            lambda: w.controllers.aicardi_control([0, 0, 0], REF, w.AicardiGains(gamma=-1.0)),
+            r"gains\.gamma = -1",
+        ),
+        (
+            lambda: w.controllers.astolfi_control([0, 0, 0], REF, w.AstolfiGains(k_rho=-3.0)),
+            r"gains\.k_rho = -3",
+        ),
+        (
+            lambda: w.controllers.aicardi_control([0, 0, 0], REF, w.Gains()),
+            r"allowed: a wmr_jax\.AicardiGains",
+        ),
+        (
+            lambda: w.controllers.astolfi_control([0, 0], REF, w.AstolfiGains()),
+            r"pose has shape \(2,\)",
+        ),
+        (lambda: w.controllers.knot_radii(1), r"knots = 1 is not allowed"),
+    ],
+)
+def test_the_laws_called_by_hand_check_their_values(call, message):
+    with pytest.raises(ValueError, match=message):
+        call()
+
+
+def test_the_laws_building_blocks_take_plain_numbers_and_lists():
+    np.testing.assert_allclose(
+        np.asarray(w.controllers.wrap_angle([1.0, 7.0])), [1.0, 7.0 - 2 * np.pi]
+    )
+    cos_bar, sin_bar = w.controllers.fold(-0.6, 0.8)
+    np.testing.assert_allclose([float(cos_bar), float(sin_bar)], [0.6, -0.8])

@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 
 from wmr_jax._src.checks import Parameters, require
-from wmr_jax._src.controllers.base import Controller, register_controller
+from wmr_jax._src.controllers.base import Controller, check_law_inputs, register_controller
 from wmr_jax._src.controllers.polar import driving_error, gain_values, hold_at_goal
 from wmr_jax._src.dynamics import sinc
 
@@ -71,6 +71,8 @@ def aicardi_control(
             f"temperature = {temperature!r} is not allowed; allowed: None (this law has no "
             "smooth relaxation)"
         )
+    if frame is None:  # called with values, not from a rollout
+        pose, ref, gains = check_law_inputs(pose, ref, gains, AicardiGains, validate_aicardi_gains)
     rho, alpha, theta_a, direction = driving_error(pose, ref, backward=gains.backward, frame=frame)
     cos_alpha = jnp.cos(alpha)
     v = direction * gains.gamma * rho * cos_alpha

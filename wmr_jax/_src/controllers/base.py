@@ -17,9 +17,13 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
+
+from wmr_jax._src.checks import as_float_tree, as_pose_array, is_traced
 
 __all__ = [
     "Controller",
+    "check_law_inputs",
     "controller_names",
     "get_controller",
     "register_controller",
@@ -163,3 +167,31 @@ def controller_names(names: Any) -> list[str]:
     if not out:
         raise ValueError("controller_names = [] is not allowed; allowed: at least one controller")
     return out
+
+
+def check_law_inputs(
+    pose: Any, ref: Any, params: Any, params_type: type, validate: Callable[[Any], Any]
+) -> tuple[Any, Any, Any]:
+    """Check a law's arguments when a user calls it with values (traced ones pass).
+
+    ``pose`` and ``ref`` must be poses ``(..., 3)`` that broadcast together,
+    ``params`` a ``params_type`` that ``validate`` accepts.
+
+    Raises:
+        ValueError: naming the argument, its value and what is allowed.
+    """
+    if is_traced((pose, ref, params)):
+        return pose, ref, params
+    pose, ref = as_pose_array("pose", pose), as_pose_array("ref", ref)
+    try:
+        np.broadcast_shapes(pose.shape[:-1], ref.shape[:-1])
+    except ValueError:
+        raise ValueError(
+            f"pose has batch shape {pose.shape[:-1]} and ref {ref.shape[:-1]}; "
+            "allowed: shapes that broadcast"
+        ) from None
+    if not isinstance(params, params_type):
+        raise ValueError(
+            f"gains = {params!r} is not allowed; allowed: a wmr_jax.{params_type.__name__}"
+        )
+    return pose, ref, as_float_tree(validate(params))

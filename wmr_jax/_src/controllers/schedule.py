@@ -34,7 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks import Parameters, require
+from wmr_jax._src.checks import Parameters, check_int, require
 from wmr_jax._src.controllers.base import Controller, register_controller
 from wmr_jax._src.controllers.shim_sung import (
     PolarError,
@@ -112,6 +112,7 @@ class ScheduleParams(Parameters):
 
 def knot_radii(knots: int = KNOTS) -> np.ndarray:
     """Return the ``r_e`` of each knot, cm: ``R_KNOT (k / (K − 1))²``, ``k = 0 … K−1``."""
+    knots = check_int("knots", knots, 2)
     return R_KNOT * (np.arange(knots) / (knots - 1)) ** 2
 
 

@@ -97,7 +97,14 @@ class Diagnostics(NamedTuple):
 
 def wrap_angle(angle: jax.Array) -> jax.Array:
     """Wrap an angle in rad to ``[−π, π)``."""
-    return jnp.mod(angle + jnp.pi, 2 * jnp.pi) - jnp.pi
+    return jnp.mod(jnp.asarray(angle) + jnp.pi, 2 * jnp.pi) - jnp.pi
+
+
+def _relaxation(temperature: Any) -> Any:
+    """``temperature`` checked where it is a value (``None``: the hard law; tracers pass)."""
+    if temperature is None or is_traced(temperature):
+        return temperature
+    return check_temperature("temperature", temperature)
 
 
 def polar_error(
@@ -175,8 +182,10 @@ def _step(
     ``scale > 0`` makes ``x`` dimensionless for the relaxation,
     ``sigmoid(x / (scale · temperature))``; the hard test does not need it.
     """
+    x = jnp.asarray(x)
     if temperature is None:
         return jnp.where(x > 0 if strict else x >= 0, 1.0, 0.0).astype(x.dtype)
+    temperature = _relaxation(temperature)
     tie = _tie_break(temperature)
     return jax.nn.sigmoid(x / (scale * temperature) + (-tie if strict else tie))
 
@@ -198,8 +207,10 @@ def _tie_break(temperature: float) -> float:
 
 def sgn(x: jax.Array, *, temperature: float | None = None) -> jax.Array:
     """Return the paper's ``Sgn(x)``: 1 if ``x > 0``, else −1 (so ``Sgn(0) = −1``) (Eq. 8)."""
+    x = jnp.asarray(x)
     if temperature is None:
         return jnp.where(x > 0, 1.0, -1.0).astype(x.dtype)
+    temperature = _relaxation(temperature)
     return jnp.tanh(x / temperature - _tie_break(temperature))  # Sgn(0) = −1
 
 
@@ -216,9 +227,10 @@ def saturated_distance(r: jax.Array, r_m: jax.Array, *, temperature: float | Non
     a number in ``[1, 2]`` rather than ``log1p``, which XLA:CPU evaluates
     several times slower: the absolute error is about an ulp of 1.
     """
-    linear = r * ((jnp.pi / 2) / r_m)  # the factor is per gain set, not per step
+    linear = r * ((jnp.pi / 2) / jnp.asarray(r_m))  # the factor is per gain set, not per step
     if temperature is None:
         return jnp.minimum(linear, jnp.pi / 2)
+    temperature = _relaxation(temperature)
     excess = linear - jnp.pi / 2
     above = excess > 0
     nearest = jnp.where(above, jnp.pi / 2, linear)
@@ -245,9 +257,11 @@ def fold(cos_a: jax.Array, sin_a: jax.Array, *, temperature: float | None = None
     ``cos a = 0``). The relaxed sign is ``tanh(cos a / T + log(1 + 1/T))``,
     which keeps that tie (see ``_tie_break``).
     """
+    cos_a, sin_a = jnp.asarray(cos_a), jnp.asarray(sin_a)
     if temperature is None:
         flip = jnp.where(cos_a < 0, -1.0, 1.0).astype(cos_a.dtype)
     else:
+        temperature = _relaxation(temperature)
         flip = jnp.tanh(cos_a / temperature + _tie_break(temperature))  # no flip at 0
     return flip * cos_a, flip * sin_a
 
@@ -290,6 +304,8 @@ def commands(
     ``v_m = k_r d sin(r̄_e) cos φ̄_e`` and
     ``ω_m = k_θ (ε sin φ̄_e + (1 − ε) sin θ̄_e)``.
     """
+    if isinstance(gains, Gains) and not is_traced(gains):
+        validate_gains(gains)  # called with values, not from a rollout
     d = direction_flag(err, gains.phi_m, temperature=temperature)
     eps = blend(err, d, gains, temperature=temperature)
     r_bar = saturated_distance(err.r, gains.r_m, temperature=temperature)
