@@ -359,3 +359,29 @@ def test_the_laws_building_blocks_take_plain_numbers_and_lists():
     )
     cos_bar, sin_bar = w.controllers.fold(-0.6, 0.8)
     np.testing.assert_allclose([float(cos_bar), float(sin_bar)], [0.6, -0.8])
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (lambda: w.studies.residual_bound(None), r"phi_m = None is not allowed"),
+        (lambda: w.studies.residual_bound(True), r"phi_m = True is not allowed"),
+        (
+            lambda: w.studies.run_benchmark(w.studies.BenchConfig(sizes="10")),
+            r"sizes = '10' is not allowed; allowed: a sequence",
+        ),
+        (
+            lambda: w.studies.run_benchmark(
+                w.studies.BenchConfig(sizes=(10,), cases=("final_poses",)), log="x"
+            ),
+            r"log = 'x' is not allowed",
+        ),
+        (
+            lambda: w.studies.evaluate_poses(np.array([REF]), w.Gains(), x64="no"),
+            r"x64 = 'no' is not allowed; allowed: True or False",
+        ),
+    ],
+)
+def test_options_of_the_studies_are_checked_before_work(call, message):
+    with pytest.raises(ValueError, match=message):
+        call()

@@ -328,6 +328,12 @@ CASES = (
 
 def _check_config(config: BenchConfig) -> BenchConfig:
     """Validate ``config`` (before any tracing); return it with ``cases`` filled in."""
+    for name in ("sizes", "cases"):
+        if isinstance(getattr(config, name), (str, bytes)):
+            value = getattr(config, name)
+            raise ValueError(
+                f"{name} = {value!r} is not allowed; allowed: a sequence, e.g. ({value!r},)"
+            )
     if not config.sizes:
         raise ValueError("sizes = () is not allowed; allowed: one or more integers >= 1")
     for i, n in enumerate(config.sizes):
@@ -407,6 +413,8 @@ def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = No
         ValueError: for a bad ``config``.
     """
     config = _check_config(config)
+    if log is not None and not callable(log):
+        raise ValueError(f"log = {log!r} is not allowed; allowed: a function of one line, or None")
     import jax
 
     if config.dtype == "float64" and not jax.config.jax_enable_x64:

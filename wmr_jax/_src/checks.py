@@ -100,6 +100,13 @@ def check_int(name: str, value: Any, minimum: int = 1, maximum: int | None = Non
     return int(value)
 
 
+def check_bool(name: str, value: Any) -> bool:
+    """Return ``value`` if it is ``True`` or ``False`` (``"no"`` is not a way of saying no)."""
+    if not isinstance(value, bool):
+        raise ValueError(f"{name} = {value!r} is not allowed; allowed: True or False")
+    return value
+
+
 def check_number(
     name: str,
     value: Any,

@@ -204,9 +204,10 @@ def evaluate_poses(
     """
     refs_host = np.asarray(checks.as_poses("refs", refs, batch=True))
     chunk = checks.check_int("chunk", chunk)
+    x64, progress = checks.check_bool("x64", x64), checks.check_bool("progress", progress)
     if np.ndim(init) != 1:
         raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,), shared by every run")
-    with jax.enable_x64(bool(x64)):
+    with jax.enable_x64(x64):
         out = sweep(
             refs_host,
             params,

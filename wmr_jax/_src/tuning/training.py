@@ -28,7 +28,13 @@ import optax
 
 from wmr_jax._src import loops
 from wmr_jax._src import rollout as simulation
-from wmr_jax._src.checks import as_float_tree, check_int, check_number, float_dtype
+from wmr_jax._src.checks import (
+    as_float_tree,
+    check_bool,
+    check_int,
+    check_number,
+    float_dtype,
+)
 from wmr_jax._src.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
 from wmr_jax._src.params import Gains, Robot, validate_one_robot
 from wmr_jax._src.poses import HORIZON_S, MAX_SAMPLES, sample_poses
@@ -175,10 +181,7 @@ class TuneConfig:
         if self.pose_clip is not None:
             check_number("pose_clip", self.pose_clip)
         for name in ("random_search", "schedule"):
-            if not isinstance(getattr(self, name), bool):
-                raise ValueError(
-                    f"{name} = {getattr(self, name)!r} is not allowed; allowed: True or False"
-                )
+            check_bool(name, getattr(self, name))
         self.spec()
         return self
 
