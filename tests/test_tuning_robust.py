@@ -55,3 +55,13 @@ def test_command_rejects_bad_values_in_one_line(tmp_path, capsys, flag, value):
     err = capsys.readouterr().err
     assert err.startswith(f"wmr-jax: error: {flag} ") and err.count("\n") == 1
     assert not (tmp_path / "tuned_gains.json").exists()
+
+
+def test_tune_robust_judges_under_the_noise_of_the_robustness_command():
+    # Both write a standard-conditions table of the same gains: the same
+    # noise draw makes them the same table.
+    from wmr_jax._src.cli.main import build_parser
+    from wmr_jax._src.tuning.robust import EVAL_NOISE_SEED
+
+    args = build_parser().parse_args(["robustness", "--out", "unused"])
+    assert int(args.seed) == EVAL_NOISE_SEED
