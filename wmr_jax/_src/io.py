@@ -12,7 +12,7 @@ import io
 import json
 import os
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +24,7 @@ __all__ = [
     "atomic_write_json",
     "atomic_write_npz",
     "atomic_write_text",
+    "json_text",
     "load_arrays",
     "remove_stale_temporaries",
     "save_arrays",
@@ -67,7 +68,13 @@ def atomic_write_npz(path: str | os.PathLike, **arrays: Any) -> Path:
 
 
 def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
-    """Write UTF-8 ``text`` to ``path`` atomically."""
+    """Write UTF-8 ``text`` to ``path`` atomically.
+
+    Raises:
+        ValueError: ``text`` is not a ``str`` (bytes go to ``atomic_write_bytes``).
+    """
+    if not isinstance(text, str):
+        raise ValueError(f"text = {text!r:.80} is not allowed; allowed: a str")
     return atomic_write_bytes(path, text.encode("utf-8"))
 
 
@@ -84,8 +91,23 @@ def _jsonable(obj: Any) -> Any:
 
 
 def atomic_write_json(path: str | os.PathLike, obj: Any) -> Path:
-    """Write ``obj`` as indented JSON atomically; ``inf`` becomes the string "inf"."""
-    return atomic_write_text(path, json.dumps(_jsonable(obj), indent=2, sort_keys=False) + "\n")
+    """Write ``obj`` as indented JSON atomically; ``inf`` becomes the string "inf".
+
+    Raises:
+        ValueError: ``obj`` holds a value JSON cannot store (nothing is written).
+    """
+    return atomic_write_text(path, json_text(obj, "obj", indent=2, sort_keys=False) + "\n")
+
+
+def json_text(obj: Any, name: str, **kwargs: Any) -> str:
+    """``obj`` as JSON text, or a ``ValueError`` naming ``name`` and the value JSON cannot store."""
+    try:
+        return json.dumps(_jsonable(obj), allow_nan=False, **kwargs)
+    except (TypeError, ValueError) as err:
+        raise ValueError(
+            f"{name} = {obj!r:.200} is not allowed ({err}); allowed: numbers, strings, "
+            "bools, None, lists and dicts of them (JSON)"
+        ) from None
 
 
 def save_figure(fig: Any, path: str | os.PathLike, **kwargs: Any) -> Path:
@@ -116,14 +138,46 @@ def _checksum(arrays: dict[str, np.ndarray], meta_text: str) -> str:
     return digest.hexdigest()
 
 
+def _checked_arrays(arrays: Any) -> dict[str, np.ndarray]:
+    """``arrays`` as NumPy arrays that ``np.load(allow_pickle=False)`` reads back, or raise."""
+    if not isinstance(arrays, Mapping):
+        raise ValueError(
+            f"arrays = {arrays!r:.80} is not allowed; allowed: a mapping of names to arrays"
+        )
+    out = {}
+    for name, value in arrays.items():
+        if not isinstance(name, str) or name in (_META, _CHECKSUM):
+            raise ValueError(
+                f"arrays name = {name!r} is not allowed; allowed: a str other than "
+                f"{_META!r} and {_CHECKSUM!r}"
+            )
+        try:
+            arr = np.asarray(value)
+        except (TypeError, ValueError):
+            arr = np.asarray(None)  # ragged lists: named below, as an object array
+        if arr.dtype.kind not in "biufcUSMm":
+            raise ValueError(
+                f"arrays[{name!r}] = {value!r:.80} is not allowed; allowed: an array of "
+                "numbers, bools or strings (not objects: None, dicts, ragged lists)"
+            )
+        out[name] = arr
+    return out
+
+
 def save_arrays(path: str | os.PathLike, arrays: dict[str, Any], meta: dict[str, Any]) -> Path:
     """Write arrays and a JSON-able ``meta`` dict as a checksummed ``.npz``, atomically.
 
     ``load_arrays`` refuses the file if any byte of the arrays or the meta
     data changed since, so a damaged or edited file is never trusted.
+
+    Raises:
+        ValueError: before anything is written, for ``arrays`` not a mapping
+            of str names to numeric, bool or string arrays (an object array,
+            ``None`` or a dict cannot be stored without pickle), a reserved
+            name (``__meta__``, ``__sha256__``), or a ``meta`` JSON cannot store.
     """
-    arrays = {name: np.asarray(value) for name, value in arrays.items()}
-    meta_text = json.dumps(_jsonable(meta), sort_keys=True)
+    arrays = _checked_arrays(arrays)
+    meta_text = json_text(meta, "meta", sort_keys=True)
     stored = dict(arrays)
     stored[_META] = np.asarray(meta_text)
     stored[_CHECKSUM] = np.asarray(_checksum(arrays, meta_text))

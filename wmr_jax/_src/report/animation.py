@@ -57,6 +57,10 @@ def _frames(samples: int, stride: int) -> list[int]:
     return frames
 
 
+# A GIF stores a frame's delay in hundredths of a second, as a 16-bit integer.
+_MAX_FRAME_MS = 655_350
+
+
 def frame_timing(dt: float, stride: int | None = None, speed: float = 1.0) -> tuple[int, int]:
     """Return ``(stride, frame_ms)``: samples per frame and the GIF's delay per frame, ms.
 
@@ -72,13 +76,22 @@ def frame_timing(dt: float, stride: int | None = None, speed: float = 1.0) -> tu
         speed: playback speed, 1 for real time.
 
     Raises:
-        ValueError: for a non-positive ``dt``, ``stride`` or ``speed``.
+        ValueError: for a non-positive ``dt``, ``stride`` or ``speed``, or a
+            delay over 655.35 s per frame (the most a GIF can store).
     """
     dt = checks.check_dt(dt)
     speed = checks.check_number("speed", speed, unit="× real time")
     candidates = range(1, 10_000) if stride is None else [checks.check_int("stride", stride)]
     for k in candidates:
         want_ms = 1000.0 * k * dt / speed
+        if not want_ms < _MAX_FRAME_MS + 5:  # would round to more than a GIF can store
+            given = f"stride = {k!r}, " if stride is not None else ""
+            raise ValueError(
+                f"dt = {dt!r} s ({given}speed = {speed!r}) is not allowed: each frame would "
+                f"show for {want_ms / 1000:.3g} s; allowed: at most {_MAX_FRAME_MS / 1000:g} s "
+                "per frame (stride · dt / speed; a GIF stores a frame's delay in hundredths "
+                "of a second as a 16-bit integer)"
+            )
         delay_ms = 10 * max(2, round(want_ms / 10))
         if stride is not None or abs(delay_ms - want_ms) <= 0.02 * want_ms:
             return k, delay_ms
@@ -134,50 +147,61 @@ def write_gif(
         The path written.
 
     Raises:
-        ValueError: for misshapen poses or references, or a bad ``speed``/``stride``.
+        ValueError: for misshapen poses or references, or a bad ``speed``, ``stride``,
+            ``trail`` or ``body_radius``.
     """
     from wmr_jax._src.report.figures import mpl_animation
 
     poses = np.asarray(poses, dtype=float)
     refs = np.asarray(refs, dtype=float)
-    if poses.ndim != 3 or poses.shape[2] != 3 or refs.shape != (poses.shape[0], 3):
+    if (
+        poses.ndim != 3
+        or poses.shape[2] != 3
+        or refs.shape != (poses.shape[0], 3)
+        or 0 in poses.shape
+    ):
         raise ValueError(
             f"poses has shape {poses.shape} and refs {refs.shape}; "
-            "allowed: poses (N, steps + 1, 3) with refs (N, 3)"
+            "allowed: poses (N, steps + 1, 3) with refs (N, 3), N >= 1 and steps + 1 >= 1"
         )
     stride, frame_ms = frame_timing(dt, stride, speed)
+    trail = checks.check_int("trail", trail, minimum=0)
+    body_radius = checks.check_number("body_radius", body_radius, unit="cm")
     n, samples, _ = poses.shape
     arrived = np.asarray(metrics.arrived(poses, refs[:, None, :], tol_r=tol_r, tol_theta=tol_theta))
     colours = [plt.get_cmap("tab10")(i % 10) for i in range(n)]
     fig, ax = _pitch(poses, refs, title, 2.5 * body_radius)
-    markers = ax.scatter(refs[:, 0], refs[:, 1], marker="x", s=50, c="k", zorder=6)
-    trails = [ax.plot([], [], "-", lw=1.0, color=c, alpha=0.6)[0] for c in colours]
-    bodies = [plt.Circle((0, 0), body_radius, fc=c, ec="k", lw=0.6, zorder=4) for c in colours]
-    for body in bodies:
-        ax.add_patch(body)
-    ticks = [ax.plot([], [], "k-", lw=1.4, zorder=5)[0] for _ in range(n)]
-    # Above the pitch, where no robot can cover it.
-    clock = ax.text(0.0, 1.01, "", transform=ax.transAxes, va="bottom", fontsize=9)
+    try:
+        markers = ax.scatter(refs[:, 0], refs[:, 1], marker="x", s=50, c="k", zorder=6)
+        trails = [ax.plot([], [], "-", lw=1.0, color=c, alpha=0.6)[0] for c in colours]
+        bodies = [plt.Circle((0, 0), body_radius, fc=c, ec="k", lw=0.6, zorder=4) for c in colours]
+        for body in bodies:
+            ax.add_patch(body)
+        ticks = [ax.plot([], [], "k-", lw=1.4, zorder=5)[0] for _ in range(n)]
+        # Above the pitch, where no robot can cover it.
+        clock = ax.text(0.0, 1.01, "", transform=ax.transAxes, va="bottom", fontsize=9)
 
-    def draw(k: int):
-        for i in range(n):
-            x, y, th = poses[i, k]
-            bodies[i].center = (x, y)
-            ticks[i].set_data(
-                [x, x + body_radius * math.cos(th)], [y, y + body_radius * math.sin(th)]
+        def draw(k: int):
+            for i in range(n):
+                x, y, th = poses[i, k]
+                bodies[i].center = (x, y)
+                ticks[i].set_data(
+                    [x, x + body_radius * math.cos(th)], [y, y + body_radius * math.sin(th)]
+                )
+                start = max(0, k - trail)
+                trails[i].set_data(poses[i, start : k + 1, 0], poses[i, start : k + 1, 1])
+            done = arrived[:, k]
+            markers.set_color(["tab:green" if d else "k" for d in done])
+            clock.set_text(
+                f"t = {k * dt:.2f} s (real time × {speed:g})   arrived {int(done.sum())}/{n}"
             )
-            start = max(0, k - trail)
-            trails[i].set_data(poses[i, start : k + 1, 0], poses[i, start : k + 1, 1])
-        done = arrived[:, k]
-        markers.set_color(["tab:green" if d else "k" for d in done])
-        clock.set_text(
-            f"t = {k * dt:.2f} s (real time × {speed:g})   arrived {int(done.sum())}/{n}"
-        )
-        return [*bodies, *ticks, *trails, markers, clock]
+            return [*bodies, *ticks, *trails, markers, clock]
 
-    frames = _frames(samples, stride)
-    anim = mpl_animation.FuncAnimation(fig, draw, frames=frames, blit=False)
-    return _save(anim, fig, path, frame_ms)
+        frames = _frames(samples, stride)
+        anim = mpl_animation.FuncAnimation(fig, draw, frames=frames, blit=False)
+        return _save(anim, fig, path, frame_ms)
+    finally:
+        plt.close(fig)  # also when drawing or encoding failed
 
 
 def animate(

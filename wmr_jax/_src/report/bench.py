@@ -85,6 +85,12 @@ def bench_table(result: dict[str, Any]) -> str:
         cores), the speed-ups per batch size, and a note when other processes
         loaded the machine (over 0.2 cores) while it was timed.
     """
+    keys = ("environment", "config", "rows")
+    if not isinstance(result, dict) or any(k not in result for k in keys) or not result["rows"]:
+        raise ValueError(
+            f"result = {result!r:.80} is not allowed; allowed: what run_benchmark returned "
+            f"(a dict with {', '.join(keys)}, and one row or more)"
+        )
     lines = [*_header(result), "", *_rate_lines(result["rows"])]
     lines += _ratio_lines(result.get("ratios") or {})
     busy = [r["others_cpu"] for r in result["rows"] if r.get("others_cpu") is not None]

@@ -7,7 +7,8 @@ draw with ``plt`` from here; nothing else in the package imports matplotlib.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import contextlib
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import matplotlib
@@ -22,6 +23,7 @@ from matplotlib.patches import Patch  # noqa: E402
 from wmr_jax._src.io import save_figure  # noqa: E402
 
 __all__ = [
+    "closed_after",
     "image_formats",
     "ListedColormap",
     "Patch",
@@ -38,6 +40,20 @@ def image_formats() -> list[str]:
     from matplotlib.backend_bases import FigureCanvasBase
 
     return sorted(FigureCanvasBase.get_supported_filetypes())
+
+
+@contextlib.contextmanager
+def closed_after(*args: Any, **kwargs: Any) -> Iterator[tuple[Any, Any]]:
+    """``plt.subplots(*args, **kwargs)`` as ``(fig, axes)``, closed on leaving, error or not.
+
+    A figure that failed before it was saved is not left open (a long
+    session would otherwise gather them).
+    """
+    fig, axes = plt.subplots(*args, **kwargs)
+    try:
+        yield fig, axes
+    finally:
+        plt.close(fig)
 
 
 def _heading_arrows(ax, poses: np.ndarray, spacing: float, color, length: float, **kw) -> None:
@@ -169,9 +185,8 @@ def plot_wheel_speeds(
 
 def path_figure(path: Any, traj: Any, ref: Sequence[float], *, title: str) -> None:
     """Save the path of one run (a ``Trajectory``) to its reference as an image."""
-    fig, ax = plt.subplots(figsize=(6, 6))
-    plot_paths(ax, [np.asarray(traj.poses)], np.asarray([ref]), label="robot path")
-    ax.set_title(title)
-    ax.legend(fontsize=8)
-    save_figure(fig, path, dpi=120, bbox_inches="tight")
-    plt.close(fig)
+    with closed_after(figsize=(6, 6)) as (fig, ax):
+        plot_paths(ax, [np.asarray(traj.poses)], np.asarray([ref]), label="robot path")
+        ax.set_title(title)
+        ax.legend(fontsize=8)
+        save_figure(fig, path, dpi=120, bbox_inches="tight")

@@ -15,11 +15,19 @@ from typing import Any
 
 import numpy as np
 
-from wmr_jax._src.io import atomic_write_json, atomic_write_text, save_figure
+from wmr_jax._src.checks import check_number
+from wmr_jax._src.io import atomic_write_text, json_text, save_figure
 from wmr_jax._src.maps import MapStudy, PoseGrid, PoseMetrics
 from wmr_jax._src.params import Robot
 from wmr_jax._src.report.figures import plt
-from wmr_jax._src.report.tables import markdown_table, number, percent
+from wmr_jax._src.report.tables import (
+    json_number,
+    markdown_table,
+    number,
+    percent,
+    require_rows,
+    row_numbers,
+)
 
 __all__ = ["comparison_table", "map_figure", "save_comparison", "save_map_study", "winner_figure"]
 
@@ -75,11 +83,16 @@ def comparison_table(rows: list[dict[str, Any]]) -> str:
         runs over V_max, mean zig-zag count and, where present, the share of
         poses where it arrives strictly before the reference controller.
     """
+    rows = require_rows("rows", rows)
     ahead = [k for k in rows[0] if k.startswith("faster than ")]
     table = []
-    for r in rows:
+    for i, raw in enumerate(rows):
+        if "controller" not in raw:
+            raise ValueError(f"rows[{i}] has no 'controller'; allowed: summarize rows")
+        # Numbers as floats, also where the JSON file holds "inf" or null for them.
+        r = row_numbers(f"rows[{i}]", raw, (*_SUMMARY_NUMBERS, *ahead))
         row = {
-            "controller": r["controller"],
+            "controller": raw["controller"],
             "success": percent(r["success"]),
             "mean / median / p90 arrival (s)": " / ".join(
                 number(r[f"{k} arrival s"]) for k in ("mean", "median", "p90")
@@ -97,6 +110,20 @@ def comparison_table(rows: list[dict[str, Any]]) -> str:
     return markdown_table(table)
 
 
+# The numbers of a ``summarize`` row that ``comparison_table`` shows.
+_SUMMARY_NUMBERS = (
+    "success",
+    "mean arrival s",
+    "median arrival s",
+    "p90 arrival s",
+    "mean path cm",
+    "mean peak wheel cm/s",
+    "max peak wheel cm/s",
+    "over V_max",
+    "mean zigzag",
+)
+
+
 def save_comparison(out_dir: str | Path, comparison: dict[str, Any]) -> list[Path]:
     """Write ``comparison.md`` and ``comparison.json`` of ``wmr_jax.studies.compare_controllers``.
 
@@ -108,14 +135,24 @@ def save_comparison(out_dir: str | Path, comparison: dict[str, Any]) -> list[Pat
         The paths written.
     """
     out = Path(out_dir)
+    keys = ("poses", "seed", "velocity", "horizon_s", "dtype", "rows")
+    if not isinstance(comparison, dict) or any(k not in comparison for k in keys):
+        raise ValueError(
+            f"comparison = {comparison!r:.80} is not allowed; allowed: what "
+            f"compare_controllers returned (a dict with {', '.join(keys)})"
+        )
+    horizon = json_number("comparison['horizon_s']", comparison["horizon_s"])
     head = (
         f"{comparison['poses']} random docs/model.md §6 poses (sample_poses seed "
         f"{comparison['seed']}), {comparison['velocity']} loop, horizon "
-        f"{comparison['horizon_s']:g} s, {comparison['dtype']}\n\n"
+        f"{horizon:g} s, {comparison['dtype']}\n\n"
     )
+    # Both texts are made (and the rows checked) before the first file is written.
+    text = head + comparison_table(comparison["rows"])
+    record = json_text(comparison, "comparison", indent=2, sort_keys=False) + "\n"
     return [
-        atomic_write_json(out / "comparison.json", comparison),
-        atomic_write_text(out / "comparison.md", head + comparison_table(comparison["rows"])),
+        atomic_write_text(out / "comparison.json", record),
+        atomic_write_text(out / "comparison.md", text),
     ]
 
 
@@ -218,8 +255,15 @@ def map_figure(
     Returns:
         The path written.
     """
+    _check_sizes(grid, {"m": m})
     ranges = _ranges({"": m}) if ranges is None else ranges
-    v_max = float(Robot().v_max) if v_max is None else float(v_max)
+    missing = [field for field, _, _ in _MAP_FIELDS if field not in ranges]
+    if missing:
+        raise ValueError(
+            f"ranges has no {missing[0]!r}; allowed: a (low, high) colour range for each of "
+            f"{[field for field, _, _ in _MAP_FIELDS]}"
+        )
+    v_max = float(Robot().v_max) if v_max is None else check_number("v_max", v_max, unit="cm/s")
     n_h, n_rows = len(grid.headings), len(_MAP_FIELDS)
     fig, axes = plt.subplots(
         n_rows,
@@ -228,6 +272,30 @@ def map_figure(
         squeeze=False,
         layout="constrained",
     )
+    try:
+        _draw_maps(fig, axes, grid, m, ranges, v_max, title)
+        save_figure(fig, path, dpi=100)
+    finally:
+        plt.close(fig)
+    return Path(path)
+
+
+def _check_sizes(grid: PoseGrid, results: dict[str, PoseMetrics]) -> None:
+    """Raise unless every metric of ``results`` has one value per pose of ``grid``."""
+    n_h, per_heading = len(grid.headings), int(np.asarray(grid.inside).sum())
+    for name, m in results.items():
+        for field in ("arrival", "path", "peak_wheel", "zigzag"):
+            size = np.size(getattr(m, field))
+            if size != n_h * per_heading:
+                raise ValueError(
+                    f"{name}.{field} has {size} values; allowed: one per pose of grid, "
+                    f"{n_h * per_heading} ({n_h} headings × {per_heading} positions)"
+                )
+
+
+def _draw_maps(fig, axes, grid, m, ranges, v_max, title) -> None:
+    """Draw the heat maps of ``map_figure`` into ``axes``, with the legend and the title."""
+    n_h, n_rows = len(grid.headings), len(_MAP_FIELDS)
     for row, (field, label, cmap_name) in enumerate(_MAP_FIELDS):
         cmap = plt.get_cmap(cmap_name).with_extremes(bad=(1, 1, 1, 0))
         image = None
@@ -263,9 +331,6 @@ def map_figure(
         framealpha=1,
     )
     fig.suptitle(title, fontsize=10)
-    save_figure(fig, path, dpi=100)
-    plt.close(fig)
-    return Path(path)
 
 
 def winner_figure(
@@ -284,6 +349,12 @@ def winner_figure(
     """
     from wmr_jax._src.report.figures import ListedColormap
 
+    if not isinstance(results, dict) or not results:
+        raise ValueError(
+            f"results = {results!r:.80} is not allowed; allowed: a non-empty dict of "
+            "controller name → PoseMetrics"
+        )
+    _check_sizes(grid, {f"results[{name!r}]": m for name, m in results.items()})
     names = list(results)
     times = np.stack([results[n].arrival for n in names])  # (C, N)
     best = np.argmin(times, axis=0).astype(float)
@@ -292,6 +363,17 @@ def winner_figure(
     cmap = ListedColormap(colours).with_extremes(bad=(1, 1, 1, 0))
     n_h = len(grid.headings)
     fig, axes = plt.subplots(1, n_h, figsize=(2.9 * n_h, 3.8), squeeze=False, layout="constrained")
+    try:
+        _draw_winner(fig, axes, grid, names, best, colours, cmap, title)
+        save_figure(fig, path, dpi=100)
+    finally:
+        plt.close(fig)
+    return Path(path)
+
+
+def _draw_winner(fig, axes, grid, names, best, colours, cmap, title) -> None:
+    """Draw the first-to-arrive map of ``winner_figure`` into ``axes``, with its legend."""
+    n_h = len(grid.headings)
     extent = (grid.xs[0], grid.xs[-1], grid.xs[0], grid.xs[-1])
     for h in range(n_h):
         ax = axes[0, h]
@@ -312,9 +394,6 @@ def winner_figure(
     ]
     fig.legend(handles=handles, loc="outside lower center", ncol=len(handles), fontsize=8)
     fig.suptitle(title, fontsize=10)
-    save_figure(fig, path, dpi=100)
-    plt.close(fig)
-    return Path(path)
 
 
 def save_map_study(out_dir: str | Path, study: MapStudy) -> list[Path]:
@@ -332,7 +411,19 @@ def save_map_study(out_dir: str | Path, study: MapStudy) -> list[Path]:
         The paths written.
     """
     out = Path(out_dir)
+    # Everything is checked, and the texts made, before the first file is written.
+    if not isinstance(study.results, dict) or not study.results:
+        raise ValueError(
+            f"study.results = {study.results!r:.80} is not allowed; allowed: a non-empty dict "
+            "of controller name → PoseMetrics"
+        )
+    _check_sizes(study.grid, {f"study.results[{k!r}]": m for k, m in study.results.items()})
     what = _describe(study.summary)
+    summary_json = json_text(study.summary, "study.summary", indent=2, sort_keys=False) + "\n"
+    summary_md = (
+        f"Pose-space sweep: {what}; docs/model.md §6 metrics "
+        "(arrival statistics over the successful runs)\n\n" + comparison_table(study.rows)
+    )
     ranges = _ranges(study.results)
     v_max = float(Robot().v_max)
     written = [
@@ -352,12 +443,6 @@ def save_map_study(out_dir: str | Path, study: MapStudy) -> list[Path]:
                 out / "winner.png", study.grid, study.results, title=f"First to arrive ({what})"
             )
         )
-    written.append(atomic_write_json(out / "summary.json", study.summary))
-    written.append(
-        atomic_write_text(
-            out / "summary.md",
-            f"Pose-space sweep: {what}; docs/model.md §6 metrics "
-            "(arrival statistics over the successful runs)\n\n" + comparison_table(study.rows),
-        )
-    )
+    written.append(atomic_write_text(out / "summary.json", summary_json))
+    written.append(atomic_write_text(out / "summary.md", summary_md))
     return written

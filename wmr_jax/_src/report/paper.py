@@ -13,10 +13,11 @@ from typing import Any
 
 import numpy as np
 
-from wmr_jax._src.io import atomic_write_json, atomic_write_text, save_figure
+from wmr_jax._src.checks import check_number
+from wmr_jax._src.io import atomic_write_text, json_text, save_figure
 from wmr_jax._src.params import Gains
-from wmr_jax._src.report.figures import plot_paths, plot_wheel_speeds, plt
-from wmr_jax._src.report.tables import markdown_table, number, percent
+from wmr_jax._src.report.figures import closed_after, plot_paths, plot_wheel_speeds, plt
+from wmr_jax._src.report.tables import markdown_table, number, percent, row_numbers
 from wmr_jax._src.rollout import DEFAULT_DT
 
 __all__ = ["paper_summary_table", "save_fig7", "save_paper"]
@@ -44,32 +45,31 @@ def _fig6(path: Path, curve: dict[str, Any], r_e: float = 1.0) -> None:
         curve: ``wmr_jax.studies.fig6_curve()``.
         r_e: the ``R_e`` in use, cm, drawn as a dashed line.
     """
-    fig, ax = plt.subplots(figsize=(6, 4))
-    ax.semilogy(curve["phi_m_deg"], curve["bound_cm"])
-    mark_deg, mark_cm = curve["mark_deg"], curve["mark_cm"]
-    ax.plot([mark_deg], [mark_cm], "ro")
-    ax.annotate(
-        f"Φ_m = {mark_deg:g}°: {mark_cm:.2f} cm",
-        (mark_deg, mark_cm),
-        textcoords="offset points",
-        xytext=(-110, 10),
-    )
-    ax.axhline(r_e, color="0.4", ls="--", lw=1, label=f"default R_e = {r_e:g} cm (a choice)")
-    ax.legend(loc="lower right", fontsize=8)
-    ax.set_xlabel("Φ_m [deg]")
-    ax.set_ylabel("least R_e = √(sin Φ_m tan Φ_m) [cm]")
-    # The paper's Fig. 6 is the "error range of R_e": V̇ ≤ 0 (docs/model.md §3.6)
-    # is proven only for r_e ≥ √(sin Φ_m tan Φ_m), so a Region 0 of radius R_e at
-    # least that large covers every distance the proof leaves out. V adds r_e² in
-    # cm² to dimensionless terms, so the bound is in cm and does not scale with R_e.
-    ax.set_title(
-        "Fig. 6: error range of R_e: R_e ≥ √(sin Φ_m tan Φ_m) cm\n"
-        "(V̇ ≤ 0 is proven only for r_e above the curve, docs/model.md §3.6)",
-        fontsize=10,
-    )
-    ax.grid(alpha=0.3, which="both")
-    save_figure(fig, path, dpi=120, bbox_inches="tight")
-    plt.close(fig)
+    with closed_after(figsize=(6, 4)) as (fig, ax):
+        ax.semilogy(curve["phi_m_deg"], curve["bound_cm"])
+        mark_deg, mark_cm = curve["mark_deg"], curve["mark_cm"]
+        ax.plot([mark_deg], [mark_cm], "ro")
+        ax.annotate(
+            f"Φ_m = {mark_deg:g}°: {mark_cm:.2f} cm",
+            (mark_deg, mark_cm),
+            textcoords="offset points",
+            xytext=(-110, 10),
+        )
+        ax.axhline(r_e, color="0.4", ls="--", lw=1, label=f"default R_e = {r_e:g} cm (a choice)")
+        ax.legend(loc="lower right", fontsize=8)
+        ax.set_xlabel("Φ_m [deg]")
+        ax.set_ylabel("least R_e = √(sin Φ_m tan Φ_m) [cm]")
+        # The paper's Fig. 6 is the "error range of R_e": V̇ ≤ 0 (docs/model.md §3.6)
+        # is proven only for r_e ≥ √(sin Φ_m tan Φ_m), so a Region 0 of radius R_e at
+        # least that large covers every distance the proof leaves out. V adds r_e² in
+        # cm² to dimensionless terms, so the bound is in cm and does not scale with R_e.
+        ax.set_title(
+            "Fig. 6: error range of R_e: R_e ≥ √(sin Φ_m tan Φ_m) cm\n"
+            "(V̇ ≤ 0 is proven only for r_e above the curve, docs/model.md §3.6)",
+            fontsize=10,
+        )
+        ax.grid(alpha=0.3, which="both")
+        save_figure(fig, path, dpi=120, bbox_inches="tight")
 
 
 def _legend_below(ax: Any) -> None:
@@ -79,60 +79,59 @@ def _legend_below(ax: Any) -> None:
 
 def _paths_figure(path: Path, title: str, refs: np.ndarray, runs: list[tuple]) -> None:
     """Draw several sets of paths ``(label, trajectory, line style, colour)`` on one plot."""
-    fig, ax = plt.subplots(figsize=(6.5, 6.5))
-    for i, (label, traj, style, color) in enumerate(runs):
-        plot_paths(
-            ax,
-            np.asarray(traj.poses),
-            refs,
-            label=label,
-            linestyle=style,
-            color=color,
-            mark_refs=i == len(runs) - 1,
-        )
-    ax.plot([0], [0], "ko", ms=5)
-    ax.set_title(title, fontsize=10)
-    _legend_below(ax)
-    save_figure(fig, path, dpi=120, bbox_inches="tight")
-    plt.close(fig)
+    with closed_after(figsize=(6.5, 6.5)) as (fig, ax):
+        for i, (label, traj, style, color) in enumerate(runs):
+            plot_paths(
+                ax,
+                np.asarray(traj.poses),
+                refs,
+                label=label,
+                linestyle=style,
+                color=color,
+                mark_refs=i == len(runs) - 1,
+            )
+        ax.plot([0], [0], "ko", ms=5)
+        ax.set_title(title, fontsize=10)
+        _legend_below(ax)
+        save_figure(fig, path, dpi=120, bbox_inches="tight")
 
 
 def _wheels_figure(path: Path, title: str, refs: np.ndarray, case: Any, v_max: float) -> None:
     """Rim speeds against time per reference, non-ideal (solid) and ideal (dotted)."""
     n = len(refs)
-    fig, axes = plt.subplots(2, (n + 1) // 2, figsize=(3.2 * ((n + 1) // 2), 5.6), sharey=True)
-    for i, ax in enumerate(axes.flat):
-        if i >= n:
-            ax.axis("off")
-            continue
-        plot_wheel_speeds(
-            ax,
-            np.asarray(case.nonideal.wheel_speeds[i]),
-            dt=DEFAULT_DT,
-            v_max=v_max,
-            labels=("left (non-ideal)", "right (non-ideal)"),
-        )
-        ax.set_prop_cycle(None)
-        plot_wheel_speeds(
-            ax,
-            np.asarray(case.ideal.wheel_speeds[i]),
-            dt=DEFAULT_DT,
-            labels=("left (ideal)", "right (ideal)"),
-            linestyle=":",
-        )
-        x, y, th = refs[i]
-        ax.set_title(f"ref ({x:g}, {y:g}, {math.degrees(th):g}°)", fontsize=9)
-        if i:
-            ax.set_ylabel("")
-    handles, labels = axes.flat[0].get_legend_handles_labels()
-    if n < axes.size:  # one shared legend, readable, in the first empty panel
-        axes.flat[n].legend(handles, labels, loc="center", fontsize=9, title="rim speed")
-    else:
-        fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=9)
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    save_figure(fig, path, dpi=110)
-    plt.close(fig)
+    cols = (n + 1) // 2
+    with closed_after(2, cols, figsize=(3.2 * cols, 5.6), sharey=True) as (fig, axes):
+        for i, ax in enumerate(axes.flat):
+            if i >= n:
+                ax.axis("off")
+                continue
+            plot_wheel_speeds(
+                ax,
+                np.asarray(case.nonideal.wheel_speeds[i]),
+                dt=DEFAULT_DT,
+                v_max=v_max,
+                labels=("left (non-ideal)", "right (non-ideal)"),
+            )
+            ax.set_prop_cycle(None)
+            plot_wheel_speeds(
+                ax,
+                np.asarray(case.ideal.wheel_speeds[i]),
+                dt=DEFAULT_DT,
+                labels=("left (ideal)", "right (ideal)"),
+                linestyle=":",
+            )
+            x, y, th = refs[i]
+            ax.set_title(f"ref ({x:g}, {y:g}, {math.degrees(th):g}°)", fontsize=9)
+            if i:
+                ax.set_ylabel("")
+        handles, labels = axes.flat[0].get_legend_handles_labels()
+        if n < axes.size:  # one shared legend, readable, in the first empty panel
+            axes.flat[n].legend(handles, labels, loc="center", fontsize=9, title="rim speed")
+        else:
+            fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=9)
+        fig.suptitle(title, fontsize=10)
+        fig.tight_layout()
+        save_figure(fig, path, dpi=110)
 
 
 def _case_figures(out_dir: Path, refs: np.ndarray, case: Any, v_max: float) -> None:
@@ -169,15 +168,25 @@ def paper_summary_table(summary: dict[str, Any], v_max: float) -> str:
         non-ideal path gap (max / mean), arrival, zig-zag count and the share
         of samples with a wheel command over ``v_max``, ideal / non-ideal.
     """
+    v_max = check_number("v_max", v_max, unit="cm/s")
+    if not isinstance(summary, dict):
+        raise ValueError(f"summary = {summary!r:.80} is not allowed; allowed: a dict")
     rows = []
-    for case, s in summary.items():
+    for case, raw in summary.items():
         if not case.startswith("kr="):
             continue
+        if not isinstance(raw, dict) or "condition" not in raw:
+            raise ValueError(
+                f"summary[{case!r}] = {raw!r:.80} is not allowed; allowed: a dict with "
+                "'condition' and the numbers of PaperRuns.summary"
+            )
+        # Numbers as floats, also where the JSON file holds "inf" or null for them.
+        s = row_numbers(f"summary[{case!r}]", raw, _SUMMARY_NUMBERS)
         rows.append(
             {
                 "k_r": case.removeprefix("kr="),
                 "k_r + L k_θ (cm/s)": f"{s['k_r + L k_theta']:g}",
-                "condition": s["condition"],
+                "condition": raw["condition"],
                 "ideal vs non-ideal path gap, max / mean (cm)": (
                     f"{number(s['max_deviation_cm'])} / {number(s['mean_deviation_cm'])}"
                 ),
@@ -193,7 +202,26 @@ def paper_summary_table(summary: dict[str, Any], v_max: float) -> str:
                 ),
             }
         )
+    if not rows:
+        raise ValueError(
+            f"summary has no gain (no key starting 'kr=', keys: {list(summary)}); allowed: "
+            "PaperRuns.summary, or paper_table.json's 'summary'"
+        )
     return markdown_table(rows)
+
+
+# The numbers of a ``PaperRuns.summary`` entry that ``paper_summary_table`` shows.
+_SUMMARY_NUMBERS = (
+    "k_r + L k_theta",
+    "max_deviation_cm",
+    "mean_deviation_cm",
+    "ideal_arrival_s",
+    "nonideal_arrival_s",
+    "ideal_zigzag",
+    "nonideal_zigzag",
+    "ideal_saturated_fraction",
+    "nonideal_saturated_fraction",
+)
 
 
 def save_paper(out_dir: str | Path, runs: Any) -> dict[str, Any]:
@@ -213,19 +241,21 @@ def save_paper(out_dir: str | Path, runs: Any) -> dict[str, Any]:
         The table as written to ``paper_table.json``.
     """
     out_dir = Path(out_dir)
-    _fig6(out_dir / "fig6.png", runs.fig6, float(Gains().r_e))
     v_max = float(runs.robot.v_max)
-    for case in runs.cases:
-        _case_figures(out_dir, runs.refs, case, v_max)
+    # The tables are made (and checked) before the first file is written.
     text = "# Paper runs (docs/model.md §5): seven references, two gains, two velocity loops\n\n"
     text += markdown_table(runs.runs, _TABLE_COLUMNS)
     text += "\n## Summary per gain (means over the seven references)\n\n"
     text += paper_summary_table(runs.summary, v_max) + "\n"
     summary = [{"case": k, **v} for k, v in runs.summary.items() if k.startswith("kr=")]
     text += markdown_table(summary)
-    atomic_write_text(out_dir / "paper_table.md", text)
     table = runs.table()
-    atomic_write_json(out_dir / "paper_table.json", table)
+    record = json_text(table, "runs.table()", indent=2, sort_keys=False) + "\n"
+    _fig6(out_dir / "fig6.png", runs.fig6, float(Gains().r_e))
+    for case in runs.cases:
+        _case_figures(out_dir, runs.refs, case, v_max)
+    atomic_write_text(out_dir / "paper_table.md", text)
+    atomic_write_text(out_dir / "paper_table.json", record)
     return table
 
 
@@ -233,15 +263,22 @@ def save_fig7(out_dir: str | Path, fig7: Any) -> None:
     """Write ``fig7.png``, ``fig7.md`` and ``fig7.json`` of ``wmr_jax.studies.fig7_runs``."""
     out_dir = Path(out_dir)
     gains = fig7.gains
+    # The table is made (and checked) before the first file is written.
+    text = markdown_table(fig7.rows)
+    record = json_text(fig7.table(), "fig7.table()", indent=2, sort_keys=False) + "\n"
     fig, ax = plt.subplots(figsize=(6.5, 6.5))
-    plot_paths(ax, np.asarray(fig7.trajectory.poses), fig7.refs, label="robot path (ideal loop)")
-    ax.plot([0], [0], "ko", ms=5)
-    ax.set_title(
-        f"Fig. 7: ideal velocity loop, k_r = {float(gains.kr):g}, k_θ = {float(gains.k_theta):g}, "
-        f"Φ_m = {math.degrees(float(gains.phi_m)):g}°"
-    )
-    _legend_below(ax)
-    save_figure(fig, out_dir / "fig7.png", dpi=120, bbox_inches="tight")
-    plt.close(fig)
-    atomic_write_text(out_dir / "fig7.md", markdown_table(fig7.rows))
-    atomic_write_json(out_dir / "fig7.json", fig7.table())
+    try:
+        plot_paths(
+            ax, np.asarray(fig7.trajectory.poses), fig7.refs, label="robot path (ideal loop)"
+        )
+        ax.plot([0], [0], "ko", ms=5)
+        ax.set_title(
+            f"Fig. 7: ideal velocity loop, k_r = {float(gains.kr):g}, "
+            f"k_θ = {float(gains.k_theta):g}, Φ_m = {math.degrees(float(gains.phi_m)):g}°"
+        )
+        _legend_below(ax)
+        save_figure(fig, out_dir / "fig7.png", dpi=120, bbox_inches="tight")
+    finally:
+        plt.close(fig)
+    atomic_write_text(out_dir / "fig7.md", text)
+    atomic_write_text(out_dir / "fig7.json", record)

@@ -8,10 +8,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from wmr_jax._src.io import atomic_write_json, atomic_write_text, save_figure
+from wmr_jax._src.io import atomic_write_text, json_text, save_figure
 from wmr_jax._src.poses import HORIZON_S
 from wmr_jax._src.report.figures import plt
-from wmr_jax._src.report.tables import markdown_table
+from wmr_jax._src.report.tables import markdown_table, require_rows
 
 __all__ = [
     "ROBUSTNESS_COLUMNS",
@@ -50,6 +50,16 @@ STANDARD_COLUMNS = [
 
 _STYLES = ("-", "--", ":", "-.")
 
+# The keys of a row that robustness_figure draws.
+_FIGURE_KEYS = [
+    "controller",
+    "condition",
+    "noise xy cm",
+    "noise theta deg",
+    "success",
+    "median arrival s",
+]
+
 
 def write_robustness(
     out_dir: str | os.PathLike,
@@ -71,20 +81,23 @@ def write_robustness(
     Returns:
         The paths written.
     """
-    out, rows = Path(out_dir), list(rows)
+    out, rows = Path(out_dir), require_rows("rows", rows)
     head = f"Robustness Monte Carlo ({velocity} loop, seed {seed}, {n_runs} runs per row)\n\n"
-    md = atomic_write_text(out / "robustness.md", head + markdown_table(rows, ROBUSTNESS_COLUMNS))
+    # Everything is checked and drawn before the first file is written.
+    text = head + markdown_table(rows, ROBUSTNESS_COLUMNS)
     meta = {"seed": seed, "velocity": velocity, "runs": n_runs, "horizon_s": HORIZON_S}
-    record = atomic_write_json(out / "robustness.json", {**meta, "rows": rows})
+    record = json_text({**meta, "rows": rows}, "rows", indent=2, sort_keys=False) + "\n"
     title = (
         f"Robustness, {velocity} loop: {n_runs} random poses (docs/model.md §6) per point, "
         f"seed {seed}; mismatch ±3 % wheel radius, ±20 % mass; latency one sample"
     )
     fig = robustness_figure(rows, title=title)
     try:
-        return [save_figure(fig, out / "robustness.png", dpi=110), md, record]
+        png = save_figure(fig, out / "robustness.png", dpi=110)
     finally:
         plt.close(fig)
+    md = atomic_write_text(out / "robustness.md", text)
+    return [png, md, atomic_write_text(out / "robustness.json", record)]
 
 
 def robustness_figure(rows: Sequence[dict[str, Any]], *, title: str) -> Any:
@@ -98,10 +111,22 @@ def robustness_figure(rows: Sequence[dict[str, Any]], *, title: str) -> Any:
     Returns:
         The matplotlib ``Figure`` (the caller saves and closes it).
     """
+    rows = require_rows("rows", rows)
+    markdown_table(rows, _FIGURE_KEYS)  # names a row without one of them
     names = list(dict.fromkeys(r["controller"] for r in rows))
     conditions = list(dict.fromkeys(r["condition"] for r in rows))
     first = [r for r in rows if (r["controller"], r["condition"]) == (names[0], conditions[0])]
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    try:
+        _draw_robustness(fig, axes, rows, names, conditions, first, title)
+    except BaseException:
+        plt.close(fig)
+        raise
+    return fig
+
+
+def _draw_robustness(fig, axes, rows, names, conditions, first, title) -> None:
+    """Draw the lines, labels and legend of ``robustness_figure``."""
     for c, name in enumerate(names):
         colour = plt.get_cmap("tab10")(c)
         for i, label in enumerate(conditions):
@@ -125,7 +150,6 @@ def robustness_figure(rows: Sequence[dict[str, Any]], *, title: str) -> Any:
     # Outside the axes, so that it never hides a line.
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, fontsize=7, loc="center left", bbox_to_anchor=(0.75, 0.5))
-    return fig
 
 
 def write_standard_conditions(
@@ -141,28 +165,51 @@ def write_standard_conditions(
     Returns:
         The paths written.
     """
-    out, rows = Path(out_dir), list(rows)
+    out, rows = Path(out_dir), require_rows("rows", rows)
+    if not isinstance(meta, dict):
+        raise ValueError(f"meta = {meta!r:.80} is not allowed; allowed: a dict")
+    # Everything is checked and drawn before the first file is written.
+    table = markdown_table(rows, STANDARD_COLUMNS)
     head = (
         "Gain sets under the standard conditions of docs/model.md §7 (hard law, ideal loop, "
         f"{rows[0]['runs']} held-out poses of docs/model.md §6, horizon {HORIZON_S:g} s)\n\n"
     )
-    md = atomic_write_text(
-        out / "standard_conditions.md", head + markdown_table(rows, STANDARD_COLUMNS)
-    )
-    record = atomic_write_json(out / "standard_conditions.json", {**meta, "rows": rows})
+    record = json_text({**meta, "rows": rows}, "rows", indent=2, sort_keys=False) + "\n"
     fig = standard_figure(rows)
     try:
-        return [save_figure(fig, out / "standard_conditions.png", dpi=110), md, record]
+        png = save_figure(fig, out / "standard_conditions.png", dpi=110)
     finally:
         plt.close(fig)
+    md = atomic_write_text(out / "standard_conditions.md", head + table)
+    return [png, md, atomic_write_text(out / "standard_conditions.json", record)]
 
 
 def standard_figure(rows: Sequence[dict[str, Any]]) -> Any:
     """Draw success and mean arrival per condition, one bar per gain set (legend outside)."""
+    rows = require_rows("rows", rows)
+    markdown_table(rows, ["condition", "gains", "success", "mean arrival s"])  # names a gap
     conditions = list(dict.fromkeys(r["condition"] for r in rows))
     sets = list(dict.fromkeys(r["gains"] for r in rows))
+    for name in sets:
+        have = {r["condition"] for r in rows if r["gains"] == name}
+        if len(have) < len(conditions):
+            lacking = next(c for c in conditions if c not in have)
+            raise ValueError(
+                f"rows has no row of gains {name!r} under condition {lacking!r}; allowed: "
+                "one row per gain set and condition"
+            )
     width = 0.8 / len(sets)
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.0))
+    try:
+        _draw_standard(fig, axes, rows, conditions, sets, width)
+    except BaseException:
+        plt.close(fig)
+        raise
+    return fig
+
+
+def _draw_standard(fig, axes, rows, conditions, sets, width) -> None:
+    """Draw the bars, labels and legend of ``standard_figure``."""
     for j, name in enumerate(sets):
         got = {r["condition"]: r for r in rows if r["gains"] == name}
         x = [i + (j - (len(sets) - 1) / 2) * width for i in range(len(conditions))]
@@ -184,4 +231,3 @@ def standard_figure(rows: Sequence[dict[str, Any]]) -> Any:
     fig.tight_layout(rect=(0, 0, 0.82, 1))
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, fontsize=8, loc="center left", bbox_to_anchor=(0.82, 0.5))
-    return fig

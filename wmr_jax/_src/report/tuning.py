@@ -12,7 +12,7 @@ import numpy as np
 from wmr_jax._src.controllers.schedule import KNOTS, SHAPE_FIELDS, knot_radii
 from wmr_jax._src.io import save_figure
 from wmr_jax._src.optimal import bound_ratios
-from wmr_jax._src.report.tables import markdown_table
+from wmr_jax._src.report.tables import markdown_table, require_rows
 from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS, PAPER_FEASIBLE_GAINS, gains_as_dict
 
 __all__ = ["comparison_table", "evaluation_table", "tuning_curve"]
@@ -51,6 +51,11 @@ def evaluation_table(evaluation: dict[str, Any], bounds: Any = None) -> str:
             ratio of each mean arrival to the mean turn–drive–turn time and
             to the mean lower bound, and a row for each yardstick.
     """
+    if not isinstance(evaluation, dict) or "paper_feasible" not in evaluation:
+        raise ValueError(
+            f"evaluation = {evaluation!r:.80} is not allowed; allowed: a dict of Evaluation "
+            "rows with 'paper_feasible' (the reference of the 'vs paper' column)"
+        )
     paper = evaluation["paper_feasible"].mean_arrival
     columns = _TABLE_COLUMNS + (_BOUND_COLUMNS if bounds is not None else [])
     rows = []
@@ -93,6 +98,7 @@ def comparison_table(rows: list[dict[str, Any]]) -> str:
     Args:
         rows: the rows of ``wmr_jax.tuning.compare`` (one per problem, seed and method).
     """
+    rows = require_rows("rows", rows)
     groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for row in rows:
         groups.setdefault((row["problem"], row["method"]), []).append(row)
@@ -146,28 +152,33 @@ def tuning_curve(
     Returns:
         ``path``.
     """
-    from wmr_jax._src.report.figures import plt
+    from wmr_jax._src.report.figures import closed_after
 
+    if not isinstance(history, dict) or any(k not in history for k in _HISTORY_KEYS):
+        raise ValueError(
+            f"history = {history!r:.80} is not allowed; allowed: TuneResult.history, a dict "
+            f"with {', '.join(_HISTORY_KEYS)}"
+        )
     steps = np.arange(1, len(history["loss"]) + 1)
-    fig, axes = plt.subplots(2, 4, figsize=(14, 6), constrained_layout=True)
-    ax = axes[0, 0]
-    ax.plot(steps, history["loss"], lw=0.8, color="C0")
-    ax.set_yscale("log")
-    ax.set_xlabel("iteration")
-    ax.set_ylabel("loss (s)", color="C0")
-    twin = ax.twinx()
-    twin.plot(steps, history["temperature"], lw=1.0, color="C3")
-    twin.set_yscale("log")
-    twin.set_ylabel("temperature", color="C3")
-    ax.set_title(f"loss ({velocity} loop)")
-    if problem == "schedule":
-        _schedule_panels(axes, steps, history["gains"])
-    else:
-        _gain_panels(axes, steps, history["gains"])
-    try:
+    with closed_after(2, 4, figsize=(14, 6), constrained_layout=True) as (fig, axes):
+        ax = axes[0, 0]
+        ax.plot(steps, history["loss"], lw=0.8, color="C0")
+        ax.set_yscale("log")
+        ax.set_xlabel("iteration")
+        ax.set_ylabel("loss (s)", color="C0")
+        twin = ax.twinx()
+        twin.plot(steps, history["temperature"], lw=1.0, color="C3")
+        twin.set_yscale("log")
+        twin.set_ylabel("temperature", color="C3")
+        ax.set_title(f"loss ({velocity} loop)")
+        if problem == "schedule":
+            _schedule_panels(axes, steps, history["gains"])
+        else:
+            _gain_panels(axes, steps, history["gains"])
         return save_figure(fig, path, dpi=110)
-    finally:
-        plt.close(fig)
+
+
+_HISTORY_KEYS = ("loss", "temperature", "gains")
 
 
 def _gain_panels(axes: Any, steps: np.ndarray, gains: np.ndarray) -> None:

@@ -1,0 +1,373 @@
+"""Bad input to the reporting layer and its files: a named ValueError, nothing half-written."""
+
+from __future__ import annotations
+
+import gc
+import json
+import math
+from types import SimpleNamespace
+
+import jax.numpy as jnp
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+
+from wmr_jax._src.report import animation
+from wmr_jax.report import (
+    ROBUSTNESS_COLUMNS as _ROBUSTNESS_COLUMNS,
+)
+from wmr_jax.report import (
+    atomic_write_json,
+    atomic_write_text,
+    bench_table,
+    comparison_table,
+    evaluation_table,
+    frame_timing,
+    load_arrays,
+    map_figure,
+    markdown_table,
+    paper_summary_table,
+    path_figure,
+    save_arrays,
+    save_comparison,
+    save_map_study,
+    standard_figure,
+    tuning_curve,
+    winner_figure,
+    write_gif,
+    write_robustness,
+    write_standard_conditions,
+)
+from wmr_jax.studies import MapStudy, PoseMetrics, pose_grid
+
+INF = math.inf
+# A GIF whose encoding is made to fail leaves an animation never rendered.
+pytestmark = pytest.mark.filterwarnings("ignore:Animation was deleted")
+
+
+# ---------------------------------------------------------------- save_arrays
+
+
+@pytest.mark.parametrize(
+    "arrays, message",
+    [
+        ({"a": None}, "arrays['a'] = None is not allowed"),
+        ({"a": {"x": 1}}, "arrays['a'] = {'x': 1} is not allowed"),
+        ({"a": np.array([object()])}, "arrays['a']"),
+        ({"a": [[1.0], [1.0, 2.0]]}, "arrays['a']"),
+        ({"__meta__": np.ones(2)}, "arrays name = '__meta__' is not allowed"),
+        ({"__sha256__": np.ones(2)}, "arrays name = '__sha256__' is not allowed"),
+        ({1: np.ones(2)}, "arrays name = 1 is not allowed"),
+        ([np.ones(2)], "arrays = [array"),
+    ],
+)
+def test_save_arrays_refuses_what_load_arrays_cannot_read(tmp_path, arrays, message):
+    path = tmp_path / "a.npz"
+    with pytest.raises(ValueError, match="allowed") as err:
+        save_arrays(path, arrays, {})
+    assert message in str(err.value)
+    assert not list(tmp_path.iterdir())  # nothing written
+
+
+def test_save_arrays_refuses_a_meta_json_cannot_store(tmp_path):
+    with pytest.raises(ValueError, match="meta = "):
+        save_arrays(tmp_path / "a.npz", {"a": np.ones(2)}, {"x": {1, 2}})
+    assert not list(tmp_path.iterdir())
+
+
+def test_save_arrays_still_round_trips(tmp_path):
+    arrays = {"a": np.arange(3.0), "s": np.asarray("text"), "b": np.array([True, False])}
+    save_arrays(tmp_path / "a.npz", arrays, {"inf": INF})
+    got, meta = load_arrays(tmp_path / "a.npz")
+    assert set(got) == set(arrays) and meta == {"inf": "inf"}
+    for k, v in arrays.items():
+        np.testing.assert_array_equal(got[k], v)
+
+
+# ---------------------------------------------------------------- own JSON read back
+
+
+def _summary_row(name, **changes):
+    row = {
+        "controller": name,
+        "poses": 4,
+        "success": 0.5,
+        "mean arrival s": 2.0,
+        "median arrival s": INF,
+        "p90 arrival s": math.nan,
+        "mean path cm": 40.0,
+        "mean peak wheel cm/s": 100.0,
+        "max peak wheel cm/s": INF,
+        "over V_max": 0.25,
+        "mean zigzag": -INF,
+        "any zigzag": 0.0,
+        "faster than shim_sung": 0.5,
+    }
+    return {**row, **changes}
+
+
+def _through_json(tmp_path, obj):
+    atomic_write_json(tmp_path / "x.json", obj)
+    with open(tmp_path / "x.json") as f:
+        return json.load(f)
+
+
+def test_comparison_table_accepts_its_own_json(tmp_path):
+    rows = [_summary_row("a"), _summary_row("b", success=1.0)]
+    loaded = _through_json(tmp_path, rows)
+    assert loaded[0]["median arrival s"] == "inf" and loaded[0]["p90 arrival s"] is None
+    table = comparison_table(loaded)
+    assert table == comparison_table(rows)
+    assert "2 / inf / nan" in table and "100 / inf" in table and "-inf" in table
+
+
+def test_comparison_table_names_a_bad_number():
+    with pytest.raises(ValueError, match=r"rows\[0\]\['success'\] = 'many' is not allowed"):
+        comparison_table([_summary_row("a", success="many")])
+    with pytest.raises(ValueError, match=r"rows\[0\] has no 'mean path cm'"):
+        comparison_table([{k: v for k, v in _summary_row("a").items() if k != "mean path cm"}])
+
+
+def _paper_summary():
+    case = {
+        "k_r + L k_theta": 180.0,
+        "condition": "violated",
+        "max_deviation_cm": INF,
+        "mean_deviation_cm": math.nan,
+        "ideal_arrival_s": 1.5,
+        "nonideal_arrival_s": INF,
+        "ideal_zigzag": 0.0,
+        "nonideal_zigzag": 2.0,
+        "ideal_saturated_fraction": 0.1,
+        "nonideal_saturated_fraction": 0.0,
+    }
+    return {"fig6": {"phi_m_deg": 70.0, "bound_cm": 1.6}, "kr=120": case}
+
+
+def test_paper_summary_table_accepts_its_own_json(tmp_path):
+    summary = _paper_summary()
+    loaded = _through_json(tmp_path, {"summary": summary})["summary"]
+    assert loaded["kr=120"]["max_deviation_cm"] == "inf"
+    table = paper_summary_table(loaded, 125.0)
+    assert table == paper_summary_table(summary, 125.0)
+    assert "inf / nan" in table and "1.5 / inf" in table
+
+
+# ---------------------------------------------------------------- empty inputs
+
+
+def _grid_and_metrics(n=None):
+    grid = pose_grid(40, (0.0,))
+    n = len(grid.refs) if n is None else n
+    arrival = np.where(np.arange(n) % 3 == 0, INF, 1.0 + np.arange(n) / n)
+    m = PoseMetrics(arrival, np.full(n, 30.0), np.linspace(50, 150, n), np.zeros(n), np.zeros(n))
+    return grid, m
+
+
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (lambda d: write_robustness(d, [], seed=0, velocity="ideal", n_runs=1), "rows = []"),
+        (lambda d: write_standard_conditions(d, [], meta={}), "rows = []"),
+        (lambda d: comparison_table([]), "rows = []"),
+        (lambda d: markdown_table([]), "rows = []"),
+        (lambda d: evaluation_table({}), "evaluation = {}"),
+        (lambda d: bench_table({}), "result = {}"),
+        (lambda d: paper_summary_table({}, 125), "summary has no gain"),
+        (lambda d: standard_figure([]), "rows = []"),
+        (lambda d: winner_figure(d / "w.png", _grid_and_metrics()[0], {}), "results = {}"),
+    ],
+)
+def test_empty_inputs_are_named(tmp_path, call, message):
+    with pytest.raises(ValueError, match="allowed") as err:
+        call(tmp_path)
+    assert message in str(err.value)
+    assert not list(tmp_path.iterdir())
+
+
+# ---------------------------------------------------------------- no half-written sets
+
+
+def _robustness_row(**changes):
+    row = dict.fromkeys(_ROBUSTNESS_COLUMNS, 1.0)
+    row.update(condition="nominal", controller="shim_sung", **changes)
+    return row
+
+
+def test_write_robustness_checks_everything_before_writing(tmp_path):
+    with pytest.raises(ValueError, match="rows = "):
+        write_robustness(
+            tmp_path, [_robustness_row(extra={1, 2})], seed=0, velocity="ideal", n_runs=1
+        )
+    assert not list(tmp_path.iterdir())
+    written = write_robustness(tmp_path, [_robustness_row()], seed=0, velocity="ideal", n_runs=1)
+    assert sorted(p.name for p in written) == ["robustness.json", "robustness.md", "robustness.png"]
+
+
+def test_write_standard_conditions_checks_everything_before_writing(tmp_path):
+    row = {
+        "condition": "latency",
+        "gains": "paper",
+        "success": 1.0,
+        "mean arrival s": 2.0,
+        "median arrival s": 2.0,
+        "mean final distance cm": 0.1,
+        "runs": 4,
+    }
+    with pytest.raises(ValueError, match="rows = "):
+        write_standard_conditions(tmp_path, [{**row, "bad": object()}], meta={})
+    with pytest.raises(ValueError, match=r"rows\[0\] has no column 'runs'"):
+        write_standard_conditions(
+            tmp_path, [{k: v for k, v in row.items() if k != "runs"}], meta={}
+        )
+    assert not list(tmp_path.iterdir())
+    assert len(write_standard_conditions(tmp_path, [row], meta={"seed": 0})) == 3
+
+
+def test_save_comparison_checks_the_rows_before_writing(tmp_path):
+    comparison = {
+        "poses": 4,
+        "seed": 0,
+        "velocity": "ideal",
+        "horizon_s": 6.0,
+        "dtype": "float64",
+        "rows": [{"controller": "a"}],
+    }
+    with pytest.raises(ValueError, match=r"rows\[0\] has no 'success'"):
+        save_comparison(tmp_path, comparison)
+    assert not list(tmp_path.iterdir())
+    with pytest.raises(ValueError, match="comparison = "):
+        save_comparison(tmp_path, {"rows": []})
+    comparison["rows"] = [_summary_row("a")]
+    paths = save_comparison(tmp_path, comparison)
+    assert {p.name for p in paths} == {"comparison.json", "comparison.md"}
+
+
+# ---------------------------------------------------------------- markdown_table
+
+
+def test_markdown_table_keeps_sign_escapes_and_formats_numpy_and_jax():
+    text = markdown_table(
+        [
+            {
+                "a|b": -INF,
+                "text": "x|y\nz",
+                "f32": np.float32(0.1),
+                "jax": jnp.float32(1 / 3),
+                "big": np.float32(123456.0),
+            }
+        ]
+    )
+    header, _, row = text.splitlines()
+    assert header == r"| a\|b | text | f32 | jax | big |"
+    assert row == r"| -inf | x\|y z | 0.1 | 0.333 | 1.235e+05 |"
+
+
+def test_markdown_table_names_a_missing_column():
+    with pytest.raises(ValueError, match=r"rows\[1\] has no column 'b'"):
+        markdown_table([{"a": 1, "b": 2}, {"a": 3}])
+    with pytest.raises(ValueError, match=r"rows\[0\] = 3 is not allowed"):
+        markdown_table([3])
+
+
+# ---------------------------------------------------------------- maps
+
+
+def test_map_figures_refuse_metrics_of_another_grid(tmp_path):
+    grid, _ = _grid_and_metrics()
+    n = len(grid.refs)
+    _, m = _grid_and_metrics(n + 5)
+    with pytest.raises(ValueError, match=rf"m.arrival has {n + 5} values; allowed: .*{n}"):
+        map_figure(tmp_path / "m.png", grid, m)
+    with pytest.raises(ValueError, match=rf"results\['b'\].arrival has {n + 5} values"):
+        winner_figure(tmp_path / "w.png", grid, {"a": _grid_and_metrics()[1], "b": m})
+    assert not list(tmp_path.iterdir())
+
+
+def test_save_map_study_checks_every_controller_before_writing(tmp_path):
+    grid, good = _grid_and_metrics()
+    _, bad = _grid_and_metrics(len(grid.refs) - 1)
+    summary = {"poses": len(grid.refs), "velocity": "ideal", "horizon_s": 6.0, "dtype": "float64"}
+    study = MapStudy(grid, {"a": good, "b": bad}, {**summary, "rows": [_summary_row("a")]})
+    with pytest.raises(ValueError, match=r"study.results\['b'\].arrival has"):
+        save_map_study(tmp_path, study)
+    assert not list(tmp_path.iterdir())
+
+
+# ---------------------------------------------------------------- figures closed on error
+
+
+def _history():
+    return {"loss": np.ones(3), "temperature": np.ones(3), "gains": np.ones((3, 7))}
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda p: path_figure(
+            p / "x.nosuchformat", SimpleNamespace(poses=np.zeros((4, 3))), (1, 1, 0), title=""
+        ),
+        lambda p: tuning_curve(p / "x.png", {**_history(), "gains": np.ones((3, 2))}),
+        lambda p: map_figure(p / "x.nosuchformat", *_grid_and_metrics()),
+        lambda p: winner_figure(
+            p / "x.nosuchformat", _grid_and_metrics()[0], {"a": _grid_and_metrics()[1]}
+        ),
+    ],
+)
+def test_a_failing_figure_is_closed(tmp_path, call):
+    before = plt.get_fignums()
+    with pytest.raises((ValueError, IndexError)):
+        call(tmp_path)
+    assert plt.get_fignums() == before
+
+
+def test_a_failing_gif_closes_its_figure(tmp_path, monkeypatch):
+    def fail(*args):
+        raise RuntimeError("encoding failed")
+
+    monkeypatch.setattr(animation, "_save", fail)
+    before = plt.get_fignums()
+    with pytest.raises(RuntimeError):
+        write_gif(tmp_path / "x.gif", np.zeros((1, 3, 3)), np.ones((1, 3)))
+    assert plt.get_fignums() == before
+    gc.collect()  # the unrendered animation warns here (ignored), not in a later test
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [({"trail": "a"}, "trail = 'a'"), ({"body_radius": -1.0}, "body_radius = -1.0")],
+)
+def test_write_gif_names_bad_drawing_options(tmp_path, kwargs, message):
+    with pytest.raises(ValueError, match="allowed") as err:
+        write_gif(tmp_path / "x.gif", np.zeros((1, 3, 3)), np.ones((1, 3)), **kwargs)
+    assert message in str(err.value)
+
+
+# ---------------------------------------------------------------- GIF delays
+
+
+def test_gif_delays_beyond_a_gif_are_named(tmp_path):
+    with pytest.raises(ValueError, match=r"dt = 1e\+30 s .*at most 655.35 s per frame"):
+        frame_timing(1e30)
+    with pytest.raises(ValueError, match="speed = 1e-300"):
+        frame_timing(0.033, 1, 1e-300)
+    assert frame_timing(655.35, 1) == (1, 655_350)
+    with pytest.raises(ValueError, match=r"dt = 1000000.0 s"):
+        write_gif(tmp_path / "x.gif", np.zeros((1, 3, 3)), np.ones((1, 3)), dt=1e6)
+    assert not list(tmp_path.iterdir())
+
+
+# ---------------------------------------------------------------- text and JSON writers
+
+
+@pytest.mark.parametrize("text", [b"bytes", None])
+def test_atomic_write_text_refuses_what_is_not_text(tmp_path, text):
+    with pytest.raises(ValueError, match=r"text = .* is not allowed; allowed: a str"):
+        atomic_write_text(tmp_path / "x.txt", text)
+    assert not list(tmp_path.iterdir())
+
+
+def test_atomic_write_json_names_a_value_json_cannot_store(tmp_path):
+    with pytest.raises(ValueError, match=r"obj = \{'a': \{1, 2\}\} is not allowed .*set"):
+        atomic_write_json(tmp_path / "x.json", {"a": {1, 2}})
+    assert not list(tmp_path.iterdir())
