@@ -28,6 +28,8 @@ from wmr_jax.report import (
     markdown_table,
     paper_summary_table,
     path_figure,
+    plot_paths,
+    plot_wheel_speeds,
     save_arrays,
     save_comparison,
     save_map_study,
@@ -371,3 +373,57 @@ def test_atomic_write_json_names_a_value_json_cannot_store(tmp_path):
     with pytest.raises(ValueError, match=r"obj = \{'a': \{1, 2\}\} is not allowed .*set"):
         atomic_write_json(tmp_path / "x.json", {"a": {1, 2}})
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (
+            lambda ax: plot_paths(ax, [np.zeros((5, 3)), np.zeros((5, 3))], np.zeros((1, 3))),
+            r"refs has shape \(1, 3\); allowed: \(M, 3\) with M >= 2",
+        ),
+        (lambda ax: plot_paths(ax, [np.zeros((5, 2))], np.zeros((1, 3))), r"paths\[0\] has shape"),
+        (
+            lambda ax: plot_paths(ax, [np.zeros((5, 3))], np.zeros((1, 3)), heading_spacing=0),
+            r"heading_spacing = 0 is not allowed",
+        ),
+        (
+            lambda ax: plot_wheel_speeds(ax, np.zeros((5, 3)), dt=0.1),
+            r"wheel_speeds has shape \(5, 3\)",
+        ),
+        (
+            lambda ax: plot_wheel_speeds(ax, np.zeros((5, 2)), dt=0.1, labels=("a",)),
+            r"labels = \('a',\) is not allowed",
+        ),
+        (lambda ax: plot_wheel_speeds(ax, np.zeros((5, 2)), dt=-0.1), r"dt = -0.1"),
+    ],
+)
+def test_drawing_helpers_name_what_they_cannot_draw(call, message):
+    fig, ax = plt.subplots()
+    try:
+        with pytest.raises(ValueError, match=message):
+            call(ax)
+    finally:
+        plt.close(fig)
+
+
+def test_tuning_curve_names_an_unknown_problem_and_gains_of_another(tmp_path):
+    history = {"loss": np.ones(3), "temperature": np.ones(3), "gains": np.ones((3, 7))}
+    with pytest.raises(ValueError, match=r"problem = 'schedul' is not allowed"):
+        tuning_curve(tmp_path / "c.png", history, problem="schedul")
+    from wmr_jax._src.tuning.problems import get_problem
+
+    columns = len(get_problem("schedule").columns)
+    with pytest.raises(
+        ValueError, match=rf"history\['gains'\] has shape \(3, 7\); allowed: \(3, {columns}\)"
+    ):
+        tuning_curve(tmp_path / "c.png", history, problem="schedule")
+    assert not (tmp_path / "c.png").exists()
+
+
+def test_animation_title_names_the_start_it_was_given():
+    from wmr_jax._src.report.animation import _start
+
+    assert _start((0.0, 0.0, 0.0)) == "(0, 0, 0°)"
+    assert _start((50.0, -5.0, math.pi / 2)) == "(50, -5, 90°)"
+    assert _start([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]) == "their initial poses"

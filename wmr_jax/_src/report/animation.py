@@ -271,7 +271,16 @@ def animate(
         np.asarray(traj.poses),
         refs,
         dt=dt,
-        title=f"{name}, {velocity} loop: {len(refs)} robots from (0, 0, 0°)",
+        title=f"{name}, {velocity} loop: {len(refs)} robots from {_start(init)}",
         speed=speed,
         stride=stride,
     )
+
+
+def _start(init: Any) -> str:
+    """The initial pose(s) for a title: ``(x, y, θ°)``, or "their initial poses"."""
+    arr = np.asarray(init, dtype=float)
+    if arr.ndim == 2 and not np.all(arr == arr[0]):
+        return "their initial poses"
+    x, y, theta = arr.reshape(-1, 3)[0]
+    return f"({x:g}, {y:g}, {math.degrees(theta):g}°)"

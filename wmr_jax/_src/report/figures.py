@@ -20,6 +20,7 @@ import numpy as np  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
+from wmr_jax._src import checks  # noqa: E402
 from wmr_jax._src.io import save_figure  # noqa: E402
 
 __all__ = [
@@ -93,7 +94,9 @@ def plot_paths(
     Args:
         ax: a matplotlib Axes.
         paths: each ``(steps + 1, 3)`` poses in cm, cm, rad.
-        refs: ``(len(paths), 3)`` reference poses.
+        refs: ``(M, 3)`` reference poses, ``M ≥ len(paths)``: the first
+            ``len(paths)`` are the paths' own, any more are marked too
+            (waypoints).
         color: one colour for all paths (default: one per path).
         label: legend label for the first path.
         linestyle: matplotlib line style.
@@ -101,9 +104,19 @@ def plot_paths(
         arrow_length: heading arrow length, cm.
         mark_refs: draw the references (a cross and a heading arrow).
     """
+    paths = [np.asarray(p, dtype=float) for p in paths]
+    for i, poses in enumerate(paths):
+        if poses.ndim != 2 or poses.shape[1] != 3 or len(poses) == 0:
+            raise ValueError(f"paths[{i}] has shape {poses.shape}; allowed: (steps + 1, 3)")
+    refs = np.asarray(refs, dtype=float)
+    if mark_refs and (refs.ndim != 2 or refs.shape[1] != 3 or len(refs) < len(paths)):
+        raise ValueError(
+            f"refs has shape {refs.shape}; allowed: (M, 3) with M >= {len(paths)}, one per path "
+            "and any more to mark"
+        )
+    checks.check_number("heading_spacing", heading_spacing, unit="cm")
     cmap = plt.get_cmap("tab10")
     for i, poses in enumerate(paths):
-        poses = np.asarray(poses)
         c = color if color is not None else cmap(i % 10)
         ax.plot(
             poses[:, 0], poses[:, 1], linestyle, color=c, lw=1.3, label=label if i == 0 else None
@@ -166,6 +179,12 @@ def plot_wheel_speeds(
     linestyle: str = "-",
 ) -> None:
     """Plot rim speeds ``(steps, 2)`` against time, with the ``±v_max`` limits."""
+    wheel_speeds = np.asarray(wheel_speeds, dtype=float)
+    if wheel_speeds.ndim != 2 or wheel_speeds.shape[1] != 2:
+        raise ValueError(f"wheel_speeds has shape {wheel_speeds.shape}; allowed: (steps, 2)")
+    if isinstance(labels, str) or len(labels) != 2:
+        raise ValueError(f"labels = {labels!r} is not allowed; allowed: two names (left, right)")
+    dt = checks.check_dt(dt)
     t = (np.arange(len(wheel_speeds)) + 1) * dt
     for j, name in enumerate(labels):
         ax.plot(t, wheel_speeds[:, j], linestyle, lw=1.2, label=name)

@@ -14,6 +14,7 @@ from wmr_jax._src.io import save_figure
 from wmr_jax._src.optimal import bound_ratios
 from wmr_jax._src.report.tables import markdown_table, require_rows
 from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS, PAPER_FEASIBLE_GAINS, gains_as_dict
+from wmr_jax._src.tuning.problems import get_problem
 
 __all__ = ["comparison_table", "evaluation_table", "tuning_curve"]
 
@@ -159,6 +160,15 @@ def tuning_curve(
             f"history = {history!r:.80} is not allowed; allowed: TuneResult.history, a dict "
             f"with {', '.join(_HISTORY_KEYS)}"
         )
+    if problem not in ("fixed", "schedule"):
+        raise ValueError(f"problem = {problem!r} is not allowed; allowed: 'fixed', 'schedule'")
+    columns = len(get_problem(problem).columns)
+    gains = np.asarray(history["gains"], dtype=float)
+    if gains.shape != (len(history["loss"]), columns):
+        raise ValueError(
+            f"history['gains'] has shape {gains.shape}; allowed: ({len(history['loss'])}, "
+            f"{columns}), one row of the {problem!r} problem's columns per iteration"
+        )
     steps = np.arange(1, len(history["loss"]) + 1)
     with closed_after(2, 4, figsize=(14, 6), constrained_layout=True) as (fig, axes):
         ax = axes[0, 0]
@@ -172,9 +182,9 @@ def tuning_curve(
         twin.set_ylabel("temperature", color="C3")
         ax.set_title(f"loss ({velocity} loop)")
         if problem == "schedule":
-            _schedule_panels(axes, steps, history["gains"])
+            _schedule_panels(axes, steps, gains)
         else:
-            _gain_panels(axes, steps, history["gains"])
+            _gain_panels(axes, steps, gains)
         return save_figure(fig, path, dpi=110)
 
 
