@@ -427,3 +427,20 @@ def test_animation_title_names_the_start_it_was_given():
     assert _start((0.0, 0.0, 0.0)) == "(0, 0, 0°)"
     assert _start((50.0, -5.0, math.pi / 2)) == "(50, -5, 90°)"
     assert _start([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]) == "their initial poses"
+
+
+def test_json_writer_refuses_keys_that_collide_and_objects_that_contain_themselves(tmp_path):
+    with pytest.raises(ValueError, match=r"keys '1', 1 collide as JSON names"):
+        atomic_write_json(tmp_path / "a.json", {1: "a", "1": "b"})
+    loop: dict = {}
+    loop["self"] = loop
+    with pytest.raises(ValueError, match=r"obj is not allowed: it contains itself"):
+        atomic_write_json(tmp_path / "b.json", loop)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("dtype", [complex, bool])
+def test_gif_poses_must_be_real_numbers(tmp_path, dtype):
+    with pytest.raises(ValueError, match=r"poses = .* is not allowed; allowed: real numbers"):
+        write_gif(tmp_path / "a.gif", np.zeros((1, 3, 3), dtype), np.zeros((1, 3)))
+    assert not (tmp_path / "a.gif").exists()

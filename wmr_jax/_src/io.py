@@ -82,7 +82,11 @@ def _jsonable(obj: Any) -> Any:
     if isinstance(obj, float) and not (obj == obj and abs(obj) != float("inf")):
         return None if obj != obj else ("inf" if obj > 0 else "-inf")
     if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
+        out = {str(k): _jsonable(v) for k, v in obj.items()}
+        if len(out) < len(obj):  # {1: a, "1": b} would keep only b
+            keys = sorted(map(repr, obj))
+            raise ValueError(f"keys {', '.join(keys)} collide as JSON names (str of each)")
+        return out
     if isinstance(obj, (list, tuple)):
         return [_jsonable(v) for v in obj]
     if hasattr(obj, "tolist"):
@@ -103,6 +107,11 @@ def json_text(obj: Any, name: str, **kwargs: Any) -> str:
     """``obj`` as JSON text, or a ``ValueError`` naming ``name`` and the value JSON cannot store."""
     try:
         return json.dumps(_jsonable(obj), allow_nan=False, **kwargs)
+    except RecursionError:
+        raise ValueError(
+            f"{name} is not allowed: it contains itself, or nests too deeply for JSON; "
+            "allowed: numbers, strings, bools, None, lists and dicts of them (JSON)"
+        ) from None
     except (TypeError, ValueError) as err:
         raise ValueError(
             f"{name} = {obj!r:.200} is not allowed ({err}); allowed: numbers, strings, "

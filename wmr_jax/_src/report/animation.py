@@ -152,6 +152,9 @@ def write_gif(
     """
     from wmr_jax._src.report.figures import mpl_animation
 
+    for name, value in (("poses", poses), ("refs", refs)):
+        if checks.array_kind(value) not in "iuf":
+            raise ValueError(f"{name} = {value!r:.80} is not allowed; allowed: real numbers")
     poses = np.asarray(poses, dtype=float)
     refs = np.asarray(refs, dtype=float)
     if (
