@@ -441,6 +441,6 @@ def test_json_writer_refuses_keys_that_collide_and_objects_that_contain_themselv
 
 @pytest.mark.parametrize("dtype", [complex, bool])
 def test_gif_poses_must_be_real_numbers(tmp_path, dtype):
-    with pytest.raises(ValueError, match=r"poses = .* is not allowed; allowed: real numbers"):
+    with pytest.raises(ValueError, match=r"poses holds (bools|complex numbers); allowed: real"):
         write_gif(tmp_path / "a.gif", np.zeros((1, 3, 3), dtype), np.zeros((1, 3)))
     assert not (tmp_path / "a.gif").exists()

@@ -153,8 +153,10 @@ def write_gif(
     from wmr_jax._src.report.figures import mpl_animation
 
     for name, value in (("poses", poses), ("refs", refs)):
-        if checks.array_kind(value) not in "iuf":
-            raise ValueError(f"{name} = {value!r:.80} is not allowed; allowed: real numbers")
+        kind = checks.array_kind(value)
+        if kind not in "iuf":
+            held = {"b": "bools", "c": "complex numbers"}.get(kind, "values that are not numbers")
+            raise ValueError(f"{name} holds {held}; allowed: real numbers [x cm, y cm, theta rad]")
     poses = np.asarray(poses, dtype=float)
     refs = np.asarray(refs, dtype=float)
     if (
