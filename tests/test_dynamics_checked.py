@@ -119,3 +119,31 @@ def test_numpy_baseline_checks_as_final_poses_does():
             w.studies.numpy_final_poses(refs, **kwargs)
     with pytest.raises(ValueError, match=r"refs has shape \(1, 4\)"):
         w.studies.numpy_final_poses(np.zeros((1, 4)))
+
+
+def test_checked_functions_keep_the_callers_float_dtype_and_empty_batches():
+    # float32 stays float32 with float64 enabled; float16 keeps its dtype.
+    cos, _ = dynamics.sin_cos(np.float32(0.5))
+    assert cos.dtype == np.float32
+    assert dynamics.sin_cos(np.float16(0.5))[0].dtype == np.float16
+    assert dynamics.arc_step(np.zeros(3, np.float32), 10.0, 1.0, 0.1).dtype == np.float32
+    assert dynamics.arc_step(np.zeros((0, 3)), 10.0, 1.0, 0.1).shape == (0, 3)
+
+
+def test_concrete_arguments_are_checked_beside_traced_ones():
+    # A traced mass does not hide a wheel loop that is too stiff for the period.
+    def stiff(mass):
+        robot = ROBOT.replace(speed_gain=1e6, body_mass=mass)
+        dynamics.check_stability(robot, 0.033, 1)
+        return mass
+
+    with pytest.raises(ValueError, match=r"substeps = 1 is not allowed"):
+        jax.grad(stiff)(1.0)
+    # Mapping over poses with concrete, bad gains still names the gains.
+    bad = w.AstolfiGains(k_rho=-3.0)
+    with pytest.raises(ValueError, match=r"gains\.k_rho = -3"):
+        jax.vmap(lambda q: w.controllers.astolfi_control(q, [30.0, 30.0, 0.0], bad))(
+            jnp.zeros((4, 3))
+        )
+    with pytest.raises(ValueError, match=r"dt = -0.033"):
+        jax.jit(lambda s: dynamics.advance(s, COMMAND, ROBOT, -0.033))(STATE)

@@ -380,6 +380,12 @@ def test_the_laws_building_blocks_take_plain_numbers_and_lists():
             lambda: w.studies.evaluate_poses(np.array([REF]), w.Gains(), x64="no"),
             r"x64 = 'no' is not allowed; allowed: True or False",
         ),
+        (
+            lambda: w.tuning.tuning_loss(w.Gains(), np.array([REF]), temperature=0.1, remat="no"),
+            r"remat = 'no' is not allowed; allowed: True or False",
+        ),
+        # A JAX bool among numbers is a bool too.
+        (lambda: w.rollout([30.0, 30.0, jax.numpy.array(True)], steps=3), r"ref = .* not allowed"),
     ],
 )
 def test_options_of_the_studies_are_checked_before_work(call, message):

@@ -57,11 +57,24 @@ def test_command_rejects_bad_values_in_one_line(tmp_path, capsys, flag, value):
     assert not (tmp_path / "tuned_gains.json").exists()
 
 
-def test_tune_robust_judges_under_the_noise_of_the_robustness_command():
+def test_tune_robust_judges_under_the_noise_of_the_robustness_command(monkeypatch):
     # Both write a standard-conditions table of the same gains: the same
     # noise draw makes them the same table.
-    from wmr_jax._src.cli.main import build_parser
-    from wmr_jax._src.tuning.robust import EVAL_NOISE_SEED
+    import jax
 
+    from wmr_jax._src import robustness
+    from wmr_jax._src.cli.main import build_parser
+
+    keys = []
+    judge = robustness.standard_conditions
+
+    def recording(sets, refs, key, **kwargs):
+        keys.append(key)
+        return judge(sets, refs, key, **kwargs)
+
+    monkeypatch.setattr(robustness, "standard_conditions", recording)
+    tuning.tune_robust(small_config())
     args = build_parser().parse_args(["robustness", "--out", "unused"])
-    assert int(args.seed) == EVAL_NOISE_SEED
+    command_key = jax.random.key(int(args.seed))
+    assert len(keys) == 1
+    np.testing.assert_array_equal(jax.random.key_data(keys[0]), jax.random.key_data(command_key))

@@ -91,12 +91,18 @@ def numpy_final_poses(
     Returns:
         ``(N, 3)`` final poses ``[x cm, y cm, θ rad]``, dtype of ``refs``.
     """
+    import jax
+
     from wmr_jax._src.checks import MAX_STEPS, as_poses, check_dt, check_int, require_unbatched
     from wmr_jax._src.params import Gains, validate_gains
 
-    # The same checks as final_poses; the arithmetic stays in the refs' dtype.
-    as_poses("refs", refs, batch=True)
-    init = np.asarray(as_poses("init", init, batch=False), dtype=np.float64)
+    # The same checks as final_poses, in the refs' own precision; the values
+    # used are the caller's, not the checked copies in JAX's dtype.
+    wide = np.asarray(refs).dtype != np.float32
+    with jax.enable_x64(bool(wide)):
+        as_poses("refs", refs, batch=True)
+        as_poses("init", init, batch=False)
+    init = np.asarray(init, dtype=np.float64)
     dt = check_dt(dt)
     steps = check_int("steps", steps, 1, MAX_STEPS)
     if gains is not None:

@@ -78,6 +78,9 @@ def array_kind(value: Any) -> str:
 def _holds_bool(value: Any) -> bool:
     if isinstance(value, (bool, np.bool_)):
         return True
+    dtype = getattr(value, "dtype", None)  # a NumPy or JAX array of bools among numbers
+    if dtype is not None and np.dtype(dtype).kind == "b":
+        return True
     if isinstance(value, (list, tuple)):
         return any(_holds_bool(item) for item in value)
     if isinstance(value, np.ndarray) and value.dtype.kind == "O":
@@ -102,9 +105,9 @@ def check_int(name: str, value: Any, minimum: int = 1, maximum: int | None = Non
 
 def check_bool(name: str, value: Any) -> bool:
     """Return ``value`` if it is ``True`` or ``False`` (``"no"`` is not a way of saying no)."""
-    if not isinstance(value, bool):
+    if not isinstance(value, (bool, np.bool_)):
         raise ValueError(f"{name} = {value!r} is not allowed; allowed: True or False")
-    return value
+    return bool(value)
 
 
 def check_number(

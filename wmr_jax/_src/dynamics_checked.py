@@ -52,12 +52,20 @@ __all__ = [
 _REDUCE_ABOVE = 1e4
 
 
-def _real(name: str, value: Any, *, finite: bool = True, last: int | None = None) -> np.ndarray:
-    """``value`` as a float array of the compute dtype: real numbers, optionally ``(..., last)``."""
+def _real(name: str, value: Any, *, finite: bool = True, last: int | None = None) -> Any:
+    """Check that ``value`` holds real numbers, optionally ``(..., last)``; tracers pass.
+
+    Returns a NumPy array in the value's own float dtype (bfloat16 and float16
+    included), or in the compute dtype for integers; a tracer as it is.
+    """
+    if is_traced(value):
+        return value
+    dtype = getattr(value, "dtype", None)
+    own_float = dtype is not None and jnp.issubdtype(dtype, jnp.floating)
     try:
-        if value is None or array_kind(value) not in "iuf":
+        if value is None or (not own_float and array_kind(value) not in "iuf"):
             raise TypeError(value)
-        arr = np.asarray(value, dtype=np.dtype(float_dtype()))
+        arr = np.asarray(value, dtype=dtype if own_float else np.dtype(float_dtype()))
     except (TypeError, ValueError):
         shape = "" if last is None else f" of shape (..., {last})"
         raise ValueError(
@@ -66,14 +74,26 @@ def _real(name: str, value: Any, *, finite: bool = True, last: int | None = None
     if last is not None and (arr.ndim == 0 or arr.shape[-1] != last):
         raise ValueError(f"{name} has shape {arr.shape}; allowed: (..., {last})")
     if finite:
-        require(name, arr, np.isfinite(arr), "finite numbers")
+        require(name, arr, np.isfinite(arr.astype(np.float64)), "finite numbers")
+    if isinstance(value, (int, float)):
+        return value  # a Python number stays weakly typed: it does not widen float32 arrays
     return arr
 
 
 def _robot(robot: Any, name: str = "robot") -> Robot:
+    """Check a robot's concrete fields (traced ones pass)."""
     if not isinstance(robot, Robot):
         raise ValueError(f"{name} = {robot!r} is not allowed; allowed: a wmr_jax.Robot")
     return validate_robot(robot)
+
+
+def _array(value: Any) -> np.ndarray:
+    """A checked value as a NumPy array (a Python number in the compute dtype)."""
+    return value if isinstance(value, np.ndarray) else np.asarray(value, float_dtype())
+
+
+def _shape(value: Any) -> tuple[int, ...]:
+    return tuple(np.shape(value))
 
 
 def _broadcast(shapes: dict[str, tuple[int, ...]]) -> None:
@@ -116,28 +136,36 @@ def _wraps(raw: Callable) -> Callable[[Callable], Callable]:
 def sin_cos(angle: Any) -> tuple[jax.Array, jax.Array]:
     if is_traced(angle):
         return dynamics.sin_cos(angle)
-    return dynamics.sin_cos(_reduced(_real("angle", angle, finite=False)))
+    return dynamics.sin_cos(_reduced(_array(_real("angle", angle, finite=False))))
 
 
 @_wraps(dynamics.sinc)
 def sinc(u: Any) -> jax.Array:
     if is_traced(u):
         return dynamics.sinc(u)
-    u = _real("u", u, finite=False)
+    u = _array(_real("u", u, finite=False))
     return dynamics._sinc_of(jnp.asarray(u), dynamics.sin_cos(_reduced(u))[1])
 
 
 @_wraps(dynamics.arc_step)
 def arc_step(pose: Any, v: Any, omega: Any, h: Any) -> jax.Array:
-    if is_traced((pose, v, omega, h)):
-        return dynamics.arc_step(pose, v, omega, h)
-    arr = _real("pose", pose, finite=False, last=3)
-    pose = jnp.reshape(as_poses("pose", arr.reshape(-1, 3), batch=True), arr.shape)
+    if not is_traced(pose):
+        arr = _real("pose", pose, finite=False, last=3)
+        if arr.size:  # finite, within range, huge headings reduced; in its own dtype
+            checked = as_poses("pose", arr.reshape(-1, 3), batch=True)
+            pose = np.asarray(checked, dtype=arr.dtype).reshape(arr.shape)
+        else:
+            pose = arr
     v, omega, h = _real("v", v), _real("omega", omega), _real("h", h)
-    require("h", h, h >= 0, "a duration >= 0 s")
-    _broadcast({"pose[..., 0]": arr.shape[:-1], "v": v.shape, "omega": omega.shape, "h": h.shape})
-    turn = np.abs(omega.astype(np.float64) * h)
-    require("omega * h", turn, turn <= _REDUCE_ABOVE, f"a turn of at most {_REDUCE_ABOVE:g} rad")
+    if not is_traced(h):
+        require("h", np.asarray(h), np.asarray(h) >= 0, "a duration >= 0 s")
+    if not is_traced((pose, v, omega, h)):
+        shapes = {"pose[..., 0]": _shape(pose)[:-1], "v": _shape(v), "omega": _shape(omega)}
+        _broadcast({**shapes, "h": _shape(h)})
+        turn = np.abs(np.asarray(omega, np.float64) * np.asarray(h, np.float64))
+        require(
+            "omega * h", turn, turn <= _REDUCE_ABOVE, f"a turn of at most {_REDUCE_ABOVE:g} rad"
+        )
     return dynamics.arc_step(pose, v, omega, h)
 
 
@@ -151,54 +179,46 @@ def initial_state(init: Any) -> dynamics.RobotState:
 @_wraps(velocity_loop.limit_wheels)
 def limit_wheels(velocity: Any, robot: Robot, *, mode: str = "clip") -> jax.Array:
     _check_mode("mode", mode)
-    if not is_traced((velocity, robot)):
-        velocity, robot = _real("velocity", velocity, last=2), _robot(robot)
+    velocity, robot = _real("velocity", velocity, last=2), _robot(robot)
     return velocity_loop.limit_wheels(velocity, robot, mode=mode)
 
 
 @_wraps(velocity_loop.inertia)
 def inertia(robot: Robot) -> tuple[jax.Array, jax.Array]:
-    if not is_traced(robot):
-        robot = _robot(robot)
-    return velocity_loop.inertia(robot)
+    return velocity_loop.inertia(_robot(robot))
 
 
 @_wraps(velocity_loop.kinetic_energy)
 def kinetic_energy(velocity: Any, robot: Robot) -> jax.Array:
-    if not is_traced((velocity, robot)):
-        velocity, robot = _real("velocity", velocity, last=2), _robot(robot)
+    velocity, robot = _real("velocity", velocity, last=2), _robot(robot)
     return velocity_loop.kinetic_energy(velocity, robot)
 
 
 @_wraps(velocity_loop.body_acceleration)
 def body_acceleration(velocity: Any, torques: Any, robot: Robot) -> jax.Array:
-    if not is_traced((velocity, torques, robot)):
-        velocity, torques = _real("velocity", velocity, last=2), _real("torques", torques, last=2)
-        _broadcast({"velocity": velocity.shape, "torques": torques.shape})
-        robot = _robot(robot)
-    return velocity_loop.body_acceleration(velocity, torques, robot)
+    velocity, torques = _real("velocity", velocity, last=2), _real("torques", torques, last=2)
+    if not is_traced((velocity, torques)):
+        _broadcast({"velocity": _shape(velocity), "torques": _shape(torques)})
+    return velocity_loop.body_acceleration(velocity, torques, _robot(robot))
 
 
 @_wraps(velocity_loop.wheel_torques)
 def wheel_torques(velocity: Any, target: Any, integral: Any, model: Robot) -> jax.Array:
-    if not is_traced((velocity, target, integral, model)):
-        arrays = {
-            name: _real(name, value, last=2)
-            for name, value in (("velocity", velocity), ("target", target), ("integral", integral))
-        }
-        _broadcast({name: arr.shape for name, arr in arrays.items()})
-        velocity, target, integral = arrays.values()
-        model = _robot(model, "model")
-    return velocity_loop.wheel_torques(velocity, target, integral, model)
+    arrays = {
+        name: _real(name, value, last=2)
+        for name, value in (("velocity", velocity), ("target", target), ("integral", integral))
+    }
+    if not is_traced(tuple(arrays.values())):
+        _broadcast({name: _shape(arr) for name, arr in arrays.items()})
+    velocity, target, integral = arrays.values()
+    return velocity_loop.wheel_torques(velocity, target, integral, _robot(model, "model"))
 
 
 @_wraps(velocity_loop.check_stability)
 def check_stability(robot: Robot, dt: Any, substeps: int) -> None:
-    if is_traced((robot, dt)):
-        return None
     robot = _robot(robot)
-    dt = check_dt(dt)
     substeps = check_int("substeps", substeps, 1, velocity_loop.MAX_SUBSTEPS)
+    dt = check_dt(dt)  # a tracer passes, and the check below then skips
     return velocity_loop.check_stability(robot, dt, substeps)
 
 
@@ -220,27 +240,26 @@ def advance(
             f"state = {state!r} is not allowed; allowed: a wmr_jax.dynamics.RobotState "
             "(e.g. from initial_state)"
         )
-    if not is_traced((state, command, robot, dt, model)):
-        pose = as_poses("state.pose", state.pose, batch=False)
-        velocity = _real("state.velocity", state.velocity)
-        integral = _real("state.integral", state.integral)
-        command = _real("command", command)
-        for name, arr, allowed in (
-            ("state.velocity", velocity, "(2,) [v cm/s, omega rad/s]"),
-            ("state.integral", integral, "(2,)"),
-            ("command", command, "(2,) [v cm/s, omega rad/s]"),
-        ):
-            if arr.shape != (2,):
-                raise ValueError(f"{name} has shape {arr.shape}; allowed: {allowed}")
-        state = dynamics.RobotState(pose, jnp.asarray(velocity), jnp.asarray(integral))
-        one = "one robot (a number per field): advance moves one robot"
-        robot = _robot(robot)
-        require_unbatched(robot, "robot", one)
-        if model is not None:
-            model = _robot(model, "model")
-            require_unbatched(model, "model", one)
-        dt = check_dt(dt)
-        velocity_loop.check_stability(robot if model is None else model, dt, substeps)
+    pose = state.pose if is_traced(state.pose) else as_poses("state.pose", state.pose, batch=False)
+    velocity = _real("state.velocity", state.velocity)
+    integral = _real("state.integral", state.integral)
+    command = _real("command", command)
+    for name, arr, allowed in (
+        ("state.velocity", velocity, "(2,) [v cm/s, omega rad/s]"),
+        ("state.integral", integral, "(2,)"),
+        ("command", command, "(2,) [v cm/s, omega rad/s]"),
+    ):
+        if _shape(arr) != (2,) and not is_traced(arr):
+            raise ValueError(f"{name} has shape {_shape(arr)}; allowed: {allowed}")
+    state = dynamics.RobotState(pose, jnp.asarray(velocity), jnp.asarray(integral))
+    one = "one robot (a number per field): advance moves one robot"
+    robot = _robot(robot)
+    require_unbatched(robot, "robot", one)
+    if model is not None:
+        model = _robot(model, "model")
+        require_unbatched(model, "model", one)
+    dt = check_dt(dt)
+    velocity_loop.check_stability(robot if model is None else model, dt, substeps)
     return velocity_loop.advance(
         state, command, robot, dt, substeps=substeps, wheel_limit=wheel_limit, model=model
     )

@@ -187,7 +187,8 @@ def disturbed_run(
     # last period's is never used.
     later = jnp.concatenate([spec.noise[1:], jnp.zeros_like(spec.noise[:1])])
     carry = (pose, loops.initial_wheel(init, options), first, jnp.zeros_like(first), acc)
-    (pose, _, _, _, acc), ys = jax.lax.scan(loops.remat(body), carry, later)
+    step = loops.remat(body) if options.remat else body
+    (pose, _, _, _, acc), ys = jax.lax.scan(step, carry, later)
     return pose.stacked(), acc, ys
 
 

@@ -180,18 +180,21 @@ def check_law_inputs(
     Raises:
         ValueError: naming the argument, its value and what is allowed.
     """
-    if is_traced((pose, ref, params)):
-        return pose, ref, params
-    pose, ref = as_pose_array("pose", pose), as_pose_array("ref", ref)
+    # Each argument is checked unless it is itself traced (vmap over the poses
+    # with concrete gains still checks the gains).
+    pose = pose if is_traced(pose) else as_pose_array("pose", pose)
+    ref = ref if is_traced(ref) else as_pose_array("ref", ref)
     try:
-        np.broadcast_shapes(pose.shape[:-1], ref.shape[:-1])
+        np.broadcast_shapes(np.shape(pose)[:-1], np.shape(ref)[:-1])
     except ValueError:
         raise ValueError(
-            f"pose has batch shape {pose.shape[:-1]} and ref {ref.shape[:-1]}; "
+            f"pose has batch shape {np.shape(pose)[:-1]} and ref {np.shape(ref)[:-1]}; "
             "allowed: shapes that broadcast"
         ) from None
     if not isinstance(params, params_type):
         raise ValueError(
             f"gains = {params!r} is not allowed; allowed: a wmr_jax.{params_type.__name__}"
         )
+    if is_traced(params):
+        return pose, ref, params
     return pose, ref, as_float_tree(validate(params))

@@ -38,7 +38,7 @@ from wmr_jax._src.checks import Parameters, check_int, require
 from wmr_jax._src.controllers.base import Controller, register_controller
 from wmr_jax._src.controllers.shim_sung import (
     PolarError,
-    commands,
+    _commands,
     direction_flag,
     polar_error,
     region_label,
@@ -153,7 +153,7 @@ def schedule_commands(
         k_theta=k_theta,
         **{name: getattr(params, name) for name in SHAPE_FIELDS},
     )
-    v, omega = commands(err, gains, temperature=temperature)
+    v, omega = _commands(err, gains, temperature=temperature)
     omega_max = params.v_max / params.half_track
     omega = jnp.clip(omega, -omega_max, omega_max)
     budget = params.v_max - params.half_track * jnp.abs(omega)  # ≥ 0 by the clip above

@@ -306,6 +306,12 @@ def commands(
     """
     if isinstance(gains, Gains) and not is_traced(gains):
         validate_gains(gains)  # called with values, not from a rollout
+    return _commands(err, gains, temperature=temperature)
+
+
+def _commands(err: PolarError, gains: Gains, *, temperature: float | None = None):
+    """``commands`` without the check of concrete gains: for laws that build their
+    own ``Gains`` per state (the gain schedule), whose fields carry the pose's shape."""
     d = direction_flag(err, gains.phi_m, temperature=temperature)
     eps = blend(err, d, gains, temperature=temperature)
     r_bar = saturated_distance(err.r, gains.r_m, temperature=temperature)

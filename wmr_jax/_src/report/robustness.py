@@ -86,7 +86,12 @@ def write_robustness(
     # Everything is checked and drawn before the first file is written.
     text = head + markdown_table(rows, ROBUSTNESS_COLUMNS)
     meta = {"seed": seed, "velocity": velocity, "runs": n_runs, "horizon_s": HORIZON_S}
-    record = json_text({**meta, "rows": rows}, "rows", indent=2, sort_keys=False) + "\n"
+    record = (
+        json_text(
+            {**meta, "rows": rows}, "seed, velocity, n_runs and rows", indent=2, sort_keys=False
+        )
+        + "\n"
+    )
     title = (
         f"Robustness, {velocity} loop: {n_runs} random poses (docs/model.md §6) per point, "
         f"seed {seed}; mismatch ±3 % wheel radius, ±20 % mass; latency one sample"
@@ -174,7 +179,7 @@ def write_standard_conditions(
         "Gain sets under the standard conditions of docs/model.md §7 (hard law, ideal loop, "
         f"{rows[0]['runs']} held-out poses of docs/model.md §6, horizon {HORIZON_S:g} s)\n\n"
     )
-    record = json_text({**meta, "rows": rows}, "rows", indent=2, sort_keys=False) + "\n"
+    record = json_text({**meta, "rows": rows}, "meta and rows", indent=2, sort_keys=False) + "\n"
     fig = standard_figure(rows)
     try:
         png = save_figure(fig, out / "standard_conditions.png", dpi=110)

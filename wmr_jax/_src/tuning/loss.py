@@ -29,6 +29,7 @@ from wmr_jax._src import rollout as simulation
 from wmr_jax._src.checks import (
     array_kind,
     as_float_tree,
+    check_bool,
     check_number,
     float_dtype,
     require,
@@ -157,7 +158,7 @@ def make_spec(
         tol_r=tol_r,
         tol_theta=tol_theta,
         weights=weights,
-        remat=bool(remat),
+        remat=check_bool("remat", remat),
         controller=options.controller,
     )
 
