@@ -445,3 +445,13 @@ def test_gif_poses_must_be_real_numbers(tmp_path, dtype):
     with pytest.raises(ValueError, match=r"poses holds (bools|complex numbers); allowed: real"):
         write_gif(tmp_path / "a.gif", np.zeros((1, 3, 3), dtype), np.zeros((1, 3)))
     assert not (tmp_path / "a.gif").exists()
+
+
+def test_bench_table_names_a_missing_entry_of_the_environment():
+    result = {
+        "environment": {"device": "cpu"},
+        "config": {"dtype": "float32", "steps": 10, "repeats": 1},
+        "rows": [{"case": "final_poses", "n": 10}],
+    }
+    with pytest.raises(ValueError, match=r"result\['environment'\] has no 'backend'"):
+        bench_table(result)

@@ -91,6 +91,21 @@ def bench_table(result: dict[str, Any]) -> str:
             f"result = {result!r:.80} is not allowed; allowed: what run_benchmark returned "
             f"(a dict with {', '.join(keys)}, and one row or more)"
         )
+    for part, needed in (
+        (
+            "environment",
+            ("device", "backend", "devices", "cpu_cores", "cpu", "jax", "jaxlib", "numpy"),
+        ),
+        ("config", ("dtype", "steps", "repeats")),
+    ):
+        missing = [k for k in needed if k not in result[part]]
+        if missing:
+            raise ValueError(
+                f"result[{part!r}] has no {missing[0]!r}; allowed: what run_benchmark returned"
+            )
+    for i, row in enumerate(result["rows"]):
+        if not all(k in row for k in ("case", "n")):
+            raise ValueError(f"result['rows'][{i}] has no 'case' and 'n'; allowed: benchmark rows")
     lines = [*_header(result), "", *_rate_lines(result["rows"])]
     lines += _ratio_lines(result.get("ratios") or {})
     busy = [r["others_cpu"] for r in result["rows"] if r.get("others_cpu") is not None]

@@ -158,6 +158,11 @@ def save_comparison(out_dir: str | Path, comparison: dict[str, Any]) -> list[Pat
 
 def _describe(summary: dict[str, Any]) -> str:
     """The run in words, for the titles and the summary's first line."""
+    missing = [k for k in ("poses", "velocity", "horizon_s", "dtype") if k not in summary]
+    if missing:
+        raise ValueError(
+            f"study.summary has no {missing[0]!r}; allowed: the summary map_study wrote"
+        )
     what = (
         f"{summary['poses']:,} poses, {summary['velocity']} loop, "
         f"horizon {summary['horizon_s']:g} s, start (0, 0, 0°)"
