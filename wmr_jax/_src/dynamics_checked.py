@@ -107,9 +107,9 @@ def _broadcast(shapes: dict[str, tuple[int, ...]]) -> None:
 def _reduced(angle: np.ndarray) -> jax.Array:
     """Angles beyond ``_REDUCE_ABOVE`` rad reduced to ``[−π, π]`` on the host.
 
-    Through NumPy's own sine and cosine, whose range reduction is exact for
-    any float64: a remainder by the float64 nearest 2π would be off by about
-    ``angle · 4e-17`` rad.
+    Through NumPy's own sine and cosine, which reduce any float64 angle
+    accurately (tested up to 1e20 rad): a remainder by the float64 nearest
+    2π would be off by about ``angle · 4e-17`` rad.
     """
     wide = angle.astype(np.float64)
     with np.errstate(invalid="ignore"):  # ±inf gives NaN, as sin and cos of it do
