@@ -75,6 +75,22 @@ def array_kind(value: Any) -> str:
     return kind
 
 
+def real_array(name: str, value: Any, allowed: str) -> np.ndarray:
+    """Return ``value`` as a float64 NumPy array if it holds real numbers only.
+
+    Raises:
+        ValueError: ``"{name} = {value!r} is not allowed; allowed: {allowed}"`` for
+            ``None``, bools, strings, complex numbers or anything else NumPy
+            cannot read as real numbers.
+    """
+    try:
+        if value is None or array_kind(value) not in "iuf":
+            raise TypeError(value)
+        return np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} = {value!r} is not allowed; allowed: {allowed}") from None
+
+
 def _holds_bool(value: Any) -> bool:
     if isinstance(value, (bool, np.bool_)):
         return True

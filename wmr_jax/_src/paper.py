@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from wmr_jax._src import metrics
-from wmr_jax._src.checks import array_kind, check_int, require
+from wmr_jax._src.checks import check_int, real_array, require
 from wmr_jax._src.controllers.shim_sung import wheel_speeds
 from wmr_jax._src.params import Gains, Robot, WheelSpeedWarning
 from wmr_jax._src.poses import paper_refs
@@ -95,14 +95,7 @@ def residual_bound(phi_m: Any) -> Any:
     Raises:
         ValueError: for a ``Φ_m`` outside ``[0, π/2)`` (the bound has no meaning there).
     """
-    try:
-        if phi_m is None or array_kind(phi_m) not in "iuf":
-            raise TypeError(phi_m)
-        arr = np.asarray(phi_m, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(
-            f"phi_m = {phi_m!r} is not allowed; allowed: numbers 0 <= phi_m < pi/2 rad"
-        ) from None
+    arr = real_array("phi_m", phi_m, "numbers 0 <= phi_m < pi/2 rad")
     require("phi_m", arr, (arr >= 0) & (arr < math.pi / 2), "0 <= phi_m < pi/2 rad")
     return np.sqrt(np.sin(arr) * np.tan(arr))
 

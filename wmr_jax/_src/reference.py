@@ -16,9 +16,9 @@ import numpy as np
 from wmr_jax._src.checks import (
     MAX_HEADING,
     MAX_STEPS,
-    array_kind,
     check_dt,
     check_int,
+    real_array,
     require_unbatched,
 )
 from wmr_jax._src.params import Gains, Robot, validate_gains, validate_robot
@@ -117,14 +117,7 @@ def _diagnostics(pose: tuple, ref: tuple, gains: Gains) -> dict[str, float]:
 
 def _one_pose(name: str, value: Any) -> tuple[float, float, float]:
     """A checked pose ``[x, y, θ]`` as three floats (float64: this is the reference)."""
-    try:
-        if array_kind(value) not in "iuf":
-            raise TypeError(value)
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(
-            f"{name} = {value!r} is not allowed; allowed: [x cm, y cm, theta rad]"
-        ) from None
+    arr = real_array(name, value, "[x cm, y cm, theta rad]")
     if arr.shape != (3,):
         raise ValueError(f"{name} has shape {arr.shape}; allowed: (3,) [x cm, y cm, theta rad]")
     if not np.all(np.isfinite(arr)) or abs(arr[2]) > MAX_HEADING:

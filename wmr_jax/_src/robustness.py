@@ -396,12 +396,7 @@ def _check_draw(key: Any, steps: Any, **levels: Any) -> None:
     for name, value in levels.items():
         if checks.is_traced(value):
             continue
-        try:
-            if checks.array_kind(value) not in "iuf":
-                raise TypeError(value)
-            arr = np.asarray(value, dtype=float)
-        except (TypeError, ValueError):
-            raise ValueError(f"{name} = {value!r} is not allowed; allowed: a number") from None
+        arr = checks.real_array(name, value, "a number")
         high = _LEVEL_LIMITS.get(name, 1.0)
         closed_high = name in _LEVEL_LIMITS
         ok = np.isfinite(arr) & (arr >= 0) & ((arr <= high) if closed_high else (arr < high))

@@ -27,11 +27,11 @@ import numpy as np
 from wmr_jax._src import loops
 from wmr_jax._src import rollout as simulation
 from wmr_jax._src.checks import (
-    array_kind,
     as_float_tree,
     check_bool,
     check_number,
     float_dtype,
+    real_array,
     require,
     require_representable,
 )
@@ -493,9 +493,8 @@ def robust_gradient(
     validate_one_robot(options.get("robot"), "robust_gradient")
     spec, temperature, (refs, _, init, robot, dt) = _prepared(start, refs, temperature, options)
     if not isinstance(z, jax.core.Tracer):
-        if array_kind(z) not in "iuf":
-            raise ValueError(f"z = {z!r} is not allowed; allowed: ({problem.dim},) real logits")
-        require("z", np.asarray(z, dtype=float), np.isfinite(np.asarray(z, float)), "finite logits")
+        host = real_array("z", z, f"({problem.dim},) real logits")
+        require("z", host, np.isfinite(host), "finite logits")
     z = as_float_tree(jnp.asarray(z))
     if z.shape != (problem.dim,):
         raise ValueError(f"z has shape {z.shape}; allowed: ({problem.dim},) for {problem.name!r}")
