@@ -346,6 +346,10 @@ def test_a_bool_among_numbers_is_refused_by_the_batch_and_reference_entry_points
             r"pose has shape \(2,\)",
         ),
         (lambda: w.controllers.knot_radii(1), r"knots = 1 is not allowed"),
+        (
+            lambda: w.controllers.direction_flag(w.controllers.polar_error([0, 0, 0], REF), 5.0),
+            r"phi_m = 5.0 is not allowed; allowed: 0 < phi_m < pi/2",
+        ),
     ],
 )
 def test_the_laws_called_by_hand_check_their_values(call, message):

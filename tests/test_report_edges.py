@@ -455,3 +455,15 @@ def test_bench_table_names_a_missing_entry_of_the_environment():
     }
     with pytest.raises(ValueError, match=r"result\['environment'\] has no 'backend'"):
         bench_table(result)
+
+
+def test_writers_refuse_a_folder_or_no_path_and_tables_impossible_rates(tmp_path):
+    with pytest.raises(ValueError, match=r"path = '' is not allowed; allowed: a file path"):
+        atomic_write_text("", "x")
+    with pytest.raises(ValueError, match=r"is a folder; allowed: a file path"):
+        atomic_write_text(tmp_path, "x")
+    from wmr_jax.tuning import Evaluation
+
+    table = {"paper_feasible": Evaluation(2.0, 5.0, 100.0, 10)}
+    with pytest.raises(ValueError, match=r"success_rate = 5.0 is not allowed; allowed: a fraction"):
+        evaluation_table(table)

@@ -38,7 +38,11 @@ def _write_atomically(path: str | os.PathLike, write: Callable[[Any], None]) -> 
     A kill at any moment leaves either the old file or the new one, never a
     half-written one; the temporary file is removed if ``write`` fails.
     """
+    if not isinstance(path, (str, os.PathLike)) or str(path) in ("", "."):
+        raise ValueError(f"path = {path!r} is not allowed; allowed: a file path")
     path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"path = {str(path)!r} is a folder; allowed: a file path")
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:

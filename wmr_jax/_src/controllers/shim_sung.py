@@ -37,7 +37,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks import as_float_tree, as_pose_array, check_temperature, is_traced
+from wmr_jax._src.checks import (
+    as_float_tree,
+    as_pose_array,
+    check_temperature,
+    is_traced,
+    require,
+)
 from wmr_jax._src.controllers.base import Controller, register_controller
 from wmr_jax._src.dynamics import sin_cos, sin_small
 from wmr_jax._src.params import Gains, Robot, check_feasible, check_sampling, validate_gains
@@ -243,6 +249,9 @@ def direction_flag(err: PolarError, phi_m: jax.Array, *, temperature: float | No
 
     ``d = 1`` if ``|φ_e| ≤ Φ_m``; ``d = −1`` if ``|φ_e| > π − Φ_m``; else 0.
     """
+    if not is_traced(phi_m):  # called with a value: Φ_m must be an angle of the law
+        arr = np.asarray(phi_m, dtype=float)
+        require("phi_m", arr, (arr > 0) & (arr < np.pi / 2), "0 < phi_m < pi/2 rad")
     cos_m = jnp.cos(phi_m)
     ahead = _step(err.cos_phi - cos_m, strict=False, temperature=temperature)
     behind = _step(-cos_m - err.cos_phi, strict=True, temperature=temperature)

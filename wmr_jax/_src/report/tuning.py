@@ -57,6 +57,20 @@ def evaluation_table(evaluation: dict[str, Any], bounds: Any = None) -> str:
             f"evaluation = {evaluation!r:.80} is not allowed; allowed: a dict of Evaluation "
             "rows with 'paper_feasible' (the reference of the 'vs paper' column)"
         )
+    for name, ev in evaluation.items():
+        for field, ok, allowed in (
+            ("success_rate", lambda x: 0 <= x <= 1, "a fraction in [0, 1]"),
+            ("mean_arrival", lambda x: x > 0, "a time > 0 s (inf if no run arrives)"),
+        ):
+            value = getattr(ev, field, None)
+            try:
+                good = not isinstance(value, (bool, str)) and ok(float(value))
+            except (TypeError, ValueError):
+                good = False
+            if not good:
+                raise ValueError(
+                    f"evaluation[{name!r}].{field} = {value!r} is not allowed; allowed: {allowed}"
+                )
     paper = evaluation["paper_feasible"].mean_arrival
     columns = _TABLE_COLUMNS + (_BOUND_COLUMNS if bounds is not None else [])
     rows = []
