@@ -22,12 +22,12 @@ import numpy as np
 
 from wmr_jax._src import dynamics, loops, velocity_loop
 from wmr_jax._src.checks import (
-    array_kind,
     as_poses,
     check_dt,
     check_int,
     float_dtype,
     is_traced,
+    real_array,
     require,
     require_unbatched,
 )
@@ -62,15 +62,11 @@ def _real(name: str, value: Any, *, finite: bool = True, last: int | None = None
         return value
     dtype = getattr(value, "dtype", None)
     own_float = dtype is not None and jnp.issubdtype(dtype, jnp.floating)
-    try:
-        if value is None or (not own_float and array_kind(value) not in "iuf"):
-            raise TypeError(value)
-        arr = np.asarray(value, dtype=dtype if own_float else np.dtype(float_dtype()))
-    except (TypeError, ValueError):
+    if own_float:
+        arr = np.asarray(value, dtype=dtype)
+    else:
         shape = "" if last is None else f" of shape (..., {last})"
-        raise ValueError(
-            f"{name} = {value!r} is not allowed; allowed: real numbers{shape}"
-        ) from None
+        arr = real_array(name, value, f"real numbers{shape}").astype(float_dtype())
     if last is not None and (arr.ndim == 0 or arr.shape[-1] != last):
         raise ValueError(f"{name} has shape {arr.shape}; allowed: (..., {last})")
     if finite:

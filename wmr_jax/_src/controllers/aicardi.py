@@ -12,8 +12,13 @@ import jax
 import jax.numpy as jnp
 
 from wmr_jax._src.checks import Parameters, require
-from wmr_jax._src.controllers.base import Controller, check_law_inputs, register_controller
-from wmr_jax._src.controllers.polar import driving_error, gain_values, hold_at_goal
+from wmr_jax._src.controllers.base import Controller, register_controller
+from wmr_jax._src.controllers.polar import (
+    checked_inputs,
+    driving_error,
+    gain_values,
+    hold_at_goal,
+)
 from wmr_jax._src.dynamics import sinc
 
 __all__ = ["AICARDI", "AicardiGains", "aicardi_control", "validate_aicardi_gains"]
@@ -66,13 +71,9 @@ def aicardi_control(
         temperature: must be ``None``; the law has no smooth relaxation.
         frame: the pose as ``(x, y, cos θ, sin θ)`` (see ``shim_sung.polar_error``).
     """
-    if temperature is not None:  # no smooth relaxation: Controller.smooth is False
-        raise ValueError(
-            f"temperature = {temperature!r} is not allowed; allowed: None (this law has no "
-            "smooth relaxation)"
-        )
-    if frame is None:  # called with values, not from a rollout
-        pose, ref, gains = check_law_inputs(pose, ref, gains, AicardiGains, validate_aicardi_gains)
+    pose, ref, gains = checked_inputs(
+        pose, ref, gains, temperature, frame, AicardiGains, validate_aicardi_gains
+    )
     rho, alpha, theta_a, direction = driving_error(pose, ref, backward=gains.backward, frame=frame)
     cos_alpha = jnp.cos(alpha)
     v = direction * gains.gamma * rho * cos_alpha

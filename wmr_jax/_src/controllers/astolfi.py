@@ -13,8 +13,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from wmr_jax._src.checks import Parameters, require
-from wmr_jax._src.controllers.base import Controller, check_law_inputs, register_controller
-from wmr_jax._src.controllers.polar import driving_error, gain_values, hold_at_goal
+from wmr_jax._src.controllers.base import Controller, register_controller
+from wmr_jax._src.controllers.polar import (
+    checked_inputs,
+    driving_error,
+    gain_values,
+    hold_at_goal,
+)
 
 __all__ = ["ASTOLFI", "AstolfiGains", "astolfi_control", "validate_astolfi_gains"]
 
@@ -68,13 +73,9 @@ def astolfi_control(
         temperature: must be ``None``; the law has no smooth relaxation.
         frame: the pose as ``(x, y, cos θ, sin θ)`` (see ``shim_sung.polar_error``).
     """
-    if temperature is not None:  # no smooth relaxation: Controller.smooth is False
-        raise ValueError(
-            f"temperature = {temperature!r} is not allowed; allowed: None (this law has no "
-            "smooth relaxation)"
-        )
-    if frame is None:  # called with values, not from a rollout
-        pose, ref, gains = check_law_inputs(pose, ref, gains, AstolfiGains, validate_astolfi_gains)
+    pose, ref, gains = checked_inputs(
+        pose, ref, gains, temperature, frame, AstolfiGains, validate_astolfi_gains
+    )
     rho, alpha, theta_a, direction = driving_error(pose, ref, backward=gains.backward, frame=frame)
     alpha = jnp.clip(alpha, -jnp.pi / 2, jnp.pi / 2)
     v = direction * gains.k_rho * rho

@@ -38,8 +38,9 @@ import numpy as np
 
 from wmr_jax._src.checks import field_values
 from wmr_jax._src.controllers import shim_sung as law
+from wmr_jax._src.controllers.base import check_law_inputs
 
-__all__ = ["AT_GOAL", "driving_error", "gain_values", "hold_at_goal"]
+__all__ = ["AT_GOAL", "checked_inputs", "driving_error", "gain_values", "hold_at_goal"]
 
 # choice (docs/model.md §3): within this distance of the reference, cm, the
 # polar laws stop driving and only turn to the reference heading. Their
@@ -101,3 +102,24 @@ def hold_at_goal(
     near = rho < AT_GOAL
     theta_e = law.wrap_angle(alpha - theta_a)
     return jnp.where(near, 0.0, v), jnp.where(near, rate * theta_e, omega)
+
+
+def checked_inputs(
+    pose: Any, ref: Any, gains: Any, temperature: Any, frame: Any, params_type: type, validate: Any
+) -> tuple[Any, Any, Any]:
+    """The polar laws' arguments, checked: no relaxation, and values a user passed by hand.
+
+    A rollout passes ``frame`` and traced values, which go through unchanged.
+
+    Raises:
+        ValueError: for a temperature (these laws have no smooth relaxation) or a
+            bad pose, reference or gain, naming it.
+    """
+    if temperature is not None:  # no smooth relaxation: Controller.smooth is False
+        raise ValueError(
+            f"temperature = {temperature!r} is not allowed; allowed: None (this law has no "
+            "smooth relaxation)"
+        )
+    if frame is None:  # called with values, not from a rollout
+        return check_law_inputs(pose, ref, gains, params_type, validate)
+    return pose, ref, gains
