@@ -467,3 +467,28 @@ def test_writers_refuse_a_folder_or_no_path_and_tables_impossible_rates(tmp_path
     table = {"paper_feasible": Evaluation(2.0, 5.0, 100.0, 10)}
     with pytest.raises(ValueError, match=r"success_rate = 5.0 is not allowed; allowed: a fraction"):
         evaluation_table(table)
+
+
+@pytest.mark.parametrize("name", ["run", "run.xyz", "run.gif.txt"])
+def test_figures_refuse_a_path_that_names_no_image_format(tmp_path, name):
+    # Without the check, "run" got PNG bytes under no ending and "run.gif.txt"
+    # matplotlib's error about "txt".
+    before = plt.get_fignums()
+    with pytest.raises(ValueError, match=rf"path = '.*{name}' is not allowed; allowed: .*\.png"):
+        path_figure(tmp_path / name, SimpleNamespace(poses=np.zeros((4, 3))), (1, 1, 0), title="")
+    assert plt.get_fignums() == before
+    assert not list(tmp_path.iterdir())
+    written = path_figure(
+        tmp_path / "run.SVG", SimpleNamespace(poses=np.zeros((4, 3))), (1, 1, 0), title=""
+    )
+    assert written is None and (tmp_path / "run.SVG").read_bytes().lstrip().startswith(b"<?xml")
+
+
+@pytest.mark.parametrize("name", ["run.png", "run", "gif"])
+def test_gifs_refuse_a_path_not_ending_in_gif(tmp_path, name):
+    # A .png path used to get GIF bytes; animate says so before it simulates.
+    with pytest.raises(ValueError, match=rf"path = '.*{name}' is not allowed; allowed: .*\.gif"):
+        write_gif(tmp_path / name, np.zeros((1, 3, 3)), np.ones((1, 3)))
+    with pytest.raises(ValueError, match=r"allowed: a path ending in \.gif"):
+        animation.animate(tmp_path / name, n_robots=1)
+    assert not list(tmp_path.iterdir())

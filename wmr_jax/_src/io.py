@@ -124,9 +124,20 @@ def json_text(obj: Any, name: str, **kwargs: Any) -> str:
 
 
 def save_figure(fig: Any, path: str | os.PathLike, **kwargs: Any) -> Path:
-    """Render a matplotlib figure to ``path`` atomically (format from the suffix)."""
+    """Render a matplotlib figure to ``path`` atomically (format from the suffix).
+
+    Raises:
+        ValueError: ``path`` does not end in an image format matplotlib can
+            write (``.png``, ``.pdf``, ``.svg``, ...), naming it.
+    """
+    supported = fig.canvas.get_supported_filetypes()
+    fmt = Path(path).suffix.lstrip(".").lower()
+    if fmt not in supported:
+        raise ValueError(
+            f"path = {os.fspath(path)!r} is not allowed; allowed: a path ending in "
+            + ", ".join(f".{name}" for name in sorted(supported))
+        )
     buffer = io.BytesIO()
-    fmt = Path(path).suffix.lstrip(".") or "png"
     fig.savefig(buffer, format=fmt, **kwargs)
     return atomic_write_bytes(path, buffer.getvalue())
 

@@ -45,12 +45,11 @@ def _flags() -> dict[str, dict[str, Any]]:
 def run(args: Any) -> int:
     """Run ``wmr-jax animate``; return the exit status."""
     from wmr_jax._src.poses import horizon_steps, paper_refs
-    from wmr_jax._src.report.animation import animate
+    from wmr_jax._src.report.animation import animate, gif_path
     from wmr_jax._src.rollout import DEFAULT_DT
 
+    gif_path("--out", args.out)
     out = flags.output_file("--out", args.out)
-    if out.suffix.lower() != ".gif":
-        raise ValueError(f"--out {args.out!r} is not allowed; allowed: a path ending in .gif")
     name = flags.controller_names([args.controller])[0]
     velocity = flags.velocity_loop(args.velocity)
     # A GIF holds every frame in memory: a few minutes of a few thousand robots at most.

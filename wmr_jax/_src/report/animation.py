@@ -29,7 +29,7 @@ from wmr_jax._src.poses import horizon_steps, sample_poses
 from wmr_jax._src.report.figures import plt
 from wmr_jax._src.rollout import DEFAULT_DT
 
-__all__ = ["animate", "frame_timing", "write_gif"]
+__all__ = ["animate", "frame_timing", "gif_path", "write_gif"]
 
 
 def _pitch(poses: np.ndarray, refs: np.ndarray, title: str, arrow: float) -> tuple[Any, Any]:
@@ -113,6 +113,15 @@ def _save(anim: Any, fig: Any, path: str | os.PathLike, frame_ms: int) -> Path:
     return target
 
 
+def gif_path(name: str, path: Any) -> Path:
+    """Return ``path`` if it ends in ``.gif``, else say so naming ``name``."""
+    text = os.fspath(path) if isinstance(path, (str, os.PathLike)) else None
+    if not isinstance(text, str) or Path(text).suffix.lower() != ".gif":
+        shown = path if text is None else text
+        raise ValueError(f"{name} {shown!r} is not allowed; allowed: a path ending in .gif")
+    return Path(text)
+
+
 def write_gif(
     path: str | os.PathLike,
     poses: np.ndarray,
@@ -147,10 +156,12 @@ def write_gif(
         The path written.
 
     Raises:
-        ValueError: for misshapen poses or references, or a bad ``speed``, ``stride``,
-            ``trail`` or ``body_radius``.
+        ValueError: for a path not ending in ``.gif``, misshapen poses or
+            references, or a bad ``speed``, ``stride``, ``trail`` or ``body_radius``.
     """
     from wmr_jax._src.report.figures import mpl_animation
+
+    path = gif_path("path =", path)
 
     for name, value in (("poses", poses), ("refs", refs)):
         kind = checks.array_kind(value)
@@ -252,6 +263,7 @@ def animate(
     Raises:
         ValueError: for a bad count, seed, option or pose, before anything runs.
     """
+    path = gif_path("path =", path)
     if refs is None:
         refs = np.asarray(sample_poses(seed, checks.check_int("n_robots", n_robots)), dtype=float)
     frame_timing(dt, stride, speed)  # bad values fail before anything runs
