@@ -492,3 +492,27 @@ def test_gifs_refuse_a_path_not_ending_in_gif(tmp_path, name):
     with pytest.raises(ValueError, match=r"allowed: a path ending in \.gif"):
         animation.animate(tmp_path / name, n_robots=1)
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (
+            {"loss": np.ones(2)},
+            r"history\['loss'\] has 2 iterations and history\['temperature'\] 3",
+        ),
+        (
+            {"temperature": [1.0, 1.0, 0.0]},
+            r"history\['temperature'\] = .*0\.0.*finite numbers > 0",
+        ),
+        ({"loss": "abc"}, r"history\['loss'\] = 'abc' is not allowed; allowed: real numbers"),
+        ({"loss": np.ones((3, 1))}, r"history\['loss'\] has shape \(3, 1\)"),
+        ({"gains": [[True] * 7] * 3}, r"history\['gains'\] = .*True.*allowed: real numbers"),
+    ],
+)
+def test_tuning_curve_checks_the_values_of_the_history(tmp_path, change, message):
+    # A short loss used to fail inside matplotlib, a zero temperature vanished
+    # from the log axis and bools were drawn as gains.
+    with pytest.raises(ValueError, match=message):
+        tuning_curve(tmp_path / "curve.png", {**_history(), **change})
+    assert not list(tmp_path.iterdir())

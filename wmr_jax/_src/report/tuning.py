@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from wmr_jax._src.checks import real_array, require
 from wmr_jax._src.controllers.schedule import KNOTS, SHAPE_FIELDS, knot_radii
 from wmr_jax._src.io import save_figure
 from wmr_jax._src.optimal import bound_ratios
@@ -177,21 +178,22 @@ def tuning_curve(
     if problem not in ("fixed", "schedule"):
         raise ValueError(f"problem = {problem!r} is not allowed; allowed: 'fixed', 'schedule'")
     columns = len(get_problem(problem).columns)
-    gains = np.asarray(history["gains"], dtype=float)
-    if gains.shape != (len(history["loss"]), columns):
+    loss, temperature = _history_curves(history)
+    gains = real_array("history['gains']", history["gains"], "real numbers")
+    if gains.shape != (len(loss), columns):
         raise ValueError(
-            f"history['gains'] has shape {gains.shape}; allowed: ({len(history['loss'])}, "
+            f"history['gains'] has shape {gains.shape}; allowed: ({len(loss)}, "
             f"{columns}), one row of the {problem!r} problem's columns per iteration"
         )
-    steps = np.arange(1, len(history["loss"]) + 1)
+    steps = np.arange(1, len(loss) + 1)
     with closed_after(2, 4, figsize=(14, 6), constrained_layout=True) as (fig, axes):
         ax = axes[0, 0]
-        ax.plot(steps, history["loss"], lw=0.8, color="C0")
+        ax.plot(steps, loss, lw=0.8, color="C0")
         ax.set_yscale("log")
         ax.set_xlabel("iteration")
         ax.set_ylabel("loss (s)", color="C0")
         twin = ax.twinx()
-        twin.plot(steps, history["temperature"], lw=1.0, color="C3")
+        twin.plot(steps, temperature, lw=1.0, color="C3")
         twin.set_yscale("log")
         twin.set_ylabel("temperature", color="C3")
         ax.set_title(f"loss ({velocity} loop)")
@@ -203,6 +205,27 @@ def tuning_curve(
 
 
 _HISTORY_KEYS = ("loss", "temperature", "gains")
+
+
+def _history_curves(history: dict) -> tuple[np.ndarray, np.ndarray]:
+    """``history``'s loss and temperature, checked: one number of each per iteration."""
+    curves = []
+    for key in ("loss", "temperature"):
+        name = f"history[{key!r}]"
+        values = real_array(name, history[key], "real numbers, one per iteration")
+        if values.ndim != 1 or values.size == 0:
+            raise ValueError(
+                f"{name} has shape {values.shape}; allowed: (iterations,) with iterations >= 1"
+            )
+        if key == "temperature":  # annealed from a positive start; drawn on a log axis
+            require(name, values, np.isfinite(values) & (values > 0), "finite numbers > 0")
+        curves.append(values)
+    if len(curves[0]) != len(curves[1]):
+        raise ValueError(
+            f"history['loss'] has {len(curves[0])} iterations and history['temperature'] "
+            f"{len(curves[1])}; allowed: one of each per iteration"
+        )
+    return curves[0], curves[1]
 
 
 def _gain_panels(axes: Any, steps: np.ndarray, gains: np.ndarray) -> None:
