@@ -516,3 +516,39 @@ def test_tuning_curve_checks_the_values_of_the_history(tmp_path, change, message
     with pytest.raises(ValueError, match=message):
         tuning_curve(tmp_path / "curve.png", {**_history(), **change})
     assert not list(tmp_path.iterdir())
+
+
+def _contains_itself() -> dict:
+    loop: dict = {}
+    loop["self"] = loop
+    return loop
+
+
+def test_paper_fig7_and_soccer_writers_check_everything_before_the_first_file(tmp_path):
+    # Stand-ins whose record cannot be written as JSON: each writer must fail
+    # before it writes a figure or a table, leaving the folder empty.
+    from wmr_jax.report import save_fig7, save_paper, write_soccer
+    from wmr_jax.studies import SoccerStudy
+
+    from wmr_jax._src.report.paper import _SUMMARY_NUMBERS, _TABLE_COLUMNS
+
+    rows = [{"case": "a", "value": 1.0}]
+    paper = SimpleNamespace(
+        robot=SimpleNamespace(v_max=125.0),
+        runs=[dict.fromkeys(_TABLE_COLUMNS, 1.0)],
+        summary={"kr=60": {"condition": "met", **dict.fromkeys(_SUMMARY_NUMBERS, 1.0)}},
+        table=_contains_itself,
+    )
+    fig7 = SimpleNamespace(gains=None, rows=rows, table=_contains_itself)
+    soccer = SoccerStudy(
+        rows=rows,
+        runs=[],
+        velocity=_contains_itself(),
+        steps=10,
+        pass_tol_r=1.0,
+        pass_tol_theta=0.1,
+    )
+    for write, arg in ((save_paper, paper), (save_fig7, fig7), (write_soccer, soccer)):
+        with pytest.raises(ValueError, match="contains itself"):
+            write(tmp_path / "out", arg)
+        assert not (tmp_path / "out").exists() or not list((tmp_path / "out").iterdir())
