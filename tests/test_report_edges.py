@@ -527,10 +527,9 @@ def _contains_itself() -> dict:
 def test_paper_fig7_and_soccer_writers_check_everything_before_the_first_file(tmp_path):
     # Stand-ins whose record cannot be written as JSON: each writer must fail
     # before it writes a figure or a table, leaving the folder empty.
+    from wmr_jax._src.report.paper import _SUMMARY_NUMBERS, _TABLE_COLUMNS
     from wmr_jax.report import save_fig7, save_paper, write_soccer
     from wmr_jax.studies import SoccerStudy
-
-    from wmr_jax._src.report.paper import _SUMMARY_NUMBERS, _TABLE_COLUMNS
 
     rows = [{"case": "a", "value": 1.0}]
     paper = SimpleNamespace(
