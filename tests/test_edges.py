@@ -350,6 +350,13 @@ def test_a_bool_among_numbers_is_refused_by_the_batch_and_reference_entry_points
             lambda: w.controllers.direction_flag(w.controllers.polar_error([0, 0, 0], REF), 5.0),
             r"phi_m = 5.0 is not allowed; allowed: 0 < phi_m < pi/2",
         ),
+        (lambda: w.controllers.saturated_distance(1.0, -2.0), r"r_m = -2.0 is not allowed"),
+        (
+            lambda: w.controllers.blend(
+                w.controllers.polar_error([0, 0, 0], REF), 1.0, w.Gains(r_a=-1.0)
+            ),
+            r"gains\.r_a = -1.0 is not allowed",
+        ),
     ],
 )
 def test_the_laws_called_by_hand_check_their_values(call, message):

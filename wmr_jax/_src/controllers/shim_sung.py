@@ -233,6 +233,9 @@ def saturated_distance(r: jax.Array, r_m: jax.Array, *, temperature: float | Non
     a number in ``[1, 2]`` rather than ``log1p``, which XLA:CPU evaluates
     several times slower: the absolute error is about an ulp of 1.
     """
+    if not is_traced(r_m):  # called with a value: R_m is a radius of the law
+        arr = np.asarray(r_m, dtype=float)
+        require("r_m", arr, np.isfinite(arr) & (arr > 0), "a finite radius > 0 cm")
     linear = r * ((jnp.pi / 2) / jnp.asarray(r_m))  # the factor is per gain set, not per step
     if temperature is None:
         return jnp.minimum(linear, jnp.pi / 2)
@@ -295,6 +298,8 @@ def blend(
     indicator of the region test, which is exact for ``d ∈ {−1, 0, 1}`` and
     smooth when the indicators are relaxed.
     """
+    if isinstance(gains, Gains) and not is_traced(gains):
+        validate_gains(gains)  # called with values, not from a rollout
     _, sin_phi_bar = fold(err.cos_phi, err.sin_phi, temperature=temperature)
     _, sin_theta_bar = fold(err.cos_theta, err.sin_theta, temperature=temperature)
     in_region_0 = _step(gains.r_e - err.r, strict=False, temperature=temperature, scale=gains.r_e)
