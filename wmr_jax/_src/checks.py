@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+from pathlib import Path
 from typing import Any
 
 import jax
@@ -24,9 +26,14 @@ __all__ = [
     "as_float_tree",
     "as_pose_array",
     "as_poses",
+    "check_bool",
+    "check_budget",
+    "check_callable",
     "check_dt",
     "check_int",
+    "check_key",
     "check_number",
+    "check_path",
     "check_temperature",
     "field_values",
     "float_dtype",
@@ -124,6 +131,42 @@ def check_bool(name: str, value: Any) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise ValueError(f"{name} = {value!r} is not allowed; allowed: True or False")
     return bool(value)
+
+
+def check_callable(name: str, value: Any) -> Any:
+    """Return ``value`` if it is ``None`` or can be called (a progress callback)."""
+    if value is not None and not callable(value):
+        raise ValueError(f"{name} = {value!r:.80} is not allowed; allowed: a function or None")
+    return value
+
+
+def check_key(name: str, key: Any) -> Any:
+    """Return ``key`` if it is a ``jax.random`` key (new style, or a legacy ``uint32[2]``).
+
+    Traced keys pass (they were checked where they were made).
+    """
+    if is_traced(key):
+        return key
+    typed = isinstance(key, jax.Array) and jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)
+    legacy = np.shape(key) == (2,) and np.asarray(key).dtype == np.uint32
+    if not (typed or legacy):
+        raise ValueError(
+            f"{name} = {key!r:.80} is not allowed; allowed: a jax.random key (jax.random.key(seed))"
+        )
+    return key
+
+
+def check_budget(name: str, value: Any) -> float:
+    """Return a wall-time budget in s: a finite number ``>= 0`` (0: one round only)."""
+    return check_number(name, value, closed=True, high=1e9, unit="s")
+
+
+def check_path(name: str, value: Any) -> Path:
+    """Return ``value`` as a ``Path`` if it is a non-empty ``str`` or ``os.PathLike``."""
+    text = os.fspath(value) if isinstance(value, (str, os.PathLike)) else None
+    if not isinstance(text, str) or not text:
+        raise ValueError(f"{name} = {value!r:.80} is not allowed; allowed: a path (str or Path)")
+    return Path(text)
 
 
 def check_number(

@@ -15,7 +15,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from wmr_jax._src.checks import as_poses, check_dt, check_number
+from wmr_jax._src.checks import as_poses, check_dt, check_number, real_array
 from wmr_jax._src.metrics import DEFAULT_TOL_R
 from wmr_jax._src.params import Robot, validate_robot
 from wmr_jax._src.rollout import DEFAULT_DT
@@ -110,6 +110,12 @@ def bound_ratios(mean_arrival: float, bounds: TimeBounds) -> dict[str, float]:
     Returns:
         ``{"turn_drive_turn_s", "lower_bound_s", "vs_turn_drive_turn", "vs_lower_bound"}``.
     """
+    # inf (none arrived) is allowed and gives inf ratios; NaN, 0 and below are not times.
+    allowed = "a time > 0 s, or inf"
+    value = real_array("mean_arrival", mean_arrival, allowed)
+    if value.shape != () or not value > 0:
+        raise ValueError(f"mean_arrival = {mean_arrival!r} is not allowed; allowed: {allowed}")
+    mean_arrival = float(value)
     tdt = float(np.mean(bounds.turn_drive_turn))
     lower = float(np.mean(bounds.lower_bound))
     if not (tdt > 0 and lower > 0):  # a mean arrival of inf (none arrived) is inf times

@@ -31,17 +31,6 @@ def _save_checkpoint(path: Path, state: Any, identity: dict[str, Any]) -> None:
     io.save_arrays(path, tuning.state_arrays(state), meta)
 
 
-def _identity_diff(saved: Any, now: dict[str, Any]) -> str:
-    """Name the settings in which a checkpoint's run differs from this one."""
-    saved_config = saved.get("config", {}) if isinstance(saved, dict) else {}
-    diffs = [
-        f"{key} = {saved_config.get(key)!r} there, {value!r} now"
-        for key, value in now["config"].items()
-        if saved_config.get(key) != value
-    ]
-    return "; ".join(diffs) or "the robot differs"
-
-
 def _load_checkpoint(path: Path, fresh: Any, identity: dict[str, Any]) -> Any:
     """Restore a checkpoint into the structure of ``fresh``.
 
@@ -64,7 +53,7 @@ def _load_checkpoint(path: Path, fresh: Any, identity: dict[str, Any]) -> Any:
     if meta.get("identity") != now:
         raise ValueError(
             f"--resume: checkpoint {path} is of another run "
-            f"({_identity_diff(meta.get('identity'), now)}); "
+            f"({tuning.run_difference(meta.get('identity'), now)}); "
             "allowed: the same settings, or a fresh --out"
         )
     try:
@@ -196,12 +185,20 @@ def tune(
     from tqdm.auto import tqdm
 
     from wmr_jax._src import io, tuning
-    from wmr_jax._src.checks import as_float_tree
+    from wmr_jax._src.checks import as_float_tree, check_bool, check_callable, check_path
     from wmr_jax._src.params import Robot, validate_robot
+    from wmr_jax._src.tuning.training import checked_config
 
-    out = Path(out_dir)
+    out = check_path("out_dir", out_dir)
+    if out.exists() and not out.is_dir():
+        raise ValueError(
+            f"out_dir = {os.fspath(out)!r} is not allowed; allowed: a folder (it is a file)"
+        )
+    check_bool("resume", resume)
+    check_bool("progress", progress)
+    check_callable("progress_fn", progress_fn)
+    config = checked_config(config)
     io.remove_stale_temporaries(out)
-    config = (tuning.TuneConfig() if config is None else config).validate()
     robot = Robot() if robot is None else robot
     identity = tuning.run_identity(config, robot)
     state = tuning.init_state(config, robot)

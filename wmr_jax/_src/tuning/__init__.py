@@ -54,6 +54,7 @@ from wmr_jax._src.tuning.training import TuneConfig as TuneConfig
 from wmr_jax._src.tuning.training import TuneResult as TuneResult
 from wmr_jax._src.tuning.training import init_state as init_state
 from wmr_jax._src.tuning.training import restore_state as restore_state
+from wmr_jax._src.tuning.training import run_difference as run_difference
 from wmr_jax._src.tuning.training import run_identity as run_identity
 from wmr_jax._src.tuning.training import state_arrays as state_arrays
 from wmr_jax._src.tuning.training import train as train

@@ -20,11 +20,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks import as_poses, float_dtype
+from wmr_jax._src.checks import (
+    as_poses,
+    check_budget,
+    check_callable,
+    check_int,
+    check_key,
+    check_number,
+    float_dtype,
+)
 from wmr_jax._src.optimal import bound_ratios, time_bounds
 from wmr_jax._src.params import Robot, validate_one_robot
 from wmr_jax._src.poses import sample_poses
-from wmr_jax._src.tuning.evaluation import RUN_OPTIONS, evaluate, held_out_poses
+from wmr_jax._src.tuning.evaluation import RUN_OPTIONS, check_run, evaluate, held_out_poses
 from wmr_jax._src.tuning.problems import get_problem
 from wmr_jax._src.tuning.search import SearchResult, population_scores, random_search
 from wmr_jax._src.tuning.training import TuneConfig, train
@@ -75,11 +83,17 @@ def cma_es_search(
     Raises:
         ValueError: if evosax is missing (one line) or for bad options.
     """
-    cma_class = _evosax_cma_es()
+    check_key("key", key)
+    budget_s = check_budget("budget_s", budget_s)
+    population = check_int("population", population, 2)
+    std_init = check_number("std_init", std_init)
+    check_callable("progress", progress)
     problem = get_problem(problem)
     robot = validate_one_robot(robot, "tuning")
     refs = as_poses("refs", refs, batch=True)
     run = {**_run_defaults(), **run, "robot": robot}
+    check_run(run)
+    cma_class = _evosax_cma_es()
     n = refs.shape[0]
     tiled = jnp.tile(refs, (population, 1))
     start = jnp.asarray(problem.start_logits(robot), float_dtype())
@@ -91,6 +105,10 @@ def cma_es_search(
     while generation == 0 or time.perf_counter() - began < budget_s:
         ask_key, tell_key = jax.random.split(jax.random.fold_in(key, generation + 1))
         z, state = strategy.ask(ask_key, state, params)
+        if generation and not np.all(np.isfinite(np.asarray(z))):
+            # The strategy broke down: on a flat landscape (every candidate
+            # scored alike) its step size can overflow. Keep the best so far.
+            break
         u = jax.nn.sigmoid(z)
         scores = population_scores(problem, u, tiled, n, robot, run)
         state, _ = strategy.tell(tell_key, z, scores, state, params)
@@ -109,6 +127,36 @@ def cma_es_search(
 def _run_defaults() -> dict[str, Any]:
     config = TuneConfig()
     return {name: getattr(config, name) for name in RUN_OPTIONS if name != "robot"}
+
+
+def _checked_plan(seeds: Any, problems: Any, configs: Any) -> dict[str, TuneConfig]:
+    """The checked ``TuneConfig`` of each problem to compare (before anything runs)."""
+    for name, value, what in (("seeds", seeds, "seeds"), ("problems", problems, "problem names")):
+        if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list)) or not value:
+            raise ValueError(
+                f"{name} = {value!r} is not allowed; allowed: a non-empty tuple or list of {what}"
+            )
+    for i, seed in enumerate(seeds):
+        check_int(f"seeds[{i}]", seed, 0, 2**32 - 1)
+    if configs is not None and not isinstance(configs, dict):
+        raise ValueError(f"configs = {configs!r:.80} is not allowed; allowed: a dict or None")
+    configs = dict(configs or {})
+    names = [get_problem(name).name for name in problems]
+    unused = sorted(set(configs) - set(names))
+    if unused:
+        raise ValueError(
+            f"configs[{unused[0]!r}] is for no problem compared; allowed: keys among {names}"
+        )
+    bases = {}
+    for name in names:
+        base = configs.get(name, TuneConfig.for_problem(name))
+        if not isinstance(base, TuneConfig) or base.problem.name != name:
+            raise ValueError(
+                f"configs[{name!r}] = {base!r:.80} is not allowed; allowed: a TuneConfig of the "
+                f"{name!r} problem (TuneConfig.for_problem({name!r}, ...))"
+            )
+        bases[name] = base.validate()
+    return bases
 
 
 def compare(
@@ -141,11 +189,11 @@ def compare(
         ratios of ``bound_ratios``.
     """
     robot = validate_one_robot(robot, "tuning")
-    configs = dict(configs or {})
+    bases = _checked_plan(seeds, problems, configs)
+    check_callable("progress", progress)
     rows = []
-    for name in problems:
+    for name, base in bases.items():
         problem = get_problem(name)
-        base = configs.get(name, TuneConfig.for_problem(problem.name))
         held_out = held_out_poses(base.eval_poses, base.eval_seed)
         bounds = time_bounds(held_out, robot=robot, dt=base.dt)
         run = {k: getattr(base, k) for k in RUN_OPTIONS if k != "robot"}

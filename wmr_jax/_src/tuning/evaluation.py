@@ -17,6 +17,7 @@ import numpy as np
 
 from wmr_jax._src import loops
 from wmr_jax._src import rollout as simulation
+from wmr_jax._src.checks import check_int
 from wmr_jax._src.controllers.schedule import SCHEDULE, ScheduleParams
 from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
 from wmr_jax._src.metrics import arrival_time
@@ -52,12 +53,31 @@ class Evaluation(NamedTuple):
 
 def held_out_poses(n: int = EVAL_POSES, eval_seed: int = EVAL_SEED) -> jax.Array:
     """Return the ``n`` held-out reference poses of the before/after table, ``(n, 3)``."""
+    eval_seed = check_int("eval_seed", eval_seed, 0, 2**32 - 1)
     return sample_poses(jax.random.fold_in(jax.random.key(eval_seed), 1), n)
 
 
 def run_options(values: dict[str, Any]) -> dict[str, Any]:
     """Pick the ``RUN_OPTIONS`` out of ``values`` (a function's ``locals()``)."""
     return {name: values[name] for name in RUN_OPTIONS}
+
+
+def check_run(run: dict[str, Any]) -> None:
+    """Check the run options of a search before it starts (names and values).
+
+    Raises:
+        ValueError: for an unknown option, or a bad ``dt``, ``horizon``,
+            ``velocity``, ``substeps`` or ``wheel_limit``, naming it.
+    """
+    unknown = sorted(set(run) - set(RUN_OPTIONS))
+    if unknown:
+        raise ValueError(f"unknown option {unknown[0]!r}; allowed: {', '.join(RUN_OPTIONS)}")
+    simulation.make_options(
+        steps=horizon_steps(run["dt"], run["horizon"]),
+        velocity=run["velocity"],
+        substeps=run["substeps"],
+        wheel_limit=run["wheel_limit"],
+    )
 
 
 def hard_runs(
@@ -121,6 +141,11 @@ def evaluate(
     Raises:
         ValueError: for out-of-range gains, poses or options, naming the value.
     """
+    if gains is None:
+        raise ValueError(
+            "gains = None is not allowed; allowed: the controller's parameters "
+            "(a Gains, a ScheduleParams, ...)"
+        )
     if controller is None:
         controller = SCHEDULE if isinstance(gains, ScheduleParams) else SHIM_SUNG
     traj, times, _ = hard_runs(refs, gains, **run_options(locals()), controller=controller)

@@ -17,6 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from wmr_jax._src.checks import is_traced, real_array, require
 from wmr_jax._src.params import Gains, Robot, validate_gains
 
 __all__ = [
@@ -61,6 +62,23 @@ def _unlerp(x: float, bounds: tuple[float, float]) -> float:
     return (x - lo) / (hi - lo)
 
 
+def checked_point(name: str, value: Any, dim: int, *, unit: bool) -> jax.Array:
+    """``value`` as an array ``(..., dim)`` of the cube (``unit``) or of logits, or say why not.
+
+    Traced values pass unchecked (they were checked where they were made).
+    """
+    if is_traced(value):
+        return jnp.asarray(value)
+    arr = real_array(name, value, f"real numbers of shape (..., {dim})")
+    if arr.ndim == 0 or arr.shape[-1] != dim:
+        raise ValueError(f"{name} has shape {arr.shape}; allowed: (..., {dim})")
+    if unit:
+        require(name, arr, (arr >= 0) & (arr <= 1), "numbers in [0, 1]")
+    else:
+        require(name, arr, ~np.isnan(arr), "real numbers (not NaN)")
+    return jnp.asarray(value)
+
+
 def gains_from_unit(u: jax.Array, robot: Robot | None = None) -> Gains:
     """Map a point of the unit cube to feasible gains (``docs/model.md §3``).
 
@@ -76,7 +94,7 @@ def gains_from_unit(u: jax.Array, robot: Robot | None = None) -> Gains:
         ``Gains`` whose fields have the leading shape of ``u``.
     """
     robot = Robot() if robot is None else robot
-    u = jnp.asarray(u)
+    u = checked_point("u", u, len(GAIN_FIELDS), unit=True)
     budget = robot.v_max * _lerp(u[..., 0], _BUDGET)  # cm/s
     share = _lerp(u[..., 1], _SHARE)
     r_m = jnp.exp(_lerp(u[..., 4], _LOG_R_M))
@@ -139,6 +157,7 @@ def gains_from_logits(z: jax.Array, robot: Robot | None = None) -> Gains:
         z: ``(..., 7)`` logits of a point of the unit cube.
         robot: gives ``L`` (cm) and ``V_max`` (cm/s); default ``Robot()``.
     """
+    z = checked_point("z", z, len(GAIN_FIELDS), unit=False)
     return gains_from_unit(jax.nn.sigmoid(z), robot)
 
 

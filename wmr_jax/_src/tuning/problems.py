@@ -56,7 +56,8 @@ class Problem:
 
     def from_logits(self, z: Any, robot: Robot) -> Any:
         """Params of the logits ``z`` (``u = σ(z)``, any real ``(..., dim)``)."""
-        return self.from_unit(1.0 / (1.0 + jnp.exp(-jnp.asarray(z))), robot)
+        z = fixed.checked_point("z", z, self.dim, unit=False)
+        return self.from_unit(1.0 / (1.0 + jnp.exp(-z)), robot)
 
     def start_logits(self, robot: Robot) -> np.ndarray:
         """Logits of ``start(robot)``, finite."""
@@ -89,7 +90,7 @@ _SCHEDULE_COLUMNS = (
 
 def _schedule_from_unit(u: Any, robot: Robot | None = None) -> ScheduleParams:
     robot = Robot() if robot is None else robot
-    u = jnp.asarray(u)
+    u = fixed.checked_point("u", u, 3 * KNOTS + 5, unit=True)
     omega_max = robot.v_max / robot.half_track
     tables = {
         "kr": robot.v_max * fixed._lerp(u[..., 0:KNOTS], _KR),

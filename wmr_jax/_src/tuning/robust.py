@@ -26,11 +26,19 @@ import numpy as np
 import optax
 
 from wmr_jax._src import loops, robustness
-from wmr_jax._src.checks import check_int, check_number, float_dtype
+from wmr_jax._src.checks import (
+    as_poses,
+    check_bool,
+    check_callable,
+    check_int,
+    check_key,
+    check_number,
+    float_dtype,
+)
 from wmr_jax._src.controllers import SHIM_SUNG
 from wmr_jax._src.controllers import shim_sung as law
 from wmr_jax._src.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
-from wmr_jax._src.params import Gains, Robot, validate_one_robot
+from wmr_jax._src.params import Gains, Robot, validate_gains, validate_one_robot
 from wmr_jax._src.poses import HORIZON_S, horizon_steps, sample_poses
 from wmr_jax._src.rollout import DEFAULT_DT, check_temperature
 from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
@@ -89,6 +97,7 @@ class RobustConfig:
         check_number("learning_rate", self.learning_rate)
         for name in ("temperature_start", "temperature_end"):
             check_temperature(name, getattr(self, name))
+        check_bool("compare", self.compare)
         return self
 
 
@@ -206,7 +215,12 @@ def _optimizer(learning_rate: float, iters: int) -> optax.GradientTransformation
 
 def robust_score(gains: Gains, refs: Any, key: jax.Array, *, dt: float = DEFAULT_DT) -> float:
     """Hard-law score: mean arrival over the standard conditions, failures 2× horizon, s."""
-    rows = _condition_metrics({"g": gains}, refs, key, dt=dt)
+    if not isinstance(gains, Gains):
+        raise ValueError(f"gains = {gains!r:.80} is not allowed; allowed: a wmr_jax.Gains")
+    check_key("key", key)
+    rows = _condition_metrics(
+        {"g": validate_gains(gains)}, as_poses("refs", refs, batch=True), key, dt=dt
+    )
     return float(np.mean([np.mean(np.minimum(m.arrival, _FAILURE_S)) for m in rows]))
 
 
@@ -248,6 +262,8 @@ def _black_box(method, key, refs, budget_s, robot, dt):
         k = jax.random.fold_in(key, generation + 1)
         if method == "cma-es":
             zs, state = strategy.ask(k, state, params)
+            if not np.all(np.isfinite(np.asarray(zs))):
+                break  # the strategy broke down (see cma_es_search); keep the best so far
         else:
             zs = jax.random.logistic(k, (8, start.shape[0]), float_dtype())
         scores = jnp.asarray([score(z) for z in zs], float_dtype())
@@ -275,7 +291,13 @@ def tune_robust(
         "searches": {method: (Gains, candidates)}, "rows": standard_conditions
         rows of the paper's, the robust-tuned and the searches' gains}``.
     """
+    if config is not None and not isinstance(config, RobustConfig):
+        raise ValueError(
+            f"config = {config!r:.80} is not allowed; allowed: a wmr_jax.tuning.RobustConfig "
+            "or None"
+        )
     config = (RobustConfig() if config is None else config).validate()
+    check_callable("progress_fn", progress_fn)
     robot = validate_one_robot(robot, "tuning")
     dtype, dt, steps = float_dtype(), DEFAULT_DT, horizon_steps(DEFAULT_DT)
     z = jnp.asarray(logits_from_gains(PAPER_FEASIBLE_GAINS, robot), dtype)

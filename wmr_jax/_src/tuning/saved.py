@@ -11,9 +11,9 @@ from __future__ import annotations
 import json
 import math
 import os
-from pathlib import Path
 from typing import Any
 
+from wmr_jax._src.checks import check_path
 from wmr_jax._src.controllers.base import Controller
 from wmr_jax._src.controllers.schedule import SCHEDULE, SHAPE_FIELDS, TABLES, ScheduleParams
 from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
@@ -92,9 +92,10 @@ def load_tuned(path: str | os.PathLike) -> tuple[Controller, Any]:
     Raises:
         ValueError: one line naming the file and what is wrong with it.
     """
+    path = check_path("path", path)
     where = f"{os.fspath(path)!r}"
     try:
-        values = json.loads(Path(path).read_text(encoding="utf-8"))
+        values = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError) as err:
         raise ValueError(f"{where} cannot be read: {' '.join(str(err).split())}") from None
     if not isinstance(values, dict):

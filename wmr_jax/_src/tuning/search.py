@@ -13,10 +13,17 @@ import numpy as np
 
 from wmr_jax._src import loops
 from wmr_jax._src import rollout as simulation
-from wmr_jax._src.checks import as_poses, check_int, float_dtype
+from wmr_jax._src.checks import (
+    as_poses,
+    check_budget,
+    check_callable,
+    check_int,
+    check_key,
+    float_dtype,
+)
 from wmr_jax._src.params import Gains, Robot, validate_one_robot
 from wmr_jax._src.poses import HORIZON_S
-from wmr_jax._src.tuning.evaluation import hard_runs, run_options
+from wmr_jax._src.tuning.evaluation import check_run, hard_runs, run_options
 from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS, unit_from_gains
 from wmr_jax._src.tuning.problems import FIXED, Problem, get_problem
 
@@ -83,14 +90,22 @@ def random_search(
     Raises:
         ValueError: for out-of-range options or poses, naming the value.
     """
+    check_key("key", key)
     robot = validate_one_robot(robot, "tuning")
-    budget_s = float(budget_s)
+    budget_s = check_budget("budget_s", budget_s)
     chunk = check_int("chunk", chunk, 1)
+    check_callable("progress", progress)
     refs = as_poses("refs", refs, batch=True)
     run = run_options(locals())
+    check_run(run)
     n = refs.shape[0]
     tiled = jnp.tile(refs, (chunk, 1))
     problem = get_problem(problem)
+    if problem is not FIXED and start is not PAPER_FEASIBLE_GAINS:
+        raise ValueError(
+            f"start is for the fixed problem; problem = {problem.name!r} starts from its own "
+            "starting point (allowed: leave start out)"
+        )
     first = problem.start(robot) if problem is not FIXED else unit_from_gains(start, robot)
     first = jnp.asarray(first, float_dtype())
     best_score, best_u, count = math.inf, first, 0

@@ -17,6 +17,7 @@ bit. It writes no files; ``wmr-jax tune`` checkpoints from the callback.
 from __future__ import annotations
 
 import dataclasses
+import json
 import time
 from collections.abc import Callable
 from typing import Any, NamedTuple
@@ -31,6 +32,7 @@ from wmr_jax._src import rollout as simulation
 from wmr_jax._src.checks import (
     as_float_tree,
     check_bool,
+    check_callable,
     check_int,
     check_number,
     float_dtype,
@@ -50,7 +52,7 @@ from wmr_jax._src.tuning.loss import LossSpec, LossWeights, make_spec, robust_va
 from wmr_jax._src.tuning.parametrisation import (
     PAPER_FEASIBLE_GAINS,
 )
-from wmr_jax._src.tuning.problems import FIXED, SCHEDULED, Problem
+from wmr_jax._src.tuning.problems import FIXED, PROBLEMS, SCHEDULED, Problem
 from wmr_jax._src.tuning.search import SearchResult, random_search
 
 __all__ = [
@@ -59,6 +61,7 @@ __all__ = [
     "TuneResult",
     "init_state",
     "restore_state",
+    "run_difference",
     "run_identity",
     "state_arrays",
     "train",
@@ -237,6 +240,9 @@ class TrainState(NamedTuple):
         temperatures: smooth-law temperature of each iteration done.
         gains: the parameters after each iteration, as flat rows (``Problem.columns``).
         elapsed_s: wall time of the iterations done (all sessions), s.
+        run: the ``run_identity`` of the settings and robot it belongs to, as
+            JSON text; ``train`` refuses a state of another run. Empty: not
+            recorded (a state built by hand), then not checked.
     """
 
     iteration: int
@@ -246,6 +252,7 @@ class TrainState(NamedTuple):
     temperatures: tuple[float, ...]
     gains: tuple[tuple[float, ...], ...]
     elapsed_s: float
+    run: str = ""
 
 
 class TuneResult(NamedTuple):
@@ -302,6 +309,8 @@ def _temperature(config: TuneConfig, iteration: int) -> float:
 
 def training_poses(seed: int, iteration: int, n: int) -> jax.Array:
     """The batch of iteration ``iteration``: a pure function of ``(seed, iteration)``, resumable."""
+    seed = check_int("seed", seed, 0, 2**32 - 1)
+    iteration = check_int("iteration", iteration, 0, 2**31 - 1)
     stream = jax.random.fold_in(jax.random.key(seed), 0)
     return sample_poses(jax.random.fold_in(stream, iteration), n)
 
@@ -309,9 +318,27 @@ def training_poses(seed: int, iteration: int, n: int) -> jax.Array:
 # ---------------------------------------------------------------- state
 
 
+def checked_config(config: Any) -> TuneConfig:
+    """``config`` validated (``None``: ``TuneConfig()``), or say why it is not one."""
+    if config is not None and not isinstance(config, TuneConfig):
+        raise ValueError(
+            f"config = {config!r:.80} is not allowed; allowed: a wmr_jax.tuning.TuneConfig or None"
+        )
+    return (TuneConfig() if config is None else config).validate()
+
+
 def _checked(config: TuneConfig | None, robot: Robot | None) -> tuple[TuneConfig, Robot]:
-    config = (TuneConfig() if config is None else config).validate()
-    return config, as_float_tree(validate_one_robot(robot, "tuning"))
+    return checked_config(config), as_float_tree(validate_one_robot(robot, "tuning"))
+
+
+def _run_text(config: TuneConfig, robot: Robot) -> str:
+    """``run_identity`` of checked settings as canonical JSON text (``TrainState.run``)."""
+    fields = (f.name for f in dataclasses.fields(Robot))
+    identity = {
+        "config": config.as_dict(),
+        "robot": {name: float(getattr(robot, name)) for name in fields},
+    }
+    return json.dumps(identity, sort_keys=True)
 
 
 def init_state(config: TuneConfig | None = None, robot: Robot | None = None) -> TrainState:
@@ -324,17 +351,24 @@ def init_state(config: TuneConfig | None = None, robot: Robot | None = None) -> 
     """
     config, robot = _checked(config, robot)
     z0 = jnp.asarray(config.problem.start_logits(robot), float_dtype())
-    return TrainState(0, z0, _optimizer(config.hyper()).init(z0), (), (), (), 0.0)
+    opt_state = _optimizer(config.hyper()).init(z0)
+    return TrainState(0, z0, opt_state, (), (), (), 0.0, _run_text(config, robot))
 
 
 def run_identity(config: TuneConfig | None = None, robot: Robot | None = None) -> dict[str, Any]:
     """What a saved state must match to be resumed: the settings and the robot (JSON-ready)."""
-    config, robot = _checked(config, robot)
-    fields = (f.name for f in dataclasses.fields(Robot))
-    return {
-        "config": config.as_dict(),
-        "robot": {name: float(getattr(robot, name)) for name in fields},
-    }
+    return json.loads(_run_text(*_checked(config, robot)))
+
+
+def run_difference(saved: Any, now: dict[str, Any]) -> str:
+    """Name the settings in which the run ``saved`` differs from ``now`` (``run_identity``s)."""
+    saved_config = saved.get("config", {}) if isinstance(saved, dict) else {}
+    diffs = [
+        f"{key} = {saved_config.get(key)!r} there, {value!r} now"
+        for key, value in now["config"].items()
+        if saved_config.get(key) != value
+    ]
+    return "; ".join(diffs) or "the robot differs"
 
 
 def state_arrays(state: TrainState) -> dict[str, np.ndarray]:
@@ -354,12 +388,14 @@ def state_arrays(state: TrainState) -> dict[str, np.ndarray]:
 def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainState:
     """Rebuild the state of ``state_arrays`` in the structure of ``fresh`` (``init_state``).
 
-    A saved state is never trusted: one whose values are not all finite, or
-    whose iteration count and history lengths disagree, is refused.
+    A saved state is never trusted: one whose values are not all finite, whose
+    iteration count, history lengths and optimiser step counts disagree,
+    whose temperatures or elapsed time are not positive, or whose parameter
+    rows are not those of ``fresh``'s problem, is refused.
 
     Raises:
         ValueError: one line, if an array is missing, of the wrong shape,
-            non-finite, or the lengths disagree.
+            non-finite, out of range, or the lengths disagree.
     """
     leaves, treedef = jax.tree.flatten(fresh.opt_state)
     try:
@@ -368,8 +404,11 @@ def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainStat
             for i, leaf in enumerate(leaves)
         ]
         gains = np.asarray(arrays["gains"], dtype=float)
+        iteration = np.asarray(arrays["iteration"])
+        if iteration.shape != () or iteration.dtype.kind not in "iu":
+            raise ValueError(f"iteration = {iteration!r} is not a whole number")
         state = TrainState(
-            iteration=int(arrays["iteration"]),
+            iteration=int(iteration),
             z=jnp.asarray(arrays["z"], dtype=fresh.z.dtype).reshape(fresh.z.shape),
             opt_state=jax.tree.unflatten(treedef, restored),
             losses=tuple(float(x) for x in arrays["losses"]),
@@ -378,6 +417,7 @@ def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainStat
             if gains.size
             else (),
             elapsed_s=float(arrays["elapsed_s"]),
+            run=fresh.run,
         )
     except (KeyError, TypeError, ValueError) as err:
         raise ValueError(f"the saved state is incomplete ({type(err).__name__}: {err})") from None
@@ -387,9 +427,28 @@ def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainStat
             f"the saved state is inconsistent: iteration {state.iteration} with histories of "
             f"{len(state.losses)}, {len(state.temperatures)} and {len(state.gains)} rows"
         )
-    values = [state.z, *restored, np.asarray(state.losses), gains, np.asarray(state.elapsed_s)]
+    temperatures = np.asarray(state.temperatures, dtype=float)
+    values = [state.z, *restored, np.asarray(state.losses), gains, temperatures]
     if not all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in values):
         raise ValueError("the saved state holds non-finite values (NaN or inf)")
+    if not (np.all(temperatures > 0) and np.isfinite(state.elapsed_s) and state.elapsed_s >= 0):
+        raise ValueError(
+            "the saved state is inconsistent: its temperatures must be > 0 and its elapsed "
+            f"time finite and >= 0 (elapsed_s = {state.elapsed_s!r})"
+        )
+    # Every step count of the optimiser (Adam's, the schedule's) is the iteration.
+    counts = [int(leaf) for leaf in restored if leaf.ndim == 0 and leaf.dtype.kind in "iu"]
+    if any(count != state.iteration for count in counts):
+        raise ValueError(
+            f"the saved state is inconsistent: iteration {state.iteration} with optimiser "
+            f"step counts {counts}"
+        )
+    problem = next((p for p in PROBLEMS.values() if p.dim == fresh.z.shape[-1]), None)
+    if problem is not None and state.gains and gains.shape[-1] != len(problem.columns):
+        raise ValueError(
+            f"the saved state is inconsistent: rows of {gains.shape[-1]} parameters; "
+            f"allowed: {len(problem.columns)}, the {problem.name!r} problem's columns"
+        )
     return state
 
 
@@ -428,6 +487,7 @@ def _iterate(config, robot, state, progress_fn) -> TrainState:
             state.temperatures + (temperature,),
             state.gains + (row,),
             state.elapsed_s + time.perf_counter() - began,
+            state.run,
         )
         if progress_fn is not None:
             progress_fn(state)
@@ -469,6 +529,28 @@ def _compare(
     return evaluation, search
 
 
+def _own_state(state: Any, config: TuneConfig, robot: Robot) -> TrainState:
+    """``state`` if it can continue the run of ``config`` and ``robot``, else say why not."""
+    if not isinstance(state, TrainState):
+        raise ValueError(
+            f"state = {state!r:.80} is not allowed; allowed: a TrainState (init_state, or "
+            "one handed to progress_fn)"
+        )
+    dim = config.problem.dim
+    if np.shape(state.z) != (dim,):
+        raise ValueError(
+            f"state holds {np.shape(state.z)} logits; allowed: ({dim},), those of the "
+            f"{config.problem.name!r} problem of config"
+        )
+    now = _run_text(config, robot)
+    if state.run and state.run != now:
+        raise ValueError(
+            f"state is of another run ({run_difference(json.loads(state.run), json.loads(now))}); "
+            "allowed: a state of this config and robot"
+        )
+    return state
+
+
 def train(
     config: TuneConfig | None = None,
     *,
@@ -502,7 +584,13 @@ def train(
         ValueError: for bad settings, naming the field.
     """
     config, robot = _checked(config, robot)
-    state = init_state(config, robot) if state is None else state
+    for name, fn in (
+        ("progress_fn", progress_fn),
+        ("search_progress", search_progress),
+        ("eval_progress", eval_progress),
+    ):
+        check_callable(name, fn)
+    state = init_state(config, robot) if state is None else _own_state(state, config, robot)
     if not 0 <= state.iteration <= config.iters:
         raise ValueError(
             f"state.iteration = {state.iteration!r} is not allowed; "

@@ -1,0 +1,241 @@
+"""Bad input to the tuning layer: a named ValueError before any work, never a silent run."""
+
+import math
+import warnings
+
+import jax
+import numpy as np
+import pytest
+
+import wmr_jax as w
+from wmr_jax import studies, tuning
+from wmr_jax._src.tuning import compare as compare_module
+
+KEY = jax.random.key(0)
+REFS = np.array([[30.0, 10.0, 1.0], [-20.0, 15.0, -2.0]])
+TINY = tuning.TuneConfig(iters=2, poses=2, eval_poses=2, horizon=0.3, random_search=False)
+
+
+def _trained_states(config):
+    states = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tuning.train(config, progress_fn=states.append)
+    return states
+
+
+# ---------------------------------------------------------------- states and configs
+
+
+def test_train_refuses_a_state_of_another_problem_or_run():
+    schedule = tuning.TuneConfig.for_problem(
+        "schedule", iters=2, poses=2, eval_poses=2, horizon=0.3, random_search=False
+    )
+    with pytest.raises(ValueError, match=r"state holds \(35,\) logits; allowed: \(7,\)"):
+        tuning.train(TINY, state=tuning.init_state(schedule))
+    with pytest.raises(ValueError, match=r"state holds \(7,\) logits; allowed: \(35,\)"):
+        tuning.train(schedule, state=tuning.init_state(TINY))
+    # A finished state of another config used to return that config's gains as this one's.
+    last = _trained_states(TINY)[-1]
+    with pytest.raises(ValueError, match=r"another run \(learning_rate = 0.1 there, 0.5 now\)"):
+        tuning.train(TINY.replace(learning_rate=0.5), state=last)
+    with pytest.raises(ValueError, match=r"state = \{\} is not allowed; allowed: a TrainState"):
+        tuning.train(TINY, state={})
+    with pytest.raises(ValueError, match=r"config = \{'iters': 2\} is not allowed"):
+        tuning.train({"iters": 2})
+
+
+@pytest.mark.parametrize(
+    ("name", "value", "message"),
+    [
+        ("iteration", np.asarray(1.7), r"iteration = array\(1.7\) is not a whole number"),
+        ("iteration", np.asarray(True), r"iteration = array\(True\) is not a whole number"),
+        ("elapsed_s", np.asarray(-5.0), r"elapsed time finite and >= 0 \(elapsed_s = -5.0\)"),
+        ("temperatures", np.asarray([-1.0, 0.1]), r"temperatures must be > 0"),
+        ("gains", np.ones((2, 2)), r"rows of 2 parameters; allowed: 7"),
+        ("opt_0", np.asarray(-3, np.int32), r"optimiser step counts \[-3, 2\]"),
+    ],
+)
+def test_restore_state_refuses_a_corrupt_state(name, value, message):
+    arrays = tuning.state_arrays(_trained_states(TINY)[-1])
+    fresh = tuning.init_state(TINY)
+    assert tuning.restore_state(arrays, fresh).iteration == 2
+    with pytest.raises(ValueError, match=message):
+        tuning.restore_state({**arrays, name: value}, fresh)
+
+
+# ---------------------------------------------------------------- the feasible set
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (
+            lambda: tuning.gains_from_logits(np.zeros(3)),
+            r"z has shape \(3,\); allowed: \(\.\.\., 7\)",
+        ),
+        (lambda: tuning.FIXED.from_logits(np.zeros(35), w.Robot()), r"z has shape \(35,\)"),
+        (lambda: tuning.robust_gains(np.zeros(3), w.Robot()), r"z has shape \(3,\)"),
+        (lambda: tuning.gains_from_unit(np.full(7, 5.0)), r"u = .*5\.0.*numbers in \[0, 1\]"),
+        (lambda: tuning.gains_from_unit(np.full(7, np.nan)), r"u = .*nan.*numbers in \[0, 1\]"),
+        (lambda: tuning.gains_from_logits(np.full(7, np.nan)), r"z = .*nan.*not NaN"),
+        (lambda: tuning.SCHEDULED.from_unit(np.zeros(7), w.Robot()), r"u has shape \(7,\)"),
+    ],
+)
+def test_the_feasible_map_refuses_points_of_another_size_or_outside_the_cube(call, message):
+    # Out-of-range indices were clamped: 3 or 35 logits gave 7 gains, and
+    # u = 5 gave k_theta = -1347.
+    with pytest.raises(ValueError, match=message):
+        call()
+
+
+def test_the_feasible_map_still_takes_batches_and_infinite_logits():
+    gains = tuning.gains_from_logits(np.array([[-np.inf] * 7, [np.inf] * 7]))
+    assert np.asarray(gains.kr).shape == (2,)
+    assert np.all(np.isfinite(np.asarray(gains.kr)))
+
+
+# ---------------------------------------------------------------- searches
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"budget_s": math.nan}, r"budget_s = nan is not allowed"),
+        ({"budget_s": math.inf}, r"budget_s = inf is not allowed"),
+        ({"budget_s": True}, r"budget_s = True is not allowed"),
+        ({"budget_s": "0.5"}, r"budget_s = '0.5' is not allowed"),
+        ({"budget_s": None}, r"budget_s = None is not allowed"),
+        ({"key": 0}, r"key = 0 is not allowed; allowed: a jax.random key"),
+        ({"progress": 5}, r"progress = 5 is not allowed; allowed: a function or None"),
+        ({"velocity": "fast"}, r"velocity = 'fast' is not allowed"),
+    ],
+)
+@pytest.mark.parametrize("search", [tuning.random_search, tuning.cma_es_search])
+def test_searches_check_their_options_before_they_start(search, kwargs, message):
+    if search is tuning.cma_es_search:
+        pytest.importorskip("evosax")
+    args = {"key": KEY, "budget_s": 0.1, "horizon": 0.3, **kwargs}
+    key = args.pop("key")
+    with pytest.raises(ValueError, match=message):
+        search(key, REFS, **args)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"population": True}, r"population = True is not allowed"),
+        ({"population": 1}, r"population = 1 is not allowed"),
+        ({"std_init": -1.0}, r"std_init = -1.0 is not allowed"),
+        ({"std_init": math.nan}, r"std_init = nan is not allowed"),
+        ({"horizn": 0.3}, r"unknown option 'horizn'; allowed: robot, dt, horizon"),
+    ],
+)
+def test_cma_es_checks_its_own_options(kwargs, message):
+    pytest.importorskip("evosax")
+    with pytest.raises(ValueError, match=message):
+        tuning.cma_es_search(KEY, REFS, budget_s=0.1, horizon=0.3, **kwargs)
+
+
+def test_random_search_refuses_a_start_the_schedule_would_ignore():
+    with pytest.raises(ValueError, match=r"start is for the fixed problem"):
+        tuning.random_search(KEY, REFS, budget_s=0.0, problem="schedule", start=w.Gains())
+
+
+def test_cma_es_keeps_its_best_when_a_flat_landscape_breaks_it(monkeypatch):
+    # Every candidate scored alike: evosax's step size overflows after some
+    # 300 generations and it asks for NaN candidates, which used to end the
+    # whole budget in a "gains.kr = nan" error.
+    pytest.importorskip("evosax")
+    scored = []
+
+    def flat(problem, u, tiled, n, robot, run):
+        scored.append(np.asarray(u))
+        return jax.numpy.full((u.shape[0],), 0.66)
+
+    monkeypatch.setattr(compare_module, "population_scores", flat)
+    result = tuning.cma_es_search(KEY, REFS, budget_s=600.0, horizon=0.3)
+    assert result.wall_s < 600.0  # stopped by the breakdown, not by the budget
+    assert all(np.all(np.isfinite(u)) for u in scored)
+    assert result.score == pytest.approx(0.66)
+    assert np.isfinite(result.gains.kr)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"seeds": ()}, r"seeds = \(\) is not allowed; allowed: a non-empty tuple"),
+        ({"problems": ()}, r"problems = \(\) is not allowed"),
+        ({"problems": "fixed"}, r"problems = 'fixed' is not allowed"),
+        ({"seeds": (0, -1)}, r"seeds\[1\] = -1 is not allowed"),
+        ({"problems": ("fixed", "bogus")}, r"problem = 'bogus' is not allowed"),
+        (
+            {"configs": {"schedule": TINY}, "problems": ("fixed",)},
+            r"configs\['schedule'\] is for no",
+        ),
+        (
+            {"configs": {"fixed": tuning.TuneConfig.for_problem("schedule")}},
+            r"of the 'fixed' problem",
+        ),
+        ({"progress": "x"}, r"progress = 'x' is not allowed"),
+    ],
+)
+def test_compare_checks_every_problem_and_seed_before_the_first_run(kwargs, message):
+    # A bad second problem or seed used to fail only after the first one's runs.
+    with pytest.raises(ValueError, match=message):
+        tuning.compare(**kwargs)
+
+
+# ---------------------------------------------------------------- smaller entry points
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (lambda: tuning.train(TINY, progress_fn=5), r"progress_fn = 5 is not allowed"),
+        (lambda: tuning.train(TINY, eval_progress=5), r"eval_progress = 5 is not allowed"),
+        (lambda: tuning.tune_robust(TINY), r"allowed: a wmr_jax.tuning.RobustConfig or None"),
+        (
+            lambda: tuning.tune_robust(tuning.RobustConfig(iters=1), progress_fn="x"),
+            r"progress_fn = 'x' is not allowed",
+        ),
+        (lambda: tuning.RobustConfig(compare="no").validate(), r"compare = 'no' is not allowed"),
+        (lambda: tuning.bound_ratios(math.nan, tuning.time_bounds(REFS)), r"mean_arrival = nan"),
+        (lambda: tuning.bound_ratios(True, tuning.time_bounds(REFS)), r"mean_arrival = True"),
+        (lambda: tuning.bound_ratios(-1.0, tuning.time_bounds(REFS)), r"mean_arrival = -1.0"),
+        (lambda: tuning.evaluate(None, REFS), r"gains = None is not allowed"),
+        (lambda: tuning.robust_score(None, REFS, KEY), r"gains = None is not allowed"),
+        (lambda: tuning.robust_score(w.Gains(), "ab", KEY), r"refs = 'ab' is not allowed"),
+        (lambda: tuning.robust_score(w.Gains(), REFS, 0), r"key = 0 is not allowed"),
+        (lambda: tuning.held_out_poses(2, -1), r"eval_seed = -1 is not allowed"),
+        (lambda: tuning.training_poses(0, -1, 2), r"iteration = -1 is not allowed"),
+        (lambda: tuning.training_poses(1.5, 0, 2), r"seed = 1.5 is not allowed"),
+        (lambda: tuning.load_tuned(5), r"path = 5 is not allowed; allowed: a path"),
+        (lambda: studies.pose_grid(4, "90"), r"headings_deg = '90' is not allowed"),
+        (lambda: studies.map_study(4, cache=5), r"cache = 5 is not allowed"),
+        (lambda: studies.monte_carlo(KEY, n_runs=2, x64="no"), r"x64 = 'no' is not allowed"),
+        (lambda: w.sweep(REFS, steps=3, resume="no"), r"resume = 'no' is not allowed"),
+        (lambda: w.sweep(REFS, steps=3, progress="no"), r"progress = 'no' is not allowed"),
+        (lambda: w.unpad(np.float32(1.0), 1), r"allowed: arrays .* with a leading batch axis"),
+        (lambda: w.shard(REFS, devices="cpu"), r"devices = 'cpu' is not allowed"),
+    ],
+)
+def test_tuning_and_study_entry_points_name_bad_values(call, message):
+    with pytest.raises(ValueError, match=message):
+        call()
+
+
+def test_tune_checks_its_folder_flags_and_config_before_writing(tmp_path):
+    afile = tmp_path / "a.txt"
+    afile.write_text("x")
+    for kwargs, message in (
+        ({"out_dir": afile}, r"out_dir = '.*a.txt' is not allowed; allowed: a folder"),
+        ({"out_dir": 5}, r"out_dir = 5 is not allowed"),
+        ({"resume": "no"}, r"resume = 'no' is not allowed"),
+        ({"progress_fn": 5}, r"progress_fn = 5 is not allowed"),
+        ({"config": {"iters": 1}}, r"config = \{'iters': 1\} is not allowed"),
+    ):
+        args = {"out_dir": tmp_path / "out", "config": TINY, **kwargs}
+        with pytest.raises(ValueError, match=message):
+            tuning.tune(args.pop("out_dir"), **args)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"]
