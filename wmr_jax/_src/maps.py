@@ -131,7 +131,9 @@ def pose_grid(
     n_poses = checks.check_int("n_poses", n_poses, 1, MAX_SAMPLES)
     r_min = checks.check_number("r_min", r_min, closed=True, unit="cm")
     r_max = checks.check_number("r_max", r_max, low=r_min, unit="cm")
-    degrees = np.asarray(headings_deg, dtype=float).reshape(-1)
+    degrees = checks.real_array(
+        "headings_deg", headings_deg, "real numbers of degrees (at least one, finite)"
+    ).reshape(-1)
     if degrees.size == 0:
         raise ValueError("headings_deg = () is not allowed; allowed: at least one heading")
     checks.require("headings_deg", degrees, np.isfinite(degrees), "finite degrees")
@@ -205,6 +207,7 @@ def evaluate_poses(
     refs_host = np.asarray(checks.as_poses("refs", refs, batch=True))
     chunk = checks.check_int("chunk", chunk)
     x64, progress = checks.check_bool("x64", x64), checks.check_bool("progress", progress)
+    cache = None if cache is None else checks.check_path("cache", cache)
     if np.ndim(init) != 1:
         raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,), shared by every run")
     with jax.enable_x64(x64):
@@ -357,6 +360,7 @@ def map_study(
         ValueError: for a bad count, heading, controller or option.
     """
     names = controllers.controller_names(controller_names)
+    cache = None if cache is None else checks.check_path("cache", cache)
     grid = pose_grid(n_poses, headings_deg)
     results = {
         name: evaluate_poses(
@@ -366,7 +370,7 @@ def map_study(
             chunk=chunk,
             progress=progress,
             x64=x64,
-            cache=None if cache is None else Path(cache) / name,
+            cache=None if cache is None else cache / name,
         )
         for name in names
     }

@@ -267,7 +267,7 @@ def perturbed_metrics(
     Raises:
         ValueError: for misshapen or non-finite inputs and bad options.
     """
-    with jax.enable_x64(bool(x64)):
+    with jax.enable_x64(checks.check_bool("x64", x64)):
         return _perturbed_metrics(disturbance, params, controller, init, dt, robot, velocity)
 
 
@@ -363,7 +363,7 @@ def disturbed_rollout(
         "v": (N, steps) cm/s, "omega": (N, steps) rad/s}``: the command
         applied over each period (zero over the first one under latency).
     """
-    with jax.enable_x64(bool(x64)):
+    with jax.enable_x64(checks.check_bool("x64", x64)):
         args, options = _prepared(disturbance, params, controller, init, dt, robot, velocity)
         out = _trajectory_jit(*args, options=options)
         return {name: np.asarray(value) for name, value in out.items()}
@@ -377,21 +377,9 @@ def disturbed_rollout(
 _LEVEL_LIMITS = {"noise_xy": 1e6, "noise_theta": 2 * math.pi, "latency": 1.0}
 
 
-def _check_key(key: Any) -> None:
-    """Raise unless ``key`` is a ``jax.random`` key (new style, or a legacy ``uint32[2]``)."""
-    if checks.is_traced(key):
-        return
-    typed = isinstance(key, jax.Array) and jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)
-    legacy = np.shape(key) == (2,) and np.asarray(key).dtype == np.uint32
-    if not (typed or legacy):
-        raise ValueError(
-            f"key = {key!r} is not allowed; allowed: a jax.random key (jax.random.key(seed))"
-        )
-
-
 def _check_draw(key: Any, steps: Any, **levels: Any) -> None:
     """Check a draw's key, length and levels where they are concrete (traced ones pass)."""
-    _check_key(key)
+    checks.check_key("key", key)
     checks.check_int("steps", steps)
     for name, value in levels.items():
         if checks.is_traced(value):
@@ -590,7 +578,7 @@ def monte_carlo(
         ValueError: for a bad count, noise level, mismatch bound or option.
     """
     n_runs = checks.check_int("n_runs", n_runs)
-    _check_key(key)
+    checks.check_key("key", key)
     noise_xy, noise_deg = _check_levels(noise_xy, noise_deg)
     if not isinstance(latency, (bool, np.bool_)):
         raise ValueError(f"latency = {latency!r} is not allowed; allowed: True or False")

@@ -122,6 +122,11 @@ def checked_devices(devices: Sequence[Any]) -> list[Any]:
     Raises:
         ValueError: for none, something else than a device, or a repeat.
     """
+    if isinstance(devices, (str, bytes, jax.Device)) or not hasattr(devices, "__iter__"):
+        raise ValueError(
+            f"devices = {devices!r} is not allowed; allowed: a sequence of JAX devices "
+            "(jax.devices(), jax.local_devices())"
+        )
     devices = list(devices)
     if not devices:
         raise ValueError("devices = [] is not allowed; allowed: at least one device")
@@ -194,9 +199,13 @@ def unpad(result: Any, n: int) -> Any:
     Raises:
         ValueError: unless ``1 <= n <=`` the leading length of every leaf.
     """
-    longest = min(
-        (np.shape(leaf)[0] for leaf in jax.tree.leaves(result) if np.ndim(leaf)), default=0
-    )
+    leaves = jax.tree.leaves(result)
+    if not leaves or any(np.ndim(leaf) == 0 for leaf in leaves):
+        raise ValueError(
+            f"result = {result!r:.80} is not allowed; allowed: arrays (or a pytree of them) "
+            "with a leading batch axis, as shard's batch gave"
+        )
+    longest = min(np.shape(leaf)[0] for leaf in leaves)
     n = check_int("n", n, 1, max(longest, 1))
     return jax.tree.map(lambda leaf: leaf[:n], result)
 

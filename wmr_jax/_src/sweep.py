@@ -605,10 +605,12 @@ def sweep(
         wheel_limit=wheel_limit,
     )
     thresholds = _thresholds(tol_r, tol_theta, v_dead_band, omega_dead_band)
-    if on_chunk is not None and not callable(on_chunk):
-        raise ValueError(f"on_chunk = {on_chunk!r} is not allowed; allowed: a function or None")
+    checks.check_callable("on_chunk", on_chunk)
+    checks.check_bool("resume", resume)
+    checks.check_bool("progress", progress)
+    out = None if out is None else checks.check_path("out", out)
     job = _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, devices)
-    store = None if out is None else _ChunkStore(Path(out), _settings(job))
+    store = None if out is None else _ChunkStore(out, _settings(job))
     results = _empty_results(job)
     with _progress(job, progress, on_chunk) as done:
         _run_chunks(job, results, store, resume, done)
