@@ -89,6 +89,13 @@ def _write(tmp_path, name, text):
         (["tune", "--out", "{dir}", "--horizon", "1e-12"], "horizon = 1e-12 s at dt"),
         (["sweep", "--out", "{dir}", "--poses", "100000000000000"], "n_poses = 100000000000000"),
         (["demo", "--out", "/dev/null"], "a folder (it is a file)"),
+        # An empty path was the current folder.
+        (["sweep", "--out", "", "--poses", "10"], "--out '' is not allowed; allowed: a folder"),
+        (["bench", "--json", ""], "--json '' is not allowed; allowed: a file name"),
+        # --compare runs its own seeds 0-2: --seed 3 was ignored without a word.
+        (["tune", "--out", "{dir}", "--compare", "--seed", "3"], "--seed is not allowed with"),
+        # Nested beyond Python's recursion limit: a RecursionError traceback before.
+        (["simulate", "--ref", "1", "2", "0", "--gains", "{deep}"], "cannot be read"),
     ],
 )
 def test_bad_values_give_one_line_and_status_2(capsys, tmp_path, argv, message):
@@ -98,6 +105,7 @@ def test_bad_values_give_one_line_and_status_2(capsys, tmp_path, argv, message):
         "bad_value": _write(tmp_path, "v.json", '{"alpha": 0.7}'),
         "good": _write(tmp_path, "g.json", '{"kr": 60}'),
         "dir": str(tmp_path / "out"),
+        "deep": _write(tmp_path, "deep.json", "[" * 100_000 + "]" * 100_000),
     }
     assert main([arg.format(**files) for arg in argv]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -117,7 +125,7 @@ def test_help_shows_the_defaults(capsys):
         main(["bench", "--help"])
     assert info.value.code == 0
     out = " ".join(capsys.readouterr().out.split())
-    assert "(default: 100)" in out and "(default: [1000, 10000, 100000])" in out
+    assert "(default: 100)" in out and "(default: 1000 10000 100000)" in out
     assert "grad_tuning_loss" in out  # the cases one may choose
 
 
@@ -152,3 +160,66 @@ def test_console_script_help():
         [sys.executable, "-m", "wmr_jax", "--help"], capture_output=True, text=True, check=True
     ).stdout
     assert "simulate" in out and "demo" in out and "paper" in out and "bench" in out
+
+
+def test_an_interrupted_compare_keeps_its_finished_seeds_and_resumes(tmp_path, monkeypatch, capsys):
+    # compare is replaced by a stand-in that returns rows at once and is
+    # interrupted at the fifth (problem, seed): the four before it are kept.
+    from wmr_jax._src.tuning import compare as compare_module
+
+    calls = []
+
+    def fake(*, seeds, problems, configs, progress):
+        calls.append((problems[0], seeds[0]))
+        if len(calls) == 5:
+            raise KeyboardInterrupt
+        row = {"mean_arrival": 0.5, "success_rate": 1.0, "peak_wheel_speed": 100.0, "poses": 2}
+        extra = {"wall_s": 1.0, "candidates": None, "vs_turn_drive_turn": 1.2}
+        bounds = {"turn_drive_turn_s": 0.4, "lower_bound_s": 0.35, "vs_lower_bound": 1.4}
+        methods = ("gradient", "cma-es", "random search")
+        return [
+            {"problem": problems[0], "seed": seeds[0], "method": m, **row, **extra, **bounds}
+            for m in methods
+        ]
+
+    monkeypatch.setattr(compare_module, "compare", fake)
+    out = tmp_path / "cmp"
+    argv = ["tune", "--out", str(out), "--compare", "--iters", "1"]
+    assert main(argv) == 130
+    kept = json.loads((out / "compare.json").read_text())
+    assert len(kept) == 12 and {r["problem"] for r in kept} == {"fixed", "schedule"}
+    calls.clear()
+    calls.append(None)  # the next call is the 2nd: not interrupted
+    assert main([*argv, "--resume"]) == 0
+    assert calls[1:] == [("schedule", 1), ("schedule", 2)]
+    assert len(json.loads((out / "compare.json").read_text())) == 18
+    assert "fixed seed 0: kept from" in capsys.readouterr().out
+    # Other settings are refused, naming the difference.
+    assert main(["tune", "--out", str(out), "--compare", "--iters", "2", "--resume"]) == 2
+    assert "iters = 1 there, 2 now" in capsys.readouterr().err
+
+
+def test_tune_robust_writes_its_gains_before_judging_them(tmp_path, monkeypatch):
+    # The searches and the evaluation take longer than the tuning: an
+    # interruption there used to lose the tuned gains.
+    from wmr_jax._src.tuning import robust
+
+    def fake(config, *, progress_fn, on_tuned):
+        on_tuned(w.Gains(kr=70.0), [1.0, 0.9])
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(robust, "tune_robust", fake)
+    assert main(["tune", "--out", str(tmp_path), "--robust", "--iters", "2"]) == 130
+    controller, gains = w.load_tuned(tmp_path / "tuned_gains.json")
+    assert gains.kr == 70.0
+    assert json.loads((tmp_path / "robust_loss.json").read_text()) == {"loss": [1.0, 0.9]}
+
+
+def test_bench_adds_repeated_cases_and_names_a_case_it_cannot_run(tmp_path, capsys):
+    path = tmp_path / "b.json"
+    common = ["bench", "--sizes", "2", "--steps", "1", "--repeats", "1", "--reference-poses", "1"]
+    argv = [*common, "--cases", "final_poses", "--cases", "final_poses_sharded"]
+    assert main([*argv, "--dtype", "float64", "--cpu-devices", "1", "--json", str(path)]) == 0
+    rows = json.loads(path.read_text())["rows"]
+    assert [r["case"] for r in rows] == ["final_poses", "final_poses_sharded"]
+    assert rows[1]["skipped"].startswith("skipped: needs 2 or more devices (1 here")

@@ -17,10 +17,15 @@ def small_config(**changes):
 
 
 def test_robust_tuning_moves_feasible_gains_and_judges_them_under_every_condition(tmp_path):
-    seen = []
-    result = tuning.tune_robust(small_config(), progress_fn=lambda i, loss: seen.append(loss))
+    seen, tuned = [], []
+    result = tuning.tune_robust(
+        small_config(),
+        progress_fn=lambda i, loss: seen.append(loss),
+        on_tuned=lambda gains, losses: tuned.append((gains, losses)),
+    )
     gains = result["gains"]
     assert len(seen) == 3 and np.all(np.isfinite(seen))
+    assert tuned == [(gains, seen)]  # handed over once, before the judging
     assert np.array_equal(result["history"]["loss"], seen)
     robot = w.Robot()
     # Feasible by construction, R_e within the arrival tolerance, and moved from the start.

@@ -534,6 +534,9 @@ class _SizeBench:
         if "final_poses_sharded" in t:
             sharded = t["final_poses_sharded"]
             first.append(self.row("final_poses_sharded", sharded, devices=len(devices)))
+        elif "final_poses_sharded" in cases:
+            why = f"skipped: needs 2 or more devices ({len(devices)} here; --cpu-devices K)"
+            first.append(self.row("final_poses_sharded", None, skipped=why))
         if "numpy_batch" in t:
             last.append(self.row("numpy_batch", t["numpy_batch"], dtype=self.config.dtype))
         if "scalar_reference" in t:

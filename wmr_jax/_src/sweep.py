@@ -313,7 +313,7 @@ class _ChunkStore:
         """Say so when the folder's chunks are of other settings: none of them will be used."""
         try:
             before = json.loads((self.folder / _MANIFEST).read_text(encoding="utf-8"))
-        except (OSError, ValueError):
+        except (OSError, ValueError, RecursionError):
             return
         chunks = len(list(self.folder.glob("chunk_*.npz")))
         if not isinstance(before, dict) or before.get("fingerprint") == self.fingerprint:

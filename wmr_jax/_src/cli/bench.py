@@ -30,9 +30,12 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument(
         "--sizes",
         nargs="+",
-        default=list(bench.DEFAULT_SIZES),
+        action="extend",
+        default=None,
         metavar="N",
-        help="batch sizes",
+        help="batch sizes, repeatable (default: "
+        + " ".join(str(n) for n in bench.DEFAULT_SIZES)
+        + ")",
     )
     for flag, _, default, metavar, text in _INT_FLAGS:
         parser.add_argument(flag, default=default, metavar=metavar, help=text)
@@ -40,6 +43,7 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument(
         "--cases",
         nargs="+",
+        action="extend",
         default=None,
         metavar="CASE",
         help="only these cases, among " + ", ".join(bench.CASES) + " (None: all of them)",
@@ -67,7 +71,10 @@ def _config_from(args: Any) -> bench.BenchConfig:
     """Return the ``BenchConfig`` of the flags, each checked (one line naming a bad one)."""
     ints = {name: flags.positive_int(flag, getattr(args, name)) for flag, name, *_ in _INT_FLAGS}
     return bench.BenchConfig(
-        sizes=tuple(flags.positive_int("--sizes", n, 1, MAX_SAMPLES) for n in args.sizes),
+        sizes=tuple(
+            flags.positive_int("--sizes", n, 1, MAX_SAMPLES)
+            for n in args.sizes or bench.DEFAULT_SIZES
+        ),
         dtype=flags.choice("--dtype", args.dtype, bench.DTYPES),
         cases=tuple(flags.choice("--cases", c, bench.CASES) for c in args.cases or ()),
         wait_idle=flags.number("--wait-idle", args.wait_idle, low=0.0, unit="s"),

@@ -71,6 +71,9 @@ def number(
 
 def _writable(flag: str, text: str, *, folder: bool) -> Path:
     """Return ``text`` as a path the command may write (a folder or a file), or say why not."""
+    if not text:  # Path("") is the current folder
+        want = "a folder name" if folder else "a file name"
+        raise ValueError(f"{flag} {text!r} is not allowed; allowed: {want}")
     path = Path(text)
     wrong = path.exists() and not path.is_dir() if folder else path.is_dir()
     if wrong:
@@ -224,7 +227,7 @@ def gains_file(flag: str, text: str) -> Any:
     fields = [f.name for f in dataclasses.fields(Gains)]
     try:
         values = json.loads(Path(text).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as err:
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as err:
         raise ValueError(f"{flag} {text!r} cannot be read: {err}") from None
     numbers = isinstance(values, dict) and all(isinstance(v, (int, float)) for v in values.values())
     if not numbers or not set(values) <= set(fields):

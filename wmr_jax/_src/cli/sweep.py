@@ -41,9 +41,12 @@ def _flags() -> dict[str, dict[str, Any]]:
         "--velocity": {"default": "ideal", "help": "velocity loop: ideal or nonideal"},
         "--headings": {
             "nargs": "+",
-            "default": list(DEFAULT_HEADINGS_DEG),
+            "action": "extend",
+            "default": None,
             "metavar": "DEG",
-            "help": "reference headings of the maps, degrees",
+            "help": "reference headings of the maps, degrees, repeatable (default: "
+            + " ".join(f"{h:g}" for h in DEFAULT_HEADINGS_DEG)
+            + ")",
         },
         "--chunk": {"default": DEFAULT_CHUNK, "metavar": "N", "help": "poses per compiled call"},
         "--no-progress": {"action": "store_true", "help": "no progress bar"},
@@ -60,13 +63,15 @@ def _flags() -> dict[str, dict[str, Any]]:
 
 def run(args: Any) -> int:
     """Run ``wmr-jax sweep``; return the exit status."""
-    from wmr_jax._src.maps import map_study
+    from wmr_jax._src.maps import DEFAULT_HEADINGS_DEG, map_study
     from wmr_jax._src.report.maps import comparison_table, save_map_study
 
     out = flags.output_dir("--out", args.out)
     n_poses = flags.positive_int("--poses", args.poses)
     chunk = flags.positive_int("--chunk", args.chunk)
-    headings = [flags.number("--headings", h, unit="degrees") for h in args.headings]
+    headings = [
+        flags.number("--headings", h, unit="degrees") for h in args.headings or DEFAULT_HEADINGS_DEG
+    ]
     names = flags.controller_names(args.controller)
     velocity = flags.velocity_loop(args.velocity)
     study = map_study(

@@ -274,7 +274,8 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument(
         "--resume",
         action="store_true",
-        help="continue from DIR/checkpoint.npz (same settings) instead of starting over",
+        help="continue from DIR/checkpoint.npz (same settings) instead of starting over; "
+        "with --compare, keep the seeds DIR/compare.json already holds",
     )
     parser.add_argument(
         "--schedule",
@@ -336,7 +337,7 @@ def _check_modes(args: Any) -> None:
     mode = modes[0] if modes else None
     unused = {
         "robust": ("schedule", "horizon", "eval_poses", "checkpoint_every", "no_random_search"),
-        "compare": ("schedule", "resume", "checkpoint_every", "no_random_search"),
+        "compare": ("schedule", "seed", "checkpoint_every", "no_random_search"),
         "gradient_cost": (*(field for _, field, _, _ in _FLAGS), "schedule", "resume"),
     }.get(mode, ())
     for name in unused:
@@ -373,7 +374,53 @@ def _shown(params: Any) -> str:
     return "  ".join(f"{k}={fmt(v)}" for k, v in values.items() if k not in ("controller", "kind"))
 
 
+_COMPARE_SEEDS = (0, 1, 2)
+_COMPARE_FORMAT = 1
+
+
+def _compare_rows(out: Path, settings: dict[str, Any], resume: bool) -> list[dict[str, Any]]:
+    """The rows of ``out/compare.json`` to keep (``--resume``), after checking they are ours."""
+    import json
+
+    from wmr_jax._src import io
+
+    record, manifest = out / "compare.json", out / "compare_settings.json"
+    if not (resume and record.exists()):
+        io.atomic_write_json(manifest, settings)
+        return []
+    advice = "allowed: the same settings, or a fresh --out"
+    try:
+        saved = json.loads(manifest.read_text(encoding="utf-8"))
+        rows = json.loads(record.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as err:
+        raise ValueError(f"--resume: {out} cannot be resumed ({err}); {advice}") from None
+    if saved != settings:
+        diff = _settings_difference(saved, settings)
+        raise ValueError(f"--resume: {record} is of another comparison ({diff}); {advice}")
+    keys = ("problem", "seed", "method")
+    if not isinstance(rows, list) or not all(
+        isinstance(r, dict) and all(k in r for k in keys) for r in rows
+    ):
+        raise ValueError(f"--resume: {record} is not a list of comparison rows; {advice}")
+    return rows
+
+
+def _settings_difference(saved: Any, now: dict[str, Any]) -> str:
+    """Name the problems whose settings differ between two ``compare_settings.json``."""
+    from wmr_jax._src.tuning import run_difference
+
+    saved_configs = saved.get("configs", {}) if isinstance(saved, dict) else {}
+    parts = [
+        f"{name}: {run_difference({'config': saved_configs.get(name)}, {'config': config})}"
+        for name, config in now["configs"].items()
+        if saved_configs.get(name) != config
+    ]
+    return "; ".join(parts) or "its format or seeds differ"
+
+
 def _compare(out: Path, args: Any) -> int:
+    import json
+
     from wmr_jax._src import io
     from wmr_jax._src.report.tuning import comparison_table
     from wmr_jax._src.tuning.compare import compare
@@ -382,8 +429,23 @@ def _compare(out: Path, args: Any) -> int:
         "fixed": _config_from(args, schedule=False),
         "schedule": _config_from(args, schedule=True),
     }
-    rows = compare(configs=configs, progress=print)
-    io.atomic_write_json(out / "compare.json", rows)
+    settings = {
+        "format": _COMPARE_FORMAT,
+        "seeds": list(_COMPARE_SEEDS),
+        "configs": {name: config.as_dict() for name, config in configs.items()},
+    }
+    settings = json.loads(json.dumps(settings))  # as it reads back from the file
+    rows = _compare_rows(out, settings, args.resume)
+    # Each (problem, seed) is written as soon as its three methods are done, so
+    # an interrupted comparison keeps them and --resume runs only the rest.
+    done = {(row["problem"], row["seed"]) for row in rows}
+    for name, config in configs.items():
+        for seed in _COMPARE_SEEDS:
+            if (name, seed) in done:
+                print(f"{name} seed {seed}: kept from {out / 'compare.json'}")
+                continue
+            rows += compare(seeds=(seed,), problems=(name,), configs={name: config}, progress=print)
+            io.atomic_write_json(out / "compare.json", rows)
     table = comparison_table(rows)
     io.atomic_write_text(out / "compare.md", table)
     print(table, end="")

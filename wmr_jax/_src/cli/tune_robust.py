@@ -59,8 +59,14 @@ def run(args: Any) -> int:
         if i == 1 or i % 25 == 0 or i == iters:
             print(f"iteration {i}/{iters}: loss {loss:.3f} s", flush=True)
 
-    result = tune_robust(config, progress_fn=progress)
-    io.atomic_write_json(out / "tuned_gains.json", tuned_json(result["gains"]))
+    def keep(gains: Any, losses: list[float]) -> None:
+        # Written before the searches and the evaluation: an interruption there
+        # loses no tuning.
+        io.atomic_write_json(out / "tuned_gains.json", tuned_json(gains))
+        io.atomic_write_json(out / "robust_loss.json", {"loss": losses})
+        print(f"tuned_gains.json, robust_loss.json -> {out} (now judging them)", flush=True)
+
+    result = tune_robust(config, progress_fn=progress, on_tuned=keep)
     searches = {
         m: {**gains_as_dict(g), "candidates": n} for m, (g, n) in result["searches"].items()
     }
@@ -74,7 +80,6 @@ def run(args: Any) -> int:
     io.atomic_write_json(out / "robust_evaluation.json", record)
     table = markdown_table(result["rows"], _COLUMNS)
     io.atomic_write_text(out / "robust_evaluation.md", table)
-    io.atomic_write_json(out / "robust_loss.json", {"loss": result["history"]["loss"].tolist()})
-    print(f"tuned_gains.json, robust_evaluation.md/json, robust_loss.json -> {out}")
+    print(f"robust_evaluation.md/json -> {out}")
     print(table, end="")
     return 0

@@ -277,13 +277,20 @@ def _black_box(method, key, refs, budget_s, robot, dt):
 
 
 def tune_robust(
-    config: RobustConfig | None = None, *, progress_fn: Any = None, robot: Robot | None = None
+    config: RobustConfig | None = None,
+    *,
+    progress_fn: Any = None,
+    on_tuned: Any = None,
+    robot: Robot | None = None,
 ) -> dict[str, Any]:
     """Tune fixed gains through the §7 disturbances; judge them with the hard law.
 
     Args:
         config: the settings; default ``RobustConfig()``.
         progress_fn: called with ``(iteration, loss)`` after each iteration.
+        on_tuned: called with ``(gains, losses)`` as soon as the iterations
+            end, before the searches and the evaluation (which take longer
+            than the tuning itself): a caller can keep the gains from there.
         robot: robot parameters; default ``Robot()``.
 
     Returns:
@@ -298,6 +305,7 @@ def tune_robust(
         )
     config = (RobustConfig() if config is None else config).validate()
     check_callable("progress_fn", progress_fn)
+    check_callable("on_tuned", on_tuned)
     robot = validate_one_robot(robot, "tuning")
     dtype, dt, steps = float_dtype(), DEFAULT_DT, horizon_steps(DEFAULT_DT)
     z = jnp.asarray(logits_from_gains(PAPER_FEASIBLE_GAINS, robot), dtype)
@@ -322,6 +330,8 @@ def tune_robust(
             progress_fn(i + 1, losses[-1])
     wall = time.perf_counter() - began
     tuned = jax.tree.map(float, robust_gains(z, robot))
+    if on_tuned is not None:
+        on_tuned(tuned, list(losses))
     sets = {"paper": PAPER_FEASIBLE_GAINS, "robust-tuned": tuned}
     searches = {}
     if config.compare:

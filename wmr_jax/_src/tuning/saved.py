@@ -96,7 +96,8 @@ def load_tuned(path: str | os.PathLike) -> tuple[Controller, Any]:
     where = f"{os.fspath(path)!r}"
     try:
         values = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as err:
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as err:
+        # RecursionError: arrays nested beyond Python's recursion limit.
         raise ValueError(f"{where} cannot be read: {' '.join(str(err).split())}") from None
     if not isinstance(values, dict):
         raise ValueError(f"{where} is not allowed; allowed: a JSON object")
