@@ -86,7 +86,9 @@ def _write(tmp_path, name, text):
         (["tune", "--out", "{dir}", "--gradient-cost", "--iters", "5"], "--iters is not allowed"),
         (["tune", "--out", "{dir}", "--eval-poses", "1000000000000"], "--eval-poses '1000"),
         (["tune", "--out", "{dir}", "--poses", "1e12"], "--poses '1e12' is not allowed"),
-        (["tune", "--out", "{dir}", "--horizon", "1e-12"], "horizon = 1e-12 s at dt"),
+        (["tune", "--out", "{dir}", "--horizon", "1e-12"], "horizon = 1e-12 s is shorter"),
+        # A whole period used to be run for it.
+        (["tune", "--out", "{dir}", "--horizon", "0.001"], "horizon = 0.001 s is shorter"),
         (["sweep", "--out", "{dir}", "--poses", "100000000000000"], "n_poses = 100000000000000"),
         (["demo", "--out", "/dev/null"], "a folder (it is a file)"),
         # An empty path was the current folder.
@@ -223,3 +225,19 @@ def test_bench_adds_repeated_cases_and_names_a_case_it_cannot_run(tmp_path, caps
     rows = json.loads(path.read_text())["rows"]
     assert [r["case"] for r in rows] == ["final_poses", "final_poses_sharded"]
     assert rows[1]["skipped"].startswith("skipped: needs 2 or more devices (1 here")
+
+
+def test_sweep_resume_refuses_chunks_of_other_settings_and_keeps_them(tmp_path, capsys):
+    # They were replaced after a warning; --resume asked to keep them.
+    out = tmp_path / "maps"
+    argv = ["sweep", "--out", str(out), "--poses", "8", "--chunk", "4", "--controller"]
+    argv += ["shim-sung", "--no-progress", "--resume"]
+    assert main([*argv, "--float32"]) == 0
+    chunks = out / "chunks" / "shim-sung"
+    before = {p.name: p.read_bytes() for p in chunks.glob("chunk_*.npz")}
+    assert before
+    capsys.readouterr()
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "--resume:" in err and "dtype 'float32' -> 'float64'" in err and "a fresh --out" in err
+    assert {p.name: p.read_bytes() for p in chunks.glob("chunk_*.npz")} == before

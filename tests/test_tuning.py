@@ -318,7 +318,10 @@ def test_loss_rejects_bad_input_before_tracing(call, name):
         ({"tol_r": 1e-50}, r"tol_r = 1e-50 is too small for float32"),
         ({"tol_theta": 1e-50}, r"tol_theta = 1e-50 is too small for float32"),
         ({"weights": tuning.LossWeights(shaping=1e39)}, r"weights.shaping = 1e\+39 is beyond"),
-        ({"horizon": 1e-12}, r"horizon = 1e-12 s at dt = 0.033 s is 0 control periods"),
+        (
+            {"horizon": 1e-12},
+            r"horizon = 1e-12 s is shorter than one control period \(dt = 0.033 s\)",
+        ),
     ],
 )
 def test_loss_options_that_would_give_nan_or_inf_are_refused(options, message):

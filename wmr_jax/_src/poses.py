@@ -122,9 +122,14 @@ def horizon_steps(dt: float, horizon: float = HORIZON_S) -> int:
     horizon = check_number("horizon", horizon, unit="s")
     # The slack keeps 6.0 / 0.033 = 181.8… at 182 despite rounding.
     steps = math.ceil(horizon / dt - 1e-9)
-    if not 1 <= steps <= MAX_STEPS:
+    if horizon < dt * (1 - 1e-9):  # it would be run as a whole period
+        raise ValueError(
+            f"horizon = {horizon!r} s is shorter than one control period (dt = {dt!r} s); "
+            "allowed: horizon >= dt"
+        )
+    if steps > MAX_STEPS:
         raise ValueError(
             f"horizon = {horizon!r} s at dt = {dt!r} s is {steps} control periods; allowed: "
-            f"1 to {MAX_STEPS} periods (horizon >= dt, and not over 2^31 - 1 periods)"
+            f"at most {MAX_STEPS} (2^31 - 1) periods"
         )
     return steps

@@ -48,9 +48,14 @@ from wmr_jax._src.controllers import SHIM_SUNG, Controller
 from wmr_jax._src.params import Robot, validate_robot
 from wmr_jax._src.sharding import checked_devices
 
-__all__ = ["DEFAULT_CHUNK_SIZE", "SWEEP_FIELDS", "sweep"]
+__all__ = ["DEFAULT_CHUNK_SIZE", "SWEEP_FIELDS", "OtherSettingsWarning", "sweep"]
 
 DEFAULT_CHUNK_SIZE = 131_072
+
+
+class OtherSettingsWarning(UserWarning):
+    """A sweep's folder holds chunks of other settings: they are not used, and are replaced."""
+
 
 SWEEP_FIELDS = (
     "final_x",
@@ -331,6 +336,7 @@ class _ChunkStore:
                 f"{self.folder} holds {chunks} chunk file(s) of a sweep with other settings "
                 f"({shown or 'its fingerprint'}): none of them is used (a resume needs the "
                 "same settings, chunk size and number of devices included)",
+                OtherSettingsWarning,
                 stacklevel=4,
             )
 

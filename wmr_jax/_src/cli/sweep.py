@@ -10,6 +10,7 @@ prints the summary table.
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 from wmr_jax._src.cli import flags
@@ -65,6 +66,7 @@ def run(args: Any) -> int:
     """Run ``wmr-jax sweep``; return the exit status."""
     from wmr_jax._src.maps import DEFAULT_HEADINGS_DEG, map_study
     from wmr_jax._src.report.maps import comparison_table, save_map_study
+    from wmr_jax._src.sweep import OtherSettingsWarning
 
     out = flags.output_dir("--out", args.out)
     n_poses = flags.positive_int("--poses", args.poses)
@@ -74,16 +76,25 @@ def run(args: Any) -> int:
     ]
     names = flags.controller_names(args.controller)
     velocity = flags.velocity_loop(args.velocity)
-    study = map_study(
-        n_poses,
-        controller_names=names,
-        velocity=velocity,
-        headings_deg=headings,
-        chunk=chunk,
-        progress=not args.no_progress,
-        x64=not args.float32,
-        cache=out / "chunks" if args.resume else None,
-    )
+    with warnings.catch_warnings():
+        # --resume asks for the finished chunks: chunks of other settings are
+        # refused, not replaced (as tune --resume refuses another run).
+        warnings.simplefilter("error", OtherSettingsWarning)
+        try:
+            study = map_study(
+                n_poses,
+                controller_names=names,
+                velocity=velocity,
+                headings_deg=headings,
+                chunk=chunk,
+                progress=not args.no_progress,
+                x64=not args.float32,
+                cache=out / "chunks" if args.resume else None,
+            )
+        except OtherSettingsWarning as err:
+            raise ValueError(
+                f"--resume: {err}; allowed: the same settings, or a fresh --out"
+            ) from None
     save_map_study(out, study)
     print(f"{study.summary['poses']} poses -> {out}/maps_*.png, summary.md, summary.json")
     print(comparison_table(study.rows), end="")
