@@ -98,6 +98,7 @@ def _write(tmp_path, name, text):
         (["tune", "--out", "{dir}", "--compare", "--seed", "3"], "--seed is not allowed with"),
         # Nested beyond Python's recursion limit: a RecursionError traceback before.
         (["simulate", "--ref", "1", "2", "0", "--gains", "{deep}"], "cannot be read"),
+        (["simulate", "--ref", "1", "2", "0", "--gains", "{twice}"], "the key 'kr' is given twice"),
     ],
 )
 def test_bad_values_give_one_line_and_status_2(capsys, tmp_path, argv, message):
@@ -108,6 +109,7 @@ def test_bad_values_give_one_line_and_status_2(capsys, tmp_path, argv, message):
         "good": _write(tmp_path, "g.json", '{"kr": 60}'),
         "dir": str(tmp_path / "out"),
         "deep": _write(tmp_path, "deep.json", "[" * 100_000 + "]" * 100_000),
+        "twice": _write(tmp_path, "twice.json", '{"kr": 60, "kr": 70}'),
     }
     assert main([arg.format(**files) for arg in argv]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -188,6 +190,7 @@ def test_an_interrupted_compare_keeps_its_finished_seeds_and_resumes(tmp_path, m
     out = tmp_path / "cmp"
     argv = ["tune", "--out", str(out), "--compare", "--iters", "1"]
     assert main(argv) == 130
+    assert "interrupted (the same command with --resume keeps" in capsys.readouterr().err
     kept = json.loads((out / "compare.json").read_text())
     assert len(kept) == 12 and {r["problem"] for r in kept} == {"fixed", "schedule"}
     calls.clear()

@@ -65,6 +65,9 @@ def test_fixed_gains_old_and_new_files_load(tmp_path):
         ('{"kr": 1' + "0" * 400 + "}", "kr = 10* is not allowed; allowed: a number"),
         ('{"kind": [1]}', "kind = \\[1\\] is not allowed; allowed: a string"),
         ('{"kr": true}', "kr = True is not allowed"),
+        # The last of a repeated key won without a word.
+        ('{"kr": 60, "kr": 70}', "cannot be read: the key 'kr' is given twice"),
+        ("[" * 100_000 + "]" * 100_000, "cannot be read: maximum recursion depth"),
     ],
 )
 def test_bad_files_are_refused_in_one_line(tmp_path, content, message):

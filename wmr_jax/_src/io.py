@@ -24,6 +24,7 @@ __all__ = [
     "atomic_write_json",
     "atomic_write_npz",
     "atomic_write_text",
+    "json_object_once",
     "json_text",
     "load_arrays",
     "remove_stale_temporaries",
@@ -59,6 +60,20 @@ def _write_atomically(path: str | os.PathLike, write: Callable[[Any], None]) -> 
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+def json_object_once(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """``json.loads``'s ``object_pairs_hook`` that refuses a key given twice.
+
+    ``json`` keeps the last of a repeated key without a word; in a file of
+    parameters edited by hand that hides a typo.
+    """
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise ValueError(f"the key {key!r} is given twice")
+        out[key] = value
+    return out
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:

@@ -222,11 +222,12 @@ def gains_file(flag: str, text: str) -> Any:
     import dataclasses
     import json
 
+    from wmr_jax._src.io import json_object_once as once
     from wmr_jax._src.params import Gains, validate_gains
 
     fields = [f.name for f in dataclasses.fields(Gains)]
     try:
-        values = json.loads(Path(text).read_text(encoding="utf-8"))
+        values = json.loads(Path(text).read_text(encoding="utf-8"), object_pairs_hook=once)
     except (OSError, UnicodeDecodeError, ValueError, RecursionError) as err:
         raise ValueError(f"{flag} {text!r} cannot be read: {err}") from None
     numbers = isinstance(values, dict) and all(isinstance(v, (int, float)) for v in values.values())

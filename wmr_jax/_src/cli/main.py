@@ -97,7 +97,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"wmr-jax: error: {' '.join(str(err).split())}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("wmr-jax: interrupted", file=sys.stderr)
+        # tune (plain or --compare) and sweep can continue; tune --robust cannot.
+        modes = ("robust", "gradient_cost")
+        resumable = hasattr(args, "resume") and not any(getattr(args, m, False) for m in modes)
+        hint = " (the same command with --resume keeps what it finished)" if resumable else ""
+        print(f"wmr-jax: interrupted{hint}", file=sys.stderr)
         return 130
 
 

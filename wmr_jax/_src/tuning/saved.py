@@ -17,6 +17,7 @@ from wmr_jax._src.checks import check_path
 from wmr_jax._src.controllers.base import Controller
 from wmr_jax._src.controllers.schedule import SCHEDULE, SHAPE_FIELDS, TABLES, ScheduleParams
 from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
+from wmr_jax._src.io import json_object_once
 from wmr_jax._src.params import Gains
 from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS
 from wmr_jax._src.tuning.problems import FIXED, SCHEDULED, params_json
@@ -95,7 +96,7 @@ def load_tuned(path: str | os.PathLike) -> tuple[Controller, Any]:
     path = check_path("path", path)
     where = f"{os.fspath(path)!r}"
     try:
-        values = json.loads(path.read_text(encoding="utf-8"))
+        values = json.loads(path.read_text(encoding="utf-8"), object_pairs_hook=json_object_once)
     except (OSError, UnicodeDecodeError, ValueError, RecursionError) as err:
         # RecursionError: arrays nested beyond Python's recursion limit.
         raise ValueError(f"{where} cannot be read: {' '.join(str(err).split())}") from None
