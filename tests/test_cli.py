@@ -89,7 +89,11 @@ def _write(tmp_path, name, text):
         (["tune", "--out", "{dir}", "--horizon", "1e-12"], "horizon = 1e-12 s is shorter"),
         # A whole period used to be run for it.
         (["tune", "--out", "{dir}", "--horizon", "0.001"], "horizon = 0.001 s is shorter"),
-        (["sweep", "--out", "{dir}", "--poses", "100000000000000"], "n_poses = 100000000000000"),
+        (["sweep", "--out", "{dir}", "--poses", "100000000000000"], "--poses: n_poses = 1000"),
+        (["sweep", "--out", "{dir}", "--headings", "1e300"], "--headings: headings_deg = "),
+        # The library's advice to switch JAX to float64 is not a flag: left out.
+        (["simulate", "--ref", "1e300", "0", "0"], "--ref: ref = [1e+300, 0.0, 0.0] is too far"),
+        (["simulate", "--ref", "1", "0", "0", "--dt", "1e-320"], "--dt: dt = 1e-320"),
         (["demo", "--out", "/dev/null"], "a folder (it is a file)"),
         # An empty path was the current folder.
         (["sweep", "--out", "", "--poses", "10"], "--out '' is not allowed; allowed: a folder"),
@@ -114,6 +118,7 @@ def test_bad_values_give_one_line_and_status_2(capsys, tmp_path, argv, message):
     assert main([arg.format(**files) for arg in argv]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("wmr-jax: error:") and message in err[0]
+    assert "jax_enable_x64" not in err[0]
 
 
 def test_argparse_errors_are_one_line_and_status_2(capsys):
@@ -244,3 +249,16 @@ def test_sweep_resume_refuses_chunks_of_other_settings_and_keeps_them(tmp_path, 
     err = capsys.readouterr().err
     assert "--resume:" in err and "dtype 'float32' -> 'float64'" in err and "a fresh --out" in err
     assert {p.name: p.read_bytes() for p in chunks.glob("chunk_*.npz")} == before
+
+
+def test_library_errors_name_the_flag_and_leave_out_advice_no_flag_follows():
+    from wmr_jax._src.checks import _FLOAT64_HINT
+    from wmr_jax._src.cli import flags
+
+    with pytest.raises(ValueError) as err, flags.as_flags({"ref": "--ref"}):
+        raise ValueError(
+            f"ref = [1e+30] is too far for float32; allowed: |x| <= 1e18{_FLOAT64_HINT}"
+        )
+    assert str(err.value) == "--ref: ref = [1e+30] is too far for float32; allowed: |x| <= 1e18"
+    with pytest.raises(ValueError, match=r"^other = 1 is not allowed$"), flags.as_flags({}):
+        raise ValueError("other = 1 is not allowed")

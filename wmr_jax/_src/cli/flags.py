@@ -8,9 +8,10 @@ own unit (degrees stay degrees).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -240,3 +241,23 @@ def gains_file(flag: str, text: str) -> Any:
         return validate_gains(Gains(**values))
     except ValueError as err:
         raise ValueError(f"{flag} {text!r}: {err}") from None
+
+
+@contextlib.contextmanager
+def as_flags(names: dict[str, str]) -> Iterator[None]:
+    """Name the command's flags in the library's errors raised inside the block.
+
+    A library error reads ``"n_poses = 10 is not allowed; ..."``; a command
+    line user typed ``--poses``, so it becomes ``"--poses: n_poses = 10 is not
+    allowed; ..."``. Advice to switch JAX to float64, which no flag does, is
+    left out.
+    """
+    from wmr_jax._src.checks import _FLOAT64_HINT
+
+    try:
+        yield
+    except ValueError as err:
+        text = str(err).replace(_FLOAT64_HINT, "")
+        name = text.split(" ", 1)[0]
+        flag = names.get(name)
+        raise ValueError(f"{flag}: {text}" if flag else text) from None

@@ -75,9 +75,10 @@ def run(args: Any) -> int:
     steps = flags.positive_int("--steps", args.steps, 1, 10**7)
     velocity = flags.velocity_loop(args.velocity)
     controller, gains = _controller_and_gains(args)
-    traj = rollout(
-        ref, gains, init=init, dt=dt, steps=steps, velocity=velocity, controller=controller
-    )
+    with flags.as_flags({"ref": "--ref", "init": "--init", "dt": "--dt"}):
+        traj = rollout(
+            ref, gains, init=init, dt=dt, steps=steps, velocity=velocity, controller=controller
+        )
     t_arrive = float(metrics.arrival_time(traj, np.asarray(ref), dt=dt))
     per_region = np.asarray(metrics.region_time(traj, dt=dt))
     final = np.asarray(traj.poses[-1])

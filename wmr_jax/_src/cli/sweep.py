@@ -76,7 +76,8 @@ def run(args: Any) -> int:
     ]
     names = flags.controller_names(args.controller)
     velocity = flags.velocity_loop(args.velocity)
-    with warnings.catch_warnings():
+    library_names = {"n_poses": "--poses", "headings_deg": "--headings", "chunk": "--chunk"}
+    with warnings.catch_warnings(), flags.as_flags(library_names):
         # --resume asks for the finished chunks: chunks of other settings are
         # refused, not replaced (as tune --resume refuses another run).
         warnings.simplefilter("error", OtherSettingsWarning)
