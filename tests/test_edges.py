@@ -152,8 +152,44 @@ def test_headings_beyond_what_float64_resolves_are_refused():
         (lambda t: w.zigzag_count(t, v_dead_band=-1.0), "v_dead_band = -1.0 is not allowed"),
         (lambda t: w.zigzag_count(t, omega_dead_band=np.nan), "omega_dead_band = nan"),
         (lambda t: w.path_length(np.zeros((5, 3))), "traj is a ndarray"),
-        (lambda t: w.success_rate([]), "allowed: one or more arrival times"),
+        (lambda t: w.success_rate([]), r"times has shape \(0,\) \(no runs\); allowed: one or"),
         (lambda t: w.success_rate(t), "times = Trajectory is not allowed"),
+        (lambda t: w.success_rate([True, False]), r"times = \[True, False\] is not allowed"),
+        (lambda t: w.success_rate([0.5, -0.1]), r"times = .*-0.1.* is not allowed"),
+        (lambda t: w.success_rate([0.5, np.nan]), r"times = .*nan.* is not allowed"),
+        (
+            lambda t: w.path_length(t._replace(distance=t.distance.at[1, 2].set(np.nan))),
+            r"traj.distance = .*nan.* allowed: finite numbers, cm, >= 0",
+        ),
+        (
+            lambda t: w.path_length(t._replace(distance=-t.distance)),
+            "traj.distance = .* allowed: finite numbers, cm, >= 0",
+        ),
+        (
+            lambda t: w.path_length(t._replace(distance=t.distance[:, 1:])),
+            r"traj.distance has shape \(3, 3\); allowed: \(3, 4\), one value per control period",
+        ),
+        (lambda t: w.path_length(t._replace(distance=None)), "traj.distance = None is not"),
+        (
+            lambda t: w.zigzag_count(t._replace(v=t.v > 0)),
+            r"traj.v = an array of bool \(3, 4\) is not allowed; allowed: finite numbers, cm/s",
+        ),
+        (
+            lambda t: w.zigzag_count(t._replace(omega=t.omega[0])),
+            r"traj.omega has shape \(4,\); allowed: \(3, 4\)",
+        ),
+        (
+            lambda t: w.region_time(t._replace(region=t.region + 4), dt=0.033),
+            "traj.region = .* allowed: integer region labels 0 to 3",
+        ),
+        (
+            lambda t: w.region_time(t._replace(region=t.region * 1.0), dt=0.033),
+            r"traj.region = an array of float\d+ \(3, 4\) is not allowed",
+        ),
+        (
+            lambda t: w.arrival_time(t._replace(poses=t.poses[:, :1]), REF, dt=0.033),
+            r"traj.poses has shape \(3, 1, 3\); allowed: \(..., steps \+ 1, 3\) with steps >= 1",
+        ),
     ],
 )
 def test_bad_metric_arguments_are_named(call, message):

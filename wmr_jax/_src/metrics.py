@@ -13,7 +13,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks import as_pose_array, check_dt, check_number, is_traced
+from wmr_jax._src.checks import (
+    array_kind,
+    as_pose_array,
+    check_dt,
+    check_number,
+    is_traced,
+    real_array,
+    require,
+)
 from wmr_jax._src.controllers import shim_sung as law
 
 __all__ = [
@@ -56,8 +64,13 @@ def _poses_of(traj: Any) -> Any:
             f"traj is a {type(traj).__name__}; allowed: a Trajectory (from rollout or "
             "batch_rollout), whose poses have shape (..., steps + 1, 3)"
         )
-    if not is_traced(poses) and (jnp.ndim(poses) < 2 or jnp.shape(poses)[-1] != 3):
-        raise ValueError(f"traj.poses has shape {jnp.shape(poses)}; allowed: (..., steps + 1, 3)")
+    if not is_traced(poses) and (
+        jnp.ndim(poses) < 2 or jnp.shape(poses)[-1] != 3 or jnp.shape(poses)[-2] < 2
+    ):
+        raise ValueError(
+            f"traj.poses has shape {jnp.shape(poses)}; allowed: (..., steps + 1, 3) with "
+            "steps >= 1 (the initial pose, then one per control period)"
+        )
     return poses
 
 
@@ -148,24 +161,61 @@ def arrival_time(
 
 
 def success_rate(times: Any) -> float:
-    """Return the fraction of finite arrival times (of ``arrival_time``, say)."""
+    """Return the fraction of finite arrival times (of ``arrival_time``, say).
+
+    Raises:
+        ValueError: for no times at all, or for something that is not arrival
+            times: bools, NaN or negative numbers (``inf`` is a run that never
+            settled, and counts as a failure).
+    """
     if not is_traced(times):
-        try:
-            size = np.asarray(times, dtype=float).size
-        except (TypeError, ValueError):
-            size = None
-        if not size:
-            raise ValueError(
-                f"times = {type(times).__name__} is not allowed; allowed: one or more arrival "
-                "times, s (from arrival_time)"
-            )
+        allowed = "one or more arrival times, s (from arrival_time; inf where a run never settles)"
+        if isinstance(times, (str, bytes)) or getattr(times, "poses", None) is not None:
+            raise ValueError(f"times = {type(times).__name__} is not allowed; allowed: {allowed}")
+        arr = real_array("times", times, allowed)
+        if arr.size == 0:
+            raise ValueError(f"times has shape {arr.shape} (no runs); allowed: {allowed}")
+        require("times", arr, ~np.isnan(arr) & (arr >= 0), allowed)
     return float(jnp.mean(jnp.isfinite(jnp.asarray(times))))
 
 
 def _field_of(traj: Any, name: str) -> Any:
-    """Return ``traj.<name>`` after checking ``traj`` is a trajectory."""
-    _poses_of(traj)
-    return getattr(traj, name)
+    """Return ``traj.<name>``, one value per control period, after checking it.
+
+    ``v``, ``omega`` and ``distance`` must be finite real numbers (``distance``
+    non-negative), ``region`` integer labels −1 to 3, each of the shape that
+    ``traj.poses`` implies: ``(..., steps)``.
+    """
+    poses = _poses_of(traj)
+    value = getattr(traj, name, None)
+    if is_traced((poses, value)):
+        return value
+    batch, steps = jnp.shape(poses)[:-2], jnp.shape(poses)[-2] - 1
+    field = f"traj.{name}"
+    if name == "region":
+        allowed = "integer region labels 0 to 3 (-1 for a controller without regions)"
+        kinds = "iu"
+    else:
+        unit = "cm" if name == "distance" else "cm/s" if name == "v" else "rad/s"
+        allowed = f"finite numbers, {unit}" + (", >= 0" if name == "distance" else "")
+        kinds = "iuf"
+    if value is None or isinstance(value, (str, bytes)) or array_kind(value) not in kinds:
+        dtype = getattr(value, "dtype", None)
+        shown = repr(value) if dtype is None else f"an array of {dtype} {np.shape(value)}"
+        raise ValueError(f"{field} = {shown} is not allowed; allowed: {allowed}")
+    arr = np.asarray(value)
+    if name == "region":
+        ok = (arr >= -1) & (arr <= 3)
+    else:
+        arr = arr.astype(float)
+        ok = np.isfinite(arr) & ((arr >= 0) if name == "distance" else True)
+    if arr.shape != (*batch, steps):
+        raise ValueError(
+            f"{field} has shape {arr.shape}; allowed: {(*batch, steps)}, one value per control "
+            f"period of traj.poses {tuple(jnp.shape(poses))}"
+        )
+    require(field, arr, ok, allowed)
+    return jnp.asarray(value)
 
 
 def path_length(traj: Any) -> jax.Array:
