@@ -76,6 +76,9 @@ def test_diagnostics_match_reference():
         ({"steps": -1}, "steps = -1"),
         ({"ref": [30.0, 30.0]}, r"ref has shape \(2,\)"),
         ({"init": [float("nan"), 0.0, 0.0]}, r"init = \[nan, 0.0, 0.0\]"),
+        # Beyond 1e153 cm the squared distance overflows float64 (was an OverflowError).
+        ({"ref": [1e160, 0.0, 0.0]}, r"ref = \[1e\+160, 0.0, 0.0\] .* \|x\|, \|y\| <= 1e\+153 cm"),
+        ({"init": [0.0, -1e155, 0.0]}, r"init = .* \|x\|, \|y\| <= 1e\+153 cm"),
         ({"robot": w.Robot(half_track=0.0)}, "robot.half_track = 0.0"),
         ({"velocity": "nonideal", "substeps": 0}, "substeps = 0"),
         ({"velocity": "nonideal", "wheel_limit": "bogus"}, "wheel_limit = 'bogus'"),
@@ -86,3 +89,14 @@ def test_the_reference_checks_its_inputs_as_rollout_does(kwargs, message):
     args = {"ref": [30.0, 30.0, 0.0], "steps": 3, **kwargs}
     with pytest.raises(ValueError, match=message):
         w.reference_rollout(args.pop("ref"), **args)
+
+
+def test_the_reference_law_refuses_positions_whose_distance_overflows():
+    with pytest.raises(ValueError, match=r"pose = .* allowed: finite numbers, \|x\|, \|y\| <= 1e"):
+        w.reference_control([1e200, 0.0, 0.0], [0.0, 0.0, 0.0], w.Gains())
+    with pytest.raises(ValueError, match=r"ref = .* allowed: finite numbers, \|x\|, \|y\| <= 1e"):
+        w.reference_diagnostics([0.0, 0.0, 0.0], [0.0, -1e156, 0.0], w.Gains())
+    # At the limit the law is still defined (and the distance finite).
+    assert w.reference_diagnostics([-1e153, 1e153, 0.0], [1e153, -1e153, 0.0], w.Gains())[
+        "r_e"
+    ] == pytest.approx(8**0.5 * 1e153)

@@ -18,6 +18,7 @@ from wmr_jax._src.checks import (
     MAX_STEPS,
     check_dt,
     check_int,
+    position_limit,
     real_array,
     require_unbatched,
 )
@@ -120,10 +121,16 @@ def _one_pose(name: str, value: Any) -> tuple[float, float, float]:
     arr = real_array(name, value, "[x cm, y cm, theta rad]")
     if arr.shape != (3,):
         raise ValueError(f"{name} has shape {arr.shape}; allowed: (3,) [x cm, y cm, theta rad]")
-    if not np.all(np.isfinite(arr)) or abs(arr[2]) > MAX_HEADING:
+    # Squared distances must stay finite in float64, as in the JAX loop's check.
+    limit = position_limit(np.float64)
+    if (
+        not np.all(np.isfinite(arr))
+        or abs(arr[2]) > MAX_HEADING
+        or np.max(np.abs(arr[:2])) > limit
+    ):
         raise ValueError(
             f"{name} = {arr.tolist()} is not allowed; allowed: finite numbers, "
-            f"|theta| <= {MAX_HEADING:.0e} rad"
+            f"|x|, |y| <= {limit:.0e} cm, |theta| <= {MAX_HEADING:.0e} rad"
         )
     return float(arr[0]), float(arr[1]), float(arr[2])
 
