@@ -34,6 +34,24 @@ def test_positions_beyond_float32_are_refused(ref):
         w.rollout(REF, init=ref, steps=3)
 
 
+def test_more_substeps_than_float32_resolves_are_refused():
+    # At 10**6 sub-steps a float32 run ended 2.7 cm short of the float64 one
+    # after 0.66 s: each sub-step's motion drowns in the rounding of the pose.
+    message = r"substeps = 1000000 is not allowed in float32, .* <= 8388, or float64"
+    with jax.enable_x64(False), pytest.raises(ValueError, match=message):
+        w.rollout(REF, steps=3, velocity="nonideal", substeps=10**6)
+    with jax.enable_x64(False), pytest.raises(ValueError, match=message):
+        w.dynamics.advance(
+            w.dynamics.initial_state([0.0, 0.0, 0.0]), (1.0, 0.0), w.Robot(), 0.033, substeps=10**6
+        )
+    with jax.enable_x64(False):
+        # The ideal loop has no sub-steps, and the limit itself runs.
+        assert np.isfinite(np.asarray(w.rollout(REF, steps=2, substeps=10**6).poses)).all()
+        assert np.isfinite(
+            np.asarray(w.rollout(REF, steps=1, velocity="nonideal", substeps=8388).poses)
+        ).all()
+
+
 def test_float64_reaches_further():
     traj = w.rollout([1e20, 0.0, 0.0], w.Gains(kr=60.0), steps=STEPS)
     assert np.all(np.isfinite(np.asarray(traj.poses)))

@@ -24,7 +24,7 @@ from wmr_jax._src import dynamics, loops, velocity_loop
 from wmr_jax._src.checks import (
     as_poses,
     check_dt,
-    check_int,
+    check_substeps,
     float_dtype,
     is_traced,
     real_array,
@@ -213,7 +213,7 @@ def wheel_torques(velocity: Any, target: Any, integral: Any, model: Robot) -> ja
 @_wraps(velocity_loop.check_stability)
 def check_stability(robot: Robot, dt: Any, substeps: int) -> None:
     robot = _robot(robot)
-    substeps = check_int("substeps", substeps, 1, velocity_loop.MAX_SUBSTEPS)
+    substeps = check_substeps(substeps)
     dt = check_dt(dt)  # a tracer passes, and the check below then skips
     return velocity_loop.check_stability(robot, dt, substeps)
 
@@ -230,7 +230,7 @@ def advance(
     model: Robot | None = None,
 ) -> tuple[dynamics.RobotState, jax.Array]:
     _check_mode("wheel_limit", wheel_limit)
-    substeps = check_int("substeps", substeps, 1, velocity_loop.MAX_SUBSTEPS)
+    substeps = check_substeps(substeps)
     if not isinstance(state, dynamics.RobotState):
         raise ValueError(
             f"state = {state!r} is not allowed; allowed: a wmr_jax.dynamics.RobotState "

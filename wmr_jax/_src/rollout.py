@@ -25,6 +25,7 @@ from wmr_jax._src.checks import (
     as_poses,
     check_dt,
     check_int,
+    check_substeps,
     check_temperature,
     float_dtype,
     is_traced,
@@ -121,9 +122,13 @@ def make_options(
         ValueError: naming the option, its value and what is allowed.
     """
     steps = check_int("steps", steps, 1, MAX_STEPS)
-    substeps = check_int("substeps", substeps, 1, MAX_STEPS)
     if velocity not in VELOCITY_LOOPS:
         raise ValueError(f"velocity = {velocity!r} is not allowed; allowed: {VELOCITY_LOOPS}")
+    # The ideal loop has no sub-steps: any count passes (and is ignored).
+    if velocity == "ideal":
+        substeps = check_int("substeps", substeps, 1, MAX_STEPS)
+    else:
+        substeps = check_substeps(substeps)
     if wheel_limit not in WHEEL_LIMITS:
         raise ValueError(f"wheel_limit = {wheel_limit!r} is not allowed; allowed: {WHEEL_LIMITS}")
     controller = get_controller(controller)
