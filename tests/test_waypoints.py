@@ -9,6 +9,7 @@ from conftest import run_metrics
 
 import wmr_jax as w
 from wmr_jax import studies
+from wmr_jax._src import waypoints
 from wmr_jax.cli import main
 
 DT = 0.033
@@ -188,3 +189,23 @@ def test_waypoints_never_reached_make_the_slowest_leg_infinite():
     rows, *_ = studies.soccer_study(controller_names=["shim-sung"], steps=10)
     for row in rows:
         assert row["slowest leg s"] == math.inf and row[f"leg {len(WP)} s"] == math.inf
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"pass_tol_r": -1.0}, "pass_tol_r = -1.0 is not allowed"),
+        ({"pass_tol_theta": 2.0}, "pass_tol_theta = 2.0 is not allowed"),
+        ({"velocity": "warp"}, "velocity = 'warp' is not allowed"),
+        ({"steps": 0}, "steps = 0 is not allowed"),
+    ],
+)
+def test_the_soccer_study_checks_its_settings_before_running_anything(monkeypatch, kwargs, message):
+    # Before, a bad pass tolerance surfaced only after the first controller's
+    # whole "stop" run had compiled and run.
+    def no_run(*args, **kwargs):
+        raise AssertionError("a run started before the settings were checked")
+
+    monkeypatch.setattr(waypoints, "chain_rollout", no_run)
+    with pytest.raises(ValueError, match=message):
+        studies.soccer_study(controller_names=["shim-sung"], **kwargs)

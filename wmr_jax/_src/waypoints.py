@@ -451,6 +451,10 @@ def soccer_study(
         settings they were run with.
     """
     names = controllers.controller_names(controller_names)
+    # Every setting is checked before the first controller runs (and compiles).
+    _tolerances(metrics.DEFAULT_TOL_R, metrics.DEFAULT_TOL_THETA, pass_tol_r, pass_tol_theta)
+    for name in names:
+        _options(steps, velocity, name, loops.DEFAULT_SUBSTEPS, "clip")
     wp = soccer_waypoints()
     modes = (("stop", None, None), ("pass", pass_tol_r, pass_tol_theta))
     rows, runs = [], []
