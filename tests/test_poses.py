@@ -59,3 +59,11 @@ def test_paper_references_and_horizon():
 def test_sampler_refuses_what_it_cannot_draw(kwargs, message):
     with pytest.raises(ValueError, match=message):
         w.sample_poses(0, 2, **kwargs)
+
+
+def test_sampler_refuses_float64_while_jax_computes_in_float32():
+    # JAX would cast the float64 result back to float32 without a word.
+    with jax.enable_x64(False), pytest.raises(ValueError, match="dtype = float64 is not allowed"):
+        w.sample_poses(0, 2, dtype=np.float64)
+    with jax.enable_x64(False):
+        assert w.sample_poses(0, 2, dtype="float32").dtype == np.float32

@@ -80,13 +80,14 @@ def sample_poses(
         n: number of poses.
         r_min: least distance, cm, ``>= 0``.
         r_max: largest distance, cm, ``>= r_min``.
-        dtype: of the result; default JAX's default float dtype.
+        dtype: of the result; default JAX's default float dtype (float64
+            only when JAX has it enabled).
 
     Returns:
         ``(n, 3)`` poses ``[x cm, y cm, θ rad]``.
 
     Raises:
-        ValueError: for a bad seed, count or distance range.
+        ValueError: for a bad seed, count, distance range or dtype.
     """
     if not isinstance(key, jax.Array):
         key = jax.random.key(check_int("seed", key, 0, 2**32 - 1))
@@ -103,6 +104,12 @@ def sample_poses(
         ok = False
     if not ok:
         raise ValueError(f"dtype = {dtype!r} is not allowed; allowed: float32 or float64")
+    if np.dtype(dtype) == np.float64 and float_dtype() != np.float64:
+        # JAX would hand back float32 without a word.
+        raise ValueError(
+            "dtype = float64 is not allowed while JAX computes in float32; allowed: float32, "
+            "or float64 after jax.config.update('jax_enable_x64', True)"
+        )
     poses = _draw(key, n, jnp.float32(r_min), jnp.float32(r_max))
     return poses.astype(dtype)
 
