@@ -209,3 +209,10 @@ def test_the_soccer_study_checks_its_settings_before_running_anything(monkeypatc
     monkeypatch.setattr(waypoints, "chain_rollout", no_run)
     with pytest.raises(ValueError, match=message):
         studies.soccer_study(controller_names=["shim-sung"], **kwargs)
+
+
+def test_batched_parameters_in_a_single_chain_point_to_the_batched_entry_point():
+    with pytest.raises(ValueError, match=r"in chain_rollout \(one run\); use batch_chain_rollout"):
+        studies.chain_rollout(WP[:2], w.Gains(kr=[60.0, 70.0]), steps=3)
+    with pytest.raises(ValueError, match=r"robot.v_max .* use batch_track_rollout for a batch"):
+        studies.track_rollout(np.zeros((3, 3)), robot=w.Robot(v_max=[125.0, 100.0]))

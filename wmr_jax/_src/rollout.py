@@ -180,22 +180,36 @@ def _common_batch(refs, params, init, robot):
     return refs, jax.tree.map(shared, params), init, jax.tree.map(shared, robot)
 
 
-def _single_run(params: Any, robot: Robot) -> None:
-    """Refuse batched parameters in ``rollout``, which runs one robot."""
+SINGLE_RUN = ("rollout", "batch_rollout or final_poses")
+
+
+def _single_run(params: Any, robot: Robot, entry: tuple[str, str]) -> None:
+    """Refuse batched parameters in an entry point that runs one robot."""
+    single, batched = entry
     for prefix, tree in (("gains", params), ("robot", robot)):
         require_unbatched(
-            tree,
-            prefix,
-            "a scalar in rollout (one run); use batch_rollout or final_poses for a batch",
+            tree, prefix, f"a scalar in {single} (one run); use {batched} for a batch"
         )
 
 
-def prepare(refs, params, init, robot, dt, options: Options, *, batch: bool | None):
+def prepare(
+    refs,
+    params,
+    init,
+    robot,
+    dt,
+    options: Options,
+    *,
+    batch: bool | None,
+    entry: tuple[str, str] = SINGLE_RUN,
+):
     """Check and convert every argument of a rollout entry point (before tracing).
 
     Args:
         batch: ``False`` for one run (``refs`` and ``init`` ``(3,)``), ``None``
             for a batch over any of refs/init/params/robot.
+        entry: for one run, the entry point's name and those that run a batch
+            instead, for the message that refuses batched parameters.
 
     Returns:
         ``(refs, params, init, robot, dt)`` ready for the jitted cores.
@@ -215,7 +229,7 @@ def prepare(refs, params, init, robot, dt, options: Options, *, batch: bool | No
     refs = as_poses("refs" if batch is not False else "ref", refs, batch=batch)
     init = as_poses("init", init, batch=None if batch is not False else False)
     if batch is False:
-        _single_run(params, robot)
+        _single_run(params, robot, entry)
     else:
         refs, params, init, robot = _common_batch(refs, params, init, robot)
     if not is_traced((params, robot, dt)):

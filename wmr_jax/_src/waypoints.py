@@ -201,7 +201,7 @@ def _tolerances(tol_r, tol_theta, pass_tol_r, pass_tol_theta) -> jax.Array:
     return jnp.asarray([pass_r, pass_theta, tol_r, tol_theta], checks.float_dtype())
 
 
-def _prepared(params, init, robot, dt, options: Options, n: int | None):
+def _prepared(params, init, robot, dt, options: Options, n: int | None, entry):
     """Check params, init, robot and dt as ``rollout`` does; ``n`` runs for a batch."""
     if n is not None and np.ndim(init) == 2 and np.shape(init)[0] != n:
         raise ValueError(f"init has {np.shape(init)[0]} rows; allowed: {n}, one per run")
@@ -209,7 +209,7 @@ def _prepared(params, init, robot, dt, options: Options, n: int | None):
     # batch size is the one every batched argument must share.
     dummy = np.zeros((3,) if n is None else (n, 3))
     _, params, init, robot, dt = simulation.prepare(
-        dummy, params, init, robot, dt, options, batch=False if n is None else None
+        dummy, params, init, robot, dt, options, batch=False if n is None else None, entry=entry
     )
     return params, init, robot, dt
 
@@ -224,9 +224,19 @@ def _options(steps, velocity, controller, substeps, wheel_limit) -> Options:
     )
 
 
-def _run(jitted, spec, params, init, robot, dt, options: Options, n: int | None):
-    """Check params, init, robot and dt, then run ``jitted`` on ``spec`` (``n`` runs or one)."""
-    params, init, robot, dt = _prepared(params, init, robot, dt, options, n)
+# The batched entry point beside each single-run one, for the message that
+# refuses batched parameters in the latter.
+_BATCHED = {"chain_rollout": "batch_chain_rollout", "track_rollout": "batch_track_rollout"}
+
+
+def _run(jitted, spec, params, init, robot, dt, options: Options, n: int | None, entry=""):
+    """Check params, init, robot and dt, then run ``jitted`` on ``spec`` (``n`` runs or one).
+
+    ``entry``: the name of the single-run entry point calling (``n`` None).
+    """
+    params, init, robot, dt = _prepared(
+        params, init, robot, dt, options, n, (entry, _BATCHED.get(entry, ""))
+    )
     return jitted(spec, params, init, robot, dt, options=options)
 
 
@@ -281,7 +291,7 @@ def chain_rollout(
     wp = _pose_stack("waypoints", waypoints, 2, "(K, 3)")
     tol = _tolerances(tol_r, tol_theta, pass_tol_r, pass_tol_theta)
     options = _options(steps, velocity, controller, substeps, wheel_limit)
-    return _run(_chain_jit, (wp, tol), params, init, robot, dt, options, None)
+    return _run(_chain_jit, (wp, tol), params, init, robot, dt, options, None, "chain_rollout")
 
 
 def batch_chain_rollout(
@@ -351,7 +361,7 @@ def track_rollout(
     """
     arr = _pose_stack("refs", refs, 2, "(steps, 3)")
     options = _options(arr.shape[0], velocity, controller, substeps, wheel_limit)
-    return _run(_track_jit, arr, params, init, robot, dt, options, None)
+    return _run(_track_jit, arr, params, init, robot, dt, options, None, "track_rollout")
 
 
 def batch_track_rollout(
