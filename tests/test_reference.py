@@ -100,3 +100,16 @@ def test_the_reference_law_refuses_positions_whose_distance_overflows():
     assert w.reference_diagnostics([-1e153, 1e153, 0.0], [1e153, -1e153, 0.0], w.Gains())[
         "r_e"
     ] == pytest.approx(8**0.5 * 1e153)
+
+
+def test_the_reference_checks_against_float64_whatever_jax_computes_in():
+    # It computes in float64: a float32 session's limits would refuse these.
+    with jax.enable_x64(False):
+        assert np.isfinite(
+            w.reference_rollout([30.0, 30.0, 0.0], w.Gains(kr=1e40), steps=2)["poses"]
+        ).all()
+        assert np.isfinite(w.reference_rollout([30.0, 30.0, 0.0], dt=1e-40, steps=2)["poses"]).all()
+        with pytest.raises(ValueError, match=r"gains.kr = 1e\+40 is beyond float32"):
+            w.rollout(
+                [30.0, 30.0, 0.0], w.Gains(kr=1e40), steps=2
+            )  # the JAX loop does compute in float32

@@ -8,9 +8,12 @@ as the honest baseline of what a scalar simulator costs.
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 from typing import Any
 
+import jax
 import numpy as np
 
 from wmr_jax._src.checks import (
@@ -59,6 +62,23 @@ def _sgn(x: float) -> float:
     return 1.0 if x > 0 else -1.0
 
 
+def _in_float64(fn: Callable) -> Callable:
+    """Check the arguments of ``fn`` against float64's range, which it computes in.
+
+    The checks follow JAX's default dtype; without this, a float32 session
+    would refuse ``kr = 1e40`` as "beyond float32" in a function that never
+    uses float32.
+    """
+
+    @functools.wraps(fn)
+    def wrapped(*args: Any, **kwargs: Any) -> Any:
+        with jax.enable_x64(True):
+            return fn(*args, **kwargs)
+
+    return wrapped
+
+
+@_in_float64
 def reference_diagnostics(pose: Any, ref: Any, gains: Gains) -> dict[str, float]:
     """Return the command and every intermediate of the law for one pose (docs/model.md §2–3)."""
     gains = _one_set(gains, validate_gains, "gains")
@@ -123,11 +143,7 @@ def _one_pose(name: str, value: Any) -> tuple[float, float, float]:
         raise ValueError(f"{name} has shape {arr.shape}; allowed: (3,) [x cm, y cm, theta rad]")
     # Squared distances must stay finite in float64, as in the JAX loop's check.
     limit = position_limit(np.float64)
-    if (
-        not np.all(np.isfinite(arr))
-        or abs(arr[2]) > MAX_HEADING
-        or np.max(np.abs(arr[:2])) > limit
-    ):
+    if not np.all(np.isfinite(arr)) or abs(arr[2]) > MAX_HEADING or np.max(np.abs(arr[:2])) > limit:
         raise ValueError(
             f"{name} = {arr.tolist()} is not allowed; allowed: finite numbers, "
             f"|x|, |y| <= {limit:.0e} cm, |theta| <= {MAX_HEADING:.0e} rad"
@@ -144,6 +160,7 @@ def _one_set(params: Any, validate: Any, name: str) -> Any:
     return params
 
 
+@_in_float64
 def reference_control(pose: Any, ref: Any, gains: Gains) -> tuple[float, float]:
     """Return the command ``(v cm/s, ω rad/s)`` for one pose (Eq. 6, 7)."""
     out = reference_diagnostics(pose, ref, gains)
@@ -237,6 +254,7 @@ class _Loop:
         return (x, yy, th), y, travelled
 
 
+@_in_float64
 def reference_rollout(
     ref: Any,
     gains: Gains | None = None,
