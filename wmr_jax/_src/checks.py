@@ -255,10 +255,14 @@ def check_dt(dt: Any) -> Any:
 
 
 def _shown(arr: np.ndarray, bad: np.ndarray) -> str:
-    """Describe the offending value(s) of ``arr`` (a scalar, or one example)."""
+    """Describe the offending value(s) of ``arr``: a scalar, or where the first one is."""
     if arr.ndim == 0:
         return repr(float(arr))
-    return f"array of shape {arr.shape} (e.g. {float(arr[bad].reshape(-1)[0])!r})"
+    where = np.argwhere(np.broadcast_to(bad, arr.shape))
+    first = f"[{', '.join(str(int(i)) for i in where[0])}] = {float(arr[tuple(where[0])])!r}"
+    if len(where) == 1:
+        return f"array of shape {arr.shape} (element {first})"
+    return f"array of shape {arr.shape} ({len(where)} of {arr.size} elements, e.g. {first})"
 
 
 def require(name: str, value: np.ndarray | None, ok: Any, allowed: str) -> None:
