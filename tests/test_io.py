@@ -81,3 +81,16 @@ def test_stale_temporaries_are_removed(tmp_path):
     removed = report.remove_stale_temporaries(tmp_path)
     assert [p.name for p in removed] == [".chunk_000001.npz.abc123.tmp"]
     assert [p.name for p in tmp_path.iterdir()] == [keep.name]
+
+
+def test_another_kind_of_file_or_a_folder_is_named_as_such(tmp_path):
+    # NumPy reads a file that is no zip archive as a pickle, and used to make
+    # a PNG renamed .npz "damaged (... pickled data ...)".
+    path = tmp_path / "checkpoint.npz"
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(100))
+    with pytest.raises(
+        report.DamagedFileError, match="checkpoint.npz is not a file of save_arrays"
+    ):
+        report.load_arrays(path)
+    with pytest.raises(report.DamagedFileError, match="is a folder; allowed: a file"):
+        report.load_arrays(tmp_path)

@@ -232,13 +232,27 @@ def load_arrays(path: str | os.PathLike) -> tuple[dict[str, np.ndarray], dict[st
         FileNotFoundError: there is no such file.
     """
     path = Path(path)
+    if path.is_dir():
+        raise DamagedFileError(f"{path} is a folder; allowed: a file written by save_arrays")
     try:
-        with open(path, "rb") as f, np.load(f, allow_pickle=False) as data:
-            stored = {name: data[name] for name in data.files}
+        with open(path, "rb") as f:
+            # NumPy reads anything that is not a zip archive as a pickle, and
+            # then blames "pickled data" for what is simply another kind of file.
+            start = f.read(4)
+            if not start:
+                raise DamagedFileError(f"{path} is damaged (it is empty)")
+            if start != b"PK\x03\x04":
+                raise DamagedFileError(
+                    f"{path} is not a file of save_arrays: it is no .npz archive (another kind "
+                    "of file, or one damaged at its start)"
+                )
+            f.seek(0)
+            with np.load(f, allow_pickle=False) as data:
+                stored = {name: data[name] for name in data.files}
         meta_text = str(stored.pop(_META))
         checksum = str(stored.pop(_CHECKSUM))
         meta = json.loads(meta_text)
-    except FileNotFoundError:
+    except (FileNotFoundError, DamagedFileError):
         raise
     except Exception as err:  # zip, zlib, EOF, key and format errors alike
         raise DamagedFileError(f"{path} is damaged ({type(err).__name__}: {err})") from None
