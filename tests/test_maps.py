@@ -7,6 +7,7 @@ horizon, so the compiled programs are shared between tests (and with test_sweep.
 import json
 import math
 
+import jax
 import numpy as np
 import pytest
 from conftest import assert_metrics_of_runs, random_refs
@@ -47,6 +48,17 @@ def test_baselines_hold_their_goal_in_float32_too(refs):
     m32 = evaluate_poses(refs, params, controller="aicardi", chunk=16, x64=False)
     assert m64.success.all() and m32.success.all()
     np.testing.assert_allclose(m32.arrival, m64.arrival, atol=0.034)  # a sample at most
+
+
+def test_float64_runs_check_their_poses_in_float64_in_a_float32_session():
+    # 1e20 cm is beyond float32's position limit (1e18) but well within float64's.
+    refs = np.array([[1e20, 0.0, 0.0], [40.1, 0.0, 0.0]])
+    with jax.enable_x64(False):
+        m = evaluate_poses(refs, w.Gains(kr=60.0), steps=1)
+        with pytest.raises(ValueError, match=r"refs\[0\] = \[1e\+20, 0.0, 0.0\]"):
+            evaluate_poses(refs, w.Gains(kr=60.0), steps=1, x64=False)
+    # One period of a straight drive at k_r = 60 cm/s: exact in float64.
+    assert m.final_distance[1] == pytest.approx(40.1 - 60.0 * w.DEFAULT_DT, abs=1e-12)
 
 
 @pytest.mark.parametrize(

@@ -117,6 +117,10 @@ def test_draws_are_evaluation_poses_and_bounded_mismatch():
         ({"ref": np.zeros((4, 2))}, "disturbance.ref has shape (4, 2)"),
         # A heading noise of 1e15 rad is no angle, and would become NaN.
         ({"noise": np.full((4, 10, 3), 1e15)}, "heading noise <= 1e+12 rad"),
+        # A bool or a string is no latency or noise, though NumPy reads them as numbers.
+        ({"delay": True}, "disturbance.delay = True is not allowed"),
+        ({"noise": np.full((4, 10, 3), "1.0")}, "array of shape (4, 10, 3) and dtype <U3"),
+        ({"ref": np.full((4, 3), np.nan)}, "is not finite"),
     ],
 )
 def test_bad_disturbances_are_rejected(change, message):
@@ -162,6 +166,24 @@ def test_levels_may_be_arrays_and_keys_must_be_keys():
         studies.sample_disturbance(key, refs, -1)
     with pytest.raises(ValueError, match=r"radius_mismatch = 2.0 is not allowed"):
         studies.draw_disturbances(key, 2, 5, radius_mismatch=2.0)
+    # A level per run must have one value per reference; bools and NaN poses are refused.
+    for kwargs, message in (
+        ({"noise_xy": np.ones(2)}, r"noise_xy has shape \(2,\); allowed: a scalar or \(3,\)"),
+        ({"noise_theta": np.ones((3, 1))}, r"noise_theta has shape \(3, 1\)"),
+        ({"latency": True}, r"latency = True is not allowed; allowed: a number >= 0 and <= 1"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            studies.sample_disturbance(key, refs, 5, **kwargs)
+    with pytest.raises(ValueError, match=r"refs\[1\] = \[nan, 0.0, 0.0\] is not finite"):
+        studies.sample_disturbance(key, np.array([[10.0, 0, 0], [np.nan, 0, 0]]), 5)
+    with pytest.raises(ValueError, match=r"disturbance = tuple is not allowed"):
+        studies.perturbed_metrics(tuple(quiet(refs, 5)))
+
+
+def test_a_mismatch_float32_cannot_hold_is_refused_there():
+    spec = quiet(np.array([[10.0, 0.0, 0.0]]), 5)._replace(mismatch=np.full((1, 3), 1e-300))
+    with pytest.raises(ValueError, match=r"below float32's smallest normal number"):
+        studies.perturbed_metrics(spec, x64=False)
 
 
 # Each flag with a value it refuses: one line on stderr, exit status 2.
@@ -272,6 +294,16 @@ def test_standard_conditions_compare_gain_sets_on_the_same_draws():
         assert a["success"] == b["success"] and a["gains"] == "paper"
     nominal = rows[0]
     assert nominal["success"] == 1.0 and nominal["mean arrival s"] < 6.0
+
+
+def test_standard_conditions_keep_float64_poses_in_a_float32_session():
+    refs = draw_refs(8, n=2) + np.array([[1e20, 0.0, 0.0], [0.0, 0.0, 0.0]])  # beyond float32's
+    with jax.enable_x64(False):
+        rows = studies.standard_conditions({"a": w.Gains(kr=60.0)}, refs, jax.random.PRNGKey(3))
+    assert [r["runs"] for r in rows] == [2] * len(studies.STANDARD_CONDITIONS)
+    assert rows[0]["condition"] == "nominal" and rows[0]["success"] == 0.5
+    # The far pose is not reached in 6 s: its distance, 1e20 cm, is in every mean.
+    assert all(r["mean final distance cm"] == pytest.approx(5e19) for r in rows)
 
 
 def test_a_disturbed_run_that_leaves_the_range_is_an_error_not_nans():

@@ -95,7 +95,16 @@ def real_array(name: str, value: Any, allowed: str) -> np.ndarray:
             raise TypeError(value)
         return np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} = {value!r} is not allowed; allowed: {allowed}") from None
+        shown = _described(value)
+        raise ValueError(f"{name} = {shown} is not allowed; allowed: {allowed}") from None
+
+
+def _described(value: Any) -> str:
+    """Return ``repr(value)``, or its type, shape and dtype if it is a large array."""
+    shape, dtype = getattr(value, "shape", None), getattr(value, "dtype", None)
+    if shape is not None and dtype is not None and int(np.prod(shape)) > 6:
+        return f"{type(value).__name__} of shape {tuple(shape)} and dtype {dtype}"
+    return repr(value)
 
 
 def _holds_bool(value: Any) -> bool:

@@ -204,9 +204,10 @@ def evaluate_poses(
     Raises:
         ValueError: for misshapen or non-finite poses and bad options.
     """
-    refs_host = np.asarray(checks.as_poses("refs", refs, batch=True))
     chunk = checks.check_int("chunk", chunk)
     x64, progress = checks.check_bool("x64", x64), checks.check_bool("progress", progress)
+    with jax.enable_x64(x64):  # checked, and kept for the distance below, in the run's dtype
+        refs_host = np.asarray(checks.as_poses("refs", refs, batch=True))
     cache = None if cache is None else checks.check_path("cache", cache)
     if np.ndim(init) != 1:
         raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,), shared by every run")

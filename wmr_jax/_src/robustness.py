@@ -273,7 +273,15 @@ def perturbed_metrics(
 
 def _checked_disturbance(disturbance: Disturbance) -> tuple[np.ndarray, ...]:
     """Return the fields of ``disturbance`` as float arrays after checking them."""
-    refs, noise, mismatch, delay = (np.asarray(f, dtype=float) for f in disturbance)
+    if not isinstance(disturbance, Disturbance):
+        raise ValueError(
+            f"disturbance = {type(disturbance).__name__} is not allowed; "
+            "allowed: a Disturbance (sample_disturbance returns one)"
+        )
+    refs, noise, mismatch, delay = (
+        checks.real_array(f"disturbance.{field}", value, "real numbers (no bools or strings)")
+        for field, value in zip(Disturbance._fields, disturbance, strict=True)
+    )
     if refs.ndim != 2 or refs.shape[1] != 3:
         raise ValueError(f"disturbance.ref has shape {refs.shape}; allowed: (N, 3)")
     n = refs.shape[0]
@@ -292,6 +300,8 @@ def _checked_disturbance(disturbance: Disturbance) -> tuple[np.ndarray, ...]:
     checks.require(
         "disturbance.mismatch", mismatch, np.isfinite(mismatch) & (mismatch > 0), "finite, > 0"
     )
+    checks.require_representable("disturbance.mismatch", mismatch)
+    checks.require_representable("disturbance.noise", noise, tiny_ok=True)
     if delay.shape not in ((), (n,)) or not np.all((delay == 0.0) | (delay == 1.0)):
         raise ValueError(
             f"disturbance.delay = {delay!r} is not allowed; allowed: 0.0 or 1.0, or ({n},) of them"
@@ -377,19 +387,28 @@ def disturbed_rollout(
 _LEVEL_LIMITS = {"noise_xy": 1e6, "noise_theta": 2 * math.pi, "latency": 1.0}
 
 
-def _check_draw(key: Any, steps: Any, **levels: Any) -> None:
-    """Check a draw's key, length and levels where they are concrete (traced ones pass)."""
+def _check_draw(key: Any, steps: Any, n: int | None, **levels: Any) -> None:
+    """Check a draw's key, length and levels where they are concrete (traced ones pass).
+
+    ``n`` is the number of runs (``None`` if unknown): a level is a scalar or ``(n,)``.
+    """
     checks.check_key("key", key)
     checks.check_int("steps", steps)
     for name, value in levels.items():
         if checks.is_traced(value):
             continue
-        arr = checks.real_array(name, value, "a number")
         high = _LEVEL_LIMITS.get(name, 1.0)
         closed_high = name in _LEVEL_LIMITS
-        ok = np.isfinite(arr) & (arr >= 0) & ((arr <= high) if closed_high else (arr < high))
         upper = f"<= {high:g}" if closed_high else f"< {high:g}"
-        checks.require(name, arr, ok, f"a number >= 0 and {upper}")
+        allowed = f"a number >= 0 and {upper}"
+        arr = checks.real_array(name, value, allowed)
+        if arr.ndim > 1 or (arr.ndim == 1 and n is not None and arr.shape != (n,)):
+            per_run = f"({n},)" if n is not None else "(N,)"
+            raise ValueError(
+                f"{name} has shape {arr.shape}; allowed: a scalar or {per_run}, one per run"
+            )
+        ok = np.isfinite(arr) & (arr >= 0) & ((arr <= high) if closed_high else (arr < high))
+        checks.require(name, arr, ok, allowed)
 
 
 def sample_disturbance(
@@ -425,17 +444,18 @@ def sample_disturbance(
         drawn independently at every sample, ``mismatch (N, 3)`` and
         ``delay (N,)`` in {0, 1}.
     """
+    if not checks.is_traced(refs):
+        refs = checks.as_poses("refs", refs, batch=True)
     _check_draw(
         key,
         steps,
+        np.shape(refs)[0],
         noise_xy=noise_xy,
         noise_theta=noise_theta,
         latency=latency,
         radius_mismatch=radius_mismatch,
         mass_mismatch=mass_mismatch,
     )
-    if not checks.is_traced(refs) and (np.ndim(refs) != 2 or np.shape(refs)[1] != 3):
-        raise ValueError(f"refs has shape {np.shape(refs)}; allowed: (N, 3)")
     refs = jnp.asarray(refs)
     n, dtype = refs.shape[0], refs.dtype
     k_noise, k_mis, k_delay = jax.random.split(key, 3)
@@ -475,7 +495,7 @@ def draw_disturbances(
         (distance 5–80 cm, any bearing, any heading), drawn by ``sample_poses``.
     """
     n = checks.check_int("n", n)
-    _check_draw(key, steps, radius_mismatch=radius_mismatch, mass_mismatch=mass_mismatch)
+    _check_draw(key, steps, n, radius_mismatch=radius_mismatch, mass_mismatch=mass_mismatch)
     k_ref, k_rest = jax.random.split(key)
     refs = sample_poses(k_ref, n, dtype=jnp.float32)
     d = sample_disturbance(
@@ -693,9 +713,12 @@ def standard_conditions(
         ``mean arrival s`` and ``median arrival s`` of the successful runs
         (``inf`` if none), ``mean final distance cm``, ``runs``.
     """
-    refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
+    with jax.enable_x64(checks.check_bool("x64", x64)):  # not rounded to float32 first
+        refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
     steps = horizon_steps(dt)
-    unit = sample_disturbance(key, refs, steps, noise_xy=1.0, noise_theta=1.0)
+    # The unit noise depends on the key and the number of runs only (drawn in
+    # the session's dtype, as before): the poses themselves stay in float64.
+    unit = sample_disturbance(key, np.zeros_like(refs), steps, noise_xy=1.0, noise_theta=1.0)
     noise = np.asarray(unit.noise, dtype=float)
     ones = np.ones((len(refs), 3))
     rows = []
