@@ -181,6 +181,15 @@ def test_shard_validates_its_input():
             w.unpad(np.arange(8), n)
     rows = [[30.0, 30.0, 0.0], [20.0, -10.0, 1.0]]
     assert w.shard(rows, devices=jax.devices()[:1]).n == 2  # a list of rows is an array
+    # A list of arrays could be rows or a pytree of batches: it is refused, not guessed.
+    with pytest.raises(ValueError, match="a list of 2 arrays; allowed: one array of rows"):
+        w.shard([np.zeros(3), np.zeros(3)])
+    with pytest.raises(ValueError, match="rows of different lengths"):
+        w.shard([[1.0, 2.0, 3.0], [1.0, 2.0]])
+    with pytest.raises(ValueError, match=r"\[1, 2\] = nan\) is not allowed; allowed: finite"):
+        w.shard([[1.0, 2.0, 3.0], [1.0, 2.0, np.nan]])
+    with pytest.raises(ValueError, match="result has no rows"):
+        w.unpad(np.zeros((0, 3)), 1)
     with pytest.raises(ValueError, match="allowed: JAX devices"):
         w.shard(np.zeros((4, 3)), devices=[0])
     with pytest.raises(ValueError, match="names a device twice"):

@@ -162,8 +162,8 @@ def shard(batch: Any, devices: Sequence[Any] | None = None) -> ShardedBatch:
     """
     sharding = batch_sharding(devices)
     count = len(sharding.mesh.devices.flat)
-    if isinstance(batch, list) and all(isinstance(row, (list, tuple, float, int)) for row in batch):
-        batch = np.asarray(batch)  # a nested list of numbers works as an array
+    if isinstance(batch, list):
+        batch = _rows("batch", batch)
     leaves = jax.tree.leaves(batch)
     if not leaves:
         raise ValueError("batch is empty; allowed: an array or a pytree of arrays")
@@ -181,6 +181,7 @@ def shard(batch: Any, devices: Sequence[Any] | None = None) -> ShardedBatch:
         if host.dtype.kind not in "biufc":
             raise ValueError(f"batch holds {host.dtype} values; allowed: numbers")
         if host.dtype.kind == "f" and not isinstance(leaf, jax.Array):
+            checks.require("batch", host, np.isfinite(host), "finite numbers")
             checks.require_representable("batch", host, tiny_ok=True)
         if padded > n:
             host = np.concatenate([host, np.repeat(host[-1:], padded - n, axis=0)])
@@ -191,6 +192,25 @@ def shard(batch: Any, devices: Sequence[Any] | None = None) -> ShardedBatch:
         return jax.device_put(host, sharding)
 
     return ShardedBatch(jax.tree.map(place, batch), n)
+
+
+def _rows(name: str, batch: list) -> np.ndarray:
+    """Return a list of rows as one array; a list holding arrays is ambiguous and refused.
+
+    ``[refs, init]`` could be a pytree of two batches or two rows of one:
+    pytrees of batches are tuples, dicts or dataclasses here, never lists.
+    """
+    if any(isinstance(row, (np.ndarray, jax.Array)) for row in batch):
+        raise ValueError(
+            f"{name} is a list of {len(batch)} arrays; allowed: one array of rows "
+            "(np.stack them), or a tuple or dict of batches"
+        )
+    try:
+        return np.asarray(batch)
+    except ValueError:
+        raise ValueError(
+            f"{name} is a list of rows of different lengths; allowed: rows of one shape"
+        ) from None
 
 
 def unpad(result: Any, n: int) -> Any:
@@ -205,8 +225,10 @@ def unpad(result: Any, n: int) -> Any:
             f"result = {result!r:.80} is not allowed; allowed: arrays (or a pytree of them) "
             "with a leading batch axis, as shard's batch gave"
         )
-    longest = min(np.shape(leaf)[0] for leaf in leaves)
-    n = check_int("n", n, 1, max(longest, 1))
+    shortest = min(np.shape(leaf)[0] for leaf in leaves)
+    if shortest == 0:
+        raise ValueError("result has no rows (a leading length of 0); allowed: shard's output")
+    n = check_int("n", n, 1, shortest)
     return jax.tree.map(lambda leaf: leaf[:n], result)
 
 
