@@ -7,6 +7,7 @@ import pytest
 from conftest import random_refs, run_metrics
 
 import wmr_jax as w
+from wmr_jax import studies
 
 DT = 0.1
 REF = np.array([10.0, 0.0, 0.0])
@@ -110,3 +111,25 @@ def test_streamed_metrics_equal_the_trajectory_metrics():
     np.testing.assert_array_equal(streamed["zigzags"], want["zigzag"])
     peak = np.abs(np.asarray(traj.wheel_speeds)).max(axis=(1, 2))
     np.testing.assert_allclose(streamed["peak_wheel_speed"], peak, rtol=1e-12)
+
+
+def test_run_table_rows_are_each_runs_metrics():
+    a = run_through([[0, 0, 0], at(), at()], v=[200.0, 0.0])
+    b = run_through([[0, 0, 0], at(5.0), at(0.5)], omega=[0.0, 100.0])
+    batch = w.Trajectory(*(np.stack(pair) for pair in zip(a, b, strict=True)))
+    refs = np.stack([REF, REF])
+    rows = studies.run_table(batch, refs, dt=DT, robot=w.Robot(half_track=1.85))
+    assert [r["arrival_s"] for r in rows] == [DT, 2 * DT]
+    assert [r["path_cm"] for r in rows] == [10.0, 19.5]  # 15 cm out, 4.5 cm back
+    assert [r["peak_wheel_cm_s"] for r in rows] == [200.0, 185.0]
+    assert [r["saturated_fraction"] for r in rows] == [0.5, 0.5]  # one period of two > 125 cm/s
+    assert [r["final_distance_cm"] for r in rows] == [0.0, 0.5]
+    # A reference per run, one robot: a shorter list of references is no longer broadcast.
+    for args, kwargs, message in (
+        ((batch, refs[:1]), {}, r"refs has shape \(1, 3\); allowed: \(2, 3\), one per run"),
+        ((batch, refs), {"robot": w.Robot(v_max=-1.0)}, r"robot.v_max = -1.0"),
+        ((batch, refs), {"robot": "x"}, r"robot is a str"),
+        ((a, REF), {}, r"poses of shape \(3, 3\) is not allowed; allowed: a Trajectory of"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            studies.run_table(*args, dt=DT, **kwargs)

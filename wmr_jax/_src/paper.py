@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 
 from wmr_jax._src import metrics
-from wmr_jax._src.checks import check_int, real_array, require
+from wmr_jax._src.checks import as_pose_array, check_int, real_array, require
 from wmr_jax._src.controllers.shim_sung import wheel_speeds
-from wmr_jax._src.params import Gains, Robot, WheelSpeedWarning
+from wmr_jax._src.params import Gains, Robot, WheelSpeedWarning, validate_one_robot
 from wmr_jax._src.poses import paper_refs
 from wmr_jax._src.rollout import DEFAULT_DT, Trajectory, batch_rollout
 
@@ -55,7 +55,18 @@ def run_table(
         commanded rim speed exceeds ``V_max``), ``zigzag`` and
         ``final_distance_cm``.
     """
-    robot = Robot() if robot is None else robot
+    robot = validate_one_robot(robot, "its V_max")
+    if not isinstance(traj, Trajectory) or np.ndim(traj.poses) != 3:
+        shape = np.shape(getattr(traj, "poses", None))
+        raise ValueError(
+            f"traj = {type(traj).__name__} with poses of shape {shape} is not allowed; "
+            "allowed: a Trajectory of batch_rollout, poses (N, steps + 1, 3)"
+        )
+    refs = np.asarray(as_pose_array("refs", refs), dtype=float)
+    if refs.shape != (len(traj.poses), 3):
+        raise ValueError(
+            f"refs has shape {refs.shape}; allowed: ({len(traj.poses)}, 3), one per run of traj"
+        )
     times = np.asarray(metrics.arrival_time(traj, refs, dt=dt))
     lengths = np.asarray(metrics.path_length(traj))
     zigzag = np.asarray(metrics.zigzag_count(traj))
