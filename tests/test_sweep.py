@@ -174,6 +174,11 @@ def test_bad_inputs_are_named_before_tracing():
         w.sweep(refs, on_chunk=5)
     with pytest.raises(ValueError, match="allowed: JAX devices"):
         w.sweep(refs, devices=[0])
+    # NumPy would read True as 1.0 and fail on ragged rows with a message of its own.
+    with pytest.raises(ValueError, match=r"init = \[0.0, 0.0, True\] is not allowed"):
+        w.sweep(refs, init=[0.0, 0.0, True])
+    with pytest.raises(ValueError, match=r"refs = \[\[1.0, 2.0, 3.0\], \[1.0, 2.0\]\] is not"):
+        w.sweep([[1.0, 2.0, 3.0], [1.0, 2.0]])
 
 
 def test_every_run_is_checked_as_final_poses_checks_it():

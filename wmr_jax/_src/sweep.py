@@ -204,8 +204,8 @@ def _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, device
 
     Every message then names the bad argument or field before anything is traced.
     """
-    if isinstance(refs, (list, tuple)):
-        refs = np.asarray(refs)  # lists work as arrays (a memmap stays as it is)
+    if isinstance(refs, (list, tuple)):  # lists work as arrays (a memmap stays as it is)
+        refs = checks.real_array("refs", refs, "rows of real numbers [x cm, y cm, θ rad]")
     n = _pose_count(refs)
     chunk_size = checks.check_int("chunk_size", chunk_size)
     devices = tuple(checked_devices(jax.local_devices() if devices is None else devices))
@@ -214,7 +214,8 @@ def _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, device
     if n > 1:
         gains = _per_run_or_shared(gains, n, "gains.")
         robot = _per_run_or_shared(robot, n, "robot.")
-    init = np.asarray(init, dtype=float) if not isinstance(init, jax.Array) else init
+    if not isinstance(init, jax.Array):
+        init = checks.real_array("init", init, "real numbers [x cm, y cm, θ rad], (3,) or (N, 3)")
     batched_init = np.ndim(init) == 2
     if batched_init and np.shape(init)[0] != n:
         raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,) or ({n}, 3)")
