@@ -109,6 +109,31 @@ def test_bad_schedules_are_refused_in_one_line():
         bad = tuning.ScheduleParams(k_theta=(10.0, 10.0, -1.0) + (10.0,) * 7)
         w.rollout([10.0, 0.0, 0.0], bad, controller=SCHEDULE)
     assert math.isclose(tuning.knot_radii()[-1], 81.0)
+    # Strings and bools are no gains (NumPy reads "60" and True as numbers);
+    # the shape gains are named as the schedule's fields, not as Gains'.
+    params = tuning.ScheduleParams()
+    for change, message in (
+        ({"kr": ("60",) * 10}, r"params.kr\[0\] = '60' is not allowed"),
+        ({"kr": (True,) + (60.0,) * 9}, r"params.kr\[0\] = True is not allowed"),
+        ({"v_max": True}, r"params.v_max = True is not allowed; allowed: a finite v_max > 0"),
+        ({"phi_m": 2.0}, r"params.phi_m = 2.0 is not allowed"),
+        ({"k_turn": (1.0,) * 2000}, r"params.k_turn has 2000 knots; allowed: 2 to 1000"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            w.final_poses([[10.0, 0.0, 0.0]], params.replace(**change), controller=SCHEDULE)
+    for knots in (1, "3", 10**12):
+        with pytest.raises(ValueError, match=f"knots = {knots!r} is not allowed"):
+            tuning.ScheduleParams.from_gains(w.Gains(), knots=knots)
+
+
+def test_a_schedule_float32_cannot_hold_is_refused_there():
+    params = tuning.ScheduleParams()
+    with jax.enable_x64(False):
+        with pytest.raises(ValueError, match=r"params.kr\[1\] = 1e-50 is below float32's"):
+            kr = (60.0, 1e-50) + (60.0,) * 8
+            w.final_poses([[10.0, 0.0, 0.0]], params.replace(kr=kr), controller=SCHEDULE)
+        with pytest.raises(ValueError, match=r"params.v_max = 1e\+39 is beyond float32"):
+            w.final_poses([[10.0, 0.0, 0.0]], params.replace(v_max=1e39), controller=SCHEDULE)
 
 
 def test_a_schedule_the_sampled_law_cannot_settle_with_warns():

@@ -125,32 +125,35 @@ class SamplingWarning(UserWarning):
     """Gains the sampled law cannot follow: ``k_θ dt ≥ 2`` or ``k_r π dt / (2 R_m) ≥ 2``."""
 
 
-def validate_gains(gains: Gains) -> Gains:
+def validate_gains(gains: Gains, prefix: str = "gains") -> Gains:
     """Check ``gains`` against the ranges of docs/model.md §3; return it unchanged.
+
+    ``prefix`` names the argument in messages (``"gains"``).
 
     Raises:
         ValueError: naming the field, its value and the allowed range.
     """
-    g = field_values(gains, Gains, "gains")
+    g = field_values(gains, Gains, prefix)
     positive = (("kr", "cm/s"), ("k_theta", "rad/s"), ("r_m", "cm"), ("r_a", "cm"), ("r_e", "cm"))
     for name, unit in positive:
         if g[name] is not None:
-            require(f"gains.{name}", g[name], g[name] > 0, f"{name} > 0 {unit}")
+            require(f"{prefix}.{name}", g[name], g[name] > 0, f"{name} > 0 {unit}")
     if g["phi_m"] is not None:
         ok = (g["phi_m"] > 0) & (g["phi_m"] < math.pi / 2)
-        require("gains.phi_m", g["phi_m"], ok, "0 < phi_m < pi/2 rad")
+        require(f"{prefix}.phi_m", g["phi_m"], ok, "0 < phi_m < pi/2 rad")
     if g["alpha"] is not None:
         ok = (g["alpha"] > 0) & (g["alpha"] < 0.5)
-        require("gains.alpha", g["alpha"], ok, "0 < alpha < 0.5")
+        require(f"{prefix}.alpha", g["alpha"], ok, "0 < alpha < 0.5")
     if g["r_e"] is not None and g["r_a"] is not None:
         require(
-            "gains.r_e",
+            f"{prefix}.r_e",
             g["r_e"],
             g["r_e"] <= g["r_a"],
-            f"0 < r_e <= r_a (gains.r_a = {g['r_a']})",
+            f"0 < r_e <= r_a ({prefix}.r_a = {g['r_a']})",
         )
     if g["r_a"] is not None and g["r_m"] is not None:
-        require("gains.r_a", g["r_a"], g["r_a"] <= g["r_m"], f"r_a <= r_m (gains.r_m = {g['r_m']})")
+        allowed = f"r_a <= r_m ({prefix}.r_m = {g['r_m']})"
+        require(f"{prefix}.r_a", g["r_a"], g["r_a"] <= g["r_m"], allowed)
     return gains
 
 

@@ -34,7 +34,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks import Parameters, check_int, require
+from wmr_jax._src.checks import (
+    Parameters,
+    check_int,
+    real_array,
+    require,
+    require_representable,
+)
 from wmr_jax._src.controllers.base import Controller, register_controller
 from wmr_jax._src.controllers.shim_sung import (
     PolarError,
@@ -56,6 +62,7 @@ __all__ = [
 ]
 
 KNOTS = 10  # knots per table by default
+MAX_KNOTS = 1000  # each knot is a term of the compiled law
 R_KNOT = 81.0  # cm, the last knot: just beyond the 80 cm of the evaluation set (§6)
 TABLES = ("kr", "k_theta", "k_turn")
 SHAPE_FIELDS = ("phi_m", "r_m", "r_a", "r_e", "alpha")
@@ -99,6 +106,11 @@ class ScheduleParams(Parameters):
         cls, gains: Gains, *, knots: int = KNOTS, robot: Robot | None = None
     ) -> ScheduleParams:
         """Constant tables equal to ``gains`` (``k_turn = k_θ``): the fixed-gain law."""
+        if not isinstance(gains, Gains):
+            raise ValueError(f"gains is a {type(gains).__name__}; allowed: a wmr_jax.Gains")
+        if not isinstance(robot, (Robot, type(None))):
+            raise ValueError(f"robot is a {type(robot).__name__}; allowed: a wmr_jax.Robot")
+        knots = check_int("knots", knots, 2, MAX_KNOTS)
         robot = Robot() if robot is None else robot
         return cls(
             kr=(gains.kr,) * knots,
@@ -112,7 +124,7 @@ class ScheduleParams(Parameters):
 
 def knot_radii(knots: int = KNOTS) -> np.ndarray:
     """Return the ``r_e`` of each knot, cm: ``R_KNOT (k / (K − 1))²``, ``k = 0 … K−1``."""
-    knots = check_int("knots", knots, 2)
+    knots = check_int("knots", knots, 2, MAX_KNOTS)
     return R_KNOT * (np.arange(knots) / (knots - 1)) ** 2
 
 
@@ -186,23 +198,35 @@ def validate_schedule(params: ScheduleParams) -> ScheduleParams:
                 f"params.{name} = {table!r} is not allowed; allowed: a tuple of >= 2 knots"
             )
         sizes.add(len(table))
+        if len(table) > MAX_KNOTS:
+            raise ValueError(
+                f"params.{name} has {len(table)} knots; allowed: 2 to {MAX_KNOTS} "
+                "(the table is unrolled into the compiled law)"
+            )
         for k, value in enumerate(table):
-            if isinstance(value, jax.core.Tracer):
-                continue
-            arr = np.asarray(value, dtype=float)
-            require(f"params.{name}[{k}]", arr, np.isfinite(arr) & (arr > 0), "a finite gain > 0")
+            _check_positive(f"params.{name}[{k}]", value, "a finite gain > 0")
     if len(sizes) > 1:
         raise ValueError(
             f"the tables have {sorted(sizes)} knots; allowed: kr, k_theta, k_turn of one length"
         )
     shape = Gains(kr=1.0, k_theta=1.0, **{name: getattr(params, name) for name in SHAPE_FIELDS})
-    validate_gains(shape)
-    for name in ("v_max", "half_track"):
-        value = getattr(params, name)
-        if not isinstance(value, jax.core.Tracer):
-            arr = np.asarray(value, dtype=float)
-            require(f"params.{name}", arr, np.isfinite(arr) & (arr > 0), f"{name} > 0")
+    validate_gains(shape, prefix="params")
+    for name, unit in (("v_max", "cm/s"), ("half_track", "cm")):
+        _check_positive(f"params.{name}", getattr(params, name), f"a finite {name} > 0, {unit}")
     return params
+
+
+def _check_positive(name: str, value: Any, allowed: str) -> None:
+    """Check a concrete knot or limit: real, finite, > 0 and within the compute dtype."""
+    if isinstance(value, jax.core.Tracer):
+        return
+    if isinstance(value, (str, bytes)):  # NumPy would read "60" as 60.0
+        raise ValueError(f"{name} = {value!r} is not allowed; allowed: {allowed}")
+    arr = real_array(name, value, allowed)
+    if arr.ndim > 1:
+        raise ValueError(f"{name} has shape {arr.shape}; allowed: a scalar or one batch axis")
+    require(name, arr, np.isfinite(arr) & (arr > 0), allowed)
+    require_representable(name, arr)
 
 
 def _check_robot(params: ScheduleParams, robot: Robot) -> None:
