@@ -244,6 +244,15 @@ def test_a_new_controller_needs_no_special_case():
         w.register_controller(dataclasses.replace(custom, name="test-bad", command=42))
     with pytest.raises(ValueError, match="allowed: a wmr_jax.Controller"):
         w.register_controller(lambda pose, ref, params: (0.0, 0.0))
+    # Flags are True or False: "no" is a non-empty string, which Python reads as true.
+    with pytest.raises(ValueError, match="replace = 'no' is not allowed; allowed: True or False"):
+        w.register_controller(dataclasses.replace(custom, name="shim-sung"), replace="no")
+    with pytest.raises(ValueError, match="controller.smooth = 'no' is not allowed"):
+        dataclasses.replace(custom, smooth="no")
+    with pytest.raises(ValueError, match="backward = 'no' is not allowed"):
+        baselines.driving_error(np.zeros(3), refs[0], backward="no")
+    with pytest.raises(ValueError, match="warn = 'no' is not allowed"):
+        w.check_feasible(w.Gains(kr=200.0), warn="no")
 
 
 @pytest.mark.parametrize("law", ["aicardi_control", "astolfi_control"])

@@ -22,6 +22,7 @@ import numpy as np
 
 from wmr_jax._src.checks import (
     Parameters,
+    check_bool,
     check_dt,
     field_values,
     require,
@@ -224,6 +225,7 @@ def check_feasible(
         warn: if true, emit a ``WheelSpeedWarning`` when the condition fails.
         stacklevel: passed to ``warnings.warn`` (which caller the warning names).
     """
+    warn = check_bool("warn", warn)
     robot = validate_robot(Robot() if robot is None else robot)
     gains = validate_gains(gains)
     require_one_batch_size(

@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks import as_float_tree, as_pose_array, is_traced
+from wmr_jax._src.checks import as_float_tree, as_pose_array, check_bool, is_traced
 
 __all__ = [
     "Controller",
@@ -64,6 +64,9 @@ class Controller:
     check_robot: Callable[[Any, Any], None] | None = None
     check_sampling: Callable[[Any, Any], None] | None = None
 
+    def __post_init__(self) -> None:
+        check_bool("controller.smooth", self.smooth)  # "no" would be true
+
     def default_params(self) -> Any:
         """Return the controller's default parameters."""
         return self.params_type()
@@ -101,6 +104,7 @@ def register_controller(controller: Controller, *, replace: bool = False) -> Con
         raise ValueError(
             f"controller is a {type(controller).__name__}; allowed: a wmr_jax.Controller"
         )
+    replace = check_bool("replace", replace)
     name = controller.name
     if not isinstance(name, str) or not _NAME.fullmatch(name):
         raise ValueError(

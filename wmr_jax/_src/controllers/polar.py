@@ -36,7 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks import field_values
+from wmr_jax._src.checks import check_bool, field_values
 from wmr_jax._src.controllers import shim_sung as law
 from wmr_jax._src.controllers.base import check_law_inputs
 
@@ -65,6 +65,7 @@ def driving_error(
         ``θ_A ∈ [−π, π)``; ``direction`` ``+1`` forwards or ``−1`` backwards.
         Each has the broadcast leading shape of ``pose`` and ``ref``.
     """
+    backward = check_bool("backward", backward)  # static: "no" would drive backwards
     err = law.polar_error(pose, ref, frame=frame)
     phi, theta_e = law.error_angles(err)
     if backward:
