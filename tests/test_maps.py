@@ -172,3 +172,10 @@ def test_bad_inputs():
         map_study(10, controller_names=["shim-sung", "typo"])
     with pytest.raises(ValueError, match=r"controller_names = \[\] is not allowed"):
         map_study(10, controller_names=[])
+
+
+def test_a_single_heading_may_be_a_number():
+    # pose_grid takes 90.0 as (90.0,); the study's summary has to as well.
+    study = map_study(10, controller_names=["shim-sung"], headings_deg=90.0, chunk=16)
+    assert study.summary["headings_deg"] == [90.0]
+    np.testing.assert_array_equal(study.grid.refs[:, 2], math.pi / 2)

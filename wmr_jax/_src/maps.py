@@ -378,7 +378,8 @@ def map_study(
     summary = {
         "poses": int(len(grid.refs)),
         "grid_side": int(len(grid.xs)),
-        "headings_deg": [float(h) for h in headings_deg],
+        # As given (pose_grid checked them: a number or a nested list works too).
+        "headings_deg": np.asarray(headings_deg, dtype=float).reshape(-1).tolist(),
         "velocity": velocity,
         "dtype": "float64" if x64 else "float32",
         "horizon_s": HORIZON_S,
