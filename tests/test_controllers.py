@@ -116,6 +116,22 @@ def test_laws_equal_their_published_coordinates():
 @pytest.mark.parametrize(
     ("command", "gains"),
     [
+        (w.control, w.Gains(kr=np.array([60.0, 70.0, 80.0]))),
+        (w.control_diagnostics, w.Gains(kr=np.array([60.0, 70.0, 80.0]))),
+        (baselines.aicardi_control, AicardiGains(gamma=np.array([1.0, 2.0, 3.0]))),
+    ],
+)
+def test_gains_for_another_number_of_poses_are_named(command, gains):
+    poses, refs = np.zeros((2, 3)), np.full((2, 3), 10.0)
+    with pytest.raises(ValueError, match=r"gains have batch shape \(3,\) and the poses \(2,\)"):
+        command(poses, refs, gains)
+    one = jax.tree.map(lambda leaf: leaf[:1] if np.ndim(leaf) else leaf, gains)
+    assert np.shape(command(poses, refs, one)[0]) == (2,)  # one gain for all poses broadcasts
+
+
+@pytest.mark.parametrize(
+    ("command", "gains"),
+    [
         (baselines.aicardi_control, AicardiGains()),
         (baselines.aicardi_control, AicardiGains(backward=True)),
         (baselines.astolfi_control, AstolfiGains()),

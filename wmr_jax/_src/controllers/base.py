@@ -201,4 +201,15 @@ def check_law_inputs(
         )
     if is_traced(params):
         return pose, ref, params
-    return pose, ref, as_float_tree(validate(params))
+    params = as_float_tree(validate(params))
+    batch = np.broadcast_shapes(np.shape(pose)[:-1], np.shape(ref)[:-1])
+    gain_shapes = {np.shape(leaf) for leaf in jax.tree.leaves(params)}
+    try:
+        np.broadcast_shapes(batch, *gain_shapes)
+    except ValueError:
+        shown = max(gain_shapes, key=len)
+        raise ValueError(
+            f"gains have batch shape {shown} and the poses {batch}; "
+            "allowed: shapes that broadcast (one gain per pose, or one for all)"
+        ) from None
+    return pose, ref, params

@@ -38,13 +38,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from wmr_jax._src.checks import (
-    as_float_tree,
     as_pose_array,
     check_temperature,
     is_traced,
     require,
 )
-from wmr_jax._src.controllers.base import Controller, register_controller
+from wmr_jax._src.controllers.base import Controller, check_law_inputs, register_controller
 from wmr_jax._src.dynamics import sin_cos, sin_small
 from wmr_jax._src.params import Gains, Robot, check_feasible, check_sampling, validate_gains
 
@@ -415,8 +414,7 @@ def _checked(pose: Any, ref: Any, gains: Gains) -> tuple[Any, Any, Gains]:
     """Check concrete arguments of the public law functions (tracers pass)."""
     if is_traced((pose, ref, gains)):
         return pose, ref, gains
-    pose, ref = _checked_pair(pose, ref)
-    return pose, ref, as_float_tree(validate_gains(gains))
+    return check_law_inputs(pose, ref, gains, Gains, validate_gains)
 
 
 def control_diagnostics(pose: jax.Array, ref: jax.Array, gains: Gains) -> Diagnostics:
