@@ -23,6 +23,11 @@ REF = [30.0, 30.0, 0.0]
 STEPS = 60
 
 
+def error():
+    """The error coordinates of the origin with respect to ``REF``."""
+    return w.polar_error([0.0, 0.0, 0.0], REF)
+
+
 # ---------------------------------------------------------------- the dtype's range
 
 
@@ -84,8 +89,15 @@ def test_gains_the_sampled_law_cannot_follow_warn():
         w.rollout(REF, dt=100.0, steps=STEPS)
     # The paper's gains and the tuned ones of the README are well inside.
     assert w.check_sampling(w.Gains(), 0.033) and w.check_sampling(w.Gains(kr=60.0), 0.033)
-    heading, distance = w.sampling_margins(w.Gains(kr=89.7, r_m=2.79), 0.033)
+    heading, distance = w.sampling_margins(w.Gains(kr=89.7, r_m=2.79, r_a=2.79), 0.033)
     assert float(heading) < 2 and 1.6 < float(distance) < 2
+    # Called with values, the helpers check them as a rollout would.
+    with pytest.raises(ValueError, match=r"gains.r_a = 20.0 is not allowed; allowed: r_a <= r_m"):
+        w.sampling_margins(w.Gains(r_m=2.79), 0.033)
+    with pytest.raises(ValueError, match=r"dt = -0.1 is not allowed"):
+        w.sampling_margins(w.Gains(), -0.1)
+    with pytest.raises(ValueError, match=r"robot.half_track = -2.0 is not allowed"):
+        w.wheel_speed_bound(w.Gains(), w.Robot(half_track=-2.0))
 
 
 @pytest.mark.parametrize("dt", [1e-46, 1e39])
@@ -349,6 +361,20 @@ def test_com_offset_is_allowed_up_to_the_body_edge():
         (
             lambda: w.region_label(w.polar_error([0.0, 0.0, 0.0], REF), w.Gains(kr=-1.0)),
             "gains.kr = -1.0",
+        ),
+        # A NaN distance is not "beyond R_e": it would be labelled Region 3.
+        (
+            lambda: w.region_label(error()._replace(r=np.float64(np.nan)), w.Gains()),
+            "err.r = nan is not allowed",
+        ),
+        (lambda: w.region_label(error(), None), "gains is a NoneType; allowed: a wmr_jax.Gains"),
+        (lambda: w.lyapunov(np.zeros(5)), "err is a ndarray; allowed: a PolarError"),
+        (lambda: w.lyapunov(error()._replace(r=-1.0)), "err.r = -1.0 is not allowed"),
+        (lambda: w.wheel_speeds(1.0, 2.0, None), "robot is a NoneType"),
+        (lambda: w.wheel_speeds(np.nan, 2.0, w.Robot()), "v = nan is not allowed"),
+        (
+            lambda: w.wheel_speeds(1.0, 2.0, w.Robot(half_track=-1.0)),
+            "robot.half_track = -1.0 is not allowed",
         ),
     ],
 )

@@ -121,6 +121,9 @@ def test_bad_schedules_are_refused_in_one_line():
     ):
         with pytest.raises(ValueError, match=message):
             w.final_poses([[10.0, 0.0, 0.0]], params.replace(**change), controller=SCHEDULE)
+    err = w.polar_error([0.0, 0.0, 0.0], [10.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match=r"params.v_max = -1.0 is not allowed"):
+        w.controllers.schedule_commands(err, params.replace(v_max=-1.0))
     for knots in (1, "3", 10**12):
         with pytest.raises(ValueError, match=f"knots = {knots!r} is not allowed"):
             tuning.ScheduleParams.from_gains(w.Gains(), knots=knots)

@@ -25,6 +25,7 @@ from wmr_jax._src.checks import (
     check_bool,
     check_dt,
     field_values,
+    is_traced,
     require,
     require_one_batch_size,
     require_unbatched,
@@ -211,6 +212,9 @@ def wheel_speed_bound(gains: Gains, robot: Robot | None = None) -> Any:
     exceeds this bound. Works on scalars, batches and tracers.
     """
     robot = Robot() if robot is None else robot
+    if not is_traced((gains, robot)):  # called with values: check them
+        validate_gains(gains)
+        validate_robot(robot)
     return gains.kr + robot.half_track * gains.k_theta
 
 
@@ -258,6 +262,9 @@ def sampling_margins(gains: Gains, dt: Any) -> tuple[Any, Any]:
     each settles only while its factor stays below 2, and overshoots
     without settling above it.
     """
+    if not is_traced((gains, dt)):  # called with values: check them
+        validate_gains(gains)
+        dt = check_dt(dt)
     return gains.k_theta * dt, gains.kr * (math.pi / 2) * dt / gains.r_m
 
 

@@ -37,6 +37,7 @@ import numpy as np
 from wmr_jax._src.checks import (
     Parameters,
     check_int,
+    is_traced,
     real_array,
     require,
     require_representable,
@@ -154,6 +155,8 @@ def schedule_commands(
             relaxation (the switches of ``shim_sung``; the caps stay hard,
             they are continuous).
     """
+    if not is_traced(params):  # called with values, not from a rollout
+        validate_schedule(params)
     d = direction_flag(err, params.phi_m, temperature=temperature)
     k_theta = _table(params.k_theta, err.r)
     # Where d = 0 the robot does not drive (v = 0), so its turn gain may be other.

@@ -41,11 +41,19 @@ from wmr_jax._src.checks import (
     as_pose_array,
     check_temperature,
     is_traced,
+    real_array,
     require,
 )
 from wmr_jax._src.controllers.base import Controller, check_law_inputs, register_controller
 from wmr_jax._src.dynamics import sin_cos, sin_small
-from wmr_jax._src.params import Gains, Robot, check_feasible, check_sampling, validate_gains
+from wmr_jax._src.params import (
+    Gains,
+    Robot,
+    check_feasible,
+    check_sampling,
+    validate_gains,
+    validate_robot,
+)
 
 __all__ = [
     "SHIM_SUNG",
@@ -103,6 +111,33 @@ class Diagnostics(NamedTuple):
 def wrap_angle(angle: jax.Array) -> jax.Array:
     """Wrap an angle in rad to ``[−π, π)``."""
     return jnp.mod(jnp.asarray(angle) + jnp.pi, 2 * jnp.pi) - jnp.pi
+
+
+def _checked_error(err: Any) -> Any:
+    """Check a concrete ``PolarError`` a user passes to the law's pieces (traced ones pass).
+
+    Its fields must be finite real numbers and ``r ≥ 0``: a NaN distance would
+    read as "not within ``R_e``" and label the state Region 3.
+    """
+    if not isinstance(err, PolarError):
+        raise ValueError(f"err is a {type(err).__name__}; allowed: a PolarError (from polar_error)")
+    if is_traced(err):
+        return err
+    for field, value in zip(PolarError._fields, err, strict=True):
+        arr = real_array(f"err.{field}", value, "finite real numbers (polar_error's)")
+        ok = np.isfinite(arr) & ((arr >= 0) if field == "r" else True)
+        require(f"err.{field}", arr, ok, "finite, >= 0 cm" if field == "r" else "finite")
+    return err
+
+
+def _checked_gains(gains: Any) -> None:
+    """Check concrete gains of the law's pieces: a ``Gains``, or a schedule's (same shape gains)."""
+    if is_traced(gains):
+        return
+    if isinstance(gains, Gains):
+        validate_gains(gains)
+    elif not all(hasattr(gains, name) for name in ("phi_m", "r_e", "r_a")):
+        raise ValueError(f"gains is a {type(gains).__name__}; allowed: a wmr_jax.Gains")
 
 
 def _relaxation(temperature: Any) -> Any:
@@ -233,7 +268,7 @@ def saturated_distance(r: jax.Array, r_m: jax.Array, *, temperature: float | Non
     several times slower: the absolute error is about an ulp of 1.
     """
     if not is_traced(r_m):  # called with a value: R_m is a radius of the law
-        arr = np.asarray(r_m, dtype=float)
+        arr = real_array("r_m", r_m, "a finite radius > 0 cm")
         require("r_m", arr, np.isfinite(arr) & (arr > 0), "a finite radius > 0 cm")
     linear = r * ((jnp.pi / 2) / jnp.asarray(r_m))  # the factor is per gain set, not per step
     if temperature is None:
@@ -251,8 +286,9 @@ def direction_flag(err: PolarError, phi_m: jax.Array, *, temperature: float | No
 
     ``d = 1`` if ``|φ_e| ≤ Φ_m``; ``d = −1`` if ``|φ_e| > π − Φ_m``; else 0.
     """
+    _checked_error(err)
     if not is_traced(phi_m):  # called with a value: Φ_m must be an angle of the law
-        arr = np.asarray(phi_m, dtype=float)
+        arr = real_array("phi_m", phi_m, "0 < phi_m < pi/2 rad")
         require("phi_m", arr, (arr > 0) & (arr < np.pi / 2), "0 < phi_m < pi/2 rad")
     cos_m = jnp.cos(phi_m)
     ahead = _step(err.cos_phi - cos_m, strict=False, temperature=temperature)
@@ -297,8 +333,8 @@ def blend(
     indicator of the region test, which is exact for ``d ∈ {−1, 0, 1}`` and
     smooth when the indicators are relaxed.
     """
-    if isinstance(gains, Gains) and not is_traced(gains):
-        validate_gains(gains)  # called with values, not from a rollout
+    _checked_error(err)
+    _checked_gains(gains)  # called with values, not from a rollout
     _, sin_phi_bar = fold(err.cos_phi, err.sin_phi, temperature=temperature)
     _, sin_theta_bar = fold(err.cos_theta, err.sin_theta, temperature=temperature)
     in_region_0 = _step(gains.r_e - err.r, strict=False, temperature=temperature, scale=gains.r_e)
@@ -317,8 +353,8 @@ def commands(
     ``v_m = k_r d sin(r̄_e) cos φ̄_e`` and
     ``ω_m = k_θ (ε sin φ̄_e + (1 − ε) sin θ̄_e)``.
     """
-    if isinstance(gains, Gains) and not is_traced(gains):
-        validate_gains(gains)  # called with values, not from a rollout
+    _checked_error(err)
+    _checked_gains(gains)  # called with values, not from a rollout
     return _commands(err, gains, temperature=temperature)
 
 
@@ -339,8 +375,8 @@ def _commands(err: PolarError, gains: Gains, *, temperature: float | None = None
 
 def region_label(err: PolarError, gains: Gains) -> jax.Array:
     """Return the region 0–3 of docs/model.md §3, by the same order of tests as ``blend``."""
-    if isinstance(gains, Gains) and not is_traced(gains):
-        validate_gains(gains)
+    _checked_error(err)
+    _checked_gains(gains)
     d = direction_flag(err, gains.phi_m)
     return jnp.where(
         err.r <= gains.r_e, 0, jnp.where(d == 0, 3, jnp.where(err.r < gains.r_a, 1, 2))
@@ -349,6 +385,7 @@ def region_label(err: PolarError, gains: Gains) -> jax.Array:
 
 def lyapunov(err: PolarError) -> jax.Array:
     """Return ``V = r_e²/2 + (1 − cos φ̄_e) + (1 − cos θ̄_e)`` (proof of Theorem 1)."""
+    _checked_error(err)
     cos_phi_bar, _ = fold(err.cos_phi, err.sin_phi)
     cos_theta_bar, _ = fold(err.cos_theta, err.sin_theta)
     return 0.5 * err.r**2 + (1 - cos_phi_bar) + (1 - cos_theta_bar)
@@ -356,6 +393,11 @@ def lyapunov(err: PolarError) -> jax.Array:
 
 def wheel_speeds(v: jax.Array, omega: jax.Array, robot: Robot) -> jax.Array:
     """Return rim speeds ``[v_L, v_R] = [v − L ω, v + L ω]`` in cm/s, shape ``(..., 2)``."""
+    if not is_traced((v, omega, robot)):  # called with values, not from a rollout
+        validate_robot(robot)
+        for name, value in (("v", v), ("omega", omega)):
+            arr = real_array(name, value, "finite real numbers")
+            require(name, arr, np.isfinite(arr), "finite real numbers")
     return jnp.stack([v - robot.half_track * omega, v + robot.half_track * omega], axis=-1)
 
 
