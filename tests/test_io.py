@@ -7,11 +7,15 @@ import numpy as np
 import pytest
 
 from wmr_jax import report
+from wmr_jax._src.report.tables import json_number
 
 
 def test_atomic_json_round_trip_keeps_infinities_readable(tmp_path):
-    path = report.atomic_write_json(tmp_path / "sub" / "a.json", {"t": [1.0, math.inf]})
-    assert json.loads(path.read_text()) == {"t": [1.0, "inf"]}
+    row = {"t": [1.0, math.inf, -math.inf, math.nan]}
+    path = report.atomic_write_json(tmp_path / "sub" / "a.json", row)
+    # NaN is written as "nan", not as null, which would not say what it was.
+    assert json.loads(path.read_text()) == {"t": [1.0, "inf", "-inf", "nan"]}
+    assert math.isnan(json_number("t", json.loads(path.read_text())["t"][3]))  # tables read it
     assert list(path.parent.iterdir()) == [path]  # no temporary file left behind
 
 

@@ -99,7 +99,7 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
 
 def _jsonable(obj: Any) -> Any:
     if isinstance(obj, float) and not (obj == obj and abs(obj) != float("inf")):
-        return None if obj != obj else ("inf" if obj > 0 else "-inf")
+        return "nan" if obj != obj else ("inf" if obj > 0 else "-inf")
     if isinstance(obj, dict):
         out = {str(k): _jsonable(v) for k, v in obj.items()}
         if len(out) < len(obj):  # {1: a, "1": b} would keep only b
@@ -114,7 +114,9 @@ def _jsonable(obj: Any) -> Any:
 
 
 def atomic_write_json(path: str | os.PathLike, obj: Any) -> Path:
-    """Write ``obj`` as indented JSON atomically; ``inf`` becomes the string "inf".
+    """Write ``obj`` as indented JSON atomically; ``inf`` and NaN become "inf" and "nan".
+
+    (JSON has no literal for them; the report tables read these strings back.)
 
     Raises:
         ValueError: ``obj`` holds a value JSON cannot store (nothing is written).
