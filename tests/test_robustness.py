@@ -140,6 +140,8 @@ def test_bad_disturbances_are_rejected(change, message):
         ({"noise_xy": [0.0], "noise_deg": [1e300]}, "noise_deg[0] = 1e+300"),
         ({"noise_xy": 0.5, "noise_deg": 1.0}, "noise_xy = 0.5 is not allowed"),
         ({"latency": "no"}, "latency = 'no' is not allowed"),
+        # The ideal loop has no mass: a mass mismatch there would change nothing.
+        ({"mass_mismatch": 0.2}, "mass_mismatch = 0.2 is not allowed with velocity = 'ideal'"),
     ],
 )
 def test_bad_monte_carlo_options(kwargs, message):
@@ -218,6 +220,9 @@ def test_command_writes_what_the_study_returns(tmp_path, capsys):
     assert len(rows) == 3 * len(studies.DEFAULT_NOISE_XY) == len(saved["rows"])
     assert [r["success"] for r in saved["rows"]] == [r["success"] for r in rows]
     assert [r["condition"] for r in rows[::5]] == [c[0] for c in studies.ROBUSTNESS_CONDITIONS]
+    # The ideal loop has no mass: its rows report the mismatch that was applied.
+    assert {r["mass mismatch"] for r in rows} == {0.0}
+    assert {r["radius mismatch"] for r in rows} == {0.0, 0.03}
     # The output folder is checked before any computation.
     (tmp_path / "file").write_text("")
     assert main(["robustness", "--out", str(tmp_path / "file"), "--runs", "1"]) == 2

@@ -604,6 +604,11 @@ def monte_carlo(
         raise ValueError(f"latency = {latency!r} is not allowed; allowed: True or False")
     for name, value in (("radius_mismatch", radius_mismatch), ("mass_mismatch", mass_mismatch)):
         checks.check_number(name, value, high=1.0, closed=True)
+    if mass_mismatch > 0 and velocity == "ideal":
+        raise ValueError(
+            f"mass_mismatch = {mass_mismatch!r} is not allowed with velocity = 'ideal', whose "
+            "robot has no mass; allowed: 0, or velocity = 'nonideal'"
+        )
     name = controllers.get_controller(controller).name
     refs, unit, mismatch = draw_disturbances(
         key, n_runs, horizon_steps(dt), radius_mismatch=radius_mismatch, mass_mismatch=mass_mismatch
@@ -646,7 +651,8 @@ def robustness_study(
     """Run the Monte Carlo for each controller and condition (``docs/model.md §7``).
 
     Conditions (``ROBUSTNESS_CONDITIONS``): measurement noise alone; noise
-    with ±3 % wheel-radius and ±20 % body-mass mismatch; and the same with
+    with ±3 % wheel-radius and ±20 % body-mass mismatch (the latter in the
+    non-ideal loop only: the ideal one has no mass); and the same with
     one-sample latency. Each controller sees the same draws (one key per
     condition, from ``seed``). ``wmr_jax.report.write_robustness`` draws and
     writes the rows.
@@ -669,6 +675,8 @@ def robustness_study(
     keys = jax.random.split(jax.random.PRNGKey(seed), len(ROBUSTNESS_CONDITIONS))
     rows = []
     for (label, radius, mass, latency), key in zip(ROBUSTNESS_CONDITIONS, keys, strict=True):
+        if velocity == "ideal":
+            mass = 0.0  # the ideal loop has no mass: the rows say so rather than ±20 %
         for name in names:
             for row in monte_carlo(
                 key,

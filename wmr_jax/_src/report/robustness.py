@@ -94,7 +94,9 @@ def write_robustness(
     )
     title = (
         f"Robustness, {velocity} loop: {n_runs} random poses (docs/model.md §6) per point, "
-        f"seed {seed}; mismatch ±3 % wheel radius, ±20 % mass; latency one sample"
+        f"seed {seed}; mismatch ±3 % wheel radius"
+        + (", ±20 % mass" if velocity == "nonideal" else "")
+        + "; latency one sample"
     )
     fig = robustness_figure(rows, title=title)
     try:
