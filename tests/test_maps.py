@@ -110,6 +110,8 @@ def test_summary_rows():
     none = summarize({"x": _metrics([inf], [1.0], [0])})[0]
     assert none["success"] == 0.0 and none["mean arrival s"] == inf
     assert "faster than shim-sung" not in none
+    with pytest.raises(ValueError, match="results is a list; allowed: a dict of controller name"):
+        summarize([results["aicardi"]])
 
 
 def test_sweep_command_writes_what_the_study_returns(tmp_path, capsys):

@@ -65,3 +65,7 @@ def test_one_robot_per_reference_and_the_edges_of_the_bounds():
     with pytest.raises(ValueError, match="bounds > 0"):
         tuning.bound_ratios(0.5, zero)
     assert tuning.bound_ratios(math.inf, tuning.time_bounds(refs))["vs_lower_bound"] == math.inf
+    # A positive time takes a sample however long the period: 30 cm at 125 cm/s
+    # is 0.24 s, one sample of 1e9 s (not 0, which the rounding slack gave).
+    slow = tuning.time_bounds([30.0, 0.0, 0.0], dt=1e9)
+    assert float(slow.turn_drive_turn) == float(slow.lower_bound) == 1e9

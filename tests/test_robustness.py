@@ -299,6 +299,8 @@ def test_standard_conditions_compare_gain_sets_on_the_same_draws():
         assert a["success"] == b["success"] and a["gains"] == "paper"
     nominal = rows[0]
     assert nominal["success"] == 1.0 and nominal["mean arrival s"] < 6.0
+    with pytest.raises(ValueError, match=r"params_by_name = \{\} is not allowed"):
+        studies.standard_conditions({}, refs, jax.random.PRNGKey(3))  # no rows at all
 
 
 def test_standard_conditions_keep_float64_poses_in_a_float32_session():

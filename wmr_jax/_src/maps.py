@@ -18,7 +18,7 @@ draws the heat maps and the first-to-arrive map and writes the summary.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -268,6 +268,13 @@ def summarize(
         fraction of poses where this controller arrives strictly earlier.
     """
     v_max = checks.check_number("v_max", v_max, unit="cm/s")
+    if not isinstance(results, Mapping) or not all(
+        isinstance(m, PoseMetrics) for m in results.values()
+    ):
+        raise ValueError(
+            f"results is a {type(results).__name__}; allowed: a dict of controller name -> "
+            "PoseMetrics (evaluate_poses returns one)"
+        )
     sizes = {name: len(m.arrival) for name, m in results.items()}
     if not results or min(sizes.values()) == 0 or len(set(sizes.values())) > 1:
         raise ValueError(

@@ -48,8 +48,10 @@ def _folded_magnitude(angle: np.ndarray) -> np.ndarray:
 
 
 def _ceil_samples(seconds: np.ndarray, dt: float) -> np.ndarray:
-    # max with 0: a zero time is 0 samples, not the −0 that the slack gives.
-    return np.maximum(np.ceil(seconds / dt - _ROUNDING), 0.0) * dt
+    # A positive time takes one sample at least, however long the period (the
+    # slack would round a time below 1e-9 periods down to 0); zero takes none.
+    samples = np.ceil(seconds / dt - _ROUNDING)
+    return np.where(seconds > 0, np.maximum(samples, 1.0), 0.0) * dt
 
 
 def _per_reference(robot: Robot, name: str, refs: np.ndarray) -> np.ndarray:

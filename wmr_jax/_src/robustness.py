@@ -28,7 +28,7 @@ engine returns values; ``wmr_jax.report`` draws and writes them.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, NamedTuple
 
 import jax
@@ -721,6 +721,11 @@ def standard_conditions(
         ``mean arrival s`` and ``median arrival s`` of the successful runs
         (``inf`` if none), ``mean final distance cm``, ``runs``.
     """
+    if not isinstance(params_by_name, Mapping) or not params_by_name:
+        raise ValueError(
+            f"params_by_name = {params_by_name!r:.80} is not allowed; allowed: a dict of "
+            "label -> parameters, at least one"
+        )
     with jax.enable_x64(checks.check_bool("x64", x64)):  # not rounded to float32 first
         refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
     steps = horizon_steps(dt)
