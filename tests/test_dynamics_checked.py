@@ -62,6 +62,18 @@ def test_arc_step_reduces_a_huge_heading_instead_of_moving_far():
             r"torque_max = -5",
         ),
         (lambda: dynamics.advance(STATE, np.array([1.0]), ROBOT, 0.033), r"command has shape"),
+        # Speeds whose squares (kinetic energy) or moves leave the dtype's range.
+        (
+            lambda: dynamics.advance(STATE, np.array([1e200, 0.0]), ROBOT, 0.033),
+            r"command = .*1e\+200.*speeds of at most 1e\+153",
+        ),
+        (
+            lambda: dynamics.advance(
+                STATE._replace(velocity=np.array([0.0, -1e200])), COMMAND, ROBOT, 0.033
+            ),
+            r"state.velocity = .*-1e\+200",
+        ),
+        (lambda: dynamics.arc_step(np.zeros(3), 1e150, 0.0, 1e4), r"v \* h = 1e\+154"),
         (lambda: dynamics.advance(STATE, COMMAND, ROBOT, -0.033), r"dt = -0.033"),
         (lambda: dynamics.advance(STATE, COMMAND, ROBOT, 0.033, substeps=-1), r"substeps = -1"),
         (lambda: dynamics.advance(STATE, COMMAND, ROBOT, 0.033, substeps=2.5), r"substeps = 2.5"),

@@ -27,6 +27,7 @@ from wmr_jax._src.checks import (
     check_substeps,
     float_dtype,
     is_traced,
+    position_limit,
     real_array,
     require,
     require_unbatched,
@@ -162,6 +163,11 @@ def arc_step(pose: Any, v: Any, omega: Any, h: Any) -> jax.Array:
         require(
             "omega * h", turn, turn <= _REDUCE_ABOVE, f"a turn of at most {_REDUCE_ABOVE:g} rad"
         )
+        move, limit = (
+            np.abs(np.asarray(v, np.float64) * np.asarray(h, np.float64)),
+            position_limit(),
+        )
+        require("v * h", move, move <= limit, f"a move of at most {limit:.0e} cm")
     return dynamics.arc_step(pose, v, omega, h)
 
 
@@ -247,6 +253,11 @@ def advance(
     ):
         if _shape(arr) != (2,) and not is_traced(arr):
             raise ValueError(f"{name} has shape {_shape(arr)}; allowed: {allowed}")
+        if not is_traced(arr):  # far beyond any wheel; their squares would overflow
+            limit = position_limit()
+            speeds = np.asarray(arr, np.float64)
+            ok = np.abs(speeds) <= limit
+            require(name, speeds, ok, f"speeds of at most {limit:.0e} cm/s or rad/s")
     state = dynamics.RobotState(pose, jnp.asarray(velocity), jnp.asarray(integral))
     one = "one robot (a number per field): advance moves one robot"
     robot = _robot(robot)
