@@ -10,6 +10,7 @@ import pytest
 from conftest import random_refs, run_metrics
 
 import wmr_jax as w
+from wmr_jax import studies
 
 DT = 0.033
 STEPS = 40
@@ -154,8 +155,14 @@ def test_damaged_or_altered_chunks_are_recomputed_with_a_warning(tmp_path):
         np.testing.assert_array_equal(again[name], full[name], err_msg=name)
 
 
-def test_bad_inputs_are_named_before_tracing():
+def test_bad_inputs_are_named_before_tracing(tmp_path):
     refs = _poses(4, 5)
+    # A folder that cannot be written is named before any run, not after the first chunk.
+    (tmp_path / "file").write_text("")
+    with pytest.raises(ValueError, match=r"out = '.*file.x' is not allowed; '.*file' is a file"):
+        w.sweep(refs, out=tmp_path / "file" / "x")
+    with pytest.raises(ValueError, match=r"cache = '.*file' is not allowed; allowed: a folder"):
+        studies.evaluate_poses(refs, cache=tmp_path / "file")
     with pytest.raises(ValueError, match=r"refs has shape \(5, 2\)"):
         w.sweep(refs[:, :2])
     with pytest.raises(ValueError, match="chunk_size = 0"):

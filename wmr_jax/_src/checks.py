@@ -30,6 +30,7 @@ __all__ = [
     "check_budget",
     "check_callable",
     "check_dt",
+    "check_folder",
     "check_int",
     "check_key",
     "check_number",
@@ -201,6 +202,18 @@ def check_path(name: str, value: Any) -> Path:
     if not isinstance(text, str) or not text:
         raise ValueError(f"{name} = {value!r:.80} is not allowed; allowed: a path (str or Path)")
     return Path(text)
+
+
+def check_folder(name: str, value: Any) -> Path:
+    """Return ``value`` as a folder this process can create or write in, checked now.
+
+    Raises:
+        ValueError: naming ``name``, for no path, a file, a path under a file,
+            or a place this process cannot write.
+    """
+    from wmr_jax._src.io import writable_path
+
+    return writable_path(f"{name} = {os.fspath(check_path(name, value))!r}", value, folder=True)
 
 
 def check_number(

@@ -30,6 +30,7 @@ __all__ = [
     "remove_stale_temporaries",
     "save_arrays",
     "save_figure",
+    "writable_path",
 ]
 
 
@@ -261,6 +262,40 @@ def load_arrays(path: str | os.PathLike) -> tuple[dict[str, np.ndarray], dict[st
     if _checksum(stored, meta_text) != checksum:
         raise DamagedFileError(f"{path} is damaged (its checksum does not match its contents)")
     return stored, meta
+
+
+def writable_path(shown: str, value: Any, *, folder: bool) -> Path:
+    """Return ``value`` as a path to write (a folder or a file), or say why not.
+
+    Tried at once, before any work, and nothing is created: a file is written
+    in (and removed from) the deepest folder of the path that exists.
+    ``shown`` introduces the value in messages (``"out = '/x'"``, ``"--out '/x'"``).
+    """
+    text = os.fspath(value) if isinstance(value, (str, os.PathLike)) else ""
+    if not text:  # Path("") is the current folder
+        want = "a folder name" if folder else "a file name"
+        raise ValueError(f"{shown} is not allowed; allowed: {want}")
+    path = Path(text)
+    wrong = path.exists() and not path.is_dir() if folder else path.is_dir()
+    if wrong:
+        want, got = ("a folder", "a file") if folder else ("a file name", "a folder")
+        raise ValueError(f"{shown} is not allowed; allowed: {want} (it is {got})")
+    for parent in path.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise ValueError(f"{shown} is not allowed; {str(parent)!r} is a file, not a folder")
+            break
+    existing = next(p for p in (path, *path.parents) if p.exists() or p == Path(p.anchor))
+    existing = existing if existing.is_dir() else existing.parent
+    try:
+        with tempfile.TemporaryFile(dir=existing):
+            pass
+    except OSError as err:
+        raise ValueError(
+            f"{shown} is not allowed; allowed: a place this process can write "
+            f"({err.strerror or err})"
+        ) from None
+    return path
 
 
 def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:

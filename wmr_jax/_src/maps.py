@@ -208,7 +208,7 @@ def evaluate_poses(
     x64, progress = checks.check_bool("x64", x64), checks.check_bool("progress", progress)
     with jax.enable_x64(x64):  # checked, and kept for the distance below, in the run's dtype
         refs_host = np.asarray(checks.as_poses("refs", refs, batch=True))
-    cache = None if cache is None else checks.check_path("cache", cache)
+    cache = None if cache is None else checks.check_folder("cache", cache)
     if np.ndim(init) != 1:
         raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,), shared by every run")
     with jax.enable_x64(x64):
@@ -368,7 +368,7 @@ def map_study(
         ValueError: for a bad count, heading, controller or option.
     """
     names = controllers.controller_names(controller_names)
-    cache = None if cache is None else checks.check_path("cache", cache)
+    cache = None if cache is None else checks.check_folder("cache", cache)
     grid = pose_grid(n_poses, headings_deg)
     results = {
         name: evaluate_poses(

@@ -615,7 +615,7 @@ def sweep(
     checks.check_callable("on_chunk", on_chunk)
     checks.check_bool("resume", resume)
     checks.check_bool("progress", progress)
-    out = None if out is None else checks.check_path("out", out)
+    out = None if out is None else checks.check_folder("out", out)
     job = _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, devices)
     store = None if out is None else _ChunkStore(out, _settings(job))
     results = _empty_results(job)

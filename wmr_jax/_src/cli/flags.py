@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import tempfile
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -72,34 +71,9 @@ def number(
 
 def _writable(flag: str, text: str, *, folder: bool) -> Path:
     """Return ``text`` as a path the command may write (a folder or a file), or say why not."""
-    if not text:  # Path("") is the current folder
-        want = "a folder name" if folder else "a file name"
-        raise ValueError(f"{flag} {text!r} is not allowed; allowed: {want}")
-    path = Path(text)
-    wrong = path.exists() and not path.is_dir() if folder else path.is_dir()
-    if wrong:
-        want, got = ("a folder", "a file") if folder else ("a file name", "a folder")
-        raise ValueError(f"{flag} {text!r} is not allowed; allowed: {want} (it is {got})")
-    for parent in path.parents:
-        if parent.exists():
-            if not parent.is_dir():
-                raise ValueError(
-                    f"{flag} {text!r} is not allowed; {str(parent)!r} is a file, not a folder"
-                )
-            break
-    # Try it now, not after minutes of work, and create nothing: write (and
-    # remove) a file in the deepest folder of the path that exists.
-    existing = next(p for p in (path, *path.parents) if p.exists() or p == Path(p.anchor))
-    existing = existing if existing.is_dir() else existing.parent
-    try:
-        with tempfile.TemporaryFile(dir=existing):
-            pass
-    except OSError as err:
-        raise ValueError(
-            f"{flag} {text!r} is not allowed; allowed: a place this process can write "
-            f"({err.strerror or err})"
-        ) from None
-    return path
+    from wmr_jax._src.io import writable_path
+
+    return writable_path(f"{flag} {text!r}", text, folder=folder)
 
 
 def output_dir(flag: str, text: str) -> Path:

@@ -185,15 +185,11 @@ def tune(
     from tqdm.auto import tqdm
 
     from wmr_jax._src import io, tuning
-    from wmr_jax._src.checks import as_float_tree, check_bool, check_callable, check_path
+    from wmr_jax._src.checks import as_float_tree, check_bool, check_callable, check_folder
     from wmr_jax._src.params import Robot, validate_robot
     from wmr_jax._src.tuning.training import checked_config
 
-    out = check_path("out_dir", out_dir)
-    if out.exists() and not out.is_dir():
-        raise ValueError(
-            f"out_dir = {os.fspath(out)!r} is not allowed; allowed: a folder (it is a file)"
-        )
+    out = check_folder("out_dir", out_dir)
     check_bool("resume", resume)
     check_bool("progress", progress)
     check_callable("progress_fn", progress_fn)
