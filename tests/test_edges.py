@@ -371,6 +371,10 @@ def test_com_offset_is_allowed_up_to_the_body_edge():
         (lambda: w.lyapunov(np.zeros(5)), "err is a ndarray; allowed: a PolarError"),
         (lambda: w.lyapunov(error()._replace(r=-1.0)), "err.r = -1.0 is not allowed"),
         (lambda: w.wheel_speeds(1.0, 2.0, None), "robot is a NoneType"),
+        # A frame is the pose as (x, y, cos θ, sin θ): read instead of the pose, so checked.
+        (lambda: w.polar_error(None, REF, frame=(0.0, 0.0, 1.0, 1.0)), r"frame\[2\] = 1.0"),
+        (lambda: w.polar_error(None, REF, frame=(0.0, np.nan, 1.0, 0.0)), r"frame\[1\] = nan"),
+        (lambda: w.polar_error(None, [1.0, 2.0], frame=(0.0, 0.0, 1.0, 0.0)), r"ref has shape"),
         (lambda: w.wheel_speeds(np.nan, 2.0, w.Robot()), "v = nan is not allowed"),
         (
             lambda: w.wheel_speeds(1.0, 2.0, w.Robot(half_track=-1.0)),

@@ -173,6 +173,8 @@ def polar_error(
         x, y = pose[..., 0], pose[..., 1]
         cos_c, sin_c = sin_cos(pose[..., 2])
     else:
+        if not is_traced((frame, ref)):
+            frame, ref = _checked_frame(frame), as_pose_array("ref", ref)
         x, y, cos_c, sin_c = frame
     cos_r, sin_r = sin_cos(ref[..., 2])
     dx, dy = ref[..., 0] - x, ref[..., 1] - y
@@ -202,6 +204,26 @@ def polar_error(
     cos_theta = cos_r * cos_c + sin_r * sin_c
     sin_theta = sin_r * cos_c - cos_r * sin_c
     return PolarError(r, cos_phi, sin_phi, cos_theta, sin_theta)
+
+
+def _checked_frame(frame: Any) -> tuple[np.ndarray, ...]:
+    """Check a concrete ``(x, y, cos θ, sin θ)``: four finite arrays, ``cos² + sin² = 1``."""
+    allowed = "(x cm, y cm, cos θ, sin θ) of the pose, finite, with cos² + sin² = 1"
+    if not isinstance(frame, (tuple, list)) or len(frame) != 4:
+        raise ValueError(f"frame = {frame!r:.80} is not allowed; allowed: {allowed}")
+    parts = [real_array(f"frame[{i}]", part, allowed) for i, part in enumerate(frame)]
+    try:
+        np.broadcast_shapes(*(part.shape for part in parts))
+    except ValueError:
+        shapes = [part.shape for part in parts]
+        raise ValueError(
+            f"frame has parts of shapes {shapes}; allowed: shapes that broadcast"
+        ) from None
+    for i, part in enumerate(parts):
+        require(f"frame[{i}]", part, np.isfinite(part), allowed)
+    norm = parts[2] ** 2 + parts[3] ** 2
+    require("frame[2]", parts[2], np.abs(norm - 1) <= 1e-6, allowed)  # a float32 sin_cos passes
+    return tuple(frame)
 
 
 def error_angles(err: PolarError) -> tuple[jax.Array, jax.Array]:
