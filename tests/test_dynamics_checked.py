@@ -50,6 +50,19 @@ def test_arc_step_reduces_a_huge_heading_instead_of_moving_far():
         (lambda: dynamics.limit_wheels(np.array([200.0, 5.0]), ROBOT, mode="clipp"), "'clipp'"),
         (lambda: dynamics.limit_wheels(np.array([1.0]), ROBOT), r"velocity has shape \(1,\)"),
         (lambda: dynamics.kinetic_energy(np.array([1.0]), ROBOT), r"velocity has shape"),
+        # A batched robot must match the batch it moves, and half floats are not computed in.
+        (
+            lambda: dynamics.kinetic_energy(np.zeros((4, 2)), ROBOT.replace(v_max=[1.0, 2.0, 3.0])),
+            r"velocity\[\.\.\., 0\] \(4,\), robot.v_max \(3,\)",
+        ),
+        (
+            lambda: dynamics.limit_wheels(np.zeros((4, 2)), ROBOT.replace(v_max=[1.0, 2.0, 3.0])),
+            r"do not broadcast",
+        ),
+        (
+            lambda: dynamics.arc_step(np.zeros(3, np.float16), 1.0, 0.0, 1.0),
+            r"pose is an array of float16; allowed: float32 or float64",
+        ),
         (lambda: dynamics.inertia(ROBOT.replace(body_mass=-10.0)), r"robot\.body_mass = -10"),
         (
             lambda: dynamics.body_acceleration(np.zeros(2), np.ones(1), ROBOT),

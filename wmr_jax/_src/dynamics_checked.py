@@ -84,6 +84,19 @@ def _robot(robot: Any, name: str = "robot") -> Robot:
     return validate_robot(robot)
 
 
+def _batch_with_robot(robot: Robot, name: str, batch: tuple[int, ...], what: str) -> None:
+    """Check that a batched robot's fields broadcast against ``what``'s batch shape."""
+    if is_traced(robot):
+        return
+    fields = {
+        f"{name}.{field}": _shape(value)
+        for field, value in vars(robot).items()
+        if _shape(value) and not is_traced(value)
+    }
+    if fields:
+        _broadcast({f"{what}[..., 0]": batch, **fields})
+
+
 def _array(value: Any) -> np.ndarray:
     """A checked value as a NumPy array (a Python number in the compute dtype)."""
     return value if isinstance(value, np.ndarray) else np.asarray(value, float_dtype())
@@ -154,6 +167,12 @@ def arc_step(pose: Any, v: Any, omega: Any, h: Any) -> jax.Array:
         else:
             pose = arr
     v, omega, h = _real("v", v), _real("omega", omega), _real("h", h)
+    for name, value in (("pose", pose), ("v", v), ("omega", omega), ("h", h)):
+        dtype = getattr(value, "dtype", None)  # the step rotates by a complex product
+        if dtype is not None and np.dtype(dtype) in (np.float16, jnp.bfloat16):
+            raise ValueError(
+                f"{name} is an array of {np.dtype(dtype).name}; allowed: float32 or float64"
+            )
     if not is_traced(h):
         require("h", np.asarray(h), np.asarray(h) >= 0, "a duration >= 0 s")
     if not is_traced((pose, v, omega, h)):
@@ -182,6 +201,7 @@ def initial_state(init: Any) -> dynamics.RobotState:
 def limit_wheels(velocity: Any, robot: Robot, *, mode: str = "clip") -> jax.Array:
     _check_mode("mode", mode)
     velocity, robot = _real("velocity", velocity, last=2), _robot(robot)
+    _batch_with_robot(robot, "robot", _shape(velocity)[:-1], "velocity")
     return velocity_loop.limit_wheels(velocity, robot, mode=mode)
 
 
@@ -193,6 +213,7 @@ def inertia(robot: Robot) -> tuple[jax.Array, jax.Array]:
 @_wraps(velocity_loop.kinetic_energy)
 def kinetic_energy(velocity: Any, robot: Robot) -> jax.Array:
     velocity, robot = _real("velocity", velocity, last=2), _robot(robot)
+    _batch_with_robot(robot, "robot", _shape(velocity)[:-1], "velocity")
     return velocity_loop.kinetic_energy(velocity, robot)
 
 
@@ -201,7 +222,9 @@ def body_acceleration(velocity: Any, torques: Any, robot: Robot) -> jax.Array:
     velocity, torques = _real("velocity", velocity, last=2), _real("torques", torques, last=2)
     if not is_traced((velocity, torques)):
         _broadcast({"velocity": _shape(velocity), "torques": _shape(torques)})
-    return velocity_loop.body_acceleration(velocity, torques, _robot(robot))
+    robot = _robot(robot)
+    _batch_with_robot(robot, "robot", _shape(velocity)[:-1], "velocity")
+    return velocity_loop.body_acceleration(velocity, torques, robot)
 
 
 @_wraps(velocity_loop.wheel_torques)
@@ -213,7 +236,9 @@ def wheel_torques(velocity: Any, target: Any, integral: Any, model: Robot) -> ja
     if not is_traced(tuple(arrays.values())):
         _broadcast({name: _shape(arr) for name, arr in arrays.items()})
     velocity, target, integral = arrays.values()
-    return velocity_loop.wheel_torques(velocity, target, integral, _robot(model, "model"))
+    model = _robot(model, "model")
+    _batch_with_robot(model, "model", _shape(velocity)[:-1], "velocity")
+    return velocity_loop.wheel_torques(velocity, target, integral, model)
 
 
 @_wraps(velocity_loop.check_stability)
