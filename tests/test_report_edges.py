@@ -17,6 +17,7 @@ from wmr_jax.report import (
     ROBUSTNESS_COLUMNS as _ROBUSTNESS_COLUMNS,
 )
 from wmr_jax.report import (
+    atomic_write_bytes,
     atomic_write_json,
     atomic_write_text,
     bench_table,
@@ -32,6 +33,7 @@ from wmr_jax.report import (
     plot_wheel_speeds,
     save_arrays,
     save_comparison,
+    save_figure,
     save_map_study,
     standard_figure,
     tuning_curve,
@@ -117,7 +119,7 @@ def _through_json(tmp_path, obj):
 def test_comparison_table_accepts_its_own_json(tmp_path):
     rows = [_summary_row("a"), _summary_row("b", success=1.0)]
     loaded = _through_json(tmp_path, rows)
-    assert loaded[0]["median arrival s"] == "inf" and loaded[0]["p90 arrival s"] is None
+    assert loaded[0]["median arrival s"] == "inf" and loaded[0]["p90 arrival s"] == "nan"
     table = comparison_table(loaded)
     assert table == comparison_table(rows)
     assert "2 / inf / nan" in table and "100 / inf" in table and "-inf" in table
@@ -368,6 +370,8 @@ def test_atomic_write_text_refuses_what_is_not_text(tmp_path, text):
     with pytest.raises(ValueError, match=r"text = .* is not allowed; allowed: a str"):
         atomic_write_text(tmp_path / "x.txt", text)
     assert not list(tmp_path.iterdir())
+    with pytest.raises(ValueError, match="data is a str; allowed: bytes"):
+        atomic_write_bytes(tmp_path / "a.bin", "abc")
 
 
 def test_atomic_write_json_names_a_value_json_cannot_store(tmp_path):
@@ -397,6 +401,18 @@ def test_atomic_write_json_names_a_value_json_cannot_store(tmp_path):
             r"labels = \('a',\) is not allowed",
         ),
         (lambda ax: plot_wheel_speeds(ax, np.zeros((5, 2)), dt=-0.1), r"dt = -0.1"),
+        (
+            lambda ax: plot_wheel_speeds(ax, np.zeros((5, 2)), dt=0.1, v_max="125"),
+            r"v_max = '125' is not allowed",
+        ),
+        # matplotlib leaves a gap at NaN: a run that left the range would look merely short.
+        (
+            lambda ax: plot_paths(ax, [np.array([[0.0, 0, 0], [np.nan, 0, 0]])], np.zeros((1, 3))),
+            r"paths\[0\] = .*\[1, 0\] = nan\) is not allowed; allowed: finite poses",
+        ),
+        (lambda ax: save_figure("fig", "a.png"), r"fig is a str; allowed: a matplotlib Figure"),
+        (lambda ax: save_figure(ax.figure, 3), r"path = 3 is not allowed"),
+        (lambda ax: path_figure("a.png", 3, [1.0, 2.0, 0.0], title=""), r"traj is a int"),
     ],
 )
 def test_drawing_helpers_name_what_they_cannot_draw(call, message):

@@ -79,6 +79,10 @@ def json_object_once(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` through a temporary file and an atomic rename."""
+    if not isinstance(data, (bytes, bytearray, memoryview)):
+        raise ValueError(
+            f"data is a {type(data).__name__}; allowed: bytes (atomic_write_text writes a str)"
+        )
     return _write_atomically(path, lambda f: f.write(data))
 
 
@@ -148,7 +152,12 @@ def save_figure(fig: Any, path: str | os.PathLike, **kwargs: Any) -> Path:
         ValueError: ``path`` does not end in an image format matplotlib can
             write (``.png``, ``.pdf``, ``.svg``, ...), naming it.
     """
-    supported = fig.canvas.get_supported_filetypes()
+    canvas = getattr(fig, "canvas", None)
+    if not hasattr(canvas, "get_supported_filetypes"):
+        raise ValueError(f"fig is a {type(fig).__name__}; allowed: a matplotlib Figure")
+    if not isinstance(path, (str, os.PathLike)) or not os.fspath(path):
+        raise ValueError(f"path = {path!r} is not allowed; allowed: a file name (str or Path)")
+    supported = canvas.get_supported_filetypes()
     fmt = Path(path).suffix.lstrip(".").lower()
     if fmt not in supported:
         raise ValueError(

@@ -104,11 +104,14 @@ def plot_paths(
         arrow_length: heading arrow length, cm.
         mark_refs: draw the references (a cross and a heading arrow).
     """
-    paths = [np.asarray(p, dtype=float) for p in paths]
+    allowed = "finite poses [x cm, y cm, θ rad], (steps + 1, 3)"
+    paths = [checks.real_array(f"paths[{i}]", p, allowed) for i, p in enumerate(paths)]
     for i, poses in enumerate(paths):
         if poses.ndim != 2 or poses.shape[1] != 3 or len(poses) == 0:
             raise ValueError(f"paths[{i}] has shape {poses.shape}; allowed: (steps + 1, 3)")
-    refs = np.asarray(refs, dtype=float)
+        # matplotlib would leave a gap at NaN: a run that left the range would look short.
+        checks.require(f"paths[{i}]", poses, np.isfinite(poses), allowed)
+    refs = checks.real_array("refs", refs, "reference poses [x cm, y cm, θ rad], (M, 3)")
     if mark_refs and (refs.ndim != 2 or refs.shape[1] != 3 or len(refs) < len(paths)):
         raise ValueError(
             f"refs has shape {refs.shape}; allowed: (M, 3) with M >= {len(paths)}, one per path "
@@ -138,7 +141,8 @@ def plot_paths(
         # quiver does not widen the data limits: take the arrow tips in, or they are clipped.
         ax.update_datalim(refs[:, :2] + tips)
         ax.autoscale_view()
-        _mark_backwards(ax, paths, refs)
+        if paths:
+            _mark_backwards(ax, paths, refs)
     ax.set_aspect("equal")
     ax.set_xlabel("x [cm]")
     ax.set_ylabel("y [cm]")
@@ -185,6 +189,8 @@ def plot_wheel_speeds(
     if isinstance(labels, str) or len(labels) != 2:
         raise ValueError(f"labels = {labels!r} is not allowed; allowed: two names (left, right)")
     dt = checks.check_dt(dt)
+    if v_max is not None:
+        v_max = checks.check_number("v_max", v_max, unit="cm/s")
     t = (np.arange(len(wheel_speeds)) + 1) * dt
     for j, name in enumerate(labels):
         ax.plot(t, wheel_speeds[:, j], linestyle, lw=1.2, label=name)
@@ -204,6 +210,8 @@ def plot_wheel_speeds(
 
 def path_figure(path: Any, traj: Any, ref: Sequence[float], *, title: str) -> None:
     """Save the path of one run (a ``Trajectory``) to its reference as an image."""
+    if getattr(traj, "poses", None) is None:
+        raise ValueError(f"traj is a {type(traj).__name__}; allowed: a Trajectory of one run")
     with closed_after(figsize=(6, 6)) as (fig, ax):
         plot_paths(ax, [np.asarray(traj.poses)], np.asarray([ref]), label="robot path")
         ax.set_title(title)
