@@ -213,6 +213,10 @@ def test_every_run_is_checked_as_final_poses_checks_it():
     np.testing.assert_array_equal(shared["final_x"], plain["final_x"])
     with pytest.raises(ValueError, match=r"gains.kr has 2 values; allowed: one, or one per"):
         w.sweep(refs, w.Gains(kr=np.array([60.0, 70.0])))
+    # Bools are named as given, not as the one-run sample the other checks look at.
+    flags = np.array([True, False] * 3)
+    with pytest.raises(ValueError, match=r"gains.kr = array\(\[ True, False,  True, False"):
+        w.sweep(refs, w.Gains(kr=flags))
 
 
 def test_a_run_that_leaves_the_range_is_an_error_not_nans():

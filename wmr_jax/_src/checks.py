@@ -36,6 +36,7 @@ __all__ = [
     "check_number",
     "check_path",
     "check_temperature",
+    "described",
     "field_values",
     "float_dtype",
     "is_traced",
@@ -96,11 +97,11 @@ def real_array(name: str, value: Any, allowed: str) -> np.ndarray:
             raise TypeError(value)
         return np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        shown = _described(value)
+        shown = described(value)
         raise ValueError(f"{name} = {shown} is not allowed; allowed: {allowed}") from None
 
 
-def _described(value: Any) -> str:
+def described(value: Any) -> str:
     """Return ``repr(value)``, or its type, shape and dtype if it is a large array."""
     shape, dtype = getattr(value, "shape", None), getattr(value, "dtype", None)
     if shape is not None and dtype is not None and int(np.prod(shape)) > 6:

@@ -168,13 +168,17 @@ def _per_run_or_shared(tree: Any, n: int, name: str) -> Any:
     """
 
     def leaf_of(path, leaf):
+        field = f"{name}{jax.tree_util.keystr(path, simple=True, separator='.')}"
+        if checks.array_kind(leaf) not in "iuf":  # named whole, not as the one-row sample
+            raise ValueError(
+                f"{field} = {checks.described(leaf)} is not allowed; allowed: finite numbers"
+            )
         if np.ndim(leaf) == 0 or np.shape(leaf)[0] == n:
             return leaf
         if np.shape(leaf)[0] == 1:
             return leaf[0]
         raise ValueError(
-            f"{name}{jax.tree_util.keystr(path, simple=True, separator='.')} has "
-            f"{np.shape(leaf)[0]} values; allowed: one, or one per reference ({n})"
+            f"{field} has {np.shape(leaf)[0]} values; allowed: one, or one per reference ({n})"
         )
 
     return jax.tree_util.tree_map_with_path(leaf_of, tree)
