@@ -144,6 +144,8 @@ def test_numpy_baseline_checks_as_final_poses_does():
             w.studies.numpy_final_poses(refs, **kwargs)
     with pytest.raises(ValueError, match=r"refs has shape \(1, 4\)"):
         w.studies.numpy_final_poses(np.zeros((1, 4)))
+    with pytest.raises(ValueError, match=r"refs = \[\[30.0, 30.0, 0.0\], \[1.0\]\] is not"):
+        w.studies.numpy_final_poses([[30.0, 30.0, 0.0], [1.0]])  # NumPy's own error before
 
 
 def test_checked_functions_keep_the_callers_float_dtype_and_empty_batches():

@@ -466,6 +466,10 @@ def test_the_laws_building_blocks_take_plain_numbers_and_lists():
             r"sizes = '10' is not allowed; allowed: a sequence",
         ),
         (
+            lambda: w.studies.run_benchmark({"steps": 1}),
+            r"config is a dict; allowed: a BenchConfig",
+        ),
+        (
             lambda: w.studies.run_benchmark(
                 w.studies.BenchConfig(sizes=(10,), cases=("final_poses",)), log="x"
             ),

@@ -98,7 +98,7 @@ def numpy_final_poses(
 
     # The same checks as final_poses, in the refs' own precision; the values
     # used are the caller's, not the checked copies in JAX's dtype.
-    wide = np.asarray(refs).dtype != np.float32
+    wide = np.dtype(getattr(refs, "dtype", np.float64)) != np.float32  # lists are float64
     with jax.enable_x64(bool(wide)):
         as_poses("refs", refs, batch=True)
         as_poses("init", init, batch=False)
@@ -334,6 +334,10 @@ CASES = (
 
 def _check_config(config: BenchConfig) -> BenchConfig:
     """Validate ``config`` (before any tracing); return it with ``cases`` filled in."""
+    if not isinstance(config, BenchConfig):
+        raise ValueError(
+            f"config is a {type(config).__name__}; allowed: a BenchConfig (fields as keywords)"
+        )
     for name in ("sizes", "cases"):
         if isinstance(getattr(config, name), (str, bytes)):
             value = getattr(config, name)
