@@ -369,6 +369,7 @@ def test_com_offset_is_allowed_up_to_the_body_edge():
         ),
         (lambda: w.region_label(error(), None), "gains is a NoneType; allowed: a wmr_jax.Gains"),
         (lambda: w.lyapunov(np.zeros(5)), "err is a ndarray; allowed: a PolarError"),
+        (lambda: w.controllers.error_angles((1.0, 0.0)), "err is a tuple; allowed: a PolarError"),
         (lambda: w.lyapunov(error()._replace(r=-1.0)), "err.r = -1.0 is not allowed"),
         (lambda: w.wheel_speeds(1.0, 2.0, None), "robot is a NoneType"),
         # A frame is the pose as (x, y, cos θ, sin θ): read instead of the pose, so checked.

@@ -231,6 +231,7 @@ def error_angles(err: PolarError) -> tuple[jax.Array, jax.Array]:
 
     For diagnostics and plots only; the law itself never needs the angles.
     """
+    _checked_error(err)
     phi = jnp.arctan2(err.sin_phi, err.cos_phi)
     theta = wrap_angle(jnp.arctan2(err.sin_theta, err.cos_theta))
     return phi, theta
