@@ -108,6 +108,17 @@ def test_draws_are_evaluation_poses_and_bounded_mismatch():
     assert abs(unit.mean()) < 0.05 and abs(unit.std() - 1) < 0.05  # 12000 N(0, 1) draws
 
 
+def test_draws_do_not_depend_on_the_sessions_dtype():
+    # The references are drawn in float32, and the noise in their dtype: a
+    # float64 session (these tests) draws the numbers a float32 session does.
+    args = (jax.random.PRNGKey(0), 4, 5)
+    wide = studies.draw_disturbances(*args, radius_mismatch=0.03, mass_mismatch=0.2)
+    with jax.enable_x64(False):
+        narrow = studies.draw_disturbances(*args, radius_mismatch=0.03, mass_mismatch=0.2)
+    for a, b in zip(wide, narrow, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 @pytest.mark.parametrize(
     ("change", "message"),
     [
@@ -170,12 +181,16 @@ def test_levels_may_be_arrays_and_keys_must_be_keys():
         studies.draw_disturbances(key, 2, 5, radius_mismatch=2.0)
     # A level per run must have one value per reference; bools and NaN poses are refused.
     for kwargs, message in (
-        ({"noise_xy": np.ones(2)}, r"noise_xy has shape \(2,\); allowed: a scalar or \(3,\)"),
+        ({"noise_xy": np.ones(2)}, r"noise_xy has shape \(2,\); allowed: a scalar .* or \(3,\)"),
         ({"noise_theta": np.ones((3, 1))}, r"noise_theta has shape \(3, 1\)"),
         ({"latency": True}, r"latency = True is not allowed; allowed: a number >= 0 and <= 1"),
     ):
         with pytest.raises(ValueError, match=message):
             studies.sample_disturbance(key, refs, 5, **kwargs)
+    shared = studies.sample_disturbance(key, refs, 5, noise_xy=np.array([0.5]))  # (1,): shared
+    np.testing.assert_array_equal(
+        shared.noise, studies.sample_disturbance(key, refs, 5, noise_xy=0.5).noise
+    )
     with pytest.raises(ValueError, match=r"refs\[1\] = \[nan, 0.0, 0.0\] is not finite"):
         studies.sample_disturbance(key, np.array([[10.0, 0, 0], [np.nan, 0, 0]]), 5)
     with pytest.raises(ValueError, match=r"disturbance = tuple is not allowed"):

@@ -402,10 +402,11 @@ def _check_draw(key: Any, steps: Any, n: int | None, **levels: Any) -> None:
         upper = f"<= {high:g}" if closed_high else f"< {high:g}"
         allowed = f"a number >= 0 and {upper}"
         arr = checks.real_array(name, value, allowed)
-        if arr.ndim > 1 or (arr.ndim == 1 and n is not None and arr.shape != (n,)):
+        if arr.ndim > 1 or (arr.ndim == 1 and n is not None and arr.shape not in ((1,), (n,))):
             per_run = f"({n},)" if n is not None else "(N,)"
             raise ValueError(
-                f"{name} has shape {arr.shape}; allowed: a scalar or {per_run}, one per run"
+                f"{name} has shape {arr.shape}; allowed: a scalar (or (1,)) shared by every "
+                f"run, or {per_run}, one per run"
             )
         ok = np.isfinite(arr) & (arr >= 0) & ((arr <= high) if closed_high else (arr < high))
         checks.require(name, arr, ok, allowed)
@@ -445,7 +446,12 @@ def sample_disturbance(
         ``delay (N,)`` in {0, 1}.
     """
     if not checks.is_traced(refs):
-        refs = checks.as_poses("refs", refs, batch=True)
+        checked = checks.as_poses("refs", refs, batch=True)
+        # Draw in the poses' own float dtype (float32 poses give the same draws
+        # in a float64 session); other numbers in JAX's default one.
+        own = getattr(refs, "dtype", None)
+        floating = own is not None and jnp.issubdtype(own, jnp.floating)
+        refs = jnp.asarray(refs) if floating else checked
     _check_draw(
         key,
         steps,
