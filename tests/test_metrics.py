@@ -2,6 +2,7 @@
 
 import math
 
+import jax
 import numpy as np
 import pytest
 from conftest import random_refs, run_metrics
@@ -124,6 +125,11 @@ def test_run_table_rows_are_each_runs_metrics():
     assert [r["peak_wheel_cm_s"] for r in rows] == [200.0, 185.0]
     assert [r["saturated_fraction"] for r in rows] == [0.5, 0.5]  # one period of two > 125 cm/s
     assert [r["final_distance_cm"] for r in rows] == [0.0, 0.5]
+    # The references are reported as given, in a float32 session too (not 40.099998).
+    odd = np.array([[40.1, 0.0, -math.pi / 4], [0.0, 40.0, math.pi / 2]])
+    with jax.enable_x64(False):
+        rows = studies.run_table(batch, odd, dt=DT)
+    assert [r["ref"] for r in rows] == [[40.1, 0.0, -45.0], [0.0, 40.0, 90.0]]
     # A reference per run, one robot: a shorter list of references is no longer broadcast.
     for args, kwargs, message in (
         ((batch, refs[:1]), {}, r"refs has shape \(1, 3\); allowed: \(2, 3\), one per run"),

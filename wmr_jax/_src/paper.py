@@ -13,6 +13,7 @@ import math
 import warnings
 from typing import Any
 
+import jax
 import numpy as np
 
 from wmr_jax._src import metrics
@@ -62,7 +63,8 @@ def run_table(
             f"traj = {type(traj).__name__} with poses of shape {shape} is not allowed; "
             "allowed: a Trajectory of batch_rollout, poses (N, steps + 1, 3)"
         )
-    refs = np.asarray(as_pose_array("refs", refs), dtype=float)
+    with jax.enable_x64(True):  # checked, and reported, in float64: 40.1 stays 40.1
+        refs = np.asarray(as_pose_array("refs", refs), dtype=float)
     if refs.shape != (len(traj.poses), 3):
         raise ValueError(
             f"refs has shape {refs.shape}; allowed: ({len(traj.poses)}, 3), one per run of traj"
