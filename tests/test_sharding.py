@@ -181,9 +181,11 @@ def test_shard_validates_its_input():
             w.unpad(np.arange(8), n)
     rows = [[30.0, 30.0, 0.0], [20.0, -10.0, 1.0]]
     assert w.shard(rows, devices=jax.devices()[:1]).n == 2  # a list of rows is an array
-    # A list of arrays could be rows or a pytree of batches: it is refused, not guessed.
-    with pytest.raises(ValueError, match="a list of 2 arrays; allowed: one array of rows"):
+    # A list of poses could be two rows or two batches of 3: it is refused, not guessed.
+    with pytest.raises(ValueError, match="list of 2 one-dimensional arrays: rows of one batch"):
         w.shard([np.zeros(3), np.zeros(3)])
+    pair = w.shard([np.zeros((4, 3)), np.ones((4, 2))], devices=jax.devices()[:1])
+    assert pair.n == 4 and [a.shape for a in pair.array] == [(4, 3), (4, 2)]  # two batches
     with pytest.raises(ValueError, match="rows of different lengths"):
         w.shard([[1.0, 2.0, 3.0], [1.0, 2.0]])
     with pytest.raises(ValueError, match=r"\[1, 2\] = nan\) is not allowed; allowed: finite"):

@@ -145,8 +145,10 @@ def shard(batch: Any, devices: Sequence[Any] | None = None) -> ShardedBatch:
     """Place a batch across ``devices``, padding its leading axis to a multiple of their count.
 
     Args:
-        batch: an ``(N, ...)`` array (e.g. reference poses ``(N, 3)``), or a
-            pytree of arrays that all have the same leading length ``N``.
+        batch: an ``(N, ...)`` array (e.g. reference poses ``(N, 3)``; a
+            nested list of numbers reads as one), or a pytree of arrays that
+            all have the same leading length ``N`` (a list of 1-D arrays is
+            ambiguous, rows or batches, and refused).
         devices: default ``jax.devices()``. With several processes
             (``jax.distributed``), every process passes the same ``batch`` and
             places the rows that belong to its own devices.
@@ -194,17 +196,21 @@ def shard(batch: Any, devices: Sequence[Any] | None = None) -> ShardedBatch:
     return ShardedBatch(jax.tree.map(place, batch), n)
 
 
-def _rows(name: str, batch: list) -> np.ndarray:
-    """Return a list of rows as one array; a list holding arrays is ambiguous and refused.
+def _rows(name: str, batch: list) -> Any:
+    """Read a list as rows of one batch (numbers), or as a pytree of batches (arrays).
 
-    ``[refs, init]`` could be a pytree of two batches or two rows of one:
-    pytrees of batches are tuples, dicts or dataclasses here, never lists.
+    A list of one-dimensional arrays alone is both: ``[pose, pose]`` reads as
+    two rows, or as two batches of 3. It is refused rather than guessed.
     """
-    if any(isinstance(row, (np.ndarray, jax.Array)) for row in batch):
-        raise ValueError(
-            f"{name} is a list of {len(batch)} arrays; allowed: one array of rows "
-            "(np.stack them), or a tuple or dict of batches"
-        )
+    arrays = [isinstance(row, (np.ndarray, jax.Array)) for row in batch]
+    if any(arrays):
+        if all(arrays) and all(np.ndim(row) == 1 for row in batch):
+            raise ValueError(
+                f"{name} is a list of {len(batch)} one-dimensional arrays: rows of one batch, "
+                f"or {len(batch)} batches? allowed: np.stack(rows) for one batch, or a tuple "
+                "or dict of batches"
+            )
+        return batch  # a pytree of batches
     try:
         return np.asarray(batch)
     except ValueError:
