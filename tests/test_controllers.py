@@ -129,6 +129,12 @@ def test_gains_for_another_number_of_poses_are_named(command, gains):
     assert np.shape(command(poses, refs, one)[0]) == (2,)  # one gain for all poses broadcasts
 
 
+def test_the_gain_that_does_not_broadcast_is_the_one_named():
+    gains = w.Gains(kr=np.array([60.0, 70.0]), r_m=np.array([20.0]))  # (1,) is shared
+    with pytest.raises(ValueError, match=r"gains have batch shape \(2,\) and the poses \(3,\)"):
+        w.control(np.zeros((3, 3)), np.full(3, 10.0), gains)
+
+
 @pytest.mark.parametrize(
     ("command", "gains"),
     [

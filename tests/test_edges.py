@@ -96,6 +96,8 @@ def test_gains_the_sampled_law_cannot_follow_warn():
         w.sampling_margins(w.Gains(r_m=2.79), 0.033)
     with pytest.raises(ValueError, match=r"dt = -0.1 is not allowed"):
         w.sampling_margins(w.Gains(), -0.1)
+    heading, _ = w.sampling_margins(w.Gains(k_theta=10.0), np.array([0.01, 0.02]))  # per period
+    np.testing.assert_allclose(heading, [0.1, 0.2])
     with pytest.raises(ValueError, match=r"robot.half_track = -2.0 is not allowed"):
         w.wheel_speed_bound(w.Gains(), w.Robot(half_track=-2.0))
 
@@ -376,7 +378,7 @@ def test_com_offset_is_allowed_up_to_the_body_edge():
         (lambda: w.polar_error(None, REF, frame=(0.0, 0.0, 1.0, 1.0)), r"frame\[2\] = 1.0"),
         (lambda: w.polar_error(None, REF, frame=(0.0, np.nan, 1.0, 0.0)), r"frame\[1\] = nan"),
         (lambda: w.polar_error(None, [1.0, 2.0], frame=(0.0, 0.0, 1.0, 0.0)), r"ref has shape"),
-        (lambda: w.wheel_speeds(np.nan, 2.0, w.Robot()), "v = nan is not allowed"),
+        (lambda: w.wheel_speeds("1", 2.0, w.Robot()), "v = '1' is not allowed"),
         (
             lambda: w.wheel_speeds(1.0, 2.0, w.Robot(half_track=-1.0)),
             "robot.half_track = -1.0 is not allowed",
@@ -386,6 +388,14 @@ def test_com_offset_is_allowed_up_to_the_body_edge():
 def test_the_law_functions_check_what_users_pass(call, message):
     with pytest.raises(ValueError, match=message):
         call()
+
+
+def test_a_frame_may_be_one_array_of_four_rows():
+    # (x, y, cos θ, sin θ) of two poses as a (4, 2) array, as a tuple of rows would be.
+    frame = np.array([[0.0, 1.0], [0.0, 0.0], [1.0, 1.0], [0.0, 0.0]])
+    np.testing.assert_allclose(w.polar_error(None, [10.0, 0.0, 0.0], frame=frame).r, [10.0, 9.0])
+    with pytest.raises(ValueError, match=r"frame = 'abcd' is not allowed; allowed: four"):
+        w.polar_error(None, REF, frame="abcd")
 
 
 def test_a_bool_among_numbers_is_refused_by_the_batch_and_reference_entry_points():

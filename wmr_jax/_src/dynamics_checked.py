@@ -271,18 +271,17 @@ def advance(
     velocity = _real("state.velocity", state.velocity)
     integral = _real("state.integral", state.integral)
     command = _real("command", command)
-    for name, arr, allowed in (
-        ("state.velocity", velocity, "(2,) [v cm/s, omega rad/s]"),
-        ("state.integral", integral, "(2,)"),
-        ("command", command, "(2,) [v cm/s, omega rad/s]"),
+    limit = position_limit()
+    for name, arr, allowed, values in (
+        ("state.velocity", velocity, "(2,) [v cm/s, omega rad/s]", "speeds"),
+        ("state.integral", integral, "(2,)", "integrals"),
+        ("command", command, "(2,) [v cm/s, omega rad/s]", "speeds"),
     ):
         if _shape(arr) != (2,) and not is_traced(arr):
             raise ValueError(f"{name} has shape {_shape(arr)}; allowed: {allowed}")
         if not is_traced(arr):  # far beyond any wheel; their squares would overflow
-            limit = position_limit()
-            speeds = np.asarray(arr, np.float64)
-            ok = np.abs(speeds) <= limit
-            require(name, speeds, ok, f"speeds of at most {limit:.0e} cm/s or rad/s")
+            wide = np.asarray(arr, np.float64)
+            require(name, wide, np.abs(wide) <= limit, f"{values} of magnitude <= {limit:.0e}")
     state = dynamics.RobotState(pose, jnp.asarray(velocity), jnp.asarray(integral))
     one = "one robot (a number per field): advance moves one robot"
     robot = _robot(robot)

@@ -26,6 +26,7 @@ from wmr_jax._src.checks import (
     check_dt,
     field_values,
     is_traced,
+    real_array,
     require,
     require_one_batch_size,
     require_unbatched,
@@ -262,9 +263,10 @@ def sampling_margins(gains: Gains, dt: Any) -> tuple[Any, Any]:
     each settles only while its factor stays below 2, and overshoots
     without settling above it.
     """
-    if not is_traced((gains, dt)):  # called with values: check them
+    if not is_traced((gains, dt)):  # called with values: check them (dt may be an array)
         validate_gains(gains)
-        dt = check_dt(dt)
+        periods = real_array("dt", dt, "periods > 0 s")
+        require("dt", periods, np.isfinite(periods) & (periods > 0), "finite periods > 0 s")
     return gains.k_theta * dt, gains.kr * (math.pi / 2) * dt / gains.r_m
 
 

@@ -207,9 +207,20 @@ def check_law_inputs(
     try:
         np.broadcast_shapes(batch, *gain_shapes)
     except ValueError:
-        shown = max(gain_shapes, key=len)
+        shown = next(
+            (shape for shape in gain_shapes if not _broadcasts(batch, shape)),
+            max(gain_shapes, key=len),
+        )
         raise ValueError(
             f"gains have batch shape {shown} and the poses {batch}; "
             "allowed: shapes that broadcast (one gain per pose, or one for all)"
         ) from None
     return pose, ref, params
+
+
+def _broadcasts(*shapes: tuple[int, ...]) -> bool:
+    try:
+        np.broadcast_shapes(*shapes)
+    except ValueError:
+        return False
+    return True
