@@ -99,8 +99,8 @@ def write_robustness(
         + "; latency one sample"
     )
     fig = robustness_figure(rows, title=title)
-    try:
-        png = save_figure(fig, out / "robustness.png", dpi=110)
+    try:  # "tight": the legend lies outside the axes
+        png = save_figure(fig, out / "robustness.png", dpi=110, bbox_inches="tight")
     finally:
         plt.close(fig)
     md = atomic_write_text(out / "robustness.md", text)
