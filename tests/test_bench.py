@@ -67,9 +67,11 @@ def test_both_losses_and_their_gradients_are_timed():
         "final_poses",
         "final_poses_nonideal",
         "final_pose_loss",
+        "jvp_final_pose_loss",
         "grad_final_pose_loss",
         "final_poses_relaxed",
         "tuning_loss",
+        "jvp_tuning_loss",
         "grad_tuning_loss",
     ]
     assert all(row["robot_steps_per_s"] > 0 for row in rows)
@@ -77,13 +79,17 @@ def test_both_losses_and_their_gradients_are_timed():
     for key in (
         "grad_final_pose_loss_over_forward",
         "grad_tuning_loss_over_forward",
+        "jvp_final_pose_loss_over_forward",
+        "jvp_tuning_loss_over_forward",
         "tuning_loss_over_final_poses",
         "tuning_loss_over_relaxed",
         "relaxed_over_final_poses",
         "nonideal_over_ideal",
     ):
         assert ratios[key] > 0, key
-    assert "non-ideal / ideal final_poses" in w.report.bench_table(result)
+    table = w.report.bench_table(result)
+    assert "non-ideal / ideal final_poses" in table
+    assert "one forward-mode derivative / forward (tuning loss)" in table
 
 
 @pytest.mark.parametrize(

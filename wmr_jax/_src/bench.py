@@ -576,9 +576,18 @@ class _SizeBench:
         case: str,
         beside: tuple[str, Callable[[], Any]] | None = None,
     ) -> list[dict]:
-        """Time ``loss(gains, refs)`` and its gradient, interleaved; return both rows.
+        """Time ``loss(gains, refs)``, its gradient and one directional derivative, interleaved.
+
+        The directional derivative (forward mode, ``jax.jvp`` along the gains
+        themselves, i.e. ``d/ds loss(s · gains)`` at ``s = 1``) prices what
+        reverse mode cannot avoid: a gradient whose scan recomputes its steps
+        runs the forward pass, then every step again with its transposed
+        linearisation, which costs what the forward-mode step does (the
+        transposition principle) — so ``1 + jvp_over_forward`` is its floor
+        (README, "Speed and scale").
 
         ``beside``: ``(case, call)`` timed in the same group, its row first.
+        Returns the rows ``[beside,] forward, jvp_<case>, <case>``.
         """
         import jax
 
@@ -586,18 +595,27 @@ class _SizeBench:
 
         forward = loops.jit_top_level(loss)
         gradient = loops.jit_top_level(jax.value_and_grad(loss))
+
+        def along_gains(gains, refs):
+            return jax.jvp(lambda g: loss(g, refs), (gains,), (gains,))
+
+        directional = loops.jit_top_level(along_gains)
         gains, refs = self.gains, self.refs
         group = {
             "forward": (lambda: forward(gains, refs), True),
+            "directional": (lambda: directional(gains, refs), True),
             "gradient": (lambda: gradient(gains, refs), True),
         }
         if beside is not None:
             group["beside"] = (beside[1], True)
         t = self.time(group)
         ratio = t["gradient"].run_s / t["forward"].run_s
+        jvp_ratio = t["directional"].run_s / t["forward"].run_s
+        jvp_case = case.replace("grad_", "jvp_", 1)
         rows = [] if beside is None else [self.row(beside[0], t["beside"])]
         return rows + [
             self.row(forward_row[0], t["forward"], **forward_row[1]),
+            self.row(jvp_case, t["directional"], jvp_over_forward=jvp_ratio),
             self.row(case, t["gradient"], grad_over_forward=ratio),
         ]
 
@@ -666,10 +684,15 @@ def _ratios(rows: list[dict]) -> dict[str, Any]:
                 entry[f"{name}vs_numpy_batch"] = value / numpy_rate
             if value and scalar:
                 entry[f"{name}vs_scalar_reference"] = value / scalar
-        for case in ("grad_final_pose_loss", "grad_tuning_loss"):
+        for case, key in (
+            ("grad_final_pose_loss", "grad_over_forward"),
+            ("grad_tuning_loss", "grad_over_forward"),
+            ("jvp_final_pose_loss", "jvp_over_forward"),
+            ("jvp_tuning_loss", "jvp_over_forward"),
+        ):
             for r in rows:
-                if r["case"] == case and r["n"] == n and "grad_over_forward" in r:
-                    entry[f"{case}_over_forward"] = r["grad_over_forward"]
+                if r["case"] == case and r["n"] == n and key in r:
+                    entry[f"{case}_over_forward"] = r[key]
         relaxed, loss = rate("final_poses_relaxed", n), rate("tuning_loss", n)
         if relaxed and loss:
             entry["tuning_loss_over_relaxed"] = relaxed / loss

@@ -14,6 +14,7 @@ _RATIO_COLUMNS = {
     "sharded_vs_scalar_reference": "sharded / scalar reference",
     "grad_final_pose_loss_over_forward": "grad / forward (final-pose loss)",
     "grad_tuning_loss_over_forward": "grad / forward (tuning loss)",
+    "jvp_tuning_loss_over_forward": "one forward-mode derivative / forward (tuning loss)",
     "tuning_loss_over_final_poses": "tuning loss / final_poses (time per robot-step)",
     "nonideal_over_ideal": "non-ideal / ideal final_poses (time per robot-step)",
     "relaxed_over_final_poses": "relaxed / hard-law final_poses (time per robot-step)",
