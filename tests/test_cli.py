@@ -25,6 +25,21 @@ def test_simulate_prints_report(capsys, tmp_path):
     assert plot.stat().st_size > 1000
 
 
+def test_simulate_says_when_the_robot_faces_backwards(capsys):
+    """θ = θ_r ± 180° counts as arrived; the report says so rather than look like a miss."""
+    seen = []
+    for ref in ([30.0, 30.0, 0.0], [30.0, -30.0, 90.0]):
+        assert main(["simulate", "--ref", *map(str, ref)]) == 0
+        out = capsys.readouterr().out
+        theta_r = math.radians(ref[2])
+        # The independent reference's last heading decides which way it faces.
+        final = w.reference_rollout([ref[0], ref[1], theta_r], w.Gains())["poses"][-1]
+        backwards = math.cos(final[2] - theta_r) < 0
+        assert ("facing backwards: θ − θ_r = " in out) == backwards, out
+        seen.append(backwards)
+    assert seen == [True, False]  # one run of each kind
+
+
 def test_simulate_nonideal(capsys):
     argv = ["simulate", "--ref", "20", "-10", "45", "--kr", "60", "--velocity", "nonideal"]
     assert main(argv) == 0

@@ -149,3 +149,29 @@ def test_compare_command_prints_what_it_stores(tmp_path, capsys):
     _check_comparison(printed, stored["rows"])
     _check_comparison((tmp_path / "comparison.md").read_text(), stored["rows"])
     assert " %" in printed  # success is a percentage
+
+
+def _slug(heading):
+    """GitHub's anchor of a Markdown heading: lower case, punctuation dropped, spaces as -."""
+    text = re.sub(r"[^\w\- ]", "", heading.strip().lower())
+    return text.replace(" ", "-")
+
+
+def test_links_between_pages_reach_a_file_and_heading():
+    """Every relative link of the README and docs/*.md opens a file, and its #anchor a heading."""
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    checked = 0
+    for page in pages:
+        text = page.read_text(encoding="utf-8")
+        for target in re.findall(r"\]\(([^)\s]+)\)", text):
+            if re.match(r"[a-z]+:", target):  # an address elsewhere
+                continue
+            path, _, anchor = target.partition("#")
+            file = (page.parent / path).resolve() if path else page
+            assert file.is_file(), f"{page.name}: {target} opens no file"
+            if anchor:
+                headings = re.findall(r"^#+ (.+)$", file.read_text(encoding="utf-8"), re.M)
+                slugs = {_slug(h) for h in headings}
+                assert anchor in slugs, f"{page.name}: {target} names no heading of {file.name}"
+            checked += 1
+    assert checked > 20  # the pages do link to each other

@@ -417,7 +417,8 @@ def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = No
         ``run_s`` (s), ``compile_s`` (s), ``robot_steps_per_s``, ``runs_s``,
         ``others_cpu`` (cores), or ``skipped`` with a reason; ``ratios`` maps
         ``"N=<n>"`` to the speed-ups of ``final_poses`` over the baselines and
-        the cost of each gradient over its forward pass.
+        the cost of each gradient, and of one forward-mode derivative, over
+        its forward pass.
 
     Raises:
         ValueError: for a bad ``config``.

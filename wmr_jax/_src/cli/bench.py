@@ -46,7 +46,11 @@ def add_arguments(parser: Any) -> None:
         action="extend",
         default=None,
         metavar="CASE",
-        help="only these cases, among " + ", ".join(bench.CASES) + " (None: all of them)",
+        help="only these cases, among "
+        + ", ".join(bench.CASES)
+        + " (default: all of them); a grad_* case also times its loss's forward pass and "
+        "one forward-mode derivative (jvp_*), and grad_tuning_loss final_poses through the "
+        "same relaxed law",
     )
     parser.add_argument(
         "--cpu-devices",

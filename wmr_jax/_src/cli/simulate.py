@@ -83,9 +83,16 @@ def run(args: Any) -> int:
     per_region = np.asarray(metrics.region_time(traj, dt=dt))
     final = np.asarray(traj.poses[-1])
     print(f"reference      : x={ref[0]:.3f} cm  y={ref[1]:.3f} cm  θ={math.degrees(ref[2]):.2f}°")
+    # The law folds front and back alike: a robot facing θ_r ± 180° is at its goal.
+    turned = math.remainder(float(final[2]) - ref[2], 2 * math.pi)
+    facing = (
+        f"  (facing backwards: θ − θ_r = {math.degrees(turned):.1f}°; front and back count alike)"
+        if math.cos(turned) < 0
+        else ""
+    )
     print(
         f"final pose     : x={final[0]:.3f} cm  y={final[1]:.3f} cm  "
-        f"θ={math.degrees(final[2]):.2f}° after {steps * dt:.3f} s"
+        f"θ={math.degrees(final[2]):.2f}° after {steps * dt:.3f} s{facing}"
     )
     arrival = "never (not arrived at the end)" if math.isinf(t_arrive) else f"{t_arrive:.3f} s"
     print(f"arrival time   : {arrival}")

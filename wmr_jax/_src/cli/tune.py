@@ -276,7 +276,7 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument(
         "--schedule",
         action="store_true",
-        help="tune the gain-scheduled law (35 parameters, docs/model.md §3) instead of the "
+        help="tune the gain-scheduled law (35 parameters, docs/model.md §3.9) instead of the "
         "7 fixed gains, with the schedule's own defaults for --iters, the step and the "
         "annealing (wmr_jax.tuning.TuneConfig.for_problem)",
     )
