@@ -79,8 +79,10 @@ def test_bad_files_are_refused_in_one_line(tmp_path, content, message):
 
 
 def test_non_finite_parameters_are_never_written():
-    with pytest.raises(ValueError, match="not all finite"):
+    with pytest.raises(ValueError, match="gains.kr = nan is not allowed; allowed: a finite"):
         tuning.tuned_json(w.Gains(kr=float("nan")))
+    with pytest.raises(ValueError, match=r"params.k_turn\[3\] = inf is not allowed"):
+        tuning.tuned_json(tuning.ScheduleParams(k_turn=(10.0,) * 3 + (np.inf,) + (10.0,) * 6))
 
 
 def test_a_checkpoint_with_nan_or_wrong_lengths_is_refused():
@@ -106,3 +108,29 @@ def test_a_schedule_file_must_be_whole_and_integers_load_as_floats(tmp_path):
     controller, gains = tuning.load_tuned(path)
     grad = jax.grad(lambda g: w.rollout([30.0, 30.0, 0.0], g, steps=5).poses[-1, 0])(gains)
     assert np.isfinite(float(grad.kr)) and float(grad.kr) != 0.0
+
+
+def test_only_what_load_tuned_reads_back_is_written():
+    """tuned_json refuses what load_tuned would refuse, by name, before writing."""
+    schedule = tuning.ScheduleParams
+    for params, message in (
+        (schedule(kr=(60.0, 60.0)), r"the tables have \[2, 10\] knots"),
+        (w.Gains(kr=-1.0), r"gains.kr = -1.0 is not allowed"),
+        (w.Gains(kr=np.array([60.0, 70.0])), r"params.kr has shape \(2,\); allowed: one"),
+        ("gains.json", "params is a str; allowed: a wmr_jax.Gains or"),
+        (None, "params is a NoneType"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            tuning.tuned_json(params)
+
+
+def test_a_null_or_missing_kind_is_named(tmp_path):
+    path = tmp_path / "tuned_gains.json"
+    path.write_text('{"kind": null, "controller": null, "kr": 50}')
+    with pytest.raises(ValueError, match="kind = None is not allowed; allowed: a string"):
+        tuning.load_tuned(path)
+    values = tuning.tuned_json(tuning.ScheduleParams())
+    del values["kind"], values["controller"]
+    path.write_text(json.dumps(values))
+    with pytest.raises(ValueError, match="is a schedule's, but the file names no kind"):
+        tuning.load_tuned(path)

@@ -2,6 +2,7 @@
 
 import math
 
+import jax
 import numpy as np
 import pytest
 from conftest import random_refs
@@ -69,3 +70,17 @@ def test_one_robot_per_reference_and_the_edges_of_the_bounds():
     # is 0.24 s, one sample of 1e9 s (not 0, which the rounding slack gave).
     slow = tuning.time_bounds([30.0, 0.0, 0.0], dt=1e9)
     assert float(slow.turn_drive_turn) == float(slow.lower_bound) == 1e9
+
+
+def test_bounds_are_computed_from_the_references_in_float64():
+    """A float32 session must not round the references first (π became 3.1415927 > π)."""
+    with jax.enable_x64(False):
+        half_turn = tuning.time_bounds([0.0, 0.0, math.pi])  # fold(π) = 0: nothing to do
+        far = tuning.time_bounds([1e17, 0.0, 0.0])
+        # 1.7 cm at 100 cm/s, tol 1 cm: 0.007 s exactly; float32 gave 8 samples of 1 ms.
+        near = tuning.time_bounds([1.7, 0.0, 0.0], robot=w.Robot(v_max=100.0), dt=0.001)
+    assert float(half_turn.turn_drive_turn) == 0.0
+    assert float(far.lower_bound) >= 1e17 / 125.0 - 1e-2 * 0.033
+    assert float(near.lower_bound) == pytest.approx(0.007)
+    with pytest.raises(ValueError, match="bounds is a tuple; allowed: a TimeBounds"):
+        tuning.bound_ratios(1.0, (1.0, 2.0))

@@ -129,6 +129,35 @@ def test_bad_schedules_are_refused_in_one_line():
             tuning.ScheduleParams.from_gains(w.Gains(), knots=knots)
 
 
+def test_lists_are_values_and_batches_must_agree():
+    """A list for a field or a knot is one batched value, as in Gains; batch sizes must agree."""
+    refs = random_refs(0, 3)
+    params = tuning.ScheduleParams()
+    want = np.asarray(w.final_poses(refs, params, controller=SCHEDULE, steps=5))
+    for change in (
+        {"phi_m": [params.phi_m] * 3},
+        {"v_max": (params.v_max,) * 3},
+        {"kr": ([60.0, 60.0, 60.0],) + (60.0,) * 9},
+        {"kr": list(params.kr)},
+    ):
+        got = w.final_poses(refs, params.replace(**change), controller=SCHEDULE, steps=5)
+        np.testing.assert_array_equal(np.asarray(got), want)
+    err = w.polar_error([0.0, 0.0, 0.0], [10.0, 0.0, 0.0])
+    for change, message in (
+        ({"kr": (np.ones(2), np.ones(3)) + (60.0,) * 8}, r"params.kr\[0\]: 2, params.kr\[1\]: 3"),
+        (
+            {"kr": (np.ones(2),) + (60.0,) * 9, "phi_m": np.ones(3)},
+            r"params.kr\[0\]: 2, params.phi_m: 3",
+        ),
+    ):
+        with pytest.raises(ValueError, match=rf"batch sizes differ \({message}"):
+            w.controllers.schedule_commands(err, params.replace(**change))
+    with pytest.raises(ValueError, match="params.r_m = an integer of about 401 digits"):
+        w.final_poses(refs, params.replace(r_m=10**400), controller=SCHEDULE, steps=5)
+    with pytest.raises(ValueError, match="gains.kr = an integer of about 401 digits"):
+        w.rollout([10.0, 0.0, 0.0], w.Gains(kr=10**400), steps=5)
+
+
 def test_a_schedule_float32_cannot_hold_is_refused_there():
     params = tuning.ScheduleParams()
     with jax.enable_x64(False):
@@ -150,3 +179,12 @@ def test_a_schedule_the_sampled_law_cannot_settle_with_warns():
     with warnings.catch_warnings():
         warnings.simplefilter("error", w.SamplingWarning)
         w.final_poses(random_refs(0, 4), wide, controller=SCHEDULE, steps=3)
+
+
+def test_the_sampling_margin_of_gains_near_float32s_limit_is_finite():
+    """k_r = 3e38 fits float32, its margin does not: computed in float64, no NumPy overflow."""
+    huge = tuning.ScheduleParams(kr=(3e38,) * 10)
+    with jax.enable_x64(False), warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        with pytest.warns(w.SamplingWarning, match=r"k_r\*pi\*dt/\(2\*R_m\) = 7\.78e\+35"):
+            w.final_poses(random_refs(0, 2), huge, controller=SCHEDULE, steps=2)

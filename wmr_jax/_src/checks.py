@@ -102,7 +102,13 @@ def real_array(name: str, value: Any, allowed: str) -> np.ndarray:
 
 
 def described(value: Any) -> str:
-    """Return ``repr(value)``, or its type, shape and dtype if it is a large array."""
+    """Return ``repr(value)``, or its type, shape and dtype if it is a large array.
+
+    An integer too large for any float is described by its size, not its
+    hundreds of digits.
+    """
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 1024:
+        return f"an integer of about {int(value.bit_length() * math.log10(2)) + 1} digits"
     shape, dtype = getattr(value, "shape", None), getattr(value, "dtype", None)
     if shape is not None and dtype is not None and int(np.prod(shape)) > 6:
         return f"{type(value).__name__} of shape {tuple(shape)} and dtype {dtype}"
@@ -330,9 +336,9 @@ def field_values(
             if array_kind(value) in "bcUS":
                 raise TypeError(value)  # True as 1, and 1 + 2j as 1, are not gains
             arr = np.asarray(value, dtype=float)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):  # OverflowError: an int beyond float
             raise ValueError(
-                f"{name} = {value!r} is not allowed; allowed: a finite number"
+                f"{name} = {described(value)} is not allowed; allowed: a finite number"
             ) from None
         if arr.ndim > 1 or arr.size == 0:
             raise ValueError(
@@ -445,15 +451,23 @@ def lists_to_arrays(params: Any) -> None:
     numbers stay as they are, for ``field_values`` to name.
     """
     for field in dataclasses.fields(params):
-        value = getattr(params, field.name)
-        if isinstance(value, (list, tuple)):
-            try:
-                if array_kind(value) not in "iuf":
-                    continue  # bools, strings: left for field_values to name
-                array = np.asarray(value, dtype=float)
-            except (TypeError, ValueError):
-                continue
-            object.__setattr__(params, field.name, array)
+        object.__setattr__(params, field.name, list_as_array(getattr(params, field.name)))
+
+
+def list_as_array(value: Any) -> Any:
+    """A list or tuple of numbers as one float NumPy array; anything else as it is.
+
+    Lists that are not numbers (bools, strings, ragged rows) stay as they
+    are, for the checks to name.
+    """
+    if not isinstance(value, (list, tuple)):
+        return value
+    try:
+        if array_kind(value) not in "iuf":
+            return value
+        return np.asarray(value, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        return value
 
 
 def as_poses(name: str, value: Any, *, batch: bool | None) -> jax.Array:

@@ -88,7 +88,10 @@ def time_bounds(
         ValueError: for bad poses, robot, ``dt`` or ``tol_r``, naming the value.
     """
     robot = validate_robot(Robot() if robot is None else robot)
-    refs = np.asarray(as_poses("refs", refs, batch=None), dtype=float)
+    as_poses("refs", refs, batch=None)  # shape, finiteness and the heading's range
+    # The references as given, in float64: through the session's float32 a
+    # heading of π became 3.1415927 > π, one sample of turning too many.
+    refs = np.asarray(refs, dtype=np.float64)
     dt = float(check_dt(dt))
     tol_r = check_number("tol_r", tol_r, unit="cm")
     v_max, half_track = (_per_reference(robot, name, refs) for name in ("v_max", "half_track"))
@@ -112,6 +115,10 @@ def bound_ratios(mean_arrival: float, bounds: TimeBounds) -> dict[str, float]:
     Returns:
         ``{"turn_drive_turn_s", "lower_bound_s", "vs_turn_drive_turn", "vs_lower_bound"}``.
     """
+    if not isinstance(bounds, TimeBounds):
+        raise ValueError(
+            f"bounds is a {type(bounds).__name__}; allowed: a TimeBounds (from time_bounds)"
+        )
     # inf (none arrived) is allowed and gives inf ratios; NaN, 0 and below are not times.
     allowed = "a time > 0 s, or inf"
     value = real_array("mean_arrival", mean_arrival, allowed)

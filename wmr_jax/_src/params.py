@@ -277,7 +277,10 @@ def check_sampling(gains: Gains, dt: Any, *, stacklevel: int = 2) -> bool:
         ValueError: for gains out of range or a ``dt`` that is not a period.
     """
     gains, dt = validate_gains(gains), check_dt(dt)
-    heading, distance = (np.max(np.asarray(m, dtype=float)) for m in sampling_margins(gains, dt))
+    # In float64: a k_r float32 can hold (3e38) has a margin beyond float32.
+    wide = jax.tree.map(lambda leaf: np.asarray(leaf, dtype=np.float64), gains)
+    margins = sampling_margins(wide, np.float64(dt))
+    heading, distance = (float(np.max(m)) for m in margins)
     if heading < 2 and distance < 2:
         return True
     warnings.warn(

@@ -38,8 +38,10 @@ from wmr_jax._src.checks import (
     Parameters,
     check_int,
     is_traced,
+    list_as_array,
     real_array,
     require,
+    require_one_batch_size,
     require_representable,
 )
 from wmr_jax._src.controllers.base import Controller, register_controller
@@ -100,7 +102,18 @@ class ScheduleParams(Parameters):
     half_track: Any = float(_ROBOT.half_track)
 
     def __post_init__(self) -> None:
-        """Keep the tables as given: a tuple of knots is one leaf per knot here."""
+        """Keep each table a tuple of knots, one leaf per knot.
+
+        A list given for a table becomes a tuple; a list given for one knot,
+        or for any other field, becomes one array (a batched value), as in
+        ``Gains``.
+        """
+        for name in TABLES:
+            table = getattr(self, name)
+            if isinstance(table, (list, tuple)):
+                object.__setattr__(self, name, tuple(list_as_array(knot) for knot in table))
+        for name in (*SHAPE_FIELDS, "v_max", "half_track"):
+            object.__setattr__(self, name, list_as_array(getattr(self, name)))
 
     @classmethod
     def from_gains(
@@ -216,6 +229,11 @@ def validate_schedule(params: ScheduleParams) -> ScheduleParams:
     validate_gains(shape, prefix="params")
     for name, unit in (("v_max", "cm/s"), ("half_track", "cm")):
         _check_positive(f"params.{name}", getattr(params, name), f"a finite {name} > 0, {unit}")
+    # Every batched value, knot or field, must run the same N (or 1, shared).
+    values = {f"params.{t}[{k}]": v for t in TABLES for k, v in enumerate(getattr(params, t))}
+    for name in (*SHAPE_FIELDS, "v_max", "half_track"):
+        values[f"params.{name}"] = getattr(params, name)
+    require_one_batch_size({name: np.shape(v)[0] for name, v in values.items() if np.ndim(v) == 1})
     return params
 
 

@@ -9,11 +9,10 @@ which hold only ``Gains`` field names, load as fixed gains.
 from __future__ import annotations
 
 import json
-import math
 import os
 from typing import Any
 
-from wmr_jax._src.checks import check_path
+from wmr_jax._src.checks import check_path, require_unbatched
 from wmr_jax._src.controllers.base import Controller
 from wmr_jax._src.controllers.schedule import SCHEDULE, SHAPE_FIELDS, TABLES, ScheduleParams
 from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
@@ -32,26 +31,29 @@ def tuned_json(params: Any) -> dict[str, Any]:
     """Return the ``tuned_gains.json`` content of ``Gains`` or ``ScheduleParams``.
 
     Raises:
-        ValueError: if a value is not finite (a file of nulls is never written).
+        ValueError: for anything but one valid parameter set (a scalar per
+            field), naming the field: ``load_tuned`` must read back what is
+            written, and a file of nulls is never written.
     """
-    problem = SCHEDULED if isinstance(params, ScheduleParams) else FIXED
-    values = params_json(problem, params)
-    numbers = [x for v in values.values() if not isinstance(v, str) for x in _flat(v)]
-    if not all(math.isfinite(x) for x in numbers):
-        raise ValueError("the tuned parameters are not all finite; nothing was written")
-    return values
-
-
-def _flat(value: Any) -> list[float]:
-    return [float(x) for x in value] if isinstance(value, list) else [float(value)]
+    if not isinstance(params, (Gains, ScheduleParams)):
+        raise ValueError(
+            f"params is a {type(params).__name__}; allowed: a wmr_jax.Gains or a "
+            "wmr_jax.controllers.ScheduleParams"
+        )
+    schedule = isinstance(params, ScheduleParams)
+    (SCHEDULE if schedule else SHIM_SUNG).validate(params)
+    require_unbatched(params, "params", "one parameter set, a scalar per field")
+    return params_json(SCHEDULED if schedule else FIXED, params)
 
 
 def _kind_of(values: dict[str, Any], where: str) -> str:
+    for name in ("kind", "controller"):
+        if name in values and not isinstance(values[name], str):  # null is no name either
+            raise ValueError(
+                f"{where}: {name} = {values[name]!r} is not allowed; allowed: a string"
+            )
     kind = values.get("kind")
     controller = values.get("controller")
-    for name, value in (("kind", kind), ("controller", controller)):
-        if value is not None and not isinstance(value, str):
-            raise ValueError(f"{where}: {name} = {value!r} is not allowed; allowed: a string")
     if kind is None and controller is None:
         return "fixed"  # a file from before the schedules: Gains field names only
     by_name = {c.name: k for k, (c, _) in _KINDS.items()}
@@ -107,6 +109,16 @@ def load_tuned(path: str | os.PathLike) -> tuple[Controller, Any]:
     fields = GAIN_FIELDS if kind == "fixed" else _SCHEDULE_FIELDS
     numbers = {k: v for k, v in values.items() if k not in ("kind", "controller")}
     bad = sorted(set(numbers) - set(fields))
+    if (
+        bad
+        and "kind" not in values
+        and "controller" not in values
+        and set(bad) <= set(_SCHEDULE_FIELDS)
+    ):
+        raise ValueError(
+            f"{where}: key {bad[0]!r} is a schedule's, but the file names no kind; allowed: "
+            "'kind': 'schedule' (as wmr-jax tune --schedule writes), or Gains fields only"
+        )
     if bad:
         raise ValueError(
             f"{where}: key {bad[0]!r} is not allowed; allowed: keys among {', '.join(fields)}"
