@@ -113,6 +113,10 @@ def _write(tmp_path, name, text):
         # An empty path was the current folder.
         (["sweep", "--out", "", "--poses", "10"], "--out '' is not allowed; allowed: a folder"),
         (["bench", "--json", ""], "--json '' is not allowed; allowed: a file name"),
+        # --knots sizes a schedule's tables: alone it would size nothing.
+        (["tune", "--out", "{dir}", "--knots", "30"], "--knots is not allowed without --schedule"),
+        (["tune", "--out", "{dir}", "--schedule", "--knots", "201"], "--knots '201' is not"),
+        (["tune", "--out", "{dir}", "--robust", "--knots", "4"], "--knots is not allowed"),
         # --compare runs its own seeds 0-2: --seed 3 was ignored without a word.
         (["tune", "--out", "{dir}", "--compare", "--seed", "3"], "--seed is not allowed with"),
         # Nested beyond Python's recursion limit: a RecursionError traceback before.
@@ -222,6 +226,29 @@ def test_an_interrupted_compare_keeps_its_finished_seeds_and_resumes(tmp_path, m
     # Other settings are refused, naming the difference.
     assert main(["tune", "--out", str(out), "--compare", "--iters", "2", "--resume"]) == 2
     assert "iters = 1 there, 2 now" in capsys.readouterr().err
+
+
+def test_compare_with_schedule_compares_that_schedule_alone(tmp_path, monkeypatch, capsys):
+    """--compare --schedule --knots K hands compare the K-knot schedule's config only."""
+    from wmr_jax._src.tuning import compare as compare_module
+
+    seen = []
+
+    def fake(*, seeds, problems, configs, progress):
+        seen.append((problems, configs[problems[0]].knots, seeds[0]))
+        row = {"mean_arrival": 0.5, "success_rate": 1.0, "wall_s": 1.0, "parameters": 14}
+        bounds = {"turn_drive_turn_s": 0.4, "lower_bound_s": 0.35}
+        methods = ("gradient", "cma-es", "random search")
+        return [
+            {"problem": problems[0], "seed": seeds[0], "method": m, **row, **bounds}
+            for m in methods
+        ]
+
+    monkeypatch.setattr(compare_module, "compare", fake)
+    argv = ["tune", "--out", str(tmp_path), "--compare", "--schedule", "--knots", "3"]
+    assert main(argv) == 0
+    assert seen == [(("schedule",), 3, 0), (("schedule",), 3, 1), (("schedule",), 3, 2)]
+    assert "| schedule (14) | gradient |" in capsys.readouterr().out
 
 
 def test_tune_robust_writes_its_gains_before_judging_them(tmp_path, monkeypatch):

@@ -186,6 +186,26 @@ def test_compare_checks_every_problem_and_seed_before_the_first_run(kwargs, mess
         tuning.compare(**kwargs)
 
 
+def test_compare_runs_all_three_methods_on_a_schedule_of_its_size():
+    """A schedule config's knots size what the gradient, CMA-ES and random search all search."""
+    small = {k: getattr(TINY, k) for k in ("iters", "poses", "eval_poses", "horizon")}
+    config = tuning.TuneConfig.for_problem("schedule", knots=2, **small)
+    searched = []
+    real_search = compare_module.random_search
+
+    def watched(*args, problem, **kwargs):
+        searched.append(problem.dim)
+        return real_search(*args, problem=problem, **kwargs)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(compare_module, "random_search", watched)
+        rows = tuning.compare(seeds=(0,), problems=("schedule",), configs={"schedule": config})
+    assert [r["method"] for r in rows] == ["gradient", "cma-es", "random search"]
+    assert searched == [11] and all(r["parameters"] == 11 for r in rows)
+    for row in rows:
+        assert row["wall_s"] > 0 and row["mean_arrival"] > 0, row  # inf: none arrives in 0.3 s
+
+
 # ---------------------------------------------------------------- smaller entry points
 
 

@@ -177,3 +177,45 @@ def test_each_problem_has_its_own_recommended_settings():
     assert tuning.TuneConfig.for_problem("schedule", iters=5, seed=3).iters == 5
     with pytest.raises(ValueError, match=r"problem = 'sched'.*'fixed', 'schedule'"):
         tuning.TuneConfig.for_problem("sched")
+
+
+def test_a_schedule_of_any_size_is_a_problem_of_its_own():
+    """knots sizes the tables: 3K + 5 parameters, and a file of K knots that loads back."""
+    for knots in (2, 4, 30):
+        problem = tuning.schedule_problem(knots)
+        assert problem is tuning.schedule_problem(knots)  # one static value per size
+        assert problem.dim == 3 * knots + 5 and len(problem.columns) == 3 * knots + 7
+        params = problem.from_unit(np.full(problem.dim, 0.3), w.Robot())
+        assert len(params.kr) == len(params.k_turn) == knots
+        again = problem.from_row(problem.row(params))
+        assert problem.row(again) == problem.row(params)
+        start = problem.start(w.Robot())
+        assert start.shape == (problem.dim,) and np.all((start > 0) & (start < 1))
+    assert tuning.schedule_problem() is tuning.SCHEDULED and tuning.SCHEDULED.dim == 35
+    for knots in (1, 201, True, 2.5):
+        with pytest.raises(ValueError, match=f"knots = {knots!r} is not allowed"):
+            tuning.schedule_problem(knots)
+
+
+def test_tuning_a_schedule_of_four_knots(tmp_path):
+    config = tuning.TuneConfig.for_problem("schedule", knots=4, **_small_settings())
+    assert config.problem is tuning.schedule_problem(4)
+    result = tuning.tune(tmp_path, config, progress=False)
+    assert len(result.gains.kr) == 4 and result.history["gains"].shape == (SMALL.iters, 19)
+    controller, params = w.load_tuned(tmp_path / "tuned_gains.json")
+    assert controller.name == "shim-sung-schedule" and len(params.k_theta) == 4
+    assert (tmp_path / "tuning_curve.png").stat().st_size > 1000
+    # Its size is part of the run: a checkpoint of 4 knots does not resume 5.
+    with pytest.raises(ValueError, match="knots = 4 there, 5 now"):
+        tuning.tune(tmp_path, config.replace(knots=5), resume=True)
+    # Knots are the schedule's; the default size is left out of the saved settings,
+    # so runs saved before schedules had a size still resume.
+    with pytest.raises(ValueError, match="knots = 4 is not allowed with schedule = False"):
+        tuning.TuneConfig(knots=4).validate()
+    assert "knots" not in tuning.TuneConfig.for_problem("schedule").as_dict()
+    assert config.as_dict()["knots"] == 4
+
+
+def _small_settings():
+    names = ("iters", "poses", "horizon", "checkpoint_every", "eval_poses", "random_search")
+    return {name: getattr(SMALL, name) for name in names}

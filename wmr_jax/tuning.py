@@ -10,7 +10,8 @@ See ``docs/model.md §3`` (the gains, their ranges and the gain schedules),
 yardsticks every tuning report compares with).
 ``TuneConfig.for_problem("schedule")`` tunes the gain-scheduled law
 (``ScheduleParams``) instead of the fixed gains, with its own recommended
-iterations, step and annealing;
+iterations, step and annealing (``knots=`` sizes its tables:
+``schedule_problem(knots)``);
 ``load_tuned`` reads either kind of ``tuned_gains.json``; ``compare`` runs
 the gradient against CMA-ES and random search at equal wall time.
 """
@@ -48,6 +49,7 @@ from wmr_jax._src.tuning.problems import FIXED as FIXED
 from wmr_jax._src.tuning.problems import SCHEDULED as SCHEDULED
 from wmr_jax._src.tuning.problems import Problem as Problem
 from wmr_jax._src.tuning.problems import get_problem as get_problem
+from wmr_jax._src.tuning.problems import schedule_problem as schedule_problem
 from wmr_jax._src.tuning.robust import RobustConfig as RobustConfig
 from wmr_jax._src.tuning.robust import robust_gains as robust_gains
 from wmr_jax._src.tuning.robust import robust_score as robust_score

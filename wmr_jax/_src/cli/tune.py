@@ -281,6 +281,12 @@ def add_arguments(parser: Any) -> None:
         "annealing (wmr_jax.tuning.TuneConfig.for_problem)",
     )
     parser.add_argument(
+        "--knots",
+        metavar="K",
+        help="with --schedule: knots per table, 3K + 5 parameters (default: 10, 35 "
+        "parameters; at most 200)",
+    )
+    parser.add_argument(
         "--robust",
         action="store_true",
         help="tune for robustness to noise and latency (docs/model.md §7)",
@@ -289,7 +295,8 @@ def add_arguments(parser: Any) -> None:
         "--compare",
         action="store_true",
         help="instead of tuning once, compare gradient, CMA-ES and random search at equal "
-        "wall time, fixed gains and schedules, seeds 0-2, into DIR/compare.{json,md}",
+        "wall time, fixed gains and schedules (with --schedule: the schedule only), seeds "
+        "0-2, into DIR/compare.{json,md}",
     )
     parser.add_argument(
         "--gradient-cost",
@@ -301,6 +308,7 @@ def add_arguments(parser: Any) -> None:
 
 def _config_from(args: Any, *, schedule: bool) -> Any:
     """The ``TuneConfig`` of the flags, each checked (one line naming a bad one)."""
+    from wmr_jax._src.controllers.schedule import MAX_KNOTS
     from wmr_jax._src.poses import MAX_SAMPLES
     from wmr_jax._src.tuning.training import TuneConfig
 
@@ -321,6 +329,8 @@ def _config_from(args: Any, *, schedule: bool) -> Any:
         checkpoint_every=flags.positive_int("--checkpoint-every", given("checkpoint_every"), 1),
         random_search=not args.no_random_search,
     )
+    if schedule and args.knots is not None:
+        config = config.replace(knots=flags.positive_int("--knots", args.knots, 2, MAX_KNOTS))
     return config.validate()  # the horizon against dt, before any work
 
 
@@ -331,9 +341,11 @@ def _check_modes(args: Any) -> None:
         a, b = (f"--{m.replace('_', '-')}" for m in modes[:2])
         raise ValueError(f"{a} is not allowed with {b}; allowed: one of them")
     mode = modes[0] if modes else None
+    if args.knots is not None and not args.schedule:
+        raise ValueError("--knots is not allowed without --schedule, whose tables it sizes")
     unused = {
         "robust": ("schedule", "horizon", "eval_poses", "checkpoint_every", "no_random_search"),
-        "compare": ("schedule", "seed", "checkpoint_every", "no_random_search"),
+        "compare": ("seed", "checkpoint_every", "no_random_search"),
         "gradient_cost": (*(field for _, field, _, _ in _FLAGS), "schedule", "resume"),
     }.get(mode, ())
     for name in unused:
@@ -421,10 +433,9 @@ def _compare(out: Path, args: Any) -> int:
     from wmr_jax._src.report.tuning import comparison_table
     from wmr_jax._src.tuning.compare import compare
 
-    configs = {
-        "fixed": _config_from(args, schedule=False),
-        "schedule": _config_from(args, schedule=True),
-    }
+    configs = {"schedule": _config_from(args, schedule=True)}
+    if not args.schedule:  # both problems, unless --schedule asks for the schedule alone
+        configs = {"fixed": _config_from(args, schedule=False), **configs}
     settings = {
         "format": _COMPARE_FORMAT,
         "seeds": list(_COMPARE_SEEDS),

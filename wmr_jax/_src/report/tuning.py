@@ -10,12 +10,12 @@ from typing import Any
 import numpy as np
 
 from wmr_jax._src.checks import real_array, require
-from wmr_jax._src.controllers.schedule import KNOTS, SHAPE_FIELDS, knot_radii
+from wmr_jax._src.controllers.schedule import MAX_KNOTS, SHAPE_FIELDS, knot_radii
 from wmr_jax._src.io import save_figure
 from wmr_jax._src.optimal import bound_ratios
 from wmr_jax._src.report.tables import markdown_table, require_rows
 from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS, PAPER_FEASIBLE_GAINS, gains_as_dict
-from wmr_jax._src.tuning.problems import get_problem
+from wmr_jax._src.tuning.problems import get_problem, schedule_problem
 
 __all__ = ["comparison_table", "evaluation_table", "tuning_curve"]
 
@@ -98,7 +98,7 @@ def evaluation_table(evaluation: dict[str, Any], bounds: Any = None) -> str:
 
 
 _COMPARE_COLUMNS = [
-    "problem",
+    "problem (parameters)",
     "method",
     "mean arrival (s), seeds 0/1/2",
     "success",
@@ -117,14 +117,17 @@ def comparison_table(rows: list[dict[str, Any]]) -> str:
     rows = require_rows("rows", rows)
     groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for row in rows:
-        groups.setdefault((row["problem"], row["method"]), []).append(row)
+        # Rows of before the schedules had a size do not say their parameter count.
+        size = row.get("parameters")
+        problem = row["problem"] if size is None else f"{row['problem']} ({size})"
+        groups.setdefault((problem, row["method"]), []).append(row)
     lines = []
     for (problem, method), group in groups.items():
         arrival = [r["mean_arrival"] for r in group]
         gap = [r["mean_arrival"] - r["lower_bound_s"] for r in group]
         lines.append(
             {
-                "problem": problem,
+                "problem (parameters)": problem,
                 "method": method,
                 "mean arrival (s), seeds 0/1/2": " / ".join(f"{a:.3f}" for a in arrival),
                 "success": f"{100 * min(r['success_rate'] for r in group):.1f} %",
@@ -136,7 +139,7 @@ def comparison_table(rows: list[dict[str, Any]]) -> str:
     first = rows[0]
     lines.append(
         {
-            "problem": "—",
+            "problem (parameters)": "—",
             "method": "turn–drive–turn / lower bound (§8)",
             "mean arrival (s), seeds 0/1/2": (
                 f"{first['turn_drive_turn_s']:.3f} / {first['lower_bound_s']:.3f}"
@@ -177,9 +180,13 @@ def tuning_curve(
         )
     if problem not in ("fixed", "schedule"):
         raise ValueError(f"problem = {problem!r} is not allowed; allowed: 'fixed', 'schedule'")
-    columns = len(get_problem(problem).columns)
     loss, temperature = _history_curves(history)
     gains = real_array("history['gains']", history["gains"], "real numbers")
+    columns = len(get_problem(problem).columns)
+    if problem == "schedule" and gains.ndim == 2 and gains.shape[1] >= 13:
+        # A schedule of K knots has 3K + 7 columns (tables, shape gains, robot).
+        knots = (gains.shape[1] - 7) // 3
+        columns = len(schedule_problem(knots).columns) if knots <= MAX_KNOTS else columns
     if gains.shape != (len(loss), columns):
         raise ValueError(
             f"history['gains'] has shape {gains.shape}; allowed: ({len(loss)}, "
@@ -244,11 +251,12 @@ def _gain_panels(axes: Any, steps: np.ndarray, gains: np.ndarray) -> None:
 
 
 def _schedule_panels(axes: Any, steps: np.ndarray, rows: np.ndarray) -> None:
-    radii = knot_radii(KNOTS)
+    knots = (rows.shape[1] - 7) // 3
+    radii = knot_radii(knots)
     titles = ("k_r(r_e) (cm/s)", "k_θ(r_e), d ≠ 0 (rad/s)", "k_θ(r_e), d = 0 (rad/s)")
     for k, title in enumerate(titles):
         ax = axes.flat[k + 1]
-        table = rows[:, k * KNOTS : (k + 1) * KNOTS]
+        table = rows[:, k * knots : (k + 1) * knots]
         ax.plot(radii, table[0], "o--", ms=3, lw=0.8, color="gray", label="iteration 1")
         ax.plot(radii, table[-1], "o-", ms=3, lw=1.2, label="tuned")
         ax.set_xscale("symlog", linthresh=1.0)
@@ -257,7 +265,7 @@ def _schedule_panels(axes: Any, steps: np.ndarray, rows: np.ndarray) -> None:
     axes.flat[1].legend(fontsize=8)
     for k, name in enumerate(("phi_m", "r_m", "r_a", "r_e")):
         ax = axes.flat[k + 4]
-        values = rows[:, 3 * KNOTS + SHAPE_FIELDS.index(name)]
+        values = rows[:, 3 * knots + SHAPE_FIELDS.index(name)]
         ax.plot(steps, np.degrees(values) if name == "phi_m" else values, lw=1.0)
         ax.set_title(_GAIN_LABELS[name])
         ax.set_xlabel("iteration")

@@ -45,6 +45,7 @@ from wmr_jax._src.tuning.problems import FIXED as FIXED
 from wmr_jax._src.tuning.problems import SCHEDULED as SCHEDULED
 from wmr_jax._src.tuning.problems import Problem as Problem
 from wmr_jax._src.tuning.problems import get_problem as get_problem
+from wmr_jax._src.tuning.problems import schedule_problem as schedule_problem
 from wmr_jax._src.tuning.saved import load_tuned as load_tuned
 from wmr_jax._src.tuning.saved import tuned_json as tuned_json
 from wmr_jax._src.tuning.search import SearchResult as SearchResult

@@ -178,12 +178,14 @@ def compare(
         seeds: seeds of the training poses and the searches.
         problems: ``"fixed"`` and/or ``"schedule"``.
         configs: the ``TuneConfig`` per problem; default
-            ``TuneConfig.for_problem(problem)``.
+            ``TuneConfig.for_problem(problem)``. A schedule's ``knots``
+            sizes the tables all three methods search.
         robot: robot parameters; default ``Robot()``.
         progress: called with a line after each method's run.
 
     Returns:
-        One row per (problem, seed, method): ``problem``, ``seed``, ``method``,
+        One row per (problem, seed, method): ``problem``, ``parameters`` (the
+        dimension searched), ``seed``, ``method``,
         ``wall_s``, ``candidates`` (``None`` for the gradient), the hard-law
         ``mean_arrival``, ``success_rate``, ``peak_wheel_speed`` and the
         ratios of ``bound_ratios``.
@@ -192,8 +194,8 @@ def compare(
     bases = _checked_plan(seeds, problems, configs)
     check_callable("progress", progress)
     rows = []
-    for name, base in bases.items():
-        problem = get_problem(name)
+    for base in bases.values():
+        problem = base.problem  # for a schedule, of base.knots knots
         held_out = held_out_poses(base.eval_poses, base.eval_seed)
         bounds = time_bounds(held_out, robot=robot, dt=base.dt)
         run = {k: getattr(base, k) for k in RUN_OPTIONS if k != "robot"}
@@ -212,6 +214,7 @@ def compare(
                 rows.append(
                     {
                         "problem": problem.name,
+                        "parameters": problem.dim,
                         "seed": seed,
                         "method": method,
                         "wall_s": wall,

@@ -1,4 +1,4 @@
-"""The two tuning problems as values: fixed gains (7 parameters) and gain schedules (35).
+"""The tuning problems as values: fixed gains (7 parameters) and gain schedules (35 by default).
 
 A ``Problem`` is the controller, its feasible set as an image of the unit
 cube (every point meets the wheel condition by construction), the starting
@@ -9,15 +9,18 @@ JSON (``tuned_gains.json``). The tuner, random search and CMA-ES take any.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
 
+from wmr_jax._src.checks import check_int
 from wmr_jax._src.controllers.base import Controller
 from wmr_jax._src.controllers.schedule import (
     KNOTS,
+    MAX_KNOTS,
     SCHEDULE,
     SHAPE_FIELDS,
     TABLES,
@@ -27,7 +30,15 @@ from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
 from wmr_jax._src.params import Gains, Robot
 from wmr_jax._src.tuning import parametrisation as fixed
 
-__all__ = ["FIXED", "PROBLEMS", "SCHEDULED", "Problem", "get_problem", "params_json"]
+__all__ = [
+    "FIXED",
+    "PROBLEMS",
+    "SCHEDULED",
+    "Problem",
+    "get_problem",
+    "params_json",
+    "schedule_problem",
+]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -81,69 +92,83 @@ FIXED = Problem(
 # the shape gains share the fixed problem's box.
 _KR = (1e-3, 1.0)  # fraction of V_max
 _K_THETA = (1e-3, 1.0)  # fraction of V_max / L
-_SCHEDULE_COLUMNS = (
-    tuple(f"{table}[{k}]" for table in TABLES for k in range(KNOTS))
-    + SHAPE_FIELDS
-    + ("v_max", "half_track")
-)
+_SHAPE_COLUMNS = (*SHAPE_FIELDS, "v_max", "half_track")
 
 
-def _schedule_from_unit(u: Any, robot: Robot | None = None) -> ScheduleParams:
-    robot = Robot() if robot is None else robot
-    u = fixed.checked_point("u", u, 3 * KNOTS + 5, unit=True)
-    omega_max = robot.v_max / robot.half_track
-    tables = {
-        "kr": robot.v_max * fixed._lerp(u[..., 0:KNOTS], _KR),
-        "k_theta": omega_max * fixed._lerp(u[..., KNOTS : 2 * KNOTS], _K_THETA),
-        "k_turn": omega_max * fixed._lerp(u[..., 2 * KNOTS : 3 * KNOTS], _K_THETA),
-    }
-    # The shape gains reuse the fixed map: its columns 2–6 are Φ_m, α and the radii.
-    shape_u = jnp.concatenate([jnp.zeros_like(u[..., :2]), u[..., 3 * KNOTS :]], axis=-1)
-    shape = fixed.gains_from_unit(shape_u, robot)
-    return ScheduleParams(
-        **{name: tuple(values[..., k] for k in range(KNOTS)) for name, values in tables.items()},
-        **{name: getattr(shape, name) for name in SHAPE_FIELDS},
-        v_max=robot.v_max,
-        half_track=robot.half_track,
+def schedule_problem(knots: int = KNOTS) -> Problem:
+    """The gain-schedule problem with ``knots`` knots per table: ``3 knots + 5`` parameters.
+
+    One ``Problem`` value per knot count (cached), so that it is the same
+    static argument of every compiled step. ``SCHEDULED`` is the default,
+    ``KNOTS`` knots (35 parameters).
+
+    Raises:
+        ValueError: for a knot count outside 2 … ``MAX_KNOTS``.
+    """
+    return _schedule_problem(check_int("knots", knots, 2, MAX_KNOTS))
+
+
+@functools.cache
+def _schedule_problem(knots: int) -> Problem:
+    columns = tuple(f"{table}[{k}]" for table in TABLES for k in range(knots)) + _SHAPE_COLUMNS
+
+    def from_unit(u: Any, robot: Robot | None = None) -> ScheduleParams:
+        robot = Robot() if robot is None else robot
+        u = fixed.checked_point("u", u, 3 * knots + 5, unit=True)
+        omega_max = robot.v_max / robot.half_track
+        tables = {
+            "kr": robot.v_max * fixed._lerp(u[..., 0:knots], _KR),
+            "k_theta": omega_max * fixed._lerp(u[..., knots : 2 * knots], _K_THETA),
+            "k_turn": omega_max * fixed._lerp(u[..., 2 * knots : 3 * knots], _K_THETA),
+        }
+        # The shape gains reuse the fixed map: its columns 2–6 are Φ_m, α and the radii.
+        shape_u = jnp.concatenate([jnp.zeros_like(u[..., :2]), u[..., 3 * knots :]], axis=-1)
+        shape = fixed.gains_from_unit(shape_u, robot)
+        return ScheduleParams(
+            **{
+                name: tuple(values[..., k] for k in range(knots)) for name, values in tables.items()
+            },
+            **{name: getattr(shape, name) for name in SHAPE_FIELDS},
+            v_max=robot.v_max,
+            half_track=robot.half_track,
+        )
+
+    def start(robot: Robot) -> np.ndarray:
+        """The paper's feasible gains as constant tables (the fixed law's start)."""
+        gains = fixed.PAPER_FEASIBLE_GAINS
+        omega_max = float(robot.v_max) / float(robot.half_track)
+        unit = fixed.unit_from_gains(gains, robot)
+
+        def inside(value: float, bounds: tuple[float, float]) -> float:
+            return float(np.clip((value - bounds[0]) / (bounds[1] - bounds[0]), 1e-3, 1 - 1e-3))
+
+        kr = inside(gains.kr / float(robot.v_max), _KR)
+        kt = inside(gains.k_theta / omega_max, _K_THETA)
+        return np.concatenate([[kr] * knots, [kt] * knots, [kt] * knots, unit[2:]])
+
+    def row(params: ScheduleParams) -> tuple[float, ...]:
+        values = [float(x) for table in TABLES for x in getattr(params, table)]
+        return tuple(values + [float(getattr(params, name)) for name in _SHAPE_COLUMNS])
+
+    def from_row(values: Any) -> ScheduleParams:
+        values = [float(x) for x in values]
+        tables = {t: tuple(values[i * knots : (i + 1) * knots]) for i, t in enumerate(TABLES)}
+        rest = dict(zip(_SHAPE_COLUMNS, values[3 * knots :], strict=True))
+        return ScheduleParams(**tables, **rest)
+
+    return Problem(
+        name="schedule",
+        controller=SCHEDULE,
+        dim=3 * knots + 5,
+        from_unit=from_unit,
+        start=start,
+        columns=columns,
+        row=row,
+        from_row=from_row,
     )
 
 
-def _schedule_start(robot: Robot) -> np.ndarray:
-    """The paper's feasible gains as constant tables (the fixed law's start)."""
-    gains = fixed.PAPER_FEASIBLE_GAINS
-    omega_max = float(robot.v_max) / float(robot.half_track)
-    unit = fixed.unit_from_gains(gains, robot)
-
-    def inside(value: float, bounds: tuple[float, float]) -> float:
-        return float(np.clip((value - bounds[0]) / (bounds[1] - bounds[0]), 1e-3, 1 - 1e-3))
-
-    kr = inside(gains.kr / float(robot.v_max), _KR)
-    kt = inside(gains.k_theta / omega_max, _K_THETA)
-    return np.concatenate([[kr] * KNOTS, [kt] * KNOTS, [kt] * KNOTS, unit[2:]])
-
-
-def _schedule_row(params: ScheduleParams) -> tuple[float, ...]:
-    values = [float(x) for table in TABLES for x in getattr(params, table)]
-    return tuple(values + [float(getattr(params, name)) for name in _SCHEDULE_COLUMNS[-7:]])
-
-
-def _schedule_from_row(row: Any) -> ScheduleParams:
-    row = [float(x) for x in row]
-    tables = {t: tuple(row[i * KNOTS : (i + 1) * KNOTS]) for i, t in enumerate(TABLES)}
-    rest = dict(zip(_SCHEDULE_COLUMNS[-7:], row[3 * KNOTS :], strict=True))
-    return ScheduleParams(**tables, **rest)
-
-
-SCHEDULED = Problem(
-    name="schedule",
-    controller=SCHEDULE,
-    dim=3 * KNOTS + 5,
-    from_unit=_schedule_from_unit,
-    start=_schedule_start,
-    columns=_SCHEDULE_COLUMNS,
-    row=_schedule_row,
-    from_row=_schedule_from_row,
-)
+SCHEDULED = schedule_problem(KNOTS)
 
 PROBLEMS = {problem.name: problem for problem in (FIXED, SCHEDULED)}
 

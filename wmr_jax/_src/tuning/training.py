@@ -37,6 +37,7 @@ from wmr_jax._src.checks import (
     check_number,
     float_dtype,
 )
+from wmr_jax._src.controllers.schedule import KNOTS, MAX_KNOTS
 from wmr_jax._src.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
 from wmr_jax._src.params import Gains, Robot, validate_one_robot
 from wmr_jax._src.poses import HORIZON_S, MAX_SAMPLES, sample_poses
@@ -52,7 +53,7 @@ from wmr_jax._src.tuning.loss import LossSpec, LossWeights, make_spec, robust_va
 from wmr_jax._src.tuning.parametrisation import (
     PAPER_FEASIBLE_GAINS,
 )
-from wmr_jax._src.tuning.problems import FIXED, PROBLEMS, SCHEDULED, Problem
+from wmr_jax._src.tuning.problems import FIXED, Problem, schedule_problem
 from wmr_jax._src.tuning.search import SearchResult, random_search
 
 __all__ = [
@@ -116,6 +117,8 @@ class TuneConfig:
         wheel_limit: ``"clip"`` or ``"scale"`` (non-ideal loop).
         schedule: tune the gain-scheduled law (``ScheduleParams``, 35
             parameters) instead of the seven fixed gains.
+        knots: knots per table of the schedule (``3 knots + 5`` parameters;
+            schedules only).
     """
 
     velocity: str = "ideal"
@@ -137,6 +140,7 @@ class TuneConfig:
     substeps: int = loops.DEFAULT_SUBSTEPS
     wheel_limit: str = "clip"
     schedule: bool = False
+    knots: int = KNOTS
 
     @classmethod
     def for_problem(cls, problem: str = "fixed", **changes: Any) -> TuneConfig:
@@ -162,8 +166,8 @@ class TuneConfig:
 
     @property
     def problem(self) -> Problem:
-        """The tuning problem: gain schedules if ``schedule``, else fixed gains."""
-        return SCHEDULED if self.schedule else FIXED
+        """The tuning problem: gain schedules of ``knots`` if ``schedule``, else fixed gains."""
+        return schedule_problem(self.knots) if self.schedule else FIXED
 
     def replace(self, **changes: Any) -> TuneConfig:
         """Return a copy with the given fields changed."""
@@ -185,6 +189,11 @@ class TuneConfig:
             check_number("pose_clip", self.pose_clip)
         for name in ("random_search", "schedule"):
             check_bool(name, getattr(self, name))
+        if not self.schedule and self.knots != KNOTS:
+            raise ValueError(
+                f"knots = {self.knots!r} is not allowed with schedule = False; allowed: knots "
+                "for a gain schedule only (TuneConfig.for_problem('schedule', knots=...))"
+            )
         self.spec()
         return self
 
@@ -211,9 +220,15 @@ class TuneConfig:
         )
 
     def as_dict(self) -> dict[str, Any]:
-        """Return the fields as JSON-ready values."""
+        """Return the fields as JSON-ready values.
+
+        ``knots`` is left out at its default, so that checkpoints and
+        comparisons saved before schedules had a size still resume.
+        """
         out = dataclasses.asdict(self)
         out["weights"] = dataclasses.asdict(self.weights)
+        if self.knots == KNOTS:
+            del out["knots"]
         return out
 
 
@@ -225,6 +240,7 @@ _INT_FIELDS = (
     ("checkpoint_every", 1, None),
     ("eval_poses", 1, MAX_SAMPLES),
     ("eval_seed", 0, 2**32 - 1),
+    ("knots", 2, MAX_KNOTS),
 )
 _POSITIVE_FIELDS = ("learning_rate", "grad_clip", "temperature_start", "temperature_end")
 
@@ -443,8 +459,10 @@ def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainStat
             f"the saved state is inconsistent: iteration {state.iteration} with optimiser "
             f"step counts {counts}"
         )
-    problem = next((p for p in PROBLEMS.values() if p.dim == fresh.z.shape[-1]), None)
-    if problem is not None and state.gains and gains.shape[-1] != len(problem.columns):
+    # The fixed problem has 7 logits, a schedule of K knots 3K + 5.
+    dim = fresh.z.shape[-1]
+    problem = FIXED if dim == FIXED.dim else schedule_problem((dim - 5) // 3)
+    if state.gains and gains.shape[-1] != len(problem.columns):
         raise ValueError(
             f"the saved state is inconsistent: rows of {gains.shape[-1]} parameters; "
             f"allowed: {len(problem.columns)}, the {problem.name!r} problem's columns"
