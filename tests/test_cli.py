@@ -115,7 +115,7 @@ def _write(tmp_path, name, text):
         (["bench", "--json", ""], "--json '' is not allowed; allowed: a file name"),
         # --knots sizes a schedule's tables: alone it would size nothing.
         (["tune", "--out", "{dir}", "--knots", "30"], "--knots is not allowed without --schedule"),
-        (["tune", "--out", "{dir}", "--schedule", "--knots", "201"], "--knots '201' is not"),
+        (["tune", "--out", "{dir}", "--schedule", "--knots", "61"], "--knots '61' is not"),
         (["tune", "--out", "{dir}", "--robust", "--knots", "4"], "--knots is not allowed"),
         # --compare runs its own seeds 0-2: --seed 3 was ignored without a word.
         (["tune", "--out", "{dir}", "--compare", "--seed", "3"], "--seed is not allowed with"),

@@ -10,12 +10,12 @@ from typing import Any
 import numpy as np
 
 from wmr_jax._src.checks import real_array, require
-from wmr_jax._src.controllers.schedule import MAX_KNOTS, SHAPE_FIELDS, knot_radii
+from wmr_jax._src.controllers.schedule import SHAPE_FIELDS, knot_radii
 from wmr_jax._src.io import save_figure
 from wmr_jax._src.optimal import bound_ratios
 from wmr_jax._src.report.tables import markdown_table, require_rows
 from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS, PAPER_FEASIBLE_GAINS, gains_as_dict
-from wmr_jax._src.tuning.problems import get_problem, schedule_problem
+from wmr_jax._src.tuning.problems import MAX_TUNED_KNOTS, get_problem, schedule_problem
 
 __all__ = ["comparison_table", "evaluation_table", "tuning_curve"]
 
@@ -186,7 +186,7 @@ def tuning_curve(
     if problem == "schedule" and gains.ndim == 2 and gains.shape[1] >= 13:
         # A schedule of K knots has 3K + 7 columns (tables, shape gains, robot).
         knots = (gains.shape[1] - 7) // 3
-        columns = len(schedule_problem(knots).columns) if knots <= MAX_KNOTS else columns
+        columns = len(schedule_problem(knots).columns) if knots <= MAX_TUNED_KNOTS else columns
     if gains.shape != (len(loss), columns):
         raise ValueError(
             f"history['gains'] has shape {gains.shape}; allowed: ({len(loss)}, "

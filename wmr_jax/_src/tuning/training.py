@@ -37,7 +37,7 @@ from wmr_jax._src.checks import (
     check_number,
     float_dtype,
 )
-from wmr_jax._src.controllers.schedule import KNOTS, MAX_KNOTS
+from wmr_jax._src.controllers.schedule import KNOTS
 from wmr_jax._src.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
 from wmr_jax._src.params import Gains, Robot, validate_one_robot
 from wmr_jax._src.poses import HORIZON_S, MAX_SAMPLES, sample_poses
@@ -53,7 +53,7 @@ from wmr_jax._src.tuning.loss import LossSpec, LossWeights, make_spec, robust_va
 from wmr_jax._src.tuning.parametrisation import (
     PAPER_FEASIBLE_GAINS,
 )
-from wmr_jax._src.tuning.problems import FIXED, Problem, schedule_problem
+from wmr_jax._src.tuning.problems import FIXED, MAX_TUNED_KNOTS, Problem, schedule_problem
 from wmr_jax._src.tuning.search import SearchResult, random_search
 
 __all__ = [
@@ -240,7 +240,7 @@ _INT_FIELDS = (
     ("checkpoint_every", 1, None),
     ("eval_poses", 1, MAX_SAMPLES),
     ("eval_seed", 0, 2**32 - 1),
-    ("knots", 2, MAX_KNOTS),
+    ("knots", 2, MAX_TUNED_KNOTS),
 )
 _POSITIVE_FIELDS = ("learning_rate", "grad_clip", "temperature_start", "temperature_end")
 
