@@ -7,7 +7,7 @@
 # the README shows are then copied to docs/*.png and the results the README
 # quotes to docs/data/*.json, which tests/test_readme.py holds the README's
 # tables against. STAGE is any of: paper compare maps waypoints animate
-# tune robustness compare-tuning compare-sizes bench (default: all, about 50 minutes on
+# tune robustness compare-tuning compare-sizes bench (default: all, about 45 minutes on
 # 2 CPU cores).
 # Every command is seeded (the seed is its default unless named here), so a
 # rerun prints the same tables; bench timings are the exception.
@@ -54,7 +54,7 @@ for stage in $STAGES; do
       cp "$OUT/robustness-standard/standard_conditions.png" docs/ ;;
     compare-tuning)  # gradient vs CMA-ES vs random search, 3 seeds (about 7 minutes)
       wmr-jax tune --out "$OUT/tune-compare" --compare ;;
-    compare-sizes)  # the same on schedules of 30 and 60 knots (about 25 minutes)
+    compare-sizes)  # the same on schedules of 30 and 60 knots (about 20 minutes)
       for knots in 30 60; do
         wmr-jax tune --out "$OUT/tune-compare-k$knots" --compare --schedule --knots $knots
       done ;;
