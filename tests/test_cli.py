@@ -249,6 +249,10 @@ def test_compare_with_schedule_compares_that_schedule_alone(tmp_path, monkeypatc
     assert main(argv) == 0
     assert seen == [(("schedule",), 3, 0), (("schedule",), 3, 1), (("schedule",), 3, 2)]
     assert "| schedule (14) | gradient |" in capsys.readouterr().out
+    # Resumed as another comparison, it names what differs (it raised AttributeError).
+    assert main(["tune", "--out", str(tmp_path), "--compare", "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert "fixed: not compared there; schedule: knots = 3 there, 10 now" in err, err
 
 
 def test_tune_robust_writes_its_gains_before_judging_them(tmp_path, monkeypatch):

@@ -191,17 +191,21 @@ def test_compare_runs_all_three_methods_on_a_schedule_of_its_size():
     small = {k: getattr(TINY, k) for k in ("iters", "poses", "eval_poses", "horizon")}
     config = tuning.TuneConfig.for_problem("schedule", knots=2, **small)
     searched = []
-    real_search = compare_module.random_search
 
-    def watched(*args, problem, **kwargs):
-        searched.append(problem.dim)
-        return real_search(*args, problem=problem, **kwargs)
+    def watched(search):
+        def run(*args, problem, **kwargs):
+            searched.append((search.__name__, problem.dim))
+            return search(*args, problem=problem, **kwargs)
+
+        return run
 
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(compare_module, "random_search", watched)
+        for name in ("cma_es_search", "random_search"):
+            patch.setattr(compare_module, name, watched(getattr(compare_module, name)))
         rows = tuning.compare(seeds=(0,), problems=("schedule",), configs={"schedule": config})
     assert [r["method"] for r in rows] == ["gradient", "cma-es", "random search"]
-    assert searched == [11] and all(r["parameters"] == 11 for r in rows)
+    assert searched == [("cma_es_search", 11), ("random_search", 11)]
+    assert all(r["parameters"] == 11 for r in rows)
     for row in rows:
         assert row["wall_s"] > 0 and row["mean_arrival"] > 0, row  # inf: none arrives in 0.3 s
 
@@ -259,3 +263,15 @@ def test_tune_checks_its_folder_flags_and_config_before_writing(tmp_path):
         with pytest.raises(ValueError, match=message):
             tuning.tune(args.pop("out_dir"), **args)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"]
+
+
+def test_compare_rows_saved_before_sizes_group_with_new_ones():
+    """A resumed comparison mixes rows without "parameters" (the default size) and rows with."""
+    from wmr_jax._src.report.tuning import comparison_table
+
+    row = {"problem": "schedule", "method": "gradient", "mean_arrival": 0.4, "wall_s": 1.0}
+    row.update(success_rate=1.0, lower_bound_s=0.34, turn_drive_turn_s=0.37)
+    rows = [row, {**row, "parameters": 35}, {**row, "parameters": 35}]
+    table = comparison_table(rows)
+    assert "| schedule (35) | gradient | 0.400 / 0.400 / 0.400 |" in table, table
+    assert table.count("| schedule") == 1

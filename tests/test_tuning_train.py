@@ -214,6 +214,10 @@ def test_tuning_a_schedule_of_four_knots(tmp_path):
         tuning.TuneConfig(knots=4).validate()
     assert "knots" not in tuning.TuneConfig.for_problem("schedule").as_dict()
     assert config.as_dict()["knots"] == 4
+    # The default size, left out of the saved settings, still names the difference
+    # (it said "the robot differs").
+    with pytest.raises(ValueError, match=r"another run \(knots = 4 there, 10 now\)"):
+        tuning.tune(tmp_path, config.replace(knots=10), resume=True)
 
 
 def _small_settings():

@@ -276,7 +276,8 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument(
         "--schedule",
         action="store_true",
-        help="tune the gain-scheduled law (35 parameters, docs/model.md §3.9) instead of the "
+        help="tune the gain-scheduled law (35 parameters by default, docs/model.md §3.9) "
+        "instead of the "
         "7 fixed gains, with the schedule's own defaults for --iters, the step and the "
         "annealing (wmr_jax.tuning.TuneConfig.for_problem)",
     )
@@ -419,11 +420,15 @@ def _settings_difference(saved: Any, now: dict[str, Any]) -> str:
     from wmr_jax._src.tuning import run_difference
 
     saved_configs = saved.get("configs", {}) if isinstance(saved, dict) else {}
+    saved_configs = saved_configs if isinstance(saved_configs, dict) else {}
     parts = [
         f"{name}: {run_difference({'config': saved_configs.get(name)}, {'config': config})}"
+        if name in saved_configs
+        else f"{name}: not compared there"
         for name, config in now["configs"].items()
         if saved_configs.get(name) != config
     ]
+    parts += [f"{name}: not compared now" for name in saved_configs if name not in now["configs"]]
     return "; ".join(parts) or "its format or seeds differ"
 
 

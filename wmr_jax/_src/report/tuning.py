@@ -15,7 +15,12 @@ from wmr_jax._src.io import save_figure
 from wmr_jax._src.optimal import bound_ratios
 from wmr_jax._src.report.tables import markdown_table, require_rows
 from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS, PAPER_FEASIBLE_GAINS, gains_as_dict
-from wmr_jax._src.tuning.problems import MAX_TUNED_KNOTS, get_problem, schedule_problem
+from wmr_jax._src.tuning.problems import (
+    MAX_TUNED_KNOTS,
+    PROBLEMS,
+    get_problem,
+    schedule_problem,
+)
 
 __all__ = ["comparison_table", "evaluation_table", "tuning_curve"]
 
@@ -117,8 +122,10 @@ def comparison_table(rows: list[dict[str, Any]]) -> str:
     rows = require_rows("rows", rows)
     groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for row in rows:
-        # Rows of before the schedules had a size do not say their parameter count.
-        size = row.get("parameters")
+        # Rows of before the schedules had a size do not say their parameter
+        # count: theirs is the default problem's.
+        default = PROBLEMS.get(row["problem"]) if isinstance(row["problem"], str) else None
+        size = row.get("parameters", None if default is None else default.dim)
         problem = row["problem"] if size is None else f"{row['problem']} ({size})"
         groups.setdefault((problem, row["method"]), []).append(row)
     lines = []

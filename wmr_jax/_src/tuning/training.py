@@ -378,11 +378,14 @@ def run_identity(config: TuneConfig | None = None, robot: Robot | None = None) -
 
 def run_difference(saved: Any, now: dict[str, Any]) -> str:
     """Name the settings in which the run ``saved`` differs from ``now`` (``run_identity``s)."""
-    saved_config = saved.get("config", {}) if isinstance(saved, dict) else {}
+    saved_config = (saved.get("config") if isinstance(saved, dict) else None) or {}
+    saved_config = saved_config if isinstance(saved_config, dict) else {}
+    # as_dict leaves the default knots out: a missing knots is the default.
+    there, here = ({"knots": KNOTS, **c} for c in (saved_config, now["config"]))
     diffs = [
-        f"{key} = {saved_config.get(key)!r} there, {value!r} now"
-        for key, value in now["config"].items()
-        if saved_config.get(key) != value
+        f"{key} = {there.get(key)!r} there, {here.get(key)!r} now"
+        for key in dict.fromkeys([*here, *there])
+        if there.get(key) != here.get(key)
     ]
     return "; ".join(diffs) or "the robot differs"
 
