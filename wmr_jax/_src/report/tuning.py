@@ -190,10 +190,10 @@ def tuning_curve(
     loss, temperature = _history_curves(history)
     gains = real_array("history['gains']", history["gains"], "real numbers")
     columns = len(get_problem(problem).columns)
-    if problem == "schedule" and gains.ndim == 2 and gains.shape[1] >= 13:
-        # A schedule of K knots has 3K + 7 columns (tables, shape gains, robot).
-        knots = (gains.shape[1] - 7) // 3
-        columns = len(schedule_problem(knots).columns) if knots <= MAX_TUNED_KNOTS else columns
+    # A schedule of K knots has 3K + 7 columns (tables, shape gains, robot).
+    knots = (gains.shape[-1] - 7) // 3 if gains.ndim == 2 else 0
+    if problem == "schedule" and 2 <= knots <= MAX_TUNED_KNOTS:
+        columns = len(schedule_problem(knots).columns)
     if gains.shape != (len(loss), columns):
         raise ValueError(
             f"history['gains'] has shape {gains.shape}; allowed: ({len(loss)}, "
@@ -212,7 +212,7 @@ def tuning_curve(
         twin.set_ylabel("temperature", color="C3")
         ax.set_title(f"loss ({velocity} loop)")
         if problem == "schedule":
-            _schedule_panels(axes, steps, gains)
+            _schedule_panels(axes, steps, gains, knots)
         else:
             _gain_panels(axes, steps, gains)
         return save_figure(fig, path, dpi=110)
@@ -257,8 +257,7 @@ def _gain_panels(axes: Any, steps: np.ndarray, gains: np.ndarray) -> None:
     axes.flat[1].legend(fontsize=8)
 
 
-def _schedule_panels(axes: Any, steps: np.ndarray, rows: np.ndarray) -> None:
-    knots = (rows.shape[1] - 7) // 3
+def _schedule_panels(axes: Any, steps: np.ndarray, rows: np.ndarray, knots: int) -> None:
     radii = knot_radii(knots)
     titles = ("k_r(r_e) (cm/s)", "k_θ(r_e), d ≠ 0 (rad/s)", "k_θ(r_e), d = 0 (rad/s)")
     for k, title in enumerate(titles):
