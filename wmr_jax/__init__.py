@@ -58,6 +58,8 @@ from wmr_jax._src.rollout import Trajectory as Trajectory
 from wmr_jax._src.rollout import batch_rollout as batch_rollout
 from wmr_jax._src.rollout import final_poses as final_poses
 from wmr_jax._src.rollout import rollout as rollout
+from wmr_jax._src.sensing.estimators import EKFParams as EKFParams
+from wmr_jax._src.sensing.estimators import ObserverParams as ObserverParams
 from wmr_jax._src.sharding import ShardedBatch as ShardedBatch
 from wmr_jax._src.sharding import shard as shard
 from wmr_jax._src.sharding import unpad as unpad

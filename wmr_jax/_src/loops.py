@@ -39,6 +39,7 @@ __all__ = [
     "batch_axes",
     "batched",
     "closed_loop_step",
+    "ideal_arc",
     "for_robot",
     "initial_state",
     "initial_wheel",
@@ -80,6 +81,9 @@ class Options:
             ``V_max h / L ≤ π/2`` (``h = dt / substeps``; the rim speeds are
             held within ``±V_max``), so the arcs need no range reduction
             (non-ideal loop; set by ``for_robot``).
+        estimator: the pose estimator between the measurements and the law
+            (a ``sensing.estimators.Estimator``), or ``None`` for raw feedback;
+            used by the disturbed loop only (docs/model.md §9).
         remat: in reverse-mode differentiation, recompute each step in the
             backward pass instead of storing its intermediates (see
             ``remat``). ``False`` stores them: more memory, and on XLA:CPU
@@ -95,6 +99,7 @@ class Options:
     wheel_integral: bool = True
     wheel_coriolis: bool = True
     small_turn: bool = False
+    estimator: Any = None
     remat: bool = True
 
 
@@ -286,6 +291,18 @@ def initial_wheel(init: jax.Array, options: Options) -> velocity_loop.WheelState
     return velocity_loop.WheelState(zero, zero, zero, zero)
 
 
+def ideal_arc(pose: SplitPose, v: jax.Array, omega: jax.Array, dt: jax.Array) -> SplitPose:
+    """Move ``pose`` over ``dt`` at the held ``(v, ω)`` on the exact arc of docs/model.md §4.
+
+    The ideal loop's motion, and the prediction of every estimator (whose
+    model is the ideal robot, docs/model.md §9).
+    """
+    position, heading = dynamics.arc_advance(pose.position, pose.heading, v, omega, dt)
+    # One Newton step towards |heading| = 1, so that rounding does not drift.
+    heading = heading * (1.5 - 0.5 * (heading.real**2 + heading.imag**2))
+    return SplitPose(position, heading, pose.theta + omega * dt)
+
+
 def advance_period(
     pose: SplitPose,
     wheel: velocity_loop.WheelState | None,
@@ -314,10 +331,7 @@ def advance_period(
     """
     v, omega = command
     if options.velocity == "ideal":
-        position, heading = dynamics.arc_advance(pose.position, pose.heading, v, omega, dt)
-        # One Newton step towards |heading| = 1, so that rounding does not drift.
-        heading = heading * (1.5 - 0.5 * (heading.real**2 + heading.imag**2))
-        new = SplitPose(position, heading, pose.theta + omega * dt)
+        new = ideal_arc(pose, v, omega, dt)
         return new, wheel, law.wheel_speeds(v, omega, robot), jnp.abs(v) * dt
     position, heading, theta, wheel, distance = velocity_loop.advance_split(
         pose.position,

@@ -26,6 +26,7 @@ import jax
 import numpy as np
 
 from wmr_jax._src import checks, controllers, metrics
+from wmr_jax._src.metrics import PoseMetrics
 from wmr_jax._src.params import Robot
 from wmr_jax._src.poses import EVAL_R_MAX, EVAL_R_MIN, HORIZON_S, MAX_SAMPLES, horizon_steps
 from wmr_jax._src.rollout import DEFAULT_DT
@@ -46,34 +47,6 @@ __all__ = [
 
 DEFAULT_HEADINGS_DEG = (-90.0, 0.0, 90.0, 180.0)
 DEFAULT_CHUNK = 16384
-
-
-class PoseMetrics(NamedTuple):
-    """docs/model.md §6 metrics of ``N`` runs, each a NumPy ``(N,)`` array.
-
-    Attributes:
-        arrival: arrival time, s; ``inf`` where the robot is not arrived at
-            the end of the horizon.
-        path: distance travelled by the centre, cm.
-        peak_wheel: largest rim speed ``|v ± L ω|`` over the run, cm/s.
-        zigzag: sign changes of ``v`` plus those of ``ω`` beyond the dead bands.
-        final_distance: distance to the reference at the end, cm.
-        first_arrival: ``(k + 1) dt`` for the first sample ``k`` at which the
-            robot is arrived, whether or not it stays, s; ``inf`` if never
-            (``None`` where not computed: ``evaluate_poses`` does not).
-    """
-
-    arrival: np.ndarray
-    path: np.ndarray
-    peak_wheel: np.ndarray
-    zigzag: np.ndarray
-    final_distance: np.ndarray
-    first_arrival: np.ndarray | None = None
-
-    @property
-    def success(self) -> np.ndarray:
-        """Whether each run arrived (finite arrival time)."""
-        return np.isfinite(self.arrival)
 
 
 # ---------------------------------------------------------------- the grid

@@ -25,6 +25,7 @@ from wmr_jax._src.checks import (
 from wmr_jax._src.controllers import shim_sung as law
 
 __all__ = [
+    "PoseMetrics",
     "DEFAULT_OMEGA_DEAD_BAND",
     "DEFAULT_TOL_R",
     "DEFAULT_V_DEAD_BAND",
@@ -46,6 +47,34 @@ DEFAULT_TOL_R = 1.0  # cm
 DEFAULT_TOL_THETA = math.radians(5.0)
 DEFAULT_V_DEAD_BAND = 1.0  # cm/s
 DEFAULT_OMEGA_DEAD_BAND = 0.1  # rad/s
+
+
+class PoseMetrics(NamedTuple):
+    """docs/model.md §6 metrics of ``N`` runs, each a NumPy ``(N,)`` array.
+
+    Attributes:
+        arrival: arrival time, s; ``inf`` where the robot is not arrived at
+            the end of the horizon.
+        path: distance travelled by the centre, cm.
+        peak_wheel: largest rim speed ``|v ± L ω|`` over the run, cm/s.
+        zigzag: sign changes of ``v`` plus those of ``ω`` beyond the dead bands.
+        final_distance: distance to the reference at the end, cm.
+        first_arrival: ``(k + 1) dt`` for the first sample ``k`` at which the
+            robot is arrived, whether or not it stays, s; ``inf`` if never
+            (``None`` where not computed: ``evaluate_poses`` does not).
+    """
+
+    arrival: np.ndarray
+    path: np.ndarray
+    peak_wheel: np.ndarray
+    zigzag: np.ndarray
+    final_distance: np.ndarray
+    first_arrival: np.ndarray | None = None
+
+    @property
+    def success(self) -> np.ndarray:
+        """Whether each run arrived (finite arrival time)."""
+        return np.isfinite(self.arrival)
 
 
 def _check_tolerances(tol_r: Any, tol_theta: Any) -> tuple[Any, Any]:

@@ -6,7 +6,7 @@ conditions (one-sample latency; pose noise σ_xy = 0.5 cm, σ_θ = 1°; both),
 and over a domain-randomised group in the non-ideal loop (noise of 0–1.5×
 the standard level, latency with probability ½, ±3 % wheel radius, ±20 %
 mass). Every disturbance is drawn inside the loss from a PRNG key by
-``robustness.sample_disturbance`` and run by ``robustness.disturbed_run``:
+``disturbances.sample_disturbance`` and run by ``loop.disturbed_run``:
 the same code as the Monte Carlo. Gains stay feasible through
 ``gains_from_logits``. Random search and CMA-ES get the same wall time
 and score candidates with the hard law under the same conditions.
@@ -41,6 +41,7 @@ from wmr_jax._src.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
 from wmr_jax._src.params import Gains, Robot, validate_gains, validate_one_robot
 from wmr_jax._src.poses import HORIZON_S, horizon_steps, sample_poses
 from wmr_jax._src.rollout import DEFAULT_DT, check_temperature
+from wmr_jax._src.sensing import disturbances, loop
 from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
 from wmr_jax._src.tuning.loss import LossWeights, arrival_terms
 from wmr_jax._src.tuning.parametrisation import (
@@ -133,31 +134,31 @@ def _group_grads(z, spec, robot, dt, options):
 
     def run_loss(z, spec):
         gains = robust_gains(z, robot)
-        _, _, (poses, _) = robustness.disturbed_run(
+        _, _, (poses, _, _) = loop.disturbed_run(
             spec, gains, init, robot, dt, options, record=True
         )
         return _relaxed_arrival(poses, spec.ref, dt)
 
-    spec_axes = robustness.Disturbance(0, 0, 0, 0)
+    spec_axes = disturbances.Disturbance(0, 0, 0, 0)
     return jax.vmap(jax.value_and_grad(run_loss), in_axes=(None, spec_axes))(z, spec)
 
 
 def _specs(key, refs, nonideal_refs, steps, temperature):
     """The loss's batches: ``[(spec, options)]``, drawn from ``key``."""
-    keys = jax.random.split(key, len(robustness.STANDARD_CONDITIONS) + 1)
+    keys = jax.random.split(key, len(disturbances.STANDARD_CONDITIONS) + 1)
     ideal = loops.Options(steps=steps, controller=SHIM_SUNG, temperature=temperature)
     specs = [
-        robustness.sample_disturbance(
+        disturbances.sample_disturbance(
             k, refs, steps, noise_xy=sxy, noise_theta=math.radians(sdeg), latency=float(latency)
         )
-        for (_, sxy, sdeg, latency), k in zip(robustness.STANDARD_CONDITIONS, keys, strict=False)
+        for (_, sxy, sdeg, latency), k in zip(disturbances.STANDARD_CONDITIONS, keys, strict=False)
     ]
     # One batch for all conditions: one scan to compile, not four.
     batches = [(jax.tree.map(lambda *leaves: jnp.concatenate(leaves), *specs), ideal)]
     if nonideal_refs.shape[0]:
         k_level, k_spec = jax.random.split(keys[-1])
         level = jax.random.uniform(k_level, (nonideal_refs.shape[0],), refs.dtype, 0.0, 1.5)
-        spec = robustness.sample_disturbance(
+        spec = disturbances.sample_disturbance(
             k_spec,
             nonideal_refs,
             steps,
@@ -228,13 +229,13 @@ def _condition_metrics(params_by_name, refs, key, *, dt):
     refs = jnp.asarray(refs, float_dtype())
     steps = horizon_steps(dt)
     out = []
-    for _, sxy, sdeg, latency in robustness.STANDARD_CONDITIONS:
-        spec = robustness.sample_disturbance(
+    for _, sxy, sdeg, latency in disturbances.STANDARD_CONDITIONS:
+        spec = disturbances.sample_disturbance(
             key, refs, steps, noise_xy=sxy, noise_theta=math.radians(sdeg), latency=float(latency)
         )
         spec = spec._replace(delay=np.float64(1.0 if latency else 0.0))
         for params in params_by_name.values():
-            out.append(robustness.perturbed_metrics(spec, params, dt=dt, x64=False))
+            out.append(loop.perturbed_metrics(spec, params, dt=dt, x64=False))
     return out
 
 
