@@ -48,7 +48,7 @@ def test_robust_tuning_moves_feasible_gains_and_judges_them_under_every_conditio
     # The saved file loads as fixed Shim-Sung gains.
     path = tmp_path / "tuned_gains.json"
     path.write_text(json.dumps(tuning.tuned_json(gains)))
-    controller, params = tuning.load_tuned(path)
+    controller, params, _ = tuning.load_tuned(path)
     assert controller.name == "shim-sung" and params.kr == pytest.approx(gains.kr)
 
 

@@ -32,6 +32,7 @@ from wmr_jax._src.paper import run_table as run_table
 from wmr_jax._src.robustness import DEFAULT_NOISE_DEG as DEFAULT_NOISE_DEG
 from wmr_jax._src.robustness import DEFAULT_NOISE_XY as DEFAULT_NOISE_XY
 from wmr_jax._src.robustness import ROBUSTNESS_CONDITIONS as ROBUSTNESS_CONDITIONS
+from wmr_jax._src.robustness import evaluate_loop as evaluate_loop
 from wmr_jax._src.robustness import monte_carlo as monte_carlo
 from wmr_jax._src.robustness import robustness_study as robustness_study
 from wmr_jax._src.robustness import standard_conditions as standard_conditions
@@ -46,6 +47,7 @@ from wmr_jax._src.sensing.estimators import OBSERVER as OBSERVER
 from wmr_jax._src.sensing.estimators import EKFParams as EKFParams
 from wmr_jax._src.sensing.estimators import Estimator as Estimator
 from wmr_jax._src.sensing.estimators import ObserverParams as ObserverParams
+from wmr_jax._src.sensing.loop import ClosedLoop as ClosedLoop
 from wmr_jax._src.sensing.loop import disturbed_rollout as disturbed_rollout
 from wmr_jax._src.sensing.loop import perturbed_metrics as perturbed_metrics
 from wmr_jax._src.waypoints import SOCCER_WAYPOINTS_DEG as SOCCER_WAYPOINTS_DEG

@@ -19,20 +19,24 @@ import numpy as np
 
 from wmr_jax._src import checks, controllers
 from wmr_jax._src.metrics import PoseMetrics
-from wmr_jax._src.poses import horizon_steps
+from wmr_jax._src.poses import HORIZON_S, horizon_steps
 from wmr_jax._src.rollout import DEFAULT_DT
 from wmr_jax._src.sensing.disturbances import (
     STANDARD_CONDITIONS,
+    STANDARD_MISMATCH,
     Disturbance,
     draw_disturbances,
     sample_disturbance,
 )
-from wmr_jax._src.sensing.loop import perturbed_metrics
+from wmr_jax._src.sensing.estimators import resolve_estimator
+from wmr_jax._src.sensing.loop import ClosedLoop, perturbed_metrics
 
 __all__ = [
     "DEFAULT_NOISE_DEG",
     "DEFAULT_NOISE_XY",
+    "MODEL_ROBOT",
     "ROBUSTNESS_CONDITIONS",
+    "evaluate_loop",
     "monte_carlo",
     "robustness_study",
     "standard_conditions",
@@ -235,62 +239,206 @@ def robustness_study(
     return rows
 
 
+def _closed_loop(value: Any, controller: Any, estimator: Any) -> ClosedLoop:
+    """A set of ``standard_conditions``: a ``ClosedLoop`` as it is, or params of ``controller``."""
+    if isinstance(value, ClosedLoop):
+        return value
+    return ClosedLoop(controller, value, estimator)
+
+
+# The model robot's row: no mismatch, no noise, no latency (docs/model.md §9).
+MODEL_ROBOT = "model robot"
+
+
 def standard_conditions(
     params_by_name: dict[str, Any],
     refs: Any,
     key: jax.Array,
     *,
     controller: Any = controllers.SHIM_SUNG,
+    estimator: Any = None,
+    mismatch: float = STANDARD_MISMATCH,
     dt: float = DEFAULT_DT,
     x64: bool = True,
 ) -> list[dict[str, Any]]:
-    """Judge parameter sets under the standard conditions of ``docs/model.md §7`` (hard law).
+    """Judge closed loops under the standard conditions of docs/model.md §7 and §9 (hard law).
 
-    Every set and condition sees the same unit noise (common random numbers,
-    drawn from ``key`` by ``sample_disturbance``); ideal loop, horizon 6 s.
+    The conditions: the model robot (no mismatch, no noise, no latency),
+    then nominal, latency, noise and both, each with every wheel's radius
+    off by ``δ ~ U(−mismatch, mismatch)`` drawn per run (docs/model.md §9:
+    without it, dead reckoning would be exact). Every set and condition sees
+    the same draws (common random numbers, from ``key`` by
+    ``sample_disturbance``); ideal loop, horizon 6 s, the estimate starting
+    from the first measurement.
 
     Args:
-        params_by_name: ``{label: params}`` of ``controller``.
+        params_by_name: ``{label: params of controller}`` or ``{label:
+            ClosedLoop}`` (a controller, its parameters and an estimator,
+            as ``load_tuned`` returns them).
         refs: ``(N, 3)`` reference poses (held-out poses of ``docs/model.md §6``).
-        key: ``jax.random`` key of the noise.
-        controller: a ``Controller`` or its registered name.
+        key: ``jax.random`` key of the noise and the mismatch.
+        controller: a ``Controller`` or its registered name, for plain params.
+        estimator: the estimator of plain params (``None``: raw feedback).
+        mismatch: bound of each wheel's relative radius error, ``[0, 1)``;
+            0 judges the model robot under every condition.
         dt: control period, s.
         x64: compute in float64.
 
     Returns:
-        One row per (condition, set): ``condition``, ``gains``, ``success``,
-        ``mean arrival s`` and ``median arrival s`` of the successful runs
-        (``inf`` if none), ``mean final distance cm``, ``runs``.
+        One row per (condition, set): ``condition``, ``gains``, ``feedback``
+        (``raw`` or the estimator's name), ``success``, ``mean arrival s``
+        and ``median arrival s`` of the successful runs (``inf`` if none),
+        ``mean final distance cm``, ``peak wheel cm/s`` (the largest over the
+        runs), ``mismatch``, ``runs``.
     """
     if not isinstance(params_by_name, Mapping) or not params_by_name:
         raise ValueError(
             f"params_by_name = {params_by_name!r:.80} is not allowed; allowed: a dict of "
-            "label -> parameters, at least one"
+            "label -> parameters or ClosedLoop, at least one"
         )
+    mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
+    sets = {
+        name: _closed_loop(value, controller, estimator) for name, value in params_by_name.items()
+    }
+    for loop in sets.values():  # every set is refused before any runs
+        resolve_estimator(loop.estimator)
+        controllers.get_controller(loop.controller)
     with jax.enable_x64(checks.check_bool("x64", x64)):  # not rounded to float32 first
         refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
     steps = horizon_steps(dt)
-    # The unit noise depends on the key and the number of runs only (drawn in
-    # the session's dtype, as before): the poses themselves stay in float64.
-    unit = sample_disturbance(key, np.zeros_like(refs), steps, noise_xy=1.0, noise_theta=1.0)
+    # The unit noise and mismatch depend on the key and the number of runs
+    # only (drawn in the session's dtype): the poses themselves stay in float64.
+    unit = sample_disturbance(
+        key, np.zeros_like(refs), steps, noise_xy=1.0, noise_theta=1.0, radius_mismatch=mismatch
+    )
     noise = np.asarray(unit.noise, dtype=float)
+    factors = np.asarray(unit.mismatch, dtype=float)
+    factors[:, 2] = 1.0  # the ideal loop has no mass
     ones = np.ones((len(refs), 3))
+    conditions = [(MODEL_ROBOT, 0.0, 0.0, False, ones)]
+    conditions += [(*condition, factors) for condition in STANDARD_CONDITIONS]
     rows = []
-    for label, sxy, sdeg, latency in STANDARD_CONDITIONS:
+    for label, sxy, sdeg, latency, wheels in conditions:
         scale = np.array([sxy, sxy, math.radians(sdeg)])
-        spec = Disturbance(refs, noise * scale, ones, np.float64(1.0 if latency else 0.0))
-        for name, params in params_by_name.items():
-            m = perturbed_metrics(spec, params, controller=controller, dt=dt, x64=x64)
+        spec = Disturbance(refs, noise * scale, wheels, np.float64(1.0 if latency else 0.0))
+        for name, loop in sets.items():
+            m = perturbed_metrics(
+                spec,
+                loop.params,
+                controller=loop.controller,
+                estimator=loop.estimator,
+                dt=dt,
+                x64=x64,
+            )
             summary = summary_row(m)
+            estimator_used, _ = resolve_estimator(loop.estimator)
             rows.append(
                 {
                     "condition": label,
                     "gains": name,
+                    "feedback": "raw" if estimator_used is None else estimator_used.name,
                     "success": summary["success"],
                     "mean arrival s": summary["mean arrival s"],
                     "median arrival s": summary["median arrival s"],
                     "mean final distance cm": summary["mean final distance cm"],
+                    "peak wheel cm/s": float(np.max(m.peak_wheel)),
+                    "mismatch": 0.0 if label == MODEL_ROBOT else mismatch,
                     "runs": len(refs),
                 }
             )
     return rows
+
+
+def evaluate_loop(
+    loop: Any,
+    refs: Any,
+    *,
+    condition: str = "nominal",
+    mismatch: float = STANDARD_MISMATCH,
+    seed: int = 0,
+    horizon: float = HORIZON_S,
+    velocity: str = "ideal",
+    dt: float = DEFAULT_DT,
+    x64: bool = True,
+) -> dict[str, Any]:
+    """Judge one closed loop on the user's own references under one standard condition.
+
+    The robot starts at the origin facing +x; hard law; the metrics of
+    docs/model.md §6 on the true pose. The noise and each wheel's radius
+    error (``δ ~ U(−mismatch, mismatch)`` per run) are drawn from ``seed``
+    by ``sample_disturbance``, as ``standard_conditions`` draws them.
+
+    Args:
+        loop: a ``ClosedLoop`` (``load_tuned`` returns one) or ``Gains``
+            (Shim–Sung, raw feedback).
+        refs: ``(N, 3)`` references ``[x cm, y cm, θ rad]``.
+        condition: ``"nominal"``, ``"latency"``, ``"noise"`` or ``"both"``
+            (docs/model.md §7).
+        mismatch: bound of each wheel's relative radius error, ``[0, 1)``;
+            0 for the model robot.
+        seed: seed of the draws, an integer in ``[0, 2³² − 1]``.
+        horizon: simulated time per run, s.
+        velocity: ``"ideal"`` or ``"nonideal"``.
+        dt: control period, s.
+        x64: compute in float64.
+
+    Returns:
+        ``{"success": fraction, "mean_arrival_s": mean over the successful
+        runs (None if none arrived), "median_arrival_s", "peak_wheel_speed":
+        cm/s (the largest rim speed of any run, mismatch included), "n",
+        "condition", "mismatch", "seed", "horizon_s", "velocity",
+        "controller", "feedback"}``.
+
+    Raises:
+        ValueError: for a bad argument, before any run.
+    """
+    labels = {label: (sxy, sdeg, lat) for label, sxy, sdeg, lat in STANDARD_CONDITIONS}
+    if condition not in labels:
+        raise ValueError(f"condition = {condition!r} is not allowed; allowed: {', '.join(labels)}")
+    loop = _closed_loop(loop, controllers.SHIM_SUNG, None)
+    estimator, _ = resolve_estimator(loop.estimator)
+    controller = controllers.get_controller(loop.controller)
+    mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
+    seed = checks.check_int("seed", seed, 0, 2**32 - 1)
+    steps = horizon_steps(dt, horizon)
+    with jax.enable_x64(checks.check_bool("x64", x64)):
+        refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
+    sxy, sdeg, latency = labels[condition]
+    unit = sample_disturbance(
+        jax.random.key(seed),
+        np.zeros_like(refs),
+        steps,
+        noise_xy=1.0,
+        noise_theta=1.0,
+        radius_mismatch=mismatch,
+    )
+    factors = np.array(unit.mismatch, dtype=float)
+    factors[:, 2] = 1.0  # the wheel radii only
+    scale = np.array([sxy, sxy, math.radians(sdeg)])
+    spec = Disturbance(
+        refs, np.asarray(unit.noise, dtype=float) * scale, factors, np.float64(float(latency))
+    )
+    m = perturbed_metrics(
+        spec,
+        loop.params,
+        controller=controller,
+        estimator=loop.estimator,
+        dt=dt,
+        velocity=velocity,
+        x64=x64,
+    )
+    arrived = m.arrival[m.success]
+    return {
+        "success": float(m.success.mean()),
+        "mean_arrival_s": float(arrived.mean()) if arrived.size else None,
+        "median_arrival_s": float(np.median(arrived)) if arrived.size else None,
+        "peak_wheel_speed": float(np.max(m.peak_wheel)),
+        "n": len(refs),
+        "condition": condition,
+        "mismatch": mismatch,
+        "seed": seed,
+        "horizon_s": steps * float(dt),
+        "velocity": velocity,
+        "controller": controller.name,
+        "feedback": "raw" if estimator is None else estimator.name,
+    }

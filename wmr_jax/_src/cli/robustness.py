@@ -86,12 +86,9 @@ def _gain_sets(args: Any) -> dict[str, Any]:
         if path is None:
             continue
         try:
-            controller, params = load_tuned(path)
+            sets[label] = load_tuned(path)  # run whole: its controller and estimator
         except ValueError as err:
             raise ValueError(f"{flag} {path!r} is not allowed: {err}") from None
-        if controller.name != "shim-sung":
-            raise ValueError(f"{flag} {path!r} is not allowed; allowed: fixed Shim-Sung gains")
-        sets[label] = params
     return sets
 
 

@@ -56,9 +56,17 @@ def _controller_and_gains(args: Any) -> tuple[Any, Any]:
         flag = "--" + given[0].replace("_", "-")
         raise ValueError(f"{flag} is not allowed with --gains; allowed: one or the other")
     try:
-        return load_tuned(args.gains)
+        loop = load_tuned(args.gains)
     except ValueError as err:
         raise ValueError(f"--gains {err}") from None
+    if loop.estimator is not None:
+        # docs/model.md §9: without noise or latency every estimator gives the nominal run.
+        print(
+            f"the file's estimator ({type(loop.estimator).__name__}) is not needed here: "
+            "simulate measures without noise or latency, where the estimate is the pose "
+            "(wmr-jax evaluate runs it under noise)"
+        )
+    return loop.controller, loop.params
 
 
 def run(args: Any) -> int:

@@ -1,23 +1,33 @@
-"""``wmr-jax tune --robust``: fixed gains tuned through the disturbances of docs/model.md §7.
+"""``wmr-jax tune --robust``: controller and estimator tuned together (docs/model.md §7, §9).
 
 Called by ``wmr-jax tune`` with its parsed flags (``out``, ``seed``,
-``iters``, ``poses``, ``velocity``, ``resume``). Writes ``tuned_gains.json``
-(the ``Gains`` field names and ``"controller": "shim-sung"``),
-``robust_evaluation.json`` and ``robust_evaluation.md`` (the hard-law table
-under the standard conditions, with random search and CMA-ES given the same
-wall time) and ``robust_loss.json`` (the loss per iteration).
+``iters``, ``poses``, ``velocity``, ``resume``, ``fixed``, ``estimator``,
+``knots``, ``compare``). By default the gain schedule and the estimator are
+tuned together (``--fixed``: the 7 fixed gains with raw feedback, as before
+estimators). Writes ``tuned_gains.json`` (controller, parameters and
+estimator, which ``load_tuned`` reads whole), ``robust_evaluation.json`` and
+``.md`` (the hard-law table under the standard conditions, each with ±3 %
+wheel mismatch, and the model robot) and ``robust_loss.json`` (the loss per
+iteration). With ``--compare`` it runs seeds 0–2 instead, each with random
+search and CMA-ES given the tuning's wall time, into
+``robust_compare.json`` and ``.md`` (each seed written as it finishes;
+``--resume`` keeps them).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import json
 from typing import Any
 
 from wmr_jax._src.cli import flags
 
 __all__ = ["run"]
 
-_COLUMNS = ["condition", "gains", "success", "mean arrival s", "median arrival s"]
+_COLUMNS = ["condition", "gains", "feedback", "success", "mean arrival s", "median arrival s"]
+_COMPARE_SEEDS = (0, 1, 2)
+_COMPARE_FORMAT = 1
+_NONE = ("none", "raw")
 
 
 def _counts(args: Any) -> tuple[int, int]:
@@ -32,9 +42,27 @@ def _counts(args: Any) -> tuple[int, int]:
     return counts[0], counts[1]
 
 
-def run(args: Any) -> int:
-    """Run ``wmr-jax tune --robust``; return the exit status."""
-    out = flags.output_dir("--out", getattr(args, "out", None))
+def _estimator(args: Any) -> Any:
+    """The ``--estimator`` name (``None`` for raw feedback); ``--fixed`` defaults to raw."""
+    from wmr_jax._src.sensing.estimators import ESTIMATORS
+    from wmr_jax._src.tuning.robust import RobustConfig
+
+    value = getattr(args, "estimator", None)
+    if value is None:
+        return None if getattr(args, "fixed", False) else RobustConfig().estimator
+    if value in _NONE:
+        return None
+    if value not in ESTIMATORS:
+        allowed = ", ".join([*ESTIMATORS, "none"])
+        raise ValueError(f"--estimator {value!r} is not allowed; allowed: {allowed}")
+    return value
+
+
+def config_from(args: Any) -> Any:
+    """The ``RobustConfig`` of the flags, each checked (one line naming a bad one)."""
+    from wmr_jax._src.tuning.problems import MAX_TUNED_KNOTS
+    from wmr_jax._src.tuning.robust import RobustConfig
+
     seed = getattr(args, "seed", None)
     seed = flags.positive_int("--seed", 0 if seed is None else seed, 0, 2**32 - 1)
     iters, poses = _counts(args)
@@ -44,36 +72,59 @@ def run(args: Any) -> int:
             f"--velocity {velocity!r} is not allowed with --robust; allowed: ideal "
             "(the robust loss mixes both loops itself)"
         )
+    fixed = bool(getattr(args, "fixed", False))
+    changes: dict[str, Any] = {
+        "iters": iters,
+        "poses": poses,
+        "seed": seed,
+        "problem": "fixed" if fixed else "schedule",
+        "estimator": _estimator(args),
+        "compare": False,
+    }
+    knots = getattr(args, "knots", None)
+    if knots is not None:
+        if fixed:
+            raise ValueError("--knots is not allowed with --fixed, which tunes no tables")
+        changes["knots"] = flags.positive_int("--knots", knots, 2, MAX_TUNED_KNOTS)
+    return RobustConfig(**changes).validate()
+
+
+def _described(config: Any) -> str:
+    law = "7 fixed gains" if config.problem == "fixed" else f"gain schedule ({config.knots} knots)"
+    sensing = "raw feedback" if config.estimator is None else f"the {config.estimator}"
+    return f"{law} with {sensing}"
+
+
+def run(args: Any) -> int:
+    """Run ``wmr-jax tune --robust``; return the exit status."""
+    out = flags.output_dir("--out", getattr(args, "out", None))
+    config = config_from(args)
+    if getattr(args, "compare", False):
+        return _compare(out, config, resume=bool(getattr(args, "resume", False)))
 
     from wmr_jax._src import io
     from wmr_jax._src.report.tables import markdown_table
-    from wmr_jax._src.tuning.parametrisation import gains_as_dict
-    from wmr_jax._src.tuning.robust import RobustConfig, tune_robust
+    from wmr_jax._src.tuning.robust import tune_robust
     from wmr_jax._src.tuning.saved import tuned_json
 
     if getattr(args, "resume", False):
         print("tune --robust keeps no checkpoint: --resume runs it again from the start")
-    config = RobustConfig(iters=iters, poses=poses, seed=seed)
+    print(f"tuning the {_described(config)} through the disturbances", flush=True)
 
     def progress(i: int, loss: float) -> None:
-        if i == 1 or i % 25 == 0 or i == iters:
-            print(f"iteration {i}/{iters}: loss {loss:.3f} s", flush=True)
+        if i == 1 or i % 25 == 0 or i == config.iters:
+            print(f"iteration {i}/{config.iters}: loss {loss:.3f} s", flush=True)
 
-    def keep(gains: Any, losses: list[float]) -> None:
-        # Written before the searches and the evaluation: an interruption there
-        # loses no tuning.
-        io.atomic_write_json(out / "tuned_gains.json", tuned_json(gains))
+    def keep(loop: Any, losses: list[float]) -> None:
+        # Written before the evaluation: an interruption there loses no tuning.
+        io.atomic_write_json(out / "tuned_gains.json", tuned_json(loop))
         io.atomic_write_json(out / "robust_loss.json", {"loss": losses})
         print(f"tuned_gains.json, robust_loss.json -> {out} (now judging them)", flush=True)
 
     result = tune_robust(config, progress_fn=progress, on_tuned=keep)
-    searches = {
-        m: {**gains_as_dict(g), "candidates": n} for m, (g, n) in result["searches"].items()
-    }
     record = {
         "config": dataclasses.asdict(config),
         "tune_wall_s": result["tune_wall_s"],
-        "searches": searches,
         "law": "hard (temperature None)",
         "rows": result["rows"],
     }
@@ -82,4 +133,67 @@ def run(args: Any) -> int:
     io.atomic_write_text(out / "robust_evaluation.md", table)
     print(f"robust_evaluation.md/json -> {out}")
     print(table, end="")
+    print(f"tuning wall time {result['tune_wall_s']:.1f} s")
+    return 0
+
+
+def _kept_rows(path: Any, settings: dict[str, Any], resume: bool) -> list[dict[str, Any]]:
+    """The rows of an earlier ``--compare`` of the same settings (``--resume``), else none."""
+    if not resume or not path.exists():
+        return []
+    try:
+        saved = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as err:
+        raise ValueError(f"--resume: {str(path)!r} cannot be read: {err}") from None
+    if not isinstance(saved, dict) or saved.get("settings") != settings:
+        raise ValueError(
+            f"--resume: {str(path)!r} holds another comparison's settings; allowed: the "
+            "same flags as the run that wrote it, or another --out"
+        )
+    rows = saved.get("rows")
+    good = isinstance(rows, list) and all(
+        isinstance(r, dict) and r.get("seed") in _COMPARE_SEEDS for r in rows
+    )
+    if not good:
+        raise ValueError(f"--resume: {str(path)!r} has malformed rows; allowed: another --out")
+    return rows
+
+
+def _compare(out: Any, config: Any, *, resume: bool) -> int:
+    """Gradient, CMA-ES and random search at equal wall time, seeds 0–2; each seed kept."""
+    from wmr_jax._src import io
+    from wmr_jax._src.report.tuning import robust_comparison_table
+    from wmr_jax._src.tuning.robust import evosax_available, tune_robust
+
+    if not evosax_available():
+        print(
+            "CMA-ES skipped: evosax is not installed (pip install 'wmr_jax[search]'); "
+            "comparing the gradient with random search only"
+        )
+    path = out / "robust_compare.json"
+    settings = {"format": _COMPARE_FORMAT, "config": dataclasses.asdict(config)}
+    settings = json.loads(json.dumps(settings))  # as it reads back from the file
+    rows = _kept_rows(path, settings, resume)
+    done = {row["seed"] for row in rows}
+    for seed in _COMPARE_SEEDS:
+        if seed in done:
+            print(f"seed {seed}: kept from {path}")
+            continue
+        print(f"seed {seed}: tuning the {_described(config)}, then the searches", flush=True)
+        result = tune_robust(dataclasses.replace(config, seed=seed, compare=True))
+        budget = result["tune_wall_s"]
+        counts = {"gradient": config.iters, **{m: n for m, (_, n) in result["searches"].items()}}
+        for row in result["rows"]:
+            if row["gains"] == "paper":
+                continue
+            method = "gradient" if row["gains"] == "robust-tuned" else row["gains"]
+            rows.append(
+                {**row, "method": method, "seed": seed, "budget_s": budget,
+                 "candidates": counts[method]}
+            )  # fmt: skip
+        io.atomic_write_json(path, {"settings": settings, "rows": rows})
+    table = robust_comparison_table(rows)
+    io.atomic_write_text(out / "robust_compare.md", table)
+    print(table, end="")
+    print(f"-> {path}, {out / 'robust_compare.md'}")
     return 0

@@ -22,7 +22,7 @@ from wmr_jax._src.tuning.problems import (
     schedule_problem,
 )
 
-__all__ = ["comparison_table", "evaluation_table", "tuning_curve"]
+__all__ = ["comparison_table", "evaluation_table", "robust_comparison_table", "tuning_curve"]
 
 _GAIN_LABELS = {
     "kr": "k_r (cm/s)",
@@ -275,3 +275,47 @@ def _schedule_panels(axes: Any, steps: np.ndarray, rows: np.ndarray, knots: int)
         ax.plot(steps, np.degrees(values) if name == "phi_m" else values, lw=1.0)
         ax.set_title(_GAIN_LABELS[name])
         ax.set_xlabel("iteration")
+
+
+# The order of a robust comparison's conditions (standard_conditions' rows).
+_ROBUST_CONDITIONS = ("model robot", "nominal", "latency", "noise", "both")
+_FAILURE_S = 12.0  # a run that never arrives scores twice the horizon
+
+
+def robust_comparison_table(rows: list[dict[str, Any]]) -> str:
+    """Markdown table of ``tune --robust --compare``: each method and seed under each condition.
+
+    A cell is the success rate and the mean arrival of the successful runs;
+    ``score`` is the mean over the conditions of the mean arrival with
+    failures counted at 12 s (twice the horizon), what the searches minimise.
+    The last rows are each method's mean over the seeds.
+    """
+    rows = require_rows("rows", rows)
+    cells: dict[tuple[str, int], dict[str, Any]] = {}
+    for row in rows:
+        key = (str(row["method"]), int(row["seed"]))
+        entry = cells.setdefault(
+            key, {"budget": float(row["budget_s"]), "candidates": int(row["candidates"])}
+        )
+        ok, mean = float(row["success"]), float(row["mean arrival s"])
+        entry[row["condition"]] = (ok, mean)
+    table, scores = [], {}
+    for (method, seed), entry in sorted(cells.items(), key=lambda kv: (kv[0][1], kv[0][0])):
+        conditions = [c for c in _ROBUST_CONDITIONS if c in entry]
+        score = np.mean(
+            [ok * (mean if ok > 0 else 0.0) + (1 - ok) * _FAILURE_S
+             for ok, mean in (entry[c] for c in conditions)]
+        )  # fmt: skip
+        scores.setdefault(method, []).append(score)
+        line = {"method": method, "seed": str(seed), "score (s)": f"{score:.3f}"}
+        for c in conditions:
+            ok, mean = entry[c]
+            line[c] = f"{100 * ok:.1f} %, " + (f"{mean:.3f} s" if ok > 0 else "none arrived")
+        line["budget (s)"] = f"{entry['budget']:.0f}"
+        line["candidates"] = str(entry["candidates"])
+        table.append(line)
+    for method, values in scores.items():
+        table.append({"method": method, "seed": "mean", "score (s)": f"{np.mean(values):.3f}"})
+    columns = ["method", "seed", "score (s)", *_ROBUST_CONDITIONS, "budget (s)", "candidates"]
+    columns = [c for c in columns if any(c in r for r in table)]
+    return markdown_table([{c: r.get(c, "") for c in columns} for r in table], columns)

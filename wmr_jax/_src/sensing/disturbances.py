@@ -44,7 +44,6 @@ __all__ = [
 ]
 
 
-
 # The standard conditions of docs/model.md §7, with the nominal model first:
 # (label, σ_xy cm, σ_θ degrees, one-sample latency). Ideal loop.
 STANDARD_CONDITIONS = (
@@ -79,6 +78,7 @@ class Disturbance(NamedTuple):
     mismatch: jax.Array
     delay: jax.Array
 
+
 def realised(command: jax.Array, mismatch: jax.Array, robot: Robot) -> tuple[jax.Array, ...]:
     """Return the body velocity ``(v, ω)`` whose rims are the commanded ``v + i ω``, scaled."""
     v, omega = command.real, command.imag
@@ -100,6 +100,7 @@ def measured(pose: loops.SplitPose, noise: jax.Array) -> loops.SplitPose:
         pose.heading * jax.lax.complex(cos_n, sin_n),
         pose.theta + noise[2],
     )
+
 
 def checked_disturbance(disturbance: Disturbance) -> tuple[np.ndarray, ...]:
     """Return the fields of ``disturbance`` as float arrays after checking them."""

@@ -159,9 +159,7 @@ def validate_observer(params: ObserverParams, prefix: str = "estimator") -> Obse
             )
         for k, value in enumerate(entries):
             label = f"{prefix}.{name}[{k}]" if isinstance(table, tuple) else f"{prefix}.{name}"
-            size = _check_values(
-                label, value, lambda a: (a >= 0) & (a <= 1), "a gain 0 <= g <= 1"
-            )
+            size = _check_values(label, value, lambda a: (a >= 0) & (a <= 1), "a gain 0 <= g <= 1")
             if size is not None:
                 sizes[label] = size
     require_one_batch_size(sizes)

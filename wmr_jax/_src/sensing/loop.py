@@ -23,7 +23,7 @@ latency the run is the nominal rollout, and its metrics those of
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -44,12 +44,30 @@ from wmr_jax._src.sensing.disturbances import (
 from wmr_jax._src.sensing.estimators import resolve_estimator
 
 __all__ = [
+    "ClosedLoop",
     "batched_disturbed",
     "disturbed_rollout",
     "disturbed_run",
     "perturbed_metrics",
     "prepare_disturbed",
 ]
+
+
+class ClosedLoop(NamedTuple):
+    """A controller, its parameters and the estimator between it and the sensor.
+
+    What ``load_tuned`` returns and what the studies of sensed loops take.
+
+    Attributes:
+        controller: a ``Controller`` or its registered name.
+        params: its parameters.
+        estimator: ``None`` (raw feedback), an estimator's name, or its
+            parameters (``ObserverParams`` / ``EKFParams``), docs/model.md §9.
+    """
+
+    controller: Any
+    params: Any
+    estimator: Any = None
 
 
 def _select(flag: jax.Array, on_true: Any, on_false: Any) -> Any:

@@ -2,8 +2,10 @@
 
 A ``tuned_gains.json`` of ``wmr-jax tune`` names its controller and kind
 (``"controller": "shim-sung"`` or ``"shim-sung-schedule"``, ``"kind": "fixed"``
-or ``"schedule"``) beside the parameters. Files from before the schedules,
-which hold only ``Gains`` field names, load as fixed gains.
+or ``"schedule"``) beside the parameters, and the estimator tuned with them
+(``"estimator": {"kind": "observer", ...}``; absent or null: raw feedback,
+docs/model.md §9). Files from before the schedules, which hold only
+``Gains`` field names, load as fixed gains.
 """
 
 from __future__ import annotations
@@ -13,11 +15,12 @@ import os
 from typing import Any
 
 from wmr_jax._src.checks import check_path, require_unbatched
-from wmr_jax._src.controllers.base import Controller
 from wmr_jax._src.controllers.schedule import SCHEDULE, SHAPE_FIELDS, TABLES, ScheduleParams
 from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
 from wmr_jax._src.io import json_object_once
 from wmr_jax._src.params import Gains
+from wmr_jax._src.sensing.loop import ClosedLoop
+from wmr_jax._src.tuning.estimation import estimator_from_json, estimator_json
 from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS
 from wmr_jax._src.tuning.problems import FIXED, SCHEDULED, params_json
 
@@ -27,14 +30,20 @@ _KINDS = {"fixed": (SHIM_SUNG, Gains), "schedule": (SCHEDULE, ScheduleParams)}
 _SCHEDULE_FIELDS = (*TABLES, *SHAPE_FIELDS, "v_max", "half_track")
 
 
-def tuned_json(params: Any) -> dict[str, Any]:
+def tuned_json(params: Any, estimator: Any = None) -> dict[str, Any]:
     """Return the ``tuned_gains.json`` content of ``Gains`` or ``ScheduleParams``.
+
+    ``params`` may also be a ``ClosedLoop`` (its params and estimator);
+    ``estimator`` is the estimator tuned with the gains (``None``: raw
+    feedback), written under ``"estimator"``.
 
     Raises:
         ValueError: for anything but one valid parameter set (a scalar per
             field), naming the field: ``load_tuned`` must read back what is
             written, and a file of nulls is never written.
     """
+    if isinstance(params, ClosedLoop):
+        params, estimator = params.params, params.estimator
     if not isinstance(params, (Gains, ScheduleParams)):
         raise ValueError(
             f"params is a {type(params).__name__}; allowed: a wmr_jax.Gains or a "
@@ -43,7 +52,11 @@ def tuned_json(params: Any) -> dict[str, Any]:
     schedule = isinstance(params, ScheduleParams)
     (SCHEDULE if schedule else SHIM_SUNG).validate(params)
     require_unbatched(params, "params", "one parameter set, a scalar per field")
-    return params_json(SCHEDULED if schedule else FIXED, params)
+    values = params_json(SCHEDULED if schedule else FIXED, params)
+    sensed = estimator_json(estimator)
+    if sensed is not None:
+        values["estimator"] = sensed
+    return values
 
 
 def _kind_of(values: dict[str, Any], where: str) -> str:
@@ -77,20 +90,25 @@ def _is_number(value: Any) -> bool:
     return True
 
 
-def load_tuned(path: str | os.PathLike) -> tuple[Controller, Any]:
-    """Load a ``tuned_gains.json`` of ``wmr-jax tune`` (fixed gains or a schedule).
+def load_tuned(path: str | os.PathLike) -> ClosedLoop:
+    """Load a ``tuned_gains.json`` of ``wmr-jax tune`` (fixed gains or a schedule, and estimator).
 
-    ``rollout(ref, params, controller=controller)``, ``batch_rollout`` and
-    ``final_poses`` run the result. A fixed-gain file may leave fields out
-    (they keep the paper's values) and may be of the old form, ``Gains``
-    field names only (``phi_m`` in radians).
+    ``rollout(ref, loop.params, controller=loop.controller)``,
+    ``batch_rollout`` and ``final_poses`` run the result; the disturbed runs
+    and the studies of sensed loops (``perturbed_metrics(...,
+    estimator=loop.estimator)``, ``standard_conditions``) run it whole. A
+    fixed-gain file may leave fields out (they keep the paper's values) and
+    may be of the old form, ``Gains`` field names only (``phi_m`` in
+    radians).
 
     Args:
         path: the JSON file.
 
     Returns:
-        ``(controller, params)``: ``(SHIM_SUNG, Gains)`` or
-        ``(SCHEDULE, ScheduleParams)``, checked.
+        ``ClosedLoop(controller, params, estimator)``: ``SHIM_SUNG`` with
+        ``Gains`` or ``SCHEDULE`` with ``ScheduleParams``, and ``None`` (raw
+        feedback) or the ``ObserverParams``/``EKFParams`` saved with them;
+        checked.
 
     Raises:
         ValueError: one line naming the file and what is wrong with it.
@@ -107,7 +125,8 @@ def load_tuned(path: str | os.PathLike) -> tuple[Controller, Any]:
     kind = _kind_of(values, where)
     controller, cls = _KINDS[kind]
     fields = GAIN_FIELDS if kind == "fixed" else _SCHEDULE_FIELDS
-    numbers = {k: v for k, v in values.items() if k not in ("kind", "controller")}
+    estimator = estimator_from_json(values.get("estimator"), where)
+    numbers = {k: v for k, v in values.items() if k not in ("kind", "controller", "estimator")}
     bad = sorted(set(numbers) - set(fields))
     if (
         bad
@@ -142,6 +161,6 @@ def load_tuned(path: str | os.PathLike) -> tuple[Controller, Any]:
         k: tuple(map(float, v)) if isinstance(v, list) else float(v) for k, v in numbers.items()
     }
     try:
-        return controller, controller.validate(cls(**numbers))
+        return ClosedLoop(controller, controller.validate(cls(**numbers)), estimator)
     except ValueError as err:
         raise ValueError(f"{where}: {err}") from None

@@ -1,0 +1,190 @@
+"""The estimator's share of a joint tuning problem: its parameters as an image of the unit cube.
+
+The joint robust tuner (``tuning.robust``) searches the controller's cube
+(``problems.Problem``) and the estimator's side by side. Every point of the
+estimator's cube is a valid ``ObserverParams`` or ``EKFParams``: the
+observer's gains are linear in ``u`` over ``[0.001, 1]`` (one knot table for
+position, one for heading); the filter's covariances are log-uniform, since
+their effect is on a log scale.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+
+from wmr_jax._src.checks import check_int
+from wmr_jax._src.sensing.estimators import (
+    OBSERVER_KNOTS,
+    EKFParams,
+    ObserverParams,
+    resolve_estimator,
+)
+
+__all__ = ["EstimatorBox", "estimator_box", "estimator_json", "estimator_from_json"]
+
+_GAIN = (1e-3, 1.0)
+# log boxes of the filter's covariances: wheel_error relative, σ_xy cm, σ_θ rad
+_EKF_LOG = {
+    "wheel_error": (math.log(1e-3), math.log(0.3)),
+    "sigma_xy": (math.log(0.02), math.log(5.0)),
+    "sigma_theta": (math.log(math.radians(0.05)), math.log(math.radians(10.0))),
+}
+_CLIP = 1e-3  # how close to a face a starting point may sit (its logit is finite)
+
+
+@dataclasses.dataclass(frozen=True)
+class EstimatorBox:
+    """An estimator's parameters as an image of ``[0, 1]^dim`` (hashable: static under jit).
+
+    Attributes:
+        name: ``"observer"`` or ``"ekf"``.
+        dim: dimension of its cube.
+        knots: knots per gain table (observer).
+    """
+
+    name: str
+    dim: int
+    knots: int = 0
+
+    def from_unit(self, u: Any) -> Any:
+        """Parameters of ``u (dim,)``, valid for every ``u`` in the cube."""
+        if self.name == "observer":
+            gains = _GAIN[0] + (_GAIN[1] - _GAIN[0]) * u
+            k = self.knots
+            return ObserverParams(
+                position=tuple(gains[i] for i in range(k)),
+                heading=tuple(gains[k + i] for i in range(k)),
+            )
+        values = {
+            name: jnp.exp(lo + (hi - lo) * u[i])
+            for i, (name, (lo, hi)) in enumerate(_EKF_LOG.items())
+        }
+        return EKFParams(**values)
+
+    def unit_of(self, params: Any) -> np.ndarray:
+        """The point of the cube of ``params`` (clipped inside it), for a starting point."""
+        if self.name == "observer":
+            tables = []
+            radii = np.linspace(0.0, 1.0, self.knots)
+            for table in (params.position, params.heading):
+                if isinstance(table, tuple):
+                    old = np.linspace(0.0, 1.0, len(table)) ** 2
+                    values = np.interp(radii**2, old, np.asarray(table, dtype=float))
+                else:
+                    values = np.full(self.knots, float(table))
+                tables.append(values)
+            u = (np.concatenate(tables) - _GAIN[0]) / (_GAIN[1] - _GAIN[0])
+        else:
+            u = np.array(
+                [
+                    (math.log(float(getattr(params, name))) - lo) / (hi - lo)
+                    for name, (lo, hi) in _EKF_LOG.items()
+                ]
+            )
+        return np.clip(u, _CLIP, 1.0 - _CLIP)
+
+    def start(self) -> np.ndarray:
+        """The estimator's default parameters as a point of the cube."""
+        default = ObserverParams() if self.name == "observer" else EKFParams()
+        return self.unit_of(default)
+
+    def columns(self) -> tuple[str, ...]:
+        """Names of the entries of a flat row."""
+        if self.name == "observer":
+            k = range(self.knots)
+            return tuple(f"position[{i}]" for i in k) + tuple(f"heading[{i}]" for i in k)
+        return tuple(_EKF_LOG)
+
+
+def estimator_box(name: str, knots: int = OBSERVER_KNOTS) -> EstimatorBox:
+    """The cube of estimator ``name`` (``"observer"``: two tables of ``knots``; ``"ekf"``: 3)."""
+    if name not in ("observer", "ekf"):
+        raise ValueError(f"estimator = {name!r} is not allowed; allowed: 'observer' or 'ekf'")
+    return _box(name, check_int("knots", knots, 2, 50))
+
+
+@functools.cache
+def _box(name: str, knots: int) -> EstimatorBox:
+    if name == "observer":
+        return EstimatorBox("observer", 2 * knots, knots)
+    return EstimatorBox("ekf", len(_EKF_LOG))
+
+
+def estimator_json(params: Any) -> dict[str, Any] | None:
+    """The ``"estimator"`` entry of ``tuned_gains.json`` (``None`` for raw feedback)."""
+    estimator, params = resolve_estimator(params)
+    if estimator is None:
+        return None
+    values: dict[str, Any] = {"kind": estimator.name, "compensate": bool(params.compensate)}
+    for field in dataclasses.fields(params):
+        if field.name == "compensate":
+            continue
+        value = getattr(params, field.name)
+        if isinstance(value, tuple):
+            values[field.name] = [float(x) for x in value]
+        else:
+            if np.ndim(value):
+                raise ValueError(
+                    f"estimator.{field.name} has shape {np.shape(value)}; allowed: one "
+                    "parameter set, a scalar per field"
+                )
+            values[field.name] = float(value)
+    return values
+
+
+def estimator_from_json(values: Any, where: str) -> Any:
+    """The estimator parameters of a ``tuned_gains.json`` ``"estimator"`` entry (checked).
+
+    Raises:
+        ValueError: one line naming the file (``where``) and the bad entry.
+    """
+    if values is None:
+        return None
+    if not isinstance(values, dict):
+        raise ValueError(
+            f"{where}: estimator = {values!r:.80} is not allowed; allowed: null or an object "
+            "with 'kind' 'observer' or 'ekf'"
+        )
+    kind = values.get("kind")
+    types = {"observer": ObserverParams, "ekf": EKFParams}
+    if kind not in types:
+        raise ValueError(
+            f"{where}: estimator kind = {kind!r} is not allowed; allowed: 'observer' or 'ekf'"
+        )
+    cls = types[kind]
+    fields = {f.name for f in dataclasses.fields(cls)}
+    given = {k: v for k, v in values.items() if k != "kind"}
+    bad = sorted(set(given) - fields)
+    if bad:
+        raise ValueError(
+            f"{where}: estimator key {bad[0]!r} is not allowed; allowed: "
+            f"{', '.join(sorted(fields))}"
+        )
+    compensate = given.pop("compensate", True)
+    if not isinstance(compensate, bool):
+        raise ValueError(
+            f"{where}: estimator compensate = {compensate!r} is not allowed; allowed: true or false"
+        )
+    numbers = {}
+    for name, value in given.items():
+        is_list = isinstance(value, list)
+        entries = value if is_list else [value]
+        if not entries or any(
+            isinstance(x, bool) or not isinstance(x, (int, float)) for x in entries
+        ):
+            raise ValueError(
+                f"{where}: estimator {name} = {value!r:.80} is not allowed; allowed: a number "
+                "or a list of numbers"
+            )
+        numbers[name] = tuple(float(x) for x in value) if is_list else float(value)
+    try:
+        _, params = resolve_estimator(cls(**numbers, compensate=compensate))
+    except ValueError as err:
+        raise ValueError(f"{where}: {err}") from None
+    return params
