@@ -1,4 +1,4 @@
-"""A plain NumPy/``math`` reference of docs/model.md §2–4, one pose at a time, no JAX.
+"""A plain NumPy/``math`` reference of docs/model.md §2–4, §7 and §9, one pose at a time, no JAX.
 
 It is written straight from ``docs/model.md`` with angles and ``atan2``, independently of
 ``wmr_jax.controllers`` (the Shim–Sung law there avoids angles for speed and differentiability). The
@@ -26,9 +26,15 @@ from wmr_jax._src.checks import (
     require_unbatched,
 )
 from wmr_jax._src.params import Gains, Robot, validate_gains, validate_robot
+from wmr_jax._src.sensing.estimators import OBSERVER_R, EKFParams, resolve_estimator
 from wmr_jax._src.velocity_loop import check_stability
 
-__all__ = ["reference_control", "reference_diagnostics", "reference_rollout"]
+__all__ = [
+    "reference_control",
+    "reference_diagnostics",
+    "reference_disturbed_rollout",
+    "reference_rollout",
+]
 
 
 # π as a sum of two floats: shifting an angle by PI_HI and then PI_LO gives the
@@ -319,3 +325,190 @@ def reference_rollout(
         "wheel_speeds": rims,
         "distance": dist,
     }
+
+
+# ---------------------------------------------------------------- the disturbed loop (§7, §9)
+
+
+def _residual(a: float) -> float:
+    """An angle difference wrapped to (−π, π] (a heading residual)."""
+    return -_wrap(-a)
+
+
+def _gain_at(table: Any, r: float) -> float:
+    """A gain table at distance ``r``: linear between knots at R (k / (K − 1))², constant beyond."""
+    if not isinstance(table, tuple):
+        return float(table)
+    values = [float(g) for g in table]
+    radii = [OBSERVER_R * (k / (len(values) - 1)) ** 2 for k in range(len(values))]
+    for k in range(1, len(values)):
+        if r <= radii[k]:
+            share = (r - radii[k - 1]) / (radii[k] - radii[k - 1])
+            return values[k - 1] + share * (values[k] - values[k - 1])
+    return values[-1]
+
+
+class _Observer:
+    """The observer in plain floats: predict on the exact arc, blend toward the measurement."""
+
+    def __init__(self, params: Any, measured: tuple, half_track: float):
+        del half_track
+        self.position, self.heading = params.position, params.heading
+        self.pose = measured
+
+    def update(self, v: float, w: float, z: tuple, ref: tuple, dt: float) -> None:
+        px, py, pth = _arc(*self.pose, v, w, dt)
+        r = math.hypot(ref[0] - px, ref[1] - py)
+        g_pos, g_head = _gain_at(self.position, r), _gain_at(self.heading, r)
+        back = (1.0 - g_head) * _residual(z[2] - pth)
+        self.pose = (
+            z[0] + (1.0 - g_pos) * (px - z[0]),
+            z[1] + (1.0 - g_pos) * (py - z[1]),
+            z[2] - back,
+        )
+
+
+class _Filter:
+    """The extended Kalman filter of the ideal robot over ``[x, y, θ]``, in NumPy."""
+
+    def __init__(self, params: EKFParams, measured: tuple, half_track: float):
+        self.wheel_error, self.L = float(params.wheel_error), half_track
+        sxy, sth = float(params.sigma_xy), float(params.sigma_theta)
+        self.meas_cov = np.diag([sxy**2, sxy**2, sth**2])
+        self.pose, self.cov = measured, self.meas_cov.copy()
+
+    def update(self, v: float, w: float, z: tuple, ref: tuple, dt: float) -> None:
+        x, y, th = self.pose
+        px, py, pth = _arc(x, y, th, v, w, dt)
+        # d(new position)/dθ is the displacement turned by a right angle.
+        jac = np.array([[1.0, 0.0, -(py - y)], [0.0, 1.0, px - x], [0.0, 0.0, 1.0]])
+        # Independent relative errors on each wheel's travel: the centre moves
+        # by their mean (taken as isotropic in x and y), the heading turns by
+        # their difference over 2L.
+        left, right = abs(v - self.L * w) * dt, abs(v + self.L * w) * dt
+        var = self.wheel_error**2 * (left**2 + right**2) / 4.0
+        cov = jac @ self.cov @ jac.T + np.diag([var, var, var / self.L**2])
+        gain = cov @ np.linalg.inv(cov + self.meas_cov)
+        step = gain @ np.array([z[0] - px, z[1] - py, _residual(z[2] - pth)])
+        self.pose = (px + step[0], py + step[1], pth + step[2])
+        cov = (np.eye(3) - gain) @ cov
+        self.cov = 0.5 * (cov + cov.T)
+
+
+def _checked_noise(noise: Any) -> np.ndarray:
+    arr = real_array("noise", noise, "(steps, 3) real numbers [cm, cm, rad]")
+    if arr.ndim != 2 or arr.shape[1] != 3 or not 1 <= arr.shape[0] <= MAX_STEPS:
+        raise ValueError(f"noise has shape {arr.shape}; allowed: (steps, 3), steps >= 1")
+    limit = position_limit(np.float64)
+    ok = np.isfinite(arr) & (np.abs(arr) <= np.array([limit, limit, MAX_HEADING]))
+    if not np.all(ok):
+        raise ValueError(
+            f"noise holds {float(arr[~ok][0])!r}; allowed: finite numbers, |x|, |y| noise <= "
+            f"{limit:.0e} cm and heading noise <= {MAX_HEADING:.0e} rad"
+        )
+    return arr
+
+
+def _checked_mismatch(mismatch: Any) -> tuple[float, float]:
+    allowed = "(left, right) rim factors > 0, or (left, right, mass) (mass unused: ideal loop)"
+    arr = real_array("mismatch", mismatch, allowed)
+    if arr.shape not in ((2,), (3,)) or not np.all(np.isfinite(arr) & (arr > 0)):
+        raise ValueError(f"mismatch = {arr.tolist()} is not allowed; allowed: {allowed}")
+    return float(arr[0]), float(arr[1])
+
+
+def _checked_delay(delay: Any) -> int:
+    allowed = "0 (no latency) or 1 (one sample)"
+    arr = real_array("delay", delay, allowed)
+    if arr.shape != () or float(arr) not in (0.0, 1.0):
+        raise ValueError(f"delay = {delay!r} is not allowed; allowed: {allowed}")
+    return int(arr)
+
+
+@_in_float64
+def reference_disturbed_rollout(
+    ref: Any,
+    gains: Gains | None = None,
+    *,
+    noise: Any,
+    mismatch: Any = (1.0, 1.0),
+    delay: Any = 0,
+    estimator: Any = None,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = 0.033,
+    robot: Robot | None = None,
+) -> dict[str, np.ndarray]:
+    """Simulate one disturbed run of the ideal loop with a Python loop (docs/model.md §7, §9).
+
+    The same run as one row of ``wmr_jax.studies.disturbed_rollout`` (Shim–Sung
+    law, ideal velocity loop), written in angles and plain floats.
+
+    Args:
+        ref: ``(3,)`` reference pose ``[cm, cm, rad]``.
+        gains: ``Gains`` (default ``Gains()``).
+        noise: ``(steps, 3)`` measurement error added to the true pose at each
+            sample ``k = 0 … steps − 1`` (sample ``k`` ends period ``k − 1``);
+            sets the number of periods.
+        mismatch: ``(left, right)`` realised over commanded rim speed; a
+            Disturbance's ``(left, right, mass)`` row is accepted too (the
+            ideal loop has no mass).
+        delay: 0, or 1 for one sample of latency (the command of sample ``k``
+            applied over period ``k + 1``, zero over the first).
+        estimator: ``None`` (the law sees the raw measurement), ``"observer"``
+            or ``"ekf"`` (defaults), or one ``ObserverParams``/``EKFParams``.
+        init: ``(3,)`` initial pose, true and measured alike.
+        dt: control period, s.
+        robot: the robot (only ``half_track`` matters); default ``Robot()``.
+
+    Returns:
+        float64 arrays: ``poses (steps + 1, 3)`` true poses, ``v``, ``omega``
+        ``(steps,)`` the command applied over each period (before the rim
+        factors), ``estimates (steps, 3)`` the estimate (or the measurement
+        without an estimator) at the end of each period.
+    """
+    gains = _one_set(Gains() if gains is None else gains, validate_gains, "gains")
+    robot = _one_set(Robot() if robot is None else robot, validate_robot, "robot")
+    kind, params = resolve_estimator(estimator)
+    require_unbatched(params, "estimator", "a number (the reference runs one pose)")
+    ref, (x, y, th) = _one_pose("ref", ref), _one_pose("init", init)
+    noise, (f_left, f_right) = _checked_noise(noise), _checked_mismatch(mismatch)
+    late, dt = _checked_delay(delay), float(check_dt(dt))
+    half_track, steps = float(robot.half_track), noise.shape[0]
+
+    def law(pose: tuple) -> tuple[float, float]:
+        out = _diagnostics(pose, ref, gains)
+        return out["v"], out["omega"]
+
+    def measure(k: int) -> tuple:
+        n = noise[k] if k < steps else (0.0, 0.0, 0.0)  # the last one is never used
+        return x + float(n[0]), y + float(n[1]), th + float(n[2])
+
+    estimate = None
+    if kind is not None:
+        make = _Observer if kind.params_type is not EKFParams else _Filter
+        estimate = make(params, measure(0), half_track)
+    roll = estimate is not None and late and bool(params.compensate)
+
+    def seen(z: tuple, in_flight: tuple) -> tuple:
+        """The pose the law is handed: the measurement, or the estimate (rolled forward)."""
+        if estimate is None:
+            return z
+        return _arc(*estimate.pose, *in_flight, dt) if roll else estimate.pose
+
+    fresh, held = law(seen(measure(0), (0.0, 0.0))), (0.0, 0.0)
+    poses, estimates = np.empty((steps + 1, 3)), np.empty((steps, 3))
+    v_out, w_out = np.empty(steps), np.empty(steps)
+    poses[0] = x, y, th
+    for k in range(steps):
+        v, w = held if late else fresh
+        left, right = f_left * (v - half_track * w), f_right * (v + half_track * w)
+        x, y, th = _arc(x, y, th, 0.5 * (left + right), 0.5 * (right - left) / half_track, dt)
+        poses[k + 1], v_out[k], w_out[k] = (x, y, th), v, w
+        z = measure(k + 1)
+        if estimate is not None:
+            estimate.update(v, w, z, ref, dt)
+        estimates[k] = z if estimate is None else estimate.pose
+        # The command just computed is applied next period under latency;
+        # ``fresh`` is the one in flight meanwhile.
+        held, fresh = fresh, law(seen(z, fresh))
+    return {"poses": poses, "v": v_out, "omega": w_out, "estimates": estimates}
