@@ -19,7 +19,9 @@ __all__ = ["COMMANDS", "build_parser", "main"]
 
 # The commands in --help order. Each lives in the module of this package of
 # the same name, except demo, which shares the paper's.
-COMMANDS = ("simulate demo paper tune sweep compare waypoints robustness animate bench").split()
+COMMANDS = (
+    "simulate demo paper tune sweep compare waypoints robustness evaluate animate bench"
+).split()
 _MODULE_OF = {"demo": "paper"}
 
 # Sweep-like commands spread their batches over every local device; on a CPU

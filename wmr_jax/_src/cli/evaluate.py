@@ -1,0 +1,331 @@
+"""``wmr-jax evaluate``: judge a tuned loop on the user's references under one condition.
+
+The loop (controller, parameters and estimator) comes from a
+``tuned_gains.json`` or a ``Gains`` JSON (``load_tuned`` reads both); the
+references from an ``(N, 3)`` ``.npy`` or ``.csv`` file ``[x cm, y cm, θ rad]``;
+``evaluate_loop`` runs them under one standard condition (docs/model.md §7,
+§9). Every flag and both files are checked before any run.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+from wmr_jax._src.cli import flags
+
+__all__ = ["SUBCOMMANDS", "load_refs"]
+
+_CONDITIONS = ("nominal", "latency", "noise", "both")
+_ESTIMATOR_CHOICES = ("none", "observer", "ekf")
+_REF_SUFFIXES = (".npy", ".csv")
+# The runs keep their noise for the whole horizon (3 floats per reference and
+# period): this many reference-periods are ~5 GB, as `robustness --runs 10^6`.
+_MAX_SAMPLES = 2 * 10**8
+_MAX_HORIZON_S = 3600.0
+
+
+def add_arguments(parser: Any) -> None:
+    """Add the flags of ``wmr-jax evaluate``."""
+    parser.add_argument(
+        "--gains",
+        required=True,
+        metavar="FILE.json",
+        help="tuned_gains.json of wmr-jax tune (fixed gains or a schedule, with its estimator) "
+        "or a JSON of Gains fields",
+    )
+    parser.add_argument(
+        "--refs",
+        required=True,
+        metavar="FILE",
+        help="references, one row [x cm, y cm, theta rad] each: an (N, 3) .npy, or a .csv "
+        "of 3 comma-separated numbers a line (a first line of names is skipped)",
+    )
+    parser.add_argument(
+        "--condition",
+        required=True,
+        metavar="NAME",
+        help="standard condition (docs/model.md §7): " + ", ".join(_CONDITIONS),
+    )
+    parser.add_argument(
+        "--mismatch",
+        default=0.03,
+        metavar="D",
+        help="bound of each wheel's relative radius error, drawn per run from U(-D, D), "
+        "in [0, 1); 0 is the model robot",
+    )
+    parser.add_argument("--seed", default=0, metavar="N", help="seed of the noise and mismatch")
+    parser.add_argument(
+        "--horizon",
+        default=6.0,
+        metavar="S",
+        help=f"simulated time per reference, s (at most {_MAX_HORIZON_S:g})",
+    )
+    parser.add_argument("--velocity", default="ideal", help="velocity loop: ideal or nonideal")
+    parser.add_argument(
+        "--estimator",
+        default=None,
+        metavar="NAME",
+        help="feedback, instead of the file's: none (raw measurements), observer or ekf (the "
+        "file's parameters if it holds that estimator, else the defaults); default: the file's",
+    )
+    parser.add_argument(
+        "--float32", action="store_true", help="compute in float32 instead of float64"
+    )
+    parser.add_argument(
+        "--json",
+        default=None,
+        metavar="OUT.json",
+        help="write the result to this JSON file (if omitted, only print it)",
+    )
+
+
+def _refs_error(path: str, what: str) -> ValueError:
+    return ValueError(f"--refs {path!r} is not allowed: {what}")
+
+
+def _float_or_none(cell: str) -> float | None:
+    try:
+        return float(cell)
+    except ValueError:
+        return None
+
+
+def _read_csv(path: str) -> tuple[Any, list[str]]:
+    """The rows of a ``.csv`` of references and their line numbers (a header line skipped)."""
+    import numpy as np
+
+    try:
+        text = Path(path).read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as err:
+        raise ValueError(f"--refs {path!r} cannot be read: {' '.join(str(err).split())}") from None
+    rows: list[list[float]] = []
+    lines: list[str] = []
+    first = True
+    for number, line in enumerate(text.splitlines(), start=1):
+        if not line.strip():
+            continue
+        cells = [cell.strip() for cell in line.split(",")]
+        values = [_float_or_none(cell) for cell in cells]
+        if first and all(v is None for v in values):  # a header line of names
+            first = False
+            continue
+        first = False
+        for column, (cell, value) in enumerate(zip(cells, values, strict=True), start=1):
+            if value is None:
+                raise _refs_error(
+                    path, f"line {number}, column {column} is {cell!r}; allowed: a number"
+                )
+        if len(values) != 3:
+            raise _refs_error(
+                path,
+                f"line {number} has {len(values)} values; allowed: 3 on every line "
+                "(x cm, y cm, theta rad)",
+            )
+        rows.append(values)
+        lines.append(f"line {number}")
+    return np.array(rows, dtype=float).reshape(-1, 3), lines
+
+
+_NPY_MAGIC = b"\x93NUMPY"
+
+
+def _read_npy(path: str) -> tuple[Any, list[str] | None]:
+    """The array of a ``.npy`` of references (never unpickled)."""
+    import numpy as np
+
+    def unreadable(err: Any) -> ValueError:
+        return ValueError(f"--refs {path!r} cannot be read: {' '.join(str(err).split())}")
+
+    try:
+        with open(path, "rb") as f:
+            start = f.read(len(_NPY_MAGIC))
+            if start != _NPY_MAGIC:  # NumPy would take any other file for a pickle
+                raise _refs_error(
+                    path, "it is no .npy array (empty, another kind of file, or damaged)"
+                )
+            f.seek(0)
+            arr = np.load(f, allow_pickle=False)
+    except ValueError as err:
+        if str(err).startswith("--refs "):
+            raise
+        if "allow_pickle" in str(err):
+            raise _refs_error(
+                path, "it holds Python objects (a pickle); allowed: an array of numbers"
+            ) from None
+        raise unreadable(err) from None
+    except (OSError, EOFError) as err:  # unreadable, truncated
+        raise unreadable(err) from None
+    if arr.dtype.kind not in "iuf":
+        raise _refs_error(path, f"its dtype is {arr.dtype}; allowed: real numbers")
+    return arr.astype(float), None
+
+
+def load_refs(path: str, *, x64: bool = True) -> Any:
+    """Return the ``(N, 3)`` references of ``--refs`` (``.npy`` or ``.csv``), checked.
+
+    A single row of 3 (a 1-D ``.npy`` of 3 values, or one CSV line) is one
+    reference.
+
+    Raises:
+        ValueError: one line naming ``--refs``, the file and what is wrong.
+    """
+    import jax
+    import numpy as np
+
+    from wmr_jax._src import checks
+
+    file = Path(path)
+    if file.is_dir():
+        raise _refs_error(path, "it is a folder; allowed: a .npy or .csv file")
+    if file.suffix.lower() not in _REF_SUFFIXES:
+        raise ValueError(f"--refs {path!r} is not allowed; allowed: a file ending in .npy or .csv")
+    if not file.exists():
+        raise ValueError(f"--refs {path!r} cannot be read: there is no such file")
+    reader = _read_npy if file.suffix.lower() == ".npy" else _read_csv
+    refs, labels = reader(path)
+    if refs.ndim == 1 and refs.shape[0] == 3:
+        refs = refs[None, :]
+    if refs.ndim != 2 or refs.shape[1] != 3:
+        raise _refs_error(
+            path, f"it has shape {refs.shape}; allowed: (N, 3) rows of x cm, y cm, theta rad"
+        )
+    if refs.shape[0] == 0:
+        raise _refs_error(path, "it holds no references; allowed: at least one row of 3 numbers")
+    labels = labels or [f"row {i} (from 0)" for i in range(len(refs))]
+    bad = np.flatnonzero(~np.isfinite(refs).all(axis=1))
+    if bad.size:
+        row = int(bad[0])
+        more = f"; {bad.size} such rows" if bad.size > 1 else ""
+        raise _refs_error(
+            path,
+            f"{labels[row]} = {refs[row].tolist()} is not finite; allowed: finite numbers{more}",
+        )
+    # The library's own limits (heading; distance, for the dtype), named as the flag.
+    from wmr_jax._src.checks import _FLOAT64_HINT
+
+    try:
+        with jax.enable_x64(x64):
+            checks.as_poses("refs", refs, batch=True)
+    except ValueError as err:
+        text = str(err).replace(_FLOAT64_HINT, ", or without --float32")
+        raise _refs_error(path, text) from None
+    return refs
+
+
+def _mismatch(text: Any) -> float:
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        value = math.nan
+    if not 0.0 <= value < 1.0:  # NaN too
+        raise ValueError(f"--mismatch {text!r} is not allowed; allowed: a number >= 0 and < 1")
+    return value
+
+
+def _horizon(text: Any, n_refs: int) -> float:
+    from wmr_jax._src.poses import horizon_steps
+    from wmr_jax._src.rollout import DEFAULT_DT
+
+    horizon = flags.number("--horizon", text, low=0.0, high=_MAX_HORIZON_S, closed=False, unit="s")
+    with flags.as_flags({"horizon": "--horizon"}):
+        steps = horizon_steps(DEFAULT_DT, horizon)
+    if n_refs * steps > _MAX_SAMPLES:
+        raise ValueError(
+            f"--horizon {text!r} with {n_refs} references is {n_refs * steps} reference-periods; "
+            f"allowed: at most {_MAX_SAMPLES:.0e} (fewer references or a shorter horizon)"
+        )
+    return horizon
+
+
+def _loop(path: str, estimator: str | None) -> Any:
+    """The closed loop of ``--gains``, its estimator replaced by ``--estimator`` if given."""
+    from wmr_jax._src.sensing.estimators import ESTIMATORS, resolve_estimator
+    from wmr_jax._src.tuning.saved import load_tuned
+
+    try:
+        loop = load_tuned(path)
+    except ValueError as err:
+        raise ValueError(f"--gains {err}") from None
+    if estimator is None:
+        return loop
+    if estimator == "none":
+        return loop._replace(estimator=None)
+    saved, params = resolve_estimator(loop.estimator)
+    # The file's tuned parameters when it holds this estimator, else its defaults.
+    chosen = params if saved is ESTIMATORS[estimator] else estimator
+    return loop._replace(estimator=chosen)
+
+
+def _percent(value: float) -> str:
+    return f"{100 * value:.1f} %"
+
+
+def _seconds(value: float | None) -> str:
+    return "none arrived" if value is None else f"{value:.3f} s"
+
+
+def summary_rows(result: dict[str, Any]) -> list[dict[str, str]]:
+    """The printed table of a result: one quantity a row, with its unit."""
+    return [
+        {"quantity": "success", "value": _percent(result["success"])},
+        {"quantity": "mean arrival", "value": _seconds(result["mean_arrival_s"])},
+        {"quantity": "median arrival", "value": _seconds(result["median_arrival_s"])},
+        {"quantity": "peak wheel speed", "value": f"{result['peak_wheel_speed']:.1f} cm/s"},
+        {"quantity": "references (n)", "value": str(result["n"])},
+        {"quantity": "condition", "value": result["condition"]},
+        {"quantity": "wheel-radius mismatch", "value": f"±{100 * result['mismatch']:g} %"},
+        {"quantity": "seed", "value": str(result["seed"])},
+        {"quantity": "horizon", "value": f"{result['horizon_s']:g} s"},
+        {"quantity": "velocity loop", "value": result["velocity"]},
+        {"quantity": "controller", "value": result["controller"]},
+        {"quantity": "feedback", "value": result["feedback"]},
+    ]
+
+
+def run(args: Any) -> int:
+    """Run ``wmr-jax evaluate``; return the exit status."""
+    out = None if args.json is None else flags.output_file("--json", args.json)
+    condition = flags.choice("--condition", args.condition, _CONDITIONS)
+    mismatch = _mismatch(args.mismatch)
+    seed = flags.positive_int("--seed", args.seed, 0, 2**32 - 1)
+    velocity = flags.velocity_loop(args.velocity)
+    estimator = None
+    if args.estimator is not None:
+        estimator = flags.choice("--estimator", args.estimator, _ESTIMATOR_CHOICES)
+    x64 = not args.float32
+    refs = load_refs(args.refs, x64=x64)
+    horizon = _horizon(args.horizon, len(refs))
+    loop = _loop(args.gains, estimator)
+
+    from wmr_jax._src.io import atomic_write_json
+    from wmr_jax._src.report.tables import markdown_table
+    from wmr_jax._src.robustness import evaluate_loop
+
+    with flags.as_flags({"refs": "--refs", "horizon": "--horizon", "mismatch": "--mismatch"}):
+        result = evaluate_loop(
+            loop,
+            refs,
+            condition=condition,
+            mismatch=mismatch,
+            seed=seed,
+            horizon=horizon,
+            velocity=velocity,
+            x64=x64,
+        )
+    result = {**result, "gains_file": str(args.gains), "refs_file": str(args.refs)}
+    if out is not None:
+        atomic_write_json(out, result)
+        print(f"evaluate -> {out}")
+    print(markdown_table(summary_rows(result), ["quantity", "value"]), end="")
+    return 0
+
+
+SUBCOMMANDS = {
+    "evaluate": {
+        "help": "judge tuned gains (and their estimator) on your references under one condition",
+        "add_arguments": add_arguments,
+        "run": run,
+    },
+}
