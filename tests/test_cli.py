@@ -116,7 +116,9 @@ def _write(tmp_path, name, text):
         # --knots sizes a schedule's tables: alone it would size nothing.
         (["tune", "--out", "{dir}", "--knots", "30"], "--knots is not allowed without --schedule"),
         (["tune", "--out", "{dir}", "--schedule", "--knots", "61"], "--knots '61' is not"),
-        (["tune", "--out", "{dir}", "--robust", "--knots", "4"], "--knots is not allowed"),
+        # --robust tunes a schedule by default, whose tables --knots sizes; not --fixed gains.
+        (["tune", "--out", "{dir}", "--robust", "--fixed", "--knots", "4"], "--knots is not"),
+        (["tune", "--out", "{dir}", "--robust", "--knots", "61"], "--knots '61' is not"),
         # --compare runs its own seeds 0-2: --seed 3 was ignored without a word.
         (["tune", "--out", "{dir}", "--compare", "--seed", "3"], "--seed is not allowed with"),
         # Nested beyond Python's recursion limit: a RecursionError traceback before.

@@ -308,12 +308,22 @@ def test_standard_conditions_compare_gain_sets_on_the_same_draws():
     refs = draw_refs(8)
     sets = {"paper": w.Gains(kr=60.0), "paper again": w.Gains(kr=60.0)}
     rows = studies.standard_conditions(sets, refs, jax.random.PRNGKey(3))
-    assert [r["condition"] for r in rows[::2]] == [c[0] for c in studies.STANDARD_CONDITIONS]
+    conditions = ["model robot", *(c[0] for c in studies.STANDARD_CONDITIONS)]
+    assert [r["condition"] for r in rows[::2]] == conditions
     # The same gains under the same draws: the same numbers, condition by condition.
     for a, b in zip(rows[::2], rows[1::2], strict=True):
         assert a["success"] == b["success"] and a["gains"] == "paper"
-    nominal = rows[0]
-    assert nominal["success"] == 1.0 and nominal["mean arrival s"] < 6.0
+        assert a["mean arrival s"] == b["mean arrival s"] and a["feedback"] == "raw"
+    model, nominal = rows[0], rows[2]
+    assert model["success"] == 1.0 and model["mean arrival s"] < 6.0
+    assert model["mismatch"] == 0.0 and nominal["mismatch"] == studies.STANDARD_MISMATCH
+    # The model robot's row is the nominal rollout: no noise, no mismatch.
+    steps = w.horizon_steps(w.DEFAULT_DT)
+    traj = w.batch_rollout(refs, w.Gains(kr=60.0), steps=steps)
+    arrival = np.asarray(w.arrival_time(traj, refs, dt=w.DEFAULT_DT))
+    assert model["mean arrival s"] == pytest.approx(arrival[np.isfinite(arrival)].mean(), abs=1e-9)
+    # The wheel mismatch moves the nominal condition off the model robot's numbers.
+    assert nominal["mean arrival s"] != model["mean arrival s"]
     with pytest.raises(ValueError, match=r"params_by_name = \{\} is not allowed"):
         studies.standard_conditions({}, refs, jax.random.PRNGKey(3))  # no rows at all
 
@@ -322,8 +332,8 @@ def test_standard_conditions_keep_float64_poses_in_a_float32_session():
     refs = draw_refs(8, n=2) + np.array([[1e20, 0.0, 0.0], [0.0, 0.0, 0.0]])  # beyond float32's
     with jax.enable_x64(False):
         rows = studies.standard_conditions({"a": w.Gains(kr=60.0)}, refs, jax.random.PRNGKey(3))
-    assert [r["runs"] for r in rows] == [2] * len(studies.STANDARD_CONDITIONS)
-    assert rows[0]["condition"] == "nominal" and rows[0]["success"] == 0.5
+    assert [r["runs"] for r in rows] == [2] * (len(studies.STANDARD_CONDITIONS) + 1)
+    assert rows[0]["condition"] == "model robot" and rows[0]["success"] == 0.5
     # The far pose is not reached in 6 s: its distance, 1e20 cm, is in every mean.
     assert all(r["mean final distance cm"] == pytest.approx(5e19) for r in rows)
 

@@ -12,7 +12,10 @@ from wmr_jax.cli import main
 
 def small_config(**changes):
     # eval_poses = poses: the held-out draw reuses the training draw's compiled sampler.
-    base = dict(iters=3, poses=3, nonideal_poses=0, eval_poses=3, compare=False)
+    base = dict(
+        iters=3, poses=3, nonideal_poses=0, eval_poses=3, compare=False, problem="fixed",
+        estimator=None,
+    )  # fmt: skip
     return tuning.RobustConfig(**{**base, **changes})
 
 
@@ -25,7 +28,8 @@ def test_robust_tuning_moves_feasible_gains_and_judges_them_under_every_conditio
     )
     gains = result["gains"]
     assert len(seen) == 3 and np.all(np.isfinite(seen))
-    assert tuned == [(gains, seen)]  # handed over once, before the judging
+    assert tuned == [(result["loop"], seen)]  # handed over once, before the judging
+    assert result["loop"].params == gains and result["loop"].estimator is None
     assert np.array_equal(result["history"]["loss"], seen)
     robot = w.Robot()
     # Feasible by construction, R_e within the arrival tolerance, and moved from the start.
@@ -39,7 +43,9 @@ def test_robust_tuning_moves_feasible_gains_and_judges_them_under_every_conditio
     )
     assert np.sum(moved > 0.05) >= 4, moved
     conditions = [r["condition"] for r in result["rows"]]
-    assert conditions == [c for c in ("nominal", "latency", "noise", "both") for _ in range(2)]
+    standard = ("model robot", "nominal", "latency", "noise", "both")
+    assert conditions == [c for c in standard for _ in range(2)]
+    assert {r["feedback"] for r in result["rows"]} == {"raw"}
     assert all(0.0 <= r["success"] <= 1.0 and r["runs"] == 3 for r in result["rows"])
     # Reproducible: the same settings give the same gains and losses.
     again = tuning.tune_robust(small_config())
@@ -83,3 +89,84 @@ def test_tune_robust_judges_under_the_noise_of_the_robustness_command(monkeypatc
     command_key = jax.random.key(int(args.seed))
     assert len(keys) == 1
     np.testing.assert_array_equal(jax.random.key_data(keys[0]), jax.random.key_data(command_key))
+
+
+def test_joint_tuning_moves_the_schedule_and_the_filter_and_saves_them_whole(tmp_path):
+    # The default problem: the gain schedule and the EKF, one vector of logits.
+    config = tuning.RobustConfig(iters=3, poses=3, nonideal_poses=2, eval_poses=3, compare=False)
+    assert (config.problem, config.estimator) == ("schedule", "ekf")
+    result = tuning.tune_robust(config)
+    loop = result["loop"]
+    assert loop.controller.name == "shim-sung-schedule"
+    assert isinstance(loop.estimator, w.EKFParams)
+    start = w.EKFParams()
+    moved = [
+        abs(np.log(getattr(loop.estimator, f) / getattr(start, f))) > 1e-3
+        for f in ("wheel_error", "sigma_xy", "sigma_theta")
+    ]
+    assert all(moved), loop.estimator  # the filter's parameters were tuned, not kept
+    # Feasible by construction: every knot's wheel budget within V_max.
+    robot = w.Robot()
+    assert max(loop.params.kr) <= float(robot.v_max) and loop.params.r_e <= 1.0
+    assert {r["feedback"] for r in result["rows"] if r["gains"] == "robust-tuned"} == {"ekf"}
+    # Saved whole and read back whole.
+    path = tmp_path / "tuned_gains.json"
+    path.write_text(json.dumps(tuning.tuned_json(loop)))
+    saved = json.loads(path.read_text())
+    assert saved["estimator"]["kind"] == "ekf"
+    again = tuning.load_tuned(path)
+    assert again.controller.name == "shim-sung-schedule"
+    assert again.estimator == loop.estimator and again.params == loop.params
+
+
+def test_the_observer_is_tuned_with_gains_in_range():
+    config = small_config(problem="schedule", estimator="observer", knots=3, observer_knots=3)
+    loop = tuning.tune_robust(config)["loop"]
+    gains = [*loop.estimator.position, *loop.estimator.heading]
+    assert len(gains) == 6 and all(0.0 < g <= 1.0 for g in gains)
+    default = w.ObserverParams()
+    assert loop.estimator.position != default.position
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        (dict(problem="fixd"), "problem = 'fixd' is not allowed"),
+        (dict(estimator="kalman"), "estimator = 'kalman' is not allowed"),
+        (dict(observer_knots=1), "knots = 1"),
+    ],
+)
+def test_config_refuses_unknown_problems_and_estimators(changes, message):
+    with pytest.raises(ValueError, match=message):
+        tuning.RobustConfig(**changes).validate()
+
+
+def test_robust_command_tunes_and_judges_the_chosen_problem(tmp_path, capsys):
+    argv = ["tune", "--robust", "--out", str(tmp_path), "--iters", "2", "--poses", "2"]
+    assert main([*argv, "--estimator", "observer", "--knots", "2"]) == 0
+    saved = json.loads((tmp_path / "tuned_gains.json").read_text())
+    assert saved["kind"] == "schedule" and saved["estimator"]["kind"] == "observer"
+    table = (tmp_path / "robust_evaluation.md").read_text()
+    assert "model robot" in table and "observer" in table
+    # --fixed: the 7 gains with raw feedback; no estimator saved.
+    assert main([*argv, "--fixed"]) == 0
+    saved = json.loads((tmp_path / "tuned_gains.json").read_text())
+    assert saved["kind"] == "fixed" and "estimator" not in saved
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--estimator", "kalman"], "--estimator 'kalman' is not allowed"),
+        (["--fixed", "--knots", "3"], "--knots is not allowed with --fixed"),
+    ],
+)
+def test_robust_command_refuses_bad_problem_flags(tmp_path, capsys, extra, message):
+    assert main(["tune", "--robust", "--out", str(tmp_path), *extra]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+
+
+def test_estimator_flags_need_robust(tmp_path, capsys):
+    assert main(["tune", "--out", str(tmp_path), "--estimator", "ekf"]) == 2
+    assert "--estimator is not allowed without --robust" in capsys.readouterr().err

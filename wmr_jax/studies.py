@@ -34,6 +34,7 @@ from wmr_jax._src.robustness import DEFAULT_NOISE_XY as DEFAULT_NOISE_XY
 from wmr_jax._src.robustness import ROBUSTNESS_CONDITIONS as ROBUSTNESS_CONDITIONS
 from wmr_jax._src.robustness import evaluate_loop as evaluate_loop
 from wmr_jax._src.robustness import monte_carlo as monte_carlo
+from wmr_jax._src.robustness import noise_curve as noise_curve
 from wmr_jax._src.robustness import robustness_study as robustness_study
 from wmr_jax._src.robustness import standard_conditions as standard_conditions
 from wmr_jax._src.sensing.disturbances import STANDARD_CONDITIONS as STANDARD_CONDITIONS

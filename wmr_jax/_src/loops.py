@@ -39,7 +39,9 @@ __all__ = [
     "batch_axes",
     "batched",
     "closed_loop_step",
+    "ArcMove",
     "ideal_arc",
+    "ideal_move",
     "for_robot",
     "initial_state",
     "initial_wheel",
@@ -291,16 +293,41 @@ def initial_wheel(init: jax.Array, options: Options) -> velocity_loop.WheelState
     return velocity_loop.WheelState(zero, zero, zero, zero)
 
 
+class ArcMove(NamedTuple):
+    """One period's motion at a held command, apart from the pose it moves (``ideal_move``).
+
+    Attributes:
+        turn: ``cos(ω dt/2) + i sin(ω dt/2)``.
+        chord: ``v dt sinc(ω dt/2)``, cm.
+        rotation: ``ω dt``, rad.
+    """
+
+    turn: jax.Array
+    chord: jax.Array
+    rotation: jax.Array
+
+    @classmethod
+    def of(cls, v: jax.Array, omega: jax.Array, dt: jax.Array) -> ArcMove:
+        """The move of the held command ``(v, ω)`` over ``dt``."""
+        turn, chord = dynamics.arc_factors(v, omega, dt)
+        return cls(turn, chord, omega * dt)
+
+
+def ideal_move(pose: SplitPose, move: ArcMove) -> SplitPose:
+    """Move ``pose`` by ``move``: the exact arc of docs/model.md §4 (``ideal_arc``)."""
+    position, heading = dynamics.arc_apply(pose.position, pose.heading, move.turn, move.chord)
+    # One Newton step towards |heading| = 1, so that rounding does not drift.
+    heading = heading * (1.5 - 0.5 * (heading.real**2 + heading.imag**2))
+    return SplitPose(position, heading, pose.theta + move.rotation)
+
+
 def ideal_arc(pose: SplitPose, v: jax.Array, omega: jax.Array, dt: jax.Array) -> SplitPose:
     """Move ``pose`` over ``dt`` at the held ``(v, ω)`` on the exact arc of docs/model.md §4.
 
     The ideal loop's motion, and the prediction of every estimator (whose
     model is the ideal robot, docs/model.md §9).
     """
-    position, heading = dynamics.arc_advance(pose.position, pose.heading, v, omega, dt)
-    # One Newton step towards |heading| = 1, so that rounding does not drift.
-    heading = heading * (1.5 - 0.5 * (heading.real**2 + heading.imag**2))
-    return SplitPose(position, heading, pose.theta + omega * dt)
+    return ideal_move(pose, ArcMove.of(v, omega, dt))
 
 
 def advance_period(

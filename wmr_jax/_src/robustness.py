@@ -35,6 +35,8 @@ __all__ = [
     "DEFAULT_NOISE_DEG",
     "DEFAULT_NOISE_XY",
     "MODEL_ROBOT",
+    "NOISE_CURVE_XY",
+    "noise_curve",
     "ROBUSTNESS_CONDITIONS",
     "evaluate_loop",
     "monte_carlo",
@@ -111,6 +113,7 @@ def monte_carlo(
     velocity: str = "ideal",
     dt: float = DEFAULT_DT,
     x64: bool = True,
+    estimator: Any = None,
 ) -> list[dict[str, Any]]:
     """Return success and arrival against noise level for one controller and condition.
 
@@ -132,6 +135,9 @@ def monte_carlo(
         velocity: ``"ideal"`` or ``"nonideal"``.
         dt: control period, s.
         x64: compute in float64 (see ``perturbed_metrics``).
+        estimator: between the measurements and the law: ``None`` (raw
+            feedback), ``"observer"``, ``"ekf"`` or their parameters
+            (docs/model.md §9).
 
     Returns:
         One row per noise level: success rate, mean and median arrival of the
@@ -155,6 +161,7 @@ def monte_carlo(
             "robot has no mass; allowed: 0, or velocity = 'nonideal'"
         )
     name = controllers.get_controller(controller).name
+    estimator_used, _ = resolve_estimator(estimator)
     refs, unit, mismatch = draw_disturbances(
         key, n_runs, horizon_steps(dt), radius_mismatch=radius_mismatch, mass_mismatch=mass_mismatch
     )
@@ -166,12 +173,14 @@ def monte_carlo(
             Disturbance(refs, unit * scale, mismatch, delay),
             params,
             controller=name,
+            estimator=estimator,
             dt=dt,
             velocity=velocity,
             x64=x64,
         )
         condition = {
             "controller": name,
+            "feedback": "raw" if estimator_used is None else estimator_used.name,
             "noise xy cm": float(sxy),
             "noise theta deg": float(sdeg),
             "radius mismatch": float(radius_mismatch),
@@ -192,6 +201,7 @@ def robustness_study(
     noise_xy: Sequence[float] = DEFAULT_NOISE_XY,
     noise_deg: Sequence[float] = DEFAULT_NOISE_DEG,
     x64: bool = True,
+    estimator: Any = None,
 ) -> list[dict[str, Any]]:
     """Run the Monte Carlo for each controller and condition (``docs/model.md §7``).
 
@@ -210,6 +220,7 @@ def robustness_study(
         noise_xy: σ of the x and y measurement noise per level, cm.
         noise_deg: σ of the heading measurement noise per level, degrees.
         x64: compute in float64 (see ``perturbed_metrics``).
+        estimator: the estimator of every controller (``None``: raw feedback).
 
     Returns:
         The rows of every condition, controller and noise level (in that
@@ -217,6 +228,7 @@ def robustness_study(
     """
     seed = checks.check_int("seed", seed, 0, 2**32 - 1)
     names = controllers.controller_names(controller_names)
+    resolve_estimator(estimator)  # refused before any run
     keys = jax.random.split(jax.random.PRNGKey(seed), len(ROBUSTNESS_CONDITIONS))
     rows = []
     for (label, radius, mass, latency), key in zip(ROBUSTNESS_CONDITIONS, keys, strict=True):
@@ -234,6 +246,7 @@ def robustness_study(
                 latency=latency,
                 velocity=velocity,
                 x64=x64,
+                estimator=estimator,
             ):
                 rows.append({"condition": label, **row})
     return rows
@@ -312,7 +325,7 @@ def standard_conditions(
         key, np.zeros_like(refs), steps, noise_xy=1.0, noise_theta=1.0, radius_mismatch=mismatch
     )
     noise = np.asarray(unit.noise, dtype=float)
-    factors = np.asarray(unit.mismatch, dtype=float)
+    factors = np.array(unit.mismatch, dtype=float)
     factors[:, 2] = 1.0  # the ideal loop has no mass
     ones = np.ones((len(refs), 3))
     conditions = [(MODEL_ROBOT, 0.0, 0.0, False, ones)]
@@ -442,3 +455,90 @@ def evaluate_loop(
         "controller": controller.name,
         "feedback": "raw" if estimator is None else estimator.name,
     }
+
+
+# σ_xy of the noise-level curve, cm (σ_θ = 2° per cm, as the standard 0.5 cm and 1°).
+NOISE_CURVE_XY = (0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0)
+_DEG_PER_CM = 2.0
+
+
+def noise_curve(
+    loops_by_name: dict[str, Any],
+    refs: Any,
+    key: jax.Array,
+    *,
+    noise_xy: Sequence[float] = NOISE_CURVE_XY,
+    mismatch: float = STANDARD_MISMATCH,
+    latency: bool = False,
+    dt: float = DEFAULT_DT,
+    x64: bool = True,
+) -> list[dict[str, Any]]:
+    """Success and mean arrival of closed loops against the level of pose noise.
+
+    ``σ_θ`` follows ``σ_xy`` as in the standard conditions (1° per 0.5 cm,
+    docs/model.md §7); every wheel's radius is off by ``δ ~ U(−mismatch,
+    mismatch)`` per run (docs/model.md §9). Every loop and level sees the
+    same unit noise and mismatch (common random numbers, from ``key``).
+
+    Args:
+        loops_by_name: ``{label: ClosedLoop or Shim–Sung Gains (raw feedback)}``.
+        refs: ``(N, 3)`` references (held-out poses of docs/model.md §6).
+        key: ``jax.random`` key of the draws.
+        noise_xy: the levels of ``σ_xy``, cm, each in ``[0, 1e6]``.
+        mismatch: bound of each wheel's relative radius error, ``[0, 1)``.
+        latency: one sample of latency in every run.
+        dt: control period, s.
+        x64: compute in float64.
+
+    Returns:
+        One row per (loop, level): ``gains``, ``feedback``, ``noise xy cm``,
+        ``noise theta deg``, ``success``, ``mean arrival s`` (``inf`` if
+        none arrived), ``mismatch``, ``latency``, ``runs``.
+    """
+    if not isinstance(loops_by_name, Mapping) or not loops_by_name:
+        raise ValueError(
+            f"loops_by_name = {loops_by_name!r:.80} is not allowed; allowed: a dict of "
+            "label -> ClosedLoop or Gains, at least one"
+        )
+    levels, _ = _check_levels(list(noise_xy), [_DEG_PER_CM * float(x) for x in noise_xy])
+    mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
+    latency = checks.check_bool("latency", latency)
+    sets = {name: _closed_loop(v, controllers.SHIM_SUNG, None) for name, v in loops_by_name.items()}
+    for loop in sets.values():
+        resolve_estimator(loop.estimator)
+        controllers.get_controller(loop.controller)
+    with jax.enable_x64(checks.check_bool("x64", x64)):
+        refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
+    unit = sample_disturbance(
+        key, np.zeros_like(refs), horizon_steps(dt), noise_xy=1.0, noise_theta=1.0,
+        radius_mismatch=mismatch,
+    )  # fmt: skip
+    noise = np.asarray(unit.noise, dtype=float)
+    factors = np.array(unit.mismatch, dtype=float)
+    factors[:, 2] = 1.0
+    rows = []
+    for name, loop in sets.items():
+        used, _ = resolve_estimator(loop.estimator)
+        for sxy in levels:
+            sdeg = _DEG_PER_CM * sxy
+            scale = np.array([sxy, sxy, math.radians(sdeg)])
+            spec = Disturbance(refs, noise * scale, factors, np.float64(1.0 if latency else 0.0))
+            m = perturbed_metrics(
+                spec, loop.params, controller=loop.controller, estimator=loop.estimator,
+                dt=dt, x64=x64,
+            )  # fmt: skip
+            summary = summary_row(m)
+            rows.append(
+                {
+                    "gains": name,
+                    "feedback": "raw" if used is None else used.name,
+                    "noise xy cm": sxy,
+                    "noise theta deg": sdeg,
+                    "success": summary["success"],
+                    "mean arrival s": summary["mean arrival s"],
+                    "mismatch": mismatch,
+                    "latency": latency,
+                    "runs": len(refs),
+                }
+            )
+    return rows

@@ -47,7 +47,22 @@ def add_arguments(parser: Any) -> None:
         "--robust-gains",
         default=None,
         metavar="PATH",
-        help="tuned_gains.json of `wmr-jax tune --robust`, shown beside them",
+        help="tuned_gains.json of `wmr-jax tune --robust`, shown beside them, run whole "
+        "(with the estimator it was tuned with)",
+    )
+    parser.add_argument(
+        "--estimator",
+        default="none",
+        metavar="NAME",
+        help="estimator of the Monte Carlo's controllers: none (raw feedback), observer or ekf "
+        "(docs/model.md §9)",
+    )
+    parser.add_argument(
+        "--noise-curve",
+        action="store_true",
+        help="also write noise_curve.{png,md,json}: success and arrival against sigma_xy "
+        "0-2 cm with ±3 %% wheel mismatch, raw and estimated feedback, for the paper's gains "
+        "and the --robust-gains file",
     )
 
 
@@ -59,6 +74,7 @@ def run(args: Any) -> int:
     n_runs = flags.positive_int("--runs", args.runs, 1, 10**6)
     names = flags.controller_names(args.controller)
     velocity = flags.velocity_loop(args.velocity)
+    estimator = _estimator(args.estimator)
     sets = _gain_sets(args)
 
     from wmr_jax._src.report.robustness import write_robustness
@@ -66,13 +82,55 @@ def run(args: Any) -> int:
     from wmr_jax._src.robustness import robustness_study
 
     rows = robustness_study(
-        seed=seed, controller_names=names, n_runs=n_runs, velocity=velocity, x64=not args.float32
+        seed=seed,
+        controller_names=names,
+        n_runs=n_runs,
+        velocity=velocity,
+        x64=not args.float32,
+        estimator=estimator,
     )
     write_robustness(out, rows, seed=seed, velocity=velocity, n_runs=n_runs)
     print(f"robustness -> {out}/robustness.png, robustness.md, robustness.json")
     print(markdown_table(rows, _PRINTED), end="")
     _standard(out, sets, seed, x64=not args.float32)
+    if args.noise_curve:
+        _noise_curve(out, sets, seed, x64=not args.float32)
     return 0
+
+
+def _estimator(name: str) -> Any:
+    """The ``--estimator`` value: ``None`` for raw feedback, else a registered estimator's name."""
+    from wmr_jax._src.sensing.estimators import ESTIMATORS
+
+    if name in ("none", "raw"):
+        return None
+    if name not in ESTIMATORS:
+        raise ValueError(
+            f"--estimator {name!r} is not allowed; allowed: none, {', '.join(ESTIMATORS)}"
+        )
+    return name
+
+
+def _noise_curve(out: Any, sets: dict[str, Any], seed: int, *, x64: bool) -> None:
+    """Success and arrival against noise: each set raw and with its (or the default) estimator."""
+    import jax
+
+    from wmr_jax._src.report.robustness import write_noise_curve
+    from wmr_jax._src.robustness import noise_curve
+    from wmr_jax._src.sensing.loop import ClosedLoop
+    from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
+
+    loops = {}
+    for name, value in sets.items():
+        loop = value if isinstance(value, ClosedLoop) else ClosedLoop("shim-sung", value, None)
+        loops[name] = loop._replace(estimator=None)
+        # The tuned estimator where the file has one, else the EKF's defaults.
+        loops[name + " + estimator"] = loop._replace(estimator=loop.estimator or "ekf")
+    refs = held_out_poses(EVAL_POSES, EVAL_SEED)
+    rows = noise_curve(loops, refs, jax.random.key(seed), x64=x64)
+    meta = {"seed": seed, "held_out_poses": EVAL_POSES, "eval_seed": EVAL_SEED}
+    write_noise_curve(out, rows, meta=meta)
+    print(f"noise curve -> {out}/noise_curve.png, .md, .json")
 
 
 def _gain_sets(args: Any) -> dict[str, Any]:
@@ -106,7 +164,7 @@ def _standard(out: Any, sets: dict[str, Any], seed: int, *, x64: bool) -> None:
     meta = {"seed": seed, "held_out_poses": EVAL_POSES, "eval_seed": EVAL_SEED}
     write_standard_conditions(out, rows, meta=meta)
     print(f"standard conditions -> {out}/standard_conditions.png, .md, .json")
-    print(markdown_table(rows, STANDARD_COLUMNS[:5]), end="")
+    print(markdown_table(rows, STANDARD_COLUMNS[:6]), end="")
 
 
 SUBCOMMANDS = {

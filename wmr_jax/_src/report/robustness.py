@@ -14,11 +14,13 @@ from wmr_jax._src.report.figures import plt
 from wmr_jax._src.report.tables import markdown_table, require_rows
 
 __all__ = [
+    "NOISE_CURVE_COLUMNS",
     "ROBUSTNESS_COLUMNS",
     "STANDARD_COLUMNS",
     "robustness_figure",
     "standard_figure",
     "write_robustness",
+    "write_noise_curve",
     "write_standard_conditions",
 ]
 
@@ -41,10 +43,24 @@ ROBUSTNESS_COLUMNS = [
 STANDARD_COLUMNS = [
     "condition",
     "gains",
+    "feedback",
     "success",
     "mean arrival s",
     "median arrival s",
     "mean final distance cm",
+    "mismatch",
+    "runs",
+]
+
+# The columns of noise_curve.md, in order.
+NOISE_CURVE_COLUMNS = [
+    "gains",
+    "feedback",
+    "noise xy cm",
+    "noise theta deg",
+    "success",
+    "mean arrival s",
+    "mismatch",
     "runs",
 ]
 
@@ -179,7 +195,9 @@ def write_standard_conditions(
     table = markdown_table(rows, STANDARD_COLUMNS)
     head = (
         "Gain sets under the standard conditions of docs/model.md §7 (hard law, ideal loop, "
-        f"{rows[0]['runs']} held-out poses of docs/model.md §6, horizon {HORIZON_S:g} s)\n\n"
+        f"{rows[0]['runs']} held-out poses of docs/model.md §6, horizon {HORIZON_S:g} s); "
+        "every condition but the model robot's with each wheel's radius off by up to the "
+        "mismatch column, drawn per run (docs/model.md §9)\n\n"
     )
     record = json_text({**meta, "rows": rows}, "meta and rows", indent=2, sort_keys=False) + "\n"
     fig = standard_figure(rows)
@@ -232,9 +250,83 @@ def _draw_standard(fig, axes, rows, conditions, sets, width) -> None:
     axes[0].set_ylim(0, 1.05)
     fig.suptitle(
         "docs/model.md §7 standard conditions: latency = 1 sample; noise σ_xy = 0.5 cm, "
-        "σ_θ = 1°; hard law, ideal loop",
+        "σ_θ = 1°; ±3 % wheel radius but on the model robot; hard law, ideal loop",
         fontsize=9,
     )
     fig.tight_layout(rect=(0, 0, 0.82, 1))
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, fontsize=8, loc="center left", bbox_to_anchor=(0.82, 0.5))
+
+
+def write_noise_curve(
+    out_dir: str | os.PathLike, rows: Sequence[dict[str, Any]], *, meta: dict[str, Any]
+) -> list[Path]:
+    """Write ``noise_curve.png``, ``.md`` and ``.json`` (``noise_curve`` rows).
+
+    Args:
+        out_dir: the folder (created if missing).
+        rows: ``noise_curve`` rows.
+        meta: what produced them (seed, where the gains came from).
+
+    Returns:
+        The paths written.
+    """
+    out, rows = Path(out_dir), require_rows("rows", rows)
+    if not isinstance(meta, dict):
+        raise ValueError(f"meta = {meta!r:.80} is not allowed; allowed: a dict")
+    table = markdown_table(rows, NOISE_CURVE_COLUMNS)
+    head = (
+        "Success and mean arrival against pose noise (σ_θ = 2° per cm of σ_xy; hard law, "
+        f"ideal loop, {rows[0]['runs']} held-out poses, each wheel's radius off by up to "
+        f"{100 * float(rows[0]['mismatch']):g} % per run; docs/model.md §7, §9)\n\n"
+    )
+    record = json_text({**meta, "rows": rows}, "meta and rows", indent=2, sort_keys=False) + "\n"
+    fig = noise_curve_figure(rows)
+    try:
+        png = save_figure(fig, out / "noise_curve.png", dpi=110)
+    finally:
+        plt.close(fig)
+    md = atomic_write_text(out / "noise_curve.md", head + table)
+    return [png, md, atomic_write_text(out / "noise_curve.json", record)]
+
+
+def noise_curve_figure(rows: Sequence[dict[str, Any]]) -> Any:
+    """Draw success and mean arrival against σ_xy, one line per loop (legend outside).
+
+    A level where no run of a loop arrived has no arrival point (not a value
+    at the horizon); its success point at 0 says why.
+    """
+    rows = require_rows("rows", rows)
+    markdown_table(rows, ["gains", "feedback", "noise xy cm", "success", "mean arrival s"])
+    names = list(dict.fromkeys(r["gains"] for r in rows))
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.0))
+    try:
+        for j, name in enumerate(names):
+            mine = sorted((r for r in rows if r["gains"] == name), key=lambda r: r["noise xy cm"])
+            x = [r["noise xy cm"] for r in mine]
+            colour = plt.get_cmap("tab10")(j)
+            style = "--" if mine[0]["feedback"] == "raw" else "-"
+            label = f"{name} ({mine[0]['feedback']})"
+            axes[0].plot(x, [r["success"] for r in mine], style, marker="o", color=colour,
+                         label=label)  # fmt: skip
+            arrival = [r["mean arrival s"] if r["success"] > 0 else math.nan for r in mine]
+            axes[1].plot(x, arrival, style, marker="o", color=colour)
+        labels = ("success rate", "mean arrival of successes [s]")
+        for ax, label in zip(axes, labels, strict=True):
+            ax.set_xlabel("pose noise σ_xy [cm] (σ_θ = 2°/cm)")
+            ax.set_ylabel(label)
+            ax.grid(alpha=0.3)
+        axes[0].set_ylim(0, 1.05)
+        axes[1].set_ylim(bottom=0)
+        fig.suptitle(
+            f"Noise-level curve: ±{100 * float(rows[0]['mismatch']):g} % wheel radius per run, "
+            "hard law, ideal loop; dashed: raw feedback, solid: estimator",
+            fontsize=9,
+        )
+        fig.tight_layout(rect=(0, 0, 0.78, 1))
+        handles, labels = axes[0].get_legend_handles_labels()
+        fig.legend(handles, labels, fontsize=8, loc="center left", bbox_to_anchor=(0.78, 0.5))
+    except BaseException:
+        plt.close(fig)
+        raise
+    return fig

@@ -39,6 +39,7 @@ from wmr_jax._src.sensing.disturbances import (
     Disturbance,
     checked_disturbance,
     measured,
+    measurement,
     realised,
 )
 from wmr_jax._src.sensing.estimators import resolve_estimator
@@ -121,18 +122,68 @@ def disturbed_run(
     ref = spec.ref
     true_robot = robot.replace(body_mass=robot.body_mass * spec.mismatch[2])
     estimator = options.estimator
-    compensate = estimator is not None and estimate.compensate
+    if estimator is None:
+        return _raw_run(spec, params, init, robot, true_robot, dt, options, fold, acc, record)
+    compensate = estimate.compensate
+    late = spec.delay > 0
 
-    def seen_by_law(state, in_flight):
-        """The pose the law is handed: the estimate, rolled over the command in flight."""
-        pose = state.pose
+    def law_input(state, in_flight: loops.ArcMove) -> loops.SplitPose:
+        """The estimate, rolled over the command in flight under latency (compensation)."""
         if not compensate:
-            return pose
-        ahead = loops.ideal_arc(pose, in_flight.real, in_flight.imag, dt)
-        return _select(spec.delay > 0, ahead, pose)
+            return state.pose
+        return _select(late, loops.ideal_move(state.pose, in_flight), state.pose)
 
     def body(carry, noise_next):
-        pose, wheel, fresh, held, state, acc = carry
+        pose, wheel, fresh, held, fresh_move, held_move, state, acc = carry
+        applied = jnp.where(late, held, fresh)
+        target = realised(applied, spec.mismatch, robot)
+        pose, wheel, rims, distance = loops.advance_period(
+            pose, wheel, target, true_robot, dt, options, model=robot
+        )
+        out = StepOutput(applied.real, applied.imag, jnp.int32(-1), rims, distance)
+        if fold is not None:
+            acc = fold(acc, pose, out)
+        sensed = measurement(pose, noise_next)
+        # The estimator's prediction moves its estimate by the applied command's
+        # arc; under latency the command now in flight is ``fresh``, whose arc
+        # was computed with it and is the next prediction's too.
+        predicted = loops.ideal_move(state.pose, _select(late, held_move, fresh_move))
+        state = estimator.update(state, predicted, applied, sensed, ref, estimate, robot, dt)
+        command = loops.split_command(law_input(state, fresh_move), ref, params, options)
+        move = loops.ArcMove.of(command.real, command.imag, dt)
+        recorded = (pose.stacked(), out, state.pose.stacked()) if record else None
+        return (pose, wheel, command, fresh, move, fresh_move, state, acc), recorded
+
+    pose = loops.SplitPose.of(init)
+    # The estimate starts from the first measurement (docs/model.md §9); no
+    # command is in flight before the first sample (a move of zero).
+    state = estimator.start(measured(pose, spec.noise[0]), estimate, robot)
+    zero = jnp.zeros((), init.dtype)
+    still = loops.ArcMove.of(zero, zero, dt)
+    first = loops.split_command(law_input(state, still), ref, params, options)
+    first_move = loops.ArcMove.of(first.real, first.imag, dt)
+    later = jnp.concatenate([spec.noise[1:], jnp.zeros_like(spec.noise[:1])])
+    carry = (
+        pose,
+        loops.initial_wheel(init, options),
+        first,
+        jnp.zeros_like(first),
+        first_move,
+        still,
+        state,
+        acc,
+    )
+    step = loops.remat(body) if options.remat else body
+    (pose, *_, acc), ys = jax.lax.scan(step, carry, later)
+    return pose.stacked(), acc, ys
+
+
+def _raw_run(spec, params, init, robot, true_robot, dt, options, fold, acc, record):
+    """``disturbed_run`` without an estimator: the law sees each measurement itself."""
+    ref = spec.ref
+
+    def body(carry, noise_next):
+        pose, wheel, fresh, held, acc = carry
         applied = jnp.where(spec.delay > 0, held, fresh)
         target = realised(applied, spec.mismatch, robot)
         pose, wheel, rims, distance = loops.advance_period(
@@ -142,35 +193,18 @@ def disturbed_run(
         if fold is not None:
             acc = fold(acc, pose, out)
         sensed = measured(pose, noise_next)
-        if estimator is None:
-            held_pose = sensed
-            command = loops.split_command(sensed, ref, params, options)
-        else:
-            state = estimator.update(state, applied, sensed, ref, estimate, robot, dt)
-            held_pose = state.pose
-            # Under latency the command now in flight is ``fresh``: it is
-            # applied over the next period.
-            command = loops.split_command(seen_by_law(state, fresh), ref, params, options)
-        recorded = (pose.stacked(), out, held_pose.stacked()) if record else None
-        return (pose, wheel, command, fresh, state, acc), recorded
+        command = loops.split_command(sensed, ref, params, options)
+        recorded = (pose.stacked(), out, sensed.stacked()) if record else None
+        return (pose, wheel, command, fresh, acc), recorded
 
     pose = loops.SplitPose.of(init)
-    sensed = measured(pose, spec.noise[0])
-    zero = jnp.zeros((), jnp.result_type(init.dtype, jnp.complex64))
-    if estimator is None:
-        state = None
-        first = loops.split_command(sensed, ref, params, options)
-    else:
-        # The estimate starts from the first measurement (docs/model.md §9);
-        # no command is in flight before the first sample.
-        state = estimator.start(sensed, estimate, robot)
-        first = loops.split_command(seen_by_law(state, zero), ref, params, options)
+    first = loops.split_command(measured(pose, spec.noise[0]), ref, params, options)
     # The measurement at sample k + 1 is taken at the end of period k; the
     # last period's is never used.
     later = jnp.concatenate([spec.noise[1:], jnp.zeros_like(spec.noise[:1])])
-    carry = (pose, loops.initial_wheel(init, options), first, jnp.zeros_like(first), state, acc)
+    carry = (pose, loops.initial_wheel(init, options), first, jnp.zeros_like(first), acc)
     step = loops.remat(body) if options.remat else body
-    (pose, _, _, _, _, acc), ys = jax.lax.scan(step, carry, later)
+    (pose, _, _, _, acc), ys = jax.lax.scan(step, carry, later)
     return pose.stacked(), acc, ys
 
 
