@@ -7,15 +7,15 @@
 # the README shows are then copied to docs/*.png and the results the README
 # quotes to docs/data/*.json, which tests/test_readme.py holds the README's
 # tables against. STAGE is any of: paper compare maps waypoints animate
-# tune robustness compare-tuning compare-sizes bench (default: all, about 45 minutes on
-# 2 CPU cores).
+# tune robustness compare-tuning compare-sizes compare-robust bench (default: all, about
+# 80 minutes on 2 CPU cores).
 # Every command is seeded (the seed is its default unless named here), so a
 # rerun prints the same tables; bench timings are the exception.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-results/readme}
 shift || true
-STAGES=${*:-paper compare maps waypoints animate tune robustness compare-tuning compare-sizes bench}
+STAGES=${*:-paper compare maps waypoints animate tune robustness compare-tuning compare-sizes compare-robust bench}
 mkdir -p "$OUT" docs/data
 
 for stage in $STAGES; do
@@ -40,7 +40,7 @@ for stage in $STAGES; do
     animate)  # real-time GIF of the paper's seven references
       wmr-jax animate --out "$OUT/robots.gif" --paper --seconds 2.5
       cp "$OUT/robots.gif" docs/robots.gif ;;
-    tune)  # fixed gains, the gain schedule and the robust gains (seed 0)
+    tune)  # fixed gains, the gain schedule, the robust schedule and EKF (seed 0)
       wmr-jax tune --out "$OUT/tune"
       wmr-jax tune --out "$OUT/tune-schedule" --schedule
       wmr-jax tune --out "$OUT/tune-robust" --robust
@@ -50,14 +50,18 @@ for stage in $STAGES; do
       cp "$OUT/robustness/robustness.png" docs/
       wmr-jax robustness --out "$OUT/robustness-standard" --runs 256 --controller shim-sung \
         --nominal-gains "$OUT/tune/tuned_gains.json" \
-        --robust-gains "$OUT/tune-robust/tuned_gains.json"
-      cp "$OUT/robustness-standard/standard_conditions.png" docs/ ;;
+        --robust-gains "$OUT/tune-robust/tuned_gains.json" --noise-curve
+      cp "$OUT/robustness-standard/standard_conditions.png" docs/
+      cp "$OUT/robustness-standard/noise_curve.png" docs/
+      cp "$OUT/robustness-standard/standard_conditions.json" docs/data/standard_conditions.json ;;
     compare-tuning)  # gradient vs CMA-ES vs random search, 3 seeds (about 7 minutes)
       wmr-jax tune --out "$OUT/tune-compare" --compare ;;
     compare-sizes)  # the same on schedules of 30 and 60 knots (about 20 minutes)
       for knots in 30 60; do
         wmr-jax tune --out "$OUT/tune-compare-k$knots" --compare --schedule --knots $knots
       done ;;
+    compare-robust)  # the joint robust problem: gradient vs CMA-ES vs random search, 3 seeds
+      wmr-jax tune --out "$OUT/tune-robust-compare" --robust --compare ;;
     bench)
       wmr-jax bench --json "$OUT/bench.json" --wait-idle 60 ;;
     *) echo "unknown stage $stage" >&2; exit 2 ;;

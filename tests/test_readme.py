@@ -175,3 +175,28 @@ def test_links_between_pages_reach_a_file_and_heading():
                 assert anchor in slugs, f"{page.name}: {target} names no heading of {file.name}"
             checked += 1
     assert checked > 20  # the pages do link to each other
+
+
+def test_readme_robust_table_is_the_stored_standard_conditions():
+    """The sensing table: success and mean arrival of each loop, as the robustness run stored."""
+    stored = json.loads((STORED / "standard_conditions.json").read_text(encoding="utf-8"))
+    rows = {(r["condition"], r["gains"]): r for r in stored["rows"]}
+    header, body = _table(README, "condition")
+    sets = ["paper (k_r = 60)", "robust-tuned, raw feedback", "robust-tuned"]
+    assert header[1:] == [
+        "paper (k_r = 60), raw", "robust-tuned, raw feedback", "robust-tuned with its EKF"
+    ]  # fmt: skip
+    conditions = ["model robot", "nominal", "latency", "noise", "both"]
+    assert [cells[0].split(" (")[0] for cells in body] == conditions
+    for cells, condition in zip(body, conditions, strict=True):
+        for cell, name in zip(cells[1:], sets, strict=True):
+            row = rows[(condition, name)]
+            parts = [p.strip() for p in cell.strip("* ").split(",")]
+            assert _agrees(parts[0], row["success"]), (condition, name, cell)
+            if len(parts) > 1:
+                assert _agrees(parts[1].removesuffix(" s"), row["mean arrival s"]), (cell, row)
+            else:
+                assert row["success"] == 0.0, (condition, name, cell)
+    # The robust-tuned loop is the one with an estimator; the raw one has none.
+    assert rows[("both", "robust-tuned")]["feedback"] == "ekf"
+    assert rows[("both", "robust-tuned, raw feedback")]["feedback"] == "raw"

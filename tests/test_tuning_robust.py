@@ -170,3 +170,46 @@ def test_robust_command_refuses_bad_problem_flags(tmp_path, capsys, extra, messa
 def test_estimator_flags_need_robust(tmp_path, capsys):
     assert main(["tune", "--out", str(tmp_path), "--estimator", "ekf"]) == 2
     assert "--estimator is not allowed without --robust" in capsys.readouterr().err
+
+
+def _fake_result(config):
+    """What tune_robust returns, made up for the command's bookkeeping (no tuning)."""
+    rows = []
+    for condition in ("model robot", "nominal", "latency", "noise", "both"):
+        for gains in ("paper", "robust-tuned", "random search"):
+            rows.append(
+                {"condition": condition, "gains": gains, "feedback": "ekf", "success": 1.0,
+                 "mean arrival s": 0.5 + config.seed, "median arrival s": 0.5}
+            )  # fmt: skip
+    return {"tune_wall_s": 1.0, "searches": {"random search": (None, 8)}, "rows": rows}
+
+
+def test_robust_compare_without_evosax_says_so_and_keeps_each_seed(tmp_path, capsys, monkeypatch):
+    from wmr_jax._src.tuning import robust
+
+    seeds = []
+
+    def fake(config, **_):
+        seeds.append(config.seed)
+        assert config.compare  # the searches run beside the gradient
+        return _fake_result(config)
+
+    monkeypatch.setattr(robust, "evosax_available", lambda: False)
+    monkeypatch.setattr(robust, "tune_robust", fake)
+    argv = ["tune", "--robust", "--compare", "--out", str(tmp_path), "--iters", "2"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "CMA-ES skipped: evosax is not installed" in out
+    assert seeds == [0, 1, 2]
+    saved = json.loads((tmp_path / "robust_compare.json").read_text())
+    assert {(r["seed"], r["method"]) for r in saved["rows"]} == {
+        (s, m) for s in (0, 1, 2) for m in ("gradient", "random search")
+    }
+    table = (tmp_path / "robust_compare.md").read_text()
+    assert "| gradient | mean |" in table and "100.0 %, 0.500 s" in table
+    # --resume keeps every seed already written; other settings are refused.
+    seeds.clear()
+    assert main([*argv, "--resume"]) == 0
+    assert seeds == []
+    assert main(["tune", "--robust", "--compare", "--out", str(tmp_path), "--resume"]) == 2
+    assert "holds another comparison's settings" in capsys.readouterr().err

@@ -122,6 +122,8 @@ def _noise_curve(out: Any, sets: dict[str, Any], seed: int, *, x64: bool) -> Non
 
     loops = {}
     for name, value in sets.items():
+        if name.endswith(", raw feedback"):
+            continue  # drawn as the raw line of its own set
         loop = value if isinstance(value, ClosedLoop) else ClosedLoop("shim-sung", value, None)
         loops[name] = loop._replace(estimator=None)
         # The tuned estimator where the file has one, else the EKF's defaults.
@@ -144,9 +146,12 @@ def _gain_sets(args: Any) -> dict[str, Any]:
         if path is None:
             continue
         try:
-            sets[label] = load_tuned(path)  # run whole: its controller and estimator
+            loop = load_tuned(path)  # run whole: its controller and estimator
         except ValueError as err:
             raise ValueError(f"{flag} {path!r} is not allowed: {err}") from None
+        sets[label] = loop
+        if loop.estimator is not None:  # beside it, the same law on raw measurements
+            sets[f"{label}, raw feedback"] = loop._replace(estimator=None)
     return sets
 
 
