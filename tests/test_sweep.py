@@ -227,3 +227,57 @@ def test_a_run_that_leaves_the_range_is_an_error_not_nans():
             w.sweep(
                 [[30.0, 30.0, 0.0]], w.AicardiGains(gamma=100.0), controller="aicardi", steps=300
             )
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "why"),
+    [
+        ("final_x", math.nan, "a final pose that is not finite"),
+        (
+            "arrival_time",
+            -5.0,
+            "an arrival time that is no whole number of periods within the horizon",
+        ),
+        (
+            "arrival_time",
+            0.05,
+            "an arrival time that is no whole number of periods within the horizon",
+        ),
+        ("success", False, "success flags that disagree with its arrival times"),
+        ("path_length", -1.0, "a path_length that is negative or not finite"),
+    ],
+)
+def test_a_chunk_rewritten_with_a_valid_checksum_is_checked_like_a_computed_one(
+    tmp_path, field, value, why
+):
+    # Rewritten through save_arrays (the checksum is valid, the fingerprint
+    # kept): the values themselves must still be ones the sweep can produce.
+    from wmr_jax._src import io
+
+    refs = _poses(3, 20)
+    full = w.sweep(refs, steps=STEPS, chunk_size=10, out=tmp_path)
+    edited = tmp_path / "chunk_000001.npz"
+    values, meta = io.load_arrays(edited)
+    arrived = int(np.flatnonzero(values["success"])[0])
+    values[field] = values[field].copy()
+    values[field][arrived] = value
+    io.save_arrays(edited, values, meta)
+    with pytest.warns(UserWarning, match=f"chunk_000001.npz holds {why}; recomputing it"):
+        again = w.sweep(refs, steps=STEPS, chunk_size=10, out=tmp_path)
+    for name in w.SWEEP_FIELDS:
+        np.testing.assert_array_equal(again[name], full[name], err_msg=name)
+
+
+def test_a_resumed_sweep_sees_a_changed_static_gain_field(tmp_path):
+    # backward is a static field: no pytree leaf, yet it decides the run.
+    refs = _poses(4, 12)
+    refs[:, 0] = -np.abs(refs[:, 0]) - 5.0  # behind the robot: backward driving matters
+    forward = w.sweep(refs, w.AicardiGains(backward=False), controller="aicardi", out=tmp_path,
+                      steps=STEPS)  # fmt: skip
+    with pytest.warns(UserWarning, match="other settings \\(gains\\)"):
+        resumed = w.sweep(refs, w.AicardiGains(backward=True), controller="aicardi",
+                          out=tmp_path, steps=STEPS)  # fmt: skip
+    fresh = w.sweep(refs, w.AicardiGains(backward=True), controller="aicardi", steps=STEPS)
+    for name in w.SWEEP_FIELDS:
+        np.testing.assert_array_equal(resumed[name], fresh[name], err_msg=name)
+    assert not np.array_equal(resumed["final_x"], forward["final_x"])

@@ -31,6 +31,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import hashlib
+import importlib.metadata
 import json
 import math
 import re
@@ -47,6 +48,11 @@ from wmr_jax._src import rollout as simulation
 from wmr_jax._src.controllers import SHIM_SUNG, Controller
 from wmr_jax._src.params import Robot, validate_robot
 from wmr_jax._src.sharding import checked_devices
+
+try:
+    _VERSION = importlib.metadata.version("wmr_jax")
+except importlib.metadata.PackageNotFoundError:  # run from a source tree, not installed
+    _VERSION = "source"
 
 __all__ = ["DEFAULT_CHUNK_SIZE", "SWEEP_FIELDS", "OtherSettingsWarning", "sweep"]
 
@@ -264,14 +270,23 @@ def _digest(*arrays: Any) -> str:
 
 
 def _tree_description(tree: Any) -> dict[str, Any]:
-    """Scalars by value, batched leaves by shape and digest (for the fingerprint)."""
-    out = {}
+    """Scalars by value, batched leaves by shape and digest (for the fingerprint).
+
+    The static fields of a parameter dataclass (``AicardiGains.backward``,
+    ``compensate``) are no pytree leaves but decide the results as much as
+    the leaves do: they are described too, with the class's name.
+    """
+    out: dict[str, Any] = {"type": type(tree).__name__}
     for path, leaf in jax.tree_util.tree_leaves_with_path(tree):
         arr = np.asarray(leaf)
         key = jax.tree_util.keystr(path) or "."
         out[key] = (
             float(arr) if arr.ndim == 0 else {"shape": list(arr.shape), "digest": _digest(arr)}
         )
+    if dataclasses.is_dataclass(tree):
+        for field in dataclasses.fields(tree):
+            if field.metadata.get("static"):
+                out[f"static {field.name}"] = repr(getattr(tree, field.name))
     return out
 
 
@@ -295,6 +310,8 @@ def _settings(job: _Job) -> dict[str, Any]:
         "robot": _tree_description(job.robot),
         "init": "per pose" if job.batched_init else _tree_description(job.init),
         "thresholds": [float(t) for t in job.thresholds],
+        # A change of the law between versions must not reuse old chunks.
+        "version": _VERSION,
     }
 
 
@@ -348,7 +365,9 @@ class _ChunkStore:
     def path(self, i: int) -> Path:
         return self.folder / f"chunk_{i:06d}.npz"
 
-    def load(self, i: int, digest: str, size: int) -> dict[str, np.ndarray] | None:
+    def load(
+        self, i: int, digest: str, size: int, job: _Job | None = None
+    ) -> dict[str, np.ndarray] | None:
         """Return chunk ``i``'s results if its file is intact and was made from these inputs.
 
         A file from other settings or poses is silently not used; a damaged or
@@ -365,6 +384,11 @@ class _ChunkStore:
             return None
         if set(values) != set(SWEEP_FIELDS) or any(v.shape != (size,) for v in values.values()):
             warnings.warn(f"{self.path(i)} has unexpected contents; recomputing it", stacklevel=4)
+            return None
+        why = None if job is None else _implausible(job, values)
+        if why is not None:
+            # Written with a valid checksum but not by this sweep's arithmetic.
+            warnings.warn(f"{self.path(i)} holds {why}; recomputing it", stacklevel=4)
             return None
         return values
 
@@ -442,6 +466,34 @@ def _check_result(job: _Job, chunk: _Chunk, host: dict[str, np.ndarray]) -> None
     checks.require_finite_runs(np.isfinite(pose).all(axis=1), job.dtype, first=chunk.lo)
 
 
+def _implausible(job: _Job, values: dict[str, np.ndarray]) -> str | None:
+    """Why a chunk read back cannot be this sweep's result, or ``None`` if it can be.
+
+    What a computed chunk must be: finite final poses (``_check_result``),
+    arrival times that are ``inf`` or whole periods within the horizon,
+    success exactly where the arrival is finite, and non-negative path
+    lengths, wheel speeds and zig-zag counts.
+    """
+    pose = np.stack([values[name] for name in ("final_x", "final_y", "final_theta")], axis=1)
+    if not np.isfinite(pose).all():
+        return "a final pose that is not finite"
+    arrival, dt = values["arrival_time"], float(job.dt)
+    finite = np.isfinite(arrival)
+    periods = arrival[finite] / dt
+    # (k + 1) dt in the compute dtype: float32 rounds it by ~1e-7 relative.
+    whole = np.abs(periods - np.round(periods)) <= 1e-3 + 1e-5 * periods
+    in_horizon = (periods >= 1 - 1e-3) & (periods <= job.options.steps + 1e-3)
+    if np.isnan(arrival).any() or np.isneginf(arrival).any() or not (whole & in_horizon).all():
+        return "an arrival time that is no whole number of periods within the horizon"
+    if not np.array_equal(values["success"].astype(bool), finite):
+        return "success flags that disagree with its arrival times"
+    for name in ("path_length", "peak_wheel_speed", "zigzags"):
+        value = values[name]
+        if not (np.isfinite(value) & (value >= 0)).all():
+            return f"a {name} that is negative or not finite"
+    return None
+
+
 def _launcher(job: _Job) -> Callable[[_Chunk], Any]:
     """Return ``launch(chunk)``: place a chunk on the devices and dispatch it (asynchronously)."""
     mesh = jax.sharding.Mesh(np.asarray(job.devices), ("batch",))
@@ -507,7 +559,7 @@ def _run_chunks(
         chunk = _chunk_inputs(job, i)
         loaded = None
         if store is not None and resume:
-            loaded = store.load(i, chunk.digest, chunk.hi - chunk.lo)
+            loaded = store.load(i, chunk.digest, chunk.hi - chunk.lo, job)
         if loaded is not None:
             keep(chunk, loaded, computed=False)
             continue
