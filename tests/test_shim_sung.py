@@ -286,3 +286,29 @@ def test_relaxed_saturation_holds_for_far_references(x64):
         for x in (1e7, 3e8, 1e9, 1e17):
             v, _ = w.control([0.0, 0.0, 0.0], [x, 0.0, 0.0], gains, temperature=0.01)
             assert float(v) == pytest.approx(60.0, rel=1e-6), x
+
+
+def test_the_elementwise_helpers_give_nan_for_nan_as_numpy_does():
+    # One convention (docs/model.md §3): NaN in, NaN out, never a sign or a
+    # folded angle made up for it; every number keeps its value.
+    from wmr_jax import controllers, dynamics
+
+    nan = float("nan")
+    x = jnp.array([nan, -0.0, 0.0, 2.0, -jnp.inf, jnp.inf])
+    np.testing.assert_array_equal(controllers.sgn(x), [nan, -1.0, -1.0, 1.0, -1.0, 1.0])
+    assert np.isnan(controllers.sgn(nan, temperature=0.1))
+    cos_bar, sin_bar = controllers.fold(jnp.array([nan, -1.0]), jnp.array([0.5, nan]))
+    assert np.isnan(cos_bar[0]) and np.isnan(sin_bar[1]) and cos_bar[1] == 1.0
+    assert np.isnan(controllers.wrap_angle(nan)) and np.isnan(dynamics.sinc(nan))
+    rims = w.wheel_speeds(jnp.array(nan), jnp.array(1.0), w.Robot())
+    assert np.all(np.isnan(rims))
+
+
+def test_the_law_reads_sgn_of_zero_as_minus_one():
+    # From (0, 0, 0) toward (10, 5, 0): θ_e = 0 exactly, Region 1 (r_e < R_a).
+    # With Sgn(0) = −1 (docs/model.md §3) ε = 0.5 + α = 0.75 and
+    # ω = k_θ ε sin φ_e, sin φ_e = 5/√125; Sgn(0) = +1 would give ε = 0.25.
+    gains = w.Gains()
+    _, omega = w.control(jnp.array([0.0, 0.0, 0.0]), jnp.array([10.0, 5.0, 0.0]), gains)
+    expected = gains.k_theta * (0.5 + gains.alpha) * 5.0 / math.sqrt(125.0)
+    assert float(omega) == pytest.approx(expected, rel=1e-6)  # float32 rounding

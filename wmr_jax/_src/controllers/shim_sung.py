@@ -276,10 +276,14 @@ def _tie_break(temperature: float) -> float:
 
 
 def sgn(x: jax.Array, *, temperature: float | None = None) -> jax.Array:
-    """Return the paper's ``Sgn(x)``: 1 if ``x > 0``, else −1 (so ``Sgn(0) = −1``) (Eq. 8)."""
+    """Return the paper's ``Sgn(x)``: 1 if ``x > 0``, else −1 (so ``Sgn(0) = −1``) (Eq. 8).
+
+    NaN in gives NaN out, as NumPy's ``sign`` does: a NaN is no number below
+    or at zero, and a sign made up for it would hide where a run diverged.
+    """
     x = jnp.asarray(x)
     if temperature is None:
-        return jnp.where(x > 0, 1.0, -1.0).astype(x.dtype)
+        return jnp.where(x > 0, 1.0, jnp.where(x <= 0, -1.0, x)).astype(x.dtype)
     temperature = _relaxation(temperature)
     return jnp.tanh(x / temperature - _tie_break(temperature))  # Sgn(0) = −1
 
