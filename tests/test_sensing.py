@@ -333,3 +333,69 @@ def test_a_saved_estimator_reads_back_whole(tmp_path):
         path.write_text(json.dumps(tuning.tuned_json(w.Gains(kr=50.0), estimator)))
         loop = w.load_tuned(path)
         assert loop.estimator == estimator and loop.params.kr == 50.0
+
+
+def _recorded_noise(monkeypatch, run):
+    """The noise of every disturbance the studies hand to the loop while ``run()`` runs."""
+    from wmr_jax._src import robustness
+
+    seen = []
+    real = robustness.perturbed_metrics
+
+    def recording(spec, *args, **kwargs):
+        seen.append(np.asarray(spec.noise))
+        return real(spec, *args, **kwargs)
+
+    monkeypatch.setattr(robustness, "perturbed_metrics", recording)
+    run()
+    return seen
+
+
+@pytest.mark.parametrize("study", ["standard_conditions", "noise_curve", "evaluate_loop"])
+def test_the_studies_draw_the_standard_noise_in_its_units(monkeypatch, study):
+    # docs/model.md §7: σ_xy = 0.5 cm and σ_θ = 1° (0.01745 rad). Read as
+    # radians, σ_θ would be 57× larger; read as cm, σ_xy the same.
+    refs = random_refs(7, 64)
+    key = jax.random.PRNGKey(2)
+    runs = {
+        "standard_conditions": lambda: studies.standard_conditions({"a": GAINS}, refs, key),
+        "noise_curve": lambda: studies.noise_curve({"a": GAINS}, refs, key, noise_xy=(0.5,)),
+        "evaluate_loop": lambda: studies.evaluate_loop(GAINS, refs, condition="noise"),
+    }
+    seen = _recorded_noise(monkeypatch, runs[study])
+    noisy = [n for n in seen if np.any(n)]
+    assert noisy
+    for noise in noisy:  # 64 runs × 182 samples: σ within 2 % at 3 standard errors
+        np.testing.assert_allclose(noise[..., :2].std(), 0.5, rtol=0.02)
+        np.testing.assert_allclose(noise[..., 2].std(), math.radians(1.0), rtol=0.02)
+
+
+def test_the_monte_carlo_draws_its_levels_in_their_units(monkeypatch):
+    seen = _recorded_noise(
+        monkeypatch,
+        lambda: studies.monte_carlo(
+            jax.random.PRNGKey(1), n_runs=64, noise_xy=(0.5,), noise_deg=(1.0,)
+        ),
+    )
+    (noise,) = seen
+    np.testing.assert_allclose(noise[..., :2].std(), 0.5, rtol=0.02)
+    np.testing.assert_allclose(noise[..., 2].std(), math.radians(1.0), rtol=0.02)
+
+
+def test_the_robust_tuner_draws_the_standard_noise_in_its_units():
+    # Levels ~ U(0, 2) per run scale both σ alike: their ratio is the standard
+    # one, 1° per 0.5 cm, whatever the levels.
+    from wmr_jax._src.tuning import robust
+
+    refs = jnp.asarray(random_refs(8, 256))
+    joint = robust.joint_problem(robust.RobustConfig())
+    batches = robust._specs(jax.random.PRNGKey(0), refs, refs[:0], 182, 0.1, joint)
+    noise = np.asarray(batches[0][0].noise).reshape(4, 256, 182, 3)  # the 4 conditions
+    for condition, (label, sxy, sdeg, _) in zip(noise, studies.STANDARD_CONDITIONS, strict=True):
+        if sxy == 0:
+            assert not np.any(condition), label
+            continue
+        ratio = condition[..., 2].std() / condition[..., :2].std()
+        np.testing.assert_allclose(ratio, math.radians(sdeg) / sxy, rtol=0.05)
+        # E[level²] = 4/3 for U(0, 2): σ_xy sqrt(4/3) overall.
+        np.testing.assert_allclose(condition[..., :2].std(), sxy * math.sqrt(4 / 3), rtol=0.1)
