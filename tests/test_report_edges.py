@@ -567,3 +567,37 @@ def test_paper_fig7_and_soccer_writers_check_everything_before_the_first_file(tm
         with pytest.raises(ValueError, match="contains itself"):
             write(tmp_path / "out", arg)
         assert not (tmp_path / "out").exists() or not list((tmp_path / "out").iterdir())
+
+
+def test_tuning_curve_marks_non_finite_losses_instead_of_a_silent_gap(tmp_path):
+    import matplotlib.pyplot as plt
+
+    from wmr_jax._src.report import figures
+
+    drawn = []
+    real = figures.closed_after
+
+    def spy(*args, **kwargs):
+        context = real(*args, **kwargs)
+
+        class Keep:
+            def __enter__(self):
+                fig, axes = context.__enter__()
+                drawn.append(axes[0, 0])
+                return fig, axes
+
+            def __exit__(self, *exc):
+                drawn.append(drawn[-1].get_title())
+                return context.__exit__(*exc)
+
+        return Keep()
+
+    history = {**_history(), "loss": np.array([1.0, np.nan, np.inf])}
+    figures.closed_after = spy
+    try:
+        tuning_curve(tmp_path / "curve.png", history)
+    finally:
+        figures.closed_after = real
+        plt.close("all")
+    assert "2 non-finite or non-positive, marked ×" in drawn[-1]
+    assert (tmp_path / "curve.png").exists()

@@ -202,7 +202,10 @@ def tuning_curve(
     steps = np.arange(1, len(loss) + 1)
     with closed_after(2, 4, figsize=(14, 6), constrained_layout=True) as (fig, axes):
         ax = axes[0, 0]
-        ax.plot(steps, loss, lw=0.8, color="C0")
+        # A loss of NaN or inf has no place on the axis: its iterations are
+        # marked along the top instead of leaving a silent gap in the line.
+        finite = np.isfinite(loss) & (loss > 0)
+        ax.plot(steps[finite], loss[finite], lw=0.8, color="C0")
         ax.set_yscale("log")
         ax.set_xlabel("iteration")
         ax.set_ylabel("loss (s)", color="C0")
@@ -210,7 +213,13 @@ def tuning_curve(
         twin.plot(steps, temperature, lw=1.0, color="C3")
         twin.set_yscale("log")
         twin.set_ylabel("temperature", color="C3")
-        ax.set_title(f"loss ({velocity} loop)")
+        title = f"loss ({velocity} loop)"
+        if not finite.all():
+            top = ax.get_xaxis_transform()  # x in data, y in axes fraction
+            ax.plot(steps[~finite], np.full((~finite).sum(), 0.97), "x", color="C3",
+                    transform=top)  # fmt: skip
+            title += f"; {(~finite).sum()} non-finite or non-positive, marked ×"
+        ax.set_title(title, fontsize=9 if not finite.all() else None)
         if problem == "schedule":
             _schedule_panels(axes, steps, gains, knots)
         else:
