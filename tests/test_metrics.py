@@ -139,3 +139,22 @@ def test_run_table_rows_are_each_runs_metrics():
     ):
         with pytest.raises(ValueError, match=message):
             studies.run_table(*args, dt=DT, **kwargs)
+
+
+def test_the_distance_tolerance_holds_at_its_boundary():
+    # docs/model.md §6: arrived when r_e <= tol_r; exactly 1 cm away counts.
+    assert math.isfinite(float(w.arrival_time(run_through(start_then(at(1.0))), REF, dt=DT)))
+    beyond = [float(np.nextafter(REF[0] + 1.0, 20.0)), 0.0, 0.0]  # the next float: 1 + 2e-15 cm
+    assert math.isinf(float(w.arrival_time(run_through(start_then(beyond)), REF, dt=DT)))
+
+
+def test_a_non_finite_pose_is_named_by_its_index_in_traj_poses():
+    # Run 1, sample 2: named as the user indexes it, not by a flattened row.
+    traj = run_through(start_then(at()))
+    poses = np.stack([traj.poses, traj.poses])
+    poses[1, 2, 0] = np.nan
+    batch = traj._replace(poses=poses)
+    with pytest.raises(
+        ValueError, match=r"traj\.poses\[1, 2\] = \[nan, 0\.0, 0\.0\] is not finite"
+    ):
+        w.arrival_time(batch, REF, dt=DT)

@@ -100,6 +100,17 @@ def _poses_of(traj: Any) -> Any:
             f"traj.poses has shape {jnp.shape(poses)}; allowed: (..., steps + 1, 3) with "
             "steps >= 1 (the initial pose, then one per control period)"
         )
+    if not is_traced(poses) and array_kind(poses) in "iuf":
+        host = np.asarray(poses)
+        bad = ~np.isfinite(host).all(axis=-1)
+        if bad.any():
+            # Named by its own index in traj.poses (batch axes, then the sample),
+            # not by its place in the flattened samples a later check would see.
+            at = tuple(int(i) for i in np.argwhere(bad)[0])
+            raise ValueError(
+                f"traj.poses[{', '.join(map(str, at))}] = {host[at].tolist()} is not finite; "
+                "allowed: finite numbers (a run that left the range has no metrics)"
+            )
     return poses
 
 
