@@ -188,3 +188,22 @@ def test_the_sampling_margin_of_gains_near_float32s_limit_is_finite():
         warnings.simplefilter("error", RuntimeWarning)
         with pytest.warns(w.SamplingWarning, match=r"k_r\*pi\*dt/\(2\*R_m\) = 7\.78e\+35"):
             w.final_poses(random_refs(0, 2), huge, controller=SCHEDULE, steps=2)
+
+
+def test_the_schedule_box_is_bounded_by_the_robot():
+    # docs/model.md §3.9: k_r knots in (0, V_max], k_theta and k_turn knots in
+    # (0, V_max / L]; the corners of the unit cube reach those bounds.
+    from wmr_jax._src.tuning.problems import schedule_problem
+
+    robot = w.Robot(half_track=5.0, v_max=60.0)
+    problem = schedule_problem(4)
+    top = problem.from_unit(np.ones(problem.dim), robot)
+    bottom = problem.from_unit(np.zeros(problem.dim), robot)
+    omega_max = 60.0 / 5.0
+    np.testing.assert_allclose([float(k) for k in top.kr], [60.0] * 4, rtol=1e-6)
+    for table in (top.k_theta, top.k_turn):
+        np.testing.assert_allclose([float(k) for k in table], [omega_max] * 4, rtol=1e-6)
+    np.testing.assert_allclose([float(k) for k in bottom.kr], [60.0e-3] * 4, rtol=1e-6)
+    np.testing.assert_allclose([float(k) for k in bottom.k_theta], [omega_max * 1e-3] * 4,
+                               rtol=1e-6)  # fmt: skip
+    assert float(top.v_max) == 60.0 and float(top.half_track) == 5.0
