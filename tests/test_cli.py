@@ -268,7 +268,7 @@ def test_tune_robust_writes_its_gains_before_judging_them(tmp_path, monkeypatch)
 
     monkeypatch.setattr(robust, "tune_robust", fake)
     assert main(["tune", "--out", str(tmp_path), "--robust", "--iters", "2"]) == 130
-    controller, gains, _ = w.load_tuned(tmp_path / "tuned_gains.json")
+    controller, gains, *_ = w.load_tuned(tmp_path / "tuned_gains.json")
     assert gains.kr == 70.0
     assert json.loads((tmp_path / "robust_loss.json").read_text()) == {"loss": [1.0, 0.9]}
 

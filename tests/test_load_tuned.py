@@ -30,7 +30,7 @@ def test_a_schedule_round_trips_through_tuned_gains_json(tmp_path, capsys):
     params = _schedule()
     path = tmp_path / "tuned_gains.json"
     path.write_text(json.dumps(tuning.tuned_json(params)))
-    controller, loaded, _ = tuning.load_tuned(path)
+    controller, loaded, *_ = tuning.load_tuned(path)
     assert controller is tuning.SCHEDULE and loaded == params
     refs = random_refs(1, 16)
     np.testing.assert_array_equal(
@@ -48,7 +48,7 @@ def test_fixed_gains_old_and_new_files_load(tmp_path):
     old.write_text(json.dumps({"kr": 80.0, "k_theta": 15.0, "alpha": 0.4}))
     assert json.loads(new.read_text())["kind"] == "fixed"
     for path in (new, old):
-        controller, loaded, _ = tuning.load_tuned(path)
+        controller, loaded, *_ = tuning.load_tuned(path)
         assert controller.name == "shim-sung" and loaded == gains
         w.rollout([20.0, 5.0, 0.0], loaded, controller=controller)
 
@@ -105,7 +105,7 @@ def test_a_schedule_file_must_be_whole_and_integers_load_as_floats(tmp_path):
         tuning.load_tuned(path)
     # JSON integers become floats, so the loaded gains can be differentiated.
     path.write_text('{"kr": 60, "k_theta": 10}')
-    controller, gains, _ = tuning.load_tuned(path)
+    controller, gains, *_ = tuning.load_tuned(path)
     grad = jax.grad(lambda g: w.rollout([30.0, 30.0, 0.0], g, steps=5).poses[-1, 0])(gains)
     assert np.isfinite(float(grad.kr)) and float(grad.kr) != 0.0
 

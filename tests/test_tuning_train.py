@@ -75,8 +75,8 @@ def test_cli_writes_the_results_and_a_resumed_run_gives_the_same_gains(tmp_path,
     printed = capsys.readouterr().out
     assert "| paper feasible | " in printed and "| tuned | " in printed
     saved = json.loads((whole / "tuned_gains.json").read_text())
-    assert list(saved) == ["controller", "kind", *tuning.GAIN_FIELDS]
-    controller, gains, _ = tuning.load_tuned(whole / "tuned_gains.json")
+    assert list(saved) == ["controller", "kind", *tuning.GAIN_FIELDS, "robot", "robot_units"]
+    controller, gains, *_ = tuning.load_tuned(whole / "tuned_gains.json")
     assert controller.name == saved["controller"] == "shim-sung"
     assert np.all(w.check_feasible(gains))
     # Every tuning report gives the ratio of each mean arrival to the §8 yardsticks.
@@ -202,7 +202,7 @@ def test_tuning_a_schedule_of_four_knots(tmp_path):
     assert config.problem is tuning.schedule_problem(4)
     result = tuning.tune(tmp_path, config, progress=False)
     assert len(result.gains.kr) == 4 and result.history["gains"].shape == (SMALL.iters, 19)
-    controller, params, _ = w.load_tuned(tmp_path / "tuned_gains.json")
+    controller, params, *_ = w.load_tuned(tmp_path / "tuned_gains.json")
     assert controller.name == "shim-sung-schedule" and len(params.k_theta) == 4
     assert (tmp_path / "tuning_curve.png").stat().st_size > 1000
     # Its size is part of the run: a checkpoint of 4 knots does not resume 5.

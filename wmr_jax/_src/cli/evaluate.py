@@ -248,6 +248,8 @@ def _loop(path: str, estimator: str | None) -> Any:
         loop = load_tuned(path)
     except ValueError as err:
         raise ValueError(f"--gains {err}") from None
+    # evaluate_loop takes no robot yet: it judges every loop on the paper robot.
+    flags.paper_robot_only(loop.robot, "--gains", path, "evaluate")
     if estimator is None:
         return loop
     if estimator == "none":

@@ -16,6 +16,7 @@ from typing import Any
 
 __all__ = [
     "add_gain_flags",
+    "add_robot_flag",
     "choice",
     "controller_names",
     "gains_file",
@@ -23,8 +24,11 @@ __all__ = [
     "number",
     "output_dir",
     "output_file",
+    "paper_robot_only",
     "pose_from_degrees",
     "positive_int",
+    "robot_for_gains",
+    "robot_from",
     "velocity_loop",
 ]
 
@@ -215,6 +219,106 @@ def gains_file(flag: str, text: str) -> Any:
         return validate_gains(Gains(**values))
     except ValueError as err:
         raise ValueError(f"{flag} {text!r}: {err}") from None
+
+
+def add_robot_flag(parser: Any, default: str = "paper") -> None:
+    """Add ``--robot NAME|FILE``: a preset, a JSON of ``Robot`` fields or a ROS YAML.
+
+    ``default`` names what runs without the flag, in the help only (``None``
+    stands for it in ``args.robot``).
+    """
+    from wmr_jax._src.robots import ROBOTS
+
+    parser.add_argument(
+        "--robot",
+        default=None,
+        metavar="NAME|FILE",
+        help=f"the robot: a preset ({', '.join(ROBOTS)}), a .json of Robot fields in cm, kg, s "
+        "(any subset; the rest the paper robot's) or a ROS diff_drive_controller .yaml "
+        f"(docs/robots.md) (default: {default})",
+    )
+
+
+def robot_from(text: Any) -> Any:
+    """Return the robot of ``--robot`` (a ``robots.LoadedRobot``), or ``None`` if not given.
+
+    Read and checked before any run; a YAML's note says which of its fields
+    were used (the command prints it).
+
+    Raises:
+        ValueError: one line naming ``--robot``, the file, the key, its value
+            and what is allowed.
+    """
+    from wmr_jax._src.robots import read_robot
+
+    if text is None:
+        return None
+    try:
+        return read_robot(text)
+    except ValueError as err:
+        raise ValueError(f"--robot {err}") from None
+
+
+def robot_for_gains(given: Any, saved: Any, gains_flag: str, path: Any) -> Any:
+    """The robot to run a tuned file's parameters on: ``--robot``'s, else the file's.
+
+    Gains are tuned within one robot's wheel budget ``k_r + L k_θ ≤ V_max``
+    (and a schedule caps its commands with that robot's ``V_max`` and
+    ``L``): on another robot they may ask a wheel for more than it can give,
+    or waste what it has. So a ``--robot`` other than the one the file
+    records is refused rather than quietly run; a file that records none
+    (from before robots were recorded) runs on ``--robot``'s.
+
+    Args:
+        given: the ``LoadedRobot`` of ``--robot``, or ``None``.
+        saved: the file's robot (``ClosedLoop.robot``), or ``None``.
+        gains_flag: the flag that named the file (``--gains``).
+        path: the file.
+
+    Returns:
+        A ``Robot``, or ``None`` (neither given: the paper robot).
+
+    Raises:
+        ValueError: one line naming both robots.
+    """
+    from wmr_jax._src.robots import describe_robot, same_robot
+
+    if given is None:
+        return saved
+    if saved is not None and not same_robot(given.robot, saved):
+        raise ValueError(
+            f"--robot {given.label!r} is not allowed with {gains_flag} {str(path)!r}: the file "
+            f"was tuned for {describe_robot(saved)}, --robot is {describe_robot(given.robot)}, "
+            "and gains are tuned within one robot's wheel budget; allowed: that robot, or no "
+            "--robot"
+        )
+    return given.robot
+
+
+def paper_robot_only(saved: Any, gains_flag: str, path: Any, judge: str) -> None:
+    """Refuse a tuned file's robot where the command's engine runs the paper robot only.
+
+    Run on the paper robot, gains tuned for another would be judged against a
+    wheel budget that is not theirs: a wrong table, given without a word.
+
+    Args:
+        saved: the file's robot (``ClosedLoop.robot``), or ``None`` (none recorded).
+        gains_flag: the flag that named the file.
+        path: the file.
+        judge: what runs the paper robot only (``"evaluate"``).
+
+    Raises:
+        ValueError: one line naming the file's robot.
+    """
+    from wmr_jax._src.params import Robot
+    from wmr_jax._src.robots import describe_robot, same_robot
+
+    if saved is not None and not same_robot(saved, Robot()):
+        raise ValueError(
+            f"{gains_flag} {str(path)!r} is not allowed: it was tuned for "
+            f"{describe_robot(saved)}, and {judge} runs the paper robot only for now; allowed: "
+            "gains tuned for the paper robot (wmr-jax simulate --gains runs these on theirs)"
+        )
 
 
 @contextlib.contextmanager

@@ -149,6 +149,8 @@ def _gain_sets(args: Any) -> dict[str, Any]:
             loop = load_tuned(path)  # run whole: its controller and estimator
         except ValueError as err:
             raise ValueError(f"{flag} {path!r} is not allowed: {err}") from None
+        # The studies take no robot yet: they run every set on the paper robot.
+        flags.paper_robot_only(loop.robot, flag, path, "robustness")
         sets[label] = loop
         if loop.estimator is not None:  # beside it, the same law on raw measurements
             sets[f"{label}, raw feedback"] = loop._replace(estimator=None)

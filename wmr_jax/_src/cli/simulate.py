@@ -37,19 +37,24 @@ def add_arguments(parser: Any) -> None:
         default=None,
         metavar="FILE.json",
         help="take the controller and its parameters from this file (tuned_gains.json of "
-        "wmr-jax tune: fixed gains or a gain schedule) instead of the gain flags",
+        "wmr-jax tune: fixed gains or a gain schedule) instead of the gain flags; the robot "
+        "it was tuned for comes with it",
     )
+    flags.add_robot_flag(parser, default="paper, or the --gains file's robot")
     flags.add_gain_flags(parser)
 
 
-def _controller_and_gains(args: Any) -> tuple[Any, Any]:
-    """The law and parameters of ``--gains FILE`` (``load_tuned``), else of the gain flags."""
+def _controller_and_gains(args: Any) -> tuple[Any, Any, Any]:
+    """The law, parameters and robot of ``--gains FILE`` (``load_tuned``), else of the gain flags.
+
+    The robot is the file's (``None`` where it records none, and for the flags).
+    """
     from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
     from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS
     from wmr_jax._src.tuning.saved import load_tuned
 
     if args.gains is None:
-        return SHIM_SUNG, flags.gains_from(args)
+        return SHIM_SUNG, flags.gains_from(args), None
     # A gain flag given on the command line is text; one left alone keeps its float default.
     given = [name for name in GAIN_FIELDS if isinstance(getattr(args, name, None), str)]
     if given:
@@ -66,7 +71,7 @@ def _controller_and_gains(args: Any) -> tuple[Any, Any]:
             "simulate measures without noise or latency, where the estimate is the pose "
             "(wmr-jax evaluate runs it under noise)"
         )
-    return loop.controller, loop.params
+    return loop.controller, loop.params, loop.robot
 
 
 def run(args: Any) -> int:
@@ -74,6 +79,8 @@ def run(args: Any) -> int:
     import numpy as np
 
     from wmr_jax._src import metrics
+    from wmr_jax._src.params import Robot
+    from wmr_jax._src.robots import describe_robot, same_robot
     from wmr_jax._src.rollout import rollout
 
     plot = None if args.plot is None else flags.image_file("--plot", args.plot)
@@ -82,14 +89,28 @@ def run(args: Any) -> int:
     dt = flags.number("--dt", args.dt, low=0.0, closed=False, unit="s")
     steps = flags.positive_int("--steps", args.steps, 1, 10**7)
     velocity = flags.velocity_loop(args.velocity)
-    controller, gains = _controller_and_gains(args)
+    given = flags.robot_from(args.robot)
+    controller, gains, saved = _controller_and_gains(args)
+    robot = flags.robot_for_gains(given, saved, "--gains", args.gains)
+    if given is not None and given.note:
+        print(given.note)
     with flags.as_flags({"ref": "--ref", "init": "--init", "dt": "--dt"}):
         traj = rollout(
-            ref, gains, init=init, dt=dt, steps=steps, velocity=velocity, controller=controller
+            ref,
+            gains,
+            init=init,
+            dt=dt,
+            steps=steps,
+            velocity=velocity,
+            controller=controller,
+            robot=robot,
         )
     t_arrive = float(metrics.arrival_time(traj, np.asarray(ref), dt=dt))
     per_region = np.asarray(metrics.region_time(traj, dt=dt))
     final = np.asarray(traj.poses[-1])
+    if robot is not None and not same_robot(robot, Robot()):
+        # Shown only off the paper robot, the one every other run of the command uses.
+        print(f"robot          : {describe_robot(robot)}")
     print(f"reference      : x={ref[0]:.3f} cm  y={ref[1]:.3f} cm  θ={math.degrees(ref[2]):.2f}°")
     # The law folds front and back alike: a robot facing θ_r ± 180° is at its goal.
     turned = math.remainder(float(final[2]) - ref[2], 2 * math.pi)
@@ -107,7 +128,8 @@ def run(args: Any) -> int:
     print(
         "time per region: "
         + "  ".join(f"R{k}={per_region[k]:.3f} s" for k in range(4))
-        + f"  (peak wheel speed {float(np.abs(np.asarray(traj.wheel_speeds)).max()):.1f} cm/s)"
+        + f"  (peak wheel speed {float(np.abs(np.asarray(traj.wheel_speeds)).max()):.1f} cm/s, "
+        f"V_max {float((Robot() if robot is None else robot).v_max):.4g} cm/s)"
     )
     if plot is not None:
         from wmr_jax._src.report.figures import path_figure

@@ -106,20 +106,24 @@ def _write_results(out: Path, config: Any, robot: Any, result: Any) -> None:
     from wmr_jax._src.optimal import bound_ratios
     from wmr_jax._src.params import check_feasible
     from wmr_jax._src.report.tuning import tuning_curve
+    from wmr_jax._src.robots import ROBOT_UNITS, robot_json
+    from wmr_jax._src.tuning.evaluation import wheel_speed_ok
     from wmr_jax._src.tuning.saved import tuned_json
 
-    tuned = tuned_json(result.gains)
+    # Each file records the robot: its gains are tuned within that robot's wheel budget.
+    tuned = tuned_json(result.gains, robot=robot)
     search = result.search
-    searched = None if search is None else tuned_json(search.gains)
+    searched = None if search is None else tuned_json(search.gains, robot=robot)
     io.atomic_write_json(out / "tuned_gains.json", tuned)
     if searched is not None:
         io.atomic_write_json(out / "random_search_gains.json", searched)
     paper = result.evaluation["paper_feasible"].mean_arrival
     bounds = held_out_bounds(config, robot)
     rows = {name: dict(ev._asdict()) for name, ev in result.evaluation.items()}
-    for row in rows.values():
+    for name, row in rows.items():
         row["speedup_vs_paper"] = paper / row["mean_arrival"]
         row.update(bound_ratios(row["mean_arrival"], bounds))
+        row["peak_wheel_speed_ok"] = wheel_speed_ok(result.evaluation[name], robot)
     report = {
         "problem": result.problem,
         "velocity": config.velocity,
@@ -130,10 +134,10 @@ def _write_results(out: Path, config: Any, robot: Any, result: Any) -> None:
         "tuned_gains": tuned,
         # Fixed gains: k_r + L k_θ ≤ V_max; a schedule meets |v| + L|ω| ≤ V_max by construction.
         "feasible": result.problem != "fixed" or bool(check_feasible(result.gains, robot)),
-        "peak_wheel_speed_ok": bool(
-            max(ev.peak_wheel_speed for ev in result.evaluation.values())
-            <= float(robot.v_max) * (1 + 1e-6)
-        ),
+        # Every row's; each row says its own (peak_wheel_speed_ok there).
+        "peak_wheel_speed_ok": all(row["peak_wheel_speed_ok"] for row in rows.values()),
+        "robot": robot_json(robot),
+        "robot_units": dict(ROBOT_UNITS),
         "wall_time_s": {
             "tuning": result.tune_wall_s,
             "random_search": None if search is None else search.wall_s,
@@ -158,8 +162,9 @@ def tune(
 ) -> Any:
     """Run ``wmr_jax.tuning.train`` and write its results and checkpoints to ``out_dir``.
 
-    Files in ``out_dir``: ``tuned_gains.json`` (the controller, the kind and
-    the parameters; ``wmr_jax.load_tuned`` reads it), ``evaluation.json``, ``tuning_curve.png``,
+    Files in ``out_dir``: ``tuned_gains.json`` (the controller, the kind,
+    the parameters and the robot; ``wmr_jax.load_tuned`` reads it),
+    ``evaluation.json``, ``tuning_curve.png``,
     ``random_search_gains.json`` and ``checkpoint.npz`` (checksummed, written
     atomically every ``config.checkpoint_every`` iterations and at the end).
 
@@ -185,7 +190,7 @@ def tune(
     from tqdm.auto import tqdm
 
     from wmr_jax._src import io, tuning
-    from wmr_jax._src.checks import as_float_tree, check_bool, check_callable, check_folder
+    from wmr_jax._src.checks import check_bool, check_callable, check_folder
     from wmr_jax._src.params import Robot, validate_robot
     from wmr_jax._src.tuning.training import checked_config
 
@@ -229,7 +234,9 @@ def tune(
         bar.close()
         search_bar.close()
         eval_bar.close()
-    _write_results(out, config, as_float_tree(validate_robot(robot)), result)
+    # The robot as given, not rounded to the session's float32: the file
+    # records it, and a preset read back must still be that preset.
+    _write_results(out, config, validate_robot(robot), result)
     return result
 
 
@@ -267,6 +274,7 @@ def add_arguments(parser: Any) -> None:
         action="store_true",
         help="skip the random-search baseline (same wall time as the tuning)",
     )
+    flags.add_robot_flag(parser)
     parser.add_argument(
         "--resume",
         action="store_true",
@@ -373,7 +381,7 @@ def _check_modes(args: Any) -> None:
         raise ValueError("--knots is not allowed without --schedule, whose tables it sizes")
     unused = {
         "compare": ("seed", "checkpoint_every", "no_random_search"),
-        "gradient_cost": (*(field for _, field, _, _ in _FLAGS), "schedule", "resume"),
+        "gradient_cost": (*(field for _, field, _, _ in _FLAGS), "schedule", "resume", "robot"),
     }.get(mode, ())
     for name in unused:
         if getattr(args, name) not in (None, False):
@@ -454,14 +462,33 @@ def _settings_difference(saved: Any, now: dict[str, Any]) -> str:
         if saved_configs.get(name) != config
     ]
     parts += [f"{name}: not compared now" for name in saved_configs if name not in now["configs"]]
+    saved_robot = saved.get("robot") if isinstance(saved, dict) else None
+    if saved_robot != now.get("robot"):
+        parts.append(
+            f"robot: {_robot_text(saved_robot)} there, {_robot_text(now.get('robot'))} now"
+        )
     return "; ".join(parts) or "its format or seeds differ"
 
 
-def _compare(out: Path, args: Any) -> int:
+def _robot_text(values: Any) -> str:
+    """A ``compare_settings.json`` robot in words (none recorded: the paper robot)."""
+    from wmr_jax._src.robots import describe_robot, robot_from_values
+
+    if values is None:
+        return "paper"
+    try:
+        return describe_robot(robot_from_values(values, "robot"))
+    except ValueError:
+        return "a damaged robot entry"
+
+
+def _compare(out: Path, args: Any, robot: Any) -> int:
     import json
 
     from wmr_jax._src import io
+    from wmr_jax._src.params import Robot
     from wmr_jax._src.report.tuning import comparison_table
+    from wmr_jax._src.robots import robot_json, same_robot
     from wmr_jax._src.tuning.compare import compare
 
     configs = {"schedule": _config_from(args, schedule=True)}
@@ -472,6 +499,12 @@ def _compare(out: Path, args: Any) -> int:
         "seeds": list(_COMPARE_SEEDS),
         "configs": {name: config.as_dict() for name, config in configs.items()},
     }
+    # Only a --robot is handed on (compare's default is the paper robot), and
+    # only another robot than the paper's is part of the settings: comparisons
+    # saved before robots were named still resume.
+    on_robot = {} if robot is None else {"robot": robot}
+    if robot is not None and not same_robot(robot, Robot()):
+        settings["robot"] = robot_json(robot)
     settings = json.loads(json.dumps(settings))  # as it reads back from the file
     rows = _compare_rows(out, settings, args.resume)
     # Each (problem, seed) is written as soon as its three methods are done, so
@@ -482,7 +515,13 @@ def _compare(out: Path, args: Any) -> int:
             if (name, seed) in done:
                 print(f"{name} seed {seed}: kept from {out / 'compare.json'}")
                 continue
-            rows += compare(seeds=(seed,), problems=(name,), configs={name: config}, progress=print)
+            rows += compare(
+                seeds=(seed,),
+                problems=(name,),
+                configs={name: config},
+                progress=print,
+                **on_robot,
+            )
             io.atomic_write_json(out / "compare.json", rows)
     table = comparison_table(rows)
     io.atomic_write_text(out / "compare.md", table)
@@ -494,6 +533,7 @@ def _compare(out: Path, args: Any) -> int:
 def run(args: Any) -> int:
     """Run ``wmr-jax tune``; return the exit status."""
     from wmr_jax._src.params import Robot
+    from wmr_jax._src.robots import describe_robot
 
     _check_modes(args)
     if args.robust:
@@ -504,19 +544,25 @@ def run(args: Any) -> int:
     config = _config_from(args, schedule=args.schedule)
     if args.gradient_cost:
         return _gradient_cost(out)
+    given = flags.robot_from(args.robot)
+    if given is not None and given.note:
+        print(given.note)
+    robot = None if given is None else given.robot
     if args.compare:
-        return _compare(out, args)
+        return _compare(out, args, robot)
     from wmr_jax._src.report.tuning import evaluation_table
 
-    result = tune(out, config, resume=args.resume)
+    result = tune(out, config, robot=robot, resume=args.resume)
+    robot = Robot() if robot is None else robot
     kind = "gain schedule" if config.schedule else "gains"
     print(f"tuned {kind} ({config.velocity} loop) -> {out / 'tuned_gains.json'}")
     print("  " + _shown(result.gains))
+    print(f"  for the robot {describe_robot(robot)}")
     print(
         f"held-out evaluation, {config.eval_poses} poses (docs/model.md §6), hard law "
         f"-> {out / 'evaluation.json'}"
     )
-    bounds = held_out_bounds(config, Robot())
+    bounds = held_out_bounds(config, robot)
     print(evaluation_table(result.evaluation, bounds), end="")
     search = result.search
     extra = "" if search is None else f"; random search {search.candidates} candidates"

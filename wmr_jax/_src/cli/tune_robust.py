@@ -4,8 +4,9 @@ Called by ``wmr-jax tune`` with its parsed flags (``out``, ``seed``,
 ``iters``, ``poses``, ``velocity``, ``resume``, ``fixed``, ``estimator``,
 ``knots``, ``compare``). By default the gain schedule and the estimator are
 tuned together (``--fixed``: the 7 fixed gains with raw feedback, as before
-estimators). Writes ``tuned_gains.json`` (controller, parameters and
-estimator, which ``load_tuned`` reads whole), ``robust_evaluation.json`` and
+estimators). Writes ``tuned_gains.json`` (controller, parameters,
+estimator and robot, which ``load_tuned`` reads whole; the paper robot, the
+only one its judge runs for now), ``robust_evaluation.json`` and
 ``.md`` (the hard-law table under the standard conditions, each with ±3 %
 wheel mismatch, and the model robot) and ``robust_loss.json`` (the loss per
 iteration). With ``--compare`` it runs seeds 0–2 instead, each with random
@@ -95,10 +96,35 @@ def _described(config: Any) -> str:
     return f"{law} with {sensing}"
 
 
+def _paper_robot_only(args: Any) -> Any:
+    """The robot of ``--robot``: the paper robot, the only one the robust tuner is judged on.
+
+    The loop is judged (and the searches scored) under the standard
+    conditions, whose engine runs the paper robot only for now: tuned on
+    another robot, the table would judge it on the wrong one.
+
+    Raises:
+        ValueError: one line, for any other robot.
+    """
+    from wmr_jax._src.params import Robot
+    from wmr_jax._src.robots import describe_robot, same_robot
+
+    given = flags.robot_from(getattr(args, "robot", None))
+    if given is not None and not same_robot(given.robot, Robot()):
+        raise ValueError(
+            f"--robot {given.label!r} is not allowed with --robust: it is "
+            f"{describe_robot(given.robot)}, and the standard conditions that judge the robust "
+            "tuning run the paper robot only for now; allowed: --robot paper, or wmr-jax tune "
+            "without --robust"
+        )
+    return Robot()
+
+
 def run(args: Any) -> int:
     """Run ``wmr-jax tune --robust``; return the exit status."""
     out = flags.output_dir("--out", getattr(args, "out", None))
     config = config_from(args)
+    robot = _paper_robot_only(args)
     if getattr(args, "compare", False):
         return _compare(out, config, resume=bool(getattr(args, "resume", False)))
 
@@ -117,7 +143,7 @@ def run(args: Any) -> int:
 
     def keep(loop: Any, losses: list[float]) -> None:
         # Written before the evaluation: an interruption there loses no tuning.
-        io.atomic_write_json(out / "tuned_gains.json", tuned_json(loop))
+        io.atomic_write_json(out / "tuned_gains.json", tuned_json(loop, robot=robot))
         io.atomic_write_json(out / "robust_loss.json", {"loss": losses})
         print(f"tuned_gains.json, robust_loss.json -> {out} (now judging them)", flush=True)
 

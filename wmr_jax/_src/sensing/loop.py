@@ -64,11 +64,15 @@ class ClosedLoop(NamedTuple):
         params: its parameters.
         estimator: ``None`` (raw feedback), an estimator's name, or its
             parameters (``ObserverParams`` / ``EKFParams``), docs/model.md §9.
+        robot: the ``Robot`` the parameters were tuned for (their wheel
+            budget ``k_r + L k_θ ≤ V_max`` is that robot's), or ``None``
+            where unknown (files from before robots were recorded).
     """
 
     controller: Any
     params: Any
     estimator: Any = None
+    robot: Any = None
 
 
 def _select(flag: jax.Array, on_true: Any, on_false: Any) -> Any:
@@ -386,7 +390,8 @@ def disturbed_rollout(
         "v": (N, steps) cm/s, "omega": (N, steps) rad/s``: the command
         applied over each period (zero over the first one under latency),
         ``"estimates": (N, steps, 3)``: the estimate of the pose at the end of
-        each period (the measurement itself without an estimator)``}``.
+        each period (the measurement itself without an estimator); the last
+        one follows a noise-free measurement, since no command uses it``}``.
     """
     with jax.enable_x64(checks.check_bool("x64", x64)):
         args, options = prepare_disturbed(

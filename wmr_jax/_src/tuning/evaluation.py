@@ -24,7 +24,14 @@ from wmr_jax._src.metrics import arrival_time
 from wmr_jax._src.params import Gains, Robot
 from wmr_jax._src.poses import HORIZON_S, horizon_steps, sample_poses
 
-__all__ = ["EVAL_POSES", "EVAL_SEED", "Evaluation", "evaluate", "held_out_poses"]
+__all__ = [
+    "EVAL_POSES",
+    "EVAL_SEED",
+    "Evaluation",
+    "evaluate",
+    "held_out_poses",
+    "wheel_speed_ok",
+]
 
 # The options of a hard-law run that ``evaluate`` and ``random_search`` take.
 RUN_OPTIONS = ("robot", "dt", "horizon", "velocity", "substeps", "wheel_limit")
@@ -157,3 +164,13 @@ def evaluate(
         peak_wheel_speed=float(np.max(np.abs(np.asarray(traj.wheel_speeds)))),
         poses=int(times.size),
     )
+
+
+def wheel_speed_ok(evaluation: Evaluation, robot: Robot | None = None) -> bool:
+    """Whether one evaluation's peak rim speed stays within ``robot``'s ``V_max`` (cm/s).
+
+    Judged row by row: one baseline that asks too much of a wheel says
+    nothing of the others. The tolerance, ``1e-6`` relative, is rounding.
+    """
+    v_max = float((Robot() if robot is None else robot).v_max)
+    return bool(evaluation.peak_wheel_speed <= v_max * (1 + 1e-6))

@@ -18,12 +18,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from wmr_jax._src.checks import is_traced, real_array, require
-from wmr_jax._src.params import Gains, Robot, validate_gains
+from wmr_jax._src.params import Gains, Robot, validate_gains, validate_one_robot
 
 __all__ = [
     "GAIN_FIELDS",
     "PAPER_FEASIBLE_GAINS",
     "gains_as_dict",
+    "paper_feasible_gains",
     "gains_from_logits",
     "gains_from_unit",
     "logits_from_gains",
@@ -35,6 +36,31 @@ GAIN_FIELDS = tuple(f.name for f in dataclasses.fields(Gains))
 # The paper's Fig. 10 gains, the ones that meet k_r + L k_θ ≤ V_max
 # (60 + 1.85 · 10 = 78.5 cm/s); every other field at its default.
 PAPER_FEASIBLE_GAINS = Gains(kr=60.0)
+
+
+def paper_feasible_gains(robot: Robot | None = None) -> Gains:
+    """The paper's feasible gains for ``robot``: its shape ``k_r : k_θ = 60 : 10``, within budget.
+
+    ``PAPER_FEASIBLE_GAINS`` (``k_r = 60`` cm/s, ``k_θ = 10`` rad/s) where
+    ``60 + 10 L ≤ V_max`` (the paper robot: 78.5 ≤ 125 cm/s); on a slower or
+    wider robot both are scaled by one factor so that ``k_r + L k_θ ≤ V_max``:
+    the baseline every tuning report compares against is then one the robot
+    can follow. The other fields keep their defaults.
+
+    Raises:
+        ValueError: for a robot that is not one valid robot (a number per field).
+    """
+    robot = validate_one_robot(robot, "the paper's feasible gains")
+    kr, k_theta = float(PAPER_FEASIBLE_GAINS.kr), float(PAPER_FEASIBLE_GAINS.k_theta)
+    v_max, half_track = float(robot.v_max), float(robot.half_track)
+    if kr + half_track * k_theta <= v_max:
+        return PAPER_FEASIBLE_GAINS
+    scale = v_max / (kr + half_track * k_theta)
+    # Rounding may put the sum an ulp over the budget: step the scale down until it is not.
+    while kr * scale + half_track * (k_theta * scale) > v_max:
+        scale = math.nextafter(scale, 0.0)
+    return PAPER_FEASIBLE_GAINS.replace(kr=kr * scale, k_theta=k_theta * scale)
+
 
 # choice: the box that tuning and random search share. The wheel budget
 # k_r + L k_θ, the share of it given to k_r, Φ_m and α are linear in u; the

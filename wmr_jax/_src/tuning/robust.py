@@ -48,6 +48,7 @@ from wmr_jax._src.controllers.schedule import KNOTS
 from wmr_jax._src.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
 from wmr_jax._src.params import Gains, Robot, validate_one_robot
 from wmr_jax._src.poses import HORIZON_S, horizon_steps, sample_poses
+from wmr_jax._src.robots import describe_robot, same_robot
 from wmr_jax._src.rollout import DEFAULT_DT, check_temperature
 from wmr_jax._src.sensing import disturbances, loop
 from wmr_jax._src.sensing.disturbances import STANDARD_MISMATCH
@@ -56,7 +57,7 @@ from wmr_jax._src.sensing.loop import ClosedLoop
 from wmr_jax._src.tuning.estimation import EstimatorBox, estimator_box
 from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
 from wmr_jax._src.tuning.loss import LossWeights, arrival_terms
-from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS
+from wmr_jax._src.tuning.parametrisation import checked_point, paper_feasible_gains
 from wmr_jax._src.tuning.problems import FIXED, Problem, schedule_problem
 
 __all__ = [
@@ -102,13 +103,13 @@ class RobustConfig:
         observer_knots: knots per gain table of the observer.
     """
 
-    iters: int = 150
+    iters: int = 300
     poses: int = 32
     nonideal_poses: int = 8
     seed: int = 0
     learning_rate: float = 0.1
     temperature_start: float = 0.1
-    temperature_end: float = 0.01
+    temperature_end: float = 0.003
     eval_poses: int = EVAL_POSES
     search_poses: int = 32
     compare: bool = True
@@ -165,8 +166,9 @@ class JointProblem:
         return ClosedLoop(self.problem.controller, params, estimate)
 
     def from_logits(self, z: Any, robot: Robot) -> ClosedLoop:
-        """The closed loop of logits ``z`` (``u = σ(z)``)."""
-        return self.from_unit(1.0 / (1.0 + jnp.exp(-jnp.asarray(z))), robot)
+        """The closed loop of logits ``z`` (``u = σ(z)``, any real ``(dim,)``)."""
+        z = checked_point("z", z, self.dim, unit=False)
+        return self.from_unit(1.0 / (1.0 + jnp.exp(-z)), robot)
 
     def start_logits(self, robot: Robot) -> np.ndarray:
         """Logits of the start: the problem's start and the estimator's defaults."""
@@ -429,10 +431,12 @@ def tune_robust(
             iterations end, before the searches and the evaluation (which
             take longer than the tuning itself): a caller can keep the result
             from there.
-        robot: robot parameters; default ``Robot()``.
+        robot: robot parameters: ``None`` or ``Robot()``, the paper robot,
+            the only one the standard conditions that judge the loop (and
+            score the searches) run for now.
 
     Returns:
-        ``{"loop": ClosedLoop (controller, params, estimator), "gains": its
+        ``{"loop": ClosedLoop (controller, params, estimator, robot), "gains": its
         params, "history": {"loss": (iters,)}, "tune_wall_s": s,
         "searches": {method: (ClosedLoop, candidates)}, "rows":
         standard_conditions rows of the paper's gains (raw feedback), the
@@ -447,6 +451,13 @@ def tune_robust(
     check_callable("progress_fn", progress_fn)
     check_callable("on_tuned", on_tuned)
     robot = validate_one_robot(robot, "tuning")
+    if not same_robot(robot, Robot()):
+        # The loop would be tuned on this robot but judged, and the searches
+        # scored, on the paper's: standard_conditions takes no robot yet.
+        raise ValueError(
+            f"robot = {describe_robot(robot)} is not allowed; allowed: None or Robot(), the "
+            "paper robot (the standard conditions that judge the robust tuning run it only)"
+        )
     joint = joint_problem(config)
     dtype, dt, steps = float_dtype(), DEFAULT_DT, horizon_steps(DEFAULT_DT)
     z = jnp.asarray(joint.start_logits(robot), dtype)
@@ -470,10 +481,10 @@ def tune_robust(
         if progress_fn is not None:
             progress_fn(i + 1, losses[-1])
     wall = time.perf_counter() - began
-    tuned = _concrete(joint.from_logits(z, robot))
+    tuned = _concrete(joint.from_logits(z, robot))._replace(robot=robot)
     if on_tuned is not None:
         on_tuned(tuned, list(losses))
-    sets = {"paper": PAPER_FEASIBLE_GAINS, "robust-tuned": tuned}
+    sets = {"paper": paper_feasible_gains(robot), "robust-tuned": tuned}
     searches = {}
     if config.compare:
         search_refs = sample_poses(jax.random.fold_in(stream, -1 % 2**31), config.search_poses)

@@ -6,11 +6,17 @@ or ``"schedule"``) beside the parameters, and the estimator tuned with them
 (``"estimator": {"kind": "observer", ...}``; absent or null: raw feedback,
 docs/model.md §9). Files from before the schedules, which hold only
 ``Gains`` field names, load as fixed gains.
+
+It also records the robot the parameters were tuned for (``"robot":
+{field: value}``, with ``"robot_units"``): gains are tuned within that
+robot's wheel budget ``k_r + L k_θ ≤ V_max``, so they travel with it. Files
+from before robots were recorded load with ``robot`` ``None``.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
 from typing import Any
 
@@ -18,7 +24,8 @@ from wmr_jax._src.checks import check_path, require_unbatched
 from wmr_jax._src.controllers.schedule import SCHEDULE, SHAPE_FIELDS, TABLES, ScheduleParams
 from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
 from wmr_jax._src.io import json_object_once
-from wmr_jax._src.params import Gains
+from wmr_jax._src.params import Gains, Robot, validate_one_robot
+from wmr_jax._src.robots import ROBOT_UNITS, check_units, robot_from_values, robot_json
 from wmr_jax._src.sensing.loop import ClosedLoop
 from wmr_jax._src.tuning.estimation import estimator_from_json, estimator_json
 from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS
@@ -30,19 +37,23 @@ _KINDS = {"fixed": (SHIM_SUNG, Gains), "schedule": (SCHEDULE, ScheduleParams)}
 _SCHEDULE_FIELDS = (*TABLES, *SHAPE_FIELDS, "v_max", "half_track")
 
 
-def tuned_json(params: Any, estimator: Any = None) -> dict[str, Any]:
+def tuned_json(params: Any, estimator: Any = None, robot: Any = None) -> dict[str, Any]:
     """Return the ``tuned_gains.json`` content of ``Gains`` or ``ScheduleParams``.
 
-    ``params`` may also be a ``ClosedLoop`` (its params and estimator);
-    ``estimator`` is the estimator tuned with the gains (``None``: raw
-    feedback), written under ``"estimator"``.
+    ``params`` may also be a ``ClosedLoop`` (its params, estimator and
+    robot); ``estimator`` is the estimator tuned with the gains (``None``:
+    raw feedback), written under ``"estimator"``; ``robot`` the ``Robot``
+    they were tuned for, written under ``"robot"`` (cm, kg, s; its units
+    under ``"robot_units"``). ``None`` (and no robot in the loop) writes no
+    robot, as files did before.
 
     Raises:
         ValueError: for anything but one valid parameter set (a scalar per
-            field), naming the field: ``load_tuned`` must read back what is
-            written, and a file of nulls is never written.
+            field) and robot, naming the field: ``load_tuned`` must read
+            back what is written, and a file of nulls is never written.
     """
     if isinstance(params, ClosedLoop):
+        robot = params.robot if robot is None else robot
         params, estimator = params.params, params.estimator
     if not isinstance(params, (Gains, ScheduleParams)):
         raise ValueError(
@@ -56,7 +67,26 @@ def tuned_json(params: Any, estimator: Any = None) -> dict[str, Any]:
     sensed = estimator_json(estimator)
     if sensed is not None:
         values["estimator"] = sensed
+    if robot is not None:
+        robot = validate_one_robot(robot, "tuned_gains.json")
+        _check_schedule_robot(params, robot, "robot")
+        values["robot"] = robot_json(robot)
+        values["robot_units"] = dict(ROBOT_UNITS)
     return values
+
+
+def _check_schedule_robot(params: Any, robot: Robot, where: str) -> None:
+    """A schedule caps ``|v| + L|ω|`` with its own ``v_max`` and ``L``: they must be its robot's."""
+    if not isinstance(params, ScheduleParams):
+        return
+    for name in ("v_max", "half_track"):
+        mine, theirs = float(getattr(params, name)), float(getattr(robot, name))
+        if not math.isclose(mine, theirs, rel_tol=1e-6):  # to float32 rounding
+            raise ValueError(
+                f"{where}: the schedule's {name} = {mine!r} is not allowed with robot.{name} = "
+                f"{theirs!r}; allowed: the same (the schedule was tuned within its robot's "
+                "wheel budget)"
+            )
 
 
 def _kind_of(values: dict[str, Any], where: str) -> str:
@@ -105,10 +135,11 @@ def load_tuned(path: str | os.PathLike) -> ClosedLoop:
         path: the JSON file.
 
     Returns:
-        ``ClosedLoop(controller, params, estimator)``: ``SHIM_SUNG`` with
-        ``Gains`` or ``SCHEDULE`` with ``ScheduleParams``, and ``None`` (raw
-        feedback) or the ``ObserverParams``/``EKFParams`` saved with them;
-        checked.
+        ``ClosedLoop(controller, params, estimator, robot)``: ``SHIM_SUNG``
+        with ``Gains`` or ``SCHEDULE`` with ``ScheduleParams``, ``None`` (raw
+        feedback) or the ``ObserverParams``/``EKFParams`` saved with them,
+        and the ``Robot`` they were tuned for (``None`` if the file records
+        none); checked.
 
     Raises:
         ValueError: one line naming the file and what is wrong with it.
@@ -126,7 +157,13 @@ def load_tuned(path: str | os.PathLike) -> ClosedLoop:
     controller, cls = _KINDS[kind]
     fields = GAIN_FIELDS if kind == "fixed" else _SCHEDULE_FIELDS
     estimator = estimator_from_json(values.get("estimator"), where)
-    numbers = {k: v for k, v in values.items() if k not in ("kind", "controller", "estimator")}
+    robot = None
+    if "robot_units" in values:
+        check_units(values["robot_units"], where)
+    if "robot" in values:
+        robot = robot_from_values(values["robot"], f"{where}: robot")
+    named = ("kind", "controller", "estimator", "robot", "robot_units")
+    numbers = {k: v for k, v in values.items() if k not in named}
     bad = sorted(set(numbers) - set(fields))
     if (
         bad
@@ -161,6 +198,9 @@ def load_tuned(path: str | os.PathLike) -> ClosedLoop:
         k: tuple(map(float, v)) if isinstance(v, list) else float(v) for k, v in numbers.items()
     }
     try:
-        return ClosedLoop(controller, controller.validate(cls(**numbers)), estimator)
+        params = controller.validate(cls(**numbers))
     except ValueError as err:
         raise ValueError(f"{where}: {err}") from None
+    if robot is not None:
+        _check_schedule_robot(params, robot, where)
+    return ClosedLoop(controller, params, estimator, robot)

@@ -1,7 +1,7 @@
 """The tuner: Adam on the logits of the feasible set, with an annealed smooth law.
 
 ``train`` starts from the paper's feasible gains (``PAPER_FEASIBLE_GAINS``,
-moved just inside the search box), runs ``config.iters`` iterations of
+moved just inside the search box, whose budget is the robot's), runs ``config.iters`` iterations of
 ``optax.chain(clip_by_global_norm, adam)`` on the robust batch gradient of
 ``tuning_loss`` over a fresh batch of ``config.poses`` references each,
 annealing the smooth law's temperature, and then, with the hard law, runs
@@ -50,9 +50,7 @@ from wmr_jax._src.tuning.evaluation import (
     held_out_poses,
 )
 from wmr_jax._src.tuning.loss import LossSpec, LossWeights, make_spec, robust_value_and_grad
-from wmr_jax._src.tuning.parametrisation import (
-    PAPER_FEASIBLE_GAINS,
-)
+from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
 from wmr_jax._src.tuning.problems import FIXED, MAX_TUNED_KNOTS, Problem, schedule_problem
 from wmr_jax._src.tuning.search import SearchResult, random_search
 
@@ -278,7 +276,8 @@ class TuneResult(NamedTuple):
         gains: the tuned parameters (feasible; floats): ``Gains``, or
             ``ScheduleParams`` for a schedule.
         evaluation: hard-law ``Evaluation`` on the held-out poses, keyed
-            ``"paper_feasible"``, ``"tuned"`` and, if run, ``"random_search"``.
+            ``"paper_feasible"`` (``paper_feasible_gains(robot)``), ``"tuned"``
+            and, if run, ``"random_search"``.
         history: per-iteration ``loss`` (s), ``temperature`` and ``gains``
             ``(iters, columns)`` (``Problem.columns``), as NumPy arrays.
         tune_wall_s: wall time of the gradient iterations (all sessions), s.
@@ -539,7 +538,9 @@ def _compare(
             **run,
         )
     held_out = held_out_poses(config.eval_poses, config.eval_seed)
-    candidates = {"paper_feasible": PAPER_FEASIBLE_GAINS, "tuned": tuned}
+    # The paper's gains scaled into this robot's wheel budget: the baseline
+    # must be gains the robot can follow, as the tuned ones are.
+    candidates = {"paper_feasible": paper_feasible_gains(robot), "tuned": tuned}
     if search is not None:
         candidates["random_search"] = search.gains
     evaluation = {}
