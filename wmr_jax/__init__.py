@@ -53,6 +53,10 @@ from wmr_jax._src.poses import sample_poses as sample_poses
 from wmr_jax._src.reference import reference_control as reference_control
 from wmr_jax._src.reference import reference_diagnostics as reference_diagnostics
 from wmr_jax._src.reference import reference_rollout as reference_rollout
+from wmr_jax._src.robots import ROBOTS as ROBOTS
+from wmr_jax._src.robots import load_robot as load_robot
+from wmr_jax._src.robots import read_robot as read_robot
+from wmr_jax._src.robots import robot_preset as robot_preset
 from wmr_jax._src.rollout import DEFAULT_DT as DEFAULT_DT
 from wmr_jax._src.rollout import Trajectory as Trajectory
 from wmr_jax._src.rollout import batch_rollout as batch_rollout
@@ -60,6 +64,7 @@ from wmr_jax._src.rollout import final_poses as final_poses
 from wmr_jax._src.rollout import rollout as rollout
 from wmr_jax._src.sensing.estimators import EKFParams as EKFParams
 from wmr_jax._src.sensing.estimators import ObserverParams as ObserverParams
+from wmr_jax._src.sensing.loop import ClosedLoop as ClosedLoop
 from wmr_jax._src.sharding import ShardedBatch as ShardedBatch
 from wmr_jax._src.sharding import shard as shard
 from wmr_jax._src.sharding import unpad as unpad
@@ -70,15 +75,96 @@ from wmr_jax._src.tuning.saved import load_tuned as load_tuned
 
 __version__ = "0.1.0"
 
-from wmr_jax import controllers as controllers  # noqa: E402  (the public families)
-from wmr_jax import dynamics as dynamics  # noqa: E402
+# The public families, imported on first use (wmr_jax.cli, say, after a plain
+# ``import wmr_jax``): report, studies and tuning import optax or matplotlib,
+# and cli every command, which ``import wmr_jax`` should not pay for.
+_SUBMODULES = ("cli", "controllers", "dynamics", "report", "studies", "tuning")
 
-_LAZY = ("report", "studies", "tuning")  # they import optax or matplotlib: on first use
+# Every name imported above as itself, and the families (tests/test_usability.py
+# holds the list to the imports: a new export goes in both).
+__all__ = [
+    "float_dtype",
+    "AICARDI",
+    "ASTOLFI",
+    "SHIM_SUNG",
+    "Controller",
+    "get_controller",
+    "register_controller",
+    "registered_names",
+    "AicardiGains",
+    "AstolfiGains",
+    "Diagnostics",
+    "PolarError",
+    "control",
+    "control_diagnostics",
+    "lyapunov",
+    "polar_error",
+    "region_label",
+    "wheel_speeds",
+    "Options",
+    "DEFAULT_TOL_R",
+    "DEFAULT_TOL_THETA",
+    "arrival_time",
+    "arrived",
+    "path_length",
+    "region_time",
+    "success_rate",
+    "zigzag_count",
+    "TimeBounds",
+    "time_bounds",
+    "Gains",
+    "Robot",
+    "SamplingWarning",
+    "WheelSpeedWarning",
+    "check_feasible",
+    "check_sampling",
+    "sampling_margins",
+    "wheel_speed_bound",
+    "EVAL_R_MAX",
+    "EVAL_R_MIN",
+    "HORIZON_S",
+    "PAPER_REFS_DEG",
+    "horizon_steps",
+    "paper_refs",
+    "sample_poses",
+    "reference_control",
+    "reference_diagnostics",
+    "reference_rollout",
+    "ROBOTS",
+    "load_robot",
+    "read_robot",
+    "robot_preset",
+    "DEFAULT_DT",
+    "Trajectory",
+    "batch_rollout",
+    "final_poses",
+    "rollout",
+    "EKFParams",
+    "ObserverParams",
+    "ClosedLoop",
+    "ShardedBatch",
+    "shard",
+    "unpad",
+    "use_cpu_devices",
+    "SWEEP_FIELDS",
+    "sweep",
+    "load_tuned",
+    "cli",
+    "controllers",
+    "dynamics",
+    "report",
+    "studies",
+    "tuning",
+]
 
 
 def __getattr__(name: str):
-    if name in _LAZY:
+    if name in _SUBMODULES:
         import importlib
 
         return importlib.import_module(f"wmr_jax.{name}")
     raise AttributeError(f"module 'wmr_jax' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

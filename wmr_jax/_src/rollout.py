@@ -34,6 +34,7 @@ from wmr_jax._src.checks import (
     require_unbatched,
 )
 from wmr_jax._src.controllers.base import Controller, get_controller
+from wmr_jax._src.controllers.polar import AT_GOAL, GOAL_EPS
 from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
 from wmr_jax._src.loops import (
     DEFAULT_STEPS,
@@ -88,15 +89,54 @@ class Trajectory(NamedTuple):
     distance: jax.Array
 
 
+# choice: where the compute dtype spaces positions near the reference more than
+# this apart, cm (a reference beyond 524 cm of the origin in float32, 3e11 cm in
+# float64), a run that starts nearer its reference than the farther of the two
+# is from the origin is computed in the reference's frame: translated so that
+# the reference is at the origin, and its poses translated back. The laws and
+# the robot do not depend on where the origin is, but the rounding does: in
+# the world frame the last millimetres to a reference 1e4 cm out are a few
+# float32 spacings, and a step of the robot rounds to a different direction or
+# none (the polar baselines then never settled, docs/model.md §3.8). In the
+# reference's frame the run has the resolution of a run near the origin, and
+# float32 arrives when float64 does. A run from near the origin to a far
+# reference stays in the world frame: translated, its goal would be resolved
+# and its start no longer, which is no better. Nearer the origin nothing
+# changes: the translation is by 0, and the run is the same bit for bit.
+GOAL_FRAME_SPACING = AT_GOAL / GOAL_EPS
+
+
+def _goal_frame(ref: jax.Array, init: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """Return ``(ref, init, shift)``, translated by ``-shift`` (see ``GOAL_FRAME_SPACING``).
+
+    ``shift`` is ``[x_r, y_r, 0]`` for a run computed in the reference's frame, else zeros.
+    """
+    far = jnp.max(jnp.abs(ref[:2]))
+    coarse = jnp.finfo(ref.dtype).eps * far > GOAL_FRAME_SPACING
+    nearer = jnp.max(jnp.abs(init[:2] - ref[:2])) < jnp.maximum(far, jnp.max(jnp.abs(init[:2])))
+    shift = jnp.where(coarse & nearer, ref.at[2].set(0.0), jnp.zeros_like(ref))
+    return ref - shift, init - shift, shift
+
+
+def _world_frame(poses: jax.Array, shift: jax.Array) -> jax.Array:
+    """Translate poses ``(..., 3)`` of the reference's frame back by ``shift``."""
+    # where, not a plain sum: a shift of 0 would turn a −0.0 into 0.0.
+    return jnp.where(jnp.any(shift != 0), poses + shift, poses)
+
+
 def _trajectory(ref, params, init, robot, dt, options: Options) -> Trajectory:
-    _, _, (poses, out) = scan_closed_loop(ref, params, init, robot, dt, options, record=True)
-    poses = jnp.concatenate([init[None], poses], axis=0)
+    local_ref, local_init, shift = _goal_frame(ref, init)
+    _, _, (poses, out) = scan_closed_loop(
+        local_ref, params, local_init, robot, dt, options, record=True
+    )
+    poses = jnp.concatenate([init[None], _world_frame(poses, shift)], axis=0)
     return Trajectory(poses, out.v, out.omega, out.region, out.wheel_speeds, out.distance)
 
 
 def _final_pose(ref, params, init, robot, dt, options: Options) -> jax.Array:
-    final, _, _ = scan_closed_loop(ref, params, init, robot, dt, options)
-    return final
+    local_ref, local_init, shift = _goal_frame(ref, init)
+    final, _, _ = scan_closed_loop(local_ref, params, local_init, robot, dt, options)
+    return _world_frame(final, shift)
 
 
 _rollout_jit = EntryJit(_trajectory, static_argnames=("options",))
@@ -387,4 +427,5 @@ def final_poses(
 
 
 for _entry in (rollout, batch_rollout, final_poses):
-    _entry.__doc__ = _entry.__doc__.replace("    {options}", _OPTIONS_DOC)
+    # _OPTIONS_DOC starts with its own line break: no blank line inside Args.
+    _entry.__doc__ = _entry.__doc__.replace("\n    {options}", _OPTIONS_DOC)

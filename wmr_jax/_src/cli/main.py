@@ -57,6 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Differentiable, batched simulator of the Shim–Sung (2003) pose controller.",
         formatter_class=_HelpFormatter,
     )
+    parser.add_argument("--version", action="version", version=f"wmr-jax {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
         module_name = _MODULE_OF.get(name, name)
@@ -77,9 +78,28 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _version() -> str:
+    """Return the installed version of the package (its own ``__version__`` if not installed)."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("wmr_jax")
+    except metadata.PackageNotFoundError:  # run from a source tree
+        from wmr_jax import __version__
+
+        return __version__
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status."""
     parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if not argv:
+        # No command is a usage error like any other (status 2, so a script
+        # whose command word came out empty fails), but the whole help says
+        # more than a one-line error would; stderr, as for every error.
+        parser.print_help(sys.stderr)
+        return 2
     args = parser.parse_args(argv)
     if args.command in _ALL_DEVICE_COMMANDS and getattr(args, "cpu_devices", None) is None:
         from wmr_jax._src.sharding import use_cpu_devices

@@ -17,6 +17,7 @@ from wmr_jax._src.controllers.polar import (
     checked_inputs,
     driving_error,
     gain_values,
+    goal_floor,
     hold_at_goal,
 )
 from wmr_jax._src.dynamics import sinc
@@ -62,7 +63,8 @@ def aicardi_control(
     With ``V = (λ ρ² + α² + h θ_A²)/2`` the paper chooses
     ``v = γ ρ cos α`` and ``ω = k α + γ (cos α sin α / α)(α + h θ_A)``, so that
     ``V̇ = −λ γ ρ² cos² α − k α² ≤ 0``; ``v`` changes sign when driving backwards.
-    Within ``AT_GOAL`` of the reference it only turns, ``ω = k θ_e`` (``polar.py``).
+    Within ``goal_floor`` of the reference (``AT_GOAL`` = 1e-3 cm, more far from
+    the origin) it only turns, ``ω = k θ_e`` (``polar.py``).
 
     Args:
         pose: ``(..., 3)`` current pose ``[x cm, y cm, θ rad]``.
@@ -78,7 +80,8 @@ def aicardi_control(
     cos_alpha = jnp.cos(alpha)
     v = direction * gains.gamma * rho * cos_alpha
     omega = gains.k * alpha + gains.gamma * cos_alpha * sinc(alpha) * (alpha + gains.h * theta_a)
-    return hold_at_goal(rho, alpha, theta_a, v, omega, gains.k)
+    floor = goal_floor(pose, ref, frame=frame)
+    return hold_at_goal(rho, alpha, theta_a, v, omega, gains.k, floor)
 
 
 def validate_aicardi_gains(gains: AicardiGains) -> AicardiGains:

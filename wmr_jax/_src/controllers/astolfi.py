@@ -18,6 +18,7 @@ from wmr_jax._src.controllers.polar import (
     checked_inputs,
     driving_error,
     gain_values,
+    goal_floor,
     hold_at_goal,
 )
 
@@ -63,8 +64,9 @@ def astolfi_control(
     ``v = k_ρ ρ`` and ``ω = k_α α + k_β β`` with ``β = −θ_A`` (Corke's "moving to
     a pose"); ``v`` changes sign when driving backwards. choice: ``α`` is held
     within ``[−π/2, π/2]`` as the Toolbox's polar-coordinate block does, which
-    matters only when backward driving is off. Within ``AT_GOAL`` of the
-    reference it only turns, ``ω = k_α θ_e`` (``polar.py``).
+    matters only when backward driving is off. Within ``goal_floor`` of the
+    reference (``AT_GOAL`` = 1e-3 cm, more far from the origin) it only turns,
+    ``ω = k_α θ_e`` (``polar.py``).
 
     Args:
         pose: ``(..., 3)`` current pose ``[x cm, y cm, θ rad]``.
@@ -80,7 +82,8 @@ def astolfi_control(
     alpha = jnp.clip(alpha, -jnp.pi / 2, jnp.pi / 2)
     v = direction * gains.k_rho * rho
     omega = gains.k_alpha * alpha - gains.k_beta * theta_a
-    return hold_at_goal(rho, alpha, theta_a, v, omega, gains.k_alpha)
+    floor = goal_floor(pose, ref, frame=frame)
+    return hold_at_goal(rho, alpha, theta_a, v, omega, gains.k_alpha, floor)
 
 
 # ---------------------------------------------------------------- boundary checks

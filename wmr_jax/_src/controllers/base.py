@@ -11,6 +11,7 @@ which one it is.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import re
 from collections.abc import Callable
 from typing import Any
@@ -66,6 +67,15 @@ class Controller:
 
     def __post_init__(self) -> None:
         check_bool("controller.smooth", self.smooth)  # "no" would be true
+        # A function the loop cannot call would fail only inside the traced
+        # scan, as a TypeError far from its cause: refuse it here instead.
+        for field in _CALLS:
+            _check_signature(self.name, field, getattr(self, field))
+
+    def __repr__(self) -> str:
+        # The generated repr lists every function with its address, which
+        # buries a rollout's signature in help() under lines of noise.
+        return f"<Controller {self.name!r}>"
 
     def default_params(self) -> Any:
         """Return the controller's default parameters."""
@@ -79,6 +89,50 @@ class Controller:
             shape = jnp.shape(frame[0]) if frame is not None else jnp.shape(pose)[:-1]
             return jnp.full(shape, -1, jnp.int32)
         return self.region(pose, ref, params, frame=frame)
+
+
+# How the package calls each function of a Controller: the positional
+# arguments, then each set of keywords it passes (the rollouts pass frame= to
+# command, the waypoint loops do not), and the signature shown as allowed.
+_CALLS: dict[str, tuple[tuple[str, ...], tuple[tuple[str, ...], ...], str]] = {
+    "command": (
+        ("pose", "ref", "params"),
+        (("temperature",), ("temperature", "frame")),
+        "command(pose, ref, params, *, temperature=None, frame=None) -> (v, omega)",
+    ),
+    "validate": (("params",), ((),), "validate(params) -> params"),
+    "region": (("pose", "ref", "params"), (("frame",),), "region(pose, ref, params, *, frame)"),
+    "check_robot": (("params", "robot"), ((),), "check_robot(params, robot) -> None"),
+    "check_sampling": (("params", "dt"), ((),), "check_sampling(params, dt) -> None"),
+}
+
+
+def _check_signature(name: Any, field: str, function: Any) -> None:
+    """Refuse a function of a ``Controller`` that cannot be called as the package calls it.
+
+    Anything that is not callable, or whose signature Python cannot read (some
+    builtins), passes here; ``register_controller`` refuses the former.
+
+    Raises:
+        ValueError: naming the controller, the field, the function's signature
+            and the one allowed.
+    """
+    if not callable(function):
+        return
+    try:
+        signature = inspect.signature(function)
+    except (TypeError, ValueError):
+        return
+    positional, keyword_sets, allowed = _CALLS[field]
+    for keywords in keyword_sets:
+        try:
+            signature.bind(*positional, **dict.fromkeys(keywords))
+        except TypeError as err:
+            shown = getattr(function, "__qualname__", type(function).__name__)
+            raise ValueError(
+                f"controller {name!r}: controller.{field} = {shown}{signature} is not allowed "
+                f"({err}); allowed: a function {allowed} (keywords with defaults, or **kwargs)"
+            ) from None
 
 
 _REGISTRY: dict[str, Controller] = {}

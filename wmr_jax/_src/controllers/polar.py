@@ -40,13 +40,35 @@ from wmr_jax._src.checks import check_bool, field_values
 from wmr_jax._src.controllers import shim_sung as law
 from wmr_jax._src.controllers.base import check_law_inputs
 
-__all__ = ["AT_GOAL", "checked_inputs", "driving_error", "gain_values", "hold_at_goal"]
+__all__ = [
+    "AT_GOAL",
+    "GOAL_EPS",
+    "checked_inputs",
+    "driving_error",
+    "gain_values",
+    "goal_floor",
+    "hold_at_goal",
+]
 
 # choice (docs/model.md §3): within this distance of the reference, cm, the
 # polar laws stop driving and only turn to the reference heading. Their
 # bearing α is undefined at ρ = 0, and once ρ is down to rounding it is noise
 # that ω would follow (PythonRobotics' move_to_pose stops at 0.001 too).
 AT_GOAL = 1e-3
+
+# choice: far from the origin the positions themselves are coarser than
+# AT_GOAL (float32 spaces them 1e-3 cm apart near 1e4 cm), so the floor grows
+# to this many machine epsilons ε of the largest coordinate magnitude. Within
+# a few spacings of the goal a step of v dt = k ρ dt rounds away (k dt ≈ 0.1
+# at the default gains and period: below ρ ≈ 5 spacings the robot no longer
+# moves), ρ stalls above a fixed floor and ω chases the bearing of a rounding
+# error instead of the reference heading, 90° off. 16 ε m is 16 to 32
+# spacings, enough for k dt down to 1/32; it changes nothing while the largest
+# coordinate is below AT_GOAL / (16 ε), 524 cm in float32 and 3e11 cm in
+# float64. The rollout entry points compute such runs in the reference's
+# frame instead (rollout.GOAL_FRAME_SPACING), where the floor is AT_GOAL
+# again; loops that run in the world frame (sweeps, studies) use this one.
+GOAL_EPS = 16
 
 
 def driving_error(
@@ -87,6 +109,34 @@ def gain_values(params: Any, cls: type) -> dict[str, np.ndarray | None]:
     return field_values(params, cls, "gains", skip=("backward",))
 
 
+def goal_floor(pose: Any, ref: jax.Array, *, frame: Any = None) -> jax.Array:
+    """Return the distance in cm within which the polar laws only turn (``hold_at_goal``).
+
+    ``max(AT_GOAL, GOAL_EPS · ε · m)`` for the machine epsilon ``ε`` of the
+    compute dtype and the largest of ``|x|, |y|`` of the pose and of the
+    reference, ``m`` in cm: ``AT_GOAL`` at ordinary coordinates, and a few
+    spacings of the representable positions far from the origin, so that the
+    floor lies above the distances that rounding leaves (see ``GOAL_EPS``).
+
+    Args:
+        pose: ``(..., 3)`` current pose ``[x cm, y cm, θ rad]``; not read when
+            ``frame`` is given.
+        ref: ``(..., 3)`` reference pose.
+        frame: the pose as ``(x, y, cos θ, sin θ)`` (see ``shim_sung.polar_error``).
+
+    Returns:
+        The broadcast leading shape of ``pose`` (or ``frame``) and ``ref``.
+    """
+    x, y = (frame[0], frame[1]) if frame is not None else (pose[..., 0], pose[..., 1])
+    x, y, ref = jnp.asarray(x), jnp.asarray(y), jnp.asarray(ref)
+    dtype = jnp.result_type(x, y, ref, float)
+    magnitude = jnp.maximum(
+        jnp.maximum(jnp.abs(x), jnp.abs(y)),
+        jnp.maximum(jnp.abs(ref[..., 0]), jnp.abs(ref[..., 1])),
+    ).astype(dtype)
+    return jnp.maximum(jnp.asarray(AT_GOAL, dtype), GOAL_EPS * jnp.finfo(dtype).eps * magnitude)
+
+
 def hold_at_goal(
     rho: jax.Array,
     alpha: jax.Array,
@@ -94,13 +144,15 @@ def hold_at_goal(
     v: jax.Array,
     omega: jax.Array,
     rate: jax.Array,
+    floor: Any = AT_GOAL,
 ) -> tuple[jax.Array, jax.Array]:
-    """Return ``(v, ω)``, or ``(0, rate · θ_e)`` where ``ρ < AT_GOAL``.
+    """Return ``(v, ω)``, or ``(0, rate · θ_e)`` where ``ρ < floor``.
 
     At the goal the robot holds its position and turns to the reference
     heading, ``θ_e = α − θ_A`` (wrapped), at the law's own heading rate.
+    ``floor``, cm: ``AT_GOAL``, or ``goal_floor`` of the pose (the laws pass it).
     """
-    near = rho < AT_GOAL
+    near = rho < floor
     theta_e = law.wrap_angle(alpha - theta_a)
     return jnp.where(near, 0.0, v), jnp.where(near, rate * theta_e, omega)
 

@@ -1,0 +1,224 @@
+"""What a user meets first: far-off goals, own controllers, the package's surface, --version."""
+
+import importlib.metadata
+import inspect
+import pydoc
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+
+import wmr_jax as w
+from wmr_jax import controllers
+from wmr_jax._src.cli.main import main
+from wmr_jax._src.controllers import base
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+# ---------------------------------------------------------------- baselines far from the origin
+
+
+def _run(controller, x64, offset):
+    with jax.enable_x64(x64):
+        ref, init = [offset + 10.0, 0.0, np.pi / 2], [offset, 0.0, 0.0]
+        traj = w.rollout(ref, controller=controller, init=init, steps=606)
+        assert traj.poses.dtype == (np.float64 if x64 else np.float32)
+        # final_poses runs in the same frame as rollout.
+        final = w.final_poses(np.array([ref]), controller=controller, init=init, steps=200)
+        np.testing.assert_allclose(final[0], traj.poses[200], rtol=0, atol=1e-6 * offset + 1e-9)
+        poses = np.asarray(traj.poses, np.float64) - [offset, 0.0, 0.0]
+        return float(w.arrival_time(traj, ref, dt=w.DEFAULT_DT)), poses
+
+
+@pytest.mark.parametrize("controller", ["aicardi", "astolfi-corke"])
+@pytest.mark.parametrize("offset", [1e4, 1e6])
+def test_polar_baselines_arrive_alike_in_float32_and_float64_far_from_the_origin(
+    controller, offset
+):
+    """Near 1e4 cm float32 spaces positions 1e-3 cm apart: aicardi used to end 90° off."""
+    t32, poses32 = _run(controller, False, offset)
+    t64, poses64 = _run(controller, True, offset)
+    t0, poses0 = _run(controller, True, 0.0)
+    assert np.isfinite(t32) and abs(t32 - t64) <= w.DEFAULT_DT * 1.001, (t32, t64)
+    # Run in the reference's frame, it is the run near the origin, moved: to
+    # the rounding of the dtype (positions to the float32 spacing at offset).
+    assert t64 == t0
+    np.testing.assert_allclose(poses64, poses0, rtol=0, atol=1e-7)
+    spacing = float(np.spacing(np.float32(offset)))
+    np.testing.assert_allclose(poses32[:, :2], poses0[:, :2], rtol=0, atol=spacing)
+    np.testing.assert_allclose(poses32[:, 2], poses0[:, 2], rtol=0, atol=1e-5)
+
+
+@pytest.mark.parametrize("law", ["aicardi_control", "astolfi_control"])
+def test_polar_goal_floor_is_1e_3_cm_at_ordinary_coordinates(law):
+    """Within 1e-3 cm the laws only turn, beyond it they drive (docs/model.md §3.8), any dtype."""
+    control = getattr(controllers, law)
+    params = w.AicardiGains() if law == "aicardi_control" else w.AstolfiGains()
+    for x64 in (False, True):
+        with jax.enable_x64(x64):
+            for origin in (0.0, 100.0):
+                pose = np.array([origin, -origin, 0.0])
+                for step, drives in ((2e-3, True), (5e-4, False)):
+                    ref = pose + np.array([step, 0.0, np.pi / 2])
+                    v, omega = control(pose, ref, params)
+                    assert (float(v) != 0.0) == drives, (x64, origin, step, float(v))
+                    assert float(omega) != 0.0
+            # Far off, float32 resolves no better than its spacing of positions;
+            # float64 keeps the fixed floor.
+            pose = np.array([1e4, 0.0, 0.0])
+            v, _ = control(pose, pose + np.array([0.01, 0.0, np.pi / 2]), params)
+            assert (float(v) != 0.0) == x64
+
+
+# ---------------------------------------------------------------- custom controllers
+
+
+def _mine(pose, ref, params, *, temperature=None, frame=None):
+    err = w.polar_error(pose, ref, frame=frame)
+    return 3.0 * err.r * err.cos_phi, 4.0 * err.sin_phi
+
+
+def test_a_command_without_the_frame_keyword_is_refused_in_one_line():
+    """Not a TypeError from inside the traced loop: a ValueError when the Controller is built."""
+
+    def no_frame(pose, ref, params, *, temperature=None):
+        return _mine(pose, ref, params)
+
+    with pytest.raises(ValueError) as info:
+        w.Controller(name="no-frame", command=no_frame, params_type=w.Gains, validate=lambda g: g)
+    message = str(info.value)
+    assert "\n" not in message
+    assert message.startswith("controller 'no-frame': controller.command = ")
+    assert "unexpected keyword argument 'frame'" in message
+    assert "allowed: a function command(pose, ref, params, *, temperature=None, frame=None)" in (
+        message
+    )
+
+    def positional_only(pose, ref, params):
+        return _mine(pose, ref, params)
+
+    with pytest.raises(ValueError, match="unexpected keyword argument 'temperature'"):
+        w.Controller(name="p", command=positional_only, params_type=w.Gains, validate=lambda g: g)
+    with pytest.raises(ValueError, match=r"controller 'r': controller.region = .*allowed: a "):
+        w.Controller(
+            name="r",
+            command=_mine,
+            params_type=w.Gains,
+            validate=lambda g: g,
+            region=lambda pose, ref, params: 0,
+        )
+    with pytest.raises(ValueError, match=r"controller.validate = .*too many positional"):
+        w.Controller(name="v", command=_mine, params_type=w.Gains, validate=lambda: None)
+    # Keywords with defaults, or **kwargs, are what the loops need; both run.
+    for command in (_mine, lambda pose, ref, params, **kw: _mine(pose, ref, params, **kw)):
+        custom = w.Controller(name="ok", command=command, params_type=w.Gains, validate=lambda g: g)
+        final = np.asarray(w.rollout([20.0, 5.0, 0.0], controller=custom, steps=150).poses[-1])
+        assert np.hypot(final[0] - 20.0, final[1] - 5.0) < 0.1
+
+
+def test_custom_controller_page_runs_as_written(tmp_path, monkeypatch, capsys):
+    """docs/custom_controller.md: its Python block runs and registers "mine"."""
+    page = (ROOT / "docs" / "custom_controller.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"```python\n(.*?)```", page, flags=re.S)
+    assert len(blocks) == 1
+    # The page registers a controller: keep it out of the other tests' registry.
+    monkeypatch.setattr(base, "_REGISTRY", dict(base._REGISTRY))
+    monkeypatch.chdir(tmp_path)
+    exec(compile(blocks[0], "docs/custom_controller.md", "exec"), {"__name__": "page"})
+    assert "mine" in w.registered_names()
+    out = capsys.readouterr().out
+    assert "final pose" in out and "d(miss after 1 s)/d(k_rho)" in out
+    arrival = float(re.search(r"arrived after (\S+) s", out).group(1))
+    assert np.isfinite(arrival)
+
+
+# ---------------------------------------------------------------- the package's surface
+
+
+def test_a_plain_import_reaches_every_family_on_first_use():
+    code = (
+        "import sys, wmr_jax\n"
+        "assert 'wmr_jax.cli' not in sys.modules and 'wmr_jax.report' not in sys.modules\n"
+        "assert callable(wmr_jax.cli.main)\n"
+        "assert 'cli' in dir(wmr_jax)\n"
+        "for name in ('controllers', 'dynamics', 'tuning', 'studies', 'report'):\n"
+        "    assert getattr(wmr_jax, name).__name__ == 'wmr_jax.' + name\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
+    assert callable(w.cli.main)
+    with pytest.raises(AttributeError, match="no attribute 'nonesuch'"):
+        w.nonesuch  # noqa: B018
+
+
+def test_all_lists_every_public_name_of_the_package():
+    assert len(w.__all__) == len(set(w.__all__))
+    for name in w.__all__:
+        assert hasattr(w, name), name
+    # Everything __init__.py re-exports (``import X as X``), and the families.
+    source = (ROOT / "wmr_jax" / "__init__.py").read_text(encoding="utf-8")
+    exported = re.findall(r"^from wmr_jax\S* import (\w+) as \1\b", source, flags=re.M)
+    families = ["cli", "controllers", "dynamics", "report", "studies", "tuning"]
+    assert sorted(w.__all__) == sorted(exported + families)
+
+
+# ---------------------------------------------------------------- help() on the entry points
+
+_PARAMETERS = [
+    "gains",
+    "init",
+    "dt",
+    "steps",
+    "robot",
+    "velocity",
+    "controller",
+    "temperature",
+    "substeps",
+    "wheel_limit",
+]
+
+
+@pytest.mark.parametrize(
+    "entry, first, summary",
+    [
+        ("rollout", "ref", "Drive the robot from ``init`` towards ``ref`` and record the whole"),
+        ("batch_rollout", "refs", "Run ``rollout`` for a batch, in one call."),
+        ("final_poses", "refs", "Return only the last pose of each run, ``(N, 3)``;"),
+    ],
+)
+def test_help_shows_the_entry_points_signature_and_docstring(entry, first, summary):
+    function = getattr(w, entry)
+    signature = inspect.signature(function)
+    assert list(signature.parameters) == [first, *_PARAMETERS]
+    assert signature.parameters["steps"].kind is inspect.Parameter.KEYWORD_ONLY
+    assert function.__doc__.startswith(summary)
+    text = pydoc.render_doc(function, renderer=pydoc.plaintext)
+    # The default controller reads as its name, not a dataclass of function addresses.
+    assert "controller: 'Controller | str' = <Controller 'shim-sung'>" in text
+    assert " at 0x" not in text and "{options}" not in text
+    # The shared option lines continue the Args list, without a blank line.
+    assert re.search(r"gains: [^\n]*\n(?:[^\n]+\n)*?\s+init: ", text), text
+
+
+# ---------------------------------------------------------------- wmr-jax --version, bare wmr-jax
+
+
+def test_version_prints_the_installed_version(capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["--version"])
+    assert info.value.code == 0
+    assert capsys.readouterr().out == f"wmr-jax {importlib.metadata.version('wmr_jax')}\n"
+
+
+def test_bare_command_prints_the_help_with_status_2(capsys):
+    assert main([]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err.startswith("usage: wmr-jax")
+    assert "--version" in captured.err
+    for command in ("simulate", "compare", "bench"):
+        assert command in captured.err
