@@ -212,10 +212,12 @@ def test_write_standard_conditions_checks_everything_before_writing(tmp_path):
     row = {
         "condition": "latency",
         "gains": "paper",
+        "feedback": "raw",
         "success": 1.0,
         "mean arrival s": 2.0,
         "median arrival s": 2.0,
         "mean final distance cm": 0.1,
+        "mismatch": 0.03,
         "runs": 4,
     }
     with pytest.raises(ValueError, match="rows = "):
