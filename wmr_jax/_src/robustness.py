@@ -259,6 +259,21 @@ def _closed_loop(value: Any, controller: Any, estimator: Any) -> ClosedLoop:
     return ClosedLoop(controller, value, estimator)
 
 
+def _unit_draws(key: jax.Array, refs: np.ndarray, steps: int, mismatch: float):
+    """Unit noise ``(N, steps, 3)`` and wheel factors ``(N, 3)`` (mass 1) of ``key``.
+
+    What standard_conditions, evaluate_loop and noise_curve scale per level:
+    the draws depend on the key and the number of runs only (drawn in the
+    session's dtype), while the poses themselves stay in float64.
+    """
+    unit = sample_disturbance(
+        key, np.zeros_like(refs), steps, noise_xy=1.0, noise_theta=1.0, radius_mismatch=mismatch
+    )
+    factors = np.array(unit.mismatch, dtype=float)
+    factors[:, 2] = 1.0  # the wheel radii only: the ideal loop has no mass
+    return np.asarray(unit.noise, dtype=float), factors
+
+
 # The model robot's row: no mismatch, no noise, no latency (docs/model.md §9).
 MODEL_ROBOT = "model robot"
 
@@ -318,15 +333,7 @@ def standard_conditions(
         controllers.get_controller(loop.controller)
     with jax.enable_x64(checks.check_bool("x64", x64)):  # not rounded to float32 first
         refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
-    steps = horizon_steps(dt)
-    # The unit noise and mismatch depend on the key and the number of runs
-    # only (drawn in the session's dtype): the poses themselves stay in float64.
-    unit = sample_disturbance(
-        key, np.zeros_like(refs), steps, noise_xy=1.0, noise_theta=1.0, radius_mismatch=mismatch
-    )
-    noise = np.asarray(unit.noise, dtype=float)
-    factors = np.array(unit.mismatch, dtype=float)
-    factors[:, 2] = 1.0  # the ideal loop has no mass
+    noise, factors = _unit_draws(key, refs, horizon_steps(dt), mismatch)
     ones = np.ones((len(refs), 3))
     conditions = [(MODEL_ROBOT, 0.0, 0.0, False, ones)]
     conditions += [(*condition, factors) for condition in STANDARD_CONDITIONS]
@@ -417,20 +424,9 @@ def evaluate_loop(
     with jax.enable_x64(checks.check_bool("x64", x64)):
         refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
     sxy, sdeg, latency = labels[condition]
-    unit = sample_disturbance(
-        jax.random.key(seed),
-        np.zeros_like(refs),
-        steps,
-        noise_xy=1.0,
-        noise_theta=1.0,
-        radius_mismatch=mismatch,
-    )
-    factors = np.array(unit.mismatch, dtype=float)
-    factors[:, 2] = 1.0  # the wheel radii only
+    noise, factors = _unit_draws(jax.random.key(seed), refs, steps, mismatch)
     scale = np.array([sxy, sxy, math.radians(sdeg)])
-    spec = Disturbance(
-        refs, np.asarray(unit.noise, dtype=float) * scale, factors, np.float64(float(latency))
-    )
+    spec = Disturbance(refs, noise * scale, factors, np.float64(float(latency)))
     m = perturbed_metrics(
         spec,
         loop.params,
@@ -509,13 +505,7 @@ def noise_curve(
         controllers.get_controller(loop.controller)
     with jax.enable_x64(checks.check_bool("x64", x64)):
         refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
-    unit = sample_disturbance(
-        key, np.zeros_like(refs), horizon_steps(dt), noise_xy=1.0, noise_theta=1.0,
-        radius_mismatch=mismatch,
-    )  # fmt: skip
-    noise = np.asarray(unit.noise, dtype=float)
-    factors = np.array(unit.mismatch, dtype=float)
-    factors[:, 2] = 1.0
+    noise, factors = _unit_draws(key, refs, horizon_steps(dt), mismatch)
     rows = []
     for name, loop in sets.items():
         used, _ = resolve_estimator(loop.estimator)

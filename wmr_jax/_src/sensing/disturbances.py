@@ -125,10 +125,9 @@ class Measurement(NamedTuple):
         return loops.SplitPose(self.position, self.base * jax.lax.complex(cos_n, sin_n), self.theta)
 
     def residual(self, estimate: loops.SplitPose) -> jax.Array:
-        """Return ``θ_measured − θ_estimate`` wrapped to ``[−π, π]``, rad."""
+        """Return ``θ_measured − θ_estimate`` wrapped to ``[−π, π)``, rad."""
         turn = self.base * jnp.conj(estimate.heading)
-        angle = jnp.arctan2(turn.imag, turn.real) + self.offset
-        return angle - (2.0 * math.pi) * jnp.round(angle * (0.5 / math.pi))
+        return law.wrap_angle(jnp.arctan2(turn.imag, turn.real) + self.offset)
 
 
 def measurement(pose: loops.SplitPose, noise: jax.Array) -> Measurement:

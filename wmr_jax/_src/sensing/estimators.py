@@ -5,7 +5,7 @@ it sent. Every period it **predicts** its pose over the period with the
 command actually applied, on the exact arc of the ideal robot
 (``loops.ideal_arc``, docs/model.md §4), then **corrects** it toward the
 measurement at the period's end; heading residuals are wrapped to
-``(−π, π]``. It starts from the first measurement. Latency compensation
+``[−π, π)``. It starts from the first measurement. Latency compensation
 (rolling the estimate over the command in flight) is the disturbed loop's
 (``sensing.loop``), for every estimator alike.
 
