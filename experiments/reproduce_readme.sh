@@ -6,8 +6,11 @@
 # OUT (default results/readme) receives every command's output; the figures
 # the README shows are then copied to docs/*.png and the results the README
 # quotes to docs/data/*.json, which tests/test_readme.py holds the README's
-# tables against. STAGE is any of: paper compare maps waypoints animate
-# tune robustness compare-tuning compare-sizes compare-robust bench (default: all, about
+# tables against, and experiments/docs_fingerprint.py records what each stage
+# was computed with (docs/data/fingerprints.json), so a change to the code
+# that would move a committed figure fails the tests until the stage is rerun.
+# STAGE is any of: paper compare maps waypoints animate tune robustness
+# compare-tuning compare-sizes compare-robust bench (default: all, about
 # 80 minutes on 2 CPU cores).
 # Every command is seeded (the seed is its default unless named here), so a
 # rerun prints the same tables; bench timings are the exception.
@@ -65,5 +68,10 @@ for stage in $STAGES; do
     bench)
       wmr-jax bench --json "$OUT/bench.json" --wait-idle 60 ;;
     *) echo "unknown stage $stage" >&2; exit 2 ;;
+  esac
+  # What the stage's docs files were computed with (tests/test_readme.py checks it).
+  case $stage in
+    paper|compare|maps|waypoints|animate|tune|robustness)
+      python experiments/docs_fingerprint.py record "$stage" ;;
   esac
 done
