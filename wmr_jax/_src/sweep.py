@@ -322,6 +322,17 @@ def _fingerprint(settings: dict[str, Any]) -> str:
 
 # ---------------------------------------------------------------- chunk files
 
+# The metadata of every chunk file: the sweep's fingerprint and its poses' digest.
+_CHUNK_META = ("fingerprint", "refs_digest")
+
+
+def _shape_of(meta: Any) -> str:
+    """What a chunk's metadata is, in a few words, for the warning that refuses it."""
+    if isinstance(meta, dict):
+        missing = [key for key in _CHUNK_META if not isinstance(meta.get(key), str)]
+        return f"without a text {' or '.join(missing)}"
+    return f"that is no JSON object ({json.dumps(meta)[:40]})"
+
 
 class _ChunkStore:
     """The folder of a resumable sweep: its settings, one checked file per chunk, the results."""
@@ -380,7 +391,17 @@ class _ChunkStore:
         except io.DamagedFileError as err:
             warnings.warn(f"{' '.join(str(err).split())}; recomputing that chunk", stacklevel=4)
             return None
-        if meta.get("fingerprint") != self.fingerprint or meta.get("refs_digest") != digest:
+        if not isinstance(meta, dict) or not all(
+            isinstance(meta.get(key), str) for key in _CHUNK_META
+        ):
+            # A valid checksum over metadata this sweep never writes.
+            warnings.warn(
+                f"{self.path(i)} has metadata {_shape_of(meta)}; allowed: an object with "
+                f"{' and '.join(_CHUNK_META)}; recomputing it",
+                stacklevel=4,
+            )
+            return None
+        if meta["fingerprint"] != self.fingerprint or meta["refs_digest"] != digest:
             return None
         if set(values) != set(SWEEP_FIELDS) or any(v.shape != (size,) for v in values.values()):
             warnings.warn(f"{self.path(i)} has unexpected contents; recomputing it", stacklevel=4)
@@ -579,7 +600,8 @@ def _progress(job: _Job, bar: bool, on_chunk: Callable[[int, int], None] | None)
     if bar:
         from tqdm.auto import tqdm
 
-        shown = tqdm(total=job.chunks, unit="chunk", desc=f"sweep {job.n} poses")
+        name = job.options.controller.name
+        shown = tqdm(total=job.chunks, unit="chunk", desc=f"{name} sweep, {job.n} poses")
 
     def done(i: int) -> None:
         if shown is not None:
