@@ -27,7 +27,12 @@ Cases compared with each other (``final_poses`` and the baselines, a loss and
 its gradient) are timed in alternation, so that they share the machine's load;
 each timed JAX call follows an untimed one, so that it measures the steady
 state of a loop of calls rather than the wake-up of XLA's threads.
-The device, JAX version and the machine's load during the run are recorded,
+Every JAX case and the scalar reference run on ``BenchConfig.robot`` (the
+paper robot by default; the NumPy baseline is the ideal loop's final poses,
+which no robot field changes), with the same steps and poses for any robot:
+throughput does not depend on how far the robot gets. The robot is recorded
+with the results, as are the device, JAX version and the machine's load
+during the run,
 since a shared machine makes every timing noisy: compare ratios taken in the
 same run rather than absolute rates across runs. ``wmr_jax.report.bench_table``
 formats the result; the command prints it.
@@ -185,6 +190,7 @@ class BenchConfig:
             evaluation set of ``docs/model.md §6``).
         wait_idle: before each round of timed calls, wait up to this many
             seconds for other processes to leave the CPU (shared machines).
+        robot: the robot every case runs (one ``Robot``); ``None``: ``Robot()``.
     """
 
     sizes: tuple[int, ...] = DEFAULT_SIZES
@@ -195,6 +201,7 @@ class BenchConfig:
     cases: tuple[str, ...] = ()
     seed: int = 0
     wait_idle: float = 0.0
+    robot: Any = None
 
 
 CASES = (
@@ -235,7 +242,20 @@ def _check_config(config: BenchConfig) -> BenchConfig:
     unknown = [c for c in config.cases if c not in CASES]
     if unknown:
         raise ValueError(f"cases = {unknown!r} are not known; allowed: {CASES}")
+    if config.robot is not None:
+        from wmr_jax._src.params import validate_one_robot
+
+        validate_one_robot(config.robot, "the benchmark")
     return dataclasses.replace(config, cases=tuple(config.cases) or CASES)
+
+
+def _robot_record(config: BenchConfig) -> dict[str, Any]:
+    """The robot the cases ran: its fields and a label (a preset's name, or "custom")."""
+    from wmr_jax._src.params import Robot
+    from wmr_jax._src.robots import robot_json, robot_name
+
+    robot = Robot() if config.robot is None else config.robot
+    return {"robot": robot_json(robot), "robot_label": robot_name(robot) or "custom"}
 
 
 def _environment() -> dict[str, Any]:
@@ -290,8 +310,9 @@ def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = No
         log: called with one line per finished case (progress).
 
     Returns:
-        ``{"environment": ..., "config": ..., "rows": [...], "ratios": {...},
-        "peak_rss_mb": ...}``; each row has ``case``, ``n``, ``steps``,
+        ``{"environment": ..., "config": ..., "robot": {field: value},
+        "robot_label": ..., "rows": [...], "ratios": {...}, "peak_rss_mb":
+        ...}``; each row has ``case``, ``n``, ``steps``,
         ``run_s`` (s), ``compile_s`` (s), ``robot_steps_per_s``, ``runs_s``,
         ``others_cpu`` (cores), or ``skipped`` with a reason; ``ratios`` maps
         ``"N=<n>"`` to the speed-ups of ``final_poses`` over the baselines and
@@ -327,9 +348,11 @@ def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = No
                 rate = row.get("robot_steps_per_s")
                 text = row.get("skipped") or (f"{rate:.3e} robot-steps/s" if rate else "")
                 say(f"{row['case']:<22} N={row['n']!s:<8} {text}")
+    fields = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
     return {
         "environment": _environment(),
-        "config": dataclasses.asdict(config),
+        "config": {name: value for name, value in fields.items() if name != "robot"},
+        **_robot_record(config),
         "rows": rows,
         "ratios": _ratios(rows),
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
@@ -345,6 +368,7 @@ class _SizeBench:
         from wmr_jax._src.poses import sample_poses
 
         self.config, self.n, self.gains, self.steps = config, n, gains, config.steps
+        self.robot = config.robot
         dtype = np.float32 if config.dtype == "float32" else np.float64
         self.refs_np = np.asarray(sample_poses(config.seed + n, n), dtype=dtype)
         self.refs = jnp.asarray(self.refs_np)
@@ -383,9 +407,13 @@ class _SizeBench:
         from wmr_jax._src.rollout import final_poses
 
         cases, gains, steps, refs = self.config.cases, self.gains, self.steps, self.refs
+        robot = self.robot
         group: dict[str, tuple[Callable[[], Any], bool]] = {}
         if "final_poses" in cases:
-            group["final_poses"] = (lambda: final_poses(refs, gains, steps=steps), True)
+            group["final_poses"] = (
+                lambda: final_poses(refs, gains, steps=steps, robot=robot),
+                True,
+            )
         if "numpy_batch" in cases:
             group["numpy_batch"] = (
                 lambda: numpy_final_poses(self.refs_np, gains, steps=steps),
@@ -399,7 +427,7 @@ class _SizeBench:
 
             def scalar_runs():
                 for ref in scalar_refs:
-                    reference.reference_rollout(ref, gains, steps=steps)
+                    reference.reference_rollout(ref, gains, steps=steps, robot=robot)
 
             group["scalar_reference"] = (scalar_runs, False)
         devices = jax.local_devices()
@@ -408,7 +436,7 @@ class _SizeBench:
 
             spread = shard(self.refs_np, devices)
             group["final_poses_sharded"] = (
-                lambda: final_poses(spread.array, gains, steps=steps),
+                lambda: final_poses(spread.array, gains, steps=steps, robot=robot),
                 True,
             )
         t = self.time(group) if group else {}
@@ -448,8 +476,9 @@ class _SizeBench:
         )  # fmt: skip
         group = {}
         for name, estimator in (("raw", None), ("observer", "observer"), ("ekf", "ekf")):
+            start, robot = (0.0, 0.0, 0.0), self.robot
             args, options = prepare_disturbed(
-                spec, self.gains, "shim-sung", estimator, (0.0, 0.0, 0.0), 0.033, None, "ideal"
+                spec, self.gains, "shim-sung", estimator, start, 0.033, robot, "ideal"
             )
             group[name] = (
                 lambda args=args, options=options: _perturbed_jit(*args, options=options),
@@ -468,10 +497,10 @@ class _SizeBench:
     def nonideal(self) -> list[dict]:
         from wmr_jax._src.rollout import final_poses
 
-        gains, steps, refs = self.gains, self.steps, self.refs
+        gains, steps, refs, robot = self.gains, self.steps, self.refs, self.robot
 
         def call():
-            return final_poses(refs, gains, steps=steps, velocity="nonideal")
+            return final_poses(refs, gains, steps=steps, velocity="nonideal", robot=robot)
 
         try:
             t = self.time({"nonideal": (call, True)})["nonideal"]
@@ -482,8 +511,12 @@ class _SizeBench:
     def batch_rollout(self) -> list[dict]:
         from wmr_jax._src.rollout import batch_rollout
 
-        gains, steps, refs = self.gains, self.steps, self.refs
-        t = self.time({"rollout": (lambda: batch_rollout(refs, gains, steps=steps), True)})
+        gains, steps, refs, robot = self.gains, self.steps, self.refs, self.robot
+
+        def call():
+            return batch_rollout(refs, gains, steps=steps, robot=robot)
+
+        t = self.time({"rollout": (call, True)})
         return [self.row("batch_rollout", t["rollout"], velocity="ideal")]
 
     def loss_rows(
@@ -542,10 +575,10 @@ class _SizeBench:
 
         from wmr_jax._src.rollout import final_poses
 
-        steps = self.steps
+        steps, robot = self.steps, self.robot
 
         def loss(gains, refs):
-            final = final_poses(refs, gains, steps=steps)
+            final = final_poses(refs, gains, steps=steps, robot=robot)
             err = final - refs
             return jnp.mean(err[:, 0] ** 2 + err[:, 1] ** 2 + (1.0 - jnp.cos(err[:, 2])))
 
@@ -559,17 +592,21 @@ class _SizeBench:
         try:
             from wmr_jax._src import tuning
 
-            horizon = self.steps * DEFAULT_DT
+            horizon, robot = self.steps * DEFAULT_DT, self.robot
 
             def loss(g, r):
-                return tuning.tuning_loss(g, r, temperature=TUNING_TEMPERATURE, horizon=horizon)
+                return tuning.tuning_loss(
+                    g, r, temperature=TUNING_TEMPERATURE, horizon=horizon, robot=robot
+                )
 
             from wmr_jax._src.rollout import final_poses
 
             gains, refs, steps = self.gains, self.refs, self.steps
 
             def relaxed():
-                return final_poses(refs, gains, steps=steps, temperature=TUNING_TEMPERATURE)
+                return final_poses(
+                    refs, gains, steps=steps, temperature=TUNING_TEMPERATURE, robot=robot
+                )
 
             row = ("tuning_loss", {"temperature": TUNING_TEMPERATURE})
             # final_poses through the same relaxed law, timed beside the loss:

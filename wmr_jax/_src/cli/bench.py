@@ -13,7 +13,14 @@ __all__ = ["SUBCOMMANDS"]
 
 # The integer flags: (flag, attribute, default, metavar, help).
 _INT_FLAGS = (
-    ("--steps", "steps", bench.DEFAULT_STEPS, "N", "control periods per run"),
+    (
+        "--steps",
+        "steps",
+        bench.DEFAULT_STEPS,
+        "N",
+        "control periods per run (the same for any --robot: throughput does not depend on how "
+        "far a run gets)",
+    ),
     ("--repeats", "repeats", bench.DEFAULT_REPEATS, "N", "timed calls per case (the median)"),
     (
         "--reference-poses",
@@ -67,14 +74,19 @@ def add_arguments(parser: Any) -> None:
         "for other processes to leave the CPU (0: do not wait)",
     )
     parser.add_argument(
-        "--json", default=None, metavar="FILE", help="also write the results here (atomically)"
+        "--json",
+        default=None,
+        metavar="FILE",
+        help="also write the results here (atomically), the robot included",
     )
+    flags.add_robot_flag(parser)
 
 
-def _config_from(args: Any) -> bench.BenchConfig:
+def _config_from(args: Any, robot: Any = None) -> bench.BenchConfig:
     """Return the ``BenchConfig`` of the flags, each checked (one line naming a bad one)."""
     ints = {name: flags.positive_int(flag, getattr(args, name)) for flag, name, *_ in _INT_FLAGS}
     return bench.BenchConfig(
+        robot=robot,
         sizes=tuple(
             flags.positive_int("--sizes", n, 1, MAX_SAMPLES)
             for n in args.sizes or bench.DEFAULT_SIZES
@@ -90,17 +102,28 @@ def run(args: Any) -> int:
     """Run ``wmr-jax bench``: print the table (progress on stderr); return 0."""
     from wmr_jax._src.io import atomic_write_json
     from wmr_jax._src.report.bench import bench_table
+    from wmr_jax._src.robots import describe_robot
     from wmr_jax._src.sharding import MAX_CPU_DEVICES, use_cpu_devices
 
     out = None if args.json is None else flags.output_file("--json", args.json)
-    config = _config_from(args)
+    given = flags.robot_from(args.robot)
+    config = _config_from(args, None if given is None else given.robot)
     cpu_devices = (
         None
         if args.cpu_devices is None
         else flags.positive_int("--cpu-devices", args.cpu_devices, 1, MAX_CPU_DEVICES)
     )
     use_cpu_devices(cpu_devices)
+    if given is not None:
+        if given.note:
+            print(given.note)
+        print(
+            f"robot {given.label!r}: {describe_robot(given.robot)}; {config.steps} control "
+            "periods per run and the paper robot's poses (5-80 cm), as for any robot"
+        )
     result = bench.run_benchmark(config, log=lambda line: print(line, file=sys.stderr, flush=True))
+    if given is not None:
+        result["robot_label"] = given.label  # the preset's name or the file
     print(bench_table(result), end="")
     if out is not None:
         atomic_write_json(out, result)
