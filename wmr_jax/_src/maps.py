@@ -18,7 +18,7 @@ draws the heat maps and the first-to-arrive map and writes the summary.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -27,8 +27,8 @@ import numpy as np
 
 from wmr_jax._src import checks, controllers, metrics
 from wmr_jax._src.metrics import PoseMetrics
-from wmr_jax._src.params import Robot
-from wmr_jax._src.poses import EVAL_R_MAX, EVAL_R_MIN, HORIZON_S, MAX_SAMPLES, horizon_steps
+from wmr_jax._src.params import Robot, validate_one_robot
+from wmr_jax._src.poses import EVAL_R_MAX, EVAL_R_MIN, MAX_SAMPLES, horizon_steps
 from wmr_jax._src.rollout import DEFAULT_DT
 from wmr_jax._src.sweep import sweep
 
@@ -40,6 +40,7 @@ __all__ = [
     "PoseMetrics",
     "compare_controllers",
     "evaluate_poses",
+    "horizon_for",
     "map_study",
     "pose_grid",
     "summarize",
@@ -47,6 +48,30 @@ __all__ = [
 
 DEFAULT_HEADINGS_DEG = (-90.0, 0.0, 90.0, 180.0)
 DEFAULT_CHUNK = 16384
+
+
+def horizon_for(robot: Robot | None = None) -> float:
+    """The docs/model.md §6 horizon for ``robot``, s: 6 s, or longer for a slower robot.
+
+    The evaluation set (5–80 cm) and its 6 s are the paper robot's. On a
+    robot whose wheels cannot follow the paper's feasible gains
+    (``60 + 10 L > V_max``) they are scaled by ``V_max / (60 + 10 L)``, and
+    the horizon by its inverse (the TurtleBot3 Burger: 37 s): the rule of
+    every study (``robustness.study_horizon``).
+
+    Raises:
+        ValueError: for anything but one valid robot.
+    """
+    from wmr_jax._src.robustness import study_horizon
+
+    return study_horizon(robot)
+
+
+def _robot_record(robot: Robot) -> dict[str, Any]:
+    """The robot as a summary records it: its fields and a label (preset name or "custom")."""
+    from wmr_jax._src.robots import robot_json, robot_name
+
+    return {"robot": robot_json(robot), "robot_label": robot_name(robot) or "custom"}
 
 
 # ---------------------------------------------------------------- the grid
@@ -147,6 +172,8 @@ def evaluate_poses(
     progress: bool = False,
     x64: bool = True,
     cache: str | Path | None = None,
+    resume: bool = True,
+    on_chunk: Callable[[int, int], None] | None = None,
 ) -> PoseMetrics:
     """Return the docs/model.md §6 metrics of every reference, in bounded memory.
 
@@ -170,6 +197,9 @@ def evaluate_poses(
         cache: a folder where each finished chunk is kept, so that a run
             interrupted and started again with the same arguments resumes
             (``wmr_jax.sweep``'s ``out``); ``None`` keeps nothing.
+        resume: with ``cache``, reuse the chunks it holds of the same
+            settings (``False``: compute every chunk, and keep it there).
+        on_chunk: called as ``on_chunk(done, total)`` after every chunk.
 
     Returns:
         ``PoseMetrics`` of ``(N,)`` NumPy arrays, in the order of ``refs``.
@@ -197,6 +227,8 @@ def evaluate_poses(
             chunk_size=chunk,
             progress=progress,
             out=cache,
+            resume=resume,
+            on_chunk=on_chunk,
         )
     final = np.stack([out["final_x"], out["final_y"]], axis=-1)
     return PoseMetrics(
@@ -293,7 +325,8 @@ class MapStudy(NamedTuple):
         results: controller name → its ``PoseMetrics`` over ``grid.refs``.
         summary: JSON-ready description of the run (``poses``, ``grid_side``,
             ``headings_deg``, ``velocity``, ``dtype``, ``horizon_s``, ``dt_s``,
-            ``tolerances``) and its ``rows`` (``summarize``).
+            ``tolerances``, ``robot``, ``robot_label``) and its ``rows``
+            (``summarize``).
     """
 
     grid: PoseGrid
@@ -316,11 +349,16 @@ def map_study(
     progress: bool = False,
     x64: bool = True,
     cache: str | Path | None = None,
+    resume: bool = True,
+    robot: Robot | None = None,
+    horizon: float | None = None,
+    on_chunk: Callable[[str, int, int], None] | None = None,
 ) -> MapStudy:
     """Run the pose-space maps of every controller; return the metrics and the summary.
 
     Every controller runs the same grid (``pose_grid``) from ``(0, 0, 0)`` to
-    the docs/model.md §6 horizon, with its default parameters.
+    the docs/model.md §6 horizon (``horizon_for(robot)``), with its default
+    parameters, on ``robot``.
 
     Args:
         n_poses: about how many reference poses in all (grid × headings).
@@ -333,25 +371,43 @@ def map_study(
         cache: a folder where each controller's finished chunks are kept
             (``cache/<controller>``) and reused when run again, so that an
             interrupted study goes on; ``None`` keeps nothing.
+        resume: with ``cache``, reuse the chunks it holds of the same
+            settings (``False``: compute them all again, keeping each there).
+        robot: the robot (one, a number per field); default ``Robot()``.
+        horizon: simulated time per run, s; default ``horizon_for(robot)``
+            (6 s, longer for a robot too slow for the paper's feasible gains).
+        on_chunk: called as ``on_chunk(controller, done, total)`` after every chunk.
 
     Returns:
-        A ``MapStudy``.
+        A ``MapStudy``; its summary records the robot (``robot``: its fields,
+        ``robot_label``: the preset's name or ``"custom"``) and the horizon.
 
     Raises:
         ValueError: for a bad count, heading, controller or option.
     """
     names = controllers.controller_names(controller_names)
     cache = None if cache is None else checks.check_folder("cache", cache)
+    checks.check_callable("on_chunk", on_chunk)
+    robot = validate_one_robot(robot, "map_study")
+    horizon = _horizon(horizon, robot)
     grid = pose_grid(n_poses, headings_deg)
+
+    def told(name: str) -> Callable[[int, int], None] | None:
+        return None if on_chunk is None else (lambda done, total: on_chunk(name, done, total))
+
     results = {
         name: evaluate_poses(
             grid.refs,
             controller=name,
+            steps=horizon_steps(DEFAULT_DT, horizon),
+            robot=robot,
             velocity=velocity,
             chunk=chunk,
             progress=progress,
             x64=x64,
             cache=None if cache is None else cache / name,
+            resume=resume,
+            on_chunk=told(name),
         )
         for name in names
     }
@@ -362,12 +418,22 @@ def map_study(
         "headings_deg": np.asarray(headings_deg, dtype=float).reshape(-1).tolist(),
         "velocity": velocity,
         "dtype": "float64" if x64 else "float32",
-        "horizon_s": HORIZON_S,
+        "horizon_s": horizon,
         "dt_s": DEFAULT_DT,
         "tolerances": {"r_cm": metrics.DEFAULT_TOL_R, "theta_deg": 5.0},
-        "rows": summarize(results, v_max=float(Robot().v_max)),
+        **_robot_record(robot),
+        "rows": summarize(results, v_max=float(robot.v_max)),
     }
     return MapStudy(grid, results, summary)
+
+
+def _horizon(horizon: float | None, robot: Robot) -> float:
+    """The horizon asked for, checked, or the robot's default (``horizon_for``)."""
+    if horizon is None:
+        return horizon_for(robot)
+    horizon = checks.check_number("horizon", horizon, unit="s")
+    horizon_steps(DEFAULT_DT, horizon)  # at least a period, at most MAX_STEPS of them
+    return horizon
 
 
 # ---------------------------------------------------------------- random-pose comparison
@@ -398,6 +464,8 @@ def compare_controllers(
     chunk: int = DEFAULT_CHUNK,
     progress: bool = False,
     x64: bool = True,
+    robot: Robot | None = None,
+    horizon: float | None = None,
 ) -> dict[str, Any]:
     """Compare every controller over the same random docs/model.md §6 poses.
 
@@ -414,10 +482,15 @@ def compare_controllers(
         chunk: poses per compiled call.
         progress: show a progress bar per controller.
         x64: compute in float64 (see ``evaluate_poses``).
+        robot: the robot (one, a number per field); default ``Robot()``.
+        horizon: simulated time per run, s; default ``horizon_for(robot)``
+            (6 s, longer for a robot too slow for the paper's feasible gains).
 
     Returns:
         A JSON-ready dict: ``poses``, ``seed``, ``velocity``, ``dtype``,
-        ``horizon_s``, ``dt_s`` and ``rows`` (``summarize``, one per run).
+        ``horizon_s``, ``dt_s``, ``robot`` (its fields), ``robot_label`` (the
+        preset's name or ``"custom"``) and ``rows`` (``summarize``, one per
+        run; "over V_max" against this robot's).
 
     Raises:
         ValueError: for a bad count, seed or option.
@@ -426,12 +499,16 @@ def compare_controllers(
 
     n_poses = checks.check_int("n_poses", n_poses, 1, MAX_SAMPLES)
     seed = checks.check_int("seed", seed, minimum=0)
+    robot = validate_one_robot(robot, "compare_controllers")
+    horizon = _horizon(horizon, robot)
     refs = np.asarray(sample_poses(seed, n_poses), dtype=float)
     results = {
         label: evaluate_poses(
             refs,
             params,
             controller=name,
+            steps=horizon_steps(DEFAULT_DT, horizon),
+            robot=robot,
             velocity=velocity,
             chunk=chunk,
             progress=progress,
@@ -444,7 +521,8 @@ def compare_controllers(
         "seed": seed,
         "velocity": velocity,
         "dtype": "float64" if x64 else "float32",
-        "horizon_s": HORIZON_S,
+        "horizon_s": horizon,
         "dt_s": DEFAULT_DT,
-        "rows": summarize(results, v_max=float(Robot().v_max)),
+        **_robot_record(robot),
+        "rows": summarize(results, v_max=float(robot.v_max)),
     }

@@ -2,9 +2,10 @@
 
 Runs ``wmr_jax.studies.compare_controllers`` (``sample_poses(--seed,
 --poses)``; Shim–Sung with the paper's gains, each baseline with its
-published gains and also with its other driving mode), writes
-``comparison.md`` and ``comparison.json`` into ``--out`` and prints the table
-the README shows. ``wmr-jax sweep`` is the grid map, not these random poses.
+published gains and also with its other driving mode) on the robot of
+``--robot``, writes ``comparison.md`` and ``comparison.json`` (which records
+the robot) into ``--out`` and prints the table the README shows. ``wmr-jax
+sweep`` is the grid map, not these random poses.
 """
 
 from __future__ import annotations
@@ -28,6 +29,15 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument("--poses", default=200_000, metavar="N", help="random reference poses")
     parser.add_argument("--seed", default=0, metavar="S", help="seed of wmr_jax.sample_poses")
     parser.add_argument("--velocity", default="ideal", help="velocity loop: ideal or nonideal")
+    parser.add_argument(
+        "--horizon",
+        default=None,
+        metavar="S",
+        help="simulated time per run, s (default: the paper robot's 6 s, docs/model.md §6; "
+        "for a --robot whose wheels cannot follow the paper's feasible gains, 60 + 10 L > "
+        "v_max, 6 s × (60 + 10 L) / v_max, as those gains are scaled to fit; printed with the "
+        "robot)",
+    )
     parser.add_argument("--chunk", default=DEFAULT_CHUNK, metavar="N", help="poses per call")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument(
@@ -35,22 +45,34 @@ def add_arguments(parser: Any) -> None:
         action="store_true",
         help="compute in float32, JAX's default (default: float64)",
     )
+    flags.add_robot_flag(parser)
 
 
 def run(args: Any) -> int:
     """Run ``wmr-jax compare``; return the exit status."""
+    from wmr_jax._src.cli.sweep import robot_and_horizon
     from wmr_jax._src.maps import compare_controllers
     from wmr_jax._src.report.maps import comparison_table, save_comparison
 
     out = flags.output_dir("--out", args.out)
-    comparison = compare_controllers(
-        flags.positive_int("--poses", args.poses),
-        seed=flags.positive_int("--seed", args.seed, 0, 2**32 - 1),
-        velocity=flags.velocity_loop(args.velocity),
-        chunk=flags.positive_int("--chunk", args.chunk),
-        progress=not args.no_progress,
-        x64=not args.float32,
-    )
+    n_poses = flags.positive_int("--poses", args.poses)
+    seed = flags.positive_int("--seed", args.seed, 0, 2**32 - 1)
+    velocity = flags.velocity_loop(args.velocity)
+    chunk = flags.positive_int("--chunk", args.chunk)
+    given, robot, horizon = robot_and_horizon(args)
+    with flags.as_flags({"horizon": "--horizon"}):
+        comparison = compare_controllers(
+            n_poses,
+            seed=seed,
+            velocity=velocity,
+            chunk=chunk,
+            progress=not args.no_progress,
+            x64=not args.float32,
+            robot=robot,
+            horizon=horizon,
+        )
+    if given is not None:
+        comparison["robot_label"] = given.label  # the preset's name or the file
     save_comparison(out, comparison)
     print(
         f"{comparison['poses']:,} random poses (seed {comparison['seed']}) -> {out}/comparison.md"

@@ -2,15 +2,18 @@
 
 Runs ``wmr_jax.studies.map_study`` on a grid of reference poses for every
 controller asked for (a square grid inside the 5–80 cm annulus at a few
-headings: its means differ from ``wmr-jax compare``'s random poses), then
-writes ``maps_<controller>.png``, ``winner.png``, ``summary.md`` and
-``summary.json`` into ``--out`` (``wmr_jax.report.save_map_study``) and
-prints the summary table.
+headings: its means differ from ``wmr-jax compare``'s random poses) on the
+robot of ``--robot``, then writes ``maps_<controller>.png``, ``winner.png``,
+``summary.md`` and ``summary.json`` (which records the robot) into ``--out``
+(``wmr_jax.report.save_map_study``) and prints the summary table. Ctrl-C
+says which finished chunks were kept (``--resume`` keeps them).
 """
 
 from __future__ import annotations
 
+import sys
 import warnings
+from pathlib import Path
 from typing import Any
 
 from wmr_jax._src.cli import flags
@@ -40,6 +43,14 @@ def _flags() -> dict[str, dict[str, Any]]:
             + ")",
         },
         "--velocity": {"default": "ideal", "help": "velocity loop: ideal or nonideal"},
+        "--horizon": {
+            "default": None,
+            "metavar": "S",
+            "help": "simulated time per run, s (default: the paper robot's 6 s, docs/model.md "
+            "§6; for a --robot whose wheels cannot follow the paper's feasible gains, "
+            "60 + 10 L > v_max, 6 s × (60 + 10 L) / v_max, as those gains are scaled to fit; "
+            "printed with the robot)",
+        },
         "--headings": {
             "nargs": "+",
             "action": "extend",
@@ -57,18 +68,84 @@ def _flags() -> dict[str, dict[str, Any]]:
         },
         "--resume": {
             "action": "store_true",
-            "help": "keep finished chunks under OUT/chunks and reuse them when run again",
+            "help": "keep each finished chunk under OUT/chunks as it is done, and reuse those "
+            "of the same settings when run again (an interrupted run says what it kept); "
+            "without it, nothing is kept",
         },
     }
 
 
+def add_arguments(parser: Any) -> None:
+    """Add the flags of ``wmr-jax sweep``."""
+    for flag, options in _flags().items():
+        parser.add_argument(flag, **options)
+    flags.add_robot_flag(parser)
+
+
+def robot_and_horizon(args: Any) -> tuple[Any, Any, float]:
+    """``--robot`` (``LoadedRobot`` or ``None``), the robot to run, and the horizon, s.
+
+    The horizon is ``--horizon``, or ``maps.horizon_for(robot)``: the paper
+    robot's 6 s, longer for a robot too slow for the paper's gains. Given a
+    ``--robot``, prints the robot and the horizon it runs (and a ROS YAML's note).
+    """
+    from wmr_jax._src.maps import horizon_for
+    from wmr_jax._src.params import Robot
+    from wmr_jax._src.robots import describe_robot
+
+    given = flags.robot_from(args.robot)
+    robot = Robot() if given is None else given.robot
+    if args.horizon is None:
+        horizon = horizon_for(robot)
+    else:
+        horizon = flags.number("--horizon", args.horizon, low=0.0, closed=False, unit="s")
+    if given is not None:
+        if given.note:
+            print(given.note)
+        scaled = " (6 s × (60 + 10 L) / v_max)" if args.horizon is None and horizon > 6 else ""
+        print(f"robot {given.label!r}: {describe_robot(robot)}; horizon {horizon:.4g} s{scaled}")
+    return given, robot, horizon
+
+
+def _interrupted(finished: dict[str, tuple[int, int]], chunks: Path | None) -> str:
+    """What an interrupted sweep kept, in one line (``chunks``: the folder, with --resume)."""
+    done = ", ".join(
+        f"{name} {count} of {total} chunk{'s' if total > 1 else ''}"
+        for name, (count, total) in finished.items()
+        if count
+    )
+    if chunks is None:
+        what = f" ({done} finished)" if done else ""
+        return (
+            f"wmr-jax: interrupted; nothing was kept{what}: --resume keeps each finished chunk "
+            "under OUT/chunks for the next run"
+        )
+    if not done:
+        return f"wmr-jax: interrupted before a chunk was finished; nothing new kept in {chunks}"
+    return (
+        f"wmr-jax: interrupted; kept in {chunks}: {done} (the same command, with --resume, "
+        "reuses them)"
+    )
+
+
 def run(args: Any) -> int:
-    """Run ``wmr-jax sweep``; return the exit status."""
+    """Run ``wmr-jax sweep``; return the exit status (130 when interrupted)."""
+    out = flags.output_dir("--out", args.out)
+    chunks = out / "chunks" if args.resume else None
+    finished: dict[str, tuple[int, int]] = {}
+    try:
+        return _run(args, out, chunks, finished)
+    except KeyboardInterrupt:
+        print(_interrupted(finished, chunks), file=sys.stderr)
+        return 130
+
+
+def _run(args: Any, out: Path, chunks: Path | None, finished: dict) -> int:
+    """The sweep; ``finished[controller]`` counts its chunks done, as they are done."""
     from wmr_jax._src.maps import DEFAULT_HEADINGS_DEG, map_study
     from wmr_jax._src.report.maps import comparison_table, save_map_study
     from wmr_jax._src.sweep import OtherSettingsWarning
 
-    out = flags.output_dir("--out", args.out)
     n_poses = flags.positive_int("--poses", args.poses)
     chunk = flags.positive_int("--chunk", args.chunk)
     headings = [
@@ -76,7 +153,17 @@ def run(args: Any) -> int:
     ]
     names = flags.controller_names(args.controller)
     velocity = flags.velocity_loop(args.velocity)
-    library_names = {"n_poses": "--poses", "headings_deg": "--headings", "chunk": "--chunk"}
+    given, robot, horizon = robot_and_horizon(args)
+
+    def on_chunk(name: str, done: int, total: int) -> None:
+        finished[name] = (done, total)
+
+    library_names = {
+        "n_poses": "--poses",
+        "headings_deg": "--headings",
+        "chunk": "--chunk",
+        "horizon": "--horizon",
+    }
     with warnings.catch_warnings(), flags.as_flags(library_names):
         # --resume asks for the finished chunks: chunks of other settings are
         # refused, not replaced (as tune --resume refuses another run).
@@ -90,12 +177,17 @@ def run(args: Any) -> int:
                 chunk=chunk,
                 progress=not args.no_progress,
                 x64=not args.float32,
-                cache=out / "chunks" if args.resume else None,
+                cache=chunks,
+                robot=robot,
+                horizon=horizon,
+                on_chunk=on_chunk,
             )
         except OtherSettingsWarning as err:
             raise ValueError(
                 f"--resume: {err}; allowed: the same settings, or a fresh --out"
             ) from None
+    if given is not None:
+        study.summary["robot_label"] = given.label  # the preset's name or the file
     save_map_study(out, study)
     print(f"{study.summary['poses']} poses -> {out}/maps_*.png, summary.md, summary.json")
     print(comparison_table(study.rows), end="")
@@ -105,7 +197,7 @@ def run(args: Any) -> int:
 SUBCOMMANDS = {
     "sweep": {
         "help": "map success, arrival, path, wheel speed and zig-zag over a pose space",
-        "flags": _flags,
+        "add_arguments": add_arguments,
         "run": run,
     },
 }
