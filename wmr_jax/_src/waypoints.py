@@ -35,7 +35,7 @@ import numpy as np
 from wmr_jax._src import checks, controllers, loops, metrics
 from wmr_jax._src import rollout as simulation
 from wmr_jax._src.loops import Options
-from wmr_jax._src.params import Robot
+from wmr_jax._src.params import Robot, validate_one_robot
 from wmr_jax._src.rollout import DEFAULT_DT, Trajectory
 
 __all__ = [
@@ -47,6 +47,7 @@ __all__ = [
     "batch_chain_rollout",
     "batch_track_rollout",
     "chain_rollout",
+    "soccer_steps",
     "soccer_study",
     "soccer_waypoints",
     "track_rollout",
@@ -62,6 +63,8 @@ SOCCER_WAYPOINTS_DEG = (
     (-40.0, -30.0, 0.0),
     (20.0, -40.0, 45.0),
 )
+# Control periods of each soccer run for the paper robot (14.85 s at dt = 0.033 s).
+SOCCER_STEPS = 450
 
 
 class ChainRun(NamedTuple):
@@ -415,14 +418,17 @@ class SoccerStudy(NamedTuple):
     """What ``soccer_study`` ran and found.
 
     Attributes:
-        rows: one per controller and mode: arrival time at each waypoint
-            (``"leg i s"``, s from the start, ``inf`` if never), the slowest
-            leg (s), the path length (``"path cm"``) and the zig-zag count.
+        rows: one per controller and mode: the time since the start of the
+            route at which each waypoint was reached (``"leg i s"``, s,
+            cumulative; ``inf`` if never), the slowest leg (``"slowest leg
+            s"``, the longest time between two waypoints), the path length
+            (``"path cm"``) and the zig-zag count.
         runs: the ``SoccerRun`` of each row, in the same order.
         velocity: the velocity loop.
         steps: control periods of each run.
         pass_tol_r: pass-through distance, cm.
         pass_tol_theta: pass-through heading tolerance, rad.
+        robot: the robot run (``Robot``); ``None`` stands for ``Robot()``.
     """
 
     rows: list[dict[str, Any]]
@@ -431,15 +437,17 @@ class SoccerStudy(NamedTuple):
     steps: int
     pass_tol_r: float
     pass_tol_theta: float
+    robot: Robot | None = None
 
 
 def soccer_study(
     *,
     controller_names: Sequence[str] | None = None,
     velocity: str = "ideal",
-    steps: int = 450,
+    steps: int = SOCCER_STEPS,
     pass_tol_r: float = 5.0,
     pass_tol_theta: float = math.radians(30.0),
+    robot: Robot | None = None,
 ) -> SoccerStudy:
     """Run the soccer-like sequence (``SOCCER_WAYPOINTS_DEG``) for each controller.
 
@@ -455,12 +463,15 @@ def soccer_study(
         steps: control periods of each run.
         pass_tol_r: pass-through distance, cm.
         pass_tol_theta: pass-through heading tolerance, rad, ``≤ π/2``.
+        robot: the robot (one, a number per field); default ``Robot()``.
+            ``soccer_steps(robot)`` gives a slower robot the time it needs.
 
     Returns:
         A ``SoccerStudy``: a row and a run per controller and mode, with the
-        settings they were run with.
+        settings (and the robot) they were run with.
     """
     names = controllers.controller_names(controller_names)
+    robot = validate_one_robot(robot, "soccer_study")
     # Every setting is checked before the first controller runs (and compiles).
     _tolerances(metrics.DEFAULT_TOL_R, metrics.DEFAULT_TOL_THETA, pass_tol_r, pass_tol_theta)
     for name in names:
@@ -478,10 +489,29 @@ def soccer_study(
                     steps=steps,
                     pass_tol_r=p_r,
                     pass_tol_theta=p_theta,
+                    robot=robot,
                 )
                 rows.append({"controller": name, "mode": mode, **_leg_summary(run)})
                 runs.append(SoccerRun(name, mode, run))
-    return SoccerStudy(rows, runs, velocity, steps, pass_tol_r, pass_tol_theta)
+    return SoccerStudy(rows, runs, velocity, steps, pass_tol_r, pass_tol_theta, robot)
+
+
+def soccer_steps(robot: Robot | None = None, steps: int = SOCCER_STEPS) -> int:
+    """Control periods for the soccer-like route on ``robot``: ``steps`` (450, 14.85 s) scaled.
+
+    The route and its 450 periods are the paper robot's. A robot whose wheels
+    cannot follow the paper's feasible gains (``60 + 10 L > V_max``) gets them
+    stretched as every study stretches its horizon (``robustness.study_horizon``:
+    ``(60 + 10 L) / V_max``; the TurtleBot3 Burger: 2775 periods).
+
+    Raises:
+        ValueError: for anything but one valid robot, or ``steps`` not an integer >= 1.
+    """
+    from wmr_jax._src.poses import HORIZON_S
+    from wmr_jax._src.robustness import study_horizon
+
+    steps = checks.check_int("steps", steps)
+    return math.ceil(steps * study_horizon(robot) / HORIZON_S - 1e-9)
 
 
 def _leg_summary(run: ChainRun) -> dict[str, Any]:

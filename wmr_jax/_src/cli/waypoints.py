@@ -1,8 +1,15 @@
-"""``wmr-jax waypoints``: consecutive motions through a chain of waypoints."""
+"""``wmr-jax waypoints``: consecutive motions through a chain of waypoints.
+
+Runs ``wmr_jax.studies.soccer_study`` on the robot of ``--robot``, writes
+``soccer.png``, ``soccer.md`` and ``soccer.json`` (which records the robot)
+into ``--out`` and prints the table: the time since the start of the route
+at which each waypoint was reached.
+"""
 
 from __future__ import annotations
 
 import math
+import re
 from typing import Any
 
 from wmr_jax._src.cli import flags
@@ -14,7 +21,14 @@ __all__ = ["SUBCOMMANDS"]
 def add_arguments(parser: Any) -> None:
     """Add the flags of ``wmr-jax waypoints``."""
     add_study_flags(parser)
-    parser.add_argument("--steps", default=450, metavar="N", help="control periods of each run")
+    parser.add_argument(
+        "--steps",
+        default=None,
+        metavar="N",
+        help="control periods of each run (default: 450, 14.85 s, for the paper robot; for a "
+        "--robot whose wheels cannot follow the paper's feasible gains, 60 + 10 L > v_max, "
+        "450 × (60 + 10 L) / v_max, as those gains are scaled to fit; printed with the robot)",
+    )
     parser.add_argument("--pass-tol", default=5.0, metavar="CM", help="pass-through distance, cm")
     parser.add_argument(
         "--pass-tol-deg",
@@ -22,31 +36,77 @@ def add_arguments(parser: Any) -> None:
         metavar="DEG",
         help="pass-through heading tolerance, degrees, <= 90 (90 ignores the heading)",
     )
+    flags.add_robot_flag(parser)
+
+
+# A row's "leg i s" is cumulative: the time since the start at which waypoint i was reached.
+_CUMULATIVE = re.compile(r"leg (\d+) s")
+
+
+def _shown(row: dict[str, Any]) -> dict[str, Any]:
+    """A result row with headers that say what its times are."""
+    out = {}
+    for key, value in row.items():
+        match = _CUMULATIVE.fullmatch(key)
+        if match:
+            key = f"waypoint {match[1]}: time since start (s)"
+        elif key == "slowest leg s":
+            key = "slowest leg (s)"
+        out[key] = value
+    return out
 
 
 def run(args: Any) -> int:
     """Run ``wmr-jax waypoints``; return the exit status."""
+    from wmr_jax._src.params import Robot
+    from wmr_jax._src.robots import describe_robot, robot_json
+    from wmr_jax._src.waypoints import soccer_steps
+
     out = flags.output_dir("--out", args.out)
     pass_deg = flags.number(
         "--pass-tol-deg", args.pass_tol_deg, low=0.0, high=90.0, closed=False, unit="degrees"
     )
+    given = flags.robot_from(args.robot)
+    robot = Robot() if given is None else given.robot
+    if args.steps is None:
+        steps = soccer_steps(robot)
+    else:
+        steps = flags.positive_int("--steps", args.steps, 1, 10**7)
     settings = {
         "controller_names": flags.controller_names(args.controller),
         "velocity": flags.velocity_loop(args.velocity),
-        "steps": flags.positive_int("--steps", args.steps, 1, 10**7),
+        "steps": steps,
         "pass_tol_r": flags.number("--pass-tol", args.pass_tol, low=0.0, closed=False, unit="cm"),
         "pass_tol_theta": math.radians(pass_deg),
+        "robot": robot,
     }
+    if given is not None:
+        if given.note:
+            print(given.note)
+        scaled = " (450 × (60 + 10 L) / v_max)" if args.steps is None and steps > 450 else ""
+        print(f"robot {given.label!r}: {describe_robot(robot)}; {steps} control periods{scaled}")
 
+    from wmr_jax._src.io import atomic_write_json
     from wmr_jax._src.report.tables import markdown_table
     from wmr_jax._src.report.waypoints import write_soccer
     from wmr_jax._src.waypoints import soccer_study
 
     study = soccer_study(**settings)
     write_soccer(out, study)
-    table = markdown_table(study.rows)
+    # soccer.json records the robot beside the settings write_soccer records.
+    record = _read_json(out / "soccer.json")
+    label = given.label if given is not None else "paper"
+    record.update(robot=robot_json(robot), robot_label=label)
+    atomic_write_json(out / "soccer.json", record)
+    table = markdown_table([_shown(row) for row in study.rows])
     print(f"soccer-like sequence -> {out}/soccer.png, soccer.md, soccer.json\n{table}", end="")
     return 0
+
+
+def _read_json(path: Any) -> dict[str, Any]:
+    import json
+
+    return json.loads(path.read_text(encoding="utf-8"))
 
 
 SUBCOMMANDS = {
