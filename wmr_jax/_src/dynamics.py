@@ -32,6 +32,7 @@ __all__ = [
     "arc_apply",
     "arc_factors",
     "arc_step",
+    "rate_limit",
     "sin_cos",
     "sin_small",
     "sinc",
@@ -85,7 +86,8 @@ class RobotState(NamedTuple):
 
     Attributes:
         pose: ``(3,)`` ``[x cm, y cm, θ rad]``; θ is not wrapped.
-        velocity: ``(2,)`` body velocity ``[v cm/s, ω rad/s]`` at the sample.
+        velocity: ``(2,)`` body velocity ``[v cm/s, ω rad/s]`` at the sample
+            (ideal loop: the command it last followed, after any speed limiter).
         integral: ``(2,)`` integral of the wheel-speed loop's velocity error
             (non-ideal loop only; zero for the ideal one).
     """
@@ -93,6 +95,18 @@ class RobotState(NamedTuple):
     pose: jax.Array
     velocity: jax.Array
     integral: jax.Array
+
+
+def rate_limit(value: jax.Array, previous: jax.Array, rate: jax.Array, dt: jax.Array) -> jax.Array:
+    """``value`` moved from ``previous`` by at most ``rate · dt`` (docs/model.md §4.2.2).
+
+    One axis of a speed limiter's acceleration limit. A ``rate`` of 0 means
+    no limit: ``value`` passes unchanged, bit for bit. Differentiable in all
+    four arguments: where the limit binds the result is ``previous ± rate dt``,
+    elsewhere ``value``.
+    """
+    step = jnp.where(rate > 0, rate * dt, jnp.inf)
+    return jnp.clip(value, previous - step, previous + step)
 
 
 def _polynomial(z: jax.Array, coefficients: tuple[float, ...]) -> jax.Array:

@@ -30,6 +30,7 @@ __all__ = [
     "DEFAULT_STEPS",
     "DEFAULT_SUBSTEPS",
     "EntryJit",
+    "HeldCommand",
     "Options",
     "SplitPose",
     "StepOutput",
@@ -48,6 +49,7 @@ __all__ = [
     "jit_top_level",
     "remat",
     "scan_closed_loop",
+    "speed_limit",
     "split_command",
     "split_region",
 ]
@@ -90,6 +92,11 @@ class Options:
             backward pass instead of storing its intermediates (see
             ``remat``). ``False`` stores them: more memory, and on XLA:CPU
             slower too; no effect on evaluation.
+        accel_limit: pass each command through the speed limiter of the
+            robot's ``accel_max`` and ``angular_accel_max`` before the ideal
+            robot follows it (ideal loop; docs/model.md §4.2.2). ``for_robot``
+            turns it on for robots that give either limit; off, the loop has
+            no limiter at all.
     """
 
     steps: int = DEFAULT_STEPS
@@ -103,16 +110,23 @@ class Options:
     small_turn: bool = False
     estimator: Any = None
     remat: bool = True
+    accel_limit: bool = False
 
 
 def for_robot(options: Options, robot: Robot, dt: Any) -> Options:
-    """Return ``options`` with the wheel-loop terms that vanish for ``robot`` left out.
+    """Return ``options`` fitted to ``robot``: its speed limiter on, vanishing terms left out.
 
-    A computed-torque loop with ``integral_gain = 0`` is a proportional loop:
-    its integral state changes nothing but costs a second RK4 step per
-    sub-step. With ``com_offset = 0`` the Coriolis terms ``G(q)`` are zero.
-    Leaving them out gives the same results, faster. When ``V_max dt /
-    (L substeps) ≤ π/2`` no sub-step can turn further than that
+    Ideal loop: the speed limiter (``accel_limit``) is turned on where the
+    robot gives an acceleration limit (``accel_max`` or
+    ``angular_accel_max`` above 0, docs/model.md §4.2.2), and for a traced
+    robot, whose limits cannot be seen (the limiter then lets an unlimited
+    axis through unchanged).
+
+    Non-ideal loop: a computed-torque loop with ``integral_gain = 0`` is a
+    proportional loop: its integral state changes nothing but costs a second
+    RK4 step per sub-step. With ``com_offset = 0`` the Coriolis terms
+    ``G(q)`` are zero. Leaving them out gives the same results, faster. When
+    ``V_max dt / (L substeps) ≤ π/2`` no sub-step can turn further than that
     (``small_turn``). Decided on the concrete robot and ``dt`` before
     tracing; traced values keep the general loop. Only for runs where the
     wheel controller's model is ``robot`` itself.
@@ -126,6 +140,10 @@ def for_robot(options: Options, robot: Robot, dt: Any) -> Options:
         value = concrete(value)
         return value is not None and not np.any(value != 0)
 
+    if options.velocity == "ideal":
+        limits = [concrete(robot.accel_max), concrete(robot.angular_accel_max)]
+        limited = any(x is None or np.any(x > 0) for x in limits)
+        return dataclasses.replace(options, accel_limit=options.accel_limit or limited)
     if options.velocity != "nonideal":
         return options
     v_max, half_track, period = (concrete(x) for x in (robot.v_max, robot.half_track, dt))
@@ -173,9 +191,14 @@ def closed_loop_step(
     v, omega = control.command(state.pose, ref, params, temperature=options.temperature)
     region = control.region_of(state.pose, ref, params)
     if options.velocity == "ideal":
-        pose = dynamics.arc_step(state.pose, v, omega, dt)
-        new_state = dynamics.RobotState(pose, jnp.stack([v, omega]), state.integral)
-        distance = jnp.abs(v) * dt
+        # The ideal robot's velocity is the command it last followed.
+        held_v, held_omega = v, omega
+        if options.accel_limit:
+            previous = HeldCommand(state.velocity[0], state.velocity[1])
+            held_v, held_omega = speed_limit(previous, v, omega, robot, dt)
+        pose = dynamics.arc_step(state.pose, held_v, held_omega, dt)
+        new_state = dynamics.RobotState(pose, jnp.stack([held_v, held_omega]), state.integral)
+        distance = jnp.abs(held_v) * dt
     else:
         new_state, distance = velocity_loop.advance(
             state,
@@ -285,11 +308,45 @@ def split_region(pose: SplitPose, ref, params, options: Options) -> jax.Array:
     return options.controller.region_of(pose.stacked(), ref, params, frame=pose.frame())
 
 
-def initial_wheel(init: jax.Array, options: Options) -> velocity_loop.WheelState | None:
-    """The wheel loop at rest (``None`` for the ideal loop, which has none)."""
-    if options.velocity == "ideal":
-        return None
+class HeldCommand(NamedTuple):
+    """The command the ideal loop's speed limiter last let through (docs/model.md §4.2.2).
+
+    The ideal loop's state beside the pose when ``Options.accel_limit`` is
+    on (leading batch axes allowed); the robot starts at rest, ``(0, 0)``.
+
+    Attributes:
+        v: linear velocity, cm/s.
+        omega: angular velocity, rad/s.
+    """
+
+    v: jax.Array
+    omega: jax.Array
+
+
+def speed_limit(
+    previous: HeldCommand, v: jax.Array, omega: jax.Array, robot: Robot, dt: jax.Array
+) -> tuple[jax.Array, jax.Array]:
+    """The command ``(v, ω)`` after the robot's speed limiter (docs/model.md §4.2.2).
+
+    Each axis moves from ``previous`` by at most its acceleration limit
+    times ``dt``; an axis whose limit is 0 (none) passes unchanged.
+    """
+    return (
+        dynamics.rate_limit(v, previous.v, robot.accel_max, dt),
+        dynamics.rate_limit(omega, previous.omega, robot.angular_accel_max, dt),
+    )
+
+
+def initial_wheel(
+    init: jax.Array, options: Options
+) -> velocity_loop.WheelState | HeldCommand | None:
+    """The velocity loop at rest: the wheel loop's state, or the ideal loop's held command.
+
+    ``None`` for the ideal loop without a speed limiter, which has no state.
+    """
     zero = jnp.zeros((), init.dtype)
+    if options.velocity == "ideal":
+        return HeldCommand(zero, zero) if options.accel_limit else None
     return velocity_loop.WheelState(zero, zero, zero, zero)
 
 
@@ -332,23 +389,27 @@ def ideal_arc(pose: SplitPose, v: jax.Array, omega: jax.Array, dt: jax.Array) ->
 
 def advance_period(
     pose: SplitPose,
-    wheel: velocity_loop.WheelState | None,
+    wheel: Any,
     command: tuple[jax.Array, jax.Array],
     robot: Robot,
     dt: jax.Array,
     options: Options,
     *,
     model: Robot | None = None,
-) -> tuple[SplitPose, velocity_loop.WheelState | None, jax.Array, jax.Array]:
+) -> tuple[SplitPose, Any, jax.Array, jax.Array]:
     """Move the robot over one period under the held ``command = (v, ω)`` (docs/model.md §4).
 
     Args:
         pose: the pose at the sample.
-        wheel: the wheel loop's state (``None`` for the ideal loop).
-        command: ``(v cm/s, ω rad/s)``, held over the period.
+        wheel: the velocity loop's state (``initial_wheel``): the wheel loop's,
+            the ideal loop's last held command under a speed limiter, or
+            ``None``.
+        command: ``(v cm/s, ω rad/s)``, held over the period (after the speed
+            limiter, if ``options.accel_limit``).
         robot: the robot that moves.
         dt: control period, s.
-        options: ``velocity``, ``substeps`` and ``wheel_limit`` are used.
+        options: ``velocity``, ``substeps``, ``wheel_limit`` and
+            ``accel_limit`` are used.
         model: the robot the wheel controller believes in (non-ideal loop;
             default ``robot``).
 
@@ -358,6 +419,9 @@ def advance_period(
     """
     v, omega = command
     if options.velocity == "ideal":
+        if options.accel_limit:
+            v, omega = speed_limit(wheel, v, omega, robot, dt)
+            wheel = HeldCommand(v, omega)
         new = ideal_arc(pose, v, omega, dt)
         return new, wheel, law.wheel_speeds(v, omega, robot), jnp.abs(v) * dt
     position, heading, theta, wheel, distance = velocity_loop.advance_split(

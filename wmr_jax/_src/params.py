@@ -103,6 +103,11 @@ class Robot(Parameters):
             velocity time constant is ``1/k_p`` (``docs/model.md §4``).
         integral_gain: integral gain ``k_i`` of the wheel-speed loop, 1/s²
             (0: none; useful when the loop's model differs from the robot).
+        accel_max: largest change of the linear-velocity command per second,
+            cm/s², that the ideal loop's speed limiter lets through (0: no
+            limit; ``docs/model.md §4.2.2``).
+        angular_accel_max: the same for the angular-velocity command, rad/s²
+            (0: no limit).
     """
 
     # choice (docs/model.md §1): L = D/2.
@@ -118,6 +123,9 @@ class Robot(Parameters):
     # choice: a 10 ms velocity time constant, well inside the 33 ms period.
     speed_gain: Any = 100.0
     integral_gain: Any = 0.0
+    # The paper's robot has no speed limiter: it is the massless ideal loop.
+    accel_max: Any = 0.0
+    angular_accel_max: Any = 0.0
 
 
 class WheelSpeedWarning(UserWarning):
@@ -170,6 +178,7 @@ _POSITIVE_ROBOT_FIELDS = (
     "torque_max",
     "speed_gain",
 )
+_NON_NEGATIVE_ROBOT_FIELDS = ("integral_gain", "accel_max", "angular_accel_max")
 
 
 def validate_robot(robot: Robot) -> Robot:
@@ -182,8 +191,9 @@ def validate_robot(robot: Robot) -> Robot:
     for name in _POSITIVE_ROBOT_FIELDS:
         if r[name] is not None:
             require(f"robot.{name}", r[name], r[name] > 0, "> 0")
-    if r["integral_gain"] is not None:
-        require("robot.integral_gain", r["integral_gain"], r["integral_gain"] >= 0, ">= 0")
+    for name in _NON_NEGATIVE_ROBOT_FIELDS:  # 0: none (no integral action, no limit)
+        if r[name] is not None:
+            require(f"robot.{name}", r[name], r[name] >= 0, ">= 0")
     if r["com_offset"] is not None and r["body_diameter"] is not None:
         ok = np.abs(r["com_offset"]) < r["body_diameter"] / 2
         require(

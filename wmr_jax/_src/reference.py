@@ -173,6 +173,18 @@ def reference_control(pose: Any, ref: Any, gains: Gains) -> tuple[float, float]:
     return out["v"], out["omega"]
 
 
+def _limited(command: float, last: float, accel: float, dt: float) -> float:
+    """One axis of the speed limiter (docs/model.md §4.2.2); ``accel`` 0: none.
+
+    The change since ``last`` is clamped to ``±accel dt`` and added to it, in
+    the order ros2_controllers' ``SpeedLimiter`` computes it.
+    """
+    if accel <= 0:
+        return command
+    change = min(max(command - last, -accel * dt), accel * dt)
+    return last + change
+
+
 def _arc(x: float, y: float, th: float, v: float, w: float, h: float):
     """Exact unicycle motion at constant (v, ω) over h (docs/model.md §4)."""
     turn = w * h
@@ -277,7 +289,9 @@ def reference_rollout(
 
     Args:
         ref, gains, init, dt, steps, robot, velocity, substeps, wheel_limit:
-            as for ``wmr_jax.rollout`` (Shim–Sung controller only).
+            as for ``wmr_jax.rollout`` (Shim–Sung controller only). A robot
+            with ``accel_max`` or ``angular_accel_max`` above 0 has its ideal
+            loop's commands pass its speed limiter (§4.2.2).
 
     Returns:
         A dict with the fields of ``wmr_jax.Trajectory`` as float64 NumPy
@@ -298,6 +312,7 @@ def reference_rollout(
         check_stability(robot, dt, substeps)  # the same bound as the JAX loop's
     ref = _one_pose("ref", ref)
     loop = _Loop(robot)
+    accel, angular_accel = float(robot.accel_max), float(robot.angular_accel_max)
     x, y, th = _one_pose("init", init)
     state = [0.0, 0.0, 0.0, 0.0]  # v, ω and the wheel loop's integrals
     poses = np.empty((steps + 1, 3))
@@ -308,8 +323,11 @@ def reference_rollout(
         out = _diagnostics((x, y, th), ref, gains)
         v, w = out["v"], out["omega"]
         if velocity == "ideal":
-            x, y, th = _arc(x, y, th, v, w, dt)
-            state, dist[k] = [v, w, 0.0, 0.0], abs(v) * dt
+            # The robot starts at rest: the first limited change is from (0, 0).
+            v_held = _limited(v, state[0], accel, dt)
+            w_held = _limited(w, state[1], angular_accel, dt)
+            x, y, th = _arc(x, y, th, v_held, w_held, dt)
+            state, dist[k] = [v_held, w_held, 0.0, 0.0], abs(v_held) * dt
         else:
             (x, y, th), state, dist[k] = loop.period(
                 (x, y, th), state, (v, w), dt, substeps, wheel_limit

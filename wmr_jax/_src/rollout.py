@@ -5,8 +5,10 @@ ranges, shapes, finiteness, options) and then call a jitted core whose static
 arguments are the shape-deciding options. Calling them again with the same
 shapes and options reuses the compiled code; for the non-ideal loop the
 robot's vanishing terms are options too (``loops.for_robot``,
-``docs/model.md §4.3``), so a robot that crosses one compiles anew. The loop
-itself is in ``loops.py``; the checks in ``checks.py``.
+``docs/model.md §4.3``), so a robot that crosses one compiles anew, and so
+is the ideal loop's speed limiter, on for a robot that gives acceleration
+limits (``docs/model.md §4.2.2``). The loop itself is in ``loops.py``; the
+checks in ``checks.py``.
 """
 
 from __future__ import annotations
@@ -73,11 +75,14 @@ class Trajectory(NamedTuple):
 
     Attributes:
         poses: ``(steps + 1, 3)`` poses ``[x cm, y cm, θ rad]``, the initial one first.
-        v: ``(steps,)`` linear-velocity command applied over each period, cm/s.
-        omega: ``(steps,)`` angular-velocity command, rad/s.
+        v: ``(steps,)`` linear-velocity command of the law over each period,
+            cm/s: what the ideal robot follows, unless the robot's speed
+            limiter changes it (``accel_max``, docs/model.md §4.2.2), or the
+            non-ideal loop's set point.
+        omega: ``(steps,)`` angular-velocity command, rad/s (likewise).
         region: ``(steps,)`` int32 region label 0–3 of the command (docs/model.md §3).
         wheel_speeds: ``(steps, 2)`` rim speeds ``[v_L, v_R]`` of the robot
-            at the end of each period, cm/s.
+            at the end of each period, cm/s (after the speed limiter, if any).
         distance: ``(steps,)`` distance the centre travelled over each period, cm.
     """
 
@@ -317,7 +322,9 @@ _OPTIONS_DOC = """
         init: ``(3,)`` initial pose, or ``(N, 3)`` for a batch.
         dt: control period in s; commands are held over it (docs/model.md §4).
         steps: number of control periods (static).
-        robot: robot parameters; default ``Robot()``.
+        robot: robot parameters; default ``Robot()``. Its ``accel_max`` and
+            ``angular_accel_max``, where above 0, limit how fast the ideal
+            loop's commands change (docs/model.md §4.2.2).
         velocity: velocity loop between command and robot (static):
             ``"ideal"`` or ``"nonideal"`` (docs/model.md §4).
         controller: a ``Controller`` or its name (static); default Shim–Sung.
