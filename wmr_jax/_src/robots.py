@@ -7,7 +7,9 @@ A robot is named by a preset (``ROBOTS``: ``paper``, ``turtlebot3-burger``,
   s; ``ROBOT_UNITS``); a field left out keeps the paper robot's value.
 * ``.yaml`` / ``.yml``: the parameters of a ros2_controllers (or ROS 1)
   ``diff_drive_controller``, nested under ``<node>: ros__parameters:`` or
-  flat; metres become centimetres (``docs/robots.md``).
+  flat; metres become centimetres (``docs/robots.md``). Its acceleration
+  limits become ``accel_max`` and ``angular_accel_max``, which the ideal
+  loop's speed limiter applies (``docs/model.md §4.2.2``).
 
 Every file is checked before anything runs, and a mistake is one line
 naming the file, the key, its value and what is allowed. The sources of the
@@ -59,6 +61,8 @@ ROBOT_UNITS = {
     "torque_max": "kg*cm^2/s^2 (1 N*m = 1e4)",
     "speed_gain": "1/s",
     "integral_gain": "1/s^2",
+    "accel_max": "cm/s^2 (linear command acceleration limit, 0: none)",
+    "angular_accel_max": "rad/s^2 (angular command acceleration limit, 0: none)",
 }
 # The unit alone, for messages ("a number > 0 (cm/s)").
 _UNIT = {name: text.split(" (")[0] for name, text in ROBOT_UNITS.items()}
@@ -73,7 +77,10 @@ _G = 981.0  # cm/s², standard gravity
 # rotational velocity 2.84 rad/s, size 138 x 178 x 192 mm, weight 1 kg with SBC,
 # battery and sensors (ROBOTIS e-Manual, TurtleBot3 > Specifications > Hardware
 # Specifications); each wheel 0.0285 kg (ROBOTIS turtlebot3_simulations, Gazebo
-# model of the Burger, wheel link mass 2.8498940e-02 kg).
+# model of the Burger, wheel link mass 2.8498940e-02 kg); acceleration limits
+# 2.5 m/s^2 and 3.2 rad/s^2 (ROBOTIS turtlebot3,
+# turtlebot3_navigation2/param/burger.yaml: the local planner's "acc_lim_x: 2.5",
+# "acc_lim_theta: 3.2", and the recoveries' "rotational_acc_lim: 3.2").
 _BURGER_SEPARATION_CM = 16.0
 _BURGER_MASS_KG = 1.0
 _BURGER_WHEEL_KG = 0.0285
@@ -95,6 +102,8 @@ TURTLEBOT3_BURGER = Robot(
     # choice: the paper robot's wheel loop, a 10 ms velocity time constant.
     speed_gain=100.0,
     integral_gain=0.0,
+    accel_max=250.0,  # 2.5 m/s², the limits ROBOTIS configures for the Burger
+    angular_accel_max=3.2,
 )
 
 # Adept MobileRobots Pioneer 3-DX. Sourced (the P3-DX datasheet and the
@@ -120,6 +129,10 @@ PIONEER_3DX = Robot(
     torque_max=round(_G * _P3DX_MASS_KG * 9.75 / 2, -2),
     speed_gain=100.0,  # choice: the paper robot's wheel loop
     integral_gain=0.0,
+    # Not found in a published source (ARIA's p3dx.p leaves TransAccel and
+    # RotAccel to the robot's firmware): no speed limiter. A file can give them.
+    accel_max=0.0,
+    angular_accel_max=0.0,
 )
 
 # Read-only: a preset is shared by every caller (Robot itself is frozen).
@@ -166,12 +179,20 @@ def robot_name(robot: Robot) -> str | None:
 
 
 def describe_robot(robot: Robot) -> str:
-    """One line: the preset's name (if any) and the fields that set the wheel budget, with units."""
+    """One line: the preset's name (if any), the fields that set the wheel budget, its limits.
+
+    The acceleration limits are named where the robot gives them (above 0).
+    """
     f = _floats(robot)
     name = robot_name(robot) or "custom"
+    limits = "".join(
+        f", {field} = {f[field]:.4g} {_UNIT[field]}"
+        for field in ("accel_max", "angular_accel_max")
+        if f[field] > 0
+    )
     return (
         f"{name} (L = {f['half_track']:.4g} cm, V_max = {f['v_max']:.4g} cm/s, "
-        f"r = {f['wheel_radius']:.4g} cm, M = {f['body_mass']:.4g} kg)"
+        f"r = {f['wheel_radius']:.4g} cm, M = {f['body_mass']:.4g} kg{limits})"
     )
 
 
@@ -229,8 +250,10 @@ def robot_from_values(values: Any, where: str) -> Robot:
             )
         if key == "com_offset":
             continue  # either sign; validate_robot keeps it inside the body below
-        low = ">= 0" if key == "integral_gain" else "> 0"  # 0: no integral action
-        if not (float(value) >= 0 if key == "integral_gain" else float(value) > 0):
+        # 0: no integral action, no acceleration limit.
+        zero = key in ("integral_gain", "accel_max", "angular_accel_max")
+        low = ">= 0" if zero else "> 0"
+        if not (float(value) >= 0 if zero else float(value) > 0):
             raise ValueError(
                 f"{where}: {key} = {value!r} is not allowed; allowed: a number {low} ({_UNIT[key]})"
             )
@@ -271,12 +294,14 @@ class LoadedRobot(NamedTuple):
     Attributes:
         robot: the checked ``Robot``.
         label: the preset name or the file's path.
-        note: one line saying which fields of a ROS YAML were used, which were
-            recorded only and which ignored; ``None`` for presets and JSON.
-        accelerations: the YAML's acceleration limits, recorded but not
-            simulated: ``{"linear.x.max_acceleration": cm/s²,
-            "angular.z.max_acceleration": rad/s²}`` (those given); ``None``
-            for presets and JSON.
+        note: one line saying which fields of a ROS YAML were used (and into
+            which ``Robot`` fields) and which ignored; ``None`` for presets
+            and JSON.
+        accelerations: the YAML's acceleration limits as read,
+            ``{"linear.x.max_acceleration": cm/s²,
+            "angular.z.max_acceleration": rad/s²}`` (those given and switched
+            on); they are the robot's ``accel_max`` and ``angular_accel_max``.
+            ``None`` for presets and JSON.
     """
 
     robot: Robot
@@ -435,9 +460,13 @@ def _positive(params: dict[str, Any], key: str, unit: str, where: str) -> float 
     return float(value)
 
 
-def _limited(params: dict[str, Any], axis: str, where: str) -> bool:
-    """Whether the file enables the velocity limit of ``axis`` (ROS 1's ``has_velocity_limits``)."""
-    key = f"{axis}.has_velocity_limits"
+def _limited(params: dict[str, Any], axis: str, where: str, kind: str = "velocity") -> bool:
+    """Whether the file enables the ``kind`` limit of ``axis`` (``has_velocity_limits``, ...).
+
+    Without the flag, a limit given is a limit, as recent ros2_controllers
+    read it (they dropped the flags; ``.nan`` is no limit there).
+    """
+    key = f"{axis}.has_{kind}_limits"
     value = params.get(key, True)
     if not isinstance(value, bool):
         raise ValueError(f"{where}: {key} = {value!r:.40} is not allowed; allowed: true or false")
@@ -531,27 +560,40 @@ def _robot_from_ros_yaml(content: str, where: str) -> tuple[Robot, str, dict[str
         values["v_max"] = max(speeds)
         shown.append(f"v_max {values['v_max']:.6g} cm/s")
 
+    # The speed limiter's acceleration limits, symmetric: ±max_acceleration
+    # (min_acceleration, max_deceleration and the *_reverse limits of an
+    # asymmetric limiter are not modelled, and land among the ignored).
     accelerations = {}
-    recorded = []
-    for key, unit, convert in (
-        ("linear.x.max_acceleration", "m/s^2", _centi),  # m/s² -> cm/s²
-        ("angular.z.max_acceleration", "rad/s^2", float),
+    for axis, field, unit, convert in (
+        ("linear.x", "accel_max", "m/s^2", _centi),  # m/s² -> cm/s²
+        ("angular.z", "angular_accel_max", "rad/s^2", float),
     ):
+        flag, key = f"{axis}.has_acceleration_limits", f"{axis}.max_acceleration"
+        limited = _limited(params, axis, where, "acceleration")
+        if flag in params:
+            used.append(flag)
         value = _positive(params, key, unit, where)
-        if value is not None:
-            accelerations[key] = convert(value)
-            recorded.append(key)
+        if value is not None and limited:
+            used.append(key)
+            accelerations[key] = values[field] = convert(value)
+            shown.append(f"{field} {values[field]:.6g} {_UNIT[field]}")
 
-    ignored = [k for k in params if k not in used and k not in recorded]
+    ignored = [k for k in params if k not in used]
     robot = robot_from_values(values, where)
-    kept = [name for name in ROBOT_FIELDS if name not in values]
+    # No acceleration limit given is none (the paper robot's 0), not a value kept.
+    kept = [
+        name
+        for name in ROBOT_FIELDS
+        if name not in values and name not in ("accel_max", "angular_accel_max")
+    ]
     note = (
         f"robot from {where}, diff_drive_controller parameters at "
         f"'{'.'.join(path) or '(top level)'}': used {', '.join(used) or 'nothing'} -> "
         f"{', '.join(shown) or 'no field'}"
         + (
-            f"; recorded, not simulated: {', '.join(recorded)} (the loop has no acceleration limit)"
-            if recorded
+            "; the ideal loop's speed limiter applies these acceleration limits to its "
+            "commands (docs/model.md §4.2.2)"
+            if accelerations
             else ""
         )
         + f"; ignored: {', '.join(ignored) or 'nothing'}"
