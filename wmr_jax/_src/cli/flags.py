@@ -8,6 +8,7 @@ own unit (degrees stay degrees).
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import math
 from collections.abc import Iterator, Sequence
@@ -15,12 +16,16 @@ from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "GAIN_FLAG",
     "add_gain_flags",
     "add_robot_flag",
     "choice",
     "controller_names",
+    "gain_flag",
+    "gain_flag_values",
     "gains_file",
     "gains_from",
+    "given_gain_flags",
     "number",
     "output_dir",
     "output_file",
@@ -139,23 +144,68 @@ def pose_from_degrees(flag: str, values: Sequence[Any]) -> list[float]:
     return [x, y, math.radians(theta)]
 
 
+# One style for every gain flag: the field's name, hyphenated, with each part
+# apart (--k-r, --k-theta, --phi-m, ...). Older spellings stay as aliases.
 _GAIN_FLAGS = (
-    # flag, field, default, unit, help
-    ("--kr", "kr", 120.0, "cm/s", "k_r, cm/s"),
-    ("--k-theta", "k_theta", 10.0, "rad/s", "k_θ, rad/s"),
-    ("--phi-m", "phi_m", 70.0, "degrees", "Φ_m, degrees"),
-    ("--r-m", "r_m", 20.0, "cm", "R_m, cm"),
-    ("--r-a", "r_a", 20.0, "cm", "R_a, cm"),
-    ("--r-e", "r_e", 1.0, "cm", "R_e, cm"),
-    ("--alpha", "alpha", 0.25, "", "α"),
+    # flag, field, default, unit, help, older spellings
+    ("--k-r", "kr", 120.0, "cm/s", "k_r, cm/s", ("--kr",)),
+    ("--k-theta", "k_theta", 10.0, "rad/s", "k_θ, rad/s", ()),
+    ("--phi-m", "phi_m", 70.0, "degrees", "Φ_m, degrees", ()),
+    ("--r-m", "r_m", 20.0, "cm", "R_m, cm", ()),
+    ("--r-a", "r_a", 20.0, "cm", "R_a, cm", ()),
+    ("--r-e", "r_e", 1.0, "cm", "R_e, cm", ()),
+    ("--alpha", "alpha", 0.25, "", "α", ()),
 )
+
+# The gain flag of each Gains field, in the style above.
+GAIN_FLAG = {field: flag for flag, field, *_ in _GAIN_FLAGS}
+# Where args records the spelling each given gain flag was typed in.
+_TYPED = "gain_flag_spelling"
+
+
+class _GainFlag(argparse.Action):
+    """Store a gain flag's text and the spelling it was typed in (for messages)."""
+
+    def __call__(self, parser: Any, namespace: Any, values: Any, option_string: Any = None):
+        setattr(namespace, self.dest, values)
+        typed = dict(getattr(namespace, _TYPED, None) or {})
+        typed[self.dest] = option_string
+        setattr(namespace, _TYPED, typed)
+
+
+def gain_flag(args: Any, field: str) -> str:
+    """The flag of a gain field as the command line gave it (``--kr``), else its own name."""
+    typed = getattr(args, _TYPED, None) or {}
+    return typed.get(field) or GAIN_FLAG[field]
+
+
+def given_gain_flags(args: Any) -> list[str]:
+    """The gain flags given on the command line, as typed (a flag left alone keeps its float)."""
+    fields = [field for _, field, *_ in _GAIN_FLAGS]
+    return [gain_flag(args, f) for f in fields if isinstance(getattr(args, f, None), str)]
 
 
 def add_gain_flags(parser: Any) -> None:
     """Add the Shim–Sung gain flags (defaults: the paper's Fig. 7) to a parser."""
     group = parser.add_argument_group("gains (docs/model.md §3; defaults are the paper's Fig. 7)")
-    for flag, _, default, _, text in _GAIN_FLAGS:
-        group.add_argument(flag, default=default, metavar="V", help=text)
+    for flag, field, default, _, text, older in _GAIN_FLAGS:
+        group.add_argument(
+            flag, *older, dest=field, default=default, metavar="V", help=text, action=_GainFlag
+        )
+
+
+def gain_flag_values(params: Any) -> list[str]:
+    """``Gains`` as the gain flags that give them: ``["--k-r", "65.592", ...]`` (Φ_m in degrees).
+
+    Six significant digits: what ``wmr-jax tune`` prints here, typed back
+    into ``wmr-jax simulate``, gives the same gains to six digits.
+    """
+    argv = []
+    for flag, field, *_ in _GAIN_FLAGS:
+        value = float(getattr(params, field))
+        value = math.degrees(value) if field == "phi_m" else value
+        argv += [flag, f"{value:.6g}"]
+    return argv
 
 
 def gains_from(args: Any) -> Any:
@@ -167,14 +217,13 @@ def gains_from(args: Any) -> Any:
     from wmr_jax._src.params import Gains, validate_gains
 
     if getattr(args, "gains", None) is not None:
-        # A flag given on the command line is text; one left alone keeps its float default.
-        given = [flag for flag, field, *_ in _GAIN_FLAGS if isinstance(getattr(args, field), str)]
+        given = given_gain_flags(args)
         if given:
             raise ValueError(f"{given[0]} is not allowed with --gains; allowed: one or the other")
         return gains_file("--gains", args.gains)
     values = {}
-    for flag, field, _, unit, _ in _GAIN_FLAGS:
-        value = number(flag, getattr(args, field), unit=unit)
+    for _, field, _, unit, *_ in _GAIN_FLAGS:
+        value = number(gain_flag(args, field), getattr(args, field), unit=unit)
         values[field] = math.radians(value) if field == "phi_m" else value
     gains = Gains(**values)
     try:
@@ -182,43 +231,39 @@ def gains_from(args: Any) -> Any:
     except ValueError as err:
         if "gains.phi_m" in str(err):
             raise ValueError(
-                f"--phi-m {args.phi_m} is not allowed; allowed: 0 < degrees < 90"
+                f"{gain_flag(args, 'phi_m')} {args.phi_m} is not allowed; allowed: 0 < degrees < 90"
             ) from None
-        for flag, field, *_ in _GAIN_FLAGS:
+        for _, field, *_ in _GAIN_FLAGS:
             if str(err).startswith(f"gains.{field} "):
-                raise ValueError(f"{flag}: {err}") from None
+                raise ValueError(f"{gain_flag(args, field)}: {err}") from None
         raise
     return gains
 
 
 def gains_file(flag: str, text: str) -> Any:
-    """Return the ``Gains`` stored in a JSON file, such as ``tuned_gains.json`` of ``wmr-jax tune``.
+    """Return the fixed ``Gains`` stored in a file such as ``tuned_gains.json`` of ``wmr-jax tune``.
 
-    The file holds one object whose keys are ``Gains`` field names (``kr``
-    cm/s, ``k_theta`` rad/s, ``phi_m`` in radians, ``r_m``, ``r_a``, ``r_e``
-    cm, ``alpha``); a field it leaves out keeps the paper's value.
+    Read by ``load_tuned``, with the units the file names (a file without
+    them, from before units were recorded, holds ``phi_m`` in radians); a
+    field it leaves out keeps the paper's value.
+
+    Raises:
+        ValueError: one line naming ``flag`` and the file, for a file
+            ``load_tuned`` refuses or one of a gain schedule.
     """
-    import dataclasses
-    import json
+    from wmr_jax._src.params import Gains
+    from wmr_jax._src.tuning.saved import load_tuned
 
-    from wmr_jax._src.io import json_object_once as once
-    from wmr_jax._src.params import Gains, validate_gains
-
-    fields = [f.name for f in dataclasses.fields(Gains)]
     try:
-        values = json.loads(Path(text).read_text(encoding="utf-8"), object_pairs_hook=once)
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as err:
-        raise ValueError(f"{flag} {text!r} cannot be read: {err}") from None
-    numbers = isinstance(values, dict) and all(isinstance(v, (int, float)) for v in values.values())
-    if not numbers or not set(values) <= set(fields):
-        raise ValueError(
-            f"{flag} {text!r} is not allowed; allowed: a JSON object of numbers with keys "
-            "among " + ", ".join(fields)
-        )
-    try:
-        return validate_gains(Gains(**values))
+        loop = load_tuned(text)
     except ValueError as err:
-        raise ValueError(f"{flag} {text!r}: {err}") from None
+        raise ValueError(f"{flag} {err}") from None
+    if not isinstance(loop.params, Gains):
+        raise ValueError(
+            f"{flag} {text!r} is not allowed here: it holds a gain schedule; allowed: a file "
+            "of fixed gains (wmr-jax simulate --gains runs a schedule)"
+        )
+    return loop.params
 
 
 def add_robot_flag(parser: Any, default: str = "paper") -> None:

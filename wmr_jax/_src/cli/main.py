@@ -40,6 +40,9 @@ class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
         hidden = action.default is None or action.default is False
         if hidden or action.default is argparse.SUPPRESS or "%(default)" in text:
             return text
+        if isinstance(action.default, (list, tuple)):
+            # Several values are shown as they are typed: "0 0 0", not "['0', '0', '0']".
+            return f"{text} (default: {' '.join(map(str, action.default))})"
         return super()._get_help_string(action)
 
 

@@ -22,7 +22,7 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument(
         "--init",
         nargs=3,
-        default=["0", "0", "0"],
+        default=["0", "0", "0"],  # shown as typed: (default: 0 0 0)
         metavar=("X", "Y", "THETA_DEG"),
         help="initial pose: cm, cm, degrees",
     )
@@ -50,16 +50,13 @@ def _controller_and_gains(args: Any) -> tuple[Any, Any, Any]:
     The robot is the file's (``None`` where it records none, and for the flags).
     """
     from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
-    from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS
     from wmr_jax._src.tuning.saved import load_tuned
 
     if args.gains is None:
         return SHIM_SUNG, flags.gains_from(args), None
-    # A gain flag given on the command line is text; one left alone keeps its float default.
-    given = [name for name in GAIN_FIELDS if isinstance(getattr(args, name, None), str)]
+    given = flags.given_gain_flags(args)
     if given:
-        flag = "--" + given[0].replace("_", "-")
-        raise ValueError(f"{flag} is not allowed with --gains; allowed: one or the other")
+        raise ValueError(f"{given[0]} is not allowed with --gains; allowed: one or the other")
     try:
         loop = load_tuned(args.gains)
     except ValueError as err:
