@@ -7,6 +7,12 @@ or ``"schedule"``) beside the parameters, and the estimator tuned with them
 docs/model.md §9). Files from before the schedules, which hold only
 ``Gains`` field names, load as fixed gains.
 
+Each number's unit is named under ``"units"`` (``{"kr": "cm/s", "phi_m":
+"rad", ..., "estimator.sigma_theta": "rad"}``): the file holds the Python
+API's units, angles in radians. A file may name an angle ``"deg"`` instead
+(one written by hand), and is read in degrees then; a file without
+``"units"`` (from before they were recorded) holds radians.
+
 It also records the robot the parameters were tuned for (``"robot":
 {field: value}``, with ``"robot_units"``): gains are tuned within that
 robot's wheel budget ``k_r + L k_θ ≤ V_max``, so they travel with it. Files
@@ -31,10 +37,39 @@ from wmr_jax._src.tuning.estimation import estimator_from_json, estimator_json
 from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS
 from wmr_jax._src.tuning.problems import FIXED, SCHEDULED, params_json
 
-__all__ = ["load_tuned", "tuned_json"]
+__all__ = ["PARAM_UNITS", "load_tuned", "tuned_json"]
 
 _KINDS = {"fixed": (SHIM_SUNG, Gains), "schedule": (SCHEDULE, ScheduleParams)}
 _SCHEDULE_FIELDS = (*TABLES, *SHAPE_FIELDS, "v_max", "half_track")
+
+# The unit of each number a tuned_gains.json holds, as its "units" records it:
+# the Python API's (angles in radians). "1": a plain number.
+PARAM_UNITS = {
+    "kr": "cm/s",
+    "k_theta": "rad/s",
+    "k_turn": "rad/s",
+    "phi_m": "rad",
+    "r_m": "cm",
+    "r_a": "cm",
+    "r_e": "cm",
+    "alpha": "1",
+    "v_max": "cm/s",
+    "half_track": "cm",
+    "estimator.position": "1",
+    "estimator.heading": "1",
+    "estimator.wheel_error": "1",
+    "estimator.sigma_xy": "cm",
+    "estimator.sigma_theta": "rad",
+}
+# Angles may be given in degrees instead (a file written by hand).
+_DEGREES = "deg"
+
+
+def _units(values: dict[str, Any]) -> dict[str, str]:
+    """The ``"units"`` entry of a file's numbers (``values``: its fields and estimator)."""
+    names = [k for k in values if k in PARAM_UNITS]
+    names += [f"estimator.{k}" for k in values.get("estimator") or {}]
+    return {name: PARAM_UNITS[name] for name in names if name in PARAM_UNITS}
 
 
 def tuned_json(params: Any, estimator: Any = None, robot: Any = None) -> dict[str, Any]:
@@ -67,6 +102,7 @@ def tuned_json(params: Any, estimator: Any = None, robot: Any = None) -> dict[st
     sensed = estimator_json(estimator)
     if sensed is not None:
         values["estimator"] = sensed
+    values["units"] = _units(values)
     if robot is not None:
         robot = validate_one_robot(robot, "tuned_gains.json")
         _check_schedule_robot(params, robot, "robot")
@@ -108,6 +144,48 @@ def _kind_of(values: dict[str, Any], where: str) -> str:
             f"kind 'fixed' (controller 'shim-sung') or 'schedule' ('shim-sung-schedule')"
         )
     return kind
+
+
+def _in_library_units(values: dict[str, Any], fields: tuple, where: str) -> dict[str, Any]:
+    """``values`` with its angles in radians, after checking its ``"units"`` (if any).
+
+    Raises:
+        ValueError: one line naming the file, the key and its unit, for a
+            unit other than the library's (or ``"deg"`` for an angle).
+    """
+    if "units" not in values:
+        return values  # a file from before units were recorded: the library's
+    units = values["units"]
+    if not isinstance(units, dict):
+        raise ValueError(
+            f"{where}: units = {units!r:.60} is not allowed; allowed: an object "
+            "{field: unit} as wmr-jax tune writes it"
+        )
+    estimator = values.get("estimator")
+    known = [*fields, *(k for k in PARAM_UNITS if k.startswith("estimator."))]
+    out = dict(values)
+    for key, unit in units.items():
+        if key not in known:
+            raise ValueError(
+                f"{where}: units[{key!r}] is not allowed; allowed: keys among {', '.join(known)}"
+            )
+        mine = PARAM_UNITS[key]
+        allowed = (mine, _DEGREES) if mine == "rad" else (mine,)
+        if unit not in allowed:
+            raise ValueError(
+                f"{where}: units[{key!r}] = {unit!r:.60} is not allowed; allowed: "
+                f"{' or '.join(map(repr, allowed))}"
+            )
+        if unit != _DEGREES:
+            continue
+        if key.startswith("estimator."):
+            name = key.split(".", 1)[1]
+            if isinstance(estimator, dict) and _is_number(estimator.get(name)):
+                estimator = {**estimator, name: math.radians(estimator[name])}
+                out["estimator"] = estimator
+        elif _is_number(values.get(key)):
+            out[key] = math.radians(values[key])
+    return out
 
 
 def _is_number(value: Any) -> bool:
@@ -156,15 +234,8 @@ def load_tuned(path: str | os.PathLike) -> ClosedLoop:
     kind = _kind_of(values, where)
     controller, cls = _KINDS[kind]
     fields = GAIN_FIELDS if kind == "fixed" else _SCHEDULE_FIELDS
-    estimator = estimator_from_json(values.get("estimator"), where)
-    robot = None
-    if "robot_units" in values:
-        check_units(values["robot_units"], where)
-    if "robot" in values:
-        robot = robot_from_values(values["robot"], f"{where}: robot")
-    named = ("kind", "controller", "estimator", "robot", "robot_units")
-    numbers = {k: v for k, v in values.items() if k not in named}
-    bad = sorted(set(numbers) - set(fields))
+    named = ("kind", "controller", "estimator", "units", "robot", "robot_units")
+    bad = sorted({k for k in values if k not in named} - set(fields))
     if (
         bad
         and "kind" not in values
@@ -179,6 +250,14 @@ def load_tuned(path: str | os.PathLike) -> ClosedLoop:
         raise ValueError(
             f"{where}: key {bad[0]!r} is not allowed; allowed: keys among {', '.join(fields)}"
         )
+    values = _in_library_units(values, fields, where)  # angles in radians from here on
+    estimator = estimator_from_json(values.get("estimator"), where)
+    robot = None
+    if "robot_units" in values:
+        check_units(values["robot_units"], where)
+    if "robot" in values:
+        robot = robot_from_values(values["robot"], f"{where}: robot")
+    numbers = {k: v for k, v in values.items() if k not in named}
     for name, value in numbers.items():
         table = kind == "schedule" and name in TABLES
         if table:
