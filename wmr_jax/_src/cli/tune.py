@@ -46,11 +46,28 @@ def _load_checkpoint(path: Path, fresh: Any, identity: dict[str, Any]) -> Any:
         arrays, meta = io.load_arrays(path)
     except io.DamagedFileError as err:
         raise ValueError(f"--resume: checkpoint {' '.join(str(err).split())}; {advice}") from None
-    if not isinstance(meta, dict) or meta.get("format") != _CHECKPOINT_FORMAT:
-        raise ValueError(f"--resume: checkpoint {path} has an unknown format; {advice}")
+    if not isinstance(meta, dict):
+        raise ValueError(
+            f"--resume: checkpoint {path} has metadata of the wrong shape ({meta!r:.60}; "
+            f"allowed: an object with 'format' and 'identity'); {advice}"
+        )
+    if meta.get("format") != _CHECKPOINT_FORMAT:
+        raise ValueError(
+            f"--resume: checkpoint {path} has an unknown format (format = "
+            f"{meta.get('format')!r:.40}; allowed: {_CHECKPOINT_FORMAT}); {advice}"
+        )
+    saved = meta.get("identity")
+    shape = {"config": dict, "robot": dict}
+    if not isinstance(saved, dict) or not all(
+        isinstance(saved.get(key), kind) for key, kind in shape.items()
+    ):
+        raise ValueError(
+            f"--resume: checkpoint {path} has metadata of the wrong shape (identity = "
+            f"{saved!r:.60}; allowed: an object with a 'config' and a 'robot' object); {advice}"
+        )
     # Compare as JSON, the way the identity was stored.
     now = json.loads(json.dumps(identity))
-    if meta.get("identity") != now:
+    if saved != now:
         raise ValueError(
             f"--resume: checkpoint {path} is of another run "
             f"({tuning.run_difference(meta.get('identity'), now)}); "
@@ -103,11 +120,10 @@ def _write_results(out: Path, config: Any, robot: Any, result: Any) -> None:
             (nothing is written then).
     """
     from wmr_jax._src import io
-    from wmr_jax._src.optimal import bound_ratios
     from wmr_jax._src.params import check_feasible
     from wmr_jax._src.report.tuning import tuning_curve
     from wmr_jax._src.robots import ROBOT_UNITS, robot_json
-    from wmr_jax._src.tuning.evaluation import wheel_speed_ok
+    from wmr_jax._src.tuning.evaluation import report_ratios, wheel_speed_ok
     from wmr_jax._src.tuning.saved import tuned_json
 
     # Each file records the robot: its gains are tuned within that robot's wheel budget.
@@ -121,8 +137,8 @@ def _write_results(out: Path, config: Any, robot: Any, result: Any) -> None:
     bounds = held_out_bounds(config, robot)
     rows = {name: dict(ev._asdict()) for name, ev in result.evaluation.items()}
     for name, row in rows.items():
-        row["speedup_vs_paper"] = paper / row["mean_arrival"]
-        row.update(bound_ratios(row["mean_arrival"], bounds))
+        # A ratio that needs a run that never arrived is null, with the reason beside it.
+        row.update(report_ratios(row["mean_arrival"], bounds, paper))
         row["peak_wheel_speed_ok"] = wheel_speed_ok(result.evaluation[name], robot)
     report = {
         "problem": result.problem,
@@ -404,48 +420,94 @@ def _gradient_cost(out: Path) -> int:
     return 0
 
 
-def _shown(params: Any) -> str:
-    """One line of the tuned parameters (tables as lists of 3 significant digits)."""
+# How tune prints each parameter: its symbol and the unit a person types it in
+# (Φ_m in degrees, as simulate's --phi-m takes it; the files hold radians).
+_PRINTED = {
+    "kr": ("k_r", "cm/s"),
+    "k_theta": ("k_θ", "rad/s"),
+    "k_turn": ("k_turn", "rad/s"),
+    "phi_m": ("Φ_m", "°"),
+    "r_m": ("R_m", "cm"),
+    "r_a": ("R_a", "cm"),
+    "r_e": ("R_e", "cm"),
+    "alpha": ("α", ""),
+    "v_max": ("V_max", "cm/s"),
+    "half_track": ("L", "cm"),
+}
+
+
+def _shown(params: Any) -> list[str]:
+    """The tuned parameters as printed: each with its unit, angles in degrees.
+
+    Fixed gains come with a second line, the ``wmr-jax simulate`` flags that
+    give them (to six digits); a schedule's tables are lists of 3 significant
+    digits.
+    """
+    import math
+
+    from wmr_jax._src.params import Gains
     from wmr_jax._src.tuning.saved import tuned_json
 
-    def fmt(value: Any) -> str:
+    def fmt(name: str, value: Any) -> str:
+        symbol, unit = _PRINTED[name]
+        to_unit = math.degrees if name == "phi_m" else float
         if isinstance(value, list):
-            return "[" + ", ".join(f"{x:.3g}" for x in value) + "]"
-        return f"{value:.4g}"
+            text = "[" + ", ".join(f"{to_unit(x):.3g}" for x in value) + "]"
+        else:
+            text = f"{to_unit(value):.4g}"
+        return f"{symbol}={text}{'' if unit in ('', '°') else ' '}{unit}"
 
     values = tuned_json(params)
-    return "  ".join(f"{k}={fmt(v)}" for k, v in values.items() if k not in ("controller", "kind"))
+    lines = ["  ".join(fmt(k, v) for k, v in values.items() if k in _PRINTED)]
+    if isinstance(params, Gains):
+        lines.append("as simulate flags: " + " ".join(flags.gain_flag_values(params)))
+    return lines
 
 
 _COMPARE_SEEDS = (0, 1, 2)
 _COMPARE_FORMAT = 1
 
 
-def _compare_rows(out: Path, settings: dict[str, Any], resume: bool) -> list[dict[str, Any]]:
-    """The rows of ``out/compare.json`` to keep (``--resume``), after checking they are ours."""
+def _compare_rows(
+    out: Path, settings: dict[str, Any], resume: bool, problems: dict[str, int]
+) -> list[dict[str, Any]]:
+    """The rows of ``out/compare.json`` to keep (``--resume``), after checking they are ours.
+
+    Checked whole before anything runs: a file of another comparison, or one
+    whose shape is not what ``--compare`` writes, is refused in one line.
+    """
     import json
 
     from wmr_jax._src import io
+    from wmr_jax._src.tuning.compare import _json_type, saved_rows
 
     record, manifest = out / "compare.json", out / "compare_settings.json"
     if not (resume and record.exists()):
         io.atomic_write_json(manifest, settings)
         return []
     advice = "allowed: the same settings, or a fresh --out"
-    try:
-        saved = json.loads(manifest.read_text(encoding="utf-8"))
-        rows = json.loads(record.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as err:
-        raise ValueError(f"--resume: {out} cannot be resumed ({err}); {advice}") from None
+    texts = {}
+    for path in (manifest, record):
+        try:
+            texts[path] = json.loads(
+                path.read_text(encoding="utf-8"), object_pairs_hook=io.json_object_once
+            )
+        except (OSError, UnicodeDecodeError, ValueError, RecursionError) as err:
+            reason = " ".join(str(err).split())
+            raise ValueError(f"--resume: {path} cannot be read ({reason}); {advice}") from None
+    saved, rows = texts[manifest], texts[record]
+    if not isinstance(saved, dict):
+        raise ValueError(
+            f"--resume: {manifest} is a JSON {_json_type(saved)}; allowed: an object (the "
+            f"settings wmr-jax tune --compare writes), or a fresh --out"
+        )
     if saved != settings:
         diff = _settings_difference(saved, settings)
         raise ValueError(f"--resume: {record} is of another comparison ({diff}); {advice}")
-    keys = ("problem", "seed", "method")
-    if not isinstance(rows, list) or not all(
-        isinstance(r, dict) and all(k in r for k in keys) for r in rows
-    ):
-        raise ValueError(f"--resume: {record} is not a list of comparison rows; {advice}")
-    return rows
+    try:
+        return saved_rows(rows, str(record), problems, tuple(settings["seeds"]))
+    except ValueError as err:
+        raise ValueError(f"--resume: {err}; remove it, or use a fresh --out") from None
 
 
 def _settings_difference(saved: Any, now: dict[str, Any]) -> str:
@@ -506,7 +568,8 @@ def _compare(out: Path, args: Any, robot: Any) -> int:
     if robot is not None and not same_robot(robot, Robot()):
         settings["robot"] = robot_json(robot)
     settings = json.loads(json.dumps(settings))  # as it reads back from the file
-    rows = _compare_rows(out, settings, args.resume)
+    problems = {name: config.problem.dim for name, config in configs.items()}
+    rows = _compare_rows(out, settings, args.resume, problems)
     # Each (problem, seed) is written as soon as its three methods are done, so
     # an interrupted comparison keeps them and --resume runs only the rest.
     done = {(row["problem"], row["seed"]) for row in rows}
@@ -556,7 +619,8 @@ def run(args: Any) -> int:
     robot = Robot() if robot is None else robot
     kind = "gain schedule" if config.schedule else "gains"
     print(f"tuned {kind} ({config.velocity} loop) -> {out / 'tuned_gains.json'}")
-    print("  " + _shown(result.gains))
+    for line in _shown(result.gains):
+        print("  " + line)
     print(f"  for the robot {describe_robot(robot)}")
     print(
         f"held-out evaluation, {config.eval_poses} poses (docs/model.md §6), hard law "

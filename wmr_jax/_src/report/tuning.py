@@ -13,7 +13,7 @@ from wmr_jax._src.checks import real_array, require
 from wmr_jax._src.controllers.schedule import SHAPE_FIELDS, knot_radii
 from wmr_jax._src.io import save_figure
 from wmr_jax._src.optimal import bound_ratios
-from wmr_jax._src.report.tables import markdown_table, require_rows
+from wmr_jax._src.report.tables import json_number, markdown_table, require_rows
 from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS, PAPER_FEASIBLE_GAINS, gains_as_dict
 from wmr_jax._src.tuning.problems import (
     MAX_TUNED_KNOTS,
@@ -38,6 +38,12 @@ _TABLE_COLUMNS = ["gains", "mean arrival (s)", "vs paper", "success", "peak whee
 
 
 _BOUND_COLUMNS = ["vs turn–drive–turn", "vs lower bound"]
+_BOUND_KEYS = ["vs_turn_drive_turn", "vs_lower_bound"]
+_NONE_ARRIVED = "none arrived"
+
+
+def _ratio(value: float) -> str:
+    return f"{value:.3f}×"
 
 
 def _right_aligned(rows: list[dict[str, str]], columns: list[str]) -> str:
@@ -77,21 +83,29 @@ def evaluation_table(evaluation: dict[str, Any], bounds: Any = None) -> str:
                 raise ValueError(
                     f"evaluation[{name!r}].{field} = {value!r} is not allowed; allowed: {allowed}"
                 )
-    paper = evaluation["paper_feasible"].mean_arrival
+    paper = float(evaluation["paper_feasible"].mean_arrival)
     columns = _TABLE_COLUMNS + (_BOUND_COLUMNS if bounds is not None else [])
     rows = []
     for name, ev in evaluation.items():
+        mean = float(ev.mean_arrival)
+        # A ratio that needs a run that never arrived says so (never nan×, inf× or 0.00×).
+        if not math.isfinite(mean):
+            vs_paper = _NONE_ARRIVED
+        elif not math.isfinite(paper):
+            vs_paper = "paper: none arrived"
+        else:
+            vs_paper = f"{paper / mean:.2f}×"
         row = {
             "gains": name.replace("_", " "),
-            "mean arrival (s)": f"{ev.mean_arrival:.3f}",
-            "vs paper": f"{paper / ev.mean_arrival:.2f}×",
+            "mean arrival (s)": f"{mean:.3f}" if math.isfinite(mean) else _NONE_ARRIVED,
+            "vs paper": vs_paper,
             "success": f"{100 * ev.success_rate:.2f} %",
             "peak wheel speed (cm/s)": f"{ev.peak_wheel_speed:.1f}",
         }
         if bounds is not None:
-            ratios = bound_ratios(ev.mean_arrival, bounds)
-            row["vs turn–drive–turn"] = f"{ratios['vs_turn_drive_turn']:.3f}×"
-            row["vs lower bound"] = f"{ratios['vs_lower_bound']:.3f}×"
+            ratios = bound_ratios(mean, bounds)
+            for column, key in zip(_BOUND_COLUMNS, _BOUND_KEYS, strict=True):
+                row[column] = _ratio(ratios[key]) if math.isfinite(mean) else _NONE_ARRIVED
         rows.append(row)
     if bounds is not None:
         for label, values in (
@@ -113,37 +127,96 @@ _COMPARE_COLUMNS = [
 ]
 
 
+# The numbers comparison_table reads from each row, and what each may be.
+_COMPARE_NUMBERS = {
+    "mean_arrival": (lambda x: x > 0, "a time > 0 s, or inf (none arrived)"),
+    "success_rate": (lambda x: 0 <= x <= 1, "a fraction in [0, 1]"),
+    "wall_s": (lambda x: 0 <= x < math.inf, "a finite time >= 0 s"),
+    "lower_bound_s": (lambda x: 0 < x < math.inf, "a finite time > 0 s"),
+    "turn_drive_turn_s": (lambda x: 0 < x < math.inf, "a finite time > 0 s"),
+}
+
+
+def _compare_numbers(i: int, row: dict[str, Any]) -> dict[str, float]:
+    """The numbers of ``rows[i]`` that the table shows, read back as ``atomic_write_json`` wrote.
+
+    Raises:
+        ValueError: one line naming the row, the key and what is allowed.
+    """
+    out = {}
+    for key, (ok, allowed) in _COMPARE_NUMBERS.items():
+        if key not in row:
+            raise ValueError(f"rows[{i}] has no {key!r}; allowed: rows of compare")
+        try:
+            value = json_number(f"rows[{i}][{key!r}]", row[key])
+        except ValueError:
+            value = math.nan
+        if not ok(value):  # NaN is never allowed
+            raise ValueError(
+                f"rows[{i}][{key!r}] = {row[key]!r:.60} is not allowed; allowed: {allowed}"
+            )
+        out[key] = value
+    for key in ("problem", "method"):
+        if not isinstance(row.get(key), str):
+            raise ValueError(
+                f"rows[{i}][{key!r}] = {row.get(key)!r:.60} is not allowed; allowed: a string"
+            )
+    return out
+
+
+def _arrived_mean(values: list[float], fmt: str) -> str:
+    """The mean of ``values`` as ``fmt``, or which of them never arrived (``inf``)."""
+    missed = sum(not math.isfinite(v) for v in values)
+    if missed == len(values):
+        return _NONE_ARRIVED
+    if missed:
+        return f"{_NONE_ARRIVED} in {missed} of {len(values)}"
+    return fmt.format(float(np.mean(values)))
+
+
 def comparison_table(rows: list[dict[str, Any]]) -> str:
     """Return gradient vs CMA-ES vs random search as Markdown, one line per problem and method.
 
+    A seed whose parameters never arrive (a mean arrival of ``inf``, or
+    ``"inf"`` as read back from JSON) reads "none arrived", as do the means
+    and ratios that would need it.
+
     Args:
         rows: the rows of ``wmr_jax.tuning.compare`` (one per problem, seed and method).
+
+    Raises:
+        ValueError: naming the row and key, for a row without a number the
+            table shows or with one that is not a number.
     """
     rows = require_rows("rows", rows)
-    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
-    for row in rows:
+    numbers = [_compare_numbers(i, row) for i, row in enumerate(rows)]
+    groups: dict[tuple[str, str], list[dict[str, float]]] = {}
+    for row, values in zip(rows, numbers, strict=True):
         # Rows of before the schedules had a size do not say their parameter
         # count: theirs is the default problem's.
-        default = PROBLEMS.get(row["problem"]) if isinstance(row["problem"], str) else None
+        default = PROBLEMS.get(row["problem"])
         size = row.get("parameters", None if default is None else default.dim)
         problem = row["problem"] if size is None else f"{row['problem']} ({size})"
-        groups.setdefault((problem, row["method"]), []).append(row)
+        groups.setdefault((problem, row["method"]), []).append(values)
     lines = []
     for (problem, method), group in groups.items():
         arrival = [r["mean_arrival"] for r in group]
         gap = [r["mean_arrival"] - r["lower_bound_s"] for r in group]
+        ratio = [r["mean_arrival"] / r["turn_drive_turn_s"] for r in group]
         lines.append(
             {
                 "problem (parameters)": problem,
                 "method": method,
-                "mean arrival (s), seeds 0/1/2": " / ".join(f"{a:.3f}" for a in arrival),
+                "mean arrival (s), seeds 0/1/2": " / ".join(
+                    f"{a:.3f}" if math.isfinite(a) else _NONE_ARRIVED for a in arrival
+                ),
                 "success": f"{100 * min(r['success_rate'] for r in group):.1f} %",
-                "mean − lower bound (s)": f"{float(np.mean(gap)):.3f}",
-                "vs turn–drive–turn": f"{np.mean(arrival) / group[0]['turn_drive_turn_s']:.3f}×",
+                "mean − lower bound (s)": _arrived_mean(gap, "{:.3f}"),
+                "vs turn–drive–turn": _arrived_mean(ratio, "{:.3f}×"),
                 "wall time (s)": " / ".join(f"{r['wall_s']:.0f}" for r in group),
             }
         )
-    first = rows[0]
+    first = numbers[0]
     lines.append(
         {
             "problem (parameters)": "—",
@@ -200,7 +273,10 @@ def tuning_curve(
             f"{columns}), one row of the {problem!r} problem's columns per iteration"
         )
     steps = np.arange(1, len(loss) + 1)
-    with closed_after(2, 4, figsize=(14, 6), constrained_layout=True) as (fig, axes):
+    # A panel for the loss and one for each parameter tuned: 7 gains, or a
+    # schedule's 3 tables and 5 shape gains.
+    grid, size = ((3, 3), (12, 9)) if problem == "schedule" else ((2, 4), (14, 6))
+    with closed_after(*grid, figsize=size, constrained_layout=True) as (fig, axes):
         ax = axes[0, 0]
         # A loss of NaN or inf has no place on the axis: its iterations are
         # marked along the top instead of leaving a silent gap in the line.
@@ -268,7 +344,11 @@ def _gain_panels(axes: Any, steps: np.ndarray, gains: np.ndarray) -> None:
 
 def _schedule_panels(axes: Any, steps: np.ndarray, rows: np.ndarray, knots: int) -> None:
     radii = knot_radii(knots)
-    titles = ("k_r(r_e) (cm/s)", "k_θ(r_e), d ≠ 0 (rad/s)", "k_θ(r_e), d = 0 (rad/s)")
+    titles = (
+        "k_r(r_e) (cm/s)",
+        "k_θ(r_e), d ≠ 0 (rad/s)",
+        "k_turn(r_e), turning in place, d = 0 (rad/s)",
+    )
     for k, title in enumerate(titles):
         ax = axes.flat[k + 1]
         table = rows[:, k * knots : (k + 1) * knots]
@@ -278,7 +358,7 @@ def _schedule_panels(axes: Any, steps: np.ndarray, rows: np.ndarray, knots: int)
         ax.set_xlabel("r_e (cm)")
         ax.set_title(title)
     axes.flat[1].legend(fontsize=8)
-    for k, name in enumerate(("phi_m", "r_m", "r_a", "r_e")):
+    for k, name in enumerate(SHAPE_FIELDS):  # Φ_m, the radii and α
         ax = axes.flat[k + 4]
         values = rows[:, 3 * knots + SHAPE_FIELDS.index(name)]
         ax.plot(steps, np.degrees(values) if name == "phi_m" else values, lw=1.0)

@@ -29,15 +29,24 @@ from wmr_jax._src.checks import (
     check_number,
     float_dtype,
 )
-from wmr_jax._src.optimal import bound_ratios, time_bounds
+from wmr_jax._src.optimal import time_bounds
 from wmr_jax._src.params import Robot, validate_one_robot
 from wmr_jax._src.poses import sample_poses
-from wmr_jax._src.tuning.evaluation import RUN_OPTIONS, check_run, evaluate, held_out_poses
+from wmr_jax._src.tuning.evaluation import (
+    RUN_OPTIONS,
+    check_run,
+    evaluate,
+    held_out_poses,
+    report_ratios,
+)
 from wmr_jax._src.tuning.problems import get_problem
 from wmr_jax._src.tuning.search import SearchResult, population_scores, random_search
 from wmr_jax._src.tuning.training import TuneConfig, train
 
-__all__ = ["cma_es_search", "compare"]
+__all__ = ["METHODS", "cma_es_search", "compare", "saved_rows"]
+
+# The methods compared, in the order of each (problem, seed)'s rows.
+METHODS = ("gradient", "cma-es", "random search")
 
 
 def _evosax_cma_es() -> Any:
@@ -188,7 +197,8 @@ def compare(
         dimension searched), ``seed``, ``method``,
         ``wall_s``, ``candidates`` (``None`` for the gradient), the hard-law
         ``mean_arrival``, ``success_rate``, ``peak_wheel_speed`` and the
-        ratios of ``bound_ratios``.
+        ratios of ``report_ratios`` (``None``, with a ``"…_reason"``, where
+        none arrived).
     """
     robot = validate_one_robot(robot, "tuning")
     bases = _checked_plan(seeds, problems, configs)
@@ -205,8 +215,8 @@ def compare(
             budget = result.tune_wall_s
             refs = sample_poses(jax.random.fold_in(jax.random.key(seed), 3), config.poses)
             key = jax.random.fold_in(jax.random.key(seed), 2)
-            found = {"gradient": (result.gains, budget, None)}
-            for method, search in (("cma-es", cma_es_search), ("random search", random_search)):
+            found = {METHODS[0]: (result.gains, budget, None)}
+            for method, search in zip(METHODS[1:], (cma_es_search, random_search), strict=True):
                 s = search(key, refs, budget_s=budget, problem=problem, robot=robot, **run)
                 found[method] = (s.gains, s.wall_s, s.candidates)
             for method, (params, wall, candidates) in found.items():
@@ -220,12 +230,100 @@ def compare(
                         "wall_s": wall,
                         "candidates": candidates,
                         **ev._asdict(),
-                        **bound_ratios(ev.mean_arrival, bounds),
+                        # A ratio of a run that never arrived: null, and why.
+                        **report_ratios(ev.mean_arrival, bounds),
                     }
                 )
                 if progress is not None:
+                    mean = (
+                        f"{ev.mean_arrival:.3f} s"
+                        if math.isfinite(ev.mean_arrival)
+                        else "none arrived"
+                    )
                     progress(
-                        f"{problem.name} seed {seed} {method}: {ev.mean_arrival:.3f} s, "
+                        f"{problem.name} seed {seed} {method}: {mean}, "
                         f"{100 * ev.success_rate:.1f} %, {wall:.0f} s"
                     )
     return rows
+
+
+def saved_rows(
+    rows: Any, where: str, problems: dict[str, int], seeds: tuple[int, ...]
+) -> list[dict[str, Any]]:
+    """Check the rows of a saved comparison (``compare.json``) before a resumed one keeps them.
+
+    Every row must be one ``compare`` writes for this comparison: a problem
+    compared now (of its parameter count), one of ``seeds``, one of
+    ``METHODS``, each number the table shows; each (problem, seed) whole
+    (all three methods, once each).
+
+    Args:
+        rows: the file's content.
+        where: the file, for messages.
+        problems: the parameter count of each problem compared now.
+        seeds: the seeds compared now.
+
+    Returns:
+        ``rows``.
+
+    Raises:
+        ValueError: one line naming ``where``, the row and what is wrong.
+    """
+    from wmr_jax._src.report.tuning import _compare_numbers
+
+    def bad(text: str) -> ValueError:
+        return ValueError(f"{where} {text}")
+
+    if not isinstance(rows, list):
+        raise bad(f"is a JSON {_json_type(rows)}; allowed: an array of comparison rows")
+    runs: dict[tuple[str, int], list[str]] = {}
+    for i, row in enumerate(rows):
+        if not isinstance(row, dict):
+            raise bad(f"row {i} is a JSON {_json_type(row)}; allowed: an object (a comparison row)")
+        for key in ("problem", "seed", "method"):
+            if key not in row:
+                raise bad(f"row {i} has no {key!r}; allowed: rows of wmr-jax tune --compare")
+        problem, seed, method = row["problem"], row["seed"], row["method"]
+        if not isinstance(problem, str) or problem not in problems:
+            raise bad(
+                f"row {i}: problem = {problem!r:.40} is not allowed; allowed: "
+                f"{', '.join(map(repr, problems))} (the problems compared now)"
+            )
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed not in seeds:
+            raise bad(
+                f"row {i}: seed = {seed!r:.40} is not allowed; allowed: "
+                f"{', '.join(map(str, seeds))} (the seeds compared)"
+            )
+        if not isinstance(method, str) or method not in METHODS:
+            raise bad(
+                f"row {i}: method = {method!r:.40} is not allowed; allowed: "
+                f"{', '.join(map(repr, METHODS))}"
+            )
+        size = row.get("parameters", problems[problem])
+        if isinstance(size, bool) or size != problems[problem]:
+            raise bad(
+                f"row {i}: parameters = {size!r:.40} is not allowed; allowed: "
+                f"{problems[problem]} (the {problem!r} problem compared now)"
+            )
+        try:
+            _compare_numbers(i, row)
+        except ValueError as err:
+            raise bad(str(err).replace(f"rows[{i}]", f"row {i}", 1)) from None
+        done = runs.setdefault((problem, seed), [])
+        if method in done:
+            raise bad(f"row {i}: {problem} seed {seed} {method} is given twice; allowed: once")
+        done.append(method)
+    for (problem, seed), done in runs.items():
+        missing = [m for m in METHODS if m not in done]
+        if missing:
+            raise bad(
+                f"holds {problem} seed {seed} without {missing[0]!r}; allowed: each problem "
+                "and seed with all three methods (as wmr-jax tune --compare writes them)"
+            )
+    return rows
+
+
+def _json_type(value: Any) -> str:
+    """The JSON name of a parsed value's type."""
+    names = {dict: "object", list: "array", str: "string", bool: "boolean", type(None): "null"}
+    return names.get(type(value), "number")

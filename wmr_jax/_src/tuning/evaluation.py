@@ -30,6 +30,7 @@ __all__ = [
     "Evaluation",
     "evaluate",
     "held_out_poses",
+    "report_ratios",
     "wheel_speed_ok",
 ]
 
@@ -174,3 +175,47 @@ def wheel_speed_ok(evaluation: Evaluation, robot: Robot | None = None) -> bool:
     """
     v_max = float((Robot() if robot is None else robot).v_max)
     return bool(evaluation.peak_wheel_speed <= v_max * (1 + 1e-6))
+
+
+# Why a report's ratio is null (JSON) or "none arrived" (print): a mean arrival
+# of inf has no ratio worth writing (inf, 0 or NaN would each mislead).
+NONE_ARRIVED = "none arrived: no held-out run of these parameters reached its goal in the horizon"
+PAPER_NONE_ARRIVED = (
+    "none arrived with the paper's gains: no held-out run of them reached its goal in the horizon"
+)
+
+
+def report_ratios(mean_arrival: float, bounds: Any, paper: float | None = None) -> dict[str, Any]:
+    """The ratios of a report row: to the §8 yardsticks and, with ``paper``, the speed-up.
+
+    Each ratio is a finite number, or ``None`` with the reason beside it
+    (``"<ratio>_reason"``) when a mean arrival it needs is ``inf`` (no run
+    arrived): a report never holds NaN.
+
+    Args:
+        mean_arrival: the row's mean arrival time, s (``inf``: none arrived).
+        bounds: ``time_bounds`` of the same poses.
+        paper: the paper's gains' mean arrival on them, s; adds
+            ``speedup_vs_paper`` (``paper / mean_arrival``).
+
+    Returns:
+        ``{"turn_drive_turn_s", "lower_bound_s", "vs_turn_drive_turn",
+        "vs_lower_bound"}`` (and ``"speedup_vs_paper"``), and a ``"…_reason"``
+        for each ``None``.
+    """
+    from wmr_jax._src.optimal import bound_ratios
+
+    out: dict[str, Any] = {}
+    arrived = math.isfinite(mean_arrival)
+    if paper is not None:
+        if arrived and math.isfinite(paper):
+            out["speedup_vs_paper"] = paper / mean_arrival
+        else:
+            out["speedup_vs_paper"] = None
+            out["speedup_vs_paper_reason"] = NONE_ARRIVED if not arrived else PAPER_NONE_ARRIVED
+    for key, value in bound_ratios(mean_arrival, bounds).items():
+        if key.startswith("vs_") and not arrived:
+            out[key], out[f"{key}_reason"] = None, NONE_ARRIVED
+        else:
+            out[key] = value
+    return out

@@ -437,7 +437,8 @@ def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainStat
             elapsed_s=float(arrays["elapsed_s"]),
             run=fresh.run,
         )
-    except (KeyError, TypeError, ValueError) as err:
+    except (KeyError, TypeError, ValueError, IndexError) as err:
+        # IndexError: an array of no axes where rows were saved.
         raise ValueError(f"the saved state is incomplete ({type(err).__name__}: {err})") from None
     lengths = {len(state.losses), len(state.temperatures), len(state.gains)}
     if lengths != {state.iteration}:
