@@ -28,11 +28,11 @@ its gradient) are timed in alternation, so that they share the machine's load;
 each timed JAX call follows an untimed one, so that it measures the steady
 state of a loop of calls rather than the wake-up of XLA's threads.
 Every JAX case and the scalar reference run on ``BenchConfig.robot`` (the
-paper robot by default; the NumPy baseline is the ideal loop's final poses,
-which no robot field changes), with the same steps and poses for any robot:
-throughput does not depend on how far the robot gets. The robot is recorded
-with the results, as are the device, JAX version and the machine's load
-during the run,
+paper robot by default; the NumPy baseline takes no robot: it runs the
+paper robot's ideal loop, which has no speed limiter), with the same steps
+and poses for any robot: throughput does not depend on how far the robot
+gets. The robot is recorded with the results, as are the device, JAX
+version and the machine's load during the run,
 since a shared machine makes every timing noisy: compare ratios taken in the
 same run rather than absolute rates across runs. ``wmr_jax.report.bench_table``
 formats the result; the command prints it.
