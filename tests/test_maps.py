@@ -181,3 +181,17 @@ def test_a_single_heading_may_be_a_number():
     study = map_study(10, controller_names=["shim-sung"], headings_deg=90.0, chunk=16)
     assert study.summary["headings_deg"] == [90.0]
     np.testing.assert_array_equal(study.grid.refs[:, 2], math.pi / 2)
+
+
+def test_the_maps_draw_the_wheel_limit_of_the_robot_the_study_ran(tmp_path, monkeypatch):
+    from wmr_jax import report
+    from wmr_jax._src.report import maps as report_maps
+
+    drawn = []
+    monkeypatch.setattr(report_maps, "map_figure", lambda path, *a, v_max, **k: drawn.append(v_max))
+    study = map_study(40, controller_names=["shim-sung"], headings_deg=(0.0,), chunk=16)
+    study.summary["robot"]["v_max"] = 22.0  # as a study of a slow robot records it
+    report.save_map_study(tmp_path, study)
+    del study.summary["robot"]  # a summary from before robots were recorded: the paper robot
+    report.save_map_study(tmp_path, study)
+    assert drawn == [22.0, 125.0]

@@ -430,7 +430,9 @@ def save_map_study(out_dir: str | Path, study: MapStudy) -> list[Path]:
         "(arrival statistics over the successful runs)\n\n" + comparison_table(study.rows)
     )
     ranges = _ranges(study.results)
-    v_max = float(Robot().v_max)
+    # The robot the study ran (older summaries record none: the paper robot).
+    robot = study.summary.get("robot") if isinstance(study.summary, dict) else None
+    v_max = float(robot["v_max"]) if isinstance(robot, dict) else float(Robot().v_max)
     written = [
         map_figure(
             out / f"maps_{name}.png",
