@@ -6,6 +6,17 @@ latency (``monte_carlo``, ``robustness_study``), and parameter sets judged
 under the standard conditions (``standard_conditions``), raw feedback or an
 estimator alike. The engine returns values; ``wmr_jax.report`` draws and
 writes them.
+
+**Your robot.** Every study takes ``robot`` (default ``Robot()``, the paper
+robot) and runs its loop on that robot, its wheels held at that robot's
+``V_max``. The references keep the evaluation set of docs/model.md §6
+(5–80 cm, any bearing and heading) whatever the robot, since the arrival
+tolerances (1 cm, 5°) and the sensor noise of §7 are lengths and angles,
+not speeds; the horizon scales instead (``study_horizon``): the paper's
+feasible gains, scaled into a slower robot's wheel budget, drive the same
+paths ``c`` times slower, and the horizon is the paper robot's 6 s over
+``c``, so that they have the time on that robot that they have on the
+paper's. A study given a ``horizon`` runs that one.
 """
 
 from __future__ import annotations
@@ -19,6 +30,7 @@ import numpy as np
 
 from wmr_jax._src import checks, controllers
 from wmr_jax._src.metrics import PoseMetrics
+from wmr_jax._src.params import Robot, validate_one_robot
 from wmr_jax._src.poses import HORIZON_S, horizon_steps
 from wmr_jax._src.rollout import DEFAULT_DT
 from wmr_jax._src.sensing.disturbances import (
@@ -34,14 +46,18 @@ from wmr_jax._src.sensing.loop import ClosedLoop, perturbed_metrics
 __all__ = [
     "DEFAULT_NOISE_DEG",
     "DEFAULT_NOISE_XY",
+    "LATE_SHARE",
     "MODEL_ROBOT",
     "NOISE_CURVE_XY",
     "noise_curve",
     "ROBUSTNESS_CONDITIONS",
     "evaluate_loop",
     "monte_carlo",
+    "robot_defaults",
     "robustness_study",
+    "settled_at_horizon",
     "standard_conditions",
+    "study_horizon",
     "summary_row",
 ]
 
@@ -79,11 +95,65 @@ def _check_levels(noise_xy: Any, noise_deg: Any) -> tuple[list[float], list[floa
     return [float(x) for x in noise_xy], [float(x) for x in noise_deg]
 
 
-def summary_row(m: PoseMetrics) -> dict[str, Any]:
-    """Return success, arrival, first arrival, final distance and zig-zag of a batch."""
+def study_horizon(robot: Robot | None = None) -> float:
+    """The studies' default horizon on ``robot``, s: 6 s for the paper robot (docs/model.md §6).
+
+    The paper's feasible gains (``k_r = 60`` cm/s, ``k_θ = 10`` rad/s) fit the
+    paper robot's wheel budget; on a robot where ``60 + 10 L > V_max`` they
+    are scaled by ``c = V_max / (60 + 10 L)`` to fit (docs/robots.md), and
+    both gains scaled by ``c`` drive the same paths ``1 / c`` times slower
+    (in continuous time; the sampled law nearly so).
+    The horizon is ``6 s / c`` (6 s where ``c ≥ 1``), rounded up to 0.1 s:
+    the TurtleBot3 Burger's (``L = 8`` cm, ``V_max = 22.72`` cm/s) is 37 s.
+
+    Raises:
+        ValueError: for anything but one valid robot.
+    """
+    # Imported here: the tuning package imports this module.
+    from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS as PAPER
+
+    robot = validate_one_robot(robot, "the studies' horizon")
+    budget = float(PAPER.kr) + float(robot.half_track) * float(PAPER.k_theta)  # cm/s
+    stretch = max(1.0, budget / float(robot.v_max))
+    return math.ceil(HORIZON_S * stretch * 10 - 1e-9) / 10
+
+
+# A success that settles only in the last quarter of the horizon, after the run
+# had been within the tolerance and left it, is no arrival (settled_at_horizon).
+LATE_SHARE = 0.25
+
+
+def settled_at_horizon(m: PoseMetrics, horizon: float) -> np.ndarray:
+    """Which runs count as arrived (docs/model.md §6) only because the horizon ends, ``(N,)``.
+
+    A run that reached the goal, left its tolerance and is back in it over
+    the final stretch has a finite settled arrival: the start of that
+    stretch, set by where the horizon cuts the run rather than by the run.
+    Under noise such runs hover about the goal and their "arrival" moves
+    with the horizon (the paper's gains under the standard noise "arrive"
+    at 5.7 s of 6 on average). Such a run is one whose settled arrival comes
+    after ``(1 − LATE_SHARE)`` of the horizon and after its first arrival;
+    a run that arrives late without having left the tolerance is not.
+
+    Args:
+        m: the runs' metrics (``first_arrival`` included).
+        horizon: the simulated time of the runs, s.
+    """
+    late = m.arrival > (1.0 - LATE_SHARE) * float(horizon)
+    return m.success & late & (m.first_arrival < m.arrival)
+
+
+def summary_row(m: PoseMetrics, horizon: float | None = None) -> dict[str, Any]:
+    """Return success, arrival, first arrival, final distance and zig-zag of a batch.
+
+    Given the runs' ``horizon`` (s), also ``"settled at horizon"``: the
+    fraction of the runs that count as successes only because the horizon
+    ends (``settled_at_horizon``), and the mean and median arrival of the
+    other successes (``inf`` if none), which the figures draw.
+    """
     ok = m.success
     t = m.arrival[ok]
-    return {
+    row = {
         "success": float(ok.mean()),
         "mean arrival s": float(t.mean()) if t.size else math.inf,
         "median arrival s": float(np.median(t)) if t.size else math.inf,
@@ -92,6 +162,14 @@ def summary_row(m: PoseMetrics) -> dict[str, Any]:
         "mean final distance cm": float(m.final_distance.mean()),
         "mean zigzag": float(m.zigzag.mean()),
     }
+    if horizon is None:
+        return row
+    late = settled_at_horizon(m, horizon)
+    early = m.arrival[ok & ~late]
+    row["settled at horizon"] = float(late.mean())
+    row["mean arrival, not at horizon s"] = float(early.mean()) if early.size else math.inf
+    row["median arrival, not at horizon s"] = float(np.median(early)) if early.size else math.inf
+    return row
 
 
 def _median_finite(times: np.ndarray) -> float:
@@ -114,12 +192,16 @@ def monte_carlo(
     dt: float = DEFAULT_DT,
     x64: bool = True,
     estimator: Any = None,
+    robot: Robot | None = None,
+    horizon: float | None = None,
 ) -> list[dict[str, Any]]:
     """Return success and arrival against noise level for one controller and condition.
 
     Every noise level reuses the same references, unit noise and mismatch
     (common random numbers), so differences between levels are the noise's.
-    Each run lasts the ``docs/model.md §6`` horizon (6 s).
+    The references are the evaluation set of ``docs/model.md §6`` on every
+    robot; each run lasts ``horizon`` (default ``study_horizon(robot)``: the
+    paper robot's 6 s, longer on a slower robot).
 
     Args:
         key: ``jax.random`` key; the same key gives the same numbers.
@@ -138,12 +220,23 @@ def monte_carlo(
         estimator: between the measurements and the law: ``None`` (raw
             feedback), ``"observer"``, ``"ekf"`` or their parameters
             (docs/model.md §9).
+        robot: the robot (the controller's model and, up to the mismatch,
+            the true one); default ``Robot()``. With ``params`` ``None`` on
+            another robot than the paper's, the two Shim–Sung laws run the
+            paper's feasible gains scaled into its wheel budget
+            (``robot_defaults``); the ideal loop does not limit wheel
+            commands, and gains set for a faster robot would drive it beyond
+            its ``V_max``.
+        horizon: simulated time per run, s; default ``study_horizon(robot)``.
 
     Returns:
         One row per noise level: success rate, mean and median arrival of the
         successful runs (s), the fraction of runs ever arrived (if only for a
         sample) and their median first arrival (s), mean final distance (cm),
-        mean zig-zag count.
+        mean zig-zag count, the fraction of runs that only settle at the
+        horizon (``settled_at_horizon``) and the mean and median arrival of
+        the other successes (s), the horizon (s) and the peak wheel speed
+        (cm/s, the largest of any run).
 
     Raises:
         ValueError: for a bad count, noise level, mismatch bound or option.
@@ -162,8 +255,11 @@ def monte_carlo(
         )
     name = controllers.get_controller(controller).name
     estimator_used, _ = resolve_estimator(estimator)
+    steps, horizon = _steps(robot, horizon, dt)
+    if params is None:
+        params = robot_defaults(name, robot)
     refs, unit, mismatch = draw_disturbances(
-        key, n_runs, horizon_steps(dt), radius_mismatch=radius_mismatch, mass_mismatch=mass_mismatch
+        key, n_runs, steps, radius_mismatch=radius_mismatch, mass_mismatch=mass_mismatch
     )
     delay = np.float64(1.0 if latency else 0.0)
     rows = []
@@ -175,6 +271,7 @@ def monte_carlo(
             controller=name,
             estimator=estimator,
             dt=dt,
+            robot=robot,
             velocity=velocity,
             x64=x64,
         )
@@ -187,9 +284,48 @@ def monte_carlo(
             "mass mismatch": float(mass_mismatch),
             "latency": bool(latency),
             "runs": int(n_runs),
+            "horizon s": horizon,
         }
-        rows.append({**condition, **summary_row(m)})
+        peak = {"peak wheel cm/s": float(np.max(m.peak_wheel))}
+        rows.append({**condition, **summary_row(m, horizon), **peak})
     return rows
+
+
+def robot_defaults(controller: Any, robot: Robot | None = None) -> Any:
+    """The parameters a study runs for ``controller`` on ``robot`` when given none.
+
+    On the paper robot (and for ``robot`` ``None``), ``None``: the
+    controller's defaults. On another robot, ``shim-sung`` runs the paper's
+    feasible gains scaled into that robot's wheel budget
+    (``tuning.paper_feasible_gains``: ``k_r : k_θ = 60 : 10``,
+    ``k_r + L k_θ ≤ V_max``) and ``shim-sung-schedule`` the same gains as
+    constant tables capped with that robot's ``V_max`` and ``L``: their
+    defaults are set for the paper robot's wheels. Other controllers keep
+    their defaults (``None``): their commands grow with the distance and
+    are bounded by no wheel budget (docs/model.md §3.8).
+    """
+    from wmr_jax._src.controllers.schedule import SCHEDULE, ScheduleParams
+    from wmr_jax._src.robots import same_robot
+    from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
+
+    name = controllers.get_controller(controller).name
+    if robot is None or same_robot(validate_one_robot(robot, "the study"), Robot()):
+        return None
+    if name == controllers.SHIM_SUNG.name:
+        return paper_feasible_gains(robot)
+    if name == SCHEDULE.name:
+        return ScheduleParams.from_gains(paper_feasible_gains(robot), robot=robot)
+    return None
+
+
+def _steps(robot: Any, horizon: Any, dt: float) -> tuple[int, float]:
+    """The periods and the horizon (s, a whole number of periods) of a study's runs.
+
+    ``horizon`` ``None`` is ``study_horizon(robot)``; the robot is checked either way.
+    """
+    default = study_horizon(robot)
+    steps = horizon_steps(dt, default if horizon is None else horizon)
+    return steps, steps * float(dt)
 
 
 def robustness_study(
@@ -202,6 +338,8 @@ def robustness_study(
     noise_deg: Sequence[float] = DEFAULT_NOISE_DEG,
     x64: bool = True,
     estimator: Any = None,
+    robot: Robot | None = None,
+    horizon: float | None = None,
 ) -> list[dict[str, Any]]:
     """Run the Monte Carlo for each controller and condition (``docs/model.md §7``).
 
@@ -221,6 +359,8 @@ def robustness_study(
         noise_deg: σ of the heading measurement noise per level, degrees.
         x64: compute in float64 (see ``perturbed_metrics``).
         estimator: the estimator of every controller (``None``: raw feedback).
+        robot: the robot of every run (``monte_carlo``); default ``Robot()``.
+        horizon: simulated time per run, s; default ``study_horizon(robot)``.
 
     Returns:
         The rows of every condition, controller and noise level (in that
@@ -229,6 +369,7 @@ def robustness_study(
     seed = checks.check_int("seed", seed, 0, 2**32 - 1)
     names = controllers.controller_names(controller_names)
     resolve_estimator(estimator)  # refused before any run
+    _steps(robot, horizon, DEFAULT_DT)  # and the robot and the horizon
     keys = jax.random.split(jax.random.PRNGKey(seed), len(ROBUSTNESS_CONDITIONS))
     rows = []
     for (label, radius, mass, latency), key in zip(ROBUSTNESS_CONDITIONS, keys, strict=True):
@@ -247,6 +388,8 @@ def robustness_study(
                 velocity=velocity,
                 x64=x64,
                 estimator=estimator,
+                robot=robot,
+                horizon=horizon,
             ):
                 rows.append({"condition": label, **row})
     return rows
@@ -288,6 +431,8 @@ def standard_conditions(
     mismatch: float = STANDARD_MISMATCH,
     dt: float = DEFAULT_DT,
     x64: bool = True,
+    robot: Robot | None = None,
+    horizon: float | None = None,
 ) -> list[dict[str, Any]]:
     """Judge closed loops under the standard conditions of docs/model.md §7 and §9 (hard law).
 
@@ -296,8 +441,9 @@ def standard_conditions(
     off by ``δ ~ U(−mismatch, mismatch)`` drawn per run (docs/model.md §9:
     without it, dead reckoning would be exact). Every set and condition sees
     the same draws (common random numbers, from ``key`` by
-    ``sample_disturbance``); ideal loop, horizon 6 s, the estimate starting
-    from the first measurement.
+    ``sample_disturbance``); ideal loop, the estimate starting from the
+    first measurement, on ``robot`` for ``horizon`` (by default the paper
+    robot's 6 s, longer on a slower robot: ``study_horizon``).
 
     Args:
         params_by_name: ``{label: params of controller}`` or ``{label:
@@ -311,13 +457,20 @@ def standard_conditions(
             0 judges the model robot under every condition.
         dt: control period, s.
         x64: compute in float64.
+        robot: the robot of every run; default: the robot the loops record
+            (``ClosedLoop.robot``), else ``Robot()``. A loop tuned for
+            another robot is refused.
+        horizon: simulated time per run, s; default ``study_horizon(robot)``.
 
     Returns:
         One row per (condition, set): ``condition``, ``gains``, ``feedback``
         (``raw`` or the estimator's name), ``success``, ``mean arrival s``
         and ``median arrival s`` of the successful runs (``inf`` if none),
         ``mean final distance cm``, ``peak wheel cm/s`` (the largest over the
-        runs), ``mismatch``, ``runs``.
+        runs, the mismatch included), ``mismatch``, ``runs``, ``settled at
+        horizon`` (the fraction of runs that only settle at the horizon,
+        ``settled_at_horizon``), ``mean arrival, not at horizon s`` (of the
+        other successes), ``horizon s``.
     """
     if not isinstance(params_by_name, Mapping) or not params_by_name:
         raise ValueError(
@@ -331,9 +484,11 @@ def standard_conditions(
     for loop in sets.values():  # every set is refused before any runs
         resolve_estimator(loop.estimator)
         controllers.get_controller(loop.controller)
+    robot = _study_robot(robot, sets, "params_by_name")
+    steps, horizon = _steps(robot, horizon, dt)
     with jax.enable_x64(checks.check_bool("x64", x64)):  # not rounded to float32 first
         refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
-    noise, factors = _unit_draws(key, refs, horizon_steps(dt), mismatch)
+    noise, factors = _unit_draws(key, refs, steps, mismatch)
     ones = np.ones((len(refs), 3))
     conditions = [(MODEL_ROBOT, 0.0, 0.0, False, ones)]
     conditions += [(*condition, factors) for condition in STANDARD_CONDITIONS]
@@ -348,9 +503,10 @@ def standard_conditions(
                 controller=loop.controller,
                 estimator=loop.estimator,
                 dt=dt,
+                robot=robot,
                 x64=x64,
             )
-            summary = summary_row(m)
+            summary = summary_row(m, horizon)
             estimator_used, _ = resolve_estimator(loop.estimator)
             rows.append(
                 {
@@ -364,9 +520,41 @@ def standard_conditions(
                     "peak wheel cm/s": float(np.max(m.peak_wheel)),
                     "mismatch": 0.0 if label == MODEL_ROBOT else mismatch,
                     "runs": len(refs),
+                    "settled at horizon": summary["settled at horizon"],
+                    "mean arrival, not at horizon s": summary["mean arrival, not at horizon s"],
+                    "horizon s": horizon,
                 }
             )
     return rows
+
+
+def _study_robot(robot: Any, loops: Mapping[str, ClosedLoop], name: str) -> Robot:
+    """The study's robot: ``robot``, else the one the ``loops`` record, else the paper's.
+
+    A loop that records the robot it was tuned for (``ClosedLoop.robot``,
+    as ``load_tuned`` returns it) is judged on that robot only: its gains
+    live in that robot's wheel budget, and a schedule caps its commands
+    with that robot's ``V_max`` and ``L``, so on another robot the numbers
+    would belong to neither.
+
+    Raises:
+        ValueError: naming the loop, for a loop tuned for another robot.
+    """
+    from wmr_jax._src.robots import describe_robot, same_robot
+
+    recorded = {label: loop.robot for label, loop in loops.items() if loop.robot is not None}
+    if robot is None and recorded:
+        robot = next(iter(recorded.values()))
+    study = validate_one_robot(robot, "the study")
+    for label, tuned in recorded.items():
+        tuned = validate_one_robot(tuned, f"{name}[{label!r}].robot")
+        if not same_robot(tuned, study):
+            raise ValueError(
+                f"{name}[{label!r}] was tuned for {describe_robot(tuned)}, which is not allowed "
+                f"in a study of {describe_robot(study)}; allowed: loops tuned for the study's "
+                "robot, or with no robot recorded"
+            )
+    return study
 
 
 def evaluate_loop(
@@ -376,10 +564,11 @@ def evaluate_loop(
     condition: str = "nominal",
     mismatch: float = STANDARD_MISMATCH,
     seed: int = 0,
-    horizon: float = HORIZON_S,
+    horizon: float | None = None,
     velocity: str = "ideal",
     dt: float = DEFAULT_DT,
     x64: bool = True,
+    robot: Robot | None = None,
 ) -> dict[str, Any]:
     """Judge one closed loop on the user's own references under one standard condition.
 
@@ -397,21 +586,36 @@ def evaluate_loop(
         mismatch: bound of each wheel's relative radius error, ``[0, 1)``;
             0 for the model robot.
         seed: seed of the draws, an integer in ``[0, 2³² − 1]``.
-        horizon: simulated time per run, s.
+        horizon: simulated time per run, s; default ``study_horizon(robot)``
+            (6 s on the paper robot, longer on a slower one).
         velocity: ``"ideal"`` or ``"nonideal"``.
         dt: control period, s.
         x64: compute in float64.
+        robot: the robot; default the one the loop records
+            (``ClosedLoop.robot``), else ``Robot()``. Another robot than the
+            loop's is refused.
 
     Returns:
         ``{"success": fraction, "mean_arrival_s": mean over the successful
-        runs (None if none arrived), "median_arrival_s", "peak_wheel_speed":
-        cm/s (the largest rim speed of any run, mismatch included), "n",
-        "condition", "mismatch", "seed", "horizon_s", "velocity",
-        "controller", "feedback"}``.
+        runs (None if none arrived), "median_arrival_s", "settled_at_horizon":
+        the fraction of runs that only settle at the horizon
+        (``settled_at_horizon``), "peak_wheel_speed": cm/s (the largest rim
+        speed of any run, mismatch included), "v_max": the robot's rim limit,
+        cm/s, "peak_wheel_speed_ok": whether the commands stayed within
+        ``V_max``, i.e. every rim within ``V_max (1 + mismatch)`` (a wheel
+        larger than modelled by ``δ`` turns ``V_max`` into ``(1 + δ) V_max``
+        at its rim), "turn_drive_turn_s": the mean time-optimal turn–drive–turn time
+        of docs/model.md §8 over the references that arrived (None if none),
+        "vs_turn_drive_turn": the mean arrival over it, "n", "condition",
+        "mismatch", "seed", "horizon_s", "velocity", "controller",
+        "feedback", "robot": {field: value}}``.
 
     Raises:
         ValueError: for a bad argument, before any run.
     """
+    from wmr_jax._src.optimal import time_bounds
+    from wmr_jax._src.robots import robot_json
+
     labels = {label: (sxy, sdeg, lat) for label, sxy, sdeg, lat in STANDARD_CONDITIONS}
     if condition not in labels:
         raise ValueError(f"condition = {condition!r} is not allowed; allowed: {', '.join(labels)}")
@@ -420,7 +624,8 @@ def evaluate_loop(
     controller = controllers.get_controller(loop.controller)
     mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
     seed = checks.check_int("seed", seed, 0, 2**32 - 1)
-    steps = horizon_steps(dt, horizon)
+    robot = _study_robot(robot, {"loop": loop}, "evaluate_loop")
+    steps, horizon = _steps(robot, horizon, dt)
     with jax.enable_x64(checks.check_bool("x64", x64)):
         refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
     sxy, sdeg, latency = labels[condition]
@@ -433,23 +638,36 @@ def evaluate_loop(
         controller=controller,
         estimator=loop.estimator,
         dt=dt,
+        robot=robot,
         velocity=velocity,
         x64=x64,
     )
     arrived = m.arrival[m.success]
+    mean = float(arrived.mean()) if arrived.size else None
+    optimal = None
+    if arrived.size:  # the same references as the mean arrival: those that arrived
+        optimal = float(np.mean(time_bounds(refs[m.success], robot=robot, dt=dt).turn_drive_turn))
     return {
         "success": float(m.success.mean()),
-        "mean_arrival_s": float(arrived.mean()) if arrived.size else None,
+        "mean_arrival_s": mean,
         "median_arrival_s": float(np.median(arrived)) if arrived.size else None,
+        "settled_at_horizon": float(settled_at_horizon(m, horizon).mean()),
         "peak_wheel_speed": float(np.max(m.peak_wheel)),
+        "v_max": float(robot.v_max),
+        "peak_wheel_speed_ok": bool(
+            np.max(m.peak_wheel) <= float(robot.v_max) * (1.0 + mismatch) * (1 + 1e-6)
+        ),
+        "turn_drive_turn_s": optimal,
+        "vs_turn_drive_turn": None if optimal is None else mean / optimal,
         "n": len(refs),
         "condition": condition,
         "mismatch": mismatch,
         "seed": seed,
-        "horizon_s": steps * float(dt),
+        "horizon_s": horizon,
         "velocity": velocity,
         "controller": controller.name,
         "feedback": "raw" if estimator is None else estimator.name,
+        "robot": robot_json(robot),
     }
 
 
@@ -468,6 +686,8 @@ def noise_curve(
     latency: bool = False,
     dt: float = DEFAULT_DT,
     x64: bool = True,
+    robot: Robot | None = None,
+    horizon: float | None = None,
 ) -> list[dict[str, Any]]:
     """Success and mean arrival of closed loops against the level of pose noise.
 
@@ -485,11 +705,17 @@ def noise_curve(
         latency: one sample of latency in every run.
         dt: control period, s.
         x64: compute in float64.
+        robot: the robot of every run; default: the robot the loops record
+            (``ClosedLoop.robot``), else ``Robot()``. A loop tuned for
+            another robot is refused.
+        horizon: simulated time per run, s; default ``study_horizon(robot)``.
 
     Returns:
         One row per (loop, level): ``gains``, ``feedback``, ``noise xy cm``,
         ``noise theta deg``, ``success``, ``mean arrival s`` (``inf`` if
-        none arrived), ``mismatch``, ``latency``, ``runs``.
+        none arrived), ``mismatch``, ``latency``, ``runs``, ``settled at
+        horizon`` (``settled_at_horizon``), ``mean arrival, not at horizon
+        s`` (of the other successes), ``horizon s``.
     """
     if not isinstance(loops_by_name, Mapping) or not loops_by_name:
         raise ValueError(
@@ -503,9 +729,11 @@ def noise_curve(
     for loop in sets.values():
         resolve_estimator(loop.estimator)
         controllers.get_controller(loop.controller)
+    robot = _study_robot(robot, sets, "loops_by_name")
+    steps, horizon = _steps(robot, horizon, dt)
     with jax.enable_x64(checks.check_bool("x64", x64)):
         refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
-    noise, factors = _unit_draws(key, refs, horizon_steps(dt), mismatch)
+    noise, factors = _unit_draws(key, refs, steps, mismatch)
     rows = []
     for name, loop in sets.items():
         used, _ = resolve_estimator(loop.estimator)
@@ -515,9 +743,9 @@ def noise_curve(
             spec = Disturbance(refs, noise * scale, factors, np.float64(1.0 if latency else 0.0))
             m = perturbed_metrics(
                 spec, loop.params, controller=loop.controller, estimator=loop.estimator,
-                dt=dt, x64=x64,
+                dt=dt, robot=robot, x64=x64,
             )  # fmt: skip
-            summary = summary_row(m)
+            summary = summary_row(m, horizon)
             rows.append(
                 {
                     "gains": name,
@@ -529,6 +757,9 @@ def noise_curve(
                     "mismatch": mismatch,
                     "latency": latency,
                     "runs": len(refs),
+                    "settled at horizon": summary["settled at horizon"],
+                    "mean arrival, not at horizon s": summary["mean arrival, not at horizon s"],
+                    "horizon s": horizon,
                 }
             )
     return rows
