@@ -1,4 +1,11 @@
-"""The robustness study's figure, tables and result file (``docs/model.md §7``)."""
+"""The robustness study's figure, tables and result file (``docs/model.md §7``).
+
+The tables print fractions of runs as percentages (``99.8 %``), as the
+README does; the JSON files keep the fractions. The figures draw the arrival
+time of the runs that arrive and mark apart the runs that count as arrived
+only because the horizon ends (``wmr_jax.studies.settled_at_horizon``), so
+that no bar or point at the horizon reads as an arrival time.
+"""
 
 from __future__ import annotations
 
@@ -11,13 +18,14 @@ from typing import Any
 from wmr_jax._src.io import atomic_write_text, json_text, save_figure
 from wmr_jax._src.poses import HORIZON_S
 from wmr_jax._src.report.figures import plt
-from wmr_jax._src.report.tables import markdown_table, require_rows
+from wmr_jax._src.report.tables import markdown_table, percent, require_rows
 
 __all__ = [
     "NOISE_CURVE_COLUMNS",
     "ROBUSTNESS_COLUMNS",
     "STANDARD_COLUMNS",
     "robustness_figure",
+    "robustness_table",
     "standard_figure",
     "write_robustness",
     "write_noise_curve",
@@ -66,6 +74,82 @@ NOISE_CURVE_COLUMNS = [
 
 _STYLES = ("-", "--", ":", "-.")
 
+# Fractions of runs, printed as percentages in the tables.
+_PERCENT_KEYS = ("success", "reached", "settled at horizon")
+# The share of runs that only settle at the horizon (studies.settled_at_horizon),
+# and the arrival of the others: shown where every row has them (rows of
+# studies run before they were recorded have not).
+_LATE = "settled at horizon"
+_ARRIVAL_COLUMNS = ("mean arrival s", "median arrival s")
+# A point where at least this share of the successes only settles at the horizon
+# is drawn as an x (line figures).
+_LATE_MARK = 0.5
+
+
+def robustness_table(rows: Sequence[dict[str, Any]], columns: Sequence[str]) -> str:
+    """A Markdown table of study rows, fractions of runs as percentages (``'99.8 %'``).
+
+    ``"settled at horizon"`` is shown after the last arrival column of
+    ``columns`` where every row has it.
+
+    Raises:
+        ValueError: for no rows or a row without one of ``columns``.
+    """
+    rows = require_rows("rows", rows)
+    columns = list(columns)
+    if all(_LATE in r for r in rows) and _LATE not in columns:
+        after = [i for i, c in enumerate(columns) if c in _ARRIVAL_COLUMNS]
+        columns.insert(after[-1] + 1 if after else len(columns), _LATE)
+    markdown_table(rows, columns)  # names a row without a column, before formatting
+    shown = [{c: _percent(r[c]) if c in _PERCENT_KEYS else r[c] for c in columns} for r in rows]
+    return markdown_table(shown, columns)
+
+
+def _percent(value: Any) -> Any:
+    """A fraction as a percentage; anything else (a damaged cell) as it is."""
+    try:
+        return percent(float(value))
+    except (TypeError, ValueError):
+        return value
+
+
+def _late_share(row: dict[str, Any]) -> float:
+    """The fraction of a row's runs that only settle at the horizon (0 where not recorded)."""
+    try:
+        return min(max(float(row.get(_LATE, 0.0)), 0.0), float(row["success"]))
+    except (TypeError, ValueError):
+        return 0.0
+
+
+def _arrived_time(row: dict[str, Any], key: str) -> float:
+    """``key`` (a mean or median arrival) over the runs that arrive, NaN where none does."""
+    if float(row["success"]) - _late_share(row) <= 0:
+        return math.nan
+    value = row.get(f"{key.removesuffix(' s')}, not at horizon s", row[key])
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        return math.nan
+    return value if math.isfinite(value) else math.nan
+
+
+def _horizon_of(rows: Sequence[dict[str, Any]], default: float = HORIZON_S) -> float:
+    """The runs' horizon, s, as the rows record it (else ``default``)."""
+    try:
+        return float(rows[0].get("horizon s", default))
+    except (TypeError, ValueError):
+        return default
+
+
+def _robot_text(meta: dict[str, Any]) -> str:
+    """``", on <robot>"`` for a meta that records a robot, else ``""``."""
+    from wmr_jax._src.robots import describe_robot, robot_from_values
+
+    if not isinstance(meta.get("robot"), dict):
+        return ""
+    return f", on {describe_robot(robot_from_values(meta['robot'], 'meta robot'))}"
+
+
 # The keys of a row that robustness_figure draws.
 _FIGURE_KEYS = [
     "controller",
@@ -84,6 +168,7 @@ def write_robustness(
     seed: int,
     velocity: str,
     n_runs: int,
+    robot: Any = None,
 ) -> list[Path]:
     """Write ``robustness.png``, ``robustness.md`` and ``robustness.json`` into ``out_dir``.
 
@@ -93,15 +178,24 @@ def write_robustness(
         seed: the study's seed.
         velocity: its velocity loop.
         n_runs: its runs per noise level.
+        robot: the study's ``Robot`` (recorded and named); ``None``: the paper robot.
 
     Returns:
         The paths written.
     """
+    from wmr_jax._src.params import Robot
+    from wmr_jax._src.robots import robot_json
+
     out, rows = Path(out_dir), require_rows("rows", rows)
-    head = f"Robustness Monte Carlo ({velocity} loop, seed {seed}, {n_runs} runs per row)\n\n"
+    horizon = _horizon_of(rows)
+    meta = {"seed": seed, "velocity": velocity, "runs": n_runs, "horizon_s": horizon}
+    meta["robot"] = robot_json(Robot() if robot is None else robot)
+    head = (
+        f"Robustness Monte Carlo ({velocity} loop, seed {seed}, {n_runs} runs per row, "
+        f"horizon {horizon:g} s{_robot_text(meta)})\n\n"
+    )
     # Everything is checked and drawn before the first file is written.
-    text = head + markdown_table(rows, ROBUSTNESS_COLUMNS)
-    meta = {"seed": seed, "velocity": velocity, "runs": n_runs, "horizon_s": HORIZON_S}
+    text = head + robustness_table(rows, ROBUSTNESS_COLUMNS)
     record = (
         json_text(
             {**meta, "rows": rows}, "seed, velocity, n_runs and rows", indent=2, sort_keys=False
@@ -109,10 +203,9 @@ def write_robustness(
         + "\n"
     )
     title = (
-        f"Robustness, {velocity} loop: {n_runs} random poses (docs/model.md §6) per point, "
-        f"seed {seed}; mismatch ±3 % wheel radius"
-        + (", ±20 % mass" if velocity == "nonideal" else "")
-        + "; latency one sample"
+        f"Robustness, {velocity} loop{_robot_text(meta)}: {n_runs} random poses "
+        f"(docs/model.md §6) per point, seed {seed}, horizon {horizon:g} s; mismatch ±3 % "
+        "wheel radius" + (", ±20 % mass" if velocity == "nonideal" else "") + "; latency one sample"
     )
     fig = robustness_figure(rows, title=title)
     try:  # "tight": the legend lies outside the axes
@@ -125,6 +218,11 @@ def write_robustness(
 
 def robustness_figure(rows: Sequence[dict[str, Any]], *, title: str) -> Any:
     """Draw success rate and median arrival against noise level, one line per row group.
+
+    The arrival panel draws the median over the runs that arrive; a point
+    where at least half of the successes only settle at the horizon
+    (``"settled at horizon"``) is an x, and has no arrival point unless
+    some runs arrive.
 
     Args:
         rows: ``robustness_study`` rows: one colour per controller, one line
@@ -148,6 +246,25 @@ def robustness_figure(rows: Sequence[dict[str, Any]], *, title: str) -> Any:
     return fig
 
 
+def _late_points(rows: Sequence[dict[str, Any]]) -> list[int]:
+    """The indices of rows where at least half of the successes only settle at the horizon."""
+    return [
+        i
+        for i, r in enumerate(rows)
+        if float(r["success"]) > 0 and _late_share(r) >= _LATE_MARK * float(r["success"])
+    ]
+
+
+def _plot_marked(ax, x, y, late, **style) -> None:
+    """A line with o markers, and x markers at the ``late`` indices."""
+    others = [i for i in range(len(x)) if i not in late]
+    ax.plot(x, y, marker="o", markevery=others, **style)
+    if late:
+        plain = {k: v for k, v in style.items() if k not in ("linestyle", "label")}
+        ax.plot([x[i] for i in late], [y[i] for i in late], linestyle="none", marker="x",
+                markersize=8, **plain)  # fmt: skip
+
+
 def _draw_robustness(fig, axes, rows, names, conditions, first, title) -> None:
     """Draw the lines, labels and legend of ``robustness_figure``."""
     for c, name in enumerate(names):
@@ -155,19 +272,21 @@ def _draw_robustness(fig, axes, rows, names, conditions, first, title) -> None:
         for i, label in enumerate(conditions):
             sel = [r for r in rows if r["controller"] == name and r["condition"] == label]
             x = [r["noise xy cm"] for r in sel]
-            style = dict(linestyle=_STYLES[i % len(_STYLES)], marker="o", color=colour)
-            axes[0].plot(x, [r["success"] for r in sel], label=f"{name}, {label}", **style)
-            # Over the successful runs only; absent (not drawn) where none succeeds.
-            medians = [r["median arrival s"] if r["success"] > 0 else math.nan for r in sel]
-            axes[1].plot(x, medians, **style)
-    axes[0].set_ylabel("success rate")
-    axes[1].set_ylabel("median arrival time of successes [s]")
+            late = _late_points(sel)
+            style = dict(linestyle=_STYLES[i % len(_STYLES)], color=colour)
+            success = [r["success"] for r in sel]
+            _plot_marked(axes[0], x, success, late, label=f"{name}, {label}", **style)
+            # Over the runs that arrive only; absent (not drawn) where none does.
+            medians = [_arrived_time(r, "median arrival s") for r in sel]
+            _plot_marked(axes[1], x, medians, late, **style)
+    axes[0].set_ylabel("success rate (x: half or more only settle at the horizon)")
+    axes[1].set_ylabel("median arrival of the runs that arrive [s]")
     degrees = ", ".join(f"{r['noise theta deg']:g}" for r in first)
     for ax in axes:
         ax.set_xlabel(f"measurement noise σ_xy [cm] (σ_θ = {degrees}°)")
         ax.grid(alpha=0.3)
     axes[0].set_ylim(-0.02, 1.02)
-    axes[1].set_ylim(0.0, HORIZON_S)
+    axes[1].set_ylim(0.0, _horizon_of(rows))
     fig.suptitle(title, fontsize=9)
     fig.tight_layout(rect=(0, 0, 0.75, 1))
     # Outside the axes, so that it never hides a line.
@@ -183,7 +302,8 @@ def write_standard_conditions(
     Args:
         out_dir: the folder (created if missing).
         rows: ``standard_conditions`` rows.
-        meta: what produced them (seed, runs, where the gains came from).
+        meta: what produced them (seed, runs, where the gains came from; the
+            robot as ``{field: value}`` under ``"robot"``, named in the text).
 
     Returns:
         The paths written.
@@ -192,12 +312,12 @@ def write_standard_conditions(
     if not isinstance(meta, dict):
         raise ValueError(f"meta = {meta!r:.80} is not allowed; allowed: a dict")
     # Everything is checked and drawn before the first file is written.
-    table = markdown_table(rows, STANDARD_COLUMNS)
+    table = robustness_table(rows, STANDARD_COLUMNS)
     head = (
-        "Gain sets under the standard conditions of docs/model.md §7 (hard law, ideal loop, "
-        f"{rows[0]['runs']} held-out poses of docs/model.md §6, horizon {HORIZON_S:g} s); "
-        "every condition but the model robot's with each wheel's radius off by up to the "
-        "mismatch column, drawn per run (docs/model.md §9)\n\n"
+        "Gain sets under the standard conditions of docs/model.md §7 (hard law, ideal loop"
+        f"{_robot_text(meta)}, {rows[0]['runs']} held-out poses of docs/model.md §6, horizon "
+        f"{_horizon_of(rows):g} s); every condition but the model robot's with each wheel's "
+        "radius off by up to the mismatch column, drawn per run (docs/model.md §9)\n\n"
     )
     record = json_text({**meta, "rows": rows}, "meta and rows", indent=2, sort_keys=False) + "\n"
     fig = standard_figure(rows)
@@ -210,7 +330,12 @@ def write_standard_conditions(
 
 
 def standard_figure(rows: Sequence[dict[str, Any]]) -> Any:
-    """Draw success and mean arrival per condition, one bar per gain set (legend outside)."""
+    """Draw success and mean arrival per condition, one bar per gain set (legend outside).
+
+    The success bar is solid for the runs that arrive and hatched for those
+    that only settle at the horizon (``"settled at horizon"``); the arrival
+    bar is the mean over the runs that arrive, absent where none does.
+    """
     rows = require_rows("rows", rows)
     markdown_table(rows, ["condition", "gains", "success", "mean arrival s"])  # names a gap
     conditions = list(dict.fromkeys(r["condition"] for r in rows))
@@ -235,15 +360,29 @@ def standard_figure(rows: Sequence[dict[str, Any]]) -> Any:
 
 def _draw_standard(fig, axes, rows, conditions, sets, width) -> None:
     """Draw the bars, labels and legend of ``standard_figure``."""
+    from matplotlib.patches import Patch
+
+    any_late = False
     for j, name in enumerate(sets):
         got = {r["condition"]: r for r in rows if r["gains"] == name}
         x = [i + (j - (len(sets) - 1) / 2) * width for i in range(len(conditions))]
         colour = plt.get_cmap("tab10")(j)
-        axes[0].bar(x, [got[c]["success"] for c in conditions], width, color=colour, label=name)
-        # Mean arrival of the successful runs; no bar where none succeeds.
-        means = [got[c]["mean arrival s"] if got[c]["success"] > 0 else 0.0 for c in conditions]
-        axes[1].bar(x, means, width, color=colour)
-    for ax, label in zip(axes, ("success rate", "mean arrival of successes [s]"), strict=True):
+        late = [_late_share(got[c]) for c in conditions]
+        arrived = [float(got[c]["success"]) - s for c, s in zip(conditions, late, strict=True)]
+        axes[0].bar(x, arrived, width, color=colour, label=name)
+        if any(late):  # no arrival time: hatched, on top of the runs that arrive
+            any_late = True
+            axes[0].bar(x, late, width, bottom=arrived, color="white", edgecolor=colour,
+                        hatch="///", linewidth=0.8)  # fmt: skip
+        # Mean arrival of the runs that arrive; no bar where none does.
+        means = [_arrived_time(got[c], "mean arrival s") for c in conditions]
+        axes[1].bar(x, [0.0 if math.isnan(m) else m for m in means], width, color=colour)
+        for xi, mean, share in zip(x, means, late, strict=True):
+            if math.isnan(mean) and share > 0:  # only settles at the horizon: said, not drawn
+                axes[1].text(xi, 0.0, "settles at horizon only", rotation=90, fontsize=6,
+                             ha="center", va="bottom", color=colour)  # fmt: skip
+    labels = ("success rate", "mean arrival of the runs that arrive [s]")
+    for ax, label in zip(axes, labels, strict=True):
         ax.set_xticks(range(len(conditions)), conditions)
         ax.set_ylabel(label)
         ax.grid(alpha=0.3, axis="y")
@@ -255,6 +394,9 @@ def _draw_standard(fig, axes, rows, conditions, sets, width) -> None:
     )
     fig.tight_layout(rect=(0, 0, 0.82, 1))
     handles, labels = axes[0].get_legend_handles_labels()
+    if any_late:
+        handles.append(Patch(facecolor="white", edgecolor="grey", hatch="///"))
+        labels.append("settles only at the horizon\n(counted as arrived; no arrival time)")
     fig.legend(handles, labels, fontsize=8, loc="center left", bbox_to_anchor=(0.82, 0.5))
 
 
@@ -274,10 +416,11 @@ def write_noise_curve(
     out, rows = Path(out_dir), require_rows("rows", rows)
     if not isinstance(meta, dict):
         raise ValueError(f"meta = {meta!r:.80} is not allowed; allowed: a dict")
-    table = markdown_table(rows, NOISE_CURVE_COLUMNS)
+    table = robustness_table(rows, NOISE_CURVE_COLUMNS)
     head = (
         "Success and mean arrival against pose noise (σ_θ = 2° per cm of σ_xy; hard law, "
-        f"ideal loop, {rows[0]['runs']} held-out poses, each wheel's radius off by up to "
+        f"ideal loop{_robot_text(meta)}, {rows[0]['runs']} held-out poses, horizon "
+        f"{_horizon_of(rows):g} s, each wheel's radius off by up to "
         f"{100 * float(rows[0]['mismatch']):g} % per run; docs/model.md §7, §9)\n\n"
     )
     record = json_text({**meta, "rows": rows}, "meta and rows", indent=2, sort_keys=False) + "\n"
@@ -294,7 +437,9 @@ def noise_curve_figure(rows: Sequence[dict[str, Any]]) -> Any:
     """Draw success and mean arrival against σ_xy, one line per loop (legend outside).
 
     A level where no run of a loop arrived has no arrival point (not a value
-    at the horizon); its success point at 0 says why.
+    at the horizon); its success point at 0 says why. The arrival is the
+    mean over the runs that arrive; a level where at least half of the
+    successes only settle at the horizon (``"settled at horizon"``) is an x.
     """
     rows = require_rows("rows", rows)
     markdown_table(rows, ["gains", "feedback", "noise xy cm", "success", "mean arrival s"])
@@ -307,11 +452,15 @@ def noise_curve_figure(rows: Sequence[dict[str, Any]]) -> Any:
             colour = plt.get_cmap("tab10")(j)
             style = "--" if mine[0]["feedback"] == "raw" else "-"
             label = f"{name} ({mine[0]['feedback']})"
-            axes[0].plot(x, [r["success"] for r in mine], style, marker="o", color=colour,
-                         label=label)  # fmt: skip
-            arrival = [r["mean arrival s"] if r["success"] > 0 else math.nan for r in mine]
-            axes[1].plot(x, arrival, style, marker="o", color=colour)
-        labels = ("success rate", "mean arrival of successes [s]")
+            late = _late_points(mine)
+            success = [r["success"] for r in mine]
+            _plot_marked(axes[0], x, success, late, linestyle=style, color=colour, label=label)
+            arrival = [_arrived_time(r, "mean arrival s") for r in mine]
+            _plot_marked(axes[1], x, arrival, late, linestyle=style, color=colour)
+        labels = (
+            "success rate (x: half or more only settle at the horizon)",
+            "mean arrival of the runs that arrive [s]",
+        )
         for ax, label in zip(axes, labels, strict=True):
             ax.set_xlabel("pose noise σ_xy [cm] (σ_θ = 2°/cm)")
             ax.set_ylabel(label)
