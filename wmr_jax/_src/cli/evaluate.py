@@ -4,7 +4,9 @@ The loop (controller, parameters and estimator) comes from a
 ``tuned_gains.json`` or a ``Gains`` JSON (``load_tuned`` reads both); the
 references from an ``(N, 3)`` ``.npy`` or ``.csv`` file ``[x cm, y cm, θ rad]``;
 ``evaluate_loop`` runs them under one standard condition (docs/model.md §7,
-§9). Every flag and both files are checked before any run.
+§9) on the robot the file records (``--robot`` for a file that records
+none; another robot than the file's is refused). Every flag and both files
+are checked before any run.
 """
 
 from __future__ import annotations
@@ -58,10 +60,13 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument("--seed", default=0, metavar="N", help="seed of the noise and mismatch")
     parser.add_argument(
         "--horizon",
-        default=6.0,
+        default=None,
         metavar="S",
-        help=f"simulated time per reference, s (at most {_MAX_HORIZON_S:g})",
+        help=f"simulated time per reference, s (at most {_MAX_HORIZON_S:g}; default: 6 on the "
+        "paper robot, longer on a slower one: 6 s times (60 + 10 L) / V_max where that "
+        "exceeds 1, the time the paper's gains take there, docs/robustness.md)",
     )
+    flags.add_robot_flag(parser, default="the --gains file's robot, else paper")
     parser.add_argument("--velocity", default="ideal", help="velocity loop: ideal or nonideal")
     parser.add_argument(
         "--estimator",
@@ -224,10 +229,14 @@ def _mismatch(text: Any) -> float:
     return value
 
 
-def _horizon(text: Any, n_refs: int) -> float:
+def _horizon(text: Any, n_refs: int, robot: Any) -> float:
+    """``--horizon``, else the robot's default (``study_horizon``), checked with the refs."""
     from wmr_jax._src.poses import horizon_steps
+    from wmr_jax._src.robustness import study_horizon
     from wmr_jax._src.rollout import DEFAULT_DT
 
+    if text is None:
+        text = study_horizon(robot)
     horizon = flags.number("--horizon", text, low=0.0, high=_MAX_HORIZON_S, closed=False, unit="s")
     with flags.as_flags({"horizon": "--horizon"}):
         steps = horizon_steps(DEFAULT_DT, horizon)
@@ -248,8 +257,6 @@ def _loop(path: str, estimator: str | None) -> Any:
         loop = load_tuned(path)
     except ValueError as err:
         raise ValueError(f"--gains {err}") from None
-    # evaluate_loop takes no robot yet: it judges every loop on the paper robot.
-    flags.paper_robot_only(loop.robot, "--gains", path, "evaluate")
     if estimator is None:
         return loop
     if estimator == "none":
@@ -268,13 +275,38 @@ def _seconds(value: float | None) -> str:
     return "none arrived" if value is None else f"{value:.3f} s"
 
 
+def _versus_optimal(result: dict[str, Any]) -> str:
+    if result["vs_turn_drive_turn"] is None:
+        return "none arrived"
+    return (
+        f"{result['vs_turn_drive_turn']:.3f}× (its mean {result['turn_drive_turn_s']:.3f} s "
+        "over the references that arrived, docs/model.md §8)"
+    )
+
+
+def _within(result: dict[str, Any]) -> str:
+    if result["peak_wheel_speed_ok"]:
+        return "every wheel command within it"
+    return "exceeded: the gains ask more of the wheels than this robot has"
+
+
 def summary_rows(result: dict[str, Any]) -> list[dict[str, str]]:
     """The printed table of a result: one quantity a row, with its unit."""
+    from wmr_jax._src.robots import describe_robot, robot_from_values
+
+    robot = describe_robot(robot_from_values(result["robot"], "robot"))
     return [
         {"quantity": "success", "value": _percent(result["success"])},
         {"quantity": "mean arrival", "value": _seconds(result["mean_arrival_s"])},
         {"quantity": "median arrival", "value": _seconds(result["median_arrival_s"])},
+        {"quantity": "vs turn–drive–turn time", "value": _versus_optimal(result)},
+        {
+            "quantity": "settled only at the horizon",
+            "value": _percent(result["settled_at_horizon"]) + " of the runs (counted as arrived)",
+        },
         {"quantity": "peak wheel speed", "value": f"{result['peak_wheel_speed']:.1f} cm/s"},
+        {"quantity": "V_max", "value": f"{result['v_max']:g} cm/s, {_within(result)}"},
+        {"quantity": "robot", "value": robot},
         {"quantity": "references (n)", "value": str(result["n"])},
         {"quantity": "condition", "value": result["condition"]},
         {"quantity": "wheel-radius mismatch", "value": f"±{100 * result['mismatch']:g} %"},
@@ -297,9 +329,13 @@ def run(args: Any) -> int:
     if args.estimator is not None:
         estimator = flags.choice("--estimator", args.estimator, _ESTIMATOR_CHOICES)
     x64 = not args.float32
+    given = flags.robot_from(args.robot)
     refs = load_refs(args.refs, x64=x64)
-    horizon = _horizon(args.horizon, len(refs))
     loop = _loop(args.gains, estimator)
+    robot = flags.robot_for_gains(given, loop.robot, "--gains", args.gains)
+    horizon = _horizon(args.horizon, len(refs), robot)
+    if given is not None and given.note:
+        print(given.note)
 
     from wmr_jax._src.io import atomic_write_json
     from wmr_jax._src.report.tables import markdown_table
@@ -315,6 +351,7 @@ def run(args: Any) -> int:
             horizon=horizon,
             velocity=velocity,
             x64=x64,
+            robot=robot,
         )
     result = {**result, "gains_file": str(args.gains), "refs_file": str(args.refs)}
     if out is not None:

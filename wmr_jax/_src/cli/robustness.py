@@ -1,4 +1,12 @@
-"""``wmr-jax robustness``: Monte Carlo of noise, model mismatch and latency (docs/model.md §7)."""
+"""``wmr-jax robustness``: Monte Carlo of noise, model mismatch and latency (docs/model.md §7).
+
+On the robot of ``--robot``, else the one the ``--nominal-gains`` and
+``--robust-gains`` files record, else the paper robot; a file tuned for
+another robot than ``--robot`` (or than the other file) is refused. The
+runs last the robot's horizon (``wmr_jax.studies.study_horizon``: 6 s on the
+paper robot, longer on a slower one), from the references of
+docs/model.md §6.
+"""
 
 from __future__ import annotations
 
@@ -64,6 +72,7 @@ def add_arguments(parser: Any) -> None:
         "0-2 cm with ±3 %% wheel mismatch, raw and estimated feedback, for the paper's gains "
         "and the --robust-gains file",
     )
+    flags.add_robot_flag(parser, default="the gain files' robot, else paper")
 
 
 def run(args: Any) -> int:
@@ -75,12 +84,21 @@ def run(args: Any) -> int:
     names = flags.controller_names(args.controller)
     velocity = flags.velocity_loop(args.velocity)
     estimator = _estimator(args.estimator)
-    sets = _gain_sets(args)
+    sets, robot = _gain_sets(args)
 
-    from wmr_jax._src.report.robustness import write_robustness
-    from wmr_jax._src.report.tables import markdown_table
-    from wmr_jax._src.robustness import robustness_study
+    from wmr_jax._src.report.robustness import robustness_table, write_robustness
+    from wmr_jax._src.robots import describe_robot
+    from wmr_jax._src.robustness import robustness_study, study_horizon
 
+    note = ""
+    if not _is_paper(robot):
+        note = (
+            "; the Monte Carlo runs shim-sung and shim-sung-schedule on the paper's gains "
+            "scaled into this robot's wheel budget, the baselines on their defaults (the "
+            "ideal loop does not limit their wheel commands: robustness.json has each row's "
+            "peak wheel speed; --velocity nonideal holds the wheels within V_max)"
+        )
+    print(f"robot {describe_robot(robot)}, horizon {study_horizon(robot):g} s{note}")
     rows = robustness_study(
         seed=seed,
         controller_names=names,
@@ -88,14 +106,35 @@ def run(args: Any) -> int:
         velocity=velocity,
         x64=not args.float32,
         estimator=estimator,
+        robot=robot,
     )
-    write_robustness(out, rows, seed=seed, velocity=velocity, n_runs=n_runs)
+    write_robustness(out, rows, seed=seed, velocity=velocity, n_runs=n_runs, robot=robot)
     print(f"robustness -> {out}/robustness.png, robustness.md, robustness.json")
-    print(markdown_table(rows, _PRINTED), end="")
-    _standard(out, sets, seed, x64=not args.float32)
+    print(robustness_table(rows, _PRINTED), end="")
+    _standard(out, sets, seed, robot, x64=not args.float32)
     if args.noise_curve:
-        _noise_curve(out, sets, seed, x64=not args.float32)
+        _noise_curve(out, sets, seed, robot, x64=not args.float32)
     return 0
+
+
+def _is_paper(robot: Any) -> bool:
+    from wmr_jax._src.params import Robot
+    from wmr_jax._src.robots import same_robot
+
+    return same_robot(robot, Robot())
+
+
+def _meta(seed: int, robot: Any) -> dict[str, Any]:
+    """What the standard conditions and the noise curve record beside their rows."""
+    from wmr_jax._src.robots import robot_json
+    from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED
+
+    return {
+        "seed": seed,
+        "held_out_poses": EVAL_POSES,
+        "eval_seed": EVAL_SEED,
+        "robot": robot_json(robot),
+    }
 
 
 def _estimator(name: str) -> Any:
@@ -111,7 +150,7 @@ def _estimator(name: str) -> Any:
     return name
 
 
-def _noise_curve(out: Any, sets: dict[str, Any], seed: int, *, x64: bool) -> None:
+def _noise_curve(out: Any, sets: dict[str, Any], seed: int, robot: Any, *, x64: bool) -> None:
     """Success and arrival against noise: each set raw and with its (or the default) estimator."""
     import jax
 
@@ -129,18 +168,29 @@ def _noise_curve(out: Any, sets: dict[str, Any], seed: int, *, x64: bool) -> Non
         # The tuned estimator where the file has one, else the EKF's defaults.
         loops[name + " + estimator"] = loop._replace(estimator=loop.estimator or "ekf")
     refs = held_out_poses(EVAL_POSES, EVAL_SEED)
-    rows = noise_curve(loops, refs, jax.random.key(seed), x64=x64)
-    meta = {"seed": seed, "held_out_poses": EVAL_POSES, "eval_seed": EVAL_SEED}
-    write_noise_curve(out, rows, meta=meta)
+    rows = noise_curve(loops, refs, jax.random.key(seed), x64=x64, robot=robot)
+    write_noise_curve(out, rows, meta=_meta(seed, robot))
     print(f"noise curve -> {out}/noise_curve.png, .md, .json")
 
 
-def _gain_sets(args: Any) -> dict[str, Any]:
-    """The paper's gains and those of the files given (checked before any computation)."""
-    from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS
+def _gain_sets(args: Any) -> tuple[dict[str, Any], Any]:
+    """The gain sets and the robot they run on (checked before any computation).
+
+    The robot is ``--robot``'s, else the one the files record (they must
+    agree), else the paper robot. The first set is the paper's gains scaled
+    into that robot's wheel budget (``k_r = 60``, ``k_θ = 10`` on the paper
+    robot, docs/robots.md).
+    """
+    from wmr_jax._src.params import Robot
+    from wmr_jax._src.robots import describe_robot, same_robot
+    from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
     from wmr_jax._src.tuning.saved import load_tuned
 
-    sets = {"paper (k_r = 60)": PAPER_FEASIBLE_GAINS}
+    given = flags.robot_from(getattr(args, "robot", None))
+    if given is not None and given.note:
+        print(given.note)
+    loops = {}
+    robot, source = (None, None) if given is None else (given.robot, f"--robot {given.label!r}")
     for flag, label in (("--nominal-gains", "nominal-tuned"), ("--robust-gains", "robust-tuned")):
         path = getattr(args, flag[2:].replace("-", "_"), None)
         if path is None:
@@ -149,29 +199,43 @@ def _gain_sets(args: Any) -> dict[str, Any]:
             loop = load_tuned(path)  # run whole: its controller and estimator
         except ValueError as err:
             raise ValueError(f"{flag} {path!r} is not allowed: {err}") from None
-        # The studies take no robot yet: they run every set on the paper robot.
-        flags.paper_robot_only(loop.robot, flag, path, "robustness")
-        sets[label] = loop
+        chosen = flags.robot_for_gains(given, loop.robot, flag, path)
+        if chosen is not None and robot is None:
+            robot, source = chosen, f"{flag} {str(path)!r}"
+        elif chosen is not None and not same_robot(chosen, robot):
+            raise ValueError(
+                f"{flag} {str(path)!r} is not allowed with {source}: it was tuned for "
+                f"{describe_robot(chosen)}, the other for {describe_robot(robot)}; allowed: "
+                "gain files tuned for one robot"
+            )
+        loops[label] = loop
+    robot = Robot() if robot is None else robot
+    paper = paper_feasible_gains(robot)
+    sets = {f"paper (k_r = {float(paper.kr):.3g})": paper}
+    for label, loop in loops.items():
+        sets[label] = loop._replace(robot=robot)  # a file that records none runs there too
         if loop.estimator is not None:  # beside it, the same law on raw measurements
-            sets[f"{label}, raw feedback"] = loop._replace(estimator=None)
-    return sets
+            sets[f"{label}, raw feedback"] = sets[label]._replace(estimator=None)
+    return sets, robot
 
 
-def _standard(out: Any, sets: dict[str, Any], seed: int, *, x64: bool) -> None:
+def _standard(out: Any, sets: dict[str, Any], seed: int, robot: Any, *, x64: bool) -> None:
     """Judge the gain sets under the standard conditions; write and print the table."""
     import jax
 
-    from wmr_jax._src.report.robustness import STANDARD_COLUMNS, write_standard_conditions
-    from wmr_jax._src.report.tables import markdown_table
+    from wmr_jax._src.report.robustness import (
+        STANDARD_COLUMNS,
+        robustness_table,
+        write_standard_conditions,
+    )
     from wmr_jax._src.robustness import standard_conditions
     from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
 
     refs = held_out_poses(EVAL_POSES, EVAL_SEED)
-    rows = standard_conditions(sets, refs, jax.random.key(seed), x64=x64)
-    meta = {"seed": seed, "held_out_poses": EVAL_POSES, "eval_seed": EVAL_SEED}
-    write_standard_conditions(out, rows, meta=meta)
+    rows = standard_conditions(sets, refs, jax.random.key(seed), x64=x64, robot=robot)
+    write_standard_conditions(out, rows, meta=_meta(seed, robot))
     print(f"standard conditions -> {out}/standard_conditions.png, .md, .json")
-    print(markdown_table(rows, STANDARD_COLUMNS[:6]), end="")
+    print(robustness_table(rows, STANDARD_COLUMNS[:6]), end="")
 
 
 SUBCOMMANDS = {

@@ -6,7 +6,7 @@ Called by ``wmr-jax tune`` with its parsed flags (``out``, ``seed``,
 tuned together (``--fixed``: the 7 fixed gains with raw feedback, as before
 estimators). Writes ``tuned_gains.json`` (controller, parameters,
 estimator and robot, which ``load_tuned`` reads whole; the paper robot, the
-only one its judge runs for now), ``robust_evaluation.json`` and
+only one the robust tuner runs for now), ``robust_evaluation.json`` and
 ``.md`` (the hard-law table under the standard conditions, each with ±3 %
 wheel mismatch, and the model robot) and ``robust_loss.json`` (the loss per
 iteration). With ``--compare`` it runs seeds 0–2 instead, each with random
@@ -97,11 +97,12 @@ def _described(config: Any) -> str:
 
 
 def _paper_robot_only(args: Any) -> Any:
-    """The robot of ``--robot``: the paper robot, the only one the robust tuner is judged on.
+    """The robot of ``--robot``: the paper robot, the only one the robust tuner runs.
 
-    The loop is judged (and the searches scored) under the standard
-    conditions, whose engine runs the paper robot only for now: tuned on
-    another robot, the table would judge it on the wrong one.
+    Its loss draws the disturbances over the paper robot's horizon and
+    scores a run that never arrives at twice it (``tuning.robust``), and it
+    refuses another robot; the judge, the standard conditions, takes one
+    (``standard_conditions(robot=...)``).
 
     Raises:
         ValueError: one line, for any other robot.
@@ -113,9 +114,9 @@ def _paper_robot_only(args: Any) -> Any:
     if given is not None and not same_robot(given.robot, Robot()):
         raise ValueError(
             f"--robot {given.label!r} is not allowed with --robust: it is "
-            f"{describe_robot(given.robot)}, and the standard conditions that judge the robust "
-            "tuning run the paper robot only for now; allowed: --robot paper, or wmr-jax tune "
-            "without --robust"
+            f"{describe_robot(given.robot)}, and the robust tuner runs the paper robot only "
+            "for now; allowed: --robot paper, or wmr-jax tune without --robust (wmr-jax "
+            "robustness --nominal-gains then judges those gains on that robot)"
         )
     return Robot()
 
@@ -129,7 +130,7 @@ def run(args: Any) -> int:
         return _compare(out, config, resume=bool(getattr(args, "resume", False)))
 
     from wmr_jax._src import io
-    from wmr_jax._src.report.tables import markdown_table
+    from wmr_jax._src.report.robustness import robustness_table
     from wmr_jax._src.tuning.robust import tune_robust
     from wmr_jax._src.tuning.saved import tuned_json
 
@@ -155,7 +156,7 @@ def run(args: Any) -> int:
         "rows": result["rows"],
     }
     io.atomic_write_json(out / "robust_evaluation.json", record)
-    table = markdown_table(result["rows"], _COLUMNS)
+    table = robustness_table(result["rows"], _COLUMNS)
     io.atomic_write_text(out / "robust_evaluation.md", table)
     print(f"robust_evaluation.md/json -> {out}")
     print(table, end="")
