@@ -279,7 +279,7 @@ def _draw_robustness(fig, axes, rows, names, conditions, first, title) -> None:
             # Over the runs that arrive only; absent (not drawn) where none does.
             medians = [_arrived_time(r, "median arrival s") for r in sel]
             _plot_marked(axes[1], x, medians, late, **style)
-    axes[0].set_ylabel("success rate (x: half or more only settle at the horizon)")
+    axes[0].set_ylabel("success rate")
     axes[1].set_ylabel("median arrival of the runs that arrive [s]")
     degrees = ", ".join(f"{r['noise theta deg']:g}" for r in first)
     for ax in axes:
@@ -290,8 +290,19 @@ def _draw_robustness(fig, axes, rows, names, conditions, first, title) -> None:
     fig.suptitle(title, fontsize=9)
     fig.tight_layout(rect=(0, 0, 0.75, 1))
     # Outside the axes, so that it never hides a line.
-    handles, labels = axes[0].get_legend_handles_labels()
+    handles, labels = _with_late_mark(axes[0], rows)
     fig.legend(handles, labels, fontsize=7, loc="center left", bbox_to_anchor=(0.75, 0.5))
+
+
+def _with_late_mark(ax: Any, rows: Sequence[dict[str, Any]]) -> tuple[list, list]:
+    """The legend of ``ax``, with what an x means where one is drawn."""
+    from matplotlib.lines import Line2D
+
+    handles, labels = ax.get_legend_handles_labels()
+    if _late_points(rows):
+        handles.append(Line2D([], [], color="grey", marker="x", linestyle="none"))
+        labels.append("x: half or more of the\nsuccesses only settle\nat the horizon")
+    return handles, labels
 
 
 def write_standard_conditions(
@@ -389,14 +400,15 @@ def _draw_standard(fig, axes, rows, conditions, sets, width) -> None:
     axes[0].set_ylim(0, 1.05)
     fig.suptitle(
         "docs/model.md §7 standard conditions: latency = 1 sample; noise σ_xy = 0.5 cm, "
-        "σ_θ = 1°; ±3 % wheel radius but on the model robot; hard law, ideal loop",
+        "σ_θ = 1°; ±3 % wheel radius but on the model robot; hard law, ideal loop, horizon "
+        f"{_horizon_of(rows):g} s",
         fontsize=9,
     )
     fig.tight_layout(rect=(0, 0, 0.82, 1))
     handles, labels = axes[0].get_legend_handles_labels()
     if any_late:
         handles.append(Patch(facecolor="white", edgecolor="grey", hatch="///"))
-        labels.append("settles only at the horizon\n(counted as arrived; no arrival time)")
+        labels.append("only settles at\nthe horizon")
     fig.legend(handles, labels, fontsize=8, loc="center left", bbox_to_anchor=(0.82, 0.5))
 
 
@@ -457,10 +469,7 @@ def noise_curve_figure(rows: Sequence[dict[str, Any]]) -> Any:
             _plot_marked(axes[0], x, success, late, linestyle=style, color=colour, label=label)
             arrival = [_arrived_time(r, "mean arrival s") for r in mine]
             _plot_marked(axes[1], x, arrival, late, linestyle=style, color=colour)
-        labels = (
-            "success rate (x: half or more only settle at the horizon)",
-            "mean arrival of the runs that arrive [s]",
-        )
+        labels = ("success rate", "mean arrival of the runs that arrive [s]")
         for ax, label in zip(axes, labels, strict=True):
             ax.set_xlabel("pose noise σ_xy [cm] (σ_θ = 2°/cm)")
             ax.set_ylabel(label)
@@ -473,7 +482,7 @@ def noise_curve_figure(rows: Sequence[dict[str, Any]]) -> Any:
             fontsize=9,
         )
         fig.tight_layout(rect=(0, 0, 0.78, 1))
-        handles, labels = axes[0].get_legend_handles_labels()
+        handles, labels = _with_late_mark(axes[0], rows)
         fig.legend(handles, labels, fontsize=8, loc="center left", bbox_to_anchor=(0.78, 0.5))
     except BaseException:
         plt.close(fig)
