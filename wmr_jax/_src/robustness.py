@@ -7,9 +7,13 @@ under the standard conditions (``standard_conditions``), raw feedback or an
 estimator alike. The engine returns values; ``wmr_jax.report`` draws and
 writes them.
 
-**Your robot.** Every study takes ``robot`` (default ``Robot()``, the paper
-robot) and runs its loop on that robot, its wheels held at that robot's
-``V_max``. The references keep the evaluation set of docs/model.md §6
+**Your robot.** Every study takes ``robot`` (default: the robot the loops
+record, ``ClosedLoop.robot``, else ``Robot()``, the paper robot) and runs
+its loop on that robot; the peak wheel speeds are judged against that
+robot's ``V_max`` (the ideal loop follows every command, so gains set for a
+faster robot show there), and the Monte Carlo runs the Shim–Sung laws on
+the paper's gains scaled into its budget (``robot_defaults``). The
+references keep the evaluation set of docs/model.md §6
 (5–80 cm, any bearing and heading) whatever the robot, since the arrival
 tolerances (1 cm, 5°) and the sensor noise of §7 are lengths and angles,
 not speeds; the horizon scales instead (``study_horizon``): the paper's
