@@ -192,14 +192,19 @@ def test_the_sampling_margin_of_gains_near_float32s_limit_is_finite():
 
 def test_the_schedule_box_is_bounded_by_the_robot():
     # docs/model.md §3.9: k_r knots in (0, V_max], k_theta and k_turn knots in
-    # (0, V_max / L]; the corners of the unit cube reach those bounds.
+    # (0, max(V_max / L, 1 / dt)]; the corners of the unit cube reach those bounds.
     from wmr_jax._src.tuning.problems import schedule_problem
 
-    robot = w.Robot(half_track=5.0, v_max=60.0)
     problem = schedule_problem(4)
+    # A robot that turns fast: V_max / L = 80 rad/s bounds the turn gains.
+    fast = problem.from_unit(np.ones(problem.dim), w.Robot(half_track=5.0, v_max=400.0))
+    for table in (fast.k_theta, fast.k_turn):
+        np.testing.assert_allclose([float(k) for k in table], [80.0] * 4, rtol=1e-6)
+    # One that turns slowly (12 rad/s): the sampled heading loop's deadbeat gain, 1 / dt.
+    robot = w.Robot(half_track=5.0, v_max=60.0)
     top = problem.from_unit(np.ones(problem.dim), robot)
     bottom = problem.from_unit(np.zeros(problem.dim), robot)
-    omega_max = 60.0 / 5.0
+    omega_max = 1.0 / 0.033
     np.testing.assert_allclose([float(k) for k in top.kr], [60.0] * 4, rtol=1e-6)
     for table in (top.k_theta, top.k_turn):
         np.testing.assert_allclose([float(k) for k in table], [omega_max] * 4, rtol=1e-6)

@@ -27,6 +27,7 @@ from wmr_jax._src.controllers.schedule import (
 )
 from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
 from wmr_jax._src.params import Gains, Robot
+from wmr_jax._src.rollout import DEFAULT_DT
 from wmr_jax._src.tuning import parametrisation as fixed
 
 __all__ = [
@@ -88,10 +89,10 @@ FIXED = Problem(
 )
 
 # choice: the box of the schedule. k_r knots may reach V_max (the cap
-# |v| ≤ V_max − L|ω| keeps the wheels within it), the turn gains V_max / L;
-# the shape gains share the fixed problem's box.
+# |v| ≤ V_max − L|ω| keeps the wheels within it), the turn gains turn_gain_max
+# (the cap |ω| ≤ V_max / L does); the shape gains share the fixed problem's box.
 _KR = (1e-3, 1.0)  # fraction of V_max
-_K_THETA = (1e-3, 1.0)  # fraction of V_max / L
+_K_THETA = (1e-3, 1.0)  # fraction of turn_gain_max
 _SHAPE_COLUMNS = (*SHAPE_FIELDS, "v_max", "half_track")
 # The largest schedule tuned: the loss gradient of larger tables takes long to
 # compile, and memory (60 knots: 40 s and 2.4 GB on 2 cores; 200 knots ran
@@ -112,6 +113,18 @@ def schedule_problem(knots: int = KNOTS) -> Problem:
     return _schedule_problem(check_int("knots", knots, 2, MAX_TUNED_KNOTS))
 
 
+def turn_gain_max(robot: Robot) -> Any:
+    """The largest turn-gain knot of the schedule's box, rad/s (docs/model.md §3.9).
+
+    ``max(V_max / L, 1 / dt₀)`` with ``dt₀ = DEFAULT_DT``: a turn gain up to
+    the rate at which the wheels saturate, and on a robot that turns slowly
+    (``V_max / L < 1 / dt₀``) up to the sampled heading loop's deadbeat gain
+    ``k dt₀ = 1`` (§4.2.1), since the command's cap ``|ω| ≤ V_max / L`` keeps
+    its wheels within ``V_max`` whatever the gain.
+    """
+    return jnp.maximum(robot.v_max / robot.half_track, 1.0 / DEFAULT_DT)
+
+
 @functools.cache
 def _schedule_problem(knots: int) -> Problem:
     columns = tuple(f"{table}[{k}]" for table in TABLES for k in range(knots)) + _SHAPE_COLUMNS
@@ -119,7 +132,7 @@ def _schedule_problem(knots: int) -> Problem:
     def from_unit(u: Any, robot: Robot | None = None) -> ScheduleParams:
         robot = Robot() if robot is None else robot
         u = fixed.checked_point("u", u, 3 * knots + 5, unit=True)
-        omega_max = robot.v_max / robot.half_track
+        omega_max = turn_gain_max(robot)
         tables = {
             "kr": robot.v_max * fixed._lerp(u[..., 0:knots], _KR),
             "k_theta": omega_max * fixed._lerp(u[..., knots : 2 * knots], _K_THETA),
@@ -140,7 +153,7 @@ def _schedule_problem(knots: int) -> Problem:
     def start(robot: Robot) -> np.ndarray:
         """The paper's feasible gains as constant tables (the fixed law's start)."""
         gains = fixed.PAPER_FEASIBLE_GAINS
-        omega_max = float(robot.v_max) / float(robot.half_track)
+        omega_max = float(turn_gain_max(robot))
         unit = fixed.unit_from_gains(gains, robot)
 
         def inside(value: float, bounds: tuple[float, float]) -> float:
