@@ -46,9 +46,11 @@ def add_arguments(parser: Any) -> None:
     )
     parser.add_argument(
         "--condition",
-        required=True,
+        default="nominal",
         metavar="NAME",
-        help="standard condition (docs/model.md §7): " + ", ".join(_CONDITIONS),
+        help="standard condition (docs/model.md §7): "
+        + ", ".join(_CONDITIONS)
+        + " (default: nominal)",
     )
     parser.add_argument(
         "--mismatch",
