@@ -75,7 +75,14 @@ def test_cli_writes_the_results_and_a_resumed_run_gives_the_same_gains(tmp_path,
     printed = capsys.readouterr().out
     assert "| paper feasible | " in printed and "| tuned | " in printed
     saved = json.loads((whole / "tuned_gains.json").read_text())
-    assert list(saved) == ["controller", "kind", *tuning.GAIN_FIELDS, "units", "robot", "robot_units"]
+    assert list(saved) == [
+        "controller",
+        "kind",
+        *tuning.GAIN_FIELDS,
+        "units",
+        "robot",
+        "robot_units",
+    ]
     controller, gains, *_ = tuning.load_tuned(whole / "tuned_gains.json")
     assert controller.name == saved["controller"] == "shim-sung"
     assert np.all(w.check_feasible(gains))
