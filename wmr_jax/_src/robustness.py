@@ -20,7 +20,10 @@ not speeds; the horizon scales instead (``study_horizon``): the paper's
 feasible gains, scaled into a slower robot's wheel budget, drive the same
 paths ``c`` times slower, and the horizon is the paper robot's 6 s over
 ``c``, so that they have the time on that robot that they have on the
-paper's. A study given a ``horizon`` runs that one.
+paper's. A study given a ``horizon`` runs that one. A robot's acceleration
+limits (``accel_max``, ``angular_accel_max``) limit the ideal loop's commands
+in every study, as in the rollouts (docs/model.md §4.2.2): the disturbed loop
+turns its speed limiter on for such a robot (``sensing.loop``).
 """
 
 from __future__ import annotations

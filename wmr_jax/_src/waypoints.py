@@ -240,6 +240,9 @@ def _run(jitted, spec, params, init, robot, dt, options: Options, n: int | None,
     params, init, robot, dt = _prepared(
         params, init, robot, dt, options, n, (entry, _BATCHED.get(entry, ""))
     )
+    # The robot's speed limiter, as in the rollouts (docs/model.md §4.2.2): the
+    # held command rides in the state's velocity, from rest.
+    options = loops.for_robot(options, robot, dt)
     return jitted(spec, params, init, robot, dt, options=options)
 
 
@@ -271,7 +274,9 @@ def chain_rollout(
         init: ``(3,)`` initial pose.
         dt: control period, s.
         steps: control periods in all (static).
-        robot: robot parameters; default ``Robot()``.
+        robot: robot parameters; default ``Robot()``. Its acceleration
+            limits, where above 0, limit the ideal loop's commands
+            (docs/model.md §4.2.2).
         velocity: ``"ideal"`` or ``"nonideal"`` (static).
         controller: a ``Controller`` or its registered name (static).
         tol_r: arrival distance at the last waypoint, cm (docs/model.md §6: 1).

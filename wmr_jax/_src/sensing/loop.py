@@ -104,6 +104,13 @@ def disturbed_run(
     measurement (``options.estimator`` ``None``) or the estimator's
     estimate, compensated for latency. Arrival is judged on the true pose.
 
+    With ``options.accel_limit`` (ideal loop; ``prepare_disturbed`` sets it
+    for a robot that gives acceleration limits, docs/model.md §4.2.2) the
+    command applied passes through the robot's speed limiter before the
+    wheels' radii scale it, and the estimator predicts with what the
+    limiter let through (its model is the ideal robot, limiter included);
+    without it the run is bit for bit what it was before limiters existed.
+
     Args:
         spec: the disturbance of this run (no batch axes; ``noise (steps, 3)``).
         params: the controller's parameters.
@@ -111,7 +118,8 @@ def disturbed_run(
         robot: the nominal robot (the controller's and estimator's model).
         dt: control period, s.
         options: static options; ``options.temperature`` selects the relaxed
-            law, ``options.estimator`` the estimator.
+            law, ``options.estimator`` the estimator, ``options.accel_limit``
+            the speed limiter.
         estimate: the estimator's parameters (unused without one).
         fold: ``fold(acc, true pose (a loops.SplitPose), StepOutput) -> acc``
             after every period.
@@ -128,6 +136,7 @@ def disturbed_run(
     estimator = options.estimator
     if estimator is None:
         return _raw_run(spec, params, init, robot, true_robot, dt, options, fold, acc, record)
+    limiter, moving = _limiter(options)
     compensate = estimate.compensate
     late = spec.delay > 0
 
@@ -140,21 +149,35 @@ def disturbed_run(
     def body(carry, noise_next):
         pose, wheel, fresh, held, fresh_move, held_move, state, acc = carry
         applied = jnp.where(late, held, fresh)
-        target = realised(applied, spec.mismatch, robot)
+        if limiter:
+            # The estimator knows what its limiter lets through: it predicts
+            # with that, and rolls its estimate over the command in flight as
+            # the limiter will let it through next period.
+            followed, wheel = _followed(wheel, applied, robot, dt)
+            move = loops.ArcMove.of(followed.real, followed.imag, dt)
+        else:
+            # The estimator's prediction moves its estimate by the applied
+            # command's arc; under latency the command now in flight is
+            # ``fresh``, whose arc was computed with it and is the next
+            # prediction's too.
+            followed, move = applied, _select(late, held_move, fresh_move)
+        target = realised(followed, spec.mismatch, robot)
         pose, wheel, rims, distance = loops.advance_period(
-            pose, wheel, target, true_robot, dt, options, model=robot
+            pose, wheel, target, true_robot, dt, moving, model=robot
         )
         out = StepOutput(applied.real, applied.imag, jnp.int32(-1), rims, distance)
         if fold is not None:
             acc = fold(acc, pose, out)
         sensed = measurement(pose, noise_next)
-        # The estimator's prediction moves its estimate by the applied command's
-        # arc; under latency the command now in flight is ``fresh``, whose arc
-        # was computed with it and is the next prediction's too.
-        predicted = loops.ideal_move(state.pose, _select(late, held_move, fresh_move))
-        state = estimator.update(state, predicted, applied, sensed, ref, estimate, robot, dt)
-        command = loops.split_command(law_input(state, fresh_move), ref, params, options)
-        move = loops.ArcMove.of(command.real, command.imag, dt)
+        predicted = loops.ideal_move(state.pose, move)
+        state = estimator.update(state, predicted, followed, sensed, ref, estimate, robot, dt)
+        in_flight = fresh_move
+        if limiter:
+            in_flight = _followed(wheel, fresh, robot, dt)[0]
+            in_flight = loops.ArcMove.of(in_flight.real, in_flight.imag, dt)
+        command = loops.split_command(law_input(state, in_flight), ref, params, options)
+        # With a limiter each period's arc follows from its state (above).
+        move = fresh_move if limiter else loops.ArcMove.of(command.real, command.imag, dt)
         recorded = (pose.stacked(), out, state.pose.stacked()) if record else None
         return (pose, wheel, command, fresh, move, fresh_move, state, acc), recorded
 
@@ -182,16 +205,38 @@ def disturbed_run(
     return pose.stacked(), acc, ys
 
 
+def _limiter(options: Options) -> tuple[bool, Options]:
+    """Whether the run has the ideal loop's speed limiter, and the options that move the robot.
+
+    The disturbed loop applies the limiter itself, to the command sent and
+    before the wheels' radii realise it (a base's limiter is software; the
+    mismatch is in its wheels); the robot then follows what comes out
+    (``loops.advance_period`` with the limiter off).
+    """
+    limiter = options.velocity == "ideal" and options.accel_limit
+    return limiter, dataclasses.replace(options, accel_limit=False) if limiter else options
+
+
+def _followed(wheel: loops.HeldCommand, applied: jax.Array, robot: Robot, dt: jax.Array):
+    """``applied`` (``v + i ω``) after the speed limiter in state ``wheel``; its new state."""
+    v, omega = loops.speed_limit(wheel, applied.real, applied.imag, robot, dt)
+    return jax.lax.complex(v, omega), loops.HeldCommand(v, omega)
+
+
 def _raw_run(spec, params, init, robot, true_robot, dt, options, fold, acc, record):
     """``disturbed_run`` without an estimator: the law sees each measurement itself."""
     ref = spec.ref
+    limiter, moving = _limiter(options)
 
     def body(carry, noise_next):
         pose, wheel, fresh, held, acc = carry
         applied = jnp.where(spec.delay > 0, held, fresh)
-        target = realised(applied, spec.mismatch, robot)
+        followed = applied
+        if limiter:
+            followed, wheel = _followed(wheel, applied, robot, dt)
+        target = realised(followed, spec.mismatch, robot)
         pose, wheel, rims, distance = loops.advance_period(
-            pose, wheel, target, true_robot, dt, options, model=robot
+            pose, wheel, target, true_robot, dt, moving, model=robot
         )
         out = StepOutput(applied.real, applied.imag, jnp.int32(-1), rims, distance)
         if fold is not None:
@@ -296,6 +341,8 @@ def perturbed_metrics(
         init: ``(3,)`` initial pose (true and measured alike), ``[cm, cm, rad]``.
         dt: control period, s.
         robot: the nominal robot (the controller's model); default ``Robot()``.
+            Its acceleration limits, where above 0, limit the ideal loop's
+            commands (docs/model.md §4.2.2).
         velocity: ``"ideal"`` or ``"nonideal"``.
         x64: compute in float64 (default): the polar baselines' bearing is
             rounding noise near the goal in float32.
@@ -337,6 +384,9 @@ def prepare_disturbed(
     refs_j, params, init, robot, dt = simulation.prepare(
         refs, params, init, robot, dt, options, batch=None
     )
+    if options.velocity == "ideal":
+        # The robot's speed limiter, as in the rollouts (docs/model.md §4.2.2).
+        options = loops.for_robot(options, robot, dt)
     if np.ndim(init) != 1:
         raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,)")
     dtype = dt.dtype
@@ -388,10 +438,11 @@ def disturbed_rollout(
     Returns:
         ``{"poses": (N, steps + 1, 3) true poses, the initial one first,
         "v": (N, steps) cm/s, "omega": (N, steps) rad/s``: the command
-        applied over each period (zero over the first one under latency),
-        ``"estimates": (N, steps, 3)``: the estimate of the pose at the end of
-        each period (the measurement itself without an estimator); the last
-        one follows a noise-free measurement, since no command uses it``}``.
+        applied over each period (zero over the first one under latency;
+        before a speed limiter, as a ``Trajectory``'s), ``"estimates": (N,
+        steps, 3)``: the estimate of the pose at the end of each period (the
+        measurement itself without an estimator); the last one follows a
+        noise-free measurement, since no command uses it``}``.
     """
     with jax.enable_x64(checks.check_bool("x64", x64)):
         args, options = prepare_disturbed(

@@ -67,7 +67,11 @@ class LossWeights:
 
 @dataclasses.dataclass(frozen=True)
 class LossSpec:
-    """Static part of the loss: horizon, velocity loop, tolerances, weights."""
+    """Static part of the loss: horizon, velocity loop, tolerances, weights.
+
+    ``accel_limit`` is the ideal loop's speed limiter (``loops.Options``),
+    set for the robot by ``for_robot`` before tracing.
+    """
 
     steps: int
     velocity: str
@@ -78,6 +82,7 @@ class LossSpec:
     weights: LossWeights
     remat: bool
     controller: Controller = SHIM_SUNG
+    accel_limit: bool = False
 
     def options(self, temperature: Any = None) -> loops.Options:
         """The rollout options of this loss with its law at ``temperature``."""
@@ -89,7 +94,20 @@ class LossSpec:
             substeps=self.substeps,
             wheel_limit=self.wheel_limit,
             remat=self.remat,
+            accel_limit=self.accel_limit,
         )
+
+    def for_robot(self, robot: Robot, dt: Any) -> LossSpec:
+        """This spec with the speed limiter of ``robot``'s acceleration limits on where it has them.
+
+        As ``loops.for_robot`` decides for the rollouts (docs/model.md
+        §4.2.2): on for a robot that gives ``accel_max`` or
+        ``angular_accel_max`` above 0 (ideal loop), so that the loss tunes the
+        loop the evaluation judges; a robot without limits keeps the loss it
+        had, bit for bit. Call it on the concrete robot, before tracing.
+        """
+        fitted = loops.for_robot(self.options(), robot, dt)
+        return dataclasses.replace(self, accel_limit=fitted.accel_limit)
 
 
 class LossTerms(NamedTuple):
@@ -350,6 +368,7 @@ def _prepared(gains: Any, refs: Any, temperature: Any, options: dict[str, Any]) 
     args = simulation.prepare(
         refs, gains, o["init"], o["robot"], o["dt"], spec.options(), batch=True
     )
+    spec = spec.for_robot(args[3], args[4])
     if temperature is not None:
         temperature = jnp.asarray(temperature, float_dtype())
     return spec, temperature, args
@@ -411,7 +430,9 @@ def tuning_loss(
         refs: ``(N, 3)`` reference poses ``[x cm, y cm, θ rad]``.
         temperature: smooth-law temperature ``> 0``, or ``None`` for the hard law.
         init: ``(3,)`` or ``(N, 3)`` initial pose(s).
-        robot: robot parameters; default ``Robot()``.
+        robot: robot parameters; default ``Robot()``. Its ``accel_max`` and
+            ``angular_accel_max``, where above 0, limit how fast the ideal
+            loop's commands change, as in the rollouts (docs/model.md §4.2.2).
         dt: control period, s.
         horizon: simulated time per run, s (``docs/model.md §6``: 6 s).
         velocity: ``"ideal"`` or ``"nonideal"`` velocity loop (``docs/model.md §4``).

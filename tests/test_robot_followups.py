@@ -1,0 +1,148 @@
+"""A robot's acceleration limits wherever its ideal loop runs (docs/model.md §4.2.2).
+
+The rollouts and sweeps turn the speed limiter on for a robot that gives
+acceleration limits (``loops.for_robot``); so do the tuning loss, the
+disturbed loop (and the studies built on it) and the waypoint loops. A robot
+whose turn may gain only ``SLOW_TURN`` rad/s per second arrives later on
+each of them than the same robot without it, and the paper robot, which has
+none, runs as before. Also: tuning checkpoints of robots without limits
+keep the identity they had before limits existed.
+"""
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import wmr_jax as w
+from wmr_jax import tuning
+from wmr_jax._src import loops, waypoints
+from wmr_jax._src.robustness import evaluate_loop
+from wmr_jax._src.sensing import loop as sensed
+from wmr_jax._src.sensing.disturbances import Disturbance, draw_disturbances
+from wmr_jax._src.tuning import training
+
+# The paper's feasible gains turn at up to 10 rad/s: at 30 rad/s² the turn
+# takes a third of a second to build up, against one sample without a limit.
+SLOW_TURN = 30.0
+LIMITED = w.Robot(angular_accel_max=SLOW_TURN)
+GAINS = tuning.PAPER_FEASIBLE_GAINS
+REFS = np.array([[30.0, 20.0, 0.5], [-20.0, 25.0, 2.0], [40.0, -10.0, -1.0]])
+
+
+def test_the_tuning_loss_runs_the_robots_speed_limiter():
+    arrival = {}
+    for name, robot in (("free", w.Robot()), ("limited", LIMITED)):
+        terms = tuning.loss_terms(GAINS, REFS, temperature=None, robot=robot, horizon=2.0)
+        arrival[name] = np.asarray(terms.arrival)
+    assert np.all(arrival["limited"] > arrival["free"] + 0.03), arrival
+    # The spec is fitted to the robot before tracing; the paper robot's is unchanged.
+    spec = training.TuneConfig().spec()
+    assert spec.for_robot(w.Robot(), 0.033) == spec and not spec.accel_limit
+    assert spec.for_robot(LIMITED, 0.033).accel_limit
+
+
+def test_the_tuner_iterates_on_the_limited_loop(monkeypatch):
+    # What the training step is compiled with, without compiling it.
+    seen = []
+
+    def step(z, opt_state, refs, temperature, init, robot, dt, *, spec, hyper, problem):
+        seen.append(spec.accel_limit)
+        return z, opt_state, jnp.zeros(()), {}
+
+    monkeypatch.setattr(training, "_train_step_jit", step)
+    config = training.TuneConfig(iters=1, poses=2)
+    for robot in (w.Robot(), LIMITED):
+        training._iterate(config, robot, training.init_state(config, robot), None)
+    assert seen == [False, True]
+
+
+# 2 s: the runs of the studies' test below (one compiled loop serves both).
+HORIZON_S = 2.0
+STEPS = 61
+
+
+def _disturbance(n=3, steps=STEPS, latency=0.0):
+    refs, _, mismatch = draw_disturbances(jax.random.key(3), n, steps, radius_mismatch=0.03)
+    return Disturbance(refs, np.zeros((n, steps, 3)), mismatch, np.float64(latency))
+
+
+# Raw feedback, and the EKF under latency (its compensation rolls the estimate
+# over the command in flight as the limiter will let it through).
+@pytest.mark.parametrize(("estimator", "latency"), [(None, 0.0), ("ekf", 1.0)])
+def test_the_disturbed_loop_runs_the_robots_speed_limiter(estimator, latency):
+    spec = _disturbance(latency=latency)  # the wheels' radii off by up to 3 %
+    arrival = {}
+    for name, robot in (("free", w.Robot()), ("limited", LIMITED)):
+        m = sensed.perturbed_metrics(spec, GAINS, robot=robot, estimator=estimator, x64=False)
+        assert np.all(m.success), name
+        arrival[name] = m.arrival
+    assert np.mean(arrival["limited"]) > np.mean(arrival["free"]) + 0.05, arrival
+    # Only the ideal loop of a robot with limits has the limiter.
+    for robot, limited in ((w.Robot(), False), (LIMITED, True)):
+        args = (spec, GAINS, w.SHIM_SUNG, estimator, (0.0, 0.0, 0.0), 0.033, robot)
+        assert sensed.prepare_disturbed(*args, "ideal")[1].accel_limit is limited
+        assert not sensed.prepare_disturbed(*args, "nonideal")[1].accel_limit
+
+
+def test_an_undisturbed_run_is_the_limited_rollout():
+    # With no noise, mismatch or latency the disturbed loop is the rollout,
+    # its speed limiter included (the estimator predicts what it lets through).
+    refs = REFS
+    spec = Disturbance(refs, np.zeros((3, 60, 3)), np.ones((3, 3)), np.float64(0.0))
+    with jax.enable_x64(True):
+        rollout = np.asarray(w.batch_rollout(refs, GAINS, robot=LIMITED, steps=60).poses)
+        for estimator in (None, "ekf"):
+            run = sensed.disturbed_rollout(spec, GAINS, robot=LIMITED, estimator=estimator)
+            np.testing.assert_array_equal(run["poses"], rollout)
+
+
+def test_the_studies_run_the_robots_speed_limiter():
+    arrival = {}
+    for name, robot in (("free", w.Robot()), ("limited", LIMITED)):
+        result = evaluate_loop(GAINS, REFS, robot=robot, horizon=HORIZON_S, mismatch=0.0, x64=False)
+        assert result["success"] == 1.0, name
+        arrival[name] = result["mean_arrival_s"]
+    assert arrival["limited"] > arrival["free"] + 0.05, arrival
+
+
+def test_the_waypoint_loops_run_the_robots_speed_limiter():
+    chain = np.array([[30.0, 10.0, 0.0], [50.0, 40.0, 1.5]])
+    arrival = {}
+    for name, robot in (("free", w.Robot()), ("limited", LIMITED)):
+        run = waypoints.chain_rollout(chain, GAINS, robot=robot, steps=120)
+        arrival[name] = np.asarray(run.arrival)
+        assert np.all(np.isfinite(arrival[name])), name
+    assert np.all(arrival["limited"] > arrival["free"]), arrival
+    # A moving reference too. The limiter's state is the state's velocity, from
+    # rest: the first turn is cut to one period's worth.
+    refs = np.tile(REFS[0], (60, 1))
+    traj = waypoints.track_rollout(refs, GAINS, robot=LIMITED).trajectory
+    assert abs(float(traj.omega[0])) > 2 * SLOW_TURN * 0.033  # what the law asked for
+    rims = np.asarray(traj.wheel_speeds[0])
+    turn = (rims[1] - rims[0]) / (2 * float(LIMITED.half_track))
+    assert abs(turn) <= SLOW_TURN * 0.033 * (1 + 1e-5)
+    assert loops.for_robot(loops.Options(), w.Robot(), 0.033).accel_limit is False
+
+
+def test_a_checkpoints_identity_leaves_out_absent_acceleration_limits():
+    config = training.TuneConfig()
+    now = tuning.run_identity(config, w.Robot())
+    # What a checkpoint saved before the limits existed holds: every other field.
+    fields = [f for f in w.Robot.__dataclass_fields__ if "accel" not in f]
+    before = {
+        "config": config.as_dict(),
+        "robot": {f: float(getattr(w.Robot(), f)) for f in fields},
+    }
+    assert now == json.loads(json.dumps(before))
+    assert training._run_text(config, w.Robot()) == json.dumps(before, sort_keys=True)
+    # A robot with a limit is another run; the limit it gives is in its identity.
+    limited = tuning.run_identity(config, LIMITED)
+    assert limited != now and limited["robot"]["angular_accel_max"] == SLOW_TURN
+    assert "accel_max" not in limited["robot"]
+    state = training.init_state(config, w.Robot())
+    with pytest.raises(ValueError, match="state is of another run"):
+        training._own_state(state, config, LIMITED)
+    assert training._own_state(state, config, w.Robot()) is state
