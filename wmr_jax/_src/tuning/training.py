@@ -346,13 +346,25 @@ def _checked(config: TuneConfig | None, robot: Robot | None) -> tuple[TuneConfig
     return checked_config(config), as_float_tree(validate_one_robot(robot, "tuning"))
 
 
+# Robot fields whose 0 means "none": left out of a run's identity at 0, so that
+# checkpoints saved before the acceleration limits existed still resume.
+_ABSENT_AT_ZERO = ("accel_max", "angular_accel_max")
+
+
 def _run_text(config: TuneConfig, robot: Robot) -> str:
-    """``run_identity`` of checked settings as canonical JSON text (``TrainState.run``)."""
-    fields = (f.name for f in dataclasses.fields(Robot))
-    identity = {
-        "config": config.as_dict(),
-        "robot": {name: float(getattr(robot, name)) for name in fields},
+    """``run_identity`` of checked settings as canonical JSON text (``TrainState.run``).
+
+    The robot's acceleration limits appear only where above 0 (a limit of 0
+    is none): a robot without them has the identity it had before they
+    existed, and one with them is another run.
+    """
+    values = {f.name: float(getattr(robot, f.name)) for f in dataclasses.fields(Robot)}
+    robot_values = {
+        name: value
+        for name, value in values.items()
+        if not (name in _ABSENT_AT_ZERO and value == 0.0)
     }
+    identity = {"config": config.as_dict(), "robot": robot_values}
     return json.dumps(identity, sort_keys=True)
 
 
@@ -478,9 +490,11 @@ def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainStat
 
 def _iterate(config, robot, state, progress_fn) -> TrainState:
     """Run the iterations from ``state.iteration`` to ``config.iters``."""
-    spec, hyper, dtype = config.spec(), config.hyper(), float_dtype()
+    hyper, dtype = config.hyper(), float_dtype()
     problem = config.problem
     dt = jnp.asarray(config.dt, dtype)
+    # The loss runs the loop the evaluation judges: the robot's speed limiter included.
+    spec = config.spec().for_robot(robot, dt)
     init = jnp.zeros((3,), dtype)
     for iteration in range(state.iteration, config.iters):
         began = time.perf_counter()
