@@ -1,8 +1,14 @@
-"""The README as a user meets it: its snippets run, its commands exist, its tables are the results.
+"""The README and the docs pages as a user meets them.
 
-The tables are held against the results that ``experiments/reproduce_readme.sh``
-stores in ``docs/data/`` (the full-size runs take minutes); the commands
-that print them are run here at a small size and must print what they store.
+Their snippets run, their commands exist, their tables are the results.
+
+The research tables live on the docs pages (docs/paper.md, maps.md, tuning.md,
+robustness.md, scale.md). Those whose runs are stored, the paper's table, the
+controller comparison, the standard conditions and the figures docs/maps.md
+quotes, are held against the results that ``experiments/reproduce_readme.sh``
+stores in ``docs/data/`` (the full-size runs take minutes); the commands that
+print them are run here at a small size and must print what they store. The
+README's tuning table is held to docs/tuning.md's, row for row.
 """
 
 import json
@@ -15,12 +21,38 @@ import pytest
 from wmr_jax.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
-README = (ROOT / "README.md").read_text(encoding="utf-8")
 STORED = ROOT / "docs" / "data"
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 
 
-def _blocks(language):
-    return re.findall(rf"```{language}\n(.*?)```", README, flags=re.S)
+def _read(name):
+    return (ROOT / name).read_text(encoding="utf-8")
+
+
+README = _read("README.md")
+# Pages whose Python blocks run here as written (docs/custom_controller.md's
+# runs in test_usability.py; docs/paper.md's takes 20 s, docs/robots.md's
+# read files a user writes first).
+QUICK_SNIPPETS = ["README.md", "docs/scale.md"]
+
+
+def _blocks(language, text=README):
+    return re.findall(rf"```{language}\n(.*?)```", text, flags=re.S)
+
+
+def _commands(text):
+    """The ``wmr-jax`` lines of a page's bash blocks, continued lines joined, comments dropped."""
+    lines = []
+    for block in _blocks("bash", text):
+        for line in block.replace("\\\n", " ").splitlines():
+            if line.startswith("wmr-jax "):
+                lines.append(line.split("#")[0].split())
+    return lines
+
+
+def _flat(text):
+    """A page's text with every run of whitespace one space, so a sentence reads as one line."""
+    return " ".join(text.split())
 
 
 def _table(text, first_column):
@@ -66,53 +98,80 @@ def _check_comparison(text, rows):
         )
 
 
-def test_readme_python_snippets_run_as_written(tmp_path, monkeypatch):
-    snippets = _blocks("python")
+@pytest.mark.parametrize("page", QUICK_SNIPPETS)
+def test_python_snippets_run_as_written(page, tmp_path, monkeypatch):
+    snippets = _blocks("python", _read(page))
     assert snippets
     monkeypatch.chdir(tmp_path)  # anything a snippet writes stays out of the repository
     for code in snippets:
-        exec(compile(code, "README.md", "exec"), {"__name__": "readme"})
+        exec(compile(code, page, "exec"), {"__name__": "readme"})
 
 
-def test_readme_commands_and_flags_exist(capsys):
-    """Every ``wmr-jax`` line of the README names a command and flags its --help lists."""
-    lines = [
-        line.split("#")[0].split()
-        for block in _blocks("bash")
-        for line in block.splitlines()
-        if line.startswith("wmr-jax ")
-    ]
-    assert len(lines) >= 8
-    for words in lines:
+def test_commands_and_flags_exist(capsys):
+    """Every ``wmr-jax`` line of the README and docs/*.md: a command, and flags its --help lists."""
+    lines = {page.name: _commands(page.read_text(encoding="utf-8")) for page in PAGES}
+    assert len(lines["README.md"]) >= 4 and sum(map(len, lines.values())) >= 25
+    for page, words in ((page, words) for page, found in lines.items() for words in found):
         with pytest.raises(SystemExit) as done:
             main([words[1], "--help"])
-        assert done.value.code == 0
+        assert done.value.code == 0, (page, words)
         helptext = capsys.readouterr().out
         for flag in (w for w in words[2:] if w.startswith("--")):
-            assert flag in helptext, (words, flag)
+            assert flag in helptext, (page, words, flag)
 
 
-def test_readme_outputs_stay_under_results():
-    """Files the README's commands write land in the git-ignored results/ folder."""
-    for block in _blocks("bash"):
-        for line in block.splitlines():
+def test_outputs_stay_under_results():
+    """Files the pages' commands write land in the git-ignored results/ folder."""
+    for page in PAGES:
+        for words in _commands(page.read_text(encoding="utf-8")):
             for flag in ("--out", "--plot", "--json"):
-                if line.startswith("wmr-jax ") and f"{flag} " in line:
-                    path = line.split(f"{flag} ")[1].split()[0]
-                    assert path.startswith("results"), line
+                if flag in words[:-1]:
+                    path = words[words.index(flag) + 1]
+                    assert path.startswith("results"), (page.name, words)
     assert "results/" in (ROOT / ".gitignore").read_text()
+
+
+def test_readme_is_a_page_a_newcomer_can_scan():
+    """At most 250 lines, the two commands, and a map naming every docs page."""
+    assert len(README.splitlines()) <= 250
+    assert "pip install . && wmr-jax demo" in README
+    assert "pip install '.[test,search]' && python -m pytest -q" in README
+    for page in sorted((ROOT / "docs").glob("*.md")):
+        assert f"](docs/{page.name})" in README, page.name
+
+
+def test_readme_headline_table_is_the_tuning_pages():
+    """The README's tuning table is rows of docs/tuning.md's, cell for cell."""
+    header, body = _table(README, "gains")
+    page_header, page_body = _table(_read("docs/tuning.md"), "gains")
+    assert header == page_header
+    names = [cells[0].strip("* ") for cells in body]
+    assert names[:3] == ["paper's feasible (k_r = 60, k_θ = 10)", "tuned", "tuned gain schedule"]
+    for cells in body:
+        assert cells in page_body, cells
 
 
 def test_comparison_table_is_the_stored_run():
     stored = json.loads((STORED / "comparison.json").read_text())
     assert stored["poses"] == 200_000 and stored["seed"] == 0 and stored["dtype"] == "float64"
-    assert "wmr-jax compare --poses 200000 --seed 0" in README.replace("--out results/compare ", "")
-    _check_comparison(README, stored["rows"])
+    page = _read("docs/maps.md")
+    assert "wmr-jax compare --poses 200000 --seed 0" in page.replace("--out results/compare ", "")
+    _check_comparison(page, stored["rows"])
+
+
+def test_comparison_prose_quotes_the_stored_run():
+    """docs/maps.md's "arrives first on only a–b %": the baselines' least and largest share."""
+    rows = json.loads((STORED / "comparison.json").read_text())["rows"]
+    shares = [100.0 * r["faster than shim-sung"] for r in rows if r["controller"] != "shim-sung"]
+    quoted = r"baseline arrives first on only ([\d.]+)–([\d.]+) %"
+    found = re.search(quoted, _flat(_read("docs/maps.md")))
+    assert found, "docs/maps.md no longer quotes the baselines' share"
+    assert found.groups() == (f"{min(shares):.2f}", f"{max(shares):.2f}"), found.groups()
 
 
 def test_paper_table_is_the_stored_run():
     summary = json.loads((STORED / "paper_table.json").read_text())["summary"]
-    _, body = _table(README, "k_r")
+    _, body = _table(_read("docs/paper.md"), "k_r")
     cases = [summary[f"kr={row[0]}"] for row in body]
     assert len(cases) == 2
     for cells, s in zip(body, cases, strict=True):
@@ -127,15 +186,52 @@ def test_paper_table_is_the_stored_run():
 
 def test_map_caption_states_the_pose_count():
     stored = json.loads((STORED / "maps_summary.json").read_text())
-    assert f"{stored['poses']:,} poses" in README
-    assert "over a million" not in README
+    assert f"{stored['poses']:,} poses" in _read("docs/maps.md")
+    assert f"{stored['poses']:,}-pose grid" in README
+    assert not any("over a million" in page.read_text(encoding="utf-8") for page in PAGES)
+
+
+def test_map_first_to_arrive_shares_are_the_stored_ones():
+    """The grid's "faster than shim-sung" shares, as docs/maps.md quotes them."""
+    stored = json.loads((STORED / "maps_summary.json").read_text())["rows"]
+    rows = {r["controller"]: r for r in stored}
+    found = re.search(
+        r"Aicardi arrives before Shim–Sung on ([\d.]+ %) of the poses"
+        r" and Astolfi/Corke on ([\d.]+ %)",
+        _flat(_read("docs/maps.md")),
+    )
+    assert found, "docs/maps.md no longer quotes the grid's first-to-arrive shares"
+    for printed, name in zip(found.groups(), ("aicardi", "astolfi-corke"), strict=True):
+        assert _agrees(printed, rows[name]["faster than shim-sung"]), (name, printed)
+
+
+def test_waypoint_times_are_the_stored_run():
+    """The chain's finishing times in docs/maps.md, stopping at each waypoint and passing."""
+    rows = json.loads((STORED / "soccer.json").read_text())["rows"]
+    end = {(r["controller"], r["mode"]): r["leg 6 s"] for r in rows}
+    found = re.search(
+        r"finished in ([\d.]+) s by Shim–Sung stopping at each \(([\d.]+) s passing through"
+        r".*?against ([\d.]+) s \(([\d.]+) s\) for Aicardi and ([\d.]+) s \(([\d.]+) s\) for"
+        r" Astolfi/Corke",
+        _flat(_read("docs/maps.md")),
+    )
+    assert found, "docs/maps.md no longer quotes the waypoint chain's times"
+    runs = [(c, m) for c in ("shim-sung", "aicardi", "astolfi-corke") for m in ("stop", "pass")]
+    for printed, run in zip(found.groups(), runs, strict=True):
+        assert _agrees(printed, end[run]), (run, printed)
 
 
 def test_figures_and_results_come_from_the_reproduce_script():
     script = (ROOT / "experiments" / "reproduce_readme.sh").read_text()
-    for name in re.findall(r"\(docs/([\w.-]+\.(?:png|gif))\)", README):
-        assert (ROOT / "docs" / name).is_file(), name
-        assert name.split(".")[0].split("_")[0] in script, name
+    shown = 0
+    for page in PAGES:
+        text = page.read_text(encoding="utf-8")
+        for target in re.findall(r"\]\(([\w./-]+\.(?:png|gif))\)", text):
+            file = (page.parent / target).resolve()
+            assert file.is_file() and file.parent == ROOT / "docs", (page.name, target)
+            assert file.name.split(".")[0].split("_")[0] in script, (page.name, target)
+            shown += 1
+    assert shown >= 14
     for path in STORED.glob("*.json"):
         assert f"docs/data/{path.name}" in script, path.name
 
@@ -159,9 +255,8 @@ def _slug(heading):
 
 def test_links_between_pages_reach_a_file_and_heading():
     """Every relative link of the README and docs/*.md opens a file, and its #anchor a heading."""
-    pages = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
     checked = 0
-    for page in pages:
+    for page in PAGES:
         text = page.read_text(encoding="utf-8")
         for target in re.findall(r"\]\(([^)\s]+)\)", text):
             if re.match(r"[a-z]+:", target):  # an address elsewhere
@@ -177,11 +272,11 @@ def test_links_between_pages_reach_a_file_and_heading():
     assert checked > 20  # the pages do link to each other
 
 
-def test_readme_robust_table_is_the_stored_standard_conditions():
-    """The sensing table: success and mean arrival of each loop, as the robustness run stored."""
+def test_robust_table_is_the_stored_standard_conditions():
+    """docs/robustness.md's sensing table: success and mean arrival of each loop, as stored."""
     stored = json.loads((STORED / "standard_conditions.json").read_text(encoding="utf-8"))
     rows = {(r["condition"], r["gains"]): r for r in stored["rows"]}
-    header, body = _table(README, "condition")
+    header, body = _table(_read("docs/robustness.md"), "condition")
     sets = ["paper (k_r = 60)", "robust-tuned, raw feedback", "robust-tuned"]
     assert header[1:] == [
         "paper (k_r = 60), raw", "robust-tuned, raw feedback", "robust-tuned with its EKF"
