@@ -15,7 +15,7 @@ estimator that moves any probe beyond 1e-9 names the stale stage and the
 command that regenerates it; an edit to a committed file that did not come
 from its stage is caught by its checksum. The probes cover the simulation,
 not the optimisers: the tuned gains themselves are checked through the
-README's tables.
+tables of README.md and the docs pages.
 """
 
 from __future__ import annotations

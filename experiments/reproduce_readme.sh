@@ -1,12 +1,11 @@
 #!/usr/bin/env bash
-# Regenerate every table and figure of README.md (and of the docs/ pages).
+# Regenerate every table and figure of README.md and the docs/ pages.
 #
 #   experiments/reproduce_readme.sh [OUT] [STAGE ...]
 #
 # OUT (default results/readme) receives every command's output; the figures
-# the README shows are then copied to docs/*.png and the results the README
-# quotes to docs/data/*.json, which tests/test_readme.py holds the README's
-# tables against, and experiments/docs_fingerprint.py records what each stage
+# the pages show are then copied to docs/*.png and the results they quote to
+# docs/data/*.json, which tests/test_readme.py holds the pages' tables against, and experiments/docs_fingerprint.py records what each stage
 # was computed with (docs/data/fingerprints.json), so a change to the code
 # that would move a committed figure fails the tests until the stage is rerun.
 # STAGE is any of: paper compare maps waypoints animate tune robustness
@@ -48,11 +47,10 @@ for stage in $STAGES; do
       wmr-jax tune --out "$OUT/tune-schedule" --schedule
       wmr-jax tune --out "$OUT/tune-robust" --robust
       cp "$OUT/tune/tuning_curve.png" docs/ ;;
-    robustness)  # after tune: the standard conditions need its two gain files
+    robustness)  # after tune: the standard conditions judge its robust gain file
       wmr-jax robustness --out "$OUT/robustness" --runs 512
       cp "$OUT/robustness/robustness.png" docs/
       wmr-jax robustness --out "$OUT/robustness-standard" --runs 256 --controller shim-sung \
-        --nominal-gains "$OUT/tune/tuned_gains.json" \
         --robust-gains "$OUT/tune-robust/tuned_gains.json" --noise-curve
       cp "$OUT/robustness-standard/standard_conditions.png" docs/
       cp "$OUT/robustness-standard/noise_curve.png" docs/

@@ -4,7 +4,7 @@ Runs ``wmr_jax.studies.compare_controllers`` (``sample_poses(--seed,
 --poses)``; Shim–Sung with the paper's gains, each baseline with its
 published gains and also with its other driving mode) on the robot of
 ``--robot``, writes ``comparison.md`` and ``comparison.json`` (which records
-the robot) into ``--out`` and prints the table the README shows. ``wmr-jax
+the robot) into ``--out`` and prints the table docs/maps.md shows. ``wmr-jax
 sweep`` is the grid map, not these random poses.
 """
 
@@ -83,7 +83,7 @@ def run(args: Any) -> int:
 
 SUBCOMMANDS = {
     "compare": {
-        "help": "compare the controllers over random poses (the README's comparison table)",
+        "help": "compare the controllers over random poses (the table of docs/maps.md)",
         "add_arguments": add_arguments,
         "run": run,
     },

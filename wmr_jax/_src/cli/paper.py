@@ -35,7 +35,7 @@ def run_paper(args: Any) -> int:
     print(f"Figs. 6-10, wheel speeds and the table -> {out}/")
     for kr in paper.PAPER_KR:
         print(_summary_line(f"kr={kr:g}", runs.summary[f"kr={kr:g}"]))
-    print("\nMeans over the seven references (the README's table):\n")
+    print("\nMeans over the seven references (the table of docs/paper.md):\n")
     print(paper_summary_table(runs.summary, float(runs.robot.v_max)), end="")
     return 0
 

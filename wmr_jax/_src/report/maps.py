@@ -72,7 +72,7 @@ def _ranges(results: dict[str, PoseMetrics]) -> dict[str, tuple[float, float]]:
 
 
 def comparison_table(rows: list[dict[str, Any]]) -> str:
-    """The Markdown table of ``summarize`` rows that the README shows, success in percent.
+    """The Markdown table of ``summarize`` rows that docs/maps.md shows, success in percent.
 
     Args:
         rows: what ``wmr_jax.studies.summarize`` returned (or its JSON).

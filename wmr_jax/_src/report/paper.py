@@ -157,7 +157,7 @@ def _case_figures(out_dir: Path, refs: np.ndarray, case: Any, v_max: float) -> N
 
 
 def paper_summary_table(summary: dict[str, Any], v_max: float) -> str:
-    """The README's table of the paper runs: one line per gain, means over the references.
+    """The table of the paper runs in docs/paper.md: one line per gain, means over the references.
 
     Args:
         summary: ``PaperRuns.summary`` (or ``paper_table.json``'s ``"summary"``).
