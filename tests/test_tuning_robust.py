@@ -221,3 +221,46 @@ def test_robust_compare_without_evosax_says_so_and_keeps_each_seed(tmp_path, cap
     assert seeds == []
     assert main(["tune", "--robust", "--compare", "--out", str(tmp_path), "--resume"]) == 2
     assert "holds another comparison's settings" in capsys.readouterr().err
+
+
+def test_robust_tuning_on_another_robot_tunes_and_judges_on_it():
+    # Slower than the paper robot (its horizon 7.9 s, not 6 s) and slow to turn.
+    robot = w.Robot(v_max=60.0, angular_accel_max=30.0)
+    result = tuning.tune_robust(small_config(iters=2, poses=2, eval_poses=2), robot=robot)
+    loop, gains = result["loop"], result["gains"]
+    assert loop.robot == robot
+    assert gains.kr + float(robot.half_track) * gains.k_theta <= 60.0 * (1 + 1e-6)
+    # Judged on it: over its horizon, the paper's gains scaled into its wheels.
+    horizon = w.studies.study_horizon(robot)
+    assert horizon == 7.9
+    assert {r["gains"] for r in result["rows"]} == {"paper", "robust-tuned"}
+    assert all(r["horizon s"] == pytest.approx(horizon, abs=0.033) for r in result["rows"])
+    assert all(r["peak wheel cm/s"] <= 60.0 * 1.03 * (1 + 1e-6) for r in result["rows"])
+
+
+def test_robust_command_tunes_on_the_robot_it_is_given(tmp_path, capsys, monkeypatch):
+    from wmr_jax._src.sensing.loop import ClosedLoop
+    from wmr_jax._src.tuning import robust
+    from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
+
+    seen = []
+
+    def fake(config, *, progress_fn, on_tuned, **kwargs):
+        seen.append(kwargs)
+        robot = kwargs.get("robot", w.Robot())
+        on_tuned(ClosedLoop(w.SHIM_SUNG, paper_feasible_gains(robot), None, robot), [1.0])
+        return _fake_result(config)
+
+    monkeypatch.setattr(robust, "tune_robust", fake)
+    burger = w.ROBOTS["turtlebot3-burger"]
+    argv = ["tune", "--robust", "--out", str(tmp_path), "--iters", "2", "--fixed"]
+    assert main([*argv, "--robot", "turtlebot3-burger"]) == 0
+    assert seen == [{"robot": burger}]
+    out = capsys.readouterr().out
+    assert "on the robot turtlebot3-burger (L = 8 cm" in out and "horizon 37 s" in out
+    assert w.load_tuned(tmp_path / "tuned_gains.json").robot == burger
+    record = json.loads((tmp_path / "robust_evaluation.json").read_text())
+    assert record["robot"]["v_max"] == pytest.approx(22.72)
+    # The paper robot is tune_robust's default: nothing is handed on.
+    assert main(argv) == 0
+    assert seen[-1] == {}

@@ -5,14 +5,14 @@ Called by ``wmr-jax tune`` with its parsed flags (``out``, ``seed``,
 ``knots``, ``compare``). By default the gain schedule and the estimator are
 tuned together (``--fixed``: the 7 fixed gains with raw feedback, as before
 estimators). Writes ``tuned_gains.json`` (controller, parameters,
-estimator and robot, which ``load_tuned`` reads whole; the paper robot, the
-only one the robust tuner runs for now), ``robust_evaluation.json`` and
-``.md`` (the hard-law table under the standard conditions, each with ±3 %
+estimator and robot, which ``load_tuned`` reads whole), ``robust_evaluation.json``
+and ``.md`` (the hard-law table under the standard conditions, each with ±3 %
 wheel mismatch, and the model robot) and ``robust_loss.json`` (the loss per
 iteration). With ``--compare`` it runs seeds 0–2 instead, each with random
 search and CMA-ES given the tuning's wall time, into
 ``robust_compare.json`` and ``.md`` (each seed written as it finishes;
-``--resume`` keeps them).
+``--resume`` keeps them). ``--robot`` tunes and judges on that robot, over
+its horizon (``robustness.study_horizon``).
 """
 
 from __future__ import annotations
@@ -96,47 +96,44 @@ def _described(config: Any) -> str:
     return f"{law} with {sensing}"
 
 
-def _paper_robot_only(args: Any) -> Any:
-    """The robot of ``--robot``: the paper robot, the only one the robust tuner runs.
+def _robot(args: Any) -> tuple[Any, dict[str, Any]]:
+    """The robot of ``--robot`` (the paper robot if not given), and the arguments that pass it on.
 
-    Its loss draws the disturbances over the paper robot's horizon and
-    scores a run that never arrives at twice it (``tuning.robust``), and it
-    refuses another robot; the judge, the standard conditions, takes one
-    (``standard_conditions(robot=...)``).
-
-    Raises:
-        ValueError: one line, for any other robot.
+    The note of a YAML is printed first. Only another robot than the
+    paper's is handed on (``tune_robust``'s default is the paper robot).
     """
     from wmr_jax._src.params import Robot
-    from wmr_jax._src.robots import describe_robot, same_robot
+    from wmr_jax._src.robots import same_robot
 
     given = flags.robot_from(getattr(args, "robot", None))
-    if given is not None and not same_robot(given.robot, Robot()):
-        raise ValueError(
-            f"--robot {given.label!r} is not allowed with --robust: it is "
-            f"{describe_robot(given.robot)}, and the robust tuner runs the paper robot only "
-            "for now; allowed: --robot paper, or wmr-jax tune without --robust (wmr-jax "
-            "robustness --nominal-gains then judges those gains on that robot)"
-        )
-    return Robot()
+    if given is not None and given.note:
+        print(given.note)
+    robot = Robot() if given is None else given.robot
+    return robot, ({} if same_robot(robot, Robot()) else {"robot": robot})
 
 
 def run(args: Any) -> int:
     """Run ``wmr-jax tune --robust``; return the exit status."""
     out = flags.output_dir("--out", getattr(args, "out", None))
     config = config_from(args)
-    robot = _paper_robot_only(args)
+    robot, on_robot = _robot(args)
     if getattr(args, "compare", False):
-        return _compare(out, config, resume=bool(getattr(args, "resume", False)))
+        return _compare(out, config, on_robot, resume=bool(getattr(args, "resume", False)))
 
     from wmr_jax._src import io
     from wmr_jax._src.report.robustness import robustness_table
+    from wmr_jax._src.robots import describe_robot, robot_json
+    from wmr_jax._src.robustness import study_horizon
     from wmr_jax._src.tuning.robust import tune_robust
     from wmr_jax._src.tuning.saved import tuned_json
 
     if getattr(args, "resume", False):
         print("tune --robust keeps no checkpoint: --resume runs it again from the start")
-    print(f"tuning the {_described(config)} through the disturbances", flush=True)
+    print(
+        f"tuning the {_described(config)} through the disturbances on the robot "
+        f"{describe_robot(robot)}, horizon {study_horizon(robot):g} s",
+        flush=True,
+    )
 
     def progress(i: int, loss: float) -> None:
         if i == 1 or i % 25 == 0 or i == config.iters:
@@ -148,9 +145,10 @@ def run(args: Any) -> int:
         io.atomic_write_json(out / "robust_loss.json", {"loss": losses})
         print(f"tuned_gains.json, robust_loss.json -> {out} (now judging them)", flush=True)
 
-    result = tune_robust(config, progress_fn=progress, on_tuned=keep)
+    result = tune_robust(config, progress_fn=progress, on_tuned=keep, **on_robot)
     record = {
         "config": dataclasses.asdict(config),
+        "robot": robot_json(robot),
         "tune_wall_s": result["tune_wall_s"],
         "law": "hard (temperature None)",
         "rows": result["rows"],
@@ -186,10 +184,16 @@ def _kept_rows(path: Any, settings: dict[str, Any], resume: bool) -> list[dict[s
     return rows
 
 
-def _compare(out: Any, config: Any, *, resume: bool) -> int:
-    """Gradient, CMA-ES and random search at equal wall time, seeds 0–2; each seed kept."""
+def _compare(out: Any, config: Any, on_robot: dict[str, Any], *, resume: bool) -> int:
+    """Gradient, CMA-ES and random search at equal wall time, seeds 0–2; each seed kept.
+
+    ``on_robot``: ``{"robot": Robot}`` for another robot than the paper's,
+    which is then part of the settings (comparisons saved before robots
+    were named still resume).
+    """
     from wmr_jax._src import io
     from wmr_jax._src.report.tuning import robust_comparison_table
+    from wmr_jax._src.robots import robot_json
     from wmr_jax._src.tuning.robust import evosax_available, tune_robust
 
     if not evosax_available():
@@ -199,6 +203,8 @@ def _compare(out: Any, config: Any, *, resume: bool) -> int:
         )
     path = out / "robust_compare.json"
     settings = {"format": _COMPARE_FORMAT, "config": dataclasses.asdict(config)}
+    if on_robot:
+        settings["robot"] = robot_json(on_robot["robot"])
     settings = json.loads(json.dumps(settings))  # as it reads back from the file
     rows = _kept_rows(path, settings, resume)
     done = {row["seed"] for row in rows}
@@ -207,7 +213,7 @@ def _compare(out: Any, config: Any, *, resume: bool) -> int:
             print(f"seed {seed}: kept from {path}")
             continue
         print(f"seed {seed}: tuning the {_described(config)}, then the searches", flush=True)
-        result = tune_robust(dataclasses.replace(config, seed=seed, compare=True))
+        result = tune_robust(dataclasses.replace(config, seed=seed, compare=True), **on_robot)
         budget = result["tune_wall_s"]
         counts = {"gradient": config.iters, **{m: n for m, (_, n) in result["searches"].items()}}
         for row in result["rows"]:

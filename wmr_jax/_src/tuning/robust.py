@@ -18,6 +18,11 @@ Every point of the searched cube is feasible (``problems.Problem``,
 ``estimation.EstimatorBox``). Random search and
 CMA-ES get the same wall time on the same cube and score candidates with
 the hard law under the standard conditions.
+
+On another robot than the paper's (``tune_robust(robot=...)``) the loop is
+tuned within that robot's wheel budget, with its speed limiter where it
+gives acceleration limits (docs/model.md §4.2.2), over the horizon of the
+studies that judge it (``robustness.study_horizon``), and judged there.
 """
 
 from __future__ import annotations
@@ -47,8 +52,7 @@ from wmr_jax._src.controllers import shim_sung as law
 from wmr_jax._src.controllers.schedule import KNOTS
 from wmr_jax._src.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
 from wmr_jax._src.params import Gains, Robot, validate_one_robot
-from wmr_jax._src.poses import HORIZON_S, horizon_steps, sample_poses
-from wmr_jax._src.robots import describe_robot, same_robot
+from wmr_jax._src.poses import horizon_steps, sample_poses
 from wmr_jax._src.rollout import DEFAULT_DT, check_temperature
 from wmr_jax._src.sensing import disturbances, loop
 from wmr_jax._src.sensing.disturbances import STANDARD_MISMATCH
@@ -75,7 +79,7 @@ __all__ = [
 # ``wmr-jax robustness`` at its default ``--seed``, so both write the same table.
 EVAL_NOISE_SEED = 0
 
-_FAILURE_S = 2.0 * HORIZON_S  # black-box score of a run that never arrives
+_FAILURE_FACTOR = 2.0  # black-box score of a run that never arrives, in horizons
 _NOISE_LEVEL_MAX = 2.0  # training noise up to twice the standard level
 
 
@@ -244,14 +248,18 @@ def _group_grads(z, spec, joint, robot, dt, options):
     return jax.vmap(jax.value_and_grad(run_loss), in_axes=(None, spec_axes))(z, spec)
 
 
-def _specs(key, refs, nonideal_refs, steps, temperature, joint):
-    """The loss's batches: ``[(spec, options)]``, drawn from ``key``."""
+def _specs(key, refs, nonideal_refs, steps, temperature, joint, accel_limit=False):
+    """The loss's batches: ``[(spec, options)]``, drawn from ``key``.
+
+    ``accel_limit``: the ideal loop's speed limiter (docs/model.md §4.2.2).
+    """
     keys = jax.random.split(key, 2 * len(disturbances.STANDARD_CONDITIONS) + 1)
     ideal = loops.Options(
         steps=steps,
         controller=joint.problem.controller,
         temperature=temperature,
         estimator=joint.options_estimator,
+        accel_limit=accel_limit,
     )
     n = refs.shape[0]
     specs = []
@@ -285,11 +293,19 @@ def _specs(key, refs, nonideal_refs, steps, temperature, joint):
             radius_mismatch=STANDARD_MISMATCH,
             mass_mismatch=0.2,
         )
-        batches.append((spec, dataclasses.replace(ideal, velocity="nonideal")))
+        nonideal = dataclasses.replace(ideal, velocity="nonideal", accel_limit=False)
+        batches.append((spec, nonideal))
     return batches
 
 
-def robust_loss(z, key, refs, nonideal_refs, temperature, robot, dt, steps, joint=None):
+def _accel_limit(robot: Robot, dt: Any) -> bool:
+    """Whether the ideal loop on ``robot`` has its speed limiter (``loops.for_robot``)."""
+    return loops.for_robot(loops.Options(), robot, dt).accel_limit
+
+
+def robust_loss(
+    z, key, refs, nonideal_refs, temperature, robot, dt, steps, joint=None, accel_limit=None
+):
     """The robust tuning loss of logits ``z`` and its robust gradient (traceable).
 
     Runs: ``refs`` under each standard condition with wheel mismatch and
@@ -302,13 +318,20 @@ def robust_loss(z, key, refs, nonideal_refs, temperature, robot, dt, steps, join
     Args:
         joint: the ``JointProblem`` of ``z``; default the 7 fixed gains with
             raw feedback.
+        accel_limit: the ideal loop's speed limiter of the robot's
+            acceleration limits (docs/model.md §4.2.2); ``None`` decides by
+            ``loops.for_robot`` (on for a traced robot, whose limits cannot
+            be seen).
 
     Returns:
         ``(mean loss s, gradient (dim,))``.
     """
     joint = JointProblem(FIXED, None) if joint is None else joint
+    if accel_limit is None:
+        accel_limit = _accel_limit(robot, dt)
     values, grads = [], []
-    for spec, options in _specs(key, refs, nonideal_refs, steps, temperature, joint):
+    batches = _specs(key, refs, nonideal_refs, steps, temperature, joint, accel_limit)
+    for spec, options in batches:
         value, grad = _group_grads(z, spec, joint, robot, dt, options)
         values.append(value)
         grads.append(grad)
@@ -322,14 +345,18 @@ def robust_loss(z, key, refs, nonideal_refs, temperature, robot, dt, steps, join
     return jnp.sum(jnp.where(finite, values, 0.0)) / kept, grad / values.shape[0]
 
 
-def _step(z, opt_state, key, refs, nonideal_refs, temperature, robot, dt, *, steps, hyper, joint):
-    loss, grad = robust_loss(z, key, refs, nonideal_refs, temperature, robot, dt, steps, joint)
+def _step(
+    z, opt_state, key, refs, nonideal_refs, temperature, robot, dt, *, steps, hyper, joint, limit
+):
+    loss, grad = robust_loss(
+        z, key, refs, nonideal_refs, temperature, robot, dt, steps, joint, limit
+    )
     grad = jnp.where(jnp.isfinite(grad), grad, 0.0)
     updates, opt_state = _optimizer(*hyper).update(grad, opt_state, z)
     return optax.apply_updates(z, updates), opt_state, loss
 
 
-_step_jit = loops.jit_top_level(_step, static_argnames=("steps", "hyper", "joint"))
+_step_jit = loops.jit_top_level(_step, static_argnames=("steps", "hyper", "joint", "limit"))
 
 
 def _optimizer(learning_rate: float, iters: int) -> optax.GradientTransformation:
@@ -337,17 +364,21 @@ def _optimizer(learning_rate: float, iters: int) -> optax.GradientTransformation
     return optax.chain(optax.clip_by_global_norm(1.0), optax.adam(schedule))
 
 
-def robust_score(gains: Any, refs: Any, key: jax.Array, *, dt: float = DEFAULT_DT) -> float:
+def robust_score(
+    gains: Any, refs: Any, key: jax.Array, *, dt: float = DEFAULT_DT, robot: Robot | None = None
+) -> float:
     """Hard-law score: mean arrival over the standard conditions, failures 2× horizon, s.
 
     The conditions of ``standard_conditions``: the model robot, then
-    nominal, latency, noise and both with ±3 % wheel mismatch.
+    nominal, latency, noise and both with ±3 % wheel mismatch, on ``robot``
+    over its horizon (``robustness.study_horizon``).
 
     Args:
         gains: ``Gains`` (raw feedback) or a ``ClosedLoop``.
         refs: ``(N, 3)`` reference poses.
         key: the draws' key.
         dt: control period, s.
+        robot: the robot; default the one ``gains`` records, else ``Robot()``.
     """
     if not isinstance(gains, (Gains, ClosedLoop)):
         raise ValueError(
@@ -355,15 +386,15 @@ def robust_score(gains: Any, refs: Any, key: jax.Array, *, dt: float = DEFAULT_D
         )
     check_key("key", key)
     refs = np.asarray(as_poses("refs", refs, batch=True), dtype=float)
-    rows = robustness.standard_conditions({"g": gains}, refs, key, dt=dt, x64=False)
+    rows = robustness.standard_conditions({"g": gains}, refs, key, dt=dt, x64=False, robot=robot)
     return float(np.mean([_score_of(row) for row in rows]))
 
 
 def _score_of(row: dict[str, Any]) -> float:
-    """Mean arrival with failures at ``_FAILURE_S``, from a ``standard_conditions`` row."""
+    """Mean arrival with failures at twice the horizon, from a ``standard_conditions`` row."""
     ok = row["success"]
     arrival = row["mean arrival s"] if ok > 0 else 0.0
-    return ok * arrival + (1.0 - ok) * _FAILURE_S
+    return ok * arrival + (1.0 - ok) * _FAILURE_FACTOR * row["horizon s"]
 
 
 def _black_box(method, key, refs, budget_s, robot, dt, joint):
@@ -378,7 +409,7 @@ def _black_box(method, key, refs, budget_s, robot, dt, joint):
         with warnings.catch_warnings():
             # Candidates far outside the useful set warn; their score says it.
             warnings.simplefilter("ignore")
-            return robust_score(closed(z), refs, score_key, dt=dt)
+            return robust_score(closed(z), refs, score_key, dt=dt, robot=robot)
 
     best_z, best, count, began = start, score(start), 1, time.perf_counter()
     if method == "cma-es":
@@ -431,16 +462,20 @@ def tune_robust(
             iterations end, before the searches and the evaluation (which
             take longer than the tuning itself): a caller can keep the result
             from there.
-        robot: robot parameters: ``None`` or ``Robot()``, the paper robot,
-            the only one the standard conditions that judge the loop (and
-            score the searches) run for now.
+        robot: robot parameters; default ``Robot()``, the paper robot. The
+            loop is tuned on it (its wheel budget, its speed limiter where it
+            gives acceleration limits) over its horizon
+            (``robustness.study_horizon``: 6 s on the paper robot, longer on
+            a slower one), and judged, and the searches scored, on it under
+            the standard conditions.
 
     Returns:
         ``{"loop": ClosedLoop (controller, params, estimator, robot), "gains": its
         params, "history": {"loss": (iters,)}, "tune_wall_s": s,
         "searches": {method: (ClosedLoop, candidates)}, "rows":
-        standard_conditions rows of the paper's gains (raw feedback), the
-        tuned loop and the searches' loops}``.
+        standard_conditions rows of the paper's gains (raw feedback; scaled
+        into the robot's wheel budget, ``paper_feasible_gains``), the tuned
+        loop and the searches' loops}``.
     """
     if config is not None and not isinstance(config, RobustConfig):
         raise ValueError(
@@ -451,15 +486,12 @@ def tune_robust(
     check_callable("progress_fn", progress_fn)
     check_callable("on_tuned", on_tuned)
     robot = validate_one_robot(robot, "tuning")
-    if not same_robot(robot, Robot()):
-        # The loop would be tuned on this robot but judged, and the searches
-        # scored, on the paper's: standard_conditions takes no robot yet.
-        raise ValueError(
-            f"robot = {describe_robot(robot)} is not allowed; allowed: None or Robot(), the "
-            "paper robot (the standard conditions that judge the robust tuning run it only)"
-        )
     joint = joint_problem(config)
-    dtype, dt, steps = float_dtype(), DEFAULT_DT, horizon_steps(DEFAULT_DT)
+    # The horizon of the studies that judge the loop: on a slower robot the
+    # paper's gains, scaled into its budget, need longer (study_horizon).
+    horizon = robustness.study_horizon(robot)
+    dtype, dt, steps = float_dtype(), DEFAULT_DT, horizon_steps(DEFAULT_DT, horizon)
+    limit = _accel_limit(robot, dt)
     z = jnp.asarray(joint.start_logits(robot), dtype)
     hyper = (float(config.learning_rate), int(config.iters))
     opt_state = _optimizer(*hyper).init(z)
@@ -475,7 +507,7 @@ def tune_robust(
         ni_refs = sample_poses(k_ni, config.nonideal_poses)
         z, opt_state, loss = _step_jit(
             z, opt_state, k_dist, refs, ni_refs, jnp.asarray(temp, dtype), robot,
-            jnp.asarray(dt, dtype), steps=steps, hyper=hyper, joint=joint,
+            jnp.asarray(dt, dtype), steps=steps, hyper=hyper, joint=joint, limit=limit,
         )  # fmt: skip
         losses.append(float(loss))
         if progress_fn is not None:
@@ -496,7 +528,9 @@ def tune_robust(
             sets[method] = searches[method][0]
     held_out = held_out_poses(config.eval_poses, EVAL_SEED)
     # The noise of wmr-jax robustness at its default seed: the same table.
-    rows = robustness.standard_conditions(sets, held_out, jax.random.key(EVAL_NOISE_SEED))
+    rows = robustness.standard_conditions(
+        sets, held_out, jax.random.key(EVAL_NOISE_SEED), robot=robot
+    )
     return {
         "loop": tuned,
         "gains": tuned.params,
