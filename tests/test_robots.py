@@ -116,7 +116,7 @@ def test_a_ros_yaml_converts_metres_to_centimetres(tmp_path, capsys):
     assert read.accelerations == {"linear.x.max_acceleration": pytest.approx(250.0)}
     note = read.note
     assert "used wheel_separation, wheel_radius, linear.x.max_velocity, angular.z.max" in note
-    assert "recorded, not simulated: linear.x.max_acceleration" in note
+    assert "accel_max 250 cm/s^2; the ideal loop's speed limiter applies these acceleration" in note
     assert "ignored: left_wheel_names, right_wheel_names, odom_frame_id" in note
     # Flat, with a limit switched off (ROS 1's has_velocity_limits): that limit is unused.
     flat = "wheel_separation: 0.5\nwheel_radius: 0.1\nlinear:\n  x:\n    has_velocity_limits: "
@@ -193,16 +193,20 @@ def test_a_tuned_file_runs_on_its_robot_and_refuses_another(tmp_path, capsys):
     )
     assert "tuned for turtlebot3-burger (L = 8 cm" in err and err.count("\n") == 1
     assert "--robot is pioneer-3dx (L = 16.5 cm" in err
-    # evaluate and robustness judge on the paper robot only: refused, not misjudged.
+    # evaluate judges the file on the robot it records, within that robot's wheels.
     refs = _file(tmp_path, "refs.csv", "30,20,0.5\n")
-    judge = ["evaluate", "--gains", str(path), "--refs", refs, "--condition", "nominal"]
-    assert main(judge) == 2
-    assert "it was tuned for turtlebot3-burger" in capsys.readouterr().err
-    # The robust tuner is judged on the paper robot only: refused before any work.
-    robust = ["tune", "--robust", "--out", str(tmp_path / "r"), "--robot", TB3]
-    assert main(robust) == 2
-    assert "--robot 'turtlebot3-burger' is not allowed with --robust" in capsys.readouterr().err
-    assert not (tmp_path / "r" / "tuned_gains.json").exists()
+    judge = ["evaluate", "--gains", str(path), "--refs", refs, "--horizon", "10", "--float32"]
+    assert main(judge) == 0
+    out = capsys.readouterr().out
+    assert "| robot " in out and "turtlebot3-burger (L = 8 cm, V_max = 22.72 cm/s" in out
+    assert "| V_max " in out and "22.72 cm/s, every wheel command within it" in out
+    # Another robot than the file's is refused there too, in one line.
+    assert main([*judge, "--robot", "pioneer-3dx"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(
+        f"wmr-jax: error: --robot 'pioneer-3dx' is not allowed with --gains {str(path)!r}: "
+    )
+    assert err.count("\n") == 1
 
 
 def test_load_tuned_reads_the_robot_back_and_checks_it(tmp_path):

@@ -29,7 +29,6 @@ __all__ = [
     "number",
     "output_dir",
     "output_file",
-    "paper_robot_only",
     "pose_from_degrees",
     "positive_int",
     "robot_for_gains",
@@ -338,32 +337,6 @@ def robot_for_gains(given: Any, saved: Any, gains_flag: str, path: Any) -> Any:
             "--robot"
         )
     return given.robot
-
-
-def paper_robot_only(saved: Any, gains_flag: str, path: Any, judge: str) -> None:
-    """Refuse a tuned file's robot where the command's engine runs the paper robot only.
-
-    Run on the paper robot, gains tuned for another would be judged against a
-    wheel budget that is not theirs: a wrong table, given without a word.
-
-    Args:
-        saved: the file's robot (``ClosedLoop.robot``), or ``None`` (none recorded).
-        gains_flag: the flag that named the file.
-        path: the file.
-        judge: what runs the paper robot only (``"evaluate"``).
-
-    Raises:
-        ValueError: one line naming the file's robot.
-    """
-    from wmr_jax._src.params import Robot
-    from wmr_jax._src.robots import describe_robot, same_robot
-
-    if saved is not None and not same_robot(saved, Robot()):
-        raise ValueError(
-            f"{gains_flag} {str(path)!r} is not allowed: it was tuned for "
-            f"{describe_robot(saved)}, and {judge} runs the paper robot only for now; allowed: "
-            "gains tuned for the paper robot (wmr-jax simulate --gains runs these on theirs)"
-        )
 
 
 @contextlib.contextmanager
