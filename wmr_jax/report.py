@@ -32,6 +32,7 @@ from wmr_jax._src.report.paper import save_fig7 as save_fig7
 from wmr_jax._src.report.paper import save_paper as save_paper
 from wmr_jax._src.report.robustness import ROBUSTNESS_COLUMNS as ROBUSTNESS_COLUMNS
 from wmr_jax._src.report.robustness import robustness_figure as robustness_figure
+from wmr_jax._src.report.robustness import robustness_table as robustness_table
 from wmr_jax._src.report.robustness import standard_figure as standard_figure
 from wmr_jax._src.report.robustness import write_robustness as write_robustness
 from wmr_jax._src.report.robustness import write_standard_conditions as write_standard_conditions

@@ -3,7 +3,9 @@
 The paper's figures (``paper_runs``, ``fig7_runs``, ``fig6_curve``), pose-space
 maps (``map_study``, ``evaluate_poses``), waypoint chains (``chain_rollout``,
 ``soccer_study``), robustness Monte Carlo (``monte_carlo``,
-``robustness_study``) and the benchmark (``run_benchmark``). ``wmr_jax.report``
+``robustness_study``; on a robot of your own, ``study_horizon`` and
+``robot_defaults`` give the horizon and gains its studies run) and the
+benchmark (``run_benchmark``). ``wmr_jax.report``
 draws and saves their results; the ``wmr-jax`` commands do both.
 """
 
@@ -31,12 +33,16 @@ from wmr_jax._src.paper import residual_bound as residual_bound
 from wmr_jax._src.paper import run_table as run_table
 from wmr_jax._src.robustness import DEFAULT_NOISE_DEG as DEFAULT_NOISE_DEG
 from wmr_jax._src.robustness import DEFAULT_NOISE_XY as DEFAULT_NOISE_XY
+from wmr_jax._src.robustness import LATE_SHARE as LATE_SHARE
 from wmr_jax._src.robustness import ROBUSTNESS_CONDITIONS as ROBUSTNESS_CONDITIONS
 from wmr_jax._src.robustness import evaluate_loop as evaluate_loop
 from wmr_jax._src.robustness import monte_carlo as monte_carlo
 from wmr_jax._src.robustness import noise_curve as noise_curve
+from wmr_jax._src.robustness import robot_defaults as robot_defaults
 from wmr_jax._src.robustness import robustness_study as robustness_study
+from wmr_jax._src.robustness import settled_at_horizon as settled_at_horizon
 from wmr_jax._src.robustness import standard_conditions as standard_conditions
+from wmr_jax._src.robustness import study_horizon as study_horizon
 from wmr_jax._src.sensing.disturbances import STANDARD_CONDITIONS as STANDARD_CONDITIONS
 from wmr_jax._src.sensing.disturbances import STANDARD_MISMATCH as STANDARD_MISMATCH
 from wmr_jax._src.sensing.disturbances import Disturbance as Disturbance
