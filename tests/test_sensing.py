@@ -399,3 +399,17 @@ def test_the_robust_tuner_draws_the_standard_noise_in_its_units():
         np.testing.assert_allclose(ratio, math.radians(sdeg) / sxy, rtol=0.05)
         # E[level²] = 4/3 for U(0, 2): σ_xy sqrt(4/3) overall.
         np.testing.assert_allclose(condition[..., :2].std(), sxy * math.sqrt(4 / 3), rtol=0.1)
+
+
+def test_estimator_parameters_per_run_must_match_the_runs():
+    """One value per run, or one for all (an axis of 1 too); another count is one clear error."""
+    refs = np.array([[30.0, 20.0, 1.0], [-20.0, 15.0, 3.0]])
+    spec = studies.sample_disturbance(jax.random.key(1), refs, 20, noise_xy=0.5, noise_theta=0.02)
+    one = studies.perturbed_metrics(spec, estimator=w.EKFParams(wheel_error=0.5))
+    same = studies.perturbed_metrics(spec, estimator=w.EKFParams(wheel_error=[0.5]))
+    np.testing.assert_array_equal(one.final_distance, same.final_distance)
+    each = studies.perturbed_metrics(spec, estimator=w.EKFParams(wheel_error=[0.5, 0.5]))
+    np.testing.assert_array_equal(one.final_distance, each.final_distance)
+    message = r"batch sizes differ \(disturbance.ref: 2, estimator.position\[1\]: 3\)"
+    with pytest.raises(ValueError, match=message):
+        studies.perturbed_metrics(spec, estimator=w.ObserverParams(position=(0.5, [0.1] * 3)))

@@ -397,7 +397,18 @@ def prepare_disturbed(
         jnp.asarray(delay, dtype),
     )
     if estimator is not None:
-        estimate = jax.tree.map(lambda leaf: jnp.asarray(leaf, dtype), estimate)
+        # One value per run, or one for all: as the gains, before any tracing.
+        sizes = {"disturbance.ref": len(refs)}
+        for key, leaf in jax.tree_util.tree_leaves_with_path(estimate):
+            if np.ndim(leaf) >= 1:
+                sizes[f"estimator{jax.tree_util.keystr(key)}"] = np.shape(leaf)[0]
+        checks.require_one_batch_size(sizes)
+
+        def shared(leaf):  # an axis of size 1 is every run's value
+            leaf = jnp.asarray(leaf, dtype)
+            return leaf[0] if leaf.ndim >= 1 and leaf.shape[0] == 1 else leaf
+
+        estimate = jax.tree.map(shared, estimate)
         options = dataclasses.replace(options, estimator=estimator)
     return (spec, params, estimate, init, robot, dt), options
 
