@@ -31,7 +31,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import hashlib
-import importlib.metadata
 import json
 import math
 import re
@@ -47,12 +46,8 @@ from wmr_jax._src import checks, io, loops, metrics
 from wmr_jax._src import rollout as simulation
 from wmr_jax._src.controllers import SHIM_SUNG, Controller
 from wmr_jax._src.params import Robot, validate_robot
+from wmr_jax._src.provenance import code_version
 from wmr_jax._src.sharding import checked_devices
-
-try:
-    _VERSION = importlib.metadata.version("wmr_jax")
-except importlib.metadata.PackageNotFoundError:  # run from a source tree, not installed
-    _VERSION = "source"
 
 __all__ = ["DEFAULT_CHUNK_SIZE", "SWEEP_FIELDS", "OtherSettingsWarning", "sweep"]
 
@@ -310,8 +305,9 @@ def _settings(job: _Job) -> dict[str, Any]:
         "robot": _tree_description(job.robot),
         "init": "per pose" if job.batched_init else _tree_description(job.init),
         "thresholds": [float(t) for t in job.thresholds],
-        # A change of the law between versions must not reuse old chunks.
-        "version": _VERSION,
+        # A change of the code that computes (the law, a loop, a metric) must
+        # not reuse old chunks, even under one version number.
+        "version": code_version(),
     }
 
 

@@ -529,6 +529,10 @@ def _settings_difference(saved: Any, now: dict[str, Any]) -> str:
         parts.append(
             f"robot: {_robot_text(saved_robot)} there, {_robot_text(now.get('robot'))} now"
         )
+    saved_code = saved.get("code") if isinstance(saved, dict) else None
+    if saved_code != now.get("code"):
+        was = saved_code or "code from before code versions were recorded"
+        parts.append(f"computed by wmr_jax {was}, this is {now.get('code')}")
     return "; ".join(parts) or "its format or seeds differ"
 
 
@@ -549,6 +553,7 @@ def _compare(out: Path, args: Any, robot: Any) -> int:
 
     from wmr_jax._src import io
     from wmr_jax._src.params import Robot
+    from wmr_jax._src.provenance import code_version
     from wmr_jax._src.report.tuning import comparison_table
     from wmr_jax._src.robots import robot_json, same_robot
     from wmr_jax._src.tuning.compare import compare
@@ -560,6 +565,8 @@ def _compare(out: Path, args: Any, robot: Any) -> int:
         "format": _COMPARE_FORMAT,
         "seeds": list(_COMPARE_SEEDS),
         "configs": {name: config.as_dict() for name, config in configs.items()},
+        # Rows computed by other code (the law, the loss, an optimiser) are not mixed in.
+        "code": code_version(),
     }
     # Only a --robot is handed on (compare's default is the paper robot), and
     # only another robot than the paper's is part of the settings: comparisons

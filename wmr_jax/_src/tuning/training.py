@@ -41,6 +41,7 @@ from wmr_jax._src.controllers.schedule import KNOTS
 from wmr_jax._src.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
 from wmr_jax._src.params import Gains, Robot, validate_one_robot
 from wmr_jax._src.poses import HORIZON_S, MAX_SAMPLES, sample_poses
+from wmr_jax._src.provenance import code_version
 from wmr_jax._src.tuning.evaluation import (
     EVAL_POSES,
     EVAL_SEED,
@@ -356,7 +357,8 @@ def _run_text(config: TuneConfig, robot: Robot) -> str:
 
     The robot's acceleration limits appear only where above 0 (a limit of 0
     is none): a robot without them has the identity it had before they
-    existed, and one with them is another run.
+    existed, and one with them is another run. ``code`` is the code that
+    computes (``provenance.code_version``): another one is another run.
     """
     values = {f.name: float(getattr(robot, f.name)) for f in dataclasses.fields(Robot)}
     robot_values = {
@@ -364,7 +366,7 @@ def _run_text(config: TuneConfig, robot: Robot) -> str:
         for name, value in values.items()
         if not (name in _ABSENT_AT_ZERO and value == 0.0)
     }
-    identity = {"config": config.as_dict(), "robot": robot_values}
+    identity = {"config": config.as_dict(), "robot": robot_values, "code": code_version()}
     return json.dumps(identity, sort_keys=True)
 
 
@@ -398,6 +400,12 @@ def run_difference(saved: Any, now: dict[str, Any]) -> str:
         for key in dict.fromkeys([*here, *there])
         if there.get(key) != here.get(key)
     ]
+    saved = saved if isinstance(saved, dict) else {}
+    if "robot" in now and saved.get("robot") != now["robot"]:
+        diffs.append("the robot differs")
+    if "code" in now and saved.get("code") != now["code"]:
+        was = saved.get("code") or "code from before code versions were recorded"
+        diffs.append(f"computed by wmr_jax {was}, this is {now['code']}")
     return "; ".join(diffs) or "the robot differs"
 
 
