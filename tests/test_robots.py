@@ -233,3 +233,14 @@ def test_load_tuned_reads_the_robot_back_and_checks_it(tmp_path):
     rounded = tuning.ScheduleParams(v_max=float(np.float32(burger.v_max)), half_track=8.0)
     path.write_text(json.dumps(tuning.tuned_json(rounded, robot=burger)))
     assert w.load_tuned(path).robot == burger
+
+
+def test_a_ros_yaml_nan_is_no_limit_but_no_size(tmp_path):
+    """ros2_controllers reads a .nan limit as none; a .nan wheel size is no robot."""
+    text = "wheel_separation: 0.4\nwheel_radius: 0.1\nlinear.x.max_velocity: .nan\n"
+    read = w.read_robot(_file(tmp_path, "nan_limit.yaml", text))
+    assert read.robot.v_max == w.Robot().v_max and read.robot.half_track == 20.0
+    for key, size in (("wheel_separation", "0.4"), ("wheel_radius", "0.1")):
+        bad = text.replace(f"{key}: {size}", f"{key}: .nan")
+        with pytest.raises(ValueError, match=f"{key} = nan is not allowed; allowed: a finite"):
+            w.read_robot(_file(tmp_path, f"nan_{key}.yaml", bad))

@@ -443,15 +443,18 @@ def _centi(value: float) -> float:
     return float(f"{100.0 * value:.15g}")
 
 
-def _positive(params: dict[str, Any], key: str, unit: str, where: str) -> float | None:
-    """The finite positive number of ``key`` (in the file's unit), ``None`` if absent or NaN.
+def _positive(
+    params: dict[str, Any], key: str, unit: str, where: str, *, limit: bool = False
+) -> float | None:
+    """The finite positive number of ``key`` (in the file's unit), ``None`` if absent.
 
-    ros2_controllers reads ``.nan`` as "no limit".
+    A ``limit`` (a velocity or acceleration bound) may also be ``.nan``, which
+    ros2_controllers reads as "no limit": ``None`` too. A NaN size is refused.
     """
     if key not in params:
         return None
     value = params[key]
-    if _is_number(value) and math.isnan(float(value)):
+    if limit and _is_number(value) and math.isnan(float(value)):
         return None
     if not _is_number(value) or not (math.isfinite(float(value)) and float(value) > 0):
         raise ValueError(
@@ -551,7 +554,7 @@ def _robot_from_ros_yaml(content: str, where: str) -> tuple[Robot, str, dict[str
         limited = _limited(params, axis, where)
         if flag in params:
             used.append(flag)
-        value = _positive(params, key, unit, where)
+        value = _positive(params, key, unit, where, limit=True)
         if value is not None and limited:
             used.append(key)
             speeds.append(to_rim(value))
@@ -572,7 +575,7 @@ def _robot_from_ros_yaml(content: str, where: str) -> tuple[Robot, str, dict[str
         limited = _limited(params, axis, where, "acceleration")
         if flag in params:
             used.append(flag)
-        value = _positive(params, key, unit, where)
+        value = _positive(params, key, unit, where, limit=True)
         if value is not None and limited:
             used.append(key)
             accelerations[key] = values[field] = convert(value)
