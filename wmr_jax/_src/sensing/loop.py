@@ -397,7 +397,13 @@ def prepare_disturbed(
         jnp.asarray(delay, dtype),
     )
     if estimator is not None:
-        # One value per run, or one for all: as the gains, before any tracing.
+        # One value per run, or one for all: as the gains, before any tracing
+        # (a list is an array of values, as everywhere, not a tree of them).
+        estimate = jax.tree.map(
+            lambda v: np.asarray(v) if isinstance(v, list) else v,
+            estimate,
+            is_leaf=lambda v: isinstance(v, list),
+        )
         sizes = {"disturbance.ref": len(refs)}
         for key, leaf in jax.tree_util.tree_leaves_with_path(estimate):
             if np.ndim(leaf) >= 1:
