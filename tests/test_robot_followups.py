@@ -146,3 +146,26 @@ def test_a_checkpoints_identity_leaves_out_absent_acceleration_limits():
     with pytest.raises(ValueError, match="state is of another run"):
         training._own_state(state, config, LIMITED)
     assert training._own_state(state, config, w.Robot()) is state
+
+
+def test_tune_runs_a_slow_robot_for_the_horizon_its_wheels_need(tmp_path, capsys, monkeypatch):
+    """Without --horizon, tune stretches the 6 s as the studies do, and says so."""
+    from wmr_jax._src.cli import tune as tune_cli
+    from wmr_jax.cli import main
+
+    seen = {}
+
+    def fake_tune(out, config, *, robot=None, resume=False):
+        seen["horizon"] = config.horizon
+        raise KeyboardInterrupt  # stop before any work: the config is what is checked
+
+    monkeypatch.setattr(tune_cli, "tune", fake_tune)
+    robot = tmp_path / "slow.json"
+    robot.write_text('{"half_track": 8.0, "v_max": 22.0}')
+    argv = ["tune", "--out", str(tmp_path / "t"), "--robot", str(robot), "--iters", "1"]
+    main(argv)
+    # (60 + 10 * 8) / 22 = 6.36 times the paper robot's 6 s, rounded up to 0.1 s.
+    assert seen["horizon"] == pytest.approx(38.2)
+    assert "horizon 38.2 s for this robot" in capsys.readouterr().out
+    main([*argv, "--horizon", "12"])
+    assert seen["horizon"] == 12.0
