@@ -244,3 +244,11 @@ def test_a_ros_yaml_nan_is_no_limit_but_no_size(tmp_path):
         bad = text.replace(f"{key}: {size}", f"{key}: .nan")
         with pytest.raises(ValueError, match=f"{key} = nan is not allowed; allowed: a finite"):
             w.read_robot(_file(tmp_path, f"nan_{key}.yaml", bad))
+
+
+def test_a_ros_yaml_value_given_as_a_mapping_is_refused(tmp_path):
+    """A limit written one level too deep was flattened under its name and ignored."""
+    text = "wheel_separation: 0.4\nwheel_radius: 0.1\nlinear:\n  x:\n    max_velocity:\n"
+    text += "      value: 0.5\n"
+    with pytest.raises(ValueError, match="linear.x.max_velocity is a mapping; allowed: a number"):
+        w.read_robot(_file(tmp_path, "deep.yaml", text))

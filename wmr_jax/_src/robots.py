@@ -520,6 +520,16 @@ def _robot_from_ros_yaml(content: str, where: str) -> tuple[Robot, str, dict[str
         )
     path, block = found[0]
     params = _flat(block)
+    # A value the model reads, given as a mapping, would otherwise be flattened
+    # under its name and ignored with the unknown keys.
+    read = (*_BLOCK_KEYS, "max_velocity", "max_acceleration", "multiplier", "has_")
+    for key in params:
+        parent = key.rsplit(".", 1)[0] if "." in key else ""
+        if parent and any(part in parent.rsplit(".", 1)[-1] for part in read):
+            raise ValueError(
+                f"{where}: {parent} is a mapping; allowed: a number (or true/false for a "
+                "has_*_limits flag)"
+            )
     values: dict[str, float] = {}
     used: list[str] = []
     shown: list[str] = []
