@@ -11,6 +11,7 @@ with ``math``, one point at a time.
 
 import math
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -119,9 +120,9 @@ def test_gains_as_dict_is_floats_in_field_order():
     [
         (np.zeros(6), r"^u has shape \(6,\); allowed: \(\.\.\., 7\)$"),
         (0.5, r"^u has shape \(\); allowed: \(\.\.\., 7\)$"),
-        (np.full(7, 1.0 + 1e-9), r"^u.*numbers in \[0, 1\]"),
-        (np.full(7, -1e-9), r"^u.*numbers in \[0, 1\]"),
-        (np.full(7, math.nan), r"^u.*numbers in \[0, 1\]"),
+        (np.full(7, 1.0 + 1e-9), r"^u = .* is not allowed; allowed: numbers in \[0, 1\]$"),
+        (np.full(7, -1e-9), r"^u = .* is not allowed; allowed: numbers in \[0, 1\]$"),
+        (np.full(7, math.nan), r"^u = .* is not allowed; allowed: numbers in \[0, 1\]$"),
         ("x", r"^u .*real numbers of shape \(\.\.\., 7\)"),
     ],
 )
@@ -134,7 +135,7 @@ def test_a_point_outside_the_cube_is_refused(u, message):
     "z, message",
     [
         (np.zeros((2, 8)), r"^z has shape \(2, 8\); allowed: \(\.\.\., 7\)$"),
-        (np.full(7, math.nan), r"^z.*real numbers \(not NaN\)"),
+        (np.full(7, math.nan), r"^z = .* is not allowed; allowed: real numbers \(not NaN\)$"),
     ],
 )
 def test_logits_that_are_no_point_are_refused(z, message):
@@ -178,3 +179,38 @@ def test_paper_feasible_gains_step_the_scale_down_when_rounding_overshoots():
 def test_paper_feasible_gains_refuse_no_robot():
     with pytest.raises(ValueError, match="v_max"):
         p.paper_feasible_gains(w.Robot(v_max=-1.0))
+    with pytest.raises(ValueError) as err:
+        p.paper_feasible_gains(w.Robot(v_max=np.array([100.0, 50.0])))
+    assert str(err.value) == (
+        "robot.v_max has shape (2,); allowed: one robot (a number per field) for the paper's "
+        "feasible gains"
+    )
+
+
+def test_paper_feasible_gains_use_the_largest_scale_within_budget():
+    """Docstring: the scale ``V_max / (60 + 10 L)``, stepped down an ulp at a time while
+    ``k_r + L k_θ`` rounds above ``V_max``; so never a smaller scale than needed."""
+    exact = over = 0
+    for v_max in np.linspace(1.0, 70.0, 400):
+        v_max = float(v_max)
+        scale = v_max / 78.5
+        exact += 60.0 * scale + 1.85 * (10.0 * scale) == v_max
+        while 60.0 * scale + 1.85 * (10.0 * scale) > v_max:
+            over += 1
+            scale = math.nextafter(scale, 0.0)
+        g = p.paper_feasible_gains(w.Robot(half_track=1.85, v_max=v_max))
+        assert (float(g.kr), float(g.k_theta)) == (60.0 * scale, 10.0 * scale), v_max
+    assert exact > 0 and over > 0  # both cases are met
+
+
+def test_points_pass_traced_into_jit_and_give_the_same_gains():
+    z = np.array([-3.0, 0.0, 2.0, -0.5, 1.0, 4.0, -4.0])
+    traced = jax.jit(lambda z: p.gains_from_logits(z, ROBOT))(jnp.asarray(z))
+    eager = p.gains_from_logits(jnp.asarray(z), ROBOT)
+    for name in p.GAIN_FIELDS:
+        assert float(getattr(traced, name)) == pytest.approx(float(getattr(eager, name)), rel=1e-12)
+
+
+def test_gains_below_the_box_are_moved_onto_its_lower_faces():
+    tiny = w.Gains(kr=1e-6, k_theta=1e-3, phi_m=1e-5, r_m=0.01, r_a=1e-5, r_e=1e-9, alpha=1e-6)
+    np.testing.assert_array_equal(p.unit_from_gains(tiny), np.full(7, 1e-3))
