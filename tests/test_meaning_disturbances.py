@@ -143,7 +143,8 @@ def test_a_valid_disturbance_is_returned_as_float_arrays():
         ({"delay": np.array([0.0, 2.0])}, r"^disturbance\.delay"),
         (
             {"ref": np.array([["a", "b", "c"]] * 2)},
-            r"(?s)^disturbance\.ref.*real numbers \(no bools or strings\)",
+            r"(?s)^disturbance\.ref = .* is not allowed; allowed: real numbers "
+            r"\(no bools or strings\)$",
         ),
     ],
 )
@@ -157,6 +158,22 @@ def test_the_noise_limits_are_per_component():
     d.checked_disturbance(_dist(noise=np.broadcast_to([1e150, -1e150, 1e12], (2, 3, 3))))
     with pytest.raises(ValueError, match=r"\|x\|, \|y\| noise <= 1e\+153 cm"):
         d.checked_disturbance(_dist(noise=np.broadcast_to([0.0, 2 * limit, 0.0], (2, 3, 3))))
+
+
+def test_one_step_noise_at_its_limits_and_tiny_noise_are_allowed_tiny_factors_not():
+    d.checked_disturbance(_dist(steps=1, noise=np.broadcast_to([1e153, -1e153, 1e12], (2, 1, 3))))
+    d.checked_disturbance(_dist(noise=np.full((2, 3, 3), 1e-320)))  # data: a tiny noise is 0
+    with pytest.raises(ValueError, match=r"^disturbance\.mismatch"):
+        d.checked_disturbance(_dist(mismatch=np.full((2, 3), 1e-320)))  # a factor of ~0
+
+
+def test_a_draw_refuses_no_key_and_no_steps():
+    with pytest.raises(ValueError, match=r"^key "):
+        d.sample_disturbance(3, np.zeros((2, 3)), 2)
+    with pytest.raises(ValueError, match=r"^steps "):
+        d.sample_disturbance(jax.random.key(0), np.zeros((2, 3)), 0)
+    with pytest.raises(ValueError, match=r"^refs "):
+        d.sample_disturbance(jax.random.key(0), np.zeros((2, 2)), 2)
 
 
 def test_checked_disturbance_refuses_what_is_no_disturbance():
