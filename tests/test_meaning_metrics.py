@@ -325,6 +325,11 @@ def test_streamed_metrics_follow_the_definitions_period_by_period():
     assert got["peak_wheel_speed"] == np.abs(wheels).max()
     assert got["zigzags"] == _zigzags(v, 0.5) + _zigzags(omega, 0.05)
     assert int(acc.step) == n
+    # RunMetrics.v_sign / omega_sign: the last sign (±1) beyond the dead band.
+    assert int(acc.v_sign) == next(int(math.copysign(1, x)) for x in v[::-1] if abs(x) > 0.5)
+    assert int(acc.omega_sign) == next(
+        int(math.copysign(1, x)) for x in omega[::-1] if abs(x) > 0.05
+    )
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
@@ -345,3 +350,6 @@ def test_streamed_metrics_of_a_run_that_never_arrives():
     assert not bool(got["success"])
     assert float(got["peak_wheel_speed"]) == 2.0
     assert int(got["zigzags"]) == 1  # |v| = 1 cm/s has no sign; ω flips once
+    assert (int(acc.v_sign), int(acc.omega_sign)) == (0, -1)  # v never had a sign
+    acc = m.stream_update(acc, far, np.array(REF), _Out(7.0, 0.0, [0, 0], 0.0), m.Thresholds())
+    assert (int(acc.v_sign), int(acc.omega_sign)) == (1, -1)  # ω in its band keeps its sign
