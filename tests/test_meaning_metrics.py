@@ -340,6 +340,19 @@ def test_streamed_metrics_keep_lengths_in_the_dtype_asked_and_counts_in_int32(dt
         assert count.dtype == np.int32 and count.shape == ()
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_streamed_metrics_of_a_run_arrived_from_its_first_sample(dtype):
+    """§6: arrived at every sample from k = 0 on: arrival (0 + 1) dt, a success."""
+    acc = m.stream_start(dtype)
+    ref = np.array(REF, dtype)
+    for _ in range(3):
+        acc = m.stream_update(acc, ref, ref, _Out(0.0, 0.0, [0.0, 0.0], 0.0), m.Thresholds())
+    got = m.stream_result(acc, 0.25)
+    assert float(got["arrival_time"]) == 0.25 and float(got["first_arrival"]) == 0.25
+    assert bool(got["success"])
+    assert got["arrival_time"].dtype == dtype and got["first_arrival"].dtype == dtype
+
+
 def test_streamed_metrics_of_a_run_that_never_arrives():
     acc = m.stream_start(np.float64)
     far = np.array([50.0, 0.0, 0.0])
