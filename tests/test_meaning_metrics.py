@@ -80,6 +80,28 @@ def test_arrived_is_distance_and_folded_heading_within_tolerance():
     np.testing.assert_array_equal(got, [_arrived(p, REF, 1.0, math.pi / 36) for p in poses])
 
 
+def test_arrived_broadcasts_batches_of_poses_against_references():
+    rng = np.random.default_rng(4)
+    poses = _near(rng, 6, 2.0, 0.2).reshape(2, 3, 3)
+    refs = np.stack([np.array(REF)] * 3)  # (3, 3): one reference per column of runs
+    got = np.asarray(m.arrived(poses, refs))
+    want = [[_arrived(p, REF, 1.0, math.pi / 36) for p in row] for row in poses]
+    np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize(
+    "poses, refs, message",
+    [
+        (np.zeros(2), np.zeros(3), r"^poses "),
+        (np.zeros(3), np.zeros((2, 4)), r"^refs "),
+        (np.array([0.0, math.nan, 0.0]), np.zeros(3), r"^poses"),
+    ],
+)
+def test_arrived_refuses_misshapen_poses_naming_them(poses, refs, message):
+    with pytest.raises(ValueError, match=message):
+        m.arrived(poses, refs)
+
+
 def test_arrival_time_is_the_start_of_the_settled_run_of_samples():
     rng = np.random.default_rng(1)
     dt, tol_r, tol_theta = 0.05, 2.0, 0.3
@@ -142,6 +164,7 @@ def test_zigzag_count_skips_the_dead_band_including_its_edge():
     got = np.asarray(m.zigzag_count(traj))
     want = [_zigzags(a, 1.0) + _zigzags(b, 0.1) for a, b in zip(v, omega, strict=True)]
     np.testing.assert_array_equal(got, want)
+    assert got.dtype.kind == "i"  # a count
     assert _zigzags(v[0], 1.0) == 2
     got = np.asarray(m.zigzag_count(traj, v_dead_band=0.0, omega_dead_band=0.15))
     want = [_zigzags(a, 0.0) + _zigzags(b, 0.15) for a, b in zip(v, omega, strict=True)]
@@ -364,5 +387,6 @@ def test_streamed_metrics_of_a_run_that_never_arrives():
     assert float(got["peak_wheel_speed"]) == 2.0
     assert int(got["zigzags"]) == 1  # |v| = 1 cm/s has no sign; ω flips once
     assert (int(acc.v_sign), int(acc.omega_sign)) == (0, -1)  # v never had a sign
+    assert (int(acc.settled_from), int(acc.first)) == (-1, -1)  # RunMetrics: −1, never arrived
     acc = m.stream_update(acc, far, np.array(REF), _Out(7.0, 0.0, [0, 0], 0.0), m.Thresholds())
     assert (int(acc.v_sign), int(acc.omega_sign)) == (1, -1)  # ω in its band keeps its sign
