@@ -114,7 +114,14 @@ FILE_SECONDS = {
     # The robust tuner's tests compile the joint gradients (schedule with a
     # filter or an observer): some 250 s on one core, so they start first.
     "test_tuning_robust.py": 250,
+    "test_fuzz_inputs.py": 60,
     "test_sensing.py": 45,
+    "test_robot_followups.py": 30,
+    "test_docs_current.py": 25,
+    "test_surfaces.py": 20,
+    "test_robot_commands.py": 15,
+    "test_accel_limits.py": 12,
+    "test_robot_studies.py": 10,
     "test_evaluate.py": 40,
     "test_robots.py": 35,
     "test_usability.py": 30,
