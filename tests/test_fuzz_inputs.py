@@ -20,8 +20,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given
 from hypothesis import strategies as st
+from test_fuzz import fuzz_settings
 
 import wmr_jax as w
 from wmr_jax import studies
@@ -46,16 +47,6 @@ _NON_NEGATIVE = {"integral_gain", "accel_max", "angular_accel_max"}
 def _normal(value):
     """Subnormal floats are refused as unrepresentable: keep the good values normal."""
     return value == 0 or abs(value) > 1e-6
-
-
-def _settings(examples):
-    return settings(
-        max_examples=examples,
-        deadline=None,
-        derandomize=True,
-        database=None,
-        suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
-    )
 
 
 # How each call was judged, per test: "valid" inputs answered (checked by the
@@ -102,7 +93,7 @@ def _robot_fields():
     return good
 
 
-@_settings(ROBOT_FILES)
+@fuzz_settings(ROBOT_FILES)
 @given(
     fields=_robot_fields(),
     bad_field=st.sampled_from([*ROBOT_FIELDS, "wheel_base", "V_max", ""]),
@@ -138,7 +129,7 @@ def test_robot_json_files(fields, bad_field, bad_value, spoil):
             assert float(getattr(robot, name)) == pytest.approx(want, rel=1e-12, abs=0), name
 
 
-@_settings(ROBOT_FILES * 3 // 10)
+@fuzz_settings(ROBOT_FILES * 3 // 10)
 @given(
     separation=st.one_of(st.floats(min_value=0.05, max_value=1.0), BAD_POSITIVE),
     radius=st.one_of(st.floats(min_value=0.01, max_value=0.3), BAD_POSITIVE),
@@ -184,7 +175,7 @@ def _is_zero(value):
     return isinstance(value, float) and value == 0.0
 
 
-@_settings(ESTIMATORS)
+@fuzz_settings(ESTIMATORS)
 @given(
     kind=st.sampled_from(["ekf", "observer"]),
     field=st.sampled_from(["wheel_error", "sigma_xy", "sigma_theta", "position", "heading"]),
@@ -229,7 +220,7 @@ def _loop():
     return _LOOP
 
 
-@_settings(EVALUATIONS)
+@fuzz_settings(EVALUATIONS)
 @given(
     condition=st.one_of(
         st.sampled_from(["nominal", "noise"]), st.sampled_from(["noisy", "", 3, None])
