@@ -7,6 +7,7 @@ are tiny and hand-made, so no test compiles a rollout.
 
 import math
 
+import jax
 import numpy as np
 import pytest
 
@@ -235,6 +236,25 @@ def test_trajectory_fields_are_checked_naming_field_unit_and_range(field, value,
     }[field]
     with pytest.raises(ValueError, match=message):
         call(traj)
+
+
+def test_a_run_without_a_field_is_refused_naming_it():
+    class PosesOnly:
+        poses = np.zeros((3, 3))
+
+    with pytest.raises(ValueError, match=r"^traj\.distance = None is not allowed"):
+        m.path_length(PosesOnly())
+
+
+def test_zigzag_count_takes_traced_dead_bands():
+    """Dead bands may be traced (Thresholds: changing them does not recompile)."""
+    v = np.array([[2.0, -2.0, 0.5, -3.0]])
+    omega = np.array([[0.3, 0.3, -0.3, 0.3]])
+    traj = _traj(np.zeros((1, 5, 3)), v=v, omega=omega)
+    count = jax.jit(lambda t, a, b: m.zigzag_count(t, v_dead_band=a, omega_dead_band=b))
+    got = np.asarray(count(traj, 1.0, 0.1))
+    np.testing.assert_array_equal(got, [_zigzags(v[0], 1.0) + _zigzags(omega[0], 0.1)])
+    np.testing.assert_array_equal(np.asarray(count(traj, 2.5, 0.1)), [0 + 2])
 
 
 def test_a_distance_of_zero_and_integer_fields_are_allowed():
