@@ -19,6 +19,7 @@ import pytest
 import wmr_jax as w
 from wmr_jax import tuning
 from wmr_jax._src import loops, waypoints
+from wmr_jax._src.provenance import code_version
 from wmr_jax._src.robustness import evaluate_loop
 from wmr_jax._src.sensing import loop as sensed
 from wmr_jax._src.sensing.disturbances import Disturbance, draw_disturbances
@@ -130,11 +131,13 @@ def test_the_waypoint_loops_run_the_robots_speed_limiter():
 def test_a_checkpoints_identity_leaves_out_absent_acceleration_limits():
     config = training.TuneConfig()
     now = tuning.run_identity(config, w.Robot())
-    # What a checkpoint saved before the limits existed holds: every other field.
+    # A robot without limits is recorded as before the limits existed: every other
+    # field (beside the settings and the code that computes, provenance.code_version).
     fields = [f for f in w.Robot.__dataclass_fields__ if "accel" not in f]
     before = {
         "config": config.as_dict(),
         "robot": {f: float(getattr(w.Robot(), f)) for f in fields},
+        "code": code_version(),
     }
     assert now == json.loads(json.dumps(before))
     assert training._run_text(config, w.Robot()) == json.dumps(before, sort_keys=True)
