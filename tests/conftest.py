@@ -6,6 +6,8 @@ JAX's default float32 path is exercised by tests that wrap themselves in
 
 import functools
 import os
+import shutil
+from pathlib import Path
 
 # The suite is mostly XLA compilation (each test compiles its own shapes and
 # options once). XLA's backend optimisation level 0 compiles the same programs
@@ -13,10 +15,26 @@ import os
 # with the NumPy reference, and tests/test_readme.py with probes recorded by
 # the commands at the default level), if more slowly, which the suite's small
 # runs do not feel. The commands and the benchmark keep XLA's default.
-if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (
-        os.environ.get("XLA_FLAGS", "") + " --xla_backend_optimization_level=0"
-    ).strip()
+# Likewise XLA:CPU's older loop emitters compile these programs about a
+# quarter faster than its fusion emitters; their float32 results may differ
+# in the last bit, so tests comparing runs across processes bit for bit hand
+# these flags on (tests/test_sharding.py).
+for _flag in ("--xla_backend_optimization_level=0", "--xla_cpu_use_fusion_emitters=false"):
+    if _flag.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
+        os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " " + _flag).strip()
+
+# JAX's persistent compilation cache, kept in the checkout (ignored by git):
+# tests that build the same program again (a new closure, another file, the
+# other worker, a subprocess) load it instead of compiling it, and a second
+# run of the suite compiles almost nothing. Its key is the compiled program
+# itself (with the XLA flags and JAX's version), so a changed law or a
+# mutant (mutmut) compiles afresh. Set WMR_JAX_TEST_CACHE=0 to run without it.
+_CACHE = Path(__file__).resolve().parent.parent / ".xla-cache"
+_CACHE_LIMIT = 2 << 30  # bytes; above this the whole cache is dropped at the next start
+if os.environ.get("WMR_JAX_TEST_CACHE", "1") != "0":
+    os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", str(_CACHE))
+    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
+    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES", "0")
 
 import jax
 import jax.numpy as jnp
@@ -153,6 +171,15 @@ FILE_SECONDS = {
     "test_optimal.py": 1,
     "test_io.py": 0,
 }
+
+
+def pytest_configure(config):
+    """Drop the compilation cache once it outgrows ``_CACHE_LIMIT`` (main process only)."""
+    if hasattr(config, "workerinput") or not _CACHE.is_dir():
+        return
+    size = sum(f.stat().st_size for f in _CACHE.rglob("*") if f.is_file())
+    if size > _CACHE_LIMIT:
+        shutil.rmtree(_CACHE, ignore_errors=True)
 
 
 def pytest_collection_modifyitems(items):

@@ -32,15 +32,15 @@ STEPS = 30
 def _env(**extra: str) -> dict:
     """This process's environment for a subprocess: its XLA flags, and ``extra``'s.
 
-    The device count is the subprocess's own; the optimisation level is this
-    process's (tests/conftest.py), so that both compile the same programs and
-    their float32 results can be compared bit for bit.
+    The device count is the subprocess's own; the optimisation level and the
+    emitters are this process's (tests/conftest.py), so that both compile the
+    same programs and their float32 results can be compared bit for bit.
     """
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     flags = [
         flag
         for flag in os.environ.get("XLA_FLAGS", "").split()
-        if flag.startswith("--xla_backend_optimization_level")
+        if flag.startswith(("--xla_backend_optimization_level", "--xla_cpu_use_fusion_emitters"))
     ]
     flags += extra.pop("XLA_FLAGS", "").split()
     return {**env, **extra, **({"XLA_FLAGS": " ".join(flags)} if flags else {})}
