@@ -172,3 +172,28 @@ def test_tune_runs_a_slow_robot_for_the_horizon_its_wheels_need(tmp_path, capsys
     assert "horizon 38.2 s for this robot" in capsys.readouterr().out
     main([*argv, "--horizon", "12"])
     assert seen["horizon"] == 12.0
+
+
+def test_tune_compare_runs_a_slow_robot_for_the_horizon_its_wheels_need(
+    tmp_path, capsys, monkeypatch
+):
+    """--compare tunes each problem over the robot's horizon too, said once."""
+    from wmr_jax._src.tuning import compare as compare_module
+    from wmr_jax.cli import main
+
+    seen = {}
+
+    def fake_compare(*, seeds, problems, configs, progress, robot=None):
+        seen.update({name: config.horizon for name, config in configs.items()})
+        raise KeyboardInterrupt  # stop before any work: the configs are what is checked
+
+    monkeypatch.setattr(compare_module, "compare", fake_compare)
+    robot = tmp_path / "slow.json"
+    robot.write_text('{"half_track": 8.0, "v_max": 22.0}')
+    argv = ["tune", "--compare", "--out", str(tmp_path / "c"), "--robot", str(robot)]
+    assert main(argv) == 130
+    assert seen == {"fixed": pytest.approx(38.2)}  # the first problem, then stopped
+    assert capsys.readouterr().out.count("horizon 38.2 s for this robot") == 1
+    seen.clear()
+    assert main([*argv, "--horizon", "12"]) == 130
+    assert seen == {"fixed": 12.0}

@@ -563,9 +563,12 @@ def _compare(out: Path, args: Any, robot: Any) -> int:
     from wmr_jax._src.robots import robot_json, same_robot
     from wmr_jax._src.tuning.compare import compare
 
-    configs = {"schedule": _config_from(args, schedule=True)}
+    # Each problem over the robot's horizon, as a single tuning run has it
+    # (said once: both problems have the same).
+    configs = {"schedule": _robot_horizon(args, _config_from(args, schedule=True), robot)}
     if not args.schedule:  # both problems, unless --schedule asks for the schedule alone
-        configs = {"fixed": _config_from(args, schedule=False), **configs}
+        fixed = _config_from(args, schedule=False).replace(horizon=configs["schedule"].horizon)
+        configs = {"fixed": fixed.validate(), **configs}
     settings = {
         "format": _COMPARE_FORMAT,
         "seeds": list(_COMPARE_SEEDS),
@@ -644,9 +647,9 @@ def run(args: Any) -> int:
     if given is not None and given.note:
         print(given.note)
     robot = None if given is None else given.robot
-    config = _robot_horizon(args, config, robot)
     if args.compare:
         return _compare(out, args, robot)
+    config = _robot_horizon(args, config, robot)
     from wmr_jax._src.report.tuning import evaluation_table
 
     result = tune(out, config, robot=robot, resume=args.resume)
