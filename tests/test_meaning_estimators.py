@@ -187,6 +187,40 @@ def test_bad_filter_parameters_are_refused_naming_the_field(params, field, allow
     assert "\n" not in message
 
 
+def test_refusals_say_what_is_allowed_in_full():
+    for params, message in (
+        (
+            ObserverParams(heading=1 + 2j),
+            "estimator.heading = (1+2j) is not allowed; allowed: a gain 0 <= g <= 1",
+        ),
+        (
+            ObserverParams(position=(0.2, 1.5)),
+            "estimator.position[1] = 1.5 is not allowed; allowed: a gain 0 <= g <= 1",
+        ),
+        (
+            EKFParams(wheel_error=-1.0),
+            "estimator.wheel_error = -1.0 is not allowed; allowed: 0 < wheel_error <= 1e6",
+        ),
+        (
+            EKFParams(sigma_xy=1j),
+            "estimator.sigma_xy = 1j is not allowed; allowed: 0 < sigma_xy <= 1e6 cm",
+        ),
+    ):
+        validate = validate_ekf if isinstance(params, EKFParams) else validate_observer
+        with pytest.raises(ValueError) as err:
+            validate(params)
+        assert str(err.value) == message
+
+
+def test_a_list_of_gains_is_a_table():
+    # A list reads as a tuple of knots (as a JSON file gives them).
+    params = ObserverParams(position=[0.1, 0.5, 0.9], heading=[1, 0])
+    assert isinstance(params.position, tuple) and isinstance(params.heading, tuple)
+    assert [float(g) for g in params.position] == [0.1, 0.5, 0.9]
+    assert [float(g) for g in params.heading] == [1.0, 0.0]
+    assert validate_observer(params) is params
+
+
 def test_each_validator_refuses_the_other_kind():
     with pytest.raises(ValueError, match="estimator is a EKFParams; allowed: a wmr_jax.Observer"):
         validate_observer(EKFParams())
@@ -201,12 +235,14 @@ def test_the_bounds_themselves_are_allowed():
     # spreads up to 1e6 are all valid; per-run batches of one size too.
     for params in (
         ObserverParams(position=0.0, heading=1.0),
+        ObserverParams(position=1e-310, heading=(1e-310, 0.5)),  # below float64's normal range
         ObserverParams(position=(0.0, 1.0), heading=(1.0,) * 50),
         ObserverParams(position=np.array([0.0, 0.5, 1.0]), heading=np.array([1.0, 0.5, 0.0])),
     ):
         assert validate_observer(params) is params
     for params in (
         EKFParams(wheel_error=1e6, sigma_xy=1e-3, sigma_theta=1e6),
+        EKFParams(wheel_error=1e-310),
         EKFParams(sigma_xy=np.full(3, 0.5), sigma_theta=np.full(3, 0.01)),
     ):
         assert validate_ekf(params) is params

@@ -132,9 +132,7 @@ def _check_values(name: str, value: Any, ok: Callable, allowed: str) -> int | No
     """Check one concrete field (a scalar or one batch axis); return its batch size."""
     if isinstance(value, jax.core.Tracer):
         return None
-    if isinstance(value, (str, bytes, bool, np.bool_)) or value is None:
-        raise ValueError(f"{name} = {value!r} is not allowed; allowed: {allowed}")
-    arr = real_array(name, value, allowed)
+    arr = real_array(name, value, allowed)  # refuses strings, bools and None by name
     if arr.ndim > 1:
         raise ValueError(f"{name} has shape {arr.shape}; allowed: a scalar or one batch axis")
     require(name, arr, np.isfinite(arr) & ok(arr), allowed)
