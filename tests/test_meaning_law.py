@@ -11,6 +11,8 @@ JAX at import.
 
 import functools
 import math
+import types
+import warnings
 
 import jax
 import numpy as np
@@ -264,6 +266,15 @@ def test_wheel_speeds_keep_the_batch_axes_first_and_trace():
 def test_the_controller_warns_of_wheels_it_cannot_drive_and_turns_it_cannot_sample():
     with pytest.warns(w.WheelSpeedWarning, match=r"k_r \+ L\*k_theta = 138.5 cm/s exceeds"):
         law.SHIM_SUNG.check_robot(w.Gains(), w.Robot())
+    # The robot's own budget: feasible on a fast robot, not on a narrow slow one.
+    fast = w.Robot(v_max=150.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        law.SHIM_SUNG.check_robot(w.Gains(), fast)
+    with pytest.warns(w.WheelSpeedWarning, match=r"= 82 cm/s exceeds v_max = 80 cm/s"):
+        law.SHIM_SUNG.check_robot(
+            w.Gains(kr=60.0, k_theta=4.0), w.Robot(half_track=5.5, v_max=80.0)
+        )
     with pytest.warns(w.SamplingWarning, match=r"k_theta\*dt = 2.64"):
         law.SHIM_SUNG.check_sampling(w.Gains(k_theta=80.0), 0.033)
 
@@ -354,6 +365,67 @@ def test_bad_frames_are_refused_in_full(frame, message):
     with pytest.raises(ValueError) as err:
         law.polar_error(None, [1.0, 2.0, 0.0], frame=frame)
     assert str(err.value) == message
+
+
+def test_the_pieces_take_any_gains_with_the_region_radii_and_refuse_others():
+    # A schedule's per-state gains are no Gains but carry Φ_m, R_e and R_a.
+    err = law.polar_error([0.0, 0.0, 0.0], [3.0, 2.0, 0.5])
+    d = law.direction_flag(err, PHI_M)
+    fields = {"phi_m": PHI_M, "r_e": 0.8, "r_a": 6.0, "alpha": 0.3}
+    np.testing.assert_allclose(
+        law.blend(err, d, types.SimpleNamespace(**fields)), law.blend(err, d, GAINS), rtol=0
+    )
+    for missing in ("phi_m", "r_e", "r_a"):
+        partial = types.SimpleNamespace(**{k: v for k, v in fields.items() if k != missing})
+        with pytest.raises(ValueError) as refused:
+            law.blend(err, d, partial)
+        assert str(refused.value) == "gains is a SimpleNamespace; allowed: a wmr_jax.Gains"
+
+
+def test_poses_and_the_direction_angle_are_checked_in_full():
+    with pytest.raises(ValueError) as err:
+        law.polar_error(np.zeros((2, 3)), np.zeros((3, 3)))
+    assert (
+        str(err.value) == "pose has batch shape (2,) and ref (3,); allowed: shapes that broadcast"
+    )
+    with pytest.raises(ValueError) as err:
+        law.polar_error(np.zeros((2, 4, 3)), np.zeros((3, 4, 3)))
+    assert str(err.value) == (
+        "pose has batch shape (2, 4) and ref (3, 4); allowed: shapes that broadcast"
+    )
+    for call, name in (
+        (lambda: law.polar_error("abc", [1.0, 2.0, 0.0]), "pose"),
+        (lambda: law.polar_error([0.0, 0.0, 0.0], [1.0, "b", 0.0]), "ref"),
+        (lambda: law.polar_error(None, [1.0, math.nan, 0.0], frame=(0.0, 0.0, 1.0, 0.0)), "ref"),
+    ):
+        with pytest.raises(ValueError, match=rf"^{name}\b"):
+            call()
+    err = law.polar_error([0.0, 0.0, 0.0], [3.0, 2.0, 0.5])
+    for value, shown in (("x", "'x'"), (0.0, "0.0"), (-0.2, "-0.2")):
+        with pytest.raises(ValueError) as refused:
+            law.direction_flag(err, value)
+        assert (
+            str(refused.value) == f"phi_m = {shown} is not allowed; allowed: 0 < phi_m < pi/2 rad"
+        )
+
+
+def test_errors_of_the_wrong_kind_are_refused_in_full():
+    with pytest.raises(ValueError) as refused:
+        law.lyapunov(law.PolarError(1.0, 1.0, "s", 1.0, 0.0))
+    assert str(refused.value) == (
+        "err.sin_phi = 's' is not allowed; allowed: finite real numbers (polar_error's)"
+    )
+    with pytest.raises(ValueError) as refused:
+        law.lyapunov(law.PolarError(1.0, 1.0, 0.0, math.inf, 0.0))
+    assert str(refused.value) == "err.cos_theta = inf is not allowed; allowed: finite"
+
+
+def test_the_saturation_radius_is_checked_in_full():
+    np.testing.assert_allclose(law.saturated_distance(0.25, 0.5), math.pi / 4, rtol=1e-15)
+    for value, shown in (("x", "'x'"), (-2.0, "-2.0"), (math.inf, "inf")):
+        with pytest.raises(ValueError) as err:
+            law.saturated_distance(1.0, value)
+        assert str(err.value) == f"r_m = {shown} is not allowed; allowed: a finite radius > 0 cm"
 
 
 def test_checked_calls_refuse_what_traced_ones_never_see():
