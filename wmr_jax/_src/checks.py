@@ -62,7 +62,8 @@ _FLOAT64_HINT = ", or float64 (jax.config.update('jax_enable_x64', True))"
 
 def float_dtype() -> Any:
     """Return JAX's default float dtype (float64 when ``jax_enable_x64`` is on)."""
-    return jnp.result_type(float)
+    # The same as jnp.result_type(float), a dozen times faster (every check calls it).
+    return jax.dtypes.canonicalize_dtype(np.float64)
 
 
 def is_traced(tree: Any) -> bool:
