@@ -198,6 +198,18 @@ def test_the_law_inside_jit_with_a_traced_temperature_is_the_same_law():
     np.testing.assert_allclose(np.stack(got, -1), relaxed_want(0.4), rtol=0, atol=1e-10)
 
 
+def test_a_float32_frame_against_float64_references_is_computed_in_float64():
+    # The rollouts may hand a float32 frame with float64 references: every
+    # part is promoted to the wider type before the rotation.
+    frame64 = (POSES[:, 0], POSES[:, 1], np.cos(POSES[:, 2]), np.sin(POSES[:, 2]))
+    frame32 = tuple(np.asarray(part, np.float32) for part in frame64)
+    got = law.polar_error(None, REFS, frame=frame32)
+    want = law.polar_error(None, REFS, frame=tuple(np.float64(part) for part in frame32))
+    for g, w_ in zip(got, want, strict=True):
+        assert g.dtype == np.float64
+        np.testing.assert_array_equal(g, w_)
+
+
 def test_a_cold_relaxation_is_the_hard_law_away_from_the_switches():
     # At T = 1e-9 every switch has decided (within ~T of its threshold
     # at most), so the relaxed law is the hard one but at the tie poses.
