@@ -157,19 +157,6 @@ def test_the_defaults_are_the_documented_ones():
             "batch",
             "",
         ),
-    ],
-)
-def test_bad_observer_parameters_are_refused_naming_the_field(params, field, allowed):
-    with pytest.raises(ValueError) as err:
-        validate_observer(params)
-    message = str(err.value)
-    assert field in message and allowed in message, message
-    assert "\n" not in message
-
-
-@pytest.mark.parametrize(
-    "params, field, allowed",
-    [
         (EKFParams(wheel_error=0.0), "estimator.wheel_error", "0 < wheel_error <= 1e6"),
         (EKFParams(sigma_xy=-0.1), "estimator.sigma_xy", "0 < sigma_xy <= 1e6 cm"),
         (EKFParams(sigma_theta=1e6 * (1 + 1e-12)), "estimator.sigma_theta", "<= 1e6 rad"),
@@ -179,9 +166,10 @@ def test_bad_observer_parameters_are_refused_naming_the_field(params, field, all
         (EKFParams(sigma_xy=np.full(2, 0.5), sigma_theta=np.full(3, 0.01)), "batch", ""),
     ],
 )
-def test_bad_filter_parameters_are_refused_naming_the_field(params, field, allowed):
+def test_bad_estimator_parameters_are_refused_naming_the_field(params, field, allowed):
+    validate = validate_ekf if isinstance(params, EKFParams) else validate_observer
     with pytest.raises(ValueError) as err:
-        validate_ekf(params)
+        validate(params)
     message = str(err.value)
     assert field in message and allowed in message, message
     assert "\n" not in message
