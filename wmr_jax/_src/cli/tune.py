@@ -563,12 +563,14 @@ def _compare(out: Path, args: Any, robot: Any) -> int:
     from wmr_jax._src.robots import robot_json, same_robot
     from wmr_jax._src.tuning.compare import compare
 
-    # Each problem over the robot's horizon, as a single tuning run has it
-    # (said once: both problems have the same).
-    configs = {"schedule": _robot_horizon(args, _config_from(args, schedule=True), robot)}
+    # Each problem over the robot's horizon, as a single tuning run has it.
+    schedule = _config_from(args, schedule=True)
+    configs = {"schedule": _robot_horizon(args, schedule, robot)}
     if not args.schedule:  # both problems, unless --schedule asks for the schedule alone
-        fixed = _config_from(args, schedule=False).replace(horizon=configs["schedule"].horizon)
-        configs = {"fixed": fixed.validate(), **configs}
+        fixed = _config_from(args, schedule=False)
+        if configs["schedule"].horizon != schedule.horizon:  # stretched (and said) above
+            fixed = fixed.replace(horizon=configs["schedule"].horizon).validate()
+        configs = {"fixed": fixed, **configs}
     settings = {
         "format": _COMPARE_FORMAT,
         "seeds": list(_COMPARE_SEEDS),
