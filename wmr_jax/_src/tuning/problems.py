@@ -153,7 +153,9 @@ def _schedule_problem(knots: int) -> Problem:
     def start(robot: Robot) -> np.ndarray:
         """The paper's feasible gains as constant tables (the fixed law's start)."""
         gains = fixed.PAPER_FEASIBLE_GAINS
-        # In float64, as the start always was (turn_gain_max may round to float32).
+        # turn_gain_max's bound, in float64 from the fields' own values as the
+        # start always was (turn_gain_max may round to float32, and divides
+        # float32 fields in float32).
         omega_max = max(float(robot.v_max) / float(robot.half_track), 1.0 / DEFAULT_DT)
         unit = fixed.unit_from_gains(gains, robot)
 
