@@ -126,8 +126,10 @@ class Measurement(NamedTuple):
 
     def residual(self, estimate: loops.SplitPose) -> jax.Array:
         """Return ``θ_measured − θ_estimate`` wrapped to ``[−π, π)``, rad."""
-        turn = self.base * jnp.conj(estimate.heading)
-        return law.wrap_angle(jnp.arctan2(turn.imag, turn.real) + self.offset)
+        # From the unwrapped angles both carry (each equal to its heading's
+        # angle): an arctangent of the heading difference costs about a
+        # third of the raw loop per period on XLA:CPU.
+        return law.wrap_angle(self.theta - estimate.theta)
 
 
 def measurement(pose: loops.SplitPose, noise: jax.Array) -> Measurement:
