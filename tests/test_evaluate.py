@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import wmr_jax as w
-from wmr_jax._src import robustness
+from wmr_jax._src import conditions
 from wmr_jax._src.cli.main import main
 from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
 from wmr_jax._src.sensing.estimators import ObserverParams
@@ -60,7 +60,7 @@ def test_npy_and_csv_give_the_same_result_as_the_library(capsys, tmp_path):
     a, b = ({k: v for k, v in r.items() if k not in ("refs_file", "gains_file")} for r in results)
     assert a == b
     assert 0.0 <= a["success"] <= 1.0 and a["n"] == len(REFS)
-    direct = robustness.evaluate_loop(
+    direct = conditions.evaluate_loop(
         gains, REFS, condition="both", mismatch=0.03, seed=3, horizon=6.0
     )
     assert a == json.loads(json.dumps(direct))  # None stays null
@@ -103,7 +103,7 @@ def test_the_files_estimator_is_used_unless_overridden(capsys, tmp_path):
         _evaluate(capsys, *base, *extra, "--json", str(out_file))
         result = json.loads(out_file.read_text())
         assert result["feedback"] == feedback[flag]
-        direct = robustness.evaluate_loop(loop, REFS[:3], condition="noise", seed=1)
+        direct = conditions.evaluate_loop(loop, REFS[:3], condition="noise", seed=1)
         assert {k: result[k] for k in direct} == json.loads(json.dumps(direct)), flag
 
 
@@ -196,7 +196,7 @@ def test_bad_values_give_one_line_exit_2_and_no_run(capsys, tmp_path, monkeypatc
     def no_run(*args, **kwargs):
         raise AssertionError("evaluate_loop ran despite a bad flag")
 
-    monkeypatch.setattr(robustness, "evaluate_loop", no_run)
+    monkeypatch.setattr(conditions, "evaluate_loop", no_run)
     assert main(argv) == 2
     captured = capsys.readouterr()
     err = captured.err.strip().splitlines()

@@ -19,8 +19,8 @@ import pytest
 import wmr_jax as w
 from wmr_jax import tuning
 from wmr_jax._src import loops, waypoints
+from wmr_jax._src.conditions import evaluate_loop
 from wmr_jax._src.provenance import code_version
-from wmr_jax._src.robustness import evaluate_loop
 from wmr_jax._src.sensing import loop as sensed
 from wmr_jax._src.sensing.disturbances import Disturbance, draw_disturbances
 from wmr_jax._src.tuning import training

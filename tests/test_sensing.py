@@ -16,6 +16,7 @@ from conftest import random_refs
 
 import wmr_jax as w
 from wmr_jax import studies
+from wmr_jax._src import conditions, robustness
 from wmr_jax._src.loops import Options
 from wmr_jax._src.reference import reference_disturbed_rollout
 from wmr_jax._src.sensing import loop
@@ -335,18 +336,16 @@ def test_a_saved_estimator_reads_back_whole(tmp_path):
         assert loop.estimator == estimator and loop.params.kr == 50.0
 
 
-def _recorded_noise(monkeypatch, run):
-    """The noise of every disturbance the studies hand to the loop while ``run()`` runs."""
-    from wmr_jax._src import robustness
-
+def _recorded_noise(monkeypatch, run, module):
+    """The noise of every disturbance ``module``'s studies hand to the loop while ``run()`` runs."""
     seen = []
-    real = robustness.perturbed_metrics
+    real = module.perturbed_metrics
 
     def recording(spec, *args, **kwargs):
         seen.append(np.asarray(spec.noise))
         return real(spec, *args, **kwargs)
 
-    monkeypatch.setattr(robustness, "perturbed_metrics", recording)
+    monkeypatch.setattr(module, "perturbed_metrics", recording)
     run()
     return seen
 
@@ -362,7 +361,7 @@ def test_the_studies_draw_the_standard_noise_in_its_units(monkeypatch, study):
         "noise_curve": lambda: studies.noise_curve({"a": GAINS}, refs, key, noise_xy=(0.5,)),
         "evaluate_loop": lambda: studies.evaluate_loop(GAINS, refs, condition="noise"),
     }
-    seen = _recorded_noise(monkeypatch, runs[study])
+    seen = _recorded_noise(monkeypatch, runs[study], conditions)
     noisy = [n for n in seen if np.any(n)]
     assert noisy
     for noise in noisy:  # 64 runs × 182 samples: σ within 2 % at 3 standard errors
@@ -376,6 +375,7 @@ def test_the_monte_carlo_draws_its_levels_in_their_units(monkeypatch):
         lambda: studies.monte_carlo(
             jax.random.PRNGKey(1), n_runs=64, noise_xy=(0.5,), noise_deg=(1.0,)
         ),
+        robustness,
     )
     (noise,) = seen
     np.testing.assert_allclose(noise[..., :2].std(), 0.5, rtol=0.02)

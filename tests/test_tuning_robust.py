@@ -74,17 +74,17 @@ def test_tune_robust_judges_under_the_noise_of_the_robustness_command(monkeypatc
     # noise draw makes them the same table.
     import jax
 
-    from wmr_jax._src import robustness
+    from wmr_jax._src import conditions
     from wmr_jax._src.cli.main import build_parser
 
     keys = []
-    judge = robustness.standard_conditions
+    judge = conditions.standard_conditions
 
     def recording(sets, refs, key, **kwargs):
         keys.append(key)
         return judge(sets, refs, key, **kwargs)
 
-    monkeypatch.setattr(robustness, "standard_conditions", recording)
+    monkeypatch.setattr(conditions, "standard_conditions", recording)
     tuning.tune_robust(small_config())
     args = build_parser().parse_args(["robustness", "--out", "unused"])
     command_key = jax.random.key(int(args.seed))

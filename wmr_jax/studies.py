@@ -13,6 +13,9 @@ from wmr_jax._src.bench import CASES as CASES
 from wmr_jax._src.bench import BenchConfig as BenchConfig
 from wmr_jax._src.bench import numpy_final_poses as numpy_final_poses
 from wmr_jax._src.bench import run_benchmark as run_benchmark
+from wmr_jax._src.conditions import evaluate_loop as evaluate_loop
+from wmr_jax._src.conditions import noise_curve as noise_curve
+from wmr_jax._src.conditions import standard_conditions as standard_conditions
 from wmr_jax._src.maps import COMPARISON_RUNS as COMPARISON_RUNS
 from wmr_jax._src.maps import DEFAULT_HEADINGS_DEG as DEFAULT_HEADINGS_DEG
 from wmr_jax._src.maps import MapStudy as MapStudy
@@ -35,13 +38,10 @@ from wmr_jax._src.robustness import DEFAULT_NOISE_DEG as DEFAULT_NOISE_DEG
 from wmr_jax._src.robustness import DEFAULT_NOISE_XY as DEFAULT_NOISE_XY
 from wmr_jax._src.robustness import LATE_SHARE as LATE_SHARE
 from wmr_jax._src.robustness import ROBUSTNESS_CONDITIONS as ROBUSTNESS_CONDITIONS
-from wmr_jax._src.robustness import evaluate_loop as evaluate_loop
 from wmr_jax._src.robustness import monte_carlo as monte_carlo
-from wmr_jax._src.robustness import noise_curve as noise_curve
 from wmr_jax._src.robustness import robot_defaults as robot_defaults
 from wmr_jax._src.robustness import robustness_study as robustness_study
 from wmr_jax._src.robustness import settled_at_horizon as settled_at_horizon
-from wmr_jax._src.robustness import standard_conditions as standard_conditions
 from wmr_jax._src.robustness import study_horizon as study_horizon
 from wmr_jax._src.sensing.disturbances import STANDARD_CONDITIONS as STANDARD_CONDITIONS
 from wmr_jax._src.sensing.disturbances import STANDARD_MISMATCH as STANDARD_MISMATCH

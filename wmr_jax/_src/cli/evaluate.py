@@ -339,9 +339,9 @@ def run(args: Any) -> int:
     if given is not None and given.note:
         print(given.note)
 
+    from wmr_jax._src.conditions import evaluate_loop
     from wmr_jax._src.io import atomic_write_json
     from wmr_jax._src.report.tables import markdown_table
-    from wmr_jax._src.robustness import evaluate_loop
 
     with flags.as_flags({"refs": "--refs", "horizon": "--horizon", "mismatch": "--mismatch"}):
         result = evaluate_loop(

@@ -154,8 +154,8 @@ def _noise_curve(out: Any, sets: dict[str, Any], seed: int, robot: Any, *, x64: 
     """Success and arrival against noise: each set raw and with its (or the default) estimator."""
     import jax
 
+    from wmr_jax._src.conditions import noise_curve
     from wmr_jax._src.report.robustness import write_noise_curve
-    from wmr_jax._src.robustness import noise_curve
     from wmr_jax._src.sensing.loop import ClosedLoop
     from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
 
@@ -223,12 +223,12 @@ def _standard(out: Any, sets: dict[str, Any], seed: int, robot: Any, *, x64: boo
     """Judge the gain sets under the standard conditions; write and print the table."""
     import jax
 
+    from wmr_jax._src.conditions import standard_conditions
     from wmr_jax._src.report.robustness import (
         STANDARD_COLUMNS,
         robustness_table,
         write_standard_conditions,
     )
-    from wmr_jax._src.robustness import standard_conditions
     from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
 
     refs = held_out_poses(EVAL_POSES, EVAL_SEED)

@@ -38,7 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from wmr_jax._src import loops, robustness
+from wmr_jax._src import conditions, loops, robustness
 from wmr_jax._src.checks import (
     as_poses,
     check_bool,
@@ -386,7 +386,7 @@ def robust_score(
         )
     check_key("key", key)
     refs = np.asarray(as_poses("refs", refs, batch=True), dtype=float)
-    rows = robustness.standard_conditions({"g": gains}, refs, key, dt=dt, x64=False, robot=robot)
+    rows = conditions.standard_conditions({"g": gains}, refs, key, dt=dt, x64=False, robot=robot)
     return float(np.mean([_score_of(row) for row in rows]))
 
 
@@ -528,7 +528,7 @@ def tune_robust(
             sets[method] = searches[method][0]
     held_out = held_out_poses(config.eval_poses, EVAL_SEED)
     # The noise of wmr-jax robustness at its default seed: the same table.
-    rows = robustness.standard_conditions(
+    rows = conditions.standard_conditions(
         sets, held_out, jax.random.key(EVAL_NOISE_SEED), robot=robot
     )
     return {
