@@ -251,8 +251,9 @@ def check_feasible(
             if np.ndim(getattr(obj, f.name)) == 1
         }
     )
-    bound = np.asarray(wheel_speed_bound(gains, robot), dtype=float)
-    v_max = np.asarray(robot.v_max, dtype=float)
+    # wheel_speed_bound's sum in NumPy (both were just checked).
+    half_track, v_max = (np.asarray(v, dtype=float) for v in (robot.half_track, robot.v_max))
+    bound = np.asarray(gains.kr, dtype=float) + half_track * np.asarray(gains.k_theta, dtype=float)
     feasible = bound <= v_max * (1 + 1e-12)
     if warn and not np.all(feasible):
         worst = float(np.max(bound))
