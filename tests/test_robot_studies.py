@@ -9,7 +9,7 @@ import pytest
 
 import wmr_jax as w
 from wmr_jax import studies
-from wmr_jax._src import robustness
+from wmr_jax._src import conditions, robustness
 from wmr_jax._src.cli.main import main
 from wmr_jax._src.metrics import PoseMetrics
 from wmr_jax._src.report.figures import plt
@@ -66,8 +66,9 @@ def _recorded(monkeypatch):
     def draws(key, n, steps, **kwargs):
         return np.tile(REFS[:1], (n, 1)), np.zeros((n, steps, 3)), np.ones((n, 3))
 
-    monkeypatch.setattr(robustness, "perturbed_metrics", fake)
-    monkeypatch.setattr(robustness, "_unit_draws", unit_draws)
+    for module in (robustness, conditions):
+        monkeypatch.setattr(module, "perturbed_metrics", fake)
+    monkeypatch.setattr(conditions, "_unit_draws", unit_draws)
     monkeypatch.setattr(robustness, "draw_disturbances", draws)
     return seen
 
@@ -136,7 +137,7 @@ def no_noise(monkeypatch):
     def unit_draws(key, refs, steps, mismatch):
         return np.zeros((len(refs), steps, 3)), np.ones((len(refs), 3))
 
-    monkeypatch.setattr(robustness, "_unit_draws", unit_draws)
+    monkeypatch.setattr(conditions, "_unit_draws", unit_draws)
 
 
 def test_a_robots_wheels_and_yardstick_are_its_own(no_noise):
@@ -200,7 +201,7 @@ def test_evaluate_runs_a_tuned_file_on_its_robot(tmp_path, capsys, monkeypatch, 
     def stand_in(*args, **kwargs):
         raise Ran(kwargs)
 
-    monkeypatch.setattr(robustness, "evaluate_loop", stand_in)
+    monkeypatch.setattr(conditions, "evaluate_loop", stand_in)
     with pytest.raises(Ran) as ran:
         main([*argv, "--robot", slow])
     (called,) = ran.value.args
@@ -225,17 +226,17 @@ def test_robustness_runs_the_files_robot_and_prints_percentages(tmp_path, capsys
 
     def standard(sets, refs, key, **kwargs):
         runs["standard"] = (sets, kwargs)
-        conditions = ("model robot", "nominal", "latency", "noise", "both")
+        labels = ("model robot", "nominal", "latency", "noise", "both")
         return [
             {"condition": c, "gains": name, "feedback": "raw", "success": 1.0,
              "mean arrival s": 1.0, "median arrival s": 1.0, "mean final distance cm": 0.1,
              "peak wheel cm/s": 80.0, "mismatch": 0.03, "runs": 400, "horizon s": 6.732,
              "settled at horizon": 0.0, "mean arrival, not at horizon s": 1.0}
-            for c in conditions for name in sets
+            for c in labels for name in sets
         ]  # fmt: skip
 
     monkeypatch.setattr(robustness, "robustness_study", monte_carlo)
-    monkeypatch.setattr(robustness, "standard_conditions", standard)
+    monkeypatch.setattr(conditions, "standard_conditions", standard)
     # Neither the held-out poses drawn nor the figures saved (the figures are tested below).
     monkeypatch.setattr(evaluation, "held_out_poses", lambda *args: REFS)
     monkeypatch.setattr(report, "save_figure", lambda fig, path, **kw: path)
