@@ -173,6 +173,18 @@ FILE_SECONDS = {
 }
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _jax_started():
+    """Start JAX's CPU backend before a test process runs its first test.
+
+    The commands split the CPU into several JAX devices when JAX has not
+    started yet (``use_cpu_devices``): without this, whichever test ran a
+    command first would decide how many devices every later test in its
+    process sees. tests/test_sharding.py splits the CPU in subprocesses.
+    """
+    jax.devices()
+
+
 def pytest_configure(config):
     """Drop the compilation cache once it outgrows ``_CACHE_LIMIT`` (main process only)."""
     if hasattr(config, "workerinput") or not _CACHE.is_dir():
