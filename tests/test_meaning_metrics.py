@@ -302,6 +302,14 @@ def test_arrival_time_refuses_no_trajectory_and_references_of_another_batch():
         m.arrival_time(traj, np.zeros((3, 3)), dt=0.1)
     with pytest.raises(ValueError, match=r"^refs has batch shape \(3,\) and poses \(2,\)"):
         m.arrived(np.zeros((2, 3)), np.zeros((3, 3)))
+    # The references themselves are checked under their own name.
+    for bad, message in (
+        ([0.0, math.nan, 0.0], r"^refs = \[0\.0, nan, 0\.0\] is not finite; allowed: finite"),
+        ("abc", r"^refs = 'abc' is not allowed; allowed: real numbers"),
+        ([0.0, 1.0], r"^refs has shape \(2,\); allowed: \(\.\.\., 3\)"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            m.arrival_time(_traj(np.zeros((2, 3))), bad, dt=0.1)
 
 
 @pytest.mark.parametrize(
