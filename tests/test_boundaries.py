@@ -75,3 +75,20 @@ def test_the_polar_baselines_only_turn_to_the_heading_at_the_goal(name, params, 
     far = pose + np.array([1.2e-3, 0.0, theta_e])
     v, _ = control(jnp.asarray(pose), jnp.asarray(far), params)
     assert float(v) != 0.0
+
+
+@pytest.mark.parametrize("tol_theta", [math.radians(5.0), 0.1, 0.3, 1.0])
+def test_a_heading_exactly_tol_theta_off_is_arrived_and_one_ulp_more_is_not(tol_theta):
+    # docs/model.md §6: |θ̄_e| ≤ tol_θ. Judged through cosines, 5° and 0.1 rad
+    # fell outside (cos rounded below cos tol) while 0.3 and 1 rad fell inside.
+    ref = np.zeros(3)
+    poses = np.array([[0.0, 0.0, tol_theta], [0.0, 0.0, -tol_theta]])
+    beyond = np.array([[0.0, 0.0, np.nextafter(tol_theta, 2.0)]])
+    assert np.all(w.arrived(poses, ref, tol_theta=tol_theta))
+    assert not np.any(w.arrived(beyond, ref, tol_theta=tol_theta))
+    # The arrival time and the streamed metrics of a run that sits there agree.
+    traj = w.Trajectory(
+        np.tile(poses[:1], (4, 1)), np.zeros(3), np.zeros(3), np.zeros(3, np.int32),
+        np.zeros((3, 2)), np.zeros(3),
+    )  # fmt: skip
+    assert float(w.arrival_time(traj, ref, dt=0.1, tol_theta=tol_theta)) == 0.1

@@ -118,9 +118,13 @@ def _is_arrived(
     poses: jax.Array, refs: jax.Array, tol_r: Any, tol_theta: Any, frame: Any = None
 ) -> jax.Array:
     err = law.polar_error(poses, refs, frame=frame)
-    cos_theta_bar, _ = law.fold(err.cos_theta, err.sin_theta)
-    # |θ̄_e| ≤ tol ⇔ cos θ̄_e ≥ cos tol, since |θ̄_e| ≤ π/2.
-    return (err.r <= tol_r) & (cos_theta_bar >= jnp.cos(tol_theta))
+    # |θ̄_e| from the headings themselves, not through cosines: a heading
+    # exactly tol_theta off is then arrived, as ≤ says (cos θ̄_e ≥ cos tol put
+    # 5° on either side of the boundary, as the two cosines happened to round).
+    turn = poses[..., 2] - refs[..., 2]
+    turn = jnp.abs(jnp.where(jnp.abs(turn) <= jnp.pi, turn, law.wrap_angle(turn)))
+    folded = jnp.minimum(turn, jnp.pi - turn)
+    return (err.r <= tol_r) & (folded <= tol_theta)
 
 
 def arrived(
