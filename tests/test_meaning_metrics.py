@@ -418,3 +418,19 @@ def test_streamed_metrics_of_a_run_that_never_arrives():
     assert (int(acc.settled_from), int(acc.first)) == (-1, -1)  # RunMetrics: −1, never arrived
     acc = m.stream_update(acc, far, np.array(REF), _Out(7.0, 0.0, [0, 0], 0.0), m.Thresholds())
     assert (int(acc.v_sign), int(acc.omega_sign)) == (1, -1)  # ω in its band keeps its sign
+
+
+def test_arrival_time_runs_traced_with_the_values_it_gives_untraced():
+    # Inside jit the trajectory and the tolerances are tracers: not checked
+    # (they cannot be), and the same arrival time as outside.
+    poses = np.array(
+        [[0.0, 0.0, 0.0], [REF[0] + 0.9, REF[1], REF[2]], [REF[0], REF[1], REF[2] + 0.05]]
+    )
+    traj = _traj(poses)
+    eager = float(m.arrival_time(traj, np.array(REF), dt=0.1, tol_r=1.0, tol_theta=0.06))
+    traced = jax.jit(
+        lambda t, tol_r, tol_theta: m.arrival_time(
+            t, np.array(REF), dt=0.1, tol_r=tol_r, tol_theta=tol_theta
+        )
+    )(traj, 1.0, 0.06)
+    assert eager == pytest.approx(0.1) and float(traced) == eager
