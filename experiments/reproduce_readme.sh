@@ -9,8 +9,9 @@
 # was computed with (docs/data/fingerprints.json), so a change to the code
 # that would move a committed figure fails the tests until the stage is rerun.
 # STAGE is any of: paper compare maps waypoints animate tune robustness
-# compare-tuning compare-sizes compare-robust bench (default: all; paper to
-# robustness took 14 minutes on 2 CPU cores, compare-robust 30 more).
+# compare-tuning compare-sizes compare-robust bench (default: all; on 2 CPU
+# cores shared with other work, tune took 12 minutes, robustness 2 and
+# compare-robust 39).
 # Every command is seeded (the seed is its default unless named here), so a
 # rerun prints the same tables; bench timings are the exception.
 set -euo pipefail
