@@ -298,7 +298,10 @@ def test_the_elementwise_helpers_give_nan_for_nan_as_numpy_does():
     np.testing.assert_array_equal(controllers.sgn(x), [nan, -1.0, -1.0, 1.0, -1.0, 1.0])
     assert np.isnan(controllers.sgn(nan, temperature=0.1))
     cos_bar, sin_bar = controllers.fold(jnp.array([nan, -1.0]), jnp.array([0.5, nan]))
-    assert np.isnan(cos_bar[0]) and np.isnan(sin_bar[1]) and cos_bar[1] == 1.0
+    assert np.isnan(cos_bar[0]) and np.isnan(sin_bar[0])  # no angle is folded from a NaN
+    assert np.isnan(sin_bar[1]) and cos_bar[1] == 1.0
+    cos_bar, sin_bar = controllers.fold(jnp.array([nan]), jnp.array([0.5]), temperature=0.1)
+    assert np.isnan(cos_bar[0]) and np.isnan(sin_bar[0])
     assert np.isnan(controllers.wrap_angle(nan)) and np.isnan(dynamics.sinc(nan))
     rims = w.wheel_speeds(jnp.array(nan), jnp.array(1.0), w.Robot())
     assert np.all(np.isnan(rims))

@@ -340,7 +340,9 @@ def fold(cos_a: jax.Array, sin_a: jax.Array, *, temperature: float | None = None
     """
     cos_a, sin_a = jnp.asarray(cos_a), jnp.asarray(sin_a)
     if temperature is None:
-        flip = jnp.where(cos_a < 0, -1.0, 1.0).astype(cos_a.dtype)
+        # A NaN cosine flips by NaN: no folded angle is made up for it.
+        flip = jnp.where(cos_a < 0, -1.0, jnp.where(jnp.isnan(cos_a), jnp.nan, 1.0))
+        flip = flip.astype(cos_a.dtype)
     else:
         temperature = _relaxation(temperature)
         flip = jnp.tanh(cos_a / temperature + _tie_break(temperature))  # no flip at 0
