@@ -15,6 +15,7 @@ import types
 import warnings
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -455,3 +456,12 @@ def test_checked_calls_refuse_what_traced_ones_never_see():
     with pytest.raises(ValueError) as err:
         law.wheel_speeds(1.0, "a", w.Robot())
     assert str(err.value) == "omega = 'a' is not allowed; allowed: real numbers"
+
+
+def test_fold_keeps_float32_in_a_float64_session():
+    # The flip is made of Python numbers (float64 here): it must not promote.
+    for temperature in (None, 0.1):
+        cos_bar, sin_bar = law.fold(jnp.float32(-0.6), jnp.float32(0.8), temperature=temperature)
+        assert cos_bar.dtype == sin_bar.dtype == jnp.float32, temperature
+    cos_bar, sin_bar = law.fold(jnp.float32(-0.6), jnp.float32(0.8))
+    assert (float(cos_bar), float(sin_bar)) == (np.float32(0.6), np.float32(-0.8))
