@@ -619,7 +619,7 @@ def _robust_rows(horizon):
 
 @pytest.mark.parametrize(("horizon", "failure"), [(38.2, 76.4), (6.0, 12.0), (None, 12.0)])
 def test_the_robust_comparison_scores_failures_at_twice_each_rows_horizon(horizon, failure):
-    # What the searches minimise (tuning.robust._score_of): failures at twice
+    # What the searches minimise (tuning.robust.condition_score): failures at twice
     # the horizon, on a slow robot too; rows saved without one are the paper's 6 s.
     from wmr_jax._src.report.tuning import robust_comparison_table
 

@@ -13,6 +13,7 @@ from wmr_jax._src.checks import real_array, require
 from wmr_jax._src.controllers.schedule import SHAPE_FIELDS, knot_radii
 from wmr_jax._src.io import save_figure
 from wmr_jax._src.optimal import bound_ratios
+from wmr_jax._src.poses import HORIZON_S
 from wmr_jax._src.report.tables import json_number, markdown_table, require_rows
 from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS, PAPER_FEASIBLE_GAINS, gains_as_dict
 from wmr_jax._src.tuning.problems import (
@@ -21,6 +22,7 @@ from wmr_jax._src.tuning.problems import (
     get_problem,
     schedule_problem,
 )
+from wmr_jax._src.tuning.robust import condition_score
 
 __all__ = ["comparison_table", "evaluation_table", "robust_comparison_table", "tuning_curve"]
 
@@ -368,8 +370,6 @@ def _schedule_panels(axes: Any, steps: np.ndarray, rows: np.ndarray, knots: int)
 
 # The order of a robust comparison's conditions (standard_conditions' rows).
 _ROBUST_CONDITIONS = ("model robot", "nominal", "latency", "noise", "both")
-_FAILURE_HORIZONS = 2.0  # a run that never arrives scores twice the horizon
-_PAPER_HORIZON_S = 6.0  # of rows written before they recorded theirs
 
 
 def robust_comparison_table(rows: list[dict[str, Any]]) -> str:
@@ -389,15 +389,14 @@ def robust_comparison_table(rows: list[dict[str, Any]]) -> str:
             key, {"budget": float(row["budget_s"]), "candidates": int(row["candidates"])}
         )
         ok, mean = float(row["success"]), float(row["mean arrival s"])
-        failure = _FAILURE_HORIZONS * float(row.get("horizon s", _PAPER_HORIZON_S))
-        entry[row["condition"]] = (ok, mean, failure)
+        # Rows written before they recorded their horizon ran the paper robot's.
+        horizon = float(row.get("horizon s", HORIZON_S))
+        score = condition_score({"success": ok, "mean arrival s": mean, "horizon s": horizon})
+        entry[row["condition"]] = (ok, mean, score)
     table, scores = [], {}
     for (method, seed), entry in sorted(cells.items(), key=lambda kv: (kv[0][1], kv[0][0])):
         conditions = [c for c in _ROBUST_CONDITIONS if c in entry]
-        score = np.mean(
-            [ok * (mean if ok > 0 else 0.0) + (1 - ok) * failure
-             for ok, mean, failure in (entry[c] for c in conditions)]
-        )  # fmt: skip
+        score = np.mean([entry[c][2] for c in conditions])
         scores.setdefault(method, []).append(score)
         line = {"method": method, "seed": str(seed), "score (s)": f"{score:.3f}"}
         for c in conditions:

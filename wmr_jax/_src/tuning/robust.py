@@ -390,11 +390,14 @@ def robust_score(
     check_key("key", key)
     refs = np.asarray(as_poses("refs", refs, batch=True), dtype=float)
     rows = conditions.standard_conditions({"g": gains}, refs, key, dt=dt, x64=False, robot=robot)
-    return float(np.mean([_score_of(row) for row in rows]))
+    return float(np.mean([condition_score(row) for row in rows]))
 
 
-def _score_of(row: dict[str, Any]) -> float:
-    """Mean arrival with failures at twice the horizon, from a ``standard_conditions`` row."""
+def condition_score(row: dict[str, Any]) -> float:
+    """Mean arrival with failures at twice the horizon, from a ``standard_conditions`` row.
+
+    What the searches minimise per condition, and what the comparison table shows.
+    """
     ok = row["success"]
     arrival = row["mean arrival s"] if ok > 0 else 0.0
     return ok * arrival + (1.0 - ok) * _FAILURE_FACTOR * row["horizon s"]
