@@ -64,6 +64,21 @@ def _unit_draws(key: jax.Array, refs: np.ndarray, steps: int, mismatch: float):
     return np.asarray(unit.noise, dtype=float), factors
 
 
+def _runs(refs: Any, key: jax.Array, robot: Robot, horizon: Any, dt: float, mismatch: float, x64):
+    """What every study here runs: ``(refs (N, 3), unit noise, wheel factors, horizon s)``."""
+    steps, horizon = study_steps(robot, horizon, dt)
+    with jax.enable_x64(checks.check_bool("x64", x64)):  # not rounded to float32 first
+        refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
+    noise, factors = _unit_draws(key, refs, steps, mismatch)
+    return refs, noise, factors, horizon
+
+
+def _scaled(refs, noise, wheels, sxy: float, sdeg: float, latency: bool) -> Disturbance:
+    """The runs' ``Disturbance`` at pose noise ``σ_xy`` cm, ``σ_θ`` degrees."""
+    scale = np.array([sxy, sxy, math.radians(sdeg)])
+    return Disturbance(refs, noise * scale, wheels, np.float64(1.0 if latency else 0.0))
+
+
 # The model robot's row: no mismatch, no noise, no latency (docs/model.md §9).
 MODEL_ROBOT = "model robot"
 
@@ -132,17 +147,13 @@ def standard_conditions(
         resolve_estimator(loop.estimator)
         controllers.get_controller(loop.controller)
     robot = _study_robot(robot, sets, "params_by_name")
-    steps, horizon = study_steps(robot, horizon, dt)
-    with jax.enable_x64(checks.check_bool("x64", x64)):  # not rounded to float32 first
-        refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
-    noise, factors = _unit_draws(key, refs, steps, mismatch)
+    refs, noise, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
     ones = np.ones((len(refs), 3))
     conditions = [(MODEL_ROBOT, 0.0, 0.0, False, ones)]
     conditions += [(*condition, factors) for condition in STANDARD_CONDITIONS]
     rows = []
     for label, sxy, sdeg, latency, wheels in conditions:
-        scale = np.array([sxy, sxy, math.radians(sdeg)])
-        spec = Disturbance(refs, noise * scale, wheels, np.float64(1.0 if latency else 0.0))
+        spec = _scaled(refs, noise, wheels, sxy, sdeg, latency)
         for name, loop in sets.items():
             m = perturbed_metrics(
                 spec,
@@ -272,13 +283,9 @@ def evaluate_loop(
     mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
     seed = checks.check_int("seed", seed, 0, 2**32 - 1)
     robot = _study_robot(robot, {"loop": loop}, "evaluate_loop")
-    steps, horizon = study_steps(robot, horizon, dt)
-    with jax.enable_x64(checks.check_bool("x64", x64)):
-        refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
-    sxy, sdeg, latency = labels[condition]
-    noise, factors = _unit_draws(jax.random.key(seed), refs, steps, mismatch)
-    scale = np.array([sxy, sxy, math.radians(sdeg)])
-    spec = Disturbance(refs, noise * scale, factors, np.float64(float(latency)))
+    draws = _runs(refs, jax.random.key(seed), robot, horizon, dt, mismatch, x64)
+    refs, noise, factors, horizon = draws
+    spec = _scaled(refs, noise, factors, *labels[condition])
     m = perturbed_metrics(
         spec,
         loop.params,
@@ -377,17 +384,13 @@ def noise_curve(
         resolve_estimator(loop.estimator)
         controllers.get_controller(loop.controller)
     robot = _study_robot(robot, sets, "loops_by_name")
-    steps, horizon = study_steps(robot, horizon, dt)
-    with jax.enable_x64(checks.check_bool("x64", x64)):
-        refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
-    noise, factors = _unit_draws(key, refs, steps, mismatch)
+    refs, noise, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
     rows = []
     for name, loop in sets.items():
         used, _ = resolve_estimator(loop.estimator)
         for sxy in levels:
             sdeg = _DEG_PER_CM * sxy
-            scale = np.array([sxy, sxy, math.radians(sdeg)])
-            spec = Disturbance(refs, noise * scale, factors, np.float64(1.0 if latency else 0.0))
+            spec = _scaled(refs, noise, factors, sxy, sdeg, latency)
             m = perturbed_metrics(
                 spec, loop.params, controller=loop.controller, estimator=loop.estimator,
                 dt=dt, robot=robot, x64=x64,
