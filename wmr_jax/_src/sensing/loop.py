@@ -147,7 +147,7 @@ def disturbed_run(
         return _select(late, loops.ideal_move(state.pose, in_flight), state.pose)
 
     def body(carry, noise_next):
-        pose, wheel, fresh, held, fresh_move, held_move, state, acc = carry
+        pose, wheel, fresh, held, held_move, state, acc = carry
         applied = jnp.where(late, held, fresh)
         if limiter:
             # The estimator knows what its limiter lets through: it predicts
@@ -158,8 +158,11 @@ def disturbed_run(
         else:
             # The estimator's prediction moves its estimate by the applied
             # command's arc; under latency the command now in flight is
-            # ``fresh``, whose arc was computed with it and is the next
-            # prediction's too.
+            # ``fresh``, whose arc is the next prediction's too (carried as
+            # ``held_move``). The arc is computed here, from the carried
+            # command, not where the law returns it: XLA would fuse the law
+            # into each of the arc's parts and compute it four times.
+            fresh_move = loops.ArcMove.of(fresh.real, fresh.imag, dt)
             followed, move = applied, _select(late, held_move, fresh_move)
         target = realised(followed, spec.mismatch, robot)
         pose, wheel, rims, distance = loops.advance_period(
@@ -171,15 +174,14 @@ def disturbed_run(
         sensed = measurement(pose, noise_next)
         predicted = loops.ideal_move(state.pose, move)
         state = estimator.update(state, predicted, followed, sensed, ref, estimate, robot, dt)
-        in_flight = fresh_move
         if limiter:
             in_flight = _followed(wheel, fresh, robot, dt)[0]
             in_flight = loops.ArcMove.of(in_flight.real, in_flight.imag, dt)
+        else:
+            in_flight = held_move = fresh_move
         command = loops.split_command(law_input(state, in_flight), ref, params, options)
-        # With a limiter each period's arc follows from its state (above).
-        move = fresh_move if limiter else loops.ArcMove.of(command.real, command.imag, dt)
         recorded = (pose.stacked(), out, state.pose.stacked()) if record else None
-        return (pose, wheel, command, fresh, move, fresh_move, state, acc), recorded
+        return (pose, wheel, command, fresh, held_move, state, acc), recorded
 
     pose = loops.SplitPose.of(init)
     # The estimate starts from the first measurement (docs/model.md §9); no
@@ -188,18 +190,9 @@ def disturbed_run(
     zero = jnp.zeros((), init.dtype)
     still = loops.ArcMove.of(zero, zero, dt)
     first = loops.split_command(law_input(state, still), ref, params, options)
-    first_move = loops.ArcMove.of(first.real, first.imag, dt)
     later = jnp.concatenate([spec.noise[1:], jnp.zeros_like(spec.noise[:1])])
-    carry = (
-        pose,
-        loops.initial_wheel(init, options),
-        first,
-        jnp.zeros_like(first),
-        first_move,
-        still,
-        state,
-        acc,
-    )
+    wheel = loops.initial_wheel(init, options)
+    carry = (pose, wheel, first, jnp.zeros_like(first), still, state, acc)
     step = loops.remat(body) if options.remat else body
     (pose, *_, acc), ys = jax.lax.scan(step, carry, later)
     return pose.stacked(), acc, ys
