@@ -10,8 +10,7 @@
 # that would move a committed figure fails the tests until the stage is rerun.
 # STAGE is any of: paper compare maps waypoints animate tune robustness
 # compare-tuning compare-sizes compare-robust bench (default: all; on 2 CPU
-# cores shared with other work, tune took 12 minutes, robustness 2 and
-# compare-robust 39).
+# cores, tune took 5 minutes, robustness 2 and compare-robust 18).
 # Every command is seeded (the seed is its default unless named here), so a
 # rerun prints the same tables; bench timings are the exception.
 set -euo pipefail
