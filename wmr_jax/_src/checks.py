@@ -516,10 +516,13 @@ def as_poses(name: str, value: Any, *, batch: bool | None) -> jax.Array:
     ok_ndim = {False: (1,), True: (2,), None: (1, 2)}[batch]
     if len(shape) not in ok_ndim or shape[-1] != 3 or (len(shape) == 2 and shape[0] == 0):
         raise ValueError(f"{name} has shape {shape}; allowed: {allowed} [x cm, y cm, theta rad]")
+    limit = position_limit()
     if arr is not None:
-        # Concrete, but maybe closed over by a caller's jit: check it eagerly.
+        # Concrete, but maybe closed over by a caller's jit: check it eagerly,
+        # as one program (op by op, each of them compiled for each new shape).
         with jax.ensure_compile_time_eval():
-            finite = bool(jnp.all(jnp.isfinite(arr)))
+            flags, reduced = _device_pose_checks(arr, limit)
+            finite, spun, too_far = (bool(f) for f in flags)
     else:
         finite = bool(np.isfinite(host).all())
     if not finite:
@@ -531,10 +534,7 @@ def as_poses(name: str, value: Any, *, batch: bool | None) -> jax.Array:
             lambda rows: ~np.isfinite(rows),
             "is not finite; allowed: finite numbers",
         )
-    if arr is not None:
-        with jax.ensure_compile_time_eval():
-            spun = bool(jnp.any(jnp.abs(arr[..., 2]) > MAX_HEADING))
-    else:
+    if arr is None:
         spun = bool(np.any(np.abs(host[..., 2]) > MAX_HEADING))
     if spun:
         _raise_row(
@@ -546,11 +546,7 @@ def as_poses(name: str, value: Any, *, batch: bool | None) -> jax.Array:
             f"has a heading beyond {MAX_HEADING:.0e} rad, where float64 no longer holds "
             "the angle modulo 2π; allowed: |theta| <= 1e+12 rad",
         )
-    limit = position_limit()
-    if arr is not None:
-        with jax.ensure_compile_time_eval():
-            too_far = bool(jnp.any(jnp.abs(arr[..., :2]) > limit))
-    else:
+    if arr is None:
         too_far = bool(np.any(np.abs(host[..., :2]) > limit))
     if too_far:
         dtype = np.dtype(float_dtype()).name
@@ -564,11 +560,25 @@ def as_poses(name: str, value: Any, *, batch: bool | None) -> jax.Array:
             f"must stay finite){_FLOAT64_HINT if dtype != 'float64' else ''}",
         )
     if arr is not None:
-        with jax.ensure_compile_time_eval():
-            return arr.at[..., 2].set(reduce_heading(arr[..., 2]))
+        return reduced
     host = host.copy()
     host[..., 2] = reduce_heading(host[..., 2])
     return jnp.asarray(host, dtype=float_dtype())
+
+
+@jax.jit
+def _device_pose_checks(arr: jax.Array, limit: Any) -> tuple[tuple[jax.Array, ...], jax.Array]:
+    """``as_poses``'s checks of a device array, and the array with its headings reduced.
+
+    ``((all finite, any heading beyond MAX_HEADING, any |x|, |y| beyond
+    limit), reduced array)``.
+    """
+    flags = (
+        jnp.all(jnp.isfinite(arr)),
+        jnp.any(jnp.abs(arr[..., 2]) > MAX_HEADING),
+        jnp.any(jnp.abs(arr[..., :2]) > limit),
+    )
+    return flags, arr.at[..., 2].set(reduce_heading(arr[..., 2]))
 
 
 def _raise_row(name, shape, arr, host, bad, message: str):

@@ -13,6 +13,7 @@ checks in ``checks.py``.
 
 from __future__ import annotations
 
+import functools
 from typing import Any, NamedTuple
 
 import jax
@@ -303,9 +304,15 @@ def finite_result(poses: Any, result: Any, *, pose_axes: int = 1) -> Any:
         local = [np.asarray(jnp.isfinite(s.data).all(axis=axes)) for s in poses.addressable_shards]
         finite = np.concatenate([f.reshape(-1) for f in local])
     else:
-        finite = np.asarray(jnp.isfinite(poses).all(axis=axes))
+        finite = np.asarray(_finite_runs(poses, axes))
     require_finite_runs(finite, poses.dtype)
     return result
+
+
+@functools.partial(jax.jit, static_argnums=1)
+def _finite_runs(poses: jax.Array, axes: tuple[int, ...]) -> jax.Array:
+    """Whether each run's poses are all finite (one program, not an op-by-op pair)."""
+    return jnp.isfinite(poses).all(axis=axes)
 
 
 # ---------------------------------------------------------------- entry points
