@@ -93,11 +93,12 @@ def test_tune_robust_judges_under_the_noise_of_the_robustness_command(monkeypatc
 
 
 def test_joint_tuning_moves_the_schedule_and_the_filter_and_saves_them_whole(tmp_path):
-    # The default problem: the gain schedule and the EKF, one vector of logits.
-    # The default problem and estimator, on a 2-knot schedule (a tenth of the
-    # compile time of the default 10 knots).
-    config = tuning.RobustConfig(iters=3, poses=3, nonideal_poses=2, eval_poses=3, compare=False)
-    assert (config.problem, config.estimator) == ("schedule", "ekf")
+    # The default problem: the gain schedule and the EKF, one vector of logits,
+    # with the default non-ideal group, on a 2-knot schedule (a tenth of the
+    # compile time of the default 10 knots). The settings of the command's
+    # test below (2 iterations of 2 poses): one compiled step serves both.
+    config = tuning.RobustConfig(iters=2, poses=2, eval_poses=3, compare=False)
+    assert (config.problem, config.estimator, config.nonideal_poses) == ("schedule", "ekf", 8)
     config = dataclasses.replace(config, knots=2)
     result = tuning.tune_robust(config)
     loop = result["loop"]
@@ -124,11 +125,8 @@ def test_joint_tuning_moves_the_schedule_and_the_filter_and_saves_them_whole(tmp
 
 
 def test_the_observer_is_tuned_with_gains_in_range():
-    # The settings of the command's test below (2 iterations of 2 poses, 8
-    # non-ideal, a 2-knot schedule): one compiled step serves both.
-    config = small_config(
-        problem="schedule", estimator="observer", knots=2, iters=2, poses=2, nonideal_poses=8
-    )
+    # The ideal-loop group only: the non-ideal one is the filter's test's.
+    config = small_config(problem="schedule", estimator="observer", knots=2, iters=2, poses=2)
     loop = tuning.tune_robust(config)["loop"]
     gains = [*loop.estimator.position, *loop.estimator.heading]
     assert len(gains) == 12 and all(0.0 < g <= 1.0 for g in gains)
@@ -151,11 +149,11 @@ def test_config_refuses_unknown_problems_and_estimators(changes, message):
 
 def test_robust_command_tunes_and_judges_the_chosen_problem(tmp_path, capsys):
     argv = ["tune", "--robust", "--out", str(tmp_path), "--iters", "2", "--poses", "2"]
-    assert main([*argv, "--estimator", "observer", "--knots", "2"]) == 0
+    assert main([*argv, "--knots", "2"]) == 0  # the default: the schedule and the EKF
     saved = json.loads((tmp_path / "tuned_gains.json").read_text())
-    assert saved["kind"] == "schedule" and saved["estimator"]["kind"] == "observer"
+    assert saved["kind"] == "schedule" and saved["estimator"]["kind"] == "ekf"
     table = (tmp_path / "robust_evaluation.md").read_text()
-    assert "model robot" in table and "observer" in table
+    assert "model robot" in table and "| ekf |" in table
     # --fixed: the 7 gains with raw feedback; no estimator saved.
     assert main([*argv, "--fixed"]) == 0
     saved = json.loads((tmp_path / "tuned_gains.json").read_text())
@@ -236,6 +234,27 @@ def test_robust_tuning_on_another_robot_tunes_and_judges_on_it():
     assert {r["gains"] for r in result["rows"]} == {"paper", "robust-tuned"}
     assert all(r["horizon s"] == pytest.approx(horizon, abs=0.033) for r in result["rows"])
     assert all(r["peak wheel cm/s"] <= 60.0 * 1.03 * (1 + 1e-6) for r in result["rows"])
+
+
+def test_robust_command_hands_its_estimator_and_table_sizes_to_the_tuner(tmp_path, monkeypatch):
+    from wmr_jax._src.sensing.loop import ClosedLoop
+    from wmr_jax._src.tuning import robust
+    from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
+
+    seen = []
+
+    def fake(config, *, progress_fn, on_tuned, **kwargs):
+        seen.append(config)
+        on_tuned(ClosedLoop(w.SHIM_SUNG, paper_feasible_gains(w.Robot()), None), [1.0])
+        return _fake_result(config)
+
+    monkeypatch.setattr(robust, "tune_robust", fake)
+    argv = ["tune", "--robust", "--out", str(tmp_path), "--iters", "2"]
+    assert main([*argv, "--estimator", "observer", "--knots", "3"]) == 0
+    assert (seen[-1].problem, seen[-1].estimator, seen[-1].knots) == ("schedule", "observer", 3)
+    assert main(argv) == 0
+    assert (seen[-1].problem, seen[-1].estimator) == ("schedule", "ekf")
+    assert seen[-1].knots == tuning.RobustConfig().knots
 
 
 def test_robust_command_tunes_on_the_robot_it_is_given(tmp_path, capsys, monkeypatch):
