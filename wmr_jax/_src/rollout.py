@@ -301,7 +301,7 @@ def finite_result(poses: Any, result: Any, *, pose_axes: int = 1) -> Any:
     axes = tuple(range(-pose_axes, 0))
     if isinstance(poses, jax.Array) and not poses.is_fully_addressable:
         # Spread over several processes: each checks the runs it holds.
-        local = [np.asarray(jnp.isfinite(s.data).all(axis=axes)) for s in poses.addressable_shards]
+        local = [np.asarray(_finite_runs(s.data, axes)) for s in poses.addressable_shards]
         finite = np.concatenate([f.reshape(-1) for f in local])
     else:
         finite = np.asarray(_finite_runs(poses, axes))
