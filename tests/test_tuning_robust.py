@@ -154,10 +154,9 @@ def test_robust_command_tunes_and_judges_the_chosen_problem(tmp_path, capsys):
     assert saved["kind"] == "schedule" and saved["estimator"]["kind"] == "ekf"
     table = (tmp_path / "robust_evaluation.md").read_text()
     assert "model robot" in table and "| ekf |" in table
-    # --fixed: the 7 gains with raw feedback; no estimator saved.
-    assert main([*argv, "--fixed"]) == 0
-    saved = json.loads((tmp_path / "tuned_gains.json").read_text())
-    assert saved["kind"] == "fixed" and "estimator" not in saved
+    # --fixed (the 7 gains with raw feedback) is handed to the tuner as such
+    # (test_robust_command_hands_..._to_the_tuner) and saved without an
+    # estimator (test_robust_command_tunes_on_the_robot_it_is_given).
 
 
 @pytest.mark.parametrize(
@@ -255,6 +254,9 @@ def test_robust_command_hands_its_estimator_and_table_sizes_to_the_tuner(tmp_pat
     assert main(argv) == 0
     assert (seen[-1].problem, seen[-1].estimator) == ("schedule", "ekf")
     assert seen[-1].knots == tuning.RobustConfig().knots
+    # --fixed: the 7 gains with raw feedback.
+    assert main([*argv, "--fixed"]) == 0
+    assert (seen[-1].problem, seen[-1].estimator) == ("fixed", None)
 
 
 def test_robust_command_tunes_on_the_robot_it_is_given(tmp_path, capsys, monkeypatch):
@@ -275,6 +277,8 @@ def test_robust_command_tunes_on_the_robot_it_is_given(tmp_path, capsys, monkeyp
     argv = ["tune", "--robust", "--out", str(tmp_path), "--iters", "2", "--fixed"]
     assert main([*argv, "--robot", "turtlebot3-burger"]) == 0
     assert seen == [{"robot": burger}]
+    saved = json.loads((tmp_path / "tuned_gains.json").read_text())
+    assert saved["kind"] == "fixed" and "estimator" not in saved
     out = capsys.readouterr().out
     assert "on the robot turtlebot3-burger (L = 8 cm" in out and "horizon 37 s" in out
     assert w.load_tuned(tmp_path / "tuned_gains.json").robot == burger
