@@ -20,11 +20,13 @@ single cost of a rollout step.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax import lax
 
 __all__ = [
     "RobotState",
@@ -37,6 +39,8 @@ __all__ = [
     "sin_small",
     "sinc",
 ]
+
+_NEAREST_EVEN = lax.RoundingMethod.TO_NEAREST_EVEN  # what jnp.round does
 
 # Below this |u| the series 1 − u²/6 + u⁴/120 equals sin(u)/u to float64
 # precision (the next term is u⁶/5040 < 1e-27), and sin(u)/u would lose digits.
@@ -110,11 +114,23 @@ def rate_limit(value: jax.Array, previous: jax.Array, rate: jax.Array, dt: jax.A
 
 
 def _polynomial(z: jax.Array, coefficients: tuple[float, ...]) -> jax.Array:
-    """Return ``Σ c_k z^k`` by Horner's rule."""
-    acc = jnp.full_like(z, coefficients[-1])
+    """Return ``Σ c_k z^k`` by Horner's rule (in ``lax``: see ``sin_cos``)."""
+    const = _constants(z)
+    acc = lax.full_like(z, coefficients[-1])
     for c in coefficients[-2::-1]:
-        acc = acc * z + c
+        acc = lax.add(lax.mul(acc, z), const(c))
     return acc
+
+
+def _constants(x: jax.Array) -> Callable:
+    """Scalar constants in ``x``'s dtype, weakly typed as ``x`` is.
+
+    Mixed with ``x`` in ``lax`` they act as Python numbers do in ``jnp``: a
+    result is weakly typed (takes a caller's dtype) only if ``x`` was.
+    """
+    if x.weak_type:
+        return lambda c: lax.full_like(x, c, shape=())
+    return lambda c: np.asarray(c, x.dtype)
 
 
 @jax.custom_jvp
@@ -137,20 +153,26 @@ def sin_cos(angle: jax.Array) -> tuple[jax.Array, jax.Array]:
     dtype = np.dtype(angle.dtype)
     if dtype not in _PIO2:
         return jnp.cos(angle), jnp.sin(angle)
-    p1, p2, p3 = _PIO2[dtype]
-    k = jnp.round(angle * (2 / np.pi))
-    r = ((angle - k * p1) - k * p2) - k * p3
-    z = r * r
-    sin_r = r + r * z * _polynomial(z, _SIN[dtype])
-    cos_r = (1 - 0.5 * z) + z * z * _polynomial(z, _COS[dtype])
+    # Written in lax, each constant in the angle's dtype: the same operations
+    # as the jnp spelling, bit for bit, at half its cost to trace (the
+    # rollouts call this a dozen times per step they trace).
+    const = _constants(angle)
+    p1, p2, p3 = (const(p) for p in _PIO2[dtype])
+    k = lax.round(lax.mul(angle, const(2 / np.pi)), _NEAREST_EVEN)
+    r = lax.sub(lax.sub(lax.sub(angle, lax.mul(k, p1)), lax.mul(k, p2)), lax.mul(k, p3))
+    z = lax.mul(r, r)
+    sin_r = lax.add(r, lax.mul(lax.mul(r, z), _polynomial(z, _SIN[dtype])))
+    cos_r = lax.sub(const(1), lax.mul(const(0.5), z))
+    cos_r = lax.add(cos_r, lax.mul(lax.mul(z, z), _polynomial(z, _COS[dtype])))
     # The quadrant as an integer: k mod 4 from its two low bits.
-    quadrant = k.astype(jnp.int32)
-    odd = (quadrant & 1) == 1
-    cos_k = jnp.where(odd, sin_r, cos_r)
-    sin_k = jnp.where(odd, cos_r, sin_r)
-    cos_k = jnp.where(((quadrant + 1) & 2) == 2, -cos_k, cos_k)
-    sin_k = jnp.where((quadrant & 2) == 2, -sin_k, sin_k)
-    return cos_k, sin_k
+    quadrant = lax.convert_element_type(k, np.int32)
+    one, two = np.int32(1), np.int32(2)
+    odd = lax.eq(lax.bitwise_and(quadrant, one), one)
+    cos_k = lax.select(odd, sin_r, cos_r)
+    sin_k = lax.select(odd, cos_r, sin_r)
+    cos_flip = lax.eq(lax.bitwise_and(lax.add(quadrant, one), two), two)
+    sin_flip = lax.eq(lax.bitwise_and(quadrant, two), two)
+    return lax.select(cos_flip, lax.neg(cos_k), cos_k), lax.select(sin_flip, lax.neg(sin_k), sin_k)
 
 
 @sin_cos.defjvp
