@@ -148,7 +148,13 @@ def arrived(
     tol_r, tol_theta = _check_tolerances(tol_r, tol_theta)
     poses, refs = as_pose_array("poses", poses), as_pose_array("refs", refs)
     _check_broadcast("poses", jnp.shape(poses)[:-1], "refs", jnp.shape(refs)[:-1])
-    return _is_arrived(poses, refs, tol_r, tol_theta)
+    return _arrived_jit(poses, refs, tol_r, tol_theta)
+
+
+# The metrics of whole trajectories as one compiled program each, not op by
+# op: dozens of operations (the polar error, its sine and cosine) would each
+# be compiled for every new shape of a batch.
+_arrived_jit = jax.jit(_is_arrived)
 
 
 def _check_broadcast(a: str, shape_a: tuple, b: str, shape_b: tuple) -> None:
@@ -195,8 +201,15 @@ def arrival_time(
     poses = _poses_of(traj)
     refs = as_pose_array("refs", refs)
     _check_broadcast("traj", jnp.shape(poses)[:-2], "refs", jnp.shape(refs)[:-1])
-    samples = poses[..., 1:, :]
-    ok = _is_arrived(samples, refs[..., None, :], tol_r, tol_theta)
+    samples, refs = poses[..., 1:, :], refs[..., None, :]
+    if not is_traced((samples, refs)):
+        samples, refs = law.checked_pair(samples, refs)
+    return _arrival_time_jit(samples, refs, tol_r, tol_theta, dt)
+
+
+@jax.jit
+def _arrival_time_jit(samples, refs, tol_r, tol_theta, dt):
+    ok = _is_arrived(samples, refs, tol_r, tol_theta)
     # Length of the run of arrived samples that ends the horizon.
     settled = jnp.sum(jnp.cumprod(ok[..., ::-1], axis=-1), axis=-1)
     steps = ok.shape[-1]
