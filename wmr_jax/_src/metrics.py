@@ -320,6 +320,12 @@ def zigzag_count(
         omega_dead_band = check_number(
             "omega_dead_band", omega_dead_band, closed=True, unit="rad/s"
         )
+    return _zigzags(v, omega, v_dead_band, omega_dead_band)
+
+
+@jax.jit
+def _zigzags(v, omega, v_dead_band, omega_dead_band):
+    """Sign changes of ``v`` plus those of ``ω``: one compiled program (see ``_arrived_jit``)."""
     return _sign_changes(v, v_dead_band) + _sign_changes(omega, omega_dead_band)
 
 
