@@ -94,6 +94,32 @@ def test_repeated_calls_do_not_retrace(caplog):
         assert any("Compiling" in r.getMessage() for r in caplog.records)
 
 
+def test_a_call_with_values_traces_without_remat_and_a_differentiated_one_with_it(monkeypatch):
+    """remat only changes what a reverse pass stores: a top-level call, which
+    nothing can differentiate, skips it; a call under ``grad`` keeps it."""
+    from wmr_jax._src import loops
+
+    checkpointed = []
+
+    def remat(body):
+        checkpointed.append(body)
+        return jax.checkpoint(body, prevent_cse=False)
+
+    monkeypatch.setattr(loops, "remat", remat)
+    refs = random_refs(4, 3)
+    steps = STEPS + 3  # a program no other test compiled
+    poses = w.batch_rollout(refs, w.Gains(kr=50.0), steps=steps).poses
+    assert checkpointed == []
+
+    def last_x(kr):
+        return w.batch_rollout(refs, w.Gains(kr=kr), steps=steps).poses[:, -1, 0].sum()
+
+    value, grad = jax.value_and_grad(last_x)(50.0)
+    assert len(checkpointed) == 1 and np.isfinite(grad)
+    # The same runs either way.
+    assert float(value) == pytest.approx(float(np.sum(poses[:, -1, 0])), rel=1e-12)
+
+
 @pytest.fixture(scope="module")
 def grid_arrivals():
     """From (0, 0, 0), k_r = 60: the 7 paper poses, an 8×8×8 grid and one pose out of reach.
