@@ -201,10 +201,10 @@ def arrival_time(
     poses = _poses_of(traj)
     refs = as_pose_array("refs", refs)
     _check_broadcast("traj", jnp.shape(poses)[:-2], "refs", jnp.shape(refs)[:-1])
-    samples, refs = poses[..., 1:, :], refs[..., None, :]
-    if not is_traced((samples, refs)):
-        samples, refs = law.checked_pair(samples, refs)
-    return _arrival_time_jit(samples, refs, tol_r, tol_theta, dt)
+    # The samples get the checks polar_error gives poses called with values
+    # (range, headings reduced); refs had them above.
+    samples = as_pose_array("pose", poses[..., 1:, :])
+    return _arrival_time_jit(samples, refs[..., None, :], tol_r, tol_theta, dt)
 
 
 @jax.jit

@@ -61,7 +61,6 @@ __all__ = [
     "Diagnostics",
     "PolarError",
     "blend",
-    "checked_pair",
     "commands",
     "control",
     "control_diagnostics",
@@ -171,7 +170,7 @@ def polar_error(
     if frame is None:
         if not is_traced((pose, ref)):
             # Called with values: NaN must not read as "at the goal" (r_e = 0).
-            pose, ref = checked_pair(pose, ref)
+            pose, ref = _checked_pair(pose, ref)
         x, y = pose[..., 0], pose[..., 1]
         cos_c, sin_c = sin_cos(pose[..., 2])
     else:
@@ -475,7 +474,7 @@ def _control(pose, ref, gains, *, temperature):
 _control_jit = jax.jit(_control, static_argnames=("temperature",))
 
 
-def checked_pair(pose: Any, ref: Any) -> tuple[Any, Any]:
+def _checked_pair(pose: Any, ref: Any) -> tuple[Any, Any]:
     """Check concrete poses ``(..., 3)`` that must broadcast against each other."""
     pose, ref = as_pose_array("pose", pose), as_pose_array("ref", ref)
     try:
