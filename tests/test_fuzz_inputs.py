@@ -7,7 +7,9 @@ each call is judged four ways: a valid input must give the right result
 the value (``clear``); an invalid input that returns is ``silent``, and any
 other exception a ``crash``. Both of the last two fail the test. The
 estimator and evaluation calls keep their shapes and static options fixed,
-so most valid calls reuse one compiled program; ten thousand calls in all.
+so most valid calls reuse one compiled program. The suite judges 2,400
+calls; each test has a ``slow`` copy with ten times its examples
+(``pytest -m slow``), 24,000 calls in all.
 """
 
 import collections
@@ -28,9 +30,12 @@ import wmr_jax as w
 from wmr_jax import studies
 from wmr_jax._src.robots import ROBOT_FIELDS
 
-ROBOT_FILES = 5000
-ESTIMATORS = 2000
-EVALUATIONS = 1500
+# Examples per test in the suite (the ``slow`` copies run ten times as many).
+ROBOT_FILES = 1000
+ROS_FILES = 300
+ESTIMATORS = 600
+EVALUATIONS = 500
+SLOW = 10
 
 # What a user may write where a number belongs but none is allowed.
 NOT_A_NUMBER = st.sampled_from(
@@ -72,6 +77,17 @@ def _expect(call, valid, names):
     return result
 
 
+def fuzz_pair(examples, **strategies):
+    """A test of ``examples`` generated calls, and its ``slow`` copy with ``SLOW`` times more."""
+
+    def make(body):
+        fast = fuzz_settings(examples)(given(**strategies)(body))
+        slow = fuzz_settings(SLOW * examples)(given(**strategies)(body))
+        return fast, pytest.mark.slow(slow)
+
+    return make
+
+
 _FOLDER = Path(tempfile.mkdtemp(prefix="wmr-fuzz-"))
 
 
@@ -93,14 +109,7 @@ def _robot_fields():
     return good
 
 
-@fuzz_settings(ROBOT_FILES)
-@given(
-    fields=_robot_fields(),
-    bad_field=st.sampled_from([*ROBOT_FIELDS, "wheel_base", "V_max", ""]),
-    bad_value=BAD_POSITIVE,
-    spoil=st.sampled_from(["none", "value", "top-level", "text"]),
-)
-def test_robot_json_files(fields, bad_field, bad_value, spoil):
+def _robot_json_file(fields, bad_field, bad_value, spoil):
     content = dict(fields)
     valid = spoil == "none"
     names = [str(_FOLDER)]
@@ -129,13 +138,16 @@ def test_robot_json_files(fields, bad_field, bad_value, spoil):
             assert float(getattr(robot, name)) == pytest.approx(want, rel=1e-12, abs=0), name
 
 
-@fuzz_settings(ROBOT_FILES * 3 // 10)
-@given(
-    separation=st.one_of(st.floats(min_value=0.05, max_value=1.0), BAD_POSITIVE),
-    radius=st.one_of(st.floats(min_value=0.01, max_value=0.3), BAD_POSITIVE),
-    speed=st.one_of(st.floats(min_value=0.05, max_value=3.0), BAD_POSITIVE),
-)
-def test_robot_ros_files(separation, radius, speed):
+test_robot_json_files, test_robot_json_files_slow = fuzz_pair(
+    ROBOT_FILES,
+    fields=_robot_fields(),
+    bad_field=st.sampled_from([*ROBOT_FIELDS, "wheel_base", "V_max", ""]),
+    bad_value=BAD_POSITIVE,
+    spoil=st.sampled_from(["none", "value", "top-level", "text"]),
+)(_robot_json_file)
+
+
+def _robot_ros_file(separation, radius, speed):
     def good(value, low, high):
         return isinstance(value, float) and not isinstance(value, bool) and low <= value <= high
 
@@ -154,6 +166,14 @@ def test_robot_ros_files(separation, radius, speed):
     if valid:
         assert float(robot.half_track) == pytest.approx(100 * separation / 2, rel=1e-12)
         assert float(robot.wheel_radius) == pytest.approx(100 * radius, rel=1e-12)
+
+
+test_robot_ros_files, test_robot_ros_files_slow = fuzz_pair(
+    ROS_FILES,
+    separation=st.one_of(st.floats(min_value=0.05, max_value=1.0), BAD_POSITIVE),
+    radius=st.one_of(st.floats(min_value=0.01, max_value=0.3), BAD_POSITIVE),
+    speed=st.one_of(st.floats(min_value=0.05, max_value=3.0), BAD_POSITIVE),
+)(_robot_ros_file)
 
 
 _REFS = np.array([[30.0, 20.0, 1.0], [-20.0, 15.0, 3.0]])
@@ -175,21 +195,7 @@ def _is_zero(value):
     return isinstance(value, float) and value == 0.0
 
 
-@fuzz_settings(ESTIMATORS)
-@given(
-    kind=st.sampled_from(["ekf", "observer"]),
-    field=st.sampled_from(["wheel_error", "sigma_xy", "sigma_theta", "position", "heading"]),
-    good=st.floats(min_value=0.01, max_value=1.0),
-    # An EKF's list is one value per run (two runs here): three values are not.
-    bad=st.one_of(
-        NOT_A_NUMBER.filter(lambda v: not isinstance(v, list)),
-        st.just([0.5, 0.5, 0.5]),
-        st.floats(max_value=0.0, allow_nan=False),
-        st.just(2.5),
-    ),
-    use_bad=st.booleans(),
-)
-def test_estimator_parameters(kind, field, good, bad, use_bad):
+def _estimator_parameters(kind, field, good, bad, use_bad):
     ekf_fields = ("wheel_error", "sigma_xy", "sigma_theta")
     if (kind == "ekf") != (field in ekf_fields):
         field = ekf_fields[0] if kind == "ekf" else "position"
@@ -210,6 +216,22 @@ def test_estimator_parameters(kind, field, good, bad, use_bad):
         assert np.all(np.isfinite(np.asarray(result.final_distance)))
 
 
+test_estimator_parameters, test_estimator_parameters_slow = fuzz_pair(
+    ESTIMATORS,
+    kind=st.sampled_from(["ekf", "observer"]),
+    field=st.sampled_from(["wheel_error", "sigma_xy", "sigma_theta", "position", "heading"]),
+    good=st.floats(min_value=0.01, max_value=1.0),
+    # An EKF's list is one value per run (two runs here): three values are not.
+    bad=st.one_of(
+        NOT_A_NUMBER.filter(lambda v: not isinstance(v, list)),
+        st.just([0.5, 0.5, 0.5]),
+        st.floats(max_value=0.0, allow_nan=False),
+        st.just(2.5),
+    ),
+    use_bad=st.booleans(),
+)(_estimator_parameters)
+
+
 _LOOP = None
 
 
@@ -220,16 +242,7 @@ def _loop():
     return _LOOP
 
 
-@fuzz_settings(EVALUATIONS)
-@given(
-    condition=st.one_of(
-        st.sampled_from(["nominal", "noise"]), st.sampled_from(["noisy", "", 3, None])
-    ),
-    mismatch=st.one_of(st.sampled_from([0.0, 0.03]), BAD_POSITIVE, st.just(1.5)),
-    seed=st.one_of(st.integers(min_value=0, max_value=2**31), st.sampled_from([-1, "0", 1.5])),
-    ref_value=st.one_of(st.floats(min_value=-60, max_value=60), NOT_A_NUMBER),
-)
-def test_evaluate(condition, mismatch, seed, ref_value):
+def _evaluate(condition, mismatch, seed, ref_value):
     refs = _REFS.copy().tolist()
     refs[0][0] = ref_value
     number = isinstance(mismatch, (int, float)) and not isinstance(mismatch, bool)
@@ -248,8 +261,19 @@ def test_evaluate(condition, mismatch, seed, ref_value):
         assert 0.0 <= result["success"] <= 1.0
 
 
-def test_ten_thousand_calls_were_judged():
-    """The tests above ran (in this order, in one process) and judged 10⁴ calls or more.
+test_evaluate, test_evaluate_slow = fuzz_pair(
+    EVALUATIONS,
+    condition=st.one_of(
+        st.sampled_from(["nominal", "noise"]), st.sampled_from(["noisy", "", 3, None])
+    ),
+    mismatch=st.one_of(st.sampled_from([0.0, 0.03]), BAD_POSITIVE, st.just(1.5)),
+    seed=st.one_of(st.integers(min_value=0, max_value=2**31), st.sampled_from([-1, "0", 1.5])),
+    ref_value=st.one_of(st.floats(min_value=-60, max_value=60), NOT_A_NUMBER),
+)(_evaluate)
+
+
+def test_every_generated_call_was_judged():
+    """The tests above ran (in this order, in one process) and judged every call they made.
 
     ``WMR_FUZZ_TALLY=FILE`` writes the tally as JSON (silent and crashing
     calls fail their test instead of being counted).
@@ -258,5 +282,6 @@ def test_ten_thousand_calls_were_judged():
         Path(os.environ["WMR_FUZZ_TALLY"]).write_text(json.dumps(dict(TALLY), indent=1))
     if sum(TALLY.values()) == 0:
         pytest.skip("run with the rest of this file")
-    assert sum(TALLY.values()) >= 10_000, TALLY
-    assert TALLY["invalid, clear error"] > 1000 and TALLY["valid, answered"] > 1000, TALLY
+    # Hypothesis may run an example twice (shrinking, replay): at least one call per example.
+    assert sum(TALLY.values()) >= ROBOT_FILES + ROS_FILES + ESTIMATORS + EVALUATIONS, TALLY
+    assert TALLY["invalid, clear error"] > 500 and TALLY["valid, answered"] > 500, TALLY
