@@ -193,9 +193,10 @@ def test_compare_runs_all_three_methods_on_a_schedule_of_its_size():
     searched = []
 
     def watched(search):
-        def run(*args, problem, **kwargs):
-            searched.append((search.__name__, problem.dim))
-            return search(*args, problem=problem, **kwargs)
+        def run(*args, problem, budget_s, **kwargs):
+            searched.append((search.__name__, problem.dim, budget_s > 0))
+            # One round each: what is searched is under test here, not for how long.
+            return search(*args, problem=problem, budget_s=0.0, **kwargs)
 
         return run
 
@@ -204,7 +205,8 @@ def test_compare_runs_all_three_methods_on_a_schedule_of_its_size():
             patch.setattr(compare_module, name, watched(getattr(compare_module, name)))
         rows = tuning.compare(seeds=(0,), problems=("schedule",), configs={"schedule": config})
     assert [r["method"] for r in rows] == ["gradient", "cma-es", "random search"]
-    assert searched == [("cma_es_search", 11), ("random_search", 11)]
+    # Each given the gradient's wall time (positive), searching the 11 logits.
+    assert searched == [("cma_es_search", 11, True), ("random_search", 11, True)]
     assert all(r["parameters"] == 11 for r in rows)
     for row in rows:
         assert row["wall_s"] > 0 and row["mean_arrival"] > 0, row  # inf: none arrives in 0.3 s
