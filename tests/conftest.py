@@ -126,50 +126,56 @@ def assert_metrics_of_runs(m, traj, refs, dt=0.033) -> dict:
 # each file goes whole to one worker (its compiled programs are reused within
 # it), in the order below. Handing out the longest files first keeps both
 # workers busy to the end, where a long file handed out last would leave one
-# idle. Approximate CPU seconds per file (2-core machine); a file not listed
-# counts as middling.
+# idle. Seconds per file measured on a 2-core machine (the mean of two runs
+# of the whole suite); a file not listed counts as one second.
 FILE_SECONDS = {
-    # The robust tuner's tests compile the joint gradients (schedule with a
-    # filter or an observer): some 250 s on one core, so they start first.
-    "test_tuning_robust.py": 250,
-    "test_fuzz_inputs.py": 60,
+    "test_tuning_robust.py": 56,
     "test_sensing.py": 45,
-    "test_robot_followups.py": 30,
-    "test_docs_current.py": 25,
-    "test_surfaces.py": 20,
-    "test_robot_commands.py": 15,
-    "test_accel_limits.py": 12,
-    "test_robot_studies.py": 10,
-    "test_evaluate.py": 40,
-    "test_robots.py": 35,
-    "test_usability.py": 30,
-    "test_fuzz.py": 27,
-    "test_robustness.py": 24,
-    "test_tuning.py": 23,
-    "test_velocity_loop.py": 19,
-    "test_schedule.py": 15,
-    "test_readme.py": 14,
-    "test_edges.py": 14,
+    "test_tuning.py": 42,
+    "test_fuzz.py": 38,
+    "test_velocity_loop.py": 25,
+    "test_tuning_edges.py": 24,
+    "test_schedule.py": 22,
+    "test_robustness.py": 22,
+    "test_sweep.py": 20,
+    "test_fuzz_inputs.py": 19,
+    "test_tuning_train.py": 18,
+    "test_edges.py": 16,
+    "test_shim_sung.py": 14,
+    "test_cli.py": 14,
     "test_controllers.py": 13,
-    "test_sharding.py": 12,  # in subprocesses
-    "test_shim_sung.py": 11,
-    "test_cli.py": 11,
-    "test_bench.py": 11,
-    "test_sweep.py": 11,
-    "test_rollout.py": 11,
-    "test_waypoints.py": 10,
-    "test_maps.py": 9,
-    "test_tuning_train.py": 8,
-    "test_velocity_loop_paths.py": 7,
-    "test_metrics.py": 6,
+    "test_robot_followups.py": 13,
+    "test_usability.py": 12,
+    "test_maps.py": 12,
+    "test_bench.py": 12,
+    "test_sharding.py": 12,
+    "test_robots.py": 11,
+    "test_readme.py": 11,
+    "test_rollout.py": 10,
+    "test_velocity_loop_paths.py": 10,
+    "test_evaluate.py": 9,
+    "test_meaning_law.py": 8,
+    "test_waypoints.py": 8,
+    "test_docs_current.py": 7,
+    "test_meaning_estimators.py": 6,
     "test_animation.py": 5,
-    "test_reference.py": 3,
-    "test_load_tuned.py": 3,
-    "test_params.py": 2,
-    "test_dynamics.py": 1,
+    "test_report_edges.py": 5,
+    "test_load_tuned.py": 5,
+    "test_meaning_disturbances.py": 5,
+    "test_reference.py": 4,
+    "test_metrics.py": 4,
+    "test_meaning_metrics.py": 3,
+    "test_dynamics_checked.py": 3,
+    "test_params.py": 3,
+    "test_accel_limits.py": 2,
+    "test_robot_commands.py": 2,
+    "test_dynamics.py": 2,
+    "test_robot_studies.py": 1,
+    "test_provenance.py": 1,
+    "test_boundaries.py": 1,
     "test_poses.py": 1,
-    "test_optimal.py": 1,
-    "test_io.py": 0,
+    "test_surfaces.py": 1,
+    "test_meaning_parametrisation.py": 1,
 }
 
 
@@ -196,7 +202,7 @@ def pytest_configure(config):
 
 def pytest_collection_modifyitems(items):
     """Longest files first; within a file, the written order."""
-    items.sort(key=lambda item: -FILE_SECONDS.get(item.path.name, 5))
+    items.sort(key=lambda item: -FILE_SECONDS.get(item.path.name, 1))
 
 
 def pytest_runtest_setup(item):
