@@ -142,6 +142,16 @@ def test_random_search_refuses_a_start_the_schedule_would_ignore():
         tuning.random_search(KEY, REFS, budget_s=0.0, problem="schedule", start=w.Gains())
 
 
+@pytest.mark.parametrize("generation", [0, 1, 2**31 - 2])
+def test_cma_es_asks_and_tells_with_the_keys_of_its_generation(generation):
+    # Each generation's keys are split(fold_in(key, generation + 1)), as the
+    # docs' comparison tables were drawn: computed in one compiled call.
+    key = jax.random.fold_in(KEY, 2)
+    want = jax.random.split(jax.random.fold_in(key, generation + 1))
+    got = compare_module._generation_keys(key, generation)
+    np.testing.assert_array_equal(jax.random.key_data(got), jax.random.key_data(want))
+
+
 def test_cma_es_keeps_its_best_when_a_flat_landscape_breaks_it(monkeypatch):
     # Every candidate scored alike: evosax's step size overflows after some
     # 300 generations and it asks for NaN candidates, which used to end the
