@@ -331,13 +331,14 @@ def test_loss_options_that_would_give_nan_or_inf_are_refused(options, message):
 
 
 def test_robust_gradient_refuses_non_finite_logits_and_warns_only_about_its_own_gains():
-    refs = random_refs(0, 4)
+    # N poses over the short horizon: the compiled gradient of the tests above.
+    refs = random_refs(0, N)
     with pytest.raises(ValueError, match=r"z = .*nan.* allowed: finite logits"):
-        tuning.robust_gradient(np.full(7, np.nan), refs, temperature=0.05)
+        tuning.robust_gradient(np.full(7, np.nan), refs, temperature=0.05, **SHORT)
     # Every z maps to feasible gains: no WheelSpeedWarning about others.
     with warnings.catch_warnings():
         warnings.simplefilter("error", w.WheelSpeedWarning)
-        loss, grad, _ = tuning.robust_gradient(np.zeros(7), refs, temperature=0.05)
+        loss, grad, _ = tuning.robust_gradient(np.zeros(7), refs, temperature=0.05, **SHORT)
     assert np.isfinite(float(loss)) and np.all(np.isfinite(np.asarray(grad)))
     # The logits become gains through one robot, not one per pose.
     robots = w.Robot(v_max=[100.0, 125.0, 110.0, 120.0])
