@@ -132,7 +132,7 @@ FILE_SECONDS = {
     "test_tuning_robust.py": 56,
     "test_sensing.py": 45,
     "test_tuning.py": 42,
-    "test_fuzz.py": 38,
+    "test_fuzz.py": 26,
     "test_velocity_loop.py": 25,
     "test_tuning_edges.py": 24,
     "test_schedule.py": 22,
