@@ -484,13 +484,17 @@ def list_as_array(value: Any) -> Any:
         return value
 
 
-def as_poses(name: str, value: Any, *, batch: bool | None) -> jax.Array:
+def as_poses(
+    name: str, value: Any, *, batch: bool | None, check_only: bool = False
+) -> jax.Array | None:
     """Return ``value`` as a float pose array after checking shape and finiteness.
 
     Args:
         name: the argument's name, for error messages.
         value: a pose ``(3,)`` or, where ``batch`` allows, a batch ``(N, 3)``.
         batch: ``False`` for a single pose, ``True`` for ``(N, 3)``, ``None`` for either.
+        check_only: only check, return ``None`` (no converted copy is made
+            or placed on a device: for callers that read the poses themselves).
 
     Raises:
         ValueError: naming the argument, its shape or bad value, and what is allowed.
@@ -560,7 +564,9 @@ def as_poses(name: str, value: Any, *, batch: bool | None) -> jax.Array:
             f"must stay finite){_FLOAT64_HINT if dtype != 'float64' else ''}",
         )
     if arr is not None:
-        return reduced
+        return None if check_only else reduced
+    if check_only:
+        return None
     host = host.copy()
     host[..., 2] = reduce_heading(host[..., 2])
     return jnp.asarray(host, dtype=float_dtype())

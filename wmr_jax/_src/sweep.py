@@ -430,19 +430,28 @@ class _Chunk:
     pad: int
     refs: np.ndarray
     init: Any
-    digest: str
 
 
 def _chunk_inputs(job: _Job, i: int) -> _Chunk:
-    """Read chunk ``i``'s inputs and the digest of everything per pose in it."""
+    """Read chunk ``i``'s inputs."""
     lo, hi = job.bounds(i)
     pad = job.chunk - (hi - lo)
     refs = _take(job.refs, True, lo, hi, pad)
     init = _take(job.init, True, lo, hi, pad) if job.batched_init else job.init
-    per_pose = [refs, init if job.batched_init else np.zeros(0)]
+    return _Chunk(i, lo, hi, pad, refs, init)
+
+
+def _chunk_digest(job: _Job, chunk: _Chunk) -> str:
+    """The digest of everything per pose in a chunk (what a stored chunk is matched by).
+
+    Only a sweep with ``out`` needs it: hashing is host work of the order of
+    the chunk's whole run on a GPU.
+    """
+    lo, hi, pad = chunk.lo, chunk.hi, chunk.pad
+    per_pose = [chunk.refs, chunk.init if job.batched_init else np.zeros(0)]
     for tree, mask in ((job.gains, job.gains_mask), (job.robot, job.robot_mask)):
         per_pose += jax.tree.leaves(_take(tree, mask, lo, hi, pad))
-    return _Chunk(i, lo, hi, pad, refs, init, _digest(*per_pose))
+    return _digest(*per_pose)
 
 
 def _check_chunk(job: _Job, chunk: _Chunk) -> None:
@@ -462,9 +471,9 @@ def _check_chunk(job: _Job, chunk: _Chunk) -> None:
         return ValueError(text)
 
     try:
-        checks.as_poses("refs", np.asarray(chunk.refs[:size]), batch=True)
+        checks.as_poses("refs", np.asarray(chunk.refs[:size]), batch=True, check_only=True)
         if job.batched_init:
-            checks.as_poses("init", np.asarray(chunk.init[:size]), batch=True)
+            checks.as_poses("init", np.asarray(chunk.init[:size]), batch=True, check_only=True)
     except ValueError as err:
         raise offset(err) from None
     lo, hi = chunk.lo, chunk.hi
@@ -479,8 +488,10 @@ def _check_chunk(job: _Job, chunk: _Chunk) -> None:
 
 def _check_result(job: _Job, chunk: _Chunk, host: dict[str, np.ndarray]) -> None:
     """Raise, as ``final_poses`` does, if a run of the chunk left the floating-point range."""
-    pose = np.stack([host[name] for name in ("final_x", "final_y", "final_theta")], axis=1)
-    checks.require_finite_runs(np.isfinite(pose).all(axis=1), job.dtype, first=chunk.lo)
+    finite = np.isfinite(host["final_x"])
+    finite &= np.isfinite(host["final_y"])
+    finite &= np.isfinite(host["final_theta"])
+    checks.require_finite_runs(finite, job.dtype, first=chunk.lo)
 
 
 def _implausible(job: _Job, values: dict[str, np.ndarray]) -> str | None:
@@ -561,27 +572,28 @@ def _run_chunks(
     """
     launch = _launcher(job)
 
-    def keep(chunk: _Chunk, values: dict[str, Any], *, computed: bool) -> None:
+    def keep(chunk: _Chunk, digest: str | None, values: dict[str, Any], *, computed: bool) -> None:
         host = {name: np.asarray(values[name])[: chunk.hi - chunk.lo] for name in SWEEP_FIELDS}
         if computed:
             _check_result(job, chunk, host)
         for name in SWEEP_FIELDS:
             results[name][chunk.lo : chunk.hi] = host[name]
         if computed and store is not None:
-            store.save(chunk.i, chunk.digest, host)
+            store.save(chunk.i, digest, host)
         done(chunk.i)
 
     pending = None
     for i in range(job.chunks):
         chunk = _chunk_inputs(job, i)
+        digest = None if store is None else _chunk_digest(job, chunk)
         loaded = None
         if store is not None and resume:
-            loaded = store.load(i, chunk.digest, chunk.hi - chunk.lo, job)
+            loaded = store.load(i, digest, chunk.hi - chunk.lo, job)
         if loaded is not None:
-            keep(chunk, loaded, computed=False)
+            keep(chunk, digest, loaded, computed=False)
             continue
         _check_chunk(job, chunk)
-        launched = (chunk, launch(chunk))
+        launched = (chunk, digest, launch(chunk))
         if pending is not None:
             keep(*pending, computed=True)
         pending = launched
