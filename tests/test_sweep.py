@@ -299,3 +299,25 @@ def test_the_streamed_arrival_is_the_settled_one_for_runs_that_arrive_leave_and_
     assert came_back.sum() >= 5, came_back.sum()  # the case this test is about
     got = w.sweep(refs, steps=100, tol_r=tol_r, tol_theta=tol_theta)
     np.testing.assert_array_equal(got["arrival_time"], want)
+
+
+def test_the_timing_script_of_docs_scale_records_what_it_timed(tmp_path):
+    # experiments/time_sweep.py gives docs/scale.md its sweep figures.
+    import importlib.util
+    import json
+    import statistics
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parent.parent / "experiments" / "time_sweep.py"
+    spec = importlib.util.spec_from_file_location("time_sweep", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    out = tmp_path / "sweep.json"
+    argv = ["--poses", "48", "--steps", "5", "--chunk", "16", "--repeats", "2"]
+    assert script.main([*argv, "--json", str(out)]) == 0
+    record = json.loads(out.read_text())
+    assert (record["poses"], record["steps"], record["chunk"]) == (48, 5, 16)
+    assert len(record["runs_s"]) == 2 and record["median_s"] == statistics.median(record["runs_s"])
+    assert record["robot_steps_per_s"] == pytest.approx(48 * 5 / record["median_s"])
+    assert record["backend"] == jax.default_backend() and record["devices"] >= 1
+    assert record["jax"] == jax.__version__ and record["peak_rss_mb"] > 0
