@@ -230,6 +230,32 @@ def test_a_run_that_leaves_the_range_is_an_error_not_nans():
             )
 
 
+@pytest.mark.parametrize("field", ["final_x", "final_y", "final_theta"])
+def test_a_computed_run_with_any_coordinate_out_of_range_is_named(monkeypatch, field):
+    # Each coordinate of a computed chunk's final poses is checked, and the
+    # run is named by its row in the whole batch (row 1 of the second chunk).
+    from wmr_jax._src import sweep as sweep_module
+
+    real = sweep_module._launcher
+
+    def launcher(job):
+        launch = real(job)
+
+        def spoiled(chunk):
+            values = dict(launch(chunk))
+            if chunk.i == 1:
+                bad = np.array(values[field])
+                bad[1] = np.inf
+                values[field] = bad
+            return values
+
+        return spoiled
+
+    monkeypatch.setattr(sweep_module, "_launcher", launcher)
+    with pytest.raises(ValueError, match=r"1 run\(s\), e.g. run 3, left the range"):
+        w.sweep(_poses(4, 6), w.Gains(kr=60.0), steps=STEPS, dt=DT, chunk_size=2)
+
+
 @pytest.mark.parametrize(
     ("field", "value", "why"),
     [
