@@ -4,9 +4,11 @@ JAX's default float32 path is exercised by tests that wrap themselves in
 ``jax.enable_x64(False)`` (e.g. ``test_rollout.py::test_float32_default_path_*``).
 """
 
+import atexit
 import functools
 import os
 import shutil
+import sys
 from pathlib import Path
 
 # The suite is mostly XLA compilation (each test compiles its own shapes and
@@ -192,12 +194,34 @@ def _jax_started():
 
 
 def pytest_configure(config):
-    """Drop the compilation cache once it outgrows ``_CACHE_LIMIT`` (main process only)."""
-    if hasattr(config, "workerinput") or not _CACHE.is_dir():
+    """Drop the compilation cache once it outgrows ``_CACHE_LIMIT`` (main process only).
+
+    In an xdist worker, end the process at exit without JAX's own clean-up.
+    """
+    if hasattr(config, "workerinput"):
+        atexit.register(_exit_now)
+        return
+    if not _CACHE.is_dir():
         return
     size = sum(f.stat().st_size for f in _CACHE.rglob("*") if f.is_file())
     if size > _CACHE_LIMIT:
         shutil.rmtree(_CACHE, ignore_errors=True)
+
+
+def _exit_now():
+    """End a worker at once, skipping the exit handlers registered before this one.
+
+    JAX's handler (registered when ``jax`` was imported, so it would run after
+    this one) frees every program the process compiled, some thousand in a
+    worker: over ten seconds, and xdist waits up to ten for each worker to
+    end before it kills it and reports. By the time the interpreter exits,
+    pytest has finished and xdist has its results; the compilation cache is
+    written as programs compile. Only xdist workers do this, so a run in one
+    process (``-n 0``, mutation testing) exits as usual.
+    """
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
 
 
 def pytest_collection_modifyitems(items):
