@@ -223,7 +223,7 @@ def _exit_now():
     JAX's handler (registered when ``jax`` was imported, so it would run after
     this one) frees every program the process compiled, some thousand in a
     worker: over ten seconds, and xdist waits up to ten for each worker to
-    end before it kills it and reports. By the time the interpreter exits,
+    end before it kills it. By the time the interpreter exits,
     pytest has finished and xdist has its results; the compilation cache is
     written as programs compile. Only xdist workers do this, so a run in one
     process (``-n 0``, mutation testing) exits as usual.
