@@ -1,0 +1,182 @@
+"""What a robot file's numbers mean (docs/robots.md): ROS calibration multipliers and the messages.
+
+Each expected value is computed here from the file's own numbers (metres to
+centimetres by hand), never taken from the reader.
+"""
+
+import dataclasses
+import json
+import re
+
+import pytest
+
+import wmr_jax as w
+from wmr_jax import tuning
+from wmr_jax._src.robots import describe_robot, robot_json, same_robot
+
+
+def _read(tmp_path, name, text):
+    path = tmp_path / name
+    path.write_text(text)
+    return w.read_robot(path)
+
+
+def test_ros_calibration_multipliers_scale_the_sizes_they_name(tmp_path):
+    # ros2_controllers multiplies the track by wheel_separation_multiplier and
+    # each wheel by its own radius multiplier; the model has one radius: their mean.
+    read = _read(
+        tmp_path,
+        "calibrated.yaml",
+        "wheel_separation: 0.30\nwheel_separation_multiplier: 1.1\nwheel_radius: 0.05\n"
+        "left_wheel_radius_multiplier: 1.04\nright_wheel_radius_multiplier: 0.98\n",
+    )
+    assert read.robot.half_track == pytest.approx(100 * 0.30 * 1.1 / 2, rel=1e-12)  # 16.5 cm
+    assert read.robot.wheel_radius == pytest.approx(100 * 0.05 * (1.04 + 0.98) / 2, rel=1e-12)
+    used = read.note.split("used ", 1)[1].split(" -> ", 1)[0].split(", ")
+    assert used == [
+        "wheel_separation",
+        "wheel_separation_multiplier",
+        "wheel_radius",
+        "left_wheel_radius_multiplier",
+        "right_wheel_radius_multiplier",
+    ]
+    # One multiplier for both wheels (ROS 1's name) scales the radius alone.
+    read = _read(
+        tmp_path,
+        "one.yaml",
+        "wheel_separation: 0.30\nwheel_radius: 0.05\nwheel_radius_multiplier: 1.2\n",
+    )
+    assert read.robot.half_track == pytest.approx(15.0, rel=1e-12)
+    assert read.robot.wheel_radius == pytest.approx(6.0, rel=1e-12)
+    assert "used wheel_separation, wheel_radius, wheel_radius_multiplier ->" in read.note
+
+
+def test_a_yaml_syntax_error_names_its_line_and_column(tmp_path):
+    lines = ["diff_drive_controller:", "  ros__parameters:", "    wheel_radius: : 0.033"]
+    column = lines[2].index(": :") + 3  # 1-based column of the second colon
+    path = tmp_path / "broken.yaml"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ValueError) as err:
+        w.read_robot(path)
+    message = str(err.value)
+    assert message.startswith(f"{str(path)!r} cannot be read: ")
+    assert message.endswith(f"mapping values are not allowed here (line 3, column {column})")
+
+
+def test_two_robots_in_one_file_are_named_by_their_paths(tmp_path):
+    text = "".join(
+        f"{side}:\n  ros__parameters:\n    wheel_separation: 0.3\n" for side in ("left", "right")
+    )
+    with pytest.raises(ValueError) as err:
+        _read(tmp_path, "two.yaml", text)
+    assert str(err.value).endswith(
+        "holds 2 sets of diff_drive_controller parameters "
+        "(left.ros__parameters, right.ros__parameters); allowed: one robot's"
+    )
+
+
+def test_a_flat_file_is_read_at_the_top_level(tmp_path):
+    read = _read(tmp_path, "flat.yaml", "wheel_separation: 0.2\n")
+    assert "diff_drive_controller parameters at '(top level)': used wheel_separation" in read.note
+    assert read.robot.half_track == pytest.approx(10.0, rel=1e-12)
+
+
+def test_a_limit_flag_that_is_not_a_boolean_is_refused_naming_the_file(tmp_path):
+    text = (
+        "wheel_separation: 0.3\nlinear:\n  x:\n    has_velocity_limits: 3\n    max_velocity: 0.5\n"
+    )
+    path = tmp_path / "flag.yaml"
+    path.write_text(text)
+    with pytest.raises(ValueError) as err:
+        w.read_robot(path)
+    assert str(err.value) == (
+        f"{str(path)!r}: linear.x.has_velocity_limits = 3 is not allowed; allowed: true or false"
+    )
+
+
+def test_an_unknown_preset_lists_the_presets_and_the_files_allowed():
+    with pytest.raises(ValueError) as err:
+        w.robot_preset("burger")
+    presets = ", ".join(w.ROBOTS)
+    assert str(err.value) == (
+        f"robot preset 'burger' is not known; allowed: {presets}, or a .json or .yaml file"
+    )
+
+
+@pytest.mark.parametrize(
+    ("units", "allowed"),
+    [
+        # docs/model.md: lengths in cm, speeds in cm/s; the unit named, then what it measures.
+        ({"v_max": "m/s"}, r"'cm/s \(wheel rim speed limit\)'"),
+        ({"half_track": "m"}, r"'cm \(half the wheel separation\)'"),
+        ({"mass": "kg"}, "keys among Robot fields"),
+    ],
+    ids=["v_max", "half_track", "not-a-field"],
+)
+def test_a_unit_other_than_the_librarys_is_refused_with_the_librarys(tmp_path, units, allowed):
+    values = tuning.tuned_json(w.Gains(kr=30.0), robot=w.ROBOTS["pioneer-3dx"])
+    path = tmp_path / "tuned_gains.json"
+    path.write_text(json.dumps({**values, "robot_units": units}))
+    ((key, unit),) = units.items()
+    message = re.escape(f"robot_units[{key!r}] = {unit!r} is not allowed; allowed: ") + allowed
+    with pytest.raises(ValueError, match=message + re.escape(" (the numbers are read in the")):
+        w.load_tuned(path)
+
+
+def test_robot_units_that_are_not_an_object_are_refused(tmp_path):
+    values = tuning.tuned_json(w.Gains(kr=30.0), robot=w.ROBOTS["pioneer-3dx"])
+    path = tmp_path / "tuned_gains.json"
+    path.write_text(json.dumps({**values, "robot_units": ["cm"]}))
+    message = (
+        "robot_units = ['cm'] is not allowed; allowed: an object {field: unit} "
+        "as wmr-jax tune writes it"
+    )
+    with pytest.raises(ValueError, match=re.escape(message)):
+        w.load_tuned(path)
+
+
+def test_a_mapping_given_for_a_limit_flag_is_refused(tmp_path):
+    # Flattened, it would land among the ignored keys and the flag would read as true.
+    text = "wheel_separation: 0.3\nlinear:\n  x:\n    has_velocity_limits:\n      a: 1\n"
+    with pytest.raises(ValueError, match=re.escape("linear.x.has_velocity_limits is a mapping;")):
+        _read(tmp_path, "flag_map.yaml", text)
+
+
+def test_a_saved_robot_that_is_not_an_object_is_refused_listing_the_fields(tmp_path):
+    values = tuning.tuned_json(w.Gains(kr=30.0), robot=w.ROBOTS["pioneer-3dx"])
+    path = tmp_path / "tuned_gains.json"
+    path.write_text(json.dumps({**values, "robot": [1, 2]}))
+    fields = ", ".join(f.name for f in dataclasses.fields(w.Robot))
+    message = f"robot is not allowed; allowed: an object of Robot fields ({fields})"
+    with pytest.raises(ValueError, match=re.escape(message)):
+        w.load_tuned(path)
+
+
+def test_a_batch_of_robots_is_not_one_robot_to_save():
+    with pytest.raises(ValueError) as err:
+        robot_json(w.Robot(v_max=[100.0, 120.0]))
+    assert str(err.value) == "robot.v_max has shape (2,); allowed: one robot, a number per field"
+
+
+def test_a_robot_is_described_by_its_wheel_budget_and_the_limits_it_gives():
+    paper = w.Robot()
+    r, mass = float(paper.wheel_radius), float(paper.body_mass)
+    budget = f"L = 8 cm, V_max = 22 cm/s, r = {r:g} cm, M = {mass:g} kg"
+    assert describe_robot(w.Robot(half_track=8.0, v_max=22.0)) == f"custom ({budget})"
+    # A limit is shown where the robot gives one (above 0), however small.
+    limited = w.Robot(half_track=8.0, v_max=22.0, accel_max=0.5, angular_accel_max=30.0)
+    assert describe_robot(limited) == (
+        f"custom ({budget}, accel_max = 0.5 cm/s^2, angular_accel_max = 30 rad/s^2)"
+    )
+    assert describe_robot(w.ROBOTS["pioneer-3dx"]).startswith("pioneer-3dx (L = 16.5 cm, ")
+
+
+def test_robots_are_the_same_to_float32_rounding_and_no_further():
+    paper = w.Robot()
+    v_max = float(paper.v_max)
+    assert same_robot(paper, w.Robot(v_max=v_max * (1 + 5e-7)))  # within float32's rounding
+    assert not same_robot(paper, w.Robot(v_max=v_max * (1 + 2e-6)))
+    assert not same_robot(paper, w.Robot(v_max=v_max + 0.01))
+    # A field that is zero (the centre of mass on the axle) compares absolutely.
+    assert same_robot(paper, w.Robot(com_offset=1e-12))
+    assert not same_robot(paper, w.Robot(com_offset=1e-6))
