@@ -95,7 +95,7 @@ def test_tune_robust_judges_under_the_noise_of_the_robustness_command(monkeypatc
 def test_joint_tuning_moves_the_schedule_and_the_filter_and_saves_them_whole(tmp_path):
     # The default problem: the gain schedule and the EKF, one vector of logits,
     # with the default non-ideal group, on a 2-knot schedule: its step traces
-    # and compiles in about 23 s on one core, the default 10 knots' in 27-31 s.
+    # and compiles in about 23 s on one core, the default 10 knots' in 26-31 s.
     # The settings of the command's test below (2 iterations of 2 poses): one
     # compiled step serves both.
     config = tuning.RobustConfig(iters=2, poses=2, eval_poses=3, compare=False)
