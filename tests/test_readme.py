@@ -108,7 +108,14 @@ def test_python_snippets_run_as_written(page, tmp_path, monkeypatch):
 
 
 def test_commands_and_flags_exist(capsys):
-    """Every ``wmr-jax`` line of the README and docs/*.md: a command, and flags its --help lists."""
+    """Every ``wmr-jax`` line of the README and docs/*.md: a command, and flags its --help lists.
+
+    Each line is also parsed as typed: a flag spelled as a prefix of another
+    (``animate --robot`` for ``--robots``) is no flag of that command.
+    """
+    from wmr_jax._src.cli.main import build_parser
+
+    parser = build_parser()
     lines = {page.name: _commands(page.read_text(encoding="utf-8")) for page in PAGES}
     assert len(lines["README.md"]) >= 4 and sum(map(len, lines.values())) >= 25
     for page, words in ((page, words) for page, found in lines.items() for words in found):
@@ -117,7 +124,48 @@ def test_commands_and_flags_exist(capsys):
         assert done.value.code == 0, (page, words)
         helptext = capsys.readouterr().out
         for flag in (w for w in words[2:] if w.startswith("--")):
-            assert flag in helptext, (page, words, flag)
+            assert re.search(rf"{re.escape(flag)}\b(?!-)", helptext), (page, words, flag)
+        if "--help" not in words:
+            args = parser.parse_args(words[1:])
+            assert args.command == words[1], (page, words)
+
+
+def test_the_robot_pages_python_runs_as_written(tmp_path, monkeypatch, capsys):
+    """docs/robots.md's Python, on the files its bash blocks write and a Burger's tuned file.
+
+    Its evaluation is the ``wmr-jax evaluate`` one: over the Burger's own
+    horizon (37 s), where the paper robot's 6 s would leave both references
+    unreached.
+    """
+    import subprocess
+
+    import wmr_jax as w
+    from wmr_jax import studies, tuning
+
+    page = _read("docs/robots.md")
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "my_robot.yaml").write_text(_blocks("yaml", page)[0])
+    printf = next(line for line in page.splitlines() if line.startswith("printf "))
+    subprocess.run(["bash", "-c", printf], check=True)
+    burger = w.ROBOTS["turtlebot3-burger"]
+    gains = studies.robot_defaults("shim-sung", burger)  # the paper's, within its wheels
+    (tmp_path / "results" / "tb3").mkdir(parents=True)
+    saved = tuning.tuned_json(gains, robot=burger)
+    (tmp_path / "results" / "tb3" / "tuned_gains.json").write_text(json.dumps(saved))
+    snippets = _blocks("python", page)
+    assert len(snippets) == 2
+    for code in snippets:
+        exec(compile(code, "docs/robots.md", "exec"), {"__name__": "robots"})
+    success, mean, peak, _, v_max = capsys.readouterr().out.split()
+    refs = [[30.0, 20.0, 0.8], [-40.0, 10.0, 3.1]]  # the page's my_refs.csv
+    horizon = studies.study_horizon(burger)
+    expected = tuning.evaluate(gains, refs, robot=burger, horizon=horizon)
+    assert horizon == 37.0 and float(v_max) == 22.72
+    assert (float(success), float(mean)) == (expected.success_rate, expected.mean_arrival)
+    assert float(peak) == expected.peak_wheel_speed <= 22.72
+    # Over the paper robot's 6 s neither reference is reached at these gains.
+    assert expected.success_rate == 1.0
+    assert tuning.evaluate(gains, refs, robot=burger, horizon=6.0).success_rate == 0.0
 
 
 def test_outputs_stay_under_results():

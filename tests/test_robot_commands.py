@@ -81,10 +81,11 @@ def test_sweep_runs_the_robot_and_records_it(tmp_path, capsys, no_figures):
 
 
 def test_a_slower_robot_gets_a_longer_horizon(monkeypatch):
-    steps = []
+    steps, gains = [], []
 
     def fake(refs, params=None, **kwargs):
         steps.append(kwargs["steps"])
+        gains.append(params)
         n = len(refs)
         ones = np.ones(n)
         return maps.PoseMetrics(ones, ones, ones, np.zeros(n, np.int32), ones)
@@ -98,6 +99,9 @@ def test_a_slower_robot_gets_a_longer_horizon(monkeypatch):
     study = maps.map_study(8, controller_names=["shim-sung"], robot=half)
     assert steps == [math.ceil(12.0 / 0.033)] and study.summary["horizon_s"] == 12.0
     assert study.summary["robot_label"] == "custom"
+    # ... for the gains it runs: the paper's feasible ones within these wheels
+    # (k_r = 30, k_theta = 5: 30 + 4 × 5 = 50 cm/s), not the default k_r = 120.
+    assert len(gains) == 1 and (gains[0].kr, gains[0].k_theta) == pytest.approx((30.0, 5.0))
 
 
 def test_a_resumed_sweep_with_another_robot_is_refused_by_name(tmp_path, capsys, no_figures):
@@ -234,10 +238,11 @@ def test_chunk_metadata_of_another_shape_or_edited_is_recomputed_with_one_warnin
 
 
 def test_compare_runs_the_robot_and_records_it(tmp_path, capsys, monkeypatch):
-    seen = []
+    seen, gains = [], []
 
     def fake(refs, params=None, **kwargs):
         seen.append((kwargs["robot"], kwargs["steps"]))
+        gains.append((kwargs["controller"], params))
         n = len(refs)
         return maps.PoseMetrics(
             arrival=np.ones(n),
@@ -252,7 +257,15 @@ def test_compare_runs_the_robot_and_records_it(tmp_path, capsys, monkeypatch):
     assert main([*argv, "--robot", "turtlebot3-burger"]) == 0
     printed = capsys.readouterr().out
     horizon = 37.0  # 6 s × (60 + 10 × 8 cm) / 22.72 cm/s, rounded up to 0.1 s
-    assert "horizon 37 s (6 s × (60 + 10 L) / v_max)" in printed
+    assert "horizon 37 s (6 s × (60 + 10 L) / v_max, rounded up to 0.1 s)" in printed
+    # Shim-Sung runs the paper's feasible gains within the Burger's wheels
+    # (k_r : k_theta = 60 : 10, k_r + 8 k_theta = 22.72 cm/s), and says so; the
+    # baselines keep their published gains.
+    kr = 22.72 * 60 / (60 + 8 * 10)
+    assert f"shim-sung at k_r = {kr:.4g} cm/s, k_theta = {kr / 6:.4g} rad/s" in printed
+    shim = [p for name, p in gains if name == "shim-sung"]
+    assert len(shim) == 1 and (shim[0].kr, shim[0].k_theta) == pytest.approx((kr, kr / 6))
+    assert [p for name, p in gains if name != "shim-sung"][0::2] == [None, None]
     assert all(robot is TURTLEBOT3_BURGER for robot, _ in seen) and len(seen) == 5
     assert {steps for _, steps in seen} == {math.ceil(horizon / 0.033)}
     stored = json.loads((tmp_path / "comparison.json").read_text())
@@ -271,9 +284,9 @@ def test_waypoints_run_the_robot_for_longer_and_say_time_since_start(
 
     asked = []
 
-    def chain(wp, *, robot=None, steps=None, **kwargs):
+    def chain(wp, *, params=None, robot=None, steps=None, **kwargs):
         # A two-period stand-in (the loop itself is test_waypoints' business).
-        asked.append((robot, steps))
+        asked.append((robot, steps, params))
         traj = w.Trajectory(
             np.zeros((3, 3)), np.ones(2), np.ones(2), np.zeros(2, np.int32), np.ones((2, 2)),
             np.ones(2),
@@ -285,10 +298,13 @@ def test_waypoints_run_the_robot_for_longer_and_say_time_since_start(
     argv = ["waypoints", "--out", str(tmp_path / "wp"), "--controller", "shim-sung"]
     assert main([*argv, "--robot", slow]) == 0
     printed = capsys.readouterr().out
-    assert "900 control periods (450 × (60 + 10 L) / v_max)" in printed
+    assert "900 control periods (450 × 12 s / 6 s, the studies' horizon on it)" in printed
+    assert "shim-sung at k_r = 30 cm/s, k_theta = 5 rad/s" in printed
     header = next(line for line in printed.splitlines() if line.startswith("| controller"))
     assert "| waypoint 1: time since start (s) |" in header and "leg 1 s" not in header
-    assert len(asked) == 2 and all(float(r.v_max) == 50.0 and n == 900 for r, n in asked)
+    assert len(asked) == 2 and all(float(r.v_max) == 50.0 and n == 900 for r, n, _ in asked)
+    # Both runs (stop and pass) with the paper's feasible gains within its wheels.
+    assert all((p.kr, p.k_theta) == pytest.approx((30.0, 5.0)) for _, _, p in asked)
     saved = json.loads((tmp_path / "wp" / "soccer.json").read_text())
     assert saved["robot"] == robot_json(Robot(half_track=4.0, v_max=50.0))
     assert saved["robot_label"] == slow and saved["steps"] == 900
@@ -316,3 +332,31 @@ def test_bench_runs_the_robot_and_records_it(tmp_path, capsys, monkeypatch):
     saved = json.loads(path.read_text())
     assert saved["robot"] == robot_json(TURTLEBOT3_BURGER)
     assert saved["robot_label"] == "turtlebot3-burger" and "robot" not in saved["config"]
+
+
+# ---------------------------------------------------------------- animate
+
+
+def test_animate_runs_the_robot_and_flags_are_spelled_whole(tmp_path, capsys, monkeypatch):
+    from wmr_jax._src.report import animation
+
+    asked = []
+
+    def fake(path, refs, params=None, **kwargs):
+        asked.append((params, kwargs["robot"]))
+        return path
+
+    monkeypatch.setattr(animation, "animate", fake)
+    argv = ["animate", "--out", str(tmp_path / "a.gif"), "--seconds", "0.5"]
+    assert main([*argv, "--robot", "turtlebot3-burger"]) == 0
+    ((params, robot),) = asked
+    assert robot == TURTLEBOT3_BURGER
+    kr = 22.72 * 60 / (60 + 8 * 10)  # the paper's feasible gains within its wheels
+    assert (params.kr, params.k_theta) == pytest.approx((kr, kr / 6))
+    assert "robot 'turtlebot3-burger'" in capsys.readouterr().out
+    assert main(argv) == 0 and asked[-1] == (None, None)  # the paper robot, its defaults
+    # A prefix of a flag is not that flag (``--robot`` once read as ``--robots``).
+    with pytest.raises(SystemExit) as refused:
+        main([*argv, "--rob", "3"])
+    assert refused.value.code == 2
+    assert "unrecognized arguments: --rob 3" in capsys.readouterr().err

@@ -29,6 +29,7 @@ from wmr_jax._src import checks, controllers, metrics
 from wmr_jax._src.metrics import PoseMetrics
 from wmr_jax._src.params import Robot, validate_one_robot
 from wmr_jax._src.poses import EVAL_R_MAX, EVAL_R_MIN, MAX_SAMPLES, horizon_steps
+from wmr_jax._src.robustness import robot_defaults
 from wmr_jax._src.rollout import DEFAULT_DT
 from wmr_jax._src.sweep import sweep
 
@@ -358,7 +359,9 @@ def map_study(
 
     Every controller runs the same grid (``pose_grid``) from ``(0, 0, 0)`` to
     the docs/model.md §6 horizon (``horizon_for(robot)``), with its default
-    parameters, on ``robot``.
+    parameters, on ``robot``; on a robot other than the paper's, Shim–Sung
+    and its schedule run the paper's feasible gains scaled into that robot's
+    wheel budget (``robot_defaults``), as the horizon is stretched for them.
 
     Args:
         n_poses: about how many reference poses in all (grid × headings).
@@ -398,6 +401,7 @@ def map_study(
     results = {
         name: evaluate_poses(
             grid.refs,
+            robot_defaults(name, robot),
             controller=name,
             steps=horizon_steps(DEFAULT_DT, horizon),
             robot=robot,
@@ -473,7 +477,9 @@ def compare_controllers(
     any bearing and heading, from ``(0, 0, 0)``), unlike ``map_study``'s
     grid, so the two report different means. Each controller runs with its
     published defaults, and the baselines also with their other driving mode
-    (``COMPARISON_RUNS``).
+    (``COMPARISON_RUNS``); on a robot other than the paper's, Shim–Sung runs
+    the paper's feasible gains scaled into that robot's wheel budget
+    (``robot_defaults``), as the horizon is stretched for them.
 
     Args:
         n_poses: number of random reference poses.
@@ -505,7 +511,7 @@ def compare_controllers(
     results = {
         label: evaluate_poses(
             refs,
-            params,
+            robot_defaults(name, robot) if params is None else params,
             controller=name,
             steps=horizon_steps(DEFAULT_DT, horizon),
             robot=robot,

@@ -469,12 +469,17 @@ def soccer_study(
         pass_tol_r: pass-through distance, cm.
         pass_tol_theta: pass-through heading tolerance, rad, ``≤ π/2``.
         robot: the robot (one, a number per field); default ``Robot()``.
-            ``soccer_steps(robot)`` gives a slower robot the time it needs.
+            ``soccer_steps(robot)`` gives a slower robot the time it needs;
+            on a robot other than the paper's, Shim–Sung and its schedule
+            run the paper's feasible gains scaled into its wheel budget
+            (``robustness.robot_defaults``).
 
     Returns:
         A ``SoccerStudy``: a row and a run per controller and mode, with the
         settings (and the robot) they were run with.
     """
+    from wmr_jax._src.robustness import robot_defaults
+
     names = controllers.controller_names(controller_names)
     robot = validate_one_robot(robot, "soccer_study")
     # Every setting is checked before the first controller runs (and compiles).
@@ -489,6 +494,7 @@ def soccer_study(
             for mode, p_r, p_theta in modes:
                 run = chain_rollout(
                     wp,
+                    params=robot_defaults(name, robot),
                     controller=name,
                     velocity=velocity,
                     steps=steps,

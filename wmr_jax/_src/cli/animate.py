@@ -2,7 +2,9 @@
 
 The references are ``--robots`` random docs/model.md §6 poses drawn with
 ``wmr_jax.sample_poses(--seed, --robots)``, or with ``--paper`` the seven of
-the paper's Fig. 7 (``wmr_jax.paper_refs``); ``wmr_jax.report.animate``
+the paper's Fig. 7 (``wmr_jax.paper_refs``), on the robot of ``--robot``
+(Shim–Sung and its schedule with the paper's feasible gains scaled into
+that robot's wheels, ``studies.robot_defaults``); ``wmr_jax.report.animate``
 records the runs and draws them.
 """
 
@@ -39,6 +41,7 @@ def _flags() -> dict[str, dict[str, Any]]:
             "metavar": "X",
             "help": "playback speed, 1 = real time (each frame lasts its simulated time)",
         },
+        "--robot": flags.robot_flag_options(),
     }
 
 
@@ -46,11 +49,15 @@ def run(args: Any) -> int:
     """Run ``wmr-jax animate``; return the exit status."""
     from wmr_jax._src.poses import horizon_steps, paper_refs
     from wmr_jax._src.report.animation import animate, gif_path
+    from wmr_jax._src.robots import describe_robot
+    from wmr_jax._src.robustness import robot_defaults
     from wmr_jax._src.rollout import DEFAULT_DT
 
     gif_path("--out", args.out)
     out = flags.output_file("--out", args.out)
     name = flags.controller_names([args.controller])[0]
+    given = flags.robot_from(args.robot)
+    robot = None if given is None else given.robot
     velocity = flags.velocity_loop(args.velocity)
     # A GIF holds every frame in memory: a few minutes of a few thousand robots at most.
     robots = flags.positive_int("--robots", args.robots, 1, 10_000)
@@ -59,9 +66,16 @@ def run(args: Any) -> int:
     speed = flags.number(
         "--speed", args.speed, low=0.0, closed=False, high=100.0, unit="× real time"
     )
+    params = robot_defaults(name, robot)
+    if given is not None:
+        if given.note:
+            print(given.note)
+        print(f"robot {given.label!r}: {describe_robot(robot)}" + flags.scaled_gains_note(robot))
     path = animate(
         out,
         paper_refs() if args.paper else None,
+        params,
+        robot=robot,
         n_robots=robots,
         seed=seed,
         controller=name,

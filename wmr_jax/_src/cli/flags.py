@@ -271,15 +271,36 @@ def add_robot_flag(parser: Any, default: str = "paper") -> None:
     ``default`` names what runs without the flag, in the help only (``None``
     stands for it in ``args.robot``).
     """
+    parser.add_argument("--robot", **robot_flag_options(default))
+
+
+def robot_flag_options(default: str = "paper") -> dict[str, Any]:
+    """The ``add_argument`` keywords of ``--robot`` (``add_robot_flag``)."""
     from wmr_jax._src.robots import ROBOTS
 
-    parser.add_argument(
-        "--robot",
-        default=None,
-        metavar="NAME|FILE",
-        help=f"the robot: a preset ({', '.join(ROBOTS)}), a .json of Robot fields in cm, kg, s "
-        "(any subset; the rest the paper robot's) or a ROS diff_drive_controller .yaml "
+    return {
+        "default": None,
+        "metavar": "NAME|FILE",
+        "help": f"the robot: a preset ({', '.join(ROBOTS)}), a .json of Robot fields in cm, kg, "
+        "s (any subset; the rest the paper robot's) or a ROS diff_drive_controller .yaml "
         f"(docs/robots.md) (default: {default})",
+    }
+
+
+def scaled_gains_note(robot: Any) -> str:
+    """What Shim–Sung runs on ``robot`` in a study given no gains, for a command to print.
+
+    ``studies.robot_defaults``: on a robot other than the paper's, the
+    paper's feasible gains scaled into its wheel budget.
+    """
+    from wmr_jax._src.robustness import robot_defaults
+
+    gains = robot_defaults("shim-sung", robot)
+    if gains is None:
+        return ""
+    return (
+        f"; shim-sung at k_r = {float(gains.kr):.4g} cm/s, k_theta = {float(gains.k_theta):.4g} "
+        "rad/s (the paper's feasible gains within its wheel budget)"
     )
 
 

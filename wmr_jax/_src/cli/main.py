@@ -59,6 +59,9 @@ def build_parser() -> argparse.ArgumentParser:
         prog="wmr-jax",
         description="Differentiable, batched simulator of the Shim–Sung (2003) pose controller.",
         formatter_class=_HelpFormatter,
+        # A flag is spelled whole: a prefix of one flag must not quietly be
+        # another (``animate --robot`` was read as ``--robots``).
+        allow_abbrev=False,
     )
     parser.add_argument("--version", action="version", version=f"wmr-jax {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -71,6 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
             help=spec["help"],
             description=spec["help"],
             formatter_class=_HelpFormatter,
+            allow_abbrev=False,
         )
         if "flags" in spec:  # a table {flag: add_argument options}
             for flag, options in spec["flags"]().items():

@@ -48,7 +48,8 @@ def _flags() -> dict[str, dict[str, Any]]:
             "metavar": "S",
             "help": "simulated time per run, s (default: the paper robot's 6 s, docs/model.md "
             "§6; for a --robot whose wheels cannot follow the paper's feasible gains, "
-            "60 + 10 L > v_max, 6 s × (60 + 10 L) / v_max, as those gains are scaled to fit; "
+            "60 + 10 L > v_max, 6 s × (60 + 10 L) / v_max rounded up to 0.1 s, as those gains are "
+            "scaled to fit; "
             "printed with the robot)",
         },
         "--headings": {
@@ -102,8 +103,15 @@ def robot_and_horizon(args: Any) -> tuple[Any, Any, float]:
     if given is not None:
         if given.note:
             print(given.note)
-        scaled = " (6 s × (60 + 10 L) / v_max)" if args.horizon is None and horizon > 6 else ""
-        print(f"robot {given.label!r}: {describe_robot(robot)}; horizon {horizon:.4g} s{scaled}")
+        scaled = (
+            " (6 s × (60 + 10 L) / v_max, rounded up to 0.1 s)"
+            if args.horizon is None and horizon > 6
+            else ""
+        )
+        print(
+            f"robot {given.label!r}: {describe_robot(robot)}; horizon {horizon:.4g} s{scaled}"
+            + flags.scaled_gains_note(robot)
+        )
     return given, robot, horizon
 
 

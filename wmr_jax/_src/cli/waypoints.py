@@ -27,7 +27,8 @@ def add_arguments(parser: Any) -> None:
         metavar="N",
         help="control periods of each run (default: 450, 14.85 s, for the paper robot; for a "
         "--robot whose wheels cannot follow the paper's feasible gains, 60 + 10 L > v_max, "
-        "450 × (60 + 10 L) / v_max, as those gains are scaled to fit; printed with the robot)",
+        "450 × h / 6 s, where h is its studies' horizon, 6 s × (60 + 10 L) / v_max rounded up "
+        "to 0.1 s, as those gains are scaled to fit; printed with the robot)",
     )
     parser.add_argument("--pass-tol", default=5.0, metavar="CM", help="pass-through distance, cm")
     parser.add_argument(
@@ -60,6 +61,7 @@ def run(args: Any) -> int:
     """Run ``wmr-jax waypoints``; return the exit status."""
     from wmr_jax._src.params import Robot
     from wmr_jax._src.robots import describe_robot, robot_json
+    from wmr_jax._src.robustness import study_horizon
     from wmr_jax._src.waypoints import soccer_steps
 
     out = flags.output_dir("--out", args.out)
@@ -83,8 +85,15 @@ def run(args: Any) -> int:
     if given is not None:
         if given.note:
             print(given.note)
-        scaled = " (450 × (60 + 10 L) / v_max)" if args.steps is None and steps > 450 else ""
-        print(f"robot {given.label!r}: {describe_robot(robot)}; {steps} control periods{scaled}")
+        scaled = (
+            f" (450 × {study_horizon(robot):g} s / 6 s, the studies' horizon on it)"
+            if args.steps is None and steps > 450
+            else ""
+        )
+        print(
+            f"robot {given.label!r}: {describe_robot(robot)}; {steps} control periods{scaled}"
+            + flags.scaled_gains_note(robot)
+        )
 
     from wmr_jax._src.io import atomic_write_json
     from wmr_jax._src.report.tables import markdown_table

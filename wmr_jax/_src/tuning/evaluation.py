@@ -22,7 +22,7 @@ from wmr_jax._src.controllers.schedule import SCHEDULE, ScheduleParams
 from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
 from wmr_jax._src.metrics import arrival_time
 from wmr_jax._src.params import Gains, Robot
-from wmr_jax._src.poses import HORIZON_S, horizon_steps, sample_poses
+from wmr_jax._src.poses import horizon_steps, sample_poses
 
 __all__ = [
     "EVAL_POSES",
@@ -126,7 +126,7 @@ def evaluate(
     *,
     robot: Robot | None = None,
     dt: float = simulation.DEFAULT_DT,
-    horizon: float = HORIZON_S,
+    horizon: float | None = None,
     velocity: str = "ideal",
     substeps: int = loops.DEFAULT_SUBSTEPS,
     wheel_limit: str = "clip",
@@ -139,7 +139,10 @@ def evaluate(
         refs: ``(N, 3)`` reference poses.
         robot: robot parameters; default ``Robot()``.
         dt: control period, s.
-        horizon: simulated time per run, s.
+        horizon: simulated time per run, s; default the studies' horizon on
+            ``robot`` (``studies.study_horizon``: the paper robot's 6 s,
+            longer on a robot too slow for the paper's feasible gains, as
+            ``wmr-jax evaluate`` runs it).
         velocity: ``"ideal"`` or ``"nonideal"``.
         substeps: inner steps per period (non-ideal loop).
         wheel_limit: ``"clip"`` or ``"scale"`` (non-ideal loop).
@@ -156,6 +159,10 @@ def evaluate(
         )
     if controller is None:
         controller = SCHEDULE if isinstance(gains, ScheduleParams) else SHIM_SUNG
+    if horizon is None:
+        from wmr_jax._src.robustness import study_horizon  # it imports the tuning package
+
+        horizon = study_horizon(robot)
     traj, times, _ = hard_runs(refs, gains, **run_options(locals()), controller=controller)
     times = np.asarray(times)
     arrived = np.isfinite(times)
