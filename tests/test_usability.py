@@ -121,6 +121,39 @@ def test_a_command_without_the_frame_keyword_is_refused_in_one_line():
         assert np.hypot(final[0] - 20.0, final[1] - 5.0) < 0.1
 
 
+@pytest.mark.parametrize(
+    ("returned", "message"),
+    [
+        (lambda err, pose: (3.0 * err.r[..., None], 0.0 * err.r), "returned v of shape (1,)"),
+        (lambda err, pose: (pose, pose), "returned v of shape (3,)"),
+        (lambda err, pose: (err.r, err.r, err.r), "returned 3 values"),
+        (lambda err, pose: err.r, "returned ShapeDtypeStruct"),
+        (lambda err, pose: (err.r, err.sin_phi > 0), "returned omega of shape () of bool"),
+        (lambda err, pose: (err.r, err.missing), "raised AttributeError: 'PolarError' object"),
+    ],
+    ids=["column", "poses", "three", "one", "bool", "raises"],
+)
+def test_a_command_that_returns_no_pair_of_scalars_is_refused_before_the_loop(returned, message):
+    """Not JAX's error from inside the traced scan: one line naming the controller."""
+
+    def command(pose, ref, params, *, temperature=None, frame=None):
+        return returned(w.polar_error(pose, ref, frame=frame), pose)
+
+    odd = w.Controller(name="odd", command=command, params_type=w.Gains, validate=lambda g: g)
+    for run in (
+        lambda: w.rollout([20.0, 5.0, 0.0], controller=odd, steps=5),
+        lambda: w.batch_rollout([[20.0, 5.0, 0.0]] * 2, w.Gains(kr=[60.0, 70.0]), controller=odd),
+    ):
+        with pytest.raises(ValueError) as info:
+            run()
+        text = str(info.value)
+        assert text.startswith("controller 'odd': controller.command(pose (3,), ref (3,), params)")
+        assert message in text and "\n" not in text
+        assert text.endswith(
+            "allowed: (v, omega), two real scalars for one pose (3,) (docs/custom_controller.md)"
+        )
+
+
 def test_custom_controller_page_runs_as_written(tmp_path, monkeypatch, capsys):
     """docs/custom_controller.md: its Python block runs and registers "mine"."""
     page = (ROOT / "docs" / "custom_controller.md").read_text(encoding="utf-8")

@@ -36,7 +36,7 @@ from wmr_jax._src.checks import (
     require_one_batch_size,
     require_unbatched,
 )
-from wmr_jax._src.controllers.base import Controller, get_controller
+from wmr_jax._src.controllers.base import Controller, check_command_output, get_controller
 from wmr_jax._src.controllers.polar import AT_GOAL, GOAL_EPS
 from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
 from wmr_jax._src.loops import (
@@ -268,6 +268,7 @@ def prepare(
             f"for controller {control.name!r}"
         )
     params = as_float_tree(control.validate(params))
+    check_command_output(control, params)
     robot = as_float_tree(validate_robot(Robot() if robot is None else robot))
     dt = check_dt(dt)
     if options.velocity == "nonideal":

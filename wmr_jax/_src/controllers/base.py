@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks import as_float_tree, as_pose_array, check_bool, is_traced
+from wmr_jax._src.checks import as_float_tree, as_pose_array, check_bool, float_dtype, is_traced
 
 __all__ = [
     "Controller",
@@ -133,6 +133,50 @@ def _check_signature(name: Any, field: str, function: Any) -> None:
                 f"controller {name!r}: controller.{field} = {shown}{signature} is not allowed "
                 f"({err}); allowed: a function {allowed} (keywords with defaults, or **kwargs)"
             ) from None
+
+
+def check_command_output(controller: Controller, params: Any) -> None:
+    """Refuse a command law that does not return ``(v, ω)`` as the loops use them.
+
+    The law is traced alone, abstractly (``jax.eval_shape``), at one pose
+    ``(3,)``: it must return two real scalars. A law that returns another
+    shape or count would otherwise fail deep inside the traced scan, in
+    JAX's words. The package's own laws are not traced again here.
+
+    Args:
+        controller: the controller.
+        params: its (validated) parameters; one run's, or a batch's, whose
+            structure the check keeps (their defaults where a leaf is not a
+            scalar, which the loops may map over).
+
+    Raises:
+        ValueError: one line naming the controller and what the law returned.
+    """
+    if getattr(controller.command, "__module__", "").startswith("wmr_jax."):
+        return
+    leaves = jax.tree.leaves(params)
+    if any(np.ndim(leaf) != 0 for leaf in leaves):
+        params = controller.default_params()
+    dtype = float_dtype()
+    probe = jax.tree.map(lambda leaf: jax.ShapeDtypeStruct((), dtype), params)
+    pose = jax.ShapeDtypeStruct((3,), dtype)
+    allowed = "allowed: (v, omega), two real scalars for one pose (3,) (docs/custom_controller.md)"
+    shown = f"controller {controller.name!r}: controller.command(pose (3,), ref (3,), params)"
+    try:
+        out = jax.eval_shape(
+            lambda p, r, g: controller.command(p, r, g, temperature=None), pose, pose, probe
+        )
+    except Exception as err:  # any error of the law, reported in one line
+        message = " ".join(str(err).split())[:160]
+        raise ValueError(f"{shown} raised {type(err).__name__}: {message}; {allowed}") from None
+    if not isinstance(out, (tuple, list)) or len(out) != 2:
+        what = f"{len(out)} values" if isinstance(out, (tuple, list)) else type(out).__name__
+        raise ValueError(f"{shown} returned {what}; {allowed}")
+    for name, value in zip(("v", "omega"), out, strict=True):
+        shape, kind = getattr(value, "shape", None), np.dtype(getattr(value, "dtype", object)).kind
+        if shape != () or kind != "f":
+            got = f"shape {shape} of {getattr(value, 'dtype', type(value).__name__)}"
+            raise ValueError(f"{shown} returned {name} of {got}; {allowed}")
 
 
 _REGISTRY: dict[str, Controller] = {}
