@@ -2,6 +2,7 @@
 
 import json
 import math
+import re
 import subprocess
 import sys
 from types import SimpleNamespace
@@ -157,6 +158,20 @@ def test_help_shows_the_defaults(capsys):
     out = " ".join(capsys.readouterr().out.split())
     assert "(default: 100)" in out and "(default: 1000 10000 100000)" in out
     assert "grad_tuning_loss" in out  # the cases one may choose
+
+
+def test_every_help_states_each_default_once(capsys):
+    from wmr_jax._src.cli.main import COMMANDS
+
+    for command in COMMANDS:
+        with pytest.raises(SystemExit):
+            main([command, "--help"])
+        out = " ".join(capsys.readouterr().out.split())
+        assert not re.search(r"\(default: [^()]*\) \(default:", out), command
+    with pytest.raises(SystemExit):
+        main(["evaluate", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert out.count("(default: nominal)") == 1
 
 
 def test_demo_writes_the_paper_figures_and_tables(tmp_path, capsys):

@@ -287,3 +287,20 @@ def test_compare_rows_saved_before_sizes_group_with_new_ones():
     table = comparison_table(rows)
     assert "| schedule (35) | gradient | 0.400 / 0.400 / 0.400 |" in table, table
     assert table.count("| schedule") == 1
+
+
+def test_compare_without_evosax_is_refused_before_any_run(monkeypatch, tmp_path, capsys):
+    import sys
+
+    from wmr_jax._src.cli.main import main
+    from wmr_jax._src.tuning import compare
+
+    trained = []
+    monkeypatch.setattr(compare, "train", lambda *a, **k: trained.append(1))
+    monkeypatch.setitem(sys.modules, "evosax.algorithms", None)  # import evosax... fails
+    with pytest.raises(ValueError, match=r"CMA-ES needs evosax; allowed: pip install"):
+        compare.compare(seeds=(0,), problems=("fixed",))
+    argv = ["tune", "--compare", "--out", str(tmp_path), "--iters", "2"]
+    assert main(argv) == 2
+    assert "CMA-ES needs evosax" in capsys.readouterr().err
+    assert trained == [] and not (tmp_path / "compare.json").exists()

@@ -106,6 +106,19 @@ def test_cli_writes_the_results_and_a_resumed_run_gives_the_same_gains(tmp_path,
     assert resumed["rows"] == report["rows"]
 
 
+def test_resume_without_a_checkpoint_says_it_starts_over(tmp_path, capsys):
+    # A mistyped --out: nothing to resume, and the user is told so.
+    with pytest.raises(_Stop):
+        tuning.tune(
+            tmp_path / "typo", SMALL, resume=True, progress=False, progress_fn=_stop_after(1)
+        )
+    out = capsys.readouterr().out
+    assert f"--resume: no checkpoint.npz in {tmp_path / 'typo'}; starting from the first" in out
+    with pytest.raises(_Stop):  # without --resume a fresh start is what was asked
+        tuning.tune(tmp_path / "new", SMALL, progress=False, progress_fn=_stop_after(1))
+    assert "--resume" not in capsys.readouterr().out
+
+
 def test_resume_refuses_other_settings_and_damaged_checkpoints(tmp_path, capsys):
     every = SMALL.replace(checkpoint_every=1)
     with pytest.raises(_Stop):

@@ -38,7 +38,8 @@ class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
             return text + " (required)"
         # Identity, not equality: a default of 0 is worth showing, False is not.
         hidden = action.default is None or action.default is False
-        if hidden or action.default is argparse.SUPPRESS or "%(default)" in text:
+        said = "%(default)" in text or "(default:" in text  # the help states it itself
+        if hidden or action.default is argparse.SUPPRESS or said:
             return text
         if isinstance(action.default, (list, tuple)):
             # Several values are shown as they are typed: "0 0 0", not "['0', '0', '0']".

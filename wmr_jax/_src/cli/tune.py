@@ -222,6 +222,8 @@ def tune(
     checkpoint = out / CHECKPOINT_NAME
     if resume and checkpoint.exists():
         state = _load_checkpoint(checkpoint, state, identity)
+    elif resume:  # a mistyped --out would otherwise start over without a word
+        print(f"--resume: no {CHECKPOINT_NAME} in {out}; starting from the first iteration")
     bar = tqdm(
         total=config.iters,
         initial=state.iteration,

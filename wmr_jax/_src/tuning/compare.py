@@ -210,10 +210,14 @@ def compare(
         ``mean_arrival``, ``success_rate``, ``peak_wheel_speed`` and the
         ratios of ``report_ratios`` (``None``, with a ``"…_reason"``, where
         none arrived).
+
+    Raises:
+        ValueError: for bad settings, or without evosax (CMA-ES), before any run.
     """
     robot = validate_one_robot(robot, "tuning")
     bases = _checked_plan(seeds, problems, configs)
     check_callable("progress", progress)
+    _evosax_cma_es()  # refused now, not after the first gradient run
     rows = []
     for base in bases.values():
         problem = base.problem  # for a schedule, of base.knots knots
