@@ -41,3 +41,19 @@ def test_the_fingerprint_notices_a_moved_loop_and_an_edited_file(tmp_path, monke
     assert any(p.startswith("compare: the aicardi loop moved") for p in problems), problems
     assert "paper: docs/fig6.png is not the file its stage wrote" in " ".join(problems)
     assert all("reproduce_readme.sh results/readme" in p for p in problems)
+
+
+def test_the_settled_at_horizon_prose_is_the_committed_table():
+    """docs/robustness.md's shares of the paper's gains under noise, from the data file."""
+    import re
+
+    rows = json.loads((ROOT / "docs" / "data" / "standard_conditions.json").read_text())["rows"]
+    row = next(r for r in rows if r["condition"] == "noise" and r["gains"].startswith("paper"))
+    runs, success, settled = row["runs"], row["success"], row["settled at horizon"]
+    text = " ".join((ROOT / "docs" / "robustness.md").read_text().split())
+    arrived, late = round(success * runs), round(settled * runs)
+    assert f"{100 * success:.1f} % of the {runs} held-out runs count as arrived" in text
+    # Both shares are of all runs (the table's column), and the count says what they mean.
+    assert f"{100 * settled:.1f} % of the {runs} only settle" in text
+    assert f"{late} of the {arrived} successes" in text
+    assert re.search(rf"arrive. at {row['mean arrival s']:.2f} s of 6 on average", text)

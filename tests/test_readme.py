@@ -343,3 +343,16 @@ def test_robust_table_is_the_stored_standard_conditions():
     # The robust-tuned loop is the one with an estimator; the raw one has none.
     assert rows[("both", "robust-tuned")]["feedback"] == "ekf"
     assert rows[("both", "robust-tuned, raw feedback")]["feedback"] == "raw"
+
+
+def test_the_pages_name_every_field_of_what_load_tuned_returns():
+    import wmr_jax as w
+
+    fields = ", ".join(w.ClosedLoop._fields)
+    mentions = [
+        (page.name, m)
+        for page in PAGES
+        for m in re.findall(r"`ClosedLoop\(([^)`]*)\)`", " ".join(page.read_text().split()))
+    ]
+    assert len(mentions) >= 2
+    assert all(m == fields for _, m in mentions), mentions
