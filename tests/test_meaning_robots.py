@@ -180,3 +180,67 @@ def test_robots_are_the_same_to_float32_rounding_and_no_further():
     # A field that is zero (the centre of mass on the axle) compares absolutely.
     assert same_robot(paper, w.Robot(com_offset=1e-12))
     assert not same_robot(paper, w.Robot(com_offset=1e-6))
+
+
+@pytest.mark.parametrize(
+    ("block", "missing", "hint"),
+    [
+        ("wheel_seperation: 0.16\n    wheel_radius: 0.033\n", "wheel_separation",
+         " ('wheel_seperation' is not a diff_drive_controller parameter)"),
+        ("wheel_separation: 0.16\n", "wheel_radius", ""),
+    ],
+    ids=["typo", "no-radius"],
+)  # fmt: skip
+def test_a_ros_file_without_both_wheel_sizes_is_refused(tmp_path, block, missing, hint):
+    # diff_drive_controller needs both; the paper robot's size in place of a
+    # misspelt one would be another robot, run without a word.
+    with pytest.raises(ValueError) as info:
+        _read(tmp_path, "r.yaml", "diff_drive_controller:\n  ros__parameters:\n    " + block)
+    assert str(info.value) == (
+        f"'{tmp_path / 'r.yaml'}': the diff_drive_controller parameters at "
+        f"'diff_drive_controller.ros__parameters' give no {missing}{hint}; allowed: both "
+        "wheel_separation and wheel_radius, in metres"
+    )
+
+
+def test_sizes_and_speeds_in_the_wrong_unit_warn_and_run_as_given(tmp_path):
+    # A ROS file written in cm: a robot 16 m wide with 3.3 m wheels, at 22 m/s.
+    ros = "wheel_separation: 16\nwheel_radius: 3.3\nlinear:\n  x:\n    max_velocity: 22\n"
+    with pytest.warns(w.RobotUnitsWarning) as caught:
+        read = _read(tmp_path, "cm.yaml", ros)
+    assert (read.robot.half_track, read.robot.wheel_radius) == (800.0, 330.0)  # as given
+    texts = [str(c.message) for c in caught]
+    where = repr(str(tmp_path / "cm.yaml"))
+    assert texts == [
+        f"{where}: {field} = {value} is outside {bounds}, as if written in another unit (a ROS "
+        "file gives metres and m/s: wheel_separation 0.16 for 16 cm); it runs as given"
+        for field, value, bounds in (
+            ("half_track", "800 cm", "0.5-500 cm"),
+            ("wheel_radius", "330 cm", "0.2-100 cm"),
+            ("v_max", "2200 cm/s", "1-2000 cm/s"),
+        )
+    ]
+    # A JSON file in metres and m/s: L = 8 cm written 0.08.
+    with pytest.warns(w.RobotUnitsWarning) as caught:
+        _read(tmp_path, "m.json", json.dumps({"half_track": 0.08, "v_max": 0.22}))
+    texts = [str(c.message) for c in caught]
+    assert len(texts) == 2 and "half_track = 0.08 cm is outside 0.5-500 cm" in texts[0]
+    assert "v_max = 0.22 cm/s is outside 1-2000 cm/s" in texts[1]
+    assert texts[0].endswith(
+        "(a JSON robot file gives cm and cm/s: half_track 8 for 8 cm); it runs as given"
+    )
+    # At the bounds, and every preset, no warning.
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", w.RobotUnitsWarning)
+        edge = {"half_track": 0.5, "v_max": 2000.0, "wheel_radius": 100.0}
+        _read(tmp_path, "edge.json", json.dumps(edge))
+        _read(
+            tmp_path,
+            "edge2.json",
+            json.dumps({"half_track": 500.0, "v_max": 1.0, "wheel_radius": 0.2}),
+        )
+        for name in w.ROBOTS:
+            (tmp_path / f"{name}.json").write_text(json.dumps(robot_json(w.ROBOTS[name])))
+            w.read_robot(tmp_path / f"{name}.json")

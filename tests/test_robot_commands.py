@@ -70,14 +70,16 @@ def test_sweep_runs_the_robot_and_records_it(tmp_path, capsys, no_figures):
     assert main(argv) == 0
     printed = capsys.readouterr()
     assert f"robot {slow!r}: custom (L = 4 cm, V_max = 50 cm/s" in printed.out
-    assert "; horizon 6 s\n" in printed.out
-    # The wheel-budget warning speaks of this robot, not the paper's.
-    assert "k_r + L*k_theta = 160 cm/s exceeds v_max = 50 cm/s" in printed.err
+    # Shim-Sung runs the paper's feasible gains within these wheels (30 + 4 × 5 =
+    # 50 cm/s), not its default k_r = 120, which would ask 160 cm/s of them.
+    assert "; horizon 6 s; shim-sung at k_r = 30 cm/s, k_theta = 5 rad/s" in printed.out
+    assert "exceeds v_max" not in printed.err
     summary = json.loads((out / "summary.json").read_text())
     assert summary["robot"] == robot_json(Robot(half_track=4.0, v_max=50.0))
     assert summary["robot_label"] == slow and summary["horizon_s"] == 6.0
-    # "over V_max" is counted against this robot's 50 cm/s.
-    assert summary["rows"][0]["max peak wheel cm/s"] > 50 and summary["rows"][0]["over V_max"] > 0
+    # "over V_max" is counted against this robot's 50 cm/s: none.
+    row = summary["rows"][0]
+    assert 40 < row["max peak wheel cm/s"] <= 50 and row["over V_max"] == 0
 
 
 def test_a_slower_robot_gets_a_longer_horizon(monkeypatch):
@@ -105,7 +107,9 @@ def test_a_slower_robot_gets_a_longer_horizon(monkeypatch):
 
 
 def test_a_resumed_sweep_with_another_robot_is_refused_by_name(tmp_path, capsys, no_figures):
-    # The same horizon (v_max 125), so the robot is the only setting that differs.
+    # The same horizon (v_max 125); on another robot than the paper's the sweep
+    # also runs its own Shim-Sung gains (the paper's feasible ones), so the two
+    # settings that differ are named.
     wide = _robot_file(tmp_path, "wide.json", half_track=3.0)
     argv = ["sweep", "--out", str(tmp_path / "maps"), *SWEEP, "--no-progress", "--resume"]
     assert main(argv) == 0
@@ -114,7 +118,7 @@ def test_a_resumed_sweep_with_another_robot_is_refused_by_name(tmp_path, capsys,
     capsys.readouterr()
     assert main([*argv, "--robot", wide]) == 2
     err = capsys.readouterr().err
-    assert "--resume:" in err and "other settings (robot)" in err, err
+    assert "--resume:" in err and "other settings (gains, robot)" in err, err
     assert _inodes(chunks) == before  # refused, not replaced
 
 

@@ -54,6 +54,7 @@ from wmr_jax._src.reference import reference_control as reference_control
 from wmr_jax._src.reference import reference_diagnostics as reference_diagnostics
 from wmr_jax._src.reference import reference_rollout as reference_rollout
 from wmr_jax._src.robots import ROBOTS as ROBOTS
+from wmr_jax._src.robots import RobotUnitsWarning as RobotUnitsWarning
 from wmr_jax._src.robots import load_robot as load_robot
 from wmr_jax._src.robots import read_robot as read_robot
 from wmr_jax._src.robots import robot_preset as robot_preset
@@ -116,6 +117,7 @@ __all__ = [
     "Robot",
     "SamplingWarning",
     "WheelSpeedWarning",
+    "RobotUnitsWarning",
     "check_feasible",
     "check_sampling",
     "sampling_margins",

@@ -19,6 +19,7 @@ presets' numbers are in each preset's comment and in ``docs/robots.md``.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import json
 import math
 import os
@@ -34,6 +35,7 @@ from wmr_jax._src.params import Robot, validate_robot
 
 __all__ = [
     "LoadedRobot",
+    "RobotUnitsWarning",
     "ROBOTS",
     "ROBOT_FIELDS",
     "ROBOT_UNITS",
@@ -68,6 +70,42 @@ ROBOT_UNITS = {
 _UNIT = {name: text.split(" (")[0] for name, text in ROBOT_UNITS.items()}
 
 _G = 981.0  # cm/s², standard gravity
+
+
+class RobotUnitsWarning(UserWarning):
+    """A robot file's size or speed looks like a unit slip (metres in JSON, cm in ROS)."""
+
+
+# Sizes and speeds no wheeled robot this model describes has (the paper's
+# soccer robot: L = 1.85 cm; a warehouse robot: L of some 30 cm, 2 m/s): a
+# value outside is most likely written in another unit. The range is wide
+# on purpose; the run goes on as given.
+_PLAUSIBLE = {
+    "half_track": (0.5, 500.0),
+    "wheel_radius": (0.2, 100.0),
+    "v_max": (1.0, 2000.0),
+}
+
+
+def _warn_unit_slips(robot: Robot, where: str, ros: bool) -> None:
+    """Warn (``RobotUnitsWarning``) for each size or speed outside ``_PLAUSIBLE``."""
+    import warnings
+
+    convention = (
+        "a ROS file gives metres and m/s: wheel_separation 0.16 for 16 cm"
+        if ros
+        else "a JSON robot file gives cm and cm/s: half_track 8 for 8 cm"
+    )
+    for field, (low, high) in _PLAUSIBLE.items():
+        value = float(getattr(robot, field))
+        if not low <= value <= high:
+            warnings.warn(
+                f"{where}: {field} = {value:.6g} {_UNIT[field]} is outside {low:g}-{high:g} "
+                f"{_UNIT[field]}, as if written in another unit ({convention}); it runs as given",
+                RobotUnitsWarning,
+                stacklevel=4,
+            )
+
 
 # ---------------------------------------------------------------- presets
 
@@ -343,8 +381,11 @@ def read_robot(source: Any) -> LoadedRobot:
     except (OSError, UnicodeDecodeError) as err:
         raise ValueError(f"{where} cannot be read: {' '.join(str(err).split())}") from None
     if path.suffix.lower() == ".json":
-        return LoadedRobot(_robot_from_json(content, where), text)
+        robot = _robot_from_json(content, where)
+        _warn_unit_slips(robot, where, ros=False)
+        return LoadedRobot(robot, text)
     robot, note, accelerations = _robot_from_ros_yaml(content, where)
+    _warn_unit_slips(robot, where, ros=True)
     return LoadedRobot(robot, text, note, accelerations)
 
 
@@ -553,7 +594,19 @@ def _robot_from_ros_yaml(content: str, where: str) -> tuple[Robot, str, dict[str
         values["wheel_radius"] = _centi(radius * factor)  # m -> cm
         shown.append(f"wheel_radius {values['wheel_radius']:.6g} cm")
 
-    half_track = values.get("half_track", float(Robot().half_track))
+    missing = [key for key in _BLOCK_KEYS if key not in used]
+    if missing:
+        # diff_drive_controller needs both; the paper robot's in their place
+        # would be a robot of another size, run without a word.
+        unknown = [key for key in params if "." not in key and key not in used]
+        close = difflib.get_close_matches(missing[0], unknown, n=1)
+        hint = f" ({close[0]!r} is not a diff_drive_controller parameter)" if close else ""
+        raise ValueError(
+            f"{where}: the diff_drive_controller parameters at "
+            f"'{'.'.join(path) or '(top level)'}' give no {missing[0]}{hint}; allowed: both "
+            "wheel_separation and wheel_radius, in metres"
+        )
+    half_track = values["half_track"]
     speeds = []
     for axis, key, unit, to_rim in (
         ("linear.x", "linear.x.max_velocity", "m/s", _centi),  # m/s -> cm/s
