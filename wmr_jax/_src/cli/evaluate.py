@@ -42,7 +42,8 @@ def add_arguments(parser: Any) -> None:
         required=True,
         metavar="FILE",
         help="references, one row [x cm, y cm, theta rad] each: an (N, 3) .npy, or a .csv "
-        "of 3 comma-separated numbers a line (a first line of names is skipped)",
+        "of 3 comma-separated numbers a line (a first line of names is skipped; one naming "
+        "another unit, such as theta_deg, is refused)",
     )
     parser.add_argument(
         "--condition",
@@ -99,6 +100,30 @@ def _float_or_none(cell: str) -> float | None:
         return None
 
 
+# Units a header may name, per column (x, y, theta): any other one is refused,
+# since the numbers below it are read as cm, cm and rad whatever it says.
+_HEADER_UNITS = ({"cm"}, {"cm"}, {"rad", "radian", "radians"})
+_UNIT_WORDS = {"m", "mm", "cm", "metre", "metres", "meter", "meters", "in", "ft"} | {
+    "rad", "radian", "radians", "deg", "degree", "degrees", "°"
+}  # fmt: skip
+
+
+def _check_header_units(path: str, number: int, cells: list[str]) -> None:
+    """Refuse a header line that names a unit other than the file's (cm, cm, rad)."""
+    import re
+
+    for column, (cell, allowed) in enumerate(zip(cells, _HEADER_UNITS, strict=False), start=1):
+        words = {w for w in re.split(r"[^a-z°]+", cell.lower()) if w in _UNIT_WORDS}
+        wrong = sorted(words - allowed)
+        if wrong:
+            unit = "cm" if column < 3 else "rad"
+            raise _refs_error(
+                path,
+                f"line {number} names column {column} {cell!r}, in {wrong[0]}; allowed: "
+                f"{unit} (the columns are read as x cm, y cm, theta rad)",
+            )
+
+
 def _read_csv(path: str) -> tuple[Any, list[str]]:
     """The rows of a ``.csv`` of references and their line numbers (a header line skipped)."""
     import numpy as np
@@ -115,7 +140,20 @@ def _read_csv(path: str) -> tuple[Any, list[str]]:
             continue
         cells = [cell.strip() for cell in line.split(",")]
         values = [_float_or_none(cell) for cell in cells]
+        # Three fields split by another separator: a file in another dialect.
+        other = next(
+            (sep for sep in (";", "\t", " ") if len(cells) == 1 and len(cells[0].split(sep)) == 3),
+            None,
+        )
+        if other is not None:
+            shown = {"\t": "tabs", " ": "spaces"}.get(other, repr(other))
+            raise _refs_error(
+                path,
+                f"line {number} is separated by {shown} ({line.strip()!r:.40}); allowed: 3 "
+                "comma-separated numbers a line (x cm, y cm, theta rad)",
+            )
         if first and all(v is None for v in values):  # a header line of names
+            _check_header_units(path, number, cells)
             first = False
             continue
         first = False
