@@ -76,8 +76,8 @@ def test_two_robots_in_one_file_are_named_by_their_paths(tmp_path):
 
 
 def test_a_flat_file_is_read_at_the_top_level(tmp_path):
-    read = _read(tmp_path, "flat.yaml", "wheel_separation: 0.2\n")
-    assert "diff_drive_controller parameters at '(top level)': used wheel_separation" in read.note
+    read = _read(tmp_path, "flat.yaml", "wheel_separation: 0.2\nwheel_radius: 0.05\n")
+    assert "parameters at '(top level)': used wheel_separation, wheel_radius" in read.note
     assert read.robot.half_track == pytest.approx(10.0, rel=1e-12)
 
 
@@ -244,3 +244,23 @@ def test_sizes_and_speeds_in_the_wrong_unit_warn_and_run_as_given(tmp_path):
         for name in w.ROBOTS:
             (tmp_path / f"{name}.json").write_text(json.dumps(robot_json(w.ROBOTS[name])))
             w.read_robot(tmp_path / f"{name}.json")
+
+
+def test_a_ros_parameter_given_dotted_and_nested_is_refused(tmp_path):
+    # Which of the two ROS would read depends on how the file is loaded: neither is guessed.
+    text = (
+        "wheel_separation: 0.16\nwheel_radius: 0.033\nlinear.x.max_velocity: 0.22\n"
+        "linear:\n  x:\n    max_velocity: 0.3\n"
+    )
+    with pytest.raises(ValueError) as info:
+        _read(tmp_path, "twice.yaml", text)
+    assert str(info.value) == (
+        f"'{tmp_path / 'twice.yaml'}': linear.x.max_velocity is given twice (= 0.22 and 0.3, "
+        "dotted and nested); allowed: each parameter once"
+    )
+    # Each spelling alone is read alike.
+    for name, limit in (("dotted", "linear.x.max_velocity: 0.3\n"),
+                        ("nested", "linear:\n  x:\n    max_velocity: 0.3\n")):  # fmt: skip
+        robot = _read(tmp_path, f"{name}.yaml", "wheel_separation: 0.16\nwheel_radius: "
+                      "0.033\n" + limit).robot  # fmt: skip
+        assert robot.v_max == 30.0

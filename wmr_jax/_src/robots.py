@@ -467,15 +467,26 @@ def _blocks(tree: Any, path: tuple[str, ...], seen: set[int], out: list) -> None
         _blocks(value, (*path, str(key)), seen, out)
 
 
-def _flat(tree: dict, prefix: str = "", depth: int = 0) -> dict[str, Any]:
-    """``{"linear": {"x": {"max_velocity": v}}}`` as ``{"linear.x.max_velocity": v}``."""
+def _flat(tree: dict, prefix: str = "", depth: int = 0, where: str = "") -> dict[str, Any]:
+    """``{"linear": {"x": {"max_velocity": v}}}`` as ``{"linear.x.max_velocity": v}``.
+
+    Raises:
+        ValueError: for a parameter given twice, dotted and nested
+            (``linear.x.max_velocity`` beside ``linear: x: max_velocity``).
+    """
     out: dict[str, Any] = {}
     for key, value in tree.items():
         name = f"{prefix}{key}"
         if isinstance(value, dict) and depth < _MAX_DEPTH:
-            out.update(_flat(value, name + ".", depth + 1))
+            inner = _flat(value, name + ".", depth + 1, where)
         else:
-            out[name] = value
+            inner = {name: value}
+        for twice in inner.keys() & out.keys():
+            raise ValueError(
+                f"{where}: {twice} is given twice (= {out[twice]!r:.20} and {inner[twice]!r:.20}, "
+                "dotted and nested); allowed: each parameter once"
+            )
+        out.update(inner)
     return out
 
 
@@ -560,7 +571,7 @@ def _robot_from_ros_yaml(content: str, where: str) -> tuple[Robot, str, dict[str
             "allowed: one robot's"
         )
     path, block = found[0]
-    params = _flat(block)
+    params = _flat(block, where=where)
     # A value the model reads, given as a mapping, would otherwise be flattened
     # under its name and ignored with the unknown keys.
     read = (*_BLOCK_KEYS, "max_velocity", "max_acceleration", "multiplier", "has_")
@@ -594,19 +605,7 @@ def _robot_from_ros_yaml(content: str, where: str) -> tuple[Robot, str, dict[str
         values["wheel_radius"] = _centi(radius * factor)  # m -> cm
         shown.append(f"wheel_radius {values['wheel_radius']:.6g} cm")
 
-    missing = [key for key in _BLOCK_KEYS if key not in used]
-    if missing:
-        # diff_drive_controller needs both; the paper robot's in their place
-        # would be a robot of another size, run without a word.
-        unknown = [key for key in params if "." not in key and key not in used]
-        close = difflib.get_close_matches(missing[0], unknown, n=1)
-        hint = f" ({close[0]!r} is not a diff_drive_controller parameter)" if close else ""
-        raise ValueError(
-            f"{where}: the diff_drive_controller parameters at "
-            f"'{'.'.join(path) or '(top level)'}' give no {missing[0]}{hint}; allowed: both "
-            "wheel_separation and wheel_radius, in metres"
-        )
-    half_track = values["half_track"]
+    half_track = values.get("half_track", float(Robot().half_track))
     speeds = []
     for axis, key, unit, to_rim in (
         ("linear.x", "linear.x.max_velocity", "m/s", _centi),  # m/s -> cm/s
@@ -644,6 +643,18 @@ def _robot_from_ros_yaml(content: str, where: str) -> tuple[Robot, str, dict[str
             accelerations[key] = values[field] = convert(value)
             shown.append(f"{field} {values[field]:.6g} {_UNIT[field]}")
 
+    missing = [key for key in _BLOCK_KEYS if key not in used]
+    if missing:
+        # diff_drive_controller needs both; the paper robot's in their place
+        # would be a robot of another size, run without a word.
+        unknown = [key for key in params if "." not in key and key not in used]
+        close = difflib.get_close_matches(missing[0], unknown, n=1)
+        hint = f" ({close[0]!r} is not a diff_drive_controller parameter)" if close else ""
+        raise ValueError(
+            f"{where}: the diff_drive_controller parameters at "
+            f"'{'.'.join(path) or '(top level)'}' give no {missing[0]}{hint}; allowed: both "
+            "wheel_separation and wheel_radius, in metres"
+        )
     ignored = [k for k in params if k not in used]
     robot = robot_from_values(values, where)
     # No acceleration limit given is none (the paper robot's 0), not a value kept.
