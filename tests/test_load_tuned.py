@@ -68,6 +68,15 @@ def test_fixed_gains_old_and_new_files_load(tmp_path):
         # The last of a repeated key won without a word.
         ('{"kr": 60, "kr": 70}', "cannot be read: the key 'kr' is given twice"),
         ("[" * 100_000 + "]" * 100_000, "cannot be read: maximum recursion depth"),
+        # Not the law's defaults (k_r = 120) from a file with no gains in it.
+        ("{}", "holds no gains \\(its keys: none\\); allowed: a tuned_gains.json"),
+        ('{"kind": "fixed", "controller": "shim-sung"}', "holds no gains \\(its keys: 'kind', "),
+        # Another of the tuner's files, named as such.
+        (
+            '{"config": {}, "rows": {}, "feasible": true, "poses": 3}',
+            "holds no gains \\(its keys: 'config', 'rows', 'feasible', ...\\); allowed: a "
+            "tuned_gains.json, as wmr-jax tune writes beside evaluation.json",
+        ),
     ],
 )
 def test_bad_files_are_refused_in_one_line(tmp_path, content, message):
