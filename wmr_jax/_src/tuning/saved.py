@@ -236,14 +236,15 @@ def load_tuned(path: str | os.PathLike) -> ClosedLoop:
     fields = GAIN_FIELDS if kind == "fixed" else _SCHEDULE_FIELDS
     named = ("kind", "controller", "estimator", "units", "robot", "robot_units")
     bad = sorted({k for k in values if k not in named} - set(fields))
-    if not values.keys() & set(fields):
-        # Another of the tuner's files (evaluation.json, a comparison), or an
-        # empty one, which would load as the law's defaults: say so.
-        keys = ", ".join(repr(k) for k in list(values)[:3]) or "none"
-        raise ValueError(
-            f"{where} holds no gains (its keys: {keys}{', ...' if len(values) > 3 else ''}); "
-            "allowed: a tuned_gains.json, as wmr-jax tune writes beside evaluation.json"
-        )
+    # Another of the tuner's files (evaluation.json, a comparison), or one
+    # without gains, which would load as the law's defaults: said as such.
+    keys = ", ".join(repr(k) for k in list(values)[:3]) or "none"
+    no_gains = ValueError(
+        f"{where} holds no gains (its keys: {keys}{', ...' if len(values) > 3 else ''}); "
+        "allowed: a tuned_gains.json, as wmr-jax tune writes beside evaluation.json"
+    )
+    if bad and not values.keys() & set(fields):
+        raise no_gains
     if (
         bad
         and "kind" not in values
@@ -265,6 +266,8 @@ def load_tuned(path: str | os.PathLike) -> ClosedLoop:
         check_units(values["robot_units"], where)
     if "robot" in values:
         robot = robot_from_values(values["robot"], f"{where}: robot")
+    if not values.keys() & set(fields):
+        raise no_gains
     numbers = {k: v for k, v in values.items() if k not in named}
     for name, value in numbers.items():
         table = kind == "schedule" and name in TABLES
