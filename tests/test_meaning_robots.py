@@ -258,6 +258,14 @@ def test_a_ros_parameter_given_dotted_and_nested_is_refused(tmp_path):
         f"'{tmp_path / 'twice.yaml'}': linear.x.max_velocity is given twice (= 0.22 and 0.3, "
         "dotted and nested); allowed: each parameter once"
     )
+    # Inside a block too, the file named: linear: {x.max_velocity, x: {max_velocity}}.
+    nested = "wheel_separation: 0.16\nwheel_radius: 0.033\nlinear:\n  x.max_velocity: 0.22\n" \
+        "  x:\n    max_velocity: 0.3\n"  # fmt: skip
+    with pytest.raises(ValueError) as info:
+        _read(tmp_path, "deep.yaml", nested)
+    assert str(info.value).startswith(
+        f"'{tmp_path / 'deep.yaml'}': linear.x.max_velocity is given twice (= 0.22 and 0.3,"
+    )
     # Each spelling alone is read alike.
     for name, limit in (("dotted", "linear.x.max_velocity: 0.3\n"),
                         ("nested", "linear:\n  x:\n    max_velocity: 0.3\n")):  # fmt: skip
