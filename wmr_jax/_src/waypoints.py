@@ -491,10 +491,11 @@ def soccer_study(
     rows, runs = [], []
     with jax.enable_x64(True):
         for name in names:
+            params = robot_defaults(name, robot)
             for mode, p_r, p_theta in modes:
                 run = chain_rollout(
                     wp,
-                    params=robot_defaults(name, robot),
+                    params=params,
                     controller=name,
                     velocity=velocity,
                     steps=steps,

@@ -11,6 +11,7 @@ which one it is.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import inspect
 import re
 from collections.abc import Callable
@@ -141,7 +142,8 @@ def check_command_output(controller: Controller, params: Any) -> None:
     The law is traced alone, abstractly (``jax.eval_shape``), at one pose
     ``(3,)``: it must return two real scalars. A law that returns another
     shape or count would otherwise fail deep inside the traced scan, in
-    JAX's words. The package's own laws are not traced again here.
+    JAX's words. The package's own laws are not traced again here, and a
+    law passes once per parameter structure and dtype (the answer is kept).
 
     Args:
         controller: the controller.
@@ -154,11 +156,15 @@ def check_command_output(controller: Controller, params: Any) -> None:
     """
     if getattr(controller.command, "__module__", "").startswith("wmr_jax."):
         return
-    leaves = jax.tree.leaves(params)
-    if any(np.ndim(leaf) != 0 for leaf in leaves):
+    if any(np.ndim(leaf) != 0 for leaf in jax.tree.leaves(params)):
         params = controller.default_params()
-    dtype = float_dtype()
-    probe = jax.tree.map(lambda leaf: jax.ShapeDtypeStruct((), dtype), params)
+    _check_output_once(controller, jax.tree.structure(params), np.dtype(float_dtype()).name)
+
+
+@functools.lru_cache(maxsize=64)
+def _check_output_once(controller: Controller, structure: Any, dtype: str) -> None:
+    """``check_command_output`` for one parameter structure and dtype (refusals are not kept)."""
+    probe = jax.tree.unflatten(structure, [jax.ShapeDtypeStruct((), dtype)] * structure.num_leaves)
     pose = jax.ShapeDtypeStruct((3,), dtype)
     allowed = "allowed: (v, omega), two real scalars for one pose (3,) (docs/custom_controller.md)"
     shown = f"controller {controller.name!r}: controller.command(pose (3,), ref (3,), params)"

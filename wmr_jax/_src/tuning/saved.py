@@ -198,6 +198,15 @@ def _is_number(value: Any) -> bool:
     return True
 
 
+def _no_gains(values: dict[str, Any], where: str) -> ValueError:
+    """The refusal of a JSON object that holds none of the gains, naming its first keys."""
+    keys = ", ".join(repr(k) for k in list(values)[:3]) or "none"
+    return ValueError(
+        f"{where} holds no gains (its keys: {keys}{', ...' if len(values) > 3 else ''}); "
+        "allowed: a tuned_gains.json, as wmr-jax tune writes beside evaluation.json"
+    )
+
+
 def load_tuned(path: str | os.PathLike) -> ClosedLoop:
     """Load a ``tuned_gains.json`` of ``wmr-jax tune`` (fixed gains or a schedule, and estimator).
 
@@ -237,14 +246,11 @@ def load_tuned(path: str | os.PathLike) -> ClosedLoop:
     named = ("kind", "controller", "estimator", "units", "robot", "robot_units")
     bad = sorted({k for k in values if k not in named} - set(fields))
     # Another of the tuner's files (evaluation.json, a comparison), or one
-    # without gains, which would load as the law's defaults: said as such.
-    keys = ", ".join(repr(k) for k in list(values)[:3]) or "none"
-    no_gains = ValueError(
-        f"{where} holds no gains (its keys: {keys}{', ...' if len(values) > 3 else ''}); "
-        "allowed: a tuned_gains.json, as wmr-jax tune writes beside evaluation.json"
-    )
-    if bad and not values.keys() & set(fields):
-        raise no_gains
+    # without gains, which would load as the law's defaults: said as such
+    # (after the refusals of its estimator and robot, which name more).
+    holds_gains = bool(values.keys() & set(fields))
+    if bad and not holds_gains:
+        raise _no_gains(values, where)
     if (
         bad
         and "kind" not in values
@@ -266,8 +272,8 @@ def load_tuned(path: str | os.PathLike) -> ClosedLoop:
         check_units(values["robot_units"], where)
     if "robot" in values:
         robot = robot_from_values(values["robot"], f"{where}: robot")
-    if not values.keys() & set(fields):
-        raise no_gains
+    if not holds_gains:
+        raise _no_gains(values, where)
     numbers = {k: v for k, v in values.items() if k not in named}
     for name, value in numbers.items():
         table = kind == "schedule" and name in TABLES
