@@ -68,6 +68,9 @@ def test_fixed_gains_old_and_new_files_load(tmp_path):
         # The last of a repeated key won without a word.
         ('{"kr": 60, "kr": 70}', "cannot be read: the key 'kr' is given twice"),
         ("[" * 100_000 + "]" * 100_000, "cannot be read: maximum recursion depth"),
+        # The problem that tuned them, if said, is one the commands know.
+        ('{"kr": 60, "tuning": "fast"}', "tuning = 'fast' is not allowed; allowed: 'nominal' or"),
+        ('{"kr": 60, "tuning": ["robust"]}', "tuning = \\['robust'\\] is not allowed"),
         # Not the law's defaults (k_r = 120) from a file with no gains in it.
         ("{}", "holds no gains \\(its keys: none\\); allowed: a tuned_gains.json"),
         ('{"kind": "fixed", "controller": "shim-sung"}', "holds no gains \\(its keys: 'kind', "),
@@ -131,6 +134,20 @@ def test_only_what_load_tuned_reads_back_is_written():
     ):
         with pytest.raises(ValueError, match=message):
             tuning.tuned_json(params)
+
+
+def test_a_file_says_which_problem_tuned_it(tmp_path):
+    """The commands record it; a file of a user's own says nothing unless asked to."""
+    gains, robot = w.Gains(kr=80.0, k_theta=15.0), w.Robot(half_track=4.0, v_max=90.0)
+    for tuning_name in ("nominal", "robust", None):
+        path = tmp_path / f"{tuning_name}.json"
+        path.write_text(json.dumps(tuning.tuned_json(gains, robot=robot, tuning=tuning_name)))
+        assert tuning.tuning_of(path) == tuning_name
+        assert ("tuning" in json.loads(path.read_text())) == (tuning_name is not None)
+        assert tuning.load_tuned(path).params == gains
+    with pytest.raises(ValueError, match="tuning = 'Robust' is not allowed; allowed: 'nominal'"):
+        tuning.tuned_json(gains, tuning="Robust")
+    # The commands' files: tests/test_tuning_train.py and test_tuning_robust.py.
 
 
 def test_a_null_or_missing_kind_is_named(tmp_path):

@@ -266,6 +266,23 @@ def test_robustness_runs_the_files_robot_and_prints_percentages(tmp_path, capsys
     assert "--robot 'paper' is not allowed with --robust-gains" in err and err.count("\n") == 1
 
 
+def test_a_file_is_labelled_by_the_problem_that_tuned_it_not_by_the_flag(tmp_path, capsys):
+    # Refused before any run: a nominal file given as --robust-gains would be
+    # labelled "robust-tuned" in every table.
+    gains = w.Gains(kr=50.0, k_theta=2.0)
+    argv = ["robustness", "--out", str(tmp_path / "rob"), "--runs", "2"]
+    for tuned_by, flag, other in (
+        ("nominal", "--robust-gains", "--nominal-gains"),
+        ("robust", "--nominal-gains", "--robust-gains"),
+    ):
+        path = _file(tmp_path, f"{tuned_by}.json", tuned_json(gains, tuning=tuned_by))
+        assert main([*argv, flag, path]) == 2
+        err = capsys.readouterr().err
+        assert f"{flag} {path!r} is not allowed: its gains were tuned by `wmr-jax tune" in err
+        assert f"(give this one as {other})" in err and err.count("\n") == 1
+    assert not (tmp_path / "rob").exists()
+
+
 # ---------------------------------------------------------------- runs that only settle late
 
 

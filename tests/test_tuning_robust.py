@@ -153,6 +153,7 @@ def test_robust_command_tunes_and_judges_the_chosen_problem(tmp_path, capsys):
     assert main([*argv, "--knots", "2"]) == 0  # the default: the schedule and the EKF
     saved = json.loads((tmp_path / "tuned_gains.json").read_text())
     assert saved["kind"] == "schedule" and saved["estimator"]["kind"] == "ekf"
+    assert saved["tuning"] == "robust"  # robustness --robust-gains takes it, --nominal-gains not
     table = (tmp_path / "robust_evaluation.md").read_text()
     assert "model robot" in table and "| ekf |" in table
     # --fixed (the 7 gains with raw feedback) is handed to the tuner as such

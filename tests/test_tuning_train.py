@@ -80,9 +80,11 @@ def test_cli_writes_the_results_and_a_resumed_run_gives_the_same_gains(tmp_path,
         "kind",
         *tuning.GAIN_FIELDS,
         "units",
+        "tuning",
         "robot",
         "robot_units",
     ]
+    assert tuning.tuning_of(whole / "tuned_gains.json") == saved["tuning"] == "nominal"
     controller, gains, *_ = tuning.load_tuned(whole / "tuned_gains.json")
     assert controller.name == saved["controller"] == "shim-sung"
     assert np.all(w.check_feasible(gains))

@@ -56,6 +56,7 @@ from wmr_jax._src.tuning.robust import robust_score as robust_score
 from wmr_jax._src.tuning.robust import tune_robust as tune_robust
 from wmr_jax._src.tuning.saved import load_tuned as load_tuned
 from wmr_jax._src.tuning.saved import tuned_json as tuned_json
+from wmr_jax._src.tuning.saved import tuning_of as tuning_of
 from wmr_jax._src.tuning.search import SearchResult as SearchResult
 from wmr_jax._src.tuning.search import random_search as random_search
 from wmr_jax._src.tuning.training import TrainState as TrainState

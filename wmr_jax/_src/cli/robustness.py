@@ -2,7 +2,9 @@
 
 On the robot of ``--robot``, else the one the ``--nominal-gains`` and
 ``--robust-gains`` files record, else the paper robot; a file tuned for
-another robot than ``--robot`` (or than the other file) is refused. The
+another robot than ``--robot`` (or than the other file) is refused, and so
+is a file that says another problem tuned it (``"tuning"``) than its flag
+names: the tables label its rows by the flag. The
 runs last the robot's horizon (``wmr_jax.studies.study_horizon``: 6 s on the
 paper robot, longer on a slower one), from the references of
 docs/model.md §6.
@@ -184,7 +186,7 @@ def _gain_sets(args: Any) -> tuple[dict[str, Any], Any]:
     from wmr_jax._src.params import Robot
     from wmr_jax._src.robots import describe_robot, same_robot
     from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
-    from wmr_jax._src.tuning.saved import load_tuned
+    from wmr_jax._src.tuning.saved import TUNINGS, load_tuned, tuning_of
 
     given = flags.robot_from(getattr(args, "robot", None))
     if given is not None and given.note:
@@ -197,8 +199,18 @@ def _gain_sets(args: Any) -> tuple[dict[str, Any], Any]:
             continue
         try:
             loop = load_tuned(path)  # run whole: its controller and estimator
+            tuning = tuning_of(path)
         except ValueError as err:
             raise ValueError(f"{flag} {path!r} is not allowed: {err}") from None
+        wanted = label.split("-")[0]
+        if tuning is not None and tuning != wanted:
+            # Its rows would be labelled by the flag: a nominal file called robust-tuned.
+            other = "--nominal-gains" if tuning == "nominal" else "--robust-gains"
+            raise ValueError(
+                f"{flag} {str(path)!r} is not allowed: its gains were tuned by "
+                f"`{TUNINGS[tuning]}`; allowed: a file of `{TUNINGS[wanted]}` (give this "
+                f"one as {other})"
+            )
         chosen = flags.robot_for_gains(given, loop.robot, flag, path)
         if chosen is not None and robot is None:
             robot, source = chosen, f"{flag} {str(path)!r}"

@@ -127,9 +127,9 @@ def _write_results(out: Path, config: Any, robot: Any, result: Any) -> None:
     from wmr_jax._src.tuning.saved import tuned_json
 
     # Each file records the robot: its gains are tuned within that robot's wheel budget.
-    tuned = tuned_json(result.gains, robot=robot)
+    tuned = tuned_json(result.gains, robot=robot, tuning="nominal")
     search = result.search
-    searched = None if search is None else tuned_json(search.gains, robot=robot)
+    searched = None if search is None else tuned_json(search.gains, robot=robot, tuning="nominal")
     io.atomic_write_json(out / "tuned_gains.json", tuned)
     if searched is not None:
         io.atomic_write_json(out / "random_search_gains.json", searched)

@@ -141,7 +141,9 @@ def run(args: Any) -> int:
 
     def keep(loop: Any, losses: list[float]) -> None:
         # Written before the evaluation: an interruption there loses no tuning.
-        io.atomic_write_json(out / "tuned_gains.json", tuned_json(loop, robot=robot))
+        io.atomic_write_json(
+            out / "tuned_gains.json", tuned_json(loop, robot=robot, tuning="robust")
+        )
         io.atomic_write_json(out / "robust_loss.json", {"loss": losses})
         print(f"tuned_gains.json, robust_loss.json -> {out} (now judging them)", flush=True)
 

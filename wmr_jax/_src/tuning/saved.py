@@ -17,6 +17,13 @@ It also records the robot the parameters were tuned for (``"robot":
 {field: value}``, with ``"robot_units"``): gains are tuned within that
 robot's wheel budget ``k_r + L k_θ ≤ V_max``, so they travel with it. Files
 from before robots were recorded load with ``robot`` ``None``.
+
+The files of ``wmr-jax tune`` also say which problem tuned them:
+``"tuning": "nominal"`` (the nominal loop, ``wmr-jax tune``) or
+``"robust"`` (under noise, mismatch and latency, ``wmr-jax tune --robust``),
+so that a study labels them by what they are (``tuning_of``). A file
+without it (written before, or by ``tuned_json`` without ``tuning=``) says
+nothing about it.
 """
 
 from __future__ import annotations
@@ -37,7 +44,7 @@ from wmr_jax._src.tuning.estimation import estimator_from_json, estimator_json
 from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS
 from wmr_jax._src.tuning.problems import FIXED, SCHEDULED, params_json
 
-__all__ = ["PARAM_UNITS", "load_tuned", "tuned_json"]
+__all__ = ["PARAM_UNITS", "TUNINGS", "load_tuned", "tuned_json", "tuning_of"]
 
 _KINDS = {"fixed": (SHIM_SUNG, Gains), "schedule": (SCHEDULE, ScheduleParams)}
 _SCHEDULE_FIELDS = (*TABLES, *SHAPE_FIELDS, "v_max", "half_track")
@@ -61,6 +68,9 @@ PARAM_UNITS = {
     "estimator.sigma_xy": "cm",
     "estimator.sigma_theta": "rad",
 }
+# The problems a file may say tuned it, and the command that tunes each.
+TUNINGS = {"nominal": "wmr-jax tune", "robust": "wmr-jax tune --robust"}
+
 # Angles may be given in degrees instead (a file written by hand).
 _DEGREES = "deg"
 
@@ -72,7 +82,9 @@ def _units(values: dict[str, Any]) -> dict[str, str]:
     return {name: PARAM_UNITS[name] for name in names if name in PARAM_UNITS}
 
 
-def tuned_json(params: Any, estimator: Any = None, robot: Any = None) -> dict[str, Any]:
+def tuned_json(
+    params: Any, estimator: Any = None, robot: Any = None, *, tuning: str | None = None
+) -> dict[str, Any]:
     """Return the ``tuned_gains.json`` content of ``Gains`` or ``ScheduleParams``.
 
     ``params`` may also be a ``ClosedLoop`` (its params, estimator and
@@ -80,7 +92,8 @@ def tuned_json(params: Any, estimator: Any = None, robot: Any = None) -> dict[st
     raw feedback), written under ``"estimator"``; ``robot`` the ``Robot``
     they were tuned for, written under ``"robot"`` (cm, kg, s; its units
     under ``"robot_units"``). ``None`` (and no robot in the loop) writes no
-    robot, as files did before.
+    robot, as files did before. ``tuning``: the problem that tuned them, a
+    key of ``TUNINGS`` (``None``: not recorded).
 
     Raises:
         ValueError: for anything but one valid parameter set (a scalar per
@@ -103,12 +116,34 @@ def tuned_json(params: Any, estimator: Any = None, robot: Any = None) -> dict[st
     if sensed is not None:
         values["estimator"] = sensed
     values["units"] = _units(values)
+    if tuning is not None:
+        values["tuning"] = _check_tuning(tuning, "tuning")
     if robot is not None:
         robot = validate_one_robot(robot, "tuned_gains.json")
         _check_schedule_robot(params, robot, "robot")
         values["robot"] = robot_json(robot)
         values["robot_units"] = dict(ROBOT_UNITS)
     return values
+
+
+def _check_tuning(tuning: Any, where: str) -> str:
+    if not isinstance(tuning, str) or tuning not in TUNINGS:
+        allowed = " or ".join(map(repr, TUNINGS))
+        raise ValueError(f"{where} = {tuning!r} is not allowed; allowed: {allowed}")
+    return tuning
+
+
+def tuning_of(path: str | os.PathLike) -> str | None:
+    """The problem that tuned a ``tuned_gains.json``: a key of ``TUNINGS``, or ``None``.
+
+    ``None`` for a file that does not say (from before it was recorded).
+
+    Raises:
+        ValueError: one line, if the file cannot be loaded (``load_tuned``).
+    """
+    load_tuned(path)
+    values = json.loads(check_path("path", path).read_text(encoding="utf-8"))
+    return values.get("tuning")
 
 
 def _check_schedule_robot(params: Any, robot: Robot, where: str) -> None:
@@ -243,7 +278,7 @@ def load_tuned(path: str | os.PathLike) -> ClosedLoop:
     kind = _kind_of(values, where)
     controller, cls = _KINDS[kind]
     fields = GAIN_FIELDS if kind == "fixed" else _SCHEDULE_FIELDS
-    named = ("kind", "controller", "estimator", "units", "robot", "robot_units")
+    named = ("kind", "controller", "estimator", "units", "robot", "robot_units", "tuning")
     bad = sorted({k for k in values if k not in named} - set(fields))
     # Another of the tuner's files (evaluation.json, a comparison), or one
     # without gains, which would load as the law's defaults: said as such
@@ -265,6 +300,8 @@ def load_tuned(path: str | os.PathLike) -> ClosedLoop:
         raise ValueError(
             f"{where}: key {bad[0]!r} is not allowed; allowed: keys among {', '.join(fields)}"
         )
+    if "tuning" in values:
+        _check_tuning(values["tuning"], f"{where}: tuning")
     values = _in_library_units(values, fields, where)  # angles in radians from here on
     estimator = estimator_from_json(values.get("estimator"), where)
     robot = None
