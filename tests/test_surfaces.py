@@ -399,3 +399,33 @@ def test_editing_only_the_metadata_of_a_saved_file_is_detected(tmp_path, monkeyp
     assert main(_checkpoint_args(tmp_path)) == 2
     err = capsys.readouterr().err
     assert not calls and err.count("\n") == 1 and "checksum does not match" in err, err
+
+
+def test_a_new_comparison_leaves_no_rows_of_an_earlier_one_to_resume(tmp_path, monkeypatch, capsys):
+    """Rows record no settings of their own: a new comparison's settings must not sit beside them.
+
+    A comparison of one horizon, then one of another cut before its first
+    seed ended: ``--resume`` of the second kept the first's rows as its own.
+    """
+    from wmr_jax._src.tuning import compare as compare_module
+
+    def stop(**kwargs):
+        raise KeyboardInterrupt
+
+    def fake(*, seeds, problems, configs, progress):
+        return _whole(problems[0], seeds[0], mean_arrival=float(configs[problems[0]].horizon))
+
+    monkeypatch.setattr(compare_module, "compare", fake)
+    argv = ["tune", "--out", str(tmp_path), "--compare", "--schedule", "--iters", "1"]
+    assert main([*argv, "--horizon", "1"]) == 0
+    assert (tmp_path / "compare.json").exists() and (tmp_path / "compare.md").exists()
+    monkeypatch.setattr(compare_module, "compare", stop)
+    assert main([*argv, "--horizon", "2"]) == 130
+    assert not (tmp_path / "compare.json").exists() and not (tmp_path / "compare.md").exists()
+    capsys.readouterr()
+    monkeypatch.setattr(compare_module, "compare", fake)
+    assert main([*argv, "--horizon", "2", "--resume"]) == 0
+    printed = capsys.readouterr().out
+    assert "kept from" not in printed
+    rows = json.loads((tmp_path / "compare.json").read_text())
+    assert {row["mean_arrival"] for row in rows} == {2.0}

@@ -150,7 +150,12 @@ def test_config_refuses_unknown_problems_and_estimators(changes, message):
 
 def test_robust_command_tunes_and_judges_the_chosen_problem(tmp_path, capsys):
     argv = ["tune", "--robust", "--out", str(tmp_path), "--iters", "2", "--poses", "2"]
+    # What judged other gains in this folder (here plain `tune`'s) goes with them.
+    for stale in ("evaluation.json", "random_search_gains.json", "tuning_curve.png"):
+        (tmp_path / stale).write_text("{}")
     assert main([*argv, "--knots", "2"]) == 0  # the default: the schedule and the EKF
+    for stale in ("evaluation.json", "random_search_gains.json", "tuning_curve.png"):
+        assert not (tmp_path / stale).exists(), stale
     saved = json.loads((tmp_path / "tuned_gains.json").read_text())
     assert saved["kind"] == "schedule" and saved["estimator"]["kind"] == "ekf"
     assert saved["tuning"] == "robust"  # robustness --robust-gains takes it, --nominal-gains not
@@ -219,7 +224,22 @@ def test_robust_compare_without_evosax_says_so_and_keeps_each_seed(tmp_path, cap
     assert main([*argv, "--resume"]) == 0
     assert seeds == []
     assert main(["tune", "--robust", "--compare", "--out", str(tmp_path), "--resume"]) == 2
-    assert "holds another comparison's settings" in capsys.readouterr().err
+    assert "holds another comparison (its config differ)" in capsys.readouterr().err
+    # Rows of another law are another comparison's too.
+    from wmr_jax._src import provenance
+
+    monkeypatch.setattr(provenance, "code_version", lambda: "0.0+another")
+    assert main([*argv, "--resume"]) == 2
+    assert "holds another comparison (its code differ)" in capsys.readouterr().err
+    assert seeds == []
+    # A new comparison (no --resume) drops the earlier one's rows and table at
+    # once: cut before its first seed ends, it leaves nothing to be kept as its own.
+    monkeypatch.setattr(
+        robust, "tune_robust", lambda config, **_: (_ for _ in ()).throw(KeyboardInterrupt)
+    )
+    assert main(argv) == 130
+    assert not (tmp_path / "robust_compare.json").exists()
+    assert not (tmp_path / "robust_compare.md").exists()
 
 
 def test_robust_tuning_on_another_robot_tunes_and_judges_on_it():

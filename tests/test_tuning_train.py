@@ -71,7 +71,12 @@ def test_train_reports_every_feasible_iterate_and_annealing_does_not_recompile(c
 
 def test_cli_writes_the_results_and_a_resumed_run_gives_the_same_gains(tmp_path, capsys):
     whole, cut = tmp_path / "whole", tmp_path / "cut"
+    # What judged other gains in this folder (here `tune --robust`'s) goes with them.
+    whole.mkdir()
+    for stale in ("robust_evaluation.md", "robust_evaluation.json", "robust_loss.json"):
+        (whole / stale).write_text("{}")
     assert main(["tune", "--out", str(whole), *SMALL_FLAGS]) == 0
+    assert not [p.name for p in whole.iterdir() if p.name.startswith("robust_")]
     printed = capsys.readouterr().out
     assert "| paper feasible | " in printed and "| tuned | " in printed
     saved = json.loads((whole / "tuned_gains.json").read_text())

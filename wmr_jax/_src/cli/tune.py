@@ -124,13 +124,13 @@ def _write_results(out: Path, config: Any, robot: Any, result: Any) -> None:
     from wmr_jax._src.report.tuning import tuning_curve
     from wmr_jax._src.robots import ROBOT_UNITS, robot_json
     from wmr_jax._src.tuning.evaluation import report_ratios, wheel_speed_ok
-    from wmr_jax._src.tuning.saved import tuned_json
+    from wmr_jax._src.tuning.saved import tuned_json, write_tuned
 
     # Each file records the robot: its gains are tuned within that robot's wheel budget.
     tuned = tuned_json(result.gains, robot=robot, tuning="nominal")
     search = result.search
     searched = None if search is None else tuned_json(search.gains, robot=robot, tuning="nominal")
-    io.atomic_write_json(out / "tuned_gains.json", tuned)
+    write_tuned(out, tuned)  # and drops the files that judged the gains it replaces
     if searched is not None:
         io.atomic_write_json(out / "random_search_gains.json", searched)
     paper = result.evaluation["paper_feasible"].mean_arrival
@@ -490,6 +490,10 @@ def _compare_rows(
 
     record, manifest = out / "compare.json", out / "compare_settings.json"
     if not (resume and record.exists()):
+        # A new comparison: an earlier one's rows, which record no settings of
+        # their own, must not stay beside these settings for a --resume to keep.
+        for stale in (record, out / "compare.md"):
+            stale.unlink(missing_ok=True)
         io.atomic_write_json(manifest, settings)
         return []
     advice = "allowed: the same settings, or a fresh --out"

@@ -125,7 +125,7 @@ def run(args: Any) -> int:
     from wmr_jax._src.robots import describe_robot, robot_json
     from wmr_jax._src.robustness import study_horizon
     from wmr_jax._src.tuning.robust import tune_robust
-    from wmr_jax._src.tuning.saved import tuned_json
+    from wmr_jax._src.tuning.saved import tuned_json, write_tuned
 
     if getattr(args, "resume", False):
         print("tune --robust keeps no checkpoint: --resume runs it again from the start")
@@ -141,9 +141,8 @@ def run(args: Any) -> int:
 
     def keep(loop: Any, losses: list[float]) -> None:
         # Written before the evaluation: an interruption there loses no tuning.
-        io.atomic_write_json(
-            out / "tuned_gains.json", tuned_json(loop, robot=robot, tuning="robust")
-        )
+        # (Removing the files that judged the gains it replaces.)
+        write_tuned(out, tuned_json(loop, robot=robot, tuning="robust"))
         io.atomic_write_json(out / "robust_loss.json", {"loss": losses})
         print(f"tuned_gains.json, robust_loss.json -> {out} (now judging them)", flush=True)
 
@@ -173,9 +172,12 @@ def _kept_rows(path: Any, settings: dict[str, Any], resume: bool) -> list[dict[s
     except (OSError, UnicodeDecodeError, ValueError) as err:
         raise ValueError(f"--resume: {str(path)!r} cannot be read: {err}") from None
     if not isinstance(saved, dict) or saved.get("settings") != settings:
+        theirs = saved.get("settings") if isinstance(saved, dict) else None
+        theirs = theirs if isinstance(theirs, dict) else {}
+        differ = [k for k in settings if theirs.get(k) != settings[k]]
         raise ValueError(
-            f"--resume: {str(path)!r} holds another comparison's settings; allowed: the "
-            "same flags as the run that wrote it, or another --out"
+            f"--resume: {str(path)!r} holds another comparison (its {', '.join(differ)} "
+            "differ); allowed: the same flags and code as the run that wrote it, or another --out"
         )
     rows = saved.get("rows")
     good = isinstance(rows, list) and all(
@@ -194,6 +196,7 @@ def _compare(out: Any, config: Any, on_robot: dict[str, Any], *, resume: bool) -
     were named still resume).
     """
     from wmr_jax._src import io
+    from wmr_jax._src.provenance import code_version
     from wmr_jax._src.report.tuning import robust_comparison_table
     from wmr_jax._src.robots import robot_json
     from wmr_jax._src.tuning.robust import evosax_available, tune_robust
@@ -204,11 +207,18 @@ def _compare(out: Any, config: Any, on_robot: dict[str, Any], *, resume: bool) -
             "comparing the gradient with random search only"
         )
     path = out / "robust_compare.json"
-    settings = {"format": _COMPARE_FORMAT, "config": dataclasses.asdict(config)}
+    settings = {
+        "format": _COMPARE_FORMAT,
+        "config": dataclasses.asdict(config),
+        "code": code_version(),  # rows of another law are not this comparison's
+    }
     if on_robot:
         settings["robot"] = robot_json(on_robot["robot"])
     settings = json.loads(json.dumps(settings))  # as it reads back from the file
     rows = _kept_rows(path, settings, resume)
+    if not resume:  # a new comparison: nothing of an earlier one stays beside its rows
+        for stale in (path, out / "robust_compare.md"):
+            stale.unlink(missing_ok=True)
     done = {row["seed"] for row in rows}
     for seed in _COMPARE_SEEDS:
         if seed in done:

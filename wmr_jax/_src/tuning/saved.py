@@ -31,12 +31,13 @@ from __future__ import annotations
 import json
 import math
 import os
+from pathlib import Path
 from typing import Any
 
 from wmr_jax._src.checks import check_path, require_unbatched
 from wmr_jax._src.controllers.schedule import SCHEDULE, SHAPE_FIELDS, TABLES, ScheduleParams
 from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
-from wmr_jax._src.io import json_object_once
+from wmr_jax._src.io import atomic_write_json, json_object_once
 from wmr_jax._src.params import Gains, Robot, validate_one_robot
 from wmr_jax._src.robots import ROBOT_UNITS, check_units, robot_from_values, robot_json
 from wmr_jax._src.sensing.loop import ClosedLoop
@@ -44,7 +45,15 @@ from wmr_jax._src.tuning.estimation import estimator_from_json, estimator_json
 from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS
 from wmr_jax._src.tuning.problems import FIXED, SCHEDULED, params_json
 
-__all__ = ["PARAM_UNITS", "TUNINGS", "load_tuned", "tuned_json", "tuning_of"]
+__all__ = [
+    "JUDGING_TUNED",
+    "PARAM_UNITS",
+    "TUNINGS",
+    "load_tuned",
+    "tuned_json",
+    "tuning_of",
+    "write_tuned",
+]
 
 _KINDS = {"fixed": (SHIM_SUNG, Gains), "schedule": (SCHEDULE, ScheduleParams)}
 _SCHEDULE_FIELDS = (*TABLES, *SHAPE_FIELDS, "v_max", "half_track")
@@ -68,6 +77,20 @@ PARAM_UNITS = {
     "estimator.sigma_xy": "cm",
     "estimator.sigma_theta": "rad",
 }
+# What the tuning commands write beside a tuned_gains.json about the gains in
+# it (their evaluation, their tuning's history, the search they were compared
+# with). ``write_tuned`` removes them before it replaces the file, so that a
+# folder never holds new gains beside the judgement of older ones: of an
+# interrupted run, of another seed, or of the other tuning command.
+JUDGING_TUNED = (
+    "evaluation.json",
+    "tuning_curve.png",
+    "random_search_gains.json",
+    "robust_loss.json",
+    "robust_evaluation.json",
+    "robust_evaluation.md",
+)
+
 # The problems a file may say tuned it, and the command that tunes each.
 TUNINGS = {"nominal": "wmr-jax tune", "robust": "wmr-jax tune --robust"}
 
@@ -124,6 +147,17 @@ def tuned_json(
         values["robot"] = robot_json(robot)
         values["robot_units"] = dict(ROBOT_UNITS)
     return values
+
+
+def write_tuned(folder: Path, values: dict[str, Any]) -> Path:
+    """Write ``values`` (``tuned_json``) to ``folder/tuned_gains.json``, atomically.
+
+    The files of ``JUDGING_TUNED`` in ``folder`` judged the gains it replaces;
+    they are removed first (the caller writes the new ones after).
+    """
+    for name in JUDGING_TUNED:
+        (folder / name).unlink(missing_ok=True)
+    return atomic_write_json(folder / "tuned_gains.json", values)
 
 
 def _check_tuning(tuning: Any, where: str) -> str:
