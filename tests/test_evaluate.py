@@ -45,6 +45,11 @@ def _evaluate(capsys, *argv):
     return captured.out
 
 
+def test_the_result_names_its_dtype():
+    one = conditions.evaluate_loop(w.Gains(kr=60.0), REFS[:2], horizon=0.5, x64=False)
+    assert one["dtype"] == "float32"
+
+
 def test_npy_and_csv_give_the_same_result_as_the_library(capsys, tmp_path):
     gains = w.Gains(kr=60.0)
     gfile = _gains_file(tmp_path, gains)
@@ -57,8 +62,14 @@ def test_npy_and_csv_give_the_same_result_as_the_library(capsys, tmp_path):
         assert result["refs_file"] == refs_file and result["gains_file"] == gfile
         assert f"evaluate -> {out_file}" in out and "| success |" in out and "cm/s" in out
         results.append(result)
-    a, b = ({k: v for k, v in r.items() if k not in ("refs_file", "gains_file")} for r in results)
+    a, b = (
+        {k: v for k, v in r.items() if k not in ("refs_file", "gains_file", "gains")}
+        for r in results
+    )
     assert a == b
+    # The gains themselves are recorded (the file may be tuned again), and the dtype.
+    assert results[0]["gains"] == results[1]["gains"] == tuned_json(gains)
+    assert a["dtype"] == "float64"
     assert 0.0 <= a["success"] <= 1.0 and a["n"] == len(REFS)
     direct = conditions.evaluate_loop(
         gains, REFS, condition="both", mismatch=0.03, seed=3, horizon=6.0

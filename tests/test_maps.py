@@ -191,7 +191,12 @@ def test_the_maps_draw_the_wheel_limit_of_the_robot_the_study_ran(tmp_path, monk
     monkeypatch.setattr(report_maps, "map_figure", lambda path, *a, v_max, **k: drawn.append(v_max))
     study = map_study(40, controller_names=["shim-sung"], headings_deg=(0.0,), chunk=16)
     study.summary["robot"]["v_max"] = 22.0  # as a study of a slow robot records it
+    # The figures of an earlier study of other controllers do not stay beside this one's.
+    for stale in ("maps_aicardi.png", "winner.png", "maps_shim-sung.png"):
+        (tmp_path / stale).write_text("an earlier study")
+    (tmp_path / "notes.png").write_text("the user's")
     report.save_map_study(tmp_path, study)
+    assert sorted(p.name for p in tmp_path.glob("*.png")) == ["maps_shim-sung.png", "notes.png"]
     del study.summary["robot"]  # a summary from before robots were recorded: the paper robot
     report.save_map_study(tmp_path, study)
     assert drawn == [22.0, 125.0]

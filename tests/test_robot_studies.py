@@ -243,9 +243,21 @@ def test_robustness_runs_the_files_robot_and_prints_percentages(tmp_path, capsys
     loop = studies.ClosedLoop("shim-sung", w.Gains(kr=50.0, k_theta=2.0), None)
     gains = _file(tmp_path, "g.json", tuned_json(loop, robot=QUICK))
     out = tmp_path / "rob"
+    # An earlier run's noise curve (not asked for now) does not stay beside this run's files.
+    out.mkdir()
+    for stale in ("noise_curve.md", "noise_curve.json", "standard_conditions.png"):
+        (out / stale).write_text("an earlier run")
     argv = ["robustness", "--out", str(out), "--runs", "2", "--controller", "aicardi"]
     assert main([*argv, "--robust-gains", gains]) == 0
     printed = capsys.readouterr().out
+    assert not (out / "noise_curve.md").exists() and not (out / "noise_curve.json").exists()
+    assert not (out / "standard_conditions.png").exists()  # removed; figures not saved here
+    # Each record says which gains, from which file, in which dtype.
+    record = json.loads((out / "standard_conditions.json").read_text())
+    assert record["gain_files"] == {"--robust-gains": gains} and record["dtype"] == "float64"
+    assert record["gains"]["robust-tuned"] == tuned_json(loop.params)
+    assert record["gains"]["paper (k_r = 54)"] == tuned_json(paper_feasible_gains(QUICK))
+    assert json.loads((out / "robustness.json").read_text())["dtype"] == "float64"
     # Both studies run the file's robot; the paper's gains are scaled into its budget.
     assert same_robot(runs["monte carlo"]["robot"], QUICK)
     sets, kwargs = runs["standard"]
@@ -260,6 +272,11 @@ def test_robustness_runs_the_files_robot_and_prints_percentages(tmp_path, capsys
     assert "| 100 % |" in (out / "standard_conditions.md").read_text()
     for name in ("standard_conditions.json", "robustness.json"):
         assert json.loads((out / name).read_text())["robot"] == robot_json(QUICK)
+    # Another dtype reads as such.
+    assert main([*argv, "--robust-gains", gains, "--float32"]) == 0
+    for name in ("standard_conditions.json", "robustness.json"):
+        assert json.loads((out / name).read_text())["dtype"] == "float32"
+    capsys.readouterr()
     # A --robot other than the file's is refused in one line.
     assert main([*argv, "--robust-gains", gains, "--robot", "paper"]) == 2
     err = capsys.readouterr().err

@@ -266,7 +266,8 @@ def evaluate_loop(
         of docs/model.md §8 over the references that arrived (None if none),
         "vs_turn_drive_turn": the mean arrival over it, "n", "condition",
         "mismatch", "seed", "horizon_s", "velocity", "controller",
-        "feedback", "robot": {field: value}}``.
+        "feedback", "robot": {field: value}, "dtype": "float64" or
+        "float32"}``.
 
     Raises:
         ValueError: for a bad argument, before any run.
@@ -322,6 +323,7 @@ def evaluate_loop(
         "controller": controller.name,
         "feedback": "raw" if estimator is None else estimator.name,
         "robot": robot_json(robot),
+        "dtype": "float64" if x64 else "float32",
     }
 
 

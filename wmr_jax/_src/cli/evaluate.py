@@ -380,6 +380,7 @@ def run(args: Any) -> int:
     from wmr_jax._src.conditions import evaluate_loop
     from wmr_jax._src.io import atomic_write_json
     from wmr_jax._src.report.tables import markdown_table
+    from wmr_jax._src.tuning.saved import tuned_json
 
     with flags.as_flags({"refs": "--refs", "horizon": "--horizon", "mismatch": "--mismatch"}):
         result = evaluate_loop(
@@ -393,7 +394,9 @@ def run(args: Any) -> int:
             x64=x64,
             robot=robot,
         )
-    result = {**result, "gains_file": str(args.gains), "refs_file": str(args.refs)}
+    # The gains themselves, not only where they were: the file may be tuned again.
+    gains = tuned_json(loop.params, loop.estimator)
+    result = {**result, "gains_file": str(args.gains), "gains": gains, "refs_file": str(args.refs)}
     if out is not None:
         atomic_write_json(out, result)
         print(f"evaluate -> {out}")

@@ -18,6 +18,14 @@ from wmr_jax._src.cli import flags
 
 __all__ = ["SUBCOMMANDS"]
 
+# What the command writes into --out (the noise curve only with --noise-curve).
+_OUTPUTS = tuple(
+    f"{stem}.{ext}"
+    for stem in ("robustness", "standard_conditions", "noise_curve")
+    for ext in ("png", "md", "json")
+)
+_GAIN_FLAGS = ("--nominal-gains", "--robust-gains")
+
 # The columns printed after the run (robustness.md has them all).
 _PRINTED = ["condition", "controller", "noise xy cm", "success", "median arrival s"]
 
@@ -87,6 +95,11 @@ def run(args: Any) -> int:
     velocity = flags.velocity_loop(args.velocity)
     estimator = _estimator(args.estimator)
     sets, robot = _gain_sets(args)
+    # The folder holds this run's results only: an earlier run's (a noise
+    # curve not asked for now, or what an interruption would leave) go first.
+    for name in _OUTPUTS:
+        (out / name).unlink(missing_ok=True)
+    meta = _meta(seed, robot, sets, args)
 
     from wmr_jax._src.report.robustness import robustness_table, write_robustness
     from wmr_jax._src.robots import describe_robot
@@ -110,12 +123,14 @@ def run(args: Any) -> int:
         estimator=estimator,
         robot=robot,
     )
-    write_robustness(out, rows, seed=seed, velocity=velocity, n_runs=n_runs, robot=robot)
+    write_robustness(
+        out, rows, seed=seed, velocity=velocity, n_runs=n_runs, robot=robot, x64=not args.float32
+    )
     print(f"robustness -> {out}/robustness.png, robustness.md, robustness.json")
     print(robustness_table(rows, _PRINTED), end="")
-    _standard(out, sets, seed, robot, x64=not args.float32)
+    _standard(out, sets, seed, robot, meta, x64=not args.float32)
     if args.noise_curve:
-        _noise_curve(out, sets, seed, robot, x64=not args.float32)
+        _noise_curve(out, sets, seed, robot, meta, x64=not args.float32)
     return 0
 
 
@@ -126,15 +141,30 @@ def _is_paper(robot: Any) -> bool:
     return same_robot(robot, Robot())
 
 
-def _meta(seed: int, robot: Any) -> dict[str, Any]:
-    """What the standard conditions and the noise curve record beside their rows."""
-    from wmr_jax._src.robots import robot_json
-    from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED
+def _meta(seed: int, robot: Any, sets: dict[str, Any], args: Any) -> dict[str, Any]:
+    """What the standard conditions and the noise curve record beside their rows.
 
+    Beside the seed, the poses and the robot: the dtype, the gain files given
+    and every set's parameters and estimator (as ``tuned_gains.json`` holds
+    them), so that two runs on other files or dtypes never read alike.
+    """
+    from wmr_jax._src.robots import robot_json
+    from wmr_jax._src.sensing.loop import ClosedLoop
+    from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED
+    from wmr_jax._src.tuning.saved import tuned_json
+
+    gains = {}
+    for label, value in sets.items():
+        loop = value if isinstance(value, ClosedLoop) else ClosedLoop("shim-sung", value, None)
+        gains[label] = tuned_json(loop.params, loop.estimator)
+    files = {flag: getattr(args, flag[2:].replace("-", "_"), None) for flag in _GAIN_FLAGS}
     return {
         "seed": seed,
         "held_out_poses": EVAL_POSES,
         "eval_seed": EVAL_SEED,
+        "dtype": "float32" if args.float32 else "float64",
+        "gain_files": {flag: str(path) for flag, path in files.items() if path is not None},
+        "gains": gains,
         "robot": robot_json(robot),
     }
 
@@ -152,7 +182,9 @@ def _estimator(name: str) -> Any:
     return name
 
 
-def _noise_curve(out: Any, sets: dict[str, Any], seed: int, robot: Any, *, x64: bool) -> None:
+def _noise_curve(
+    out: Any, sets: dict[str, Any], seed: int, robot: Any, meta: dict[str, Any], *, x64: bool
+) -> None:
     """Success and arrival against noise: each set raw and with its (or the default) estimator."""
     import jax
 
@@ -171,7 +203,7 @@ def _noise_curve(out: Any, sets: dict[str, Any], seed: int, robot: Any, *, x64: 
         loops[name + " + estimator"] = loop._replace(estimator=loop.estimator or "ekf")
     refs = held_out_poses(EVAL_POSES, EVAL_SEED)
     rows = noise_curve(loops, refs, jax.random.key(seed), x64=x64, robot=robot)
-    write_noise_curve(out, rows, meta=_meta(seed, robot))
+    write_noise_curve(out, rows, meta=meta)
     print(f"noise curve -> {out}/noise_curve.png, .md, .json")
 
 
@@ -231,7 +263,9 @@ def _gain_sets(args: Any) -> tuple[dict[str, Any], Any]:
     return sets, robot
 
 
-def _standard(out: Any, sets: dict[str, Any], seed: int, robot: Any, *, x64: bool) -> None:
+def _standard(
+    out: Any, sets: dict[str, Any], seed: int, robot: Any, meta: dict[str, Any], *, x64: bool
+) -> None:
     """Judge the gain sets under the standard conditions; write and print the table."""
     import jax
 
@@ -245,7 +279,7 @@ def _standard(out: Any, sets: dict[str, Any], seed: int, robot: Any, *, x64: boo
 
     refs = held_out_poses(EVAL_POSES, EVAL_SEED)
     rows = standard_conditions(sets, refs, jax.random.key(seed), x64=x64, robot=robot)
-    write_standard_conditions(out, rows, meta=_meta(seed, robot))
+    write_standard_conditions(out, rows, meta=meta)
     print(f"standard conditions -> {out}/standard_conditions.png, .md, .json")
     print(robustness_table(rows, STANDARD_COLUMNS[:6]), end="")
 

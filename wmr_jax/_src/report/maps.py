@@ -406,7 +406,9 @@ def save_map_study(out_dir: str | Path, study: MapStudy) -> list[Path]:
 
     Writes ``maps_<controller>.png`` (metrics × headings), ``winner.png``
     (which controller arrives first; only with two controllers or more),
-    ``summary.md`` and ``summary.json``, each atomically.
+    ``summary.md`` and ``summary.json``, each atomically, and removes the
+    ``maps_*.png`` and ``winner.png`` of an earlier study that this one does
+    not draw.
 
     Args:
         out_dir: output folder (created if needed).
@@ -433,6 +435,13 @@ def save_map_study(out_dir: str | Path, study: MapStudy) -> list[Path]:
     # The robot the study ran (older summaries record none: the paper robot).
     robot = study.summary.get("robot") if isinstance(study.summary, dict) else None
     v_max = float(robot["v_max"]) if isinstance(robot, dict) else float(Robot().v_max)
+    # A figure of an earlier study in this folder (another controller, a
+    # winner of several) would pass for this one's: only this study's stay.
+    drawn = {f"maps_{name}.png" for name in study.results}
+    drawn |= {"winner.png"} if len(study.results) > 1 else set()
+    for stale in [*out.glob("maps_*.png"), out / "winner.png"]:
+        if stale.name not in drawn:
+            stale.unlink(missing_ok=True)
     written = [
         map_figure(
             out / f"maps_{name}.png",
