@@ -5,6 +5,7 @@ import math
 import re
 import subprocess
 import sys
+from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
@@ -325,3 +326,32 @@ def test_library_errors_name_the_flag_and_leave_out_advice_no_flag_follows():
     assert str(err.value) == "--ref: ref = [1e+30] is too far for float32; allowed: |x| <= 1e18"
     with pytest.raises(ValueError, match=r"^other = 1 is not allowed$"), flags.as_flags({}):
         raise ValueError("other = 1 is not allowed")
+
+
+def test_the_program_ends_an_interrupted_run_at_once_with_status_130(monkeypatch):
+    """An interrupted run's status is 130, not a crash of the interpreter's clean-up after it.
+
+    Cut while XLA compiled, ``wmr-jax tune`` reported the interruption and then
+    died in the interpreter's teardown (status 139, a segmentation fault) in
+    four of six tries; the program now ends at once after the report.
+    """
+    import tomllib
+
+    from wmr_jax._src.cli import main as cli_main
+
+    pyproject = Path(__file__).resolve().parents[1] / "pyproject.toml"
+    scripts = tomllib.loads(pyproject.read_text())["project"]["scripts"]
+    assert scripts == {"wmr-jax": "wmr_jax._src.cli.main:entry"}
+    ended = []
+
+    def os_exit(status):
+        ended.append(status)
+        raise SystemExit(status)
+
+    monkeypatch.setattr(cli_main.os, "_exit", os_exit)
+    for status, how in ((130, [130]), (0, []), (2, [])):
+        monkeypatch.setattr(cli_main, "main", lambda status=status: status)
+        with pytest.raises(SystemExit) as exit_:
+            cli_main.entry()
+        assert exit_.value.code == status and ended == how
+        ended.clear()

@@ -1,7 +1,5 @@
-"""``python -m wmr_jax`` runs the ``wmr-jax`` command line."""
+"""``python -m wmr_jax``: the ``wmr-jax`` command line."""
 
-import sys
+from wmr_jax._src.cli.main import entry
 
-from wmr_jax._src.cli.main import main
-
-sys.exit(main())
+entry()

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 import warnings
 from collections.abc import Sequence
@@ -146,5 +147,23 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
         print(f"wmr-jax: warning: {text}", file=sys.stderr)
 
 
+def entry() -> None:
+    """The ``wmr-jax`` program: ``main`` with the process's arguments, then exit with its status.
+
+    After an interruption (status 130) the process ends at once, without the
+    interpreter's clean-up: a computation cut mid-way (say, while XLA
+    compiled) leaves JAX's threads running, and tearing the interpreter down
+    under them could crash it (a segmentation fault, status 139) after the
+    interruption was reported, hiding the status 130. Everything written
+    was written atomically and is flushed.
+    """
+    status = main()
+    if status == 130:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(130)
+    sys.exit(status)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()
