@@ -112,8 +112,14 @@ def held_out_bounds(config: Any, robot: Any) -> Any:
     return time_bounds(refs, robot=robot, dt=config.dt)
 
 
-def _write_results(out: Path, config: Any, robot: Any, result: Any) -> None:
+def _write_results(
+    out: Path, config: Any, robot: Any, result: Any, resumed_at: int | None = None
+) -> None:
     """Write the parameters, the evaluation and the tuning curve of ``result`` to ``out``.
+
+    ``resumed_at``: the iteration this session resumed from (``None``: it ran
+    them all); recorded beside the wall times, which count every session's
+    compilation.
 
     Raises:
         ValueError: one line, if the tuned parameters are not all finite
@@ -155,8 +161,11 @@ def _write_results(out: Path, config: Any, robot: Any, result: Any) -> None:
         "robot": robot_json(robot),
         "robot_units": dict(ROBOT_UNITS),
         "wall_time_s": {
+            # Each session compiles the step again: a resumed run's tuning time
+            # (the random search's budget) holds one more compilation per resume.
             "tuning": result.tune_wall_s,
             "random_search": None if search is None else search.wall_s,
+            "resumed_at_iteration": resumed_at,
         },
         "random_search_candidates": None if search is None else search.candidates,
         "config": config.as_dict(),
@@ -254,7 +263,8 @@ def tune(
         eval_bar.close()
     # The robot as given, not rounded to the session's float32: the file
     # records it, and a preset read back must still be that preset.
-    _write_results(out, config, validate_robot(robot), result)
+    resumed_at = state.iteration if state.iteration else None
+    _write_results(out, config, validate_robot(robot), result, resumed_at)
     return result
 
 
