@@ -88,6 +88,7 @@ def test_bad_files_are_refused_in_one_line(tmp_path, content, message):
     with pytest.raises(ValueError, match=message) as err:
         tuning.load_tuned(path)
     assert "\n" not in str(err.value)
+    assert str(err.value).startswith(f"{str(path)!r}"), "the message names the file first"
 
 
 def test_non_finite_parameters_are_never_written():
