@@ -194,9 +194,14 @@ def test_the_maps_draw_the_wheel_limit_of_the_robot_the_study_ran(tmp_path, monk
     # The figures of an earlier study of other controllers do not stay beside this one's.
     for stale in ("maps_aicardi.png", "winner.png", "maps_shim-sung.png"):
         (tmp_path / stale).write_text("an earlier study")
-    (tmp_path / "notes.png").write_text("the user's")
+    for own in ("notes.png", "maps_of_my_notes.png"):  # not a controller's map
+        (tmp_path / own).write_text("the user's")
     report.save_map_study(tmp_path, study)
-    assert sorted(p.name for p in tmp_path.glob("*.png")) == ["maps_shim-sung.png", "notes.png"]
+    assert sorted(p.name for p in tmp_path.glob("*.png")) == [
+        "maps_of_my_notes.png",
+        "maps_shim-sung.png",
+        "notes.png",
+    ]
     del study.summary["robot"]  # a summary from before robots were recorded: the paper robot
     report.save_map_study(tmp_path, study)
     assert drawn == [22.0, 125.0]

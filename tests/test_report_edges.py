@@ -206,6 +206,11 @@ def test_write_robustness_checks_everything_before_writing(tmp_path):
     assert not list(tmp_path.iterdir())
     written = write_robustness(tmp_path, [_robustness_row()], seed=0, velocity="ideal", n_runs=1)
     assert sorted(p.name for p in written) == ["robustness.json", "robustness.md", "robustness.png"]
+    # A dtype is recorded when the caller says it, never guessed.
+    assert "dtype" not in json.loads((tmp_path / "robustness.json").read_text())
+    for x64, dtype in ((False, "float32"), (True, "float64")):
+        write_robustness(tmp_path, [_robustness_row()], seed=0, velocity="ideal", n_runs=1, x64=x64)
+        assert json.loads((tmp_path / "robustness.json").read_text())["dtype"] == dtype
 
 
 def test_write_standard_conditions_checks_everything_before_writing(tmp_path):

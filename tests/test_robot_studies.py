@@ -300,6 +300,25 @@ def test_a_file_is_labelled_by_the_problem_that_tuned_it_not_by_the_flag(tmp_pat
     assert not (tmp_path / "rob").exists()
 
 
+def test_a_gain_file_is_read_once(tmp_path, monkeypatch, capsys):
+    """Its gains and the problem that tuned it come from one reading: a pipe is read once."""
+    import pathlib
+
+    path = _file(tmp_path, "g.json", tuned_json(w.Gains(kr=50.0), tuning="nominal"))
+    reads = []
+    read_text = pathlib.Path.read_text
+
+    def counted(self, *args, **kwargs):
+        reads.append(str(self))
+        return read_text(self, *args, **kwargs)
+
+    monkeypatch.setattr(pathlib.Path, "read_text", counted)
+    argv = ["robustness", "--out", str(tmp_path / "rob"), "--robust-gains", path]
+    assert main(argv) == 2  # refused (tuned nominally) before any run
+    assert reads.count(path) == 1, reads
+    assert "its gains were tuned by `wmr-jax tune`" in capsys.readouterr().err
+
+
 # ---------------------------------------------------------------- runs that only settle late
 
 

@@ -224,13 +224,13 @@ def test_robust_compare_without_evosax_says_so_and_keeps_each_seed(tmp_path, cap
     assert main([*argv, "--resume"]) == 0
     assert seeds == []
     assert main(["tune", "--robust", "--compare", "--out", str(tmp_path), "--resume"]) == 2
-    assert "holds another comparison (its config differ)" in capsys.readouterr().err
+    assert "holds another comparison (other config)" in capsys.readouterr().err
     # Rows of another law are another comparison's too.
     from wmr_jax._src import provenance
 
     monkeypatch.setattr(provenance, "code_version", lambda: "0.0+another")
     assert main([*argv, "--resume"]) == 2
-    assert "holds another comparison (its code differ)" in capsys.readouterr().err
+    assert "holds another comparison (other code)" in capsys.readouterr().err
     assert seeds == []
     # A new comparison (no --resume) drops the earlier one's rows and table at
     # once: cut before its first seed ends, it leaves nothing to be kept as its own.

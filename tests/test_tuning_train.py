@@ -112,8 +112,7 @@ def test_cli_writes_the_results_and_a_resumed_run_gives_the_same_gains(tmp_path,
     resumed = json.loads((cut / "evaluation.json").read_text())
     assert resumed["rows"] == report["rows"]
     # Its wall time counts a second session's compilation: the report says it was resumed.
-    assert resumed["wall_time_s"]["resumed_at_iteration"] == 2
-    assert report["wall_time_s"]["resumed_at_iteration"] is None
+    assert resumed["resumed_at_iteration"] == 2 and report["resumed_at_iteration"] is None
 
 
 def test_resume_without_a_checkpoint_says_it_starts_over(tmp_path, capsys):

@@ -149,14 +149,8 @@ def _meta(seed: int, robot: Any, sets: dict[str, Any], args: Any) -> dict[str, A
     them), so that two runs on other files or dtypes never read alike.
     """
     from wmr_jax._src.robots import robot_json
-    from wmr_jax._src.sensing.loop import ClosedLoop
     from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED
-    from wmr_jax._src.tuning.saved import tuned_json
 
-    gains = {}
-    for label, value in sets.items():
-        loop = value if isinstance(value, ClosedLoop) else ClosedLoop("shim-sung", value, None)
-        gains[label] = tuned_json(loop.params, loop.estimator)
     files = {flag: getattr(args, flag[2:].replace("-", "_"), None) for flag in _GAIN_FLAGS}
     return {
         "seed": seed,
@@ -164,9 +158,21 @@ def _meta(seed: int, robot: Any, sets: dict[str, Any], args: Any) -> dict[str, A
         "eval_seed": EVAL_SEED,
         "dtype": "float32" if args.float32 else "float64",
         "gain_files": {flag: str(path) for flag, path in files.items() if path is not None},
-        "gains": gains,
+        "gains": _gains_of(sets),
         "robot": robot_json(robot),
     }
+
+
+def _gains_of(sets: dict[str, Any]) -> dict[str, Any]:
+    """Each set's parameters and estimator, as ``tuned_gains.json`` holds them."""
+    from wmr_jax._src.sensing.loop import ClosedLoop
+    from wmr_jax._src.tuning.saved import tuned_json
+
+    gains = {}
+    for label, value in sets.items():
+        loop = value if isinstance(value, ClosedLoop) else ClosedLoop("shim-sung", value, None)
+        gains[label] = tuned_json(loop.params, loop.estimator)
+    return gains
 
 
 def _estimator(name: str) -> Any:
@@ -203,7 +209,7 @@ def _noise_curve(
         loops[name + " + estimator"] = loop._replace(estimator=loop.estimator or "ekf")
     refs = held_out_poses(EVAL_POSES, EVAL_SEED)
     rows = noise_curve(loops, refs, jax.random.key(seed), x64=x64, robot=robot)
-    write_noise_curve(out, rows, meta=meta)
+    write_noise_curve(out, rows, meta={**meta, "gains": _gains_of(loops)})  # the loops it ran
     print(f"noise curve -> {out}/noise_curve.png, .md, .json")
 
 
@@ -218,7 +224,7 @@ def _gain_sets(args: Any) -> tuple[dict[str, Any], Any]:
     from wmr_jax._src.params import Robot
     from wmr_jax._src.robots import describe_robot, same_robot
     from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
-    from wmr_jax._src.tuning.saved import TUNINGS, load_tuned, tuning_of
+    from wmr_jax._src.tuning.saved import TUNINGS, load_tuned_and_tuning
 
     given = flags.robot_from(getattr(args, "robot", None))
     if given is not None and given.note:
@@ -230,8 +236,7 @@ def _gain_sets(args: Any) -> tuple[dict[str, Any], Any]:
         if path is None:
             continue
         try:
-            loop = load_tuned(path)  # run whole: its controller and estimator
-            tuning = tuning_of(path)
+            loop, tuning = load_tuned_and_tuning(path)  # run whole: its law and estimator
         except ValueError as err:
             raise ValueError(f"{flag} {path!r} is not allowed: {err}") from None
         wanted = label.split("-")[0]

@@ -161,12 +161,12 @@ def _write_results(
         "robot": robot_json(robot),
         "robot_units": dict(ROBOT_UNITS),
         "wall_time_s": {
-            # Each session compiles the step again: a resumed run's tuning time
-            # (the random search's budget) holds one more compilation per resume.
             "tuning": result.tune_wall_s,
             "random_search": None if search is None else search.wall_s,
-            "resumed_at_iteration": resumed_at,
         },
+        # Each session compiles the step again: a resumed run's tuning time
+        # (the random search's budget) holds one more compilation per resume.
+        "resumed_at_iteration": resumed_at,
         "random_search_candidates": None if search is None else search.candidates,
         "config": config.as_dict(),
     }
@@ -188,7 +188,9 @@ def tune(
     """Run ``wmr_jax.tuning.train`` and write its results and checkpoints to ``out_dir``.
 
     Files in ``out_dir``: ``tuned_gains.json`` (the controller, the kind,
-    the parameters and the robot; ``wmr_jax.load_tuned`` reads it),
+    the parameters and the robot; ``wmr_jax.load_tuned`` reads it; the
+    files that judged the gains it replaces, ``saved.JUDGING_TUNED``, are
+    removed when it is written),
     ``evaluation.json``, ``tuning_curve.png``,
     ``random_search_gains.json`` and ``checkpoint.npz`` (checksummed, written
     atomically every ``config.checkpoint_every`` iterations and at the end).

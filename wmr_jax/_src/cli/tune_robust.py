@@ -174,10 +174,11 @@ def _kept_rows(path: Any, settings: dict[str, Any], resume: bool) -> list[dict[s
     if not isinstance(saved, dict) or saved.get("settings") != settings:
         theirs = saved.get("settings") if isinstance(saved, dict) else None
         theirs = theirs if isinstance(theirs, dict) else {}
-        differ = [k for k in settings if theirs.get(k) != settings[k]]
+        keys = [*settings, *(k for k in theirs if k not in settings)]
+        differ = [k for k in keys if theirs.get(k) != settings.get(k)]
         raise ValueError(
-            f"--resume: {str(path)!r} holds another comparison (its {', '.join(differ)} "
-            "differ); allowed: the same flags and code as the run that wrote it, or another --out"
+            f"--resume: {str(path)!r} holds another comparison (other {', '.join(differ)}); "
+            "allowed: the same flags and code as the run that wrote it, or another --out"
         )
     rows = saved.get("rows")
     good = isinstance(rows, list) and all(
@@ -192,8 +193,9 @@ def _compare(out: Any, config: Any, on_robot: dict[str, Any], *, resume: bool) -
     """Gradient, CMA-ES and random search at equal wall time, seeds 0–2; each seed kept.
 
     ``on_robot``: ``{"robot": Robot}`` for another robot than the paper's,
-    which is then part of the settings (comparisons saved before robots
-    were named still resume).
+    which is then part of the settings, with the code version: rows of
+    other code (comparisons saved before it was recorded included) are not
+    resumed.
     """
     from wmr_jax._src import io
     from wmr_jax._src.provenance import code_version

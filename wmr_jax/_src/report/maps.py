@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from wmr_jax._src.checks import check_number
+from wmr_jax._src.controllers import registered_names
 from wmr_jax._src.io import atomic_write_text, json_text, save_figure
 from wmr_jax._src.maps import MapStudy, PoseGrid, PoseMetrics
 from wmr_jax._src.params import Robot
@@ -407,8 +408,8 @@ def save_map_study(out_dir: str | Path, study: MapStudy) -> list[Path]:
     Writes ``maps_<controller>.png`` (metrics × headings), ``winner.png``
     (which controller arrives first; only with two controllers or more),
     ``summary.md`` and ``summary.json``, each atomically, and removes the
-    ``maps_*.png`` and ``winner.png`` of an earlier study that this one does
-    not draw.
+    maps (``maps_<registered controller>.png``) and ``winner.png`` of an
+    earlier study that this one does not draw.
 
     Args:
         out_dir: output folder (created if needed).
@@ -437,11 +438,12 @@ def save_map_study(out_dir: str | Path, study: MapStudy) -> list[Path]:
     v_max = float(robot["v_max"]) if isinstance(robot, dict) else float(Robot().v_max)
     # A figure of an earlier study in this folder (another controller, a
     # winner of several) would pass for this one's: only this study's stay.
+    # (Maps of registered controllers only: another maps_*.png is not a study's.)
+    earlier = {f"maps_{name}.png" for name in registered_names()} | {"winner.png"}
     drawn = {f"maps_{name}.png" for name in study.results}
     drawn |= {"winner.png"} if len(study.results) > 1 else set()
-    for stale in [*out.glob("maps_*.png"), out / "winner.png"]:
-        if stale.name not in drawn:
-            stale.unlink(missing_ok=True)
+    for name in sorted(earlier - drawn):
+        (out / name).unlink(missing_ok=True)
     written = [
         map_figure(
             out / f"maps_{name}.png",

@@ -169,7 +169,7 @@ def write_robustness(
     velocity: str,
     n_runs: int,
     robot: Any = None,
-    x64: bool = True,
+    x64: bool | None = None,
 ) -> list[Path]:
     """Write ``robustness.png``, ``robustness.md`` and ``robustness.json`` into ``out_dir``.
 
@@ -180,7 +180,8 @@ def write_robustness(
         velocity: its velocity loop.
         n_runs: its runs per noise level.
         robot: the study's ``Robot`` (recorded and named); ``None``: the paper robot.
-        x64: whether the study computed in float64 (recorded as its ``dtype``).
+        x64: whether the study computed in float64, recorded as its
+            ``dtype``; ``None`` records none (rather than guess one).
 
     Returns:
         The paths written.
@@ -191,7 +192,8 @@ def write_robustness(
     out, rows = Path(out_dir), require_rows("rows", rows)
     horizon = _horizon_of(rows)
     meta = {"seed": seed, "velocity": velocity, "runs": n_runs, "horizon_s": horizon}
-    meta["dtype"] = "float64" if x64 else "float32"
+    if x64 is not None:
+        meta["dtype"] = "float64" if x64 else "float32"
     meta["robot"] = robot_json(Robot() if robot is None else robot)
     head = (
         f"Robustness Monte Carlo ({velocity} loop, seed {seed}, {n_runs} runs per row, "

@@ -50,6 +50,7 @@ __all__ = [
     "PARAM_UNITS",
     "TUNINGS",
     "load_tuned",
+    "load_tuned_and_tuning",
     "tuned_json",
     "tuning_of",
     "write_tuned",
@@ -175,9 +176,7 @@ def tuning_of(path: str | os.PathLike) -> str | None:
     Raises:
         ValueError: one line, if the file cannot be loaded (``load_tuned``).
     """
-    load_tuned(path)
-    values = json.loads(check_path("path", path).read_text(encoding="utf-8"))
-    return values.get("tuning")
+    return load_tuned_and_tuning(path)[1]
 
 
 def _check_schedule_robot(params: Any, robot: Robot, where: str) -> None:
@@ -300,6 +299,14 @@ def load_tuned(path: str | os.PathLike) -> ClosedLoop:
     Raises:
         ValueError: one line naming the file and what is wrong with it.
     """
+    return load_tuned_and_tuning(path)[0]
+
+
+def load_tuned_and_tuning(path: str | os.PathLike) -> tuple[ClosedLoop, str | None]:
+    """``load_tuned``'s loop and ``tuning_of``'s answer, from one reading of the file.
+
+    (A pipe, such as ``/dev/stdin``, can be read only once.)
+    """
     path = check_path("path", path)
     where = f"{os.fspath(path)!r}"
     try:
@@ -370,4 +377,4 @@ def load_tuned(path: str | os.PathLike) -> ClosedLoop:
         raise ValueError(f"{where}: {err}") from None
     if robot is not None:
         _check_schedule_robot(params, robot, where)
-    return ClosedLoop(controller, params, estimator, robot)
+    return ClosedLoop(controller, params, estimator, robot), values.get("tuning")
