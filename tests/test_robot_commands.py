@@ -77,6 +77,8 @@ def test_sweep_runs_the_robot_and_records_it(tmp_path, capsys, no_figures):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["robot"] == robot_json(Robot(half_track=4.0, v_max=50.0))
     assert summary["robot_label"] == slow and summary["horizon_s"] == 6.0
+    # The figures' titles and the table's heading name the robot they ran.
+    assert f"start (0, 0, 0°), robot {slow}" in (out / "summary.md").read_text()
     # "over V_max" is counted against this robot's 50 cm/s: none.
     row = summary["rows"][0]
     assert 40 < row["max peak wheel cm/s"] <= 50 and row["over V_max"] == 0

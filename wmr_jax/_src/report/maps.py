@@ -29,6 +29,7 @@ from wmr_jax._src.report.tables import (
     require_rows,
     row_numbers,
 )
+from wmr_jax._src.robots import robot_from_values, same_robot
 
 __all__ = ["comparison_table", "map_figure", "save_comparison", "save_map_study", "winner_figure"]
 
@@ -168,6 +169,10 @@ def _describe(summary: dict[str, Any]) -> str:
         f"{summary['poses']:,} poses, {summary['velocity']} loop, "
         f"horizon {summary['horizon_s']:g} s, start (0, 0, 0°)"
     )
+    # Another robot than the paper's is named (older summaries record none).
+    robot, label = summary.get("robot"), summary.get("robot_label")
+    if isinstance(robot, dict) and not same_robot(robot_from_values(robot, "robot"), Robot()):
+        what += f", robot {label if isinstance(label, str) else 'custom'}"
     return what + ("" if summary["dtype"] == "float64" else ", float32")
 
 
