@@ -95,11 +95,11 @@ def run(args: Any) -> int:
     velocity = flags.velocity_loop(args.velocity)
     estimator = _estimator(args.estimator)
     sets, robot = _gain_sets(args)
+    meta = _meta(seed, robot, sets, args)
     # The folder holds this run's results only: an earlier run's (a noise
     # curve not asked for now, or what an interruption would leave) go first.
     for name in _OUTPUTS:
         (out / name).unlink(missing_ok=True)
-    meta = _meta(seed, robot, sets, args)
 
     from wmr_jax._src.report.robustness import robustness_table, write_robustness
     from wmr_jax._src.robots import describe_robot
