@@ -170,6 +170,8 @@ def test_an_interrupted_sweep_with_resume_says_what_it_kept_and_reuses_it(
     assert list(kept) == ["chunk_000000.npz"]
     monkeypatch.setattr(maps, "sweep", real)
     assert main(argv) == 0
+    said = f"--resume: finished chunks in {out / 'chunks'} (shim-sung 1): those of these settings"
+    assert said in capsys.readouterr().out
     after = _inodes(chunks)
     assert list(after) == [f"chunk_{i:06d}.npz" for i in range(_chunks_run())]
     assert after["chunk_000000.npz"] == kept["chunk_000000.npz"]  # reused, not recomputed

@@ -166,6 +166,16 @@ def _run(args: Any, out: Path, chunks: Path | None, finished: dict) -> int:
     def on_chunk(name: str, done: int, total: int) -> None:
         finished[name] = (done, total)
 
+    if chunks is not None:  # said before the run, progress bar or not
+        found = {n: len(list((chunks / n).glob("chunk_*.npz"))) for n in names}
+        if any(found.values()):
+            counts = ", ".join(f"{n} {k}" for n, k in found.items() if k)
+            print(
+                f"--resume: finished chunks in {chunks} ({counts}): those of these settings "
+                "are reused, the rest computed",
+                flush=True,
+            )
+
     library_names = {
         "n_poses": "--poses",
         "headings_deg": "--headings",
