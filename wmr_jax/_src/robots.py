@@ -24,6 +24,7 @@ import json
 import math
 import os
 import types
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -89,8 +90,6 @@ _PLAUSIBLE = {
 
 def _warn_unit_slips(robot: Robot, where: str, ros: bool) -> None:
     """Warn (``RobotUnitsWarning``) for each size or speed outside ``_PLAUSIBLE``."""
-    import warnings
-
     convention = (
         "a ROS file gives metres and m/s: wheel_separation 0.16 for 16 cm"
         if ros

@@ -12,6 +12,7 @@ are checked before any run.
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -110,8 +111,6 @@ _UNIT_WORDS = {"m", "mm", "cm", "metre", "metres", "meter", "meters", "in", "ft"
 
 def _check_header_units(path: str, number: int, cells: list[str]) -> None:
     """Refuse a header line that names a unit other than the file's (cm, cm, rad)."""
-    import re
-
     for column, (cell, allowed) in enumerate(zip(cells, _HEADER_UNITS, strict=False), start=1):
         words = {w for w in re.split(r"[^a-z°]+", cell.lower()) if w in _UNIT_WORDS}
         wrong = sorted(words - allowed)

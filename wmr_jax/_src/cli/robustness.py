@@ -231,7 +231,10 @@ def _gain_sets(args: Any) -> tuple[dict[str, Any], Any]:
         print(given.note)
     loops = {}
     robot, source = (None, None) if given is None else (given.robot, f"--robot {given.label!r}")
-    for flag, label in (("--nominal-gains", "nominal-tuned"), ("--robust-gains", "robust-tuned")):
+    for flag, label, wanted in (
+        ("--nominal-gains", "nominal-tuned", "nominal"),
+        ("--robust-gains", "robust-tuned", "robust"),
+    ):
         path = getattr(args, flag[2:].replace("-", "_"), None)
         if path is None:
             continue
@@ -239,7 +242,6 @@ def _gain_sets(args: Any) -> tuple[dict[str, Any], Any]:
             loop, tuning = load_tuned_and_tuning(path)  # run whole: its law and estimator
         except ValueError as err:
             raise ValueError(f"{flag} {path!r} is not allowed: {err}") from None
-        wanted = label.split("-")[0]
         if tuning is not None and tuning != wanted:
             # Its rows would be labelled by the flag: a nominal file called robust-tuned.
             other = "--nominal-gains" if tuning == "nominal" else "--robust-gains"
