@@ -98,3 +98,30 @@ def test_another_kind_of_file_or_a_folder_is_named_as_such(tmp_path):
         report.load_arrays(path)
     with pytest.raises(report.DamagedFileError, match="is a folder; allowed: a file"):
         report.load_arrays(tmp_path)
+
+
+def test_a_sealed_record_reads_back_whole_and_refuses_any_changed_value(tmp_path):
+    from wmr_jax._src import io
+
+    record = {"seed": np.int64(2), "t": (0.1, math.inf), "x": np.float32(0.5), "ok": True}
+    path = io.atomic_write_json(tmp_path / "r.json", io.sealed(record))
+    read = json.loads(path.read_text())
+    # What reads back is the content as JSON holds it, and nothing else.
+    assert io.unsealed(read, "r") == {"seed": 2, "t": [0.1, "inf"], "x": 0.5, "ok": True}
+    # Key order and layout are not content.
+    assert io.unsealed(json.loads(json.dumps(read, indent=3, sort_keys=True)), "r")["seed"] == 2
+    for key, other in (("seed", 3), ("t", [0.1, "-inf"]), ("x", 0.5000001), ("ok", 1)):
+        with pytest.raises(io.DamagedFileError, match=r"^r was changed after it was written"):
+            io.unsealed({**read, key: other}, "r")
+    with pytest.raises(io.DamagedFileError, match=r"^r was changed"):
+        io.unsealed({**read, "added": 1}, "r")
+    with pytest.raises(io.DamagedFileError, match=r"^r was changed"):
+        io.unsealed({**read, "t": object()}, "r")  # no JSON at all
+    for bad in ({k: v for k, v in read.items() if k != "sha256"}, [read], {**read, "sha256": 1}):
+        with pytest.raises(io.DamagedFileError, match=r"^r has no checksum"):
+            io.unsealed(bad, "r")
+    for bad in (read, [1, 2], None):  # already sealed, or no record
+        with pytest.raises(ValueError, match=r"^record = .* allowed: a mapping without"):
+            io.sealed(bad)
+    with pytest.raises(ValueError, match=r"^record = .* is not allowed .*JSON"):
+        io.sealed({"f": print})

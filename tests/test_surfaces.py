@@ -248,11 +248,18 @@ def _whole(problem="fixed", seed=0, **changes):
     return [_row(problem, seed, m, **changes) for m in ("gradient", "cma-es", "random search")]
 
 
+def _as_written(rows):
+    """``rows`` as ``tune --compare`` writes them: each object sealed with its checksum."""
+    if not isinstance(rows, list):
+        return rows
+    return [io.sealed(row) if isinstance(row, dict) else row for row in rows]
+
+
 @pytest.mark.parametrize(
     ("rows", "message"),
     [
         ({"rows": []}, r"compare.json is a JSON object; allowed: an array of comparison rows"),
-        ([["fixed", 0, "gradient"]], r"row 0 is a JSON array; allowed: an object"),
+        ([["fixed", 0, "gradient"]], r"compare.json row 0 has no checksum"),
         (
             [{"problem": "fixed", "seed": 0, "method": "gradient"}],
             r"row 0 has no 'mean_arrival'",
@@ -283,7 +290,7 @@ def test_resume_refuses_a_malformed_compare_json_before_any_work(
     argv = ["tune", "--out", str(tmp_path), "--compare", "--iters", "1"]
     assert main(argv) == 130  # writes compare_settings.json, then stops
     capsys.readouterr()
-    (tmp_path / "compare.json").write_text(json.dumps(rows))
+    (tmp_path / "compare.json").write_text(json.dumps(_as_written(rows)))
     calls.clear()
     assert main([*argv, "--resume"]) == 2
     err = capsys.readouterr().err
@@ -335,12 +342,56 @@ def test_resume_keeps_whole_rows_of_runs_that_never_arrived(tmp_path, monkeypatc
     argv = ["tune", "--out", str(tmp_path), "--compare", "--schedule", "--iters", "1"]
     assert main(argv) == 130  # writes compare_settings.json, then stops
     kept = _whole("schedule", 0, mean_arrival="inf", vs_lower_bound=None)
-    (tmp_path / "compare.json").write_text(json.dumps(kept))
+    (tmp_path / "compare.json").write_text(json.dumps(_as_written(kept)))
     monkeypatch.setattr(compare_module, "compare", fake)
     assert main([*argv, "--resume"]) == 0
     printed = capsys.readouterr().out
     assert "schedule seed 0: kept from" in printed
     assert "none arrived / 0.500 / 0.500" in printed and "nan" not in printed, printed
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda rows: rows[1].update(mean_arrival=0.45), r"compare.json row 1 was changed after"),
+        (lambda rows: rows[2].update(seed=1), r"compare.json row 2 was changed after"),
+        (lambda rows: rows[0].pop("sha256"), r"compare.json row 0 has no checksum"),
+        (lambda rows: rows.reverse(), None),  # order, layout and key order are not content
+    ],
+)
+def test_resume_keeps_no_row_whose_values_changed_after_they_were_written(
+    tmp_path, monkeypatch, capsys, edit, message
+):
+    from wmr_jax._src.tuning import compare as compare_module
+
+    calls, interrupt = [], [True]
+
+    def fake(*, seeds, problems, configs, progress):
+        calls.append((problems[0], seeds[0]))
+        if interrupt[0] and len(calls) == 2:
+            raise KeyboardInterrupt
+        return _whole(problems[0], seeds[0])
+
+    monkeypatch.setattr(compare_module, "compare", fake)
+    argv = ["tune", "--out", str(tmp_path), "--compare", "--schedule", "--iters", "1"]
+    assert main(argv) == 130  # seed 0 written by the command, seed 1 interrupted
+    record = tmp_path / "compare.json"
+    rows = json.loads(record.read_text())
+    assert [row["seed"] for row in rows] == [0, 0, 0] and all("sha256" in row for row in rows)
+    edit(rows)
+    record.write_text(json.dumps(rows, indent=4, sort_keys=True))
+    capsys.readouterr()
+    calls.clear()
+    interrupt[0] = False
+    code = main([*argv, "--resume"])
+    out, err = capsys.readouterr()
+    if message is None:
+        assert code == 0 and "schedule seed 0: kept from" in out, err
+        assert calls == [("schedule", 1), ("schedule", 2)]
+        return
+    assert code == 2 and not calls, "the comparison started"
+    assert err.count("\n") == 1 and re.search(message, err), err
+    assert "remove it, or use a fresh --out" in err
 
 
 def _checkpoint_args(tmp_path):

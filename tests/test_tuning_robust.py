@@ -223,6 +223,23 @@ def test_robust_compare_without_evosax_says_so_and_keeps_each_seed(tmp_path, cap
     seeds.clear()
     assert main([*argv, "--resume"]) == 0
     assert seeds == []
+    # A value changed after it was written is not kept: the file is refused whole.
+    record = tmp_path / "robust_compare.json"
+    written = record.read_text()
+    edited = json.loads(written)
+    assert edited["rows"][0]["success"] == 1.0
+    edited["rows"][0]["success"] = 0.9
+    record.write_text(json.dumps(edited))
+    capsys.readouterr()
+    assert main([*argv, "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert "robust_compare.json' was changed after it was written" in err, err
+    assert err.count("\n") == 1 and seeds == []
+    del edited["sha256"]
+    record.write_text(json.dumps(edited))
+    assert main([*argv, "--resume"]) == 2
+    assert "robust_compare.json' has no checksum" in capsys.readouterr().err
+    record.write_text(written)
     assert main(["tune", "--robust", "--compare", "--out", str(tmp_path), "--resume"]) == 2
     assert "holds another comparison (other config)" in capsys.readouterr().err
     # Rows of another law are another comparison's too.

@@ -30,6 +30,8 @@ __all__ = [
     "remove_stale_temporaries",
     "save_arrays",
     "save_figure",
+    "sealed",
+    "unsealed",
     "writable_path",
 ]
 
@@ -271,6 +273,65 @@ def load_arrays(path: str | os.PathLike) -> tuple[dict[str, np.ndarray], dict[st
     if _checksum(stored, meta_text) != checksum:
         raise DamagedFileError(f"{path} is damaged (its checksum does not match its contents)")
     return stored, meta
+
+
+# ---------------------------------------------------------------- sealed JSON records
+
+_SEAL = "sha256"
+
+
+def _record_digest(record: dict[str, Any]) -> str:
+    return hashlib.sha256(json_text(record, "record", sort_keys=True).encode()).hexdigest()
+
+
+def sealed(record: Mapping[str, Any]) -> dict[str, Any]:
+    """``record`` as it reads back from JSON, with a ``"sha256"`` of its content added.
+
+    For the JSON results a resumed run keeps (a tuning comparison's rows):
+    ``unsealed`` then refuses a record whose values were changed after it
+    was written, as ``load_arrays`` does for array files.
+
+    Raises:
+        ValueError: ``record`` is not a mapping of str keys without
+            ``"sha256"``, or holds a value JSON cannot store.
+    """
+    if not isinstance(record, Mapping) or _SEAL in record:
+        raise ValueError(
+            f"record = {record!r:.80} is not allowed; allowed: a mapping without a {_SEAL!r} key"
+        )
+    content = json.loads(json_text(dict(record), "record"))
+    return {**content, _SEAL: _record_digest(content)}
+
+
+def unsealed(record: Any, where: str) -> dict[str, Any]:
+    """The content of a record ``sealed`` wrote, checked against its ``"sha256"``.
+
+    Args:
+        record: the record as read from the file.
+        where: what it is (the file and the row), for the message.
+
+    Raises:
+        DamagedFileError: ``record`` has no checksum, or one its content does
+            not match (one line, naming ``where``).
+    """
+    if not isinstance(record, dict) or not isinstance(record.get(_SEAL), str):
+        raise DamagedFileError(
+            f"{where} has no checksum (it was not written by this version of wmr_jax, "
+            "or was edited)"
+        )
+    content = {key: value for key, value in record.items() if key != _SEAL}
+    try:
+        digest = _record_digest(content)
+    except ValueError:  # a value JSON does not round-trip cannot be one sealed() wrote
+        digest = None
+    if digest != record[_SEAL]:
+        raise DamagedFileError(
+            f"{where} was changed after it was written (its checksum does not match its contents)"
+        )
+    return content
+
+
+# ---------------------------------------------------------------- paths
 
 
 def writable_path(shown: str, value: Any, *, folder: bool) -> Path:

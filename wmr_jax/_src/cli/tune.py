@@ -528,6 +528,8 @@ def _compare_rows(
         diff = _settings_difference(saved, settings)
         raise ValueError(f"--resume: {record} is of another comparison ({diff}); {advice}")
     try:
+        if isinstance(rows, list):  # values changed since they were written are not kept
+            rows = [io.unsealed(row, f"{record} row {i}") for i, row in enumerate(rows)]
         return saved_rows(rows, str(record), problems, tuple(settings["seeds"]))
     except ValueError as err:
         raise ValueError(f"--resume: {err}; remove it, or use a fresh --out") from None
@@ -620,7 +622,8 @@ def _compare(out: Path, args: Any, robot: Any) -> int:
                 progress=print,
                 **on_robot,
             )
-            io.atomic_write_json(out / "compare.json", rows)
+            # Each row sealed with a checksum: --resume keeps only what this wrote.
+            io.atomic_write_json(out / "compare.json", [io.sealed(row) for row in rows])
     table = comparison_table(rows)
     io.atomic_write_text(out / "compare.md", table)
     print(table, end="")

@@ -165,6 +165,8 @@ def run(args: Any) -> int:
 
 def _kept_rows(path: Any, settings: dict[str, Any], resume: bool) -> list[dict[str, Any]]:
     """The rows of an earlier ``--compare`` of the same settings (``--resume``), else none."""
+    from wmr_jax._src import io
+
     if not resume or not path.exists():
         return []
     try:
@@ -180,6 +182,10 @@ def _kept_rows(path: Any, settings: dict[str, Any], resume: bool) -> list[dict[s
             f"--resume: {str(path)!r} holds another comparison (other {', '.join(differ)}); "
             "allowed: the same flags and code as the run that wrote it, or another --out"
         )
+    try:  # values changed since they were written are not kept
+        saved = io.unsealed(saved, repr(str(path)))
+    except ValueError as err:
+        raise ValueError(f"--resume: {err}; allowed: remove it, or another --out") from None
     rows = saved.get("rows")
     good = isinstance(rows, list) and all(
         isinstance(r, dict) and r.get("seed") in _COMPARE_SEEDS for r in rows
@@ -238,7 +244,8 @@ def _compare(out: Any, config: Any, on_robot: dict[str, Any], *, resume: bool) -
                 {**row, "method": method, "seed": seed, "budget_s": budget,
                  "candidates": counts[method]}
             )  # fmt: skip
-        io.atomic_write_json(path, {"settings": settings, "rows": rows})
+        # Sealed with a checksum: --resume keeps only what this wrote.
+        io.atomic_write_json(path, io.sealed({"settings": settings, "rows": rows}))
     table = robust_comparison_table(rows)
     io.atomic_write_text(out / "robust_compare.md", table)
     print(table, end="")
