@@ -212,8 +212,13 @@ def main(argv: list[str] | None = None) -> int:
     rec = sub.add_parser("record", help="store a stage's probes and file checksums")
     rec.add_argument("stage", choices=list(STAGES))
     chk = sub.add_parser("check", help="name the stages whose outputs no longer hold")
-    chk.add_argument("stage", nargs="*", choices=list(STAGES))
+    # No ``choices`` here: Python < 3.12 checks the empty list (every stage) against them.
+    chk.add_argument("stage", nargs="*", help=f"default: every stage ({', '.join(STAGES)})")
     args = parser.parse_args(argv)
+    if args.command == "check":
+        unknown = [stage for stage in args.stage if stage not in STAGES]
+        if unknown:
+            parser.error(f"stage = {unknown[0]!r} is not allowed; allowed: {', '.join(STAGES)}")
     if args.command == "record":
         record(args.stage)
         return 0

@@ -9,6 +9,8 @@ hand edit of a file, names the stage to rerun.
 import json
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -26,6 +28,20 @@ def _fingerprint_tool():
 def test_committed_docs_files_are_what_their_stage_computes_today():
     """A change to a loop that moves a committed figure or table names the stage to rerun."""
     assert _fingerprint_tool().check() == []
+
+
+def test_the_check_command_checks_every_stage_unless_told_which(monkeypatch, capsys):
+    tool = _fingerprint_tool()
+    asked = []
+    monkeypatch.setattr(tool, "check", lambda stages=None: asked.append(stages) or [])
+    assert tool.main(["check"]) == 0  # argparse of Python 3.11 refused the empty list
+    assert tool.main(["check", "maps", "tune"]) == 0
+    assert asked == [[], ["maps", "tune"]]
+    assert "every docs stage holds" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as info:
+        tool.main(["check", "mapz"])
+    assert info.value.code == 2
+    assert "stage = 'mapz' is not allowed; allowed: paper, compare" in capsys.readouterr().err
 
 
 def test_the_fingerprint_notices_a_moved_loop_and_an_edited_file(tmp_path, monkeypatch):
