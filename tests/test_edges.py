@@ -259,6 +259,62 @@ def test_lists_are_fields_and_size_one_axes_are_shared():
         w.batch_rollout([REF, REF], w.Gains(kr=kr), steps=3)
 
 
+def _one_run_each(run, batched, singles):
+    """``run(batched)`` equals ``run(single)`` for each single, run by run (leaf by leaf)."""
+    together = jax.tree.map(np.asarray, run(batched))
+    for i, single in enumerate(singles):
+        alone = jax.tree.map(np.asarray, run(single))
+        jax.tree.map(lambda a, b, i=i: np.testing.assert_allclose(a[i], b[0]), together, alone)
+
+
+def test_every_batched_entry_point_shares_one_reference_with_each_run_of_batched_params():
+    """README: a batch axis of size 1 is shared by every run (a raw vmap error before)."""
+    from wmr_jax import studies
+
+    kr = [40.0, 80.0, 120.0]
+    gains, each = w.Gains(kr=kr), [w.Gains(kr=[k]) for k in kr]
+    one = np.array([REF])
+    disturbance = studies.sample_disturbance(jax.random.key(0), one, 20, noise_xy=0.5)
+    ekf, ekfs = w.EKFParams(sigma_xy=[0.2, 0.9]), [w.EKFParams(sigma_xy=s) for s in (0.2, 0.9)]
+    chain = np.array([[[20.0, 0.0, 0.0], REF]])
+    track = np.broadcast_to(np.array(REF), (1, 20, 3))
+    for run, batched, singles in (
+        (lambda g: w.sweep(one, g, steps=20), gains, each),
+        (lambda g: studies.disturbed_rollout(disturbance, g), gains, each),
+        (lambda e: studies.perturbed_metrics(disturbance, estimator=e), ekf, ekfs),
+        (lambda g: studies.evaluate_poses(one, g, steps=20), gains, each),
+        (lambda g: studies.batch_chain_rollout(chain, g, steps=20), gains, each),
+        (lambda g: studies.batch_track_rollout(track, g), gains, each),
+    ):  # fmt: skip
+        _one_run_each(run, batched, singles)
+    # One init per run shares the reference and the references of the track.
+    inits = np.array([[0.0, 0.0, 0.0], [5.0, -5.0, 1.0]])
+    both = studies.batch_track_rollout(track, init=inits)
+    second = studies.batch_track_rollout(track, init=inits[1:])
+    np.testing.assert_allclose(np.asarray(both.error)[1], np.asarray(second.error)[0])
+    # Other sizes are still refused, naming both.
+    with pytest.raises(ValueError, match=r"gains.kr has 3 values; allowed: one, or one per"):
+        w.sweep(np.array([REF, REF]), gains, steps=5)
+    with pytest.raises(ValueError, match=r"batch sizes differ"):
+        studies.disturbed_rollout(
+            studies.sample_disturbance(jax.random.key(0), np.array([REF, REF]), 5), gains
+        )
+
+
+def test_a_study_that_judges_one_loop_refuses_a_batch_of_parameters():
+    """Its table would mix the runs of several loops into one row."""
+    from wmr_jax import studies
+
+    batched = w.Gains(kr=[40.0, 80.0])
+    with pytest.raises(ValueError, match=r"^loop.params.kr has shape \(2,\); allowed: scalars"):
+        studies.evaluate_loop(batched, np.array([REF]))
+    with pytest.raises(ValueError, match=r"^params_by_name\['b'\].params.kr has shape"):
+        studies.standard_conditions({"a": w.Gains(), "b": batched}, np.array([REF]), None)
+    loop = studies.ClosedLoop("shim-sung", w.Gains(), w.EKFParams(sigma_xy=[0.2, 0.9]))
+    with pytest.raises(ValueError, match=r"^loop.estimator.sigma_xy has shape \(2,\)"):
+        studies.evaluate_loop(loop, np.array([REF]))
+
+
 @pytest.mark.parametrize(
     "value",
     ["abc", 1 + 2j, {"a": 1}, None, ["x", "y"], True, [True, False], [60.0, True], np.array([1j])],

@@ -46,6 +46,7 @@ __all__ = [
     "reduce_heading",
     "require",
     "require_finite_runs",
+    "leading_size",
     "require_one_batch_size",
     "require_representable",
     "require_unbatched",
@@ -370,6 +371,16 @@ def require_one_batch_size(sizes: dict[str, int]) -> int | None:
         listed = ", ".join(f"{k}: {v}" for k, v in sizes.items())
         raise ValueError(f"batch sizes differ ({listed}); allowed: one common N, or 1")
     return n
+
+
+def leading_size(*trees: Any) -> int:
+    """The largest batch axis among the leaves of ``trees`` (1: no leaf has one).
+
+    For parameter trees (gains, robots, estimators), whose leaves are scalars
+    or ``(N,)``; whether the sizes agree is checked where they are used.
+    """
+    sizes = [jnp.shape(leaf)[0] for leaf in jax.tree.leaves(trees) if jnp.ndim(leaf) >= 1]
+    return max(sizes, default=1)
 
 
 def require_unbatched(tree: Any, prefix: str, allowed: str) -> None:

@@ -42,11 +42,20 @@ __all__ = [
 ]
 
 
-def _closed_loop(value: Any, controller: Any, estimator: Any) -> ClosedLoop:
-    """A set of ``standard_conditions``: a ``ClosedLoop`` as it is, or params of ``controller``."""
-    if isinstance(value, ClosedLoop):
-        return value
-    return ClosedLoop(controller, value, estimator)
+def _closed_loop(value: Any, controller: Any, estimator: Any, where: str) -> ClosedLoop:
+    """A set of ``standard_conditions``: a ``ClosedLoop`` as it is, or params of ``controller``.
+
+    Raises:
+        ValueError: naming ``where``, for parameters with a batch axis: each
+            set is one loop, judged over the references (its table would
+            mix several loops' runs).
+    """
+    loop = value if isinstance(value, ClosedLoop) else ClosedLoop(controller, value, estimator)
+    allowed = "scalars: one loop (perturbed_metrics runs a batch of parameters)"
+    checks.require_unbatched(loop.params, f"{where}.params", allowed)
+    if not isinstance(loop.estimator, str):  # a name is its default parameters
+        checks.require_unbatched(loop.estimator, f"{where}.estimator", allowed)
+    return loop
 
 
 def _unit_draws(key: jax.Array, refs: np.ndarray, steps: int, mismatch: float):
@@ -110,7 +119,8 @@ def standard_conditions(
     Args:
         params_by_name: ``{label: params of controller}`` or ``{label:
             ClosedLoop}`` (a controller, its parameters and an estimator,
-            as ``load_tuned`` returns them).
+            as ``load_tuned`` returns them); each one loop, its parameters
+            without a batch axis (refused, naming the label).
         refs: ``(N, 3)`` reference poses (held-out poses of ``docs/model.md §6``).
         key: ``jax.random`` key of the noise and the mismatch.
         controller: a ``Controller`` or its registered name, for plain params.
@@ -141,7 +151,8 @@ def standard_conditions(
         )
     mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
     sets = {
-        name: _closed_loop(value, controller, estimator) for name, value in params_by_name.items()
+        name: _closed_loop(value, controller, estimator, f"params_by_name[{name!r}]")
+        for name, value in params_by_name.items()
     }
     for loop in sets.values():  # every set is refused before any runs
         resolve_estimator(loop.estimator)
@@ -270,7 +281,8 @@ def evaluate_loop(
         "float32"}``.
 
     Raises:
-        ValueError: for a bad argument, before any run.
+        ValueError: for a bad argument, before any run; for parameters with
+            a batch axis (one loop is judged; ``perturbed_metrics`` runs a batch).
     """
     from wmr_jax._src.optimal import time_bounds
     from wmr_jax._src.robots import robot_json
@@ -278,7 +290,7 @@ def evaluate_loop(
     labels = {label: (sxy, sdeg, lat) for label, sxy, sdeg, lat in STANDARD_CONDITIONS}
     if condition not in labels:
         raise ValueError(f"condition = {condition!r} is not allowed; allowed: {', '.join(labels)}")
-    loop = _closed_loop(loop, controllers.SHIM_SUNG, None)
+    loop = _closed_loop(loop, controllers.SHIM_SUNG, None, "loop")
     estimator, _ = resolve_estimator(loop.estimator)
     controller = controllers.get_controller(loop.controller)
     mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
@@ -381,7 +393,10 @@ def noise_curve(
     levels, _ = check_levels(list(noise_xy), [_DEG_PER_CM * float(x) for x in noise_xy])
     mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
     latency = checks.check_bool("latency", latency)
-    sets = {name: _closed_loop(v, controllers.SHIM_SUNG, None) for name, v in loops_by_name.items()}
+    sets = {
+        name: _closed_loop(v, controllers.SHIM_SUNG, None, f"loops_by_name[{name!r}]")
+        for name, v in loops_by_name.items()
+    }
     for loop in sets.values():
         resolve_estimator(loop.estimator)
         controllers.get_controller(loop.controller)

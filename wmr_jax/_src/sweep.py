@@ -216,6 +216,9 @@ def _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, device
     devices = tuple(checked_devices(jax.local_devices() if devices is None else devices))
     gains = options.controller.default_params() if gains is None else gains
     robot = Robot() if robot is None else robot
+    runs = max(checks.leading_size(gains, robot), np.shape(init)[0] if np.ndim(init) == 2 else 1)
+    if n == 1 and runs > 1:  # one reference shared by every run of batched parameters
+        refs, n = np.repeat(np.asarray(refs[:1]), runs, axis=0), runs
     if n > 1:
         gains = _per_run_or_shared(gains, n, "gains.")
         robot = _per_run_or_shared(robot, n, "robot.")

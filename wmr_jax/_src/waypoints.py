@@ -217,6 +217,18 @@ def _prepared(params, init, robot, dt, options: Options, n: int | None, entry):
     return params, init, robot, dt
 
 
+def _shared_by_every_run(poses: jax.Array, params: Any, robot: Any, init: Any = None) -> jax.Array:
+    """``poses (1, ...)`` repeated for each run of batched params, robot or init; else as given.
+
+    A batch axis of size 1 is shared by every run, the references' too.
+    """
+    runs = checks.leading_size(params, robot)
+    runs = max(runs, np.shape(init)[0] if np.ndim(init) == 2 else 1)
+    if poses.shape[0] == 1 and runs > 1:
+        return jnp.broadcast_to(poses, (runs, *poses.shape[1:]))
+    return poses
+
+
 def _options(steps, velocity, controller, substeps, wheel_limit) -> Options:
     return simulation.make_options(
         steps=steps,
@@ -340,6 +352,7 @@ def batch_chain_rollout(
         wp = jnp.broadcast_to(wp, (np.shape(init)[0], *wp.shape))
     else:
         wp = _pose_stack("waypoints", waypoints, 3, "(N, K, 3)")
+    wp = _shared_by_every_run(wp, params, robot)
     tol = _tolerances(tol_r, tol_theta, pass_tol_r, pass_tol_theta)
     options = _options(steps, velocity, controller, substeps, wheel_limit)
     return _run(_batch_chain_jit, (wp, tol), params, init, robot, dt, options, wp.shape[0])
@@ -389,7 +402,7 @@ def batch_track_rollout(
     Returns:
         A ``TrackRun`` whose fields have a leading axis ``N``.
     """
-    arr = _pose_stack("refs", refs, 3, "(N, steps, 3)")
+    arr = _shared_by_every_run(_pose_stack("refs", refs, 3, "(N, steps, 3)"), params, robot, init)
     options = _options(arr.shape[1], velocity, controller, substeps, wheel_limit)
     return _run(_batch_track_jit, arr, params, init, robot, dt, options, arr.shape[0])
 

@@ -371,6 +371,20 @@ def prepare_disturbed(
     """
     refs, noise, mismatch, delay = checked_disturbance(disturbance)
     estimator, estimate = resolve_estimator(estimator)
+    if estimator is not None:
+        # One value per run, or one for all: as the gains, before any tracing
+        # (a list is an array of values, as everywhere, not a tree of them).
+        estimate = jax.tree.map(
+            lambda v: np.asarray(v) if isinstance(v, list) else v,
+            estimate,
+            is_leaf=lambda v: isinstance(v, list),
+        )
+    runs = checks.leading_size(params, robot, estimate)
+    if len(refs) == 1 and runs > 1:
+        # One disturbance shared by every run of batched parameters, as a
+        # batch axis of size 1 is everywhere (README: the Python API).
+        refs, noise, mismatch = (np.repeat(a, runs, axis=0) for a in (refs, noise, mismatch))
+        delay = np.repeat(delay, runs, axis=0) if delay.ndim else delay
     options = simulation.make_options(
         steps=noise.shape[1], velocity=velocity, controller=controller
     )
@@ -390,13 +404,6 @@ def prepare_disturbed(
         jnp.asarray(delay, dtype),
     )
     if estimator is not None:
-        # One value per run, or one for all: as the gains, before any tracing
-        # (a list is an array of values, as everywhere, not a tree of them).
-        estimate = jax.tree.map(
-            lambda v: np.asarray(v) if isinstance(v, list) else v,
-            estimate,
-            is_leaf=lambda v: isinstance(v, list),
-        )
         sizes = {"disturbance.ref": len(refs)}
         for key, leaf in jax.tree_util.tree_leaves_with_path(estimate):
             if np.ndim(leaf) >= 1:
