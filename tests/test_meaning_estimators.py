@@ -209,6 +209,20 @@ def test_a_list_of_gains_is_a_table():
     assert validate_observer(params) is params
 
 
+def test_an_array_of_gains_is_one_constant_per_run_not_a_table():
+    gains = np.array([0.2, 0.5, 0.7, 0.9])  # as many values as runs: nothing refuses it
+    spec = _disturbance(0.0)
+    kw = {"init": (0.0, 0.0, 0.0), "robot": ROBOT}
+    per_run = studies.disturbed_rollout(spec, GAINS, estimator=ObserverParams(position=gains), **kw)
+    for i, g in enumerate(gains):
+        alone = studies.disturbed_rollout(spec, GAINS, estimator=ObserverParams(position=g), **kw)
+        np.testing.assert_allclose(per_run["poses"][i], alone["poses"][i], atol=ATOL)
+    table = studies.disturbed_rollout(
+        spec, GAINS, estimator=ObserverParams(position=tuple(gains)), **kw
+    )
+    assert np.abs(np.asarray(table["poses"]) - np.asarray(per_run["poses"])).max() > 1e-3
+
+
 def test_each_validator_refuses_the_other_kind():
     with pytest.raises(ValueError, match="estimator is a EKFParams; allowed: a wmr_jax.Observer"):
         validate_observer(EKFParams())

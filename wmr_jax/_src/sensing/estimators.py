@@ -86,9 +86,11 @@ class ObserverParams(Parameters):
 
     Attributes:
         position: gain toward the measured position, in ``[0, 1]``: a
-            constant, or a tuple of ``K ≥ 2`` knots at ``observer_radii(K)``
-            cm of estimated distance to the goal (linear between, constant
-            beyond the last).
+            constant, or a tuple (or list) of ``K ≥ 2`` knots at
+            ``observer_radii(K)`` cm of estimated distance to the goal
+            (linear between, constant beyond the last). An array is not a
+            table but one constant per run, a batch axis as for every
+            parameter: write a table of an array as ``tuple(array)``.
         heading: gain toward the measured heading, likewise.
         compensate: static; hand the law the estimate rolled forward over the
             command in flight under latency (docs/model.md §9). ``False``
