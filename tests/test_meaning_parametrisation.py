@@ -214,3 +214,37 @@ def test_points_pass_traced_into_jit_and_give_the_same_gains():
 def test_gains_below_the_box_are_moved_onto_its_lower_faces():
     tiny = w.Gains(kr=1e-6, k_theta=1e-3, phi_m=1e-5, r_m=0.01, r_a=1e-5, r_e=1e-9, alpha=1e-6)
     np.testing.assert_array_equal(p.unit_from_gains(tiny), np.full(7, 1e-3))
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        # A negative or NaN budget gave negative or NaN gains, L = 0 gave k_θ = inf.
+        (lambda: p.gains_from_unit(np.full(7, 0.5), w.Robot(v_max=-1.0)), r"robot.v_max = -1.0"),
+        (lambda: p.gains_from_logits(np.zeros(7), w.Robot(v_max=math.nan)), r"robot.v_max = nan"),
+        (lambda: p.gains_from_unit(np.full(7, 0.5), w.Robot(half_track=0.0)), r"robot.half_track"),
+        (lambda: p.unit_from_gains(w.Gains(), w.Robot(v_max=math.nan)), r"robot.v_max = nan"),
+        (lambda: p.gains_from_unit(np.full(7, 0.5), "paper"), r"robot is a str; allowed: a"),
+        (
+            lambda: p.gains_from_unit(np.full(7, 0.5), w.Robot(v_max=[100.0, 120.0])),
+            r"robot.v_max has shape \(2,\); allowed: one robot",
+        ),
+        # A batch raised "only 0-dimensional arrays can be converted".
+        (lambda: p.gains_as_dict(w.Gains(kr=[1.0, 2.0])), r"gains.kr has shape \(2,\); allowed"),
+        (lambda: p.logits_from_gains(w.Gains(kr=[1.0, 2.0])), r"gains.kr has shape \(2,\)"),
+        (lambda: p.gains_as_dict(w.Gains(kr=-1.0)), r"gains.kr = -1.0 is not allowed"),
+        (lambda: p.gains_as_dict(None), r"gains is a NoneType; allowed: a wmr_jax.Gains"),
+    ],
+)
+def test_the_maps_refuse_a_robot_or_gains_they_cannot_map(call, message):
+    with pytest.raises(ValueError, match=rf"^{message}") as info:
+        call()
+    assert "\n" not in str(info.value)
+
+
+def test_a_traced_robot_is_mapped_unchecked():
+    """Inside jit the robot's fields are tracers: mapped as given, checked by the caller."""
+    robot = w.Robot(v_max=100.0)
+    direct = p.gains_from_unit(np.full(7, 0.5), robot)
+    traced = jax.jit(lambda r: p.gains_from_unit(np.full(7, 0.5), r))(robot)
+    assert float(traced.kr) == pytest.approx(float(direct.kr), rel=1e-12)

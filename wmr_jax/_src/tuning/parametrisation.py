@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks import is_traced, real_array, require
+from wmr_jax._src.checks import is_traced, real_array, require, require_unbatched
 from wmr_jax._src.params import Gains, Robot, validate_gains, validate_one_robot
 
 __all__ = [
@@ -118,8 +118,13 @@ def gains_from_unit(u: jax.Array, robot: Robot | None = None) -> Gains:
 
     Returns:
         ``Gains`` whose fields have the leading shape of ``u``.
+
+    Raises:
+        ValueError: for ``u`` outside the cube, or a robot that is not one
+            valid ``Robot`` (a traced one is not checked).
     """
-    robot = Robot() if robot is None else robot
+    if not is_traced(robot):
+        robot = validate_one_robot(robot, "gains_from_unit")
     u = checked_point("u", u, len(GAIN_FIELDS), unit=True)
     budget = robot.v_max * _lerp(u[..., 0], _BUDGET)  # cm/s
     share = _lerp(u[..., 1], _SHARE)
@@ -153,10 +158,10 @@ def unit_from_gains(gains: Gains, robot: Robot | None = None) -> np.ndarray:
         ``(7,)`` float64 array in ``[1e-3, 1 − 1e-3]``.
 
     Raises:
-        ValueError: for gains outside the ranges of ``docs/model.md §3``.
+        ValueError: for gains outside the ranges of ``docs/model.md §3``, or
+            a robot that is not one valid ``Robot``.
     """
-    robot = Robot() if robot is None else robot
-    validate_gains(gains)
+    robot = validate_one_robot(robot, "unit_from_gains")
     g = gains_as_dict(gains)
     budget = g["kr"] + float(robot.half_track) * g["k_theta"]
     u = [
@@ -172,7 +177,14 @@ def unit_from_gains(gains: Gains, robot: Robot | None = None) -> np.ndarray:
 
 
 def gains_as_dict(gains: Gains) -> dict[str, float]:
-    """Return scalar gains as ``{field: float}`` in ``GAIN_FIELDS`` order (JSON-ready)."""
+    """Return scalar gains as ``{field: float}`` in ``GAIN_FIELDS`` order (JSON-ready).
+
+    Raises:
+        ValueError: for gains outside the ranges of ``docs/model.md §3``, or
+            with a batch axis, naming the field.
+    """
+    validate_gains(gains)
+    require_unbatched(gains, "gains", "a scalar (one set of gains)")
     return {name: float(getattr(gains, name)) for name in GAIN_FIELDS}
 
 
