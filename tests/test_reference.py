@@ -105,11 +105,31 @@ def test_the_reference_law_refuses_positions_whose_distance_overflows():
 def test_the_reference_checks_against_float64_whatever_jax_computes_in():
     # It computes in float64: a float32 session's limits would refuse these.
     with jax.enable_x64(False):
-        assert np.isfinite(
-            w.reference_rollout([30.0, 30.0, 0.0], w.Gains(kr=1e40), steps=2)["poses"]
-        ).all()
+        with pytest.warns(w.SamplingWarning):  # as the JAX rollout warns in float64
+            poses = w.reference_rollout([30.0, 30.0, 0.0], w.Gains(kr=1e40), steps=2)["poses"]
+        assert np.isfinite(poses).all()
         assert np.isfinite(w.reference_rollout([30.0, 30.0, 0.0], dt=1e-40, steps=2)["poses"]).all()
         with pytest.raises(ValueError, match=r"gains.kr = 1e\+40 is beyond float32"):
             w.rollout(
                 [30.0, 30.0, 0.0], w.Gains(kr=1e40), steps=2
             )  # the JAX loop does compute in float32
+
+
+@pytest.mark.parametrize("kwargs", [{"gains": w.Gains(k_theta=1e30)}, {"dt": 1e30}])
+def test_the_reference_refuses_a_run_beyond_what_float64_resolves(kwargs):
+    """It returned headings of 1e28 rad where the JAX rollout refuses the run."""
+    with pytest.warns(w.SamplingWarning), pytest.raises(ValueError) as info:
+        w.reference_rollout([30.0, 30.0, 0.0], steps=5, **kwargs)
+    assert str(info.value).startswith("the run left the range float64 resolves")
+    assert "heading beyond 1e+12 rad" in str(info.value)
+    with jax.enable_x64(True), pytest.warns(w.SamplingWarning), pytest.raises(ValueError):
+        w.rollout([30.0, 30.0, 0.0], steps=5, **kwargs)
+
+
+def test_the_reference_warns_where_rollout_warns_and_runs_on():
+    gains = w.Gains(k_theta=100.0)  # k_θ dt = 3.3: it cannot settle, and stays in range
+    with pytest.warns(w.SamplingWarning, match=r"k_theta\*dt = 3.3") as caught:
+        w.reference_rollout([30.0, 30.0, 0.0], gains, steps=5)
+    assert caught[0].filename == __file__  # at the caller, as rollout's
+    with pytest.warns(w.SamplingWarning, match=r"k_theta\*dt = 3.3"):
+        w.rollout([30.0, 30.0, 0.0], gains, steps=5)

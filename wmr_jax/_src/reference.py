@@ -25,7 +25,7 @@ from wmr_jax._src.checks import (
     real_array,
     require_unbatched,
 )
-from wmr_jax._src.params import Gains, Robot, validate_gains, validate_robot
+from wmr_jax._src.params import Gains, Robot, check_sampling, validate_gains, validate_robot
 from wmr_jax._src.sensing.estimators import OBSERVER_R, EKFParams, resolve_estimator
 from wmr_jax._src.velocity_loop import check_stability
 
@@ -308,6 +308,7 @@ def reference_rollout(
         )
     dt, steps = float(check_dt(dt)), check_int("steps", steps, 1, MAX_STEPS)
     substeps = check_int("substeps", substeps, 1, MAX_STEPS)
+    check_sampling(gains, dt, stacklevel=4)  # the JAX rollout's warning, at the caller
     if velocity == "nonideal":
         check_stability(robot, dt, substeps)  # the same bound as the JAX loop's
     ref = _one_pose("ref", ref)
@@ -335,6 +336,14 @@ def reference_rollout(
         poses[k + 1] = x, y, th
         v_out[k], w_out[k], region[k] = v, w, out["region"]
         rims[k] = state[0] - loop.L * state[1], state[0] + loop.L * state[1]
+    with np.errstate(invalid="ignore"):
+        resolved = np.isfinite(poses).all() and np.abs(poses[:, 2]).max() <= MAX_HEADING
+    if not resolved:  # as the JAX rollout refuses an inf or NaN pose
+        raise ValueError(
+            f"the run left the range float64 resolves (a pose became inf or NaN, or its "
+            f"heading beyond {MAX_HEADING:.0e} rad); allowed: gains and dt that keep the "
+            "sampled law stable (docs/model.md §4)"
+        )
     return {
         "poses": poses,
         "v": v_out,
