@@ -344,6 +344,21 @@ def test_a_run_that_left_the_goal_and_is_back_only_at_the_end_has_not_arrived():
     assert "settled at horizon" not in robustness.summary_row(m)  # without a horizon: as before
 
 
+def test_late_arrivals_need_first_arrivals_and_a_horizon():
+    """evaluate_poses records no first arrivals: a one-line refusal, not a TypeError."""
+    swept = studies.evaluate_poses(np.array([[30.0, 30.0, 0.0]]), w.Gains(), steps=20)
+    assert swept.first_arrival is None
+    for call in (robustness.settled_at_horizon, robustness.summary_row):
+        with pytest.raises(ValueError, match=r"^m.first_arrival is None \(evaluate_poses"):
+            call(swept, 6.0)
+    with pytest.raises(ValueError, match=r"^m is a NoneType; allowed: a PoseMetrics"):
+        robustness.settled_at_horizon(None, 6.0)
+    m = _metrics([1.0], [1.0])
+    for horizon in (None, -1.0, math.nan, "6"):
+        with pytest.raises(ValueError, match=r"^horizon = .* is not allowed"):
+            robustness.settled_at_horizon(m, horizon)
+
+
 def _standard_rows():
     base = {"mean final distance cm": 0.5, "mismatch": 0.03, "runs": 400, "feedback": "raw"}
     return [

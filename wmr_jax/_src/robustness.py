@@ -138,9 +138,29 @@ def settled_at_horizon(m: PoseMetrics, horizon: float) -> np.ndarray:
     Args:
         m: the runs' metrics (``first_arrival`` included).
         horizon: the simulated time of the runs, s.
+
+    Raises:
+        ValueError: for metrics without first arrivals, or a horizon that
+            is not a time.
     """
-    late = m.arrival > (1.0 - LATE_SHARE) * float(horizon)
+    _check_with_first_arrivals(m, "m")
+    horizon = checks.check_number("horizon", horizon, unit="s")
+    late = m.arrival > (1.0 - LATE_SHARE) * horizon
     return m.success & late & (m.first_arrival < m.arrival)
+
+
+def _check_with_first_arrivals(m: Any, name: str) -> None:
+    """Raise unless ``m`` is ``PoseMetrics`` that carry each run's first arrival."""
+    if not isinstance(m, PoseMetrics):
+        raise ValueError(
+            f"{name} is a {type(m).__name__}; allowed: a PoseMetrics (perturbed_metrics "
+            "returns one)"
+        )
+    if m.first_arrival is None:
+        raise ValueError(
+            f"{name}.first_arrival is None (evaluate_poses does not record first arrivals); "
+            "allowed: the metrics of perturbed_metrics, which do"
+        )
 
 
 def summary_row(m: PoseMetrics, horizon: float | None = None) -> dict[str, Any]:
@@ -150,7 +170,12 @@ def summary_row(m: PoseMetrics, horizon: float | None = None) -> dict[str, Any]:
     fraction of the runs that count as successes only because the horizon
     ends (``settled_at_horizon``), and the mean and median arrival of the
     other successes (``inf`` if none), which the figures draw.
+
+    Raises:
+        ValueError: for metrics without first arrivals (``evaluate_poses``
+            records none), or a horizon that is not a time.
     """
+    _check_with_first_arrivals(m, "m")
     ok = m.success
     t = m.arrival[ok]
     row = {
