@@ -557,3 +557,18 @@ def test_the_laws_building_blocks_take_plain_numbers_and_lists():
 def test_options_of_the_studies_are_checked_before_work(call, message):
     with pytest.raises(ValueError, match=message):
         call()
+
+
+def test_a_parameter_below_the_smallest_normal_number_is_told_what_is_allowed():
+    """It said "allowed: 0 or a larger magnitude", and 0 is then refused for r_e."""
+    with jax.enable_x64(False):
+        with pytest.raises(ValueError) as info:
+            w.rollout(REF, w.Gains(r_e=1e-45), steps=3)
+    message = str(info.value)
+    assert message.startswith("gains.r_e = ") and "smallest normal number (1.18e-38)" in message
+    assert message.endswith(
+        "allowed: a magnitude of at least 1.18e-38 (or 0, where the field "
+        "allows 0), or float64 (jax.config.update('jax_enable_x64', True))"
+    )
+    with pytest.raises(ValueError, match=r"^gains.r_e = 0.0 is not allowed"):
+        w.rollout(REF, w.Gains(r_e=0.0), steps=3)

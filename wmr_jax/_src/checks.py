@@ -441,7 +441,8 @@ def require_representable(name: str, value: np.ndarray, *, tiny_ok: bool = False
     if np.any(small):
         raise ValueError(
             f"{name} = {_shown(value, small)} is below {dtype.name}'s smallest normal number "
-            f"({tiny:.3g}); allowed: 0 or a larger magnitude"
+            f"({tiny:.3g}); allowed: a magnitude of at least {tiny:.3g} (or 0, where the "
+            "field allows 0)"
             + (_FLOAT64_HINT if dtype != np.float64 else "")
         )
     ok = np.abs(value) <= largest
