@@ -130,6 +130,16 @@ def test_bools_strings_and_complex_numbers_are_not_numbers(kwargs, message):
         w.rollout(ref, w.Gains(kr=60.0), steps=3, **args)
 
 
+@pytest.mark.parametrize("dtype", [complex, bool, str])
+def test_a_batch_that_is_not_numbers_is_named_on_one_line(dtype):
+    """A 2-D array's repr has a line per row: the message showed them all."""
+    refs = np.ones((2, 3), dtype)
+    for call in (lambda: w.final_poses(refs, steps=3), lambda: w.final_poses([REF], init=refs)):
+        with pytest.raises(ValueError, match=r"^(refs|init) = array\(\[\[.*\], \[") as info:
+            call()
+        assert "\n" not in str(info.value)
+
+
 def test_temperature_and_steps_have_upper_bounds():
     with pytest.raises(ValueError, match=r"temperature = 1e\+30 is not allowed"):
         w.rollout(REF, temperature=1e30, steps=3)

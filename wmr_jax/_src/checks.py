@@ -105,7 +105,7 @@ def real_array(name: str, value: Any, allowed: str) -> np.ndarray:
 
 
 def described(value: Any) -> str:
-    """Return ``repr(value)``, or its type, shape and dtype if it is a large array.
+    """Return ``repr(value)`` on one line, or its type, shape and dtype if it is a large array.
 
     An integer too large for any float is described by its size, not its
     hundreds of digits.
@@ -115,7 +115,7 @@ def described(value: Any) -> str:
     shape, dtype = getattr(value, "shape", None), getattr(value, "dtype", None)
     if shape is not None and dtype is not None and int(np.prod(shape)) > 6:
         return f"{type(value).__name__} of shape {tuple(shape)} and dtype {dtype}"
-    return repr(value)
+    return " ".join(repr(value).split())  # a 2-D array's repr has a line per row
 
 
 def _holds_bool(value: Any) -> bool:
@@ -525,7 +525,7 @@ def as_poses(
                 raise TypeError(value)  # True as 1, or 1 + 2j as 1, is no coordinate
             host = np.asarray(value, dtype=float)
         except (TypeError, ValueError) as err:
-            raise ValueError(f"{name} = {value!r} is not allowed; allowed: {real}") from err
+            raise ValueError(f"{name} = {described(value)} is not allowed; allowed: {real}") from err
         arr = None
     shape = tuple((arr if arr is not None else host).shape)
     allowed = {False: "(3,)", True: "(N, 3) with N >= 1", None: "(3,) or (N, 3)"}[batch]
@@ -649,7 +649,7 @@ def as_pose_array(name: str, value: Any) -> Any:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         raise ValueError(
-            f"{name} = {value!r} is not allowed; allowed: real numbers (..., 3) "
+            f"{name} = {described(value)} is not allowed; allowed: real numbers (..., 3) "
             "[x cm, y cm, theta rad]"
         ) from None
     if arr.ndim == 0 or arr.shape[-1] != 3:
