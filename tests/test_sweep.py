@@ -215,7 +215,7 @@ def test_every_run_is_checked_as_final_poses_checks_it():
         w.sweep(refs, w.Gains(kr=np.array([60.0, 70.0])))
     # Bools are named as given, not as the one-run sample the other checks look at.
     flags = np.array([True, False] * 3)
-    with pytest.raises(ValueError, match=r"gains.kr = array\(\[ True, False,  True, False"):
+    with pytest.raises(ValueError, match=r"gains.kr = array\(\[ True, False, True, False"):
         w.sweep(refs, w.Gains(kr=flags))
 
 
