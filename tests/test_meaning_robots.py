@@ -6,8 +6,10 @@ centimetres by hand), never taken from the reader.
 
 import dataclasses
 import json
+import math
 import re
 
+import numpy as np
 import pytest
 
 import wmr_jax as w
@@ -272,3 +274,36 @@ def test_a_ros_parameter_given_dotted_and_nested_is_refused(tmp_path):
         robot = _read(tmp_path, f"{name}.yaml", "wheel_separation: 0.16\nwheel_radius: "
                       "0.033\n" + limit).robot  # fmt: skip
         assert robot.v_max == 30.0
+
+
+def test_a_robot_typed_in_metres_warns_where_it_is_written():
+    """Robot(half_track=0.08) ran as a 0.8 mm robot without a word (only files warned)."""
+    import warnings
+
+    import jax
+
+    with pytest.warns(w.RobotUnitsWarning) as caught:
+        robot = w.Robot(half_track=0.08, v_max=0.22)
+    assert [c.filename for c in caught] == [__file__, __file__]
+    assert [str(c.message) for c in caught] == [
+        f"Robot {field} = {value} is outside {bounds}, as if written in another unit (the "
+        "library's are cm and cm/s: half_track=8.0 for 8 cm); it runs as given"
+        for field, value, bounds in (
+            ("half_track", "0.08 cm", "0.5-500 cm"),
+            ("v_max", "0.22 cm/s", "1-2000 cm/s"),
+        )
+    ]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", w.RobotUnitsWarning)
+        # The library's own copies do not warn again; nor do batches, the
+        # bounds, values refused later, or any preset.
+        robot.replace(body_mass=1.0)
+        jax.tree.map(lambda x: x, robot)
+        w.Robot(half_track=np.array([0.08, 0.09]))
+        w.Robot(half_track=0.5, v_max=2000.0, wheel_radius=100.0)
+        w.Robot(half_track=500.0, v_max=1.0, wheel_radius=0.2)
+        w.Robot(half_track=-1.0, v_max=math.nan)
+        for name in w.ROBOTS:
+            w.Robot(**{f: getattr(w.ROBOTS[name], f) for f in ("half_track", "v_max")})
+    with pytest.warns(w.RobotUnitsWarning, match=r"^Robot wheel_radius = 330 cm is outside"):
+        w.Robot(wheel_radius=330.0)

@@ -1,6 +1,7 @@
 """The non-ideal velocity loop: Eq. 5 dynamics, wheel limits, its limits (docs/model.md §4)."""
 
 import math
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -88,7 +89,9 @@ def _stiff(speed_gain, stiffest):
     The sub-steps suit the ``stiffest`` loop of the series, so that every loop
     of a series runs one compiled program (the number of sub-steps is static).
     """
-    robot = w.Robot(speed_gain=float(speed_gain), v_max=1e6, torque_max=1e12)
+    with warnings.catch_warnings():  # no wheel limit on purpose: not a unit slip
+        warnings.simplefilter("ignore", w.RobotUnitsWarning)
+        robot = w.Robot(speed_gain=float(speed_gain), v_max=1e6, torque_max=1e12)
     return robot, max(10, math.ceil(stiffest * 0.033))
 
 

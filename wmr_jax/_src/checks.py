@@ -442,8 +442,7 @@ def require_representable(name: str, value: np.ndarray, *, tiny_ok: bool = False
         raise ValueError(
             f"{name} = {_shown(value, small)} is below {dtype.name}'s smallest normal number "
             f"({tiny:.3g}); allowed: a magnitude of at least {tiny:.3g} (or 0, where the "
-            "field allows 0)"
-            + (_FLOAT64_HINT if dtype != np.float64 else "")
+            "field allows 0)" + (_FLOAT64_HINT if dtype != np.float64 else "")
         )
     ok = np.abs(value) <= largest
     if not np.all(ok):
@@ -525,7 +524,8 @@ def as_poses(
                 raise TypeError(value)  # True as 1, or 1 + 2j as 1, is no coordinate
             host = np.asarray(value, dtype=float)
         except (TypeError, ValueError) as err:
-            raise ValueError(f"{name} = {described(value)} is not allowed; allowed: {real}") from err
+            shown = described(value)
+            raise ValueError(f"{name} = {shown} is not allowed; allowed: {real}") from err
         arr = None
     shape = tuple((arr if arr is not None else host).shape)
     allowed = {False: "(3,)", True: "(N, 3) with N >= 1", None: "(3,) or (N, 3)"}[batch]

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 import warnings
 from typing import Any
 
@@ -33,6 +34,7 @@ from wmr_jax._src.checks import (
 )
 
 __all__ = [
+    "RobotUnitsWarning",
     "Gains",
     "Robot",
     "SamplingWarning",
@@ -126,6 +128,53 @@ class Robot(Parameters):
     # The paper's robot has no speed limiter: it is the massless ideal loop.
     accel_max: Any = 0.0
     angular_accel_max: Any = 0.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _warn_unit_slips(self)
+
+
+class RobotUnitsWarning(UserWarning):
+    """A robot's size or speed looks like a unit slip (metres where cm belong, or cm in ROS)."""
+
+
+# Sizes and speeds no wheeled robot this model describes has (the paper's
+# soccer robot: L = 1.85 cm; a warehouse robot: L of some 30 cm, 2 m/s): a
+# value outside is most likely written in another unit. The range is wide
+# on purpose; the run goes on as given.
+PLAUSIBLE = {
+    "half_track": (0.5, 500.0, "cm"),
+    "wheel_radius": (0.2, 100.0, "cm"),
+    "v_max": (1.0, 2000.0, "cm/s"),
+}
+_NOT_TYPED_BY_A_USER = ("wmr_jax.", "jax.", "dataclasses")
+
+
+def _warn_unit_slips(robot: Robot) -> None:
+    """Warn (``RobotUnitsWarning``) where ``Robot(...)`` is called, for a size in metres.
+
+    Only for numbers given as such (arrays and tracers are batches and
+    programs, not typed values), and only where ``Robot(...)`` is written
+    outside the library: the copies that ``replace`` and JAX's tree
+    functions make, and the robots of files (which say it naming the file),
+    do not warn again.
+    """
+    caller = sys._getframe(3).f_globals.get("__name__", "")  # _warn, __post_init__, __init__
+    if caller.startswith(_NOT_TYPED_BY_A_USER):
+        return
+    for field, (low, high, unit) in PLAUSIBLE.items():
+        value = getattr(robot, field)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            continue
+        if not 0 < value < math.inf or low <= value <= high:
+            continue  # out of range or not a number: refused where the robot is used
+        warnings.warn(
+            f"Robot {field} = {value:.6g} {unit} is outside {low:g}-{high:g} {unit}, as if "
+            "written in another unit (the library's are cm and cm/s: half_track=8.0 for "
+            "8 cm); it runs as given",
+            RobotUnitsWarning,
+            stacklevel=4,
+        )
 
 
 class WheelSpeedWarning(UserWarning):

@@ -32,7 +32,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from wmr_jax._src.checks import require_unbatched
-from wmr_jax._src.params import Robot, validate_robot
+from wmr_jax._src.params import PLAUSIBLE, Robot, RobotUnitsWarning, validate_robot
 
 __all__ = [
     "LoadedRobot",
@@ -73,29 +73,14 @@ _UNIT = {name: text.split(" (")[0] for name, text in ROBOT_UNITS.items()}
 _G = 981.0  # cm/s², standard gravity
 
 
-class RobotUnitsWarning(UserWarning):
-    """A robot file's size or speed looks like a unit slip (metres in JSON, cm in ROS)."""
-
-
-# Sizes and speeds no wheeled robot this model describes has (the paper's
-# soccer robot: L = 1.85 cm; a warehouse robot: L of some 30 cm, 2 m/s): a
-# value outside is most likely written in another unit. The range is wide
-# on purpose; the run goes on as given.
-_PLAUSIBLE = {
-    "half_track": (0.5, 500.0),
-    "wheel_radius": (0.2, 100.0),
-    "v_max": (1.0, 2000.0),
-}
-
-
 def _warn_unit_slips(robot: Robot, where: str, ros: bool) -> None:
-    """Warn (``RobotUnitsWarning``) for each size or speed outside ``_PLAUSIBLE``."""
+    """Warn (``RobotUnitsWarning``) for each size or speed of a file outside ``PLAUSIBLE``."""
     convention = (
         "a ROS file gives metres and m/s: wheel_separation 0.16 for 16 cm"
         if ros
         else "a JSON robot file gives cm and cm/s: half_track 8 for 8 cm"
     )
-    for field, (low, high) in _PLAUSIBLE.items():
+    for field, (low, high, _) in PLAUSIBLE.items():
         value = float(getattr(robot, field))
         if not low <= value <= high:
             warnings.warn(
