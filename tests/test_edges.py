@@ -582,3 +582,17 @@ def test_a_parameter_below_the_smallest_normal_number_is_told_what_is_allowed():
     )
     with pytest.raises(ValueError, match=r"^gains.r_e = 0.0 is not allowed"):
         w.rollout(REF, w.Gains(r_e=0.0), steps=3)
+
+
+def test_wheel_speeds_take_lists_and_name_shapes_that_do_not_broadcast():
+    """A list raised "can't multiply sequence", mismatched shapes jax's broadcasting error."""
+    np.testing.assert_allclose(
+        np.asarray(w.wheel_speeds([1.0, 2.0], [0.0, 1.0], w.Robot(half_track=2.0))),
+        [[1.0, 1.0], [0.0, 4.0]],
+    )
+    with pytest.raises(ValueError, match=r"^shapes v \(3,\), omega \(4,\), robot.half_track \(\)"):
+        w.wheel_speeds(np.ones(3), np.ones(4), w.Robot())
+    with pytest.raises(ValueError, match=r"robot.half_track \(2,\) do not broadcast"):
+        w.wheel_speeds(np.ones(3), np.ones(3), w.Robot(half_track=[1.0, 2.0]))
+    with pytest.raises(ValueError, match=r"^omega = \[1, 'x'\] is not allowed"):
+        w.wheel_speeds(1.0, [1, "x"], w.Robot())

@@ -428,11 +428,25 @@ def lyapunov(err: PolarError) -> jax.Array:
 
 
 def wheel_speeds(v: jax.Array, omega: jax.Array, robot: Robot) -> jax.Array:
-    """Return rim speeds ``[v_L, v_R] = [v − L ω, v + L ω]`` in cm/s, shape ``(..., 2)``."""
+    """Return rim speeds ``[v_L, v_R] = [v − L ω, v + L ω]`` in cm/s, shape ``(..., 2)``.
+
+    ``v``, ``omega`` and ``robot.half_track`` broadcast against each other.
+
+    Raises:
+        ValueError: called with values (not traced), for a bad robot, values
+            that are not real numbers, or shapes that do not broadcast.
+    """
     if not is_traced((v, omega, robot)):  # called with values, not from a rollout
         validate_robot(robot)
-        for name, value in (("v", v), ("omega", omega)):
-            real_array(name, value, "real numbers")  # NaN in, NaN out: a diverged run shows
+        # Lists work as arrays; NaN in, NaN out: a diverged run shows.
+        v, omega = (real_array(name, x, "real numbers") for name, x in (("v", v), ("omega", omega)))
+        shapes = {"v": v.shape, "omega": omega.shape}
+        shapes["robot.half_track"] = np.shape(robot.half_track)
+        try:
+            np.broadcast_shapes(*shapes.values())
+        except ValueError:
+            listed = ", ".join(f"{name} {shape}" for name, shape in shapes.items())
+            raise ValueError(f"shapes {listed} do not broadcast; allowed: shapes that do") from None
     return jnp.stack([v - robot.half_track * omega, v + robot.half_track * omega], axis=-1)
 
 
