@@ -271,6 +271,18 @@ def test_a_new_controller_needs_no_special_case():
         w.register_controller(dataclasses.replace(custom, name="shim-sung"), replace="no")
     with pytest.raises(ValueError, match="controller.smooth = 'no' is not allowed"):
         dataclasses.replace(custom, smooth="no")
+    # Checked where it is built, registered or not (they failed at the first rollout).
+    for changes, message in (
+        ({"validate": None}, r"controller.validate = None is not allowed; allowed: a function "
+         r"validate\(params\) -> params"),
+        ({"region": 5}, r"controller.region = 5 is not allowed; allowed: a function, or None"),
+        ({"params_type": w.Gains()}, r"controller.params_type = Gains\(.* allowed: a class"),
+        ({"name": None}, r"^controller.name = None is not allowed; allowed: a non-empty str"),
+        ({"name": " "}, r"^controller.name = ' ' is not allowed"),
+    ):  # fmt: skip
+        with pytest.raises(ValueError, match=message):
+            dataclasses.replace(custom, **changes)
+    assert dataclasses.replace(custom, region=None, check_robot=None).region is None
     with pytest.raises(ValueError, match="backward = 'no' is not allowed"):
         baselines.driving_error(np.zeros(3), refs[0], backward="no")
     with pytest.raises(ValueError, match="warn = 'no' is not allowed"):

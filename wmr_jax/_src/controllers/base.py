@@ -67,11 +67,28 @@ class Controller:
     check_sampling: Callable[[Any, Any], None] | None = None
 
     def __post_init__(self) -> None:
+        # Checked where it is built: a controller is usable without registering.
+        if not isinstance(self.name, str) or not self.name.strip():
+            raise ValueError(
+                f"controller.name = {self.name!r} is not allowed; allowed: a non-empty str"
+            )
         check_bool("controller.smooth", self.smooth)  # "no" would be true
-        # A function the loop cannot call would fail only inside the traced
-        # scan, as a TypeError far from its cause: refuse it here instead.
         for field in _CALLS:
-            _check_signature(self.name, field, getattr(self, field))
+            value = getattr(self, field)
+            if not callable(value) and not (value is None and field not in _REQUIRED):
+                allowed = "a function" if field in _REQUIRED else "a function, or None"
+                raise ValueError(
+                    f"controller {self.name!r}: controller.{field} = {value!r:.60} is not "
+                    f"allowed; allowed: {allowed} {_CALLS[field][2]}"
+                )
+            # A function the loop cannot call would fail only inside the traced
+            # scan, as a TypeError far from its cause: refuse it here instead.
+            _check_signature(self.name, field, value)
+        if not isinstance(self.params_type, type):
+            raise ValueError(
+                f"controller {self.name!r}: controller.params_type = {self.params_type!r:.60} "
+                "is not allowed; allowed: a class (its defaults are the default parameters)"
+            )
 
     def __repr__(self) -> str:
         # The generated repr lists every function with its address, which
@@ -108,11 +125,14 @@ _CALLS: dict[str, tuple[tuple[str, ...], tuple[tuple[str, ...], ...], str]] = {
 }
 
 
+_REQUIRED = ("command", "validate")  # the rest may be None
+
+
 def _check_signature(name: Any, field: str, function: Any) -> None:
     """Refuse a function of a ``Controller`` that cannot be called as the package calls it.
 
-    Anything that is not callable, or whose signature Python cannot read (some
-    builtins), passes here; ``register_controller`` refuses the former.
+    A function whose signature Python cannot read (some builtins) passes;
+    one that is not callable is refused by ``Controller`` before this.
 
     Raises:
         ValueError: naming the controller, the field, the function's signature
@@ -214,14 +234,6 @@ def register_controller(controller: Controller, *, replace: bool = False) -> Con
         raise ValueError(
             f"controller.name = {name!r} is not allowed; allowed: lower-case letters, digits, "
             "'-' and '_', starting with a letter or digit"
-        )
-    for field in ("command", "validate", "region", "check_robot", "check_sampling"):
-        value = getattr(controller, field)
-        if not callable(value) and not (value is None and field not in ("command", "validate")):
-            raise ValueError(f"controller.{field} = {value!r} is not allowed; allowed: a function")
-    if not isinstance(controller.params_type, type):
-        raise ValueError(
-            f"controller.params_type = {controller.params_type!r} is not allowed; allowed: a class"
         )
     known = _REGISTRY.get(name)
     if known is not None and known != controller and not replace:
