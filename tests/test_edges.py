@@ -596,3 +596,30 @@ def test_wheel_speeds_take_lists_and_name_shapes_that_do_not_broadcast():
         w.wheel_speeds(np.ones(3), np.ones(3), w.Robot(half_track=[1.0, 2.0]))
     with pytest.raises(ValueError, match=r"^omega = \[1, 'x'\] is not allowed"):
         w.wheel_speeds(1.0, [1, "x"], w.Robot())
+
+
+@pytest.mark.parametrize(
+    ("name", "call"),
+    [
+        ("time_bounds", lambda x: w.time_bounds(np.array([[30.0, 30.0, 0.0]]) * x)),
+        ("check_feasible", lambda x: w.check_feasible(w.Gains(kr=x))),
+        ("success_rate", lambda x: w.success_rate(x * np.ones(3))),
+        ("sweep", lambda x: w.sweep(np.array([REF]), w.Gains(kr=x), steps=3)),
+        ("tuning.evaluate", lambda x: tuning.evaluate(w.Gains(kr=x), np.array([REF]))),
+    ],
+)
+def test_host_functions_say_they_need_values_inside_a_transformation(name, call):
+    """They raised JAX's TracerArrayConversionError, several lines long."""
+    for transform in (jax.jit, jax.grad):
+        with pytest.raises(ValueError) as info:
+            transform(call)(60.0)
+        assert str(info.value).startswith(f"{name} is called with traced values (inside jax.jit")
+        assert "\n" not in str(info.value)
+
+
+def test_the_wheel_speed_bound_names_batches_of_two_sizes():
+    with pytest.raises(ValueError, match=r"^batch sizes differ \(gains.kr: 2, robot.half_track: 3"):
+        w.wheel_speed_bound(w.Gains(kr=[1.0, 2.0]), w.Robot(half_track=[1.0, 2.0, 3.0]))
+    bound = w.wheel_speed_bound(w.Gains(kr=[1.0, 2.0]), w.Robot(half_track=[2.0]))
+    np.testing.assert_allclose(np.asarray(bound), [1.0 + 2.0 * 10.0, 2.0 + 2.0 * 10.0])
+    assert float(jax.jit(lambda k: w.wheel_speed_bound(w.Gains(kr=k)))(60.0)) == 60.0 + 18.5

@@ -47,6 +47,7 @@ __all__ = [
     "require",
     "require_finite_runs",
     "leading_size",
+    "require_concrete",
     "require_one_batch_size",
     "require_representable",
     "require_unbatched",
@@ -71,6 +72,23 @@ def float_dtype() -> Any:
 def is_traced(tree: Any) -> bool:
     """Return whether any leaf of ``tree`` is a JAX tracer."""
     return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(tree))
+
+
+def require_concrete(function: str, *trees: Any) -> None:
+    """Refuse a traced argument of a ``function`` that computes on the host with values.
+
+    Such a function called inside ``jax.jit``, ``vmap`` or ``grad`` would
+    fail converting a tracer to NumPy, in JAX's words, several lines long.
+
+    Raises:
+        ValueError: one line naming ``function`` and what to do instead.
+    """
+    if is_traced(trees):
+        raise ValueError(
+            f"{function} is called with traced values (inside jax.jit, vmap or grad); allowed: "
+            "concrete values: it computes on the host, so call it outside the transformation "
+            "(rollout, batch_rollout, final_poses and the metrics run inside one)"
+        )
 
 
 def array_kind(value: Any) -> str:

@@ -21,6 +21,7 @@ from wmr_jax._src.checks import (
     is_traced,
     real_array,
     require,
+    require_concrete,
 )
 from wmr_jax._src.controllers import shim_sung as law
 
@@ -228,14 +229,14 @@ def success_rate(times: Any) -> float:
             times: bools, NaN or negative numbers (``inf`` is a run that never
             settled, and counts as a failure).
     """
-    if not is_traced(times):
-        allowed = "one or more arrival times, s (from arrival_time; inf where a run never settles)"
-        if isinstance(times, (str, bytes)) or getattr(times, "poses", None) is not None:
-            raise ValueError(f"times = {type(times).__name__} is not allowed; allowed: {allowed}")
-        arr = real_array("times", times, allowed)
-        if arr.size == 0:
-            raise ValueError(f"times has shape {arr.shape} (no runs); allowed: {allowed}")
-        require("times", arr, ~np.isnan(arr) & (arr >= 0), allowed)
+    require_concrete("success_rate", times)  # a float of NumPy's count, on the host
+    allowed = "one or more arrival times, s (from arrival_time; inf where a run never settles)"
+    if isinstance(times, (str, bytes)) or getattr(times, "poses", None) is not None:
+        raise ValueError(f"times = {type(times).__name__} is not allowed; allowed: {allowed}")
+    arr = real_array("times", times, allowed)
+    if arr.size == 0:
+        raise ValueError(f"times has shape {arr.shape} (no runs); allowed: {allowed}")
+    require("times", arr, ~np.isnan(arr) & (arr >= 0), allowed)
     # In NumPy: JAX's mean of bools is float32 even in a float64 session (3/5 -> 0.6000000238).
     finite = np.isfinite(np.asarray(times, dtype=float))
     return float(np.count_nonzero(finite) / finite.size)

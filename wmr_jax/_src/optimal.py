@@ -15,7 +15,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from wmr_jax._src.checks import as_poses, check_dt, check_number, real_array
+from wmr_jax._src.checks import as_poses, check_dt, check_number, real_array, require_concrete
 from wmr_jax._src.metrics import DEFAULT_TOL_R
 from wmr_jax._src.params import Robot, validate_robot
 from wmr_jax._src.rollout import DEFAULT_DT
@@ -87,6 +87,7 @@ def time_bounds(
     Raises:
         ValueError: for bad poses, robot, ``dt`` or ``tol_r``, naming the value.
     """
+    require_concrete("time_bounds", refs, robot, dt, tol_r)
     robot = validate_robot(Robot() if robot is None else robot)
     as_poses("refs", refs, batch=None)  # shape, finiteness and the heading's range
     # The references as given, in float64: through the session's float32 a

@@ -29,6 +29,7 @@ from wmr_jax._src.checks import (
     is_traced,
     real_array,
     require,
+    require_concrete,
     require_one_batch_size,
     require_unbatched,
 )
@@ -275,7 +276,20 @@ def wheel_speed_bound(gains: Gains, robot: Robot | None = None) -> Any:
     if not is_traced((gains, robot)):  # called with values: check them
         validate_gains(gains)
         validate_robot(robot)
+        _require_one_batch(gains, robot)
     return gains.kr + robot.half_track * gains.k_theta
+
+
+def _require_one_batch(gains: Gains, robot: Robot) -> None:
+    """Raise, naming the fields, unless the batched fields of both share one size (or 1)."""
+    require_one_batch_size(
+        {
+            f"{name}.{f.name}": np.shape(getattr(obj, f.name))[0]
+            for name, obj in (("gains", gains), ("robot", robot))
+            for f in dataclasses.fields(obj)
+            if np.ndim(getattr(obj, f.name)) == 1
+        }
+    )
 
 
 def check_feasible(
@@ -289,17 +303,11 @@ def check_feasible(
         warn: if true, emit a ``WheelSpeedWarning`` when the condition fails.
         stacklevel: passed to ``warnings.warn`` (which caller the warning names).
     """
+    require_concrete("check_feasible", gains, robot)
     warn = check_bool("warn", warn)
     robot = validate_robot(Robot() if robot is None else robot)
     gains = validate_gains(gains)
-    require_one_batch_size(
-        {
-            f"{name}.{f.name}": np.shape(getattr(obj, f.name))[0]
-            for name, obj in (("gains", gains), ("robot", robot))
-            for f in dataclasses.fields(obj)
-            if np.ndim(getattr(obj, f.name)) == 1
-        }
-    )
+    _require_one_batch(gains, robot)
     # wheel_speed_bound's sum in NumPy (both were just checked).
     half_track, v_max = (np.asarray(v, dtype=float) for v in (robot.half_track, robot.v_max))
     bound = np.asarray(gains.kr, dtype=float) + half_track * np.asarray(gains.k_theta, dtype=float)

@@ -705,6 +705,7 @@ def sweep(
     checks.check_bool("resume", resume)
     checks.check_bool("progress", progress)
     out = None if out is None else checks.check_folder("out", out)
+    checks.require_concrete("sweep", refs, gains, init, robot, dt)  # it runs chunk by chunk
     job = _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, devices)
     store = None if out is None else _ChunkStore(out, _settings(job))
     results = _empty_results(job)

@@ -17,7 +17,7 @@ import numpy as np
 
 from wmr_jax._src import loops
 from wmr_jax._src import rollout as simulation
-from wmr_jax._src.checks import check_int
+from wmr_jax._src.checks import check_int, require_concrete
 from wmr_jax._src.controllers.schedule import SCHEDULE, ScheduleParams
 from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
 from wmr_jax._src.metrics import arrival_time
@@ -152,6 +152,7 @@ def evaluate(
     Raises:
         ValueError: for out-of-range gains, poses or options, naming the value.
     """
+    require_concrete("tuning.evaluate", gains, refs, robot, dt, horizon)  # a summary, on the host
     if gains is None:
         raise ValueError(
             "gains = None is not allowed; allowed: the controller's parameters "
