@@ -623,3 +623,22 @@ def test_the_wheel_speed_bound_names_batches_of_two_sizes():
     bound = w.wheel_speed_bound(w.Gains(kr=[1.0, 2.0]), w.Robot(half_track=[2.0]))
     np.testing.assert_allclose(np.asarray(bound), [1.0 + 2.0 * 10.0, 2.0 + 2.0 * 10.0])
     assert float(jax.jit(lambda k: w.wheel_speed_bound(w.Gains(kr=k)))(60.0)) == 60.0 + 18.5
+
+
+def test_a_trajectory_larger_than_the_memory_is_refused_before_it_runs(monkeypatch):
+    """steps = 2**30 went on to allocate 13 GB at once (the system may stall, not fail)."""
+    from wmr_jax._src import rollout as module
+
+    monkeypatch.setattr(module, "_memory_bytes", lambda: 10**6)
+    itemsize = np.dtype(jax.numpy.zeros(0).dtype).itemsize
+    per_period = 9 * itemsize + 4  # 9 floats and the region's int32
+    fits = 10**6 // per_period - 1  # steps + 1 periods of one run just fit
+    assert w.rollout(REF, steps=fits).poses.shape == (fits + 1, 3)
+    with pytest.raises(ValueError, match=rf"^steps = {fits + 1} for 1 run\(s\) is not allowed"):
+        w.rollout(REF, steps=fits + 1)
+    with pytest.raises(ValueError, match=r"for 4 run\(s\) .* more than the 0.001 GB of memory"):
+        w.batch_rollout(np.array([REF] * 4), steps=fits // 2)
+    monkeypatch.setattr(module, "_memory_bytes", lambda: None)  # unknown: runs as before
+    assert w.batch_rollout(np.array([REF] * 4), steps=fits // 2).poses.shape[0] == 4
+    monkeypatch.undo()
+    assert module._memory_bytes() > 10**8  # this machine's memory, in bytes

@@ -14,6 +14,7 @@ checks in ``checks.py``.
 from __future__ import annotations
 
 import functools
+import os
 from typing import Any, NamedTuple
 
 import jax
@@ -32,6 +33,7 @@ from wmr_jax._src.checks import (
     check_temperature,
     float_dtype,
     is_traced,
+    leading_size,
     require_finite_runs,
     require_one_batch_size,
     require_unbatched,
@@ -343,6 +345,54 @@ _OPTIONS_DOC = """
             non-ideal loop (static)."""
 
 
+# A trajectory holds, per run and period, a pose (3), v, ω, the two rim
+# speeds and the distance (6 floats) and the region (an int32).
+_FLOATS_PER_PERIOD = 9
+
+
+def _memory_bytes() -> int | None:
+    """The memory a run's arrays may take: the accelerators', or the host's (None: unknown).
+
+    Over several processes, each holds its share of a sharded batch.
+    """
+    devices = jax.local_devices()
+    if devices[0].platform != "cpu":
+        limits = [(d.memory_stats() or {}).get("bytes_limit") for d in devices]
+        local = sum(limits) if all(limits) else None
+    else:
+        try:
+            local = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        except (AttributeError, OSError, ValueError):  # not a POSIX system
+            local = None
+    return None if local is None else local * jax.process_count()
+
+
+def require_trajectory_fits(args: tuple, steps: int) -> None:
+    """Refuse, before it runs, a trajectory larger than the machine's memory.
+
+    XLA would try to allocate it whole: on a host that overcommits memory,
+    the system may stall or kill the process rather than fail.
+
+    Raises:
+        ValueError: naming the runs, the steps and the bytes needed.
+    """
+    refs, params, init, robot, _ = args
+    runs = max(
+        jnp.shape(refs)[0] if jnp.ndim(refs) == 2 else 1,
+        jnp.shape(init)[0] if jnp.ndim(init) == 2 else 1,
+        leading_size(params, robot),
+    )
+    itemsize = np.dtype(float_dtype()).itemsize
+    needed = runs * (steps + 1) * (_FLOATS_PER_PERIOD * itemsize + 4)
+    memory = _memory_bytes()
+    if memory is not None and needed > memory:
+        raise ValueError(
+            f"steps = {steps} for {runs} run(s) is not allowed: the trajectory needs "
+            f"{needed / 1e9:.3g} GB, more than the {memory / 1e9:.3g} GB of memory here; "
+            "allowed: fewer steps or runs, or final_poses or sweep, which keep no trajectory"
+        )
+
+
 def rollout(
     ref: Any,
     gains: Any = None,
@@ -373,6 +423,7 @@ def rollout(
     """
     options = make_options(**_static_options(locals()))
     args = prepare(ref, gains, init, robot, dt, options, batch=False)
+    require_trajectory_fits(args, options.steps)
     options = for_robot(options, args[3], args[4])
     traj = _rollout_jit(*args, options=options)
     return finite_result(traj.poses, traj, pose_axes=2)
@@ -408,6 +459,7 @@ def batch_rollout(
     """
     options = make_options(**_static_options(locals()))
     args = prepare(refs, gains, init, robot, dt, options, batch=None)
+    require_trajectory_fits(args, options.steps)
     options = for_robot(options, args[3], args[4])
     traj = _batch_rollout_jit(*args, options=options)
     return finite_result(traj.poses, traj, pose_axes=2)
