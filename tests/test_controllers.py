@@ -276,6 +276,7 @@ def test_a_new_controller_needs_no_special_case():
         ({"validate": None}, r"controller.validate = None is not allowed; allowed: a function "
          r"validate\(params\) -> params"),
         ({"region": 5}, r"controller.region = 5 is not allowed; allowed: a function, or None"),
+        ({"region": np.zeros((2, 2))}, r"controller.region = array\(\[\[0., 0.\], \[0., 0.\]\]\)"),
         ({"params_type": w.Gains()}, r"controller.params_type = Gains\(.* allowed: a class"),
         ({"name": None}, r"^controller.name = None is not allowed; allowed: a non-empty str"),
         ({"name": " "}, r"^controller.name = ' ' is not allowed"),

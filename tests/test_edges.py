@@ -138,6 +138,9 @@ def test_a_batch_that_is_not_numbers_is_named_on_one_line(dtype):
         with pytest.raises(ValueError, match=r"^(refs|init) = array\(\[\[.*\], \[") as info:
             call()
         assert "\n" not in str(info.value)
+    # A string is shown as given, its spaces kept.
+    with pytest.raises(ValueError, match=r"^init = 'a  b' is not allowed"):
+        w.rollout(REF, init="a  b", steps=3)
 
 
 def test_temperature_and_steps_have_upper_bounds():
@@ -302,9 +305,24 @@ def test_every_batched_entry_point_shares_one_reference_with_each_run_of_batched
     both = studies.batch_track_rollout(track, init=inits)
     second = studies.batch_track_rollout(track, init=inits[1:])
     np.testing.assert_allclose(np.asarray(both.error)[1], np.asarray(second.error)[0])
-    # Other sizes are still refused, naming both.
+    chained = studies.batch_chain_rollout(chain, init=inits, steps=20)
+    alone = studies.batch_chain_rollout(chain, init=inits[1:], steps=20)
+    np.testing.assert_allclose(np.asarray(chained.leg)[1], np.asarray(alone.leg)[0])
+    # One start shared by several references, as batch_rollout shares it.
+    two = np.array([REF, [20.0, -10.0, 1.0]])
+    np.testing.assert_allclose(
+        w.sweep(two, steps=20, init=np.zeros((1, 3)))["final_x"], w.sweep(two, steps=20)["final_x"]
+    )
+    # Other sizes are still refused, naming the sizes given (not the repeated reference).
     with pytest.raises(ValueError, match=r"gains.kr has 3 values; allowed: one, or one per"):
         w.sweep(np.array([REF, REF]), gains, steps=5)
+    two_robots = w.Robot(v_max=[100.0, 120.0])
+    with pytest.raises(ValueError, match=r"^batch sizes differ \(gains.kr: 3, robot.v_max: 2\)"):
+        w.sweep(one, gains, robot=two_robots, steps=5)
+    with pytest.raises(ValueError, match=r"^batch sizes differ \(gains.kr: 3, estimator.sigma_xy"):
+        studies.perturbed_metrics(disturbance, gains, estimator=ekf)
+    with pytest.raises(ValueError, match=r"^init = \[\[0, 0, 0\], \[0, 0\]\] is not allowed"):
+        w.sweep(one, init=[[0, 0, 0], [0, 0]], steps=5)
     with pytest.raises(ValueError, match=r"batch sizes differ"):
         studies.disturbed_rollout(
             studies.sample_disturbance(jax.random.key(0), np.array([REF, REF]), 5), gains

@@ -307,3 +307,11 @@ def test_a_robot_typed_in_metres_warns_where_it_is_written():
             w.Robot(**{f: getattr(w.ROBOTS[name], f) for f in ("half_track", "v_max")})
     with pytest.warns(w.RobotUnitsWarning, match=r"^Robot wheel_radius = 330 cm is outside"):
         w.Robot(wheel_radius=330.0)
+    # A value typed into a copy warns there too, and only that value.
+    with pytest.warns(w.RobotUnitsWarning) as caught:
+        w.Robot().replace(half_track=0.09, body_mass=2.0)
+    assert [c.filename for c in caught] == [__file__]
+    assert str(caught[0].message).startswith("Robot half_track = 0.09 cm is outside")
+    with pytest.warns(w.RobotUnitsWarning, match=r"^Robot v_max = 0.3 cm/s") as caught:
+        dataclasses.replace(w.Robot(), v_max=0.3)
+    assert [c.filename for c in caught] == [__file__]

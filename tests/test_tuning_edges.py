@@ -241,6 +241,10 @@ def test_compare_runs_all_three_methods_on_a_schedule_of_its_size():
         (lambda: tuning.bound_ratios(-1.0, tuning.time_bounds(REFS)), r"mean_arrival = -1.0"),
         (lambda: tuning.evaluate(None, REFS), r"gains = None is not allowed"),
         (lambda: tuning.robust_score(None, REFS, KEY), r"gains = None is not allowed"),
+        (
+            lambda: tuning.robust_score(w.Gains(kr=[60.0, 90.0]), REFS, KEY),
+            r"^gains.kr has shape \(2,\); allowed: scalars: one set of gains",
+        ),
         (lambda: tuning.robust_score(w.Gains(), "ab", KEY), r"refs = 'ab' is not allowed"),
         (lambda: tuning.robust_score(w.Gains(), REFS, 0), r"key = 0 is not allowed"),
         (lambda: tuning.held_out_poses(2, -1), r"eval_seed = -1 is not allowed"),

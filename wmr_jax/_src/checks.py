@@ -36,6 +36,7 @@ __all__ = [
     "check_key",
     "check_number",
     "check_path",
+    "common_batch_size",
     "check_temperature",
     "described",
     "field_values",
@@ -46,7 +47,6 @@ __all__ = [
     "reduce_heading",
     "require",
     "require_finite_runs",
-    "leading_size",
     "require_concrete",
     "require_one_batch_size",
     "require_representable",
@@ -133,7 +133,9 @@ def described(value: Any) -> str:
     shape, dtype = getattr(value, "shape", None), getattr(value, "dtype", None)
     if shape is not None and dtype is not None and int(np.prod(shape)) > 6:
         return f"{type(value).__name__} of shape {tuple(shape)} and dtype {dtype}"
-    return " ".join(repr(value).split())  # a 2-D array's repr has a line per row
+    if shape is not None:  # an array's repr has a line per row; a str keeps its spaces
+        return " ".join(repr(value).split())
+    return repr(value)
 
 
 def _holds_bool(value: Any) -> bool:
@@ -391,14 +393,27 @@ def require_one_batch_size(sizes: dict[str, int]) -> int | None:
     return n
 
 
-def leading_size(*trees: Any) -> int:
-    """The largest batch axis among the leaves of ``trees`` (1: no leaf has one).
+def common_batch_size(trees: dict[str, Any], poses: dict[str, Any] | None = None) -> int:
+    """The batch size ``N`` shared by every batched input; 1 if none is batched.
 
-    For parameter trees (gains, robots, estimators), whose leaves are scalars
-    or ``(N,)``; whether the sizes agree is checked where they are used.
+    Args:
+        trees: name → parameter tree (gains, robot, estimator), whose leaves
+            are scalars or ``(N,)``.
+        poses: name → poses, ``(3,)`` or ``(N, 3)``.
+
+    Raises:
+        ValueError: naming each size, when two of them, neither 1, differ.
     """
-    sizes = [jnp.shape(leaf)[0] for leaf in jax.tree.leaves(trees) if jnp.ndim(leaf) >= 1]
-    return max(sizes, default=1)
+    sizes = {}
+    for prefix, tree in trees.items():
+        for path, leaf in jax.tree_util.tree_leaves_with_path(tree):
+            if np.ndim(leaf) >= 1:
+                key = jax.tree_util.keystr(path, simple=True, separator=".")
+                sizes[f"{prefix}.{key}" if key else prefix] = np.shape(leaf)[0]
+    for name, value in (poses or {}).items():
+        if np.ndim(value) == 2:
+            sizes[name] = np.shape(value)[0]
+    return require_one_batch_size(sizes) or 1
 
 
 def require_unbatched(tree: Any, prefix: str, allowed: str) -> None:

@@ -132,7 +132,19 @@ class Robot(Parameters):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        _warn_unit_slips(self)
+        # Where Robot(...) or dataclasses.replace(robot, ...) was called.
+        frame, level = sys._getframe(2), 3  # __post_init__, __init__, the caller
+        if frame.f_globals.get("__name__") == "dataclasses":
+            frame, level = frame.f_back, level + 1
+        if frame is not None and not _in_library(frame):
+            _warn_unit_slips(vars(self), stacklevel=level + 1)
+
+    def replace(self, **changes: Any) -> Robot:
+        """Return a copy with the given fields changed (a size typed in metres warns here)."""
+        robot = super().replace(**changes)
+        if not _in_library(sys._getframe(1)):
+            _warn_unit_slips(changes, stacklevel=3)
+        return robot
 
 
 class RobotUnitsWarning(UserWarning):
@@ -148,23 +160,24 @@ PLAUSIBLE = {
     "wheel_radius": (0.2, 100.0, "cm"),
     "v_max": (1.0, 2000.0, "cm/s"),
 }
-_NOT_TYPED_BY_A_USER = ("wmr_jax.", "jax.", "dataclasses")
 
 
-def _warn_unit_slips(robot: Robot) -> None:
-    """Warn (``RobotUnitsWarning``) where ``Robot(...)`` is called, for a size in metres.
+def _in_library(frame: Any) -> bool:
+    """Whether ``frame`` runs code of the library or of JAX (copies, not typed values)."""
+    return str(frame.f_globals.get("__name__", "")).startswith(("wmr_jax.", "jax.", "dataclasses"))
+
+
+def _warn_unit_slips(values: dict[str, Any], *, stacklevel: int) -> None:
+    """Warn (``RobotUnitsWarning``) for each size or speed in ``values`` that looks like metres.
 
     Only for numbers given as such (arrays and tracers are batches and
-    programs, not typed values), and only where ``Robot(...)`` is written
-    outside the library: the copies that ``replace`` and JAX's tree
+    programs, not typed values), and only where a user typed them
+    (``Robot(...)``, ``replace``): the copies the library and JAX's tree
     functions make, and the robots of files (which say it naming the file),
     do not warn again.
     """
-    caller = sys._getframe(3).f_globals.get("__name__", "")  # _warn, __post_init__, __init__
-    if caller.startswith(_NOT_TYPED_BY_A_USER):
-        return
     for field, (low, high, unit) in PLAUSIBLE.items():
-        value = getattr(robot, field)
+        value = values.get(field)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             continue
         if not 0 < value < math.inf or low <= value <= high:
@@ -174,7 +187,7 @@ def _warn_unit_slips(robot: Robot) -> None:
             "written in another unit (the library's are cm and cm/s: half_track=8.0 for "
             "8 cm); it runs as given",
             RobotUnitsWarning,
-            stacklevel=4,
+            stacklevel=stacklevel,
         )
 
 

@@ -31,9 +31,9 @@ from wmr_jax._src.checks import (
     check_int,
     check_substeps,
     check_temperature,
+    common_batch_size,
     float_dtype,
     is_traced,
-    leading_size,
     require_finite_runs,
     require_one_batch_size,
     require_unbatched,
@@ -377,11 +377,7 @@ def require_trajectory_fits(args: tuple, steps: int) -> None:
         ValueError: naming the runs, the steps and the bytes needed.
     """
     refs, params, init, robot, _ = args
-    runs = max(
-        jnp.shape(refs)[0] if jnp.ndim(refs) == 2 else 1,
-        jnp.shape(init)[0] if jnp.ndim(init) == 2 else 1,
-        leading_size(params, robot),
-    )
+    runs = common_batch_size({"gains": params, "robot": robot}, {"refs": refs, "init": init})
     itemsize = np.dtype(float_dtype()).itemsize
     needed = runs * (steps + 1) * (_FLOATS_PER_PERIOD * itemsize + 4)
     memory = _memory_bytes()

@@ -216,17 +216,19 @@ def _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, device
     devices = tuple(checked_devices(jax.local_devices() if devices is None else devices))
     gains = options.controller.default_params() if gains is None else gains
     robot = Robot() if robot is None else robot
-    runs = max(checks.leading_size(gains, robot), np.shape(init)[0] if np.ndim(init) == 2 else 1)
-    if n == 1 and runs > 1:  # one reference shared by every run of batched parameters
-        refs, n = np.repeat(np.asarray(refs[:1]), runs, axis=0), runs
+    if not isinstance(init, jax.Array):
+        init = checks.real_array("init", init, "real numbers [x cm, y cm, θ rad], (3,) or (N, 3)")
+    if n == 1:  # one reference shared by every run of batched parameters
+        runs = checks.common_batch_size({"gains": gains, "robot": robot}, {"init": init})
+        refs, n = (np.repeat(np.asarray(refs[:1]), runs, axis=0), runs) if runs > 1 else (refs, 1)
     if n > 1:
         gains = _per_run_or_shared(gains, n, "gains.")
         robot = _per_run_or_shared(robot, n, "robot.")
-    if not isinstance(init, jax.Array):
-        init = checks.real_array("init", init, "real numbers [x cm, y cm, θ rad], (3,) or (N, 3)")
+    if np.ndim(init) == 2 and np.shape(init)[0] == 1:
+        init = init[0]  # one start shared by every run
     batched_init = np.ndim(init) == 2
     if batched_init and np.shape(init)[0] != n:
-        raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,) or ({n}, 3)")
+        raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,), (1, 3) or ({n}, 3)")
     gains_mask, robot_mask = _batched_leaves(gains, n), _batched_leaves(robot, n)
     simulation.prepare(
         np.asarray(refs[:1], dtype=float),

@@ -222,9 +222,10 @@ def _shared_by_every_run(poses: jax.Array, params: Any, robot: Any, init: Any = 
 
     A batch axis of size 1 is shared by every run, the references' too.
     """
-    runs = checks.leading_size(params, robot)
-    runs = max(runs, np.shape(init)[0] if np.ndim(init) == 2 else 1)
-    if poses.shape[0] == 1 and runs > 1:
+    if poses.shape[0] != 1:
+        return poses
+    runs = checks.common_batch_size({"gains": params, "robot": robot}, {"init": init})
+    if runs > 1:
         return jnp.broadcast_to(poses, (runs, *poses.shape[1:]))
     return poses
 
@@ -352,7 +353,7 @@ def batch_chain_rollout(
         wp = jnp.broadcast_to(wp, (np.shape(init)[0], *wp.shape))
     else:
         wp = _pose_stack("waypoints", waypoints, 3, "(N, K, 3)")
-    wp = _shared_by_every_run(wp, params, robot)
+    wp = _shared_by_every_run(wp, params, robot, init)
     tol = _tolerances(tol_r, tol_theta, pass_tol_r, pass_tol_theta)
     options = _options(steps, velocity, controller, substeps, wheel_limit)
     return _run(_batch_chain_jit, (wp, tol), params, init, robot, dt, options, wp.shape[0])

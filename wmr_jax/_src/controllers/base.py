@@ -21,7 +21,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks import as_float_tree, as_pose_array, check_bool, float_dtype, is_traced
+from wmr_jax._src.checks import (
+    as_float_tree,
+    as_pose_array,
+    check_bool,
+    described,
+    float_dtype,
+    is_traced,
+)
 
 __all__ = [
     "Controller",
@@ -78,7 +85,7 @@ class Controller:
             if not callable(value) and not (value is None and field not in _REQUIRED):
                 allowed = "a function" if field in _REQUIRED else "a function, or None"
                 raise ValueError(
-                    f"controller {self.name!r}: controller.{field} = {value!r:.60} is not "
+                    f"controller {self.name!r}: controller.{field} = {described(value):.60} is not "
                     f"allowed; allowed: {allowed} {_CALLS[field][2]}"
                 )
             # A function the loop cannot call would fail only inside the traced
@@ -86,7 +93,8 @@ class Controller:
             _check_signature(self.name, field, value)
         if not isinstance(self.params_type, type):
             raise ValueError(
-                f"controller {self.name!r}: controller.params_type = {self.params_type!r:.60} "
+                f"controller {self.name!r}: controller.params_type = "
+                f"{described(self.params_type):.60} "
                 "is not allowed; allowed: a class (its defaults are the default parameters)"
             )
 

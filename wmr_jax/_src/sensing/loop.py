@@ -379,7 +379,7 @@ def prepare_disturbed(
             estimate,
             is_leaf=lambda v: isinstance(v, list),
         )
-    runs = checks.leading_size(params, robot, estimate)
+    runs = checks.common_batch_size({"gains": params, "robot": robot, "estimator": estimate})
     if len(refs) == 1 and runs > 1:
         # One disturbance shared by every run of batched parameters, as a
         # batch axis of size 1 is everywhere (README: the Python API).

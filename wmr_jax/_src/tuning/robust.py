@@ -47,6 +47,7 @@ from wmr_jax._src.checks import (
     check_key,
     check_number,
     float_dtype,
+    require_unbatched,
 )
 from wmr_jax._src.controllers import shim_sung as law
 from wmr_jax._src.controllers.schedule import KNOTS
@@ -389,6 +390,8 @@ def robust_score(
         )
     check_key("key", key)
     refs = np.asarray(as_poses("refs", refs, batch=True), dtype=float)
+    params = gains.params if isinstance(gains, ClosedLoop) else gains
+    require_unbatched(params, "gains", "scalars: one set of gains, scored as one")
     rows = conditions.standard_conditions({"g": gains}, refs, key, dt=dt, x64=False, robot=robot)
     return float(np.mean([condition_score(row) for row in rows]))
 
