@@ -303,15 +303,21 @@ def test_a_robot_typed_in_metres_warns_where_it_is_written():
         w.Robot(half_track=0.5, v_max=2000.0, wheel_radius=100.0)
         w.Robot(half_track=500.0, v_max=1.0, wheel_radius=0.2)
         w.Robot(half_track=-1.0, v_max=math.nan)
+        w.Robot(half_track=0.0, v_max=math.inf, wheel_radius=0.0)
         for name in w.ROBOTS:
             w.Robot(**{f: getattr(w.ROBOTS[name], f) for f in ("half_track", "v_max")})
     with pytest.warns(w.RobotUnitsWarning, match=r"^Robot wheel_radius = 330 cm is outside"):
         w.Robot(wheel_radius=330.0)
     # A value typed into a copy warns there too, and only that value.
     with pytest.warns(w.RobotUnitsWarning) as caught:
-        w.Robot().replace(half_track=0.09, body_mass=2.0)
+        copy = w.Robot().replace(half_track=0.09, body_mass=2.0)
+    assert (copy.half_track, copy.body_mass, copy.v_max) == (0.09, 2.0, 125.0)
     assert [c.filename for c in caught] == [__file__]
     assert str(caught[0].message).startswith("Robot half_track = 0.09 cm is outside")
+    # A batched field is not a typed value; the fields after it still are.
+    with pytest.warns(w.RobotUnitsWarning, match=r"^Robot v_max = 0.22 cm/s") as caught:
+        w.Robot(half_track=np.array([8.0, 9.0]), v_max=0.22)
+    assert len(caught) == 1
     with pytest.warns(w.RobotUnitsWarning, match=r"^Robot v_max = 0.3 cm/s") as caught:
         dataclasses.replace(w.Robot(), v_max=0.3)
     assert [c.filename for c in caught] == [__file__]

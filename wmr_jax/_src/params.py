@@ -132,18 +132,12 @@ class Robot(Parameters):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        # Where Robot(...) or dataclasses.replace(robot, ...) was called.
-        frame, level = sys._getframe(2), 3  # __post_init__, __init__, the caller
-        if frame.f_globals.get("__name__") == "dataclasses":
-            frame, level = frame.f_back, level + 1
-        if frame is not None and not _in_library(frame):
-            _warn_unit_slips(vars(self), stacklevel=level + 1)
+        _warn_unit_slips(vars(self))
 
     def replace(self, **changes: Any) -> Robot:
         """Return a copy with the given fields changed (a size typed in metres warns here)."""
-        robot = super().replace(**changes)
-        if not _in_library(sys._getframe(1)):
-            _warn_unit_slips(changes, stacklevel=3)
+        robot = super().replace(**changes)  # a copy made in the library: it does not warn
+        _warn_unit_slips(changes)
         return robot
 
 
@@ -162,20 +156,25 @@ PLAUSIBLE = {
 }
 
 
-def _in_library(frame: Any) -> bool:
-    """Whether ``frame`` runs code of the library or of JAX (copies, not typed values)."""
-    return str(frame.f_globals.get("__name__", "")).startswith(("wmr_jax.", "jax.", "dataclasses"))
-
-
-def _warn_unit_slips(values: dict[str, Any], *, stacklevel: int) -> None:
+def _warn_unit_slips(values: dict[str, Any]) -> None:
     """Warn (``RobotUnitsWarning``) for each size or speed in ``values`` that looks like metres.
 
     Only for numbers given as such (arrays and tracers are batches and
     programs, not typed values), and only where a user typed them
     (``Robot(...)``, ``replace``): the copies the library and JAX's tree
     functions make, and the robots of files (which say it naming the file),
-    do not warn again.
+    do not warn again. Frames of this module (the constructor, ``replace``),
+    of ``dataclasses`` and of the mutation tester's trampolines
+    (``pyproject.toml``) are stepped over to find that code.
     """
+    frame, stacklevel = sys._getframe(0), 1  # as warnings.warn counts, from here
+    while frame is not None:
+        module = str(frame.f_globals.get("__name__", ""))
+        if module not in (__name__, "dataclasses") and not module.startswith("mutmut."):
+            break
+        frame, stacklevel = frame.f_back, stacklevel + 1
+    if frame is None or module.startswith(("wmr_jax.", "jax.")):
+        return  # a copy the library or JAX made, not a value typed by a user
     for field, (low, high, unit) in PLAUSIBLE.items():
         value = values.get(field)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
