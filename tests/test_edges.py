@@ -656,6 +656,16 @@ def test_a_trajectory_larger_than_the_memory_is_refused_before_it_runs(monkeypat
         w.rollout(REF, steps=fits + 1)
     with pytest.raises(ValueError, match=r"for 4 run\(s\) .* more than the 0.001 GB of memory"):
         w.batch_rollout(np.array([REF] * 4), steps=fits // 2)
+    # The other entry points that keep every period: the disturbed runs, the waypoints'.
+    from wmr_jax import studies
+
+    disturbance = studies.sample_disturbance(jax.random.key(0), np.array([REF]), 2 * fits)
+    with pytest.raises(ValueError, match=r"^steps = \d+ for 1 run\(s\) is not allowed"):
+        studies.disturbed_rollout(disturbance)
+    with pytest.raises(ValueError, match=r"for 1 run\(s\) .* more than the 0.001 GB"):
+        studies.chain_rollout(np.array([REF]), steps=fits)
+    with pytest.raises(ValueError, match=r"for 2 run\(s\) .* more than the 0.001 GB"):
+        studies.batch_track_rollout(np.broadcast_to(np.array(REF), (2, fits, 3)))
     monkeypatch.setattr(module, "_memory_bytes", lambda: None)  # unknown: runs as before
     assert w.batch_rollout(np.array([REF] * 4), steps=fits // 2).poses.shape[0] == 4
     monkeypatch.undo()

@@ -368,22 +368,34 @@ def _memory_bytes() -> int | None:
 
 
 def require_trajectory_fits(args: tuple, steps: int) -> None:
-    """Refuse, before it runs, a trajectory larger than the machine's memory.
+    """Refuse, before it runs, a ``Trajectory`` larger than the machine's memory.
+
+    ``args``: the rollout's prepared ``(refs, params, init, robot, dt)``.
+    """
+    refs, params, init, robot, _ = args
+    runs = common_batch_size({"gains": params, "robot": robot}, {"refs": refs, "init": init})
+    require_memory(runs, steps, floats=_FLOATS_PER_PERIOD, ints=1)
+
+
+def require_memory(runs: int, steps: int, *, floats: int, ints: int = 0) -> None:
+    """Refuse, before it runs, a record of ``runs × (steps + 1)`` periods larger than the memory.
 
     XLA would try to allocate it whole: on a host that overcommits memory,
     the system may stall or kill the process rather than fail.
 
+    Args:
+        floats, ints: the floats (compute dtype) and int32 values recorded per
+            run and period.
+
     Raises:
         ValueError: naming the runs, the steps and the bytes needed.
     """
-    refs, params, init, robot, _ = args
-    runs = common_batch_size({"gains": params, "robot": robot}, {"refs": refs, "init": init})
     itemsize = np.dtype(float_dtype()).itemsize
-    needed = runs * (steps + 1) * (_FLOATS_PER_PERIOD * itemsize + 4)
+    needed = runs * (steps + 1) * (floats * itemsize + ints * 4)
     memory = _memory_bytes()
     if memory is not None and needed > memory:
         raise ValueError(
-            f"steps = {steps} for {runs} run(s) is not allowed: the trajectory needs "
+            f"steps = {steps} for {runs} run(s) is not allowed: the record of the runs needs "
             f"{needed / 1e9:.3g} GB, more than the {memory / 1e9:.3g} GB of memory here; "
             "allowed: fewer steps or runs, or final_poses or sweep, which keep no trajectory"
         )

@@ -256,6 +256,8 @@ def _run(jitted, spec, params, init, robot, dt, options: Options, n: int | None,
     # The robot's speed limiter, as in the rollouts (docs/model.md §4.2.2): the
     # held command rides in the state's velocity, from rest.
     options = loops.for_robot(options, robot, dt)
+    # A trajectory, and the leg or the tracking error of each period.
+    simulation.require_memory(n or 1, options.steps, floats=10, ints=2)
     return jitted(spec, params, init, robot, dt, options=options)
 
 

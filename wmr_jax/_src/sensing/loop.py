@@ -465,5 +465,7 @@ def disturbed_rollout(
         args, options = prepare_disturbed(
             disturbance, params, controller, estimator, init, dt, robot, velocity
         )
+        # Per run and period: the pose, v, ω and the estimate handed to the law.
+        simulation.require_memory(len(args[0].ref), options.steps, floats=8)
         out = _trajectory_jit(*args, options=options)
         return {name: np.asarray(value) for name, value in out.items()}
