@@ -138,6 +138,9 @@ def test_a_batch_that_is_not_numbers_is_named_on_one_line(dtype):
         with pytest.raises(ValueError, match=r"^(refs|init) = array\(\[\[.*\], \[") as info:
             call()
         assert "\n" not in str(info.value)
+    # Nested in a list, an array is on one line too.
+    with pytest.raises(ValueError, match=r"^ref = \[array\(\[\[1., 0.\], \[0., 1.\]\]\), 1.0"):
+        w.rollout([np.eye(2), 1.0, 2.0], steps=3)
     # A string is shown as given, its spaces kept.
     with pytest.raises(ValueError, match=r"^init = 'a  b' is not allowed"):
         w.rollout(REF, init="a  b", steps=3)
@@ -647,9 +650,8 @@ def test_a_trajectory_larger_than_the_memory_is_refused_before_it_runs(monkeypat
     """steps = 2**30 went on to allocate 13 GB at once (the system may stall, not fail)."""
     from wmr_jax._src import rollout as module
 
-    monkeypatch.setattr(module, "_memory_bytes", lambda: 10**6)
-    itemsize = np.dtype(jax.numpy.zeros(0).dtype).itemsize
-    per_period = 9 * itemsize + 4  # 9 floats and the region's int32
+    monkeypatch.setattr(module, "_memory_bytes", lambda inputs=None: 10**6)
+    per_period = module.record_bytes(1, 0, module.TRAJECTORY_RECORD)  # one run, one period
     fits = 10**6 // per_period - 1  # steps + 1 periods of one run just fit
     assert w.rollout(REF, steps=fits).poses.shape == (fits + 1, 3)
     with pytest.raises(ValueError, match=rf"^steps = {fits + 1} for 1 run\(s\) is not allowed"):
@@ -666,7 +668,53 @@ def test_a_trajectory_larger_than_the_memory_is_refused_before_it_runs(monkeypat
         studies.chain_rollout(np.array([REF]), steps=fits)
     with pytest.raises(ValueError, match=r"for 2 run\(s\) .* more than the 0.001 GB"):
         studies.batch_track_rollout(np.broadcast_to(np.array(REF), (2, fits, 3)))
-    monkeypatch.setattr(module, "_memory_bytes", lambda: None)  # unknown: runs as before
+    monkeypatch.setattr(module, "_memory_bytes", lambda inputs=None: None)  # unknown: runs
     assert w.batch_rollout(np.array([REF] * 4), steps=fits // 2).poses.shape[0] == 4
     monkeypatch.undo()
     assert module._memory_bytes() > 10**8  # this machine's memory, in bytes
+
+
+def test_the_memory_check_counts_what_each_record_holds(monkeypatch):
+    """Its count is an upper bound of the arrays returned, within a period of each."""
+    from wmr_jax import studies
+    from wmr_jax._src import rollout as module
+    from wmr_jax._src import waypoints
+    from wmr_jax._src.sensing import loop
+
+    steps, runs = 40, 3
+    refs = np.array([REF, [20.0, -10.0, 1.0], [-15.0, 25.0, 2.0]])
+    disturbance = studies.sample_disturbance(jax.random.key(0), refs, steps)
+    chain = np.broadcast_to(np.array([[20.0, 0.0, 0.0], REF]), (runs, 2, 3))
+    track = np.broadcast_to(np.array(REF), (runs, steps, 3))
+    for result, record in (
+        (w.batch_rollout(refs, steps=steps), module.TRAJECTORY_RECORD),
+        (studies.disturbed_rollout(disturbance), loop._DISTURBED_RECORD),
+        (studies.batch_chain_rollout(chain, steps=steps), waypoints._CHAIN_RECORD),
+        (studies.batch_track_rollout(track), waypoints._TRACK_RECORD),
+    ):
+        held = sum(np.asarray(leaf).nbytes for leaf in jax.tree.leaves(result))
+        counted = module.record_bytes(runs, steps, record)
+        # The commands have steps rows, the poses steps + 1; a chain's arrivals are few.
+        assert held <= counted <= held * (1 + 1.0 / steps), (record, held, counted)
+
+
+def test_the_memory_check_comes_before_a_shared_run_is_repeated(monkeypatch):
+    """A one-run disturbance or track repeated for each of a million gains was copied first."""
+    from wmr_jax import studies
+    from wmr_jax._src import rollout as module
+    from wmr_jax._src import waypoints
+    from wmr_jax._src.sensing import loop
+
+    def copied(*args, **kwargs):
+        raise AssertionError("the shared run was copied before the memory was checked")
+
+    many = w.Gains(kr=np.full(10**4, 60.0))
+    one = studies.sample_disturbance(jax.random.key(0), np.array([REF]), 50)
+    track = np.broadcast_to(np.array(REF), (1, 50, 3))
+    monkeypatch.setattr(module, "_memory_bytes", lambda inputs=None: 10**6)
+    monkeypatch.setattr(loop.np, "repeat", copied)  # NumPy's, for this test only
+    monkeypatch.setattr(waypoints.jnp, "broadcast_to", copied)
+    with pytest.raises(ValueError, match=r"^steps = 50 for 10000 run\(s\) is not allowed"):
+        studies.disturbed_rollout(one, many)
+    with pytest.raises(ValueError, match=r"^steps = 50 for 10000 run\(s\) is not allowed"):
+        studies.batch_track_rollout(track, many)

@@ -314,6 +314,18 @@ def test_a_robot_typed_in_metres_warns_where_it_is_written():
     assert (copy.half_track, copy.body_mass, copy.v_max) == (0.09, 2.0, 125.0)
     assert [c.filename for c in caught] == [__file__]
     assert str(caught[0].message).startswith("Robot half_track = 0.09 cm is outside")
+    # A NumPy scalar is a typed number; a dataclass subclass warns at its caller too.
+    with pytest.warns(w.RobotUnitsWarning, match=r"^Robot v_max = 0.2 cm/s") as caught:
+        w.Robot(v_max=np.float32(0.2))
+    assert [c.filename for c in caught] == [__file__]
+
+    @dataclasses.dataclass(frozen=True)
+    class Rover(w.Robot):
+        pass
+
+    with pytest.warns(w.RobotUnitsWarning, match=r"^Robot half_track = 0.07 cm") as caught:
+        Rover(half_track=0.07)
+    assert [c.filename for c in caught] == [__file__]
     # A batched field is not a typed value; the fields after it still are.
     with pytest.warns(w.RobotUnitsWarning, match=r"^Robot v_max = 0.22 cm/s") as caught:
         w.Robot(half_track=np.array([8.0, 9.0]), v_max=0.22)

@@ -133,9 +133,9 @@ def described(value: Any) -> str:
     shape, dtype = getattr(value, "shape", None), getattr(value, "dtype", None)
     if shape is not None and dtype is not None and int(np.prod(shape)) > 6:
         return f"{type(value).__name__} of shape {tuple(shape)} and dtype {dtype}"
-    if shape is not None:  # an array's repr has a line per row; a str keeps its spaces
-        return " ".join(repr(value).split())
-    return repr(value)
+    if isinstance(value, (str, bytes)):  # shown as given, its spaces kept
+        return repr(value)
+    return " ".join(repr(value).split())  # an array's repr has a line per row, nested or not
 
 
 def _holds_bool(value: Any) -> bool:

@@ -156,6 +156,10 @@ PLAUSIBLE = {
 }
 
 
+# A number as typed: Python's, or one NumPy scalar (an array is a batch).
+_TYPED_NUMBERS = (int, float, np.integer, np.floating)
+
+
 def _warn_unit_slips(values: dict[str, Any]) -> None:
     """Warn (``RobotUnitsWarning``) for each size or speed in ``values`` that looks like metres.
 
@@ -170,14 +174,17 @@ def _warn_unit_slips(values: dict[str, Any]) -> None:
     frame, stacklevel = sys._getframe(0), 1  # as warnings.warn counts, from here
     while frame is not None:
         module = str(frame.f_globals.get("__name__", ""))
+        # A dataclass subclass's generated __init__ (not "python -c" code).
+        generated = frame.f_code.co_filename == "<string>" and frame.f_code.co_name == "__init__"
         if module not in (__name__, "dataclasses") and not module.startswith("mutmut."):
-            break
+            if not generated:
+                break
         frame, stacklevel = frame.f_back, stacklevel + 1
     if frame is None or module.startswith(("wmr_jax.", "jax.")):
         return  # a copy the library or JAX made, not a value typed by a user
     for field, (low, high, unit) in PLAUSIBLE.items():
         value = values.get(field)
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, _TYPED_NUMBERS):
             continue
         if not 0 < value < math.inf or low <= value <= high:
             continue  # out of range or not a number: refused where the robot is used

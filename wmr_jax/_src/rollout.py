@@ -345,26 +345,48 @@ _OPTIONS_DOC = """
             non-ideal loop (static)."""
 
 
-# A trajectory holds, per run and period, a pose (3), v, ω, the two rim
-# speeds and the distance (6 floats) and the region (an int32).
-_FLOATS_PER_PERIOD = 9
+# What a Trajectory holds per run and period: a pose (3), v, ω, the two rim
+# speeds and the distance (8 floats), and the region (an int32).
+TRAJECTORY_RECORD = (8, 1)
 
 
-def _memory_bytes() -> int | None:
-    """The memory a run's arrays may take: the accelerators', or the host's (None: unknown).
+def _memory_bytes(inputs: Any = None) -> int | None:
+    """The memory the arrays of a run on ``inputs`` may take (None: unknown).
 
-    Over several processes, each holds its share of a sharded batch.
+    The host's for a run on the CPU; on an accelerator, the ``bytes_limit``
+    of each device the inputs span (one device, the default, for inputs not
+    on devices), times the processes when they are spread over several.
     """
-    devices = jax.local_devices()
-    if devices[0].platform != "cpu":
-        limits = [(d.memory_stats() or {}).get("bytes_limit") for d in devices]
-        local = sum(limits) if all(limits) else None
-    else:
+    arrays = [x for x in jax.tree.leaves(inputs) if isinstance(x, jax.Array)]
+    spans = [x.sharding.device_set for x in arrays if not is_traced(x)]
+    devices = max(spans, key=len, default=None)
+    if devices is None:
+        default = jax.config.jax_default_device
+        if isinstance(default, str):
+            default = jax.local_devices(backend=default)[0]
+        devices = {default if default is not None else jax.local_devices()[0]}
+    local = [d for d in devices if d.process_index == jax.process_index()]
+    if next(iter(devices)).platform == "cpu":
         try:
-            local = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+            memory = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
         except (AttributeError, OSError, ValueError):  # not a POSIX system
-            local = None
-    return None if local is None else local * jax.process_count()
+            return None
+    else:
+        limits = [(d.memory_stats() or {}).get("bytes_limit") for d in local]
+        if not limits or not all(limits):
+            return None
+        memory = sum(limits)
+    return memory * len({d.process_index for d in devices})
+
+
+def record_bytes(runs: int, steps: int, record: tuple[int, int]) -> int:
+    """Bytes of a record of ``runs`` runs: ``(floats, int32s)`` per period, ``steps + 1`` periods.
+
+    An upper bound of the arrays returned (the poses have ``steps + 1``
+    rows, the commands ``steps``), in the compute dtype.
+    """
+    floats, ints = record
+    return runs * (steps + 1) * (floats * np.dtype(float_dtype()).itemsize + ints * 4)
 
 
 def require_trajectory_fits(args: tuple, steps: int) -> None:
@@ -374,25 +396,25 @@ def require_trajectory_fits(args: tuple, steps: int) -> None:
     """
     refs, params, init, robot, _ = args
     runs = common_batch_size({"gains": params, "robot": robot}, {"refs": refs, "init": init})
-    require_memory(runs, steps, floats=_FLOATS_PER_PERIOD, ints=1)
+    require_memory(runs, steps, TRAJECTORY_RECORD, args)
 
 
-def require_memory(runs: int, steps: int, *, floats: int, ints: int = 0) -> None:
-    """Refuse, before it runs, a record of ``runs × (steps + 1)`` periods larger than the memory.
+def require_memory(runs: int, steps: int, record: tuple[int, int], inputs: Any = None) -> None:
+    """Refuse, before it runs, a record of ``runs`` runs larger than the memory it would take.
 
     XLA would try to allocate it whole: on a host that overcommits memory,
     the system may stall or kill the process rather than fail.
 
     Args:
-        floats, ints: the floats (compute dtype) and int32 values recorded per
-            run and period.
+        record: ``(floats, int32s)`` recorded per run and period.
+        inputs: the run's inputs, whose devices it runs on (default: the
+            default device).
 
     Raises:
         ValueError: naming the runs, the steps and the bytes needed.
     """
-    itemsize = np.dtype(float_dtype()).itemsize
-    needed = runs * (steps + 1) * (floats * itemsize + ints * 4)
-    memory = _memory_bytes()
+    needed = record_bytes(runs, steps, record)
+    memory = _memory_bytes(inputs)
     if memory is not None and needed > memory:
         raise ValueError(
             f"steps = {steps} for {runs} run(s) is not allowed: the record of the runs needs "

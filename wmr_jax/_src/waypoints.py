@@ -217,15 +217,22 @@ def _prepared(params, init, robot, dt, options: Options, n: int | None, entry):
     return params, init, robot, dt
 
 
-def _shared_by_every_run(poses: jax.Array, params: Any, robot: Any, init: Any = None) -> jax.Array:
+# What each loop keeps per run and period, (floats, int32s): a Trajectory
+# (8 floats and the region) and the leg of a chain, or the error of a track.
+_CHAIN_RECORD, _TRACK_RECORD = (8, 2), (9, 1)
+
+
+def _shared_by_every_run(
+    poses: jax.Array, params: Any, robot: Any, init: Any, steps: int, record: tuple[int, int]
+) -> jax.Array:
     """``poses (1, ...)`` repeated for each run of batched params, robot or init; else as given.
 
-    A batch axis of size 1 is shared by every run, the references' too.
+    A batch axis of size 1 is shared by every run, the references' too. A
+    record of the runs larger than the memory is refused first.
     """
-    if poses.shape[0] != 1:
-        return poses
     runs = checks.common_batch_size({"gains": params, "robot": robot}, {"init": init})
-    if runs > 1:
+    simulation.require_memory(max(poses.shape[0], runs), steps, record)
+    if poses.shape[0] == 1 and runs > 1:
         return jnp.broadcast_to(poses, (runs, *poses.shape[1:]))
     return poses
 
@@ -256,8 +263,6 @@ def _run(jitted, spec, params, init, robot, dt, options: Options, n: int | None,
     # The robot's speed limiter, as in the rollouts (docs/model.md §4.2.2): the
     # held command rides in the state's velocity, from rest.
     options = loops.for_robot(options, robot, dt)
-    # A trajectory, and the leg or the tracking error of each period.
-    simulation.require_memory(n or 1, options.steps, floats=10, ints=2)
     return jitted(spec, params, init, robot, dt, options=options)
 
 
@@ -314,6 +319,7 @@ def chain_rollout(
     wp = _pose_stack("waypoints", waypoints, 2, "(K, 3)")
     tol = _tolerances(tol_r, tol_theta, pass_tol_r, pass_tol_theta)
     options = _options(steps, velocity, controller, substeps, wheel_limit)
+    simulation.require_memory(1, options.steps, _CHAIN_RECORD)
     return _run(_chain_jit, (wp, tol), params, init, robot, dt, options, None, "chain_rollout")
 
 
@@ -355,9 +361,9 @@ def batch_chain_rollout(
         wp = jnp.broadcast_to(wp, (np.shape(init)[0], *wp.shape))
     else:
         wp = _pose_stack("waypoints", waypoints, 3, "(N, K, 3)")
-    wp = _shared_by_every_run(wp, params, robot, init)
     tol = _tolerances(tol_r, tol_theta, pass_tol_r, pass_tol_theta)
     options = _options(steps, velocity, controller, substeps, wheel_limit)
+    wp = _shared_by_every_run(wp, params, robot, init, options.steps, _CHAIN_RECORD)
     return _run(_batch_chain_jit, (wp, tol), params, init, robot, dt, options, wp.shape[0])
 
 
@@ -385,6 +391,7 @@ def track_rollout(
     """
     arr = _pose_stack("refs", refs, 2, "(steps, 3)")
     options = _options(arr.shape[0], velocity, controller, substeps, wheel_limit)
+    simulation.require_memory(1, options.steps, _TRACK_RECORD)
     return _run(_track_jit, arr, params, init, robot, dt, options, None, "track_rollout")
 
 
@@ -405,8 +412,9 @@ def batch_track_rollout(
     Returns:
         A ``TrackRun`` whose fields have a leading axis ``N``.
     """
-    arr = _shared_by_every_run(_pose_stack("refs", refs, 3, "(N, steps, 3)"), params, robot, init)
+    arr = _pose_stack("refs", refs, 3, "(N, steps, 3)")
     options = _options(arr.shape[1], velocity, controller, substeps, wheel_limit)
+    arr = _shared_by_every_run(arr, params, robot, init, options.steps, _TRACK_RECORD)
     return _run(_batch_track_jit, arr, params, init, robot, dt, options, arr.shape[0])
 
 

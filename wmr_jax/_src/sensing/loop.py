@@ -361,10 +361,19 @@ def perturbed_metrics(
         return result
 
 
+# What disturbed_rollout keeps per run and period: the pose, v, ω and the
+# estimate handed to the law (8 floats).
+_DISTURBED_RECORD = (8, 0)
+
+
 def prepare_disturbed(
-    disturbance, params, controller, estimator, init, dt, robot, velocity
+    disturbance, params, controller, estimator, init, dt, robot, velocity, *, record=None
 ) -> tuple[tuple, Options]:
     """Check a batch of disturbances and the run's settings; return the jitted core's arguments.
+
+    ``record``: ``(floats, int32s)`` the caller keeps per run and period, for
+    a run that keeps every period: one larger than the memory is refused
+    before anything grows with the runs.
 
     Returns:
         ``((spec, params, estimate, init, robot, dt), options)``.
@@ -380,6 +389,8 @@ def prepare_disturbed(
             is_leaf=lambda v: isinstance(v, list),
         )
     runs = checks.common_batch_size({"gains": params, "robot": robot, "estimator": estimate})
+    if record is not None:
+        simulation.require_memory(max(len(refs), runs), noise.shape[1], record, disturbance)
     if len(refs) == 1 and runs > 1:
         # One disturbance shared by every run of batched parameters, as a
         # batch axis of size 1 is everywhere (README: the Python API).
@@ -463,9 +474,8 @@ def disturbed_rollout(
     """
     with jax.enable_x64(checks.check_bool("x64", x64)):
         args, options = prepare_disturbed(
-            disturbance, params, controller, estimator, init, dt, robot, velocity
-        )
-        # Per run and period: the pose, v, ω and the estimate handed to the law.
-        simulation.require_memory(len(args[0].ref), options.steps, floats=8)
+            disturbance, params, controller, estimator, init, dt, robot, velocity,
+            record=_DISTURBED_RECORD,
+        )  # fmt: skip
         out = _trajectory_jit(*args, options=options)
         return {name: np.asarray(value) for name, value in out.items()}
