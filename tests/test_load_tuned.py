@@ -109,6 +109,21 @@ def test_a_checkpoint_with_nan_or_wrong_lengths_is_refused():
         tuning.restore_state({**good, "iteration": np.asarray(2)}, fresh)
 
 
+def test_a_fixed_gain_file_written_by_tune_must_be_whole(tmp_path):
+    """Without its k_r it loaded the paper's 120 cm/s, beyond the wheels, without a word."""
+    path = tmp_path / "tuned_gains.json"
+    for recorded in ({"tuning": "nominal"}, {}):  # with or without the tuning it records
+        values = tuning.tuned_json(w.Gains(kr=80.0, k_theta=15.0), **recorded)
+        assert "units" in values
+        del values["kr"]
+        path.write_text(json.dumps(values))
+        with pytest.raises(ValueError, match=r"the field 'kr' is missing \(a file that records"):
+            tuning.load_tuned(path)
+    # A hand-written file of Gains fields only may leave fields out.
+    path.write_text('{"k_theta": 15.0}')
+    assert tuning.load_tuned(path).params == w.Gains(k_theta=15.0)
+
+
 def test_a_schedule_file_must_be_whole_and_integers_load_as_floats(tmp_path):
     schedule = tuning.tuned_json(tuning.ScheduleParams())
     del schedule["phi_m"]

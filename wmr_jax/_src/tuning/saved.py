@@ -282,9 +282,10 @@ def load_tuned(path: str | os.PathLike) -> ClosedLoop:
     ``batch_rollout`` and ``final_poses`` run the result; the disturbed runs
     and the studies of sensed loops (``perturbed_metrics(...,
     estimator=loop.estimator)``, ``standard_conditions``) run it whole. A
-    fixed-gain file may leave fields out (they keep the paper's values) and
-    may be of the old form, ``Gains`` field names only (``phi_m`` in
-    radians).
+    hand-written fixed-gain file of ``Gains`` field names only (the old
+    form, ``phi_m`` in radians) may leave fields out (they keep the paper's
+    values); a file that records its units, as ``wmr-jax tune`` writes it,
+    is whole.
 
     Args:
         path: the JSON file.
@@ -362,11 +363,15 @@ def load_tuned_and_tuning(path: str | os.PathLike) -> tuple[ClosedLoop, str | No
         if not ok:
             shape = "a list of >= 2 numbers" if table else "a number"
             raise ValueError(f"{where}: {name} = {value!r} is not allowed; allowed: {shape}")
-    if kind == "schedule":
-        # A schedule is saved whole; a missing field is a damaged file, not a default.
+    # A schedule is saved whole, and so are fixed gains in a file that records
+    # its units or tuning (as wmr-jax tune writes it): a missing field is a
+    # damaged or edited file, not a default. A hand-written file of Gains
+    # fields only may leave fields out (the paper's values).
+    if kind == "schedule" or "units" in values or "tuning" in values:
         missing = [name for name in fields if name not in numbers]
         if missing:
-            raise ValueError(f"{where}: the field {missing[0]!r} is missing")
+            written = "" if kind == "schedule" else " (a file that records its units is whole)"
+            raise ValueError(f"{where}: the field {missing[0]!r} is missing{written}")
     # Floats, not JSON's integers: the gains must be differentiable.
     numbers = {
         k: tuple(map(float, v)) if isinstance(v, list) else float(v) for k, v in numbers.items()
