@@ -119,6 +119,17 @@ def test_a_fixed_gain_file_written_by_tune_must_be_whole(tmp_path):
         path.write_text(json.dumps(values))
         with pytest.raises(ValueError, match=r"the field 'kr' is missing \(a file that records"):
             tuning.load_tuned(path)
+    # Its estimator too (without its σ_xy, the default 0.5 cm was tuned with).
+    loop = w.ObserverParams(position=0.3, heading=0.4)
+    values = tuning.tuned_json(tuning.ScheduleParams(), estimator=w.EKFParams(sigma_xy=0.2))
+    del values["estimator"]["sigma_xy"]
+    path.write_text(json.dumps(values))
+    with pytest.raises(ValueError, match=r"the estimator field 'sigma_xy' is missing"):
+        tuning.load_tuned(path)
+    values = tuning.tuned_json(tuning.ScheduleParams(), estimator=loop)
+    del values["estimator"]["compensate"]  # as written before it existed: it was on
+    path.write_text(json.dumps(values))
+    assert tuning.load_tuned(path).estimator == loop
     # A hand-written file of Gains fields only may leave fields out.
     path.write_text('{"k_theta": 15.0}')
     assert tuning.load_tuned(path).params == w.Gains(k_theta=15.0)

@@ -138,8 +138,11 @@ def estimator_json(params: Any) -> dict[str, Any] | None:
     return values
 
 
-def estimator_from_json(values: Any, where: str) -> Any:
+def estimator_from_json(values: Any, where: str, *, whole: bool = False) -> Any:
     """The estimator parameters of a ``tuned_gains.json`` ``"estimator"`` entry (checked).
+
+    ``whole``: the entry must hold every field, as ``estimator_json`` writes
+    it (otherwise a field left out keeps its default).
 
     Raises:
         ValueError: one line naming the file (``where``) and the bad entry.
@@ -165,6 +168,13 @@ def estimator_from_json(values: Any, where: str) -> Any:
         raise ValueError(
             f"{where}: estimator key {bad[0]!r} is not allowed; allowed: "
             f"{', '.join(sorted(fields))}"
+        )
+    # compensate is left out by files written before it existed (it was on).
+    missing = sorted(fields - set(given) - {"compensate"}) if whole else []
+    if missing:
+        raise ValueError(
+            f"{where}: the estimator field {missing[0]!r} is missing (a file that records its "
+            "units is whole)"
         )
     compensate = given.pop("compensate", True)
     if not isinstance(compensate, bool):

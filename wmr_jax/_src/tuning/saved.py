@@ -345,7 +345,8 @@ def load_tuned_and_tuning(path: str | os.PathLike) -> tuple[ClosedLoop, str | No
     if "tuning" in values:
         _check_tuning(values["tuning"], f"{where}: tuning")
     values = _in_library_units(values, fields, where)  # angles in radians from here on
-    estimator = estimator_from_json(values.get("estimator"), where)
+    whole = kind == "schedule" or "units" in values or "tuning" in values  # as tune writes it
+    estimator = estimator_from_json(values.get("estimator"), where, whole=whole)
     robot = None
     if "robot_units" in values:
         check_units(values["robot_units"], where)
@@ -367,7 +368,7 @@ def load_tuned_and_tuning(path: str | os.PathLike) -> tuple[ClosedLoop, str | No
     # its units or tuning (as wmr-jax tune writes it): a missing field is a
     # damaged or edited file, not a default. A hand-written file of Gains
     # fields only may leave fields out (the paper's values).
-    if kind == "schedule" or "units" in values or "tuning" in values:
+    if whole:
         missing = [name for name in fields if name not in numbers]
         if missing:
             written = "" if kind == "schedule" else " (a file that records its units is whole)"
