@@ -130,9 +130,16 @@ def test_a_fixed_gain_file_written_by_tune_must_be_whole(tmp_path):
     del values["estimator"]["compensate"]  # as written before it existed: it was on
     path.write_text(json.dumps(values))
     assert tuning.load_tuned(path).estimator == loop
-    # A hand-written file of Gains fields only may leave fields out.
-    path.write_text('{"k_theta": 15.0}')
-    assert tuning.load_tuned(path).params == w.Gains(k_theta=15.0)
+    # The tuning it records says as much as its units.
+    values = tuning.tuned_json(w.Gains(kr=80.0), tuning="robust")
+    del values["units"], values["phi_m"]
+    path.write_text(json.dumps(values))
+    with pytest.raises(ValueError, match=r"the field 'phi_m' is missing \(a file that records"):
+        tuning.load_tuned(path)
+    # A hand-written file of Gains fields only may leave fields out, its estimator's too.
+    path.write_text('{"k_theta": 15.0, "estimator": {"kind": "ekf", "sigma_xy": 0.2}}')
+    loop = tuning.load_tuned(path)
+    assert loop.params == w.Gains(k_theta=15.0) and loop.estimator == w.EKFParams(sigma_xy=0.2)
 
 
 def test_a_schedule_file_must_be_whole_and_integers_load_as_floats(tmp_path):
@@ -140,7 +147,7 @@ def test_a_schedule_file_must_be_whole_and_integers_load_as_floats(tmp_path):
     del schedule["phi_m"]
     path = tmp_path / "tuned_gains.json"
     path.write_text(json.dumps(schedule))
-    with pytest.raises(ValueError, match="the field 'phi_m' is missing"):
+    with pytest.raises(ValueError, match="the field 'phi_m' is missing$"):
         tuning.load_tuned(path)
     # JSON integers become floats, so the loaded gains can be differentiated.
     path.write_text('{"kr": 60, "k_theta": 10}')
