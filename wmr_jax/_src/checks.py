@@ -36,6 +36,7 @@ __all__ = [
     "check_key",
     "check_number",
     "check_path",
+    "batch_sizes",
     "common_batch_size",
     "check_temperature",
     "described",
@@ -393,27 +394,30 @@ def require_one_batch_size(sizes: dict[str, int]) -> int | None:
     return n
 
 
-def common_batch_size(trees: dict[str, Any], poses: dict[str, Any] | None = None) -> int:
-    """The batch size ``N`` shared by every batched input; 1 if none is batched.
+def batch_sizes(trees: dict[str, Any], poses: dict[str, Any] | None = None) -> dict[str, int]:
+    """The leading size of every batched input, by name (``refs``, ``gains.kr``, ...).
 
     Args:
         trees: name → parameter tree (gains, robot, estimator), whose leaves
             are scalars or ``(N,)``.
         poses: name → poses, ``(3,)`` or ``(N, 3)``.
+    """
+    poses = poses or {}
+    sizes = {name: np.shape(value)[0] for name, value in poses.items() if np.ndim(value) == 2}
+    for prefix, tree in trees.items():
+        for path, leaf in jax.tree_util.tree_leaves_with_path(tree):
+            if np.ndim(leaf) == 1:
+                sizes[f"{prefix}{jax.tree_util.keystr(path)}"] = np.shape(leaf)[0]
+    return sizes
+
+
+def common_batch_size(trees: dict[str, Any], poses: dict[str, Any] | None = None) -> int:
+    """The batch size ``N`` shared by every batched input (``batch_sizes``); 1 if none is.
 
     Raises:
         ValueError: naming each size, when two of them, neither 1, differ.
     """
-    sizes = {}
-    for prefix, tree in trees.items():
-        for path, leaf in jax.tree_util.tree_leaves_with_path(tree):
-            if np.ndim(leaf) >= 1:
-                key = jax.tree_util.keystr(path, simple=True, separator=".")
-                sizes[f"{prefix}.{key}" if key else prefix] = np.shape(leaf)[0]
-    for name, value in (poses or {}).items():
-        if np.ndim(value) == 2:
-            sizes[name] = np.shape(value)[0]
-    return require_one_batch_size(sizes) or 1
+    return require_one_batch_size(batch_sizes(trees, poses)) or 1
 
 
 def require_unbatched(tree: Any, prefix: str, allowed: str) -> None:

@@ -25,12 +25,12 @@ from wmr_jax._src.checks import (
     Parameters,
     check_bool,
     check_dt,
+    common_batch_size,
     field_values,
     is_traced,
     real_array,
     require,
     require_concrete,
-    require_one_batch_size,
     require_unbatched,
 )
 
@@ -160,6 +160,22 @@ PLAUSIBLE = {
 _TYPED_NUMBERS = (int, float, np.integer, np.floating)
 
 
+def implausible(values: dict[str, Any]) -> list[tuple[str, Any, tuple[float, float, str]]]:
+    """The sizes and speeds among ``values`` outside ``PLAUSIBLE``: ``(field, value, range)``.
+
+    Numbers only (arrays and tracers are batches and programs), and within
+    ``(0, inf)``: other values are refused where the robot is used.
+    """
+    found = []
+    for field, bounds in PLAUSIBLE.items():
+        value = values.get(field)
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, _TYPED_NUMBERS):
+            continue
+        if 0 < value < math.inf and not bounds[0] <= value <= bounds[1]:
+            found.append((field, value, bounds))
+    return found
+
+
 def _warn_unit_slips(values: dict[str, Any]) -> None:
     """Warn (``RobotUnitsWarning``) for each size or speed in ``values`` that looks like metres.
 
@@ -182,12 +198,7 @@ def _warn_unit_slips(values: dict[str, Any]) -> None:
         frame, stacklevel = frame.f_back, stacklevel + 1
     if frame is None or module.startswith(("wmr_jax.", "jax.")):
         return  # a copy the library or JAX made, not a value typed by a user
-    for field, (low, high, unit) in PLAUSIBLE.items():
-        value = values.get(field)
-        if isinstance(value, (bool, np.bool_)) or not isinstance(value, _TYPED_NUMBERS):
-            continue
-        if not 0 < value < math.inf or low <= value <= high:
-            continue  # out of range or not a number: refused where the robot is used
+    for field, value, (low, high, unit) in implausible(values):
         warnings.warn(
             f"Robot {field} = {value:.6g} {unit} is outside {low:g}-{high:g} {unit}, as if "
             "written in another unit (the library's are cm and cm/s: half_track=8.0 for "
@@ -295,20 +306,8 @@ def wheel_speed_bound(gains: Gains, robot: Robot | None = None) -> Any:
     if not is_traced((gains, robot)):  # called with values: check them
         validate_gains(gains)
         validate_robot(robot)
-        _require_one_batch(gains, robot)
+        common_batch_size({"gains": gains, "robot": robot})
     return gains.kr + robot.half_track * gains.k_theta
-
-
-def _require_one_batch(gains: Gains, robot: Robot) -> None:
-    """Raise, naming the fields, unless the batched fields of both share one size (or 1)."""
-    require_one_batch_size(
-        {
-            f"{name}.{f.name}": np.shape(getattr(obj, f.name))[0]
-            for name, obj in (("gains", gains), ("robot", robot))
-            for f in dataclasses.fields(obj)
-            if np.ndim(getattr(obj, f.name)) == 1
-        }
-    )
 
 
 def check_feasible(
@@ -326,7 +325,7 @@ def check_feasible(
     warn = check_bool("warn", warn)
     robot = validate_robot(Robot() if robot is None else robot)
     gains = validate_gains(gains)
-    _require_one_batch(gains, robot)
+    common_batch_size({"gains": gains, "robot": robot})
     # wheel_speed_bound's sum in NumPy (both were just checked).
     half_track, v_max = (np.asarray(v, dtype=float) for v in (robot.half_track, robot.v_max))
     bound = np.asarray(gains.kr, dtype=float) + half_track * np.asarray(gains.k_theta, dtype=float)

@@ -32,7 +32,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from wmr_jax._src.checks import require_unbatched
-from wmr_jax._src.params import PLAUSIBLE, Robot, RobotUnitsWarning, validate_robot
+from wmr_jax._src.params import Robot, RobotUnitsWarning, implausible, validate_robot
 
 __all__ = [
     "LoadedRobot",
@@ -80,15 +80,13 @@ def _warn_unit_slips(robot: Robot, where: str, ros: bool) -> None:
         if ros
         else "a JSON robot file gives cm and cm/s: half_track 8 for 8 cm"
     )
-    for field, (low, high, _) in PLAUSIBLE.items():
-        value = float(getattr(robot, field))
-        if not low <= value <= high:
-            warnings.warn(
-                f"{where}: {field} = {value:.6g} {_UNIT[field]} is outside {low:g}-{high:g} "
-                f"{_UNIT[field]}, as if written in another unit ({convention}); it runs as given",
-                RobotUnitsWarning,
-                stacklevel=4,
-            )
+    for field, value, (low, high, _) in implausible(vars(robot)):
+        warnings.warn(
+            f"{where}: {field} = {value:.6g} {_UNIT[field]} is outside {low:g}-{high:g} "
+            f"{_UNIT[field]}, as if written in another unit ({convention}); it runs as given",
+            RobotUnitsWarning,
+            stacklevel=4,
+        )
 
 
 # ---------------------------------------------------------------- presets

@@ -27,6 +27,7 @@ from wmr_jax._src.checks import (
     MAX_TEMPERATURE,
     as_float_tree,
     as_poses,
+    batch_sizes,
     check_dt,
     check_int,
     check_substeps,
@@ -191,27 +192,15 @@ def make_options(
     return Options(steps, velocity, controller, temperature, substeps, wheel_limit)
 
 
-def _batch_sizes(refs: jax.Array, params: Any, init: jax.Array, robot: Robot) -> dict[str, int]:
-    """Return the leading size of every batched argument, by name."""
-    sizes = {}
-    if refs.ndim == 2:
-        sizes["refs"] = refs.shape[0]
-    if init.ndim == 2:
-        sizes["init"] = init.shape[0]
-    for prefix, tree in (("gains", params), ("robot", robot)):
-        for key, leaf in jax.tree_util.tree_leaves_with_path(tree):
-            if jnp.ndim(leaf) == 1:
-                sizes[f"{prefix}{jax.tree_util.keystr(key)}"] = jnp.shape(leaf)[0]
-    return sizes
-
-
 def _common_batch(refs, params, init, robot):
     """Check the batch sizes agree; an axis of size 1 is shared by every run.
 
     Returns:
         ``(refs, params, init, robot)`` with the size-1 axes removed.
     """
-    n = require_one_batch_size(_batch_sizes(refs, params, init, robot))
+    n = require_one_batch_size(
+        batch_sizes({"gains": params, "robot": robot}, {"refs": refs, "init": init})
+    )
     if n is None:
         raise ValueError(
             "refs has shape (3,) and nothing else is batched; allowed: refs (N, 3), "

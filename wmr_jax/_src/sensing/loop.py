@@ -415,10 +415,7 @@ def prepare_disturbed(
         jnp.asarray(delay, dtype),
     )
     if estimator is not None:
-        sizes = {"disturbance.ref": len(refs)}
-        for key, leaf in jax.tree_util.tree_leaves_with_path(estimate):
-            if np.ndim(leaf) >= 1:
-                sizes[f"estimator{jax.tree_util.keystr(key)}"] = np.shape(leaf)[0]
+        sizes = {"disturbance.ref": len(refs), **checks.batch_sizes({"estimator": estimate})}
         checks.require_one_batch_size(sizes)
 
         def shared(leaf):  # an axis of size 1 is every run's value
