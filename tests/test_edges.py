@@ -297,7 +297,7 @@ def test_every_batched_entry_point_shares_one_reference_with_each_run_of_batched
     for run, batched, singles in (
         (lambda g: w.sweep(one, g, steps=20), gains, each),
         (lambda g: studies.disturbed_rollout(disturbance, g), gains, each),
-        (lambda e: studies.perturbed_metrics(disturbance, estimator=e), ekf, ekfs),
+        (lambda e: studies.disturbed_metrics(disturbance, estimator=e), ekf, ekfs),
         (lambda g: studies.evaluate_poses(one, g, steps=20), gains, each),
         (lambda g: studies.batch_chain_rollout(chain, g, steps=20), gains, each),
         (lambda g: studies.batch_track_rollout(track, g), gains, each),
@@ -323,7 +323,7 @@ def test_every_batched_entry_point_shares_one_reference_with_each_run_of_batched
     with pytest.raises(ValueError, match=r"^batch sizes differ \(gains.kr: 3, robot.v_max: 2\)"):
         w.sweep(one, gains, robot=two_robots, steps=5)
     with pytest.raises(ValueError, match=r"^batch sizes differ \(gains.kr: 3, estimator.sigma_xy"):
-        studies.perturbed_metrics(disturbance, gains, estimator=ekf)
+        studies.disturbed_metrics(disturbance, gains, estimator=ekf)
     with pytest.raises(ValueError, match=r"^init = \[\[0, 0, 0\], \[0, 0\]\] is not allowed"):
         w.sweep(one, init=[[0, 0, 0], [0, 0]], steps=5)
     with pytest.raises(ValueError, match=r"batch sizes differ"):

@@ -207,7 +207,7 @@ def _estimator_parameters(kind, field, good, bad, use_bad):
     valid = valid or (kind == "observer" and (bad == [0.5, 0.5, 0.5] or _is_zero(bad)))
     params = (w.EKFParams if kind == "ekf" else w.ObserverParams)(**{field: value})
     result = _expect(
-        lambda: studies.perturbed_metrics(_disturbance(), estimator=params),
+        lambda: studies.disturbed_metrics(_disturbance(), estimator=params),
         valid,
         [f"estimator.{field}", "batch size"],
     )

@@ -77,7 +77,7 @@ def test_the_disturbed_loop_runs_the_robots_speed_limiter(estimator, latency):
     spec = _disturbance(latency=latency)  # the wheels' radii off by up to 3 %
     arrival = {}
     for name, robot in (("free", w.Robot()), ("limited", LIMITED)):
-        m = sensed.perturbed_metrics(spec, GAINS, robot=robot, estimator=estimator, x64=False)
+        m = sensed.disturbed_metrics(spec, GAINS, robot=robot, estimator=estimator, x64=False)
         assert np.all(m.success), name
         arrival[name] = m.arrival
     assert np.mean(arrival["limited"]) > np.mean(arrival["free"]) + 0.05, arrival

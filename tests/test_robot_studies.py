@@ -67,7 +67,7 @@ def _recorded(monkeypatch):
         return np.tile(REFS[:1], (n, 1)), np.zeros((n, steps, 3)), np.ones((n, 3))
 
     for module in (robustness, conditions):
-        monkeypatch.setattr(module, "perturbed_metrics", fake)
+        monkeypatch.setattr(module, "disturbed_metrics", fake)
     monkeypatch.setattr(conditions, "_unit_draws", unit_draws)
     monkeypatch.setattr(robustness, "draw_disturbances", draws)
     return seen
@@ -125,7 +125,7 @@ def test_the_monte_carlo_scales_the_paper_gains_into_the_robots_budget(monkeypat
         return PoseMetrics(ones, ones, ones, ones, ones, ones)
 
     _recorded(monkeypatch)
-    monkeypatch.setattr(robustness, "perturbed_metrics", fake)
+    monkeypatch.setattr(robustness, "disturbed_metrics", fake)
     studies.monte_carlo(KEY, n_runs=1, noise_xy=(0.0,), noise_deg=(0.0,), robot=QUICK)
     assert params == [paper_feasible_gains(QUICK)]
 

@@ -45,7 +45,7 @@ def draw_refs(seed, n=N):
 @pytest.mark.parametrize("controller", ["shim-sung", "aicardi", "astolfi-corke"])
 def test_zero_disturbance_is_the_nominal_run(controller):
     refs = draw_refs(3)
-    m = studies.perturbed_metrics(quiet(refs, STEPS), controller=controller)
+    m = studies.disturbed_metrics(quiet(refs, STEPS), controller=controller)
     traj = w.batch_rollout(refs, steps=STEPS, controller=controller)
     # The same closed loop and the same arithmetic on the pose.
     want = assert_metrics_of_runs(m, traj, refs, DT)
@@ -57,7 +57,7 @@ def test_zero_disturbance_is_the_nominal_run(controller):
 
 def test_zero_disturbance_is_the_nominal_run_nonideal():
     refs = draw_refs(4, 4)
-    m = studies.perturbed_metrics(quiet(refs, 20), controller="aicardi", velocity="nonideal")
+    m = studies.disturbed_metrics(quiet(refs, 20), controller="aicardi", velocity="nonideal")
     traj = w.batch_rollout(refs, steps=20, controller="aicardi", velocity="nonideal")
     np.testing.assert_allclose(m.path, np.asarray(w.path_length(traj)), rtol=1e-10)
     final = np.asarray(traj.poses[:, -1, :2])
@@ -70,7 +70,7 @@ def test_equal_wheel_factors_scale_the_gains():
     refs = draw_refs(3)
     s = 1.05
     spec = quiet(refs, STEPS)._replace(mismatch=np.tile([s, s, 1.0], (N, 1)))
-    m = studies.perturbed_metrics(spec, controller="astolfi-corke")
+    m = studies.disturbed_metrics(spec, controller="astolfi-corke")
     gains = w.AstolfiGains(k_rho=3.0 * s, k_alpha=8.0 * s, k_beta=-3.0 * s)
     traj = w.batch_rollout(refs, gains, steps=STEPS, controller="astolfi-corke")
     want = run_metrics(traj, refs, DT)
@@ -80,8 +80,8 @@ def test_equal_wheel_factors_scale_the_gains():
 
 def test_latency_changes_the_run():
     refs = draw_refs(3)
-    prompt = studies.perturbed_metrics(quiet(refs, STEPS), controller="aicardi")
-    late = studies.perturbed_metrics(quiet(refs, STEPS, delay=1.0), controller="aicardi")
+    prompt = studies.disturbed_metrics(quiet(refs, STEPS), controller="aicardi")
+    late = studies.disturbed_metrics(quiet(refs, STEPS, delay=1.0), controller="aicardi")
     # One period at rest first: the late runs are not the prompt ones.
     assert np.all(late.path != prompt.path)
 
@@ -137,7 +137,7 @@ def test_draws_do_not_depend_on_the_sessions_dtype():
 def test_bad_disturbances_are_rejected(change, message):
     spec = quiet(np.zeros((4, 3)) + [10.0, 0.0, 0.0], 10)._replace(**change)
     with pytest.raises(ValueError, match="allowed") as info:
-        studies.perturbed_metrics(spec)
+        studies.disturbed_metrics(spec)
     assert message in str(info.value)
 
 
@@ -194,13 +194,13 @@ def test_levels_may_be_arrays_and_keys_must_be_keys():
     with pytest.raises(ValueError, match=r"refs\[1\] = \[nan, 0.0, 0.0\] is not finite"):
         studies.sample_disturbance(key, np.array([[10.0, 0, 0], [np.nan, 0, 0]]), 5)
     with pytest.raises(ValueError, match=r"disturbance = tuple is not allowed"):
-        studies.perturbed_metrics(tuple(quiet(refs, 5)))
+        studies.disturbed_metrics(tuple(quiet(refs, 5)))
 
 
 def test_a_mismatch_float32_cannot_hold_is_refused_there():
     spec = quiet(np.array([[10.0, 0.0, 0.0]]), 5)._replace(mismatch=np.full((1, 3), 1e-300))
     with pytest.raises(ValueError, match=r"below float32's smallest normal number"):
-        studies.perturbed_metrics(spec, x64=False)
+        studies.disturbed_metrics(spec, x64=False)
 
 
 # Each flag with a value it refuses: one line on stderr, exit status 2.
@@ -343,6 +343,6 @@ def test_a_disturbed_run_that_leaves_the_range_is_an_error_not_nans():
     # (at γ dt = 3.3 it may wander near 1e15 cm instead, as rounding decides).
     spec = studies.sample_disturbance(jax.random.key(0), np.array([[30.0, 30.0, 0.0]]), 300)
     with pytest.raises(ValueError, match=r"1 run\(s\), e.g. run 0, left the range of float32"):
-        studies.perturbed_metrics(
+        studies.disturbed_metrics(
             spec, w.AicardiGains(gamma=1000.0), controller="aicardi", x64=False
         )

@@ -219,7 +219,7 @@ def test_gradients_through_noisy_runs_are_finite(estimator, params):
 def test_bad_estimators_are_refused_by_both(estimator, message):
     spec = quiet(2, 0.0)
     with pytest.raises(ValueError, match="allowed") as info:
-        studies.perturbed_metrics(spec, estimator=estimator)
+        studies.disturbed_metrics(spec, estimator=estimator)
     assert message in str(info.value)
     with pytest.raises(ValueError, match="allowed") as info:
         reference_disturbed_rollout(spec.ref[0], noise=spec.noise[0], estimator=estimator)
@@ -255,17 +255,17 @@ def test_every_controller_and_loop_runs_with_an_estimator():
     refs = random_refs(5, 3)
     spec = studies.Disturbance(refs, np.zeros((3, 90, 3)), np.ones((3, 3)), np.float64(0.0))
     for controller in ("aicardi", "astolfi-corke", "shim-sung-schedule"):
-        nominal = studies.perturbed_metrics(spec, controller=controller)
+        nominal = studies.disturbed_metrics(spec, controller=controller)
         for estimator in ("observer", "ekf"):
-            m = studies.perturbed_metrics(spec, controller=controller, estimator=estimator)
+            m = studies.disturbed_metrics(spec, controller=controller, estimator=estimator)
             # Equal to float64 rounding (the estimate is the pose to ~1e-13 cm).
             np.testing.assert_allclose(m.final_distance, nominal.final_distance, atol=1e-9)
             np.testing.assert_array_equal(m.arrival, nominal.arrival)
     # The non-ideal robot is not the estimator's model (docs/model.md §9): the
     # estimate trails its pose even without noise, so the run differs from
     # the nominal one, yet every run still arrives.
-    nominal = studies.perturbed_metrics(spec, velocity="nonideal")
-    sensed = studies.perturbed_metrics(spec, velocity="nonideal", estimator="ekf")
+    nominal = studies.disturbed_metrics(spec, velocity="nonideal")
+    sensed = studies.disturbed_metrics(spec, velocity="nonideal", estimator="ekf")
     assert np.all(np.isfinite(sensed.arrival)) and np.all(np.isfinite(nominal.arrival))
     assert not np.array_equal(sensed.final_distance, nominal.final_distance)
 
@@ -339,13 +339,13 @@ def test_a_saved_estimator_reads_back_whole(tmp_path):
 def _recorded_noise(monkeypatch, run, module):
     """The noise of every disturbance ``module``'s studies hand to the loop while ``run()`` runs."""
     seen = []
-    real = module.perturbed_metrics
+    real = module.disturbed_metrics
 
     def recording(spec, *args, **kwargs):
         seen.append(np.asarray(spec.noise))
         return real(spec, *args, **kwargs)
 
-    monkeypatch.setattr(module, "perturbed_metrics", recording)
+    monkeypatch.setattr(module, "disturbed_metrics", recording)
     run()
     return seen
 
@@ -405,11 +405,11 @@ def test_estimator_parameters_per_run_must_match_the_runs():
     """One value per run, or one for all (an axis of 1 too); another count is one clear error."""
     refs = np.array([[30.0, 20.0, 1.0], [-20.0, 15.0, 3.0]])
     spec = studies.sample_disturbance(jax.random.key(1), refs, 20, noise_xy=0.5, noise_theta=0.02)
-    one = studies.perturbed_metrics(spec, estimator=w.EKFParams(wheel_error=0.5))
-    same = studies.perturbed_metrics(spec, estimator=w.EKFParams(wheel_error=[0.5]))
+    one = studies.disturbed_metrics(spec, estimator=w.EKFParams(wheel_error=0.5))
+    same = studies.disturbed_metrics(spec, estimator=w.EKFParams(wheel_error=[0.5]))
     np.testing.assert_array_equal(one.final_distance, same.final_distance)
-    each = studies.perturbed_metrics(spec, estimator=w.EKFParams(wheel_error=[0.5, 0.5]))
+    each = studies.disturbed_metrics(spec, estimator=w.EKFParams(wheel_error=[0.5, 0.5]))
     np.testing.assert_array_equal(one.final_distance, each.final_distance)
     message = r"batch sizes differ \(disturbance.ref: 2, estimator.position\[1\]: 3\)"
     with pytest.raises(ValueError, match=message):
-        studies.perturbed_metrics(spec, estimator=w.ObserverParams(position=(0.5, [0.1] * 3)))
+        studies.disturbed_metrics(spec, estimator=w.ObserverParams(position=(0.5, [0.1] * 3)))

@@ -55,8 +55,8 @@ from wmr_jax._src.sensing.estimators import EKFParams as EKFParams
 from wmr_jax._src.sensing.estimators import Estimator as Estimator
 from wmr_jax._src.sensing.estimators import ObserverParams as ObserverParams
 from wmr_jax._src.sensing.loop import ClosedLoop as ClosedLoop
+from wmr_jax._src.sensing.loop import disturbed_metrics as disturbed_metrics
 from wmr_jax._src.sensing.loop import disturbed_rollout as disturbed_rollout
-from wmr_jax._src.sensing.loop import perturbed_metrics as perturbed_metrics
 from wmr_jax._src.waypoints import SOCCER_WAYPOINTS_DEG as SOCCER_WAYPOINTS_DEG
 from wmr_jax._src.waypoints import ChainRun as ChainRun
 from wmr_jax._src.waypoints import SoccerRun as SoccerRun

@@ -468,7 +468,7 @@ class _SizeBench:
         import jax
 
         from wmr_jax._src.sensing.disturbances import sample_disturbance
-        from wmr_jax._src.sensing.loop import _perturbed_jit, prepare_disturbed
+        from wmr_jax._src.sensing.loop import _disturbed_jit, prepare_disturbed
 
         spec = sample_disturbance(
             jax.random.PRNGKey(self.config.seed), self.refs, self.steps, noise_xy=0.5,
@@ -481,7 +481,7 @@ class _SizeBench:
                 spec, self.gains, "shim-sung", estimator, start, 0.033, robot, "ideal"
             )
             group[name] = (
-                lambda args=args, options=options: _perturbed_jit(*args, options=options),
+                lambda args=args, options=options: _disturbed_jit(*args, options=options),
                 True,
             )
         t = self.time(group)

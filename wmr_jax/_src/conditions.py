@@ -31,7 +31,7 @@ from wmr_jax._src.sensing.disturbances import (
     sample_disturbance,
 )
 from wmr_jax._src.sensing.estimators import resolve_estimator
-from wmr_jax._src.sensing.loop import ClosedLoop, perturbed_metrics
+from wmr_jax._src.sensing.loop import ClosedLoop, disturbed_metrics
 
 __all__ = [
     "MODEL_ROBOT",
@@ -51,7 +51,7 @@ def _closed_loop(value: Any, controller: Any, estimator: Any, where: str) -> Clo
             mix several loops' runs).
     """
     loop = value if isinstance(value, ClosedLoop) else ClosedLoop(controller, value, estimator)
-    allowed = "scalars: one loop (perturbed_metrics runs a batch of parameters)"
+    allowed = "scalars: one loop (disturbed_metrics runs a batch of parameters)"
     checks.require_unbatched(loop.params, f"{where}.params", allowed)
     if not isinstance(loop.estimator, str):  # a name is its default parameters
         checks.require_unbatched(loop.estimator, f"{where}.estimator", allowed)
@@ -166,7 +166,7 @@ def standard_conditions(
     for label, sxy, sdeg, latency, wheels in conditions:
         spec = _scaled(refs, noise, wheels, sxy, sdeg, latency)
         for name, loop in sets.items():
-            m = perturbed_metrics(
+            m = disturbed_metrics(
                 spec,
                 loop.params,
                 controller=loop.controller,
@@ -282,7 +282,7 @@ def evaluate_loop(
 
     Raises:
         ValueError: for a bad argument, before any run; for parameters with
-            a batch axis (one loop is judged; ``perturbed_metrics`` runs a batch).
+            a batch axis (one loop is judged; ``disturbed_metrics`` runs a batch).
     """
     from wmr_jax._src.optimal import time_bounds
     from wmr_jax._src.robots import robot_json
@@ -299,7 +299,7 @@ def evaluate_loop(
     draws = _runs(refs, jax.random.key(seed), robot, horizon, dt, mismatch, x64)
     refs, noise, factors, horizon = draws
     spec = _scaled(refs, noise, factors, *labels[condition])
-    m = perturbed_metrics(
+    m = disturbed_metrics(
         spec,
         loop.params,
         controller=controller,
@@ -408,7 +408,7 @@ def noise_curve(
         for sxy in levels:
             sdeg = _DEG_PER_CM * sxy
             spec = _scaled(refs, noise, factors, sxy, sdeg, latency)
-            m = perturbed_metrics(
+            m = disturbed_metrics(
                 spec, loop.params, controller=loop.controller, estimator=loop.estimator,
                 dt=dt, robot=robot, x64=x64,
             )  # fmt: skip

@@ -1,12 +1,12 @@
 """The closed loop of one pose as a ``lax.scan``, and the one ``vmap`` that batches it.
 
-``closed_loop_step`` samples the controller and moves the robot over one
-control period (``docs/model.md §4``); ``scan_closed_loop`` runs it for a
-number of periods, recording the run or folding it into streamed metrics;
-``batched`` lifts any single-pose function to batches. The scan itself takes
-a faster, equal route (``_split_loop``) built from ``advance_period``, which
-the disturbed loops of ``robustness`` share. Nothing here checks its
-inputs: the entry points do that first (``wmr_jax._src.checks``).
+``ClosedLoopStep`` samples the controller and moves the robot over one
+control period (``docs/model.md §4``), with an optional disturbance and
+estimator (§7, §9); ``scan_closed_loop`` runs it for a number of periods,
+recording the run or folding it into streamed metrics. Every run of the
+package is that one scan. ``batched`` lifts any single-pose function to
+batches. Nothing here checks its inputs: the entry points do that first
+(``wmr_jax._src.checks``).
 """
 
 from __future__ import annotations
@@ -39,7 +39,8 @@ __all__ = [
     "advance_period",
     "batch_axes",
     "batched",
-    "closed_loop_step",
+    "ClosedLoopStep",
+    "LoopCarry",
     "ArcMove",
     "ideal_arc",
     "ideal_move",
@@ -97,6 +98,8 @@ class Options:
             robot follows it (ideal loop; docs/model.md §4.2.2). ``for_robot``
             turns it on for robots that give either limit; off, the loop has
             no limiter at all.
+        max_delay: the longest latency, in samples, a disturbed run can have:
+            that many commands ride in flight (at least one; docs/model.md §7).
     """
 
     steps: int = DEFAULT_STEPS
@@ -111,6 +114,7 @@ class Options:
     estimator: Any = None
     remat: bool = True
     accel_limit: bool = False
+    max_delay: int = 1
 
 
 def for_robot(options: Options, robot: Robot, dt: Any) -> Options:
@@ -165,7 +169,12 @@ def initial_state(init: jax.Array) -> dynamics.RobotState:
 
 
 class StepOutput(NamedTuple):
-    """What one control period reports (one sample of a ``Trajectory``)."""
+    """What one control period reports (one sample of a ``Trajectory``).
+
+    ``v`` and ``ω`` are the command applied over the period (before a speed
+    limiter and the wheels' mismatch); ``region`` is ``-1`` in a disturbed
+    run, whose law sees a measured pose, not the true one.
+    """
 
     v: jax.Array
     omega: jax.Array
@@ -174,45 +183,212 @@ class StepOutput(NamedTuple):
     distance: jax.Array
 
 
-def closed_loop_step(
-    state: dynamics.RobotState,
-    ref: jax.Array,
-    params: Any,
-    robot: Robot,
-    dt: jax.Array,
-    options: Options,
-) -> tuple[dynamics.RobotState, StepOutput]:
-    """Sample the controller at ``state`` and move the robot over one ``dt`` (docs/model.md §4).
+Fold = Callable[[Any, "SplitPose", StepOutput], Any]
 
-    The single-pose building block of every rollout; scans of other kinds
-    (streaming metrics, waypoints) are built from it.
+
+class LoopCarry(NamedTuple):
+    """What the one closed-loop step carries from period to period.
+
+    Attributes:
+        pose: the true pose at the sample (``SplitPose``).
+        wheel: the velocity loop's state (``initial_wheel``).
+        command: the command computed at the sample, ``v + i ω`` (computed
+            at the end of the previous period, see ``closed_loop_step``).
+        in_flight: the commands computed at the ``max_delay`` samples before
+            it, newest first (disturbed runs only; ``()`` otherwise).
+        moves: their arcs (``ArcMove``), for an estimator without a speed
+            limiter; ``()`` otherwise.
+        estimate: the estimator's state, or ``None``.
+        ref: the reference of the command.
+        acc: the fold's accumulator.
     """
-    control = options.controller
-    v, omega = control.command(state.pose, ref, params, temperature=options.temperature)
-    region = control.region_of(state.pose, ref, params)
-    if options.velocity == "ideal":
-        # The ideal robot's velocity is the command it last followed.
-        held_v, held_omega = v, omega
-        if options.accel_limit:
-            previous = HeldCommand(state.velocity[0], state.velocity[1])
-            held_v, held_omega = speed_limit(previous, v, omega, robot, dt)
-        pose = dynamics.arc_step(state.pose, held_v, held_omega, dt)
-        new_state = dynamics.RobotState(pose, jnp.stack([held_v, held_omega]), state.integral)
-        distance = jnp.abs(held_v) * dt
-    else:
-        new_state, distance = velocity_loop.advance(
-            state,
-            jnp.stack([v, omega]),
-            robot,
-            dt,
-            substeps=options.substeps,
-            wheel_limit=options.wheel_limit,
+
+    pose: Any
+    wheel: Any
+    command: jax.Array
+    in_flight: tuple
+    moves: tuple
+    estimate: Any
+    ref: jax.Array
+    acc: Any
+
+
+@dataclasses.dataclass(frozen=True)
+class ClosedLoopStep:
+    """One control period of the closed loop: law → commands in flight → velocity loop → robot.
+
+    The one step of every run (docs/model.md §4, §7, §9). Its optional parts
+    are ``None`` where a run has none:
+
+    * ``disturbance`` (a ``sensing.Disturbance`` of one run): the law sees
+      ``pose + noise``, the command computed at sample ``k`` acts from sample
+      ``k + delay`` (zero before; ``options.max_delay`` commands are carried
+      in flight), the wheels' radii scale the rims and the body mass is off
+      by its factor. ``None`` is the nominal run, with none of these.
+    * ``options.estimator`` with its parameters ``estimate``: between the
+      measurement and the law; it predicts with the command followed and
+      corrects toward each measurement, and with ``compensate`` the law sees
+      its estimate rolled forward over the commands in flight.
+    * ``aim(acc) -> ref``: the reference of the next command, from the fold's
+      accumulator (waypoint chains, moving references); ``None`` keeps
+      ``ref``.
+
+    Arranged for speed, which makes the rollouts several times faster than
+    a plain step:
+
+    * The position and heading ride as complex numbers ``x + i y`` and
+      ``cos θ + i sin θ`` (``SplitPose``), so no step recomputes the
+      heading's cosine and sine for the law (``frame=`` of
+      ``Controller.command``) or the arc. θ itself is carried too, for the
+      pose; the non-ideal wheel loop rides as four scalars
+      (``velocity_loop.WheelState``), never as ``(N, 2)`` arrays.
+    * The command of the next period is computed at the end of each period
+      and carried as ``v + i ω``. XLA on the CPU compiles a step into one
+      loop per output of the step and repeats in each whatever they share;
+      carried this way, the law is evaluated in one loop only.
+    * The heading is renormalised every period by one Newton step towards
+      ``|heading| = 1``, so rounding does not make it drift over long runs.
+    """
+
+    params: Any
+    robot: Robot
+    dt: jax.Array
+    options: Options
+    disturbance: Any = None
+    estimate: Any = None
+    aim: Callable[[Any], jax.Array] | None = None
+    fold: Fold | None = None
+    record: bool = False
+
+    @property
+    def limiter(self) -> bool:
+        return self.options.velocity == "ideal" and self.options.accel_limit
+
+    @property
+    def slots(self) -> int:
+        return 0 if self.disturbance is None else max(1, self.options.max_delay)
+
+    def law(self, pose: SplitPose, ref: jax.Array) -> jax.Array:
+        return split_command(pose, ref, self.params, self.options)
+
+    def delayed(self, fresh: jax.Array, queue: tuple) -> Any:
+        """Of ``fresh`` and the older ``queue``, the one computed ``delay`` samples ago."""
+        applied = fresh
+        for j, held in enumerate(queue):
+            applied = _select(self.disturbance.delay == j + 1, held, applied)
+        return applied
+
+    def followed(self, wheel: Any, command: jax.Array) -> tuple[jax.Array, Any]:
+        """``command`` after the speed limiter in state ``wheel`` (where the loop has one)."""
+        if not self.limiter:
+            return command, wheel
+        v, omega = speed_limit(wheel, command.real, command.imag, self.robot, self.dt)
+        return jax.lax.complex(v, omega), HeldCommand(v, omega)
+
+    def law_input(self, estimate: SplitPose, queue: tuple, moves: tuple, wheel: Any) -> SplitPose:
+        """The estimate rolled over the commands in flight, oldest first (compensation).
+
+        ``queue``/``moves``: the commands in flight and their arcs, newest
+        first; with a speed limiter, each passes through it as it will.
+        """
+        if not self.estimate.compensate:
+            return estimate
+        for j in reversed(range(self.slots)):
+            if moves:
+                move = moves[j]
+            else:
+                followed, next_wheel = self.followed(wheel, queue[j])
+                move = ArcMove.of(followed.real, followed.imag, self.dt)
+            late = self.disturbance.delay > j
+            if not moves:
+                wheel = _select(late, next_wheel, wheel)
+            estimate = _select(late, ideal_move(estimate, move), estimate)
+        return estimate
+
+    def start(self, ref: jax.Array, init: jax.Array, acc: Any) -> LoopCarry:
+        """The carry at the first sample: the robot at rest at ``init`` (3,)."""
+        pose = SplitPose.of(init)
+        wheel = initial_wheel(init, self.options)
+        spec, estimator = self.disturbance, self.options.estimator
+        state, queue, moves = None, (), ()
+        if spec is None:
+            first = self.law(pose, ref)
+        else:
+            sensed = spec.measurement(pose, spec.noise[0]).pose()
+            if estimator is None:
+                first = self.law(sensed, ref)
+            else:
+                # The estimate starts from the first measurement (docs/model.md
+                # §9); no command is in flight before the first sample.
+                state = estimator.start(sensed, self.estimate, self.robot)
+                zero = jnp.zeros((), init.dtype)
+                still = (ArcMove.of(zero, zero, self.dt),) * self.slots
+                first = self.law(self.law_input(state.pose, (), still, wheel), ref)
+                moves = () if self.limiter else still
+            queue = (jnp.zeros_like(first),) * self.slots
+        return LoopCarry(pose, wheel, first, queue, moves, state, ref, acc)
+
+    def __call__(self, carry: LoopCarry, noise_next: Any) -> tuple[LoopCarry, Any]:
+        """Move over one period under the carried command; compute the next one.
+
+        ``noise_next``: the measurement noise at the end of the period (3,)
+        (``None`` without a disturbance).
+        """
+        pose, wheel, fresh, queue, moves, state, ref, acc = carry
+        spec, estimator, dt = self.disturbance, self.options.estimator, self.dt
+        applied = fresh if spec is None else self.delayed(fresh, queue)
+        if spec is not None:
+            region = jnp.int32(-1)
+        elif self.fold or self.record:
+            region = split_region(pose, ref, self.params, self.options)
+        else:
+            region = None
+        followed, wheel = self.followed(wheel, applied)
+        if estimator is not None:
+            if moves:
+                # The arc of the carried command is computed here, not where
+                # the law returns it: XLA would fuse the law into each of the
+                # arc's parts and compute it four times.
+                fresh_move = ArcMove.of(fresh.real, fresh.imag, dt)
+                move = self.delayed(fresh_move, moves)
+                moves = (fresh_move, *moves[:-1])
+            else:
+                move = ArcMove.of(followed.real, followed.imag, dt)
+        target = (followed.real, followed.imag)
+        robot = self.robot
+        if spec is not None:
+            target, robot = spec.realised(followed, robot), spec.true_robot(robot)
+        pose, wheel, rims, distance = advance_period(
+            pose, wheel, target, robot, dt, self.options, model=self.robot
         )
-    rims = law.wheel_speeds(new_state.velocity[0], new_state.velocity[1], robot)
-    return new_state, StepOutput(v, omega, region, rims, distance)
+        out = StepOutput(applied.real, applied.imag, region, rims, distance)
+        if self.fold is not None:
+            acc = self.fold(acc, pose, out)
+        queue = (fresh, *queue[:-1]) if queue else ()
+        if spec is None:
+            seen = pose
+        else:
+            sensed = spec.measurement(pose, noise_next)
+            if estimator is None:
+                seen = sensed.pose()
+            else:
+                predicted = ideal_move(state.pose, move)
+                state = estimator.update(
+                    state, predicted, followed, sensed, ref, self.estimate, self.robot, dt
+                )
+                seen = state.pose
+        next_ref = ref if self.aim is None else self.aim(acc)
+        law_pose = seen if estimator is None else self.law_input(seen, queue, moves, wheel)
+        command = self.law(law_pose, next_ref)
+        recorded = None
+        if self.record:
+            recorded = (pose.stacked(), out) + (() if spec is None else (seen.stacked(),))
+        return LoopCarry(pose, wheel, command, queue, moves, state, next_ref, acc), recorded
 
 
-Fold = Callable[[Any, jax.Array, StepOutput], Any]
+def _select(flag: jax.Array, on_true: Any, on_false: Any) -> Any:
+    """``on_true`` where ``flag`` else ``on_false``, leaf by leaf (pytrees of one structure)."""
+    return jax.tree.map(lambda a, b: jnp.where(flag, a, b), on_true, on_false)
 
 
 def scan_closed_loop(
@@ -223,34 +399,61 @@ def scan_closed_loop(
     dt: jax.Array,
     options: Options,
     *,
+    disturbance: Any = None,
+    estimate: Any = None,
+    aim: Callable[[Any], jax.Array] | None = None,
     fold: Fold | None = None,
     acc: Any = None,
     record: bool = False,
 ) -> tuple[jax.Array, Any, Any]:
-    """Run ``options.steps`` control periods for one pose, streaming or recording.
+    """Run the closed loop of one pose: the one ``lax.scan`` of ``ClosedLoopStep``.
 
-    The same closed loop as scanning ``closed_loop_step``, arranged for
-    speed (see ``_split_loop``).
+    Every run is this scan: rollouts, streamed metrics, sweeps, waypoint
+    chains, moving references, the disturbed runs and the tuning losses.
 
     Args:
-        ref: ``(3,)`` reference pose.
+        ref: ``(3,)`` reference pose (of the first command, with ``aim``).
         params: the controller's parameters.
         init: ``(3,)`` initial pose.
-        robot: robot parameters.
+        robot: robot parameters (the nominal one: the law's, the wheel
+            controller's and the estimator's model).
         dt: control period, s.
         options: static rollout options.
+        disturbance: a ``sensing.Disturbance`` of one run (no batch axes;
+            its ``noise (steps, 3)`` sets the number of periods), or ``None``.
+        estimate: the estimator's parameters (``options.estimator``; a
+            disturbed run only).
+        aim: ``aim(acc) -> ref``, the reference of the command computed after
+            each period, from the fold's accumulator.
         fold: ``fold(acc, pose, out) -> acc``, called after every period with
-            the pose at its end as a ``SplitPose`` (``pose.stacked()`` is
+            the true pose at its end as a ``SplitPose`` (``pose.stacked()`` is
             ``[x, y, θ]``, ``pose.frame()`` gives ``cos θ`` and ``sin θ``
             without computing them) and its ``StepOutput``: metrics that
             stream through the scan instead of storing the trajectory.
         acc: the initial value of the fold's accumulator (a pytree).
-        record: also return every pose and ``StepOutput`` (stacked over steps).
+        record: also return every pose and ``StepOutput`` (stacked over
+            steps) and, in a disturbed run, the pose the law's side holds at
+            each sample: the estimate (before compensation), or the
+            measurement without an estimator.
 
     Returns:
-        ``(final pose (3,), acc, (poses (steps, 3), StepOutput) or None)``.
+        ``(final pose (3,), acc, records or None)``.
     """
-    return _split_loop(ref, params, init, robot, dt, options, fold, acc, record)
+    step = ClosedLoopStep(params, robot, dt, options, disturbance, estimate, aim, fold, record)
+    carry = step.start(ref, init, acc)
+    if disturbance is None:
+        xs, length = None, options.steps
+    else:
+        # The measurement at sample k + 1 is taken at the end of period k; the
+        # last period's is never used.
+        noise = disturbance.noise
+        xs, length = jnp.concatenate([noise[1:], jnp.zeros_like(noise[:1])]), None
+    def body(carry, noise_next):
+        return step(carry, noise_next)
+
+    body = remat(body) if options.remat else body
+    carry, ys = jax.lax.scan(body, carry, xs, length=length)
+    return carry.pose.stacked(), carry.acc, ys
 
 
 def remat(body: Callable) -> Callable:
@@ -405,11 +608,11 @@ def advance_period(
             the ideal loop's last held command under a speed limiter, or
             ``None``.
         command: ``(v cm/s, ω rad/s)``, held over the period (after the speed
-            limiter, if ``options.accel_limit``).
+            limiter, which ``ClosedLoopStep`` applies).
         robot: the robot that moves.
         dt: control period, s.
-        options: ``velocity``, ``substeps``, ``wheel_limit`` and
-            ``accel_limit`` are used.
+        options: ``velocity``, ``substeps``, ``wheel_limit`` and the wheel
+            loop's flags are used.
         model: the robot the wheel controller believes in (non-ideal loop;
             default ``robot``).
 
@@ -419,9 +622,6 @@ def advance_period(
     """
     v, omega = command
     if options.velocity == "ideal":
-        if options.accel_limit:
-            v, omega = speed_limit(wheel, v, omega, robot, dt)
-            wheel = HeldCommand(v, omega)
         new = ideal_arc(pose, v, omega, dt)
         return new, wheel, law.wheel_speeds(v, omega, robot), jnp.abs(v) * dt
     position, heading, theta, wheel, distance = velocity_loop.advance_split(
@@ -441,43 +641,6 @@ def advance_period(
     )
     rims = law.wheel_speeds(wheel.v, wheel.omega, robot)
     return SplitPose(position, heading, theta), wheel, rims, distance
-
-
-def _split_loop(ref, params, init, robot, dt, options, fold, acc, record):
-    """The closed loop, arranged for speed; equal to scanning ``closed_loop_step``.
-
-    Three things make it several times faster than the plain scan:
-
-    * The position and heading ride as complex numbers ``x + i y`` and
-      ``cos θ + i sin θ`` (``SplitPose``), so no step recomputes the
-      heading's cosine and sine for the law (``frame=`` of
-      ``Controller.command``) or the arc. θ itself is carried too, for the
-      pose; the non-ideal wheel loop rides as four scalars
-      (``velocity_loop.WheelState``), never as ``(N, 2)`` arrays.
-    * The command of the next period is computed at the end of each period
-      and carried as ``v + i ω``. XLA on the CPU compiles a step into one
-      loop per output of the step and repeats in each whatever they share;
-      carried this way, the law is evaluated in one loop only.
-    * The heading is renormalised every period by one Newton step towards
-      ``|heading| = 1``, so rounding does not make it drift over long runs.
-    """
-
-    def body(carry, _):
-        pose, wheel, cmd, acc = carry
-        v, omega = cmd.real, cmd.imag
-        region = split_region(pose, ref, params, options) if fold or record else None
-        pose, wheel, rims, distance = advance_period(pose, wheel, (v, omega), robot, dt, options)
-        out = StepOutput(v, omega, region, rims, distance)
-        if fold is not None:
-            acc = fold(acc, pose, out)
-        carry = (pose, wheel, split_command(pose, ref, params, options), acc)
-        return carry, ((pose.stacked(), out) if record else None)
-
-    pose = SplitPose.of(init)
-    carry = (pose, initial_wheel(init, options), split_command(pose, ref, params, options), acc)
-    step = remat(body) if options.remat else body
-    (pose, _, _, acc), ys = jax.lax.scan(step, carry, None, length=options.steps)
-    return pose.stacked(), acc, ys
 
 
 # ---------------------------------------------------------------- batching

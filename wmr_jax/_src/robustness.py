@@ -46,7 +46,7 @@ from wmr_jax._src.sensing.disturbances import (
     draw_disturbances,
 )
 from wmr_jax._src.sensing.estimators import resolve_estimator
-from wmr_jax._src.sensing.loop import perturbed_metrics
+from wmr_jax._src.sensing.loop import disturbed_metrics
 
 __all__ = [
     "DEFAULT_NOISE_DEG",
@@ -153,13 +153,13 @@ def _check_with_first_arrivals(m: Any, name: str) -> None:
     """Raise unless ``m`` is ``PoseMetrics`` that carry each run's first arrival."""
     if not isinstance(m, PoseMetrics):
         raise ValueError(
-            f"{name} is a {type(m).__name__}; allowed: a PoseMetrics (perturbed_metrics "
+            f"{name} is a {type(m).__name__}; allowed: a PoseMetrics (disturbed_metrics "
             "returns one)"
         )
     if m.first_arrival is None:
         raise ValueError(
             f"{name}.first_arrival is None (evaluate_poses does not record first arrivals); "
-            "allowed: the metrics of perturbed_metrics, which do"
+            "allowed: the metrics of disturbed_metrics, which do"
         )
 
 
@@ -241,7 +241,7 @@ def monte_carlo(
         latency: apply each command one sample late.
         velocity: ``"ideal"`` or ``"nonideal"``.
         dt: control period, s.
-        x64: compute in float64 (see ``perturbed_metrics``).
+        x64: compute in float64 (see ``disturbed_metrics``).
         estimator: between the measurements and the law: ``None`` (raw
             feedback), ``"observer"``, ``"ekf"`` or their parameters
             (docs/model.md §9).
@@ -290,7 +290,7 @@ def monte_carlo(
     rows = []
     for sxy, sdeg in zip(noise_xy, noise_deg, strict=True):
         scale = np.array([sxy, sxy, math.radians(sdeg)])
-        m = perturbed_metrics(
+        m = disturbed_metrics(
             Disturbance(refs, unit * scale, mismatch, delay),
             params,
             controller=name,
@@ -382,7 +382,7 @@ def robustness_study(
         velocity: ``"ideal"`` or ``"nonideal"``.
         noise_xy: σ of the x and y measurement noise per level, cm.
         noise_deg: σ of the heading measurement noise per level, degrees.
-        x64: compute in float64 (see ``perturbed_metrics``).
+        x64: compute in float64 (see ``disturbed_metrics``).
         estimator: the estimator of every controller (``None``: raw feedback).
         robot: the robot of every run (``monte_carlo``); default ``Robot()``.
         horizon: simulated time per run, s; default ``study_horizon(robot)``.

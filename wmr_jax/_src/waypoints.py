@@ -1,7 +1,8 @@
 """Consecutive motions: a chain of waypoints, and references that move.
 
-Two closed loops built from ``loops.closed_loop_step``, each a
-``lax.scan`` over one robot, batched by ``loops.batched``:
+Two uses of the one closed loop (``loops.scan_closed_loop``), each over one
+robot, batched by ``loops.batched``; a fold follows the arrivals and
+``aim`` hands the law the reference of each period:
 
 * **Waypoint chain.** The robot is given waypoint 0 and, when it has arrived
   there, waypoint 1, and so on. Arrived means the test of
@@ -101,61 +102,81 @@ class TrackRun(NamedTuple):
 
 
 def _chain_single(spec, params, init, robot, dt, options: Options) -> ChainRun:
-    """Scan one robot through its waypoints; ``spec = (waypoints (K, 3), tolerances (4,))``."""
+    """Run one robot through its waypoints; ``spec = (waypoints (K, 3), tolerances (4,))``.
+
+    The fold carries ``(period, leg, period at which each waypoint was
+    reached (-1: not yet), start of the last run of arrived samples on the
+    last leg (-1: none))``; ``aim`` hands the law the waypoint of the leg.
+    """
     waypoints, tolerances = spec
     n_legs = waypoints.shape[0]
     pass_r, pass_theta, final_r, final_theta = (tolerances[i] for i in range(4))
     dtype = waypoints.dtype
 
-    def body(carry, k):
-        state, leg, arrival, run_start = carry
-        target = waypoints[leg]
-        state, out = loops.closed_loop_step(state, target, params, robot, dt, options)
+    def fold(acc, pose, out):
+        k, leg, reached_at, run_start = acc
         last = leg == n_legs - 1
         tol_r = jnp.where(last, final_r, pass_r)
         tol_theta = jnp.where(last, final_theta, pass_theta)
-        ok = metrics.arrived(state.pose, target, tol_r=tol_r, tol_theta=tol_theta)
+        ok = metrics.arrived(pose.stacked(), waypoints[leg], tol_r=tol_r, tol_theta=tol_theta)
         reached = ok & ~last
-        arrival = jnp.where(
-            reached & (jnp.arange(n_legs) == leg), (k + 1).astype(dtype) * dt, arrival
-        )
+        reached_at = jnp.where(reached & (jnp.arange(n_legs) == leg), k, reached_at)
         # On the last leg, remember where the current run of arrived samples began.
         run_start = jnp.where(last & ok, jnp.where(run_start < 0, k, run_start), -1)
-        record = (state.pose, out, leg)
-        return (state, leg + reached.astype(leg.dtype), arrival, run_start), record
+        return k + 1, leg + reached.astype(leg.dtype), reached_at, run_start
 
-    carry = (
-        loops.initial_state(init),
+    start = (
         jnp.zeros((), jnp.int32),
-        jnp.full((n_legs,), jnp.inf, dtype),
+        jnp.zeros((), jnp.int32),
+        jnp.full((n_legs,), -1, jnp.int32),
         jnp.full((), -1, jnp.int32),
     )
-    steps = jnp.arange(options.steps, dtype=jnp.int32)
-    (_, _, arrival, run_start), (poses, out, leg) = jax.lax.scan(body, carry, steps)
-    settled = jnp.where(run_start >= 0, (run_start + 1).astype(dtype) * dt, jnp.inf)
-    arrival = arrival.at[-1].set(settled)
-    traj = _as_trajectory(init, poses, out)
-    return ChainRun(traj, leg, arrival)
+    _, (_, _, reached_at, run_start), (poses, out) = loops.scan_closed_loop(
+        waypoints[0],
+        params,
+        init,
+        robot,
+        dt,
+        options,
+        aim=lambda acc: waypoints[acc[1]],
+        fold=fold,
+        acc=start,
+        record=True,
+    )
+    arrival = _period_end(reached_at.at[-1].set(run_start), dt, dtype)
+    # The leg of period k: the waypoints reached before it.
+    periods = jnp.arange(options.steps, dtype=jnp.int32)[:, None]
+    passed = (reached_at[None, :-1] >= 0) & (reached_at[None, :-1] < periods)
+    leg = jnp.sum(passed, axis=1, dtype=jnp.int32)
+    return ChainRun(_as_trajectory(init, poses, out), leg, arrival)
 
 
 def _track_single(refs, params, init, robot, dt, options: Options) -> TrackRun:
-    """Scan one robot after a reference per period, ``refs (steps, 3)``."""
-    dtype = refs.dtype
+    """Run one robot after a reference per period, ``refs (steps, 3)``."""
+    last = refs.shape[0] - 1
+    _, _, (poses, out) = loops.scan_closed_loop(
+        refs[0],
+        params,
+        init,
+        robot,
+        dt,
+        options,
+        aim=lambda k: refs[jnp.minimum(k, last)],
+        fold=lambda k, pose, out: k + 1,
+        acc=jnp.zeros((), jnp.int32),
+        record=True,
+    )
+    ok = metrics.arrived(poses, refs)
+    # The samples from which every later one is arrived: the last run of them.
+    settled = jnp.cumprod(ok[::-1].astype(jnp.int32))[::-1]
+    run_start = jnp.where(ok[-1], settled.shape[0] - jnp.sum(settled), -1)
+    arrival = _period_end(run_start, dt, refs.dtype)
+    return TrackRun(_as_trajectory(init, poses, out), _distance(poses, refs), arrival)
 
-    def body(carry, xs):
-        state, run_start = carry
-        k, ref = xs
-        state, out = loops.closed_loop_step(state, ref, params, robot, dt, options)
-        ok = metrics.arrived(state.pose, ref)
-        run_start = jnp.where(ok, jnp.where(run_start < 0, k, run_start), -1)
-        error = _distance(state.pose, ref)
-        return (state, run_start), (state.pose, out, error)
 
-    carry = (loops.initial_state(init), jnp.full((), -1, jnp.int32))
-    xs = (jnp.arange(options.steps, dtype=jnp.int32), refs)
-    (_, run_start), (poses, out, error) = jax.lax.scan(body, carry, xs)
-    arrival = jnp.where(run_start >= 0, (run_start + 1).astype(dtype) * dt, jnp.inf)
-    return TrackRun(_as_trajectory(init, poses, out), error, arrival)
+def _period_end(period: jax.Array, dt: jax.Array, dtype: Any) -> jax.Array:
+    """The time at the end of ``period`` (int32, ``-1`` for never: ``inf``), s."""
+    return jnp.where(period >= 0, (period + 1).astype(dtype) * dt, jnp.inf)
 
 
 def _distance(pose: jax.Array, ref: jax.Array) -> jax.Array:

@@ -2,11 +2,13 @@
 
 A ``Disturbance`` holds what makes one run differ from the nominal one:
 pose-measurement noise at every sample, each wheel's radius error, the body
-mass error (non-ideal loop) and a one-sample latency. ``sample_disturbance``
+mass error (non-ideal loop) and a latency of a whole number of samples. ``sample_disturbance``
 is the one place they are drawn (the Monte Carlo, the standard conditions
 and the robust tuner's loss alike); ``realised`` and ``measured`` are how the
 disturbed loop (``sensing.loop``) applies them.
 
+* **Latency** of ``m`` samples (``delay``, any integer ``m >= 0``): the
+  command computed at sample ``k`` acts from sample ``k + m``, zero before.
 * **Wheel-radius mismatch.** The controller converts rim speeds to wheel
   turns with the nominal radius, so a wheel of radius ``r (1 + δ)`` moves its
   rim ``1 + δ`` times as fast as commanded; each wheel has its own ``δ``.
@@ -71,14 +73,27 @@ class Disturbance(NamedTuple):
         mismatch: ``(3,)`` ``[left rim factor, right rim factor, mass factor]``:
             realised over commanded rim speed per wheel, and true over model
             body mass (1: no mismatch).
-        delay: ``()`` 1.0 for a one-sample latency, 0.0 for none (per run,
-            or one value shared by a batch).
+        delay: ``()`` the latency in samples, an integer ``m >= 0``: the
+            command computed at sample ``k`` acts from sample ``k + m`` (per
+            run, or one value shared by a batch; stored as a float).
     """
 
     ref: jax.Array
     noise: jax.Array
     mismatch: jax.Array
     delay: jax.Array
+
+    def realised(self, command: jax.Array, robot: Robot) -> tuple[jax.Array, ...]:
+        """The body velocity ``(v, ω)`` of the rims of ``command`` (``v + i ω``), scaled."""
+        return realised(command, self.mismatch, robot)
+
+    def true_robot(self, robot: Robot) -> Robot:
+        """The robot that moves: ``robot`` with its body mass off by the mass factor."""
+        return robot.replace(body_mass=robot.body_mass * self.mismatch[2])
+
+    def measurement(self, pose: loops.SplitPose, noise: jax.Array) -> Measurement:
+        """What the sensor reports at ``pose`` with ``noise`` ``(3,)``."""
+        return measurement(pose, noise)
 
 
 def realised(command: jax.Array, mismatch: jax.Array, robot: Robot) -> tuple[jax.Array, ...]:
@@ -155,7 +170,13 @@ def checked_disturbance(disturbance: Disturbance) -> tuple[np.ndarray, ...]:
             "allowed: a Disturbance (sample_disturbance returns one)"
         )
     refs, noise, mismatch, delay = (
-        checks.real_array(f"disturbance.{field}", value, "real numbers (no bools or strings)")
+        checks.real_array(
+            f"disturbance.{field}",
+            value,
+            "an integer number of samples m >= 0 (no bools or strings)"
+            if field == "delay"
+            else "real numbers (no bools or strings)",
+        )
         for field, value in zip(Disturbance._fields, disturbance, strict=True)
     )
     if refs.ndim != 2 or refs.shape[1] != 3:
@@ -178,9 +199,12 @@ def checked_disturbance(disturbance: Disturbance) -> tuple[np.ndarray, ...]:
     )
     checks.require_representable("disturbance.mismatch", mismatch)
     checks.require_representable("disturbance.noise", noise, tiny_ok=True)
-    if delay.shape not in ((), (n,)) or not np.all((delay == 0.0) | (delay == 1.0)):
+    steps = noise.shape[1]
+    whole = np.isfinite(delay) & (delay >= 0) & (delay <= steps)
+    if delay.shape not in ((), (n,)) or not np.all(whole & (np.floor(delay) == delay)):
         raise ValueError(
-            f"disturbance.delay = {delay!r} is not allowed; allowed: 0.0 or 1.0, or ({n},) of them"
+            f"disturbance.delay = {delay!r} is not allowed; allowed: an integer number of "
+            f"samples 0 <= m <= {steps} (the steps), or ({n},) of them"
         )
     return refs, noise, mismatch, delay
 

@@ -1,22 +1,22 @@
 """The disturbed closed loop (docs/model.md §7), with or without an estimator (§9).
 
-One closed loop per run, with four departures from the nominal one, all
-held in a ``sensing.disturbances.Disturbance``:
+The one closed-loop step of every run (``loops.ClosedLoopStep``), given a
+``sensing.disturbances.Disturbance``: four departures from the nominal run,
+which is the same step without one.
 
 * **Pose-measurement noise.** The controller's side sees ``pose + n_k``;
   arrival is judged on the true pose.
 * **Wheel-radius mismatch** and **mass mismatch** (``disturbances.realised``).
-* **One-sample latency.** The command computed at sample ``k`` is applied over
-  period ``k + 1`` (zero over the first period).
+* **Latency** of ``delay`` samples: the command computed at sample ``k`` is
+  applied from period ``k + delay`` (zero before).
 
 Between the measurement and the law sits the loop's estimator
 (``Options.estimator``, docs/model.md §9): ``None`` hands the law the raw
-measurement, as before estimators existed (bit for bit); an estimator
-predicts over each period with the command applied, corrects toward the
-measurement, and under latency the law sees its estimate rolled forward over
-the command in flight (compensation). With no noise, no mismatch and no
-latency the run is the nominal rollout, and its metrics those of
-``docs/model.md §6`` (tested). The metrics stream through the scan
+measurement; an estimator predicts over each period with the command
+applied, corrects toward the measurement, and under latency the law sees its
+estimate rolled forward over the commands in flight (compensation). With no
+noise, no mismatch and no latency the run is the nominal rollout, and its
+metrics those of ``docs/model.md §6`` (tested). The metrics stream through the scan
 (``metrics.stream_update``), so batches are bounded in memory.
 """
 
@@ -31,17 +31,11 @@ import numpy as np
 
 from wmr_jax._src import checks, controllers, loops, metrics
 from wmr_jax._src import rollout as simulation
-from wmr_jax._src.loops import Options, StepOutput
+from wmr_jax._src.loops import Options
 from wmr_jax._src.metrics import PoseMetrics
 from wmr_jax._src.params import Robot
 from wmr_jax._src.rollout import DEFAULT_DT
-from wmr_jax._src.sensing.disturbances import (
-    Disturbance,
-    checked_disturbance,
-    measured,
-    measurement,
-    realised,
-)
+from wmr_jax._src.sensing.disturbances import Disturbance, checked_disturbance
 from wmr_jax._src.sensing.estimators import resolve_estimator
 
 __all__ = [
@@ -49,7 +43,7 @@ __all__ = [
     "batched_disturbed",
     "disturbed_rollout",
     "disturbed_run",
-    "perturbed_metrics",
+    "disturbed_metrics",
     "prepare_disturbed",
 ]
 
@@ -75,11 +69,6 @@ class ClosedLoop(NamedTuple):
     robot: Any = None
 
 
-def _select(flag: jax.Array, on_true: Any, on_false: Any) -> Any:
-    """``on_true`` where ``flag`` else ``on_false``, leaf by leaf (pytrees of one structure)."""
-    return jax.tree.map(lambda a, b: jnp.where(flag, a, b), on_true, on_false)
-
-
 def disturbed_run(
     spec: Disturbance,
     params: Any,
@@ -93,33 +82,28 @@ def disturbed_run(
     acc: Any = None,
     record: bool = False,
 ) -> tuple[jax.Array, Any, Any]:
-    """Run one pose under its ``Disturbance`` (docs/model.md §7, §9); the one disturbed loop.
+    """Run one pose under its ``Disturbance`` (docs/model.md §7, §9): the one step, disturbed.
 
-    The robustness Monte Carlo, the standard conditions and the robust tuner
-    all run this. Over period ``k`` the robot moves under the command
-    computed at sample ``k`` (``delay`` 0) or ``k − 1`` (``delay`` 1; zero over
-    the first period), its rims scaled by the wheel-radius factors; in the
+    ``loops.scan_closed_loop`` with ``disturbance=spec``. Over period ``k``
+    the robot moves under the command computed at sample ``k − delay`` (zero
+    before the first), its rims scaled by the wheel-radius factors; in the
     non-ideal loop the true robot's mass is ``M`` times the mass factor while
     the wheel controller keeps the nominal model. The law sees the
     measurement (``options.estimator`` ``None``) or the estimator's
     estimate, compensated for latency. Arrival is judged on the true pose.
-
-    With ``options.accel_limit`` (ideal loop; ``prepare_disturbed`` sets it
-    for a robot that gives acceleration limits, docs/model.md §4.2.2) the
-    command applied passes through the robot's speed limiter before the
-    wheels' radii scale it, and the estimator predicts with what the
-    limiter let through (its model is the ideal robot, limiter included);
-    without it the run is bit for bit what it was before limiters existed.
+    With ``options.accel_limit`` the command passes through the robot's speed
+    limiter before the wheels' radii scale it (a base's limiter is software,
+    the mismatch is in its wheels), and the estimator predicts with what the
+    limiter let through.
 
     Args:
-        spec: the disturbance of this run (no batch axes; ``noise (steps, 3)``).
+        spec: the disturbance of this run (no batch axes; ``noise (steps, 3)``;
+            ``delay`` at most ``options.max_delay``).
         params: the controller's parameters.
         init: ``(3,)`` initial pose.
         robot: the nominal robot (the controller's and estimator's model).
         dt: control period, s.
-        options: static options; ``options.temperature`` selects the relaxed
-            law, ``options.estimator`` the estimator, ``options.accel_limit``
-            the speed limiter.
+        options: static options.
         estimate: the estimator's parameters (unused without one).
         fold: ``fold(acc, true pose (a loops.SplitPose), StepOutput) -> acc``
             after every period.
@@ -131,126 +115,22 @@ def disturbed_run(
     Returns:
         ``(final true pose (3,), acc, (poses, outputs, estimates) or None)``.
     """
-    ref = spec.ref
-    true_robot = robot.replace(body_mass=robot.body_mass * spec.mismatch[2])
-    estimator = options.estimator
-    if estimator is None:
-        return _raw_run(spec, params, init, robot, true_robot, dt, options, fold, acc, record)
-    limiter, moving = _limiter(options)
-    compensate = estimate.compensate
-    late = spec.delay > 0
-
-    def law_input(state, in_flight: loops.ArcMove) -> loops.SplitPose:
-        """The estimate, rolled over the command in flight under latency (compensation)."""
-        if not compensate:
-            return state.pose
-        return _select(late, loops.ideal_move(state.pose, in_flight), state.pose)
-
-    def body(carry, noise_next):
-        pose, wheel, fresh, held, held_move, state, acc = carry
-        applied = jnp.where(late, held, fresh)
-        if limiter:
-            # The estimator knows what its limiter lets through: it predicts
-            # with that, and rolls its estimate over the command in flight as
-            # the limiter will let it through next period.
-            followed, wheel = _followed(wheel, applied, robot, dt)
-            move = loops.ArcMove.of(followed.real, followed.imag, dt)
-        else:
-            # The estimator's prediction moves its estimate by the applied
-            # command's arc; under latency the command now in flight is
-            # ``fresh``, whose arc is the next prediction's too (carried as
-            # ``held_move``). The arc is computed here, from the carried
-            # command, not where the law returns it: XLA would fuse the law
-            # into each of the arc's parts and compute it four times.
-            fresh_move = loops.ArcMove.of(fresh.real, fresh.imag, dt)
-            followed, move = applied, _select(late, held_move, fresh_move)
-        target = realised(followed, spec.mismatch, robot)
-        pose, wheel, rims, distance = loops.advance_period(
-            pose, wheel, target, true_robot, dt, moving, model=robot
-        )
-        out = StepOutput(applied.real, applied.imag, jnp.int32(-1), rims, distance)
-        if fold is not None:
-            acc = fold(acc, pose, out)
-        sensed = measurement(pose, noise_next)
-        predicted = loops.ideal_move(state.pose, move)
-        state = estimator.update(state, predicted, followed, sensed, ref, estimate, robot, dt)
-        if limiter:
-            in_flight = _followed(wheel, fresh, robot, dt)[0]
-            in_flight = loops.ArcMove.of(in_flight.real, in_flight.imag, dt)
-        else:
-            in_flight = held_move = fresh_move
-        command = loops.split_command(law_input(state, in_flight), ref, params, options)
-        recorded = (pose.stacked(), out, state.pose.stacked()) if record else None
-        return (pose, wheel, command, fresh, held_move, state, acc), recorded
-
-    pose = loops.SplitPose.of(init)
-    # The estimate starts from the first measurement (docs/model.md §9); no
-    # command is in flight before the first sample (a move of zero).
-    state = estimator.start(measured(pose, spec.noise[0]), estimate, robot)
-    zero = jnp.zeros((), init.dtype)
-    still = loops.ArcMove.of(zero, zero, dt)
-    first = loops.split_command(law_input(state, still), ref, params, options)
-    later = jnp.concatenate([spec.noise[1:], jnp.zeros_like(spec.noise[:1])])
-    wheel = loops.initial_wheel(init, options)
-    carry = (pose, wheel, first, jnp.zeros_like(first), still, state, acc)
-    step = loops.remat(body) if options.remat else body
-    (pose, *_, acc), ys = jax.lax.scan(step, carry, later)
-    return pose.stacked(), acc, ys
+    return loops.scan_closed_loop(
+        spec.ref,
+        params,
+        init,
+        robot,
+        dt,
+        options,
+        disturbance=spec,
+        estimate=estimate,
+        fold=fold,
+        acc=acc,
+        record=record,
+    )
 
 
-def _limiter(options: Options) -> tuple[bool, Options]:
-    """Whether the run has the ideal loop's speed limiter, and the options that move the robot.
-
-    The disturbed loop applies the limiter itself, to the command sent and
-    before the wheels' radii realise it (a base's limiter is software; the
-    mismatch is in its wheels); the robot then follows what comes out
-    (``loops.advance_period`` with the limiter off).
-    """
-    limiter = options.velocity == "ideal" and options.accel_limit
-    return limiter, dataclasses.replace(options, accel_limit=False) if limiter else options
-
-
-def _followed(wheel: loops.HeldCommand, applied: jax.Array, robot: Robot, dt: jax.Array):
-    """``applied`` (``v + i ω``) after the speed limiter in state ``wheel``; its new state."""
-    v, omega = loops.speed_limit(wheel, applied.real, applied.imag, robot, dt)
-    return jax.lax.complex(v, omega), loops.HeldCommand(v, omega)
-
-
-def _raw_run(spec, params, init, robot, true_robot, dt, options, fold, acc, record):
-    """``disturbed_run`` without an estimator: the law sees each measurement itself."""
-    ref = spec.ref
-    limiter, moving = _limiter(options)
-
-    def body(carry, noise_next):
-        pose, wheel, fresh, held, acc = carry
-        applied = jnp.where(spec.delay > 0, held, fresh)
-        followed = applied
-        if limiter:
-            followed, wheel = _followed(wheel, applied, robot, dt)
-        target = realised(followed, spec.mismatch, robot)
-        pose, wheel, rims, distance = loops.advance_period(
-            pose, wheel, target, true_robot, dt, moving, model=robot
-        )
-        out = StepOutput(applied.real, applied.imag, jnp.int32(-1), rims, distance)
-        if fold is not None:
-            acc = fold(acc, pose, out)
-        sensed = measured(pose, noise_next)
-        command = loops.split_command(sensed, ref, params, options)
-        recorded = (pose.stacked(), out, sensed.stacked()) if record else None
-        return (pose, wheel, command, fresh, acc), recorded
-
-    pose = loops.SplitPose.of(init)
-    first = loops.split_command(measured(pose, spec.noise[0]), ref, params, options)
-    # The measurement at sample k + 1 is taken at the end of period k; the
-    # last period's is never used.
-    later = jnp.concatenate([spec.noise[1:], jnp.zeros_like(spec.noise[:1])])
-    carry = (pose, loops.initial_wheel(init, options), first, jnp.zeros_like(first), acc)
-    step = loops.remat(body) if options.remat else body
-    (pose, _, _, _, acc), ys = jax.lax.scan(step, carry, later)
-    return pose.stacked(), acc, ys
-
-
-def _perturbed_single(spec: Disturbance, params, estimate, init, robot, dt, options: Options):
+def _disturbed_single(spec: Disturbance, params, estimate, init, robot, dt, options: Options):
     """Run one pose under its ``Disturbance``, streaming the ``docs/model.md §6`` metrics."""
     ref = spec.ref
     thresholds = metrics.Thresholds()
@@ -305,10 +185,10 @@ def batched_disturbed(single):
     return run
 
 
-_perturbed_jit = loops.EntryJit(batched_disturbed(_perturbed_single), static_argnames=("options",))
+_disturbed_jit = loops.EntryJit(batched_disturbed(_disturbed_single), static_argnames=("options",))
 
 
-def perturbed_metrics(
+def disturbed_metrics(
     disturbance: Disturbance,
     params: Any = None,
     *,
@@ -350,7 +230,7 @@ def perturbed_metrics(
         args, options = prepare_disturbed(
             disturbance, params, controller, estimator, init, dt, robot, velocity
         )
-        out = _perturbed_jit(*args, options=options)
+        out = _disturbed_jit(*args, options=options)
         result = PoseMetrics(**{f: np.asarray(out[f]) for f in PoseMetrics._fields})
         checks.require_finite_runs(
             np.isfinite(result.final_distance),
@@ -405,6 +285,8 @@ def prepare_disturbed(
     if options.velocity == "ideal":
         # The robot's speed limiter, as in the rollouts (docs/model.md §4.2.2).
         options = loops.for_robot(options, robot, dt)
+    # The commands in flight the loop carries: as many as the longest latency.
+    options = dataclasses.replace(options, max_delay=max(1, int(np.max(delay))))
     if np.ndim(init) != 1:
         raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,)")
     dtype = dt.dtype
@@ -458,7 +340,7 @@ def disturbed_rollout(
 ) -> dict[str, np.ndarray]:
     """Return the true poses, estimates and applied commands of disturbed runs (docs/model.md §7).
 
-    Args: as for ``perturbed_metrics``.
+    Args: as for ``disturbed_metrics``.
 
     Returns:
         ``{"poses": (N, steps + 1, 3) true poses, the initial one first,
