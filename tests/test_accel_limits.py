@@ -112,20 +112,6 @@ def test_without_limits_the_loop_has_no_limiter_and_the_same_results(refs, free)
         np.testing.assert_array_equal(getattr(unbound, field), getattr(free, field))
 
 
-def test_the_plain_step_applies_the_same_limiter(refs, limited):
-    options = loops.for_robot(loops.Options(steps=STEPS), HEAVY, DT)
-
-    def plain(ref):
-        def body(state, _):
-            state, _ = loops.closed_loop_step(state, ref, GAINS, HEAVY, jnp.asarray(DT), options)
-            return state, state.pose
-
-        return jax.lax.scan(body, loops.initial_state(jnp.zeros(3)), None, length=STEPS)[1]
-
-    poses = np.asarray(jax.jit(plain)(jnp.asarray(refs[1])))
-    np.testing.assert_allclose(poses, limited.poses[1, 1:], rtol=0, atol=1e-12)
-
-
 def test_the_limiter_is_differentiable_in_the_command_and_the_limit():
     def step(a, v):
         robot = HEAVY.replace(accel_max=a)

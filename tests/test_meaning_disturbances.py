@@ -142,14 +142,21 @@ def test_a_valid_disturbance_is_returned_as_float_arrays():
         ),
         (
             {"delay": 0.5},
-            r"^disturbance\.delay = array\(0\.5\) is not allowed; allowed: 0\.0 or 1\.0, "
-            r"or \(2,\) of them$",
+            r"^disturbance\.delay = array\(0\.5\) is not allowed; allowed: an integer number "
+            r"of samples 0 <= m <= 3 \(the steps\), or \(2,\) of them$",
         ),
         (
             {"delay": np.zeros(3)},
             r"^disturbance\.delay = array\(\[0\., 0\., 0\.\]\) is not allowed",
         ),
-        ({"delay": np.array([0.0, 2.0])}, r"^disturbance\.delay"),
+        ({"delay": np.array([0.0, 4.0])}, r"^disturbance\.delay = .*allowed: an integer"),
+        ({"delay": -1.0}, r"^disturbance\.delay = array\(-1\.\) is not allowed; allowed: an"),
+        ({"delay": np.nan}, r"^disturbance\.delay = array\(nan\) is not allowed; allowed: an"),
+        (
+            {"delay": True},
+            r"^disturbance\.delay = True is not allowed; allowed: an integer number of "
+            r"samples m >= 0 \(no bools or strings\)$",
+        ),
         (
             {"ref": np.array([["a", "b", "c"]] * 2)},
             r"(?s)^disturbance\.ref = .* is not allowed; allowed: real numbers "

@@ -147,6 +147,62 @@ def test_compensated_latency_is_the_nominal_run_one_period_late(name):
     np.testing.assert_allclose(want["poses"][1:], nominal[0], rtol=0, atol=1e-12)
 
 
+# Latencies of several samples, one per run (0 and 1 among them).
+LONG_DELAYS = np.array([2.0, 3.0, 0.0, 1.0, 3.0, 2.0])
+
+
+@pytest.mark.parametrize("name", ["raw", "observer", "observer-uncompensated", "ekf"])
+def test_a_latency_of_several_samples_matches_the_numpy_reference(name):
+    # The command of sample k acts from sample k + m; compensated, the law
+    # sees the estimate rolled over the m commands in flight, oldest first.
+    spec = _draw(1)._replace(delay=LONG_DELAYS)
+    got = studies.disturbed_rollout(spec, GAINS, estimator=ESTIMATORS[name])
+    for i, want in enumerate(reference_runs(spec, ESTIMATORS[name])):
+        for field in ("poses", "v", "omega", "estimates"):
+            np.testing.assert_allclose(got[field][i], want[field], rtol=0, atol=ATOL)
+    # Zero over the first m periods, then the command computed m samples before.
+    for i, m in enumerate(LONG_DELAYS.astype(int)):
+        assert np.all(got["v"][i, :m] == 0.0) and np.all(got["omega"][i, :m] == 0.0)
+        assert abs(got["v"][i, m]) + abs(got["omega"][i, m]) > 0.0
+
+
+@pytest.mark.parametrize("m", [2, 3])
+def test_compensated_latency_of_m_samples_is_the_nominal_run_m_periods_late(m):
+    # As for one sample: the robot rests over m periods, then each command
+    # starts at the pose the law was handed, rolled over the m in flight.
+    spec = quiet(2, float(m))
+    got = studies.disturbed_rollout(spec, GAINS, estimator=ESTIMATORS["ekf"])
+    nominal = np.asarray(w.batch_rollout(spec.ref, GAINS, steps=STEPS - m).poses)
+    for k in range(1, m + 1):
+        np.testing.assert_array_equal(got["poses"][:, k], got["poses"][:, 0])
+    np.testing.assert_allclose(got["poses"][:, m:], nominal, rtol=0, atol=1e-12)
+
+
+def test_compensation_rolls_the_commands_in_flight_through_the_speed_limiter():
+    # Under a speed limiter the commands in flight are rolled as the limiter
+    # will let them through: the delayed run is the nominal limited one, late.
+    heavy, m = w.Robot(accel_max=100.0, angular_accel_max=20.0), 2
+    spec = quiet(2, float(m))
+    got = studies.disturbed_rollout(spec, GAINS, estimator="observer", robot=heavy)
+    nominal = np.asarray(w.batch_rollout(spec.ref, GAINS, steps=STEPS - m, robot=heavy).poses)
+    np.testing.assert_allclose(got["poses"][:, m:], nominal, rtol=0, atol=1e-9)
+    free = np.asarray(w.batch_rollout(spec.ref, GAINS, steps=STEPS - m).poses)
+    assert np.abs(free - nominal).max() > 1.0  # the limiter binds
+
+
+def test_the_reference_takes_a_latency_of_several_samples():
+    # Independent of the JAX loop: without noise or an estimator, m samples
+    # of latency shift the nominal run's commands by m periods only at the
+    # start; a run that rests over m periods and then runs the nominal
+    # commands open loop is the reference's first m + 1 poses.
+    ref, m = (30.0, 10.0, 0.5), 3
+    got = reference_disturbed_rollout(ref, GAINS, noise=np.zeros((20, 3)), delay=m)
+    np.testing.assert_array_equal(got["poses"][: m + 1], np.zeros((m + 1, 3)))
+    assert np.all(got["v"][:m] == 0.0)
+    nominal = w.reference_rollout(ref, GAINS, steps=1)
+    assert got["v"][m] == nominal["v"][0] and got["omega"][m] == nominal["omega"][0]
+
+
 def test_observer_of_gain_one_is_raw_feedback_bit_for_bit():
     # A gain of 1 hands the law the measurement itself (the blend is written
     # as z + (1 − g)(prediction − z)); uncompensated, nothing else changes.
@@ -234,6 +290,7 @@ def test_bad_estimators_are_refused_by_both(estimator, message):
         ({"mismatch": (1.0, 0.0)}, "mismatch = [1.0, 0.0] is not allowed"),
         ({"mismatch": (1.0,)}, "mismatch = [1.0] is not allowed"),
         ({"delay": 0.5}, "delay = 0.5 is not allowed"),
+        ({"delay": -1}, "delay = -1 is not allowed"),
         ({"delay": True}, "delay = True is not allowed"),
         ({"estimator": w.EKFParams(sigma_xy=np.ones(2))}, "estimator.sigma_xy has shape (2,)"),
         ({"ref": (1.0, 2.0)}, "ref has shape (2,)"),

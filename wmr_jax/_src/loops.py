@@ -448,6 +448,7 @@ def scan_closed_loop(
         # last period's is never used.
         noise = disturbance.noise
         xs, length = jnp.concatenate([noise[1:], jnp.zeros_like(noise[:1])]), None
+
     def body(carry, noise_next):
         return step(carry, noise_next)
 

@@ -445,9 +445,9 @@ def _checked_mismatch(mismatch: Any) -> tuple[float, float]:
 
 
 def _checked_delay(delay: Any) -> int:
-    allowed = "0 (no latency) or 1 (one sample)"
+    allowed = "an integer number of samples m >= 0"
     arr = real_array("delay", delay, allowed)
-    if arr.shape != () or float(arr) not in (0.0, 1.0):
+    if arr.shape != () or not (np.isfinite(arr) and arr >= 0 and np.floor(arr) == arr):
         raise ValueError(f"delay = {delay!r} is not allowed; allowed: {allowed}")
     return int(arr)
 
@@ -479,8 +479,8 @@ def reference_disturbed_rollout(
         mismatch: ``(left, right)`` realised over commanded rim speed; a
             Disturbance's ``(left, right, mass)`` row is accepted too (the
             ideal loop has no mass).
-        delay: 0, or 1 for one sample of latency (the command of sample ``k``
-            applied over period ``k + 1``, zero over the first).
+        delay: the latency ``m``, samples: the command of sample ``k`` is
+            applied over period ``k + m``, zero over the first ``m``.
         estimator: ``None`` (the law sees the raw measurement), ``"observer"``
             or ``"ekf"`` (defaults), or one ``ObserverParams``/``EKFParams``.
         init: ``(3,)`` initial pose, true and measured alike.
@@ -514,20 +514,27 @@ def reference_disturbed_rollout(
     if kind is not None:
         make = _Observer if kind.params_type is not EKFParams else _Filter
         estimate = make(params, measure(0), half_track)
-    roll = estimate is not None and late and bool(params.compensate)
+    roll = estimate is not None and late > 0 and bool(params.compensate)
 
-    def seen(z: tuple, in_flight: tuple) -> tuple:
+    def seen(z: tuple, in_flight: list) -> tuple:
         """The pose the law is handed: the measurement, or the estimate (rolled forward)."""
         if estimate is None:
             return z
-        return _arc(*estimate.pose, *in_flight, dt) if roll else estimate.pose
+        if not roll:
+            return estimate.pose
+        pose = estimate.pose
+        for command in in_flight:
+            pose = _arc(*pose, *command, dt)
+        return pose
 
-    fresh, held = law(seen(measure(0), (0.0, 0.0))), (0.0, 0.0)
+    # The commands in flight, the next one to be applied first.
+    in_flight = [(0.0, 0.0)] * late
+    fresh = law(seen(measure(0), in_flight))
     poses, estimates = np.empty((steps + 1, 3)), np.empty((steps, 3))
     v_out, w_out = np.empty(steps), np.empty(steps)
     poses[0] = x, y, th
     for k in range(steps):
-        v, w = held if late else fresh
+        v, w = in_flight[0] if late else fresh
         left, right = f_left * (v - half_track * w), f_right * (v + half_track * w)
         x, y, th = _arc(x, y, th, 0.5 * (left + right), 0.5 * (right - left) / half_track, dt)
         poses[k + 1], v_out[k], w_out[k] = (x, y, th), v, w
@@ -535,7 +542,7 @@ def reference_disturbed_rollout(
         if estimate is not None:
             estimate.update(v, w, z, ref, dt)
         estimates[k] = z if estimate is None else estimate.pose
-        # The command just computed is applied next period under latency;
-        # ``fresh`` is the one in flight meanwhile.
-        held, fresh = fresh, law(seen(z, fresh))
+        # Under latency the command just computed joins those in flight.
+        in_flight = in_flight[1:] + [fresh] if late else in_flight
+        fresh = law(seen(z, in_flight))
     return {"poses": poses, "v": v_out, "omega": w_out, "estimates": estimates}
