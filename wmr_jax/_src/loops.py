@@ -193,13 +193,14 @@ class LoopCarry(NamedTuple):
         pose: the true pose at the sample (``SplitPose``).
         wheel: the velocity loop's state (``initial_wheel``).
         command: the command computed at the sample, ``v + i ω`` (computed
-            at the end of the previous period, see ``closed_loop_step``).
+            at the end of the previous period, see ``ClosedLoopStep``).
         in_flight: the commands computed at the ``max_delay`` samples before
             it, newest first (disturbed runs only; ``()`` otherwise).
         moves: their arcs (``ArcMove``), for an estimator without a speed
             limiter; ``()`` otherwise.
         estimate: the estimator's state, or ``None``.
-        ref: the reference of the command.
+        ref: the reference of the command (with ``aim`` only; ``None``
+            otherwise, so that a constant one is not carried).
         acc: the fold's accumulator.
     """
 
@@ -225,10 +226,11 @@ class ClosedLoopStep:
       ``k + delay`` (zero before; ``options.max_delay`` commands are carried
       in flight), the wheels' radii scale the rims and the body mass is off
       by its factor. ``None`` is the nominal run, with none of these.
-    * ``options.estimator`` with its parameters ``estimate``: between the
-      measurement and the law; it predicts with the command followed and
-      corrects toward each measurement, and with ``compensate`` the law sees
-      its estimate rolled forward over the commands in flight.
+    * ``options.estimator`` with its parameters ``estimate`` (in a disturbed
+      run: it filters the disturbance's sensor): between the measurement and
+      the law; it predicts with the command followed and corrects toward each
+      measurement, and with ``compensate`` the law sees its estimate rolled
+      forward over the commands in flight.
     * ``aim(acc) -> ref``: the reference of the next command, from the fold's
       accumulator (waypoint chains, moving references); ``None`` keeps
       ``ref``.
@@ -250,6 +252,7 @@ class ClosedLoopStep:
       ``|heading| = 1``, so rounding does not make it drift over long runs.
     """
 
+    ref: jax.Array
     params: Any
     robot: Robot
     dt: jax.Array
@@ -263,6 +266,10 @@ class ClosedLoopStep:
     @property
     def limiter(self) -> bool:
         return self.options.velocity == "ideal" and self.options.accel_limit
+
+    @property
+    def estimator(self) -> Any:
+        return None if self.disturbance is None else self.options.estimator
 
     @property
     def slots(self) -> int:
@@ -309,7 +316,7 @@ class ClosedLoopStep:
         """The carry at the first sample: the robot at rest at ``init`` (3,)."""
         pose = SplitPose.of(init)
         wheel = initial_wheel(init, self.options)
-        spec, estimator = self.disturbance, self.options.estimator
+        spec, estimator = self.disturbance, self.estimator
         state, queue, moves = None, (), ()
         if spec is None:
             first = self.law(pose, ref)
@@ -326,7 +333,8 @@ class ClosedLoopStep:
                 first = self.law(self.law_input(state.pose, (), still, wheel), ref)
                 moves = () if self.limiter else still
             queue = (jnp.zeros_like(first),) * self.slots
-        return LoopCarry(pose, wheel, first, queue, moves, state, ref, acc)
+        carried = None if self.aim is None else ref
+        return LoopCarry(pose, wheel, first, queue, moves, state, carried, acc)
 
     def __call__(self, carry: LoopCarry, noise_next: Any) -> tuple[LoopCarry, Any]:
         """Move over one period under the carried command; compute the next one.
@@ -335,7 +343,8 @@ class ClosedLoopStep:
         (``None`` without a disturbance).
         """
         pose, wheel, fresh, queue, moves, state, ref, acc = carry
-        spec, estimator, dt = self.disturbance, self.options.estimator, self.dt
+        ref = self.ref if self.aim is None else ref
+        spec, estimator, dt = self.disturbance, self.estimator, self.dt
         applied = fresh if spec is None else self.delayed(fresh, queue)
         if spec is not None:
             region = jnp.int32(-1)
@@ -380,6 +389,7 @@ class ClosedLoopStep:
         next_ref = ref if self.aim is None else self.aim(acc)
         law_pose = seen if estimator is None else self.law_input(seen, queue, moves, wheel)
         command = self.law(law_pose, next_ref)
+        next_ref = None if self.aim is None else next_ref
         recorded = None
         if self.record:
             recorded = (pose.stacked(), out) + (() if spec is None else (seen.stacked(),))
@@ -439,7 +449,7 @@ def scan_closed_loop(
     Returns:
         ``(final pose (3,), acc, records or None)``.
     """
-    step = ClosedLoopStep(params, robot, dt, options, disturbance, estimate, aim, fold, record)
+    step = ClosedLoopStep(ref, params, robot, dt, options, disturbance, estimate, aim, fold, record)
     carry = step.start(ref, init, acc)
     if disturbance is None:
         xs, length = None, options.steps
