@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sys
 import warnings
 from typing import Any
 
@@ -35,7 +34,6 @@ from wmr_jax._src.checks import (
 )
 
 __all__ = [
-    "RobotUnitsWarning",
     "Gains",
     "Robot",
     "SamplingWarning",
@@ -91,7 +89,13 @@ _WHEEL_MASS = 0.010
 class Robot(Parameters):
     """Differential-drive robot of the paper's Table 1 (docs/model.md §1, §4).
 
-    Units: cm, kg, s; torques in kg·cm²/s² (1 N·m = 1e4 kg·cm²/s²).
+    Units: cm, kg, s; torques in kg·cm²/s² (1 N·m = 1e4 kg·cm²/s²). A robot
+    8 cm across the wheels is ``Robot(half_track=4.0)``, not ``0.04``: the
+    constructor takes the numbers as given. The robots read from a file or a
+    ``--robot`` flag (``load_robot``, ``read_robot``) warn
+    (``RobotUnitsWarning``) when a size or speed looks written in metres.
+    Ranges are checked where a robot is used (``rollout`` and the other
+    entry points), not here.
 
     Attributes:
         half_track: ``L``, distance from the centre C to each wheel, cm.
@@ -129,83 +133,6 @@ class Robot(Parameters):
     # The paper's robot has no speed limiter: it is the massless ideal loop.
     accel_max: Any = 0.0
     angular_accel_max: Any = 0.0
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        _warn_unit_slips(vars(self))
-
-    def replace(self, **changes: Any) -> Robot:
-        """Return a copy with the given fields changed (a size typed in metres warns here)."""
-        robot = super().replace(**changes)  # a copy made in the library: it does not warn
-        _warn_unit_slips(changes)
-        return robot
-
-
-class RobotUnitsWarning(UserWarning):
-    """A robot's size or speed looks like a unit slip (metres where cm belong, or cm in ROS)."""
-
-
-# Sizes and speeds no wheeled robot this model describes has (the paper's
-# soccer robot: L = 1.85 cm; a warehouse robot: L of some 30 cm, 2 m/s): a
-# value outside is most likely written in another unit. The range is wide
-# on purpose; the run goes on as given.
-PLAUSIBLE = {
-    "half_track": (0.5, 500.0, "cm"),
-    "wheel_radius": (0.2, 100.0, "cm"),
-    "v_max": (1.0, 2000.0, "cm/s"),
-}
-
-
-# A number as typed: Python's, or one NumPy scalar (an array is a batch).
-_TYPED_NUMBERS = (int, float, np.integer, np.floating)
-
-
-def implausible(values: dict[str, Any]) -> list[tuple[str, Any, tuple[float, float, str]]]:
-    """The sizes and speeds among ``values`` outside ``PLAUSIBLE``: ``(field, value, range)``.
-
-    Numbers only (arrays and tracers are batches and programs), and within
-    ``(0, inf)``: other values are refused where the robot is used.
-    """
-    found = []
-    for field, bounds in PLAUSIBLE.items():
-        value = values.get(field)
-        if isinstance(value, (bool, np.bool_)) or not isinstance(value, _TYPED_NUMBERS):
-            continue
-        if 0 < value < math.inf and not bounds[0] <= value <= bounds[1]:
-            found.append((field, value, bounds))
-    return found
-
-
-def _warn_unit_slips(values: dict[str, Any]) -> None:
-    """Warn (``RobotUnitsWarning``) for each size or speed in ``values`` that looks like metres.
-
-    Only for numbers given as such (arrays and tracers are batches and
-    programs, not typed values), and only where a user typed them
-    (``Robot(...)``, ``replace``): the copies the library and JAX's tree
-    functions make, and the robots of files (which say it naming the file),
-    do not warn again. Frames of this module (the constructor, ``replace``),
-    of ``dataclasses`` and of the mutation tester's trampolines
-    (``pyproject.toml``) are stepped over to find that code.
-    """
-    frame, stacklevel = sys._getframe(0), 1  # as warnings.warn counts, from here
-    while frame is not None:
-        module = str(frame.f_globals.get("__name__", ""))
-        # A dataclass subclass's generated __init__ (not "python -c" code).
-        generated = frame.f_code.co_filename == "<string>" and frame.f_code.co_name == "__init__"
-        if module not in (__name__, "dataclasses") and not module.startswith("mutmut."):
-            if not generated:
-                break
-        frame, stacklevel = frame.f_back, stacklevel + 1
-    if frame is None or module.startswith(("wmr_jax.", "jax.")):
-        return  # a copy the library or JAX made, not a value typed by a user
-    for field, value, (low, high, unit) in implausible(values):
-        warnings.warn(
-            f"Robot {field} = {value:.6g} {unit} is outside {low:g}-{high:g} {unit}, as if "
-            "written in another unit (the library's are cm and cm/s: half_track=8.0 for "
-            "8 cm); it runs as given",
-            RobotUnitsWarning,
-            stacklevel=stacklevel,
-        )
 
 
 class WheelSpeedWarning(UserWarning):
