@@ -253,11 +253,16 @@ def check_feasible(
     robot = validate_robot(Robot() if robot is None else robot)
     gains = validate_gains(gains)
     common_batch_size({"gains": gains, "robot": robot})
-    # wheel_speed_bound's sum in NumPy (both were just checked).
+    return feasible(gains, robot, warn=warn, stacklevel=stacklevel + 1)
+
+
+def feasible(gains: Gains, robot: Robot, *, warn: bool, stacklevel: int) -> np.ndarray:
+    """``check_feasible`` of gains and a robot already checked (the rollouts' warning)."""
+    # wheel_speed_bound's sum in NumPy.
     half_track, v_max = (np.asarray(v, dtype=float) for v in (robot.half_track, robot.v_max))
     bound = np.asarray(gains.kr, dtype=float) + half_track * np.asarray(gains.k_theta, dtype=float)
-    feasible = bound <= v_max * (1 + 1e-12)
-    if warn and not np.all(feasible):
+    ok = bound <= v_max * (1 + 1e-12)
+    if warn and not np.all(ok):
         worst = float(np.max(bound))
         warnings.warn(
             f"k_r + L*k_theta = {worst:.4g} cm/s exceeds v_max = {float(np.max(v_max)):.4g} cm/s: "
@@ -265,7 +270,7 @@ def check_feasible(
             WheelSpeedWarning,
             stacklevel=stacklevel,
         )
-    return feasible
+    return ok
 
 
 def sampling_margins(gains: Gains, dt: Any) -> tuple[Any, Any]:
@@ -280,6 +285,10 @@ def sampling_margins(gains: Gains, dt: Any) -> tuple[Any, Any]:
         validate_gains(gains)
         periods = real_array("dt", dt, "periods > 0 s")
         require("dt", periods, np.isfinite(periods) & (periods > 0), "finite periods > 0 s")
+    return _margins(gains, dt)
+
+
+def _margins(gains: Gains, dt: Any) -> tuple[Any, Any]:
     return gains.k_theta * dt, gains.kr * (math.pi / 2) * dt / gains.r_m
 
 
@@ -290,10 +299,14 @@ def check_sampling(gains: Gains, dt: Any, *, stacklevel: int = 2) -> bool:
         ValueError: for gains out of range or a ``dt`` that is not a period.
     """
     gains, dt = validate_gains(gains), check_dt(dt)
+    return sampled(gains, dt, stacklevel=stacklevel + 1)
+
+
+def sampled(gains: Gains, dt: float, *, stacklevel: int) -> bool:
+    """``check_sampling`` of gains and a period already checked (the rollouts' warning)."""
     # In float64: a k_r float32 can hold (3e38) has a margin beyond float32.
     wide = jax.tree.map(lambda leaf: np.asarray(leaf, dtype=np.float64), gains)
-    margins = sampling_margins(wide, np.float64(dt))
-    heading, distance = (float(np.max(m)) for m in margins)
+    heading, distance = (float(np.max(m)) for m in _margins(wide, np.float64(dt)))
     if heading < 2 and distance < 2:
         return True
     warnings.warn(
