@@ -5,9 +5,12 @@ every field is a traced leaf: gains and robot parameters can be differentiated,
 vmapped (give a field a leading batch axis) and passed through ``jax.jit``
 without retracing when only their values change.
 
-Validation happens here, in plain Python, before any tracing (docs/model.md §3). Leaves
-that are tracers (a user calling the library inside their own ``jit`` or
-``grad``) cannot be inspected and are skipped.
+Their checks (``validate_gains``, ``validate_robot``) live here, in plain
+Python, and the entry points call them before any tracing (docs/model.md §3).
+Building a ``Gains`` or ``Robot`` checks nothing: JAX rebuilds them through
+``__init__`` on every tree operation. Leaves that are tracers (a user calling
+an entry point inside their own ``jit`` or ``grad``) cannot be inspected and
+are skipped.
 """
 
 from __future__ import annotations

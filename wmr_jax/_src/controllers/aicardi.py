@@ -70,8 +70,10 @@ def _aicardi_control(
         pose: ``(..., 3)`` current pose ``[x cm, y cm, θ rad]``.
         ref: ``(..., 3)`` reference pose.
         gains: ``AicardiGains``.
-        temperature: ignored: the law has no smooth relaxation (``smooth=False``).
-        frame: the pose as ``(x, y, cos θ, sin θ)`` (see ``shim_sung.polar_error``).
+        temperature: ``None``: the law has no smooth relaxation (``aicardi_control``
+            refuses any other value).
+        frame: the pose as ``(x, y, cos θ, sin θ)``, as the rollouts hand it to
+            the registered law (see ``shim_sung.polar_error``).
     """
     rho, alpha, theta_a, direction = driving_error(pose, ref, backward=gains.backward, frame=frame)
     cos_alpha = jnp.cos(alpha)

@@ -368,7 +368,7 @@ def _law(pose, ref, gains, *, temperature=None, frame=None):
     return commands(polar_error(pose, ref, frame=frame), gains, temperature=temperature)
 
 
-_control_jit = jax.jit(_law)  # None (the hard law) is an empty tree: no recompiling
+_control_jit = jax.jit(_law)  # the temperature an argument: a new value does not recompile
 
 
 def control_diagnostics(pose: jax.Array, ref: jax.Array, gains: Gains) -> Diagnostics:
