@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import wmr_jax as w
 from wmr_jax import dynamics
 
 
@@ -65,3 +66,46 @@ def test_arc_step_gradient_matches_central_differences():
             for i in range(3)
         ]
         np.testing.assert_allclose(grad, fd, rtol=1e-7, atol=1e-7)
+
+
+def test_the_primitives_are_the_same_called_with_values_and_traced():
+    """``wmr_jax.dynamics`` is pure: jit and grad run the very function called by hand."""
+    robot, command = w.Robot(), jnp.array([10.0, 1.0])
+    cos = jax.jit(lambda a: dynamics.sin_cos(a)[0])(1.0)
+    np.testing.assert_allclose(float(cos), math.cos(1.0), atol=1e-15)
+    slope = jax.grad(lambda omega: dynamics.arc_step(jnp.zeros(3), 10.0, omega, 0.1)[2])(1.0)
+    np.testing.assert_allclose(float(slope), 0.1)
+
+    def step(command):
+        state, _ = dynamics.advance(dynamics.initial_state([0.0, 0.0, 0.0]), command, robot, 0.033)
+        return state.pose[0]
+
+    np.testing.assert_array_equal(float(jax.jit(step)(command)), float(step(command)))
+    # The robot moved forwards about v · dt (the wheel loop lags the command a little).
+    assert 0.2 < float(step(command)) < 10.0 * 0.033
+
+
+def test_the_primitives_keep_the_callers_float_dtype_and_empty_batches():
+    cos, _ = dynamics.sin_cos(np.float32(0.5))
+    assert cos.dtype == np.float32
+    assert dynamics.sin_cos(np.float16(0.5))[0].dtype == np.float16
+    assert dynamics.arc_step(np.zeros(3, np.float32), 10.0, 1.0, 0.1).dtype == np.float32
+    assert dynamics.arc_step(np.zeros((0, 3)), 10.0, 1.0, 0.1).shape == (0, 3)
+    assert dynamics.initial_state([0, 0, 0]).pose.dtype == w.float_dtype()
+
+
+def test_check_stability_names_the_substeps_a_stiff_wheel_loop_needs():
+    robot = w.Robot()  # k_p = 100 1/s: 100 · 10 s / 2.5 = 400 sub-steps
+    dynamics.check_stability(robot, 10.0, 400)
+    with pytest.raises(ValueError, match=r"substeps = 10 is not allowed .*substeps >= 400"):
+        dynamics.check_stability(robot, 10.0, 10)
+    with pytest.raises(ValueError, match=r"a smaller speed_gain"):
+        dynamics.check_stability(robot.replace(speed_gain=1e300), 0.033, 10)
+    # A traced mass does not hide a wheel loop that is too stiff for the period.
+
+    def stiff(mass):
+        dynamics.check_stability(robot.replace(speed_gain=1e6, body_mass=mass), 0.033, 1)
+        return mass
+
+    with pytest.raises(ValueError, match=r"substeps = 1 is not allowed"):
+        jax.grad(stiff)(1.0)

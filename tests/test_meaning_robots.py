@@ -6,10 +6,8 @@ centimetres by hand), never taken from the reader.
 
 import dataclasses
 import json
-import math
 import re
 
-import numpy as np
 import pytest
 
 import wmr_jax as w
@@ -276,60 +274,22 @@ def test_a_ros_parameter_given_dotted_and_nested_is_refused(tmp_path):
         assert robot.v_max == 30.0
 
 
-def test_a_robot_typed_in_metres_warns_where_it_is_written():
-    """Robot(half_track=0.08) ran as a 0.8 mm robot without a word (only files warned)."""
+def test_a_robot_built_in_python_takes_cm_as_given_and_never_warns():
+    """``Robot(...)`` is in cm by definition: only files and flags are read in a unit.
+
+    The constructor cannot tell a user's call from the copies JAX and the
+    library make of a robot, so it warns about nothing; the units warning
+    belongs to the loaders (``test_sizes_and_speeds_in_the_wrong_unit_warn...``).
+    """
     import warnings
 
     import jax
 
-    with pytest.warns(w.RobotUnitsWarning) as caught:
-        robot = w.Robot(half_track=0.08, v_max=0.22)
-    assert [c.filename for c in caught] == [__file__, __file__]
-    assert [str(c.message) for c in caught] == [
-        f"Robot {field} = {value} is outside {bounds}, as if written in another unit (the "
-        "library's are cm and cm/s: half_track=8.0 for 8 cm); it runs as given"
-        for field, value, bounds in (
-            ("half_track", "0.08 cm", "0.5-500 cm"),
-            ("v_max", "0.22 cm/s", "1-2000 cm/s"),
-        )
-    ]
     with warnings.catch_warnings():
         warnings.simplefilter("error", w.RobotUnitsWarning)
-        # The library's own copies do not warn again; nor do batches, the
-        # bounds, values refused later, or any preset.
-        robot.replace(body_mass=1.0)
-        jax.tree.map(lambda x: x, robot)
-        w.Robot(half_track=np.array([0.08, 0.09]))
-        w.Robot(half_track=0.5, v_max=2000.0, wheel_radius=100.0)
-        w.Robot(half_track=500.0, v_max=1.0, wheel_radius=0.2)
-        w.Robot(half_track=-1.0, v_max=math.nan)
-        w.Robot(half_track=0.0, v_max=math.inf, wheel_radius=0.0)
-        for name in w.ROBOTS:
-            w.Robot(**{f: getattr(w.ROBOTS[name], f) for f in ("half_track", "v_max")})
-    with pytest.warns(w.RobotUnitsWarning, match=r"^Robot wheel_radius = 330 cm is outside"):
-        w.Robot(wheel_radius=330.0)
-    # A value typed into a copy warns there too, and only that value.
-    with pytest.warns(w.RobotUnitsWarning) as caught:
-        copy = w.Robot().replace(half_track=0.09, body_mass=2.0)
-    assert (copy.half_track, copy.body_mass, copy.v_max) == (0.09, 2.0, 125.0)
-    assert [c.filename for c in caught] == [__file__]
-    assert str(caught[0].message).startswith("Robot half_track = 0.09 cm is outside")
-    # A NumPy scalar is a typed number; a dataclass subclass warns at its caller too.
-    with pytest.warns(w.RobotUnitsWarning, match=r"^Robot v_max = 0.2 cm/s") as caught:
-        w.Robot(v_max=np.float32(0.2))
-    assert [c.filename for c in caught] == [__file__]
-
-    @dataclasses.dataclass(frozen=True)
-    class Rover(w.Robot):
-        pass
-
-    with pytest.warns(w.RobotUnitsWarning, match=r"^Robot half_track = 0.07 cm") as caught:
-        Rover(half_track=0.07)
-    assert [c.filename for c in caught] == [__file__]
-    # A batched field is not a typed value; the fields after it still are.
-    with pytest.warns(w.RobotUnitsWarning, match=r"^Robot v_max = 0.22 cm/s") as caught:
-        w.Robot(half_track=np.array([8.0, 9.0]), v_max=0.22)
-    assert len(caught) == 1
-    with pytest.warns(w.RobotUnitsWarning, match=r"^Robot v_max = 0.3 cm/s") as caught:
-        dataclasses.replace(w.Robot(), v_max=0.3)
-    assert [c.filename for c in caught] == [__file__]
+        robot = w.Robot(half_track=0.08, v_max=0.22)
+        assert (robot.half_track, robot.v_max) == (0.08, 0.22)
+        copy = robot.replace(half_track=0.09, body_mass=2.0)
+        assert (copy.half_track, copy.body_mass, copy.v_max) == (0.09, 2.0, 0.22)
+        assert jax.tree.map(lambda x: x, robot) == robot
+        assert dataclasses.replace(w.Robot(), v_max=0.3).v_max == 0.3

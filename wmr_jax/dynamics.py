@@ -2,21 +2,28 @@
 
 ``docs/model.md §4``: the ideal loop integrates each held ``(v, ω)`` exactly
 (``arc_step``); the non-ideal loop runs a computed-torque wheel-speed loop on
-the Euler–Lagrange dynamics of Eq. 5 with wheel limits (``advance``). Called
-with values, each function checks them first; inside a caller's ``jit`` or
-``grad`` it runs as it is.
+the Euler–Lagrange dynamics of Eq. 5 with wheel limits (``advance``).
+
+These are the pure primitives the rollouts are built of, the same functions
+called with values or inside ``jit``, ``grad`` and ``vmap``: they check
+nothing. A ``(2,)`` pose is read as JAX indexes it, a negative period runs
+backwards, and ``sin_cos`` is accurate for angles up to about 1e5 rad
+(float32). Check your inputs (``check_stability`` tells whether the wheel
+loop's sub-steps are short enough for a robot and period), or use the entry
+points (``wmr_jax.rollout``, ``batch_rollout``, ``final_poses``), which check
+theirs on the host before tracing.
 """
 
 from wmr_jax._src.dynamics import RobotState as RobotState
-from wmr_jax._src.dynamics_checked import advance as advance
-from wmr_jax._src.dynamics_checked import arc_step as arc_step
-from wmr_jax._src.dynamics_checked import body_acceleration as body_acceleration
-from wmr_jax._src.dynamics_checked import check_stability as check_stability
-from wmr_jax._src.dynamics_checked import inertia as inertia
-from wmr_jax._src.dynamics_checked import initial_state as initial_state
-from wmr_jax._src.dynamics_checked import kinetic_energy as kinetic_energy
-from wmr_jax._src.dynamics_checked import limit_wheels as limit_wheels
-from wmr_jax._src.dynamics_checked import sin_cos as sin_cos
-from wmr_jax._src.dynamics_checked import sinc as sinc
-from wmr_jax._src.dynamics_checked import wheel_torques as wheel_torques
+from wmr_jax._src.dynamics import arc_step as arc_step
+from wmr_jax._src.dynamics import initial_state as initial_state
+from wmr_jax._src.dynamics import sin_cos as sin_cos
+from wmr_jax._src.dynamics import sinc as sinc
 from wmr_jax._src.velocity_loop import DEFAULT_SUBSTEPS as DEFAULT_SUBSTEPS
+from wmr_jax._src.velocity_loop import advance as advance
+from wmr_jax._src.velocity_loop import body_acceleration as body_acceleration
+from wmr_jax._src.velocity_loop import check_stability as check_stability
+from wmr_jax._src.velocity_loop import inertia as inertia
+from wmr_jax._src.velocity_loop import kinetic_energy as kinetic_energy
+from wmr_jax._src.velocity_loop import limit_wheels as limit_wheels
+from wmr_jax._src.velocity_loop import wheel_torques as wheel_torques

@@ -34,6 +34,7 @@ __all__ = [
     "arc_apply",
     "arc_factors",
     "arc_step",
+    "initial_state",
     "rate_limit",
     "sin_cos",
     "sin_small",
@@ -99,6 +100,14 @@ class RobotState(NamedTuple):
     pose: jax.Array
     velocity: jax.Array
     integral: jax.Array
+
+
+def initial_state(init: jax.Array) -> RobotState:
+    """Return the robot at rest at ``init``, a ``(3,)`` pose ``[x cm, y cm, θ rad]``."""
+    init = jnp.asarray(init)
+    init = init.astype(jnp.result_type(init, float))  # integers as the float dtype
+    zeros = jnp.zeros((2,), init.dtype)
+    return RobotState(pose=init, velocity=zeros, integral=zeros)
 
 
 def rate_limit(value: jax.Array, previous: jax.Array, rate: jax.Array, dt: jax.Array) -> jax.Array:

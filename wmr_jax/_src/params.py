@@ -5,16 +5,18 @@ every field is a traced leaf: gains and robot parameters can be differentiated,
 vmapped (give a field a leading batch axis) and passed through ``jax.jit``
 without retracing when only their values change.
 
-Validation happens here, in plain Python, before any tracing (docs/model.md §3). Leaves
-that are tracers (a user calling the library inside their own ``jit`` or
-``grad``) cannot be inspected and are skipped.
+Their checks (``validate_gains``, ``validate_robot``) live here, in plain
+Python, and the entry points call them before any tracing (docs/model.md §3).
+Building a ``Gains`` or ``Robot`` checks nothing: JAX rebuilds them through
+``__init__`` on every tree operation. Leaves that are tracers (a user calling
+an entry point inside their own ``jit`` or ``grad``) cannot be inspected and
+are skipped.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-import sys
 import warnings
 from typing import Any
 
@@ -35,7 +37,6 @@ from wmr_jax._src.checks import (
 )
 
 __all__ = [
-    "RobotUnitsWarning",
     "Gains",
     "Robot",
     "SamplingWarning",
@@ -91,7 +92,13 @@ _WHEEL_MASS = 0.010
 class Robot(Parameters):
     """Differential-drive robot of the paper's Table 1 (docs/model.md §1, §4).
 
-    Units: cm, kg, s; torques in kg·cm²/s² (1 N·m = 1e4 kg·cm²/s²).
+    Units: cm, kg, s; torques in kg·cm²/s² (1 N·m = 1e4 kg·cm²/s²). A robot
+    8 cm across the wheels is ``Robot(half_track=4.0)``, not ``0.04``: the
+    constructor takes the numbers as given. The robots read from a file or a
+    ``--robot`` flag (``load_robot``, ``read_robot``) warn
+    (``RobotUnitsWarning``) when a size or speed looks written in metres.
+    Ranges are checked where a robot is used (``rollout`` and the other
+    entry points), not here.
 
     Attributes:
         half_track: ``L``, distance from the centre C to each wheel, cm.
@@ -129,83 +136,6 @@ class Robot(Parameters):
     # The paper's robot has no speed limiter: it is the massless ideal loop.
     accel_max: Any = 0.0
     angular_accel_max: Any = 0.0
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        _warn_unit_slips(vars(self))
-
-    def replace(self, **changes: Any) -> Robot:
-        """Return a copy with the given fields changed (a size typed in metres warns here)."""
-        robot = super().replace(**changes)  # a copy made in the library: it does not warn
-        _warn_unit_slips(changes)
-        return robot
-
-
-class RobotUnitsWarning(UserWarning):
-    """A robot's size or speed looks like a unit slip (metres where cm belong, or cm in ROS)."""
-
-
-# Sizes and speeds no wheeled robot this model describes has (the paper's
-# soccer robot: L = 1.85 cm; a warehouse robot: L of some 30 cm, 2 m/s): a
-# value outside is most likely written in another unit. The range is wide
-# on purpose; the run goes on as given.
-PLAUSIBLE = {
-    "half_track": (0.5, 500.0, "cm"),
-    "wheel_radius": (0.2, 100.0, "cm"),
-    "v_max": (1.0, 2000.0, "cm/s"),
-}
-
-
-# A number as typed: Python's, or one NumPy scalar (an array is a batch).
-_TYPED_NUMBERS = (int, float, np.integer, np.floating)
-
-
-def implausible(values: dict[str, Any]) -> list[tuple[str, Any, tuple[float, float, str]]]:
-    """The sizes and speeds among ``values`` outside ``PLAUSIBLE``: ``(field, value, range)``.
-
-    Numbers only (arrays and tracers are batches and programs), and within
-    ``(0, inf)``: other values are refused where the robot is used.
-    """
-    found = []
-    for field, bounds in PLAUSIBLE.items():
-        value = values.get(field)
-        if isinstance(value, (bool, np.bool_)) or not isinstance(value, _TYPED_NUMBERS):
-            continue
-        if 0 < value < math.inf and not bounds[0] <= value <= bounds[1]:
-            found.append((field, value, bounds))
-    return found
-
-
-def _warn_unit_slips(values: dict[str, Any]) -> None:
-    """Warn (``RobotUnitsWarning``) for each size or speed in ``values`` that looks like metres.
-
-    Only for numbers given as such (arrays and tracers are batches and
-    programs, not typed values), and only where a user typed them
-    (``Robot(...)``, ``replace``): the copies the library and JAX's tree
-    functions make, and the robots of files (which say it naming the file),
-    do not warn again. Frames of this module (the constructor, ``replace``),
-    of ``dataclasses`` and of the mutation tester's trampolines
-    (``pyproject.toml``) are stepped over to find that code.
-    """
-    frame, stacklevel = sys._getframe(0), 1  # as warnings.warn counts, from here
-    while frame is not None:
-        module = str(frame.f_globals.get("__name__", ""))
-        # A dataclass subclass's generated __init__ (not "python -c" code).
-        generated = frame.f_code.co_filename == "<string>" and frame.f_code.co_name == "__init__"
-        if module not in (__name__, "dataclasses") and not module.startswith("mutmut."):
-            if not generated:
-                break
-        frame, stacklevel = frame.f_back, stacklevel + 1
-    if frame is None or module.startswith(("wmr_jax.", "jax.")):
-        return  # a copy the library or JAX made, not a value typed by a user
-    for field, value, (low, high, unit) in implausible(values):
-        warnings.warn(
-            f"Robot {field} = {value:.6g} {unit} is outside {low:g}-{high:g} {unit}, as if "
-            "written in another unit (the library's are cm and cm/s: half_track=8.0 for "
-            "8 cm); it runs as given",
-            RobotUnitsWarning,
-            stacklevel=stacklevel,
-        )
 
 
 class WheelSpeedWarning(UserWarning):
@@ -326,11 +256,16 @@ def check_feasible(
     robot = validate_robot(Robot() if robot is None else robot)
     gains = validate_gains(gains)
     common_batch_size({"gains": gains, "robot": robot})
-    # wheel_speed_bound's sum in NumPy (both were just checked).
+    return feasible(gains, robot, warn=warn, stacklevel=stacklevel + 1)
+
+
+def feasible(gains: Gains, robot: Robot, *, warn: bool, stacklevel: int) -> np.ndarray:
+    """``check_feasible`` of gains and a robot already checked (the rollouts' warning)."""
+    # wheel_speed_bound's sum in NumPy.
     half_track, v_max = (np.asarray(v, dtype=float) for v in (robot.half_track, robot.v_max))
     bound = np.asarray(gains.kr, dtype=float) + half_track * np.asarray(gains.k_theta, dtype=float)
-    feasible = bound <= v_max * (1 + 1e-12)
-    if warn and not np.all(feasible):
+    ok = bound <= v_max * (1 + 1e-12)
+    if warn and not np.all(ok):
         worst = float(np.max(bound))
         warnings.warn(
             f"k_r + L*k_theta = {worst:.4g} cm/s exceeds v_max = {float(np.max(v_max)):.4g} cm/s: "
@@ -338,7 +273,7 @@ def check_feasible(
             WheelSpeedWarning,
             stacklevel=stacklevel,
         )
-    return feasible
+    return ok
 
 
 def sampling_margins(gains: Gains, dt: Any) -> tuple[Any, Any]:
@@ -353,6 +288,10 @@ def sampling_margins(gains: Gains, dt: Any) -> tuple[Any, Any]:
         validate_gains(gains)
         periods = real_array("dt", dt, "periods > 0 s")
         require("dt", periods, np.isfinite(periods) & (periods > 0), "finite periods > 0 s")
+    return _margins(gains, dt)
+
+
+def _margins(gains: Gains, dt: Any) -> tuple[Any, Any]:
     return gains.k_theta * dt, gains.kr * (math.pi / 2) * dt / gains.r_m
 
 
@@ -363,10 +302,14 @@ def check_sampling(gains: Gains, dt: Any, *, stacklevel: int = 2) -> bool:
         ValueError: for gains out of range or a ``dt`` that is not a period.
     """
     gains, dt = validate_gains(gains), check_dt(dt)
+    return sampled(gains, dt, stacklevel=stacklevel + 1)
+
+
+def sampled(gains: Gains, dt: float, *, stacklevel: int) -> bool:
+    """``check_sampling`` of gains and a period already checked (the rollouts' warning)."""
     # In float64: a k_r float32 can hold (3e38) has a margin beyond float32.
     wide = jax.tree.map(lambda leaf: np.asarray(leaf, dtype=np.float64), gains)
-    margins = sampling_margins(wide, np.float64(dt))
-    heading, distance = (float(np.max(m)) for m in margins)
+    heading, distance = (float(np.max(m)) for m in _margins(wide, np.float64(dt)))
     if heading < 2 and distance < 2:
         return True
     warnings.warn(

@@ -32,7 +32,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from wmr_jax._src.checks import require_unbatched
-from wmr_jax._src.params import Robot, RobotUnitsWarning, implausible, validate_robot
+from wmr_jax._src.params import Robot, validate_robot
 
 __all__ = [
     "LoadedRobot",
@@ -71,6 +71,41 @@ ROBOT_UNITS = {
 _UNIT = {name: text.split(" (")[0] for name, text in ROBOT_UNITS.items()}
 
 _G = 981.0  # cm/s², standard gravity
+
+
+class RobotUnitsWarning(UserWarning):
+    """A robot's size or speed looks like a unit slip (metres where cm belong, or cm in ROS)."""
+
+
+# Sizes and speeds no wheeled robot this model describes has (the paper's
+# soccer robot: L = 1.85 cm; a warehouse robot: L of some 30 cm, 2 m/s): a
+# value outside is most likely written in another unit. The range is wide
+# on purpose; the run goes on as given.
+PLAUSIBLE = {
+    "half_track": (0.5, 500.0, "cm"),
+    "wheel_radius": (0.2, 100.0, "cm"),
+    "v_max": (1.0, 2000.0, "cm/s"),
+}
+
+
+# A number as typed: Python's, or one NumPy scalar (an array is a batch).
+_TYPED_NUMBERS = (int, float, np.integer, np.floating)
+
+
+def implausible(values: dict[str, Any]) -> list[tuple[str, Any, tuple[float, float, str]]]:
+    """The sizes and speeds among ``values`` outside ``PLAUSIBLE``: ``(field, value, range)``.
+
+    Numbers only (arrays and tracers are batches and programs), and within
+    ``(0, inf)``: other values are refused where the robot is used.
+    """
+    found = []
+    for field, bounds in PLAUSIBLE.items():
+        value = values.get(field)
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, _TYPED_NUMBERS):
+            continue
+        if 0 < value < math.inf and not bounds[0] <= value <= bounds[1]:
+            found.append((field, value, bounds))
+    return found
 
 
 def _warn_unit_slips(robot: Robot, where: str, ros: bool) -> None:

@@ -14,8 +14,8 @@ import jax.numpy as jnp
 from wmr_jax._src.checks import Parameters, require
 from wmr_jax._src.controllers.base import Controller, register_controller
 from wmr_jax._src.controllers.polar import (
-    checked_inputs,
     driving_error,
+    entry_point,
     gain_values,
     goal_floor,
     hold_at_goal,
@@ -50,7 +50,7 @@ class AicardiGains(Parameters):
     backward: bool = dataclasses.field(default=False, metadata={"static": True})
 
 
-def aicardi_control(
+def _aicardi_control(
     pose: jax.Array,
     ref: jax.Array,
     gains: AicardiGains,
@@ -70,12 +70,11 @@ def aicardi_control(
         pose: ``(..., 3)`` current pose ``[x cm, y cm, θ rad]``.
         ref: ``(..., 3)`` reference pose.
         gains: ``AicardiGains``.
-        temperature: must be ``None``; the law has no smooth relaxation.
-        frame: the pose as ``(x, y, cos θ, sin θ)`` (see ``shim_sung.polar_error``).
+        temperature: ``None``: the law has no smooth relaxation (``aicardi_control``
+            refuses any other value).
+        frame: the pose as ``(x, y, cos θ, sin θ)``, as the rollouts hand it to
+            the registered law (see ``shim_sung.polar_error``).
     """
-    pose, ref, gains = checked_inputs(
-        pose, ref, gains, temperature, frame, AicardiGains, validate_aicardi_gains
-    )
     rho, alpha, theta_a, direction = driving_error(pose, ref, backward=gains.backward, frame=frame)
     cos_alpha = jnp.cos(alpha)
     v = direction * gains.gamma * rho * cos_alpha
@@ -100,8 +99,11 @@ def validate_aicardi_gains(gains: AicardiGains) -> AicardiGains:
 AICARDI = register_controller(
     Controller(
         name="aicardi",
-        command=aicardi_control,
+        command=_aicardi_control,
         params_type=AicardiGains,
         validate=validate_aicardi_gains,
     )
 )
+
+aicardi_control = entry_point(_aicardi_control, AicardiGains, validate_aicardi_gains)
+"""The law called by hand: poses and gains checked first, no ``temperature``."""

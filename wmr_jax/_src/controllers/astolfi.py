@@ -15,8 +15,8 @@ import numpy as np
 from wmr_jax._src.checks import Parameters, require
 from wmr_jax._src.controllers.base import Controller, register_controller
 from wmr_jax._src.controllers.polar import (
-    checked_inputs,
     driving_error,
+    entry_point,
     gain_values,
     goal_floor,
     hold_at_goal,
@@ -51,7 +51,7 @@ class AstolfiGains(Parameters):
     backward: bool = dataclasses.field(default=True, metadata={"static": True})
 
 
-def astolfi_control(
+def _astolfi_control(
     pose: jax.Array,
     ref: jax.Array,
     gains: AstolfiGains,
@@ -72,12 +72,11 @@ def astolfi_control(
         pose: ``(..., 3)`` current pose ``[x cm, y cm, θ rad]``.
         ref: ``(..., 3)`` reference pose.
         gains: ``AstolfiGains``.
-        temperature: must be ``None``; the law has no smooth relaxation.
-        frame: the pose as ``(x, y, cos θ, sin θ)`` (see ``shim_sung.polar_error``).
+        temperature: ``None``: the law has no smooth relaxation (``astolfi_control``
+            refuses any other value).
+        frame: the pose as ``(x, y, cos θ, sin θ)``, as the rollouts hand it to
+            the registered law (see ``shim_sung.polar_error``).
     """
-    pose, ref, gains = checked_inputs(
-        pose, ref, gains, temperature, frame, AstolfiGains, validate_astolfi_gains
-    )
     rho, alpha, theta_a, direction = driving_error(pose, ref, backward=gains.backward, frame=frame)
     alpha = jnp.clip(alpha, -jnp.pi / 2, jnp.pi / 2)
     v = direction * gains.k_rho * rho
@@ -116,8 +115,11 @@ def validate_astolfi_gains(gains: AstolfiGains) -> AstolfiGains:
 ASTOLFI = register_controller(
     Controller(
         name="astolfi-corke",
-        command=astolfi_control,
+        command=_astolfi_control,
         params_type=AstolfiGains,
         validate=validate_astolfi_gains,
     )
 )
+
+astolfi_control = entry_point(_astolfi_control, AstolfiGains, validate_astolfi_gains)
+"""The law called by hand: poses and gains checked first, no ``temperature``."""

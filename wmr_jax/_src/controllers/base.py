@@ -300,7 +300,7 @@ def controller_names(names: Any) -> list[str]:
 def check_law_inputs(
     pose: Any, ref: Any, params: Any, params_type: type, validate: Callable[[Any], Any]
 ) -> tuple[Any, Any, Any]:
-    """Check a law's arguments when a user calls it with values (traced ones pass).
+    """Check the arguments of a law's entry point (``control``; traced ones pass).
 
     ``pose`` and ``ref`` must be poses ``(..., 3)`` that broadcast together,
     ``params`` a ``params_type`` that ``validate`` accepts.
@@ -310,8 +310,7 @@ def check_law_inputs(
     """
     # Each argument is checked unless it is itself traced (vmap over the poses
     # with concrete gains still checks the gains).
-    pose = pose if is_traced(pose) else as_pose_array("pose", pose)
-    ref = ref if is_traced(ref) else as_pose_array("ref", ref)
+    pose, ref = as_pose_array("pose", pose), as_pose_array("ref", ref)
     try:
         np.broadcast_shapes(np.shape(pose)[:-1], np.shape(ref)[:-1])
     except ValueError:

@@ -30,6 +30,7 @@ commands and their gradients are finite.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import jax
@@ -43,7 +44,7 @@ from wmr_jax._src.controllers.base import check_law_inputs
 __all__ = [
     "AT_GOAL",
     "GOAL_EPS",
-    "checked_inputs",
+    "entry_point",
     "driving_error",
     "gain_values",
     "goal_floor",
@@ -157,22 +158,23 @@ def hold_at_goal(
     return jnp.where(near, 0.0, v), jnp.where(near, rate * theta_e, omega)
 
 
-def checked_inputs(
-    pose: Any, ref: Any, gains: Any, temperature: Any, frame: Any, params_type: type, validate: Any
-) -> tuple[Any, Any, Any]:
-    """The polar laws' arguments, checked: no relaxation, and values a user passed by hand.
+def entry_point(law: Callable, params_type: type, validate: Callable) -> Callable:
+    """The public form of a polar law: its arguments checked on the host, then the law.
 
-    A rollout passes ``frame`` and traced values, which go through unchanged.
-
-    Raises:
-        ValueError: for a temperature (these laws have no smooth relaxation) or a
-            bad pose, reference or gain, naming it.
+    ``law`` is the pure ``Controller.command`` the loops call (with ``frame``);
+    the returned function takes poses, refuses a ``temperature`` (these laws
+    have no smooth relaxation) and checks the poses and gains as ``control``
+    does, naming the argument.
     """
-    if temperature is not None:  # no smooth relaxation: Controller.smooth is False
-        raise ValueError(
-            f"temperature = {temperature!r} is not allowed; allowed: None (this law has no "
-            "smooth relaxation)"
-        )
-    if frame is None:  # called with values, not from a rollout
-        return check_law_inputs(pose, ref, gains, params_type, validate)
-    return pose, ref, gains
+
+    def checked(pose: Any, ref: Any, gains: Any, *, temperature: Any = None) -> Any:
+        if temperature is not None:
+            raise ValueError(
+                f"temperature = {temperature!r} is not allowed; allowed: None (this law has "
+                "no smooth relaxation)"
+            )
+        return law(*check_law_inputs(pose, ref, gains, params_type, validate))
+
+    checked.__name__ = checked.__qualname__ = law.__name__.lstrip("_")
+    checked.__module__, checked.__doc__ = law.__module__, law.__doc__
+    return checked

@@ -37,7 +37,6 @@ import numpy as np
 from wmr_jax._src.checks import (
     Parameters,
     check_int,
-    is_traced,
     list_as_array,
     real_array,
     require,
@@ -47,12 +46,12 @@ from wmr_jax._src.checks import (
 from wmr_jax._src.controllers.base import Controller, register_controller
 from wmr_jax._src.controllers.shim_sung import (
     PolarError,
-    _commands,
+    commands,
     direction_flag,
     polar_error,
     region_label,
 )
-from wmr_jax._src.params import Gains, Robot, WheelSpeedWarning, check_sampling, validate_gains
+from wmr_jax._src.params import Gains, Robot, WheelSpeedWarning, sampled, validate_gains
 
 __all__ = [
     "KNOTS",
@@ -169,9 +168,10 @@ def schedule_commands(
         temperature: ``None`` for the hard law, positive for its smooth
             relaxation (the switches of ``shim_sung``; the caps stay hard,
             they are continuous).
+
+    A pure building block like those of ``shim_sung``: ``params`` is not
+    checked here (``validate_schedule`` checks it, as the rollouts do).
     """
-    if not is_traced(params):  # called with values, not from a rollout
-        validate_schedule(params)
     d = direction_flag(err, params.phi_m, temperature=temperature)
     k_theta = _table(params.k_theta, err.r)
     # Where d = 0 the robot does not drive (v = 0), so its turn gain may be other.
@@ -183,7 +183,7 @@ def schedule_commands(
         k_theta=k_theta,
         **{name: getattr(params, name) for name in SHAPE_FIELDS},
     )
-    v, omega = _commands(err, gains, temperature=temperature)
+    v, omega = commands(err, gains, temperature=temperature)
     omega_max = params.v_max / params.half_track
     omega = jnp.clip(omega, -omega_max, omega_max)
     budget = params.v_max - params.half_track * jnp.abs(omega)  # ≥ 0 by the clip above
@@ -275,7 +275,7 @@ def _check_sampling(params: ScheduleParams, dt: Any) -> None:
         k_theta=params.k_theta[0],
         **{name: getattr(params, name) for name in SHAPE_FIELDS},
     )
-    check_sampling(at_goal, dt, stacklevel=5)
+    sampled(at_goal, dt, stacklevel=5)  # the schedule and dt checked by the rollout
 
 
 SCHEDULE = register_controller(

@@ -1,8 +1,12 @@
 """The Shim–Sung asymptotic pose controller, one equation per function (docs/model.md §2–3).
 
-Every function here is pure, unjitted and elementwise: it takes single-pose
-quantities (or arrays that broadcast together) and returns the same. Batching
-is done once, in ``loops.batched``.
+Every function here but ``control`` and ``control_diagnostics`` is a pure,
+unjitted, elementwise building block: it takes single-pose quantities (or
+arrays that broadcast together) and returns the same, and it checks nothing,
+called with values or traced alike (a NaN in gives NaN out; a ``(2,)`` pose
+is read as JAX indexes it). Check your inputs, or call the entry points
+(``control``, ``control_diagnostics``, ``rollout``), which check theirs on
+the host before tracing. Batching is done once, in ``loops.batched``.
 
 The angles ``φ_e`` and ``θ_e`` travel as their cosine and sine. This is the
 same law as the paper's, only stated without ``atan2``:
@@ -31,30 +35,15 @@ cosines), so one temperature fits them all.
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
-from wmr_jax._src.checks import (
-    as_pose_array,
-    check_temperature,
-    described,
-    is_traced,
-    real_array,
-    require,
-)
+from wmr_jax._src.checks import check_temperature, is_traced
 from wmr_jax._src.controllers.base import Controller, check_law_inputs, register_controller
 from wmr_jax._src.dynamics import sin_cos, sin_small
-from wmr_jax._src.params import (
-    Gains,
-    Robot,
-    check_feasible,
-    check_sampling,
-    validate_gains,
-    validate_robot,
-)
+from wmr_jax._src.params import Gains, Robot, feasible, sampled, validate_gains
 
 __all__ = [
     "SHIM_SUNG",
@@ -114,40 +103,6 @@ def wrap_angle(angle: jax.Array) -> jax.Array:
     return jnp.mod(jnp.asarray(angle) + jnp.pi, 2 * jnp.pi) - jnp.pi
 
 
-def _checked_error(err: Any) -> Any:
-    """Check a concrete ``PolarError`` a user passes to the law's pieces (traced ones pass).
-
-    Its fields must be finite real numbers and ``r ≥ 0``: a NaN distance would
-    read as "not within ``R_e``" and label the state Region 3.
-    """
-    if not isinstance(err, PolarError):
-        raise ValueError(f"err is a {type(err).__name__}; allowed: a PolarError (from polar_error)")
-    if is_traced(err):
-        return err
-    for field, value in zip(PolarError._fields, err, strict=True):
-        arr = real_array(f"err.{field}", value, "finite real numbers (polar_error's)")
-        ok = np.isfinite(arr) & ((arr >= 0) if field == "r" else True)
-        require(f"err.{field}", arr, ok, "finite, >= 0 cm" if field == "r" else "finite")
-    return err
-
-
-def _checked_gains(gains: Any) -> None:
-    """Check concrete gains of the law's pieces: a ``Gains``, or a schedule's (same shape gains)."""
-    if is_traced(gains):
-        return
-    if isinstance(gains, Gains):
-        validate_gains(gains)
-    elif not all(hasattr(gains, name) for name in ("phi_m", "r_e", "r_a")):
-        raise ValueError(f"gains is a {type(gains).__name__}; allowed: a wmr_jax.Gains")
-
-
-def _relaxation(temperature: Any) -> Any:
-    """``temperature`` checked where it is a value (``None``: the hard law; tracers pass)."""
-    if temperature is None or is_traced(temperature):
-        return temperature
-    return check_temperature("temperature", temperature)
-
-
 def polar_error(
     pose: jax.Array,
     ref: jax.Array,
@@ -167,15 +122,12 @@ def polar_error(
     Returns:
         A ``PolarError`` whose fields have the broadcast leading shape.
     """
+    ref = jnp.asarray(ref)
     if frame is None:
-        if not is_traced((pose, ref)):
-            # Called with values: NaN must not read as "at the goal" (r_e = 0).
-            pose, ref = _checked_pair(pose, ref)
+        pose = jnp.asarray(pose)
         x, y = pose[..., 0], pose[..., 1]
         cos_c, sin_c = sin_cos(pose[..., 2])
     else:
-        if not is_traced((frame, ref)):
-            frame, ref = _checked_frame(frame), as_pose_array("ref", ref)
         x, y, cos_c, sin_c = frame
     cos_r, sin_r = sin_cos(ref[..., 2])
     dx, dy = ref[..., 0] - x, ref[..., 1] - y
@@ -207,38 +159,11 @@ def polar_error(
     return PolarError(r, cos_phi, sin_phi, cos_theta, sin_theta)
 
 
-def _checked_frame(frame: Any) -> tuple[np.ndarray, ...]:
-    """Check a concrete ``(x, y, cos θ, sin θ)``: four finite arrays, ``cos² + sin² = 1``."""
-    allowed = "(x cm, y cm, cos θ, sin θ) of the pose, finite, with cos² + sin² = 1"
-    try:
-        count = None if isinstance(frame, (str, bytes)) else len(frame)
-    except TypeError:  # a number, None
-        count = None
-    if count != 4:
-        raise ValueError(
-            f"frame = {described(frame)} is not allowed; allowed: four values or arrays {allowed}"
-        )
-    parts = [real_array(f"frame[{i}]", part, allowed) for i, part in enumerate(frame)]
-    try:
-        np.broadcast_shapes(*(part.shape for part in parts))
-    except ValueError:
-        shapes = [part.shape for part in parts]
-        raise ValueError(
-            f"frame has parts of shapes {shapes}; allowed: shapes that broadcast"
-        ) from None
-    for i, part in enumerate(parts):
-        require(f"frame[{i}]", part, np.isfinite(part), allowed)
-    norm = parts[2] ** 2 + parts[3] ** 2
-    require("frame[2]", parts[2], np.abs(norm - 1) <= 1e-6, allowed)  # a float32 sin_cos passes
-    return tuple(frame)
-
-
 def error_angles(err: PolarError) -> tuple[jax.Array, jax.Array]:
     """Return ``(φ_e, θ_e)`` in rad, ``φ_e ∈ (−π, π]`` and ``θ_e ∈ [−π, π)``.
 
     For diagnostics and plots only; the law itself never needs the angles.
     """
-    _checked_error(err)
     phi = jnp.arctan2(err.sin_phi, err.cos_phi)
     theta = wrap_angle(jnp.arctan2(err.sin_theta, err.cos_theta))
     return phi, theta
@@ -255,7 +180,6 @@ def _step(
     x = jnp.asarray(x)
     if temperature is None:
         return jnp.where(x > 0 if strict else x >= 0, 1.0, 0.0).astype(x.dtype)
-    temperature = _relaxation(temperature)
     tie = _tie_break(temperature)
     return jax.nn.sigmoid(x / (scale * temperature) + (-tie if strict else tie))
 
@@ -284,7 +208,6 @@ def sgn(x: jax.Array, *, temperature: float | None = None) -> jax.Array:
     x = jnp.asarray(x)
     if temperature is None:
         return jnp.where(x > 0, 1.0, jnp.where(x <= 0, -1.0, x)).astype(x.dtype)
-    temperature = _relaxation(temperature)
     return jnp.tanh(x / temperature - _tie_break(temperature))  # Sgn(0) = −1
 
 
@@ -301,13 +224,9 @@ def saturated_distance(r: jax.Array, r_m: jax.Array, *, temperature: float | Non
     a number in ``[1, 2]`` rather than ``log1p``, which XLA:CPU evaluates
     several times slower: the absolute error is about an ulp of 1.
     """
-    if not is_traced(r_m):  # called with a value: R_m is a radius of the law
-        arr = real_array("r_m", r_m, "a finite radius > 0 cm")
-        require("r_m", arr, np.isfinite(arr) & (arr > 0), "a finite radius > 0 cm")
     linear = r * ((jnp.pi / 2) / jnp.asarray(r_m))  # the factor is per gain set, not per step
     if temperature is None:
         return jnp.minimum(linear, jnp.pi / 2)
-    temperature = _relaxation(temperature)
     excess = linear - jnp.pi / 2
     above = excess > 0
     nearest = jnp.where(above, jnp.pi / 2, linear)
@@ -320,10 +239,6 @@ def direction_flag(err: PolarError, phi_m: jax.Array, *, temperature: float | No
 
     ``d = 1`` if ``|φ_e| ≤ Φ_m``; ``d = −1`` if ``|φ_e| > π − Φ_m``; else 0.
     """
-    _checked_error(err)
-    if not is_traced(phi_m):  # called with a value: Φ_m must be an angle of the law
-        arr = real_array("phi_m", phi_m, "0 < phi_m < pi/2 rad")
-        require("phi_m", arr, (arr > 0) & (arr < np.pi / 2), "0 < phi_m < pi/2 rad")
     cos_m = jnp.cos(phi_m)
     ahead = _step(err.cos_phi - cos_m, strict=False, temperature=temperature)
     behind = _step(-cos_m - err.cos_phi, strict=True, temperature=temperature)
@@ -344,7 +259,6 @@ def fold(cos_a: jax.Array, sin_a: jax.Array, *, temperature: float | None = None
         flip = jnp.where(cos_a < 0, -1.0, jnp.where(jnp.isnan(cos_a), jnp.nan, 1.0))
         flip = flip.astype(cos_a.dtype)
     else:
-        temperature = _relaxation(temperature)
         flip = jnp.tanh(cos_a / temperature + _tie_break(temperature))  # no flip at 0
     return flip * cos_a, flip * sin_a
 
@@ -369,8 +283,6 @@ def blend(
     indicator of the region test, which is exact for ``d ∈ {−1, 0, 1}`` and
     smooth when the indicators are relaxed.
     """
-    _checked_error(err)
-    _checked_gains(gains)  # called with values, not from a rollout
     _, sin_phi_bar = fold(err.cos_phi, err.sin_phi, temperature=temperature)
     _, sin_theta_bar = fold(err.cos_theta, err.sin_theta, temperature=temperature)
     in_region_0 = _step(gains.r_e - err.r, strict=False, temperature=temperature, scale=gains.r_e)
@@ -389,14 +301,6 @@ def commands(
     ``v_m = k_r d sin(r̄_e) cos φ̄_e`` and
     ``ω_m = k_θ (ε sin φ̄_e + (1 − ε) sin θ̄_e)``.
     """
-    _checked_error(err)
-    _checked_gains(gains)  # called with values, not from a rollout
-    return _commands(err, gains, temperature=temperature)
-
-
-def _commands(err: PolarError, gains: Gains, *, temperature: float | None = None):
-    """``commands`` without the check of concrete gains: for laws that build their
-    own ``Gains`` per state (the gain schedule), whose fields carry the pose's shape."""
     d = direction_flag(err, gains.phi_m, temperature=temperature)
     eps = blend(err, d, gains, temperature=temperature)
     r_bar = saturated_distance(err.r, gains.r_m, temperature=temperature)
@@ -411,8 +315,6 @@ def _commands(err: PolarError, gains: Gains, *, temperature: float | None = None
 
 def region_label(err: PolarError, gains: Gains) -> jax.Array:
     """Return the region 0–3 of docs/model.md §3, by the same order of tests as ``blend``."""
-    _checked_error(err)
-    _checked_gains(gains)
     d = direction_flag(err, gains.phi_m)
     return jnp.where(
         err.r <= gains.r_e, 0, jnp.where(d == 0, 3, jnp.where(err.r < gains.r_a, 1, 2))
@@ -421,7 +323,6 @@ def region_label(err: PolarError, gains: Gains) -> jax.Array:
 
 def lyapunov(err: PolarError) -> jax.Array:
     """Return ``V = r_e²/2 + (1 − cos φ̄_e) + (1 − cos θ̄_e)`` (proof of Theorem 1)."""
-    _checked_error(err)
     cos_phi_bar, _ = fold(err.cos_phi, err.sin_phi)
     cos_theta_bar, _ = fold(err.cos_theta, err.sin_theta)
     return 0.5 * err.r**2 + (1 - cos_phi_bar) + (1 - cos_theta_bar)
@@ -431,91 +332,55 @@ def wheel_speeds(v: jax.Array, omega: jax.Array, robot: Robot) -> jax.Array:
     """Return rim speeds ``[v_L, v_R] = [v − L ω, v + L ω]`` in cm/s, shape ``(..., 2)``.
 
     ``v``, ``omega`` and ``robot.half_track`` broadcast against each other.
-
-    Raises:
-        ValueError: called with values (not traced), for a bad robot, values
-            that are not real numbers, or shapes that do not broadcast.
     """
-    if not is_traced((v, omega, robot)):  # called with values, not from a rollout
-        validate_robot(robot)
-        # Lists work as arrays; NaN in, NaN out: a diverged run shows.
-        v, omega = (real_array(name, x, "real numbers") for name, x in (("v", v), ("omega", omega)))
-        shapes = {"v": v.shape, "omega": omega.shape}
-        shapes["robot.half_track"] = np.shape(robot.half_track)
-        try:
-            np.broadcast_shapes(*shapes.values())
-        except ValueError:
-            listed = ", ".join(f"{name} {shape}" for name, shape in shapes.items())
-            raise ValueError(f"shapes {listed} do not broadcast; allowed: shapes that do") from None
+    v, omega = jnp.asarray(v), jnp.asarray(omega)
     return jnp.stack([v - robot.half_track * omega, v + robot.half_track * omega], axis=-1)
 
 
 def control(
-    pose: jax.Array,
-    ref: jax.Array,
-    gains: Gains,
-    *,
-    temperature: float | None = None,
-    frame: tuple[jax.Array, jax.Array, jax.Array, jax.Array] | None = None,
+    pose: jax.Array, ref: jax.Array, gains: Gains, *, temperature: float | None = None
 ) -> tuple[jax.Array, jax.Array]:
     """Return the command ``(v cm/s, ω rad/s)`` of the asymptotic controller.
 
+    An entry point: its arguments are checked on the host, then the law runs
+    as one compiled program, the same one whether called with values or
+    inside a caller's ``jit``, ``grad`` or ``vmap`` (traced values cannot be
+    read, so they are not checked).
+
     Args:
         pose: ``(..., 3)`` current pose ``[x cm, y cm, θ rad]``.
-        ref: ``(..., 3)`` reference pose.
-        gains: controller gains.
+        ref: ``(..., 3)`` reference pose, broadcastable against ``pose``.
+        gains: controller gains (scalars, or arrays that broadcast against the poses).
         temperature: ``None`` for the paper's law; positive for its smooth
             relaxation (see the module docstring).
-        frame: optional ``(x, y, cos θ, sin θ)`` of the pose (see ``polar_error``).
 
     Raises:
-        ValueError: for concrete poses or gains out of range (called from a
-            rollout, the arguments are traced and were checked before).
+        ValueError: naming the argument, its value and what is allowed.
     """
-    if frame is None and not is_traced((pose, ref, gains)):
-        # Called by a user with values: check them, and run the law as one
-        # compiled program rather than op by op.
-        if temperature is not None:
-            temperature = check_temperature("temperature", temperature)
-        return _control_jit(*_checked(pose, ref, gains), temperature=temperature)
+    if temperature is not None and not is_traced(temperature):  # a tuner's traced one passes
+        temperature = check_temperature("temperature", temperature)
+    pose, ref, gains = check_law_inputs(pose, ref, gains, Gains, validate_gains)
+    return _control_jit(pose, ref, gains, temperature=temperature)
+
+
+def _law(pose, ref, gains, *, temperature=None, frame=None):
+    """The law as the loops call it (``Controller.command``): pure, inputs checked before."""
     return commands(polar_error(pose, ref, frame=frame), gains, temperature=temperature)
 
 
-def _control(pose, ref, gains, *, temperature):
-    return commands(polar_error(pose, ref), gains, temperature=temperature)
-
-
-_control_jit = jax.jit(_control, static_argnames=("temperature",))
-
-
-def _checked_pair(pose: Any, ref: Any) -> tuple[Any, Any]:
-    """Check concrete poses ``(..., 3)`` that must broadcast against each other."""
-    pose, ref = as_pose_array("pose", pose), as_pose_array("ref", ref)
-    try:
-        np.broadcast_shapes(pose.shape[:-1], ref.shape[:-1])
-    except ValueError:
-        raise ValueError(
-            f"pose has batch shape {pose.shape[:-1]} and ref {ref.shape[:-1]}; "
-            "allowed: shapes that broadcast"
-        ) from None
-    return pose, ref
-
-
-def _checked(pose: Any, ref: Any, gains: Gains) -> tuple[Any, Any, Gains]:
-    """Check concrete arguments of the public law functions (tracers pass)."""
-    if is_traced((pose, ref, gains)):
-        return pose, ref, gains
-    return check_law_inputs(pose, ref, gains, Gains, validate_gains)
+_control_jit = jax.jit(_law)  # the temperature an argument: a new value does not recompile
 
 
 def control_diagnostics(pose: jax.Array, ref: jax.Array, gains: Gains) -> Diagnostics:
-    """Return the command with the region, ``d``, ``ε``, ``V`` and error coordinates."""
-    if not is_traced((pose, ref, gains)):
-        return _diagnostics_jit(*_checked(pose, ref, gains))
-    return _diagnostics(pose, ref, gains)
+    """Return the command with the region, ``d``, ``ε``, ``V`` and error coordinates.
+
+    An entry point, checked and compiled as ``control`` is.
+    """
+    return _diagnostics_jit(*check_law_inputs(pose, ref, gains, Gains, validate_gains))
 
 
-def _diagnostics(pose: jax.Array, ref: jax.Array, gains: Gains) -> Diagnostics:
+@jax.jit
+def _diagnostics_jit(pose: jax.Array, ref: jax.Array, gains: Gains) -> Diagnostics:
     err = polar_error(pose, ref)
     d = direction_flag(err, gains.phi_m)
     v, omega = commands(err, gains)
@@ -539,17 +404,17 @@ def _region(pose: jax.Array, ref: jax.Array, gains: Gains, *, frame=None) -> jax
 
 def _warn_infeasible(gains: Gains, robot: Robot) -> None:
     # Legal, but a wheel may be asked for more than V_max (docs/model.md §3).
-    check_feasible(gains, robot, warn=True, stacklevel=5)
+    feasible(gains, robot, warn=True, stacklevel=5)  # both checked by the rollout
 
 
 def _warn_unsampled(gains: Gains, dt) -> None:
-    check_sampling(gains, dt, stacklevel=5)
+    sampled(gains, dt, stacklevel=5)
 
 
 SHIM_SUNG = register_controller(
     Controller(
         name="shim-sung",
-        command=control,
+        command=_law,
         params_type=Gains,
         validate=validate_gains,
         region=_region,
@@ -559,6 +424,3 @@ SHIM_SUNG = register_controller(
     )
 )
 """The Shim–Sung asymptotic controller of the paper, the default everywhere."""
-
-
-_diagnostics_jit = jax.jit(_diagnostics)
