@@ -224,7 +224,7 @@ def _gain_sets(args: Any) -> tuple[dict[str, Any], Any]:
     from wmr_jax._src.params import Robot
     from wmr_jax._src.robots import describe_robot, same_robot
     from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
-    from wmr_jax._src.tuning.saved import TUNINGS, load_tuned_and_tuning
+    from wmr_jax._src.tuning.saved import TUNINGS
 
     given = flags.robot_from(getattr(args, "robot", None))
     if given is not None and given.note:
@@ -238,10 +238,7 @@ def _gain_sets(args: Any) -> tuple[dict[str, Any], Any]:
         path = getattr(args, flag[2:].replace("-", "_"), None)
         if path is None:
             continue
-        try:
-            loop, tuning = load_tuned_and_tuning(path)  # run whole: its law and estimator
-        except ValueError as err:
-            raise ValueError(f"{flag} {path!r} is not allowed: {err}") from None
+        loop, tuning = flags.tuned_file(flag, path)  # run whole: its law and estimator
         if tuning is not None and tuning != wanted:
             # Its rows would be labelled by the flag: a nominal file called robust-tuned.
             other = "--nominal-gains" if tuning == "nominal" else "--robust-gains"

@@ -1,0 +1,242 @@
+"""What a user reads: per-reference results, units that look wrong, horizons, errors, progress."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+import wmr_jax as w
+from wmr_jax._src import conditions
+from wmr_jax._src.cli import simulate
+from wmr_jax._src.cli.main import main
+from wmr_jax._src.tuning.saved import tuned_json
+
+REFS = np.array([[30.0, 20.0, 0.3], [-20.0, 15.0, 1.0], [25.0, -10.0, -0.5]])
+
+
+def _file(tmp_path, name, text):
+    path = tmp_path / name
+    path.write_text(text)
+    return str(path)
+
+
+def _gains(tmp_path, gains=None):
+    return _file(tmp_path, "g.json", json.dumps(tuned_json(gains or w.Gains(kr=60.0))))
+
+
+# ---------------------------------------------------------------- evaluate, per reference
+
+
+def test_each_reference_has_its_own_result_in_the_library():
+    # Two within reach in 2 s and one 400 cm away, which the paper's gains cannot reach in 2 s.
+    refs = np.array([[30.0, 20.0, 0.3], [400.0, 0.0, 0.0], [-20.0, 15.0, 1.0]])
+    result = conditions.evaluate_loop(w.Gains(kr=60.0), refs, horizon=2.0, mismatch=0.0)
+    per = result["per_reference"]
+    assert [r["success"] for r in per] == [True, False, True]
+    assert [r["ref"] for r in per] == refs.tolist()
+    assert per[1]["arrival_s"] is None and per[1]["final_distance_cm"] > 100.0
+    # Each arrival is that of the single rollout of its reference (nominal, model robot).
+    for ref, r in zip(refs[[0, 2]], (per[0], per[2]), strict=True):
+        traj = w.rollout(ref, w.Gains(kr=60.0), steps=math.ceil(2.0 / w.DEFAULT_DT))
+        expected = float(w.arrival_time(traj, ref, dt=w.DEFAULT_DT))
+        assert r["arrival_s"] == pytest.approx(expected, abs=1e-9)
+        final = np.asarray(traj.poses[-1])
+        assert r["final_distance_cm"] == pytest.approx(np.hypot(*(final[:2] - ref[:2])), abs=1e-6)
+        assert r["settled_at_horizon"] is False
+    # The summary is the mean over the list.
+    assert result["success"] == pytest.approx(2 / 3)
+
+
+def test_evaluate_names_the_references_that_failed_and_writes_them_all(capsys, tmp_path):
+    refs = _file(tmp_path, "refs.csv", "x_cm,y_cm,theta_rad\n30,20,0.3\n400,0,0\n-20,15,1\n")
+    per_ref, out_json = tmp_path / "per.csv", tmp_path / "out.json"
+    argv = ["evaluate", "--gains", _gains(tmp_path), "--refs", refs, "--horizon", "2"]
+    assert main([*argv, "--per-ref", str(per_ref), "--json", str(out_json)]) == 0
+    out = capsys.readouterr().out
+    assert "| not arrived | line 3 |" in out  # the file's own line numbers, header counted
+    lines = per_ref.read_text().splitlines()
+    assert lines[0].startswith("where,x_cm,y_cm,theta_rad,arrived,arrival_s,final_distance_cm")
+    assert [line.split(",")[:5] for line in lines[1:]] == [
+        ["line 2", "30", "20", "0.3", "true"],
+        ["line 3", "400", "0", "0", "false"],
+        ["line 4", "-20", "15", "1", "true"],
+    ]
+    assert lines[2].split(",")[5] == ""  # no arrival time where it did not arrive
+    saved = json.loads(out_json.read_text())["per_reference"]
+    assert [r["success"] for r in saved] == [True, False, True]
+    assert float(lines[1].split(",")[5]) == pytest.approx(saved[0]["arrival_s"], rel=1e-5)
+
+
+def test_many_failures_are_counted_not_all_listed(capsys, tmp_path):
+    far = "".join(f"{400 + k},0,0\n" for k in range(7))
+    refs = _file(tmp_path, "refs.csv", far)
+    assert main(["evaluate", "--gains", _gains(tmp_path), "--refs", refs, "--horizon", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "| not arrived | line 1, line 2, line 3, line 4, line 5 and 2 more (--per-ref" in out
+
+
+def test_a_bad_per_ref_path_is_refused_before_the_run(capsys, tmp_path):
+    refs = _file(tmp_path, "refs.csv", "30,20,0.3\n")
+    argv = ["evaluate", "--gains", _gains(tmp_path), "--refs", refs, "--per-ref", "/dev/null/x"]
+    assert main(argv) == 2
+    assert "--per-ref '/dev/null/x' is not allowed" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- references in another unit
+
+
+def test_references_in_metres_are_warned_about(capsys, tmp_path):
+    refs = _file(tmp_path, "refs.csv", "0.3,0.2,0.8\n-0.4,0.1,3.1\n")
+    assert main(["evaluate", "--gains", _gains(tmp_path), "--refs", refs, "--horizon", "1"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"wmr-jax: warning: --refs {refs!r}: every ")
+    assert "within 1 cm of the start" in err[0] and "metres" in err[0]
+
+
+def test_headings_in_degrees_are_warned_about(capsys, tmp_path):
+    refs = _file(tmp_path, "refs.csv", "30,20,45\n-40,10,180\n")
+    assert main(["evaluate", "--gains", _gains(tmp_path), "--refs", refs, "--horizon", "1"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "headings up to 180 look like degrees" in err[0]
+
+
+def test_references_in_cm_and_radians_pass_without_a_word(capsys, tmp_path):
+    refs = _file(tmp_path, "refs.csv", "30,20,0.8\n-40,10,3.1\n0.5,0,6.2\n")
+    assert main(["evaluate", "--gains", _gains(tmp_path), "--refs", refs, "--horizon", "1"]) == 0
+    assert capsys.readouterr().err == ""
+
+
+# ---------------------------------------------------------------- what each number is
+
+
+def test_the_peak_rim_speed_beside_v_max_says_it_includes_the_mismatch(capsys, tmp_path):
+    refs = _file(tmp_path, "refs.csv", "30,20,0.3\n")
+    argv = ["evaluate", "--gains", _gains(tmp_path, w.Gains(kr=120.0, k_theta=1.0))]
+    assert main([*argv, "--refs", refs, "--horizon", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "cm/s at the rims, wheel-radius mismatch included |" in out
+    # 125 cm/s × 1.03: the rim speed a command within V_max may reach.
+    assert "a wheel up to 3 % larger than modelled turns that into up to 128.8 cm/s" in out
+    assert main([*argv, "--refs", refs, "--horizon", "2", "--mismatch", "0"]) == 0
+    out = capsys.readouterr().out
+    assert "| V_max | 125 cm/s, every wheel command within it |" in out
+    assert "mismatch included" not in out
+
+
+def test_a_failing_run_under_noise_points_to_robust_tuning(capsys, tmp_path):
+    refs = _file(tmp_path, "refs.csv", "400,0,0\n")
+    argv = ["evaluate", "--gains", _gains(tmp_path), "--refs", refs, "--horizon", "1"]
+    assert main([*argv, "--condition", "noise"]) == 0
+    assert "hint: these gains were not tuned for this noise; wmr-jax tune --robust" in (
+        capsys.readouterr().out
+    )
+    assert main([*argv, "--condition", "nominal"]) == 0  # not a matter of noise there
+    assert "hint" not in capsys.readouterr().out
+
+
+# ---------------------------------------------------------------- simulate
+
+
+def test_simulate_stretches_its_run_on_a_slow_robot(capsys):
+    burger = w.ROBOTS["turtlebot3-burger"]
+    # The studies' horizon, 37 s there against 6 s, stretches the 150 steps alike.
+    assert simulate.default_steps(None) == 150
+    assert simulate.default_steps(w.Robot()) == 150
+    assert simulate.default_steps(burger) == math.ceil(150 * 37.0 / 6.0)
+    argv = ["simulate", "--robot", "turtlebot3-burger", "--ref", "30", "20", "45"]
+    assert main([*argv, "--k-r", "9.7", "--k-theta", "1.6"]) == 0
+    out = capsys.readouterr().out
+    assert f"after {925 * 0.033:.3f} s" in out and "arrival time   : never" not in out
+
+
+def test_simulate_says_what_to_do_when_not_arrived(capsys):
+    assert main(["simulate", "--ref", "30", "20", "45", "--steps", "10"]) == 0
+    out = capsys.readouterr().out
+    assert "arrival time   : never (not arrived at the end)" in out
+    assert "not arrived in 0.33 s; a longer run, such as --steps 40" in out
+
+
+@pytest.mark.parametrize(
+    ("radians", "degrees"),
+    [
+        (math.radians(945.0), -135.0),
+        (math.radians(180.0), 180.0),
+        (math.radians(-180.0), 180.0),
+        (math.radians(-30.0), -30.0),
+        (math.radians(360.0), 0.0),
+    ],
+)
+def test_simulate_prints_headings_wrapped(radians, degrees):
+    assert simulate._degrees(radians) == pytest.approx(degrees, abs=1e-9)
+
+
+def test_simulate_prints_the_reference_heading_wrapped(capsys):
+    assert main(["simulate", "--ref", "10", "0", "405", "--steps", "2"]) == 0
+    assert "θ=45.00°" in capsys.readouterr().out
+
+
+def test_simulate_names_the_files_it_runs(capsys, tmp_path):
+    robot = _file(tmp_path, "bot.json", json.dumps({"half_track": 5.0, "v_max": 60.0}))
+    assert main(["simulate", "--ref", "30", "20", "0", "--robot", robot, "--steps", "3"]) == 0
+    out = capsys.readouterr().out
+    assert "robot          : custom (L = 5 cm, V_max = 60 cm/s" in out
+    assert f", from {robot}\n" in out
+    gains = _gains(tmp_path)
+    assert main(["simulate", "--ref", "30", "20", "0", "--gains", gains, "--steps", "3"]) == 0
+    assert f"gains          : {gains} (shim-sung)\n" in capsys.readouterr().out
+
+
+def test_the_plot_title_names_the_gains():
+    ref = [30.0, 20.0, math.radians(45.0)]
+    title = simulate.plot_title(ref, None, w.Gains(kr=9.7, k_theta=1.6), None)
+    assert title == "ref = (30, 20, 45°); k_r = 9.7, k_θ = 1.6, Φ_m = 70°"
+    title = simulate.plot_title(ref, None, w.Gains(kr=60.0), "results/tune/tuned_gains.json")
+    assert title.endswith("k_r = 60, k_θ = 10, Φ_m = 70° (tuned_gains.json)")
+
+
+# ---------------------------------------------------------------- errors in one voice
+
+
+@pytest.mark.parametrize(
+    ("argv", "expected"),
+    [
+        (["simulate", "--ref", "1", "2"], "wmr-jax: error: argument --ref: expected 3 arguments"),
+        (
+            ["simulate", "--ref", "1", "2", "3", "--gains", "{missing}"],
+            "wmr-jax: error: --gains '{missing}' cannot be read: there is no such file\n",
+        ),
+        (
+            ["evaluate", "--gains", "{missing}", "--refs", "{refs}"],
+            "wmr-jax: error: --gains '{missing}' cannot be read: there is no such file\n",
+        ),
+        (
+            ["robustness", "--nominal-gains", "{missing}", "--out", "{out}"],
+            "wmr-jax: error: --nominal-gains '{missing}' cannot be read: there is no such file\n",
+        ),
+        (
+            ["simulate", "--ref", "1", "2", "3", "--gains", "{refs}"],
+            "wmr-jax: error: --gains '{refs}' is not a JSON gains file (no JSON from line 1 column 3 "
+            "on); allowed: the tuned_gains.json of wmr-jax tune, or a JSON object of Gains fields\n",
+        ),
+        (
+            ["simulate", "--ref", "1", "2", "3", "--gains", "{folder}"],
+            "wmr-jax: error: --gains '{folder}' cannot be read: it is a folder\n",
+        ),
+    ],
+)
+def test_errors_have_one_prefix_and_one_wording(capsys, tmp_path, argv, expected):
+    files = {
+        "missing": str(tmp_path / "none.json"),
+        "refs": _file(tmp_path, "refs.csv", "30,20,0.3\n"),
+        "out": str(tmp_path / "out"),
+        "folder": str(tmp_path),
+    }
+    try:
+        status = main([part.format(**files) for part in argv])
+    except SystemExit as exit_:  # the parser's own errors
+        status = exit_.code
+    assert status == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Errno" not in err
+    assert err.startswith(expected.format(**files))
