@@ -1,5 +1,6 @@
 """What a user reads: per-reference results, units that look wrong, horizons, errors, progress."""
 
+import io
 import json
 import math
 
@@ -8,7 +9,7 @@ import pytest
 
 import wmr_jax as w
 from wmr_jax._src import conditions
-from wmr_jax._src.cli import simulate
+from wmr_jax._src.cli import progress, simulate
 from wmr_jax._src.cli.main import main
 from wmr_jax._src.tuning.saved import tuned_json
 
@@ -216,8 +217,9 @@ def test_the_plot_title_names_the_gains():
         ),
         (
             ["simulate", "--ref", "1", "2", "3", "--gains", "{refs}"],
-            "wmr-jax: error: --gains '{refs}' is not a JSON gains file (no JSON from line 1 column 3 "
-            "on); allowed: the tuned_gains.json of wmr-jax tune, or a JSON object of Gains fields\n",
+            "wmr-jax: error: --gains '{refs}' is not a JSON gains file (no JSON from line 1 "
+            "column 3 on); allowed: the tuned_gains.json of wmr-jax tune, or a JSON object of "
+            "Gains fields\n",
         ),
         (
             ["simulate", "--ref", "1", "2", "3", "--gains", "{folder}"],
@@ -240,3 +242,45 @@ def test_errors_have_one_prefix_and_one_wording(capsys, tmp_path, argv, expected
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "Errno" not in err
     assert err.startswith(expected.format(**files))
+
+
+# ---------------------------------------------------------------- progress off a terminal
+
+
+class _Terminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_progress_off_a_terminal_is_plain_lines():
+    stream = io.StringIO()
+    shown = progress.bar(total=4, desc="tune (ideal)", file=stream, dynamic_ncols=True)
+    for _ in range(4):
+        shown.update(1)
+        shown.set_postfix(loss="0.5s", refresh=False)
+    shown.close()
+    text = stream.getvalue()
+    assert "\r" not in text and "\x1b" not in text and "█" not in text
+    lines = text.splitlines()
+    assert lines and all(line.startswith("tune (ideal): ") for line in lines)
+    assert lines[-1].startswith("tune (ideal): 4/4 [")
+    # A bar made and never moved says nothing.
+    stream = io.StringIO()
+    progress.bar(total=3, desc="hard-law evaluation", file=stream).close()
+    assert stream.getvalue() == ""
+
+
+def test_progress_on_a_terminal_is_a_bar():
+    stream = _Terminal()
+    shown = progress.bar(total=4, desc="tune", file=stream)
+    shown.update(4)
+    shown.close()
+    assert "\r" in stream.getvalue() and progress.on_terminal(stream)
+    assert not progress.on_terminal(io.StringIO())
+
+
+def test_sweep_written_to_a_file_has_no_bar_escapes(capsys, tmp_path):
+    argv = ["sweep", "--out", str(tmp_path / "s"), "--poses", "6", "--chunk", "3"]
+    assert main([*argv, "--horizon", "0.2", "--headings", "0"]) == 0
+    err = capsys.readouterr().err
+    assert "sweep, " in err and "\r" not in err and "\x1b" not in err

@@ -214,10 +214,9 @@ def tune(
         ValueError: one line, for bad settings or a damaged checkpoint or one
             of another run.
     """
-    from tqdm.auto import tqdm
-
     from wmr_jax._src import io, tuning
     from wmr_jax._src.checks import check_bool, check_callable, check_folder
+    from wmr_jax._src.cli.progress import bar as tqdm
     from wmr_jax._src.params import Robot, validate_robot
     from wmr_jax._src.tuning.training import checked_config
 
