@@ -284,3 +284,71 @@ def test_sweep_written_to_a_file_has_no_bar_escapes(capsys, tmp_path):
     assert main([*argv, "--horizon", "0.2", "--headings", "0"]) == 0
     err = capsys.readouterr().err
     assert "sweep, " in err and "\r" not in err and "\x1b" not in err
+
+
+# ---------------------------------------------------------------- the tuning curve
+
+
+def _drawn_axes(monkeypatch, draw):
+    """The axes ``draw`` drew on (their lines and titles), kept past the figure's closing."""
+    from wmr_jax._src.report import figures
+
+    kept = []
+    real = figures.closed_after
+
+    def spy(*args, **kwargs):
+        context = real(*args, **kwargs)
+
+        class Keep:
+            def __enter__(self):
+                fig, axes = context.__enter__()
+                kept.append(axes)
+                return fig, axes
+
+            def __exit__(self, *exc):
+                kept[-1] = [
+                    (ax.get_title(), [(line.get_label(), line.get_ydata()) for line in ax.lines])
+                    for ax in kept[-1].flat
+                ]
+                return context.__exit__(*exc)
+
+        return Keep()
+
+    monkeypatch.setattr(figures, "closed_after", spy)
+    draw()
+    return kept[-1]
+
+
+def _history(iters=3):
+    return {"loss": np.ones(iters), "temperature": np.ones(iters), "gains": np.ones((iters, 7))}
+
+
+def test_the_tuning_curve_draws_the_baseline_of_the_robot_tuned_for(monkeypatch, tmp_path):
+    from wmr_jax import report
+
+    burger = w.ROBOTS["turtlebot3-burger"]
+    panels = _drawn_axes(
+        monkeypatch, lambda: report.tuning_curve(tmp_path / "c.png", _history(), robot=burger)
+    )
+    title, lines = panels[1]  # k_r
+    assert title == "k_r (cm/s)"
+    ((label, y),) = [(label, y) for label, y in lines if "paper" in label]
+    # 60 · 22.72 / (60 + 8 · 10): the paper's gains scaled into the Burger's budget.
+    assert y[0] == pytest.approx(60.0 * 22.72 / 140.0)
+    assert label == "paper's, scaled into the wheel budget (k_r = 9.74, k_θ = 1.62)"
+    panels = _drawn_axes(monkeypatch, lambda: report.tuning_curve(tmp_path / "c.png", _history()))
+    ((label, y),) = [(label, y) for label, y in panels[1][1] if "paper" in label]
+    assert label == "paper (feasible)" and y[0] == 60.0
+
+
+def test_the_tuning_curve_marks_gains_it_cannot_draw(monkeypatch, tmp_path):
+    from wmr_jax import report
+
+    history = _history(4)
+    history["gains"][1:3, 0] = [np.nan, np.inf]  # k_r at iterations 2 and 3
+    panels = _drawn_axes(monkeypatch, lambda: report.tuning_curve(tmp_path / "c.png", history))
+    title, lines = panels[1]
+    assert title == "k_r (cm/s); 2 non-finite, marked ×"
+    assert panels[2][0] == "k_θ (rad/s)"  # the others as they were
+    drawn = [y for label, y in lines if not label.startswith("paper")]
+    assert [len(y) for y in drawn] == [2, 2]  # the two finite values, then the two marks

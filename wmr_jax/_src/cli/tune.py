@@ -172,7 +172,11 @@ def _write_results(
     }
     io.atomic_write_json(out / "evaluation.json", report)
     tuning_curve(
-        out / "tuning_curve.png", result.history, velocity=config.velocity, problem=result.problem
+        out / "tuning_curve.png",
+        result.history,
+        velocity=config.velocity,
+        problem=result.problem,
+        robot=robot,
     )
 
 
