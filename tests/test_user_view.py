@@ -3,6 +3,7 @@
 import io
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -352,3 +353,50 @@ def test_the_tuning_curve_marks_gains_it_cannot_draw(monkeypatch, tmp_path):
     assert panels[2][0] == "k_θ (rad/s)"  # the others as they were
     drawn = [y for label, y in lines if not label.startswith("paper")]
     assert [len(y) for y in drawn] == [2, 2]  # the two finite values, then the two marks
+
+
+# ---------------------------------------------------------------- the paper's figures
+
+
+def _legends(monkeypatch, draw):
+    """The legend of each figure ``draw`` saves: ``(title, [entries])``."""
+    from wmr_jax._src.report import paper
+
+    legends = []
+
+    def keep(fig, path, **kwargs):
+        legend = fig.axes[0].get_legend()
+        legends.append(
+            (Path(path).name, legend.get_title().get_text(), [t.get_text() for t in legend.texts])
+        )
+        return Path(path)
+
+    monkeypatch.setattr(paper, "save_figure", keep)
+    draw()
+    return legends
+
+
+def test_fig7_has_one_legend_entry_per_coloured_path(monkeypatch, tmp_path):
+    from wmr_jax._src import paper as runs
+    from wmr_jax._src.report import paper
+
+    fig7 = runs.fig7_runs()
+    ((name, title, entries),) = _legends(monkeypatch, lambda: paper.save_fig7(tmp_path, fig7))
+    assert name == "fig7.png" and title == "robot paths (ideal loop)"
+    expected = [
+        f"to ({x:g}, {y:g}, {math.degrees(theta):g}°)" for x, y, theta in np.asarray(fig7.refs)
+    ]
+    # Then the references, and the circle of the one the robot reaches backwards.
+    backwards = "arrived backwards (θ = θ_r ± 180°)"
+    assert len(expected) == 7 and entries == [*expected, "reference", backwards]
+
+
+def test_fig9_keeps_one_entry_per_loop(monkeypatch, tmp_path):
+    from wmr_jax._src.report import paper
+
+    refs = np.array([[30.0, 20.0, 0.3], [-20.0, 15.0, 1.0]])
+    traj = w.batch_rollout(refs, w.Gains(kr=60.0), steps=5)
+    runs = [("ideal", traj, "--", "tab:blue"), ("non-ideal", traj, "-", "tab:red")]
+    path = tmp_path / "fig9.png"
+    legends = _legends(monkeypatch, lambda: paper._paths_figure(path, "t", refs, runs))
+    assert legends == [("fig9.png", "", ["ideal", "non-ideal", "reference"])]
