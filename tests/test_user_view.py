@@ -137,6 +137,17 @@ def test_a_failing_run_under_noise_points_to_robust_tuning(capsys, tmp_path):
     assert "hint" not in capsys.readouterr().out
 
 
+def test_the_hint_names_the_robot_the_file_was_tuned_for(capsys, tmp_path):
+    burger = w.ROBOTS["turtlebot3-burger"]
+    gains = _file(
+        tmp_path, "g.json", json.dumps(tuned_json(w.Gains(kr=9.0, k_theta=1.5), robot=burger))
+    )
+    refs = _file(tmp_path, "refs.csv", "400,0,0\n")
+    argv = ["evaluate", "--gains", gains, "--refs", refs, "--horizon", "1", "--condition", "both"]
+    assert main(argv) == 0
+    assert "wmr-jax tune --robust --robot turtlebot3-burger --out DIR" in capsys.readouterr().out
+
+
 # ---------------------------------------------------------------- simulate
 
 

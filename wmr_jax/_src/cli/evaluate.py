@@ -442,7 +442,15 @@ def hint(result: dict[str, Any], args: Any) -> str:
     noisy = result["condition"] in ("noise", "both")
     if not noisy or result["success"] >= _HINT_BELOW:
         return ""
-    robot = f" --robot {args.robot}" if args.robot else ""
+    from wmr_jax._src.robots import robot_from_values, robot_name
+
+    name = robot_name(robot_from_values(result["robot"], "robot"))
+    if args.robot:
+        robot = f" --robot {args.robot}"
+    elif name != "paper":
+        robot = f" --robot {name or 'YOUR_ROBOT_FILE'}"
+    else:
+        robot = ""
     return (
         f"hint: these gains were not tuned for this noise; wmr-jax tune --robust{robot} "
         "--out DIR tunes gains and an estimator for it (docs/robustness.md), then evaluate "
