@@ -411,3 +411,16 @@ def test_fig9_keeps_one_entry_per_loop(monkeypatch, tmp_path):
     path = tmp_path / "fig9.png"
     legends = _legends(monkeypatch, lambda: paper._paths_figure(path, "t", refs, runs))
     assert legends == [("fig9.png", "", ["ideal", "non-ideal", "reference"])]
+
+
+def test_gain_files_of_two_robots_are_refused_in_a_short_line(capsys, tmp_path):
+    burger, pioneer = w.ROBOTS["turtlebot3-burger"], w.ROBOTS["pioneer-3dx"]
+    nominal = _file(tmp_path, "n.json", json.dumps(tuned_json(w.Gains(kr=9.0), robot=burger)))
+    robust = _file(tmp_path, "r.json", json.dumps(tuned_json(w.Gains(kr=9.0), robot=pioneer)))
+    argv = ["robustness", "--out", str(tmp_path / "o"), "--nominal-gains", nominal]
+    assert main([*argv, "--robust-gains", robust]) == 2
+    assert capsys.readouterr().err == (
+        f"wmr-jax: error: --robust-gains {robust!r} is not allowed with --nominal-gains "
+        f"{nominal!r}: tuned for pioneer-3dx, the other for turtlebot3-burger; allowed: gain "
+        "files tuned for one robot\n"
+    )
