@@ -229,8 +229,8 @@ def test_the_plot_title_names_the_gains():
         ),
         (
             ["simulate", "--ref", "1", "2", "3", "--gains", "{refs}"],
-            "wmr-jax: error: --gains '{refs}' is not a JSON gains file (no JSON from line 1 "
-            "column 3 on); allowed: the tuned_gains.json of wmr-jax tune, or a JSON object of "
+            "wmr-jax: error: --gains '{refs}' is not a JSON gains file (not JSON at line 1 "
+            "column 3); allowed: the tuned_gains.json of wmr-jax tune, or a JSON object of "
             "Gains fields\n",
         ),
         (

@@ -279,7 +279,7 @@ def tuned_file(flag: str, path: Any) -> Any:
         parsed = _JSON_AT.search(reason)
         if parsed is not None:
             raise ValueError(
-                f"{flag} {head} is not a JSON gains file (no JSON from {parsed[2]} on); allowed: "
+                f"{flag} {head} is not a JSON gains file (not JSON at {parsed[2]}); allowed: "
                 "the tuned_gains.json of wmr-jax tune, or a JSON object of Gains fields"
             ) from None
         raise ValueError(f"{flag} {head} cannot be read: {os_reason(reason)}") from None
