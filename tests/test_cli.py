@@ -58,7 +58,9 @@ def test_simulate_takes_gains_from_a_file(capsys, tmp_path):
     from_file = capsys.readouterr().out
     flags = ["--kr", "60", "--k-theta", "8", "--phi-m", "60"]
     assert main(["simulate", "--ref", *ref, *flags]) == 0
-    assert from_file == capsys.readouterr().out
+    # The same run; the file's output names the file the gains came from.
+    named = f"gains          : {path} (shim-sung)\n"
+    assert from_file == named + capsys.readouterr().out
 
 
 def _write(tmp_path, name, text):

@@ -78,7 +78,8 @@ def test_npy_and_csv_give_the_same_result_as_the_library(capsys, tmp_path):
     assert a["condition"] == "both" and a["feedback"] == "raw" and a["mismatch"] == 0.03
     # The printed table carries the same numbers, with units.
     assert f"| success | {100 * direct['success']:.1f} % |" in out
-    assert f"| peak wheel speed | {direct['peak_wheel_speed']:.1f} cm/s |" in out
+    peak = f"{direct['peak_wheel_speed']:.1f} cm/s at the rims, wheel-radius mismatch included"
+    assert f"| peak wheel speed | {peak} |" in out
 
 
 def test_a_single_row_is_one_reference_and_none_arrived_is_said(capsys, tmp_path):
@@ -178,7 +179,7 @@ def _write(tmp_path, name, content):
         ({"--velocity": "warp"}, "--velocity 'warp' is not allowed"),
         ({"--estimator": "kalman"}, "--estimator 'kalman' is not allowed; allowed: none"),
         ({"--gains": "{missing_json}"}, "--gains '{missing_json}' cannot be read"),
-        ({"--gains": "{garbled_json}"}, "--gains '{garbled_json}' cannot be read"),
+        ({"--gains": "{garbled_json}"}, "--gains '{garbled_json}' is not a JSON gains file"),
         ({"--gains": "{bad_gains}"}, "--gains '{bad_gains}': key 'warp' is not allowed"),
         ({"--json": "/dev/null/out.json"}, "--json '/dev/null/out.json' is not allowed"),
     ],

@@ -125,3 +125,40 @@ def test_a_sealed_record_reads_back_whole_and_refuses_any_changed_value(tmp_path
             io.sealed(bad)
     with pytest.raises(ValueError, match=r"^record = .* is not allowed .*JSON"):
         io.sealed({"f": print})
+
+
+def _edit_meta(path, edit):
+    """Rewrite ``path`` as a valid .npz with its ``__meta__`` edited and its checksum kept."""
+    with np.load(path) as data:
+        stored = {name: data[name] for name in data.files}
+    meta = json.loads(str(stored["__meta__"]))
+    stored["__meta__"] = np.asarray(json.dumps(edit(meta), sort_keys=True))
+    np.savez(path, **stored)
+
+
+def test_edited_meta_data_is_refused_as_edited_values_are(tmp_path):
+    # The checksum covers the meta data too: a chunk whose settings were edited
+    # would otherwise pass for one of other settings.
+    path = tmp_path / "c.npz"
+    report.save_arrays(path, {"z": np.arange(5.0)}, {"steps": 150, "dt": 0.033})
+    _edit_meta(path, lambda meta: {**meta, "steps": 300})
+    with pytest.raises(report.DamagedFileError, match="checksum does not match"):
+        report.load_arrays(path)
+    # The same text again, key order and all, is the file as written.
+    report.save_arrays(path, {"z": np.arange(5.0)}, {"steps": 150, "dt": 0.033})
+    _edit_meta(path, lambda meta: meta)
+    assert report.load_arrays(path)[1] == {"steps": 150, "dt": 0.033}
+
+
+def test_a_sweep_chunk_with_edited_meta_data_is_refused(tmp_path):
+    import wmr_jax as w
+
+    refs = np.array([[30.0, 20.0, 0.3], [-20.0, 15.0, 1.0]])
+    folder = tmp_path / "sweep"
+    w.sweep(refs, steps=3, chunk_size=2, out=folder)
+    chunks = sorted(folder.rglob("chunk_*.npz"))
+    assert chunks
+    report.load_arrays(chunks[0])  # as written, it reads
+    _edit_meta(chunks[0], lambda meta: {**meta, "edited": True})
+    with pytest.raises(report.DamagedFileError, match="checksum does not match"):
+        report.load_arrays(chunks[0])

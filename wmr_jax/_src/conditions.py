@@ -278,7 +278,10 @@ def evaluate_loop(
         "vs_turn_drive_turn": the mean arrival over it, "n", "condition",
         "mismatch", "seed", "horizon_s", "velocity", "controller",
         "feedback", "robot": {field: value}, "dtype": "float64" or
-        "float32"}``.
+        "float32", "per_reference": one entry per reference, in order,
+        {"ref": [x cm, y cm, θ rad], "success": bool, "arrival_s": s (None
+        where it did not arrive), "final_distance_cm": distance to the
+        reference at the end, "settled_at_horizon": bool}}``.
 
     Raises:
         ValueError: for a bad argument, before any run; for parameters with
@@ -311,6 +314,19 @@ def evaluate_loop(
     )
     arrived = m.arrival[m.success]
     mean = float(arrived.mean()) if arrived.size else None
+    late = settled_at_horizon(m, horizon)
+    per_reference = [
+        {
+            "ref": [float(v) for v in ref],
+            "success": bool(ok),
+            "arrival_s": float(t) if ok else None,
+            "final_distance_cm": float(d),
+            "settled_at_horizon": bool(s),
+        }
+        for ref, ok, t, d, s in zip(
+            np.asarray(refs), m.success, m.arrival, m.final_distance, late, strict=True
+        )
+    ]
     optimal = None
     if arrived.size:  # the same references as the mean arrival: those that arrived
         optimal = float(np.mean(time_bounds(refs[m.success], robot=robot, dt=dt).turn_drive_turn))
@@ -318,7 +334,7 @@ def evaluate_loop(
         "success": float(m.success.mean()),
         "mean_arrival_s": mean,
         "median_arrival_s": float(np.median(arrived)) if arrived.size else None,
-        "settled_at_horizon": float(settled_at_horizon(m, horizon).mean()),
+        "settled_at_horizon": float(late.mean()),
         "peak_wheel_speed": float(np.max(m.peak_wheel)),
         "v_max": float(robot.v_max),
         "peak_wheel_speed_ok": bool(
@@ -336,6 +352,7 @@ def evaluate_loop(
         "feedback": "raw" if estimator is None else estimator.name,
         "robot": robot_json(robot),
         "dtype": "float64" if x64 else "float32",
+        "per_reference": per_reference,
     }
 
 

@@ -88,6 +88,14 @@ def add_arguments(parser: Any) -> None:
         metavar="OUT.json",
         help="write the result to this JSON file (if omitted, only print it)",
     )
+    parser.add_argument(
+        "--per-ref",
+        default=None,
+        metavar="OUT.csv",
+        help="write one line per reference to this CSV: where it is in --refs, the reference, "
+        "whether it arrived, its arrival time, its final distance and whether it settled only "
+        "at the horizon",
+    )
 
 
 def _refs_error(path: str, what: str) -> ValueError:
@@ -215,6 +223,11 @@ def load_refs(path: str, *, x64: bool = True) -> Any:
     Raises:
         ValueError: one line naming ``--refs``, the file and what is wrong.
     """
+    return _labelled_refs(path, x64=x64)[0]
+
+
+def _labelled_refs(path: str, *, x64: bool = True) -> tuple[Any, list[str]]:
+    """``load_refs`` and where each reference is in the file (``line 3``, ``row 0 (from 0)``)."""
     import jax
     import numpy as np
 
@@ -255,7 +268,38 @@ def load_refs(path: str, *, x64: bool = True) -> Any:
     except ValueError as err:
         text = str(err).replace(_FLOAT64_HINT, ", or without --float32")
         raise _refs_error(path, text) from None
-    return refs
+    return refs, labels
+
+
+def unit_warnings(path: str, refs: Any) -> list[str]:
+    """One-line warnings for references whose numbers look like another unit.
+
+    The columns are read as cm, cm and rad whatever their scale. References
+    that all lie within the arrival distance (docs/model.md §6) of the start
+    are judged arrived in position from the first period, as a file in
+    metres would be; headings beyond 2π rad look like degrees. Both are legal
+    (a set of turns in place; headings are reduced modulo 2π), so they are
+    warned about, not refused.
+    """
+    import numpy as np
+
+    from wmr_jax._src.metrics import DEFAULT_TOL_R
+
+    out = []
+    distance = np.hypot(refs[:, 0], refs[:, 1])
+    if float(distance.max()) <= DEFAULT_TOL_R:
+        out.append(
+            f"--refs {path!r}: every reference lies within {DEFAULT_TOL_R:g} cm of the start "
+            f"(the farthest {float(distance.max()):.3g} cm), inside the arrival tolerance; the "
+            "columns are read as x cm, y cm, theta rad (a file in metres needs x and y times 100)"
+        )
+    heading = np.abs(refs[:, 2])
+    if float(heading.max()) > 2 * np.pi:
+        out.append(
+            f"--refs {path!r}: headings up to {float(heading.max()):g} look like degrees; the "
+            "third column is read as radians (a file in degrees needs theta times pi/180)"
+        )
+    return out
 
 
 def _mismatch(text: Any) -> float:
@@ -290,12 +334,8 @@ def _horizon(text: Any, n_refs: int, robot: Any) -> float:
 def _loop(path: str, estimator: str | None) -> Any:
     """The closed loop of ``--gains``, its estimator replaced by ``--estimator`` if given."""
     from wmr_jax._src.sensing.estimators import ESTIMATORS, resolve_estimator
-    from wmr_jax._src.tuning.saved import load_tuned
 
-    try:
-        loop = load_tuned(path)
-    except ValueError as err:
-        raise ValueError(f"--gains {err}") from None
+    loop = flags.tuned_file("--gains", path)[0]
     if estimator is None:
         return loop
     if estimator == "none":
@@ -324,18 +364,54 @@ def _versus_optimal(result: dict[str, Any]) -> str:
 
 
 def _within(result: dict[str, Any]) -> str:
+    bound = result["v_max"] * (1.0 + result["mismatch"])
     if result["peak_wheel_speed_ok"]:
-        return "every wheel command within it"
+        if result["mismatch"] == 0:
+            return "every wheel command within it"
+        return (
+            f"every wheel command within it (a wheel up to {100 * result['mismatch']:g} % larger "
+            f"than modelled turns that into up to {bound:.4g} cm/s at its rim)"
+        )
     return "exceeded: the gains ask more of the wheels than this robot has"
 
 
-def summary_rows(result: dict[str, Any]) -> list[dict[str, str]]:
-    """The printed table of a result: one quantity a row, with its unit."""
+def _peak(result: dict[str, Any]) -> str:
+    text = f"{result['peak_wheel_speed']:.1f} cm/s"
+    if result["mismatch"] == 0:
+        return text
+    return text + " at the rims, wheel-radius mismatch included"
+
+
+_SHOWN_FAILURES = 5
+
+
+def _failed(result: dict[str, Any], labels: list[str] | None) -> str:
+    """Where the references that did not arrive are in ``--refs``; the first few named."""
+    failed = [i for i, r in enumerate(result["per_reference"]) if not r["success"]]
+    if not failed:
+        return "none"
+    names = [labels[i] if labels else f"row {i} (from 0)" for i in failed[:_SHOWN_FAILURES]]
+    more = len(failed) - len(names)
+    return ", ".join(names) + (f" and {more} more (--per-ref lists them all)" if more else "")
+
+
+def summary_rows(result: dict[str, Any], labels: list[str] | None = None) -> list[dict[str, str]]:
+    """The printed table of a result: one quantity a row, with its unit.
+
+    ``labels`` says where each reference is in ``--refs`` (``line 3``), for
+    the row of those that did not arrive.
+    """
     from wmr_jax._src.robots import describe_robot, robot_from_values
 
     robot = describe_robot(robot_from_values(result["robot"], "robot"))
-    return [
+    if result.get("robot_file"):
+        robot += f", from {result['robot_file']}"
+    rows = [
         {"quantity": "success", "value": _percent(result["success"])},
+    ]
+    if "per_reference" in result:
+        rows.append({"quantity": "not arrived", "value": _failed(result, labels)})
+    return rows + [
         {"quantity": "mean arrival", "value": _seconds(result["mean_arrival_s"])},
         {"quantity": "median arrival", "value": _seconds(result["median_arrival_s"])},
         {"quantity": "vs turn–drive–turn time", "value": _versus_optimal(result)},
@@ -343,7 +419,7 @@ def summary_rows(result: dict[str, Any]) -> list[dict[str, str]]:
             "quantity": "settled only at the horizon",
             "value": _percent(result["settled_at_horizon"]) + " of the runs (counted as arrived)",
         },
-        {"quantity": "peak wheel speed", "value": f"{result['peak_wheel_speed']:.1f} cm/s"},
+        {"quantity": "peak wheel speed", "value": _peak(result)},
         {"quantity": "V_max", "value": f"{result['v_max']:g} cm/s, {_within(result)}"},
         {"quantity": "robot", "value": robot},
         {"quantity": "references (n)", "value": str(result["n"])},
@@ -357,9 +433,48 @@ def summary_rows(result: dict[str, Any]) -> list[dict[str, str]]:
     ]
 
 
+# Below this success under noise, the hint to tune for it is printed.
+_HINT_BELOW = 0.95
+
+
+def hint(result: dict[str, Any], args: Any) -> str:
+    """What to do about a loop that fails under noise, or ``""``."""
+    noisy = result["condition"] in ("noise", "both")
+    if not noisy or result["success"] >= _HINT_BELOW:
+        return ""
+    from wmr_jax._src.robots import robot_from_values, robot_name
+
+    name = robot_name(robot_from_values(result["robot"], "robot"))
+    if args.robot:
+        robot = f" --robot {args.robot}"
+    elif name != "paper":
+        robot = f" --robot {name or 'YOUR_ROBOT_FILE'}"
+    else:
+        robot = ""
+    return (
+        f"hint: these gains were not tuned for this noise; wmr-jax tune --robust{robot} "
+        "--out DIR tunes gains and an estimator for it (docs/robustness.md), then evaluate "
+        "DIR/tuned_gains.json"
+    )
+
+
+def per_ref_csv(result: dict[str, Any], labels: list[str]) -> str:
+    """The ``--per-ref`` table: one line per reference, in the order of ``--refs``."""
+    lines = ["where,x_cm,y_cm,theta_rad,arrived,arrival_s,final_distance_cm,settled_at_horizon"]
+    for label, r in zip(labels, result["per_reference"], strict=True):
+        arrival = "" if r["arrival_s"] is None else f"{r['arrival_s']:.6g}"
+        x, y, theta = (f"{v:.10g}" for v in r["ref"])
+        lines.append(
+            f"{label},{x},{y},{theta},{str(r['success']).lower()},{arrival},"
+            f"{r['final_distance_cm']:.6g},{str(r['settled_at_horizon']).lower()}"
+        )
+    return "\n".join(lines) + "\n"
+
+
 def run(args: Any) -> int:
     """Run ``wmr-jax evaluate``; return the exit status."""
     out = None if args.json is None else flags.output_file("--json", args.json)
+    per_ref = None if args.per_ref is None else flags.output_file("--per-ref", args.per_ref)
     condition = flags.choice("--condition", args.condition, _CONDITIONS)
     mismatch = _mismatch(args.mismatch)
     seed = flags.positive_int("--seed", args.seed, 0, 2**32 - 1)
@@ -369,15 +484,19 @@ def run(args: Any) -> int:
         estimator = flags.choice("--estimator", args.estimator, _ESTIMATOR_CHOICES)
     x64 = not args.float32
     given = flags.robot_from(args.robot)
-    refs = load_refs(args.refs, x64=x64)
+    refs, labels = _labelled_refs(args.refs, x64=x64)
     loop = _loop(args.gains, estimator)
     robot = flags.robot_for_gains(given, loop.robot, "--gains", args.gains)
     horizon = _horizon(args.horizon, len(refs), robot)
     if given is not None and given.note:
         print(given.note)
+    import warnings
+
+    for text in unit_warnings(args.refs, refs):
+        warnings.warn(text, UserWarning, stacklevel=1)
 
     from wmr_jax._src.conditions import evaluate_loop
-    from wmr_jax._src.io import atomic_write_json
+    from wmr_jax._src.io import atomic_write_json, atomic_write_text
     from wmr_jax._src.report.tables import markdown_table
     from wmr_jax._src.tuning.saved import tuned_json
 
@@ -396,10 +515,18 @@ def run(args: Any) -> int:
     # The gains themselves, not only where they were: the file may be tuned again.
     gains = tuned_json(loop.params, loop.estimator)
     result = {**result, "gains_file": str(args.gains), "gains": gains, "refs_file": str(args.refs)}
+    if given is not None and flags.is_robot_file(args.robot):
+        result["robot_file"] = str(args.robot)
     if out is not None:
         atomic_write_json(out, result)
         print(f"evaluate -> {out}")
-    print(markdown_table(summary_rows(result), ["quantity", "value"]), end="")
+    if per_ref is not None:
+        atomic_write_text(per_ref, per_ref_csv(result, labels))
+        print(f"per reference -> {per_ref}")
+    print(markdown_table(summary_rows(result, labels), ["quantity", "value"]), end="")
+    advice = hint(result, args)
+    if advice:
+        print(advice)
     return 0
 
 

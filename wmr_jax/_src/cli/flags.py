@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import math
+import re
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -239,6 +240,51 @@ def gains_from(args: Any) -> Any:
     return gains
 
 
+_ERRNO = re.compile(r"\[Errno (\d+)\] ([^:]*)(: .*)?$")
+_JSON_AT = re.compile(r"^(Expecting|Extra data|Unterminated|Invalid)\b.*?(line \d+ column \d+)")
+
+
+def os_reason(text: str) -> str:
+    """An ``OSError``'s text in the commands' words: ``there is no such file``, not ``[Errno 2]…``.
+
+    The path the OS repeats at the end is left out (the message names it).
+    """
+    text = " ".join(str(text).split())
+    found = _ERRNO.search(text)
+    if found is None:
+        return text
+    reason = {"2": "there is no such file", "21": "it is a folder"}.get(found[1])
+    return text[: found.start()] + (reason or found[2][:1].lower() + found[2][1:])
+
+
+def tuned_file(flag: str, path: Any) -> Any:
+    """``load_tuned_and_tuning(path)`` for a command's flag: ``(ClosedLoop, tuning)``.
+
+    A missing file, a folder or a file that is no JSON (a ``.csv`` of
+    references given as the gains) is said in the commands' words, naming
+    the flag and the file.
+
+    Raises:
+        ValueError: one line naming ``flag``, the file and what is wrong.
+    """
+    from wmr_jax._src.tuning.saved import load_tuned_and_tuning
+
+    try:
+        return load_tuned_and_tuning(path)
+    except ValueError as err:
+        text = str(err)
+        head, sep, reason = text.partition(" cannot be read: ")
+        if not sep:
+            raise ValueError(f"{flag} {text}") from None
+        parsed = _JSON_AT.search(reason)
+        if parsed is not None:
+            raise ValueError(
+                f"{flag} {head} is not a JSON gains file (not JSON at {parsed[2]}); allowed: "
+                "the tuned_gains.json of wmr-jax tune, or a JSON object of Gains fields"
+            ) from None
+        raise ValueError(f"{flag} {head} cannot be read: {os_reason(reason)}") from None
+
+
 def gains_file(flag: str, text: str) -> Any:
     """Return the fixed ``Gains`` stored in a file such as ``tuned_gains.json`` of ``wmr-jax tune``.
 
@@ -251,12 +297,8 @@ def gains_file(flag: str, text: str) -> Any:
             ``load_tuned`` refuses or one of a gain schedule.
     """
     from wmr_jax._src.params import Gains
-    from wmr_jax._src.tuning.saved import load_tuned
 
-    try:
-        loop = load_tuned(text)
-    except ValueError as err:
-        raise ValueError(f"{flag} {err}") from None
+    loop = tuned_file(flag, text)[0]
     if not isinstance(loop.params, Gains):
         raise ValueError(
             f"{flag} {text!r} is not allowed here: it holds a gain schedule; allowed: a file "
@@ -324,6 +366,23 @@ def robot_from(text: Any) -> Any:
         raise ValueError(f"--robot {err}") from None
 
 
+def is_robot_file(text: Any) -> bool:
+    """Whether ``--robot``'s value names a file rather than a preset."""
+    from wmr_jax._src.robots import ROBOTS
+
+    return text is not None and text not in ROBOTS
+
+
+def robot_shown(given: Any, robot: Any) -> str:
+    """One line for the robot a command runs: ``describe_robot``, and the file it came from."""
+    from wmr_jax._src.robots import describe_robot
+
+    text = describe_robot(robot)
+    if given is not None and is_robot_file(given.label):
+        text += f", from {given.label}"
+    return text
+
+
 def robot_for_gains(given: Any, saved: Any, gains_flag: str, path: Any) -> Any:
     """The robot to run a tuned file's parameters on: ``--robot``'s, else the file's.
 
@@ -346,18 +405,29 @@ def robot_for_gains(given: Any, saved: Any, gains_flag: str, path: Any) -> Any:
     Raises:
         ValueError: one line naming both robots.
     """
-    from wmr_jax._src.robots import describe_robot, same_robot
+    from wmr_jax._src.robots import same_robot
 
     if given is None:
         return saved
     if saved is not None and not same_robot(given.robot, saved):
         raise ValueError(
-            f"--robot {given.label!r} is not allowed with {gains_flag} {str(path)!r}: the file "
-            f"was tuned for {describe_robot(saved)}, --robot is {describe_robot(given.robot)}, "
-            "and gains are tuned within one robot's wheel budget; allowed: that robot, or no "
-            "--robot"
+            f"--robot {given.label!r} is not allowed with {gains_flag} {str(path)!r}, tuned for "
+            f"{short_robot(saved)} (gains fit one robot's wheel budget); allowed: that robot, "
+            "or no --robot"
         )
     return given.robot
+
+
+def short_robot(robot: Any) -> str:
+    """A robot in a few words: its preset's name, else its track and wheel limit."""
+    from wmr_jax._src.robots import robot_name
+
+    name = robot_name(robot)
+    if name is not None:
+        return name
+    return (
+        f"a robot with L = {float(robot.half_track):.4g} cm, V_max = {float(robot.v_max):.4g} cm/s"
+    )
 
 
 @contextlib.contextmanager

@@ -52,7 +52,8 @@ class _Parser(argparse.ArgumentParser):
     """An ``ArgumentParser`` whose errors are one line, like every other error."""
 
     def error(self, message: str):
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        # One prefix for every error, the parser's as the commands' own.
+        self.exit(2, f"wmr-jax: error: {message} (see {self.prog} --help)\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -125,7 +126,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"wmr-jax: error: {err}", file=sys.stderr)
         return 2
     except OSError as err:  # a disk that fills or a folder that vanishes mid-run
-        print(f"wmr-jax: error: {' '.join(str(err).split())}", file=sys.stderr)
+        from wmr_jax._src.cli.flags import os_reason
+
+        print(f"wmr-jax: error: {os_reason(str(err))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         # tune (plain or --compare) and sweep can continue; tune --robust cannot.

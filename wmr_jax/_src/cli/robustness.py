@@ -113,7 +113,9 @@ def run(args: Any) -> int:
             "ideal loop does not limit their wheel commands: robustness.json has each row's "
             "peak wheel speed; --velocity nonideal holds the wheels within V_max)"
         )
-    print(f"robot {describe_robot(robot)}, horizon {study_horizon(robot):g} s{note}")
+    robot_file = getattr(args, "robot", None)
+    origin = f", from {robot_file}" if flags.is_robot_file(robot_file) else ""
+    print(f"robot {describe_robot(robot)}{origin}, horizon {study_horizon(robot):g} s{note}")
     rows = robustness_study(
         seed=seed,
         controller_names=names,
@@ -222,9 +224,9 @@ def _gain_sets(args: Any) -> tuple[dict[str, Any], Any]:
     robot, docs/robots.md).
     """
     from wmr_jax._src.params import Robot
-    from wmr_jax._src.robots import describe_robot, same_robot
+    from wmr_jax._src.robots import same_robot
     from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
-    from wmr_jax._src.tuning.saved import TUNINGS, load_tuned_and_tuning
+    from wmr_jax._src.tuning.saved import TUNINGS
 
     given = flags.robot_from(getattr(args, "robot", None))
     if given is not None and given.note:
@@ -238,10 +240,7 @@ def _gain_sets(args: Any) -> tuple[dict[str, Any], Any]:
         path = getattr(args, flag[2:].replace("-", "_"), None)
         if path is None:
             continue
-        try:
-            loop, tuning = load_tuned_and_tuning(path)  # run whole: its law and estimator
-        except ValueError as err:
-            raise ValueError(f"{flag} {path!r} is not allowed: {err}") from None
+        loop, tuning = flags.tuned_file(flag, path)  # run whole: its law and estimator
         if tuning is not None and tuning != wanted:
             # Its rows would be labelled by the flag: a nominal file called robust-tuned.
             other = "--nominal-gains" if tuning == "nominal" else "--robust-gains"
@@ -255,9 +254,9 @@ def _gain_sets(args: Any) -> tuple[dict[str, Any], Any]:
             robot, source = chosen, f"{flag} {str(path)!r}"
         elif chosen is not None and not same_robot(chosen, robot):
             raise ValueError(
-                f"{flag} {str(path)!r} is not allowed with {source}: it was tuned for "
-                f"{describe_robot(chosen)}, the other for {describe_robot(robot)}; allowed: "
-                "gain files tuned for one robot"
+                f"{flag} {str(path)!r} is not allowed with {source}: tuned for "
+                f"{flags.short_robot(chosen)}, the other for {flags.short_robot(robot)}; "
+                "allowed: gain files tuned for one robot"
             )
         loops[label] = loop
     robot = Robot() if robot is None else robot

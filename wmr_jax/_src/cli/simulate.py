@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 from wmr_jax._src.cli import flags
@@ -27,7 +28,13 @@ def add_arguments(parser: Any) -> None:
         help="initial pose: cm, cm, degrees",
     )
     parser.add_argument("--dt", default=0.033, metavar="S", help="control period, s")
-    parser.add_argument("--steps", default=150, metavar="N", help="control periods")
+    parser.add_argument(
+        "--steps",
+        default=None,
+        metavar="N",
+        help="control periods (default: 150 on the paper robot; on a slower robot as many "
+        "times more as the studies' horizon is longer there, docs/robustness.md)",
+    )
     parser.add_argument("--velocity", default="ideal", help="velocity loop: ideal or nonideal")
     parser.add_argument(
         "--plot", default=None, metavar="FILE.png", help="save the path to this image"
@@ -50,17 +57,13 @@ def _controller_and_gains(args: Any) -> tuple[Any, Any, Any]:
     The robot is the file's (``None`` where it records none, and for the flags).
     """
     from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
-    from wmr_jax._src.tuning.saved import load_tuned
 
     if args.gains is None:
         return SHIM_SUNG, flags.gains_from(args), None
     given = flags.given_gain_flags(args)
     if given:
         raise ValueError(f"{given[0]} is not allowed with --gains; allowed: one or the other")
-    try:
-        loop = load_tuned(args.gains)
-    except ValueError as err:
-        raise ValueError(f"--gains {err}") from None
+    loop = flags.tuned_file("--gains", args.gains)[0]
     if loop.estimator is not None:
         # docs/model.md §9: without noise or latency every estimator gives the nominal run.
         print(
@@ -71,26 +74,70 @@ def _controller_and_gains(args: Any) -> tuple[Any, Any, Any]:
     return loop.controller, loop.params, loop.robot
 
 
+def _degrees(theta: float) -> float:
+    """A heading in degrees, wrapped into (-180°, 180°]: 945° is printed as -135°."""
+    wrapped = math.remainder(theta, 2 * math.pi)  # [-π, π]
+    return math.degrees(wrapped + 2 * math.pi if wrapped <= -math.pi else wrapped)
+
+
+# Steps of a run on the paper robot: 4.95 s at the default dt.
+DEFAULT_STEPS = 150
+
+
+def default_steps(robot: Any) -> int:
+    """``DEFAULT_STEPS`` stretched as the studies' horizon is on a slower robot.
+
+    ``study_horizon``: the paper's gains scaled into a smaller wheel budget
+    drive the same paths that many times slower, so a run of the default
+    length on such a robot would end before it arrives.
+    """
+    from wmr_jax._src.poses import HORIZON_S
+    from wmr_jax._src.robustness import study_horizon
+
+    stretch = 1.0 if robot is None else study_horizon(robot) / HORIZON_S
+    return math.ceil(DEFAULT_STEPS * stretch - 1e-9)
+
+
+def plot_title(ref: Any, controller: Any, gains: Any, gains_file: Any) -> str:
+    """The title of ``--plot``: the reference and the gains that drove to it."""
+    from wmr_jax._src.params import Gains
+
+    where = f"ref = ({ref[0]:g}, {ref[1]:g}, {math.degrees(ref[2]):g}°)"
+    if isinstance(gains, Gains):
+        what = (
+            f"k_r = {float(gains.kr):.4g}, k_θ = {float(gains.k_theta):.4g}, "
+            f"Φ_m = {math.degrees(float(gains.phi_m)):.4g}°"
+        )
+    else:
+        what = controller.name
+    if gains_file is not None:
+        what += f" ({Path(str(gains_file)).name})"
+    return f"{where}; {what}"
+
+
 def run(args: Any) -> int:
     """Run ``wmr-jax simulate``; return the exit status."""
     import numpy as np
 
     from wmr_jax._src import metrics
     from wmr_jax._src.params import Robot
-    from wmr_jax._src.robots import describe_robot, same_robot
+    from wmr_jax._src.robots import same_robot
     from wmr_jax._src.rollout import rollout
 
     plot = None if args.plot is None else flags.image_file("--plot", args.plot)
     ref = flags.pose_from_degrees("--ref", args.ref)
     init = flags.pose_from_degrees("--init", args.init)
     dt = flags.number("--dt", args.dt, low=0.0, closed=False, unit="s")
-    steps = flags.positive_int("--steps", args.steps, 1, 10**7)
+    if args.steps is not None:
+        steps = flags.positive_int("--steps", args.steps, 1, 10**7)
     velocity = flags.velocity_loop(args.velocity)
     given = flags.robot_from(args.robot)
     controller, gains, saved = _controller_and_gains(args)
     robot = flags.robot_for_gains(given, saved, "--gains", args.gains)
     if given is not None and given.note:
         print(given.note)
+    if args.steps is None:
+        steps = default_steps(robot)
     with flags.as_flags({"ref": "--ref", "init": "--init", "dt": "--dt"}):
         traj = rollout(
             ref,
@@ -107,8 +154,10 @@ def run(args: Any) -> int:
     final = np.asarray(traj.poses[-1])
     if robot is not None and not same_robot(robot, Robot()):
         # Shown only off the paper robot, the one every other run of the command uses.
-        print(f"robot          : {describe_robot(robot)}")
-    print(f"reference      : x={ref[0]:.3f} cm  y={ref[1]:.3f} cm  θ={math.degrees(ref[2]):.2f}°")
+        print(f"robot          : {flags.robot_shown(given, robot)}")
+    if args.gains is not None:
+        print(f"gains          : {args.gains} ({controller.name})")
+    print(f"reference      : x={ref[0]:.3f} cm  y={ref[1]:.3f} cm  θ={_degrees(ref[2]):.2f}°")
     # The law folds front and back alike: a robot facing θ_r ± 180° is at its goal.
     turned = math.remainder(float(final[2]) - ref[2], 2 * math.pi)
     facing = (
@@ -118,10 +167,15 @@ def run(args: Any) -> int:
     )
     print(
         f"final pose     : x={final[0]:.3f} cm  y={final[1]:.3f} cm  "
-        f"θ={math.degrees(final[2]):.2f}° after {steps * dt:.3f} s{facing}"
+        f"θ={_degrees(float(final[2])):.2f}° after {steps * dt:.3f} s{facing}"
     )
     arrival = "never (not arrived at the end)" if math.isinf(t_arrive) else f"{t_arrive:.3f} s"
     print(f"arrival time   : {arrival}")
+    if math.isinf(t_arrive):
+        print(
+            f"hint           : not arrived in {steps * dt:.3g} s; a longer run, such as "
+            f"--steps {4 * steps}, shows whether it arrives later"
+        )
     print(
         "time per region: "
         + "  ".join(f"R{k}={per_region[k]:.3f} s" for k in range(4))
@@ -131,9 +185,7 @@ def run(args: Any) -> int:
     if plot is not None:
         from wmr_jax._src.report.figures import path_figure
 
-        path_figure(
-            plot, traj, ref, title=f"ref = ({ref[0]:g}, {ref[1]:g}, {math.degrees(ref[2]):g}°)"
-        )
+        path_figure(plot, traj, ref, title=plot_title(ref, controller, gains, args.gains))
         print(f"plot           : {plot}")
     return 0
 

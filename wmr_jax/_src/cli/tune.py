@@ -172,7 +172,11 @@ def _write_results(
     }
     io.atomic_write_json(out / "evaluation.json", report)
     tuning_curve(
-        out / "tuning_curve.png", result.history, velocity=config.velocity, problem=result.problem
+        out / "tuning_curve.png",
+        result.history,
+        velocity=config.velocity,
+        problem=result.problem,
+        robot=robot,
     )
 
 
@@ -214,10 +218,9 @@ def tune(
         ValueError: one line, for bad settings or a damaged checkpoint or one
             of another run.
     """
-    from tqdm.auto import tqdm
-
     from wmr_jax._src import io, tuning
     from wmr_jax._src.checks import check_bool, check_callable, check_folder
+    from wmr_jax._src.cli.progress import bar as tqdm
     from wmr_jax._src.params import Robot, validate_robot
     from wmr_jax._src.tuning.training import checked_config
 

@@ -8,6 +8,7 @@ draw with ``plt`` from here; nothing else in the package imports matplotlib.
 from __future__ import annotations
 
 import contextlib
+import math
 from collections.abc import Iterator, Sequence
 from typing import Any
 
@@ -98,7 +99,10 @@ def plot_paths(
             ``len(paths)`` are the paths' own, any more are marked too
             (waypoints).
         color: one colour for all paths (default: one per path).
-        label: legend label for the first path.
+        label: legend label of the paths: with one colour, of the first
+            path, which stands for them all; with one colour per path, each
+            path is entered as ``to (x, y, θ°)``, its reference, and
+            ``label`` is left to the legend's title.
         linestyle: matplotlib line style.
         heading_spacing: draw the heading every this many cm of travel.
         arrow_length: heading arrow length, cm.
@@ -119,11 +123,16 @@ def plot_paths(
         )
     checks.check_number("heading_spacing", heading_spacing, unit="cm")
     cmap = plt.get_cmap("tab10")
+    # One colour per path: each its own legend entry, named by its reference.
+    each = color is None and label is not None and len(paths) > 1 and mark_refs
     for i, poses in enumerate(paths):
         c = color if color is not None else cmap(i % 10)
-        ax.plot(
-            poses[:, 0], poses[:, 1], linestyle, color=c, lw=1.3, label=label if i == 0 else None
-        )
+        if each:
+            x, y, theta = refs[i]
+            name = f"to ({x:g}, {y:g}, {math.degrees(theta):g}°)"
+        else:
+            name = label if i == 0 else None
+        ax.plot(poses[:, 0], poses[:, 1], linestyle, color=c, lw=1.3, label=name)
         _heading_arrows(ax, poses, heading_spacing, c, arrow_length, alpha=0.8)
     if mark_refs:
         refs = np.asarray(refs)

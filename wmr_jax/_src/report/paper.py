@@ -72,9 +72,12 @@ def _fig6(path: Path, curve: dict[str, Any], r_e: float = 1.0) -> None:
         save_figure(fig, path, dpi=120, bbox_inches="tight")
 
 
-def _legend_below(ax: Any) -> None:
+def _legend_below(ax: Any, title: str | None = None) -> None:
     """The legend under the axes, where it covers no path."""
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8)
+    ax.legend(
+        loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8, title=title,
+        title_fontsize=8,
+    )  # fmt: skip
 
 
 def _paths_figure(path: Path, title: str, refs: np.ndarray, runs: list[tuple]) -> None:
@@ -92,7 +95,8 @@ def _paths_figure(path: Path, title: str, refs: np.ndarray, runs: list[tuple]) -
             )
         ax.plot([0], [0], "ko", ms=5)
         ax.set_title(title, fontsize=10)
-        _legend_below(ax)
+        # One colour per path: the entries name the references, the title the loop.
+        _legend_below(ax, runs[0][0] if len(runs) == 1 and runs[0][3] is None else None)
         save_figure(fig, path, dpi=120, bbox_inches="tight")
 
 
@@ -268,15 +272,14 @@ def save_fig7(out_dir: str | Path, fig7: Any) -> None:
     record = json_text(fig7.table(), "fig7.table()", indent=2, sort_keys=False) + "\n"
     fig, ax = plt.subplots(figsize=(6.5, 6.5))
     try:
-        plot_paths(
-            ax, np.asarray(fig7.trajectory.poses), fig7.refs, label="robot path (ideal loop)"
-        )
+        label = "robot paths (ideal loop)"
+        plot_paths(ax, np.asarray(fig7.trajectory.poses), fig7.refs, label=label)
         ax.plot([0], [0], "ko", ms=5)
         ax.set_title(
             f"Fig. 7: ideal velocity loop, k_r = {float(gains.kr):g}, "
             f"k_θ = {float(gains.k_theta):g}, Φ_m = {math.degrees(float(gains.phi_m)):g}°"
         )
-        _legend_below(ax)
+        _legend_below(ax, label)
         save_figure(fig, out_dir / "fig7.png", dpi=120, bbox_inches="tight")
     finally:
         plt.close(fig)

@@ -15,7 +15,12 @@ from wmr_jax._src.io import save_figure
 from wmr_jax._src.optimal import bound_ratios
 from wmr_jax._src.poses import HORIZON_S
 from wmr_jax._src.report.tables import json_number, markdown_table, require_rows
-from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS, PAPER_FEASIBLE_GAINS, gains_as_dict
+from wmr_jax._src.tuning.parametrisation import (
+    GAIN_FIELDS,
+    PAPER_FEASIBLE_GAINS,
+    gains_as_dict,
+    paper_feasible_gains,
+)
 from wmr_jax._src.tuning.problems import (
     MAX_TUNED_KNOTS,
     PROBLEMS,
@@ -237,11 +242,17 @@ def tuning_curve(
     *,
     velocity: str = "ideal",
     problem: str = "fixed",
+    robot: Any = None,
 ) -> Path:
     """Save the loss (with the temperature) and the parameters against the iteration.
 
     For a schedule, the three tables are drawn against ``r_e`` (first and
-    last iteration) and the shape gains against the iteration.
+    last iteration) and the shape gains against the iteration. Fixed gains
+    are drawn beside the tuner's baseline on ``robot``, the paper's feasible
+    gains scaled into its wheel budget (``paper_feasible_gains``), as the
+    table of the run compares with. A value that is NaN or infinite has no
+    place on an axis: its iterations are marked × along the panel's top and
+    counted in its title, never left as a silent gap.
 
     Args:
         path: the image file to write (atomically).
@@ -249,6 +260,7 @@ def tuning_curve(
             ``gains`` ``(iters, columns)`` (``Problem.columns``).
         velocity: the velocity loop tuned for, for the title.
         problem: ``"fixed"`` or ``"schedule"``.
+        robot: the robot tuned for; ``None`` is the paper robot.
 
     Returns:
         ``path``.
@@ -274,16 +286,15 @@ def tuning_curve(
             f"history['gains'] has shape {gains.shape}; allowed: ({len(loss)}, "
             f"{columns}), one row of the {problem!r} problem's columns per iteration"
         )
+    baseline = paper_feasible_gains(robot)
     steps = np.arange(1, len(loss) + 1)
     # A panel for the loss and one for each parameter tuned: 7 gains, or a
     # schedule's 3 tables and 5 shape gains.
     grid, size = ((3, 3), (12, 9)) if problem == "schedule" else ((2, 4), (14, 6))
     with closed_after(*grid, figsize=size, constrained_layout=True) as (fig, axes):
         ax = axes[0, 0]
-        # A loss of NaN or inf has no place on the axis: its iterations are
-        # marked along the top instead of leaving a silent gap in the line.
-        finite = np.isfinite(loss) & (loss > 0)
-        ax.plot(steps[finite], loss[finite], lw=0.8, color="C0")
+        # The loss axis is logarithmic: a loss <= 0 has no place on it either.
+        finite = _plot_marked(ax, steps, loss, np.isfinite(loss) & (loss > 0), lw=0.8, color="C0")
         ax.set_yscale("log")
         ax.set_xlabel("iteration")
         ax.set_ylabel("loss (s)", color="C0")
@@ -293,16 +304,31 @@ def tuning_curve(
         twin.set_ylabel("temperature", color="C3")
         title = f"loss ({velocity} loop)"
         if not finite.all():
-            top = ax.get_xaxis_transform()  # x in data, y in axes fraction
-            ax.plot(steps[~finite], np.full((~finite).sum(), 0.97), "x", color="C3",
-                    transform=top)  # fmt: skip
             title += f"; {(~finite).sum()} non-finite or non-positive, marked ×"
         ax.set_title(title, fontsize=9 if not finite.all() else None)
         if problem == "schedule":
             _schedule_panels(axes, steps, gains, knots)
         else:
-            _gain_panels(axes, steps, gains)
+            _gain_panels(axes, steps, gains, baseline)
         return save_figure(fig, path, dpi=110)
+
+
+def _plot_marked(ax: Any, steps: np.ndarray, values: np.ndarray, drawn: Any, **style: Any) -> Any:
+    """Plot ``values`` where ``drawn``, mark the rest × along the top; return ``drawn``."""
+    drawn = np.asarray(drawn, dtype=bool)
+    ax.plot(steps[drawn], values[drawn], **style)
+    if not drawn.all():
+        top = ax.get_xaxis_transform()  # x in data, y in axes fraction
+        ax.plot(steps[~drawn], np.full((~drawn).sum(), 0.97), "x", color="C3", transform=top)
+    return drawn
+
+
+def _marked_title(ax: Any, title: str, drawn: Any) -> None:
+    """``title``, with the count of the values not drawn where there are any."""
+    missing = int((~np.asarray(drawn, dtype=bool)).sum())
+    if missing:
+        title += f"; {missing} non-finite, marked ×"
+    ax.set_title(title, fontsize=9 if missing else None)
 
 
 _HISTORY_KEYS = ("loss", "temperature", "gains")
@@ -329,17 +355,28 @@ def _history_curves(history: dict) -> tuple[np.ndarray, np.ndarray]:
     return curves[0], curves[1]
 
 
-def _gain_panels(axes: Any, steps: np.ndarray, gains: np.ndarray) -> None:
-    paper = gains_as_dict(PAPER_FEASIBLE_GAINS)
+def baseline_label(baseline: Any) -> str:
+    """The legend of the tuning curve's dashed baseline: the gains the table compares with."""
+    if baseline is PAPER_FEASIBLE_GAINS:
+        return "paper (feasible)"
+    return (
+        f"paper's, scaled into the wheel budget (k_r = {float(baseline.kr):.3g}, "
+        f"k_θ = {float(baseline.k_theta):.3g})"
+    )
+
+
+def _gain_panels(axes: Any, steps: np.ndarray, gains: np.ndarray, baseline: Any) -> None:
+    start_values = gains_as_dict(baseline)
+    label = baseline_label(baseline)
     for k, name in enumerate(GAIN_FIELDS):
         ax = axes.flat[k + 1]
         values = gains[:, k]
-        start = paper[name]
+        start = start_values[name]
         if name == "phi_m":
             values, start = np.degrees(values), math.degrees(start)
-        ax.plot(steps, values, lw=1.0)
-        ax.axhline(start, ls="--", lw=0.8, color="gray", label="paper (feasible)")
-        ax.set_title(_GAIN_LABELS[name])
+        drawn = _plot_marked(ax, steps, values, np.isfinite(values), lw=1.0)
+        ax.axhline(start, ls="--", lw=0.8, color="gray", label=label)
+        _marked_title(ax, _GAIN_LABELS[name], drawn)
         ax.set_xlabel("iteration")
     axes.flat[1].legend(fontsize=8)
 
@@ -358,13 +395,17 @@ def _schedule_panels(axes: Any, steps: np.ndarray, rows: np.ndarray, knots: int)
         ax.plot(radii, table[-1], "o-", ms=3, lw=1.2, label="tuned")
         ax.set_xscale("symlog", linthresh=1.0)
         ax.set_xlabel("r_e (cm)")
-        ax.set_title(title)
+        missing = int((~np.isfinite(table[[0, -1]])).sum())
+        if missing:
+            title += f"; {missing} knot values non-finite, not drawn"
+        ax.set_title(title, fontsize=9 if missing else None)
     axes.flat[1].legend(fontsize=8)
     for k, name in enumerate(SHAPE_FIELDS):  # Φ_m, the radii and α
         ax = axes.flat[k + 4]
         values = rows[:, 3 * knots + SHAPE_FIELDS.index(name)]
-        ax.plot(steps, np.degrees(values) if name == "phi_m" else values, lw=1.0)
-        ax.set_title(_GAIN_LABELS[name])
+        values = np.degrees(values) if name == "phi_m" else values
+        drawn = _plot_marked(ax, steps, values, np.isfinite(values), lw=1.0)
+        _marked_title(ax, _GAIN_LABELS[name], drawn)
         ax.set_xlabel("iteration")
 
 
