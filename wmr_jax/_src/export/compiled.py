@@ -21,10 +21,19 @@ import numpy as np
 
 from wmr_jax._src.export.codegen import HEADER, SOURCE
 
-__all__ = ["CFLAGS", "CompiledController", "compile_controller", "compiler", "sanitizers_work"]
+__all__ = [
+    "CFLAGS",
+    "CONTRACT",
+    "CompiledController",
+    "compile_controller",
+    "compiler",
+    "sanitizers_work",
+]
 
 # The flags the exported files must compile cleanly with.
 CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror")
+# Multiply-adds fused where the CPU has them, as XLA:CPU compiles the JAX step.
+CONTRACT = ("-march=native", "-ffp-contract=fast")
 SANITIZE = ("-fsanitize=address,undefined", "-fno-omit-frame-pointer", "-fno-sanitize-recover=all")
 
 _BATCH_DRIVER = r"""
@@ -146,6 +155,7 @@ def compile_controller(
     build: str | os.PathLike | None = None,
     optimise: str = "-O2",
     sanitize: bool = False,
+    contract: bool = False,
 ) -> CompiledController:
     """Compile ``folder/wmr_controller.c`` with the batch driver into a shared library; load it.
 
@@ -155,6 +165,11 @@ def compile_controller(
         optimise: the optimisation flag.
         sanitize: build with ``-fsanitize=address,undefined`` (the library
             then needs the sanitizer's runtime loaded first: see the tests).
+        contract: fuse multiplications and additions into FMAs for this
+            machine's CPU (``CONTRACT``), as XLA:CPU does: the same rounding
+            as the JAX step, so that even states exactly on a switch of the
+            law fall on the same side. ISO C's default (``False``) rounds
+            every operation; it differs from the JAX step in the last bits.
 
     Raises:
         ValueError: for a folder without the exported files, or no C compiler.
@@ -177,5 +192,7 @@ def compile_controller(
     flags = [*CFLAGS, optimise, "-fPIC", "-shared", f"-I{folder}"]
     if sanitize:
         flags += list(SANITIZE)
+    if contract:
+        flags += list(CONTRACT)
     _run([cc, *flags, str(folder / SOURCE), str(driver), "-o", str(library), "-lm"])
     return CompiledController(folder, library)
