@@ -509,3 +509,16 @@ def test_clean_under_address_and_undefined_sanitizers(tmp_path, robust_file):
     assert done.returncode == 0, done.stderr
     assert done.stderr == ""
     assert int(done.stdout) == export.MAX_LATENCY + 4  # every latency arrived
+
+
+def test_bench_times_the_c_step(tmp_path):
+    config = w.studies.BenchConfig(
+        sizes=(50,), steps=20, repeats=1, dtype="float64", cases=("c_controller",)
+    )
+    (row,) = w.studies.run_benchmark(config)["rows"]
+    assert row["case"] == "c_controller" and row["ns_per_step"] > 0
+    assert row["robot_steps_per_s"] == pytest.approx(1e9 / row["ns_per_step"])
+    loop = w.ClosedLoop(
+        w.tuning.SCHEDULE, w.tuning.ScheduleParams.from_gains(w.Gains()), "ekf", w.Robot()
+    )
+    assert row["state_bytes"] == _build(tmp_path, loop).size
