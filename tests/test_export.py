@@ -522,3 +522,71 @@ def test_bench_times_the_c_step(tmp_path):
         w.tuning.SCHEDULE, w.tuning.ScheduleParams.from_gains(w.Gains()), "ekf", w.Robot()
     )
     assert row["state_bytes"] == _build(tmp_path, loop).size
+
+
+_SIMULATED_ROBOT = r"""
+#include <math.h>
+#include <stdio.h>
+#include "wmr_controller.h"
+
+void drive_to(double x, double y, double theta, int latency, int periods);
+
+/* The robot the page's loop drives: the ideal robot on its exact arc, one
+   period of latency (a command acts from the period after it is sent). */
+static double robot[3], applied[2], pending[2];
+
+void read_pose(double pose[3]) { pose[0] = robot[0]; pose[1] = robot[1]; pose[2] = robot[2]; }
+
+void send_command(const double command[2]) { pending[0] = command[0]; pending[1] = command[1]; }
+
+void wait_for_next_period(void)
+{
+    double dt = wmr_period(), u = 0.5 * applied[1] * dt;
+    double chord = applied[0] * dt * (fabs(u) > 1e-12 ? sin(u) / u : 1.0);
+    robot[0] += chord * cos(robot[2] + u);
+    robot[1] += chord * sin(robot[2] + u);
+    robot[2] += applied[1] * dt;
+    applied[0] = pending[0];
+    applied[1] = pending[1];
+}
+
+int main(void)
+{
+    drive_to(30.0, 20.0, 1.0, 1, 300);
+    printf("%.6f %.6f %.6f\n", robot[0], robot[1], robot[2]);
+    return 0;
+}
+"""
+
+
+def test_the_deploy_pages_host_loop_drives_a_robot_to_its_goal(tmp_path, robust_file):
+    """docs/deploy.md's C loop, as written, against a simulated robot with one period of latency."""
+    from pathlib import Path
+
+    page = (Path(__file__).parent.parent / "docs" / "deploy.md").read_text(encoding="utf-8")
+    (block,) = [b for b in re.findall(r"```c\n(.*?)```", page, re.S) if "drive_to" in b]
+    loop = w.load_tuned(robust_file)
+    folder = tmp_path / "c"
+    export.write_sources(folder, export.c_sources(loop), loop)
+    (tmp_path / "loop.c").write_text(block)
+    (tmp_path / "robot.c").write_text(_SIMULATED_ROBOT)
+    exe = tmp_path / "host"
+    sources = [folder / "wmr_controller.c", tmp_path / "loop.c", tmp_path / "robot.c"]
+    subprocess.run(
+        [
+            export.compiler(),
+            *export.CFLAGS,
+            f"-I{folder}",
+            *map(str, sources),
+            "-o",
+            str(exe),
+            "-lm",
+        ],
+        check=True,
+    )
+    final = np.array(
+        subprocess.run([str(exe)], capture_output=True, text=True).stdout.split(), float
+    )
+    # Arrived as docs/model.md §6 counts it: within 1 cm and 5° of the goal.
+    assert np.hypot(final[0] - 30.0, final[1] - 20.0) <= w.DEFAULT_TOL_R
+    assert abs(np.angle(np.exp(1j * (final[2] - 1.0)))) <= w.DEFAULT_TOL_THETA

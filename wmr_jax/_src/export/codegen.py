@@ -515,8 +515,7 @@ void wmr_step(wmr_controller *c, const double measured[3], double command[2]);
 def _step(c: _Emitter, estimator: Any, compensate: bool) -> str:
     """``wmr_init`` and ``wmr_step``: the order of ``sensing.loop.disturbed_run``."""
     if estimator is None:
-        feedback = """    (void)mth;
-    wmr_sin_cos(mth, &cos_m, &sin_m);
+        feedback = """    wmr_sin_cos(mth, &cos_m, &sin_m);
     wmr_law(c, mx, my, cos_m, sin_m, cmd);"""
     else:
         roll = ""
