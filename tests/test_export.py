@@ -241,7 +241,9 @@ def test_c_sources_refuses_what_it_cannot_write():
 
 @pytest.mark.parametrize(
     "label, estimator, latency",
-    [("robust", "ekf", 1), ("robust", "ekf", 0), ("fixed", "observer", 1), ("fixed", None, 0)],
+    [("robust", "ekf", 1), ("robust", "ekf", 0), ("fixed", "observer", 1), ("fixed", None, 0)]
+    + [("fixed", w.ObserverParams(position=0.4, heading=0.6, compensate=False), 1)]
+    + [("robust", w.EKFParams(wheel_error=0.05, compensate=False), 1)],
 )
 def test_one_step_equals_the_jax_step(tmp_path, robust_file, fixed_file, label, estimator, latency):
     """10⁴ random states, double: 1e-12 relative (measured: about 1e-13)."""
@@ -590,3 +592,25 @@ def test_the_deploy_pages_host_loop_drives_a_robot_to_its_goal(tmp_path, robust_
     # Arrived as docs/model.md §6 counts it: within 1 cm and 5° of the goal.
     assert np.hypot(final[0] - 30.0, final[1] - 20.0) <= w.DEFAULT_TOL_R
     assert abs(np.angle(np.exp(1j * (final[2] - 1.0)))) <= w.DEFAULT_TOL_THETA
+
+
+@pytest.mark.parametrize("velocity", ["ideal", "nonideal"])
+def test_closed_loop_with_a_speed_limiter_and_the_wheel_loop(tmp_path, fixed_file, velocity):
+    """A robot whose limiter binds (docs/model.md §4.2.2) in the ideal loop: the C limits
+    what it sends as the loop's limiter does, and predicts with it. The non-ideal wheel
+    loop (which models no limiter) on the robot without one."""
+    limited = w.Robot(accel_max=400.0, angular_accel_max=60.0)
+    robot = limited if velocity == "ideal" else w.Robot()
+    loop = w.load_tuned(fixed_file)._replace(estimator="ekf", robot=robot)
+    compiled = _build(tmp_path, loop)
+    _, (refs, noise, factors, _) = _conditions_runs(loop, 40)
+    spec = conditions._scaled(refs, noise, factors, 0.5, 1.0, True)
+    jax_m = perturbed_metrics(spec, loop.params, estimator="ekf", robot=robot, velocity=velocity)
+    c_m = export.compiled_metrics(compiled, spec, loop, robot=robot, velocity=velocity)
+    assert jax_m.success.mean() > 0.9
+    np.testing.assert_array_equal(c_m.arrival, jax_m.arrival)
+    np.testing.assert_allclose(c_m.path, jax_m.path, rtol=1e-9)
+    if velocity == "nonideal":
+        with pytest.raises(ValueError, match="velocity = 'nonideal' is not allowed"):
+            limited_loop = loop._replace(robot=limited)
+            export.compiled_metrics(compiled, spec, limited_loop, robot=limited, velocity=velocity)

@@ -139,6 +139,13 @@ def compiled_metrics(
     n = np.shape(disturbance.ref)[0]
     latency = _latencies(disturbance.delay, n)
     robot = loop.robot if robot is None else robot
+    limits = (getattr(robot, "accel_max", 0.0), getattr(robot, "angular_accel_max", 0.0))
+    if velocity == "nonideal" and any(float(np.max(x)) > 0 for x in limits):
+        raise ValueError(
+            "velocity = 'nonideal' is not allowed with a robot that gives acceleration limits; "
+            "allowed: 'ideal' (the C applies the robot's speed limiter, docs/model.md §4.2.2, "
+            "which the non-ideal loop does not model)"
+        )
     with jax.enable_x64(True):
         args, options = prepare_disturbed(
             disturbance._replace(delay=np.float64(0.0)),
