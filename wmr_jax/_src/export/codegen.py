@@ -388,8 +388,8 @@ static void wmr_correct(wmr_controller *c, wmr_pose predicted,
 """
 
 
-def _limits(c: _Emitter, robot: Robot) -> tuple[str, bool]:
-    """The speed limiter (docs/model.md §4.2.2) and the wheel-speed limit; whether one limits."""
+def _limits(c: _Emitter, robot: Robot) -> str:
+    """The speed limiter (docs/model.md §4.2.2) and the wheel-speed limit, as ``wmr_limit``."""
     accel = _scalar(robot.accel_max, "robot.accel_max")
     angular = _scalar(robot.angular_accel_max, "robot.angular_accel_max")
     v_max = _scalar(robot.v_max, "robot.v_max")
@@ -424,7 +424,7 @@ def _limits(c: _Emitter, robot: Robot) -> tuple[str, bool]:
         "}",
         "",
     ]
-    return "\n".join(lines), limiter
+    return "\n".join(lines)
 
 
 def _describe(loop: ClosedLoop, estimator: Any, robot: Robot, real: str, period: float) -> str:
@@ -632,8 +632,7 @@ def c_sources(
     robot = Robot() if loop.robot is None else loop.robot
     c = _Emitter(real, float(period))
     pieces = [_kernels(c), _arc(c) if estimator is not None else "", _law(c, params)]
-    limits, _ = _limits(c, robot)
-    pieces.append(limits)
+    pieces.append(_limits(c, robot))
     compensate = False
     if estimator is not None:
         pieces.append(_wrap(c))
