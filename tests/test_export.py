@@ -614,3 +614,61 @@ def test_closed_loop_with_a_speed_limiter_and_the_wheel_loop(tmp_path, fixed_fil
         with pytest.raises(ValueError, match="velocity = 'nonideal' is not allowed"):
             limited_loop = loop._replace(robot=limited)
             export.compiled_metrics(compiled, spec, limited_loop, robot=limited, velocity=velocity)
+
+
+_BASELINES = [
+    (w.AICARDI, w.AicardiGains()),
+    (w.AICARDI, w.AicardiGains(backward=True)),
+    (w.ASTOLFI, w.AstolfiGains(backward=False)),
+    (w.ASTOLFI, w.AstolfiGains()),
+]
+
+
+def _wheel_clipped(cmd, robot):
+    """``(v, ω)`` with each rim ``v ∓ L ω`` clipped at ``±V_max`` (where one exceeds it)."""
+    half_track, v_max = float(robot.half_track), float(robot.v_max)
+    rims = np.stack([cmd[:, 0] - half_track * cmd[:, 1], cmd[:, 0] + half_track * cmd[:, 1]], 1)
+    over = np.any(np.abs(rims) > v_max, axis=1)
+    rims = np.clip(rims, -v_max, v_max)
+    clipped = np.stack([0.5 * rims.sum(1), (rims[:, 1] - rims[:, 0]) / (2 * half_track)], 1)
+    return np.where(over[:, None], clipped, cmd)
+
+
+@pytest.mark.parametrize("controller, gains", _BASELINES)
+def test_baseline_laws_equal_the_jax_law_within_the_wheel_limit(tmp_path, controller, gains):
+    """Aicardi and Astolfi: the JAX law (atan2 and all), each rim then held within ±V_max as
+    the robot holds it (the baselines ask for more far from the goal; the C clips)."""
+    loop = w.ClosedLoop(controller, gains)
+    compiled = _build(tmp_path, loop)
+    rng = np.random.default_rng(5)
+    n = 10_000
+    refs = np.c_[rng.uniform(-80, 80, (n, 2)), rng.uniform(-np.pi, np.pi, n)]
+    meas = np.c_[rng.uniform(-80, 80, (n, 2)), rng.uniform(-4, 4, n)]
+    meas[:1000, :2] = refs[:1000, :2] + rng.normal(0, 1e-3, (1000, 2))  # at the goal floor
+    meas[1000:3000, :2] = refs[1000:3000, :2] + rng.normal(0, 3, (2000, 2))
+    compiled.start(refs, 0)
+    c_cmd = compiled.step(meas)
+    options = loops.Options(controller=controller)
+
+    def one(ref, z):
+        c = loops.split_command(loops.SplitPose.of(z), ref, gains, options)
+        return jnp.stack([c.real, c.imag])
+
+    jax_cmd = np.asarray(jax.jit(jax.vmap(one))(jnp.asarray(refs), jnp.asarray(meas)))
+    expected = _wheel_clipped(jax_cmd, w.Robot())
+    assert np.quantile(_relative(c_cmd, expected), 0.999) < 1e-12
+    assert np.all(_relative(c_cmd, expected) < 1e-9)  # atan2: libm's against XLA's
+
+
+def test_baseline_closed_loop_in_the_wheel_loop(tmp_path):
+    """The non-ideal loop clips each wheel at ±V_max as the C does: on the model robot, under
+    latency, the two loops arrive together (the ideal loop has no wheel limit, §4.2.2)."""
+    controller, gains = _BASELINES[2]
+    loop = w.ClosedLoop(controller, gains)
+    compiled = _build(tmp_path, loop)
+    robot, (refs, noise, _, _) = _conditions_runs(loop, 30)
+    spec = Disturbance(refs, 0 * noise, np.ones((len(refs), 3)), np.float64(1.0))
+    jax_m = perturbed_metrics(spec, gains, controller=controller, velocity="nonideal")
+    c_m = export.compiled_metrics(compiled, spec, loop, robot=robot, velocity="nonideal")
+    assert jax_m.success.mean() > 0.5
+    np.testing.assert_array_equal(c_m.arrival, jax_m.arrival)

@@ -27,6 +27,8 @@ from typing import Any
 import numpy as np
 
 from wmr_jax._src import dynamics
+from wmr_jax._src.controllers.aicardi import AICARDI, AicardiGains
+from wmr_jax._src.controllers.astolfi import ASTOLFI, AstolfiGains
 from wmr_jax._src.controllers.schedule import SCHEDULE, ScheduleParams, knot_radii
 from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
 from wmr_jax._src.params import Gains, Robot
@@ -123,6 +125,22 @@ def _scalar(value: Any, name: str) -> float:
     return float(arr)
 
 
+# The error coordinates of Eq. 3 (shim_sung.polar_error), shared by every law.
+_ERROR = """    /* The error in the robot frame (Eq. 3), docs/model.md §2. */
+    wmr_real dx = c->ref[0] - x, dy = c->ref[1] - y;
+    wmr_real e_x = cos_c * dx - (-sin_c) * dy;
+    wmr_real e_y = cos_c * dy + (-sin_c) * dx;
+    wmr_real r_sq = e_x * e_x + e_y * e_y;
+    int positive = r_sq > {zero};
+    wmr_real safe_r = {sqrt}(positive ? r_sq : {one});
+    wmr_real inv_r = {one} / safe_r;
+    wmr_real r = positive ? safe_r : {zero};
+    wmr_real cos_phi = positive ? e_x * inv_r : {one};
+    wmr_real sin_phi = e_y * inv_r;
+    wmr_real cos_theta = c->ref_cos * cos_c + c->ref_sin * sin_c;
+    wmr_real sin_theta = c->ref_sin * cos_c - c->ref_cos * sin_c;"""
+
+
 def _law(c: _Emitter, params: Any) -> str:
     """The law: ``wmr_law(c, x, y, cos θ, sin θ, command)`` (docs/model.md §2–3)."""
     schedule = isinstance(params, ScheduleParams)
@@ -141,19 +159,7 @@ def _law(c: _Emitter, params: Any) -> str:
     body = f"""static void wmr_law(const wmr_controller *c, wmr_real x, wmr_real y, wmr_real cos_c,
                     wmr_real sin_c, wmr_real out[2])
 {{
-    /* The error in the robot frame (Eq. 3), docs/model.md §2. */
-    wmr_real dx = c->ref[0] - x, dy = c->ref[1] - y;
-    wmr_real e_x = cos_c * dx - (-sin_c) * dy;
-    wmr_real e_y = cos_c * dy + (-sin_c) * dx;
-    wmr_real r_sq = e_x * e_x + e_y * e_y;
-    int positive = r_sq > {c(0)};
-    wmr_real safe_r = {c.fn("sqrt")}(positive ? r_sq : {c(1)});
-    wmr_real inv_r = {c(1)} / safe_r;
-    wmr_real r = positive ? safe_r : {c(0)};
-    wmr_real cos_phi = positive ? e_x * inv_r : {c(1)};
-    wmr_real sin_phi = e_y * inv_r;
-    wmr_real cos_theta = c->ref_cos * cos_c + c->ref_sin * sin_c;
-    wmr_real sin_theta = c->ref_sin * cos_c - c->ref_cos * sin_c;
+{_ERROR.format(zero=c(0), one=c(1), sqrt=c.fn("sqrt"))}
     /* Direction d, blend and commands (Eq. 6-8), docs/model.md §3. */
     wmr_real ahead = (cos_phi - {c(cos_m)} >= {c(0)}) ? {c(1)} : {c(0)};
     wmr_real behind = (-{c(cos_m)} - cos_phi > {c(0)}) ? {c(1)} : {c(0)};
@@ -196,22 +202,97 @@ def _law(c: _Emitter, params: Any) -> str:
     return "\n".join(parts) + body
 
 
-def _kernels(c: _Emitter) -> str:
-    """``sin_cos``, ``sin_small``, the arc and the angle wrap of the project, in C."""
+def _polar_law(c: _Emitter, name: str, params: Any) -> str:
+    """A baseline polar law as ``wmr_law`` (``controllers/aicardi.py``, ``astolfi.py``).
+
+    ``ρ``, ``α`` and ``θ_A`` from the same error coordinates as the Shim–Sung
+    law, with ``atan2``; within ``goal_floor`` the robot only turns.
+    """
+    from wmr_jax._src.controllers import polar
+
+    backward = bool(params.backward)
+    eps = float(np.finfo(c.dtype).eps)
+    if backward:
+        alpha = f"""    int behind = cos_phi < {c(0)};
+    wmr_real alpha = behind ? wmr_wrap(phi + {c(np.pi)}) : phi;
+    wmr_real direction = behind ? {c(-1)} : {c(1)};"""
+    else:
+        alpha = f"""    wmr_real alpha = phi;
+    wmr_real direction = {c(1)};"""
+    if name == "aicardi":
+        gamma, k, h = (_scalar(getattr(params, f), f"params.{f}") for f in ("gamma", "k", "h"))
+        law = f"""    wmr_real cos_alpha, sin_alpha, sinc;
+    wmr_real theta_a = wmr_wrap(alpha - theta_e);
+    wmr_sin_cos(alpha, &cos_alpha, &sin_alpha);
+    /* sin(a)/a, by its series where it would cancel (dynamics.sinc). */
+    sinc = {c.fn("fabs")}(alpha) < {c(dynamics._SINC_SERIES_BELOW)}
+        ? {c(1)} - alpha * alpha / {c(6)} * ({c(1)} - alpha * alpha / {c(20)})
+        : sin_alpha / alpha;
+    v = direction * {c(gamma)} * r * cos_alpha;
+    omega = {c(k)} * alpha + {c(gamma)} * cos_alpha * sinc * (alpha + {c(h)} * theta_a);
+    rate = {c(k)};"""
+    else:
+        k_rho, k_alpha, k_beta = (
+            _scalar(getattr(params, f), f"params.{f}") for f in ("k_rho", "k_alpha", "k_beta")
+        )
+        law = f"""    wmr_real theta_a = wmr_wrap(alpha - theta_e);
+    alpha = wmr_clip(alpha, {c(-np.pi / 2)}, {c(np.pi / 2)});
+    v = direction * {c(k_rho)} * r;
+    omega = {c(k_alpha)} * alpha - {c(k_beta)} * theta_a;
+    rate = {c(k_alpha)};"""
+    return f"""static void wmr_law(const wmr_controller *c, wmr_real x, wmr_real y, wmr_real cos_c,
+                    wmr_real sin_c, wmr_real out[2])
+{{
+{_ERROR.format(zero=c(0), one=c(1), sqrt=c.fn("sqrt"))}
+    wmr_real phi = {c.fn("atan2")}(sin_phi, cos_phi);
+    wmr_real theta_e = wmr_wrap({c.fn("atan2")}(sin_theta, cos_theta));
+    wmr_real v, omega, rate, magnitude, floor;
+{alpha}
+{law}
+    /* At the goal: hold the position, turn to the goal's heading (polar.hold_at_goal). */
+    magnitude = wmr_max(wmr_max({c.fn("fabs")}(x), {c.fn("fabs")}(y)),
+                        wmr_max({c.fn("fabs")}(c->ref[0]), {c.fn("fabs")}(c->ref[1])));
+    floor = wmr_max({c(polar.AT_GOAL)}, {c(polar.GOAL_EPS)} * {c(eps)} * magnitude);
+    if (r < floor) {{
+        v = {c(0)};
+        omega = rate * wmr_wrap(alpha - theta_a);
+    }}
+    out[0] = v;
+    out[1] = omega;
+}}
+"""
+
+
+def _kernels(c: _Emitter, polar: bool) -> str:
+    """``sin_cos`` and the helpers the law uses (``sin_small`` and ``Sgn`` for Shim–Sung)."""
     p1, p2, p3 = dynamics._PIO2[c.dtype]
     sin_poly = _horner(c, "z", dynamics._SIN[c.dtype])
     cos_poly = _horner(c, "z", dynamics._COS[c.dtype])
     taylor = _horner(c, "z", dynamics._SIN_TAYLOR[c.dtype])
-    return f"""static wmr_real wmr_min(wmr_real a, wmr_real b) {{ return a < b ? a : b; }}
+    helpers = (
+        "static wmr_real wmr_max(wmr_real a, wmr_real b) { return a > b ? a : b; }\n"
+        if polar
+        else f"""static wmr_real wmr_min(wmr_real a, wmr_real b) {{ return a < b ? a : b; }}
 
+/* Sgn of Eq. 8: 1 if x > 0, else -1. */
+static wmr_real wmr_sgn(wmr_real x) {{ return x > {c(0)} ? {c(1)} : {c(-1)}; }}
+
+/* sin of an angle in [0, pi/2] by its Taylor series (dynamics.sin_small). */
+static wmr_real wmr_sin_small(wmr_real angle)
+{{
+    wmr_real z = angle * angle;
+    return angle * {taylor};
+}}
+"""
+    )
+    return (
+        helpers
+        + f"""
 static wmr_real wmr_clip(wmr_real x, wmr_real low, wmr_real high)
 {{
     x = x > low ? x : low;
     return x < high ? x : high;
 }}
-
-/* Sgn of Eq. 8: 1 if x > 0, else -1. */
-static wmr_real wmr_sgn(wmr_real x) {{ return x > {c(0)} ? {c(1)} : {c(-1)}; }}
 
 /* cos and sin of an angle: Cody-Waite reduction by pi/2, minimax kernels
    (dynamics.sin_cos; within an ulp or two up to |angle| ~ 1e6 rad). */
@@ -229,14 +310,8 @@ static void wmr_sin_cos(wmr_real angle, wmr_real *cos_out, wmr_real *sin_out)
     *cos_out = ((quadrant + 1u) & 2u) == 2u ? -cos_k : cos_k;
     *sin_out = (quadrant & 2u) == 2u ? -sin_k : sin_k;
 }}
-
-/* sin of an angle in [0, pi/2] by its Taylor series (dynamics.sin_small). */
-static wmr_real wmr_sin_small(wmr_real angle)
-{{
-    wmr_real z = angle * angle;
-    return angle * {taylor};
-}}
 """
+    )
 
 
 def _arc(c: _Emitter) -> str:
@@ -429,11 +504,17 @@ def _limits(c: _Emitter, robot: Robot) -> str:
 
 def _describe(loop: ClosedLoop, estimator: Any, robot: Robot, real: str, period: float) -> str:
     """The header's account of what was baked in."""
-    schedule = isinstance(loop.params, ScheduleParams)
-    law = f"gain schedule, {len(loop.params.kr)} knots" if schedule else "fixed gains"
+    if isinstance(loop.params, ScheduleParams):
+        law = f"Shim-Sung (2003), gain schedule of {len(loop.params.kr)} knots"
+    elif isinstance(loop.params, Gains):
+        law = "Shim-Sung (2003), fixed gains"
+    else:
+        law = {AICARDI.name: "Aicardi et al. (1995)", ASTOLFI.name: "Astolfi (Corke's form)"}[
+            getattr(loop.controller, "name", loop.controller)
+        ]
     feedback = "raw measurements" if estimator is None else estimator.name
     return (
-        f" * Law: Shim-Sung (2003), {law}. Feedback: {feedback}.\n"
+        f" * Law: {law}. Feedback: {feedback}.\n"
         f" * Robot: V_max = {float(robot.v_max):g} cm/s, L = {float(robot.half_track):g} cm, "
         f"speed limiter: {_limiter_text(robot)}.\n"
         f" * Period: {period:g} s. Arithmetic: {real}."
@@ -619,23 +700,31 @@ def c_sources(
         raise ValueError(f"max_latency = {max_latency!r} is not allowed; allowed: 0 to 1000")
     params = loop.params
     controller = getattr(loop.controller, "name", loop.controller)
-    if isinstance(params, Gains) and controller == SHIM_SUNG.name:
-        SHIM_SUNG.validate(params)
-    elif isinstance(params, ScheduleParams) and controller == SCHEDULE.name:
-        SCHEDULE.validate(params)
-    else:
+    laws = {
+        SHIM_SUNG.name: (SHIM_SUNG, Gains),
+        SCHEDULE.name: (SCHEDULE, ScheduleParams),
+        AICARDI.name: (AICARDI, AicardiGains),
+        ASTOLFI.name: (ASTOLFI, AstolfiGains),
+    }
+    if controller not in laws or not isinstance(params, laws[controller][1]):
+        allowed = ", ".join(f"{name!r} with {cls.__name__}" for name, (_, cls) in laws.items())
         raise ValueError(
             f"loop.controller = {controller!r} with {type(params).__name__} is not allowed; "
-            "allowed: 'shim-sung' with Gains or 'shim-sung-schedule' with ScheduleParams"
+            f"allowed: {allowed}"
         )
+    laws[controller][0].validate(params)
+    polar = controller in (AICARDI.name, ASTOLFI.name)
     estimator, estimate = resolve_estimator(loop.estimator)
     robot = Robot() if loop.robot is None else loop.robot
     c = _Emitter(real, float(period))
-    pieces = [_kernels(c), _arc(c) if estimator is not None else "", _law(c, params)]
+    law = _polar_law(c, controller, params) if polar else _law(c, params)
+    pieces = [_kernels(c, polar), _arc(c) if estimator is not None else ""]
+    if polar or estimator is not None:
+        pieces.append(_wrap(c))
+    pieces.append(law)
     pieces.append(_limits(c, robot))
     compensate = False
     if estimator is not None:
-        pieces.append(_wrap(c))
         if isinstance(estimate, EKFParams):
             pieces.append(_ekf(c, estimate, robot))
         else:
@@ -675,11 +764,36 @@ def write_sources(folder: Any, sources: CSources, loop: ClosedLoop) -> list[Any]
     for name, text in ((HEADER, sources.header), (SOURCE, sources.source)):
         (folder / name).write_text(text, encoding="utf-8")
         written.append(folder / name)
+    if isinstance(loop.params, (Gains, ScheduleParams)):
+        gains, baseline = tuned_json(loop), None
+    else:  # a baseline law, which a tuned_gains.json cannot hold
+        gains, baseline = None, _baseline_json(loop)
     meta = {
-        "gains": tuned_json(loop),
+        "gains": gains,
+        "baseline": baseline,
         "period_s": sources.period,
         "real": sources.real,
         "max_latency": sources.max_latency,
     }
     written.append(atomic_write_json(folder / "wmr_controller.json", meta))
     return written
+
+
+def _baseline_json(loop: ClosedLoop) -> dict[str, Any]:
+    """A baseline loop as ``wmr_controller.json`` holds it: law, gains, estimator, robot."""
+    from wmr_jax._src.robots import robot_json
+    from wmr_jax._src.tuning.estimation import estimator_json
+
+    params = loop.params
+    return {
+        "controller": getattr(loop.controller, "name", loop.controller),
+        "params": {
+            f.name: _field_json(getattr(params, f.name)) for f in dataclasses.fields(params)
+        },
+        "estimator": estimator_json(loop.estimator),
+        "robot": None if loop.robot is None else robot_json(loop.robot),
+    }
+
+
+def _field_json(value: Any) -> Any:
+    return value if isinstance(value, bool) else float(np.asarray(value))

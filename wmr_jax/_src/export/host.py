@@ -204,7 +204,7 @@ def read_metadata(folder: str | os.PathLike) -> dict[str, Any]:
             f"--c {os.fspath(folder)!r} cannot be read: {METADATA}: {' '.join(str(err).split())}; "
             "allowed: a folder written by wmr-jax export"
         ) from None
-    if not isinstance(values, dict) or "gains" not in values:
+    if not isinstance(values, dict) or (values.get("gains") or values.get("baseline")) is None:
         raise ValueError(f"--c {os.fspath(folder)!r}: {METADATA} holds no gains")
     return values
 
@@ -220,6 +220,8 @@ def exported_loop(folder: str | os.PathLike) -> tuple[ClosedLoop, dict[str, Any]
     from wmr_jax._src.tuning.saved import load_tuned
 
     meta = read_metadata(folder)
+    if meta.get("baseline") is not None:
+        return _baseline_loop(meta["baseline"], folder), meta
     with tempfile.TemporaryDirectory() as tmp:  # load_tuned's checks, on the saved gains
         path = Path(tmp, "tuned_gains.json")
         path.write_text(json.dumps(meta["gains"]), encoding="utf-8")
@@ -228,6 +230,25 @@ def exported_loop(folder: str | os.PathLike) -> tuple[ClosedLoop, dict[str, Any]
         except ValueError as err:
             message = str(err).replace(repr(str(path)), METADATA)
             raise ValueError(f"--c {os.fspath(folder)!r}: {message}") from None
+
+
+def _baseline_loop(values: Any, folder: Any) -> ClosedLoop:
+    """The baseline loop a ``wmr_controller.json`` records (``codegen._baseline_json``)."""
+    from wmr_jax._src.controllers import get_controller
+    from wmr_jax._src.robots import robot_from_values
+    from wmr_jax._src.tuning.estimation import estimator_from_json
+
+    where = f"--c {os.fspath(folder)!r}: {METADATA}"
+    try:
+        controller = get_controller(values["controller"])
+        params = controller.validate(controller.params_type(**values["params"]))
+        estimator = values.get("estimator")
+        estimator = None if estimator is None else estimator_from_json(estimator, where)
+        robot = values.get("robot")
+        robot = None if robot is None else robot_from_values(robot, where)
+    except (KeyError, TypeError) as err:
+        raise ValueError(f"{where} holds no loop ({err})") from None
+    return ClosedLoop(controller, params, estimator, robot)
 
 
 def evaluate_compiled(
