@@ -161,7 +161,8 @@ def compile_controller(
 
     Args:
         folder: the folder ``wmr-jax export`` wrote.
-        build: where to put the library (default: a new temporary folder).
+        build: where to put the library (default: a temporary folder, removed
+            with the returned controller).
         optimise: the optimisation flag.
         sanitize: build with ``-fsanitize=address,undefined`` (the library
             then needs the sanitizer's runtime loaded first: see the tests).
@@ -184,7 +185,9 @@ def compile_controller(
     cc = compiler()
     if cc is None:
         raise ValueError("no C compiler found (cc, or $CC); allowed: a machine with one")
-    build = Path(tempfile.mkdtemp(prefix="wmr_export_")) if build is None else Path(build)
+    # A library of its own folder: removed with the CompiledController that loaded it.
+    scratch = tempfile.TemporaryDirectory(prefix="wmr_export_") if build is None else None
+    build = Path(scratch.name if scratch is not None else build)
     build.mkdir(parents=True, exist_ok=True)
     driver = build / "wmr_batch.c"
     driver.write_text(_BATCH_DRIVER)
@@ -195,4 +198,6 @@ def compile_controller(
     if contract:
         flags += list(CONTRACT)
     _run([cc, *flags, str(folder / SOURCE), str(driver), "-o", str(library), "-lm"])
-    return CompiledController(folder, library)
+    compiled = CompiledController(folder, library)
+    compiled.scratch = scratch
+    return compiled
