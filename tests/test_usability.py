@@ -179,7 +179,7 @@ def test_a_plain_import_reaches_every_family_on_first_use():
         "assert 'wmr_jax.cli' not in sys.modules and 'wmr_jax.report' not in sys.modules\n"
         "assert callable(wmr_jax.cli.main)\n"
         "assert 'cli' in dir(wmr_jax)\n"
-        "for name in ('controllers', 'dynamics', 'tuning', 'studies', 'report'):\n"
+        "for name in ('controllers', 'dynamics', 'tuning', 'studies', 'report', 'export'):\n"
         "    assert getattr(wmr_jax, name).__name__ == 'wmr_jax.' + name\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
@@ -195,7 +195,7 @@ def test_all_lists_every_public_name_of_the_package():
     # Everything __init__.py re-exports (``import X as X``), and the families.
     source = (ROOT / "wmr_jax" / "__init__.py").read_text(encoding="utf-8")
     exported = re.findall(r"^from wmr_jax\S* import (\w+) as \1\b", source, flags=re.M)
-    families = ["cli", "controllers", "dynamics", "report", "studies", "tuning"]
+    families = ["cli", "controllers", "dynamics", "export", "report", "studies", "tuning"]
     assert sorted(w.__all__) == sorted(exported + families)
 
 

@@ -2,7 +2,8 @@
 
 The curated surface: users import ``wmr_jax`` (and the families
 ``wmr_jax.controllers``, ``wmr_jax.dynamics``, ``wmr_jax.tuning``,
-``wmr_jax.studies``, ``wmr_jax.report``), never the private ``wmr_jax._src``.
+``wmr_jax.studies``, ``wmr_jax.report``, ``wmr_jax.export``), never the private
+``wmr_jax._src``.
 The model every function implements is ``docs/model.md``.
 """
 
@@ -79,7 +80,7 @@ __version__ = "0.1.0"
 # The public families, imported on first use (wmr_jax.cli, say, after a plain
 # ``import wmr_jax``): report, studies and tuning import optax or matplotlib,
 # and cli every command, which ``import wmr_jax`` should not pay for.
-_SUBMODULES = ("cli", "controllers", "dynamics", "report", "studies", "tuning")
+_SUBMODULES = ("cli", "controllers", "dynamics", "export", "report", "studies", "tuning")
 
 # Every name imported above as itself, and the families (tests/test_usability.py
 # holds the list to the imports: a new export goes in both).
@@ -154,6 +155,7 @@ __all__ = [
     "cli",
     "controllers",
     "dynamics",
+    "export",
     "report",
     "studies",
     "tuning",

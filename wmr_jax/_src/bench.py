@@ -212,6 +212,7 @@ CASES = (
     "grad_final_pose_loss",
     "grad_tuning_loss",
     "disturbed_estimator",
+    "c_controller",
     "numpy_batch",
     "scalar_reference",
 )
@@ -390,6 +391,7 @@ class _SizeBench:
             ("grad_final_pose_loss", self.final_pose_loss),
             ("grad_tuning_loss", self.tuning_loss),
             ("disturbed_estimator", self.disturbed),
+            ("c_controller", self.c_controller),
         ):
             if case in cases:
                 rows += step()
@@ -492,6 +494,57 @@ class _SizeBench:
                 self.row(f"disturbed_{name}", t[name], over_raw=t[name].run_s / raw)
                 for name in ("observer", "ekf")
             ),
+        ]
+
+    def c_controller(self) -> list[dict]:
+        """The exported C controller (``wmr_jax.export``): a gain schedule with its EKF.
+
+        ``N`` controllers, one sample of latency (so compensation runs too),
+        each stepped ``steps`` times through noisy poses on the way to its
+        goal; one foreign call steps all ``N``, so the time is the C's. The
+        row carries ``ns_per_step``, ``sizeof(wmr_controller)`` and the bytes
+        of the compiled step.
+        """
+        import tempfile
+        from pathlib import Path
+
+        from wmr_jax._src.controllers.schedule import SCHEDULE, ScheduleParams
+        from wmr_jax._src.export import codegen, compiled
+        from wmr_jax._src.params import Robot
+        from wmr_jax._src.sensing.loop import ClosedLoop
+
+        if compiled.compiler() is None:
+            return [self.row("c_controller", None, skipped="skipped: no C compiler")]
+        robot = Robot() if self.robot is None else self.robot
+        params = ScheduleParams.from_gains(self.gains, robot=robot)
+        loop = ClosedLoop(SCHEDULE, params, "ekf", robot)
+        with tempfile.TemporaryDirectory() as tmp:
+            codegen.write_sources(Path(tmp), codegen.c_sources(loop), loop)
+            c = compiled.compile_controller(tmp, build=Path(tmp, "build"))
+            code_bytes = _code_bytes(Path(tmp, "wmr_controller.c"), Path(tmp, "build"))
+        refs = np.asarray(self.refs_np, dtype=np.float64)
+        rng = np.random.default_rng(self.config.seed)
+        along = np.linspace(0.0, 1.0, self.steps)[:, None, None] * refs[None]
+        measured = np.ascontiguousarray(along + rng.normal(0.0, 0.5, along.shape))
+
+        def run():
+            c.start(refs, 1)
+            for z in measured:
+                c.step(z)
+
+        t = self.time({"c": (run, False)})["c"]
+        per_step = t.run_s / (self.n * self.steps) * 1e9
+        return [
+            self.row(
+                "c_controller",
+                t,
+                ns_per_step=per_step,
+                state_bytes=c.size,
+                code_bytes=code_bytes,
+                law="schedule",
+                feedback="ekf",
+                latency=1,
+            )
         ]
 
     def nonideal(self) -> list[dict]:
@@ -615,6 +668,23 @@ class _SizeBench:
             return self.loss_rows(loss, row, "grad_tuning_loss", beside)
         except (ImportError, AttributeError, TypeError, NotImplementedError) as err:
             return [self.row("grad_tuning_loss", None, skipped=f"skipped: {err}")]
+
+
+def _code_bytes(source: Any, build: Any) -> int | None:
+    """Bytes of code and constants of ``source`` compiled with the export's flags (``-O2``)."""
+    import subprocess
+
+    from wmr_jax._src.export.compiled import CFLAGS, compiler
+
+    obj = build / "wmr_controller.o"
+    done = subprocess.run(
+        [compiler(), *CFLAGS, "-O2", "-c", str(source), "-o", str(obj)], capture_output=True
+    )
+    if done.returncode != 0:
+        return None
+    size = subprocess.run(["size", str(obj)], capture_output=True, text=True)
+    lines = size.stdout.splitlines() if size.returncode == 0 else []
+    return int(lines[1].split()[0]) if len(lines) > 1 else obj.stat().st_size
 
 
 def _ratios(rows: list[dict]) -> dict[str, Any]:

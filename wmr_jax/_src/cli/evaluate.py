@@ -33,10 +33,9 @@ def add_arguments(parser: Any) -> None:
     """Add the flags of ``wmr-jax evaluate``."""
     parser.add_argument(
         "--gains",
-        required=True,
         metavar="FILE.json",
         help="tuned_gains.json of wmr-jax tune (fixed gains or a schedule, with its estimator) "
-        "or a JSON of Gains fields",
+        "or a JSON of Gains fields (required, unless --c)",
     )
     parser.add_argument(
         "--refs",
@@ -96,6 +95,7 @@ def add_arguments(parser: Any) -> None:
         "whether it arrived, its arrival time, its final distance and whether it settled only "
         "at the horizon",
     )
+    add_compiled_argument(parser)
 
 
 def _refs_error(path: str, what: str) -> ValueError:
@@ -473,6 +473,10 @@ def per_ref_csv(result: dict[str, Any], labels: list[str]) -> str:
 
 def run(args: Any) -> int:
     """Run ``wmr-jax evaluate``; return the exit status."""
+    if args.c is not None:
+        return run_compiled(args)
+    if args.gains is None:
+        raise ValueError("--gains is required; allowed: a tuned_gains.json (or --c DIR)")
     out = None if args.json is None else flags.output_file("--json", args.json)
     per_ref = None if args.per_ref is None else flags.output_file("--per-ref", args.per_ref)
     condition = flags.choice("--condition", args.condition, _CONDITIONS)
@@ -527,6 +531,56 @@ def run(args: Any) -> int:
     advice = hint(result, args)
     if advice:
         print(advice)
+    return 0
+
+
+# ---------------------------------------------------------------- --c: a compiled controller
+
+
+def add_compiled_argument(parser: Any) -> None:
+    """Add ``--c DIR``: judge the C controller ``wmr-jax export`` wrote there instead."""
+    parser.add_argument(
+        "--c",
+        default=None,
+        metavar="DIR",
+        help="judge the C controller wmr-jax export wrote into DIR, compiled with the system "
+        "C compiler, in place of --gains (the same runs; float64 loop, docs/deploy.md)",
+    )
+
+
+def run_compiled(args: Any) -> int:
+    """``wmr-jax evaluate --c DIR``: the runs of ``--gains``, the commands of the compiled C."""
+    from wmr_jax._src.export.compiled import compile_controller
+    from wmr_jax._src.export.host import evaluate_compiled, exported_loop
+    from wmr_jax._src.io import atomic_write_json
+    from wmr_jax._src.report.tables import markdown_table
+
+    for flag, value in (("--gains", args.gains), ("--estimator", args.estimator)):
+        if value is not None:
+            raise ValueError(f"{flag} is not allowed with --c; allowed: the loop baked into the C")
+    if args.float32:
+        raise ValueError("--float32 is not allowed with --c; allowed: wmr-jax export --real float")
+    out = None if args.json is None else flags.output_file("--json", args.json)
+    condition = flags.choice("--condition", args.condition, _CONDITIONS)
+    mismatch = _mismatch(args.mismatch)
+    seed = flags.positive_int("--seed", args.seed, 0, 2**32 - 1)
+    velocity = flags.velocity_loop(args.velocity)
+    given = flags.robot_from(args.robot)
+    refs = load_refs(args.refs)
+    loop, meta = exported_loop(args.c)
+    robot = flags.robot_for_gains(given, loop.robot, "--c", args.c)
+    horizon = _horizon(args.horizon, len(refs), robot)
+    compiled = compile_controller(args.c)
+    with flags.as_flags({"refs": "--refs", "horizon": "--horizon", "mismatch": "--mismatch"}):
+        result = evaluate_compiled(
+            compiled, loop, refs, condition=condition, mismatch=mismatch, seed=seed,
+            horizon=horizon, velocity=velocity, robot=robot,
+        )  # fmt: skip
+    result = {**result, "c_folder": str(args.c), "gains": meta["gains"], "refs_file": args.refs}
+    if out is not None:
+        atomic_write_json(out, result)
+        print(f"evaluate -> {out}")
+    print(markdown_table(summary_rows(result), ["quantity", "value"]), end="")
     return 0
 
 

@@ -1,0 +1,118 @@
+"""``wmr-jax export``: a tuned loop as a C controller for the robot (docs/deploy.md).
+
+Reads a ``tuned_gains.json`` (``load_tuned``: fixed gains or a schedule, its
+estimator and robot) and writes ``wmr_controller.h``, ``wmr_controller.c`` and
+``wmr_controller.json`` (the loop they were generated from, for
+``wmr-jax evaluate --c``) into ``--out``. Where the machine has a C compiler,
+the files are compiled once with the flags they promise to pass, and the
+state's and the object's sizes printed.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from wmr_jax._src.cli import flags
+
+__all__ = ["SUBCOMMANDS"]
+
+
+def add_arguments(parser: Any) -> None:
+    """Add the flags of ``wmr-jax export``."""
+    parser.add_argument(
+        "--gains",
+        required=True,
+        metavar="FILE.json",
+        help="tuned_gains.json of wmr-jax tune (fixed gains or a schedule, with its estimator) "
+        "or a JSON of Gains fields",
+    )
+    parser.add_argument(
+        "--out", required=True, metavar="DIR", help="folder to write the C files into"
+    )
+    parser.add_argument(
+        "--real",
+        default="double",
+        metavar="TYPE",
+        help="arithmetic of the controller's step: double or float",
+    )
+    flags.add_robot_flag(parser, default="the --gains file's robot, else paper")
+
+
+def _object_size(folder: Path) -> tuple[int, int] | None:
+    """``(sizeof(wmr_controller), bytes of the compiled code)``, or ``None`` without a compiler."""
+    import subprocess
+
+    from wmr_jax._src.export.compiled import CFLAGS, compiler
+
+    cc = compiler()
+    if cc is None:
+        return None
+    with tempfile.TemporaryDirectory() as tmp:
+        obj, probe = Path(tmp, "wmr_controller.o"), Path(tmp, "probe")
+        src = folder / "wmr_controller.c"
+        compiled = subprocess.run(
+            [cc, *CFLAGS, "-O2", "-c", str(src), "-o", str(obj)], capture_output=True, text=True
+        )
+        if compiled.returncode != 0:
+            raise ValueError(f"the exported C does not compile: {compiled.stderr.strip()}")
+        main = Path(tmp, "size.c")
+        main.write_text(
+            '#include <stdio.h>\n#include "wmr_controller.h"\n'
+            'int main(void) { printf("%lu\\n", (unsigned long)wmr_size()); return 0; }\n'
+        )
+        subprocess.run(
+            [cc, f"-I{folder}", str(main), str(obj), "-o", str(probe), "-lm"], check=True
+        )
+        size = int(subprocess.run([str(probe)], capture_output=True, text=True).stdout)
+        text = _text_size(obj)
+        return size, text
+
+
+def _text_size(obj: Path) -> int:
+    """Bytes of code and constants in an object file (``size``'s text), else the file's size."""
+    import shutil
+    import subprocess
+
+    tool = shutil.which("size")
+    if tool:
+        done = subprocess.run([tool, str(obj)], capture_output=True, text=True)
+        lines = done.stdout.split("\n")
+        if done.returncode == 0 and len(lines) > 1:
+            return int(lines[1].split()[0])
+    return obj.stat().st_size
+
+
+def run(args: Any) -> int:
+    """Run ``wmr-jax export``; return the exit status."""
+    from wmr_jax._src.export.codegen import REALS, c_sources, write_sources
+    from wmr_jax._src.tuning.saved import load_tuned
+
+    out = flags.output_dir("--out", args.out)
+    real = flags.choice("--real", args.real, REALS)
+    given = flags.robot_from(args.robot)
+    try:
+        loop = load_tuned(args.gains)
+    except ValueError as err:
+        raise ValueError(f"--gains {err}") from None
+    robot = flags.robot_for_gains(given, loop.robot, "--gains", args.gains)
+    if robot is not None:
+        loop = loop._replace(robot=robot)
+    sources = c_sources(loop, real=real)
+    for path in write_sources(out, sources, loop):
+        print(f"export -> {path}")
+    sizes = _object_size(out)
+    if sizes is not None:
+        print(f"sizeof(wmr_controller) = {sizes[0]} bytes; code and constants: {sizes[1]} bytes")
+    print(f"period {sources.period:g} s, latency 0 to {sources.max_latency} periods, {real}")
+    return 0
+
+
+SUBCOMMANDS = {
+    "export": {
+        "help": "write a tuned loop (law, estimator, latency compensation) as a C controller",
+        "add_arguments": add_arguments,
+        "run": run,
+    },
+}

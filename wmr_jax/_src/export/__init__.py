@@ -1,0 +1,1 @@
+"""The tuned loop as C: code generation, compilation and the host-side loop that judges it."""

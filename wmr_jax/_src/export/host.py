@@ -1,0 +1,323 @@
+"""The project's disturbed loop driven by a compiled controller (docs/model.md §7, §9).
+
+The robot, its noise, wheel-radius and mass mismatch, speed limiter and
+latency are simulated as ``sensing.loop.disturbed_run`` simulates them, with
+its own functions (``loops.advance_period``, ``disturbances.realised``,
+``disturbances.measured``, the streamed metrics of ``metrics``); only the
+controller's side is the C one: every period the host hands the compiled
+controllers the poses measured at the sample and applies the commands they
+sent ``latency`` periods before. One jitted, batched period per call; the
+C steps every run in one foreign call.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from wmr_jax._src import checks, loops, metrics
+from wmr_jax._src.export.codegen import MAX_LATENCY
+from wmr_jax._src.export.compiled import CompiledController
+from wmr_jax._src.loops import StepOutput
+from wmr_jax._src.metrics import PoseMetrics
+from wmr_jax._src.rollout import DEFAULT_DT
+from wmr_jax._src.sensing.disturbances import Disturbance, measured, realised
+from wmr_jax._src.sensing.loop import ClosedLoop, _followed, _limiter, prepare_disturbed
+
+__all__ = [
+    "METADATA",
+    "compiled_metrics",
+    "evaluate_compiled",
+    "exported_loop",
+    "read_metadata",
+]
+
+# What `wmr-jax export` writes beside the C: the loop it was generated from.
+METADATA = "wmr_controller.json"
+
+
+def _period(pose, wheel, acc, applied, noise_next, mismatch, ref, robot, dt, options, limiter):
+    """One period of one run (the body of ``disturbed_run``, the law left out)."""
+    moving = options
+    true_robot = robot.replace(body_mass=robot.body_mass * mismatch[2])
+    command = jax.lax.complex(applied[0], applied[1])
+    followed = command
+    if limiter:
+        followed, wheel = _followed(wheel, command, robot, dt)
+    target = realised(followed, mismatch, robot)
+    pose, wheel, rims, distance = loops.advance_period(
+        pose, wheel, target, true_robot, dt, moving, model=robot
+    )
+    out = StepOutput(command.real, command.imag, jnp.int32(-1), rims, distance)
+    acc = metrics.stream_update(
+        acc, pose.stacked(), ref, out, metrics.Thresholds(), frame=pose.frame()
+    )
+    return pose, wheel, acc, measured(pose, noise_next).stacked()
+
+
+_batched_period = jax.jit(
+    jax.vmap(_period, in_axes=(0, 0, 0, 0, 0, 0, 0, None, None, None, None)),
+    static_argnames=("options", "limiter"),
+)
+
+
+def _result(acc, pose, ref, dt):
+    result = metrics.stream_result(acc, dt)
+    d = pose.stacked()[:2] - ref[:2]
+    return {
+        "arrival": result["arrival_time"],
+        "path": result["path_length"],
+        "peak_wheel": result["peak_wheel_speed"],
+        "zigzag": result["zigzags"],
+        "final_distance": jnp.sqrt(jnp.sum(d * d)),
+        "first_arrival": result["first_arrival"],
+    }
+
+
+_batched_result = jax.jit(jax.vmap(_result, in_axes=(0, 0, 0, None)))
+
+
+def _latencies(delay: Any, n: int) -> np.ndarray:
+    delay = np.asarray(delay, dtype=float)
+    ok = delay.shape in ((), (n,)) and bool(
+        np.all((delay >= 0) & (delay <= MAX_LATENCY) & (delay == np.round(delay)))
+    )
+    if not ok:
+        raise ValueError(
+            f"disturbance.delay = {delay!r:.80} is not allowed; allowed: whole numbers of "
+            f"periods 0 to {MAX_LATENCY}, one or ({n},)"
+        )
+    return np.broadcast_to(delay, (n,)).astype(int)
+
+
+def compiled_metrics(
+    compiled: CompiledController,
+    disturbance: Disturbance,
+    loop: ClosedLoop,
+    *,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = DEFAULT_DT,
+    robot: Any = None,
+    velocity: str = "ideal",
+) -> PoseMetrics:
+    """The ``docs/model.md §6`` metrics of disturbed runs with the compiled controller in the loop.
+
+    The counterpart of ``perturbed_metrics`` (float64): the same runs, the
+    command of each period given by the C controller instead of the JAX law
+    and estimator. ``disturbance.delay`` may be any whole number of periods
+    up to ``MAX_LATENCY`` (the C holds that many commands in flight).
+
+    Args:
+        compiled: the compiled controller (``compile_controller``).
+        disturbance: as for ``perturbed_metrics``, ``delay`` 0, 1, 2, …
+        loop: the loop the controller was generated from (its parameters
+            check the run's settings as ``perturbed_metrics`` does).
+        init: ``(3,)`` initial pose.
+        dt: control period, s: the controller's own (``wmr_period()``).
+        robot: the nominal robot; default the loop's, else ``Robot()``.
+        velocity: ``"ideal"`` or ``"nonideal"``.
+
+    Raises:
+        ValueError: for bad inputs, or a ``dt`` other than the controller's period.
+    """
+    if not math.isclose(float(dt), compiled.period, rel_tol=1e-12):
+        raise ValueError(
+            f"dt = {dt!r} is not allowed; allowed: the compiled controller's period, "
+            f"{compiled.period!r} s"
+        )
+    if not isinstance(disturbance, Disturbance):
+        raise ValueError(
+            f"disturbance = {type(disturbance).__name__} is not allowed; allowed: a Disturbance"
+        )
+    n = np.shape(disturbance.ref)[0]
+    latency = _latencies(disturbance.delay, n)
+    robot = loop.robot if robot is None else robot
+    limits = (getattr(robot, "accel_max", 0.0), getattr(robot, "angular_accel_max", 0.0))
+    if velocity == "nonideal" and any(float(np.max(x)) > 0 for x in limits):
+        raise ValueError(
+            "velocity = 'nonideal' is not allowed with a robot that gives acceleration limits; "
+            "allowed: 'ideal' (the C applies the robot's speed limiter, docs/model.md §4.2.2, "
+            "which the non-ideal loop does not model)"
+        )
+    with jax.enable_x64(True):
+        args, options = prepare_disturbed(
+            disturbance._replace(delay=np.float64(0.0)),
+            loop.params,
+            loop.controller,
+            None,
+            init,
+            dt,
+            robot,
+            velocity,
+        )
+        spec, _, _, init_j, robot_j, dt_j = args
+        limiter, moving = _limiter(options)
+        refs = np.asarray(spec.ref)
+        noise = np.asarray(spec.noise)
+        steps = noise.shape[1]
+        pose = jax.vmap(loops.SplitPose.of)(jnp.broadcast_to(init_j, (n, 3)))
+        wheel = jax.vmap(lambda _: loops.initial_wheel(init_j, options))(jnp.arange(n))
+        acc = jax.vmap(lambda _: metrics.stream_start(init_j.dtype))(jnp.arange(n))
+        compiled.start(refs, latency)
+        first = np.asarray(jax.vmap(lambda p, z: measured(p, z).stacked())(pose, spec.noise[:, 0]))
+        sent = [compiled.step(first)]
+        later = np.concatenate([noise[:, 1:], np.zeros_like(noise[:, :1])], axis=1)
+        rows = np.arange(n)
+        for k in range(steps):
+            # The command sent `latency` periods ago acts now (zero before the first).
+            applied = np.zeros((n, 2))
+            due = k - latency
+            ok = due >= 0
+            if np.any(ok):
+                history = np.stack(sent)  # (k + 1, n, 2)
+                applied[ok] = history[due[ok], rows[ok]]
+            pose, wheel, acc, sensed = _batched_period(
+                pose, wheel, acc, jnp.asarray(applied), jnp.asarray(later[:, k]),
+                spec.mismatch, spec.ref, robot_j, dt_j, moving, limiter,
+            )  # fmt: skip
+            if k + 1 < steps:
+                sent.append(compiled.step(np.asarray(sensed)))
+        out = _batched_result(acc, pose, spec.ref, dt_j)
+        result = PoseMetrics(**{f: np.asarray(out[f]) for f in PoseMetrics._fields})
+    checks.require_finite_runs(
+        np.isfinite(result.final_distance),
+        np.dtype(np.float64),
+        allowed="disturbances and a controller that keep the sampled loop stable",
+    )
+    return result
+
+
+def read_metadata(folder: str | os.PathLike) -> dict[str, Any]:
+    """The ``wmr_controller.json`` that ``wmr-jax export`` wrote beside the C."""
+    path = Path(folder) / METADATA
+    try:
+        values = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as err:
+        raise ValueError(
+            f"--c {os.fspath(folder)!r} cannot be read: {METADATA}: {' '.join(str(err).split())}; "
+            "allowed: a folder written by wmr-jax export"
+        ) from None
+    if not isinstance(values, dict) or (values.get("gains") or values.get("baseline")) is None:
+        raise ValueError(f"--c {os.fspath(folder)!r}: {METADATA} holds no gains")
+    return values
+
+
+def exported_loop(folder: str | os.PathLike) -> tuple[ClosedLoop, dict[str, Any]]:
+    """The loop a folder of ``wmr-jax export`` was generated from, and its ``wmr_controller.json``.
+
+    Raises:
+        ValueError: one line naming the folder, for a missing or bad file.
+    """
+    import tempfile
+
+    from wmr_jax._src.tuning.saved import load_tuned
+
+    meta = read_metadata(folder)
+    if meta.get("baseline") is not None:
+        return _baseline_loop(meta["baseline"], folder), meta
+    with tempfile.TemporaryDirectory() as tmp:  # load_tuned's checks, on the saved gains
+        path = Path(tmp, "tuned_gains.json")
+        path.write_text(json.dumps(meta["gains"]), encoding="utf-8")
+        try:
+            return load_tuned(path), meta
+        except ValueError as err:
+            message = str(err).replace(repr(str(path)), METADATA)
+            raise ValueError(f"--c {os.fspath(folder)!r}: {message}") from None
+
+
+def _baseline_loop(values: Any, folder: Any) -> ClosedLoop:
+    """The baseline loop a ``wmr_controller.json`` records (``codegen._baseline_json``)."""
+    from wmr_jax._src.controllers import get_controller
+    from wmr_jax._src.robots import robot_from_values
+    from wmr_jax._src.tuning.estimation import estimator_from_json
+
+    where = f"--c {os.fspath(folder)!r}: {METADATA}"
+    try:
+        controller = get_controller(values["controller"])
+        params = controller.validate(controller.params_type(**values["params"]))
+        estimator = values.get("estimator")
+        estimator = None if estimator is None else estimator_from_json(estimator, where)
+        robot = values.get("robot")
+        robot = None if robot is None else robot_from_values(robot, where)
+    except (KeyError, TypeError) as err:
+        raise ValueError(f"{where} holds no loop ({err})") from None
+    return ClosedLoop(controller, params, estimator, robot)
+
+
+def evaluate_compiled(
+    compiled: CompiledController,
+    loop: ClosedLoop,
+    refs: Any,
+    *,
+    condition: str = "nominal",
+    mismatch: float = 0.03,
+    seed: int = 0,
+    horizon: float | None = None,
+    velocity: str = "ideal",
+    robot: Any = None,
+) -> dict[str, Any]:
+    """``evaluate_loop`` of a compiled controller: the same draws, runs and figures (float64).
+
+    ``loop`` is the loop the controller was generated from; the runs are
+    those ``evaluate_loop(loop, refs, ...)`` makes, the commands the C's.
+    """
+    from wmr_jax._src import conditions
+
+    labels = {label: (sxy, sdeg, lat) for label, sxy, sdeg, lat in conditions.STANDARD_CONDITIONS}
+    if condition not in labels:
+        raise ValueError(f"condition = {condition!r} is not allowed; allowed: {', '.join(labels)}")
+    mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
+    seed = checks.check_int("seed", seed, 0, 2**32 - 1)
+    robot = conditions._study_robot(robot, {"loop": loop}, "evaluate_compiled")
+    dt = compiled.period
+    refs, noise, factors, horizon = conditions._runs(
+        refs, jax.random.key(seed), robot, horizon, dt, mismatch, True
+    )
+    spec = conditions._scaled(refs, noise, factors, *labels[condition])
+    m = compiled_metrics(compiled, spec, loop, dt=dt, robot=robot, velocity=velocity)
+    return _figures(m, loop, refs, robot, condition, mismatch, seed, horizon, velocity, dt)
+
+
+def _figures(m, loop, refs, robot, condition, mismatch, seed, horizon, velocity, dt):
+    """The result dict of ``conditions.evaluate_loop``, of the compiled controller's runs."""
+    from wmr_jax._src import controllers
+    from wmr_jax._src.optimal import time_bounds
+    from wmr_jax._src.robots import robot_json
+    from wmr_jax._src.robustness import settled_at_horizon
+    from wmr_jax._src.sensing.estimators import resolve_estimator
+
+    estimator, _ = resolve_estimator(loop.estimator)
+    arrived = m.arrival[m.success]
+    mean = float(arrived.mean()) if arrived.size else None
+    optimal = None
+    if arrived.size:
+        optimal = float(np.mean(time_bounds(refs[m.success], robot=robot, dt=dt).turn_drive_turn))
+    peak = float(np.max(m.peak_wheel))
+    return {
+        "success": float(m.success.mean()),
+        "mean_arrival_s": mean,
+        "median_arrival_s": float(np.median(arrived)) if arrived.size else None,
+        "settled_at_horizon": float(settled_at_horizon(m, horizon).mean()),
+        "peak_wheel_speed": peak,
+        "v_max": float(robot.v_max),
+        "peak_wheel_speed_ok": bool(peak <= float(robot.v_max) * (1.0 + mismatch) * (1 + 1e-6)),
+        "turn_drive_turn_s": optimal,
+        "vs_turn_drive_turn": None if optimal is None else mean / optimal,
+        "n": len(refs),
+        "condition": condition,
+        "mismatch": mismatch,
+        "seed": seed,
+        "horizon_s": horizon,
+        "velocity": velocity,
+        "controller": controllers.get_controller(loop.controller).name + " (compiled C)",
+        "feedback": "raw" if estimator is None else estimator.name,
+        "robot": robot_json(robot),
+        "dtype": "float64",
+    }

@@ -1,0 +1,44 @@
+"""The tuned loop as a C controller for the robot: generate, compile, and judge it.
+
+``c_sources`` turns a ``ClosedLoop`` (``load_tuned``) into ``wmr_controller.h``
+and ``wmr_controller.c``: C99, no heap, no global state, the tuned constants
+baked in (``write_sources`` writes them, with the loop as JSON beside them;
+``wmr-jax export`` does both). ``compile_controller`` builds them with the
+system C compiler and wraps them with ``ctypes``; ``compiled_metrics`` runs the
+project's disturbed loop (docs/model.md §7, §9) with the compiled controller
+giving the commands, and ``evaluate_compiled`` judges it as
+``wmr_jax.studies.evaluate_loop`` judges the tuned file. docs/deploy.md
+takes the files from here to the robot.
+"""
+
+from wmr_jax._src.export.codegen import MAX_LATENCY as MAX_LATENCY
+from wmr_jax._src.export.codegen import REALS as REALS
+from wmr_jax._src.export.codegen import CSources as CSources
+from wmr_jax._src.export.codegen import c_sources as c_sources
+from wmr_jax._src.export.codegen import write_sources as write_sources
+from wmr_jax._src.export.compiled import CFLAGS as CFLAGS
+from wmr_jax._src.export.compiled import CompiledController as CompiledController
+from wmr_jax._src.export.compiled import compile_controller as compile_controller
+from wmr_jax._src.export.compiled import compiler as compiler
+from wmr_jax._src.export.compiled import sanitizers_work as sanitizers_work
+from wmr_jax._src.export.host import compiled_metrics as compiled_metrics
+from wmr_jax._src.export.host import evaluate_compiled as evaluate_compiled
+from wmr_jax._src.export.host import exported_loop as exported_loop
+from wmr_jax._src.export.host import read_metadata as read_metadata
+
+__all__ = [
+    "MAX_LATENCY",
+    "REALS",
+    "CSources",
+    "c_sources",
+    "write_sources",
+    "CFLAGS",
+    "CompiledController",
+    "compile_controller",
+    "compiler",
+    "sanitizers_work",
+    "compiled_metrics",
+    "evaluate_compiled",
+    "exported_loop",
+    "read_metadata",
+]
