@@ -226,8 +226,8 @@ def test_c_sources_refuses_what_it_cannot_write():
     loop = w.ClosedLoop(w.SHIM_SUNG, w.Gains())
     with pytest.raises(ValueError, match="real = 'long' is not allowed"):
         export.c_sources(loop, real="long")
-    with pytest.raises(ValueError, match="loop.controller = 'aicardi'"):
-        export.c_sources(w.ClosedLoop(w.AICARDI, w.AicardiGains()))
+    with pytest.raises(ValueError, match="loop.controller = 'aicardi' with Gains is not allowed"):
+        export.c_sources(w.ClosedLoop(w.AICARDI, w.Gains()))
     with pytest.raises(ValueError, match="period = 0"):
         export.c_sources(loop, period=0)
     with pytest.raises(ValueError, match="loop is a Gains"):
@@ -452,6 +452,8 @@ def test_evaluate_c_judges_the_compiled_controller_as_the_file(tmp_path, robust_
     assert "--estimator is not allowed with --c" in capsys.readouterr().err
     assert main(["evaluate", "--c", str(tmp_path), *common]) == 2
     assert "wmr_controller.json" in capsys.readouterr().err
+    assert main(["evaluate", *common]) == 2
+    assert "--gains is required" in capsys.readouterr().err
 
 
 # ---------------------------------------------------------------- sanitizers
