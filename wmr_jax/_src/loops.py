@@ -336,6 +336,43 @@ class ClosedLoopStep:
         carried = None if self.aim is None else ref
         return LoopCarry(pose, wheel, first, queue, moves, state, carried, acc)
 
+    def move(
+        self, pose: SplitPose, wheel: Any, applied: jax.Array, ref: jax.Array, acc: Any
+    ) -> tuple[SplitPose, Any, jax.Array, StepOutput, Any]:
+        """The plant's half of a period: the robot moves under ``applied`` (``v + i ω``).
+
+        The command passes the speed limiter (where the loop has one), the
+        disturbance's wheels realise it on its true robot (where there is
+        one), the velocity loop and the robot advance over the period
+        (``advance_period``), and the fold takes the period's ``StepOutput``.
+        What the command side does (the law, the commands in flight, the
+        estimator) is left to the caller: ``__call__`` here, or a host loop
+        whose commands come from elsewhere (``wmr_jax.export``).
+
+        Returns:
+            ``(pose, wheel, followed, out, acc)`` at the end of the period;
+            ``followed`` is the command the limiter let through.
+        """
+        spec = self.disturbance
+        if spec is not None:
+            region = jnp.int32(-1)
+        elif self.fold or self.record:
+            region = split_region(pose, ref, self.params, self.options)
+        else:
+            region = None
+        followed, wheel = self.followed(wheel, applied)
+        target = (followed.real, followed.imag)
+        robot = self.robot
+        if spec is not None:
+            target, robot = spec.realised(followed, robot), spec.true_robot(robot)
+        pose, wheel, rims, distance = advance_period(
+            pose, wheel, target, robot, self.dt, self.options, model=self.robot
+        )
+        out = StepOutput(applied.real, applied.imag, region, rims, distance)
+        if self.fold is not None:
+            acc = self.fold(acc, pose, out)
+        return pose, wheel, followed, out, acc
+
     def __call__(self, carry: LoopCarry, noise_next: Any) -> tuple[LoopCarry, Any]:
         """Move over one period under the carried command; compute the next one.
 
@@ -346,33 +383,17 @@ class ClosedLoopStep:
         ref = self.ref if self.aim is None else ref
         spec, estimator, dt = self.disturbance, self.estimator, self.dt
         applied = fresh if spec is None else self.delayed(fresh, queue)
-        if spec is not None:
-            region = jnp.int32(-1)
-        elif self.fold or self.record:
-            region = split_region(pose, ref, self.params, self.options)
-        else:
-            region = None
-        followed, wheel = self.followed(wheel, applied)
-        if estimator is not None:
-            if moves:
-                # The arc of the carried command is computed here, not where
-                # the law returns it: XLA would fuse the law into each of the
-                # arc's parts and compute it four times.
-                fresh_move = ArcMove.of(fresh.real, fresh.imag, dt)
-                move = self.delayed(fresh_move, moves)
-                moves = (fresh_move, *moves[:-1])
-            else:
-                move = ArcMove.of(followed.real, followed.imag, dt)
-        target = (followed.real, followed.imag)
-        robot = self.robot
-        if spec is not None:
-            target, robot = spec.realised(followed, robot), spec.true_robot(robot)
-        pose, wheel, rims, distance = advance_period(
-            pose, wheel, target, robot, dt, self.options, model=self.robot
-        )
-        out = StepOutput(applied.real, applied.imag, region, rims, distance)
-        if self.fold is not None:
-            acc = self.fold(acc, pose, out)
+        if estimator is not None and moves:
+            # The arc of the carried command is computed here, not where the
+            # law returns it: XLA would fuse the law into each of the arc's
+            # parts and compute it four times.
+            fresh_move = ArcMove.of(fresh.real, fresh.imag, dt)
+            move = self.delayed(fresh_move, moves)
+            moves = (fresh_move, *moves[:-1])
+        pose, wheel, followed, out, acc = self.move(pose, wheel, applied, ref, acc)
+        if estimator is not None and not moves:
+            # With a speed limiter: the arc of what it let through.
+            move = ArcMove.of(followed.real, followed.imag, dt)
         queue = (fresh, *queue[:-1]) if queue else ()
         if spec is None:
             seen = pose

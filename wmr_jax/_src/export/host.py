@@ -1,13 +1,14 @@
 """The project's disturbed loop driven by a compiled controller (docs/model.md §7, §9).
 
-The robot, its noise, wheel-radius and mass mismatch, speed limiter and
-latency are simulated as ``sensing.loop.disturbed_run`` simulates them, with
-its own functions (``loops.advance_period``, ``disturbances.realised``,
-``disturbances.measured``, the streamed metrics of ``metrics``); only the
-controller's side is the C one: every period the host hands the compiled
-controllers the poses measured at the sample and applies the commands they
-sent ``latency`` periods before. One jitted, batched period per call; the
-C steps every run in one foreign call.
+The robot's side of every period is the one closed-loop step's
+(``loops.ClosedLoopStep.move``: the speed limiter, the disturbance's wheels
+and mass, the velocity loop and the robot, the streamed metrics of
+``sensing.loop.metrics_fold``), and the sensor is the disturbance's; only
+the controller's side is the C one (the law, the commands in flight, the
+estimator): every period the host hands the compiled controllers the poses
+measured at the sample and applies the commands they sent ``latency``
+periods before. One jitted, batched period per call; the C steps every run
+in one foreign call.
 """
 
 from __future__ import annotations
@@ -25,11 +26,10 @@ import numpy as np
 from wmr_jax._src import checks, loops, metrics
 from wmr_jax._src.export.codegen import MAX_LATENCY
 from wmr_jax._src.export.compiled import CompiledController
-from wmr_jax._src.loops import StepOutput
 from wmr_jax._src.metrics import PoseMetrics
 from wmr_jax._src.rollout import DEFAULT_DT
-from wmr_jax._src.sensing.disturbances import Disturbance, measured, realised
-from wmr_jax._src.sensing.loop import ClosedLoop, _followed, _limiter, prepare_disturbed
+from wmr_jax._src.sensing.disturbances import Disturbance
+from wmr_jax._src.sensing.loop import ClosedLoop, metrics_fold, metrics_result, prepare_disturbed
 
 __all__ = [
     "METADATA",
@@ -43,45 +43,29 @@ __all__ = [
 METADATA = "wmr_controller.json"
 
 
-def _period(pose, wheel, acc, applied, noise_next, mismatch, ref, robot, dt, options, limiter):
-    """One period of one run (the body of ``disturbed_run``, the law left out)."""
-    moving = options
-    true_robot = robot.replace(body_mass=robot.body_mass * mismatch[2])
+def _period(pose, wheel, acc, applied, noise_next, spec, robot, dt, options):
+    """One period of one run: the one step's plant half (``ClosedLoopStep.move``).
+
+    The robot moves under ``applied`` ``(v, ω)``, the command the C sent
+    ``latency`` periods before (the law, the commands in flight and the
+    estimator are the C's); returns the moved state and what the sensor
+    reports at the end of the period, ``[x, y, θ]``.
+    """
+    fold = metrics_fold(spec.ref)
+    step = loops.ClosedLoopStep(spec.ref, None, robot, dt, options, disturbance=spec, fold=fold)
     command = jax.lax.complex(applied[0], applied[1])
-    followed = command
-    if limiter:
-        followed, wheel = _followed(wheel, command, robot, dt)
-    target = realised(followed, mismatch, robot)
-    pose, wheel, rims, distance = loops.advance_period(
-        pose, wheel, target, true_robot, dt, moving, model=robot
-    )
-    out = StepOutput(command.real, command.imag, jnp.int32(-1), rims, distance)
-    acc = metrics.stream_update(
-        acc, pose.stacked(), ref, out, metrics.Thresholds(), frame=pose.frame()
-    )
-    return pose, wheel, acc, measured(pose, noise_next).stacked()
+    pose, wheel, _, _, acc = step.move(pose, wheel, command, spec.ref, acc)
+    return pose, wheel, acc, spec.measurement(pose, noise_next).pose().stacked()
 
 
 _batched_period = jax.jit(
-    jax.vmap(_period, in_axes=(0, 0, 0, 0, 0, 0, 0, None, None, None, None)),
-    static_argnames=("options", "limiter"),
+    jax.vmap(_period, in_axes=(0, 0, 0, 0, 0, Disturbance(0, 0, 0, None), None, None, None)),
+    static_argnames=("options",),
 )
-
-
-def _result(acc, pose, ref, dt):
-    result = metrics.stream_result(acc, dt)
-    d = pose.stacked()[:2] - ref[:2]
-    return {
-        "arrival": result["arrival_time"],
-        "path": result["path_length"],
-        "peak_wheel": result["peak_wheel_speed"],
-        "zigzag": result["zigzags"],
-        "final_distance": jnp.sqrt(jnp.sum(d * d)),
-        "first_arrival": result["first_arrival"],
-    }
-
-
-_batched_result = jax.jit(jax.vmap(_result, in_axes=(0, 0, 0, None)))
+_batched_result = jax.jit(
+    jax.vmap(lambda acc, pose, ref, dt: metrics_result(acc, pose.stacked(), ref, dt),
+             in_axes=(0, 0, 0, None))
+)  # fmt: skip
 
 
 def _latencies(delay: Any, n: int) -> np.ndarray:
@@ -109,16 +93,16 @@ def compiled_metrics(
 ) -> PoseMetrics:
     """The ``docs/model.md §6`` metrics of disturbed runs with the compiled controller in the loop.
 
-    The counterpart of ``perturbed_metrics`` (float64): the same runs, the
+    The counterpart of ``disturbed_metrics`` (float64): the same runs, the
     command of each period given by the C controller instead of the JAX law
     and estimator. ``disturbance.delay`` may be any whole number of periods
     up to ``MAX_LATENCY`` (the C holds that many commands in flight).
 
     Args:
         compiled: the compiled controller (``compile_controller``).
-        disturbance: as for ``perturbed_metrics``, ``delay`` 0, 1, 2, …
+        disturbance: as for ``disturbed_metrics``, ``delay`` 0, 1, 2, …
         loop: the loop the controller was generated from (its parameters
-            check the run's settings as ``perturbed_metrics`` does).
+            check the run's settings as ``disturbed_metrics`` does).
         init: ``(3,)`` initial pose.
         dt: control period, s: the controller's own (``wmr_period()``).
         robot: the nominal robot; default the loop's, else ``Robot()``.
@@ -158,7 +142,6 @@ def compiled_metrics(
             velocity,
         )
         spec, _, _, init_j, robot_j, dt_j = args
-        limiter, moving = _limiter(options)
         refs = np.asarray(spec.ref)
         noise = np.asarray(spec.noise)
         steps = noise.shape[1]
@@ -166,7 +149,8 @@ def compiled_metrics(
         wheel = jax.vmap(lambda _: loops.initial_wheel(init_j, options))(jnp.arange(n))
         acc = jax.vmap(lambda _: metrics.stream_start(init_j.dtype))(jnp.arange(n))
         compiled.start(refs, latency)
-        first = np.asarray(jax.vmap(lambda p, z: measured(p, z).stacked())(pose, spec.noise[:, 0]))
+        sense = jax.vmap(lambda p, z: spec.measurement(p, z).pose().stacked())
+        first = np.asarray(sense(pose, spec.noise[:, 0]))
         sent = [compiled.step(first)]
         later = np.concatenate([noise[:, 1:], np.zeros_like(noise[:, :1])], axis=1)
         rows = np.arange(n)
@@ -180,7 +164,7 @@ def compiled_metrics(
                 applied[ok] = history[due[ok], rows[ok]]
             pose, wheel, acc, sensed = _batched_period(
                 pose, wheel, acc, jnp.asarray(applied), jnp.asarray(later[:, k]),
-                spec.mismatch, spec.ref, robot_j, dt_j, moving, limiter,
+                spec, robot_j, dt_j, options,
             )  # fmt: skip
             if k + 1 < steps:
                 sent.append(compiled.step(np.asarray(sensed)))

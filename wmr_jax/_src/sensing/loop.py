@@ -44,6 +44,8 @@ __all__ = [
     "disturbed_rollout",
     "disturbed_run",
     "disturbed_metrics",
+    "metrics_fold",
+    "metrics_result",
     "prepare_disturbed",
 ]
 
@@ -130,14 +132,19 @@ def disturbed_run(
     )
 
 
-def _disturbed_single(spec: Disturbance, params, estimate, init, robot, dt, options: Options):
-    """Run one pose under its ``Disturbance``, streaming the ``docs/model.md §6`` metrics."""
-    ref = spec.ref
+def metrics_fold(ref: jax.Array) -> loops.Fold:
+    """The fold that streams the ``docs/model.md §6`` metrics of a run toward ``ref`` (3,)."""
     thresholds = metrics.Thresholds()
 
     def fold(acc, pose, out):
         return metrics.stream_update(acc, pose.stacked(), ref, out, thresholds, frame=pose.frame())
 
+    return fold
+
+
+def _disturbed_single(spec: Disturbance, params, estimate, init, robot, dt, options: Options):
+    """Run one pose under its ``Disturbance``, streaming the ``docs/model.md §6`` metrics."""
+    ref = spec.ref
     final, acc, _ = disturbed_run(
         spec,
         params,
@@ -146,9 +153,14 @@ def _disturbed_single(spec: Disturbance, params, estimate, init, robot, dt, opti
         dt,
         options,
         estimate=estimate,
-        fold=fold,
+        fold=metrics_fold(ref),
         acc=metrics.stream_start(ref.dtype),
     )
+    return metrics_result(acc, final, ref, dt)
+
+
+def metrics_result(acc: Any, final: jax.Array, ref: jax.Array, dt: jax.Array) -> dict:
+    """The metrics ``metrics_fold`` streamed, and the distance from ``final`` (3,) to ``ref``."""
     result = metrics.stream_result(acc, dt)
     d = final[:2] - ref[:2]
     return {

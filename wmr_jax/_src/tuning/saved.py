@@ -280,7 +280,7 @@ def load_tuned(path: str | os.PathLike) -> ClosedLoop:
 
     ``rollout(ref, loop.params, controller=loop.controller)``,
     ``batch_rollout`` and ``final_poses`` run the result; the disturbed runs
-    and the studies of sensed loops (``perturbed_metrics(...,
+    and the studies of sensed loops (``disturbed_metrics(...,
     estimator=loop.estimator)``, ``standard_conditions``) run it whole. A
     hand-written fixed-gain file of ``Gains`` field names only (the old
     form, ``phi_m`` in radians) may leave fields out (they keep the paper's
