@@ -220,6 +220,36 @@ def test_export_command_writes_the_files_and_refuses_bad_flags(tmp_path, robust_
     assert meta["real"] == "float" and isinstance(loop.params, ScheduleParams)
     assert main(["export", "--gains", robust_file, "--out", str(out), "--real", "half"]) == 2
     assert "--real 'half' is not allowed; allowed: double, float" in capsys.readouterr().err
+    assert meta["period_s"] == DT  # the project's period unless --period says otherwise
+    for bad in ("0", "-0.01", "nan", "inf", "fast"):
+        assert main(["export", "--gains", robust_file, "--out", str(out), "--period", bad]) == 2
+        err = capsys.readouterr().err
+        assert f"--period {bad!r} is not allowed; allowed: a finite number > 0 s" in err
+
+
+def test_export_period_is_baked_in_and_recorded(tmp_path, robust_file):
+    """``--period 0.02``: the C predicts and limits over 0.02 s, so in the disturbed loop run at
+    0.02 s it arrives when the JAX loop at 0.02 s does; the JSON records the period."""
+    out = tmp_path / "ctl"
+    assert main(["export", "--gains", robust_file, "--out", str(out), "--period", "0.02"]) == 0
+    compiled = export.compile_controller(out, build=tmp_path / "b")
+    loop, meta = export.exported_loop(out)
+    assert compiled.period == 0.02 and meta["period_s"] == 0.02
+    robot = loop.robot or w.Robot()
+    refs = w.sample_poses(2003, 40)
+    refs, noise, factors, _ = conditions._runs(
+        refs, jax.random.key(0), robot, None, 0.02, 0.03, True
+    )
+    spec = conditions._scaled(refs, noise, factors, 0.5, 1.0, True)
+    jax_m = disturbed_metrics(
+        spec, loop.params, controller=loop.controller, estimator=loop.estimator, robot=robot,
+        dt=0.02,
+    )  # fmt: skip
+    c_m = export.compiled_metrics(compiled, spec, loop, robot=robot, dt=0.02)
+    assert jax_m.success.mean() > 0.9
+    np.testing.assert_array_equal(c_m.arrival, jax_m.arrival)
+    with pytest.raises(ValueError, match="the compiled controller's period, 0.02 s"):
+        export.compiled_metrics(compiled, spec, loop, robot=robot)  # at the default 0.033 s
 
 
 def test_c_sources_refuses_what_it_cannot_write():

@@ -2,10 +2,10 @@
 
 Reads a ``tuned_gains.json`` (``load_tuned``: fixed gains or a schedule, its
 estimator and robot) and writes ``wmr_controller.h``, ``wmr_controller.c`` and
-``wmr_controller.json`` (the loop they were generated from, for
-``wmr-jax evaluate --c``) into ``--out``. Where the machine has a C compiler,
-the files are compiled once with the flags they promise to pass, and the
-state's and the object's sizes printed.
+``wmr_controller.json`` (the loop they were generated from and the period
+``--period`` bakes in, for ``wmr-jax evaluate --c``) into ``--out``. Where
+the machine has a C compiler, the files are compiled once with the flags they
+promise to pass, and the state's and the object's sizes printed.
 """
 
 from __future__ import annotations
@@ -36,6 +36,13 @@ def add_arguments(parser: Any) -> None:
         default="double",
         metavar="TYPE",
         help="arithmetic of the controller's step: double or float",
+    )
+    parser.add_argument(
+        "--period",
+        default=None,
+        metavar="S",
+        help="control period the C is called at, s: the one the gains were tuned for "
+        "(a tuned_gains.json does not record it; default the project's DEFAULT_DT, 0.033)",
     )
     flags.add_robot_flag(parser, default="the --gains file's robot, else paper")
 
@@ -87,10 +94,14 @@ def _text_size(obj: Path) -> int:
 def run(args: Any) -> int:
     """Run ``wmr-jax export``; return the exit status."""
     from wmr_jax._src.export.codegen import REALS, c_sources, write_sources
+    from wmr_jax._src.rollout import DEFAULT_DT
     from wmr_jax._src.tuning.saved import load_tuned
 
     out = flags.output_dir("--out", args.out)
     real = flags.choice("--real", args.real, REALS)
+    period = DEFAULT_DT
+    if args.period is not None:
+        period = flags.number("--period", args.period, low=0.0, closed=False, unit="s")
     given = flags.robot_from(args.robot)
     try:
         loop = load_tuned(args.gains)
@@ -99,7 +110,7 @@ def run(args: Any) -> int:
     robot = flags.robot_for_gains(given, loop.robot, "--gains", args.gains)
     if robot is not None:
         loop = loop._replace(robot=robot)
-    sources = c_sources(loop, real=real)
+    sources = c_sources(loop, real=real, period=period)
     for path in write_sources(out, sources, loop):
         print(f"export -> {path}")
     sizes = _object_size(out)
