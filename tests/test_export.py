@@ -252,6 +252,25 @@ def test_export_period_is_baked_in_and_recorded(tmp_path, robust_file):
         export.compiled_metrics(compiled, spec, loop, robot=robot)  # at the default 0.033 s
 
 
+def test_a_library_built_in_a_temporary_folder_goes_with_its_controller(tmp_path, fixed_file):
+    """Without ``build``, the library's folder is removed when the controller is, silently
+    (the CLI shows every warning; a collected TemporaryDirectory warned)."""
+    import gc
+    import warnings
+
+    loop = w.load_tuned(fixed_file)
+    export.write_sources(tmp_path / "c", export.c_sources(loop), loop)
+    with warnings.catch_warnings(record=True) as shown:
+        warnings.simplefilter("always")
+        compiled = export.compile_controller(tmp_path / "c")
+        scratch = compiled.library.parent
+        assert scratch.is_dir() and compiled.period == DT
+        del compiled
+        gc.collect()
+    assert not scratch.exists()
+    assert [str(x.message) for x in shown] == []
+
+
 def test_c_sources_refuses_what_it_cannot_write():
     loop = w.ClosedLoop(w.SHIM_SUNG, w.Gains())
     with pytest.raises(ValueError, match="real = 'long' is not allowed"):

@@ -14,6 +14,7 @@ import os
 import shutil
 import subprocess
 import tempfile
+import weakref
 from pathlib import Path
 from typing import Any
 
@@ -185,9 +186,10 @@ def compile_controller(
     cc = compiler()
     if cc is None:
         raise ValueError("no C compiler found (cc, or $CC); allowed: a machine with one")
-    # A library of its own folder: removed with the CompiledController that loaded it.
-    scratch = tempfile.TemporaryDirectory(prefix="wmr_export_") if build is None else None
-    build = Path(scratch.name if scratch is not None else build)
+    # A library of its own folder: removed with the CompiledController that loaded it
+    # (a finaliser, not a TemporaryDirectory, which warns when it is collected).
+    scratch = tempfile.mkdtemp(prefix="wmr_export_") if build is None else None
+    build = Path(scratch if scratch is not None else build)
     build.mkdir(parents=True, exist_ok=True)
     driver = build / "wmr_batch.c"
     driver.write_text(_BATCH_DRIVER)
@@ -197,7 +199,13 @@ def compile_controller(
         flags += list(SANITIZE)
     if contract:
         flags += list(CONTRACT)
-    _run([cc, *flags, str(folder / SOURCE), str(driver), "-o", str(library), "-lm"])
-    compiled = CompiledController(folder, library)
-    compiled.scratch = scratch
+    try:
+        _run([cc, *flags, str(folder / SOURCE), str(driver), "-o", str(library), "-lm"])
+        compiled = CompiledController(folder, library)
+    except BaseException:
+        if scratch is not None:
+            shutil.rmtree(scratch, ignore_errors=True)
+        raise
+    if scratch is not None:
+        weakref.finalize(compiled, shutil.rmtree, scratch, ignore_errors=True)
     return compiled
