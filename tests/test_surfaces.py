@@ -45,8 +45,10 @@ def _stand_in_train(monkeypatch, evaluation, gains=TUNED):
             "loss": np.array([0.1, 0.08]),
             "temperature": np.array([0.1, 0.01]),
             "gains": np.array([row, row]),
+            "validated_at": np.array([0, 2]),
+            "validation": np.array([1.0, 0.9]),
         }
-        return TuneResult(gains, evaluation, history, 1.0, None, "fixed")
+        return TuneResult(gains, evaluation, history, 1.0, None, "fixed", 2)
 
     monkeypatch.setattr(_src_tuning, "train", fake)  # the one wmr-jax tune calls
     # The curve is drawn (test_the_schedule_curve_...), not rendered here: seconds of

@@ -168,6 +168,15 @@ def _write_results(
         # (the random search's budget) holds one more compilation per resume.
         "resumed_at_iteration": resumed_at,
         "random_search_candidates": None if search is None else search.candidates,
+        # The iterate kept: the best hard-law score on the validation poses.
+        "best_iteration": result.best_iteration,
+        "validation": {
+            "poses": config.validation_poses,
+            "scored_at": [int(i) for i in result.history["validated_at"]],
+            "score_s": [float(v) for v in result.history["validation"]],
+        },
+        "no_better_than_baseline": result.note is not None,
+        "note": result.note,
         "config": config.as_dict(),
     }
     io.atomic_write_json(out / "evaluation.json", report)
@@ -690,7 +699,10 @@ def run(args: Any) -> int:
     print(evaluation_table(result.evaluation, bounds), end="")
     search = result.search
     extra = "" if search is None else f"; random search {search.candidates} candidates"
-    print(f"tuning wall time {result.tune_wall_s:.1f} s{extra}")
+    kept = f"kept iteration {result.best_iteration} (best validation score)"
+    print(f"tuning wall time {result.tune_wall_s:.1f} s{extra}; {kept}")
+    if result.note is not None:
+        print(result.note)
     print(f"curve -> {out / 'tuning_curve.png'}")
     return 0
 

@@ -153,13 +153,25 @@ def run(args: Any) -> int:
         "tune_wall_s": result["tune_wall_s"],
         "law": "hard (temperature None)",
         "rows": result["rows"],
+        # The iterate kept: the best hard-law score on the validation poses.
+        "best_iteration": result["best_iteration"],
+        "validation": {
+            "poses": config.validation_poses,
+            "scored_at": [int(i) for i in result["history"]["validated_at"]],
+            "score_s": [float(v) for v in result["history"]["validation"]],
+        },
+        "no_better_than_baseline": result["note"] is not None,
+        "note": result["note"],
     }
     io.atomic_write_json(out / "robust_evaluation.json", record)
     table = robustness_table(result["rows"], _COLUMNS)
     io.atomic_write_text(out / "robust_evaluation.md", table)
     print(f"robust_evaluation.md/json -> {out}")
     print(table, end="")
-    print(f"tuning wall time {result['tune_wall_s']:.1f} s")
+    kept = f"kept iteration {result['best_iteration']} (best validation score)"
+    print(f"tuning wall time {result['tune_wall_s']:.1f} s; {kept}")
+    if result["note"] is not None:
+        print(result["note"])
     return 0
 
 

@@ -18,7 +18,9 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import time
+import warnings
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
@@ -48,12 +50,13 @@ from wmr_jax._src.tuning.evaluation import (
     RUN_OPTIONS,
     Evaluation,
     evaluate,
+    hard_runs,
     held_out_poses,
 )
 from wmr_jax._src.tuning.loss import LossSpec, LossWeights, make_spec, robust_value_and_grad
 from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
 from wmr_jax._src.tuning.problems import FIXED, MAX_TUNED_KNOTS, Problem, schedule_problem
-from wmr_jax._src.tuning.search import SearchResult, random_search
+from wmr_jax._src.tuning.search import FAILURE_FACTOR, SearchResult, random_search
 
 __all__ = [
     "TrainState",
@@ -118,6 +121,11 @@ class TuneConfig:
             parameters) instead of the seven fixed gains.
         knots: knots per table of the schedule (``3 knots + 5`` parameters;
             schedules only).
+        validate_every: iterations between hard-law scores of the iterate
+            on the validation poses; the start and the last iterate are
+            always scored, and the best scored iterate is the result.
+        validation_poses: poses of that score, drawn from ``seed`` apart
+            from the training batches and the held-out poses.
     """
 
     velocity: str = "ideal"
@@ -140,6 +148,8 @@ class TuneConfig:
     wheel_limit: str = "clip"
     schedule: bool = False
     knots: int = KNOTS
+    validate_every: int = 25
+    validation_poses: int = 128
 
     @classmethod
     def for_problem(cls, problem: str = "fixed", **changes: Any) -> TuneConfig:
@@ -240,6 +250,8 @@ _INT_FIELDS = (
     ("eval_poses", 1, MAX_SAMPLES),
     ("eval_seed", 0, 2**32 - 1),
     ("knots", 2, MAX_TUNED_KNOTS),
+    ("validate_every", 1, None),
+    ("validation_poses", 1, MAX_SAMPLES),
 )
 _POSITIVE_FIELDS = ("learning_rate", "grad_clip", "temperature_start", "temperature_end")
 
@@ -258,6 +270,9 @@ class TrainState(NamedTuple):
         run: the ``run_identity`` of the settings and robot it belongs to, as
             JSON text; ``train`` refuses a state of another run. Empty: not
             recorded (a state built by hand), then not checked.
+        validated: ``(iteration, score s)`` of each hard-law score on the
+            validation poses so far (iteration 0: the start), in order.
+        start: the start's parameters as a flat row (``Problem.columns``).
     """
 
     iteration: int
@@ -268,6 +283,8 @@ class TrainState(NamedTuple):
     gains: tuple[tuple[float, ...], ...]
     elapsed_s: float
     run: str = ""
+    validated: tuple[tuple[int, float], ...] = ()
+    start: tuple[float, ...] = ()
 
 
 class TuneResult(NamedTuple):
@@ -280,9 +297,17 @@ class TuneResult(NamedTuple):
             ``"paper_feasible"`` (``paper_feasible_gains(robot)``), ``"tuned"``
             and, if run, ``"random_search"``.
         history: per-iteration ``loss`` (s), ``temperature`` and ``gains``
-            ``(iters, columns)`` (``Problem.columns``), as NumPy arrays.
+            ``(iters, columns)`` (``Problem.columns``), and the validation
+            scores: ``validated_at`` (iterations, 0 the start) and
+            ``validation`` (s), as NumPy arrays.
         tune_wall_s: wall time of the gradient iterations (all sessions), s.
         search: the random search's result, or ``None``.
+        problem: ``"fixed"`` or ``"schedule"``.
+        best_iteration: the iterate returned (0: the start), the one of the
+            lowest validation score, the later of equal ones.
+        note: one line when the tuned parameters are no better than the
+            baseline on the held-out poses (``no_better_than_baseline``),
+            else ``None``.
     """
 
     gains: Gains
@@ -291,6 +316,8 @@ class TuneResult(NamedTuple):
     tune_wall_s: float
     search: SearchResult | None
     problem: str = "fixed"
+    best_iteration: int = 0
+    note: str | None = None
 
 
 # ---------------------------------------------------------------- optimiser
@@ -379,9 +406,11 @@ def init_state(config: TuneConfig | None = None, robot: Robot | None = None) -> 
         ValueError: for bad settings, naming the field.
     """
     config, robot = _checked(config, robot)
-    z0 = jnp.asarray(config.problem.start_logits(robot), float_dtype())
+    problem = config.problem
+    z0 = jnp.asarray(problem.start_logits(robot), float_dtype())
     opt_state = _optimizer(config.hyper()).init(z0)
-    return TrainState(0, z0, opt_state, (), (), (), 0.0, _run_text(config, robot))
+    start = problem.row(problem.from_logits(z0, robot))
+    return TrainState(0, z0, opt_state, (), (), (), 0.0, _run_text(config, robot), (), start)
 
 
 def run_identity(config: TuneConfig | None = None, robot: Robot | None = None) -> dict[str, Any]:
@@ -419,6 +448,8 @@ def state_arrays(state: TrainState) -> dict[str, np.ndarray]:
         "temperatures": np.asarray(state.temperatures, dtype=float),
         "gains": np.asarray(state.gains, dtype=float) if state.gains else np.zeros((0, 0)),
         "elapsed_s": np.asarray(state.elapsed_s, dtype=float),
+        "validated": np.asarray(state.validated, dtype=float).reshape(-1, 2),
+        "start": np.asarray(state.start, dtype=float),
         **{f"opt_{i}": np.asarray(leaf) for i, leaf in enumerate(leaves)},
     }
 
@@ -456,6 +487,10 @@ def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainStat
             else (),
             elapsed_s=float(arrays["elapsed_s"]),
             run=fresh.run,
+            validated=tuple(
+                (int(i), float(v)) for i, v in np.asarray(arrays["validated"], float).reshape(-1, 2)
+            ),
+            start=tuple(float(x) for x in np.asarray(arrays["start"], float).reshape(-1)),
         )
     except (KeyError, TypeError, ValueError, IndexError) as err:
         # IndexError: an array of no axes where rows were saved.
@@ -467,7 +502,9 @@ def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainStat
             f"{len(state.losses)}, {len(state.temperatures)} and {len(state.gains)} rows"
         )
     temperatures = np.asarray(state.temperatures, dtype=float)
-    values = [state.z, *restored, np.asarray(state.losses), gains, temperatures]
+    validated = np.asarray(state.validated, dtype=float).reshape(-1, 2)
+    values = [state.z, *restored, np.asarray(state.losses), gains, temperatures, validated]
+    values.append(np.asarray(state.start, dtype=float))
     if not all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in values):
         raise ValueError("the saved state holds non-finite values (NaN or inf)")
     if not (np.all(temperatures > 0) and np.isfinite(state.elapsed_s) and state.elapsed_s >= 0):
@@ -482,6 +519,14 @@ def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainStat
             f"the saved state is inconsistent: iteration {state.iteration} with optimiser "
             f"step counts {counts}"
         )
+    at = [i for i, _ in state.validated]
+    if at != sorted(set(at)) or any(not 0 <= i <= state.iteration for i in at):
+        raise ValueError(
+            f"the saved state is inconsistent: validation scores at iterations {at} "
+            f"after {state.iteration}"
+        )
+    if state.start != fresh.start:
+        raise ValueError("the saved state is inconsistent: its start is not this run's")
     # The fixed problem has 7 logits, a schedule of K knots 3K + 5.
     dim = fresh.z.shape[-1]
     problem = FIXED if dim == FIXED.dim else schedule_problem((dim - 5) // 3)
@@ -496,14 +541,65 @@ def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainStat
 # ---------------------------------------------------------------- the loop
 
 
+def validation_poses(config: TuneConfig) -> jax.Array:
+    """The poses the iterates are scored on: from ``config.seed``, apart from every other set.
+
+    Stream 4 of the seed: the training batches are stream 0, the random
+    search's candidates and poses 2 and 3; the held-out poses come from
+    ``eval_seed``.
+    """
+    key = jax.random.fold_in(jax.random.key(config.seed), 4)
+    return sample_poses(key, config.validation_poses)
+
+
+def validation_score(config: TuneConfig, robot: Robot, params: Any, refs: Any) -> float:
+    """Hard-law score of ``params`` on ``refs``: mean arrival, failures at twice the horizon, s."""
+    run = {name: getattr(config, name) for name in RUN_OPTIONS if name != "robot"}
+    with warnings.catch_warnings():
+        # An iterate is scored, not reported: its warnings (wheel saturation,
+        # sampling margins) are the tuner's business; its score says it.
+        warnings.simplefilter("ignore")
+        _, times, steps = hard_runs(
+            refs, params, robot=robot, **run, controller=config.problem.controller
+        )
+    times = np.asarray(times, dtype=float)
+    return float(np.mean(np.minimum(times, FAILURE_FACTOR * steps * config.dt)))
+
+
+def best_iteration(validated: Any) -> int:
+    """The iteration of the lowest score in ``(iteration, score)`` pairs; the later of equal ones.
+
+    The later wins a tie: the last iterate, tuned down to the coldest
+    temperature, stays the result unless an earlier one scores lower.
+    """
+    best, best_score = 0, math.inf
+    for iteration, score in validated:
+        if score <= best_score:
+            best, best_score = int(iteration), float(score)
+    return best
+
+
+def _scored(config, robot, state, refs) -> TrainState:
+    """``state`` with its current iterate's validation score appended."""
+    problem = config.problem
+    row = state.gains[-1] if state.iteration else state.start
+    score = validation_score(config, robot, problem.from_row(row), refs)
+    return state._replace(validated=state.validated + ((state.iteration, score),))
+
+
 def _iterate(config, robot, state, progress_fn) -> TrainState:
-    """Run the iterations from ``state.iteration`` to ``config.iters``."""
+    """Run the iterations from ``state.iteration`` to ``config.iters``, scoring every few."""
     hyper, dtype = config.hyper(), float_dtype()
     problem = config.problem
     dt = jnp.asarray(config.dt, dtype)
     # The loss runs the loop the evaluation judges: the robot's speed limiter included.
     spec = config.spec().for_robot(robot, dt)
     init = jnp.zeros((3,), dtype)
+    refs_val = validation_poses(config)
+    if state.iteration == 0 and not state.validated:
+        began = time.perf_counter()
+        state = _scored(config, robot, state, refs_val)
+        state = state._replace(elapsed_s=state.elapsed_s + time.perf_counter() - began)
     for iteration in range(state.iteration, config.iters):
         began = time.perf_counter()
         temperature = _temperature(config, iteration)
@@ -522,16 +618,17 @@ def _iterate(config, robot, state, progress_fn) -> TrainState:
         )
         loss = float(loss)
         row = problem.row(problem.from_logits(z, robot))
-        state = TrainState(
-            iteration + 1,
-            z,
-            opt_state,
-            state.losses + (loss,),
-            state.temperatures + (temperature,),
-            state.gains + (row,),
-            state.elapsed_s + time.perf_counter() - began,
-            state.run,
+        state = state._replace(
+            iteration=iteration + 1,
+            z=z,
+            opt_state=opt_state,
+            losses=state.losses + (loss,),
+            temperatures=state.temperatures + (temperature,),
+            gains=state.gains + (row,),
         )
+        if state.iteration % config.validate_every == 0 or state.iteration == config.iters:
+            state = _scored(config, robot, state, refs_val)
+        state = state._replace(elapsed_s=state.elapsed_s + time.perf_counter() - began)
         if progress_fn is not None:
             progress_fn(state)
     return state
@@ -587,6 +684,10 @@ def _own_state(state: Any, config: TuneConfig, robot: Robot) -> TrainState:
             f"state holds {np.shape(state.z)} logits; allowed: ({dim},), those of the "
             f"{config.problem.name!r} problem of config"
         )
+    if not state.start:  # built by hand: the start is this run's
+        problem = config.problem
+        start = problem.row(problem.from_logits(problem.start_logits(robot), robot))
+        state = state._replace(start=start)
     now = _run_text(config, robot)
     if state.run and state.run != now:
         raise ValueError(
@@ -645,13 +746,38 @@ def train(
     if not state.gains:
         raise ValueError("state holds no iteration; allowed: a state after at least one")
     problem = config.problem
-    tuned = problem.from_row(state.gains[-1])
+    if not state.validated or state.validated[-1][0] != state.iteration:
+        # A state handed in after its last iteration, not scored there yet.
+        state = _scored(config, robot, state, validation_poses(config))
+    best = best_iteration(state.validated)
+    tuned = problem.from_row(state.gains[best - 1] if best else state.start)
     history = {
         "loss": np.asarray(state.losses),
         "temperature": np.asarray(state.temperatures),
         "gains": np.asarray(state.gains).reshape(len(state.gains), -1),
+        "validated_at": np.asarray([i for i, _ in state.validated], dtype=int),
+        "validation": np.asarray([v for _, v in state.validated], dtype=float),
     }
     evaluation, search = _compare(
         config, robot, tuned, state.elapsed_s, search_progress, eval_progress
     )
-    return TuneResult(tuned, evaluation, history, state.elapsed_s, search, problem.name)
+    note = baseline_note(evaluation, "paper_feasible", "tuned")
+    return TuneResult(tuned, evaluation, history, state.elapsed_s, search, problem.name, best, note)
+
+
+def baseline_note(evaluation: dict[str, Any], baseline: str, tuned: str) -> str | None:
+    """One line when the ``tuned`` row is no better than the ``baseline`` row, else ``None``.
+
+    No better: it arrives less often, or as often and no sooner on average
+    (hard law, held-out poses).
+    """
+    ours, theirs = evaluation[tuned], evaluation[baseline]
+    if ours.success_rate > theirs.success_rate or (
+        ours.success_rate == theirs.success_rate and ours.mean_arrival < theirs.mean_arrival
+    ):
+        return None
+    return (
+        f"warning: the tuned parameters are no better than the baseline ({baseline}): "
+        f"{ours.mean_arrival:.3f} s at {ours.success_rate:.0%} success against "
+        f"{theirs.mean_arrival:.3f} s at {theirs.success_rate:.0%} on the held-out poses"
+    )
