@@ -30,11 +30,14 @@ def _train(config, **kwargs):
         ([(0, 5.0), (2, 3.0), (4, 4.0), (6, 4.5)], 2),
         ([(0, 5.0), (2, 3.0), (4, 3.0), (6, 4.0)], 4),  # a tie goes to the later iterate
         ([(0, 5.0), (2, 3.0), (6, 3.0)], 6),  # so the last one stays where it is as good
+        ([(0, 5.0), (2, 3.0), (6, 3.03)], 6),  # or within 1 %: the validation set is a sample
+        ([(0, 5.0), (2, 3.0), (6, 3.031)], 2),  # beyond 1 %, the earlier one
         ([(0, 1.0), (2, 3.0), (6, 3.0)], 0),  # the start, if nothing beats it
     ],
 )
-def test_the_best_iterate_is_the_lowest_score_the_later_of_equal_ones(validated, best):
+def test_the_best_iterate_is_the_last_unless_an_earlier_one_is_clearly_better(validated, best):
     assert training.best_iteration(validated) == best
+    assert training.BEST_MARGIN == 0.01
 
 
 def test_train_scores_the_start_every_few_iterations_and_the_last(monkeypatch):
