@@ -63,7 +63,7 @@ __all__ = [
     "TuneResult",
     "init_state",
     "restore_state",
-    "run_difference",
+    "differences",
     "run_identity",
     "state_arrays",
     "train",
@@ -228,15 +228,9 @@ class TuneConfig:
         )
 
     def as_dict(self) -> dict[str, Any]:
-        """Return the fields as JSON-ready values.
-
-        ``knots`` is left out at its default, so that checkpoints and
-        comparisons saved before schedules had a size still resume.
-        """
+        """Return the fields as JSON-ready values."""
         out = dataclasses.asdict(self)
         out["weights"] = dataclasses.asdict(self.weights)
-        if self.knots == KNOTS:
-            del out["knots"]
         return out
 
 
@@ -374,25 +368,13 @@ def _checked(config: TuneConfig | None, robot: Robot | None) -> tuple[TuneConfig
     return checked_config(config), as_float_tree(validate_one_robot(robot, "tuning"))
 
 
-# Robot fields whose 0 means "none": left out of a run's identity at 0, so that
-# checkpoints saved before the acceleration limits existed still resume.
-_ABSENT_AT_ZERO = ("accel_max", "angular_accel_max")
-
-
 def _run_text(config: TuneConfig, robot: Robot) -> str:
     """``run_identity`` of checked settings as canonical JSON text (``TrainState.run``).
 
-    The robot's acceleration limits appear only where above 0 (a limit of 0
-    is none): a robot without them has the identity it had before they
-    existed, and one with them is another run. ``code`` is the code that
-    computes (``provenance.code_version``): another one is another run.
+    Every robot field is part of it, and ``code``, the code that computes
+    (``provenance.code_version``): another one is another run.
     """
-    values = {f.name: float(getattr(robot, f.name)) for f in dataclasses.fields(Robot)}
-    robot_values = {
-        name: value
-        for name, value in values.items()
-        if not (name in _ABSENT_AT_ZERO and value == 0.0)
-    }
+    robot_values = {f.name: float(getattr(robot, f.name)) for f in dataclasses.fields(Robot)}
     identity = {"config": config.as_dict(), "robot": robot_values, "code": code_version()}
     return json.dumps(identity, sort_keys=True)
 
@@ -418,24 +400,21 @@ def run_identity(config: TuneConfig | None = None, robot: Robot | None = None) -
     return json.loads(_run_text(*_checked(config, robot)))
 
 
-def run_difference(saved: Any, now: dict[str, Any]) -> str:
-    """Name the settings in which the run ``saved`` differs from ``now`` (``run_identity``s)."""
-    saved_config = (saved.get("config") if isinstance(saved, dict) else None) or {}
-    saved_config = saved_config if isinstance(saved_config, dict) else {}
-    # as_dict leaves the default knots out: a missing knots is the default.
-    there, here = ({"knots": KNOTS, **c} for c in (saved_config, now["config"]))
+def differences(saved: dict[str, Any], now: dict[str, Any]) -> str:
+    """Name what differs between two ``run_identity``s: settings, the robot, the code."""
+    there, here = saved.get("config", {}), now["config"]
+    if not isinstance(there, dict):
+        there = {}
     diffs = [
         f"{key} = {there.get(key)!r} there, {here.get(key)!r} now"
         for key in dict.fromkeys([*here, *there])
         if there.get(key) != here.get(key)
     ]
-    saved = saved if isinstance(saved, dict) else {}
-    if "robot" in now and saved.get("robot") != now["robot"]:
+    if saved.get("robot") != now.get("robot"):
         diffs.append("the robot differs")
-    if "code" in now and saved.get("code") != now["code"]:
-        was = saved.get("code") or "code from before code versions were recorded"
-        diffs.append(f"computed by wmr_jax {was}, this is {now['code']}")
-    return "; ".join(diffs) or "the robot differs"
+    if saved.get("code") != now.get("code"):
+        diffs.append(f"computed by wmr_jax {saved.get('code')}, this is {now.get('code')}")
+    return "; ".join(diffs) or "the format differs"
 
 
 def state_arrays(state: TrainState) -> dict[str, np.ndarray]:
@@ -700,7 +679,7 @@ def _own_state(state: Any, config: TuneConfig, robot: Robot) -> TrainState:
     now = _run_text(config, robot)
     if state.run and state.run != now:
         raise ValueError(
-            f"state is of another run ({run_difference(json.loads(state.run), json.loads(now))}); "
+            f"state is of another run ({differences(json.loads(state.run), json.loads(now))}); "
             "allowed: a state of this config and robot"
         )
     return state
