@@ -64,7 +64,7 @@ from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
 from wmr_jax._src.tuning.loss import LossWeights, arrival_terms
 from wmr_jax._src.tuning.parametrisation import checked_point, paper_feasible_gains
 from wmr_jax._src.tuning.problems import FIXED, Problem, schedule_problem
-from wmr_jax._src.tuning.training import best_iteration
+from wmr_jax._src.tuning.training import anneal, best_iteration, optimizer
 
 __all__ = [
     "JointProblem",
@@ -375,8 +375,7 @@ _step_jit = loops.jit_top_level(_step, static_argnames=("steps", "hyper", "joint
 
 
 def _optimizer(learning_rate: float, iters: int) -> optax.GradientTransformation:
-    schedule = optax.cosine_decay_schedule(learning_rate, iters, alpha=0.1)
-    return optax.chain(optax.clip_by_global_norm(1.0), optax.adam(schedule))
+    return optimizer(learning_rate, iters)
 
 
 def robust_score(
@@ -535,9 +534,7 @@ def tune_robust(
 
     validated, iterates = [scored(0, z)], {0: z}
     for i in range(config.iters):
-        frac = i / max(config.iters - 1, 1)
-        ratio = config.temperature_end / config.temperature_start
-        temp = config.temperature_start * ratio**frac
+        temp = anneal(config.temperature_start, config.temperature_end, i, config.iters)
         k = jax.random.fold_in(stream, i)
         k_refs, k_ni, k_dist = jax.random.split(k, 3)
         refs = sample_poses(k_refs, config.poses)

@@ -317,11 +317,31 @@ class TuneResult(NamedTuple):
 # ---------------------------------------------------------------- optimiser
 
 
+def optimizer(
+    learning_rate: float, iters: int, grad_clip: float = 1.0
+) -> optax.GradientTransformation:
+    """The tuners' optimiser: ``clip_by_global_norm`` then Adam, its step cosine-decayed.
+
+    Cosine decay to a tenth: large steps while the temperature is high and
+    the landscape smooth, small ones once it is close to the hard law. The
+    fixed-gain and schedule tuner (``train``) and the robust one
+    (``tune_robust``) share it.
+    """
+    schedule = optax.cosine_decay_schedule(learning_rate, iters, alpha=0.1)
+    return optax.chain(optax.clip_by_global_norm(grad_clip), optax.adam(schedule))
+
+
+def anneal(start: float, end: float, iteration: int, iters: int) -> float:
+    """The smooth law's temperature, geometric: ``start`` at 0, ``end`` at ``iters − 1``.
+
+    The one schedule of both tuners.
+    """
+    frac = iteration / max(iters - 1, 1)
+    return start * (end / start) ** frac
+
+
 def _optimizer(hyper: _OptimHyper) -> optax.GradientTransformation:
-    # Cosine decay to a tenth: large steps while the temperature is high and
-    # the landscape smooth, small ones once it is close to the hard law.
-    schedule = optax.cosine_decay_schedule(hyper.learning_rate, hyper.iters, alpha=0.1)
-    return optax.chain(optax.clip_by_global_norm(hyper.grad_clip), optax.adam(schedule))
+    return optimizer(hyper.learning_rate, hyper.iters, hyper.grad_clip)
 
 
 def _train_step(z, opt_state, refs, temperature, init, robot, dt, *, spec, hyper, problem):
@@ -339,9 +359,8 @@ _train_step_jit = loops.jit_top_level(_train_step, static_argnames=("spec", "hyp
 
 
 def _temperature(config: TuneConfig, iteration: int) -> float:
-    """Geometric annealing from ``temperature_start`` to ``temperature_end``."""
-    frac = iteration / max(config.iters - 1, 1)
-    return config.temperature_start * (config.temperature_end / config.temperature_start) ** frac
+    """Geometric annealing from ``temperature_start`` to ``temperature_end`` (``anneal``)."""
+    return anneal(config.temperature_start, config.temperature_end, iteration, config.iters)
 
 
 def training_poses(seed: int, iteration: int, n: int) -> jax.Array:
