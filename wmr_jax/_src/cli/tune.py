@@ -169,11 +169,9 @@ def _check_modes(args: Any) -> None:
 
 
 def _gradient_cost(out: Path) -> int:
-    from wmr_jax._src import io, tuning
+    from wmr_jax._src.tuning.cost import write_gradient_costs
 
-    costs = [tuning.gradient_cost(remat=remat) for remat in (True, False)]
-    io.atomic_write_json(out / "gradient_cost.json", [c._asdict() for c in costs])
-    for c in costs:
+    for c in write_gradient_costs(out):
         print(
             f"{c.poses} poses x {c.steps} steps, remat={c.remat}: forward {c.forward_s:.3f} s, "
             f"gradient {c.gradient_s:.3f} s ({c.gradient_s / c.forward_s:.1f}x); peak memory "
