@@ -217,7 +217,7 @@ def test_an_interrupted_compare_keeps_its_finished_seeds_and_resumes(tmp_path, m
 
     calls = []
 
-    def fake(*, seeds, problems, configs, progress):
+    def fake(*, seeds, problems, configs, progress, robot=None):
         calls.append((problems[0], seeds[0]))
         if len(calls) == 5:
             raise KeyboardInterrupt
@@ -254,7 +254,7 @@ def test_compare_with_schedule_compares_that_schedule_alone(tmp_path, monkeypatc
 
     seen = []
 
-    def fake(*, seeds, problems, configs, progress):
+    def fake(*, seeds, problems, configs, progress, robot=None):
         seen.append((problems, configs[problems[0]].knots, seeds[0]))
         row = {"mean_arrival": 0.5, "success_rate": 1.0, "wall_s": 1.0, "parameters": 14}
         bounds = {"turn_drive_turn_s": 0.4, "lower_bound_s": 0.35}

@@ -128,23 +128,21 @@ def test_the_waypoint_loops_run_the_robots_speed_limiter():
     assert loops.for_robot(loops.Options(), w.Robot(), 0.033).accel_limit is False
 
 
-def test_a_checkpoints_identity_leaves_out_absent_acceleration_limits():
+def test_a_checkpoints_identity_holds_every_robot_field():
     config = training.TuneConfig()
     now = tuning.run_identity(config, w.Robot())
-    # A robot without limits is recorded as before the limits existed: every other
-    # field (beside the settings and the code that computes, provenance.code_version).
-    fields = [f for f in w.Robot.__dataclass_fields__ if "accel" not in f]
-    before = {
+    # Every robot field, the settings and the code that computes (provenance.code_version).
+    fields = list(w.Robot.__dataclass_fields__)
+    expected = {
         "config": config.as_dict(),
         "robot": {f: float(getattr(w.Robot(), f)) for f in fields},
         "code": code_version(),
     }
-    assert now == json.loads(json.dumps(before))
-    assert training._run_text(config, w.Robot()) == json.dumps(before, sort_keys=True)
+    assert now == json.loads(json.dumps(expected))
+    assert training._run_text(config, w.Robot()) == json.dumps(expected, sort_keys=True)
     # A robot with a limit is another run; the limit it gives is in its identity.
     limited = tuning.run_identity(config, LIMITED)
     assert limited != now and limited["robot"]["angular_accel_max"] == SLOW_TURN
-    assert "accel_max" not in limited["robot"]
     state = training.init_state(config, w.Robot())
     with pytest.raises(ValueError, match="state is of another run"):
         training._own_state(state, config, LIMITED)
@@ -153,7 +151,7 @@ def test_a_checkpoints_identity_leaves_out_absent_acceleration_limits():
 
 def test_tune_runs_a_slow_robot_for_the_horizon_its_wheels_need(tmp_path, capsys, monkeypatch):
     """Without --horizon, tune stretches the 6 s as the studies do, and says so."""
-    from wmr_jax._src.cli import tune as tune_cli
+    from wmr_jax._src.tuning import run as tune_run
     from wmr_jax.cli import main
 
     seen = {}
@@ -162,7 +160,7 @@ def test_tune_runs_a_slow_robot_for_the_horizon_its_wheels_need(tmp_path, capsys
         seen["horizon"] = config.horizon
         raise KeyboardInterrupt  # stop before any work: the config is what is checked
 
-    monkeypatch.setattr(tune_cli, "tune", fake_tune)
+    monkeypatch.setattr(tune_run, "tune", fake_tune)
     robot = tmp_path / "slow.json"
     robot.write_text('{"half_track": 8.0, "v_max": 22.0}')
     argv = ["tune", "--out", str(tmp_path / "t"), "--robot", str(robot), "--iters", "1"]

@@ -17,11 +17,10 @@ import pytest
 import wmr_jax as w
 from wmr_jax import tuning
 from wmr_jax._src import io
-from wmr_jax._src import tuning as _src_tuning
 from wmr_jax._src.cli import flags
-from wmr_jax._src.cli import tune as tune_cli
 from wmr_jax._src.cli.main import build_parser
 from wmr_jax._src.report import tuning as _report_tuning
+from wmr_jax._src.tuning import run as tune_run
 from wmr_jax._src.tuning.evaluation import Evaluation, report_ratios
 from wmr_jax._src.tuning.training import TuneResult
 from wmr_jax.cli import main
@@ -45,14 +44,16 @@ def _stand_in_train(monkeypatch, evaluation, gains=TUNED):
             "loss": np.array([0.1, 0.08]),
             "temperature": np.array([0.1, 0.01]),
             "gains": np.array([row, row]),
+            "validated_at": np.array([0, 2]),
+            "validation": np.array([1.0, 0.9]),
         }
-        return TuneResult(gains, evaluation, history, 1.0, None, "fixed")
+        return TuneResult(gains, evaluation, history, 1.0, None, "fixed", 2)
 
-    monkeypatch.setattr(_src_tuning, "train", fake)  # the one wmr-jax tune calls
+    monkeypatch.setattr(tune_run.training, "train", fake)  # the one wmr-jax tune calls
     # The curve is drawn (test_the_schedule_curve_...), not rendered here: seconds of
     # matplotlib; and the held-out yardsticks are those of two poses, without JAX.
     monkeypatch.setattr(_report_tuning, "tuning_curve", lambda path, *a, **k: path)
-    monkeypatch.setattr(tune_cli, "held_out_bounds", lambda config, robot: BOUNDS)
+    monkeypatch.setattr(tune_run, "held_out_bounds", lambda config, robot: BOUNDS)
     return calls
 
 
@@ -335,7 +336,7 @@ def test_resume_keeps_whole_rows_of_runs_that_never_arrived(tmp_path, monkeypatc
     def stop(**kwargs):
         raise KeyboardInterrupt
 
-    def fake(*, seeds, problems, configs, progress):
+    def fake(*, seeds, problems, configs, progress, robot=None):
         return _whole(problems[0], seeds[0])
 
     monkeypatch.setattr(compare_module, "compare", stop)
@@ -366,7 +367,7 @@ def test_resume_keeps_no_row_whose_values_changed_after_they_were_written(
 
     calls, interrupt = [], [True]
 
-    def fake(*, seeds, problems, configs, progress):
+    def fake(*, seeds, problems, configs, progress, robot=None):
         calls.append((problems[0], seeds[0]))
         if interrupt[0] and len(calls) == 2:
             raise KeyboardInterrupt
@@ -402,17 +403,17 @@ def _checkpoint_args(tmp_path):
     ("meta", "message"),
     [
         ([2, {}], r"has metadata of the wrong shape \(\[2, \{\}\]"),
-        ({"format": 1, "identity": {}}, r"has an unknown format \(format = 1; allowed: 2\)"),
-        ({"format": 2, "identity": "run"}, r"metadata of the wrong shape \(identity = 'run'"),
-        ({"format": 2, "identity": {"config": [], "robot": {}}}, r"identity = \{'config': \[\]"),
-        ({"format": 2, "identity": {"config": {}}}, r"with a 'config' and a 'robot' object"),
+        ({"format": 2, "identity": {}}, r"has an unknown format \(format = 2; allowed: 3\)"),
+        ({"format": 3, "identity": "run"}, r"metadata of the wrong shape \(identity = 'run'"),
+        ({"format": 3, "identity": {"config": [], "robot": {}}}, r"identity = \{'config': \[\]"),
+        ({"format": 3, "identity": {"config": {}}}, r"with a 'config' and a 'robot' object"),
     ],
 )
 def test_resume_refuses_a_checkpoint_whose_metadata_has_the_wrong_shape(
     tmp_path, monkeypatch, capsys, meta, message
 ):
     calls = _stand_in_train(monkeypatch, {"paper_feasible": ARRIVED, "tuned": ARRIVED})
-    io.save_arrays(tmp_path / tune_cli.CHECKPOINT_NAME, {"iteration": np.asarray(1)}, meta)
+    io.save_arrays(tmp_path / tune_run.CHECKPOINT_NAME, {"iteration": np.asarray(1)}, meta)
     assert main(_checkpoint_args(tmp_path)) == 2
     err = capsys.readouterr().err
     assert not calls and err.count("\n") == 1, err
@@ -432,8 +433,8 @@ def test_a_checkpoint_of_rows_without_axes_is_refused_in_one_line():
 
 
 def test_editing_only_the_metadata_of_a_saved_file_is_detected(tmp_path, monkeypatch, capsys):
-    path = tmp_path / tune_cli.CHECKPOINT_NAME
-    io.save_arrays(path, {"x": np.arange(3.0)}, {"format": 2, "identity": {"seed": 0}})
+    path = tmp_path / tune_run.CHECKPOINT_NAME
+    io.save_arrays(path, {"x": np.arange(3.0)}, {"format": 3, "identity": {"seed": 0}})
     with np.load(path) as data:
         stored = {name: data[name] for name in data.files}
     # The same arrays and checksum; the metadata alone edited.
@@ -463,7 +464,7 @@ def test_a_new_comparison_leaves_no_rows_of_an_earlier_one_to_resume(tmp_path, m
     def stop(**kwargs):
         raise KeyboardInterrupt
 
-    def fake(*, seeds, problems, configs, progress):
+    def fake(*, seeds, problems, configs, progress, robot=None):
         return _whole(problems[0], seeds[0], mean_arrival=float(configs[problems[0]].horizon))
 
     monkeypatch.setattr(compare_module, "compare", fake)

@@ -20,7 +20,34 @@ def small_config(**changes):
     return tuning.RobustConfig(**{**base, **changes})
 
 
-def test_robust_tuning_moves_feasible_gains_and_judges_them_under_every_condition(tmp_path):
+def _scores(monkeypatch, values):
+    """Stand in for the validation score: ``values`` in turn (start, every few, the last)."""
+    from wmr_jax._src.tuning import robust
+
+    given = iter(values)
+    monkeypatch.setattr(robust, "robust_score", lambda *args, **kwargs: next(given))
+
+
+def test_robust_tuning_keeps_the_iterate_of_the_best_validation_score(monkeypatch):
+    _scores(monkeypatch, [1.0, 2.0, 0.5, 3.0])  # iterations 0, 1, 2, 3: 2 is the best
+    result = tuning.tune_robust(small_config(validate_every=1))
+    assert result["best_iteration"] == 2
+    assert result["history"]["validated_at"].tolist() == [0, 1, 2, 3]
+    assert result["history"]["validation"].tolist() == [1.0, 2.0, 0.5, 3.0]
+    _scores(monkeypatch, [1.0, 2.0, 3.0, 4.0])  # nothing beats the start
+    start = tuning.tune_robust(small_config(validate_every=1))
+    assert start["best_iteration"] == 0
+    first = tuning.robust_gains(tuning.FIXED.start_logits(w.Robot()), w.Robot())
+    expected = {f: float(getattr(first, f)) for f in tuning.GAIN_FIELDS}
+    assert tuning.gains_as_dict(start["gains"]) == expected
+    note = start["note"]
+    assert note is None or ("\n" not in note and note.startswith("warning: the tuned loop"))
+
+
+def test_robust_tuning_moves_feasible_gains_and_judges_them_under_every_condition(
+    tmp_path, monkeypatch
+):
+    _scores(monkeypatch, range(100, 0, -1))  # each score lower: the last iterate is the best
     seen, tuned = [], []
     result = tuning.tune_robust(
         small_config(),
@@ -88,8 +115,10 @@ def test_tune_robust_judges_under_the_noise_of_the_robustness_command(monkeypatc
     tuning.tune_robust(small_config())
     args = build_parser().parse_args(["robustness", "--out", "unused"])
     command_key = jax.random.key(int(args.seed))
-    assert len(keys) == 1
-    np.testing.assert_array_equal(jax.random.key_data(keys[0]), jax.random.key_data(command_key))
+    # The validation scores at iterations 0 and 3 first, with a key of their own; then the table.
+    assert len(keys) == 3
+    np.testing.assert_array_equal(jax.random.key_data(keys[-1]), jax.random.key_data(command_key))
+    assert not np.array_equal(jax.random.key_data(keys[0]), jax.random.key_data(command_key))
 
 
 def test_joint_tuning_moves_the_schedule_and_the_filter_and_saves_them_whole(tmp_path):
@@ -193,7 +222,11 @@ def _fake_result(config):
                 {"condition": condition, "gains": gains, "feedback": "ekf", "success": 1.0,
                  "mean arrival s": 0.5 + config.seed, "median arrival s": 0.5}
             )  # fmt: skip
-    return {"tune_wall_s": 1.0, "searches": {"random search": (None, 8)}, "rows": rows}
+    history = {"validated_at": np.array([0, config.iters]), "validation": np.array([2.0, 1.0])}
+    return {
+        "tune_wall_s": 1.0, "searches": {"random search": (None, 8)}, "rows": rows,
+        "best_iteration": config.iters, "note": None, "history": history,
+    }  # fmt: skip
 
 
 def test_robust_compare_without_evosax_says_so_and_keeps_each_seed(tmp_path, capsys, monkeypatch):

@@ -237,14 +237,11 @@ def test_tuning_a_schedule_of_four_knots(tmp_path):
     # Its size is part of the run: a checkpoint of 4 knots does not resume 5.
     with pytest.raises(ValueError, match="knots = 4 there, 5 now"):
         tuning.tune(tmp_path, config.replace(knots=5), resume=True)
-    # Knots are the schedule's; the default size is left out of the saved settings,
-    # so runs saved before schedules had a size still resume.
+    # Knots are the schedule's; every size, the default's too, is in the saved settings.
     with pytest.raises(ValueError, match="knots = 4 is not allowed with schedule = False"):
         tuning.TuneConfig(knots=4).validate()
-    assert "knots" not in tuning.TuneConfig.for_problem("schedule").as_dict()
+    assert tuning.TuneConfig.for_problem("schedule").as_dict()["knots"] == 10
     assert config.as_dict()["knots"] == 4
-    # The default size, left out of the saved settings, still names the difference
-    # (it said "the robot differs").
     with pytest.raises(ValueError, match=r"another run \(knots = 4 there, 10 now\)"):
         tuning.tune(tmp_path, config.replace(knots=10), resume=True)
 

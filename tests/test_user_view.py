@@ -10,7 +10,7 @@ import pytest
 
 import wmr_jax as w
 from wmr_jax._src import conditions
-from wmr_jax._src.cli import progress, simulate
+from wmr_jax._src.report import progress, simulate
 from wmr_jax._src.cli.main import main
 from wmr_jax._src.tuning.saved import tuned_json
 

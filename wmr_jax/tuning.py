@@ -16,8 +16,6 @@ iterations, step and annealing (``knots=`` sizes its tables:
 the gradient against CMA-ES and random search at equal wall time.
 """
 
-from wmr_jax._src.cli.tune import CHECKPOINT_NAME as CHECKPOINT_NAME
-from wmr_jax._src.cli.tune import tune as tune
 from wmr_jax._src.controllers.schedule import SCHEDULE as SCHEDULE
 from wmr_jax._src.controllers.schedule import ScheduleParams as ScheduleParams
 from wmr_jax._src.controllers.schedule import knot_radii as knot_radii
@@ -54,6 +52,8 @@ from wmr_jax._src.tuning.robust import RobustConfig as RobustConfig
 from wmr_jax._src.tuning.robust import robust_gains as robust_gains
 from wmr_jax._src.tuning.robust import robust_score as robust_score
 from wmr_jax._src.tuning.robust import tune_robust as tune_robust
+from wmr_jax._src.tuning.run import CHECKPOINT_NAME as CHECKPOINT_NAME
+from wmr_jax._src.tuning.run import tune as tune
 from wmr_jax._src.tuning.saved import load_tuned as load_tuned
 from wmr_jax._src.tuning.saved import tuned_json as tuned_json
 from wmr_jax._src.tuning.saved import tuning_of as tuning_of

@@ -611,7 +611,7 @@ def _progress(job: _Job, bar: bool, on_chunk: Callable[[int, int], None] | None)
     """Yield ``done(i)``, called as chunk ``i`` is done: it moves the bar, calls ``on_chunk``."""
     shown = None
     if bar:
-        from wmr_jax._src.cli.progress import bar as tqdm
+        from wmr_jax._src.report.progress import bar as tqdm
 
         name = job.options.controller.name
         shown = tqdm(total=job.chunks, unit="chunk", desc=f"{name} sweep, {job.n} poses")

@@ -17,17 +17,12 @@ its horizon (``robustness.study_horizon``).
 
 from __future__ import annotations
 
-import dataclasses
-import json
 from typing import Any
 
 from wmr_jax._src.cli import flags
 
 __all__ = ["run"]
 
-_COLUMNS = ["condition", "gains", "feedback", "success", "mean arrival s", "median arrival s"]
-_COMPARE_SEEDS = (0, 1, 2)
-_COMPARE_FORMAT = 1
 _NONE = ("none", "raw")
 
 
@@ -90,12 +85,6 @@ def config_from(args: Any) -> Any:
     return RobustConfig(**changes).validate()
 
 
-def _described(config: Any) -> str:
-    law = "7 fixed gains" if config.problem == "fixed" else f"gain schedule ({config.knots} knots)"
-    sensing = "raw feedback" if config.estimator is None else f"the {config.estimator}"
-    return f"{law} with {sensing}"
-
-
 def _robot(args: Any) -> tuple[Any, dict[str, Any]]:
     """The robot of ``--robot`` (the paper robot if not given), and the arguments that pass it on.
 
@@ -118,19 +107,17 @@ def run(args: Any) -> int:
     config = config_from(args)
     robot, on_robot = _robot(args)
     if getattr(args, "compare", False):
-        return _compare(out, config, on_robot, resume=bool(getattr(args, "resume", False)))
+        return _compare(out, config, robot, resume=bool(getattr(args, "resume", False)))
 
-    from wmr_jax._src import io
-    from wmr_jax._src.report.robustness import robustness_table
-    from wmr_jax._src.robots import describe_robot, robot_json
+    from wmr_jax._src.robots import describe_robot
     from wmr_jax._src.robustness import study_horizon
     from wmr_jax._src.tuning.robust import tune_robust
-    from wmr_jax._src.tuning.saved import tuned_json, write_tuned
+    from wmr_jax._src.tuning.robust_run import described, save_tuned, write_evaluation
 
     if getattr(args, "resume", False):
         print("tune --robust keeps no checkpoint: --resume runs it again from the start")
     print(
-        f"tuning the {_described(config)} through the disturbances on the robot "
+        f"tuning the {described(config)} through the disturbances on the robot "
         f"{describe_robot(robot)}, horizon {study_horizon(robot):g} s",
         flush=True,
     )
@@ -141,113 +128,32 @@ def run(args: Any) -> int:
 
     def keep(loop: Any, losses: list[float]) -> None:
         # Written before the evaluation: an interruption there loses no tuning.
-        # (Removing the files that judged the gains it replaces.)
-        write_tuned(out, tuned_json(loop, robot=robot, tuning="robust"))
-        io.atomic_write_json(out / "robust_loss.json", {"loss": losses})
+        save_tuned(out, loop, losses, robot)
         print(f"tuned_gains.json, robust_loss.json -> {out} (now judging them)", flush=True)
 
     result = tune_robust(config, progress_fn=progress, on_tuned=keep, **on_robot)
-    record = {
-        "config": dataclasses.asdict(config),
-        "robot": robot_json(robot),
-        "tune_wall_s": result["tune_wall_s"],
-        "law": "hard (temperature None)",
-        "rows": result["rows"],
-    }
-    io.atomic_write_json(out / "robust_evaluation.json", record)
-    table = robustness_table(result["rows"], _COLUMNS)
-    io.atomic_write_text(out / "robust_evaluation.md", table)
+    table = write_evaluation(out, config, robot, result)
     print(f"robust_evaluation.md/json -> {out}")
     print(table, end="")
-    print(f"tuning wall time {result['tune_wall_s']:.1f} s")
+    kept = f"kept iteration {result['best_iteration']} (best validation score)"
+    print(f"tuning wall time {result['tune_wall_s']:.1f} s; {kept}")
+    if result["note"] is not None:
+        print(result["note"])
     return 0
 
 
-def _kept_rows(path: Any, settings: dict[str, Any], resume: bool) -> list[dict[str, Any]]:
-    """The rows of an earlier ``--compare`` of the same settings (``--resume``), else none."""
-    from wmr_jax._src import io
-
-    if not resume or not path.exists():
-        return []
-    try:
-        saved = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as err:
-        raise ValueError(f"--resume: {str(path)!r} cannot be read: {err}") from None
-    if not isinstance(saved, dict) or saved.get("settings") != settings:
-        theirs = saved.get("settings") if isinstance(saved, dict) else None
-        theirs = theirs if isinstance(theirs, dict) else {}
-        keys = [*settings, *(k for k in theirs if k not in settings)]
-        differ = [k for k in keys if theirs.get(k) != settings.get(k)]
-        raise ValueError(
-            f"--resume: {str(path)!r} holds another comparison (other {', '.join(differ)}); "
-            "allowed: the same flags and code as the run that wrote it, or another --out"
-        )
-    try:  # values changed since they were written are not kept
-        saved = io.unsealed(saved, repr(str(path)))
-    except ValueError as err:
-        raise ValueError(f"--resume: {err}; allowed: remove it, or another --out") from None
-    rows = saved.get("rows")
-    good = isinstance(rows, list) and all(
-        isinstance(r, dict) and r.get("seed") in _COMPARE_SEEDS for r in rows
-    )
-    if not good:
-        raise ValueError(f"--resume: {str(path)!r} has malformed rows; allowed: another --out")
-    return rows
-
-
-def _compare(out: Any, config: Any, on_robot: dict[str, Any], *, resume: bool) -> int:
-    """Gradient, CMA-ES and random search at equal wall time, seeds 0–2; each seed kept.
-
-    ``on_robot``: ``{"robot": Robot}`` for another robot than the paper's,
-    which is then part of the settings, with the code version: rows of
-    other code (comparisons saved before it was recorded included) are not
-    resumed.
-    """
-    from wmr_jax._src import io
-    from wmr_jax._src.provenance import code_version
+def _compare(out: Any, config: Any, robot: Any, *, resume: bool) -> int:
+    """Gradient, CMA-ES and random search at equal wall time, seeds 0–2; each seed kept."""
     from wmr_jax._src.report.tuning import robust_comparison_table
-    from wmr_jax._src.robots import robot_json
-    from wmr_jax._src.tuning.robust import evosax_available, tune_robust
+    from wmr_jax._src.tuning.robust import evosax_available
+    from wmr_jax._src.tuning.robust_run import run_comparison
 
     if not evosax_available():
         print(
             "CMA-ES skipped: evosax is not installed (pip install 'wmr_jax[search]'); "
             "comparing the gradient with random search only"
         )
-    path = out / "robust_compare.json"
-    settings = {
-        "format": _COMPARE_FORMAT,
-        "config": dataclasses.asdict(config),
-        "code": code_version(),  # rows of another law are not this comparison's
-    }
-    if on_robot:
-        settings["robot"] = robot_json(on_robot["robot"])
-    settings = json.loads(json.dumps(settings))  # as it reads back from the file
-    rows = _kept_rows(path, settings, resume)
-    if not resume:  # a new comparison: nothing of an earlier one stays beside its rows
-        for stale in (path, out / "robust_compare.md"):
-            stale.unlink(missing_ok=True)
-    done = {row["seed"] for row in rows}
-    for seed in _COMPARE_SEEDS:
-        if seed in done:
-            print(f"seed {seed}: kept from {path}")
-            continue
-        print(f"seed {seed}: tuning the {_described(config)}, then the searches", flush=True)
-        result = tune_robust(dataclasses.replace(config, seed=seed, compare=True), **on_robot)
-        budget = result["tune_wall_s"]
-        counts = {"gradient": config.iters, **{m: n for m, (_, n) in result["searches"].items()}}
-        for row in result["rows"]:
-            if row["gains"] == "paper":
-                continue
-            method = "gradient" if row["gains"] == "robust-tuned" else row["gains"]
-            rows.append(
-                {**row, "method": method, "seed": seed, "budget_s": budget,
-                 "candidates": counts[method]}
-            )  # fmt: skip
-        # Sealed with a checksum: --resume keeps only what this wrote.
-        io.atomic_write_json(path, io.sealed({"settings": settings, "rows": rows}))
-    table = robust_comparison_table(rows)
-    io.atomic_write_text(out / "robust_compare.md", table)
-    print(table, end="")
-    print(f"-> {path}, {out / 'robust_compare.md'}")
+    rows = run_comparison(out, config, robot=robot, resume=resume, progress=print)
+    print(robust_comparison_table(rows), end="")
+    print(f"-> {out / 'robust_compare.json'}, {out / 'robust_compare.md'}")
     return 0

@@ -19,7 +19,9 @@ One concept per module:
 * ``cost``: ``gradient_cost``, the gradient's time and memory.
 * ``problems``: the fixed-gain and gain-schedule problems as values.
 * ``saved``: ``tuned_gains.json`` and ``load_tuned``.
-* ``compare``: CMA-ES (``evosax``) and the equal-wall-time comparison.
+* ``compare``: CMA-ES (``evosax``) and the equal-wall-time comparison,
+  resumable into a folder (``run_comparison``).
+* ``run``: ``tune``, a run with its checkpoints and result files.
 """
 
 from wmr_jax._src.tuning.cost import GradientCost as GradientCost
@@ -55,7 +57,6 @@ from wmr_jax._src.tuning.training import TuneConfig as TuneConfig
 from wmr_jax._src.tuning.training import TuneResult as TuneResult
 from wmr_jax._src.tuning.training import init_state as init_state
 from wmr_jax._src.tuning.training import restore_state as restore_state
-from wmr_jax._src.tuning.training import run_difference as run_difference
 from wmr_jax._src.tuning.training import run_identity as run_identity
 from wmr_jax._src.tuning.training import state_arrays as state_arrays
 from wmr_jax._src.tuning.training import train as train

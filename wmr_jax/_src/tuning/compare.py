@@ -11,9 +11,11 @@ law on the same held-out poses, with the time-optimal yardsticks of
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import jax
@@ -41,9 +43,9 @@ from wmr_jax._src.tuning.evaluation import (
 )
 from wmr_jax._src.tuning.problems import get_problem
 from wmr_jax._src.tuning.search import SearchResult, population_scores, random_search
-from wmr_jax._src.tuning.training import TuneConfig, train
+from wmr_jax._src.tuning.training import TuneConfig, differences, train
 
-__all__ = ["METHODS", "cma_es_search", "compare", "saved_rows"]
+__all__ = ["COMPARE_SEEDS", "METHODS", "cma_es_search", "compare", "run_comparison", "saved_rows"]
 
 # The methods compared, in the order of each (problem, seed)'s rows.
 METHODS = ("gradient", "cma-es", "random search")
@@ -342,3 +344,140 @@ def _json_type(value: Any) -> str:
     """The JSON name of a parsed value's type."""
     names = {dict: "object", list: "array", str: "string", bool: "boolean", type(None): "null"}
     return names.get(type(value), "number")
+
+
+# ---------------------------------------------------------------- a resumable comparison
+
+COMPARE_SEEDS = (0, 1, 2)
+COMPARE_FORMAT = 2
+
+
+def run_comparison(
+    out: Path,
+    configs: dict[str, TuneConfig],
+    *,
+    robot: Robot | None = None,
+    resume: bool = False,
+    progress: Callable[[str], Any] | None = print,
+) -> list[dict[str, Any]]:
+    """``compare`` for seeds 0–2 of each problem in ``configs``, into ``out/compare.{json,md}``.
+
+    Each (problem, seed) is written, sealed with a checksum, as soon as its
+    three methods are done, beside ``compare_settings.json`` (the settings,
+    the robot and the code): with ``resume`` an interrupted comparison of the
+    same settings keeps them and runs only the rest; one of other settings
+    is refused in one line.
+
+    Returns:
+        All rows, kept and new.
+    """
+    from wmr_jax._src import io
+    from wmr_jax._src.provenance import code_version
+    from wmr_jax._src.report.tuning import comparison_table
+    from wmr_jax._src.robots import robot_json
+
+    robot = validate_one_robot(robot, "tuning")
+    settings = {
+        "format": COMPARE_FORMAT,
+        "seeds": list(COMPARE_SEEDS),
+        "configs": {name: config.as_dict() for name, config in configs.items()},
+        "robot": robot_json(robot),
+        # Rows computed by other code (the law, the loss, an optimiser) are not mixed in.
+        "code": code_version(),
+    }
+    settings = json.loads(json.dumps(settings))  # as it reads back from the file
+    problems = {name: config.problem.dim for name, config in configs.items()}
+    rows = _compare_rows(out, settings, resume, problems)
+    done = {(row["problem"], row["seed"]) for row in rows}
+    for name, config in configs.items():
+        for seed in COMPARE_SEEDS:
+            if (name, seed) in done:
+                if progress is not None:
+                    progress(f"{name} seed {seed}: kept from {out / 'compare.json'}")
+                continue
+            rows += compare(
+                seeds=(seed,), problems=(name,), configs={name: config}, robot=robot,
+                progress=progress,
+            )  # fmt: skip
+            # Each row sealed with a checksum: a resumed comparison keeps only what this wrote.
+            io.atomic_write_json(out / "compare.json", [io.sealed(row) for row in rows])
+    io.atomic_write_text(out / "compare.md", comparison_table(rows))
+    return rows
+
+
+def _compare_rows(
+    out: Path, settings: dict[str, Any], resume: bool, problems: dict[str, int]
+) -> list[dict[str, Any]]:
+    """The rows of ``out/compare.json`` to keep (``--resume``), after checking they are ours.
+
+    Checked whole before anything runs: a file of another comparison, or one
+    whose shape is not what ``--compare`` writes, is refused in one line.
+    """
+    from wmr_jax._src import io
+
+    record, manifest = out / "compare.json", out / "compare_settings.json"
+    if not (resume and record.exists()):
+        # A new comparison: an earlier one's rows, which record no settings of
+        # their own, must not stay beside these settings for a --resume to keep.
+        for stale in (record, out / "compare.md"):
+            stale.unlink(missing_ok=True)
+        io.atomic_write_json(manifest, settings)
+        return []
+    advice = "allowed: the same settings, or a fresh --out"
+    texts = {}
+    for path in (manifest, record):
+        try:
+            texts[path] = json.loads(
+                path.read_text(encoding="utf-8"), object_pairs_hook=io.json_object_once
+            )
+        except (OSError, UnicodeDecodeError, ValueError, RecursionError) as err:
+            reason = " ".join(str(err).split())
+            raise ValueError(f"--resume: {path} cannot be read ({reason}); {advice}") from None
+    saved, rows = texts[manifest], texts[record]
+    if not isinstance(saved, dict):
+        raise ValueError(
+            f"--resume: {manifest} is a JSON {_json_type(saved)}; allowed: an object (the "
+            f"settings wmr-jax tune --compare writes), or a fresh --out"
+        )
+    if saved != settings:
+        diff = _settings_difference(saved, settings)
+        raise ValueError(f"--resume: {record} is of another comparison ({diff}); {advice}")
+    try:
+        if isinstance(rows, list):  # values changed since they were written are not kept
+            rows = [io.unsealed(row, f"{record} row {i}") for i, row in enumerate(rows)]
+        return saved_rows(rows, str(record), problems, tuple(settings["seeds"]))
+    except ValueError as err:
+        raise ValueError(f"--resume: {err}; remove it, or use a fresh --out") from None
+
+
+def _settings_difference(saved: Any, now: dict[str, Any]) -> str:
+    """Name the problems whose settings differ between two ``compare_settings.json``."""
+    saved_configs = saved.get("configs", {}) if isinstance(saved, dict) else {}
+    saved_configs = saved_configs if isinstance(saved_configs, dict) else {}
+    parts = [
+        f"{name}: {differences({'config': saved_configs.get(name)}, {'config': config})}"
+        if name in saved_configs
+        else f"{name}: not compared there"
+        for name, config in now["configs"].items()
+        if saved_configs.get(name) != config
+    ]
+    parts += [f"{name}: not compared now" for name in saved_configs if name not in now["configs"]]
+    saved_robot = saved.get("robot") if isinstance(saved, dict) else None
+    if saved_robot != now.get("robot"):
+        parts.append(
+            f"robot: {_robot_text(saved_robot)} there, {_robot_text(now.get('robot'))} now"
+        )
+    saved_code = saved.get("code") if isinstance(saved, dict) else None
+    if saved_code != now.get("code"):
+        parts.append(f"computed by wmr_jax {saved_code}, this is {now.get('code')}")
+    return "; ".join(parts) or "its format or seeds differ"
+
+
+def _robot_text(values: Any) -> str:
+    """A ``compare_settings.json`` robot in words."""
+    from wmr_jax._src.robots import describe_robot, robot_from_values
+
+    try:
+        return describe_robot(robot_from_values(values, "robot"))
+    except ValueError:
+        return "a damaged robot entry"

@@ -21,7 +21,7 @@ from wmr_jax._src.tuning.parametrisation import (
     logits_from_gains,
 )
 
-__all__ = ["GradientCost", "gradient_cost"]
+__all__ = ["GradientCost", "gradient_cost", "write_gradient_costs"]
 
 
 class GradientCost(NamedTuple):
@@ -136,3 +136,12 @@ def gradient_cost(
     return GradientCost(
         poses, steps, bool(remat), forward_s, gradient_s, forward_peak, gradient_peak
     )
+
+
+def write_gradient_costs(out: Any) -> list[GradientCost]:
+    """Measure ``gradient_cost`` with and without remat; write ``out/gradient_cost.json``."""
+    from wmr_jax._src import io
+
+    costs = [gradient_cost(remat=remat) for remat in (True, False)]
+    io.atomic_write_json(out / "gradient_cost.json", [c._asdict() for c in costs])
+    return costs

@@ -19,6 +19,7 @@ import numpy as np
 
 from wmr_jax._src.checks import is_traced, real_array, require, require_unbatched
 from wmr_jax._src.params import Gains, Robot, validate_gains, validate_one_robot
+from wmr_jax._src.poses import EVAL_R_MAX
 
 __all__ = [
     "GAIN_FIELDS",
@@ -73,9 +74,20 @@ _PHI_M = (1e-3, math.pi / 2 - 1e-3)  # rad
 _ALPHA = (1e-3, 0.5 - 1e-3)
 _LOG_R_M = (math.log(0.5), math.log(200.0))  # log cm
 _LOG_RATIO = (math.log(0.01), 0.0)  # log of R_a/R_m and of R_e/R_a
+# The evaluation radius the length box above is chosen for (docs/model.md §6):
+# the radii scale with the poses' reach, EVAL_R_MAX, by EVAL_R_MAX / this.
+_BOX_RADIUS = 80.0  # cm
 # How close to a face of the cube a starting point may sit: the logit of a
 # point on a face is infinite (the paper's R_a = R_m is one).
 _UNIT_CLIP = 1e-3
+
+
+def _log_r_m() -> tuple[float, float]:
+    """The box of ``log R_m`` (log cm), scaled by the evaluation radius (``EVAL_R_MAX``)."""
+    if EVAL_R_MAX == _BOX_RADIUS:  # the box as chosen, bit for bit
+        return _LOG_R_M
+    shift = math.log(EVAL_R_MAX / _BOX_RADIUS)
+    return (_LOG_R_M[0] + shift, _LOG_R_M[1] + shift)
 
 
 def _lerp(u: Any, bounds: tuple[float, float]) -> Any:
@@ -128,7 +140,7 @@ def gains_from_unit(u: jax.Array, robot: Robot | None = None) -> Gains:
     u = checked_point("u", u, len(GAIN_FIELDS), unit=True)
     budget = robot.v_max * _lerp(u[..., 0], _BUDGET)  # cm/s
     share = _lerp(u[..., 1], _SHARE)
-    r_m = jnp.exp(_lerp(u[..., 4], _LOG_R_M))
+    r_m = jnp.exp(_lerp(u[..., 4], _log_r_m()))
     # exp(·) ≤ 1 here, so the products keep R_e ≤ R_a ≤ R_m after rounding.
     r_a = r_m * jnp.exp(_lerp(u[..., 5], _LOG_RATIO))
     r_e = r_a * jnp.exp(_lerp(u[..., 6], _LOG_RATIO))
@@ -169,7 +181,7 @@ def unit_from_gains(gains: Gains, robot: Robot | None = None) -> np.ndarray:
         _unlerp(g["kr"] / budget, _SHARE),
         _unlerp(g["phi_m"], _PHI_M),
         _unlerp(g["alpha"], _ALPHA),
-        _unlerp(math.log(g["r_m"]), _LOG_R_M),
+        _unlerp(math.log(g["r_m"]), _log_r_m()),
         _unlerp(math.log(g["r_a"] / g["r_m"]), _LOG_RATIO),
         _unlerp(math.log(g["r_e"] / g["r_a"]), _LOG_RATIO),
     ]

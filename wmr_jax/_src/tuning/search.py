@@ -31,7 +31,7 @@ __all__ = ["SearchResult", "population_scores", "random_search"]
 
 # Random search scores a run that never arrives as twice the horizon: worse
 # than any arrival, but finite, so that candidates' means stay comparable.
-_FAILURE_FACTOR = 2.0
+FAILURE_FACTOR = 2.0
 
 
 class SearchResult(NamedTuple):
@@ -141,4 +141,4 @@ def population_scores(problem: Problem, u: jax.Array, tiled: jax.Array, n: int, 
         warnings.simplefilter("ignore")
         _, times, steps = hard_runs(tiled, population, **run, controller=problem.controller)
     times = times.reshape(u.shape[0], n)
-    return jnp.mean(jnp.minimum(times, _FAILURE_FACTOR * steps * run["dt"]), axis=1)
+    return jnp.mean(jnp.minimum(times, FAILURE_FACTOR * steps * run["dt"]), axis=1)

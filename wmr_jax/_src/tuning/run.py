@@ -1,0 +1,284 @@
+"""A tuning run with its files: checkpoints, ``tuned_gains.json``, ``evaluation.json``, the curve.
+
+``tune`` runs ``train`` and writes its results and resumable checkpoints to a
+folder (``wmr-jax tune`` is it with flags); the checkpoint format is
+``CHECKPOINT_FORMAT``, an ``io.save_arrays`` file of ``state_arrays`` with the
+run's identity (``run_identity``) beside it: a checkpoint of other settings,
+another robot, other code or another format is refused, never read.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from wmr_jax._src import io
+from wmr_jax._src.tuning import training
+
+__all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_NAME", "held_out_bounds", "tune", "write_results"]
+
+CHECKPOINT_NAME = "checkpoint.npz"
+CHECKPOINT_FORMAT = 3
+
+
+# ---------------------------------------------------------------- checkpoints
+
+
+def save_checkpoint(path: Path, state: Any, identity: dict[str, Any]) -> None:
+    """Write ``state`` and the run's ``identity`` to ``path`` (checksummed, atomically)."""
+    meta = {"format": CHECKPOINT_FORMAT, "identity": identity}
+    io.save_arrays(path, training.state_arrays(state), meta)
+
+
+def load_checkpoint(path: Path, fresh: Any, identity: dict[str, Any]) -> Any:
+    """Restore a checkpoint into the structure of ``fresh``.
+
+    Raises:
+        ValueError: one line, if it is damaged or belongs to another run.
+    """
+    advice = "remove it to start over"
+    try:
+        arrays, meta = io.load_arrays(path)
+    except io.DamagedFileError as err:
+        raise ValueError(f"--resume: checkpoint {' '.join(str(err).split())}; {advice}") from None
+    if not isinstance(meta, dict):
+        raise ValueError(
+            f"--resume: checkpoint {path} has metadata of the wrong shape ({meta!r:.60}; "
+            f"allowed: an object with 'format' and 'identity'); {advice}"
+        )
+    if meta.get("format") != CHECKPOINT_FORMAT:
+        raise ValueError(
+            f"--resume: checkpoint {path} has an unknown format (format = "
+            f"{meta.get('format')!r:.40}; allowed: {CHECKPOINT_FORMAT}); {advice}"
+        )
+    saved = meta.get("identity")
+    shape = {"config": dict, "robot": dict}
+    if not isinstance(saved, dict) or not all(
+        isinstance(saved.get(key), kind) for key, kind in shape.items()
+    ):
+        raise ValueError(
+            f"--resume: checkpoint {path} has metadata of the wrong shape (identity = "
+            f"{saved!r:.60}; allowed: an object with a 'config' and a 'robot' object); {advice}"
+        )
+    # Compare as JSON, the way the identity was stored.
+    now = json.loads(json.dumps(identity))
+    if saved != now:
+        raise ValueError(
+            f"--resume: checkpoint {path} is of another run "
+            f"({training.differences(saved, now)}); "
+            "allowed: the same settings, or a fresh --out"
+        )
+    try:
+        return training.restore_state(arrays, fresh)
+    except ValueError as err:
+        raise ValueError(f"--resume: checkpoint {path}: {err}; {advice}") from None
+
+
+# ---------------------------------------------------------------- the run
+
+
+def _progress(
+    config: Any, checkpoint: Path, identity: dict[str, Any], bar: Any, user_fn: Callable | None
+) -> Callable[[Any], None]:
+    """The training's progress callback: the bar, the checkpoint, then the caller's."""
+
+    def report(state: Any) -> None:
+        bar.update(1)
+        bar.set_postfix(
+            loss=f"{state.losses[-1]:.3f}s", T=f"{state.temperatures[-1]:.3g}", refresh=False
+        )
+        last = state.iteration == config.iters
+        if last or state.iteration % config.checkpoint_every == 0:
+            save_checkpoint(checkpoint, state, identity)
+        if last:
+            bar.close()  # before the random search and the evaluation
+        if user_fn is not None:
+            user_fn(state)
+
+    return report
+
+
+def held_out_bounds(config: Any, robot: Any) -> Any:
+    """The time-optimal yardsticks (docs/model.md §8) of the held-out poses of ``config``."""
+    from wmr_jax._src.optimal import time_bounds
+    from wmr_jax._src.tuning.evaluation import held_out_poses
+
+    refs = held_out_poses(config.eval_poses, config.eval_seed)
+    return time_bounds(refs, robot=robot, dt=config.dt)
+
+
+def write_results(
+    out: Path, config: Any, robot: Any, result: Any, resumed_at: int | None = None
+) -> None:
+    """Write the parameters, the evaluation and the tuning curve of ``result`` to ``out``.
+
+    ``resumed_at``: the iteration this session resumed from (``None``: it ran
+    them all); recorded beside the wall times, which count every session's
+    compilation.
+
+    Raises:
+        ValueError: one line, if the tuned parameters are not all finite
+            (nothing is written then).
+    """
+    from wmr_jax._src.params import check_feasible
+    from wmr_jax._src.report.tuning import tuning_curve
+    from wmr_jax._src.robots import ROBOT_UNITS, robot_json
+    from wmr_jax._src.tuning.evaluation import report_ratios, wheel_speed_ok
+    from wmr_jax._src.tuning.saved import tuned_json, write_tuned
+
+    # Each file records the robot: its gains are tuned within that robot's wheel budget.
+    tuned = tuned_json(result.gains, robot=robot, tuning="nominal")
+    search = result.search
+    searched = None if search is None else tuned_json(search.gains, robot=robot, tuning="nominal")
+    write_tuned(out, tuned)  # and drops the files that judged the gains it replaces
+    if searched is not None:
+        io.atomic_write_json(out / "random_search_gains.json", searched)
+    paper = result.evaluation["paper_feasible"].mean_arrival
+    bounds = held_out_bounds(config, robot)
+    rows = {name: dict(ev._asdict()) for name, ev in result.evaluation.items()}
+    for name, row in rows.items():
+        # A ratio that needs a run that never arrived is null, with the reason beside it.
+        row.update(report_ratios(row["mean_arrival"], bounds, paper))
+        row["peak_wheel_speed_ok"] = wheel_speed_ok(result.evaluation[name], robot)
+    report = {
+        "problem": result.problem,
+        "velocity": config.velocity,
+        "held_out_poses": config.eval_poses,
+        "horizon_s": config.horizon,
+        "law": "hard (temperature None)",
+        "rows": rows,
+        "tuned_gains": tuned,
+        # Fixed gains: k_r + L k_θ ≤ V_max; a schedule meets |v| + L|ω| ≤ V_max by construction.
+        "feasible": result.problem != "fixed" or bool(check_feasible(result.gains, robot)),
+        # Every row's; each row says its own (peak_wheel_speed_ok there).
+        "peak_wheel_speed_ok": all(row["peak_wheel_speed_ok"] for row in rows.values()),
+        "robot": robot_json(robot),
+        "robot_units": dict(ROBOT_UNITS),
+        "wall_time_s": {
+            "tuning": result.tune_wall_s,
+            "random_search": None if search is None else search.wall_s,
+        },
+        # Each session compiles the step again: a resumed run's tuning time
+        # (the random search's budget) holds one more compilation per resume.
+        "resumed_at_iteration": resumed_at,
+        "random_search_candidates": None if search is None else search.candidates,
+        # The iterate kept: the best hard-law score on the validation poses.
+        "best_iteration": result.best_iteration,
+        "validation": {
+            "poses": config.validation_poses,
+            "scored_at": [int(i) for i in result.history["validated_at"]],
+            "score_s": [float(v) for v in result.history["validation"]],
+        },
+        "no_better_than_baseline": result.note is not None,
+        "note": result.note,
+        "config": config.as_dict(),
+    }
+    io.atomic_write_json(out / "evaluation.json", report)
+    tuning_curve(
+        out / "tuning_curve.png",
+        result.history,
+        velocity=config.velocity,
+        problem=result.problem,
+        robot=robot,
+    )
+
+
+def _bars(config: Any, state: Any, progress: bool) -> tuple[Any, Any, Any]:
+    """The progress bars of a run: the iterations, the random search, the evaluation."""
+    from wmr_jax._src.report.progress import bar as tqdm
+
+    bar = tqdm(
+        total=config.iters,
+        initial=state.iteration,
+        desc=f"tune ({config.velocity})",
+        disable=not progress,
+        dynamic_ncols=True,
+    )
+    search_bar = tqdm(
+        desc="random search (same wall time)",
+        unit=" candidates",
+        disable=not (progress and config.random_search),
+        dynamic_ncols=True,
+    )
+    eval_bar = tqdm(total=3, desc="hard-law evaluation", disable=not progress, dynamic_ncols=True)
+    return bar, search_bar, eval_bar
+
+
+def tune(
+    out_dir: str | os.PathLike,
+    config: Any = None,
+    *,
+    robot: Any = None,
+    resume: bool = False,
+    progress: bool = True,
+    progress_fn: Callable[[Any], Any] | None = None,
+) -> Any:
+    """Run ``wmr_jax.tuning.train`` and write its results and checkpoints to ``out_dir``.
+
+    Files in ``out_dir``: ``tuned_gains.json`` (the controller, the kind,
+    the parameters and the robot; ``wmr_jax.load_tuned`` reads it; the
+    files that judged the gains it replaces, ``saved.JUDGING_TUNED``, are
+    removed when it is written),
+    ``evaluation.json``, ``tuning_curve.png``,
+    ``random_search_gains.json`` and ``checkpoint.npz`` (checksummed, written
+    atomically every ``config.checkpoint_every`` iterations and at the end).
+
+    Args:
+        out_dir: output folder (created if needed).
+        config: a ``TuneConfig``; default ``TuneConfig()``.
+        robot: robot parameters; default ``Robot()``.
+        resume: continue from ``out_dir/checkpoint.npz`` if present (it must
+            come from the same settings); the result is the same as that of
+            an uninterrupted run. Without it, any checkpoint is overwritten.
+        progress: show a progress bar with the loss.
+        progress_fn: called with the ``TrainState`` after each iteration,
+            after the checkpoint; an exception it raises stops the run (the
+            checkpoint of the last ``checkpoint_every`` boundary stays).
+
+    Returns:
+        The ``TuneResult`` of ``train``.
+
+    Raises:
+        ValueError: one line, for bad settings or a damaged checkpoint or one
+            of another run.
+    """
+    from wmr_jax._src.checks import check_bool, check_callable, check_folder
+    from wmr_jax._src.params import Robot, validate_robot
+
+    out = check_folder("out_dir", out_dir)
+    check_bool("resume", resume)
+    check_bool("progress", progress)
+    check_callable("progress_fn", progress_fn)
+    config = training.checked_config(config)
+    io.remove_stale_temporaries(out)
+    robot = Robot() if robot is None else robot
+    identity = training.run_identity(config, robot)
+    state = training.init_state(config, robot)
+    checkpoint = out / CHECKPOINT_NAME
+    if resume and checkpoint.exists():
+        state = load_checkpoint(checkpoint, state, identity)
+    elif resume:  # a mistyped --out would otherwise start over without a word
+        print(f"--resume: no {CHECKPOINT_NAME} in {out}; starting from the first iteration")
+    bar, search_bar, eval_bar = _bars(config, state, progress)
+    report = _progress(config, checkpoint, identity, bar, progress_fn)
+    try:
+        result = training.train(
+            config,
+            robot=robot,
+            state=state,
+            progress_fn=report,
+            search_progress=search_bar.update,
+            eval_progress=lambda _name: (search_bar.close(), eval_bar.update(1)),
+        )
+    finally:
+        bar.close()
+        search_bar.close()
+        eval_bar.close()
+    # The robot as given, not rounded to the session's float32: the file
+    # records it, and a preset read back must still be that preset.
+    resumed_at = state.iteration if state.iteration else None
+    write_results(out, config, validate_robot(robot), result, resumed_at)
+    return result
