@@ -10,8 +10,9 @@ import pytest
 
 import wmr_jax as w
 from wmr_jax._src import conditions
+from wmr_jax._src.cli import simulate
 from wmr_jax._src.cli.main import main
-from wmr_jax._src.report import progress, simulate
+from wmr_jax._src.report import progress
 from wmr_jax._src.tuning.saved import tuned_json
 
 REFS = np.array([[30.0, 20.0, 0.3], [-20.0, 15.0, 1.0], [25.0, -10.0, -0.5]])
