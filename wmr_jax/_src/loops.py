@@ -361,14 +361,15 @@ class ClosedLoopStep:
         else:
             region = None
         followed, wheel = self.followed(wheel, applied)
-        target = (followed.real, followed.imag)
+        v, omega = applied.real, applied.imag
+        target = (v, omega) if followed is applied else (followed.real, followed.imag)
         robot = self.robot
         if spec is not None:
             target, robot = spec.realised(followed, robot), spec.true_robot(robot)
         pose, wheel, rims, distance = advance_period(
             pose, wheel, target, robot, self.dt, self.options, model=self.robot
         )
-        out = StepOutput(applied.real, applied.imag, region, rims, distance)
+        out = StepOutput(v, omega, region, rims, distance)
         if self.fold is not None:
             acc = self.fold(acc, pose, out)
         return pose, wheel, followed, out, acc
