@@ -18,15 +18,35 @@ __all__ = ["SUBCOMMANDS"]
 
 
 def add_arguments(parser: Any) -> None:
-    parser.add_argument("--log", nargs="+", metavar="FILE", help="logs: CSV t,v_cmd,omega_cmd,x,y,theta (s, cm/s, rad/s, cm, cm, rad) or ROS 2 bags (.mcap, .db3)")
+    parser.add_argument(
+        "--log",
+        nargs="+",
+        metavar="FILE",
+        help="logs: CSV t,v_cmd,omega_cmd,x,y,theta (s, cm/s, rad/s, cm, cm, rad) "
+        "or ROS 2 bags (.mcap, .db3)",
+    )
     flags.add_robot_flag(parser)
     parser.add_argument("--out", metavar="DIR", help="output folder (identified.json, fit.png)")
-    parser.add_argument("--cmd-topic", metavar="TOPIC", help="bag topic of the commands (Twist, TwistStamped)")
-    parser.add_argument("--pose-topic", metavar="TOPIC", help="bag topic of the tracked poses (PoseStamped, Odometry)")
-    parser.add_argument("--dt", metavar="S", help="control period of a bag, s (default: the commands' median spacing)")
-    parser.add_argument("--plan", metavar="OUT.csv", help="write a command plan to drive instead of fitting")
+    parser.add_argument(
+        "--cmd-topic", metavar="TOPIC", help="bag topic of the commands (Twist, TwistStamped)"
+    )
+    parser.add_argument(
+        "--pose-topic",
+        metavar="TOPIC",
+        help="bag topic of the tracked poses (PoseStamped, Odometry)",
+    )
+    parser.add_argument(
+        "--dt",
+        metavar="S",
+        help="control period of a bag, s (default: the commands' median spacing)",
+    )
+    parser.add_argument(
+        "--plan", metavar="OUT.csv", help="write a command plan to drive instead of fitting"
+    )
     parser.add_argument("--minutes", default="5", metavar="MIN", help="length of the plan")
-    parser.add_argument("--plan-dt", default="0.04", metavar="S", help="the plan's control period, s")
+    parser.add_argument(
+        "--plan-dt", default="0.04", metavar="S", help="the plan's control period, s"
+    )
     parser.add_argument("--seed", default="0", metavar="N", help="the plan's random seed")
 
 
@@ -46,7 +66,9 @@ def run(args: Any) -> int:
     dt = None if args.dt is None else flags.number("--dt", args.dt, low=0, closed=False)
     minimum = fitting.WARMUP + fitting.SEGMENT + 1
     logs = [
-        reading.read_log(p, cmd_topic=args.cmd_topic, pose_topic=args.pose_topic, dt=dt, minimum=minimum)
+        reading.read_log(
+            p, cmd_topic=args.cmd_topic, pose_topic=args.pose_topic, dt=dt, minimum=minimum
+        )
         for p in args.log
     ]
     period = logs[0].dt
@@ -89,7 +111,7 @@ def _plan(args: Any, robot: Any) -> int:
 
 SUBCOMMANDS = {
     "identify": {
-        "help": "fit the true robot (wheel scales, half-track, wheel lag, latency, noise) to its logs",
+        "help": "fit the true robot (wheel scales, track, wheel lag, latency, noise) to its logs",
         "add_arguments": add_arguments,
         "run": run,
     },

@@ -22,7 +22,7 @@ one ``vmap`` and the lowest cost wins (a profile over ``m``).
 from __future__ import annotations
 
 import math
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -216,10 +216,14 @@ def _fit(logs, base, dt, iterations, segment):
         thetas[latency], float(latency), segs, base_l, base, dt, sigma0, iterations=2
     )
     sigma = _noise(r, sigma0, segs)
-    theta, cost, jtj, r = _refine(theta, float(latency), segs, base_l, base, dt, sigma, iterations=iterations)
+    theta, cost, jtj, r = _refine(
+        theta, float(latency), segs, base_l, base, dt, sigma, iterations=iterations
+    )
     sigma = _noise(r, sigma, segs)
     # Weights from the final noise: the curvature in units of the noise itself.
-    theta, cost, jtj, r = _refine(theta, float(latency), segs, base_l, base, dt, sigma, iterations=2)
+    theta, cost, jtj, r = _refine(
+        theta, float(latency), segs, base_l, base, dt, sigma, iterations=2
+    )
     theta = np.asarray(theta)
     covariance = np.linalg.inv(np.asarray(jtj))
     half = Z95 * np.sqrt(np.diag(covariance))

@@ -69,11 +69,14 @@ def read_csv(path: Any, minimum: int = 2) -> Log:
         try:
             parsed = [float(c) for c in row]
         except ValueError:
-            raise ValueError(f"{where}: line {number} = {','.join(row)!r} is not all numbers") from None
+            raise ValueError(
+                f"{where}: line {number} = {','.join(row)!r} is not all numbers"
+            ) from None
         for name, value in zip(HEADER, parsed, strict=True):
             if not math.isfinite(value):
                 raise ValueError(
-                    f"{where}: line {number}: {name} = {value} is not allowed; allowed: a finite number"
+                    f"{where}: line {number}: {name} = {value} is not allowed; "
+                    "allowed: a finite number"
                 )
         values.append(parsed)
     table = np.asarray(values, dtype=float).reshape(-1, len(HEADER))
@@ -203,7 +206,9 @@ def read_bag(path: Any, cmd_topic: str, pose_topic: str, dt: float | None, minim
         raise ValueError(f"{where} cannot be read as a ROS 2 bag: {err}") from None
     for topic, got in ((cmd_topic, cmds), (pose_topic, poses)):
         if len(got) < 2:
-            raise ValueError(f"{where}: topic {topic!r} has {len(got)} messages; allowed: at least 2")
+            raise ValueError(
+                f"{where}: topic {topic!r} has {len(got)} messages; allowed: at least 2"
+            )
     c, p = np.asarray(cmds), np.asarray(poses)
     if not np.all(np.isfinite(c)) or not np.all(np.isfinite(p)):
         bad = cmd_topic if not np.all(np.isfinite(c)) else pose_topic
@@ -214,11 +219,22 @@ def read_bag(path: Any, cmd_topic: str, pose_topic: str, dt: float | None, minim
     held = np.clip(np.searchsorted(c[:, 0], t + 1e-9 * period, side="right") - 1, 0, len(c) - 1)
     commands = c[held, 1:]
     heading = np.unwrap(p[:, 3])
-    measured = np.column_stack([np.interp(t, p[:, 0], p[:, k]) for k in (1, 2)] + [np.interp(t, p[:, 0], heading)])
-    return check_log(t - t[0], commands, measured, f"{where} (topics {cmd_topic}, {pose_topic})", minimum)
+    measured = np.column_stack(
+        [np.interp(t, p[:, 0], p[:, k]) for k in (1, 2)] + [np.interp(t, p[:, 0], heading)]
+    )
+    return check_log(
+        t - t[0], commands, measured, f"{where} (topics {cmd_topic}, {pose_topic})", minimum
+    )
 
 
-def read_log(path: Any, *, cmd_topic: str | None = None, pose_topic: str | None = None, dt: float | None = None, minimum: int = 2) -> Log:
+def read_log(
+    path: Any,
+    *,
+    cmd_topic: str | None = None,
+    pose_topic: str | None = None,
+    dt: float | None = None,
+    minimum: int = 2,
+) -> Log:
     """Read a CSV log, or a ROS 2 bag with its topics."""
     p = Path(path)
     if p.suffix.lower() == ".csv":
@@ -227,4 +243,6 @@ def read_log(path: Any, *, cmd_topic: str | None = None, pose_topic: str | None 
         if not cmd_topic or not pose_topic:
             raise ValueError(f"{path}: a ROS 2 bag needs --cmd-topic and --pose-topic")
         return read_bag(p, cmd_topic, pose_topic, dt, minimum)
-    raise ValueError(f"--log {path} is not allowed; allowed: a .csv log, or a ROS 2 bag (.mcap, .db3)")
+    raise ValueError(
+        f"--log {path} is not allowed; allowed: a .csv log, or a ROS 2 bag (.mcap, .db3)"
+    )

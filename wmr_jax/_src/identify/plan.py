@@ -40,7 +40,9 @@ def square_commands(robot: Robot, dt: float, side: float, clockwise: bool) -> np
     return np.asarray(leg * 4, dtype=float)
 
 
-def plan_commands(robot: Robot, dt: float, minutes: float, seed: int = 0, *, squares: bool = True) -> np.ndarray:
+def plan_commands(
+    robot: Robot, dt: float, minutes: float, seed: int = 0, *, squares: bool = True
+) -> np.ndarray:
     """An exciting command sequence ``(N, 2)`` of ``minutes`` at period ``dt`` (cm/s, rad/s)."""
     rng = np.random.default_rng(seed)
     total = round(minutes * 60 / dt)
@@ -56,7 +58,7 @@ def plan_commands(robot: Robot, dt: float, minutes: float, seed: int = 0, *, squ
         v = rng.uniform(-0.3, 1.0) * v_lim
         w = rng.uniform(-1.0, 1.0) * w_lim
         # Within the rims' budget: |v| + L |ω| ≤ V_max / 2.
-        excess = (abs(v) / v_lim + abs(w) / w_lim)
+        excess = abs(v) / v_lim + abs(w) / w_lim
         if excess > 1:
             v, w = v / excess, w / excess
         parts.insert(len(parts) // 2 if squares else len(parts), np.tile([v, w], (hold, 1)))
@@ -89,7 +91,13 @@ def synthetic_log(
         base64 = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), base)
         robot = model.fitted_robot(base64, half_track, speed_gain)
         poses = model.replay(
-            commands, init, robot, jnp.asarray(scale), base64.half_track, latency, dt,
+            commands,
+            init,
+            robot,
+            jnp.asarray(scale),
+            base64.half_track,
+            latency,
+            dt,
             max_delay=max(1, latency),
         )
         true = jnp.concatenate([init[None], poses[:-1]])

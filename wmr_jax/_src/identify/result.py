@@ -67,8 +67,7 @@ def table(content: dict[str, Any]) -> str:
     lines.append(f"{'latency (samples)':<20}{content['latency_samples']:>12d}")
     ros = content["ros"]
     lines.append(
-        "ROS diff_drive_controller: "
-        + ", ".join(f"{k} = {v:.6f}" for k, v in ros.items())
+        "ROS diff_drive_controller: " + ", ".join(f"{k} = {v:.6f}" for k, v in ros.items())
     )
     return "\n".join(lines)
 
@@ -88,8 +87,13 @@ def plot_fit(path: Path, logs: list, base: Robot, result: fitting.Fit, dt: float
         for i, log in enumerate(logs):
             poses = np.asarray(
                 model.replay(
-                    log.commands, np.asarray(log.poses[0]), robot, result.wheel_scale,
-                    float(base.half_track), result.latency, dt,
+                    log.commands,
+                    np.asarray(log.poses[0]),
+                    robot,
+                    result.wheel_scale,
+                    float(base.half_track),
+                    result.latency,
+                    dt,
                 )
             )
             predicted = np.vstack([log.poses[:1], poses[:-1]])
