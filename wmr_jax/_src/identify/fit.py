@@ -32,12 +32,14 @@ from wmr_jax._src.controllers import shim_sung as law
 from wmr_jax._src.identify import model
 from wmr_jax._src.params import Robot
 
-__all__ = ["Fit", "Segments", "fit_log", "segments_of", "Z95"]
+__all__ = ["Fit", "Segments", "fit_batch", "fit_log", "levenberg_marquardt", "segments_of", "Z95"]
 
 Z95 = 1.959963984540054
 SEGMENT = 60  # samples in a segment's window
 WARMUP = model.MAX_LATENCY + 10  # periods replayed before it
-PROFILE_SEGMENTS = 24  # segments the latency profile uses
+CHUNK = 16  # segments evaluated together
+PROFILE_CHUNKS = 2  # chunks the latency profile uses
+PROFILE_ITERATIONS = 3
 
 
 class Segments(NamedTuple):
@@ -106,35 +108,111 @@ def _segment_residuals(theta, delay, commands, measured, base_half_track, base, 
 
 
 def _residuals(theta, delay, segs, base_half_track, base, dt, sigma):
-    per = jax.vmap(
+    return jax.vmap(
         lambda c, m: _segment_residuals(theta, delay, c, m, base_half_track, base, dt, sigma)
     )(segs.commands, segs.measured)
-    return per
 
 
-def _lm(theta0, delay, segs, base_half_track, base, dt, sigma, iterations):
-    """Levenberg–Marquardt from ``theta0``; returns ``(θ, cost, JᵀJ, residuals)``."""
+def _normal_one(theta, delay, commands, measured, mask, base_half_track, base, dt, sigma):
+    """``(cost, JᵀJ, Jᵀr, r)`` of one chunk of segments; ``mask`` drops padding segments."""
 
-    def flat(theta):
-        return _residuals(theta, delay, segs, base_half_track, base, dt, sigma).reshape(-1)
+    def flat(t):
+        r = _residuals(t, delay, Segments(commands, measured), base_half_track, base, dt, sigma)
+        r = (r * mask[:, None, None]).reshape(-1)
+        return r, r
 
-    def body(state, _):
-        theta, lam = state
-        r = flat(theta)
-        jac = jax.jacfwd(flat)(theta)
-        jtj, g = jac.T @ jac, jac.T @ r
-        diag = jnp.diag(jnp.diag(jtj))
-        step = -jnp.linalg.solve(jtj + lam * diag, g)
-        cost, trial = r @ r, flat(theta + step)
-        better = trial @ trial < cost
-        theta = jnp.where(better, theta + step, theta)
-        lam = jnp.where(better, lam * 0.3, lam * 10.0)
-        return (theta, lam), None
+    jac, r = jax.jacfwd(flat, has_aux=True)(theta)
+    return r @ r, jac.T @ jac, jac.T @ r, r
 
-    (theta, _), _ = jax.lax.scan(body, (theta0, jnp.asarray(1e-3, theta0.dtype)), None, iterations)
-    r = flat(theta)
-    jac = jax.jacfwd(flat)(theta)
-    return theta, r @ r, jac.T @ jac, r
+
+def _cost_one(theta, delay, commands, measured, mask, base_half_track, base, dt, sigma):
+    r = _residuals(theta, delay, Segments(commands, measured), base_half_track, base, dt, sigma)
+    r = r * mask[:, None, None]
+    return jnp.sum(r * r)
+
+
+# Batched over robots (leading axis of every argument but the base robot):
+# one log is a batch of one, a coverage study a batch of many, one program each.
+_AXES = (0, 0, 0, 0, 0, 0, None, 0, 0)
+_normal = jax.jit(jax.vmap(_normal_one, in_axes=_AXES))
+_cost = jax.jit(jax.vmap(_cost_one, in_axes=_AXES))
+
+
+class Chunks(NamedTuple):
+    """Segments in chunks of ``CHUNK`` (the last padded with copies, masked out).
+
+    Every field has a leading batch axis (robots), then the chunk axis.
+    """
+
+    commands: np.ndarray  # (B, K, CHUNK, T, 2)
+    measured: np.ndarray  # (B, K, CHUNK, S, 3)
+    mask: np.ndarray  # (B, K, CHUNK)
+
+
+def chunked(segs: list[Segments]) -> Chunks:
+    """Chunk the segments of each robot of a batch (all with the same number of segments)."""
+    count = len(segs[0].commands)
+    k = -(-count // CHUNK)
+    index = np.arange(k * CHUNK) % count
+    mask = (np.arange(k * CHUNK) < count).astype(float).reshape(k, CHUNK)
+    return Chunks(
+        np.stack(
+            [np.asarray(s.commands)[index].reshape(k, CHUNK, *s.commands.shape[1:]) for s in segs]
+        ),
+        np.stack(
+            [np.asarray(s.measured)[index].reshape(k, CHUNK, *s.measured.shape[1:]) for s in segs]
+        ),
+        np.broadcast_to(mask, (len(segs), k, CHUNK)),
+    )
+
+
+def _summed(function, theta, delay, chunks, chunk_ids, fixed, sigma):
+    """``function`` summed over the chunks ``chunk_ids`` (residuals concatenated)."""
+    total = None
+    for j in chunk_ids:
+        out = function(
+            theta,
+            delay,
+            chunks.commands[:, j],
+            chunks.measured[:, j],
+            chunks.mask[:, j],
+            fixed[0],
+            fixed[1],
+            fixed[2],
+            sigma,
+        )
+        out = jax.device_get(out)
+        if total is None:
+            total = list(out) if isinstance(out, tuple) else out
+        elif isinstance(out, tuple):
+            total = [a + b for a, b in zip(total[:3], out[:3], strict=True)] + [
+                np.concatenate([total[3], out[3]], axis=-1)
+            ]
+        else:
+            total = total + out
+    return total
+
+
+def levenberg_marquardt(theta, delay, chunks, fixed, sigma, iterations, chunk_ids=None):
+    """Levenberg–Marquardt on a batch: ``θ (B, 4)`` → ``(θ, cost, JᵀJ, r)``, host-side loop.
+
+    ``fixed``: ``(base half-track (B,), base robot, dt (B,))``.
+    """
+    ids = range(chunks.commands.shape[1]) if chunk_ids is None else chunk_ids
+    theta = np.asarray(theta, float)
+    lam = np.full(theta.shape[0], 1e-3)
+    for _ in range(iterations):
+        cost, jtj, g, _ = _summed(_normal, theta, delay, chunks, ids, fixed, sigma)
+        damped = jtj + lam[:, None, None] * (
+            np.eye(4) * np.diagonal(jtj, axis1=1, axis2=2)[:, None]
+        )
+        step = -np.linalg.solve(damped, g[..., None])[..., 0]
+        trial = _summed(_cost, theta + step, delay, chunks, ids, fixed, sigma)
+        better = trial < cost
+        theta = np.where(better[:, None], theta + step, theta)
+        lam = np.where(better, lam * 0.3, lam * 10.0)
+    cost, jtj, _, r = _summed(_normal, theta, delay, chunks, ids, fixed, sigma)
+    return theta, cost, jtj, r
 
 
 class Fit(NamedTuple):
@@ -179,63 +257,72 @@ def fit_log(
         return _fit(logs, base, dt, iterations, segment)
 
 
-def _stacked(logs, segment):
+def _segments(logs, segment):
     parts = [segments_of(c, p, segment) for c, p in logs]
     parts = [s for s in parts if len(s.commands)]
     if not parts:
         raise ValueError(
             f"the logs are too short: each needs at least {WARMUP + segment + 1} samples"
         )
-    return Segments(*(jnp.asarray(np.concatenate(x)) for x in zip(*parts, strict=True)))
+    return Segments(*(np.concatenate(x) for x in zip(*parts, strict=True)))
 
 
-@jax.jit
-def _profile(theta0, segs, base_half_track, base, dt, sigma):
-    delays = jnp.arange(model.MAX_LATENCY + 1, dtype=theta0.dtype)
-    run = jax.vmap(lambda m: _lm(theta0, m, segs, base_half_track, base, dt, sigma, 4)[:2])
-    return run(delays)
+def fit_batch(segs: list[Segments], base: Robot, dt: float, iterations: int = 8) -> list[Fit]:
+    """Fit a batch of robots' logs (same length each) at once; one ``Fit`` per robot."""
+    with jax.enable_x64(True):
+        return _fit_batch(segs, base, dt, iterations)
 
 
-_refine = jax.jit(_lm, static_argnames="iterations")
+def _fit_batch(segs, base, dt, iterations):
+    batch = len(segs)
+    chunks = chunked(segs)
+    base = jax.tree.map(lambda x: np.float64(x), base)
+    base_l = float(base.half_track)
+    fixed = (np.full(batch, base_l), base, np.full(batch, float(dt)))
+    theta0 = np.tile([0.0, 0.0, base_l, float(base.speed_gain)], (batch, 1))
+    sigma0 = np.tile([1.0, 0.02], (batch, 1))
+    # The profile over m on the first chunks only: the latency shows in
+    # every segment, and the refinement then uses them all.
+    profile_ids = range(min(PROFILE_CHUNKS, chunks.commands.shape[1]))
+    thetas, costs = [], []
+    for m in range(model.MAX_LATENCY + 1):
+        delay = np.full(batch, float(m))
+        theta, cost, _, _ = levenberg_marquardt(
+            theta0, delay, chunks, fixed, sigma0, PROFILE_ITERATIONS, profile_ids
+        )
+        thetas.append(theta)
+        costs.append(cost)
+    costs = np.stack(costs, axis=1)  # (B, M)
+    latency = np.argmin(costs, axis=1)
+    theta = np.stack([thetas[m][i] for i, m in enumerate(latency)])
+    delay = latency.astype(float)
+    theta, _, _, r = levenberg_marquardt(theta, delay, chunks, fixed, sigma0, 2)
+    sigma = _noise(r, sigma0, chunks)
+    theta, _, _, r = levenberg_marquardt(theta, delay, chunks, fixed, sigma, iterations)
+    sigma = _noise(r, sigma, chunks)
+    # Weights from the final noise: the curvature in units of the noise itself.
+    theta, _, jtj, r = levenberg_marquardt(theta, delay, chunks, fixed, sigma, 1)
+    return [
+        _result(theta[i], int(latency[i]), sigma[i], jtj[i], r[i], costs[i], chunks)
+        for i in range(batch)
+    ]
 
 
 def _fit(logs, base, dt, iterations, segment):
-    segs = _stacked(logs, segment)
-    base = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), base)
-    base_l = base.half_track
-    theta0 = jnp.asarray([0.0, 0.0, float(base_l), float(base.speed_gain)])
-    dt = jnp.asarray(dt, jnp.float64)
-    sigma0 = jnp.asarray([1.0, 0.02])
-    # The profile over m on an even subset of the segments: the latency
-    # shows in every one of them, and the refinement then uses them all.
-    every = max(1, len(segs.commands) // PROFILE_SEGMENTS)
-    subset = Segments(segs.commands[::every], segs.measured[::every])
-    thetas, costs = _profile(theta0, subset, base_l, base, dt, sigma0)
-    latency = int(jnp.argmin(costs))
-    theta, _, _, r = _refine(
-        thetas[latency], float(latency), segs, base_l, base, dt, sigma0, iterations=2
-    )
-    sigma = _noise(r, sigma0, segs)
-    theta, cost, jtj, r = _refine(
-        theta, float(latency), segs, base_l, base, dt, sigma, iterations=iterations
-    )
-    sigma = _noise(r, sigma, segs)
-    # Weights from the final noise: the curvature in units of the noise itself.
-    theta, cost, jtj, r = _refine(
-        theta, float(latency), segs, base_l, base, dt, sigma, iterations=2
-    )
-    theta = np.asarray(theta)
-    covariance = np.linalg.inv(np.asarray(jtj))
+    return _fit_batch([_segments(logs, segment)], base, dt, iterations)[0]
+
+
+def _result(theta, latency, sigma, jtj, r, costs, chunks):
+    covariance = np.linalg.inv(jtj)
     half = Z95 * np.sqrt(np.diag(covariance))
     names = ("wheel_scale_left", "wheel_scale_right", "half_track", "speed_gain")
     centre = np.array([1 + theta[0], 1 + theta[1], theta[2], theta[3]])
     ci = {n: (float(c - h), float(c + h)) for n, c, h in zip(names, centre, half, strict=True)}
-    sigma = np.asarray(sigma)
-    dof_xy, dof_t = _dof(segs)
+    dof_xy, dof_t = _dof(chunks)
     for name, s, dof in (("sigma_xy", sigma[0], dof_xy), ("sigma_theta", sigma[1], dof_t)):
         spread = Z95 / math.sqrt(2 * dof)
         ci[name] = (float(s * (1 - spread)), float(s * (1 + spread)))
-    res = np.asarray(r).reshape(-1, 3)
+    res = _kept(r, chunks)
     rms = {
         "xy": float(np.sqrt(np.mean(res[:, :2] ** 2)) * sigma[0]),
         "theta": float(np.sqrt(np.mean(res[:, 2] ** 2)) * sigma[1]),
@@ -255,17 +342,29 @@ def _fit(logs, base, dt, iterations, segment):
     )
 
 
-def _dof(segs):
-    n, s = segs.measured.shape[:2]
+def _kept(r, chunks):
+    """The residuals ``(n, 3)`` of one robot's real (unpadded) segments."""
+    window = chunks.measured.shape[3]
+    res = np.asarray(r).reshape(-1, window, 3)
+    keep = chunks.mask[0].reshape(-1) > 0
+    return res[keep].reshape(-1, 3)
+
+
+def _dof(chunks):
+    n = int(np.sum(chunks.mask[0]))
+    s = chunks.measured.shape[3]
     # Each segment's transform takes two degrees of freedom from the
     # positions and one from the headings.
     return n * (2 * s - 2), n * (s - 1)
 
 
-def _noise(r, sigma, segs):
-    """σ_xy and σ_θ from weighted residuals ``r`` at weights ``sigma``."""
-    res = np.asarray(r).reshape(-1, 3)
-    dof_xy, dof_t = _dof(segs)
-    s_xy = math.sqrt(float(np.sum(res[:, :2] ** 2)) / dof_xy) * float(sigma[0])
-    s_t = math.sqrt(float(np.sum(res[:, 2] ** 2)) / dof_t) * float(sigma[1])
-    return jnp.asarray([s_xy, s_t])
+def _noise(r, sigma, chunks):
+    """σ_xy and σ_θ ``(B, 2)`` from weighted residuals ``r`` ``(B, …)`` at weights ``sigma``."""
+    dof_xy, dof_t = _dof(chunks)
+    out = []
+    for i in range(len(sigma)):
+        res = np.asarray(r[i]).reshape(-1, 3)
+        s_xy = math.sqrt(float(np.sum(res[:, :2] ** 2)) / dof_xy) * float(sigma[i][0])
+        s_t = math.sqrt(float(np.sum(res[:, 2] ** 2)) / dof_t) * float(sigma[i][1])
+        out.append([s_xy, s_t])
+    return np.asarray(out)
