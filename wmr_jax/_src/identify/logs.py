@@ -164,13 +164,15 @@ def read_bag(path: Any, cmd_topic: str, pose_topic: str, dt: float | None, minim
     period is ``dt`` or the commands' median spacing.
     """
     from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
 
     where = str(path)
     path = Path(path)
     bag = path.parent if path.suffix in (".mcap", ".db3") and path.is_file() else path
     cmds, poses = [], []
+    first = None
     try:
-        with AnyReader([bag]) as reader:
+        with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
             topics = {c.topic: c for c in reader.connections}
             for topic in (cmd_topic, pose_topic):
                 if topic not in topics:
@@ -181,7 +183,8 @@ def read_bag(path: Any, cmd_topic: str, pose_topic: str, dt: float | None, minim
             wanted = [topics[cmd_topic], topics[pose_topic]]
             for conn, stamp, raw in reader.messages(connections=wanted):
                 msg = reader.deserialize(raw, conn.msgtype)
-                t = stamp * 1e-9
+                first = stamp if first is None else first
+                t = (stamp - first) * 1e-9  # from the first message: ns stay exact
                 if conn.topic == cmd_topic:
                     twist = getattr(msg, "twist", msg)
                     if not hasattr(twist, "linear"):
