@@ -72,7 +72,7 @@ def test_replay_with_the_true_parameters_is_the_closed_loop_bit_for_bit():
 
 
 def test_the_model_moves_the_body_with_the_true_half_track():
-    """Straight and on-the-spot commands move as the model's formulas say, independently computed."""
+    """Straight and on-the-spot commands move as the model's formulas say."""
     dt, steps = 0.05, 200
     scale, track, base_track = (1.01, 0.99), 9.0, 8.0
     commands = np.zeros((steps, 2))
