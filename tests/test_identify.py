@@ -45,7 +45,12 @@ def test_replay_with_the_true_parameters_is_the_closed_loop_bit_for_bit():
         )
         noise = jax.random.normal(jax.random.PRNGKey(3), (steps, 3)) * 0.3
         spec = model.TrueRobot(
-            noise, jnp.asarray([1.02, 0.985]), jnp.float64(BASE.half_track), jnp.float64(latency)
+            noise,
+            jnp.asarray([1.02, 0.985]),
+            jnp.float64(BASE.half_track),
+            jnp.float64(latency),
+            robot.half_track,
+            robot.speed_gain,
         )
         options = loops.Options(
             steps=steps,
@@ -223,3 +228,31 @@ def test_plan_stays_within_the_wheel_budget_and_holds_both_squares():
     # Eight quarter turns each way: 2π counter-clockwise and 2π clockwise.
     assert np.sum(turns[turns > 0]) * DT == pytest.approx(2 * np.pi, rel=1e-9)
     assert np.sum(turns[turns < 0]) * DT == pytest.approx(-2 * np.pi, rel=1e-9)
+
+
+def test_an_identified_robot_equal_to_its_base_runs_the_nominal_loop():
+    """Scales of 1, the base's half-track, no latency or noise: the plain rollout's poses."""
+    from wmr_jax._src.identify.closed_loop import identified_rollout
+    from wmr_jax._src.rollout import rollout
+
+    identified = {
+        "robot": {"half_track": float(BASE.half_track), "speed_gain": float(BASE.speed_gain)},
+        "wheel_scale": {"left": 1.0, "right": 1.0},
+        "latency_samples": 0,
+        "noise": {"sigma_xy": 0.3, "sigma_theta": 0.01},
+    }
+    ref, init = [30.0, 20.0, 1.0], [0.0, 0.0, 0.0]
+    traj = identified_rollout(
+        ref, Gains(), controller=SHIM_SUNG, init=init, dt=0.033, steps=100, velocity="ideal",
+        base=BASE, identified=identified, noise=False,
+    )  # fmt: skip
+    with jax.enable_x64(True):
+        nominal = rollout(ref, Gains(), init=init, dt=0.033, steps=100, robot=BASE)
+    np.testing.assert_allclose(traj.poses, np.asarray(nominal.poses), atol=1e-9)
+    # A wider true track turns less than the base believes: the run differs.
+    identified["robot"]["half_track"] *= 1.05
+    wider = identified_rollout(
+        ref, Gains(), controller=SHIM_SUNG, init=init, dt=0.033, steps=100, velocity="ideal",
+        base=BASE, identified=identified, noise=False,
+    )  # fmt: skip
+    assert np.max(np.abs(wider.poses - traj.poses)) > 1e-3

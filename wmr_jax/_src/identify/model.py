@@ -70,23 +70,28 @@ class TrueRobot(NamedTuple):
         scale: ``(2,)`` ``[1 + δ_L, 1 + δ_R]``, rim over set point.
         base_half_track: ``L₀``, the half-track the firmware converts with, cm.
         delay: the latency ``m`` in samples (a float holding an integer).
+        half_track: the true half-track ``L``, cm.
+        speed_gain: the true wheel loop's gain, 1/s.
     """
 
     noise: jax.Array
     scale: jax.Array
     base_half_track: jax.Array
     delay: jax.Array
+    half_track: jax.Array
+    speed_gain: jax.Array
 
     def realised(self, command: jax.Array, robot: Robot) -> tuple[jax.Array, jax.Array]:
-        """The body velocity of the true rims of ``command``; ``robot`` is the true robot."""
+        """The body velocity of the true rims of ``command`` (``v + i ω``)."""
+        del robot  # the firmware's half-track is the base's, the body's the true one
         v, omega = command.real, command.imag
         left = (v - self.base_half_track * omega) * self.scale[0]
         right = (v + self.base_half_track * omega) * self.scale[1]
-        return 0.5 * (left + right), 0.5 * (right - left) / robot.half_track
+        return 0.5 * (left + right), 0.5 * (right - left) / self.half_track
 
     def true_robot(self, robot: Robot) -> Robot:
-        """The robot that moves is the step's own (the true one)."""
-        return robot
+        """The robot that moves: ``robot`` with the true half-track and wheel-loop gain."""
+        return robot.replace(half_track=self.half_track, speed_gain=self.speed_gain)
 
     def measurement(self, pose: loops.SplitPose, noise: jax.Array) -> Any:
         return disturbances.measurement(pose, noise)
@@ -147,6 +152,8 @@ def replay(
         jnp.asarray(scale, dtype),
         jnp.asarray(base_half_track, dtype),
         jnp.asarray(delay, dtype),
+        robot.half_track,
+        robot.speed_gain,
     )
     _, _, records = loops.scan_closed_loop(
         refs[0],
