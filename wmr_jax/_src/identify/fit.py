@@ -125,6 +125,21 @@ def _normal_one(theta, delay, commands, measured, mask, base_half_track, base, d
     return r @ r, jac.T @ jac, jac.T @ r, r
 
 
+def _normal_fd_one(theta, delay, commands, measured, mask, base_half_track, base, dt, sigma):
+    """``_normal_one`` with the Jacobian by central differences (the baseline)."""
+
+    def flat(t):
+        r = _residuals(t, delay, Segments(commands, measured), base_half_track, base, dt, sigma)
+        return (r * mask[:, None, None]).reshape(-1)
+
+    h = jnp.maximum(jnp.abs(theta), 1.0) * FD_STEP
+    probes = jnp.concatenate([theta + jnp.diag(h), theta - jnp.diag(h)])
+    values = jax.vmap(flat)(probes)
+    jac = ((values[:4] - values[4:]) / (2 * h[:, None])).T
+    r = flat(theta)
+    return r @ r, jac.T @ jac, jac.T @ r, r
+
+
 def _cost_one(theta, delay, commands, measured, mask, base_half_track, base, dt, sigma):
     r = _residuals(theta, delay, Segments(commands, measured), base_half_track, base, dt, sigma)
     r = r * mask[:, None, None]
@@ -136,6 +151,8 @@ def _cost_one(theta, delay, commands, measured, mask, base_half_track, base, dt,
 _AXES = (0, 0, 0, 0, 0, 0, None, 0, 0)
 _normal = jax.jit(jax.vmap(_normal_one, in_axes=_AXES))
 _cost = jax.jit(jax.vmap(_cost_one, in_axes=_AXES))
+_normal_fd = jax.jit(jax.vmap(_normal_fd_one, in_axes=_AXES))
+FD_STEP = 1e-6
 
 
 class Chunks(NamedTuple):
@@ -193,16 +210,19 @@ def _summed(function, theta, delay, chunks, chunk_ids, fixed, sigma):
     return total
 
 
-def levenberg_marquardt(theta, delay, chunks, fixed, sigma, iterations, chunk_ids=None):
+def levenberg_marquardt(
+    theta, delay, chunks, fixed, sigma, iterations, chunk_ids=None, normal=None
+):
     """Levenberg–Marquardt on a batch: ``θ (B, 4)`` → ``(θ, cost, JᵀJ, r)``, host-side loop.
 
     ``fixed``: ``(base half-track (B,), base robot, dt (B,))``.
     """
     ids = range(chunks.commands.shape[1]) if chunk_ids is None else chunk_ids
+    normal = _normal if normal is None else normal
     theta = np.asarray(theta, float)
     lam = np.full(theta.shape[0], 1e-3)
     for _ in range(iterations):
-        cost, jtj, g, _ = _summed(_normal, theta, delay, chunks, ids, fixed, sigma)
+        cost, jtj, g, _ = _summed(normal, theta, delay, chunks, ids, fixed, sigma)
         damped = jtj + lam[:, None, None] * (
             np.eye(4) * np.diagonal(jtj, axis1=1, axis2=2)[:, None]
         )
@@ -211,7 +231,7 @@ def levenberg_marquardt(theta, delay, chunks, fixed, sigma, iterations, chunk_id
         better = trial < cost
         theta = np.where(better[:, None], theta + step, theta)
         lam = np.where(better, lam * 0.3, lam * 10.0)
-    cost, jtj, _, r = _summed(_normal, theta, delay, chunks, ids, fixed, sigma)
+    cost, jtj, _, r = _summed(normal, theta, delay, chunks, ids, fixed, sigma)
     return theta, cost, jtj, r
 
 
@@ -267,13 +287,19 @@ def _segments(logs, segment):
     return Segments(*(np.concatenate(x) for x in zip(*parts, strict=True)))
 
 
-def fit_batch(segs: list[Segments], base: Robot, dt: float, iterations: int = 8) -> list[Fit]:
-    """Fit a batch of robots' logs (same length each) at once; one ``Fit`` per robot."""
+def fit_batch(
+    segs: list[Segments], base: Robot, dt: float, iterations: int = 8, *, jacobian: str = "exact"
+) -> list[Fit]:
+    """Fit a batch of robots' logs (same length each) at once; one ``Fit`` per robot.
+
+    ``jacobian="fd"``: central finite differences instead of ``jacfwd`` (the
+    baseline).
+    """
     with jax.enable_x64(True):
-        return _fit_batch(segs, base, dt, iterations)
+        return _fit_batch(segs, base, dt, iterations, _normal_fd if jacobian == "fd" else None)
 
 
-def _fit_batch(segs, base, dt, iterations):
+def _fit_batch(segs, base, dt, iterations, normal=None):
     batch = len(segs)
     chunks = chunked(segs)
     base = jax.tree.map(lambda x: np.float64(x), base)
@@ -288,7 +314,7 @@ def _fit_batch(segs, base, dt, iterations):
     for m in range(model.MAX_LATENCY + 1):
         delay = np.full(batch, float(m))
         theta, cost, _, _ = levenberg_marquardt(
-            theta0, delay, chunks, fixed, sigma0, PROFILE_ITERATIONS, profile_ids
+            theta0, delay, chunks, fixed, sigma0, PROFILE_ITERATIONS, profile_ids, normal
         )
         thetas.append(theta)
         costs.append(cost)
@@ -296,12 +322,14 @@ def _fit_batch(segs, base, dt, iterations):
     latency = np.argmin(costs, axis=1)
     theta = np.stack([thetas[m][i] for i, m in enumerate(latency)])
     delay = latency.astype(float)
-    theta, _, _, r = levenberg_marquardt(theta, delay, chunks, fixed, sigma0, 2)
+    theta, _, _, r = levenberg_marquardt(theta, delay, chunks, fixed, sigma0, 2, None, normal)
     sigma = _noise(r, sigma0, chunks)
-    theta, _, _, r = levenberg_marquardt(theta, delay, chunks, fixed, sigma, iterations)
+    theta, _, _, r = levenberg_marquardt(
+        theta, delay, chunks, fixed, sigma, iterations, None, normal
+    )
     sigma = _noise(r, sigma, chunks)
     # Weights from the final noise: the curvature in units of the noise itself.
-    theta, _, jtj, r = levenberg_marquardt(theta, delay, chunks, fixed, sigma, 1)
+    theta, _, jtj, r = levenberg_marquardt(theta, delay, chunks, fixed, sigma, 1, None, normal)
     return [
         _result(theta[i], int(latency[i]), sigma[i], jtj[i], r[i], costs[i], chunks)
         for i in range(batch)

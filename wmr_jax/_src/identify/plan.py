@@ -49,7 +49,7 @@ def plan_commands(
     v_lim, w_lim = _limits(robot)
     parts = []
     if squares:
-        side = min(100.0, 2 * v_lim)
+        side = min(200.0, 4 * v_lim)
         for clockwise in (False, True):
             parts.append(square_commands(robot, dt, side, clockwise))
     count = sum(len(p) for p in parts)
