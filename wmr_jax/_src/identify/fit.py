@@ -99,7 +99,7 @@ def _placed(predicted: jax.Array, measured: jax.Array, w_xy: jax.Array, w_theta:
 
 def _segment_residuals(theta, delay, commands, measured, base_half_track, base, dt, sigma):
     """Weighted residuals ``(S, 3)`` of one segment at parameters ``θ``."""
-    robot = model.fitted_robot(base, theta[2], theta[3])
+    robot = model.fitted_robot(base, theta[2], jnp.exp(theta[3]))
     scale = jnp.stack([1 + theta[0], 1 + theta[1]])
     init = jnp.zeros((3,), commands.dtype)
     poses = model.replay(commands, init, robot, scale, base_half_track, delay, dt)
@@ -153,6 +153,11 @@ _normal = jax.jit(jax.vmap(_normal_one, in_axes=_AXES))
 _cost = jax.jit(jax.vmap(_cost_one, in_axes=_AXES))
 _normal_fd = jax.jit(jax.vmap(_normal_fd_one, in_axes=_AXES))
 FD_STEP = 1e-6
+# The wheel loop's gain is fitted as its logarithm (always positive, and a
+# relative step in every direction), kept where the replay's RK4 sub-steps
+# stay stable (k_p dt / substeps <= 2.5, docs/model.md §4.3).
+_LOG_GAIN_LOW = math.log(0.5)
+_STABLE = 2.5 * model.SUBSTEPS
 
 
 class Chunks(NamedTuple):
@@ -230,6 +235,7 @@ def levenberg_marquardt(
         trial = _summed(_cost, theta + step, delay, chunks, ids, fixed, sigma)
         better = trial < cost
         theta = np.where(better[:, None], theta + step, theta)
+        theta[:, 3] = np.clip(theta[:, 3], _LOG_GAIN_LOW, np.log(_STABLE / fixed[2]))
         lam = np.where(better, lam * 0.3, lam * 10.0)
     cost, jtj, _, r = _summed(normal, theta, delay, chunks, ids, fixed, sigma)
     return theta, cost, jtj, r
@@ -247,7 +253,7 @@ class Fit(NamedTuple):
         ci95: ``{name: (low, high)}``.
         residual_rms: ``{"xy": cm, "theta": rad}``.
         profile: cost per latency ``0 … MAX_LATENCY``.
-        covariance: ``(4, 4)`` of ``θ``.
+        covariance: ``(4, 4)`` of ``θ = (δ_L, δ_R, L, log k_p)``.
         segment_residuals: ``(n, 3)`` the windows' residuals, cm, cm, rad.
     """
 
@@ -305,7 +311,7 @@ def _fit_batch(segs, base, dt, iterations, normal=None):
     base = jax.tree.map(lambda x: np.float64(x), base)
     base_l = float(base.half_track)
     fixed = (np.full(batch, base_l), base, np.full(batch, float(dt)))
-    theta0 = np.tile([0.0, 0.0, base_l, float(base.speed_gain)], (batch, 1))
+    theta0 = np.tile([0.0, 0.0, base_l, math.log(float(base.speed_gain))], (batch, 1))
     sigma0 = np.tile([1.0, 0.02], (batch, 1))
     # The profile over m on the first chunks only: the latency shows in
     # every segment, and the refinement then uses them all.
@@ -343,9 +349,11 @@ def _fit(logs, base, dt, iterations, segment):
 def _result(theta, latency, sigma, jtj, r, costs, chunks):
     covariance = np.linalg.inv(jtj)
     half = Z95 * np.sqrt(np.diag(covariance))
-    names = ("wheel_scale_left", "wheel_scale_right", "half_track", "speed_gain")
-    centre = np.array([1 + theta[0], 1 + theta[1], theta[2], theta[3]])
-    ci = {n: (float(c - h), float(c + h)) for n, c, h in zip(names, centre, half, strict=True)}
+    names = ("wheel_scale_left", "wheel_scale_right", "half_track")
+    centre = np.array([1 + theta[0], 1 + theta[1], theta[2]])
+    ci = {n: (float(c - h), float(c + h)) for n, c, h in zip(names, centre, half, strict=False)}
+    # The gain's interval is that of its logarithm, mapped back.
+    ci["speed_gain"] = (math.exp(theta[3] - half[3]), math.exp(theta[3] + half[3]))
     dof_xy, dof_t = _dof(chunks)
     for name, s, dof in (("sigma_xy", sigma[0], dof_xy), ("sigma_theta", sigma[1], dof_t)):
         spread = Z95 / math.sqrt(2 * dof)
@@ -358,7 +366,7 @@ def _result(theta, latency, sigma, jtj, r, costs, chunks):
     return Fit(
         centre[:2],
         float(theta[2]),
-        float(theta[3]),
+        math.exp(theta[3]),
         latency,
         float(sigma[0]),
         float(sigma[1]),
