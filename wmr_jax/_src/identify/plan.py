@@ -21,10 +21,16 @@ from wmr_jax._src.params import Robot
 __all__ = ["plan_commands", "square_commands", "synthetic_log"]
 
 
+# The fastest turn a plan asks for, rad/s: a small robot spinning at the
+# rate its wheels allow traces loops a few cm wide, where its speed scale
+# hardly shows.
+TURN_RATE = 2.0
+
+
 def _limits(robot: Robot) -> tuple[float, float]:
-    """Speed and turn rate within half the rim budget each."""
+    """Speed and turn rate within half the rim budget each (turns at most ``TURN_RATE``)."""
     v_max = float(robot.v_max)
-    return 0.5 * v_max, 0.5 * v_max / float(robot.half_track)
+    return 0.5 * v_max, min(0.5 * v_max / float(robot.half_track), TURN_RATE)
 
 
 def square_commands(robot: Robot, dt: float, side: float, clockwise: bool) -> np.ndarray:
@@ -43,7 +49,11 @@ def square_commands(robot: Robot, dt: float, side: float, clockwise: bool) -> np
 def plan_commands(
     robot: Robot, dt: float, minutes: float, seed: int = 0, *, squares: bool = True
 ) -> np.ndarray:
-    """An exciting command sequence ``(N, 2)`` of ``minutes`` at period ``dt`` (cm/s, rad/s)."""
+    """An exciting command sequence ``(N, 2)`` of ``minutes`` at period ``dt`` (cm/s, rad/s).
+
+    The two squares first (a plan shorter than they are ends inside them),
+    then random held commands.
+    """
     rng = np.random.default_rng(seed)
     total = round(minutes * 60 / dt)
     v_lim, w_lim = _limits(robot)
@@ -61,7 +71,7 @@ def plan_commands(
         excess = abs(v) / v_lim + abs(w) / w_lim
         if excess > 1:
             v, w = v / excess, w / excess
-        parts.insert(len(parts) // 2 if squares else len(parts), np.tile([v, w], (hold, 1)))
+        parts.append(np.tile([v, w], (hold, 1)))
         count += hold
     commands = np.concatenate(parts)[:total]
     return commands
