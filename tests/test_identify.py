@@ -257,3 +257,38 @@ def test_an_identified_robot_equal_to_its_base_runs_the_nominal_loop():
         base=BASE, identified=identified, noise=False,
     )  # fmt: skip
     assert np.max(np.abs(wider.poses - traj.poses)) > 1e-3
+
+
+def test_an_identified_json_reads_as_its_true_robot(tmp_path):
+    """Other commands' --robot reads identify's output as the identified robot, with a note."""
+    import json
+
+    from wmr_jax._src.robots import read_robot
+
+    content = {
+        "robot": {"half_track": 17.2, "speed_gain": 64.0, "v_max": 120.0},
+        "wheel_scale": {"left": 1.01, "right": 0.99},
+        "latency_samples": 1,
+    }
+    path = tmp_path / "identified.json"
+    path.write_text(json.dumps(content))
+    found = read_robot(str(path))
+    assert (found.robot.half_track, found.robot.speed_gain) == (17.2, 64.0)
+    assert "simulate only" in found.note
+
+
+def test_cli_plan_and_a_bad_log(tmp_path, capsys, good):
+    from wmr_jax._src.cli.main import main
+
+    out = tmp_path / "drive.csv"
+    assert main(["identify", "--plan", str(out), "--minutes", "0.5", "--plan-dt", "0.05"]) == 0
+    lines = out.read_text().splitlines()
+    assert lines[0] == "t,v_cmd,omega_cmd" and len(lines) == 1 + 600
+    commands, measured = good
+    metres = measured.copy()
+    metres[:, :2] /= 100
+    path = _csv(tmp_path, commands, metres, name="metres.csv")
+    capsys.readouterr()
+    assert main(["identify", "--log", str(path), "--out", str(tmp_path / "id")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("wmr-jax: error:") and "metres" in err and "\n" not in err
