@@ -9,14 +9,17 @@ form (variable projection), so the tracker's noise enters the fit only as
 noise, never as a biased starting point.
 
 The residuals are smooth in the four continuous parameters
-``θ = (δ_L, δ_R, L, k_p)`` and there are thousands of them: a least-squares
+``θ = (δ_L, δ_R, L, log k_p)`` and there are thousands of them: a least-squares
 problem that Gauss–Newton solves in a handful of steps where a first-order
 method (Adam, L-BFGS on the summed loss) needs hundreds. The Jacobian is
 exact (``jax.jacfwd``, four tangents through the scan), the step is
 Levenberg–Marquardt's (damped where a step would not lower the cost), and
 ``JᵀJ`` at the optimum is the curvature the 95 % intervals come from. The
-latency ``m`` is an integer: every ``m`` in ``0 … MAX_LATENCY`` is fitted in
-one ``vmap`` and the lowest cost wins (a profile over ``m``).
+latency ``m`` is an integer: every ``m`` in ``0 … MAX_LATENCY`` is fitted for
+a few steps on the first segments and the lowest cost wins (a profile over
+``m``). The residuals and their normal equations are one compiled program
+over a fixed-size chunk of segments and a batch of robots (``vmap``), so a
+log of any length, or a hundred robots' logs, compile it once.
 """
 
 from __future__ import annotations
