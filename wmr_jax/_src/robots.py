@@ -398,8 +398,15 @@ def read_robot(source: Any) -> LoadedRobot:
     except (OSError, UnicodeDecodeError) as err:
         raise ValueError(f"{where} cannot be read: {' '.join(str(err).split())}") from None
     if path.suffix.lower() == ".json":
-        robot = _robot_from_json(content, where)
+        identified = _identified_block(content)
+        robot = _robot_from_json(content if identified is None else identified, where)
         _warn_unit_slips(robot, where, ros=False)
+        if identified is not None:
+            note = (
+                f"{text}: the identified robot (its half-track and wheel-loop gain); its "
+                "wheel scales, latency and tracker noise act in simulate only"
+            )
+            return LoadedRobot(robot, text, note)
         return LoadedRobot(robot, text)
     robot, note, accelerations = _robot_from_ros_yaml(content, where)
     _warn_unit_slips(robot, where, ros=True)
@@ -418,6 +425,17 @@ def load_robot(source: Any) -> Robot:
         ValueError: one line naming the file, the key, its value and what is allowed.
     """
     return read_robot(source).robot
+
+
+def _identified_block(content: str) -> str | None:
+    """The ``robot`` block of an ``identify`` output (``identified.json``), else ``None``."""
+    try:
+        values = json.loads(content)
+    except (ValueError, RecursionError):
+        return None
+    if isinstance(values, dict) and "wheel_scale" in values and "robot" in values:
+        return json.dumps(values["robot"])
+    return None
 
 
 def _robot_from_json(content: str, where: str) -> Robot:

@@ -21,7 +21,8 @@ __all__ = ["COMMANDS", "build_parser", "main"]
 # The commands in --help order. Each lives in the module of this package of
 # the same name, except demo, which shares the paper's.
 COMMANDS = (
-    "simulate demo paper tune sweep compare waypoints robustness evaluate export animate bench"
+    "simulate demo paper tune sweep compare waypoints robustness evaluate export animate identify "
+    "bench"
 ).split()
 _MODULE_OF = {"demo": "paper"}
 

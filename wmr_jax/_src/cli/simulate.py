@@ -115,6 +115,22 @@ def plot_title(ref: Any, controller: Any, gains: Any, gains_file: Any) -> str:
     return f"{where}; {what}"
 
 
+def _identified(source: Any) -> Any:
+    """``(LoadedRobot of the base, content)`` of an ``identify`` output, else ``None``."""
+    from wmr_jax._src.identify.closed_loop import is_identified, read_identified
+    from wmr_jax._src.robots import LoadedRobot
+
+    if not is_identified(source):
+        return None
+    base, content = read_identified(source)
+    note = (
+        f"the true robot is the one identified in {source} (wheel scales, half-track "
+        f"{content['robot']['half_track']:.4g} cm, latency {content['latency_samples']}, "
+        "tracker noise); the controller believes its base robot"
+    )
+    return LoadedRobot(base, str(source), note), content
+
+
 def run(args: Any) -> int:
     """Run ``wmr-jax simulate``; return the exit status."""
     import numpy as np
@@ -131,24 +147,33 @@ def run(args: Any) -> int:
     if args.steps is not None:
         steps = flags.positive_int("--steps", args.steps, 1, 10**7)
     velocity = flags.velocity_loop(args.velocity)
-    given = flags.robot_from(args.robot)
+    identified = _identified(args.robot)
+    given = flags.robot_from(args.robot) if identified is None else identified[0]
     controller, gains, saved = _controller_and_gains(args)
     robot = flags.robot_for_gains(given, saved, "--gains", args.gains)
     if given is not None and given.note:
         print(given.note)
     if args.steps is None:
         steps = default_steps(robot)
-    with flags.as_flags({"ref": "--ref", "init": "--init", "dt": "--dt"}):
-        traj = rollout(
-            ref,
-            gains,
-            init=init,
-            dt=dt,
-            steps=steps,
-            velocity=velocity,
-            controller=controller,
-            robot=robot,
-        )
+    if identified is not None:
+        from wmr_jax._src.identify.closed_loop import identified_rollout
+
+        traj = identified_rollout(
+            ref, gains, controller=controller, init=init, dt=dt, steps=steps,
+            velocity=velocity, base=robot, identified=identified[1],
+        )  # fmt: skip
+    else:
+        with flags.as_flags({"ref": "--ref", "init": "--init", "dt": "--dt"}):
+            traj = rollout(
+                ref,
+                gains,
+                init=init,
+                dt=dt,
+                steps=steps,
+                velocity=velocity,
+                controller=controller,
+                robot=robot,
+            )
     t_arrive = float(metrics.arrival_time(traj, np.asarray(ref), dt=dt))
     per_region = np.asarray(metrics.region_time(traj, dt=dt))
     final = np.asarray(traj.poses[-1])

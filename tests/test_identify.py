@@ -1,0 +1,294 @@
+"""Identifying the true robot from its logs (wmr_jax._src.identify, docs/model.md §10)."""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from wmr_jax._src import loops
+from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
+from wmr_jax._src.identify import fit, logs, model, plan
+from wmr_jax._src.params import Gains
+from wmr_jax._src.robots import load_robot
+
+BASE = load_robot("paper")
+DT = 0.04
+SIGMA_XY, SIGMA_THETA = 0.3, math.radians(0.5)
+
+
+def _log(seed, scale, track_factor, gain, latency, minutes=1.0, dt=DT, squares=True):
+    commands = plan.plan_commands(BASE, dt, minutes, seed, squares=squares)
+    return plan.synthetic_log(
+        commands,
+        BASE,
+        scale,
+        float(BASE.half_track) * track_factor,
+        gain,
+        latency,
+        dt,
+        SIGMA_XY,
+        SIGMA_THETA,
+        jax.random.PRNGKey(seed),
+    )
+
+
+def test_replay_with_the_true_parameters_is_the_closed_loop_bit_for_bit():
+    """A log written by the Shim–Sung loop on the true robot replays to its poses exactly."""
+    steps, latency = 120, 2
+    with jax.enable_x64(True):
+        robot = model.fitted_robot(
+            jax.tree.map(jnp.float64, BASE), float(BASE.half_track) * 1.03, 60.0
+        )
+        noise = jax.random.normal(jax.random.PRNGKey(3), (steps, 3)) * 0.3
+        spec = model.TrueRobot(
+            noise,
+            jnp.asarray([1.02, 0.985]),
+            jnp.float64(BASE.half_track),
+            jnp.float64(latency),
+            robot.half_track,
+            robot.speed_gain,
+        )
+        options = loops.Options(
+            steps=steps,
+            velocity="nonideal",
+            controller=SHIM_SUNG,
+            wheel_integral=False,
+            wheel_coriolis=False,
+            remat=False,
+            max_delay=latency,
+        )
+        init = jnp.asarray([-40.0, 25.0, 1.0])
+        ref = jnp.zeros(3)
+        _, _, (poses, out, _) = loops.scan_closed_loop(
+            ref, Gains(), init, robot, jnp.float64(DT), options, disturbance=spec, record=True
+        )
+        applied = np.column_stack([out.v, out.omega])
+        assert np.all(applied[:latency] == 0) and np.any(applied[latency:] != 0)
+        # The command sent at sample k is the one applied at sample k + m.
+        sent = np.vstack([applied[latency:], np.zeros((latency, 2))])
+        replayed = model.replay(
+            jnp.asarray(sent), init, robot, spec.scale, spec.base_half_track, latency, DT
+        )
+    assert np.array_equal(np.asarray(replayed), np.asarray(poses))
+
+
+def test_the_model_moves_the_body_with_the_true_half_track():
+    """Straight and on-the-spot commands move as the model's formulas say."""
+    dt, steps = 0.05, 200
+    scale, track, base_track = (1.01, 0.99), 9.0, 8.0
+    commands = np.zeros((steps, 2))
+    commands[:100, 0] = 20.0
+    commands[100:, 1] = 0.5
+    with jax.enable_x64(True):
+        robot = model.fitted_robot(
+            jax.tree.map(jnp.float64, BASE.replace(half_track=base_track)), track, 200.0
+        )
+        poses = np.asarray(
+            model.replay(
+                jnp.asarray(commands), jnp.zeros(3), robot, jnp.asarray(scale), base_track, 0, dt
+            )
+        )
+    # Straight: rims 20·(1.01) and 20·(0.99): v = 20, ω = 20·(0.99 − 1.01)/(2·9).
+    omega = 20 * (scale[1] - scale[0]) / (2 * track)
+    assert poses[99, 2] == pytest.approx(omega * 100 * dt, rel=2e-2)
+    # On the spot: rims ∓0.5·8 scaled: ω = 0.5·8·(1.01 + 0.99)/(2·9).
+    turn = (poses[199, 2] - poses[129, 2]) / (70 * dt)
+    assert turn == pytest.approx(0.5 * base_track * (scale[0] + scale[1]) / (2 * track), rel=1e-6)
+
+
+def test_identification_recovers_several_robots_within_the_targets():
+    """Four robots, latency 0–3, one minute of driving each, fitted in one batch."""
+    truths = [
+        ((1.012, 0.991), 1.015, 100.0, 0),
+        ((0.993, 1.006), 0.985, 70.0, 1),
+        ((1.004, 1.009), 1.03, 130.0, 2),
+        ((0.988, 0.997), 0.99, 90.0, 3),
+    ]
+    segs = []
+    for seed, (scale, track, gain, latency) in enumerate(truths):
+        commands, measured, _ = _log(seed, scale, track, gain, latency, squares=False)
+        segs.append(fit.segments_of(commands, measured))
+    found = fit.fit_batch(segs, BASE, DT)
+    for (scale, track, gain, latency), got in zip(truths, found, strict=True):
+        assert got.latency == latency
+        # One minute of driving, not the target's five: twice the target's 0.1 %.
+        np.testing.assert_allclose(got.wheel_scale, scale, rtol=2e-3)
+        assert got.half_track == pytest.approx(float(BASE.half_track) * track, rel=2e-3)
+        assert got.speed_gain == pytest.approx(gain, rel=0.1)
+        assert got.sigma_xy == pytest.approx(SIGMA_XY, rel=0.2)
+        assert got.sigma_theta == pytest.approx(SIGMA_THETA, rel=0.2)
+        lo, hi = got.ci95["half_track"]
+        assert lo < got.half_track < hi
+
+
+def _csv(tmp_path, commands, poses, dt=DT, name="log.csv"):
+    path = tmp_path / name
+    logs.write_csv(path, dt, commands, poses)
+    return path
+
+
+def test_a_ros2_bag_reads_as_its_csv(tmp_path):
+    """Twist and PoseStamped messages at the samples, in m, read back to the CSV's log."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    commands, measured, _ = _log(5, (1.01, 0.99), 1.0, 100.0, 1, minutes=0.2)
+    csv_log = logs.read_csv(_csv(tmp_path, commands, measured))
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    twist_t = store.types["geometry_msgs/msg/Twist"]
+    vector = store.types["geometry_msgs/msg/Vector3"]
+    pose_t = store.types["geometry_msgs/msg/PoseStamped"]
+    header_t = store.types["std_msgs/msg/Header"]
+    time_t = store.types["builtin_interfaces/msg/Time"]
+    point_t = store.types["geometry_msgs/msg/Point"]
+    quat_t = store.types["geometry_msgs/msg/Quaternion"]
+    inner_t = store.types["geometry_msgs/msg/Pose"]
+    start = 1_700_000_000 * 10**9
+    path = tmp_path / "bag"
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        cmd = writer.add_connection("/cmd_vel", twist_t.__msgtype__, typestore=store)
+        pos = writer.add_connection("/tracker", pose_t.__msgtype__, typestore=store)
+        for k, (c, p) in enumerate(zip(commands, measured, strict=True)):
+            stamp = start + round(k * DT * 1e9)
+            msg = twist_t(vector(c[0] / 100, 0.0, 0.0), vector(0.0, 0.0, c[1]))
+            writer.write(cmd, stamp, store.serialize_cdr(msg, twist_t.__msgtype__))
+            half = p[2] / 2
+            header = header_t(time_t(stamp // 10**9, stamp % 10**9), "map")
+            pose = inner_t(
+                point_t(p[0] / 100, p[1] / 100, 0.0),
+                quat_t(0.0, 0.0, math.sin(half), math.cos(half)),
+            )
+            writer.write(pos, stamp, store.serialize_cdr(pose_t(header, pose), pose_t.__msgtype__))
+    bag_log = logs.read_log(path, cmd_topic="/cmd_vel", pose_topic="/tracker")
+    assert bag_log.dt == pytest.approx(DT, rel=1e-9)
+    np.testing.assert_allclose(bag_log.commands, csv_log.commands, atol=1e-9)
+    np.testing.assert_allclose(bag_log.poses, csv_log.poses, atol=1e-9)
+    with pytest.raises(ValueError, match="topic '/odom' is not in the bag"):
+        logs.read_log(path, cmd_topic="/cmd_vel", pose_topic="/odom")
+
+
+@pytest.fixture(scope="module")
+def good():
+    commands, measured, _ = _log(7, (1.01, 0.99), 1.0, 100.0, 0, minutes=1.5)
+    return commands, measured
+
+
+def _error(path):
+    with pytest.raises(ValueError) as info:
+        logs.read_csv(path, minimum=50)
+    message = str(info.value)
+    assert str(path) in message and "\n" not in message
+    return message
+
+
+def test_bad_logs_give_one_clear_error_each(tmp_path, good):
+    commands, measured = good
+    # Non-uniform time: one step of 1.5 periods at the 11th row (line 12).
+    path = _csv(tmp_path, commands, measured, name="ok.csv")
+    text = path.read_text().splitlines()
+    row = text[11].split(",")
+    row[0] = repr(float(row[0]) + DT / 2)
+    text[11] = ",".join(row)
+    (tmp_path / "time.csv").write_text("\n".join(text) + "\n")
+    assert "line 12" in _error(tmp_path / "time.csv") and "uniform" in _error(tmp_path / "time.csv")
+    # Too short.
+    assert "too short" in _error(_csv(tmp_path, commands[:20], measured[:20], name="short.csv"))
+    # NaN at line 6.
+    bad = measured.copy()
+    bad[4, 1] = np.nan
+    message = _error(_csv(tmp_path, commands, bad, name="nan.csv"))
+    assert "line 6" in message and "y = nan" in message
+    # Metres and m/s.
+    metres = measured.copy()
+    metres[:, :2] /= 100
+    assert "metres" in _error(_csv(tmp_path, commands, metres, name="metres.csv"))
+    fast = commands.copy()
+    fast[:, 0] /= 100
+    assert "m/s" in _error(_csv(tmp_path, fast, measured, name="ms.csv"))
+    # Degrees, wrapped to ±180 as trackers write them.
+    degrees = measured.copy()
+    degrees[:, 2] = (np.rad2deg(degrees[:, 2]) + 180) % 360 - 180
+    assert "degrees" in _error(_csv(tmp_path, commands, degrees, name="deg.csv"))
+    # A wrong header.
+    (tmp_path / "header.csv").write_text("t,v,w,x,y,theta\n0,0,0,0,0,0\n")
+    assert "line 1" in _error(tmp_path / "header.csv")
+    # The good log reads.
+    assert logs.read_csv(path, minimum=50).commands.shape == commands.shape
+
+
+def test_plan_stays_within_the_wheel_budget_and_holds_both_squares():
+    commands = plan.plan_commands(BASE, DT, 2.0, seed=1)
+    assert commands.shape == (round(120 / DT), 2)
+    rims = np.abs(commands[:, 0]) + float(BASE.half_track) * np.abs(commands[:, 1])
+    assert np.max(rims) <= float(BASE.v_max)
+    turns = commands[(commands[:, 0] == 0) & (commands[:, 1] != 0), 1]
+    # Eight quarter turns each way: 2π counter-clockwise and 2π clockwise.
+    assert np.sum(turns[turns > 0]) * DT == pytest.approx(2 * np.pi, rel=1e-9)
+    assert np.sum(turns[turns < 0]) * DT == pytest.approx(-2 * np.pi, rel=1e-9)
+
+
+def test_an_identified_robot_equal_to_its_base_runs_the_nominal_loop():
+    """Scales of 1, the base's half-track, no latency or noise: the plain rollout's poses."""
+    from wmr_jax._src.identify.closed_loop import identified_rollout
+    from wmr_jax._src.rollout import rollout
+
+    identified = {
+        "robot": {"half_track": float(BASE.half_track), "speed_gain": float(BASE.speed_gain)},
+        "wheel_scale": {"left": 1.0, "right": 1.0},
+        "latency_samples": 0,
+        "noise": {"sigma_xy": 0.3, "sigma_theta": 0.01},
+    }
+    ref, init = [30.0, 20.0, 1.0], [0.0, 0.0, 0.0]
+    traj = identified_rollout(
+        ref, Gains(), controller=SHIM_SUNG, init=init, dt=0.033, steps=100, velocity="ideal",
+        base=BASE, identified=identified, noise=False,
+    )  # fmt: skip
+    with jax.enable_x64(True):
+        nominal = rollout(ref, Gains(), init=init, dt=0.033, steps=100, robot=BASE)
+    np.testing.assert_allclose(traj.poses, np.asarray(nominal.poses), atol=1e-9)
+    # A wider true track turns less than the base believes: the run differs.
+    identified["robot"]["half_track"] *= 1.05
+    wider = identified_rollout(
+        ref, Gains(), controller=SHIM_SUNG, init=init, dt=0.033, steps=100, velocity="ideal",
+        base=BASE, identified=identified, noise=False,
+    )  # fmt: skip
+    assert np.max(np.abs(wider.poses - traj.poses)) > 1e-3
+
+
+def test_an_identified_json_reads_as_its_true_robot(tmp_path):
+    """Other commands' --robot reads identify's output as the identified robot, with a note."""
+    import json
+
+    from wmr_jax._src.robots import read_robot
+
+    content = {
+        "robot": {"half_track": 17.2, "speed_gain": 64.0, "v_max": 120.0},
+        "wheel_scale": {"left": 1.01, "right": 0.99},
+        "latency_samples": 1,
+    }
+    path = tmp_path / "identified.json"
+    path.write_text(json.dumps(content))
+    found = read_robot(str(path))
+    assert (found.robot.half_track, found.robot.speed_gain) == (17.2, 64.0)
+    assert "simulate only" in found.note
+
+
+def test_cli_plan_and_a_bad_log(tmp_path, capsys, good):
+    from wmr_jax._src.cli.main import main
+
+    out = tmp_path / "drive.csv"
+    assert main(["identify", "--plan", str(out), "--minutes", "0.5", "--plan-dt", "0.05"]) == 0
+    lines = out.read_text().splitlines()
+    assert lines[0] == "t,v_cmd,omega_cmd" and len(lines) == 1 + 600
+    commands, measured = good
+    metres = measured.copy()
+    metres[:, :2] /= 100
+    path = _csv(tmp_path, commands, metres, name="metres.csv")
+    capsys.readouterr()
+    assert main(["identify", "--log", str(path), "--out", str(tmp_path / "id")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("wmr-jax: error:") and "metres" in err and "\n" not in err

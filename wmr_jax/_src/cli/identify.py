@@ -1,0 +1,118 @@
+"""``wmr-jax identify``: fit the true robot to its logs, or plan the driving that does.
+
+``--log FILE [FILE ...] --robot BASE --out DIR`` writes ``DIR/identified.json``
+(usable as ``--robot`` of ``simulate``, ``evaluate``, ``tune``) and
+``DIR/fit.png``, and prints the table. ``--plan OUT.csv --robot BASE
+--minutes 5`` writes the commands to drive (docs/robots.md).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+from wmr_jax._src.cli import flags
+
+__all__ = ["SUBCOMMANDS"]
+
+
+def add_arguments(parser: Any) -> None:
+    parser.add_argument(
+        "--log",
+        nargs="+",
+        metavar="FILE",
+        help="logs: CSV t,v_cmd,omega_cmd,x,y,theta (s, cm/s, rad/s, cm, cm, rad) "
+        "or ROS 2 bags (.mcap, .db3)",
+    )
+    flags.add_robot_flag(parser)
+    parser.add_argument("--out", metavar="DIR", help="output folder (identified.json, fit.png)")
+    parser.add_argument(
+        "--cmd-topic", metavar="TOPIC", help="bag topic of the commands (Twist, TwistStamped)"
+    )
+    parser.add_argument(
+        "--pose-topic",
+        metavar="TOPIC",
+        help="bag topic of the tracked poses (PoseStamped, Odometry)",
+    )
+    parser.add_argument(
+        "--dt",
+        metavar="S",
+        help="control period of a bag, s (default: the commands' median spacing)",
+    )
+    parser.add_argument(
+        "--plan", metavar="OUT.csv", help="write a command plan to drive instead of fitting"
+    )
+    parser.add_argument("--minutes", default="5", metavar="MIN", help="length of the plan")
+    parser.add_argument(
+        "--plan-dt", default="0.04", metavar="S", help="the plan's control period, s"
+    )
+    parser.add_argument("--seed", default="0", metavar="N", help="the plan's random seed")
+
+
+def run(args: Any) -> int:
+    from wmr_jax._src.robots import load_robot
+
+    robot = load_robot("paper") if args.robot is None else flags.robot_from(args.robot).robot
+    if args.plan is not None:
+        return _plan(args, robot)
+    if not args.log or args.out is None:
+        raise ValueError("identify needs --log FILE [FILE ...] and --out DIR (or --plan OUT.csv)")
+    from wmr_jax._src.identify import fit as fitting
+    from wmr_jax._src.identify import logs as reading
+    from wmr_jax._src.identify import result as output
+
+    out = flags.output_dir("--out", args.out)
+    dt = None if args.dt is None else flags.number("--dt", args.dt, low=0, closed=False)
+    minimum = fitting.WARMUP + fitting.SEGMENT + 1
+    logs = [
+        reading.read_log(
+            p, cmd_topic=args.cmd_topic, pose_topic=args.pose_topic, dt=dt, minimum=minimum
+        )
+        for p in args.log
+    ]
+    period = logs[0].dt
+    for log in logs[1:]:
+        if abs(log.dt - period) > 1e-3 * period:
+            raise ValueError(
+                f"--log {log.source} has a period of {log.dt:.6g} s; allowed: that of "
+                f"{logs[0].source} ({period:.6g} s)"
+            )
+    start = time.perf_counter()
+    found = fitting.fit_log([(g.commands, g.poses) for g in logs], robot, period)
+    seconds = time.perf_counter() - start
+    content = output.identified(robot, found, [g.source for g in logs], period)
+    content["fit_seconds"] = seconds
+    path = output.write(out, content)
+    output.plot_fit(out / "fit.png", logs, robot, found, period)
+    print(output.table(content))
+    print(f"fitted in {seconds:.1f} s; wrote {path} and {out / 'fit.png'}")
+    return 0
+
+
+def _plan(args: Any, robot: Any) -> int:
+    import numpy as np
+
+    from wmr_jax._src.identify import plan
+
+    minutes = flags.number("--minutes", args.minutes, low=0, closed=False)
+    dt = flags.number("--plan-dt", args.plan_dt, low=0, closed=False)
+    seed = flags.positive_int("--seed", args.seed, minimum=0)
+    path = Path(flags.output_file("--plan", args.plan))
+    commands = plan.plan_commands(robot, dt, minutes, seed)
+    t = np.arange(len(commands)) * dt
+    with open(path, "w") as f:
+        f.write("t,v_cmd,omega_cmd\n")
+        for row in np.column_stack([t, commands]):
+            f.write(",".join(f"{x:.6f}" for x in row) + "\n")
+    print(f"wrote {len(commands)} commands ({minutes:g} min at {dt:g} s) to {path}")
+    return 0
+
+
+SUBCOMMANDS = {
+    "identify": {
+        "help": "fit the true robot (wheel scales, track, wheel lag, latency, noise) to its logs",
+        "add_arguments": add_arguments,
+        "run": run,
+    },
+}

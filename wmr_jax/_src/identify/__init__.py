@@ -1,0 +1,1 @@
+"""Identify the true robot from its logs (docs/model.md §10)."""
