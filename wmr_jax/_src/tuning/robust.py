@@ -62,7 +62,7 @@ from wmr_jax._src.sensing.estimators import ESTIMATORS, OBSERVER_KNOTS
 from wmr_jax._src.sensing.loop import ClosedLoop
 from wmr_jax._src.tuning.estimation import EstimatorBox, estimator_box
 from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
-from wmr_jax._src.tuning.loss import LossWeights, arrival_terms
+from wmr_jax._src.tuning.loss import LossWeights, arrival_terms, capped_mean
 from wmr_jax._src.tuning.parametrisation import checked_point, paper_feasible_gains
 from wmr_jax._src.tuning.problems import FIXED, Problem, schedule_problem
 from wmr_jax._src.tuning.training import anneal, best_iteration, optimizer
@@ -253,7 +253,15 @@ def robust_gains(z: jax.Array, robot: Robot) -> Gains:
 
 
 def _relaxed_arrival(poses: jax.Array, ref: jax.Array, dt: jax.Array) -> jax.Array:
-    """Relaxed arrival time plus log-error shaping of one recorded run, s (as ``tuning_loss``)."""
+    """Relaxed arrival time plus log-error shaping of one recorded run, s.
+
+    The quantity of ``tuning_loss``'s per-run term in the ideal loop (the
+    same ``arrival_terms``, tolerances and weights), computed from the run's
+    recorded poses: ``disturbed_run`` records the trajectory, while
+    ``tuning_loss`` streams the sum through the rollout's scan (``S ← a (S +
+    1)`` forwards, not the reversed cumulative product). The two agree to
+    rounding, not bit for bit, so each tuner keeps its own.
+    """
     weights = LossWeights()
     err = law.polar_error(poses, ref)
     dist = err.r**2 / DEFAULT_TOL_R**2
@@ -385,13 +393,8 @@ def robust_loss(
         values.append(value)
         grads.append(grad)
     values, grads = jnp.concatenate(values), jnp.concatenate(grads)
-    norms = jnp.linalg.norm(grads, axis=-1)
-    finite = jnp.isfinite(norms) & jnp.isfinite(values)
-    cap = jnp.nanmedian(jnp.where(finite, norms, jnp.nan))
-    scale = jnp.where(finite, jnp.minimum(1.0, cap / jnp.where(norms > 0, norms, 1.0)), 0.0)
-    grad = jnp.sum(jnp.where(finite[:, None], grads, 0.0) * scale[:, None], axis=0)
-    kept = jnp.maximum(jnp.sum(finite), 1)
-    return jnp.sum(jnp.where(finite, values, 0.0)) / kept, grad / values.shape[0]
+    loss, grad, _, _ = capped_mean(values, grads)
+    return loss, grad / values.shape[0]
 
 
 def _step(
