@@ -65,6 +65,7 @@ from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
 from wmr_jax._src.tuning.loss import LossWeights, arrival_terms, capped_mean
 from wmr_jax._src.tuning.parametrisation import checked_point, paper_feasible_gains
 from wmr_jax._src.tuning.problems import FIXED, Problem, schedule_problem
+from wmr_jax._src.tuning.search import search_loop
 from wmr_jax._src.tuning.training import anneal, best_iteration, optimizer
 
 __all__ = [
@@ -492,29 +493,37 @@ def _black_box(method, key, refs, budget_s, robot, dt, joint, noise=None):
             warnings.simplefilter("ignore")
             return robust_score(closed(z), refs, score_key, dt=dt, robot=robot, noise=noise)
 
-    best_z, best, count, began = start, score(start), 1, time.perf_counter()
+    best = (start, score(start))
+    began = time.perf_counter()
     if method == "cma-es":
         from evosax.algorithms import CMA_ES
 
         strategy = CMA_ES(population_size=8, solution=start)
         params = strategy.default_params
         state = strategy.init(jax.random.fold_in(key, 0), start, params)
-    generation = 0
-    while time.perf_counter() - began < budget_s:
+
+    def propose(generation: int) -> Any:
+        nonlocal state
         k = jax.random.fold_in(key, generation + 1)
+        if method != "cma-es":
+            return jax.random.logistic(k, (8, start.shape[0]), float_dtype())
+        zs, state = strategy.ask(k, state, params)
+        # The strategy broke down (see cma_es_search): keep the best so far.
+        return zs if np.all(np.isfinite(np.asarray(zs))) else None
+
+    def tell(generation: int, zs: Any, scores: Any) -> None:
+        nonlocal state
         if method == "cma-es":
-            zs, state = strategy.ask(k, state, params)
-            if not np.all(np.isfinite(np.asarray(zs))):
-                break  # the strategy broke down (see cma_es_search); keep the best so far
-        else:
-            zs = jax.random.logistic(k, (8, start.shape[0]), float_dtype())
-        scores = jnp.asarray([score(z) for z in zs], float_dtype())
-        if method == "cma-es":
+            k = jax.random.fold_in(key, generation + 1)
             state, _ = strategy.tell(k, zs, scores, state, params)
-        i = int(jnp.argmin(scores))
-        if float(scores[i]) < best:
-            best, best_z = float(scores[i]), zs[i]
-        count, generation = count + len(zs), generation + 1
+
+    def scores(zs: Any) -> jax.Array:
+        return jnp.asarray([score(z) for z in zs], float_dtype())
+
+    best_z, _, count = search_loop(
+        propose, scores, budget_s, began=began, best=best, count=1, tell=tell,
+        at_least_once=False,
+    )  # fmt: skip
     return closed(best_z), count
 
 
