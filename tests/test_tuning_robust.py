@@ -359,3 +359,67 @@ def test_robust_command_tunes_on_the_robot_it_is_given(tmp_path, capsys, monkeyp
     # The paper robot is tune_robust's default: nothing is handed on.
     assert main(argv) == 0
     assert seen[-1] == {}
+
+
+def test_sensor_noise_sets_the_training_draws_and_is_recorded(tmp_path, monkeypatch):
+    import jax
+    import jax.numpy as jnp
+
+    from wmr_jax._src import conditions
+    from wmr_jax._src.tuning import robust
+
+    joint = robust.joint_problem(small_config())
+    refs = jnp.asarray([[10.0, 5.0, 0.3], [-8.0, 4.0, 1.0]])
+    key = jax.random.key(3)
+
+    def drawn(noise):
+        batches = robust._specs(key, refs, refs, 4, 0.1, joint, noise=noise)
+        return [np.asarray(spec.noise) for spec, _ in batches]
+
+    standard, doubled = drawn(None), drawn((1.0, 3.0))
+    assert [n.shape for n in standard] == [(8, 4, 3), (2, 4, 3)]
+    # The same draws scaled: nominal and latency runs stay without noise, the
+    # noisy ones twice in x, y and three times in heading, in both loops.
+    ideal, ideal_doubled = standard[0], doubled[0]
+    np.testing.assert_array_equal(ideal_doubled[:4], 0.0)
+    np.testing.assert_array_equal(ideal[:4], 0.0)
+    for std, new in ((ideal[4:], ideal_doubled[4:]), (standard[1], doubled[1])):
+        assert np.any(std != 0.0)
+        np.testing.assert_allclose(new[..., :2], 2.0 * std[..., :2], rtol=1e-6)
+        np.testing.assert_allclose(new[..., 2], 3.0 * std[..., 2], rtol=1e-6)
+    np.testing.assert_array_equal(drawn((0.5, 1.0))[0], ideal)  # the default is the standard
+
+    # The validation, the searches' scores and the table judge at the same noise.
+    seen = []
+    judge = conditions.standard_conditions
+
+    def recording(sets, refs, key, **kwargs):
+        seen.append(kwargs.get("noise"))
+        return judge(sets, refs, key, **kwargs)
+
+    monkeypatch.setattr(conditions, "standard_conditions", recording)
+    argv = ["tune", "--robust", "--fixed", "--out", str(tmp_path), "--iters", "1", "--poses", "2"]
+    assert main([*argv, "--noise", "1", "--noise-theta", "3"]) == 0
+    assert seen and all(n == (1.0, 3.0) for n in seen)
+    record = json.loads((tmp_path / "robust_evaluation.json").read_text())
+    assert record["noise"] == {"xy cm": 1.0, "theta degrees": 3.0}
+    assert record["config"]["noise_xy"] == 1.0 and record["config"]["noise_theta"] == 3.0
+
+
+@pytest.mark.parametrize(
+    ("flag", "value"), [("--noise", "-1"), ("--noise", "nan"), ("--noise-theta", "inf")]
+)
+def test_noise_flags_refuse_bad_values_in_one_line(tmp_path, capsys, flag, value):
+    assert main(["tune", "--robust", "--out", str(tmp_path), flag, value]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"wmr-jax: error: {flag} {value!r} is not allowed") and ">= 0" in err
+    assert err.count("\n") == 1
+    assert main(["tune", "--out", str(tmp_path), flag, "1"]) == 2
+    assert f"{flag} is not allowed without --robust" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("field", ["noise_xy", "noise_theta"])
+@pytest.mark.parametrize("value", [-0.1, float("nan"), float("inf"), "1"])
+def test_config_refuses_bad_noise(field, value):
+    with pytest.raises(ValueError, match=f"{field} = .* is not allowed; allowed: a number >= 0"):
+        tuning.RobustConfig(**{field: value}).validate()

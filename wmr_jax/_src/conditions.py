@@ -104,6 +104,7 @@ def standard_conditions(
     x64: bool = True,
     robot: Robot | None = None,
     horizon: float | None = None,
+    noise: tuple[float, float] | None = None,
 ) -> list[dict[str, Any]]:
     """Judge closed loops under the standard conditions of docs/model.md §7 and §9 (hard law).
 
@@ -133,6 +134,8 @@ def standard_conditions(
             (``ClosedLoop.robot``), else ``Robot()``. A loop tuned for
             another robot is refused.
         horizon: simulated time per run, s; default ``study_horizon(robot)``.
+        noise: ``(σ_xy cm, σ_θ degrees)`` of the noise and both conditions;
+            default the standard 0.5 cm, 1°.
 
     Returns:
         One row per (condition, set): ``condition``, ``gains``, ``feedback``
@@ -150,6 +153,16 @@ def standard_conditions(
             "label -> parameters or ClosedLoop, at least one"
         )
     mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
+    sensor = noise
+    if sensor is not None:
+        if not isinstance(sensor, (tuple, list)) or len(sensor) != 2:
+            raise ValueError(
+                f"noise = {noise!r:.80} is not allowed; allowed: (σ_xy cm, σ_θ degrees) or None"
+            )
+        sensor = tuple(
+            checks.check_number(f"noise[{i}]", v, closed=True, unit=u)
+            for i, (v, u) in enumerate(zip(sensor, ("cm", "degrees"), strict=True))
+        )
     sets = {
         name: _closed_loop(value, controller, estimator, f"params_by_name[{name!r}]")
         for name, value in params_by_name.items()
@@ -161,7 +174,10 @@ def standard_conditions(
     refs, noise, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
     ones = np.ones((len(refs), 3))
     conditions = [(MODEL_ROBOT, 0.0, 0.0, False, ones)]
-    conditions += [(*condition, factors) for condition in STANDARD_CONDITIONS]
+    for label, sxy, sdeg, latency in STANDARD_CONDITIONS:
+        if sensor is not None and sxy:
+            sxy, sdeg = sensor
+        conditions.append((label, sxy, sdeg, latency, factors))
     rows = []
     for label, sxy, sdeg, latency, wheels in conditions:
         spec = _scaled(refs, noise, wheels, sxy, sdeg, latency)

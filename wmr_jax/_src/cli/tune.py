@@ -93,6 +93,17 @@ def add_arguments(parser: Any) -> None:
         "(raw feedback) (default: ekf; none with --fixed)",
     )
     parser.add_argument(
+        "--noise",
+        metavar="CM",
+        help="with --robust: your sensor's position noise σ_xy in cm; the tuning trains on "
+        "up to twice it and judges the noise conditions at it (default: 0.5)",
+    )
+    parser.add_argument(
+        "--noise-theta",
+        metavar="DEG",
+        help="with --robust: your sensor's heading noise σ_θ in degrees, as --noise (default: 1)",
+    )
+    parser.add_argument(
         "--compare",
         action="store_true",
         help="instead of tuning once, compare gradient, CMA-ES and random search at equal "
@@ -138,9 +149,10 @@ def _config_from(args: Any, *, schedule: bool) -> Any:
 
 def _check_modes(args: Any) -> None:
     """Refuse flags the chosen mode would ignore (one line naming them)."""
-    for name in ("fixed", "estimator"):
+    for name in ("fixed", "estimator", "noise", "noise_theta"):
         if getattr(args, name) not in (None, False) and not args.robust:
-            raise ValueError(f"--{name} is not allowed without --robust, whose problem it sets")
+            flag = f"--{name.replace('_', '-')}"
+            raise ValueError(f"{flag} is not allowed without --robust, whose problem it sets")
     if args.robust:
         # --robust --compare is the robust comparison; --knots sizes its schedule.
         unused = ("schedule", "horizon", "eval_poses", "checkpoint_every", "no_random_search")

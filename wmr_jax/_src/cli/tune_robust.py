@@ -2,9 +2,9 @@
 
 Called by ``wmr-jax tune`` with its parsed flags (``out``, ``seed``,
 ``iters``, ``poses``, ``velocity``, ``resume``, ``fixed``, ``estimator``,
-``knots``, ``compare``). By default the gain schedule and the estimator are
-tuned together (``--fixed``: the 7 fixed gains with raw feedback, as before
-estimators). Writes ``tuned_gains.json`` (controller, parameters,
+``knots``, ``compare``, ``noise``, ``noise_theta``). By default the gain
+schedule and the estimator are tuned together (``--fixed``: the 7 fixed
+gains with raw feedback, as before estimators). Writes ``tuned_gains.json`` (controller, parameters,
 estimator and robot, which ``load_tuned`` reads whole), ``robust_evaluation.json``
 and ``.md`` (the hard-law table under the standard conditions, each with ±3 %
 wheel mismatch, and the model robot) and ``robust_loss.json`` (the loss per
@@ -12,7 +12,9 @@ iteration). With ``--compare`` it runs seeds 0–2 instead, each with random
 search and CMA-ES given the tuning's wall time, into
 ``robust_compare.json`` and ``.md`` (each seed written as it finishes;
 ``--resume`` keeps them). ``--robot`` tunes and judges on that robot, over
-its horizon (``robustness.study_horizon``).
+its horizon (``robustness.study_horizon``). ``--noise`` and ``--noise-theta``
+set the sensor's pose noise the loop is tuned and judged for
+(``RobustConfig.noise_xy``, ``noise_theta``).
 """
 
 from __future__ import annotations
@@ -77,6 +79,13 @@ def config_from(args: Any) -> Any:
         "estimator": _estimator(args),
         "compare": False,
     }
+    for flag, name, unit in (
+        ("--noise", "noise_xy", "cm"),
+        ("--noise-theta", "noise_theta", "degrees"),
+    ):
+        value = getattr(args, name if name == "noise_theta" else "noise", None)
+        if value is not None:
+            changes[name] = flags.number(flag, value, low=0.0, unit=unit)
     knots = getattr(args, "knots", None)
     if knots is not None:
         if fixed:

@@ -42,7 +42,12 @@ from wmr_jax._src.tuning.evaluation import (
     report_ratios,
 )
 from wmr_jax._src.tuning.problems import get_problem
-from wmr_jax._src.tuning.search import SearchResult, population_scores, random_search
+from wmr_jax._src.tuning.search import (
+    SearchResult,
+    population_scores,
+    random_search,
+    search_loop,
+)
 from wmr_jax._src.tuning.training import TuneConfig, differences, train
 
 __all__ = ["COMPARE_SEEDS", "METHODS", "cma_es_search", "compare", "run_comparison", "saved_rows"]
@@ -112,25 +117,29 @@ def cma_es_search(
     params = dataclasses.replace(strategy.default_params, std_init=std_init)
     began = time.perf_counter()
     state = strategy.init(jax.random.fold_in(key, 0), start, params)
-    best_score, best_z, count, generation = math.inf, start, 0, 0
-    while generation == 0 or time.perf_counter() - began < budget_s:
-        ask_key, tell_key = _generation_keys(key, generation)
+    tell_keys = {}
+
+    def propose(generation: int) -> Any:
+        nonlocal state
+        ask_key, tell_keys[generation] = _generation_keys(key, generation)
         z, state = strategy.ask(ask_key, state, params)
         if generation and not np.all(np.isfinite(np.asarray(z))):
             # The strategy broke down: on a flat landscape (every candidate
             # scored alike) its step size can overflow. Keep the best so far.
-            break
-        u = jax.nn.sigmoid(z)
-        scores = population_scores(problem, u, tiled, n, robot, run)
-        state, _ = strategy.tell(tell_key, z, scores, state, params)
-        host = np.asarray(scores)
-        i = int(np.argmin(host))
-        if host[i] < best_score:
-            best_score, best_z = float(host[i]), z[i]
-        count += population
-        generation += 1
-        if progress is not None:
-            progress(population)
+            return None
+        return z
+
+    def tell(generation: int, z: Any, scores: Any) -> None:
+        nonlocal state
+        state, _ = strategy.tell(tell_keys.pop(generation), z, scores, state, params)
+
+    def score(z: Any) -> Any:
+        return population_scores(problem, jax.nn.sigmoid(z), tiled, n, robot, run)
+
+    best_z, best_score, count = search_loop(
+        propose, score, budget_s, began=began, best=(start, math.inf), tell=tell,
+        progress=progress,
+    )  # fmt: skip
     best = jax.tree.map(float, problem.from_logits(best_z, robot))
     return SearchResult(best, best_score, count, time.perf_counter() - began)
 

@@ -309,6 +309,28 @@ def robust_value_and_grad(
     # One vmap over the references; the logits are shared, so the map from
     # them to the parameters runs once and each pose's gradient is (dim,).
     values, grads = jax.vmap(jax.value_and_grad(single, argnums=1), in_axes=(0, None))(refs, z)
+    loss, grad, finite, scale = capped_mean(values, grads, pose_clip)
+    grad = jnp.where(jnp.all(jnp.isfinite(grad)), grad, 0.0) / refs.shape[0]
+    stats = {
+        "dropped": jnp.mean((~finite).astype(grad.dtype)),
+        "clipped": jnp.mean((finite & (scale < 1.0)).astype(grad.dtype)),
+    }
+    return loss, grad, stats
+
+
+def capped_mean(values, grads, pose_clip=1.0):
+    """Mean loss and capped gradient sum of per-run ``values (N,)`` and ``grads (N, dim)``.
+
+    A run grazing a switching surface of the law has a gradient orders of
+    magnitude above the rest: each run's gradient is capped at ``pose_clip``
+    times the batch median norm (``None``: no cap), and runs whose value or
+    gradient is not finite are dropped from both.
+
+    Returns:
+        ``(mean loss over the kept runs, Σ capped gradients (dim,), kept (N,),
+        scale (N,))``: the caller divides the sum by ``N`` (its own guard on a
+        non-finite sum first).
+    """
     norms = jnp.linalg.norm(grads, axis=-1)
     finite = jnp.isfinite(norms) & jnp.isfinite(values)
     if pose_clip is None:
@@ -318,14 +340,9 @@ def robust_value_and_grad(
         scale = jnp.minimum(1.0, cap / jnp.where(norms > 0, norms, 1.0))
     weight = jnp.where(finite, scale, 0.0)
     grad = jnp.sum(jnp.where(finite[:, None], grads, 0.0) * weight[:, None], axis=0)
-    grad = jnp.where(jnp.all(jnp.isfinite(grad)), grad, 0.0) / refs.shape[0]
     kept = jnp.maximum(jnp.sum(finite), 1)
     loss = jnp.sum(jnp.where(finite, values, 0.0)) / kept
-    stats = {
-        "dropped": jnp.mean((~finite).astype(norms.dtype)),
-        "clipped": jnp.mean((finite & (scale < 1.0)).astype(norms.dtype)),
-    }
-    return loss, grad, stats
+    return loss, grad, finite, scale
 
 
 _robust_jit = loops.jit_top_level(robust_value_and_grad, static_argnames=("spec", "problem"))

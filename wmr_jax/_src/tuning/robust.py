@@ -4,9 +4,10 @@ The loss is the relaxed arrival time of ``tuning_loss`` (plus its log-error
 shaping), averaged over domain-randomised runs: the standard conditions
 (nominal, one-sample latency, pose noise, both) in the ideal loop, each with
 every wheel's radius off by up to ±3 % and the noise scaled per run by a
-level drawn from ``U(0, 2)`` (up to twice the standard σ_xy = 0.5 cm,
-σ_θ = 1°), and a group in the non-ideal loop with ±20 % body mass and
-latency with probability ½ besides. Every disturbance is drawn inside the
+level drawn from ``U(0, 2)`` (up to twice ``RobustConfig.noise_xy`` and
+``noise_theta``, by default the standard σ_xy = 0.5 cm, σ_θ = 1°), and a
+group in the non-ideal loop with ±20 % body mass and latency with
+probability ½ besides. Every disturbance is drawn inside the
 loss from a PRNG key by ``sample_disturbance`` and run by
 ``sensing.loop.disturbed_run``: the same code as the Monte Carlo.
 
@@ -61,9 +62,10 @@ from wmr_jax._src.sensing.estimators import ESTIMATORS, OBSERVER_KNOTS
 from wmr_jax._src.sensing.loop import ClosedLoop
 from wmr_jax._src.tuning.estimation import EstimatorBox, estimator_box
 from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
-from wmr_jax._src.tuning.loss import LossWeights, arrival_terms
+from wmr_jax._src.tuning.loss import LossWeights, arrival_terms, capped_mean
 from wmr_jax._src.tuning.parametrisation import checked_point, paper_feasible_gains
 from wmr_jax._src.tuning.problems import FIXED, Problem, schedule_problem
+from wmr_jax._src.tuning.search import search_loop
 from wmr_jax._src.tuning.training import anneal, best_iteration, optimizer
 
 __all__ = [
@@ -82,7 +84,9 @@ __all__ = [
 EVAL_NOISE_SEED = 0
 
 _FAILURE_FACTOR = 2.0  # black-box score of a run that never arrives, in horizons
-_NOISE_LEVEL_MAX = 2.0  # training noise up to twice the standard level
+_NOISE_LEVEL_MAX = 2.0  # training noise up to twice the sensor's level
+# The standard pose noise (σ_xy cm, σ_θ degrees): that of the noisy standard conditions.
+_STANDARD_NOISE = next((c[1], c[2]) for c in disturbances.STANDARD_CONDITIONS if c[1])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -113,6 +117,11 @@ class RobustConfig:
             scored, and the best scored iterate is the result.
         validation_poses: poses of that score, drawn from ``seed`` apart from
             the training, search and held-out poses.
+        noise_xy: the sensor's position noise σ_xy, cm: the training draws
+            it up to twice this (``U(0, 2)`` per run), and the validation,
+            the searches and the evaluation judge the noise and both
+            conditions at it.
+        noise_theta: the sensor's heading noise σ_θ, degrees (as ``noise_xy``).
     """
 
     # choice: 600. At 300 the loop under noise and latency together came out
@@ -134,6 +143,8 @@ class RobustConfig:
     observer_knots: int = OBSERVER_KNOTS
     validate_every: int = 25
     validation_poses: int = 32
+    noise_xy: float = 0.5
+    noise_theta: float = 1.0
 
     def validate(self) -> RobustConfig:
         """Check every field; return ``self`` (``ValueError`` naming the field)."""
@@ -147,6 +158,8 @@ class RobustConfig:
         for name in ("temperature_start", "temperature_end"):
             check_temperature(name, getattr(self, name))
         check_bool("compare", self.compare)
+        check_number("noise_xy", self.noise_xy, closed=True, unit="cm")
+        check_number("noise_theta", self.noise_theta, closed=True, unit="degrees")
         if self.problem not in ("fixed", "schedule"):
             raise ValueError(
                 f"problem = {self.problem!r} is not allowed; allowed: 'fixed' or 'schedule'"
@@ -158,6 +171,11 @@ class RobustConfig:
             )
         joint_problem(self)  # checks the knot counts
         return self
+
+    @property
+    def noise(self) -> tuple[float, float]:
+        """``(σ_xy cm, σ_θ degrees)`` of the sensor tuned for."""
+        return float(self.noise_xy), float(self.noise_theta)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -236,7 +254,15 @@ def robust_gains(z: jax.Array, robot: Robot) -> Gains:
 
 
 def _relaxed_arrival(poses: jax.Array, ref: jax.Array, dt: jax.Array) -> jax.Array:
-    """Relaxed arrival time plus log-error shaping of one recorded run, s (as ``tuning_loss``)."""
+    """Relaxed arrival time plus log-error shaping of one recorded run, s.
+
+    The quantity of ``tuning_loss``'s per-run term in the ideal loop (the
+    same ``arrival_terms``, tolerances and weights), computed from the run's
+    recorded poses: ``disturbed_run`` records the trajectory, while
+    ``tuning_loss`` streams the sum through the rollout's scan (``S ← a (S +
+    1)`` forwards, not the reversed cumulative product). The two agree to
+    rounding, not bit for bit, so each tuner keeps its own.
+    """
     weights = LossWeights()
     err = law.polar_error(poses, ref)
     dist = err.r**2 / DEFAULT_TOL_R**2
@@ -263,11 +289,14 @@ def _group_grads(z, spec, joint, robot, dt, options):
     return jax.vmap(jax.value_and_grad(run_loss), in_axes=(None, spec_axes))(z, spec)
 
 
-def _specs(key, refs, nonideal_refs, steps, temperature, joint, accel_limit=False):
+def _specs(key, refs, nonideal_refs, steps, temperature, joint, accel_limit=False, noise=None):
     """The loss's batches: ``[(spec, options)]``, drawn from ``key``.
 
-    ``accel_limit``: the ideal loop's speed limiter (docs/model.md §4.2.2).
+    ``accel_limit``: the ideal loop's speed limiter (docs/model.md §4.2.2);
+    ``noise``: ``(σ_xy cm, σ_θ degrees)`` of the noisy runs, each scaled by
+    a level ``U(0, 2)`` (default the standard 0.5 cm, 1°).
     """
+    noise_xy, noise_deg = _STANDARD_NOISE if noise is None else noise
     keys = jax.random.split(key, 2 * len(disturbances.STANDARD_CONDITIONS) + 1)
     ideal = loops.Options(
         steps=steps,
@@ -279,6 +308,8 @@ def _specs(key, refs, nonideal_refs, steps, temperature, joint, accel_limit=Fals
     n = refs.shape[0]
     specs = []
     for i, (_, sxy, sdeg, latency) in enumerate(disturbances.STANDARD_CONDITIONS):
+        if sxy:
+            sxy, sdeg = noise_xy, noise_deg
         level = jax.random.uniform(keys[2 * i], (n,), refs.dtype, 0.0, _NOISE_LEVEL_MAX)
         specs.append(
             disturbances.sample_disturbance(
@@ -302,8 +333,8 @@ def _specs(key, refs, nonideal_refs, steps, temperature, joint, accel_limit=Fals
             k_spec,
             nonideal_refs,
             steps,
-            noise_xy=0.5 * level,
-            noise_theta=math.radians(1.0) * level,
+            noise_xy=noise_xy * level,
+            noise_theta=math.radians(noise_deg) * level,
             latency=0.5,
             radius_mismatch=STANDARD_MISMATCH,
             mass_mismatch=0.2,
@@ -319,7 +350,17 @@ def _accel_limit(robot: Robot, dt: Any) -> bool:
 
 
 def robust_loss(
-    z, key, refs, nonideal_refs, temperature, robot, dt, steps, joint=None, accel_limit=None
+    z,
+    key,
+    refs,
+    nonideal_refs,
+    temperature,
+    robot,
+    dt,
+    steps,
+    joint=None,
+    accel_limit=None,
+    noise=None,
 ):
     """The robust tuning loss of logits ``z`` and its robust gradient (traceable).
 
@@ -337,6 +378,8 @@ def robust_loss(
             acceleration limits (docs/model.md §4.2.2); ``None`` decides by
             ``loops.for_robot`` (on for a traced robot, whose limits cannot
             be seen).
+        noise: ``(σ_xy cm, σ_θ degrees)`` of the sensor (``RobustConfig.noise``);
+            default the standard 0.5 cm, 1°.
 
     Returns:
         ``(mean loss s, gradient (dim,))``.
@@ -345,33 +388,43 @@ def robust_loss(
     if accel_limit is None:
         accel_limit = _accel_limit(robot, dt)
     values, grads = [], []
-    batches = _specs(key, refs, nonideal_refs, steps, temperature, joint, accel_limit)
+    batches = _specs(key, refs, nonideal_refs, steps, temperature, joint, accel_limit, noise)
     for spec, options in batches:
         value, grad = _group_grads(z, spec, joint, robot, dt, options)
         values.append(value)
         grads.append(grad)
     values, grads = jnp.concatenate(values), jnp.concatenate(grads)
-    norms = jnp.linalg.norm(grads, axis=-1)
-    finite = jnp.isfinite(norms) & jnp.isfinite(values)
-    cap = jnp.nanmedian(jnp.where(finite, norms, jnp.nan))
-    scale = jnp.where(finite, jnp.minimum(1.0, cap / jnp.where(norms > 0, norms, 1.0)), 0.0)
-    grad = jnp.sum(jnp.where(finite[:, None], grads, 0.0) * scale[:, None], axis=0)
-    kept = jnp.maximum(jnp.sum(finite), 1)
-    return jnp.sum(jnp.where(finite, values, 0.0)) / kept, grad / values.shape[0]
+    loss, grad, _, _ = capped_mean(values, grads)
+    return loss, grad / values.shape[0]
 
 
 def _step(
-    z, opt_state, key, refs, nonideal_refs, temperature, robot, dt, *, steps, hyper, joint, limit
+    z,
+    opt_state,
+    key,
+    refs,
+    nonideal_refs,
+    temperature,
+    robot,
+    dt,
+    *,
+    steps,
+    hyper,
+    joint,
+    limit,
+    noise,
 ):
     loss, grad = robust_loss(
-        z, key, refs, nonideal_refs, temperature, robot, dt, steps, joint, limit
+        z, key, refs, nonideal_refs, temperature, robot, dt, steps, joint, limit, noise
     )
     grad = jnp.where(jnp.isfinite(grad), grad, 0.0)
     updates, opt_state = _optimizer(*hyper).update(grad, opt_state, z)
     return optax.apply_updates(z, updates), opt_state, loss
 
 
-_step_jit = loops.jit_top_level(_step, static_argnames=("steps", "hyper", "joint", "limit"))
+_step_jit = loops.jit_top_level(
+    _step, static_argnames=("steps", "hyper", "joint", "limit", "noise")
+)
 
 
 def _optimizer(learning_rate: float, iters: int) -> optax.GradientTransformation:
@@ -379,7 +432,13 @@ def _optimizer(learning_rate: float, iters: int) -> optax.GradientTransformation
 
 
 def robust_score(
-    gains: Any, refs: Any, key: jax.Array, *, dt: float = DEFAULT_DT, robot: Robot | None = None
+    gains: Any,
+    refs: Any,
+    key: jax.Array,
+    *,
+    dt: float = DEFAULT_DT,
+    robot: Robot | None = None,
+    noise: tuple[float, float] | None = None,
 ) -> float:
     """Hard-law score: mean arrival over the standard conditions, failures 2× horizon, s.
 
@@ -393,6 +452,8 @@ def robust_score(
         key: the draws' key.
         dt: control period, s.
         robot: the robot; default the one ``gains`` records, else ``Robot()``.
+        noise: ``(σ_xy cm, σ_θ degrees)`` of the noise and both conditions;
+            default the standard 0.5 cm, 1°.
     """
     if not isinstance(gains, (Gains, ClosedLoop)):
         raise ValueError(
@@ -402,7 +463,9 @@ def robust_score(
     refs = np.asarray(as_poses("refs", refs, batch=True), dtype=float)
     params = gains.params if isinstance(gains, ClosedLoop) else gains
     require_unbatched(params, "gains", "scalars: one set of gains, scored as one")
-    rows = conditions.standard_conditions({"g": gains}, refs, key, dt=dt, x64=False, robot=robot)
+    rows = conditions.standard_conditions(
+        {"g": gains}, refs, key, dt=dt, x64=False, robot=robot, noise=noise
+    )
     return float(np.mean([condition_score(row) for row in rows]))
 
 
@@ -416,7 +479,7 @@ def condition_score(row: dict[str, Any]) -> float:
     return ok * arrival + (1.0 - ok) * _FAILURE_FACTOR * row["horizon s"]
 
 
-def _black_box(method, key, refs, budget_s, robot, dt, joint):
+def _black_box(method, key, refs, budget_s, robot, dt, joint, noise=None):
     """Random search or CMA-ES on the logits for ``budget_s`` s: ``(ClosedLoop, candidates)``."""
     start = jnp.asarray(joint.start_logits(robot), float_dtype())
     score_key = jax.random.fold_in(key, 7)
@@ -428,31 +491,39 @@ def _black_box(method, key, refs, budget_s, robot, dt, joint):
         with warnings.catch_warnings():
             # Candidates far outside the useful set warn; their score says it.
             warnings.simplefilter("ignore")
-            return robust_score(closed(z), refs, score_key, dt=dt, robot=robot)
+            return robust_score(closed(z), refs, score_key, dt=dt, robot=robot, noise=noise)
 
-    best_z, best, count, began = start, score(start), 1, time.perf_counter()
+    best = (start, score(start))
+    began = time.perf_counter()
     if method == "cma-es":
         from evosax.algorithms import CMA_ES
 
         strategy = CMA_ES(population_size=8, solution=start)
         params = strategy.default_params
         state = strategy.init(jax.random.fold_in(key, 0), start, params)
-    generation = 0
-    while time.perf_counter() - began < budget_s:
+
+    def propose(generation: int) -> Any:
+        nonlocal state
         k = jax.random.fold_in(key, generation + 1)
+        if method != "cma-es":
+            return jax.random.logistic(k, (8, start.shape[0]), float_dtype())
+        zs, state = strategy.ask(k, state, params)
+        # The strategy broke down (see cma_es_search): keep the best so far.
+        return zs if np.all(np.isfinite(np.asarray(zs))) else None
+
+    def tell(generation: int, zs: Any, scores: Any) -> None:
+        nonlocal state
         if method == "cma-es":
-            zs, state = strategy.ask(k, state, params)
-            if not np.all(np.isfinite(np.asarray(zs))):
-                break  # the strategy broke down (see cma_es_search); keep the best so far
-        else:
-            zs = jax.random.logistic(k, (8, start.shape[0]), float_dtype())
-        scores = jnp.asarray([score(z) for z in zs], float_dtype())
-        if method == "cma-es":
+            k = jax.random.fold_in(key, generation + 1)
             state, _ = strategy.tell(k, zs, scores, state, params)
-        i = int(jnp.argmin(scores))
-        if float(scores[i]) < best:
-            best, best_z = float(scores[i]), zs[i]
-        count, generation = count + len(zs), generation + 1
+
+    def scores(zs: Any) -> jax.Array:
+        return jnp.asarray([score(z) for z in zs], float_dtype())
+
+    best_z, _, count = search_loop(
+        propose, scores, budget_s, began=began, best=best, count=1, tell=tell,
+        at_least_once=False,
+    )  # fmt: skip
     return closed(best_z), count
 
 
@@ -515,6 +586,7 @@ def tune_robust(
     horizon = robustness.study_horizon(robot)
     dtype, dt, steps = float_dtype(), DEFAULT_DT, horizon_steps(DEFAULT_DT, horizon)
     limit = _accel_limit(robot, dt)
+    noise = config.noise
     z = jnp.asarray(joint.start_logits(robot), dtype)
     hyper = (float(config.learning_rate), int(config.iters))
     opt_state = _optimizer(*hyper).init(z)
@@ -530,7 +602,9 @@ def tune_robust(
             # An iterate is scored, not reported: its score says what its warnings would.
             warnings.simplefilter("ignore")
             loop_z = _concrete(joint.from_logits(z, robot))
-            return iteration, robust_score(loop_z, validation_refs, validation_key, robot=robot)
+            return iteration, robust_score(
+                loop_z, validation_refs, validation_key, robot=robot, noise=noise
+            )
 
     validated, iterates = [scored(0, z)], {0: z}
     for i in range(config.iters):
@@ -542,6 +616,7 @@ def tune_robust(
         z, opt_state, loss = _step_jit(
             z, opt_state, k_dist, refs, ni_refs, jnp.asarray(temp, dtype), robot,
             jnp.asarray(dt, dtype), steps=steps, hyper=hyper, joint=joint, limit=limit,
+            noise=noise,
         )  # fmt: skip
         losses.append(float(loss))
         if (i + 1) % config.validate_every == 0 or i + 1 == config.iters:
@@ -562,12 +637,12 @@ def tune_robust(
             if method == "cma-es" and not evosax_available():
                 continue
             key = jax.random.fold_in(jax.random.key(config.seed), 12 + len(searches))
-            searches[method] = _black_box(method, key, search_refs, wall, robot, dt, joint)
+            searches[method] = _black_box(method, key, search_refs, wall, robot, dt, joint, noise)
             sets[method] = searches[method][0]
     held_out = held_out_poses(config.eval_poses, EVAL_SEED)
     # The noise of wmr-jax robustness at its default seed: the same table.
     rows = conditions.standard_conditions(
-        sets, held_out, jax.random.key(EVAL_NOISE_SEED), robot=robot
+        sets, held_out, jax.random.key(EVAL_NOISE_SEED), robot=robot, noise=noise
     )
     means = {
         name: float(np.mean([condition_score(r) for r in rows if r["gains"] == name]))

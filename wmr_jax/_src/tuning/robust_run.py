@@ -39,7 +39,8 @@ def described(config: RobustConfig) -> str:
     """What ``config`` tunes, in words: the law and its feedback."""
     law = "7 fixed gains" if config.problem == "fixed" else f"gain schedule ({config.knots} knots)"
     sensing = "raw feedback" if config.estimator is None else f"the {config.estimator}"
-    return f"{law} with {sensing}"
+    noise = f"pose noise {config.noise_xy:g} cm, {config.noise_theta:g}°"
+    return f"{law} with {sensing}, for {noise}"
 
 
 def save_tuned(out: Path, loop: Any, losses: list[float], robot: Robot) -> None:
@@ -63,6 +64,8 @@ def write_evaluation(out: Path, config: RobustConfig, robot: Robot, result: dict
         "robot": robot_json(robot),
         "tune_wall_s": result["tune_wall_s"],
         "law": "hard (temperature None)",
+        # The sensor tuned for: the training's noise up to twice it, the table's at it.
+        "noise": {"xy cm": config.noise_xy, "theta degrees": config.noise_theta},
         "rows": result["rows"],
         # The iterate kept: the best hard-law score on the validation poses.
         "best_iteration": result["best_iteration"],

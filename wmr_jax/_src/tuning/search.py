@@ -27,7 +27,7 @@ from wmr_jax._src.tuning.evaluation import check_run, hard_runs, run_options
 from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS, unit_from_gains
 from wmr_jax._src.tuning.problems import FIXED, Problem, get_problem
 
-__all__ = ["SearchResult", "population_scores", "random_search"]
+__all__ = ["SearchResult", "population_scores", "random_search", "search_loop"]
 
 # Random search scores a run that never arrives as twice the horizon: worse
 # than any arrival, but finite, so that candidates' means stay comparable.
@@ -108,21 +108,74 @@ def random_search(
         )
     first = problem.start(robot) if problem is not FIXED else unit_from_gains(start, robot)
     first = jnp.asarray(first, float_dtype())
-    best_score, best_u, count = math.inf, first, 0
+
+    def propose(generation: int) -> jax.Array:
+        k = jax.random.fold_in(key, generation * chunk)
+        u = jax.random.uniform(k, (chunk, problem.dim), float_dtype())
+        return u.at[0].set(first) if generation == 0 else u
+
+    def score(u: jax.Array) -> Any:
+        return population_scores(problem, u, tiled, n, robot, run)
+
     began = time.perf_counter()
-    while count == 0 or time.perf_counter() - began < budget_s:
-        u = jax.random.uniform(jax.random.fold_in(key, count), (chunk, problem.dim), float_dtype())
-        if count == 0:
-            u = u.at[0].set(first)
-        scores = np.asarray(population_scores(problem, u, tiled, n, robot, run))
-        i = int(np.argmin(scores))
-        if scores[i] < best_score:
-            best_score, best_u = float(scores[i]), u[i]
-        count += chunk
-        if progress is not None:
-            progress(chunk)
+    best_u, best_score, count = search_loop(
+        propose, score, budget_s, began=began, best=(first, math.inf), progress=progress
+    )
     best = jax.tree.map(float, problem.from_unit(best_u, robot))
     return SearchResult(best, best_score, count, time.perf_counter() - began)
+
+
+def search_loop(
+    propose: Any,
+    score: Any,
+    budget_s: float,
+    *,
+    began: float,
+    best: tuple[Any, float],
+    count: int = 0,
+    tell: Any = None,
+    progress: Any = None,
+    at_least_once: bool = True,
+) -> tuple[Any, float, int]:
+    """The loop of every black-box search: propose, score, keep the best, until the budget.
+
+    Random search, CMA-ES (``cma_es_search``) and the robust tuner's
+    searches differ only in how they propose a generation and score it.
+
+    Args:
+        propose: ``propose(generation)`` → candidates ``(P, dim)``, or
+            ``None`` to stop (a strategy that broke down).
+        score: ``score(candidates)`` → ``(P,)`` scores, lower is better.
+        budget_s: wall-time budget, s, counted from ``began``
+            (``time.perf_counter``).
+        best: ``(candidate, score)`` to beat (a start scored already, or
+            ``(start, inf)``).
+        count: candidates scored already.
+        tell: ``tell(generation, candidates, scores)`` after each scoring.
+        progress: called with the generation's size after each.
+        at_least_once: run one generation whatever the budget.
+
+    Returns:
+        ``(best candidate, its score, candidates scored)``.
+    """
+    best_x, best_score = best
+    generation = 0
+    while (at_least_once and generation == 0) or time.perf_counter() - began < budget_s:
+        xs = propose(generation)
+        if xs is None:
+            break
+        scores = score(xs)
+        if tell is not None:
+            tell(generation, xs, scores)
+        host = np.asarray(scores)
+        i = int(np.argmin(host))
+        if float(host[i]) < best_score:
+            best_score, best_x = float(host[i]), xs[i]
+        count += len(xs)
+        generation += 1
+        if progress is not None:
+            progress(len(xs))
+    return best_x, best_score, count
 
 
 def population_scores(problem: Problem, u: jax.Array, tiled: jax.Array, n: int, robot, run):
