@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src import checks, loops, metrics
+from wmr_jax._src import checks, loops, metrics, motion
 from wmr_jax._src.export.codegen import MAX_LATENCY
 from wmr_jax._src.export.compiled import CompiledController
 from wmr_jax._src.metrics import PoseMetrics
@@ -145,8 +145,8 @@ def compiled_metrics(
         refs = np.asarray(spec.ref)
         noise = np.asarray(spec.noise)
         steps = noise.shape[1]
-        pose = jax.vmap(loops.SplitPose.of)(jnp.broadcast_to(init_j, (n, 3)))
-        wheel = jax.vmap(lambda _: loops.initial_wheel(init_j, options))(jnp.arange(n))
+        pose = jax.vmap(motion.SplitPose.of)(jnp.broadcast_to(init_j, (n, 3)))
+        wheel = jax.vmap(lambda _: motion.initial_wheel(init_j, options))(jnp.arange(n))
         acc = jax.vmap(lambda _: metrics.stream_start(init_j.dtype))(jnp.arange(n))
         compiled.start(refs, latency)
         sense = jax.vmap(lambda p, z: spec.measurement(p, z).pose().stacked())
