@@ -416,10 +416,7 @@ class _SizeBench:
         def call():
             return final_poses(refs, gains, steps=steps, velocity="nonideal", robot=robot)
 
-        try:
-            t = self.time({"nonideal": (call, True)})["nonideal"]
-        except NotImplementedError as err:
-            return [self.row("final_poses_nonideal", None, skipped=f"skipped: {err}")]
+        t = self.time({"nonideal": (call, True)})["nonideal"]
         return [self.row("final_poses_nonideal", t, velocity="nonideal")]
 
     def batch_rollout(self) -> list[dict]:
@@ -500,35 +497,28 @@ class _SizeBench:
         return self.loss_rows(loss, row, "grad_final_pose_loss")
 
     def tuning_loss(self) -> list[dict]:
-        """``wmr_jax.tuning.tuning_loss`` and its gradient, or a row saying why not."""
-        from wmr_jax._src.rollout import DEFAULT_DT
+        """``wmr_jax.tuning.tuning_loss`` and its gradient, beside the relaxed law it wraps."""
+        from wmr_jax._src import tuning
+        from wmr_jax._src.rollout import DEFAULT_DT, final_poses
 
-        try:
-            from wmr_jax._src import tuning
+        horizon, robot = self.steps * DEFAULT_DT, self.robot
+        gains, refs, steps = self.gains, self.refs, self.steps
 
-            horizon, robot = self.steps * DEFAULT_DT, self.robot
+        def loss(g, r):
+            return tuning.tuning_loss(
+                g, r, temperature=TUNING_TEMPERATURE, horizon=horizon, robot=robot
+            )
 
-            def loss(g, r):
-                return tuning.tuning_loss(
-                    g, r, temperature=TUNING_TEMPERATURE, horizon=horizon, robot=robot
-                )
+        def relaxed():
+            return final_poses(
+                refs, gains, steps=steps, temperature=TUNING_TEMPERATURE, robot=robot
+            )
 
-            from wmr_jax._src.rollout import final_poses
-
-            gains, refs, steps = self.gains, self.refs, self.steps
-
-            def relaxed():
-                return final_poses(
-                    refs, gains, steps=steps, temperature=TUNING_TEMPERATURE, robot=robot
-                )
-
-            row = ("tuning_loss", {"temperature": TUNING_TEMPERATURE})
-            # final_poses through the same relaxed law, timed beside the loss:
-            # what the loss adds to the law it differentiates.
-            beside = ("final_poses_relaxed", relaxed)
-            return self.loss_rows(loss, row, "grad_tuning_loss", beside)
-        except (ImportError, AttributeError, TypeError, NotImplementedError) as err:
-            return [self.row("grad_tuning_loss", None, skipped=f"skipped: {err}")]
+        row = ("tuning_loss", {"temperature": TUNING_TEMPERATURE})
+        # final_poses through the same relaxed law, timed beside the loss:
+        # what the loss adds to the law it differentiates.
+        beside = ("final_poses_relaxed", relaxed)
+        return self.loss_rows(loss, row, "grad_tuning_loss", beside)
 
 
 def _code_bytes(source: Any, build: Any) -> int | None:
