@@ -11,7 +11,7 @@ import pytest
 
 import wmr_jax as w
 from wmr_jax import tuning
-from wmr_jax._src import dynamics, loops
+from wmr_jax._src import dynamics, loops, motion
 from wmr_jax._src.robots import ROBOT_UNITS, describe_robot, robot_json, same_robot
 
 DT = 0.033
@@ -115,8 +115,8 @@ def test_without_limits_the_loop_has_no_limiter_and_the_same_results(refs, free)
 def test_the_limiter_is_differentiable_in_the_command_and_the_limit():
     def step(a, v):
         robot = HEAVY.replace(accel_max=a)
-        held = loops.HeldCommand(jnp.asarray(10.0), jnp.asarray(0.0))
-        return loops.speed_limit(held, v, jnp.asarray(1.0), robot, DT)[0]
+        held = motion.HeldCommand(jnp.asarray(10.0), jnp.asarray(0.0))
+        return motion.speed_limit(held, v, jnp.asarray(1.0), robot, DT)[0]
 
     grad = jax.jit(jax.grad(step, argnums=(0, 1)))
     # Binding: v = 10 + a dt, whatever the command.

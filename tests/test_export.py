@@ -3,7 +3,7 @@
 The C files of ``wmr_jax.export`` are compiled here with the system C
 compiler (present on every machine the suite runs on) and called through
 ``ctypes``. One step is held to the JAX step built from the project's own
-pieces (``loops.ideal_move``, the estimators' ``update``, the law), the law
+pieces (``motion.ideal_move``, the estimators' ``update``, the law), the law
 alone also to the NumPy reference; the closed loop to ``disturbed_metrics``
 run by the same disturbances, latencies of several samples included; any
 latency up to the C's bound also to the nominal run shifted by the latency,
@@ -22,7 +22,7 @@ import pytest
 
 import wmr_jax as w
 from wmr_jax import export
-from wmr_jax._src import conditions, loops
+from wmr_jax._src import conditions, loops, motion
 from wmr_jax._src.cli.main import main
 from wmr_jax._src.controllers import get_controller
 from wmr_jax._src.controllers.schedule import ScheduleParams, knot_radii
@@ -141,11 +141,11 @@ def _jax_step(loop, refs, est, cov, meas, applied, fresh, latency):
     dt = jnp.float64(DT)
 
     def one(ref, e, p, z, acted, flight):
-        pose, sensed = loops.SplitPose.of(e), loops.SplitPose.of(z)
+        pose, sensed = motion.SplitPose.of(e), motion.SplitPose.of(z)
         measurement = Measurement(sensed.position, sensed.heading, jnp.float64(0.0), z[2])
         law_input = sensed
         if estimator is not None:
-            predicted = loops.ideal_move(pose, loops.ArcMove.of(acted[0], acted[1], dt))
+            predicted = motion.ideal_move(pose, motion.ArcMove.of(acted[0], acted[1], dt))
             state = estimator.start(pose, estimate, robot)
             if estimator.name == "ekf":
                 state = state._replace(covariance=p)
@@ -155,8 +155,10 @@ def _jax_step(loop, refs, est, cov, meas, applied, fresh, latency):
             )
             law_input = state.pose
             if latency == 1 and estimate.compensate:
-                law_input = loops.ideal_move(law_input, loops.ArcMove.of(flight[0], flight[1], dt))
-        c = loops.split_command(law_input, ref, loop.params, options)
+                law_input = motion.ideal_move(
+                    law_input, motion.ArcMove.of(flight[0], flight[1], dt)
+                )
+        c = motion.split_command(law_input, ref, loop.params, options)
         return jnp.stack([c.real, c.imag])
 
     args = (refs, est, cov, meas, applied, fresh)
@@ -363,7 +365,7 @@ def test_law_on_its_switches_and_at_the_goal(tmp_path, robust_file, fixed_file, 
     options = loops.Options(controller=get_controller(loop.controller))
 
     def one(ref, z):
-        c = loops.split_command(loops.SplitPose.of(z), ref, loop.params, options)
+        c = motion.split_command(motion.SplitPose.of(z), ref, loop.params, options)
         return jnp.stack([c.real, c.imag])
 
     jax_cmd = np.asarray(jax.jit(jax.vmap(one))(jnp.asarray(refs), jnp.asarray(meas)))
@@ -709,7 +711,7 @@ def test_baseline_laws_equal_the_jax_law_within_the_wheel_limit(tmp_path, contro
     options = loops.Options(controller=controller)
 
     def one(ref, z):
-        c = loops.split_command(loops.SplitPose.of(z), ref, gains, options)
+        c = motion.split_command(motion.SplitPose.of(z), ref, gains, options)
         return jnp.stack([c.real, c.imag])
 
     jax_cmd = np.asarray(jax.jit(jax.vmap(one))(jnp.asarray(refs), jnp.asarray(meas)))

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import wmr_jax as w
-from wmr_jax._src import loops
+from wmr_jax._src import motion
 from wmr_jax._src.sensing import disturbances as d
 
 ROBOT = w.Robot(half_track=2.5)
@@ -51,7 +51,7 @@ def test_realised_velocity_with_factors_of_one_is_the_command_bit_for_bit():
 
 
 def _split(x, y, theta):
-    return loops.SplitPose(
+    return motion.SplitPose(
         jnp.asarray(complex(x, y)), jnp.asarray(cmath.exp(1j * theta)), jnp.asarray(theta)
     )
 

@@ -9,8 +9,7 @@ import pytest
 
 import wmr_jax as w
 from wmr_jax import tuning
-from wmr_jax._src import provenance
-from wmr_jax._src import sweep as sweep_module
+from wmr_jax._src import provenance, sweep_files
 from wmr_jax._src.tuning.training import differences
 
 
@@ -55,13 +54,13 @@ def test_a_resumed_sweep_of_other_code_recomputes_with_a_warning(tmp_path, monke
     chunks = sorted(tmp_path.glob("chunk_*.npz"))
     assert len(chunks) == 2
     manifest = json.loads((tmp_path / "sweep.json").read_text())
-    monkeypatch.setattr(sweep_module, "code_version", lambda: "0.1.0+another-law")
-    with pytest.warns(sweep_module.OtherSettingsWarning, match="version"):
+    monkeypatch.setattr(sweep_files, "code_version", lambda: "0.1.0+another-law")
+    with pytest.warns(sweep_files.OtherSettingsWarning, match="version"):
         again = w.sweep(refs, out=tmp_path, steps=20, chunk_size=2)
     # Recomputed (here by the same law, so the same numbers), and now of the new code.
     for name in first:
         np.testing.assert_array_equal(again[name], first[name])
     assert json.loads((tmp_path / "sweep.json").read_text())["version"] != manifest["version"]
     with warnings.catch_warnings():
-        warnings.simplefilter("error", sweep_module.OtherSettingsWarning)  # reused, no word
+        warnings.simplefilter("error", sweep_files.OtherSettingsWarning)  # reused, no word
         w.sweep(refs, out=tmp_path, steps=20, chunk_size=2)

@@ -42,17 +42,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
-import platform
 import resource
-import statistics
-import time
 import warnings
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
+from wmr_jax._src.bench_timing import Timing, environment, time_group
 from wmr_jax._src.checks import check_int, check_number
 from wmr_jax._src.numpy_batch import numpy_final_poses
 from wmr_jax._src.poses import MAX_SAMPLES
@@ -66,113 +63,6 @@ DEFAULT_REFERENCE_POSES = 20
 DTYPES = ("float32", "float64")
 # The smooth law used for the gradient of the tuning loss, as tuning anneals it.
 TUNING_TEMPERATURE = 0.05
-
-
-def _cpu_busy_seconds() -> float | None:
-    """Return the CPU seconds all processes have used (Linux), or ``None``."""
-    try:
-        with open("/proc/stat", encoding="ascii") as f:
-            fields = [int(v) for v in f.readline().split()[1:]]
-    except (OSError, ValueError):
-        return None
-    # user, nice, system, irq, softirq, steal
-    busy = fields[0] + fields[1] + fields[2] + sum(fields[5:8])
-    return busy / os.sysconf("SC_CLK_TCK")
-
-
-def _own_cpu_seconds() -> float:
-    usage = resource.getrusage(resource.RUSAGE_SELF)
-    return usage.ru_utime + usage.ru_stime
-
-
-@dataclasses.dataclass
-class Timing:
-    """Timing of one benchmark case.
-
-    Attributes:
-        run_s: median wall time of one call, s.
-        compile_s: extra time of the first call (trace and compile), s.
-        runs_s: every timed call, s.
-        others_cpu: CPU other processes used while the case was timed, in
-            cores (0 on an idle machine; Linux only, else ``None``).
-    """
-
-    run_s: float
-    compile_s: float | None
-    runs_s: list[float]
-    others_cpu: float | None
-
-
-def _wait_for_idle(limit_s: float, *, threshold: float = 0.1, window_s: float = 0.3) -> None:
-    """Wait up to ``limit_s`` until other processes use under ``threshold`` cores."""
-    deadline = time.monotonic() + limit_s
-    while time.monotonic() < deadline:
-        busy0, own0 = _cpu_busy_seconds(), _own_cpu_seconds()
-        if busy0 is None:
-            return
-        time.sleep(window_s)
-        busy1, own1 = _cpu_busy_seconds(), _own_cpu_seconds()
-        if max(0.0, (busy1 - busy0) - (own1 - own0)) / window_s < threshold:
-            return
-
-
-def _time_group(
-    calls: dict[str, tuple[Callable[[], Any], bool]], repeats: int, *, wait_idle: float = 0.0
-) -> dict:
-    """Time several calls, interleaved, so that they see the same machine load.
-
-    Args:
-        calls: ``name -> (call, compiled)``; a ``compiled`` call gets a first,
-            untimed call whose extra time is reported as its compile time.
-        repeats: timed calls of each.
-        wait_idle: before each round of calls, wait up to this many seconds
-            for the machine to be idle (0: do not wait).
-
-    Returns:
-        ``name -> Timing``.
-    """
-    import jax
-
-    first: dict[str, float | None] = {}
-    for name, (call, compiled) in calls.items():
-        first[name] = None
-        if compiled:
-            start = time.perf_counter()
-            jax.block_until_ready(call())
-            first[name] = time.perf_counter() - start
-    runs: dict[str, list[float]] = {name: [] for name in calls}
-    # CPU time of other processes while each case ran, summed over its calls:
-    # /proc/stat counts in 10 ms ticks, too coarse for one short call.
-    others: dict[str, list[float]] = {name: [0.0, 0.0] for name in calls}
-    for _ in range(repeats):
-        if wait_idle > 0:
-            _wait_for_idle(wait_idle)
-        for name, (call, compiled) in calls.items():
-            if compiled:
-                # Steady state, as in a loop of calls: right after another
-                # case (NumPy's half second, say) XLA's worker threads are
-                # asleep, and waking them costs a JAX call up to 30 %.
-                jax.block_until_ready(call())
-            busy0, own0, start = _cpu_busy_seconds(), _own_cpu_seconds(), time.perf_counter()
-            jax.block_until_ready(call())
-            wall = time.perf_counter() - start
-            busy1, own1 = _cpu_busy_seconds(), _own_cpu_seconds()
-            runs[name].append(wall)
-            if busy0 is not None and busy1 is not None:
-                others[name][0] += max(0.0, (busy1 - busy0) - (own1 - own0))
-                others[name][1] += wall
-    cores = os.cpu_count() or 1
-    timings = {}
-    for name in calls:
-        run = statistics.median(runs[name])
-        compile_s = None if first[name] is None else max(0.0, first[name] - run)
-        cpu, wall = others[name]
-        share = min(cores, cpu / wall) if wall > 0 and _cpu_busy_seconds() is not None else None
-        timings[name] = Timing(run, compile_s, runs[name], share)
-    return timings
-
-
-# ---------------------------------------------------------------- the benchmark
 
 
 @dataclasses.dataclass(frozen=True)
@@ -259,35 +149,6 @@ def _robot_record(config: BenchConfig) -> dict[str, Any]:
     return {"robot": robot_json(robot), "robot_label": robot_name(robot) or "custom"}
 
 
-def _environment() -> dict[str, Any]:
-    import jax
-    import jaxlib
-
-    devices = jax.devices()
-    cpu_model = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    cpu_model = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return {
-        "jax": jax.__version__,
-        "jaxlib": jaxlib.__version__,
-        "numpy": np.__version__,
-        "python": platform.python_version(),
-        "backend": jax.default_backend(),
-        "device": str(devices[0].device_kind),
-        "devices": len(devices),
-        "cpu": cpu_model,
-        "cpu_cores": os.cpu_count(),
-        "x64": bool(jax.config.jax_enable_x64),
-        "xla_flags": os.environ.get("XLA_FLAGS", ""),
-    }
-
-
 def _row(case: str, n: int | None, steps: int, timing: Timing | None, **extra: Any) -> dict:
     row: dict[str, Any] = {"case": case, "n": n, "steps": steps}
     if timing is not None:
@@ -351,7 +212,7 @@ def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = No
                 say(f"{row['case']:<22} N={row['n']!s:<8} {text}")
     fields = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
     return {
-        "environment": _environment(),
+        "environment": environment(),
         "config": {name: value for name, value in fields.items() if name != "robot"},
         **_robot_record(config),
         "rows": rows,
@@ -375,7 +236,7 @@ class _SizeBench:
         self.refs = jnp.asarray(self.refs_np)
 
     def time(self, calls: dict[str, tuple[Callable[[], Any], bool]]) -> dict[str, Timing]:
-        return _time_group(calls, self.config.repeats, wait_idle=self.config.wait_idle)
+        return time_group(calls, self.config.repeats, wait_idle=self.config.wait_idle)
 
     def row(self, case: str, timing: Timing | None, **extra: Any) -> dict:
         return _row(case, self.n, self.steps, timing, **extra)
@@ -555,10 +416,7 @@ class _SizeBench:
         def call():
             return final_poses(refs, gains, steps=steps, velocity="nonideal", robot=robot)
 
-        try:
-            t = self.time({"nonideal": (call, True)})["nonideal"]
-        except NotImplementedError as err:
-            return [self.row("final_poses_nonideal", None, skipped=f"skipped: {err}")]
+        t = self.time({"nonideal": (call, True)})["nonideal"]
         return [self.row("final_poses_nonideal", t, velocity="nonideal")]
 
     def batch_rollout(self) -> list[dict]:
@@ -639,35 +497,28 @@ class _SizeBench:
         return self.loss_rows(loss, row, "grad_final_pose_loss")
 
     def tuning_loss(self) -> list[dict]:
-        """``wmr_jax.tuning.tuning_loss`` and its gradient, or a row saying why not."""
-        from wmr_jax._src.rollout import DEFAULT_DT
+        """``wmr_jax.tuning.tuning_loss`` and its gradient, beside the relaxed law it wraps."""
+        from wmr_jax._src import tuning
+        from wmr_jax._src.rollout import DEFAULT_DT, final_poses
 
-        try:
-            from wmr_jax._src import tuning
+        horizon, robot = self.steps * DEFAULT_DT, self.robot
+        gains, refs, steps = self.gains, self.refs, self.steps
 
-            horizon, robot = self.steps * DEFAULT_DT, self.robot
+        def loss(g, r):
+            return tuning.tuning_loss(
+                g, r, temperature=TUNING_TEMPERATURE, horizon=horizon, robot=robot
+            )
 
-            def loss(g, r):
-                return tuning.tuning_loss(
-                    g, r, temperature=TUNING_TEMPERATURE, horizon=horizon, robot=robot
-                )
+        def relaxed():
+            return final_poses(
+                refs, gains, steps=steps, temperature=TUNING_TEMPERATURE, robot=robot
+            )
 
-            from wmr_jax._src.rollout import final_poses
-
-            gains, refs, steps = self.gains, self.refs, self.steps
-
-            def relaxed():
-                return final_poses(
-                    refs, gains, steps=steps, temperature=TUNING_TEMPERATURE, robot=robot
-                )
-
-            row = ("tuning_loss", {"temperature": TUNING_TEMPERATURE})
-            # final_poses through the same relaxed law, timed beside the loss:
-            # what the loss adds to the law it differentiates.
-            beside = ("final_poses_relaxed", relaxed)
-            return self.loss_rows(loss, row, "grad_tuning_loss", beside)
-        except (ImportError, AttributeError, TypeError, NotImplementedError) as err:
-            return [self.row("grad_tuning_loss", None, skipped=f"skipped: {err}")]
+        row = ("tuning_loss", {"temperature": TUNING_TEMPERATURE})
+        # final_poses through the same relaxed law, timed beside the loss:
+        # what the loss adds to the law it differentiates.
+        beside = ("final_poses_relaxed", relaxed)
+        return self.loss_rows(loss, row, "grad_tuning_loss", beside)
 
 
 def _code_bytes(source: Any, build: Any) -> int | None:

@@ -303,7 +303,6 @@ def evaluate_loop(
         ValueError: for a bad argument, before any run; for parameters with
             a batch axis (one loop is judged; ``disturbed_metrics`` runs a batch).
     """
-    from wmr_jax._src.optimal import time_bounds
     from wmr_jax._src.robots import robot_json
 
     labels = {label: (sxy, sdeg, lat) for label, sxy, sdeg, lat in STANDARD_CONDITIONS}
@@ -328,8 +327,6 @@ def evaluate_loop(
         velocity=velocity,
         x64=x64,
     )
-    arrived = m.arrival[m.success]
-    mean = float(arrived.mean()) if arrived.size else None
     late = settled_at_horizon(m, horizon)
     per_reference = [
         {
@@ -343,19 +340,40 @@ def evaluate_loop(
             np.asarray(refs), m.success, m.arrival, m.final_distance, late, strict=True
         )
     ]
+    row = figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity)
+    row.update(
+        controller=controller.name,
+        feedback="raw" if estimator is None else estimator.name,
+        robot=robot_json(robot),
+        dtype="float64" if x64 else "float32",
+        per_reference=per_reference,
+    )
+    return row
+
+
+def figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity) -> dict[str, Any]:
+    """The figures of one condition's runs and the settings that drew them.
+
+    The mean arrival is compared with the turn–drive–turn bound of the same
+    references (those that arrived); the peak wheel speed with ``v_max``, which
+    a wheel up to ``mismatch`` larger may exceed by as much.
+    """
+    from wmr_jax._src.optimal import time_bounds
+
+    arrived = m.arrival[m.success]
+    mean = float(arrived.mean()) if arrived.size else None
     optimal = None
-    if arrived.size:  # the same references as the mean arrival: those that arrived
+    if arrived.size:
         optimal = float(np.mean(time_bounds(refs[m.success], robot=robot, dt=dt).turn_drive_turn))
+    peak = float(np.max(m.peak_wheel))
     return {
         "success": float(m.success.mean()),
         "mean_arrival_s": mean,
         "median_arrival_s": float(np.median(arrived)) if arrived.size else None,
-        "settled_at_horizon": float(late.mean()),
-        "peak_wheel_speed": float(np.max(m.peak_wheel)),
+        "settled_at_horizon": float(settled_at_horizon(m, horizon).mean()),
+        "peak_wheel_speed": peak,
         "v_max": float(robot.v_max),
-        "peak_wheel_speed_ok": bool(
-            np.max(m.peak_wheel) <= float(robot.v_max) * (1.0 + mismatch) * (1 + 1e-6)
-        ),
+        "peak_wheel_speed_ok": bool(peak <= float(robot.v_max) * (1.0 + mismatch) * (1 + 1e-6)),
         "turn_drive_turn_s": optimal,
         "vs_turn_drive_turn": None if optimal is None else mean / optimal,
         "n": len(refs),
@@ -364,11 +382,6 @@ def evaluate_loop(
         "seed": seed,
         "horizon_s": horizon,
         "velocity": velocity,
-        "controller": controller.name,
-        "feedback": "raw" if estimator is None else estimator.name,
-        "robot": robot_json(robot),
-        "dtype": "float64" if x64 else "float32",
-        "per_reference": per_reference,
     }
 
 

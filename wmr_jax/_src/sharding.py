@@ -75,11 +75,10 @@ def use_cpu_devices(count: int | None = None) -> int:
 
     XLA runs the kernels of one program one after another, so on the CPU one
     device leaves cores idle; a batch sharded over several CPU devices runs
-    one stream of kernels per device, which the cores then share. Measured on
-    2 cores at ``N = 10⁵``: 2 devices about 1.25×, 4 devices about 1.3× the
-    throughput of one. This only takes effect before JAX has started (no JAX
-    computation yet in this process); later it changes nothing. It has no
-    effect on accelerator backends.
+    one stream of kernels per device, which the cores then share
+    (``wmr-jax bench`` measures the gain). This only takes effect before JAX
+    has started (no JAX computation yet in this process); later it changes
+    nothing. It has no effect on accelerator backends.
 
     Args:
         count: devices to make; default twice the number of cores this

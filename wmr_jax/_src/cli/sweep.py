@@ -152,7 +152,7 @@ def _run(args: Any, out: Path, chunks: Path | None, finished: dict) -> int:
     """The sweep; ``finished[controller]`` counts its chunks done, as they are done."""
     from wmr_jax._src.maps import DEFAULT_HEADINGS_DEG, map_study
     from wmr_jax._src.report.maps import comparison_table, save_map_study
-    from wmr_jax._src.sweep import OtherSettingsWarning
+    from wmr_jax._src.sweep_files import OtherSettingsWarning
 
     n_poses = flags.positive_int("--poses", args.poses)
     chunk = flags.positive_int("--chunk", args.chunk)

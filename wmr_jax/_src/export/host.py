@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src import checks, loops, metrics
+from wmr_jax._src import checks, loops, metrics, motion
 from wmr_jax._src.export.codegen import MAX_LATENCY
 from wmr_jax._src.export.compiled import CompiledController
 from wmr_jax._src.metrics import PoseMetrics
@@ -145,8 +145,8 @@ def compiled_metrics(
         refs = np.asarray(spec.ref)
         noise = np.asarray(spec.noise)
         steps = noise.shape[1]
-        pose = jax.vmap(loops.SplitPose.of)(jnp.broadcast_to(init_j, (n, 3)))
-        wheel = jax.vmap(lambda _: loops.initial_wheel(init_j, options))(jnp.arange(n))
+        pose = jax.vmap(motion.SplitPose.of)(jnp.broadcast_to(init_j, (n, 3)))
+        wheel = jax.vmap(lambda _: motion.initial_wheel(init_j, options))(jnp.arange(n))
         acc = jax.vmap(lambda _: metrics.stream_start(init_j.dtype))(jnp.arange(n))
         compiled.start(refs, latency)
         sense = jax.vmap(lambda p, z: spec.measurement(p, z).pose().stacked())
@@ -271,37 +271,16 @@ def evaluate_compiled(
 
 def _figures(m, loop, refs, robot, condition, mismatch, seed, horizon, velocity, dt):
     """The result dict of ``conditions.evaluate_loop``, of the compiled controller's runs."""
-    from wmr_jax._src import controllers
-    from wmr_jax._src.optimal import time_bounds
+    from wmr_jax._src import conditions, controllers
     from wmr_jax._src.robots import robot_json
-    from wmr_jax._src.robustness import settled_at_horizon
     from wmr_jax._src.sensing.estimators import resolve_estimator
 
     estimator, _ = resolve_estimator(loop.estimator)
-    arrived = m.arrival[m.success]
-    mean = float(arrived.mean()) if arrived.size else None
-    optimal = None
-    if arrived.size:
-        optimal = float(np.mean(time_bounds(refs[m.success], robot=robot, dt=dt).turn_drive_turn))
-    peak = float(np.max(m.peak_wheel))
-    return {
-        "success": float(m.success.mean()),
-        "mean_arrival_s": mean,
-        "median_arrival_s": float(np.median(arrived)) if arrived.size else None,
-        "settled_at_horizon": float(settled_at_horizon(m, horizon).mean()),
-        "peak_wheel_speed": peak,
-        "v_max": float(robot.v_max),
-        "peak_wheel_speed_ok": bool(peak <= float(robot.v_max) * (1.0 + mismatch) * (1 + 1e-6)),
-        "turn_drive_turn_s": optimal,
-        "vs_turn_drive_turn": None if optimal is None else mean / optimal,
-        "n": len(refs),
-        "condition": condition,
-        "mismatch": mismatch,
-        "seed": seed,
-        "horizon_s": horizon,
-        "velocity": velocity,
-        "controller": controllers.get_controller(loop.controller).name + " (compiled C)",
-        "feedback": "raw" if estimator is None else estimator.name,
-        "robot": robot_json(robot),
-        "dtype": "float64",
-    }
+    row = conditions.figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity)
+    row.update(
+        controller=controllers.get_controller(loop.controller).name + " (compiled C)",
+        feedback="raw" if estimator is None else estimator.name,
+        robot=robot_json(robot),
+        dtype="float64",
+    )
+    return row

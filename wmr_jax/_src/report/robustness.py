@@ -335,14 +335,7 @@ def write_standard_conditions(
         f"{_horizon_of(rows):g} s); every condition but the model robot's with each wheel's "
         "radius off by up to the mismatch column, drawn per run (docs/model.md §9)\n\n"
     )
-    record = json_text({**meta, "rows": rows}, "meta and rows", indent=2, sort_keys=False) + "\n"
-    fig = standard_figure(rows)
-    try:
-        png = save_figure(fig, out / "standard_conditions.png", dpi=110)
-    finally:
-        plt.close(fig)
-    md = atomic_write_text(out / "standard_conditions.md", head + table)
-    return [png, md, atomic_write_text(out / "standard_conditions.json", record)]
+    return _write_study(out, "standard_conditions", head + table, meta, rows, standard_figure)
 
 
 def standard_figure(rows: Sequence[dict[str, Any]]) -> Any:
@@ -440,14 +433,22 @@ def write_noise_curve(
         f"{_horizon_of(rows):g} s, each wheel's radius off by up to "
         f"{100 * float(rows[0]['mismatch']):g} % per run; docs/model.md §7, §9)\n\n"
     )
+    return _write_study(out, "noise_curve", head + table, meta, rows, noise_curve_figure)
+
+
+def _write_study(out: Path, name: str, text: str, meta: dict, rows: Any, figure: Any) -> list[Path]:
+    """Write ``name``.png (``figure(rows)``), ``.md`` (``text``) and ``.json`` (meta and rows).
+
+    The record and the figure are made before the first file is written.
+    """
     record = json_text({**meta, "rows": rows}, "meta and rows", indent=2, sort_keys=False) + "\n"
-    fig = noise_curve_figure(rows)
+    fig = figure(rows)
     try:
-        png = save_figure(fig, out / "noise_curve.png", dpi=110)
+        png = save_figure(fig, out / f"{name}.png", dpi=110)
     finally:
         plt.close(fig)
-    md = atomic_write_text(out / "noise_curve.md", head + table)
-    return [png, md, atomic_write_text(out / "noise_curve.json", record)]
+    md = atomic_write_text(out / f"{name}.md", text)
+    return [png, md, atomic_write_text(out / f"{name}.json", record)]
 
 
 def noise_curve_figure(rows: Sequence[dict[str, Any]]) -> Any:

@@ -29,7 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src import checks, dynamics, loops
+from wmr_jax._src import checks, dynamics, motion
 from wmr_jax._src.controllers import shim_sung as law
 from wmr_jax._src.params import Robot
 from wmr_jax._src.poses import sample_poses
@@ -91,7 +91,7 @@ class Disturbance(NamedTuple):
         """The robot that moves: ``robot`` with its body mass off by the mass factor."""
         return robot.replace(body_mass=robot.body_mass * self.mismatch[2])
 
-    def measurement(self, pose: loops.SplitPose, noise: jax.Array) -> Measurement:
+    def measurement(self, pose: motion.SplitPose, noise: jax.Array) -> Measurement:
         """What the sensor reports at ``pose`` with ``noise`` ``(3,)``."""
         return measurement(pose, noise)
 
@@ -134,12 +134,14 @@ class Measurement(NamedTuple):
         cos_n, sin_n = dynamics.sin_cos(self.offset + angle)
         return self.base * jax.lax.complex(cos_n, sin_n)
 
-    def pose(self) -> loops.SplitPose:
+    def pose(self) -> motion.SplitPose:
         """The measured pose (exactly the pose for zero noise)."""
         cos_n, sin_n = dynamics.sin_cos(self.offset)
-        return loops.SplitPose(self.position, self.base * jax.lax.complex(cos_n, sin_n), self.theta)
+        return motion.SplitPose(
+            self.position, self.base * jax.lax.complex(cos_n, sin_n), self.theta
+        )
 
-    def residual(self, estimate: loops.SplitPose) -> jax.Array:
+    def residual(self, estimate: motion.SplitPose) -> jax.Array:
         """Return ``θ_measured − θ_estimate`` wrapped to ``[−π, π)``, rad."""
         # From the unwrapped angles both carry (each equal to its heading's
         # angle): an arctangent of the heading difference costs about a
@@ -147,7 +149,7 @@ class Measurement(NamedTuple):
         return law.wrap_angle(self.theta - estimate.theta)
 
 
-def measurement(pose: loops.SplitPose, noise: jax.Array) -> Measurement:
+def measurement(pose: motion.SplitPose, noise: jax.Array) -> Measurement:
     """What the sensor reports at ``pose`` with ``noise`` ``(3,)`` ``[cm, cm, rad]``."""
     return Measurement(
         pose.position + jax.lax.complex(noise[0], noise[1]),
@@ -157,7 +159,7 @@ def measurement(pose: loops.SplitPose, noise: jax.Array) -> Measurement:
     )
 
 
-def measured(pose: loops.SplitPose, noise: jax.Array) -> loops.SplitPose:
+def measured(pose: motion.SplitPose, noise: jax.Array) -> motion.SplitPose:
     """The pose the controller sees: ``pose + noise`` (exactly ``pose`` for zero noise)."""
     return measurement(pose, noise).pose()
 

@@ -3,7 +3,7 @@
 An estimator sees what a robot has: each noisy measurement and the commands
 it sent. Every period it **predicts** its pose over the period with the
 command actually applied, on the exact arc of the ideal robot
-(``loops.ideal_arc``, docs/model.md §4), then **corrects** it toward the
+(``motion.ideal_arc``, docs/model.md §4), then **corrects** it toward the
 measurement at the period's end; heading residuals are wrapped to
 ``[−π, π)``. It starts from the first measurement. Latency compensation
 (rolling the estimate over the command in flight) is the disturbed loop's
@@ -35,7 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src import loops
+from wmr_jax._src import motion
 from wmr_jax._src.checks import (
     Parameters,
     check_bool,
@@ -188,9 +188,9 @@ def validate_ekf(params: EKFParams, prefix: str = "estimator") -> EKFParams:
 
 
 class ObserverState(NamedTuple):
-    """The observer's estimate (a ``loops.SplitPose``)."""
+    """The observer's estimate (a ``motion.SplitPose``)."""
 
-    pose: loops.SplitPose
+    pose: motion.SplitPose
 
 
 def _table(values: Any, r: jax.Array) -> jax.Array:
@@ -211,7 +211,7 @@ def _rotation(angle: jax.Array) -> jax.Array:
     return jax.lax.complex(cos_a, sin_a)
 
 
-def _observer_start(measured: loops.SplitPose, params: Any, robot: Robot) -> ObserverState:
+def _observer_start(measured: motion.SplitPose, params: Any, robot: Robot) -> ObserverState:
     del params, robot
     return ObserverState(measured)
 
@@ -230,7 +230,7 @@ def _observer_update(state, predicted, command, measured, ref, params, robot, dt
     # prediction, so that a gain of 1 returns the measurement bit for bit.
     position = measured.position + (1.0 - g_position) * (predicted.position - measured.position)
     back = (1.0 - g_heading) * measured.residual(predicted)
-    return ObserverState(loops.SplitPose(position, measured.turned(-back), measured.theta - back))
+    return ObserverState(motion.SplitPose(position, measured.turned(-back), measured.theta - back))
 
 
 # ---------------------------------------------------------------- the EKF
@@ -243,11 +243,11 @@ class EKFState(NamedTuple):
     ``(P₀₀, P₀₁, P₀₂, P₁₁, P₁₂, P₂₂)``.
     """
 
-    pose: loops.SplitPose
+    pose: motion.SplitPose
     covariance: jax.Array
 
 
-def _ekf_start(measured: loops.SplitPose, params: EKFParams, robot: Robot) -> EKFState:
+def _ekf_start(measured: motion.SplitPose, params: EKFParams, robot: Robot) -> EKFState:
     del robot
     zero = jnp.zeros_like(measured.theta)
     rxy, rth = params.sigma_xy**2 + zero, params.sigma_theta**2 + zero
@@ -262,10 +262,10 @@ def _ekf_update(state, predicted, command, measured, ref, params, robot, dt) -> 
     ``R S⁻¹ M``, and the gain ``K = M S⁻¹`` is ``P R⁻¹``: the filter computes
     the six entries of ``R S⁻¹ M`` (one array, divided by ``det S`` once) and
     corrects the pose with them. Every product is written out: under
-    ``vmap`` a batch of 3 × 3 matrix products is several times slower on
-    XLA:CPU than the same arithmetic elementwise, and the textbook order
-    (``K``, then ``(I − K) M``) made XLA recompute ``K`` in each of the nine
-    quantities that read it (0.3× the raw loop's cost per step at 10⁵ runs).
+    ``vmap`` a batch of 3 × 3 matrix products is slower on XLA:CPU than the
+    same arithmetic elementwise, and in the textbook order (``K``, then
+    ``(I − K) M``) XLA recomputes ``K`` in each of the nine quantities that
+    read it.
     """
     del ref
     v, omega = command.real, command.imag
@@ -311,7 +311,7 @@ def _ekf_update(state, predicted, command, measured, ref, params, robot, dt) -> 
     dx = p00 * y0 + p01 * y1 + p02 * y2
     dy = p01 * y0 + p11 * y1 + p12 * y2
     dth = p02 * y0 + p12 * y1 + p22 * y2
-    pose = loops.SplitPose(
+    pose = motion.SplitPose(
         predicted.position + jax.lax.complex(dx, dy),
         predicted.heading * _rotation(dth),
         predicted.theta + dth,
@@ -334,7 +334,7 @@ class Estimator:
             measurement.
         update: ``(state, predicted SplitPose, applied command v + iω,
             ``disturbances.Measurement``, ref (3,), params, robot, dt) -> state``: the
-            estimate moved over the period by the loop (``loops.ideal_move``,
+            estimate moved over the period by the loop (``motion.ideal_move``,
             shared with the latency compensation), then corrected.
     """
 

@@ -107,7 +107,7 @@ def disturbed_run(
         dt: control period, s.
         options: static options.
         estimate: the estimator's parameters (unused without one).
-        fold: ``fold(acc, true pose (a loops.SplitPose), StepOutput) -> acc``
+        fold: ``fold(acc, true pose (a motion.SplitPose), StepOutput) -> acc``
             after every period.
         acc: the fold's initial accumulator.
         record: also return every true pose ``(steps, 3)``, ``StepOutput`` and

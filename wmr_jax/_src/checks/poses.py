@@ -1,0 +1,184 @@
+"""Checks of poses: shape, finiteness, the dtype's range, huge headings reduced."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from wmr_jax._src.checks.values import (
+    _FLOAT64_HINT,
+    array_kind,
+    described,
+    float_dtype,
+    is_traced,
+)
+
+
+def as_poses(
+    name: str, value: Any, *, batch: bool | None, check_only: bool = False
+) -> jax.Array | None:
+    """Return ``value`` as a float pose array after checking shape and finiteness.
+
+    Args:
+        name: the argument's name, for error messages.
+        value: a pose ``(3,)`` or, where ``batch`` allows, a batch ``(N, 3)``.
+        batch: ``False`` for a single pose, ``True`` for ``(N, 3)``, ``None`` for either.
+        check_only: only check, return ``None`` (no converted copy is made
+            or placed on a device: for callers that read the poses themselves).
+
+    Raises:
+        ValueError: naming the argument, its shape or bad value, and what is allowed.
+    """
+    if isinstance(value, jax.core.Tracer):
+        return value
+    real = "real numbers [x cm, y cm, theta rad]"
+    if isinstance(value, jax.Array):
+        if value.dtype.kind in "bc":
+            raise ValueError(f"{name} has dtype {value.dtype}; allowed: {real}")
+        arr = value.astype(float_dtype()) if value.dtype != float_dtype() else value
+        host = None
+    else:
+        try:
+            if array_kind(value) in "bcUS":
+                raise TypeError(value)  # True as 1, or 1 + 2j as 1, is no coordinate
+            host = np.asarray(value, dtype=float)
+        except (TypeError, ValueError) as err:
+            shown = described(value)
+            raise ValueError(f"{name} = {shown} is not allowed; allowed: {real}") from err
+        arr = None
+    shape = tuple((arr if arr is not None else host).shape)
+    allowed = {False: "(3,)", True: "(N, 3) with N >= 1", None: "(3,) or (N, 3)"}[batch]
+    ok_ndim = {False: (1,), True: (2,), None: (1, 2)}[batch]
+    if len(shape) not in ok_ndim or shape[-1] != 3 or (len(shape) == 2 and shape[0] == 0):
+        raise ValueError(f"{name} has shape {shape}; allowed: {allowed} [x cm, y cm, theta rad]")
+    limit = position_limit()
+    if arr is not None:
+        # Concrete, but maybe closed over by a caller's jit: check it eagerly,
+        # as one program (op by op, each of them compiled for each new shape).
+        with jax.ensure_compile_time_eval():
+            flags, reduced = _device_pose_checks(arr, limit)
+            finite, spun, too_far = (bool(f) for f in flags)
+    else:
+        finite = bool(np.isfinite(host).all())
+    if not finite:
+        _raise_row(
+            name,
+            shape,
+            arr,
+            host,
+            lambda rows: ~np.isfinite(rows),
+            "is not finite; allowed: finite numbers",
+        )
+    if arr is None:
+        spun = bool(np.any(np.abs(host[..., 2]) > MAX_HEADING))
+    if spun:
+        _raise_row(
+            name,
+            shape,
+            arr,
+            host,
+            lambda rows: np.abs(rows[:, 2:]) > MAX_HEADING,
+            f"has a heading beyond {MAX_HEADING:.0e} rad, where float64 no longer holds "
+            "the angle modulo 2π; allowed: |theta| <= 1e+12 rad",
+        )
+    if arr is None:
+        too_far = bool(np.any(np.abs(host[..., :2]) > limit))
+    if too_far:
+        dtype = np.dtype(float_dtype()).name
+        _raise_row(
+            name,
+            shape,
+            arr,
+            host,
+            lambda rows: np.abs(rows[:, :2]) > limit,
+            f"is too far for {dtype}; allowed: |x|, |y| <= {limit:.0e} cm (squared distances "
+            f"must stay finite){_FLOAT64_HINT if dtype != 'float64' else ''}",
+        )
+    if arr is not None:
+        return None if check_only else reduced
+    if check_only:
+        return None
+    host = host.copy()
+    host[..., 2] = reduce_heading(host[..., 2])
+    return jnp.asarray(host, dtype=float_dtype())
+
+
+@jax.jit
+def _device_pose_checks(arr: jax.Array, limit: Any) -> tuple[tuple[jax.Array, ...], jax.Array]:
+    """``as_poses``'s checks of a device array, and the array with its headings reduced.
+
+    ``((all finite, any heading beyond MAX_HEADING, any |x|, |y| beyond
+    limit), reduced array)``.
+    """
+    flags = (
+        jnp.all(jnp.isfinite(arr)),
+        jnp.any(jnp.abs(arr[..., 2]) > MAX_HEADING),
+        jnp.any(jnp.abs(arr[..., :2]) > limit),
+    )
+    return flags, arr.at[..., 2].set(reduce_heading(arr[..., 2]))
+
+
+def _raise_row(name, shape, arr, host, bad, message: str):
+    """Raise ``message`` naming the first pose (row) for which ``bad`` holds."""
+    flat = np.asarray(arr if arr is not None else host, dtype=float).reshape(-1, 3)
+    row = int(np.flatnonzero(np.asarray(bad(flat)).any(axis=1))[0])
+    where = f"{name}[{row}]" if len(shape) == 2 else name
+    raise ValueError(f"{where} = {flat[row].tolist()} {message}")
+
+
+# Headings beyond this many radians are reduced modulo 2π on the way in (in
+# float64 on the host): the fast sine and cosine of the rollouts are accurate
+# only up to about 1e5 rad in float32. Smaller headings are kept as given.
+HEADING_REDUCE_ABOVE = 1e4
+# Beyond this a float64 heading is a multiple of 2π only to ±1e-4 rad and worse.
+MAX_HEADING = 1e12
+
+
+def reduce_heading(theta: Any) -> Any:
+    """Return headings with ``|θ| > HEADING_REDUCE_ABOVE`` reduced to ``[−π, π)``."""
+    if isinstance(theta, np.ndarray):
+        wrapped = np.remainder(theta + np.pi, 2 * np.pi) - np.pi
+        return np.where(np.abs(theta) > HEADING_REDUCE_ABOVE, wrapped, theta)
+    wrapped = jnp.remainder(theta + jnp.pi, 2 * jnp.pi) - jnp.pi
+    return jnp.where(jnp.abs(theta) > HEADING_REDUCE_ABOVE, wrapped, theta)
+
+
+def position_limit(dtype: Any = None) -> float:
+    """Return the largest ``|x|``, ``|y|`` (cm) a pose may have in ``dtype`` (default: compute).
+
+    Squared distances must stay finite: ``(2 limit)² · 2`` below the dtype's
+    largest number, rounded down to a power of ten (1e18 cm in float32,
+    1e153 cm in float64).
+    """
+    largest = float(np.finfo(np.dtype(float_dtype() if dtype is None else dtype)).max)
+    return float(10.0 ** math.floor(math.log10(math.sqrt(largest / 8))))
+
+
+def as_pose_array(name: str, value: Any) -> Any:
+    """Return ``value`` as checked float poses of any batch shape ``(..., 3)`` (tracers pass).
+
+    The same checks as ``as_poses`` (finite, within the dtype's range, huge
+    headings reduced), for functions that broadcast poses against each other.
+    """
+    if is_traced(value):
+        return value
+    try:
+        if array_kind(value) in "bcUS":
+            raise TypeError(value)
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"{name} = {described(value)} is not allowed; allowed: real numbers (..., 3) "
+            "[x cm, y cm, theta rad]"
+        ) from None
+    if arr.ndim == 0 or arr.shape[-1] != 3:
+        raise ValueError(f"{name} has shape {arr.shape}; allowed: (..., 3) [x cm, y cm, theta rad]")
+    if arr.ndim == 1:
+        return as_poses(name, arr, batch=False)
+    flat = arr.reshape(-1, 3)
+    poses = as_poses(name, flat, batch=True) if flat.size else jnp.asarray(flat, float_dtype())
+    return poses.reshape(arr.shape)
