@@ -351,3 +351,18 @@ def test_evaluate_on_an_identified_robot_runs_each_reference_as_simulate_does(tm
                               robot=BASE)  # fmt: skip
     assert np.max(np.abs(plain.arrival - np.asarray(arrival))) > 1e-3
     assert main(args + ["--condition", "noise"]) == 2
+
+
+def test_evaluate_takes_gains_tuned_for_the_identified_robot():
+    """tune --robot identified.json records the fitted robot; evaluate runs them on the base."""
+    from wmr_jax._src.cli.evaluate import _tuned_for_identified
+    from wmr_jax._src.robots import robot_json
+
+    content = {
+        "robot": {**robot_json(BASE), "half_track": float(BASE.half_track) * 1.04},
+        "base_robot": robot_json(BASE),
+    }
+    fitted = BASE.replace(half_track=float(BASE.half_track) * 1.04)
+    assert _tuned_for_identified(fitted, content)
+    assert not _tuned_for_identified(BASE.replace(half_track=3.0), content)
+    assert not _tuned_for_identified(None, content)

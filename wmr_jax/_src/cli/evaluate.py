@@ -346,6 +346,20 @@ def _loop(path: str, estimator: str | None) -> Any:
     return loop._replace(estimator=chosen)
 
 
+def _tuned_for_identified(saved: Any, content: dict[str, Any]) -> bool:
+    """Whether ``saved`` (a file's robot) is the robot ``tune --robot identified.json`` reads."""
+    import dataclasses
+
+    from wmr_jax._src.params import Robot
+    from wmr_jax._src.robots import same_robot
+
+    if saved is None:
+        return False
+    names = {f.name for f in dataclasses.fields(Robot)}
+    base = {**content["base_robot"], **content["robot"]}
+    return same_robot(saved, Robot(**{f: float(v) for f, v in base.items() if f in names}))
+
+
 def _percent(value: float) -> str:
     return f"{100 * value:.1f} %"
 
@@ -505,6 +519,9 @@ def run(args: Any) -> int:
     given = flags.robot_from(args.robot) if identified is None else identified[0]
     refs, labels = _labelled_refs(args.refs, x64=x64)
     loop = _loop(args.gains, estimator)
+    if identified is not None and _tuned_for_identified(loop.robot, identified[1]):
+        # Gains tuned with --robot identified.json run on the controller that believes the base.
+        loop = loop._replace(robot=identified[0].robot)
     robot = flags.robot_for_gains(given, loop.robot, "--gains", args.gains)
     horizon = _horizon(args.horizon, len(refs), robot)
     if given is not None and given.note:
