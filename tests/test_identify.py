@@ -274,7 +274,7 @@ def test_an_identified_json_reads_as_its_true_robot(tmp_path):
     path.write_text(json.dumps(content))
     found = read_robot(str(path))
     assert (found.robot.half_track, found.robot.speed_gain) == (17.2, 64.0)
-    assert "simulate only" in found.note
+    assert "simulate and evaluate only" in found.note
 
 
 def test_cli_plan_and_a_bad_log(tmp_path, capsys, good):
@@ -292,3 +292,77 @@ def test_cli_plan_and_a_bad_log(tmp_path, capsys, good):
     assert main(["identify", "--log", str(path), "--out", str(tmp_path / "id")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("wmr-jax: error:") and "metres" in err and "\n" not in err
+
+
+def test_evaluate_on_an_identified_robot_runs_each_reference_as_simulate_does(tmp_path, capsys):
+    """Latency 2 and 2 % wheel mismatch: per-reference arrival as identified_rollout's and as
+    the disturbed loop's with the same wheel factors and latency (the models coincide there)."""
+    import json
+
+    from wmr_jax._src import metrics
+    from wmr_jax._src.cli.main import main
+    from wmr_jax._src.identify.closed_loop import identified_rollout
+    from wmr_jax._src.poses import horizon_steps
+    from wmr_jax._src.robots import robot_json
+    from wmr_jax._src.rollout import DEFAULT_DT
+    from wmr_jax._src.sensing.disturbances import Disturbance
+    from wmr_jax._src.sensing.loop import disturbed_metrics
+
+    identified = {
+        "robot": {"half_track": float(BASE.half_track), "speed_gain": float(BASE.speed_gain)},
+        "base_robot": robot_json(BASE),
+        "wheel_scale": {"left": 1.02, "right": 0.98},
+        "latency_samples": 2,
+        "noise": {"sigma_xy": 0.0, "sigma_theta": 0.0},
+    }
+    path = tmp_path / "identified.json"
+    path.write_text(json.dumps(identified))
+    refs = np.array([[40.0, 30.0, 1.0], [-30.0, 20.0, -2.0], [10.0, -50.0, 0.5]])
+    np.save(tmp_path / "refs.npy", refs)
+    fields = {"kr": 120.0, "k_theta": 10.0, "phi_m": math.radians(70)}
+    gains = Gains(**fields)
+    (tmp_path / "gains.json").write_text(json.dumps(fields))
+    args = ["evaluate", "--gains", str(tmp_path / "gains.json")]
+    args += ["--refs", str(tmp_path / "refs.npy"), "--robot", str(path), "--horizon", "6"]
+    args += ["--json", str(tmp_path / "out.json")]
+    assert main(args) == 0
+    printed = capsys.readouterr().out
+    assert "runs on the robot identified in" in printed and "believes its base" in printed
+    got = json.loads((tmp_path / "out.json").read_text())
+    assert got["condition"] == "identified"
+    arrival = [np.inf if r["arrival_s"] is None else r["arrival_s"] for r in got["per_reference"]]
+    steps = horizon_steps(DEFAULT_DT, 6.0)
+    expected = []
+    for ref in refs:
+        traj = identified_rollout(
+            ref, gains, controller=SHIM_SUNG, init=[0.0, 0.0, 0.0], dt=DEFAULT_DT, steps=steps,
+            velocity="ideal", base=BASE, identified=identified, noise=False,
+        )  # fmt: skip
+        expected.append(float(metrics.arrival_time(traj, ref, dt=DEFAULT_DT)))
+    assert np.isfinite(expected).all()
+    np.testing.assert_allclose(arrival, expected, atol=1e-9)
+    spec = Disturbance(
+        refs, np.zeros((3, steps, 3)), np.tile([1.02, 0.98, 1.0], (3, 1)), np.float64(2.0)
+    )
+    m = disturbed_metrics(spec, gains, robot=BASE)
+    np.testing.assert_allclose(arrival, m.arrival, atol=1e-9)
+    # Without the latency and mismatch the arrivals move: the identified robot acted.
+    plain = disturbed_metrics(spec._replace(mismatch=np.ones((3, 3)), delay=np.float64(0)), gains,
+                              robot=BASE)  # fmt: skip
+    assert np.max(np.abs(plain.arrival - np.asarray(arrival))) > 1e-3
+    assert main(args + ["--condition", "noise"]) == 2
+
+
+def test_evaluate_takes_gains_tuned_for_the_identified_robot():
+    """tune --robot identified.json records the fitted robot; evaluate runs them on the base."""
+    from wmr_jax._src.cli.evaluate import _tuned_for_identified
+    from wmr_jax._src.robots import robot_json
+
+    content = {
+        "robot": {**robot_json(BASE), "half_track": float(BASE.half_track) * 1.04},
+        "base_robot": robot_json(BASE),
+    }
+    fitted = BASE.replace(half_track=float(BASE.half_track) * 1.04)
+    assert _tuned_for_identified(fitted, content)
+    assert not _tuned_for_identified(BASE.replace(half_track=3.0), content)
+    assert not _tuned_for_identified(None, content)

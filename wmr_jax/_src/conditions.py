@@ -254,6 +254,7 @@ def evaluate_loop(
     dt: float = DEFAULT_DT,
     x64: bool = True,
     robot: Robot | None = None,
+    identified: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Judge one closed loop on the user's own references under one standard condition.
 
@@ -279,6 +280,13 @@ def evaluate_loop(
         robot: the robot; default the one the loop records
             (``ClosedLoop.robot``), else ``Robot()``. Another robot than the
             loop's is refused.
+        identified: the content of an ``identified.json`` whose base is
+            ``robot``: the runs are on the identified robot (its wheel scales,
+            half-track, wheel lag, latency and tracker noise;
+            ``identify.closed_loop.identified_metrics``) while the loop
+            believes ``robot``; ``condition`` must be ``"nominal"`` and
+            ``mismatch`` is set aside. The result's condition is
+            ``"identified"``, its mismatch the largest wheel scale's departure.
 
     Returns:
         ``{"success": fraction, "mean_arrival_s": mean over the successful
@@ -316,17 +324,22 @@ def evaluate_loop(
     robot = _study_robot(robot, {"loop": loop}, "evaluate_loop")
     draws = _runs(refs, jax.random.key(seed), robot, horizon, dt, mismatch, x64)
     refs, noise, factors, horizon = draws
-    spec = _scaled(refs, noise, factors, *labels[condition])
-    m = disturbed_metrics(
-        spec,
-        loop.params,
-        controller=controller,
-        estimator=loop.estimator,
-        dt=dt,
-        robot=robot,
-        velocity=velocity,
-        x64=x64,
-    )
+    if identified is None:
+        spec = _scaled(refs, noise, factors, *labels[condition])
+        m = disturbed_metrics(
+            spec,
+            loop.params,
+            controller=controller,
+            estimator=loop.estimator,
+            dt=dt,
+            robot=robot,
+            velocity=velocity,
+            x64=x64,
+        )
+    else:
+        m, condition, mismatch = _on_identified(
+            identified, condition, refs, noise, loop, controller, dt, robot, velocity, x64
+        )
     late = settled_at_horizon(m, horizon)
     per_reference = [
         {
@@ -383,6 +396,26 @@ def figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity) ->
         "horizon_s": horizon,
         "velocity": velocity,
     }
+
+
+def _on_identified(identified, condition, refs, noise, loop, controller, dt, robot, velocity, x64):
+    """``evaluate_loop``'s metrics on an identified robot, its condition and its mismatch."""
+    from wmr_jax._src.identify.closed_loop import identified_metrics
+
+    if condition != "nominal":
+        raise ValueError(
+            f"condition = {condition!r} is not allowed on an identified robot; allowed: "
+            "nominal (its latency and tracker noise are the identified ones)"
+        )
+    sigma = identified["noise"]
+    sdeg = math.degrees(sigma["sigma_theta"])
+    spec = _scaled(refs, noise, np.ones((len(refs), 3)), sigma["sigma_xy"], sdeg, False)
+    m = identified_metrics(
+        spec, loop.params, identified=dict(identified), controller=controller,
+        estimator=loop.estimator, dt=dt, robot=robot, velocity=velocity, x64=x64,
+    )  # fmt: skip
+    scale = identified["wheel_scale"]
+    return m, "identified", max(abs(scale["left"] - 1.0), abs(scale["right"] - 1.0))
 
 
 # σ_xy of the noise-level curve, cm (σ_θ = 2° per cm, as the standard 0.5 cm and 1°).

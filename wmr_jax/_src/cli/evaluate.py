@@ -346,6 +346,20 @@ def _loop(path: str, estimator: str | None) -> Any:
     return loop._replace(estimator=chosen)
 
 
+def _tuned_for_identified(saved: Any, content: dict[str, Any]) -> bool:
+    """Whether ``saved`` (a file's robot) is the robot ``tune --robot identified.json`` reads."""
+    import dataclasses
+
+    from wmr_jax._src.params import Robot
+    from wmr_jax._src.robots import same_robot
+
+    if saved is None:
+        return False
+    names = {f.name for f in dataclasses.fields(Robot)}
+    base = {**content["base_robot"], **content["robot"]}
+    return same_robot(saved, Robot(**{f: float(v) for f, v in base.items() if f in names}))
+
+
 def _percent(value: float) -> str:
     return f"{100 * value:.1f} %"
 
@@ -406,6 +420,12 @@ def summary_rows(result: dict[str, Any], labels: list[str] | None = None) -> lis
     robot = describe_robot(robot_from_values(result["robot"], "robot"))
     if result.get("robot_file"):
         robot += f", from {result['robot_file']}"
+    if result["condition"] == "identified":
+        robot = (
+            f"runs on the robot identified in {result.get('robot_file', 'identified.json')} "
+            f"(wheel scales, half-track, wheel lag, latency, tracker noise); the loop believes "
+            f"its base: {describe_robot(robot_from_values(result['robot'], 'robot'))}"
+        )
     rows = [
         {"quantity": "success", "value": _percent(result["success"])},
     ]
@@ -487,9 +507,21 @@ def run(args: Any) -> int:
     if args.estimator is not None:
         estimator = flags.choice("--estimator", args.estimator, _ESTIMATOR_CHOICES)
     x64 = not args.float32
-    given = flags.robot_from(args.robot)
+    from wmr_jax._src.identify.closed_loop import loaded_identified
+
+    identified = loaded_identified(args.robot)
+    if identified is not None and (condition != "nominal" or isinstance(args.mismatch, str)):
+        flag = "--condition" if condition != "nominal" else "--mismatch"
+        raise ValueError(
+            f"{flag} is not allowed with --robot {args.robot}; allowed: the identified robot's "
+            "own latency, tracker noise and wheel scales"
+        )
+    given = flags.robot_from(args.robot) if identified is None else identified[0]
     refs, labels = _labelled_refs(args.refs, x64=x64)
     loop = _loop(args.gains, estimator)
+    if identified is not None and _tuned_for_identified(loop.robot, identified[1]):
+        # Gains tuned with --robot identified.json run on the controller that believes the base.
+        loop = loop._replace(robot=identified[0].robot)
     robot = flags.robot_for_gains(given, loop.robot, "--gains", args.gains)
     horizon = _horizon(args.horizon, len(refs), robot)
     if given is not None and given.note:
@@ -515,6 +547,7 @@ def run(args: Any) -> int:
             velocity=velocity,
             x64=x64,
             robot=robot,
+            identified=None if identified is None else identified[1],
         )
     # The gains themselves, not only where they were: the file may be tuned again.
     gains = tuned_json(loop.params, loop.estimator)

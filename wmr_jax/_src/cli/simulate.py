@@ -117,18 +117,9 @@ def plot_title(ref: Any, controller: Any, gains: Any, gains_file: Any) -> str:
 
 def _identified(source: Any) -> Any:
     """``(LoadedRobot of the base, content)`` of an ``identify`` output, else ``None``."""
-    from wmr_jax._src.identify.closed_loop import is_identified, read_identified
-    from wmr_jax._src.robots import LoadedRobot
+    from wmr_jax._src.identify.closed_loop import loaded_identified
 
-    if not is_identified(source):
-        return None
-    base, content = read_identified(source)
-    note = (
-        f"the true robot is the one identified in {source} (wheel scales, half-track "
-        f"{content['robot']['half_track']:.4g} cm, latency {content['latency_samples']}, "
-        "tracker noise); the controller believes its base robot"
-    )
-    return LoadedRobot(base, str(source), note), content
+    return loaded_identified(source)
 
 
 def run(args: Any) -> int:

@@ -11,6 +11,8 @@ non-ideal loop the wheel controller keeps the base's model.
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import json
 from pathlib import Path
 from typing import Any
@@ -19,12 +21,21 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src import loops
+from wmr_jax._src import checks, loops, metrics
 from wmr_jax._src.identify import model
+from wmr_jax._src.metrics import PoseMetrics
 from wmr_jax._src.params import Robot
 from wmr_jax._src.rollout import Trajectory
+from wmr_jax._src.sensing import loop as sensing_loop
+from wmr_jax._src.sensing.disturbances import Disturbance
 
-__all__ = ["is_identified", "read_identified", "identified_rollout"]
+__all__ = [
+    "identified_metrics",
+    "identified_rollout",
+    "is_identified",
+    "loaded_identified",
+    "read_identified",
+]
 
 _KEYS = ("robot", "base_robot", "wheel_scale", "latency_samples", "noise")
 
@@ -54,6 +65,101 @@ def read_identified(source: Any) -> tuple[Robot, dict[str, Any]]:
             f"integer 0-{model.MAX_LATENCY}"
         )
     return base, content
+
+
+def loaded_identified(source: Any) -> Any:
+    """``(LoadedRobot of the base, content)`` of an ``identify`` output, else ``None``.
+
+    The loaded robot's note says, in one line, that the runs are on the
+    identified robot while the controller believes its base.
+    """
+    from wmr_jax._src.robots import LoadedRobot
+
+    if not is_identified(source):
+        return None
+    base, content = read_identified(source)
+    note = (
+        f"the true robot is the one identified in {source} (wheel scales, half-track "
+        f"{content['robot']['half_track']:.4g} cm, latency {content['latency_samples']}, "
+        "tracker noise); the controller believes its base robot"
+    )
+    return LoadedRobot(base, str(source), note), content
+
+
+def true_robot(identified: dict[str, Any], base: Robot, noise: Any, dtype: Any) -> model.TrueRobot:
+    """The ``TrueRobot`` disturbance of ``identified`` with measurement noise ``noise``."""
+    true = identified["robot"]
+    scale = [identified["wheel_scale"]["left"], identified["wheel_scale"]["right"]]
+    return model.TrueRobot(
+        jnp.asarray(noise, dtype),
+        jnp.asarray(scale, dtype),
+        jnp.asarray(base.half_track, dtype),
+        jnp.asarray(int(identified["latency_samples"]), dtype),
+        jnp.asarray(true["half_track"], dtype),
+        jnp.asarray(true["speed_gain"], dtype),
+    )
+
+
+def _metrics_single(ref, spec, params, estimate, init, robot, dt, options):
+    """One run toward ``ref`` on the true robot ``spec``, streaming the §6 metrics."""
+    final, acc, _ = loops.scan_closed_loop(
+        ref,
+        params,
+        init,
+        robot,
+        dt,
+        options,
+        disturbance=spec,
+        estimate=estimate,
+        fold=sensing_loop.metrics_fold(ref),
+        acc=metrics.stream_start(ref.dtype),
+    )
+    return sensing_loop.metrics_result(acc, final, ref, dt)
+
+
+@functools.partial(jax.jit, static_argnames=("options",))
+def _metrics_batch(refs, spec, params, estimate, init, robot, dt, options):
+    axes = model.TrueRobot(0, None, None, None, None, None)
+    return jax.vmap(
+        lambda r, s: _metrics_single(r, s, params, estimate, init, robot, dt, options),
+        in_axes=(0, axes),
+    )(refs, spec)
+
+
+def identified_metrics(
+    disturbance: Disturbance,
+    params: Any,
+    *,
+    identified: dict[str, Any],
+    controller: Any,
+    estimator: Any = None,
+    dt: float,
+    robot: Robot,
+    velocity: str = "ideal",
+    x64: bool = True,
+) -> PoseMetrics:
+    """The ``docs/model.md §6`` metrics of a batch of runs on the identified robot.
+
+    ``disturbance`` carries the references and their measurement noise
+    ``(N, steps, 3)`` (its wheel factors and latency are checked and set
+    aside): the wheel scales, half-track, wheel-loop gain and latency are
+    ``identified``'s. The controller and its estimator believe ``robot``
+    (the base). Checked and prepared as ``disturbed_metrics`` prepares its
+    runs, then run through the same step with ``model.TrueRobot`` as the
+    disturbance, the plug-in ``identified_rollout`` runs.
+    """
+    with jax.enable_x64(checks.check_bool("x64", x64)):
+        delay = int(identified["latency_samples"])
+        args, options = sensing_loop.prepare_disturbed(
+            disturbance._replace(delay=np.float64(delay)),
+            params, controller, estimator, (0.0, 0.0, 0.0), dt, robot, velocity,
+        )  # fmt: skip
+        spec, params, estimate, init, robot, dt = args
+        options = loops.for_robot(options, robot, dt)
+        options = dataclasses.replace(options, max_delay=max(1, delay), remat=False)
+        plug = true_robot(identified, robot, spec.noise, dt.dtype)
+        out = _metrics_batch(spec.ref, plug, params, estimate, init, robot, dt, options)
+        return PoseMetrics(**{f: np.asarray(out[f]) for f in PoseMetrics._fields})
 
 
 def identified_rollout(
