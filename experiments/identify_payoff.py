@@ -32,11 +32,11 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from wmr_jax._src.conditions import evaluate_loop
 from wmr_jax._src.identify import fit, plan
 from wmr_jax._src.identify import result as output
-from wmr_jax._src.robots import load_robot
-from wmr_jax._src.rollout import DEFAULT_DT
+from wmr_jax._src.model.robots import load_robot
+from wmr_jax._src.sim.rollout import DEFAULT_DT
+from wmr_jax._src.studies.conditions import evaluate_loop
 
 SCALE = (1.02, 0.985)
 TRACK = 1.04

@@ -24,7 +24,7 @@ import jax
 import numpy as np
 
 from wmr_jax._src.identify import fit, plan, umbmark
-from wmr_jax._src.robots import load_robot
+from wmr_jax._src.model.robots import load_robot
 
 SIGMA_XY, SIGMA_THETA = 0.3, math.radians(0.5)
 

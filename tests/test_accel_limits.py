@@ -11,8 +11,9 @@ import pytest
 
 import wmr_jax as w
 from wmr_jax import tuning
-from wmr_jax._src import dynamics, loops, motion
-from wmr_jax._src.robots import ROBOT_UNITS, describe_robot, robot_json, same_robot
+from wmr_jax._src.model import dynamics
+from wmr_jax._src.model.robots import ROBOT_UNITS, describe_robot, robot_json, same_robot
+from wmr_jax._src.sim import loops, motion
 
 DT = 0.033
 STEPS = 150

@@ -625,7 +625,7 @@ def test_the_wheel_speed_bound_names_batches_of_two_sizes():
 
 def test_a_trajectory_larger_than_the_memory_is_refused_before_it_runs(monkeypatch):
     """steps = 2**30 went on to allocate 13 GB at once (the system may stall, not fail)."""
-    from wmr_jax._src import rollout as module
+    from wmr_jax._src.sim import rollout as module
 
     monkeypatch.setattr(module, "_memory_bytes", lambda inputs=None: 10**6)
     per_period = module.record_bytes(1, 0, module.TRAJECTORY_RECORD)  # one run, one period
@@ -654,9 +654,9 @@ def test_a_trajectory_larger_than_the_memory_is_refused_before_it_runs(monkeypat
 def test_the_memory_check_counts_what_each_record_holds(monkeypatch):
     """Its count is an upper bound of the arrays returned, within a period of each."""
     from wmr_jax import studies
-    from wmr_jax._src import rollout as module
-    from wmr_jax._src import waypoints
-    from wmr_jax._src.sensing import loop
+    from wmr_jax._src.sim import rollout as module
+    from wmr_jax._src.sim.sensing import loop
+    from wmr_jax._src.studies import waypoints
 
     steps, runs = 40, 3
     refs = np.array([REF, [20.0, -10.0, 1.0], [-15.0, 25.0, 2.0]])
@@ -678,9 +678,9 @@ def test_the_memory_check_counts_what_each_record_holds(monkeypatch):
 def test_the_memory_check_comes_before_a_shared_run_is_repeated(monkeypatch):
     """A one-run disturbance or track repeated for each of a million gains was copied first."""
     from wmr_jax import studies
-    from wmr_jax._src import rollout as module
-    from wmr_jax._src import waypoints
-    from wmr_jax._src.sensing import loop
+    from wmr_jax._src.sim import rollout as module
+    from wmr_jax._src.sim.sensing import loop
+    from wmr_jax._src.studies import waypoints
 
     def copied(*args, **kwargs):
         raise AssertionError("the shared run was copied before the memory was checked")

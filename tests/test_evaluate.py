@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 import wmr_jax as w
-from wmr_jax._src import conditions
 from wmr_jax._src.cli.main import main
-from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
-from wmr_jax._src.sensing.estimators import ObserverParams
-from wmr_jax._src.sensing.loop import ClosedLoop
+from wmr_jax._src.model.controllers.shim_sung import SHIM_SUNG
+from wmr_jax._src.sim.sensing.estimators import ObserverParams
+from wmr_jax._src.sim.sensing.loop import ClosedLoop
+from wmr_jax._src.studies import conditions
 from wmr_jax._src.tuning.saved import tuned_json
 
 # A few references within reach in 6 s (x cm, y cm, θ rad), and one far beyond.

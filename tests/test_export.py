@@ -22,17 +22,18 @@ import pytest
 
 import wmr_jax as w
 from wmr_jax import export
-from wmr_jax._src import conditions, loops, motion
 from wmr_jax._src.cli.main import main
-from wmr_jax._src.controllers import get_controller
-from wmr_jax._src.controllers.schedule import ScheduleParams, knot_radii
-from wmr_jax._src.sensing.disturbances import (
+from wmr_jax._src.model.controllers import get_controller
+from wmr_jax._src.model.controllers.schedule import ScheduleParams, knot_radii
+from wmr_jax._src.sim import loops, motion
+from wmr_jax._src.sim.sensing.disturbances import (
     STANDARD_CONDITIONS,
     Disturbance,
     Measurement,
 )
-from wmr_jax._src.sensing.estimators import resolve_estimator
-from wmr_jax._src.sensing.loop import disturbed_metrics
+from wmr_jax._src.sim.sensing.estimators import resolve_estimator
+from wmr_jax._src.sim.sensing.loop import disturbed_metrics
+from wmr_jax._src.studies import conditions
 
 pytestmark = pytest.mark.skipif(export.compiler() is None, reason="no C compiler on this machine")
 

@@ -28,7 +28,7 @@ from test_fuzz import fuzz_settings
 
 import wmr_jax as w
 from wmr_jax import studies
-from wmr_jax._src.robots import ROBOT_FIELDS
+from wmr_jax._src.model.robots import ROBOT_FIELDS
 
 # Examples per test in the suite (the ``slow`` copies run ten times as many).
 ROBOT_FILES = 1000

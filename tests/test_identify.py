@@ -9,11 +9,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from wmr_jax._src import loops
-from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
 from wmr_jax._src.identify import fit, logs, model, plan
-from wmr_jax._src.params import Gains
-from wmr_jax._src.robots import load_robot
+from wmr_jax._src.model.controllers.shim_sung import SHIM_SUNG
+from wmr_jax._src.model.params import Gains
+from wmr_jax._src.model.robots import load_robot
+from wmr_jax._src.sim import loops
 
 BASE = load_robot("paper")
 DT = 0.04
@@ -234,7 +234,7 @@ def test_plan_stays_within_the_wheel_budget_and_holds_both_squares():
 def test_an_identified_robot_equal_to_its_base_runs_the_nominal_loop():
     """Scales of 1, the base's half-track, no latency or noise: the plain rollout's poses."""
     from wmr_jax._src.identify.closed_loop import identified_rollout
-    from wmr_jax._src.rollout import rollout
+    from wmr_jax._src.sim.rollout import rollout
 
     identified = {
         "robot": {"half_track": float(BASE.half_track), "speed_gain": float(BASE.speed_gain)},
@@ -263,7 +263,7 @@ def test_an_identified_json_reads_as_its_true_robot(tmp_path):
     """Other commands' --robot reads identify's output as the identified robot, with a note."""
     import json
 
-    from wmr_jax._src.robots import read_robot
+    from wmr_jax._src.model.robots import read_robot
 
     content = {
         "robot": {"half_track": 17.2, "speed_gain": 64.0, "v_max": 120.0},
@@ -299,14 +299,14 @@ def test_evaluate_on_an_identified_robot_runs_each_reference_as_simulate_does(tm
     the disturbed loop's with the same wheel factors and latency (the models coincide there)."""
     import json
 
-    from wmr_jax._src import metrics
     from wmr_jax._src.cli.main import main
     from wmr_jax._src.identify.closed_loop import identified_rollout
-    from wmr_jax._src.poses import horizon_steps
-    from wmr_jax._src.robots import robot_json
-    from wmr_jax._src.rollout import DEFAULT_DT
-    from wmr_jax._src.sensing.disturbances import Disturbance
-    from wmr_jax._src.sensing.loop import disturbed_metrics
+    from wmr_jax._src.model.robots import robot_json
+    from wmr_jax._src.sim import metrics
+    from wmr_jax._src.sim.poses import horizon_steps
+    from wmr_jax._src.sim.rollout import DEFAULT_DT
+    from wmr_jax._src.sim.sensing.disturbances import Disturbance
+    from wmr_jax._src.sim.sensing.loop import disturbed_metrics
 
     identified = {
         "robot": {"half_track": float(BASE.half_track), "speed_gain": float(BASE.speed_gain)},
@@ -356,7 +356,7 @@ def test_evaluate_on_an_identified_robot_runs_each_reference_as_simulate_does(tm
 def test_evaluate_takes_gains_tuned_for_the_identified_robot():
     """tune --robot identified.json records the fitted robot; evaluate runs them on the base."""
     from wmr_jax._src.cli.evaluate import _tuned_for_identified
-    from wmr_jax._src.robots import robot_json
+    from wmr_jax._src.model.robots import robot_json
 
     content = {
         "robot": {**robot_json(BASE), "half_track": float(BASE.half_track) * 1.04},

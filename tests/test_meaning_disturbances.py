@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 import wmr_jax as w
-from wmr_jax._src import motion
-from wmr_jax._src.sensing import disturbances as d
+from wmr_jax._src.sim import motion
+from wmr_jax._src.sim.sensing import disturbances as d
 
 ROBOT = w.Robot(half_track=2.5)
 

@@ -15,8 +15,8 @@ import pytest
 
 import wmr_jax as w
 from wmr_jax import studies
-from wmr_jax._src.reference import reference_disturbed_rollout
-from wmr_jax._src.sensing.estimators import (
+from wmr_jax._src.oracle.reference import reference_disturbed_rollout
+from wmr_jax._src.sim.sensing.estimators import (
     EKF,
     OBSERVER,
     OBSERVER_R,

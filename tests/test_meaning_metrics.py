@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import wmr_jax as w
-from wmr_jax._src import metrics as m
+from wmr_jax._src.sim import metrics as m
 
 REF = (10.0, -5.0, 0.7)
 

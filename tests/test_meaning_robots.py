@@ -12,7 +12,7 @@ import pytest
 
 import wmr_jax as w
 from wmr_jax import tuning
-from wmr_jax._src.robots import describe_robot, robot_json, same_robot
+from wmr_jax._src.model.robots import describe_robot, robot_json, same_robot
 
 
 def _read(tmp_path, name, text):

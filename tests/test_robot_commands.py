@@ -13,10 +13,11 @@ import numpy as np
 import pytest
 
 import wmr_jax as w
-from wmr_jax._src import io, maps
+from wmr_jax._src import io
 from wmr_jax._src.cli.main import main
-from wmr_jax._src.params import Robot
-from wmr_jax._src.robots import TURTLEBOT3_BURGER, robot_json
+from wmr_jax._src.model.params import Robot
+from wmr_jax._src.model.robots import TURTLEBOT3_BURGER, robot_json
+from wmr_jax._src.studies import maps
 
 # Eight poses (two headings), two chunks of four: the compiled sweep every test shares.
 SWEEP = ["--poses", "8", "--headings", "0", "90", "--chunk", "4", "--controller", "shim-sung"]
@@ -288,7 +289,7 @@ def test_compare_runs_the_robot_and_records_it(tmp_path, capsys, monkeypatch):
 def test_waypoints_run_the_robot_for_longer_and_say_time_since_start(
     tmp_path, capsys, monkeypatch, no_figures
 ):
-    from wmr_jax._src import waypoints
+    from wmr_jax._src.studies import waypoints
 
     asked = []
 
@@ -322,7 +323,7 @@ def test_waypoints_run_the_robot_for_longer_and_say_time_since_start(
 
 
 def test_bench_runs_the_robot_and_records_it(tmp_path, capsys, monkeypatch):
-    from wmr_jax._src import rollout
+    from wmr_jax._src.sim import rollout
 
     robots = []
 

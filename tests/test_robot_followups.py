@@ -18,11 +18,12 @@ import pytest
 
 import wmr_jax as w
 from wmr_jax import tuning
-from wmr_jax._src import loops, waypoints
-from wmr_jax._src.conditions import evaluate_loop
 from wmr_jax._src.provenance import code_version
-from wmr_jax._src.sensing import loop as sensed
-from wmr_jax._src.sensing.disturbances import Disturbance, draw_disturbances
+from wmr_jax._src.sim import loops
+from wmr_jax._src.sim.sensing import loop as sensed
+from wmr_jax._src.sim.sensing.disturbances import Disturbance, draw_disturbances
+from wmr_jax._src.studies import waypoints
+from wmr_jax._src.studies.conditions import evaluate_loop
 from wmr_jax._src.tuning import training
 
 # The paper's feasible gains turn at up to 10 rad/s: at 30 rad/s² the turn

@@ -9,12 +9,12 @@ import pytest
 
 import wmr_jax as w
 from wmr_jax import studies
-from wmr_jax._src import conditions, robustness
 from wmr_jax._src.cli.main import main
-from wmr_jax._src.metrics import PoseMetrics
+from wmr_jax._src.model.robots import robot_json, same_robot
 from wmr_jax._src.report.figures import plt
 from wmr_jax._src.report.robustness import robustness_table, standard_figure
-from wmr_jax._src.robots import robot_json, same_robot
+from wmr_jax._src.sim.metrics import PoseMetrics
+from wmr_jax._src.studies import conditions, robustness
 from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
 from wmr_jax._src.tuning.saved import tuned_json
 

@@ -9,7 +9,7 @@ import pytest
 
 import wmr_jax as w
 from wmr_jax import tuning
-from wmr_jax._src.robots import ROBOT_UNITS, robot_json, same_robot
+from wmr_jax._src.model.robots import ROBOT_UNITS, robot_json, same_robot
 from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
 from wmr_jax.cli import main
 

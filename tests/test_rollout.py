@@ -97,7 +97,7 @@ def test_repeated_calls_do_not_retrace(caplog):
 def test_a_call_with_values_traces_without_remat_and_a_differentiated_one_with_it(monkeypatch):
     """remat only changes what a reverse pass stores: a top-level call, which
     nothing can differentiate, skips it; a call under ``grad`` keeps it."""
-    from wmr_jax._src import loops
+    from wmr_jax._src.sim import loops
 
     checkpointed = []
 

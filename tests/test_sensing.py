@@ -16,11 +16,11 @@ from conftest import random_refs
 
 import wmr_jax as w
 from wmr_jax import studies
-from wmr_jax._src import conditions, robustness
-from wmr_jax._src.loops import Options
-from wmr_jax._src.reference import reference_disturbed_rollout
-from wmr_jax._src.sensing import loop
-from wmr_jax._src.sensing.estimators import EKF, OBSERVER
+from wmr_jax._src.oracle.reference import reference_disturbed_rollout
+from wmr_jax._src.sim.loops import Options
+from wmr_jax._src.sim.sensing import loop
+from wmr_jax._src.sim.sensing.estimators import EKF, OBSERVER
+from wmr_jax._src.studies import conditions, robustness
 
 # One batch shape for every disturbed rollout here, so that each estimator
 # compiles one program: N references over the docs/model.md §6 horizon, with

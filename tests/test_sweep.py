@@ -234,7 +234,7 @@ def test_a_run_that_leaves_the_range_is_an_error_not_nans():
 def test_a_computed_run_with_any_coordinate_out_of_range_is_named(monkeypatch, field):
     # Each coordinate of a computed chunk's final poses is checked, and the
     # run is named by its row in the whole batch (row 1 of the second chunk).
-    from wmr_jax._src import sweep as sweep_module
+    from wmr_jax._src.studies import sweep as sweep_module
 
     real = sweep_module._launcher
 

@@ -101,8 +101,8 @@ def test_tune_robust_judges_under_the_noise_of_the_robustness_command(monkeypatc
     # noise draw makes them the same table.
     import jax
 
-    from wmr_jax._src import conditions
     from wmr_jax._src.cli.main import build_parser
+    from wmr_jax._src.studies import conditions
 
     keys = []
     judge = conditions.standard_conditions
@@ -308,7 +308,7 @@ def test_robust_tuning_on_another_robot_tunes_and_judges_on_it():
 
 
 def test_robust_command_hands_its_estimator_and_table_sizes_to_the_tuner(tmp_path, monkeypatch):
-    from wmr_jax._src.sensing.loop import ClosedLoop
+    from wmr_jax._src.sim.sensing.loop import ClosedLoop
     from wmr_jax._src.tuning import robust
     from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
 
@@ -332,7 +332,7 @@ def test_robust_command_hands_its_estimator_and_table_sizes_to_the_tuner(tmp_pat
 
 
 def test_robust_command_tunes_on_the_robot_it_is_given(tmp_path, capsys, monkeypatch):
-    from wmr_jax._src.sensing.loop import ClosedLoop
+    from wmr_jax._src.sim.sensing.loop import ClosedLoop
     from wmr_jax._src.tuning import robust
     from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
 
@@ -365,7 +365,7 @@ def test_sensor_noise_sets_the_training_draws_and_is_recorded(tmp_path, monkeypa
     import jax
     import jax.numpy as jnp
 
-    from wmr_jax._src import conditions
+    from wmr_jax._src.studies import conditions
     from wmr_jax._src.tuning import robust
 
     joint = robust.joint_problem(small_config())

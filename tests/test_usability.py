@@ -15,7 +15,7 @@ import pytest
 import wmr_jax as w
 from wmr_jax import controllers
 from wmr_jax._src.cli.main import main
-from wmr_jax._src.controllers import base
+from wmr_jax._src.model.controllers import base
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 import wmr_jax as w
-from wmr_jax._src import conditions
 from wmr_jax._src.cli import simulate
 from wmr_jax._src.cli.main import main
 from wmr_jax._src.report import progress
+from wmr_jax._src.studies import conditions
 from wmr_jax._src.tuning.saved import tuned_json
 
 REFS = np.array([[30.0, 20.0, 0.3], [-20.0, 15.0, 1.0], [25.0, -10.0, -0.5]])
@@ -389,8 +389,8 @@ def _legends(monkeypatch, draw):
 
 
 def test_fig7_has_one_legend_entry_per_coloured_path(monkeypatch, tmp_path):
-    from wmr_jax._src import paper as runs
     from wmr_jax._src.report import paper
+    from wmr_jax._src.studies import paper as runs
 
     fig7 = runs.fig7_runs()
     ((name, title, entries),) = _legends(monkeypatch, lambda: paper.save_fig7(tmp_path, fig7))

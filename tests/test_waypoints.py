@@ -9,7 +9,7 @@ from conftest import run_metrics
 
 import wmr_jax as w
 from wmr_jax import studies
-from wmr_jax._src import waypoints
+from wmr_jax._src.studies import waypoints
 from wmr_jax.cli import main
 
 DT = 0.033

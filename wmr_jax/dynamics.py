@@ -14,16 +14,16 @@ points (``wmr_jax.rollout``, ``batch_rollout``, ``final_poses``), which check
 theirs on the host before tracing.
 """
 
-from wmr_jax._src.dynamics import RobotState as RobotState
-from wmr_jax._src.dynamics import arc_step as arc_step
-from wmr_jax._src.dynamics import initial_state as initial_state
-from wmr_jax._src.dynamics import sin_cos as sin_cos
-from wmr_jax._src.dynamics import sinc as sinc
-from wmr_jax._src.velocity_loop import DEFAULT_SUBSTEPS as DEFAULT_SUBSTEPS
-from wmr_jax._src.velocity_loop import advance as advance
-from wmr_jax._src.velocity_loop import body_acceleration as body_acceleration
-from wmr_jax._src.velocity_loop import check_stability as check_stability
-from wmr_jax._src.velocity_loop import inertia as inertia
-from wmr_jax._src.velocity_loop import kinetic_energy as kinetic_energy
-from wmr_jax._src.velocity_loop import limit_wheels as limit_wheels
-from wmr_jax._src.velocity_loop import wheel_torques as wheel_torques
+from wmr_jax._src.model.dynamics import RobotState as RobotState
+from wmr_jax._src.model.dynamics import arc_step as arc_step
+from wmr_jax._src.model.dynamics import initial_state as initial_state
+from wmr_jax._src.model.dynamics import sin_cos as sin_cos
+from wmr_jax._src.model.dynamics import sinc as sinc
+from wmr_jax._src.model.velocity_loop import DEFAULT_SUBSTEPS as DEFAULT_SUBSTEPS
+from wmr_jax._src.model.velocity_loop import advance as advance
+from wmr_jax._src.model.velocity_loop import body_acceleration as body_acceleration
+from wmr_jax._src.model.velocity_loop import check_stability as check_stability
+from wmr_jax._src.model.velocity_loop import inertia as inertia
+from wmr_jax._src.model.velocity_loop import kinetic_energy as kinetic_energy
+from wmr_jax._src.model.velocity_loop import limit_wheels as limit_wheels
+from wmr_jax._src.model.velocity_loop import wheel_torques as wheel_torques

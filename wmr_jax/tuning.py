@@ -16,12 +16,12 @@ iterations, step and annealing (``knots=`` sizes its tables:
 the gradient against CMA-ES and random search at equal wall time.
 """
 
-from wmr_jax._src.controllers.schedule import SCHEDULE as SCHEDULE
-from wmr_jax._src.controllers.schedule import ScheduleParams as ScheduleParams
-from wmr_jax._src.controllers.schedule import knot_radii as knot_radii
-from wmr_jax._src.optimal import TimeBounds as TimeBounds
-from wmr_jax._src.optimal import bound_ratios as bound_ratios
-from wmr_jax._src.optimal import time_bounds as time_bounds
+from wmr_jax._src.model.controllers.schedule import SCHEDULE as SCHEDULE
+from wmr_jax._src.model.controllers.schedule import ScheduleParams as ScheduleParams
+from wmr_jax._src.model.controllers.schedule import knot_radii as knot_radii
+from wmr_jax._src.studies.optimal import TimeBounds as TimeBounds
+from wmr_jax._src.studies.optimal import bound_ratios as bound_ratios
+from wmr_jax._src.studies.optimal import time_bounds as time_bounds
 from wmr_jax._src.tuning.compare import cma_es_search as cma_es_search
 from wmr_jax._src.tuning.compare import compare as compare
 from wmr_jax._src.tuning.cost import GradientCost as GradientCost

@@ -19,7 +19,7 @@ __all__ = ["SUBCOMMANDS"]
 
 def _flags() -> dict[str, dict[str, Any]]:
     """Flag -> ``add_argument`` keywords, in ``--help`` order (values are checked in ``run``)."""
-    from wmr_jax._src.controllers import SHIM_SUNG, registered_names
+    from wmr_jax._src.model.controllers import SHIM_SUNG, registered_names
 
     return {
         "--out": {"required": True, "metavar": "FILE.gif", "help": "GIF to write"},
@@ -47,11 +47,11 @@ def _flags() -> dict[str, dict[str, Any]]:
 
 def run(args: Any) -> int:
     """Run ``wmr-jax animate``; return the exit status."""
-    from wmr_jax._src.poses import horizon_steps, paper_refs
+    from wmr_jax._src.model.robots import describe_robot
     from wmr_jax._src.report.animation import animate, gif_path
-    from wmr_jax._src.robots import describe_robot
-    from wmr_jax._src.robustness import robot_defaults
-    from wmr_jax._src.rollout import DEFAULT_DT
+    from wmr_jax._src.sim.poses import horizon_steps, paper_refs
+    from wmr_jax._src.sim.rollout import DEFAULT_DT
+    from wmr_jax._src.studies.robustness import robot_defaults
 
     gif_path("--out", args.out)
     out = flags.output_file("--out", args.out)

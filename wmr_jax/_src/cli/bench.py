@@ -5,9 +5,9 @@ from __future__ import annotations
 import sys
 from typing import Any
 
-from wmr_jax._src import bench
 from wmr_jax._src.cli import flags
-from wmr_jax._src.poses import MAX_SAMPLES
+from wmr_jax._src.sim.poses import MAX_SAMPLES
+from wmr_jax._src.studies import bench
 
 __all__ = ["SUBCOMMANDS"]
 
@@ -101,9 +101,9 @@ def _config_from(args: Any, robot: Any = None) -> bench.BenchConfig:
 def run(args: Any) -> int:
     """Run ``wmr-jax bench``: print the table (progress on stderr); return 0."""
     from wmr_jax._src.io import atomic_write_json
+    from wmr_jax._src.model.robots import describe_robot
     from wmr_jax._src.report.bench import bench_table
-    from wmr_jax._src.robots import describe_robot
-    from wmr_jax._src.sharding import MAX_CPU_DEVICES, use_cpu_devices
+    from wmr_jax._src.sim.sharding import MAX_CPU_DEVICES, use_cpu_devices
 
     out = None if args.json is None else flags.output_file("--json", args.json)
     given = flags.robot_from(args.robot)

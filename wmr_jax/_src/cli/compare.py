@@ -19,7 +19,7 @@ __all__ = ["SUBCOMMANDS"]
 
 def add_arguments(parser: Any) -> None:
     """Add the flags of ``wmr-jax compare``."""
-    from wmr_jax._src.maps import COMPARISON_RUNS, DEFAULT_CHUNK
+    from wmr_jax._src.studies.maps import COMPARISON_RUNS, DEFAULT_CHUNK
 
     parser.description = (
         "Compare the controllers over random docs/model.md §6 poses (not the grid of "
@@ -51,8 +51,8 @@ def add_arguments(parser: Any) -> None:
 def run(args: Any) -> int:
     """Run ``wmr-jax compare``; return the exit status."""
     from wmr_jax._src.cli.sweep import robot_and_horizon
-    from wmr_jax._src.maps import compare_controllers
     from wmr_jax._src.report.maps import comparison_table, save_comparison
+    from wmr_jax._src.studies.maps import compare_controllers
 
     out = flags.output_dir("--out", args.out)
     n_poses = flags.positive_int("--poses", args.poses)

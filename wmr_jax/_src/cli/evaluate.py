@@ -283,7 +283,7 @@ def unit_warnings(path: str, refs: Any) -> list[str]:
     """
     import numpy as np
 
-    from wmr_jax._src.metrics import DEFAULT_TOL_R
+    from wmr_jax._src.sim.metrics import DEFAULT_TOL_R
 
     out = []
     distance = np.hypot(refs[:, 0], refs[:, 1])
@@ -314,9 +314,9 @@ def _mismatch(text: Any) -> float:
 
 def _horizon(text: Any, n_refs: int, robot: Any) -> float:
     """``--horizon``, else the robot's default (``study_horizon``), checked with the refs."""
-    from wmr_jax._src.poses import horizon_steps
-    from wmr_jax._src.robustness import study_horizon
-    from wmr_jax._src.rollout import DEFAULT_DT
+    from wmr_jax._src.sim.poses import horizon_steps
+    from wmr_jax._src.sim.rollout import DEFAULT_DT
+    from wmr_jax._src.studies.robustness import study_horizon
 
     if text is None:
         text = study_horizon(robot)
@@ -333,7 +333,7 @@ def _horizon(text: Any, n_refs: int, robot: Any) -> float:
 
 def _loop(path: str, estimator: str | None) -> Any:
     """The closed loop of ``--gains``, its estimator replaced by ``--estimator`` if given."""
-    from wmr_jax._src.sensing.estimators import ESTIMATORS, resolve_estimator
+    from wmr_jax._src.sim.sensing.estimators import ESTIMATORS, resolve_estimator
 
     loop = flags.tuned_file("--gains", path)[0]
     if estimator is None:
@@ -350,8 +350,8 @@ def _tuned_for_identified(saved: Any, content: dict[str, Any]) -> bool:
     """Whether ``saved`` (a file's robot) is the robot ``tune --robot identified.json`` reads."""
     import dataclasses
 
-    from wmr_jax._src.params import Robot
-    from wmr_jax._src.robots import same_robot
+    from wmr_jax._src.model.params import Robot
+    from wmr_jax._src.model.robots import same_robot
 
     if saved is None:
         return False
@@ -415,7 +415,7 @@ def summary_rows(result: dict[str, Any], labels: list[str] | None = None) -> lis
     ``labels`` says where each reference is in ``--refs`` (``line 3``), for
     the row of those that did not arrive.
     """
-    from wmr_jax._src.robots import describe_robot, robot_from_values
+    from wmr_jax._src.model.robots import describe_robot, robot_from_values
 
     robot = describe_robot(robot_from_values(result["robot"], "robot"))
     if result.get("robot_file"):
@@ -462,7 +462,7 @@ def hint(result: dict[str, Any], args: Any) -> str:
     noisy = result["condition"] in ("noise", "both")
     if not noisy or result["success"] >= _HINT_BELOW:
         return ""
-    from wmr_jax._src.robots import robot_from_values, robot_name
+    from wmr_jax._src.model.robots import robot_from_values, robot_name
 
     name = robot_name(robot_from_values(result["robot"], "robot"))
     if args.robot:
@@ -531,9 +531,9 @@ def run(args: Any) -> int:
     for text in unit_warnings(args.refs, refs):
         warnings.warn(text, UserWarning, stacklevel=1)
 
-    from wmr_jax._src.conditions import evaluate_loop
     from wmr_jax._src.io import atomic_write_json, atomic_write_text
     from wmr_jax._src.report.tables import markdown_table
+    from wmr_jax._src.studies.conditions import evaluate_loop
     from wmr_jax._src.tuning.saved import tuned_json
 
     with flags.as_flags({"refs": "--refs", "horizon": "--horizon", "mismatch": "--mismatch"}):

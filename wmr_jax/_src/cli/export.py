@@ -94,7 +94,7 @@ def _text_size(obj: Path) -> int:
 def run(args: Any) -> int:
     """Run ``wmr-jax export``; return the exit status."""
     from wmr_jax._src.export.codegen import REALS, c_sources, write_sources
-    from wmr_jax._src.rollout import DEFAULT_DT
+    from wmr_jax._src.sim.rollout import DEFAULT_DT
     from wmr_jax._src.tuning.saved import load_tuned
 
     out = flags.output_dir("--out", args.out)

@@ -118,14 +118,14 @@ def choice(flag: str, text: str, allowed: Sequence[str]) -> str:
 
 def velocity_loop(text: str) -> str:
     """Return the name of a velocity loop given to ``--velocity``."""
-    from wmr_jax._src.loops import VELOCITY_LOOPS
+    from wmr_jax._src.sim.loops import VELOCITY_LOOPS
 
     return choice("--velocity", text, VELOCITY_LOOPS)
 
 
 def controller_names(names: Sequence[str] | None) -> list[str]:
     """Return the controllers given to ``--controller`` (default: every registered one)."""
-    from wmr_jax._src.controllers import registered_names
+    from wmr_jax._src.model.controllers import registered_names
 
     known = registered_names()
     if not names:
@@ -214,7 +214,7 @@ def gains_from(args: Any) -> Any:
     With a ``--gains FILE`` flag (``args.gains``), the gains come from that file
     instead, and a gain flag given beside it is an error.
     """
-    from wmr_jax._src.params import Gains, validate_gains
+    from wmr_jax._src.model.params import Gains, validate_gains
 
     if getattr(args, "gains", None) is not None:
         given = given_gain_flags(args)
@@ -296,7 +296,7 @@ def gains_file(flag: str, text: str) -> Any:
         ValueError: one line naming ``flag`` and the file, for a file
             ``load_tuned`` refuses or one of a gain schedule.
     """
-    from wmr_jax._src.params import Gains
+    from wmr_jax._src.model.params import Gains
 
     loop = tuned_file(flag, text)[0]
     if not isinstance(loop.params, Gains):
@@ -318,7 +318,7 @@ def add_robot_flag(parser: Any, default: str = "paper") -> None:
 
 def robot_flag_options(default: str = "paper") -> dict[str, Any]:
     """The ``add_argument`` keywords of ``--robot`` (``add_robot_flag``)."""
-    from wmr_jax._src.robots import ROBOTS
+    from wmr_jax._src.model.robots import ROBOTS
 
     return {
         "default": None,
@@ -335,7 +335,7 @@ def scaled_gains_note(robot: Any) -> str:
     ``studies.robot_defaults``: on a robot other than the paper's, the
     paper's feasible gains scaled into its wheel budget.
     """
-    from wmr_jax._src.robustness import robot_defaults
+    from wmr_jax._src.studies.robustness import robot_defaults
 
     gains = robot_defaults("shim-sung", robot)
     if gains is None:
@@ -356,7 +356,7 @@ def robot_from(text: Any) -> Any:
         ValueError: one line naming ``--robot``, the file, the key, its value
             and what is allowed.
     """
-    from wmr_jax._src.robots import read_robot
+    from wmr_jax._src.model.robots import read_robot
 
     if text is None:
         return None
@@ -368,14 +368,14 @@ def robot_from(text: Any) -> Any:
 
 def is_robot_file(text: Any) -> bool:
     """Whether ``--robot``'s value names a file rather than a preset."""
-    from wmr_jax._src.robots import ROBOTS
+    from wmr_jax._src.model.robots import ROBOTS
 
     return text is not None and text not in ROBOTS
 
 
 def robot_shown(given: Any, robot: Any) -> str:
     """One line for the robot a command runs: ``describe_robot``, and the file it came from."""
-    from wmr_jax._src.robots import describe_robot
+    from wmr_jax._src.model.robots import describe_robot
 
     text = describe_robot(robot)
     if given is not None and is_robot_file(given.label):
@@ -405,7 +405,7 @@ def robot_for_gains(given: Any, saved: Any, gains_flag: str, path: Any) -> Any:
     Raises:
         ValueError: one line naming both robots.
     """
-    from wmr_jax._src.robots import same_robot
+    from wmr_jax._src.model.robots import same_robot
 
     if given is None:
         return saved
@@ -420,7 +420,7 @@ def robot_for_gains(given: Any, saved: Any, gains_flag: str, path: Any) -> Any:
 
 def short_robot(robot: Any) -> str:
     """A robot in a few words: its preset's name, else its track and wheel limit."""
-    from wmr_jax._src.robots import robot_name
+    from wmr_jax._src.model.robots import robot_name
 
     name = robot_name(robot)
     if name is not None:

@@ -51,7 +51,7 @@ def add_arguments(parser: Any) -> None:
 
 
 def run(args: Any) -> int:
-    from wmr_jax._src.robots import load_robot
+    from wmr_jax._src.model.robots import load_robot
 
     robot = load_robot("paper") if args.robot is None else flags.robot_from(args.robot).robot
     if args.plan is not None:

@@ -113,7 +113,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     args = parser.parse_args(argv)
     if args.command in _ALL_DEVICE_COMMANDS and getattr(args, "cpu_devices", None) is None:
-        from wmr_jax._src.sharding import use_cpu_devices
+        from wmr_jax._src.sim.sharding import use_cpu_devices
 
         # Before any JAX computation; a no-op on accelerators. A command with
         # its own --cpu-devices flag splits the CPU itself, after checking it.

@@ -26,8 +26,8 @@ def _summary_line(case: str, s: dict[str, Any]) -> str:
 
 def run_paper(args: Any) -> int:
     """Run ``wmr-jax paper``: simulate, write the figures and table, print the summary."""
-    from wmr_jax._src import paper
     from wmr_jax._src.report.paper import paper_summary_table, save_paper
+    from wmr_jax._src.studies import paper
 
     out = flags.output_dir("--out", args.out)
     runs = paper.paper_runs()
@@ -42,9 +42,9 @@ def run_paper(args: Any) -> int:
 
 def run_demo(args: Any) -> int:
     """Run ``wmr-jax demo``: Fig. 7 and its table, then ``paper``; return the exit status."""
-    from wmr_jax._src import paper
     from wmr_jax._src.report.paper import save_fig7
     from wmr_jax._src.report.tables import markdown_table
+    from wmr_jax._src.studies import paper
 
     out = flags.output_dir("--out", args.out)
     fig7 = paper.fig7_runs()

@@ -32,7 +32,7 @@ _PRINTED = ["condition", "controller", "noise xy cm", "success", "median arrival
 
 def add_study_flags(parser: Any) -> None:
     """Add ``--out``, ``--controller`` and ``--velocity``, the flags every study command has."""
-    from wmr_jax._src.controllers import registered_names
+    from wmr_jax._src.model.controllers import registered_names
 
     known = ", ".join(registered_names())
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
@@ -101,9 +101,9 @@ def run(args: Any) -> int:
     for name in _OUTPUTS:
         (out / name).unlink(missing_ok=True)
 
+    from wmr_jax._src.model.robots import describe_robot
     from wmr_jax._src.report.robustness import robustness_table, write_robustness
-    from wmr_jax._src.robots import describe_robot
-    from wmr_jax._src.robustness import robustness_study, study_horizon
+    from wmr_jax._src.studies.robustness import robustness_study, study_horizon
 
     note = ""
     if not _is_paper(robot):
@@ -137,8 +137,8 @@ def run(args: Any) -> int:
 
 
 def _is_paper(robot: Any) -> bool:
-    from wmr_jax._src.params import Robot
-    from wmr_jax._src.robots import same_robot
+    from wmr_jax._src.model.params import Robot
+    from wmr_jax._src.model.robots import same_robot
 
     return same_robot(robot, Robot())
 
@@ -150,7 +150,7 @@ def _meta(seed: int, robot: Any, sets: dict[str, Any], args: Any) -> dict[str, A
     and every set's parameters and estimator (as ``tuned_gains.json`` holds
     them), so that two runs on other files or dtypes never read alike.
     """
-    from wmr_jax._src.robots import robot_json
+    from wmr_jax._src.model.robots import robot_json
     from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED
 
     files = {flag: getattr(args, flag[2:].replace("-", "_"), None) for flag in _GAIN_FLAGS}
@@ -167,7 +167,7 @@ def _meta(seed: int, robot: Any, sets: dict[str, Any], args: Any) -> dict[str, A
 
 def _gains_of(sets: dict[str, Any]) -> dict[str, Any]:
     """Each set's parameters and estimator, as ``tuned_gains.json`` holds them."""
-    from wmr_jax._src.sensing.loop import ClosedLoop
+    from wmr_jax._src.sim.sensing.loop import ClosedLoop
     from wmr_jax._src.tuning.saved import tuned_json
 
     gains = {}
@@ -179,7 +179,7 @@ def _gains_of(sets: dict[str, Any]) -> dict[str, Any]:
 
 def _estimator(name: str) -> Any:
     """The ``--estimator`` value: ``None`` for raw feedback, else a registered estimator's name."""
-    from wmr_jax._src.sensing.estimators import ESTIMATORS
+    from wmr_jax._src.sim.sensing.estimators import ESTIMATORS
 
     if name in ("none", "raw"):
         return None
@@ -196,9 +196,9 @@ def _noise_curve(
     """Success and arrival against noise: each set raw and with its (or the default) estimator."""
     import jax
 
-    from wmr_jax._src.conditions import noise_curve
     from wmr_jax._src.report.robustness import write_noise_curve
-    from wmr_jax._src.sensing.loop import ClosedLoop
+    from wmr_jax._src.sim.sensing.loop import ClosedLoop
+    from wmr_jax._src.studies.conditions import noise_curve
     from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
 
     loops = {}
@@ -223,8 +223,8 @@ def _gain_sets(args: Any) -> tuple[dict[str, Any], Any]:
     into that robot's wheel budget (``k_r = 60``, ``k_θ = 10`` on the paper
     robot, docs/robots.md).
     """
-    from wmr_jax._src.params import Robot
-    from wmr_jax._src.robots import same_robot
+    from wmr_jax._src.model.params import Robot
+    from wmr_jax._src.model.robots import same_robot
     from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
     from wmr_jax._src.tuning.saved import TUNINGS
 
@@ -275,12 +275,12 @@ def _standard(
     """Judge the gain sets under the standard conditions; write and print the table."""
     import jax
 
-    from wmr_jax._src.conditions import standard_conditions
     from wmr_jax._src.report.robustness import (
         STANDARD_COLUMNS,
         robustness_table,
         write_standard_conditions,
     )
+    from wmr_jax._src.studies.conditions import standard_conditions
     from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
 
     refs = held_out_poses(EVAL_POSES, EVAL_SEED)

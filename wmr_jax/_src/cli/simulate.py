@@ -56,7 +56,7 @@ def _controller_and_gains(args: Any) -> tuple[Any, Any, Any]:
 
     The robot is the file's (``None`` where it records none, and for the flags).
     """
-    from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
+    from wmr_jax._src.model.controllers.shim_sung import SHIM_SUNG
 
     if args.gains is None:
         return SHIM_SUNG, flags.gains_from(args), None
@@ -91,8 +91,8 @@ def default_steps(robot: Any) -> int:
     drive the same paths that many times slower, so a run of the default
     length on such a robot would end before it arrives.
     """
-    from wmr_jax._src.poses import HORIZON_S
-    from wmr_jax._src.robustness import study_horizon
+    from wmr_jax._src.sim.poses import HORIZON_S
+    from wmr_jax._src.studies.robustness import study_horizon
 
     stretch = 1.0 if robot is None else study_horizon(robot) / HORIZON_S
     return math.ceil(DEFAULT_STEPS * stretch - 1e-9)
@@ -100,7 +100,7 @@ def default_steps(robot: Any) -> int:
 
 def plot_title(ref: Any, controller: Any, gains: Any, gains_file: Any) -> str:
     """The title of ``--plot``: the reference and the gains that drove to it."""
-    from wmr_jax._src.params import Gains
+    from wmr_jax._src.model.params import Gains
 
     where = f"ref = ({ref[0]:g}, {ref[1]:g}, {math.degrees(ref[2]):g}°)"
     if isinstance(gains, Gains):
@@ -126,10 +126,10 @@ def run(args: Any) -> int:
     """Run ``wmr-jax simulate``; return the exit status."""
     import numpy as np
 
-    from wmr_jax._src import metrics
-    from wmr_jax._src.params import Robot
-    from wmr_jax._src.robots import same_robot
-    from wmr_jax._src.rollout import rollout
+    from wmr_jax._src.model.params import Robot
+    from wmr_jax._src.model.robots import same_robot
+    from wmr_jax._src.sim import metrics
+    from wmr_jax._src.sim.rollout import rollout
 
     plot = None if args.plot is None else flags.image_file("--plot", args.plot)
     ref = flags.pose_from_degrees("--ref", args.ref)

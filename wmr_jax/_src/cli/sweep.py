@@ -23,8 +23,8 @@ __all__ = ["SUBCOMMANDS"]
 
 def _flags() -> dict[str, dict[str, Any]]:
     """Flag -> ``add_argument`` keywords, in ``--help`` order (values are checked in ``run``)."""
-    from wmr_jax._src.controllers import registered_names
-    from wmr_jax._src.maps import DEFAULT_CHUNK, DEFAULT_HEADINGS_DEG
+    from wmr_jax._src.model.controllers import registered_names
+    from wmr_jax._src.studies.maps import DEFAULT_CHUNK, DEFAULT_HEADINGS_DEG
 
     return {
         "--out": {"required": True, "metavar": "DIR", "help": "output folder"},
@@ -90,9 +90,9 @@ def robot_and_horizon(args: Any) -> tuple[Any, Any, float]:
     robot's 6 s, longer for a robot too slow for the paper's gains. Given a
     ``--robot``, prints the robot and the horizon it runs (and a ROS YAML's note).
     """
-    from wmr_jax._src.maps import horizon_for
-    from wmr_jax._src.params import Robot
-    from wmr_jax._src.robots import describe_robot
+    from wmr_jax._src.model.params import Robot
+    from wmr_jax._src.model.robots import describe_robot
+    from wmr_jax._src.studies.maps import horizon_for
 
     given = flags.robot_from(args.robot)
     robot = Robot() if given is None else given.robot
@@ -150,9 +150,9 @@ def run(args: Any) -> int:
 
 def _run(args: Any, out: Path, chunks: Path | None, finished: dict) -> int:
     """The sweep; ``finished[controller]`` counts its chunks done, as they are done."""
-    from wmr_jax._src.maps import DEFAULT_HEADINGS_DEG, map_study
     from wmr_jax._src.report.maps import comparison_table, save_map_study
-    from wmr_jax._src.sweep_files import OtherSettingsWarning
+    from wmr_jax._src.studies.maps import DEFAULT_HEADINGS_DEG, map_study
+    from wmr_jax._src.studies.sweep_files import OtherSettingsWarning
 
     n_poses = flags.positive_int("--poses", args.poses)
     chunk = flags.positive_int("--chunk", args.chunk)

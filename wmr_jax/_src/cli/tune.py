@@ -120,7 +120,7 @@ def add_arguments(parser: Any) -> None:
 
 def _config_from(args: Any, *, schedule: bool) -> Any:
     """The ``TuneConfig`` of the flags, each checked (one line naming a bad one)."""
-    from wmr_jax._src.poses import MAX_SAMPLES
+    from wmr_jax._src.sim.poses import MAX_SAMPLES
     from wmr_jax._src.tuning.problems import MAX_TUNED_KNOTS
     from wmr_jax._src.tuning.training import TuneConfig
 
@@ -218,7 +218,7 @@ def _shown(params: Any) -> list[str]:
     """
     import math
 
-    from wmr_jax._src.params import Gains
+    from wmr_jax._src.model.params import Gains
     from wmr_jax._src.tuning.saved import tuned_json
 
     def fmt(name: str, value: Any) -> str:
@@ -262,7 +262,7 @@ def _robot_horizon(args: Any, config: Any, robot: Any) -> Any:
     follow the paper's feasible gains, gets the studies' stretched horizon
     (``studies.study_horizon``), so that its yardstick row can arrive at all.
     """
-    from wmr_jax._src.robustness import study_horizon
+    from wmr_jax._src.studies.robustness import study_horizon
 
     if robot is None or args.horizon is not None or args.gradient_cost:
         return config
@@ -278,8 +278,8 @@ def _robot_horizon(args: Any, config: Any, robot: Any) -> Any:
 
 def run(args: Any) -> int:
     """Run ``wmr-jax tune``; return the exit status."""
-    from wmr_jax._src.params import Robot
-    from wmr_jax._src.robots import describe_robot
+    from wmr_jax._src.model.params import Robot
+    from wmr_jax._src.model.robots import describe_robot
 
     _check_modes(args)
     if args.robust:

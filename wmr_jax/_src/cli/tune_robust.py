@@ -42,7 +42,7 @@ def _counts(args: Any) -> tuple[int, int]:
 
 def _estimator(args: Any) -> Any:
     """The ``--estimator`` name (``None`` for raw feedback); ``--fixed`` defaults to raw."""
-    from wmr_jax._src.sensing.estimators import ESTIMATORS
+    from wmr_jax._src.sim.sensing.estimators import ESTIMATORS
     from wmr_jax._src.tuning.robust import RobustConfig
 
     value = getattr(args, "estimator", None)
@@ -100,8 +100,8 @@ def _robot(args: Any) -> tuple[Any, dict[str, Any]]:
     The note of a YAML is printed first. Only another robot than the
     paper's is handed on (``tune_robust``'s default is the paper robot).
     """
-    from wmr_jax._src.params import Robot
-    from wmr_jax._src.robots import same_robot
+    from wmr_jax._src.model.params import Robot
+    from wmr_jax._src.model.robots import same_robot
 
     given = flags.robot_from(getattr(args, "robot", None))
     if given is not None and given.note:
@@ -118,8 +118,8 @@ def run(args: Any) -> int:
     if getattr(args, "compare", False):
         return _compare(out, config, robot, resume=bool(getattr(args, "resume", False)))
 
-    from wmr_jax._src.robots import describe_robot
-    from wmr_jax._src.robustness import study_horizon
+    from wmr_jax._src.model.robots import describe_robot
+    from wmr_jax._src.studies.robustness import study_horizon
     from wmr_jax._src.tuning.robust import tune_robust
     from wmr_jax._src.tuning.robust_run import described, save_tuned, write_evaluation
 

@@ -59,10 +59,10 @@ def _shown(row: dict[str, Any]) -> dict[str, Any]:
 
 def run(args: Any) -> int:
     """Run ``wmr-jax waypoints``; return the exit status."""
-    from wmr_jax._src.params import Robot
-    from wmr_jax._src.robots import describe_robot, robot_json
-    from wmr_jax._src.robustness import study_horizon
-    from wmr_jax._src.waypoints import soccer_steps
+    from wmr_jax._src.model.params import Robot
+    from wmr_jax._src.model.robots import describe_robot, robot_json
+    from wmr_jax._src.studies.robustness import study_horizon
+    from wmr_jax._src.studies.waypoints import soccer_steps
 
     out = flags.output_dir("--out", args.out)
     pass_deg = flags.number(
@@ -98,7 +98,7 @@ def run(args: Any) -> int:
     from wmr_jax._src.io import atomic_write_json
     from wmr_jax._src.report.tables import markdown_table
     from wmr_jax._src.report.waypoints import write_soccer
-    from wmr_jax._src.waypoints import soccer_study
+    from wmr_jax._src.studies.waypoints import soccer_study
 
     study = soccer_study(**settings)
     write_soccer(out, study)

@@ -7,8 +7,8 @@ estimator's constants baked in (``codegen`` assembles the pieces).
 from __future__ import annotations
 
 from wmr_jax._src.export import c_law
-from wmr_jax._src.params import Robot
-from wmr_jax._src.sensing.estimators import (
+from wmr_jax._src.model.params import Robot
+from wmr_jax._src.sim.sensing.estimators import (
     EKFParams,
     ObserverParams,
     observer_radii,

@@ -12,9 +12,9 @@ from typing import Any
 
 import numpy as np
 
-from wmr_jax._src import dynamics
-from wmr_jax._src.controllers.schedule import ScheduleParams, knot_radii
-from wmr_jax._src.params import Robot
+from wmr_jax._src.model import dynamics
+from wmr_jax._src.model.controllers.schedule import ScheduleParams, knot_radii
+from wmr_jax._src.model.params import Robot
 
 __all__ = ["Emitter", "arc", "kernels", "law", "limits", "polar_law", "scalar", "wrap"]
 
@@ -157,7 +157,7 @@ def polar_law(c: Emitter, name: str, params: Any) -> str:
     ``ρ``, ``α`` and ``θ_A`` from the same error coordinates as the Shim–Sung
     law, with ``atan2``; within ``goal_floor`` the robot only turns.
     """
-    from wmr_jax._src.controllers import polar
+    from wmr_jax._src.model.controllers import polar
 
     backward = bool(params.backward)
     eps = float(np.finfo(c.dtype).eps)

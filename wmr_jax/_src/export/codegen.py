@@ -26,18 +26,18 @@ from typing import Any
 
 import numpy as np
 
-from wmr_jax._src.controllers.aicardi import AICARDI, AicardiGains
-from wmr_jax._src.controllers.astolfi import ASTOLFI, AstolfiGains
-from wmr_jax._src.controllers.schedule import SCHEDULE, ScheduleParams
-from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
 from wmr_jax._src.export import c_estimators, c_law
-from wmr_jax._src.params import Gains, Robot
-from wmr_jax._src.rollout import DEFAULT_DT
-from wmr_jax._src.sensing.estimators import (
+from wmr_jax._src.model.controllers.aicardi import AICARDI, AicardiGains
+from wmr_jax._src.model.controllers.astolfi import ASTOLFI, AstolfiGains
+from wmr_jax._src.model.controllers.schedule import SCHEDULE, ScheduleParams
+from wmr_jax._src.model.controllers.shim_sung import SHIM_SUNG
+from wmr_jax._src.model.params import Gains, Robot
+from wmr_jax._src.sim.rollout import DEFAULT_DT
+from wmr_jax._src.sim.sensing.estimators import (
     EKFParams,
     resolve_estimator,
 )
-from wmr_jax._src.sensing.loop import ClosedLoop
+from wmr_jax._src.sim.sensing.loop import ClosedLoop
 
 __all__ = ["MAX_LATENCY", "REALS", "CSources", "c_sources"]
 
@@ -347,7 +347,7 @@ def write_sources(folder: Any, sources: CSources, loop: ClosedLoop) -> list[Any]
 
 def _baseline_json(loop: ClosedLoop) -> dict[str, Any]:
     """A baseline loop as ``wmr_controller.json`` holds it: law, gains, estimator, robot."""
-    from wmr_jax._src.robots import robot_json
+    from wmr_jax._src.model.robots import robot_json
     from wmr_jax._src.tuning.estimation import estimator_json
 
     params = loop.params

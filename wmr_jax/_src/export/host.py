@@ -23,13 +23,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src import checks, loops, metrics, motion
+from wmr_jax._src import checks
 from wmr_jax._src.export.codegen import MAX_LATENCY
 from wmr_jax._src.export.compiled import CompiledController
-from wmr_jax._src.metrics import PoseMetrics
-from wmr_jax._src.rollout import DEFAULT_DT
-from wmr_jax._src.sensing.disturbances import Disturbance
-from wmr_jax._src.sensing.loop import ClosedLoop, metrics_fold, metrics_result, prepare_disturbed
+from wmr_jax._src.sim import loops, metrics, motion
+from wmr_jax._src.sim.metrics import PoseMetrics
+from wmr_jax._src.sim.rollout import DEFAULT_DT
+from wmr_jax._src.sim.sensing.disturbances import Disturbance
+from wmr_jax._src.sim.sensing.loop import (
+    ClosedLoop,
+    metrics_fold,
+    metrics_result,
+    prepare_disturbed,
+)
 
 __all__ = [
     "METADATA",
@@ -218,8 +224,8 @@ def exported_loop(folder: str | os.PathLike) -> tuple[ClosedLoop, dict[str, Any]
 
 def _baseline_loop(values: Any, folder: Any) -> ClosedLoop:
     """The baseline loop a ``wmr_controller.json`` records (``codegen._baseline_json``)."""
-    from wmr_jax._src.controllers import get_controller
-    from wmr_jax._src.robots import robot_from_values
+    from wmr_jax._src.model.controllers import get_controller
+    from wmr_jax._src.model.robots import robot_from_values
     from wmr_jax._src.tuning.estimation import estimator_from_json
 
     where = f"--c {os.fspath(folder)!r}: {METADATA}"
@@ -252,7 +258,7 @@ def evaluate_compiled(
     ``loop`` is the loop the controller was generated from; the runs are
     those ``evaluate_loop(loop, refs, ...)`` makes, the commands the C's.
     """
-    from wmr_jax._src import conditions
+    from wmr_jax._src.studies import conditions
 
     labels = {label: (sxy, sdeg, lat) for label, sxy, sdeg, lat in conditions.STANDARD_CONDITIONS}
     if condition not in labels:
@@ -271,9 +277,10 @@ def evaluate_compiled(
 
 def _figures(m, loop, refs, robot, condition, mismatch, seed, horizon, velocity, dt):
     """The result dict of ``conditions.evaluate_loop``, of the compiled controller's runs."""
-    from wmr_jax._src import conditions, controllers
-    from wmr_jax._src.robots import robot_json
-    from wmr_jax._src.sensing.estimators import resolve_estimator
+    from wmr_jax._src.model import controllers
+    from wmr_jax._src.model.robots import robot_json
+    from wmr_jax._src.sim.sensing.estimators import resolve_estimator
+    from wmr_jax._src.studies import conditions
 
     estimator, _ = resolve_estimator(loop.estimator)
     row = conditions.figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity)

@@ -21,13 +21,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src import checks, loops, metrics
+from wmr_jax._src import checks
 from wmr_jax._src.identify import model
-from wmr_jax._src.metrics import PoseMetrics
-from wmr_jax._src.params import Robot
-from wmr_jax._src.rollout import Trajectory
-from wmr_jax._src.sensing import loop as sensing_loop
-from wmr_jax._src.sensing.disturbances import Disturbance
+from wmr_jax._src.model.params import Robot
+from wmr_jax._src.sim import loops, metrics
+from wmr_jax._src.sim.metrics import PoseMetrics
+from wmr_jax._src.sim.rollout import Trajectory
+from wmr_jax._src.sim.sensing import loop as sensing_loop
+from wmr_jax._src.sim.sensing.disturbances import Disturbance
 
 __all__ = [
     "identified_metrics",
@@ -73,7 +74,7 @@ def loaded_identified(source: Any) -> Any:
     The loaded robot's note says, in one line, that the runs are on the
     identified robot while the controller believes its base.
     """
-    from wmr_jax._src.robots import LoadedRobot
+    from wmr_jax._src.model.robots import LoadedRobot
 
     if not is_identified(source):
         return None

@@ -31,9 +31,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.controllers import shim_sung as law
 from wmr_jax._src.identify import model
-from wmr_jax._src.params import Robot
+from wmr_jax._src.model.controllers import shim_sung as law
+from wmr_jax._src.model.params import Robot
 
 __all__ = ["Fit", "Segments", "fit_batch", "fit_log", "levenberg_marquardt", "segments_of", "Z95"]
 

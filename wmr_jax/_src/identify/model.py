@@ -22,10 +22,10 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 
-from wmr_jax._src import loops
-from wmr_jax._src.controllers.base import Controller
-from wmr_jax._src.params import Robot
-from wmr_jax._src.sensing import disturbances
+from wmr_jax._src.model.controllers.base import Controller
+from wmr_jax._src.model.params import Robot
+from wmr_jax._src.sim import loops
+from wmr_jax._src.sim.sensing import disturbances
 
 __all__ = [
     "LOGGED",

@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from wmr_jax._src.identify import model
-from wmr_jax._src.params import Robot
+from wmr_jax._src.model.params import Robot
 
 __all__ = ["plan_commands", "square_commands", "synthetic_log"]
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from wmr_jax._src.identify import fit as fitting
 from wmr_jax._src.identify import model
-from wmr_jax._src.params import Robot
+from wmr_jax._src.model.params import Robot
 
 __all__ = ["identified", "table", "plot_fit", "true_robot"]
 

@@ -21,13 +21,15 @@ from typing import Any
 import jax
 import numpy as np
 
-from wmr_jax._src import checks, controllers, metrics
-from wmr_jax._src import rollout as simulation
+from wmr_jax._src import checks
 from wmr_jax._src.io import atomic_write_bytes
-from wmr_jax._src.params import Robot
-from wmr_jax._src.poses import horizon_steps, sample_poses
+from wmr_jax._src.model import controllers
+from wmr_jax._src.model.params import Robot
 from wmr_jax._src.report.figures import plt
-from wmr_jax._src.rollout import DEFAULT_DT
+from wmr_jax._src.sim import metrics
+from wmr_jax._src.sim import rollout as simulation
+from wmr_jax._src.sim.poses import horizon_steps, sample_poses
+from wmr_jax._src.sim.rollout import DEFAULT_DT
 
 __all__ = ["animate", "frame_timing", "gif_path", "write_gif"]
 

@@ -164,7 +164,7 @@ def _mark_backwards(ax: Any, paths: Sequence[np.ndarray], refs: np.ndarray) -> N
     Folding makes front and back alike, so such runs count as arrived; the
     circle tells them apart from the ones that end facing ``θ_r``.
     """
-    from wmr_jax._src.metrics import DEFAULT_TOL_R
+    from wmr_jax._src.sim.metrics import DEFAULT_TOL_R
 
     ends = np.asarray([np.asarray(p)[-1] for p in paths])
     close = np.hypot(*(ends[:, :2] - refs[: len(ends), :2]).T) <= DEFAULT_TOL_R

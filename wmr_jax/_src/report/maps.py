@@ -16,10 +16,10 @@ from typing import Any
 import numpy as np
 
 from wmr_jax._src.checks import check_number
-from wmr_jax._src.controllers import registered_names
 from wmr_jax._src.io import atomic_write_text, json_text, save_figure
-from wmr_jax._src.maps import MapStudy, PoseGrid, PoseMetrics
-from wmr_jax._src.params import Robot
+from wmr_jax._src.model.controllers import registered_names
+from wmr_jax._src.model.params import Robot
+from wmr_jax._src.model.robots import robot_from_values, same_robot
 from wmr_jax._src.report.figures import plt
 from wmr_jax._src.report.tables import (
     json_number,
@@ -29,7 +29,7 @@ from wmr_jax._src.report.tables import (
     require_rows,
     row_numbers,
 )
-from wmr_jax._src.robots import robot_from_values, same_robot
+from wmr_jax._src.studies.maps import MapStudy, PoseGrid, PoseMetrics
 
 __all__ = ["comparison_table", "map_figure", "save_comparison", "save_map_study", "winner_figure"]
 

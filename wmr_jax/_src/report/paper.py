@@ -15,10 +15,10 @@ import numpy as np
 
 from wmr_jax._src.checks import check_number
 from wmr_jax._src.io import atomic_write_text, json_text, save_figure
-from wmr_jax._src.params import Gains
+from wmr_jax._src.model.params import Gains
 from wmr_jax._src.report.figures import closed_after, plot_paths, plot_wheel_speeds, plt
 from wmr_jax._src.report.tables import markdown_table, number, percent, row_numbers
-from wmr_jax._src.rollout import DEFAULT_DT
+from wmr_jax._src.sim.rollout import DEFAULT_DT
 
 __all__ = ["paper_summary_table", "save_fig7", "save_paper"]
 

@@ -16,9 +16,9 @@ from pathlib import Path
 from typing import Any
 
 from wmr_jax._src.io import atomic_write_text, json_text, save_figure
-from wmr_jax._src.poses import HORIZON_S
 from wmr_jax._src.report.figures import plt
 from wmr_jax._src.report.tables import markdown_table, percent, require_rows
+from wmr_jax._src.sim.poses import HORIZON_S
 
 __all__ = [
     "NOISE_CURVE_COLUMNS",
@@ -143,7 +143,7 @@ def _horizon_of(rows: Sequence[dict[str, Any]], default: float = HORIZON_S) -> f
 
 def _robot_text(meta: dict[str, Any]) -> str:
     """``", on <robot>"`` for a meta that records a robot, else ``""``."""
-    from wmr_jax._src.robots import describe_robot, robot_from_values
+    from wmr_jax._src.model.robots import describe_robot, robot_from_values
 
     if not isinstance(meta.get("robot"), dict):
         return ""
@@ -186,8 +186,8 @@ def write_robustness(
     Returns:
         The paths written.
     """
-    from wmr_jax._src.params import Robot
-    from wmr_jax._src.robots import robot_json
+    from wmr_jax._src.model.params import Robot
+    from wmr_jax._src.model.robots import robot_json
 
     out, rows = Path(out_dir), require_rows("rows", rows)
     horizon = _horizon_of(rows)

@@ -10,11 +10,11 @@ from typing import Any
 import numpy as np
 
 from wmr_jax._src.checks import real_array, require
-from wmr_jax._src.controllers.schedule import SHAPE_FIELDS, knot_radii
 from wmr_jax._src.io import save_figure
-from wmr_jax._src.optimal import bound_ratios
-from wmr_jax._src.poses import HORIZON_S
+from wmr_jax._src.model.controllers.schedule import SHAPE_FIELDS, knot_radii
 from wmr_jax._src.report.tables import json_number, markdown_table, require_rows
+from wmr_jax._src.sim.poses import HORIZON_S
+from wmr_jax._src.studies.optimal import bound_ratios
 from wmr_jax._src.tuning.parametrisation import (
     GAIN_FIELDS,
     PAPER_FEASIBLE_GAINS,

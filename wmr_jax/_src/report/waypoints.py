@@ -13,8 +13,8 @@ import numpy as np
 from wmr_jax._src.io import atomic_write_text, json_text, save_figure
 from wmr_jax._src.report.figures import plot_paths, plt
 from wmr_jax._src.report.tables import markdown_table
-from wmr_jax._src.rollout import DEFAULT_DT
-from wmr_jax._src.waypoints import (
+from wmr_jax._src.sim.rollout import DEFAULT_DT
+from wmr_jax._src.studies.waypoints import (
     SOCCER_WAYPOINTS_DEG,
     SoccerRun,
     SoccerStudy,

@@ -31,9 +31,9 @@ from wmr_jax._src.checks import (
     check_number,
     float_dtype,
 )
-from wmr_jax._src.optimal import time_bounds
-from wmr_jax._src.params import Robot, validate_one_robot
-from wmr_jax._src.poses import sample_poses
+from wmr_jax._src.model.params import Robot, validate_one_robot
+from wmr_jax._src.sim.poses import sample_poses
+from wmr_jax._src.studies.optimal import time_bounds
 from wmr_jax._src.tuning.evaluation import (
     RUN_OPTIONS,
     check_run,
@@ -381,9 +381,9 @@ def run_comparison(
         All rows, kept and new.
     """
     from wmr_jax._src import io
+    from wmr_jax._src.model.robots import robot_json
     from wmr_jax._src.provenance import code_version
     from wmr_jax._src.report.tuning import comparison_table
-    from wmr_jax._src.robots import robot_json
 
     robot = validate_one_robot(robot, "tuning")
     settings = {
@@ -484,7 +484,7 @@ def _settings_difference(saved: Any, now: dict[str, Any]) -> str:
 
 def _robot_text(values: Any) -> str:
     """A ``compare_settings.json`` robot in words."""
-    from wmr_jax._src.robots import describe_robot, robot_from_values
+    from wmr_jax._src.model.robots import describe_robot, robot_from_values
 
     try:
         return describe_robot(robot_from_values(values, "robot"))

@@ -8,12 +8,12 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 
-from wmr_jax._src import loops
-from wmr_jax._src import rollout as simulation
 from wmr_jax._src.checks import as_float_tree, check_int, float_dtype
-from wmr_jax._src.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
-from wmr_jax._src.params import Robot
-from wmr_jax._src.poses import sample_poses
+from wmr_jax._src.model.params import Robot
+from wmr_jax._src.sim import loops
+from wmr_jax._src.sim import rollout as simulation
+from wmr_jax._src.sim.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
+from wmr_jax._src.sim.poses import sample_poses
 from wmr_jax._src.tuning.loss import LossWeights, batch_loss, make_spec, robust_value_and_grad
 from wmr_jax._src.tuning.parametrisation import (
     PAPER_FEASIBLE_GAINS,

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from wmr_jax._src.checks import check_int
-from wmr_jax._src.sensing.estimators import (
+from wmr_jax._src.sim.sensing.estimators import (
     OBSERVER_KNOTS,
     EKFParams,
     ObserverParams,

@@ -15,14 +15,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src import loops
-from wmr_jax._src import rollout as simulation
 from wmr_jax._src.checks import check_int, require_concrete
-from wmr_jax._src.controllers.schedule import SCHEDULE, ScheduleParams
-from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
-from wmr_jax._src.metrics import arrival_time
-from wmr_jax._src.params import Gains, Robot
-from wmr_jax._src.poses import horizon_steps, sample_poses
+from wmr_jax._src.model.controllers.schedule import SCHEDULE, ScheduleParams
+from wmr_jax._src.model.controllers.shim_sung import SHIM_SUNG
+from wmr_jax._src.model.params import Gains, Robot
+from wmr_jax._src.sim import loops
+from wmr_jax._src.sim import rollout as simulation
+from wmr_jax._src.sim.metrics import arrival_time
+from wmr_jax._src.sim.poses import horizon_steps, sample_poses
 
 __all__ = [
     "EVAL_POSES",
@@ -161,7 +161,7 @@ def evaluate(
     if controller is None:
         controller = SCHEDULE if isinstance(gains, ScheduleParams) else SHIM_SUNG
     if horizon is None:
-        from wmr_jax._src.robustness import study_horizon  # it imports the tuning package
+        from wmr_jax._src.studies.robustness import study_horizon  # it imports the tuning package
 
         horizon = study_horizon(robot)
     traj, times, _ = hard_runs(refs, gains, **run_options(locals()), controller=controller)
@@ -211,7 +211,7 @@ def report_ratios(mean_arrival: float, bounds: Any, paper: float | None = None) 
         "vs_lower_bound"}`` (and ``"speedup_vs_paper"``), and a ``"…_reason"``
         for each ``None``.
     """
-    from wmr_jax._src.optimal import bound_ratios
+    from wmr_jax._src.studies.optimal import bound_ratios
 
     out: dict[str, Any] = {}
     arrived = math.isfinite(mean_arrival)

@@ -24,8 +24,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src import loops
-from wmr_jax._src import rollout as simulation
 from wmr_jax._src.checks import (
     as_float_tree,
     check_bool,
@@ -35,14 +33,16 @@ from wmr_jax._src.checks import (
     require,
     require_representable,
 )
-from wmr_jax._src.controllers import SHIM_SUNG
-from wmr_jax._src.controllers import shim_sung as law
-from wmr_jax._src.controllers.base import Controller
-from wmr_jax._src.controllers.schedule import SCHEDULE, ScheduleParams
-from wmr_jax._src.dynamics import sin_cos
-from wmr_jax._src.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
-from wmr_jax._src.params import Gains, Robot, validate_one_robot
-from wmr_jax._src.poses import HORIZON_S, horizon_steps
+from wmr_jax._src.model.controllers import SHIM_SUNG
+from wmr_jax._src.model.controllers import shim_sung as law
+from wmr_jax._src.model.controllers.base import Controller
+from wmr_jax._src.model.controllers.schedule import SCHEDULE, ScheduleParams
+from wmr_jax._src.model.dynamics import sin_cos
+from wmr_jax._src.model.params import Gains, Robot, validate_one_robot
+from wmr_jax._src.sim import loops
+from wmr_jax._src.sim import rollout as simulation
+from wmr_jax._src.sim.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
+from wmr_jax._src.sim.poses import HORIZON_S, horizon_steps
 from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS
 from wmr_jax._src.tuning.problems import FIXED, Problem, get_problem
 

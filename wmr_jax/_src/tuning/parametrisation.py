@@ -18,8 +18,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from wmr_jax._src.checks import is_traced, real_array, require, require_unbatched
-from wmr_jax._src.params import Gains, Robot, validate_gains, validate_one_robot
-from wmr_jax._src.poses import EVAL_R_MAX
+from wmr_jax._src.model.params import Gains, Robot, validate_gains, validate_one_robot
+from wmr_jax._src.sim.poses import EVAL_R_MAX
 
 __all__ = [
     "GAIN_FIELDS",

@@ -17,17 +17,17 @@ import jax.numpy as jnp
 import numpy as np
 
 from wmr_jax._src.checks import check_int
-from wmr_jax._src.controllers.base import Controller
-from wmr_jax._src.controllers.schedule import (
+from wmr_jax._src.model.controllers.base import Controller
+from wmr_jax._src.model.controllers.schedule import (
     KNOTS,
     SCHEDULE,
     SHAPE_FIELDS,
     TABLES,
     ScheduleParams,
 )
-from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
-from wmr_jax._src.params import Gains, Robot
-from wmr_jax._src.rollout import DEFAULT_DT
+from wmr_jax._src.model.controllers.shim_sung import SHIM_SUNG
+from wmr_jax._src.model.params import Gains, Robot
+from wmr_jax._src.sim.rollout import DEFAULT_DT
 from wmr_jax._src.tuning import parametrisation as fixed
 
 __all__ = [

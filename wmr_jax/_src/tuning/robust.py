@@ -39,7 +39,6 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from wmr_jax._src import conditions, loops, robustness
 from wmr_jax._src.checks import (
     as_poses,
     check_bool,
@@ -50,16 +49,18 @@ from wmr_jax._src.checks import (
     float_dtype,
     require_unbatched,
 )
-from wmr_jax._src.controllers import shim_sung as law
-from wmr_jax._src.controllers.schedule import KNOTS
-from wmr_jax._src.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
-from wmr_jax._src.params import Gains, Robot, validate_one_robot
-from wmr_jax._src.poses import horizon_steps, sample_poses
-from wmr_jax._src.rollout import DEFAULT_DT, check_temperature
-from wmr_jax._src.sensing import disturbances, loop
-from wmr_jax._src.sensing.disturbances import STANDARD_MISMATCH
-from wmr_jax._src.sensing.estimators import ESTIMATORS, OBSERVER_KNOTS
-from wmr_jax._src.sensing.loop import ClosedLoop
+from wmr_jax._src.model.controllers import shim_sung as law
+from wmr_jax._src.model.controllers.schedule import KNOTS
+from wmr_jax._src.model.params import Gains, Robot, validate_one_robot
+from wmr_jax._src.sim import loops
+from wmr_jax._src.sim.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
+from wmr_jax._src.sim.poses import horizon_steps, sample_poses
+from wmr_jax._src.sim.rollout import DEFAULT_DT, check_temperature
+from wmr_jax._src.sim.sensing import disturbances, loop
+from wmr_jax._src.sim.sensing.disturbances import STANDARD_MISMATCH
+from wmr_jax._src.sim.sensing.estimators import ESTIMATORS, OBSERVER_KNOTS
+from wmr_jax._src.sim.sensing.loop import ClosedLoop
+from wmr_jax._src.studies import conditions, robustness
 from wmr_jax._src.tuning.estimation import EstimatorBox, estimator_box
 from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
 from wmr_jax._src.tuning.loss import LossWeights, arrival_terms, capped_mean

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from wmr_jax._src import io
-from wmr_jax._src.params import Robot, validate_one_robot
+from wmr_jax._src.model.params import Robot, validate_one_robot
 from wmr_jax._src.tuning import robust
 from wmr_jax._src.tuning.robust import RobustConfig
 
@@ -56,8 +56,8 @@ def save_tuned(out: Path, loop: Any, losses: list[float], robot: Robot) -> None:
 
 def write_evaluation(out: Path, config: RobustConfig, robot: Robot, result: dict) -> str:
     """Write ``robust_evaluation.json`` and ``.md`` of a robust result; return the table."""
+    from wmr_jax._src.model.robots import robot_json
     from wmr_jax._src.report.robustness import robustness_table
-    from wmr_jax._src.robots import robot_json
 
     record = {
         "config": dataclasses.asdict(config),
@@ -129,9 +129,9 @@ def run_comparison(
     Returns:
         The rows (kept and new), also written to ``robust_compare.json`` and ``.md``.
     """
+    from wmr_jax._src.model.robots import robot_json
     from wmr_jax._src.provenance import code_version
     from wmr_jax._src.report.tuning import robust_comparison_table
-    from wmr_jax._src.robots import robot_json
 
     robot = validate_one_robot(robot, "tuning")
     path = out / "robust_compare.json"

@@ -103,7 +103,7 @@ def _progress(
 
 def held_out_bounds(config: Any, robot: Any) -> Any:
     """The time-optimal yardsticks (docs/model.md §8) of the held-out poses of ``config``."""
-    from wmr_jax._src.optimal import time_bounds
+    from wmr_jax._src.studies.optimal import time_bounds
     from wmr_jax._src.tuning.evaluation import held_out_poses
 
     refs = held_out_poses(config.eval_poses, config.eval_seed)
@@ -123,9 +123,9 @@ def write_results(
         ValueError: one line, if the tuned parameters are not all finite
             (nothing is written then).
     """
-    from wmr_jax._src.params import check_feasible
+    from wmr_jax._src.model.params import check_feasible
+    from wmr_jax._src.model.robots import ROBOT_UNITS, robot_json
     from wmr_jax._src.report.tuning import tuning_curve
-    from wmr_jax._src.robots import ROBOT_UNITS, robot_json
     from wmr_jax._src.tuning.evaluation import report_ratios, wheel_speed_ok
     from wmr_jax._src.tuning.saved import tuned_json, write_tuned
 
@@ -246,7 +246,7 @@ def tune(
             of another run.
     """
     from wmr_jax._src.checks import check_bool, check_callable, check_folder
-    from wmr_jax._src.params import Robot, validate_robot
+    from wmr_jax._src.model.params import Robot, validate_robot
 
     out = check_folder("out_dir", out_dir)
     check_bool("resume", resume)

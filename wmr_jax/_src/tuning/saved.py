@@ -35,12 +35,12 @@ from pathlib import Path
 from typing import Any
 
 from wmr_jax._src.checks import check_path, require_unbatched
-from wmr_jax._src.controllers.schedule import SCHEDULE, SHAPE_FIELDS, TABLES, ScheduleParams
-from wmr_jax._src.controllers.shim_sung import SHIM_SUNG
 from wmr_jax._src.io import atomic_write_json, json_object_once
-from wmr_jax._src.params import Gains, Robot, validate_one_robot
-from wmr_jax._src.robots import ROBOT_UNITS, check_units, robot_from_values, robot_json
-from wmr_jax._src.sensing.loop import ClosedLoop
+from wmr_jax._src.model.controllers.schedule import SCHEDULE, SHAPE_FIELDS, TABLES, ScheduleParams
+from wmr_jax._src.model.controllers.shim_sung import SHIM_SUNG
+from wmr_jax._src.model.params import Gains, Robot, validate_one_robot
+from wmr_jax._src.model.robots import ROBOT_UNITS, check_units, robot_from_values, robot_json
+from wmr_jax._src.sim.sensing.loop import ClosedLoop
 from wmr_jax._src.tuning.estimation import estimator_from_json, estimator_json
 from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS
 from wmr_jax._src.tuning.problems import FIXED, SCHEDULED, params_json

@@ -11,8 +11,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src import loops
-from wmr_jax._src import rollout as simulation
 from wmr_jax._src.checks import (
     as_poses,
     check_budget,
@@ -21,8 +19,10 @@ from wmr_jax._src.checks import (
     check_key,
     float_dtype,
 )
-from wmr_jax._src.params import Gains, Robot, validate_one_robot
-from wmr_jax._src.poses import HORIZON_S
+from wmr_jax._src.model.params import Gains, Robot, validate_one_robot
+from wmr_jax._src.sim import loops
+from wmr_jax._src.sim import rollout as simulation
+from wmr_jax._src.sim.poses import HORIZON_S
 from wmr_jax._src.tuning.evaluation import check_run, hard_runs, run_options
 from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS, unit_from_gains
 from wmr_jax._src.tuning.problems import FIXED, Problem, get_problem

@@ -28,8 +28,6 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from wmr_jax._src import loops
-from wmr_jax._src import rollout as simulation
 from wmr_jax._src.checks import (
     as_float_tree,
     check_bool,
@@ -38,11 +36,13 @@ from wmr_jax._src.checks import (
     check_number,
     float_dtype,
 )
-from wmr_jax._src.controllers.schedule import KNOTS
-from wmr_jax._src.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
-from wmr_jax._src.params import Gains, Robot, validate_one_robot
-from wmr_jax._src.poses import HORIZON_S, MAX_SAMPLES, sample_poses
+from wmr_jax._src.model.controllers.schedule import KNOTS
+from wmr_jax._src.model.params import Gains, Robot, validate_one_robot
 from wmr_jax._src.provenance import code_version
+from wmr_jax._src.sim import loops
+from wmr_jax._src.sim import rollout as simulation
+from wmr_jax._src.sim.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
+from wmr_jax._src.sim.poses import HORIZON_S, MAX_SAMPLES, sample_poses
 from wmr_jax._src.tuning.evaluation import (
     EVAL_POSES,
     EVAL_SEED,

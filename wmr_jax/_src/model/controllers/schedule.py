@@ -1,0 +1,293 @@
+"""The Shim–Sung law with gain schedules: gains as functions of the error state (docs/model.md §3).
+
+The fixed-gain law must keep ``k_r + L k_θ ≤ V_max`` for the worst case of
+both commands together, so neither can use the wheel budget the other leaves
+unused. Here the gains are tables over the distance ``r_e`` and the wheel
+condition is met by construction instead, at every state:
+
+* ``ω = k_θ(r_e) (ε sin φ̄_e + (1 − ε) sin θ̄_e)`` where ``d ≠ 0`` and
+  ``ω = k_turn(r_e) sin φ̄_e`` where ``d = 0`` (Region 3: the robot turns in
+  place, so the whole budget may go to turning), blended by ``1 − d²``;
+  then ``|ω| ≤ V_max / L``.
+* ``v = k_r(r_e) d sin(r̄_e) cos φ̄_e``, then ``|v| ≤ V_max − L |ω|``: the
+  speed uses whatever the turn leaves, which makes the effective ``k_r``
+  depend on the angles as well.
+
+So ``|v| + L|ω| ≤ V_max``: every wheel command ``v ± L ω`` is within
+``±V_max``. The tables are piecewise linear in ``r_e`` with knots at
+``r_k = R_KNOT (k / (K − 1))²`` (dense near the goal, where the law switches
+most), constant beyond the last. With constant tables (``k_turn = k_θ``) that
+meet ``k_r + L k_θ ≤ V_max`` neither cap is active and the command equals
+the fixed-gain law's exactly: the regions, blend, fold and saturation are
+``shim_sung.commands`` itself, evaluated with the gains of the state, not a
+copy of the law.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from wmr_jax._src.checks import (
+    Parameters,
+    check_int,
+    list_as_array,
+    real_array,
+    require,
+    require_one_batch_size,
+    require_representable,
+)
+from wmr_jax._src.model.controllers.base import Controller, register_controller
+from wmr_jax._src.model.controllers.shim_sung import (
+    PolarError,
+    commands,
+    direction_flag,
+    polar_error,
+    region_label,
+)
+from wmr_jax._src.model.params import Gains, Robot, WheelSpeedWarning, sampled, validate_gains
+
+__all__ = [
+    "KNOTS",
+    "R_KNOT",
+    "SCHEDULE",
+    "ScheduleParams",
+    "knot_radii",
+    "schedule_commands",
+    "validate_schedule",
+]
+
+KNOTS = 10  # knots per table by default
+# Each knot is a term of the compiled law: a rollout of 200 knots compiles in
+# 7 s, of 300 in 20 s and 1.3 GB, of 1000 not at all (tuning stops at 60).
+MAX_KNOTS = 200
+R_KNOT = 81.0  # cm, the last knot: just beyond the 80 cm of the evaluation set (§6)
+TABLES = ("kr", "k_theta", "k_turn")
+SHAPE_FIELDS = ("phi_m", "r_m", "r_a", "r_e", "alpha")
+
+_ROBOT = Robot()
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class ScheduleParams(Parameters):
+    """Parameters of the gain-scheduled Shim–Sung law (docs/model.md §3).
+
+    Each table is a tuple of ``K ≥ 2`` knot values (each a scalar, or with one
+    leading batch axis), the gain at ``r_e = knot_radii(K)[k]``.
+
+    Attributes:
+        kr: speed gain ``k_r(r_e)`` knots, cm/s, ``> 0``.
+        k_theta: turn gain ``k_θ(r_e)`` knots where ``d ≠ 0``, rad/s, ``> 0``.
+        k_turn: turn gain knots where ``d = 0`` (Region 3), rad/s, ``> 0``.
+        phi_m, r_m, r_a, r_e, alpha: as in ``Gains``.
+        v_max: the wheel-speed limit the commands respect, cm/s.
+        half_track: ``L`` of the robot, cm.
+    """
+
+    kr: tuple = (60.0,) * KNOTS
+    k_theta: tuple = (10.0,) * KNOTS
+    k_turn: tuple = (10.0,) * KNOTS
+    phi_m: Any = math.radians(70.0)
+    r_m: Any = 20.0
+    r_a: Any = 20.0
+    r_e: Any = 1.0
+    alpha: Any = 0.25
+    v_max: Any = float(_ROBOT.v_max)
+    half_track: Any = float(_ROBOT.half_track)
+
+    def __post_init__(self) -> None:
+        """Keep each table a tuple of knots, one leaf per knot.
+
+        A list given for a table becomes a tuple; a list given for one knot,
+        or for any other field, becomes one array (a batched value), as in
+        ``Gains``.
+        """
+        for name in TABLES:
+            table = getattr(self, name)
+            if isinstance(table, (list, tuple)):
+                object.__setattr__(self, name, tuple(list_as_array(knot) for knot in table))
+        for name in (*SHAPE_FIELDS, "v_max", "half_track"):
+            object.__setattr__(self, name, list_as_array(getattr(self, name)))
+
+    @classmethod
+    def from_gains(
+        cls, gains: Gains, *, knots: int = KNOTS, robot: Robot | None = None
+    ) -> ScheduleParams:
+        """Constant tables equal to ``gains`` (``k_turn = k_θ``): the fixed-gain law."""
+        if not isinstance(gains, Gains):
+            raise ValueError(f"gains is a {type(gains).__name__}; allowed: a wmr_jax.Gains")
+        if not isinstance(robot, (Robot, type(None))):
+            raise ValueError(f"robot is a {type(robot).__name__}; allowed: a wmr_jax.Robot")
+        knots = check_int("knots", knots, 2, MAX_KNOTS)
+        robot = Robot() if robot is None else robot
+        return cls(
+            kr=(gains.kr,) * knots,
+            k_theta=(gains.k_theta,) * knots,
+            k_turn=(gains.k_theta,) * knots,
+            **{name: getattr(gains, name) for name in SHAPE_FIELDS},
+            v_max=robot.v_max,
+            half_track=robot.half_track,
+        )
+
+
+def knot_radii(knots: int = KNOTS) -> np.ndarray:
+    """Return the ``r_e`` of each knot, cm: ``R_KNOT (k / (K − 1))²``, ``k = 0 … K−1``."""
+    knots = check_int("knots", knots, 2, MAX_KNOTS)
+    return R_KNOT * (np.arange(knots) / (knots - 1)) ** 2
+
+
+def _table(values: tuple, r: jax.Array) -> jax.Array:
+    """Piecewise-linear table over ``knot_radii`` at ``r`` (constant beyond the last knot).
+
+    Written as the first knot plus each increment times its ramp, so that a
+    constant table gives its value exactly (no ``w c + (1 − w) c`` rounding).
+    """
+    radii = knot_radii(len(values))
+    out = values[0]
+    for k in range(1, len(values)):
+        ramp = jnp.clip((r - radii[k - 1]) * (1.0 / (radii[k] - radii[k - 1])), 0.0, 1.0)
+        out = out + (values[k] - values[k - 1]) * ramp
+    return out
+
+
+def schedule_commands(
+    err: PolarError, params: ScheduleParams, *, temperature: float | None = None
+) -> tuple[jax.Array, jax.Array]:
+    """Return the scheduled command ``(v cm/s, ω rad/s)``; ``|v| + L|ω| ≤ V_max`` always.
+
+    Args:
+        err: the error coordinates of ``shim_sung.polar_error``.
+        params: the schedule.
+        temperature: ``None`` for the hard law, positive for its smooth
+            relaxation (the switches of ``shim_sung``; the caps stay hard,
+            they are continuous).
+
+    A pure building block like those of ``shim_sung``: ``params`` is not
+    checked here (``validate_schedule`` checks it, as the rollouts do).
+    """
+    d = direction_flag(err, params.phi_m, temperature=temperature)
+    k_theta = _table(params.k_theta, err.r)
+    # Where d = 0 the robot does not drive (v = 0), so its turn gain may be other.
+    k_theta = k_theta + (1 - d * d) * (_table(params.k_turn, err.r) - k_theta)
+    # The fixed-gain law itself, with the gains of this state (blend reads
+    # r_e, r_a and alpha, which the schedule shares with Gains).
+    gains = Gains(
+        kr=_table(params.kr, err.r),
+        k_theta=k_theta,
+        **{name: getattr(params, name) for name in SHAPE_FIELDS},
+    )
+    v, omega = commands(err, gains, temperature=temperature)
+    omega_max = params.v_max / params.half_track
+    omega = jnp.clip(omega, -omega_max, omega_max)
+    budget = params.v_max - params.half_track * jnp.abs(omega)  # ≥ 0 by the clip above
+    return jnp.clip(v, -budget, budget), omega
+
+
+def _command(pose, ref, params, *, temperature=None, frame=None):
+    return schedule_commands(polar_error(pose, ref, frame=frame), params, temperature=temperature)
+
+
+def _region(pose, ref, params, *, frame=None):
+    return region_label(polar_error(pose, ref, frame=frame), params)
+
+
+def validate_schedule(params: ScheduleParams) -> ScheduleParams:
+    """Check a schedule's tables and shape gains (docs/model.md §3); return it unchanged.
+
+    Raises:
+        ValueError: naming the field, its value and what is allowed.
+    """
+    if not isinstance(params, ScheduleParams):
+        raise ValueError(
+            f"params is a {type(params).__name__}; allowed: a wmr_jax.controllers.ScheduleParams"
+        )
+    sizes = set()
+    for name in TABLES:
+        table = getattr(params, name)
+        if not isinstance(table, (tuple, list)) or len(table) < 2:
+            raise ValueError(
+                f"params.{name} = {table!r} is not allowed; allowed: a tuple of >= 2 knots"
+            )
+        sizes.add(len(table))
+        if len(table) > MAX_KNOTS:
+            raise ValueError(
+                f"params.{name} has {len(table)} knots; allowed: 2 to {MAX_KNOTS} "
+                "(the table is unrolled into the compiled law)"
+            )
+        for k, value in enumerate(table):
+            _check_positive(f"params.{name}[{k}]", value, "a finite gain > 0")
+    if len(sizes) > 1:
+        raise ValueError(
+            f"the tables have {sorted(sizes)} knots; allowed: kr, k_theta, k_turn of one length"
+        )
+    shape = Gains(kr=1.0, k_theta=1.0, **{name: getattr(params, name) for name in SHAPE_FIELDS})
+    validate_gains(shape, prefix="params")
+    for name, unit in (("v_max", "cm/s"), ("half_track", "cm")):
+        _check_positive(f"params.{name}", getattr(params, name), f"a finite {name} > 0, {unit}")
+    # Every batched value, knot or field, must run the same N (or 1, shared).
+    values = {f"params.{t}[{k}]": v for t in TABLES for k, v in enumerate(getattr(params, t))}
+    for name in (*SHAPE_FIELDS, "v_max", "half_track"):
+        values[f"params.{name}"] = getattr(params, name)
+    require_one_batch_size({name: np.shape(v)[0] for name, v in values.items() if np.ndim(v) == 1})
+    return params
+
+
+def _check_positive(name: str, value: Any, allowed: str) -> None:
+    """Check a concrete knot or limit: real, finite, > 0 and within the compute dtype."""
+    if isinstance(value, jax.core.Tracer):
+        return
+    if isinstance(value, (str, bytes)):  # NumPy would read "60" as 60.0
+        raise ValueError(f"{name} = {value!r} is not allowed; allowed: {allowed}")
+    arr = real_array(name, value, allowed)
+    if arr.ndim > 1:
+        raise ValueError(f"{name} has shape {arr.shape}; allowed: a scalar or one batch axis")
+    require(name, arr, np.isfinite(arr) & (arr > 0), allowed)
+    require_representable(name, arr)
+
+
+def _check_robot(params: ScheduleParams, robot: Robot) -> None:
+    # The bound holds for the params' v_max and L; warn if the robot's are tighter.
+    tighter = np.asarray(robot.v_max) < np.asarray(params.v_max) * (1 - 1e-6)
+    other_l = ~np.isclose(np.asarray(robot.half_track), np.asarray(params.half_track))
+    if np.any(tighter) or np.any(other_l):
+        warnings.warn(
+            "the schedule bounds |v| + L|omega| by its own v_max and half_track, which differ "
+            "from the robot's: wheel commands may saturate (docs/model.md §3)",
+            WheelSpeedWarning,
+            stacklevel=5,
+        )
+
+
+def _check_sampling(params: ScheduleParams, dt: Any) -> None:
+    # Settling is decided at the goal, r_e -> 0, where the tables take their
+    # first knots: there the law is the fixed-gain one with those gains, and
+    # the same condition applies (docs/model.md §4). The caps cannot rescue
+    # it: near the goal the commands are small and no cap is active.
+    at_goal = Gains(
+        kr=params.kr[0],
+        k_theta=params.k_theta[0],
+        **{name: getattr(params, name) for name in SHAPE_FIELDS},
+    )
+    sampled(at_goal, dt, stacklevel=5)  # the schedule and dt checked by the rollout
+
+
+SCHEDULE = register_controller(
+    Controller(
+        name="shim-sung-schedule",
+        command=_command,
+        params_type=ScheduleParams,
+        validate=validate_schedule,
+        region=_region,
+        smooth=True,
+        check_robot=_check_robot,
+        check_sampling=_check_sampling,
+    )
+)
+"""The gain-scheduled Shim–Sung law (``ScheduleParams``), registered by name."""

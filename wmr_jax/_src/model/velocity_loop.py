@@ -1,0 +1,425 @@
+"""The non-ideal velocity loop: wheel-speed control of the Eq. 5 dynamics (docs/model.md §4).
+
+Between the pose controller and the robot sits a wheel-speed controller that
+can only do so much. Over each control period ``dt``:
+
+1. The command ``(v_m, ω_m)`` becomes rim-speed set points
+   ``v_R* = v_m + L ω_m``, ``v_L* = v_m − L ω_m``, limited to ``±V_max``:
+   choice (docs/model.md §4) per-wheel clipping by default, as the paper's uneven
+   trajectories suggest; ``wheel_limit="scale"`` divides both by one factor
+   instead, which keeps the commanded curvature.
+2. choice (docs/model.md §4): the wheel-speed controller is a model-based
+   (computed-torque) loop with proportional and optional integral action on
+   the body velocity ``q = (v, ω)``:
+   ``B τ = H (k_p (q* − q) + k_i z) + G(q)``, ``ż = q* − q``, each wheel's
+   torque then clipped at ``±τ_max``. Computed torque was chosen over a plain
+   PI on each wheel because, with an exact model and unsaturated torques, it
+   makes every component of ``q`` a first-order lag ``1/k_p``, so one number
+   states how stiff the loop is, and the limit ``k_p → ∞`` is the ideal loop.
+   The paper used an adaptive controller (its ref. [14]), whose details it
+   does not give.
+3. The robot obeys the Euler–Lagrange dynamics of Eq. 5, ``H q̇ + G(q) = B τ``
+   with ``τ = (τ_L, τ_R)``:
+   ``m₁₁ v̇ − M a ω² = (τ_L + τ_R)/r`` and ``m₂₂ ω̇ + M a v ω = L (τ_R − τ_L)/r``,
+   where ``a`` is the centre-of-mass offset ahead of the axle,
+   ``m₁₁ = M + 2m + 2 I_w/r²`` and ``m₂₂ = I_b + M a² + 2 m L² + 2 I_d + 2 I_w L²/r²``,
+   with the body a uniform disc of diameter ``D`` (``I_b = M D²/8``) and each
+   wheel a uniform disc of radius ``r`` (``I_w = m r²/2`` about its axle,
+   ``I_d = m r²/4`` about a diameter). Under zero torque the kinetic energy
+   ``(m₁₁ v² + m₂₂ ω²)/2`` is conserved.
+4. Integration: ``substeps`` inner steps of ``h = dt/substeps``. Velocity and
+   integral advance by classical RK4 (torque clipping included in the
+   right-hand side); the pose advances by the exact arc (``dynamics.arc_step``)
+   at the mean of the sub-step's start and end velocities, which is second
+   order and exact once the velocity has settled. After each sub-step each
+   wheel's rim speed is held within ``±V_max`` (the motors cannot go faster).
+
+The rollouts leave out what vanishes for the robot at hand (``integral``,
+``coriolis`` and ``small_turn`` of ``advance_split``, chosen by
+``loops.for_robot``): with ``k_i = 0`` and ``a = 0`` a sub-step is one RK4
+step of the velocity alone, which XLA:CPU computes once and stores.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from wmr_jax._src.model import dynamics
+from wmr_jax._src.model.params import Robot
+
+__all__ = [
+    "DEFAULT_SUBSTEPS",
+    "WheelState",
+    "advance",
+    "advance_split",
+    "body_acceleration",
+    "check_stability",
+    "inertia",
+    "kinetic_energy",
+    "limit_wheels",
+    "wheel_torques",
+]
+
+DEFAULT_SUBSTEPS = 10
+
+# RK4 is stable on ẏ = −k y for k h < 2.785; keep a margin, the loop is
+# nonlinear once torques saturate.
+MAX_SUBSTEPS = 2**31 - 1  # a scan's length is an int32
+_MAX_STIFFNESS = 2.5
+
+
+def inertia(robot: Robot) -> tuple[jax.Array, jax.Array]:
+    """Return the diagonal of ``H``: ``(m₁₁ kg, m₂₂ kg·cm²)`` (Eq. 5)."""
+    M, m, r, L, a = (
+        robot.body_mass,
+        robot.wheel_mass,
+        robot.wheel_radius,
+        robot.half_track,
+        robot.com_offset,
+    )
+    spin = 0.5 * m * r**2  # each wheel about its axle
+    across = 0.25 * m * r**2  # each wheel about a vertical diameter
+    body = M * robot.body_diameter**2 / 8.0
+    m11 = M + 2 * m + 2 * spin / r**2
+    m22 = body + M * a**2 + 2 * m * L**2 + 2 * across + 2 * spin * L**2 / r**2
+    return m11, m22
+
+
+def kinetic_energy(velocity: jax.Array, robot: Robot) -> jax.Array:
+    """Return ``(m₁₁ v² + m₂₂ ω²)/2`` in kg·cm²/s² for ``velocity (..., 2)``."""
+    m11, m22 = inertia(robot)
+    return 0.5 * (m11 * velocity[..., 0] ** 2 + m22 * velocity[..., 1] ** 2)
+
+
+def _coriolis(velocity: jax.Array, robot: Robot) -> jax.Array:
+    """``G(q) = (−M a ω², M a v ω)`` of Eq. 5."""
+    v, w = velocity[..., 0], velocity[..., 1]
+    ma = robot.body_mass * robot.com_offset
+    return jnp.stack([-ma * w * w, ma * v * w], axis=-1)
+
+
+def body_acceleration(velocity: jax.Array, torques: jax.Array, robot: Robot) -> jax.Array:
+    """Return ``q̇ = H⁻¹ (B τ − G(q))`` for wheel torques ``τ = (τ_L, τ_R)`` (Eq. 5).
+
+    Args:
+        velocity: ``(..., 2)`` ``[v cm/s, ω rad/s]``.
+        torques: ``(..., 2)`` ``[τ_L, τ_R]`` in kg·cm²/s².
+        robot: the robot's parameters.
+
+    Returns:
+        ``(..., 2)`` ``[v̇ cm/s², ω̇ rad/s²]``.
+    """
+    m11, m22 = inertia(robot)
+    r, L = robot.wheel_radius, robot.half_track
+    tau_l, tau_r = torques[..., 0], torques[..., 1]
+    drive = jnp.stack([(tau_l + tau_r) / r, L * (tau_r - tau_l) / r], axis=-1)
+    rhs = drive - _coriolis(velocity, robot)
+    return jnp.stack([rhs[..., 0] / m11, rhs[..., 1] / m22], axis=-1)
+
+
+def wheel_torques(
+    velocity: jax.Array, target: jax.Array, integral: jax.Array, model: Robot
+) -> jax.Array:
+    """Return the clipped computed-torque command ``[τ_L, τ_R]`` of the wheel loop.
+
+    ``B τ = H (k_p (q* − q) + k_i z) + G(q)`` with the model's ``H``, ``G``,
+    ``B``; each torque then within ``±τ_max``.
+    """
+    m11, m22 = inertia(model)
+    desired = model.speed_gain * (target - velocity) + model.integral_gain * integral
+    coriolis = _coriolis(velocity, model)
+    force = m11 * desired[..., 0] + coriolis[..., 0]
+    moment = m22 * desired[..., 1] + coriolis[..., 1]
+    r, L = model.wheel_radius, model.half_track
+    tau_r = 0.5 * r * (force + moment / L)
+    tau_l = 0.5 * r * (force - moment / L)
+    torques = jnp.stack([tau_l, tau_r], axis=-1)
+    return jnp.clip(torques, -model.torque_max, model.torque_max)
+
+
+def limit_wheels(velocity: jax.Array, robot: Robot, *, mode: str = "clip") -> jax.Array:
+    """Return the body velocity whose rim speeds lie within ``±V_max``.
+
+    Args:
+        velocity: ``(..., 2)`` ``[v, ω]``.
+        robot: gives ``L`` and ``V_max``.
+        mode: ``"clip"`` each rim speed on its own, or ``"scale"`` both by
+            the same factor (keeps ``ω/v``).
+    """
+    v, w = _limit_split(velocity[..., 0], velocity[..., 1], robot, mode)
+    return jnp.stack([v, w], axis=-1)
+
+
+class WheelState(NamedTuple):
+    """The wheel loop's state as separate scalars (leading batch axes allowed).
+
+    Attributes:
+        v: body linear velocity, cm/s.
+        omega: body angular velocity, rad/s.
+        z_v: integral of the linear-velocity error, cm.
+        z_omega: integral of the angular-velocity error, rad.
+    """
+
+    v: jax.Array
+    omega: jax.Array
+    z_v: jax.Array
+    z_omega: jax.Array
+
+
+def _limit_split(v, w, robot: Robot, mode: str):
+    """``limit_wheels`` on separate ``v``, ``ω``: the same arithmetic, no stacking."""
+    L, v_max = robot.half_track, robot.v_max
+    left, right = v - L * w, v + L * w
+    if mode == "clip":
+        left, right = jnp.clip(left, -v_max, v_max), jnp.clip(right, -v_max, v_max)
+    elif mode != "scale":
+        raise ValueError(f"mode = {mode!r} is not allowed; allowed: 'clip' or 'scale'")
+    else:
+        excess = jnp.maximum(jnp.maximum(jnp.abs(left), jnp.abs(right)) / v_max, 1.0)
+        left, right = left / excess, right / excess
+    return 0.5 * (left + right), 0.5 * (right - left) / L
+
+
+def _loop_rates(target, robot: Robot, model: Robot, with_integral: bool, with_coriolis: bool):
+    """Return ``f(wheel) -> d wheel/dt`` of the closed wheel loop (Eq. 5 and its controller).
+
+    ``wheel`` is the velocity ``v + i ω``, with the integral ``z_v + i z_ω``
+    beside it if ``with_integral``; without, the integral term is left out
+    (exactly what it contributes when ``integral_gain`` is zero). Likewise
+    ``with_coriolis=False`` leaves out ``G(q)``, which is zero when both
+    robots have their centre of mass on the axle.
+
+    The arithmetic of ``wheel_torques`` followed by ``body_acceleration``,
+    written on separate scalars so that a batched rollout carries no
+    ``(N, 2)`` arrays (XLA rebuilds those column by column every step).
+    """
+    target_v, target_w = target
+    m11, m22 = inertia(model)
+    true_m11, true_m22 = inertia(robot)
+    model_ma = model.body_mass * model.com_offset
+    true_ma = robot.body_mass * robot.com_offset
+    r, limit = model.wheel_radius, model.torque_max
+    # Reciprocals once per period: a division is an "expensive" operation to
+    # XLA, which then stores its result instead of fusing it into its users.
+    inv_l = 1.0 / model.half_track
+    to_v, to_w = (
+        1.0 / (robot.wheel_radius * true_m11),
+        robot.half_track / (robot.wheel_radius * true_m22),
+    )
+    inv_m11, inv_m22 = 1.0 / true_m11, 1.0 / true_m22
+
+    def rates(y):
+        # y = v + i ω, or (v + i ω, z_v + i z_ω) with the integral: complex
+        # pairs, so that XLA computes both parts of each in one loop (it
+        # compiles one loop per output array and repeats in each the work
+        # they share).
+        velocity, integral = y if with_integral else (y, None)
+        v, w = velocity.real, velocity.imag
+        error_v, error_w = target_v - v, target_w - w
+        demand_v, demand_w = model.speed_gain * error_v, model.speed_gain * error_w
+        if with_integral:
+            demand_v = demand_v + model.integral_gain * integral.real
+            demand_w = demand_w + model.integral_gain * integral.imag
+        force, moment = m11 * demand_v, m22 * demand_w
+        if with_coriolis:
+            force, moment = force - model_ma * w * w, moment + model_ma * v * w
+        tau_r = jnp.clip(0.5 * r * (force + moment * inv_l), -limit, limit)
+        tau_l = jnp.clip(0.5 * r * (force - moment * inv_l), -limit, limit)
+        accel_v, accel_w = to_v * (tau_l + tau_r), to_w * (tau_r - tau_l)
+        if with_coriolis:
+            accel_v = accel_v + inv_m11 * true_ma * w * w
+            accel_w = accel_w - inv_m22 * true_ma * v * w
+        accel = jax.lax.complex(accel_v, accel_w)
+        return (accel, jax.lax.complex(error_v, error_w)) if with_integral else accel
+
+    return rates
+
+
+def _along(y, c, k):
+    """Return ``y + c k`` for complex ``y``, ``k`` and a real ``c``.
+
+    Written on the parts: ``c`` times a complex number is otherwise a full
+    complex product (``c`` promoted to complex), three times the work.
+    """
+    return jax.lax.complex(y.real + c * k.real, y.imag + c * k.imag)
+
+
+def _rk4(f, y, h):
+    """One classical RK4 step of ``ẏ = f(y)``, ``y`` a pytree of complex arrays."""
+
+    def along(c, k):
+        return jax.tree.map(lambda a, b: _along(a, c, b), y, k)
+
+    k1 = f(y)
+    k2 = f(along(0.5 * h, k1))
+    k3 = f(along(0.5 * h, k2))
+    k4 = f(along(h, k3))
+    total = jax.tree.map(lambda b1, b2, b3, b4: (b1 + b4) + 2 * (b2 + b3), k1, k2, k3, k4)
+    return along(h / 6.0, total)
+
+
+def advance_split(
+    position: jax.Array,
+    heading: jax.Array,
+    theta: jax.Array,
+    wheel: WheelState,
+    command: tuple[jax.Array, jax.Array],
+    robot: Robot,
+    dt: jax.Array,
+    *,
+    substeps: int = DEFAULT_SUBSTEPS,
+    wheel_limit: str = "clip",
+    model: Robot | None = None,
+    integral: bool = True,
+    coriolis: bool = True,
+    small_turn: bool = False,
+) -> tuple[jax.Array, jax.Array, jax.Array, WheelState, jax.Array]:
+    """Move the robot over one control period under the non-ideal loop (docs/model.md §4).
+
+    ``advance`` on a pose split as the rollouts carry it: position ``x + i y``
+    and heading ``cos θ + i sin θ`` as complex numbers, θ beside them, the
+    wheel loop as two complex numbers inside (``v + i ω``, ``z_v + i z_ω``),
+    so that a batched rollout carries no ``(N, 2)`` arrays.
+
+    Args:
+        position: complex ``x + i y``, cm.
+        heading: complex ``cos θ + i sin θ``.
+        theta: heading angle, rad (not wrapped).
+        wheel: the wheel loop's state at the sample.
+        command: held command ``(v_m cm/s, ω_m rad/s)``.
+        robot: the robot that moves.
+        dt: control period, s.
+        substeps: inner steps (static).
+        wheel_limit: ``"clip"`` or ``"scale"`` the rim-speed set points (static).
+        model: the robot the wheel controller believes in (default ``robot``).
+        integral: carry the loop's integral (static); ``False`` is exact only
+            when ``model.integral_gain`` is zero, and leaves ``z`` unchanged.
+        coriolis: include ``G(q)`` (static); ``False`` is exact only when
+            ``robot.com_offset`` and ``model.com_offset`` are zero.
+        small_turn: ``robot.v_max · dt / (robot.half_track · substeps) ≤ π/2``
+            holds (static), so no sub-step turns further than ``π/2``
+            (``dynamics.arc_advance``).
+
+    Returns:
+        ``(position, heading, theta, wheel, distance cm)`` at the next sample;
+        the heading renormalised to unit modulus.
+    """
+    model = robot if model is None else model
+    target = _limit_split(command[0], command[1], model, wheel_limit)
+    rates = _loop_rates(target, robot, model, integral, coriolis)
+    h = dt / substeps
+
+    def substep(carry, _):
+        position, heading, wheel, covered = carry
+        velocity = wheel[0] if integral else wheel
+        wheel = _rk4(rates, wheel, h)
+        new = wheel[0] if integral else wheel
+        new_v, new_w = _limit_split(new.real, new.imag, robot, "clip")
+        new = jax.lax.complex(new_v, new_w)
+        wheel = (new, wheel[1]) if integral else new
+        # Stored once: XLA:CPU compiles one loop per output of the sub-step
+        # and would otherwise repeat the whole RK4 step in each of them.
+        wheel = jax.lax.optimization_barrier(wheel)
+        new = wheel[0] if integral else wheel  # the stored one (not new_v, new_w)
+        mean_v, mean_w = 0.5 * (velocity.real + new.real), 0.5 * (velocity.imag + new.imag)
+        position, heading = dynamics.arc_advance(
+            position, heading, mean_v, mean_w, h, small_turn=small_turn
+        )
+        # Distance and turn in one accumulator |v| h + i ω h: one loop, not two.
+        covered = jax.lax.complex(covered.real + jnp.abs(mean_v) * h, covered.imag + mean_w * h)
+        return (position, heading, wheel, covered), None
+
+    velocity = jax.lax.complex(wheel.v, wheel.omega)
+    z = jax.lax.complex(wheel.z_v, wheel.z_omega)
+    start = (velocity, z) if integral else velocity
+    carry = (position, heading, start, jnp.zeros_like(position))
+    # An inner scan, not an unrolled chain: unrolled, XLA fuses the stages
+    # of consecutive sub-steps into each other and repeats their shared work
+    # in every output (measured 1.5-2x slower at 10 sub-steps).
+    (position, heading, state, covered), _ = jax.lax.scan(substep, carry, None, length=substeps)
+    velocity, z = state if integral else (state, z)
+    wheel = WheelState(velocity.real, velocity.imag, z.real, z.imag)
+    # One Newton step towards |heading| = 1, so that rounding does not drift.
+    heading = heading * (1.5 - 0.5 * (heading.real**2 + heading.imag**2))
+    return position, heading, theta + covered.imag, wheel, covered.real
+
+
+def advance(
+    state: dynamics.RobotState,
+    command: jax.Array,
+    robot: Robot,
+    dt: jax.Array,
+    *,
+    substeps: int = DEFAULT_SUBSTEPS,
+    wheel_limit: str = "clip",
+    model: Robot | None = None,
+) -> tuple[dynamics.RobotState, jax.Array]:
+    """Move the robot over one control period under the non-ideal loop (docs/model.md §4).
+
+    Args:
+        state: pose, body velocity and loop integral at the sample.
+        command: ``(2,)`` held command ``[v_m cm/s, ω_m rad/s]``.
+        robot: the robot that moves.
+        dt: control period, s.
+        substeps: inner steps (static).
+        wheel_limit: ``"clip"`` or ``"scale"`` the rim-speed set points (static).
+        model: the robot the wheel controller believes in (default ``robot``);
+            differs from ``robot`` to study model mismatch.
+
+    Returns:
+        The state at the next sample and the distance the centre travelled, cm.
+    """
+    x, y, theta = state.pose[0], state.pose[1], state.pose[2]
+    cos_theta, sin_theta = dynamics.sin_cos(theta)
+    wheel = WheelState(state.velocity[0], state.velocity[1], state.integral[0], state.integral[1])
+    position, _, theta, wheel, travelled = advance_split(
+        jax.lax.complex(x, y),
+        jax.lax.complex(cos_theta, sin_theta),
+        theta,
+        wheel,
+        (command[0], command[1]),
+        robot,
+        dt,
+        substeps=substeps,
+        wheel_limit=wheel_limit,
+        model=model,
+    )
+    pose = jnp.stack([position.real, position.imag, theta])
+    velocity = jnp.stack([wheel.v, wheel.omega])
+    return dynamics.RobotState(pose, velocity, jnp.stack([wheel.z_v, wheel.z_omega])), travelled
+
+
+def check_stability(robot: Robot, dt: float, substeps: int) -> None:
+    """Raise ``ValueError`` if the inner sub-step is too long for the loop's stiffness.
+
+    The wheel loop's error obeys ``ë + k_p ė + k_i e = 0``; its fastest mode
+    has ``|λ| = max((k_p + √(k_p² − 4 k_i)) / 2, √k_i)`` (``k_p`` when
+    ``k_i = 0``), and RK4 needs ``|λ| dt / substeps ≤ 2.5``.
+    """
+    gain, integral = robot.speed_gain, robot.integral_gain
+    if any(isinstance(x, jax.core.Tracer) for x in (gain, integral, dt)):
+        return
+    k_p = np.asarray(gain, dtype=float)
+    k_i = np.asarray(integral, dtype=float)
+    with np.errstate(over="ignore"):  # k_p² of a huge gain: inf, then refused below
+        discriminant = np.maximum(k_p**2 - 4 * k_i, 0.0)
+    fastest = float(np.max(np.maximum((k_p + np.sqrt(discriminant)) / 2, np.sqrt(k_i))))
+    if not fastest * float(dt) / substeps <= _MAX_STIFFNESS:
+        need = fastest * float(dt) / _MAX_STIFFNESS
+        need = math.ceil(need) if math.isfinite(need) else math.inf
+        allowed = (
+            f"substeps >= {need}"
+            if need <= MAX_SUBSTEPS
+            else f"a smaller speed_gain or integral_gain ({need:.3g} substeps, beyond 2^31 - 1)"
+        )
+        raise ValueError(
+            f"substeps = {substeps} is not allowed for robot.speed_gain = "
+            f"{float(np.max(k_p)):g} 1/s, robot.integral_gain = {float(np.max(k_i)):g} 1/s² "
+            f"and dt = {float(dt):g} s (fastest wheel-loop mode {fastest:.4g} 1/s); allowed: "
+            f"{allowed} (|lambda| * dt / substeps <= {_MAX_STIFFNESS})"
+        )

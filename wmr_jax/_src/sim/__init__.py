@@ -1,0 +1,1 @@
+"""Simulation: the closed-loop step and scan, disturbances, estimators, metrics, sharding."""

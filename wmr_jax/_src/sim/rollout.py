@@ -1,0 +1,517 @@
+"""Closed-loop rollouts: the entry points ``rollout``, ``batch_rollout``, ``final_poses``.
+
+The entry points check their inputs in plain Python (``docs/model.md §3``
+ranges, shapes, finiteness, options) and then call a jitted core whose static
+arguments are the shape-deciding options. Calling them again with the same
+shapes and options reuses the compiled code; for the non-ideal loop the
+robot's vanishing terms are options too (``loops.for_robot``,
+``docs/model.md §4.3``), so a robot that crosses one compiles anew, and so
+is the ideal loop's speed limiter, on for a robot that gives acceleration
+limits (``docs/model.md §4.2.2``). The loop itself is in ``loops.py``; the
+checks in ``checks.py``.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from wmr_jax._src.checks import (
+    MAX_STEPS,
+    MAX_TEMPERATURE,
+    as_float_tree,
+    as_poses,
+    batch_sizes,
+    check_dt,
+    check_int,
+    check_substeps,
+    check_temperature,
+    common_batch_size,
+    float_dtype,
+    is_traced,
+    require_finite_runs,
+    require_one_batch_size,
+    require_unbatched,
+)
+from wmr_jax._src.model import velocity_loop
+from wmr_jax._src.model.controllers.base import Controller, check_command_output, get_controller
+from wmr_jax._src.model.controllers.polar import AT_GOAL, GOAL_EPS
+from wmr_jax._src.model.controllers.shim_sung import SHIM_SUNG
+from wmr_jax._src.model.params import Robot, validate_robot
+from wmr_jax._src.sim.loops import (
+    DEFAULT_STEPS,
+    DEFAULT_SUBSTEPS,
+    VELOCITY_LOOPS,
+    WHEEL_LIMITS,
+    EntryJit,
+    Options,
+    batched,
+    for_robot,
+    scan_closed_loop,
+)
+
+__all__ = [
+    "DEFAULT_DT",
+    "MAX_STEPS",
+    "MAX_TEMPERATURE",
+    "Trajectory",
+    "batch_rollout",
+    "check_temperature",
+    "final_poses",
+    "finite_result",
+    "make_options",
+    "prepare",
+    "rollout",
+]
+
+DEFAULT_DT = 0.033
+
+
+class Trajectory(NamedTuple):
+    """A closed-loop run, sampled once per control period.
+
+    Leading batch axes, if any, come first in every field.
+
+    Attributes:
+        poses: ``(steps + 1, 3)`` poses ``[x cm, y cm, θ rad]``, the initial one first.
+        v: ``(steps,)`` linear-velocity command of the law over each period,
+            cm/s: what the ideal robot follows, unless the robot's speed
+            limiter changes it (``accel_max``, docs/model.md §4.2.2), or the
+            non-ideal loop's set point.
+        omega: ``(steps,)`` angular-velocity command, rad/s (likewise).
+        region: ``(steps,)`` int32 region label 0–3 of the command (docs/model.md §3).
+        wheel_speeds: ``(steps, 2)`` rim speeds ``[v_L, v_R]`` of the robot
+            at the end of each period, cm/s (after the speed limiter, if any).
+        distance: ``(steps,)`` distance the centre travelled over each period, cm.
+    """
+
+    poses: jax.Array
+    v: jax.Array
+    omega: jax.Array
+    region: jax.Array
+    wheel_speeds: jax.Array
+    distance: jax.Array
+
+
+# choice: where the compute dtype spaces positions near the reference more than
+# this apart, cm (a reference beyond 524 cm of the origin in float32, 3e11 cm in
+# float64), a run that starts nearer its reference than the farther of the two
+# is from the origin is computed in the reference's frame: translated so that
+# the reference is at the origin, and its poses translated back. The laws and
+# the robot do not depend on where the origin is, but the rounding does: in
+# the world frame the last millimetres to a reference 1e4 cm out are a few
+# float32 spacings, and a step of the robot rounds to a different direction or
+# none (the polar baselines then never settled, docs/model.md §3.8). In the
+# reference's frame the run has the resolution of a run near the origin, and
+# float32 arrives when float64 does. A run from near the origin to a far
+# reference stays in the world frame: translated, its goal would be resolved
+# and its start no longer, which is no better. Nearer the origin nothing
+# changes: the translation is by 0, and the run is the same bit for bit.
+GOAL_FRAME_SPACING = AT_GOAL / GOAL_EPS
+
+
+def _goal_frame(ref: jax.Array, init: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """Return ``(ref, init, shift)``, translated by ``-shift`` (see ``GOAL_FRAME_SPACING``).
+
+    ``shift`` is ``[x_r, y_r, 0]`` for a run computed in the reference's frame, else zeros.
+    """
+    far = jnp.max(jnp.abs(ref[:2]))
+    coarse = jnp.finfo(ref.dtype).eps * far > GOAL_FRAME_SPACING
+    nearer = jnp.max(jnp.abs(init[:2] - ref[:2])) < jnp.maximum(far, jnp.max(jnp.abs(init[:2])))
+    shift = jnp.where(coarse & nearer, ref.at[2].set(0.0), jnp.zeros_like(ref))
+    return ref - shift, init - shift, shift
+
+
+def _world_frame(poses: jax.Array, shift: jax.Array) -> jax.Array:
+    """Translate poses ``(..., 3)`` of the reference's frame back by ``shift``."""
+    # where, not a plain sum: a shift of 0 would turn a −0.0 into 0.0.
+    return jnp.where(jnp.any(shift != 0), poses + shift, poses)
+
+
+def _trajectory(ref, params, init, robot, dt, options: Options) -> Trajectory:
+    local_ref, local_init, shift = _goal_frame(ref, init)
+    _, _, (poses, out) = scan_closed_loop(
+        local_ref, params, local_init, robot, dt, options, record=True
+    )
+    poses = jnp.concatenate([init[None], _world_frame(poses, shift)], axis=0)
+    return Trajectory(poses, out.v, out.omega, out.region, out.wheel_speeds, out.distance)
+
+
+def _final_pose(ref, params, init, robot, dt, options: Options) -> jax.Array:
+    local_ref, local_init, shift = _goal_frame(ref, init)
+    final, _, _ = scan_closed_loop(local_ref, params, local_init, robot, dt, options)
+    return _world_frame(final, shift)
+
+
+_rollout_jit = EntryJit(_trajectory, static_argnames=("options",))
+_batch_rollout_jit = EntryJit(batched(_trajectory), static_argnames=("options",))
+_final_poses_jit = EntryJit(batched(_final_pose), static_argnames=("options",))
+
+
+# ---------------------------------------------------------------- boundary checks
+
+
+def make_options(
+    *,
+    steps: Any = DEFAULT_STEPS,
+    velocity: Any = "ideal",
+    controller: Any = SHIM_SUNG,
+    temperature: Any = None,
+    substeps: Any = DEFAULT_SUBSTEPS,
+    wheel_limit: Any = "clip",
+) -> Options:
+    """Check the static options of a rollout and return them as ``Options``.
+
+    Raises:
+        ValueError: naming the option, its value and what is allowed.
+    """
+    steps = check_int("steps", steps, 1, MAX_STEPS)
+    if velocity not in VELOCITY_LOOPS:
+        raise ValueError(f"velocity = {velocity!r} is not allowed; allowed: {VELOCITY_LOOPS}")
+    # The ideal loop has no sub-steps: any count passes (and is ignored).
+    if velocity == "ideal":
+        substeps = check_int("substeps", substeps, 1, MAX_STEPS)
+    else:
+        substeps = check_substeps(substeps)
+    if wheel_limit not in WHEEL_LIMITS:
+        raise ValueError(f"wheel_limit = {wheel_limit!r} is not allowed; allowed: {WHEEL_LIMITS}")
+    controller = get_controller(controller)
+    if temperature is not None:
+        value = check_temperature("temperature", temperature)
+        if not controller.smooth:
+            raise ValueError(
+                f"temperature = {temperature!r} is not allowed for controller "
+                f"{controller.name!r}; allowed: None (it has no smooth relaxation)"
+            )
+        temperature = value
+    return Options(steps, velocity, controller, temperature, substeps, wheel_limit)
+
+
+def _common_batch(refs, params, init, robot):
+    """Check the batch sizes agree; an axis of size 1 is shared by every run.
+
+    Returns:
+        ``(refs, params, init, robot)`` with the size-1 axes removed.
+    """
+    n = require_one_batch_size(
+        batch_sizes({"gains": params, "robot": robot}, {"refs": refs, "init": init})
+    )
+    if n is None:
+        raise ValueError(
+            "refs has shape (3,) and nothing else is batched; allowed: refs (N, 3), "
+            "init (N, 3) or gains/robot fields of shape (N,)"
+        )
+    if n == 1:
+        return refs, params, init, robot
+
+    def shared(leaf):
+        return leaf[0] if jnp.ndim(leaf) >= 1 and jnp.shape(leaf)[0] == 1 else leaf
+
+    refs = refs[0] if refs.ndim == 2 and refs.shape[0] == 1 else refs
+    init = init[0] if init.ndim == 2 and init.shape[0] == 1 else init
+    return refs, jax.tree.map(shared, params), init, jax.tree.map(shared, robot)
+
+
+SINGLE_RUN = ("rollout", "batch_rollout or final_poses")
+
+
+def _single_run(params: Any, robot: Robot, entry: tuple[str, str]) -> None:
+    """Refuse batched parameters in an entry point that runs one robot."""
+    single, batched = entry
+    for prefix, tree in (("gains", params), ("robot", robot)):
+        require_unbatched(
+            tree, prefix, f"a scalar in {single} (one run); use {batched} for a batch"
+        )
+
+
+def prepare(
+    refs,
+    params,
+    init,
+    robot,
+    dt,
+    options: Options,
+    *,
+    batch: bool | None,
+    entry: tuple[str, str] = SINGLE_RUN,
+):
+    """Check and convert every argument of a rollout entry point (before tracing).
+
+    Args:
+        batch: ``False`` for one run (``refs`` and ``init`` ``(3,)``), ``None``
+            for a batch over any of refs/init/params/robot.
+        entry: for one run, the entry point's name and those that run a batch
+            instead, for the message that refuses batched parameters.
+
+    Returns:
+        ``(refs, params, init, robot, dt)`` ready for the jitted cores.
+    """
+    control = options.controller
+    params = control.default_params() if params is None else params
+    if not isinstance(params, control.params_type):
+        raise ValueError(
+            f"gains is a {type(params).__name__}; allowed: a {control.params_type.__name__} "
+            f"for controller {control.name!r}"
+        )
+    params = as_float_tree(control.validate(params))
+    check_command_output(control, params)
+    robot = as_float_tree(validate_robot(Robot() if robot is None else robot))
+    dt = check_dt(dt)
+    if options.velocity == "nonideal":
+        velocity_loop.check_stability(robot, dt, options.substeps)
+    refs = as_poses("refs" if batch is not False else "ref", refs, batch=batch)
+    init = as_poses("init", init, batch=None if batch is not False else False)
+    if batch is False:
+        _single_run(params, robot, entry)
+    else:
+        refs, params, init, robot = _common_batch(refs, params, init, robot)
+    if not is_traced((params, robot, dt)):
+        if control.check_robot is not None:
+            control.check_robot(params, robot)
+        if control.check_sampling is not None:
+            control.check_sampling(params, dt)
+    return refs, params, init, robot, jnp.asarray(dt, dtype=float_dtype())
+
+
+def finite_result(poses: Any, result: Any, *, pose_axes: int = 1) -> Any:
+    """Return ``result``, or raise if a pose of the run left the floating-point range.
+
+    The inputs passed their checks, but some gains or periods drive the robot
+    (or its heading) beyond what the compute dtype can hold; a run with an
+    ``inf`` or ``NaN`` pose is reported, not returned (as diffrax throws on a
+    failed solve). Skipped inside a caller's own transformations.
+    """
+    if is_traced(poses):
+        return result
+    # One flag per run: the trailing axes (the pose, and the time axis of a
+    # trajectory) are reduced, the leading batch axes kept.
+    axes = tuple(range(-pose_axes, 0))
+    if isinstance(poses, jax.Array) and not poses.is_fully_addressable:
+        # Spread over several processes: each checks the runs it holds.
+        local = [np.asarray(_finite_runs(s.data, axes)) for s in poses.addressable_shards]
+        finite = np.concatenate([f.reshape(-1) for f in local])
+    else:
+        finite = np.asarray(_finite_runs(poses, axes))
+    require_finite_runs(finite, poses.dtype)
+    return result
+
+
+@functools.partial(jax.jit, static_argnums=1)
+def _finite_runs(poses: jax.Array, axes: tuple[int, ...]) -> jax.Array:
+    """Whether each run's poses are all finite (one program, not an op-by-op pair)."""
+    return jnp.isfinite(poses).all(axis=axes)
+
+
+# ---------------------------------------------------------------- entry points
+
+_STATIC = ("steps", "velocity", "controller", "temperature", "substeps", "wheel_limit")
+
+
+def _static_options(arguments: dict[str, Any]) -> dict[str, Any]:
+    """Pick the static options out of an entry point's arguments."""
+    return {name: arguments[name] for name in _STATIC}
+
+
+_OPTIONS_DOC = """
+        init: ``(3,)`` initial pose, or ``(N, 3)`` for a batch.
+        dt: control period in s; commands are held over it (docs/model.md §4).
+        steps: number of control periods (static).
+        robot: robot parameters; default ``Robot()``. Its ``accel_max`` and
+            ``angular_accel_max``, where above 0, limit how fast the ideal
+            loop's commands change (docs/model.md §4.2.2).
+        velocity: velocity loop between command and robot (static):
+            ``"ideal"`` or ``"nonideal"`` (docs/model.md §4).
+        controller: a ``Controller`` or its name (static); default Shim–Sung.
+        temperature: ``None`` for the paper's law, or a smooth relaxation
+            (``docs/model.md §3``).
+        substeps: inner integration steps per period, non-ideal loop (static).
+        wheel_limit: ``"clip"`` (per wheel) or ``"scale"`` (keep the curvature),
+            non-ideal loop (static)."""
+
+
+# What a Trajectory holds per run and period: a pose (3), v, ω, the two rim
+# speeds and the distance (8 floats), and the region (an int32).
+TRAJECTORY_RECORD = (8, 1)
+
+
+def _memory_bytes(inputs: Any = None) -> int | None:
+    """The memory the arrays of a run on ``inputs`` may take (None: unknown).
+
+    The host's for a run on the CPU; on an accelerator, the ``bytes_limit``
+    of each device the inputs span (one device, the default, for inputs not
+    on devices), times the processes when they are spread over several.
+    """
+    arrays = [x for x in jax.tree.leaves(inputs) if isinstance(x, jax.Array)]
+    spans = [x.sharding.device_set for x in arrays if not is_traced(x)]
+    devices = max(spans, key=len, default=None)
+    if devices is None:
+        default = jax.config.jax_default_device
+        if isinstance(default, str):
+            default = jax.local_devices(backend=default)[0]
+        devices = {default if default is not None else jax.local_devices()[0]}
+    local = [d for d in devices if d.process_index == jax.process_index()]
+    if next(iter(devices)).platform == "cpu":
+        try:
+            memory = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        except (AttributeError, OSError, ValueError):  # not a POSIX system
+            return None
+    else:
+        limits = [(d.memory_stats() or {}).get("bytes_limit") for d in local]
+        if not limits or not all(limits):
+            return None
+        memory = sum(limits)
+    return memory * len({d.process_index for d in devices})
+
+
+def record_bytes(runs: int, steps: int, record: tuple[int, int]) -> int:
+    """Bytes of a record of ``runs`` runs: ``(floats, int32s)`` per period, ``steps + 1`` periods.
+
+    An upper bound of the arrays returned (the poses have ``steps + 1``
+    rows, the commands ``steps``), in the compute dtype.
+    """
+    floats, ints = record
+    return runs * (steps + 1) * (floats * np.dtype(float_dtype()).itemsize + ints * 4)
+
+
+def require_trajectory_fits(args: tuple, steps: int) -> None:
+    """Refuse, before it runs, a ``Trajectory`` larger than the machine's memory.
+
+    ``args``: the rollout's prepared ``(refs, params, init, robot, dt)``.
+    """
+    refs, params, init, robot, _ = args
+    runs = common_batch_size({"gains": params, "robot": robot}, {"refs": refs, "init": init})
+    require_memory(runs, steps, TRAJECTORY_RECORD, args)
+
+
+def require_memory(runs: int, steps: int, record: tuple[int, int], inputs: Any = None) -> None:
+    """Refuse, before it runs, a record of ``runs`` runs larger than the memory it would take.
+
+    XLA would try to allocate it whole: on a host that overcommits memory,
+    the system may stall or kill the process rather than fail.
+
+    Args:
+        record: ``(floats, int32s)`` recorded per run and period.
+        inputs: the run's inputs, whose devices it runs on (default: the
+            default device).
+
+    Raises:
+        ValueError: naming the runs, the steps and the bytes needed.
+    """
+    needed = record_bytes(runs, steps, record)
+    memory = _memory_bytes(inputs)
+    if memory is not None and needed > memory:
+        raise ValueError(
+            f"steps = {steps} for {runs} run(s) is not allowed: the record of the runs needs "
+            f"{needed / 1e9:.3g} GB, more than the {memory / 1e9:.3g} GB of memory here; "
+            "allowed: fewer steps or runs, or final_poses or sweep, which keep no trajectory"
+        )
+
+
+def rollout(
+    ref: Any,
+    gains: Any = None,
+    *,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = DEFAULT_DT,
+    steps: int = DEFAULT_STEPS,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    controller: Controller | str = SHIM_SUNG,
+    temperature: float | None = None,
+    substeps: int = DEFAULT_SUBSTEPS,
+    wheel_limit: str = "clip",
+) -> Trajectory:
+    """Drive the robot from ``init`` towards ``ref`` and record the whole run.
+
+    Args:
+        ref: ``(3,)`` reference pose ``[x cm, y cm, θ rad]``.
+        gains: the controller's parameters; default ``Gains()`` (Fig. 7).
+    {options}
+
+    Returns:
+        A ``Trajectory`` with ``steps + 1`` poses.
+
+    Raises:
+        ValueError: for out-of-range gains, non-finite or misshapen poses,
+            ``steps < 1``, ``dt ≤ 0`` or an unknown option.
+    """
+    options = make_options(**_static_options(locals()))
+    args = prepare(ref, gains, init, robot, dt, options, batch=False)
+    require_trajectory_fits(args, options.steps)
+    options = for_robot(options, args[3], args[4])
+    traj = _rollout_jit(*args, options=options)
+    return finite_result(traj.poses, traj, pose_axes=2)
+
+
+def batch_rollout(
+    refs: Any,
+    gains: Any = None,
+    *,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = DEFAULT_DT,
+    steps: int = DEFAULT_STEPS,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    controller: Controller | str = SHIM_SUNG,
+    temperature: float | None = None,
+    substeps: int = DEFAULT_SUBSTEPS,
+    wheel_limit: str = "clip",
+) -> Trajectory:
+    """Run ``rollout`` for a batch, in one call.
+
+    Any of ``refs (N, 3)``, ``init (N, 3)`` and the leaves of ``gains`` or
+    ``robot`` with shape ``(N,)`` are mapped over together; the rest are
+    shared by every run. Sharded ``jax.Array`` inputs give sharded outputs.
+
+    Args:
+        refs: ``(N, 3)`` reference poses (or ``(3,)`` if something else is batched).
+        gains: the controller's parameters, leaves scalar or ``(N,)``.
+    {options}
+
+    Returns:
+        A ``Trajectory`` whose fields have a leading axis ``N``.
+    """
+    options = make_options(**_static_options(locals()))
+    args = prepare(refs, gains, init, robot, dt, options, batch=None)
+    require_trajectory_fits(args, options.steps)
+    options = for_robot(options, args[3], args[4])
+    traj = _batch_rollout_jit(*args, options=options)
+    return finite_result(traj.poses, traj, pose_axes=2)
+
+
+def final_poses(
+    refs: Any,
+    gains: Any = None,
+    *,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = DEFAULT_DT,
+    steps: int = DEFAULT_STEPS,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    controller: Controller | str = SHIM_SUNG,
+    temperature: float | None = None,
+    substeps: int = DEFAULT_SUBSTEPS,
+    wheel_limit: str = "clip",
+) -> jax.Array:
+    """Return only the last pose of each run, ``(N, 3)``; memory O(N), not O(N·steps).
+
+    Args:
+        refs: ``(N, 3)`` reference poses (or ``(3,)`` if something else is batched).
+        gains: the controller's parameters, leaves scalar or ``(N,)``.
+    {options}
+    """
+    options = make_options(**_static_options(locals()))
+    args = prepare(refs, gains, init, robot, dt, options, batch=None)
+    options = for_robot(options, args[3], args[4])
+    final = _final_poses_jit(*args, options=options)
+    return finite_result(final, final)
+
+
+for _entry in (rollout, batch_rollout, final_poses):
+    # _OPTIONS_DOC starts with its own line break: no blank line inside Args.
+    _entry.__doc__ = _entry.__doc__.replace("\n    {options}", _OPTIONS_DOC)

@@ -1,0 +1,380 @@
+"""Pose estimators of the sensed loop (docs/model.md §9): an observer and an extended Kalman filter.
+
+An estimator sees what a robot has: each noisy measurement and the commands
+it sent. Every period it **predicts** its pose over the period with the
+command actually applied, on the exact arc of the ideal robot
+(``motion.ideal_arc``, docs/model.md §4), then **corrects** it toward the
+measurement at the period's end; heading residuals are wrapped to
+``[−π, π)``. It starts from the first measurement. Latency compensation
+(rolling the estimate over the command in flight) is the disturbed loop's
+(``sensing.loop``), for every estimator alike.
+
+* ``OBSERVER`` (``ObserverParams``): a fixed-structure observer. Position
+  and heading are pulled toward the measurement by gains in ``[0, 1]``
+  (0: dead reckoning; 1: the measurement itself), each either a constant or
+  a table over the estimated distance to the goal, like the controller's
+  gain schedule: a robot can trust its odometry near the goal, where noise
+  matters most, and its sensor far away, where odometry errors add up.
+* ``EKF`` (``EKFParams``): the extended Kalman filter of the ideal robot,
+  with the measurement noise and each wheel's odometry error as its tunable
+  covariances (the process noise grows with each wheel's travel, as a
+  wheel-radius error does).
+
+Like controllers, estimators are values: pure functions of one pose and a
+pytree of parameters, batched by the loop's single ``vmap``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from wmr_jax._src.checks import (
+    Parameters,
+    check_bool,
+    list_as_array,
+    real_array,
+    require,
+    require_one_batch_size,
+    require_representable,
+)
+from wmr_jax._src.model.dynamics import sin_cos
+from wmr_jax._src.model.params import Robot
+from wmr_jax._src.sim import motion
+
+__all__ = [
+    "EKF",
+    "ESTIMATORS",
+    "EKFParams",
+    "Estimator",
+    "OBSERVER",
+    "OBSERVER_KNOTS",
+    "OBSERVER_R",
+    "ObserverParams",
+    "observer_radii",
+    "resolve_estimator",
+]
+
+OBSERVER_KNOTS = 6  # knots per gain table by default
+# The last knot, cm: the gains matter near the goal, where the law is most
+# sensitive to noise; beyond it they are constant.
+OBSERVER_R = 20.0
+
+
+def observer_radii(knots: int) -> np.ndarray:
+    """Return the distance of each gain knot, cm: ``OBSERVER_R (k / (K − 1))²``."""
+    return OBSERVER_R * (np.arange(knots) / (knots - 1)) ** 2
+
+
+# choice: the hand-set default of the tables, from 0.05 at the goal (where a
+# 0.5 cm noise would otherwise move the robot back and forth) up to 0.7
+# beyond about 7 cm; tuned tables replace it (wmr-jax tune --robust).
+_DEFAULT_POSITION = (0.05, 0.1, 0.4, 0.7, 0.7, 0.7)
+_DEFAULT_HEADING = (0.05, 0.1, 0.4, 0.7, 0.7, 0.7)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class ObserverParams(Parameters):
+    """Gains of the observer (docs/model.md §9).
+
+    Attributes:
+        position: gain toward the measured position, in ``[0, 1]``: a
+            constant, or a tuple (or list) of ``K ≥ 2`` knots at
+            ``observer_radii(K)`` cm of estimated distance to the goal
+            (linear between, constant beyond the last). An array is not a
+            table but one constant per run, a batch axis as for every
+            parameter: write a table of an array as ``tuple(array)``.
+        heading: gain toward the measured heading, likewise.
+        compensate: static; hand the law the estimate rolled forward over the
+            command in flight under latency (docs/model.md §9). ``False``
+            hands it the estimate of the measurement's time.
+    """
+
+    position: Any = _DEFAULT_POSITION
+    heading: Any = _DEFAULT_HEADING
+    compensate: bool = dataclasses.field(default=True, metadata={"static": True})
+
+    def __post_init__(self) -> None:
+        for name in ("position", "heading"):
+            table = getattr(self, name)
+            if isinstance(table, (list, tuple)):
+                object.__setattr__(self, name, tuple(list_as_array(k) for k in table))
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class EKFParams(Parameters):
+    """Covariances of the extended Kalman filter (docs/model.md §9).
+
+    Attributes:
+        wheel_error: standard deviation of each wheel's travel over a period,
+            relative to that travel (odometry error), ``> 0``.
+        sigma_xy: standard deviation of the measured x and y, cm, ``> 0``.
+        sigma_theta: standard deviation of the measured heading, rad, ``> 0``.
+        compensate: static; as in ``ObserverParams``.
+    """
+
+    wheel_error: Any = 0.03
+    sigma_xy: Any = 0.5
+    sigma_theta: Any = math.radians(1.0)
+    compensate: bool = dataclasses.field(default=True, metadata={"static": True})
+
+
+# ---------------------------------------------------------------- checks
+
+
+def _check_values(name: str, value: Any, ok: Callable, allowed: str) -> int | None:
+    """Check one concrete field (a scalar or one batch axis); return its batch size."""
+    if isinstance(value, jax.core.Tracer):
+        return None
+    arr = real_array(name, value, allowed)  # refuses strings, bools and None by name
+    if arr.ndim > 1:
+        raise ValueError(f"{name} has shape {arr.shape}; allowed: a scalar or one batch axis")
+    require(name, arr, np.isfinite(arr) & ok(arr), allowed)
+    require_representable(name, arr, tiny_ok=True)
+    return arr.shape[0] if arr.ndim else None
+
+
+def validate_observer(params: ObserverParams, prefix: str = "estimator") -> ObserverParams:
+    """Check an ``ObserverParams``; return it unchanged (``ValueError`` naming the field)."""
+    if not isinstance(params, ObserverParams):
+        raise ValueError(
+            f"{prefix} is a {type(params).__name__}; allowed: a wmr_jax.ObserverParams"
+        )
+    check_bool(f"{prefix}.compensate", params.compensate)
+    sizes = {}
+    for name in ("position", "heading"):
+        table = getattr(params, name)
+        entries = table if isinstance(table, tuple) else (table,)
+        if isinstance(table, tuple) and not 2 <= len(table) <= 50:
+            raise ValueError(
+                f"{prefix}.{name} has {len(table)} knots; allowed: a number, or 2 to 50 knots"
+            )
+        for k, value in enumerate(entries):
+            label = f"{prefix}.{name}[{k}]" if isinstance(table, tuple) else f"{prefix}.{name}"
+            size = _check_values(label, value, lambda a: (a >= 0) & (a <= 1), "a gain 0 <= g <= 1")
+            if size is not None:
+                sizes[label] = size
+    require_one_batch_size(sizes)
+    return params
+
+
+def validate_ekf(params: EKFParams, prefix: str = "estimator") -> EKFParams:
+    """Check an ``EKFParams``; return it unchanged (``ValueError`` naming the field)."""
+    if not isinstance(params, EKFParams):
+        raise ValueError(f"{prefix} is a {type(params).__name__}; allowed: a wmr_jax.EKFParams")
+    check_bool(f"{prefix}.compensate", params.compensate)
+    sizes = {}
+    units = {"wheel_error": "", "sigma_xy": " cm", "sigma_theta": " rad"}
+    for name, unit in units.items():
+        label = f"{prefix}.{name}"
+        size = _check_values(
+            label, getattr(params, name), lambda a: (a > 0) & (a <= 1e6), f"0 < {name} <= 1e6{unit}"
+        )
+        if size is not None:
+            sizes[label] = size
+    require_one_batch_size(sizes)
+    return params
+
+
+# ---------------------------------------------------------------- the observer
+
+
+class ObserverState(NamedTuple):
+    """The observer's estimate (a ``motion.SplitPose``)."""
+
+    pose: motion.SplitPose
+
+
+def _table(values: Any, r: jax.Array) -> jax.Array:
+    """A gain table at distance ``r``: piecewise linear over ``observer_radii``."""
+    if not isinstance(values, tuple):
+        return values + jnp.zeros_like(r)
+    radii = observer_radii(len(values))
+    out = values[0] + jnp.zeros_like(r)
+    for k in range(1, len(values)):
+        ramp = jnp.clip((r - radii[k - 1]) * (1.0 / (radii[k] - radii[k - 1])), 0.0, 1.0)
+        out = out + (values[k] - values[k - 1]) * ramp
+    return out
+
+
+def _rotation(angle: jax.Array) -> jax.Array:
+    """``cos angle + i sin angle`` (exactly ``1`` at ``0``)."""
+    cos_a, sin_a = sin_cos(angle)
+    return jax.lax.complex(cos_a, sin_a)
+
+
+def _observer_start(measured: motion.SplitPose, params: Any, robot: Robot) -> ObserverState:
+    del params, robot
+    return ObserverState(measured)
+
+
+def _observer_update(state, predicted, command, measured, ref, params, robot, dt):
+    """Blend the prediction over the period toward ``measured``."""
+    del state, command, robot, dt
+    # |ref − estimate| as a plain square root: the complex absolute value
+    # guards against overflow (positions here are bounded by the input
+    # checks) and cost about a quarter of the raw loop on XLA:CPU.
+    d = jax.lax.complex(ref[0], ref[1]) - predicted.position
+    distance = jnp.sqrt(d.real * d.real + d.imag * d.imag)
+    g_position = _table(params.position, distance)
+    g_heading = _table(params.heading, distance)
+    # Written as the measurement plus (1 − g) of the way back to the
+    # prediction, so that a gain of 1 returns the measurement bit for bit.
+    position = measured.position + (1.0 - g_position) * (predicted.position - measured.position)
+    back = (1.0 - g_heading) * measured.residual(predicted)
+    return ObserverState(motion.SplitPose(position, measured.turned(-back), measured.theta - back))
+
+
+# ---------------------------------------------------------------- the EKF
+
+
+class EKFState(NamedTuple):
+    """The filter's estimate and its covariance over ``[x cm, y cm, θ rad]``.
+
+    ``covariance`` is one array of its six distinct entries
+    ``(P₀₀, P₀₁, P₀₂, P₁₁, P₁₂, P₂₂)``.
+    """
+
+    pose: motion.SplitPose
+    covariance: jax.Array
+
+
+def _ekf_start(measured: motion.SplitPose, params: EKFParams, robot: Robot) -> EKFState:
+    del robot
+    zero = jnp.zeros_like(measured.theta)
+    rxy, rth = params.sigma_xy**2 + zero, params.sigma_theta**2 + zero
+    return EKFState(measured, jnp.stack((rxy, zero, zero, rxy, zero, rth)))
+
+
+def _ekf_update(state, predicted, command, measured, ref, params, robot, dt) -> EKFState:
+    """Predict the covariance over the period, then the Kalman correction toward ``measured``.
+
+    With ``M`` the predicted covariance, ``R`` the measurement's and
+    ``S = M + R``, the corrected covariance ``P = M − M S⁻¹ M`` is also
+    ``R S⁻¹ M``, and the gain ``K = M S⁻¹`` is ``P R⁻¹``: the filter computes
+    the six entries of ``R S⁻¹ M`` (one array, divided by ``det S`` once) and
+    corrects the pose with them. Every product is written out: under
+    ``vmap`` a batch of 3 × 3 matrix products is slower on XLA:CPU than the
+    same arithmetic elementwise, and in the textbook order (``K``, then
+    ``(I − K) M``) XLA recomputes ``K`` in each of the nine quantities that
+    read it.
+    """
+    del ref
+    v, omega = command.real, command.imag
+    moved = predicted.position - state.pose.position
+    # The arc's Jacobian in the pose: the heading turns the displacement,
+    # F = [[1, 0, a], [0, 1, b], [0, 0, 1]].
+    a, b = -moved.imag, moved.real
+    p00, p01, p02, p11, p12, p22 = (state.covariance[i] for i in range(6))
+    # Each wheel's travel has a relative error of std wheel_error; their sum
+    # moves the centre, their difference over 2L turns it (independent wheels).
+    travel_left = jnp.abs(v - robot.half_track * omega) * dt
+    travel_right = jnp.abs(v + robot.half_track * omega) * dt
+    q = params.wheel_error**2 * (travel_left**2 + travel_right**2) / 4.0
+    # M = F P Fᵀ + Q.
+    m02, m12, m22 = p02 + a * p22, p12 + b * p22, p22 + q / robot.half_track**2
+    m00 = p00 + 2.0 * a * p02 + a * a * p22 + q
+    m01 = p01 + a * p12 + b * p02 + a * b * p22
+    m11 = p11 + 2.0 * b * p12 + b * b * p22 + q
+    # S = M + R and its adjugate C (symmetric): S⁻¹ = C / det S.
+    rxy, rth = params.sigma_xy**2, params.sigma_theta**2
+    s00, s11, s22 = m00 + rxy, m11 + rxy, m22 + rth
+    c00, c01, c02 = s11 * s22 - m12 * m12, m02 * m12 - m01 * s22, m01 * m12 - m02 * s11
+    c11, c12, c22 = s00 * s22 - m02 * m02, m01 * m02 - s00 * m12, s00 * s11 - m01 * m01
+    det = s00 * c00 + m01 * c01 + m02 * c02
+    # P = R C M / det S: its six distinct entries.
+    covariance = (
+        jnp.stack(
+            (
+                rxy * (c00 * m00 + c01 * m01 + c02 * m02),
+                rxy * (c00 * m01 + c01 * m11 + c02 * m12),
+                rxy * (c00 * m02 + c01 * m12 + c02 * m22),
+                rxy * (c01 * m01 + c11 * m11 + c12 * m12),
+                rxy * (c01 * m02 + c11 * m12 + c12 * m22),
+                rth * (c02 * m02 + c12 * m12 + c22 * m22),
+            )
+        )
+        / det
+    )
+    p00, p01, p02, p11, p12, p22 = (covariance[i] for i in range(6))
+    # The correction K y = P R⁻¹ y.
+    residual = measured.position - predicted.position
+    y0, y1, y2 = residual.real / rxy, residual.imag / rxy, measured.residual(predicted) / rth
+    dx = p00 * y0 + p01 * y1 + p02 * y2
+    dy = p01 * y0 + p11 * y1 + p12 * y2
+    dth = p02 * y0 + p12 * y1 + p22 * y2
+    pose = motion.SplitPose(
+        predicted.position + jax.lax.complex(dx, dy),
+        predicted.heading * _rotation(dth),
+        predicted.theta + dth,
+    )
+    return EKFState(pose, covariance)
+
+
+# ---------------------------------------------------------------- estimators as values
+
+
+@dataclasses.dataclass(frozen=True)
+class Estimator:
+    """A pose estimator as a value (hashable: a static ``jit`` argument).
+
+    Attributes:
+        name: short name for the CLI and tables (``"observer"``, ``"ekf"``).
+        params_type: the class of its parameter pytree.
+        validate: checks a parameter pytree before tracing; returns it.
+        start: ``(measured SplitPose, params, robot) -> state`` from the first
+            measurement.
+        update: ``(state, predicted SplitPose, applied command v + iω,
+            ``disturbances.Measurement``, ref (3,), params, robot, dt) -> state``: the
+            estimate moved over the period by the loop (``motion.ideal_move``,
+            shared with the latency compensation), then corrected.
+    """
+
+    name: str
+    params_type: type
+    validate: Callable[[Any], Any]
+    start: Callable[..., Any]
+    update: Callable[..., Any]
+
+    def default_params(self) -> Any:
+        """Return the estimator's default parameters."""
+        return self.params_type()
+
+
+OBSERVER = Estimator(
+    "observer", ObserverParams, validate_observer, _observer_start, _observer_update
+)
+EKF = Estimator("ekf", EKFParams, validate_ekf, _ekf_start, _ekf_update)
+ESTIMATORS = {e.name: e for e in (OBSERVER, EKF)}
+
+
+def resolve_estimator(value: Any) -> tuple[Estimator | None, Any]:
+    """Return ``(Estimator, checked params)`` of an ``estimator=`` argument.
+
+    Args:
+        value: ``None`` (raw feedback), a name of ``ESTIMATORS`` (its default
+            parameters), or an ``ObserverParams``/``EKFParams``.
+
+    Raises:
+        ValueError: for anything else, naming what is allowed.
+    """
+    if value is None:
+        return None, None
+    if isinstance(value, str) and value in ESTIMATORS:
+        estimator = ESTIMATORS[value]
+        return estimator, estimator.default_params()
+    for estimator in ESTIMATORS.values():
+        if isinstance(value, estimator.params_type):
+            return estimator, estimator.validate(value)
+    raise ValueError(
+        f"estimator = {value!r:.80} is not allowed; allowed: None (raw feedback), "
+        f"{' or '.join(repr(n) for n in ESTIMATORS)}, an ObserverParams or an EKFParams"
+    )

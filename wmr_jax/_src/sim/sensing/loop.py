@@ -1,0 +1,374 @@
+"""The disturbed closed loop (docs/model.md §7), with or without an estimator (§9).
+
+The one closed-loop step of every run (``loops.ClosedLoopStep``), given a
+``sensing.disturbances.Disturbance``: four departures from the nominal run,
+which is the same step without one.
+
+* **Pose-measurement noise.** The controller's side sees ``pose + n_k``;
+  arrival is judged on the true pose.
+* **Wheel-radius mismatch** and **mass mismatch** (``disturbances.realised``).
+* **Latency** of ``delay`` samples: the command computed at sample ``k`` is
+  applied from period ``k + delay`` (zero before).
+
+Between the measurement and the law sits the loop's estimator
+(``Options.estimator``, docs/model.md §9): ``None`` hands the law the raw
+measurement; an estimator predicts over each period with the command
+applied, corrects toward the measurement, and under latency the law sees its
+estimate rolled forward over the commands in flight (compensation). With no
+noise, no mismatch and no latency the run is the nominal rollout, and its
+metrics those of ``docs/model.md §6`` (tested). The metrics stream through the scan
+(``metrics.stream_update``), so batches are bounded in memory.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from wmr_jax._src import checks
+from wmr_jax._src.model import controllers
+from wmr_jax._src.model.params import Robot
+from wmr_jax._src.sim import loops, metrics
+from wmr_jax._src.sim import rollout as simulation
+from wmr_jax._src.sim.loops import Options
+from wmr_jax._src.sim.metrics import PoseMetrics
+from wmr_jax._src.sim.rollout import DEFAULT_DT
+from wmr_jax._src.sim.sensing.disturbances import Disturbance, checked_disturbance
+from wmr_jax._src.sim.sensing.estimators import resolve_estimator
+
+__all__ = [
+    "ClosedLoop",
+    "batched_disturbed",
+    "disturbed_rollout",
+    "disturbed_run",
+    "disturbed_metrics",
+    "metrics_fold",
+    "metrics_result",
+    "prepare_disturbed",
+]
+
+
+class ClosedLoop(NamedTuple):
+    """A controller, its parameters and the estimator between it and the sensor.
+
+    What ``load_tuned`` returns and what the studies of sensed loops take.
+
+    Attributes:
+        controller: a ``Controller`` or its registered name.
+        params: its parameters.
+        estimator: ``None`` (raw feedback), an estimator's name, or its
+            parameters (``ObserverParams`` / ``EKFParams``), docs/model.md §9.
+        robot: the ``Robot`` the parameters were tuned for (their wheel
+            budget ``k_r + L k_θ ≤ V_max`` is that robot's), or ``None``
+            where unknown (files from before robots were recorded).
+    """
+
+    controller: Any
+    params: Any
+    estimator: Any = None
+    robot: Any = None
+
+
+def disturbed_run(
+    spec: Disturbance,
+    params: Any,
+    init: jax.Array,
+    robot: Robot,
+    dt: jax.Array,
+    options: Options,
+    *,
+    estimate: Any = None,
+    fold: loops.Fold | None = None,
+    acc: Any = None,
+    record: bool = False,
+) -> tuple[jax.Array, Any, Any]:
+    """Run one pose under its ``Disturbance`` (docs/model.md §7, §9): the one step, disturbed.
+
+    ``loops.scan_closed_loop`` with ``disturbance=spec``. Over period ``k``
+    the robot moves under the command computed at sample ``k − delay`` (zero
+    before the first), its rims scaled by the wheel-radius factors; in the
+    non-ideal loop the true robot's mass is ``M`` times the mass factor while
+    the wheel controller keeps the nominal model. The law sees the
+    measurement (``options.estimator`` ``None``) or the estimator's
+    estimate, compensated for latency. Arrival is judged on the true pose.
+    With ``options.accel_limit`` the command passes through the robot's speed
+    limiter before the wheels' radii scale it (a base's limiter is software,
+    the mismatch is in its wheels), and the estimator predicts with what the
+    limiter let through.
+
+    Args:
+        spec: the disturbance of this run (no batch axes; ``noise (steps, 3)``;
+            ``delay`` at most ``options.max_delay``).
+        params: the controller's parameters.
+        init: ``(3,)`` initial pose.
+        robot: the nominal robot (the controller's and estimator's model).
+        dt: control period, s.
+        options: static options.
+        estimate: the estimator's parameters (unused without one).
+        fold: ``fold(acc, true pose (a motion.SplitPose), StepOutput) -> acc``
+            after every period.
+        acc: the fold's initial accumulator.
+        record: also return every true pose ``(steps, 3)``, ``StepOutput`` and
+            the pose the estimator holds at each sample (the measurement
+            without one) ``(steps, 3)``.
+
+    Returns:
+        ``(final true pose (3,), acc, (poses, outputs, estimates) or None)``.
+    """
+    return loops.scan_closed_loop(
+        spec.ref,
+        params,
+        init,
+        robot,
+        dt,
+        options,
+        disturbance=spec,
+        estimate=estimate,
+        fold=fold,
+        acc=acc,
+        record=record,
+    )
+
+
+def metrics_fold(ref: jax.Array) -> loops.Fold:
+    """The fold that streams the ``docs/model.md §6`` metrics of a run toward ``ref`` (3,)."""
+    thresholds = metrics.Thresholds()
+
+    def fold(acc, pose, out):
+        return metrics.stream_update(acc, pose.stacked(), ref, out, thresholds, frame=pose.frame())
+
+    return fold
+
+
+def _disturbed_single(spec: Disturbance, params, estimate, init, robot, dt, options: Options):
+    """Run one pose under its ``Disturbance``, streaming the ``docs/model.md §6`` metrics."""
+    ref = spec.ref
+    final, acc, _ = disturbed_run(
+        spec,
+        params,
+        init,
+        robot,
+        dt,
+        options,
+        estimate=estimate,
+        fold=metrics_fold(ref),
+        acc=metrics.stream_start(ref.dtype),
+    )
+    return metrics_result(acc, final, ref, dt)
+
+
+def metrics_result(acc: Any, final: jax.Array, ref: jax.Array, dt: jax.Array) -> dict:
+    """The metrics ``metrics_fold`` streamed, and the distance from ``final`` (3,) to ``ref``."""
+    result = metrics.stream_result(acc, dt)
+    d = final[:2] - ref[:2]
+    return {
+        "arrival": result["arrival_time"],
+        "path": result["path_length"],
+        "peak_wheel": result["peak_wheel_speed"],
+        "zigzag": result["zigzags"],
+        "final_distance": jnp.sqrt(jnp.sum(d * d)),
+        "first_arrival": result["first_arrival"],
+    }
+
+
+def batched_disturbed(single):
+    """Lift ``single(spec, params, estimate, init, robot, dt, options)`` over disturbances.
+
+    Every field of ``spec`` carries the batch axis, except a scalar ``delay``
+    (shared); ``params``, ``estimate`` and ``robot`` leaves may carry it too.
+    """
+
+    def run(spec, params, estimate, init, robot, dt, options):
+        spec_axes = Disturbance(0, 0, 0, 0 if jnp.ndim(spec.delay) == 1 else None)
+        in_axes = (
+            spec_axes,
+            loops.batch_axes(params, 0),
+            loops.batch_axes(estimate, 0),
+            None,
+            loops.batch_axes(robot, 0),
+            None,
+        )
+        return jax.vmap(lambda *a: single(*a, options), in_axes=in_axes)(
+            spec, params, estimate, init, robot, dt
+        )
+
+    return run
+
+
+_disturbed_jit = loops.EntryJit(batched_disturbed(_disturbed_single), static_argnames=("options",))
+
+
+def disturbed_metrics(
+    disturbance: Disturbance,
+    params: Any = None,
+    *,
+    controller: Any = controllers.SHIM_SUNG,
+    estimator: Any = None,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = DEFAULT_DT,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    x64: bool = True,
+) -> PoseMetrics:
+    """Return the ``docs/model.md §6`` metrics of a batch of disturbed runs.
+
+    Args:
+        disturbance: a ``Disturbance`` with a leading batch axis ``N`` on
+            every field but ``delay`` (a scalar); ``noise`` is
+            ``(N, steps, 3)`` and sets the number of periods.
+        params: the controller's parameters (its defaults if ``None``).
+        controller: a ``Controller`` or its registered name.
+        estimator: ``None`` (the law sees the raw measurement), ``"observer"``
+            or ``"ekf"`` (default parameters), or an ``ObserverParams`` /
+            ``EKFParams`` (docs/model.md §9).
+        init: ``(3,)`` initial pose (true and measured alike), ``[cm, cm, rad]``.
+        dt: control period, s.
+        robot: the nominal robot (the controller's model); default ``Robot()``.
+            Its acceleration limits, where above 0, limit the ideal loop's
+            commands (docs/model.md §4.2.2).
+        velocity: ``"ideal"`` or ``"nonideal"``.
+        x64: compute in float64 (default): the polar baselines' bearing is
+            rounding noise near the goal in float32.
+
+    Returns:
+        ``PoseMetrics`` of ``(N,)`` NumPy arrays, ``first_arrival`` included.
+
+    Raises:
+        ValueError: for misshapen or non-finite inputs and bad options.
+    """
+    with jax.enable_x64(checks.check_bool("x64", x64)):
+        args, options = prepare_disturbed(
+            disturbance, params, controller, estimator, init, dt, robot, velocity
+        )
+        out = _disturbed_jit(*args, options=options)
+        result = PoseMetrics(**{f: np.asarray(out[f]) for f in PoseMetrics._fields})
+        checks.require_finite_runs(
+            np.isfinite(result.final_distance),
+            args[-1].dtype,
+            allowed="disturbances, gains and dt that keep the sampled law stable "
+            "(docs/model.md §4, §7)",
+        )
+        return result
+
+
+# What disturbed_rollout keeps per run and period: the pose, v, ω and the
+# estimate handed to the law (8 floats).
+_DISTURBED_RECORD = (8, 0)
+
+
+def prepare_disturbed(
+    disturbance, params, controller, estimator, init, dt, robot, velocity, *, record=None
+) -> tuple[tuple, Options]:
+    """Check a batch of disturbances and the run's settings; return the jitted core's arguments.
+
+    ``record``: ``(floats, int32s)`` the caller keeps per run and period, for
+    a run that keeps every period: one larger than the memory is refused
+    before anything grows with the runs.
+
+    Returns:
+        ``((spec, params, estimate, init, robot, dt), options)``.
+    """
+    refs, noise, mismatch, delay = checked_disturbance(disturbance)
+    estimator, estimate = resolve_estimator(estimator)
+    if estimator is not None:
+        # One value per run, or one for all: as the gains, before any tracing
+        # (a list is an array of values, as everywhere, not a tree of them).
+        estimate = jax.tree.map(
+            lambda v: np.asarray(v) if isinstance(v, list) else v,
+            estimate,
+            is_leaf=lambda v: isinstance(v, list),
+        )
+    runs = checks.common_batch_size({"gains": params, "robot": robot, "estimator": estimate})
+    if record is not None:
+        simulation.require_memory(max(len(refs), runs), noise.shape[1], record, disturbance)
+    if len(refs) == 1 and runs > 1:
+        # One disturbance shared by every run of batched parameters, as a
+        # batch axis of size 1 is everywhere (README: the Python API).
+        refs, noise, mismatch = (np.repeat(a, runs, axis=0) for a in (refs, noise, mismatch))
+        delay = np.repeat(delay, runs, axis=0) if delay.ndim else delay
+    options = simulation.make_options(
+        steps=noise.shape[1], velocity=velocity, controller=controller
+    )
+    refs_j, params, init, robot, dt = simulation.prepare(
+        refs, params, init, robot, dt, options, batch=None
+    )
+    if options.velocity == "ideal":
+        # The robot's speed limiter, as in the rollouts (docs/model.md §4.2.2).
+        options = loops.for_robot(options, robot, dt)
+    # The commands in flight the loop carries: as many as the longest latency.
+    options = dataclasses.replace(options, max_delay=max(1, int(np.max(delay))))
+    if np.ndim(init) != 1:
+        raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,)")
+    dtype = dt.dtype
+    spec = Disturbance(
+        refs_j,
+        jnp.asarray(noise, dtype),
+        jnp.asarray(mismatch, dtype),
+        jnp.asarray(delay, dtype),
+    )
+    if estimator is not None:
+        sizes = {"disturbance.ref": len(refs), **checks.batch_sizes({"estimator": estimate})}
+        checks.require_one_batch_size(sizes)
+
+        def shared(leaf):  # an axis of size 1 is every run's value
+            leaf = jnp.asarray(leaf, dtype)
+            return leaf[0] if leaf.ndim >= 1 and leaf.shape[0] == 1 else leaf
+
+        estimate = jax.tree.map(shared, estimate)
+        options = dataclasses.replace(options, estimator=estimator)
+    return (spec, params, estimate, init, robot, dt), options
+
+
+def _disturbed_trajectory(spec, params, estimate, init, robot, dt, options):
+    _, _, (poses, out, held) = disturbed_run(
+        spec, params, init, robot, dt, options, estimate=estimate, record=True
+    )
+    return {
+        "poses": jnp.concatenate([init[None], poses]),
+        "v": out.v,
+        "omega": out.omega,
+        "estimates": held,
+    }
+
+
+_trajectory_jit = loops.EntryJit(
+    batched_disturbed(_disturbed_trajectory), static_argnames=("options",)
+)
+
+
+def disturbed_rollout(
+    disturbance: Disturbance,
+    params: Any = None,
+    *,
+    controller: Any = controllers.SHIM_SUNG,
+    estimator: Any = None,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = DEFAULT_DT,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    x64: bool = True,
+) -> dict[str, np.ndarray]:
+    """Return the true poses, estimates and applied commands of disturbed runs (docs/model.md §7).
+
+    Args: as for ``disturbed_metrics``.
+
+    Returns:
+        ``{"poses": (N, steps + 1, 3) true poses, the initial one first,
+        "v": (N, steps) cm/s, "omega": (N, steps) rad/s``: the command
+        applied over each period (zero over the first one under latency;
+        before a speed limiter, as a ``Trajectory``'s), ``"estimates": (N,
+        steps, 3)``: the estimate of the pose at the end of each period (the
+        measurement itself without an estimator); the last one follows a
+        noise-free measurement, since no command uses it``}``.
+    """
+    with jax.enable_x64(checks.check_bool("x64", x64)):
+        args, options = prepare_disturbed(
+            disturbance, params, controller, estimator, init, dt, robot, velocity,
+            record=_DISTURBED_RECORD,
+        )  # fmt: skip
+        out = _trajectory_jit(*args, options=options)
+        return {name: np.asarray(value) for name, value in out.items()}

@@ -1,0 +1,1 @@
+"""Studies built on the simulation: paper figures, maps, sweeps, robustness, waypoints, bench."""

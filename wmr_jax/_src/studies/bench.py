@@ -1,0 +1,590 @@
+"""Throughput of the simulator in robot-steps per second (the engine of ``wmr-jax bench``).
+
+One robot-step is one robot simulated over one control period. For each batch
+size ``run_benchmark`` times
+
+* ``final_poses`` with the ideal velocity loop, and with the non-ideal one;
+  with several local devices also the ideal one on a batch spread over all of
+  them (``wmr_jax.shard``); the command splits the CPU into two devices per
+  core first (``--cpu-devices``), which is faster on the CPU;
+* ``batch_rollout`` (whole trajectories), ideal loop;
+* the gradient of a batched loss with respect to the gains: the mean squared
+  final-pose error through ``final_poses``, and ``wmr_jax.tuning``'s loss;
+  each against its own forward evaluation;
+
+and, in the same run, two baselines of the ideal loop:
+
+* the package's scalar NumPy reference (``wmr_jax.reference_rollout``), one
+  pose at a time in a Python loop: a few poses are timed and the rate is per
+  robot-step;
+* ``numpy_final_poses``, the law and the exact arc of ``docs/model.md §2–4``
+  written for NumPy arrays the way a user would without JAX: vectorised over
+  the batch, one Python iteration per control period, angles and ``atan2``.
+
+Each time is the median of ``repeats`` calls after a first call, whose extra
+time is reported apart as the compile time (tracing and XLA compilation).
+Cases compared with each other (``final_poses`` and the baselines, a loss and
+its gradient) are timed in alternation, so that they share the machine's load;
+each timed JAX call follows an untimed one, so that it measures the steady
+state of a loop of calls rather than the wake-up of XLA's threads.
+Every JAX case and the scalar reference run on ``BenchConfig.robot`` (the
+paper robot by default; the NumPy baseline takes no robot: it runs the
+paper robot's ideal loop, which has no speed limiter), with the same steps
+and poses for any robot: throughput does not depend on how far the robot
+gets. The robot is recorded with the results, as are the device, JAX
+version and the machine's load during the run,
+since a shared machine makes every timing noisy: compare ratios taken in the
+same run rather than absolute rates across runs. ``wmr_jax.report.bench_table``
+formats the result; the command prints it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import resource
+import warnings
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from wmr_jax._src.checks import check_int, check_number
+from wmr_jax._src.oracle.numpy_batch import numpy_final_poses
+from wmr_jax._src.sim.poses import MAX_SAMPLES
+from wmr_jax._src.studies.bench_timing import Timing, environment, time_group
+
+__all__ = ["CASES", "BenchConfig", "numpy_final_poses", "run_benchmark"]
+
+DEFAULT_SIZES = (1_000, 10_000, 100_000)
+DEFAULT_STEPS = 100
+DEFAULT_REPEATS = 5
+DEFAULT_REFERENCE_POSES = 20
+DTYPES = ("float32", "float64")
+# The smooth law used for the gradient of the tuning loss, as tuning anneals it.
+TUNING_TEMPERATURE = 0.05
+
+
+@dataclasses.dataclass(frozen=True)
+class BenchConfig:
+    """What ``run_benchmark`` measures.
+
+    Attributes:
+        sizes: batch sizes N.
+        steps: control periods per run.
+        repeats: timed calls per case (the median is reported).
+        dtype: ``"float32"`` or ``"float64"``.
+        reference_poses: poses the scalar reference is timed on.
+        cases: which cases to run, from ``CASES``; empty: every case.
+        seed: seed of the reference poses (``wmr_jax.sample_poses``, the
+            evaluation set of ``docs/model.md §6``).
+        wait_idle: before each round of timed calls, wait up to this many
+            seconds for other processes to leave the CPU (shared machines).
+        robot: the robot every case runs (one ``Robot``); ``None``: ``Robot()``.
+    """
+
+    sizes: tuple[int, ...] = DEFAULT_SIZES
+    steps: int = DEFAULT_STEPS
+    repeats: int = DEFAULT_REPEATS
+    dtype: str = "float32"
+    reference_poses: int = DEFAULT_REFERENCE_POSES
+    cases: tuple[str, ...] = ()
+    seed: int = 0
+    wait_idle: float = 0.0
+    robot: Any = None
+
+
+CASES = (
+    "final_poses",
+    "final_poses_sharded",
+    "final_poses_nonideal",
+    "batch_rollout",
+    "grad_final_pose_loss",
+    "grad_tuning_loss",
+    "disturbed_estimator",
+    "c_controller",
+    "numpy_batch",
+    "scalar_reference",
+)
+
+
+def _check_config(config: BenchConfig) -> BenchConfig:
+    """Validate ``config`` (before any tracing); return it with ``cases`` filled in."""
+    if not isinstance(config, BenchConfig):
+        raise ValueError(
+            f"config is a {type(config).__name__}; allowed: a BenchConfig (fields as keywords)"
+        )
+    for name in ("sizes", "cases"):
+        if isinstance(getattr(config, name), (str, bytes)):
+            value = getattr(config, name)
+            raise ValueError(
+                f"{name} = {value!r} is not allowed; allowed: a sequence, e.g. ({value!r},)"
+            )
+    if not config.sizes:
+        raise ValueError("sizes = () is not allowed; allowed: one or more integers >= 1")
+    for i, n in enumerate(config.sizes):
+        check_int(f"sizes[{i}]", n, 1, MAX_SAMPLES)
+    for name in ("steps", "repeats", "reference_poses"):
+        check_int(name, getattr(config, name))
+    check_int("seed", config.seed, 0, 2**32 - 1 - max(config.sizes))
+    check_number("wait_idle", config.wait_idle, closed=True, unit="s")
+    if config.dtype not in DTYPES:
+        raise ValueError(f"dtype = {config.dtype!r} is not allowed; allowed: {DTYPES}")
+    unknown = [c for c in config.cases if c not in CASES]
+    if unknown:
+        raise ValueError(f"cases = {unknown!r} are not known; allowed: {CASES}")
+    if config.robot is not None:
+        from wmr_jax._src.model.params import validate_one_robot
+
+        validate_one_robot(config.robot, "the benchmark")
+    return dataclasses.replace(config, cases=tuple(config.cases) or CASES)
+
+
+def _robot_record(config: BenchConfig) -> dict[str, Any]:
+    """The robot the cases ran: its fields and a label (a preset's name, or "custom")."""
+    from wmr_jax._src.model.params import Robot
+    from wmr_jax._src.model.robots import robot_json, robot_name
+
+    robot = Robot() if config.robot is None else config.robot
+    return {"robot": robot_json(robot), "robot_label": robot_name(robot) or "custom"}
+
+
+def _row(case: str, n: int | None, steps: int, timing: Timing | None, **extra: Any) -> dict:
+    row: dict[str, Any] = {"case": case, "n": n, "steps": steps}
+    if timing is not None:
+        count = (n or 0) * steps
+        row.update(
+            run_s=timing.run_s,
+            compile_s=timing.compile_s,
+            robot_steps_per_s=count / timing.run_s if timing.run_s > 0 else None,
+            runs_s=timing.runs_s,
+            others_cpu=timing.others_cpu,
+        )
+    row.update(extra)
+    return row
+
+
+def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = None) -> dict:
+    """Run the benchmark and return its results as a JSON-ready dict.
+
+    Args:
+        config: what to measure.
+        log: called with one line per finished case (progress).
+
+    Returns:
+        ``{"environment": ..., "config": ..., "robot": {field: value},
+        "robot_label": ..., "rows": [...], "ratios": {...}, "peak_rss_mb":
+        ...}``; each row has ``case``, ``n``, ``steps``,
+        ``run_s`` (s), ``compile_s`` (s), ``robot_steps_per_s``, ``runs_s``,
+        ``others_cpu`` (cores), or ``skipped`` with a reason; ``ratios`` maps
+        ``"N=<n>"`` to the speed-ups of ``final_poses`` over the baselines and
+        the cost of each gradient, and of one forward-mode derivative, over
+        its forward pass.
+
+    Raises:
+        ValueError: for a bad ``config``.
+    """
+    config = _check_config(config)
+    if log is not None and not callable(log):
+        raise ValueError(f"log = {log!r} is not allowed; allowed: a function of one line, or None")
+    import jax
+
+    if config.dtype == "float64" and not jax.config.jax_enable_x64:
+        jax.config.update("jax_enable_x64", True)
+    if config.dtype == "float32" and jax.config.jax_enable_x64:
+        raise ValueError(
+            "dtype = 'float32' is not allowed while jax_enable_x64 is on; "
+            "allowed: 'float64', or turn jax_enable_x64 off"
+        )
+    from wmr_jax._src.model.params import Gains
+
+    say = log or (lambda line: None)
+    rows: list[dict] = []
+    with warnings.catch_warnings():
+        # The paper's gains trip the wheel-speed warning on every call.
+        warnings.simplefilter("ignore")
+        for n in config.sizes:
+            bench = _SizeBench(config, n, Gains())
+            for row in bench.rows(scalar=n == max(config.sizes)):
+                rows.append(row)
+                rate = row.get("robot_steps_per_s")
+                text = row.get("skipped") or (f"{rate:.3e} robot-steps/s" if rate else "")
+                say(f"{row['case']:<22} N={row['n']!s:<8} {text}")
+    fields = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
+    return {
+        "environment": environment(),
+        "config": {name: value for name, value in fields.items() if name != "robot"},
+        **_robot_record(config),
+        "rows": rows,
+        "ratios": _ratios(rows),
+        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    }
+
+
+class _SizeBench:
+    """The cases of one batch size ``n``, each a step that returns its rows."""
+
+    def __init__(self, config: BenchConfig, n: int, gains: Any) -> None:
+        import jax.numpy as jnp
+
+        from wmr_jax._src.sim.poses import sample_poses
+
+        self.config, self.n, self.gains, self.steps = config, n, gains, config.steps
+        self.robot = config.robot
+        dtype = np.float32 if config.dtype == "float32" else np.float64
+        self.refs_np = np.asarray(sample_poses(config.seed + n, n), dtype=dtype)
+        self.refs = jnp.asarray(self.refs_np)
+
+    def time(self, calls: dict[str, tuple[Callable[[], Any], bool]]) -> dict[str, Timing]:
+        return time_group(calls, self.config.repeats, wait_idle=self.config.wait_idle)
+
+    def row(self, case: str, timing: Timing | None, **extra: Any) -> dict:
+        return _row(case, self.n, self.steps, timing, **extra)
+
+    def rows(self, *, scalar: bool) -> list[dict]:
+        """Return the rows of every chosen case, in the order of the table."""
+        cases = self.config.cases
+        baselines = self.baselines(scalar=scalar and "scalar_reference" in cases)
+        rows = baselines[0]
+        for case, step in (
+            ("final_poses_nonideal", self.nonideal),
+            ("batch_rollout", self.batch_rollout),
+            ("grad_final_pose_loss", self.final_pose_loss),
+            ("grad_tuning_loss", self.tuning_loss),
+            ("disturbed_estimator", self.disturbed),
+            ("c_controller", self.c_controller),
+        ):
+            if case in cases:
+                rows += step()
+        return rows + baselines[1]
+
+    def baselines(self, *, scalar: bool) -> tuple[list[dict], list[dict]]:
+        """Time ``final_poses`` against both baselines, interleaved: their ratio counts.
+
+        Returns:
+            The rows of ``final_poses`` (and sharded), then those of the baselines.
+        """
+        import jax
+
+        from wmr_jax._src.oracle import reference
+        from wmr_jax._src.sim.rollout import final_poses
+
+        cases, gains, steps, refs = self.config.cases, self.gains, self.steps, self.refs
+        robot = self.robot
+        group: dict[str, tuple[Callable[[], Any], bool]] = {}
+        if "final_poses" in cases:
+            group["final_poses"] = (
+                lambda: final_poses(refs, gains, steps=steps, robot=robot),
+                True,
+            )
+        if "numpy_batch" in cases:
+            group["numpy_batch"] = (
+                lambda: numpy_final_poses(self.refs_np, gains, steps=steps),
+                False,
+            )
+        k = self.config.reference_poses
+        if scalar:
+            from wmr_jax._src.sim.poses import sample_poses
+
+            scalar_refs = np.asarray(sample_poses(self.config.seed, k), dtype=np.float64)
+
+            def scalar_runs():
+                for ref in scalar_refs:
+                    reference.reference_rollout(ref, gains, steps=steps, robot=robot)
+
+            group["scalar_reference"] = (scalar_runs, False)
+        devices = jax.local_devices()
+        if "final_poses_sharded" in cases and len(devices) > 1:
+            from wmr_jax._src.sim.sharding import shard
+
+            spread = shard(self.refs_np, devices)
+            group["final_poses_sharded"] = (
+                lambda: final_poses(spread.array, gains, steps=steps, robot=robot),
+                True,
+            )
+        t = self.time(group) if group else {}
+        first, last = [], []
+        if "final_poses" in t:
+            first.append(self.row("final_poses", t["final_poses"], velocity="ideal"))
+        if "final_poses_sharded" in t:
+            sharded = t["final_poses_sharded"]
+            first.append(self.row("final_poses_sharded", sharded, devices=len(devices)))
+        elif "final_poses_sharded" in cases:
+            why = f"skipped: needs 2 or more devices ({len(devices)} here; --cpu-devices K)"
+            first.append(self.row("final_poses_sharded", None, skipped=why))
+        if "numpy_batch" in t:
+            last.append(self.row("numpy_batch", t["numpy_batch"], dtype=self.config.dtype))
+        if "scalar_reference" in t:
+            note = "float64, one pose at a time"
+            last.append(_row("scalar_reference", k, steps, t["scalar_reference"], note=note))
+        return first, last
+
+    def disturbed(self) -> list[dict]:
+        """The disturbed loop (docs/model.md §7) raw and with each estimator, interleaved.
+
+        Noise σ_xy = 0.5 cm, σ_θ = 1°, ±3 % wheel radius and one sample of
+        latency (so compensation runs too); the jitted core is timed, the
+        checks before it are not. The rows of ``disturbed_observer`` and
+        ``disturbed_ekf`` carry their cost per robot-step over the raw loop.
+        """
+
+        import jax
+
+        from wmr_jax._src.sim.sensing.disturbances import sample_disturbance
+        from wmr_jax._src.sim.sensing.loop import _disturbed_jit, prepare_disturbed
+
+        spec = sample_disturbance(
+            jax.random.PRNGKey(self.config.seed), self.refs, self.steps, noise_xy=0.5,
+            noise_theta=math.radians(1.0), radius_mismatch=0.03, latency=1.0,
+        )  # fmt: skip
+        group = {}
+        for name, estimator in (("raw", None), ("observer", "observer"), ("ekf", "ekf")):
+            start, robot = (0.0, 0.0, 0.0), self.robot
+            args, options = prepare_disturbed(
+                spec, self.gains, "shim-sung", estimator, start, 0.033, robot, "ideal"
+            )
+            group[name] = (
+                lambda args=args, options=options: _disturbed_jit(*args, options=options),
+                True,
+            )
+        t = self.time(group)
+        raw = t["raw"].run_s
+        return [
+            self.row("disturbed_raw", t["raw"], feedback="raw"),
+            *(
+                self.row(f"disturbed_{name}", t[name], over_raw=t[name].run_s / raw)
+                for name in ("observer", "ekf")
+            ),
+        ]
+
+    def c_controller(self) -> list[dict]:
+        """The exported C controller (``wmr_jax.export``): a gain schedule with its EKF.
+
+        ``N`` controllers, one sample of latency (so compensation runs too),
+        each stepped ``steps`` times through noisy poses on the way to its
+        goal; one foreign call steps all ``N``, so the time is the C's. The
+        row carries ``ns_per_step``, ``sizeof(wmr_controller)`` and the bytes
+        of the compiled step.
+        """
+        import tempfile
+        from pathlib import Path
+
+        from wmr_jax._src.export import codegen, compiled
+        from wmr_jax._src.model.controllers.schedule import SCHEDULE, ScheduleParams
+        from wmr_jax._src.model.params import Robot
+        from wmr_jax._src.sim.sensing.loop import ClosedLoop
+
+        if compiled.compiler() is None:
+            return [self.row("c_controller", None, skipped="skipped: no C compiler")]
+        robot = Robot() if self.robot is None else self.robot
+        params = ScheduleParams.from_gains(self.gains, robot=robot)
+        loop = ClosedLoop(SCHEDULE, params, "ekf", robot)
+        with tempfile.TemporaryDirectory() as tmp:
+            codegen.write_sources(Path(tmp), codegen.c_sources(loop), loop)
+            c = compiled.compile_controller(tmp, build=Path(tmp, "build"))
+            code_bytes = _code_bytes(Path(tmp, "wmr_controller.c"), Path(tmp, "build"))
+        refs = np.asarray(self.refs_np, dtype=np.float64)
+        rng = np.random.default_rng(self.config.seed)
+        along = np.linspace(0.0, 1.0, self.steps)[:, None, None] * refs[None]
+        measured = np.ascontiguousarray(along + rng.normal(0.0, 0.5, along.shape))
+
+        def run():
+            c.start(refs, 1)
+            for z in measured:
+                c.step(z)
+
+        t = self.time({"c": (run, False)})["c"]
+        per_step = t.run_s / (self.n * self.steps) * 1e9
+        return [
+            self.row(
+                "c_controller",
+                t,
+                ns_per_step=per_step,
+                state_bytes=c.size,
+                code_bytes=code_bytes,
+                law="schedule",
+                feedback="ekf",
+                latency=1,
+            )
+        ]
+
+    def nonideal(self) -> list[dict]:
+        from wmr_jax._src.sim.rollout import final_poses
+
+        gains, steps, refs, robot = self.gains, self.steps, self.refs, self.robot
+
+        def call():
+            return final_poses(refs, gains, steps=steps, velocity="nonideal", robot=robot)
+
+        t = self.time({"nonideal": (call, True)})["nonideal"]
+        return [self.row("final_poses_nonideal", t, velocity="nonideal")]
+
+    def batch_rollout(self) -> list[dict]:
+        from wmr_jax._src.sim.rollout import batch_rollout
+
+        gains, steps, refs, robot = self.gains, self.steps, self.refs, self.robot
+
+        def call():
+            return batch_rollout(refs, gains, steps=steps, robot=robot)
+
+        t = self.time({"rollout": (call, True)})
+        return [self.row("batch_rollout", t["rollout"], velocity="ideal")]
+
+    def loss_rows(
+        self,
+        loss: Callable,
+        forward_row: tuple[str, dict],
+        case: str,
+        beside: tuple[str, Callable[[], Any]] | None = None,
+    ) -> list[dict]:
+        """Time ``loss(gains, refs)``, its gradient and one directional derivative, interleaved.
+
+        The directional derivative (forward mode, ``jax.jvp`` along the gains
+        themselves, i.e. ``d/ds loss(s · gains)`` at ``s = 1``) prices what
+        reverse mode cannot avoid: a gradient whose scan recomputes its steps
+        runs the forward pass, then every step again with its transposed
+        linearisation, which costs what the forward-mode step does (the
+        transposition principle) — so ``1 + jvp_over_forward`` is its floor
+        (README, "Speed and scale").
+
+        ``beside``: ``(case, call)`` timed in the same group, its row first.
+        Returns the rows ``[beside,] forward, jvp_<case>, <case>``.
+        """
+        import jax
+
+        from wmr_jax._src.sim import loops
+
+        forward = loops.jit_top_level(loss)
+        gradient = loops.jit_top_level(jax.value_and_grad(loss))
+
+        def along_gains(gains, refs):
+            return jax.jvp(lambda g: loss(g, refs), (gains,), (gains,))
+
+        directional = loops.jit_top_level(along_gains)
+        gains, refs = self.gains, self.refs
+        group = {
+            "forward": (lambda: forward(gains, refs), True),
+            "directional": (lambda: directional(gains, refs), True),
+            "gradient": (lambda: gradient(gains, refs), True),
+        }
+        if beside is not None:
+            group["beside"] = (beside[1], True)
+        t = self.time(group)
+        ratio = t["gradient"].run_s / t["forward"].run_s
+        jvp_ratio = t["directional"].run_s / t["forward"].run_s
+        jvp_case = case.replace("grad_", "jvp_", 1)
+        rows = [] if beside is None else [self.row(beside[0], t["beside"])]
+        return rows + [
+            self.row(forward_row[0], t["forward"], **forward_row[1]),
+            self.row(jvp_case, t["directional"], jvp_over_forward=jvp_ratio),
+            self.row(case, t["gradient"], grad_over_forward=ratio),
+        ]
+
+    def final_pose_loss(self) -> list[dict]:
+        """The mean squared final-pose error through ``final_poses``, and its gradient."""
+        import jax.numpy as jnp
+
+        from wmr_jax._src.sim.rollout import final_poses
+
+        steps, robot = self.steps, self.robot
+
+        def loss(gains, refs):
+            final = final_poses(refs, gains, steps=steps, robot=robot)
+            err = final - refs
+            return jnp.mean(err[:, 0] ** 2 + err[:, 1] ** 2 + (1.0 - jnp.cos(err[:, 2])))
+
+        row = ("final_pose_loss", {"of": "mean squared error"})
+        return self.loss_rows(loss, row, "grad_final_pose_loss")
+
+    def tuning_loss(self) -> list[dict]:
+        """``wmr_jax.tuning.tuning_loss`` and its gradient, beside the relaxed law it wraps."""
+        from wmr_jax._src import tuning
+        from wmr_jax._src.sim.rollout import DEFAULT_DT, final_poses
+
+        horizon, robot = self.steps * DEFAULT_DT, self.robot
+        gains, refs, steps = self.gains, self.refs, self.steps
+
+        def loss(g, r):
+            return tuning.tuning_loss(
+                g, r, temperature=TUNING_TEMPERATURE, horizon=horizon, robot=robot
+            )
+
+        def relaxed():
+            return final_poses(
+                refs, gains, steps=steps, temperature=TUNING_TEMPERATURE, robot=robot
+            )
+
+        row = ("tuning_loss", {"temperature": TUNING_TEMPERATURE})
+        # final_poses through the same relaxed law, timed beside the loss:
+        # what the loss adds to the law it differentiates.
+        beside = ("final_poses_relaxed", relaxed)
+        return self.loss_rows(loss, row, "grad_tuning_loss", beside)
+
+
+def _code_bytes(source: Any, build: Any) -> int | None:
+    """Bytes of code and constants of ``source`` compiled with the export's flags (``-O2``)."""
+    import subprocess
+
+    from wmr_jax._src.export.compiled import CFLAGS, compiler
+
+    obj = build / "wmr_controller.o"
+    done = subprocess.run(
+        [compiler(), *CFLAGS, "-O2", "-c", str(source), "-o", str(obj)], capture_output=True
+    )
+    if done.returncode != 0:
+        return None
+    size = subprocess.run(["size", str(obj)], capture_output=True, text=True)
+    lines = size.stdout.splitlines() if size.returncode == 0 else []
+    return int(lines[1].split()[0]) if len(lines) > 1 else obj.stat().st_size
+
+
+def _ratios(rows: list[dict]) -> dict[str, Any]:
+    """Speed-ups of ``final_poses`` over the baselines, per batch size."""
+
+    def rate(case: str, n: int | None = None) -> float | None:
+        for row in rows:
+            if row["case"] == case and (n is None or row["n"] == n):
+                return row.get("robot_steps_per_s")
+        return None
+
+    scalar = rate("scalar_reference")
+    out: dict[str, Any] = {}
+    sizes = sorted({row["n"] for row in rows if row["case"] != "scalar_reference"})
+    for n in sizes:
+        entry: dict[str, Any] = {}
+        numpy_rate = rate("numpy_batch", n)
+        jax_rates = (("", rate("final_poses", n)), ("sharded_", rate("final_poses_sharded", n)))
+        for name, value in jax_rates:
+            if value and numpy_rate:
+                entry[f"{name}vs_numpy_batch"] = value / numpy_rate
+            if value and scalar:
+                entry[f"{name}vs_scalar_reference"] = value / scalar
+        for case, key in (
+            ("grad_final_pose_loss", "grad_over_forward"),
+            ("grad_tuning_loss", "grad_over_forward"),
+            ("jvp_final_pose_loss", "jvp_over_forward"),
+            ("jvp_tuning_loss", "jvp_over_forward"),
+        ):
+            for r in rows:
+                if r["case"] == case and r["n"] == n and key in r:
+                    entry[f"{case}_over_forward"] = r[key]
+        for name in ("observer", "ekf"):
+            for r in rows:
+                if r["case"] == f"disturbed_{name}" and r["n"] == n and "over_raw" in r:
+                    entry[f"disturbed_{name}_over_raw"] = r["over_raw"]
+        relaxed, loss = rate("final_poses_relaxed", n), rate("tuning_loss", n)
+        if relaxed and loss:
+            entry["tuning_loss_over_relaxed"] = relaxed / loss
+        # Costs per robot-step against final_poses (ideal loop), measured in this run.
+        ideal = rate("final_poses", n)
+        for case, key in (
+            ("tuning_loss", "tuning_loss_over_final_poses"),
+            ("final_poses_nonideal", "nonideal_over_ideal"),
+            ("final_poses_relaxed", "relaxed_over_final_poses"),
+        ):
+            value = rate(case, n)
+            if ideal and value:
+                entry[key] = ideal / value
+        if entry:
+            out[f"N={n}"] = entry
+    return out

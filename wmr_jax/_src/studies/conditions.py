@@ -1,0 +1,517 @@
+"""The standard conditions: judging closed loops (docs/model.md §7, §9).
+
+Given loops (a controller, its parameters and an estimator, as
+``load_tuned`` returns them, or plain parameters) are judged on held-out or
+the user's own references under the conditions of docs/model.md §7, each with
+the per-run wheel-radius mismatch of §9: all of them side by side
+(``standard_conditions``), one loop under one condition with the figures
+``wmr-jax evaluate`` prints (``evaluate_loop``), and success and arrival
+against the level of pose noise (``noise_curve``). Every loop and condition
+sees the same draws (common random numbers). The horizon, the robot and the
+summary of a run set are the robustness study's (``robustness``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import jax
+import numpy as np
+
+from wmr_jax._src import checks
+from wmr_jax._src.model import controllers
+from wmr_jax._src.model.params import Robot, validate_one_robot
+from wmr_jax._src.sim.rollout import DEFAULT_DT
+from wmr_jax._src.sim.sensing.disturbances import (
+    STANDARD_CONDITIONS,
+    STANDARD_MISMATCH,
+    Disturbance,
+    sample_disturbance,
+)
+from wmr_jax._src.sim.sensing.estimators import resolve_estimator
+from wmr_jax._src.sim.sensing.loop import ClosedLoop, disturbed_metrics
+from wmr_jax._src.studies.robustness import (
+    check_levels,
+    settled_at_horizon,
+    study_steps,
+    summary_row,
+)
+
+__all__ = [
+    "MODEL_ROBOT",
+    "NOISE_CURVE_XY",
+    "evaluate_loop",
+    "noise_curve",
+    "standard_conditions",
+]
+
+
+def _closed_loop(value: Any, controller: Any, estimator: Any, where: str) -> ClosedLoop:
+    """A set of ``standard_conditions``: a ``ClosedLoop`` as it is, or params of ``controller``.
+
+    Raises:
+        ValueError: naming ``where``, for parameters with a batch axis: each
+            set is one loop, judged over the references (its table would
+            mix several loops' runs).
+    """
+    loop = value if isinstance(value, ClosedLoop) else ClosedLoop(controller, value, estimator)
+    allowed = "scalars: one loop (disturbed_metrics runs a batch of parameters)"
+    checks.require_unbatched(loop.params, f"{where}.params", allowed)
+    if not isinstance(loop.estimator, str):  # a name is its default parameters
+        checks.require_unbatched(loop.estimator, f"{where}.estimator", allowed)
+    return loop
+
+
+def _unit_draws(key: jax.Array, refs: np.ndarray, steps: int, mismatch: float):
+    """Unit noise ``(N, steps, 3)`` and wheel factors ``(N, 3)`` (mass 1) of ``key``.
+
+    What standard_conditions, evaluate_loop and noise_curve scale per level:
+    the draws depend on the key and the number of runs only (drawn in the
+    session's dtype), while the poses themselves stay in float64.
+    """
+    unit = sample_disturbance(
+        key, np.zeros_like(refs), steps, noise_xy=1.0, noise_theta=1.0, radius_mismatch=mismatch
+    )
+    factors = np.array(unit.mismatch, dtype=float)
+    factors[:, 2] = 1.0  # the wheel radii only: the ideal loop has no mass
+    return np.asarray(unit.noise, dtype=float), factors
+
+
+def _runs(refs: Any, key: jax.Array, robot: Robot, horizon: Any, dt: float, mismatch: float, x64):
+    """What every study here runs: ``(refs (N, 3), unit noise, wheel factors, horizon s)``."""
+    steps, horizon = study_steps(robot, horizon, dt)
+    with jax.enable_x64(checks.check_bool("x64", x64)):  # not rounded to float32 first
+        refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
+    noise, factors = _unit_draws(key, refs, steps, mismatch)
+    return refs, noise, factors, horizon
+
+
+def _scaled(refs, noise, wheels, sxy: float, sdeg: float, latency: bool) -> Disturbance:
+    """The runs' ``Disturbance`` at pose noise ``σ_xy`` cm, ``σ_θ`` degrees."""
+    scale = np.array([sxy, sxy, math.radians(sdeg)])
+    return Disturbance(refs, noise * scale, wheels, np.float64(1.0 if latency else 0.0))
+
+
+# The model robot's row: no mismatch, no noise, no latency (docs/model.md §9).
+MODEL_ROBOT = "model robot"
+
+
+def standard_conditions(
+    params_by_name: dict[str, Any],
+    refs: Any,
+    key: jax.Array,
+    *,
+    controller: Any = controllers.SHIM_SUNG,
+    estimator: Any = None,
+    mismatch: float = STANDARD_MISMATCH,
+    dt: float = DEFAULT_DT,
+    x64: bool = True,
+    robot: Robot | None = None,
+    horizon: float | None = None,
+    noise: tuple[float, float] | None = None,
+) -> list[dict[str, Any]]:
+    """Judge closed loops under the standard conditions of docs/model.md §7 and §9 (hard law).
+
+    The conditions: the model robot (no mismatch, no noise, no latency),
+    then nominal, latency, noise and both, each with every wheel's radius
+    off by ``δ ~ U(−mismatch, mismatch)`` drawn per run (docs/model.md §9:
+    without it, dead reckoning would be exact). Every set and condition sees
+    the same draws (common random numbers, from ``key`` by
+    ``sample_disturbance``); ideal loop, the estimate starting from the
+    first measurement, on ``robot`` for ``horizon`` (by default the paper
+    robot's 6 s, longer on a slower robot: ``study_horizon``).
+
+    Args:
+        params_by_name: ``{label: params of controller}`` or ``{label:
+            ClosedLoop}`` (a controller, its parameters and an estimator,
+            as ``load_tuned`` returns them); each one loop, its parameters
+            without a batch axis (refused, naming the label).
+        refs: ``(N, 3)`` reference poses (held-out poses of ``docs/model.md §6``).
+        key: ``jax.random`` key of the noise and the mismatch.
+        controller: a ``Controller`` or its registered name, for plain params.
+        estimator: the estimator of plain params (``None``: raw feedback).
+        mismatch: bound of each wheel's relative radius error, ``[0, 1)``;
+            0 judges the model robot under every condition.
+        dt: control period, s.
+        x64: compute in float64.
+        robot: the robot of every run; default: the robot the loops record
+            (``ClosedLoop.robot``), else ``Robot()``. A loop tuned for
+            another robot is refused.
+        horizon: simulated time per run, s; default ``study_horizon(robot)``.
+        noise: ``(σ_xy cm, σ_θ degrees)`` of the noise and both conditions;
+            default the standard 0.5 cm, 1°.
+
+    Returns:
+        One row per (condition, set): ``condition``, ``gains``, ``feedback``
+        (``raw`` or the estimator's name), ``success``, ``mean arrival s``
+        and ``median arrival s`` of the successful runs (``inf`` if none),
+        ``mean final distance cm``, ``peak wheel cm/s`` (the largest over the
+        runs, the mismatch included), ``mismatch``, ``runs``, ``settled at
+        horizon`` (the fraction of runs that only settle at the horizon,
+        ``settled_at_horizon``), ``mean arrival, not at horizon s`` (of the
+        other successes), ``horizon s``.
+    """
+    if not isinstance(params_by_name, Mapping) or not params_by_name:
+        raise ValueError(
+            f"params_by_name = {params_by_name!r:.80} is not allowed; allowed: a dict of "
+            "label -> parameters or ClosedLoop, at least one"
+        )
+    mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
+    sensor = noise
+    if sensor is not None:
+        if not isinstance(sensor, (tuple, list)) or len(sensor) != 2:
+            raise ValueError(
+                f"noise = {noise!r:.80} is not allowed; allowed: (σ_xy cm, σ_θ degrees) or None"
+            )
+        sensor = tuple(
+            checks.check_number(f"noise[{i}]", v, closed=True, unit=u)
+            for i, (v, u) in enumerate(zip(sensor, ("cm", "degrees"), strict=True))
+        )
+    sets = {
+        name: _closed_loop(value, controller, estimator, f"params_by_name[{name!r}]")
+        for name, value in params_by_name.items()
+    }
+    for loop in sets.values():  # every set is refused before any runs
+        resolve_estimator(loop.estimator)
+        controllers.get_controller(loop.controller)
+    robot = _study_robot(robot, sets, "params_by_name")
+    refs, noise, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
+    ones = np.ones((len(refs), 3))
+    conditions = [(MODEL_ROBOT, 0.0, 0.0, False, ones)]
+    for label, sxy, sdeg, latency in STANDARD_CONDITIONS:
+        if sensor is not None and sxy:
+            sxy, sdeg = sensor
+        conditions.append((label, sxy, sdeg, latency, factors))
+    rows = []
+    for label, sxy, sdeg, latency, wheels in conditions:
+        spec = _scaled(refs, noise, wheels, sxy, sdeg, latency)
+        for name, loop in sets.items():
+            m = disturbed_metrics(
+                spec,
+                loop.params,
+                controller=loop.controller,
+                estimator=loop.estimator,
+                dt=dt,
+                robot=robot,
+                x64=x64,
+            )
+            summary = summary_row(m, horizon)
+            estimator_used, _ = resolve_estimator(loop.estimator)
+            rows.append(
+                {
+                    "condition": label,
+                    "gains": name,
+                    "feedback": "raw" if estimator_used is None else estimator_used.name,
+                    "success": summary["success"],
+                    "mean arrival s": summary["mean arrival s"],
+                    "median arrival s": summary["median arrival s"],
+                    "mean final distance cm": summary["mean final distance cm"],
+                    "peak wheel cm/s": float(np.max(m.peak_wheel)),
+                    "mismatch": 0.0 if label == MODEL_ROBOT else mismatch,
+                    "runs": len(refs),
+                    "settled at horizon": summary["settled at horizon"],
+                    "mean arrival, not at horizon s": summary["mean arrival, not at horizon s"],
+                    "horizon s": horizon,
+                }
+            )
+    return rows
+
+
+def _study_robot(robot: Any, loops: Mapping[str, ClosedLoop], name: str) -> Robot:
+    """The study's robot: ``robot``, else the one the ``loops`` record, else the paper's.
+
+    A loop that records the robot it was tuned for (``ClosedLoop.robot``,
+    as ``load_tuned`` returns it) is judged on that robot only: its gains
+    live in that robot's wheel budget, and a schedule caps its commands
+    with that robot's ``V_max`` and ``L``, so on another robot the numbers
+    would belong to neither.
+
+    Raises:
+        ValueError: naming the loop, for a loop tuned for another robot.
+    """
+    from wmr_jax._src.model.robots import describe_robot, same_robot
+
+    recorded = {label: loop.robot for label, loop in loops.items() if loop.robot is not None}
+    if robot is None and recorded:
+        robot = next(iter(recorded.values()))
+    study = validate_one_robot(robot, "the study")
+    for label, tuned in recorded.items():
+        tuned = validate_one_robot(tuned, f"{name}[{label!r}].robot")
+        if not same_robot(tuned, study):
+            raise ValueError(
+                f"{name}[{label!r}] was tuned for {describe_robot(tuned)}, which is not allowed "
+                f"in a study of {describe_robot(study)}; allowed: loops tuned for the study's "
+                "robot, or with no robot recorded"
+            )
+    return study
+
+
+def evaluate_loop(
+    loop: Any,
+    refs: Any,
+    *,
+    condition: str = "nominal",
+    mismatch: float = STANDARD_MISMATCH,
+    seed: int = 0,
+    horizon: float | None = None,
+    velocity: str = "ideal",
+    dt: float = DEFAULT_DT,
+    x64: bool = True,
+    robot: Robot | None = None,
+    identified: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Judge one closed loop on the user's own references under one standard condition.
+
+    The robot starts at the origin facing +x; hard law; the metrics of
+    docs/model.md §6 on the true pose. The noise and each wheel's radius
+    error (``δ ~ U(−mismatch, mismatch)`` per run) are drawn from ``seed``
+    by ``sample_disturbance``, as ``standard_conditions`` draws them.
+
+    Args:
+        loop: a ``ClosedLoop`` (``load_tuned`` returns one) or ``Gains``
+            (Shim–Sung, raw feedback).
+        refs: ``(N, 3)`` references ``[x cm, y cm, θ rad]``.
+        condition: ``"nominal"``, ``"latency"``, ``"noise"`` or ``"both"``
+            (docs/model.md §7).
+        mismatch: bound of each wheel's relative radius error, ``[0, 1)``;
+            0 for the model robot.
+        seed: seed of the draws, an integer in ``[0, 2³² − 1]``.
+        horizon: simulated time per run, s; default ``study_horizon(robot)``
+            (6 s on the paper robot, longer on a slower one).
+        velocity: ``"ideal"`` or ``"nonideal"``.
+        dt: control period, s.
+        x64: compute in float64.
+        robot: the robot; default the one the loop records
+            (``ClosedLoop.robot``), else ``Robot()``. Another robot than the
+            loop's is refused.
+        identified: the content of an ``identified.json`` whose base is
+            ``robot``: the runs are on the identified robot (its wheel scales,
+            half-track, wheel lag, latency and tracker noise;
+            ``identify.closed_loop.identified_metrics``) while the loop
+            believes ``robot``; ``condition`` must be ``"nominal"`` and
+            ``mismatch`` is set aside. The result's condition is
+            ``"identified"``, its mismatch the largest wheel scale's departure.
+
+    Returns:
+        ``{"success": fraction, "mean_arrival_s": mean over the successful
+        runs (None if none arrived), "median_arrival_s", "settled_at_horizon":
+        the fraction of runs that only settle at the horizon
+        (``settled_at_horizon``), "peak_wheel_speed": cm/s (the largest rim
+        speed of any run, mismatch included), "v_max": the robot's rim limit,
+        cm/s, "peak_wheel_speed_ok": whether the commands stayed within
+        ``V_max``, i.e. every rim within ``V_max (1 + mismatch)`` (a wheel
+        larger than modelled by ``δ`` turns ``V_max`` into ``(1 + δ) V_max``
+        at its rim), "turn_drive_turn_s": the mean time-optimal turn–drive–turn time
+        of docs/model.md §8 over the references that arrived (None if none),
+        "vs_turn_drive_turn": the mean arrival over it, "n", "condition",
+        "mismatch", "seed", "horizon_s", "velocity", "controller",
+        "feedback", "robot": {field: value}, "dtype": "float64" or
+        "float32", "per_reference": one entry per reference, in order,
+        {"ref": [x cm, y cm, θ rad], "success": bool, "arrival_s": s (None
+        where it did not arrive), "final_distance_cm": distance to the
+        reference at the end, "settled_at_horizon": bool}}``.
+
+    Raises:
+        ValueError: for a bad argument, before any run; for parameters with
+            a batch axis (one loop is judged; ``disturbed_metrics`` runs a batch).
+    """
+    from wmr_jax._src.model.robots import robot_json
+
+    labels = {label: (sxy, sdeg, lat) for label, sxy, sdeg, lat in STANDARD_CONDITIONS}
+    if condition not in labels:
+        raise ValueError(f"condition = {condition!r} is not allowed; allowed: {', '.join(labels)}")
+    loop = _closed_loop(loop, controllers.SHIM_SUNG, None, "loop")
+    estimator, _ = resolve_estimator(loop.estimator)
+    controller = controllers.get_controller(loop.controller)
+    mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
+    seed = checks.check_int("seed", seed, 0, 2**32 - 1)
+    robot = _study_robot(robot, {"loop": loop}, "evaluate_loop")
+    draws = _runs(refs, jax.random.key(seed), robot, horizon, dt, mismatch, x64)
+    refs, noise, factors, horizon = draws
+    if identified is None:
+        spec = _scaled(refs, noise, factors, *labels[condition])
+        m = disturbed_metrics(
+            spec,
+            loop.params,
+            controller=controller,
+            estimator=loop.estimator,
+            dt=dt,
+            robot=robot,
+            velocity=velocity,
+            x64=x64,
+        )
+    else:
+        m, condition, mismatch = _on_identified(
+            identified, condition, refs, noise, loop, controller, dt, robot, velocity, x64
+        )
+    late = settled_at_horizon(m, horizon)
+    per_reference = [
+        {
+            "ref": [float(v) for v in ref],
+            "success": bool(ok),
+            "arrival_s": float(t) if ok else None,
+            "final_distance_cm": float(d),
+            "settled_at_horizon": bool(s),
+        }
+        for ref, ok, t, d, s in zip(
+            np.asarray(refs), m.success, m.arrival, m.final_distance, late, strict=True
+        )
+    ]
+    row = figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity)
+    row.update(
+        controller=controller.name,
+        feedback="raw" if estimator is None else estimator.name,
+        robot=robot_json(robot),
+        dtype="float64" if x64 else "float32",
+        per_reference=per_reference,
+    )
+    return row
+
+
+def figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity) -> dict[str, Any]:
+    """The figures of one condition's runs and the settings that drew them.
+
+    The mean arrival is compared with the turn–drive–turn bound of the same
+    references (those that arrived); the peak wheel speed with ``v_max``, which
+    a wheel up to ``mismatch`` larger may exceed by as much.
+    """
+    from wmr_jax._src.studies.optimal import time_bounds
+
+    arrived = m.arrival[m.success]
+    mean = float(arrived.mean()) if arrived.size else None
+    optimal = None
+    if arrived.size:
+        optimal = float(np.mean(time_bounds(refs[m.success], robot=robot, dt=dt).turn_drive_turn))
+    peak = float(np.max(m.peak_wheel))
+    return {
+        "success": float(m.success.mean()),
+        "mean_arrival_s": mean,
+        "median_arrival_s": float(np.median(arrived)) if arrived.size else None,
+        "settled_at_horizon": float(settled_at_horizon(m, horizon).mean()),
+        "peak_wheel_speed": peak,
+        "v_max": float(robot.v_max),
+        "peak_wheel_speed_ok": bool(peak <= float(robot.v_max) * (1.0 + mismatch) * (1 + 1e-6)),
+        "turn_drive_turn_s": optimal,
+        "vs_turn_drive_turn": None if optimal is None else mean / optimal,
+        "n": len(refs),
+        "condition": condition,
+        "mismatch": mismatch,
+        "seed": seed,
+        "horizon_s": horizon,
+        "velocity": velocity,
+    }
+
+
+def _on_identified(identified, condition, refs, noise, loop, controller, dt, robot, velocity, x64):
+    """``evaluate_loop``'s metrics on an identified robot, its condition and its mismatch."""
+    from wmr_jax._src.identify.closed_loop import identified_metrics
+
+    if condition != "nominal":
+        raise ValueError(
+            f"condition = {condition!r} is not allowed on an identified robot; allowed: "
+            "nominal (its latency and tracker noise are the identified ones)"
+        )
+    sigma = identified["noise"]
+    sdeg = math.degrees(sigma["sigma_theta"])
+    spec = _scaled(refs, noise, np.ones((len(refs), 3)), sigma["sigma_xy"], sdeg, False)
+    m = identified_metrics(
+        spec, loop.params, identified=dict(identified), controller=controller,
+        estimator=loop.estimator, dt=dt, robot=robot, velocity=velocity, x64=x64,
+    )  # fmt: skip
+    scale = identified["wheel_scale"]
+    return m, "identified", max(abs(scale["left"] - 1.0), abs(scale["right"] - 1.0))
+
+
+# σ_xy of the noise-level curve, cm (σ_θ = 2° per cm, as the standard 0.5 cm and 1°).
+NOISE_CURVE_XY = (0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0)
+_DEG_PER_CM = 2.0
+
+
+def noise_curve(
+    loops_by_name: dict[str, Any],
+    refs: Any,
+    key: jax.Array,
+    *,
+    noise_xy: Sequence[float] = NOISE_CURVE_XY,
+    mismatch: float = STANDARD_MISMATCH,
+    latency: bool = False,
+    dt: float = DEFAULT_DT,
+    x64: bool = True,
+    robot: Robot | None = None,
+    horizon: float | None = None,
+) -> list[dict[str, Any]]:
+    """Success and mean arrival of closed loops against the level of pose noise.
+
+    ``σ_θ`` follows ``σ_xy`` as in the standard conditions (1° per 0.5 cm,
+    docs/model.md §7); every wheel's radius is off by ``δ ~ U(−mismatch,
+    mismatch)`` per run (docs/model.md §9). Every loop and level sees the
+    same unit noise and mismatch (common random numbers, from ``key``).
+
+    Args:
+        loops_by_name: ``{label: ClosedLoop or Shim–Sung Gains (raw feedback)}``.
+        refs: ``(N, 3)`` references (held-out poses of docs/model.md §6).
+        key: ``jax.random`` key of the draws.
+        noise_xy: the levels of ``σ_xy``, cm, each in ``[0, 1e6]``.
+        mismatch: bound of each wheel's relative radius error, ``[0, 1)``.
+        latency: one sample of latency in every run.
+        dt: control period, s.
+        x64: compute in float64.
+        robot: the robot of every run; default: the robot the loops record
+            (``ClosedLoop.robot``), else ``Robot()``. A loop tuned for
+            another robot is refused.
+        horizon: simulated time per run, s; default ``study_horizon(robot)``.
+
+    Returns:
+        One row per (loop, level): ``gains``, ``feedback``, ``noise xy cm``,
+        ``noise theta deg``, ``success``, ``mean arrival s`` (``inf`` if
+        none arrived), ``mismatch``, ``latency``, ``runs``, ``settled at
+        horizon`` (``settled_at_horizon``), ``mean arrival, not at horizon
+        s`` (of the other successes), ``horizon s``.
+    """
+    if not isinstance(loops_by_name, Mapping) or not loops_by_name:
+        raise ValueError(
+            f"loops_by_name = {loops_by_name!r:.80} is not allowed; allowed: a dict of "
+            "label -> ClosedLoop or Gains, at least one"
+        )
+    levels, _ = check_levels(list(noise_xy), [_DEG_PER_CM * float(x) for x in noise_xy])
+    mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
+    latency = checks.check_bool("latency", latency)
+    sets = {
+        name: _closed_loop(v, controllers.SHIM_SUNG, None, f"loops_by_name[{name!r}]")
+        for name, v in loops_by_name.items()
+    }
+    for loop in sets.values():
+        resolve_estimator(loop.estimator)
+        controllers.get_controller(loop.controller)
+    robot = _study_robot(robot, sets, "loops_by_name")
+    refs, noise, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
+    rows = []
+    for name, loop in sets.items():
+        used, _ = resolve_estimator(loop.estimator)
+        for sxy in levels:
+            sdeg = _DEG_PER_CM * sxy
+            spec = _scaled(refs, noise, factors, sxy, sdeg, latency)
+            m = disturbed_metrics(
+                spec, loop.params, controller=loop.controller, estimator=loop.estimator,
+                dt=dt, robot=robot, x64=x64,
+            )  # fmt: skip
+            summary = summary_row(m, horizon)
+            rows.append(
+                {
+                    "gains": name,
+                    "feedback": "raw" if used is None else used.name,
+                    "noise xy cm": sxy,
+                    "noise theta deg": sdeg,
+                    "success": summary["success"],
+                    "mean arrival s": summary["mean arrival s"],
+                    "mismatch": mismatch,
+                    "latency": latency,
+                    "runs": len(refs),
+                    "settled at horizon": summary["settled at horizon"],
+                    "mean arrival, not at horizon s": summary["mean arrival, not at horizon s"],
+                    "horizon s": horizon,
+                }
+            )
+    return rows

@@ -1,0 +1,536 @@
+"""Pose-space maps: docs/model.md §6 metrics over grids of reference poses, per controller.
+
+For a grid of reference positions ``(x_r, y_r)`` at several headings ``θ_r``,
+with the robot starting at the origin, every pose is run to the
+docs/model.md §6 horizon by ``wmr_jax.sweep``, which reduces each run to its
+metrics inside the time loop (success, arrival time, path length, peak wheel
+speed, zig-zag count) and feeds the poses in fixed-size chunks: no trajectory
+is stored, memory grows with the number of poses only (a few numbers each),
+and one compiled program serves any count. A million poses is an ordinary run.
+
+``map_study`` runs the grid for every controller and returns the metrics and
+a side-by-side summary table; ``summarize`` gives the same table for any set
+of poses (the comparison over random docs/model.md §6 poses uses it). This
+module returns values and writes no files: ``wmr_jax.report.save_map_study``
+draws the heat maps and the first-to-arrive map and writes the summary.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import jax
+import numpy as np
+
+from wmr_jax._src import checks
+from wmr_jax._src.model import controllers
+from wmr_jax._src.model.params import Robot, validate_one_robot
+from wmr_jax._src.sim import metrics
+from wmr_jax._src.sim.metrics import PoseMetrics
+from wmr_jax._src.sim.poses import EVAL_R_MAX, EVAL_R_MIN, MAX_SAMPLES, horizon_steps
+from wmr_jax._src.sim.rollout import DEFAULT_DT
+from wmr_jax._src.studies.robustness import robot_defaults
+from wmr_jax._src.studies.sweep import sweep
+
+__all__ = [
+    "COMPARISON_RUNS",
+    "DEFAULT_HEADINGS_DEG",
+    "MapStudy",
+    "PoseGrid",
+    "PoseMetrics",
+    "compare_controllers",
+    "evaluate_poses",
+    "horizon_for",
+    "map_study",
+    "pose_grid",
+    "summarize",
+]
+
+DEFAULT_HEADINGS_DEG = (-90.0, 0.0, 90.0, 180.0)
+DEFAULT_CHUNK = 16384
+
+
+def horizon_for(robot: Robot | None = None) -> float:
+    """The docs/model.md §6 horizon for ``robot``, s: 6 s, or longer for a slower robot.
+
+    The evaluation set (5–80 cm) and its 6 s are the paper robot's. On a
+    robot whose wheels cannot follow the paper's feasible gains
+    (``60 + 10 L > V_max``) they are scaled by ``V_max / (60 + 10 L)``, and
+    the horizon by its inverse (the TurtleBot3 Burger: 37 s): the rule of
+    every study (``robustness.study_horizon``).
+
+    Raises:
+        ValueError: for anything but one valid robot.
+    """
+    from wmr_jax._src.studies.robustness import study_horizon
+
+    return study_horizon(robot)
+
+
+def _robot_record(robot: Robot) -> dict[str, Any]:
+    """The robot as a summary records it: its fields and a label (preset name or "custom")."""
+    from wmr_jax._src.model.robots import robot_json, robot_name
+
+    return {"robot": robot_json(robot), "robot_label": robot_name(robot) or "custom"}
+
+
+# ---------------------------------------------------------------- the grid
+
+
+class PoseGrid(NamedTuple):
+    """A grid of references: ``G × G`` positions at ``H`` headings, inside the evaluation annulus.
+
+    Attributes:
+        xs: ``(G,)`` x_r, cm (also the y_r values).
+        headings: ``(H,)`` θ_r, rad.
+        inside: ``(G, G)`` bool, ``[iy, ix]``: position within ``r_min..r_max``.
+        refs: ``(H · n_inside, 3)`` the references run, heading-major.
+    """
+
+    xs: np.ndarray
+    headings: np.ndarray
+    inside: np.ndarray
+    refs: np.ndarray
+
+
+_MAX_SIDE = 4097  # grid points per side at most: 16.8 million positions
+
+
+def _grid(side: int, r_min: float, r_max: float) -> tuple:
+    """The grid's axis, the mask of its points in the annulus, and their coordinates."""
+    xs = np.linspace(-r_max, r_max, side)
+    gx, gy = np.meshgrid(xs, xs)  # [iy, ix]
+    dist = np.hypot(gx, gy)
+    return xs, (dist >= r_min) & (dist <= r_max), gx, gy
+
+
+def pose_grid(
+    n_poses: int,
+    headings_deg: Sequence[float] = DEFAULT_HEADINGS_DEG,
+    *,
+    r_min: float = EVAL_R_MIN,
+    r_max: float = EVAL_R_MAX,
+) -> PoseGrid:
+    """Return a square grid over ``[−r_max, r_max]²`` with about ``n_poses`` references.
+
+    Only positions at distance ``r_min``–``r_max`` from the origin are run (the
+    docs/model.md §6 set); the grid side is chosen so that their number times
+    the number of headings is close to ``n_poses``.
+
+    Args:
+        n_poses: about how many references in all, ``>= 1``.
+        headings_deg: the reference headings θ_r, degrees (at least one, finite).
+        r_min: least distance from the origin, cm.
+        r_max: largest distance, cm, ``> r_min``.
+
+    Raises:
+        ValueError: for a bad count, heading or distance range.
+    """
+    n_poses = checks.check_int("n_poses", n_poses, 1, MAX_SAMPLES)
+    r_min = checks.check_number("r_min", r_min, closed=True, unit="cm")
+    r_max = checks.check_number("r_max", r_max, low=r_min, unit="cm")
+    degrees = checks.real_array(
+        "headings_deg", headings_deg, "real numbers of degrees (at least one, finite)"
+    ).reshape(-1)
+    if degrees.size == 0:
+        raise ValueError("headings_deg = () is not allowed; allowed: at least one heading")
+    checks.require("headings_deg", degrees, np.isfinite(degrees), "finite degrees")
+    checks.require(
+        "headings_deg",
+        degrees,
+        np.abs(np.radians(degrees)) <= checks.MAX_HEADING,
+        f"|heading| <= {math.degrees(checks.MAX_HEADING):.3g} degrees",
+    )
+    headings = np.radians(degrees)
+    annulus = math.pi * (1.0 - (r_min / r_max) ** 2) / 4  # its share of the square
+    side = min(max(2, round(math.sqrt(n_poses / (len(headings) * annulus)))), _MAX_SIDE)
+    xs, inside, gx, gy = _grid(side, r_min, r_max)
+    if not inside.any():
+        # An even grid can miss a thin annulus; an odd one has (r_max, 0) on it.
+        xs, inside, gx, gy = _grid(side + 1, r_min, r_max)
+    pos = np.stack([gx[inside], gy[inside]], axis=-1)
+    refs = np.concatenate(
+        [np.concatenate([pos, np.full((len(pos), 1), h)], axis=-1) for h in headings]
+    )
+    return PoseGrid(xs, headings, inside, refs)
+
+
+# ---------------------------------------------------------------- evaluation
+
+
+def evaluate_poses(
+    refs: Any,
+    params: Any = None,
+    *,
+    controller: Any = controllers.SHIM_SUNG,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = DEFAULT_DT,
+    steps: int | None = None,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    chunk: int = DEFAULT_CHUNK,
+    progress: bool = False,
+    x64: bool = True,
+    cache: str | Path | None = None,
+    resume: bool = True,
+    on_chunk: Callable[[int, int], None] | None = None,
+) -> PoseMetrics:
+    """Return the docs/model.md §6 metrics of every reference, in bounded memory.
+
+    Args:
+        refs: ``(N, 3)`` reference poses ``[x cm, y cm, θ rad]``.
+        params: the controller's parameters (its defaults if ``None``); leaves
+            scalar, or ``(N,)`` for one value per pose.
+        controller: a ``Controller`` or its registered name.
+        init: ``(3,)`` initial pose shared by every run.
+        dt: control period, s.
+        steps: control periods; default the docs/model.md §6 horizon of 6 s.
+        robot: robot parameters; default ``Robot()``.
+        velocity: ``"ideal"`` or ``"nonideal"``.
+        chunk: poses per compiled call (the last chunk is padded to it).
+        progress: show a progress bar (stderr).
+        x64: compute in float64 (default), whatever JAX's default dtype.
+            The polar-coordinate baselines are singular at their goal: in
+            float32 the rounding of positions (about 4e-6 cm at 40 cm) makes
+            their bearing ``α`` random once ``ρ`` gets that small, within the
+            6 s horizon, and their heading drifts off again; ``False`` shows it.
+        cache: a folder where each finished chunk is kept, so that a run
+            interrupted and started again with the same arguments resumes
+            (``wmr_jax.sweep``'s ``out``); ``None`` keeps nothing.
+        resume: with ``cache``, reuse the chunks it holds of the same
+            settings (``False``: compute every chunk, and keep it there).
+        on_chunk: called as ``on_chunk(done, total)`` after every chunk.
+
+    Returns:
+        ``PoseMetrics`` of ``(N,)`` NumPy arrays, in the order of ``refs``.
+
+    Raises:
+        ValueError: for misshapen or non-finite poses and bad options.
+    """
+    chunk = checks.check_int("chunk", chunk)
+    x64, progress = checks.check_bool("x64", x64), checks.check_bool("progress", progress)
+    with jax.enable_x64(x64):  # checked, and kept for the distance below, in the run's dtype
+        refs_host = np.asarray(checks.as_poses("refs", refs, batch=True))
+    cache = None if cache is None else checks.check_folder("cache", cache)
+    if np.ndim(init) != 1:
+        raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,), shared by every run")
+    with jax.enable_x64(x64):
+        out = sweep(
+            refs_host,
+            params,
+            init=init,
+            dt=dt,
+            steps=horizon_steps(dt) if steps is None else steps,
+            robot=robot,
+            velocity=velocity,
+            controller=controller,
+            chunk_size=chunk,
+            progress=progress,
+            out=cache,
+            resume=resume,
+            on_chunk=on_chunk,
+        )
+    final = np.stack([out["final_x"], out["final_y"]], axis=-1)
+    return PoseMetrics(
+        arrival=out["arrival_time"],
+        path=out["path_length"],
+        peak_wheel=out["peak_wheel_speed"],
+        zigzag=out["zigzags"],
+        final_distance=np.hypot(*(final - refs_host[:, :2]).T),
+    )
+
+
+# ---------------------------------------------------------------- summaries
+
+
+def _arrival_stats(t: np.ndarray) -> dict[str, float]:
+    """Mean, median and 90th percentile of the arrival times of the successful runs, s."""
+    if not t.size:
+        return {"mean arrival s": math.inf, "median arrival s": math.inf, "p90 arrival s": math.inf}
+    return {
+        "mean arrival s": float(t.mean()),
+        "median arrival s": float(np.median(t)),
+        "p90 arrival s": float(np.percentile(t, 90)),
+    }
+
+
+def summarize(
+    results: dict[str, PoseMetrics], *, v_max: float = 125.0, reference: str | None = None
+) -> list[dict[str, Any]]:
+    """Return one row of summary statistics per controller, side by side.
+
+    Args:
+        results: controller name → its ``PoseMetrics`` over the same poses.
+        v_max: wheel-speed limit for the "over V_max" column, cm/s.
+        reference: the controller the others are compared with pose by pose
+            (default: Shim–Sung if present).
+
+    Returns:
+        Rows with: poses, success rate, mean/median/90th-percentile arrival
+        time of the successful runs, mean path length, mean and largest peak
+        wheel speed, fraction of runs over ``v_max``, mean zig-zag count,
+        fraction of runs with any zig-zag, and against ``reference``: the
+        fraction of poses where this controller arrives strictly earlier.
+    """
+    v_max = checks.check_number("v_max", v_max, unit="cm/s")
+    if not isinstance(results, Mapping) or not all(
+        isinstance(m, PoseMetrics) for m in results.values()
+    ):
+        raise ValueError(
+            f"results is a {type(results).__name__}; allowed: a dict of controller name -> "
+            "PoseMetrics (evaluate_poses returns one)"
+        )
+    sizes = {name: len(m.arrival) for name, m in results.items()}
+    if not results or min(sizes.values()) == 0 or len(set(sizes.values())) > 1:
+        raise ValueError(
+            f"results of {sizes} runs are not allowed; allowed: one or more controllers, each "
+            "over the same poses (at least one)"
+        )
+    if reference is not None and reference not in results:
+        raise ValueError(
+            f"reference = {reference!r} is not allowed; allowed: one of {list(results)}"
+        )
+    if reference is None and controllers.SHIM_SUNG.name in results:
+        reference = controllers.SHIM_SUNG.name
+    rows = []
+    for name, m in results.items():
+        ok = m.success
+        row: dict[str, Any] = {
+            "controller": name,
+            "poses": int(len(m.arrival)),
+            "success": float(ok.mean()),
+            **_arrival_stats(m.arrival[ok]),
+            "mean path cm": float(m.path.mean()),
+            "mean peak wheel cm/s": float(m.peak_wheel.mean()),
+            "max peak wheel cm/s": float(m.peak_wheel.max()),
+            "over V_max": float((m.peak_wheel > v_max * (1 + 1e-9)).mean()),
+            "mean zigzag": float(m.zigzag.mean()),
+            "any zigzag": float((m.zigzag > 0).mean()),
+        }
+        if reference is not None and reference in results:
+            ref_t = results[reference].arrival
+            row[f"faster than {reference}"] = float((m.arrival < ref_t).mean())
+        rows.append(row)
+    return rows
+
+
+# ---------------------------------------------------------------- the study
+
+
+class MapStudy(NamedTuple):
+    """What ``map_study`` returns.
+
+    Attributes:
+        grid: the references run (``PoseGrid``).
+        results: controller name → its ``PoseMetrics`` over ``grid.refs``.
+        summary: JSON-ready description of the run (``poses``, ``grid_side``,
+            ``headings_deg``, ``velocity``, ``dtype``, ``horizon_s``, ``dt_s``,
+            ``tolerances``, ``robot``, ``robot_label``) and its ``rows``
+            (``summarize``).
+    """
+
+    grid: PoseGrid
+    results: dict[str, PoseMetrics]
+    summary: dict[str, Any]
+
+    @property
+    def rows(self) -> list[dict[str, Any]]:
+        """The summary table, one row per controller."""
+        return self.summary["rows"]
+
+
+def map_study(
+    n_poses: int = 20000,
+    *,
+    controller_names: Sequence[str] | None = None,
+    velocity: str = "ideal",
+    headings_deg: Sequence[float] = DEFAULT_HEADINGS_DEG,
+    chunk: int = DEFAULT_CHUNK,
+    progress: bool = False,
+    x64: bool = True,
+    cache: str | Path | None = None,
+    resume: bool = True,
+    robot: Robot | None = None,
+    horizon: float | None = None,
+    on_chunk: Callable[[str, int, int], None] | None = None,
+) -> MapStudy:
+    """Run the pose-space maps of every controller; return the metrics and the summary.
+
+    Every controller runs the same grid (``pose_grid``) from ``(0, 0, 0)`` to
+    the docs/model.md §6 horizon (``horizon_for(robot)``), with its default
+    parameters, on ``robot``; on a robot other than the paper's, Shim–Sung
+    and its schedule run the paper's feasible gains scaled into that robot's
+    wheel budget (``robot_defaults``), as the horizon is stretched for them.
+
+    Args:
+        n_poses: about how many reference poses in all (grid × headings).
+        controller_names: controllers to run; default every registered one.
+        velocity: ``"ideal"`` or ``"nonideal"``.
+        headings_deg: the reference headings θ_r of the maps, degrees.
+        chunk: poses per compiled call.
+        progress: show a progress bar per controller.
+        x64: compute in float64 (see ``evaluate_poses``).
+        cache: a folder where each controller's finished chunks are kept
+            (``cache/<controller>``) and reused when run again, so that an
+            interrupted study goes on; ``None`` keeps nothing.
+        resume: with ``cache``, reuse the chunks it holds of the same
+            settings (``False``: compute them all again, keeping each there).
+        robot: the robot (one, a number per field); default ``Robot()``.
+        horizon: simulated time per run, s; default ``horizon_for(robot)``
+            (6 s, longer for a robot too slow for the paper's feasible gains).
+        on_chunk: called as ``on_chunk(controller, done, total)`` after every chunk.
+
+    Returns:
+        A ``MapStudy``; its summary records the robot (``robot``: its fields,
+        ``robot_label``: the preset's name or ``"custom"``) and the horizon.
+
+    Raises:
+        ValueError: for a bad count, heading, controller or option.
+    """
+    names = controllers.controller_names(controller_names)
+    cache = None if cache is None else checks.check_folder("cache", cache)
+    checks.check_callable("on_chunk", on_chunk)
+    robot = validate_one_robot(robot, "map_study")
+    horizon = _horizon(horizon, robot)
+    grid = pose_grid(n_poses, headings_deg)
+
+    def told(name: str) -> Callable[[int, int], None] | None:
+        return None if on_chunk is None else (lambda done, total: on_chunk(name, done, total))
+
+    results = {
+        name: evaluate_poses(
+            grid.refs,
+            robot_defaults(name, robot),
+            controller=name,
+            steps=horizon_steps(DEFAULT_DT, horizon),
+            robot=robot,
+            velocity=velocity,
+            chunk=chunk,
+            progress=progress,
+            x64=x64,
+            cache=None if cache is None else cache / name,
+            resume=resume,
+            on_chunk=told(name),
+        )
+        for name in names
+    }
+    summary = {
+        "poses": int(len(grid.refs)),
+        "grid_side": int(len(grid.xs)),
+        # As given (pose_grid checked them: a number or a nested list works too).
+        "headings_deg": np.asarray(headings_deg, dtype=float).reshape(-1).tolist(),
+        "velocity": velocity,
+        "dtype": "float64" if x64 else "float32",
+        "horizon_s": horizon,
+        "dt_s": DEFAULT_DT,
+        "tolerances": {"r_cm": metrics.DEFAULT_TOL_R, "theta_deg": 5.0},
+        **_robot_record(robot),
+        "rows": summarize(results, v_max=float(robot.v_max)),
+    }
+    return MapStudy(grid, results, summary)
+
+
+def _horizon(horizon: float | None, robot: Robot) -> float:
+    """The horizon asked for, checked, or the robot's default (``horizon_for``)."""
+    if horizon is None:
+        return horizon_for(robot)
+    horizon = checks.check_number("horizon", horizon, unit="s")
+    horizon_steps(DEFAULT_DT, horizon)  # at least a period, at most MAX_STEPS of them
+    return horizon
+
+
+# ---------------------------------------------------------------- random-pose comparison
+
+
+def _comparison_runs() -> dict[str, tuple[str, Any]]:
+    """Label -> (controller name, parameters): each baseline also with its other driving mode."""
+    from wmr_jax._src.model.controllers.aicardi import AicardiGains
+    from wmr_jax._src.model.controllers.astolfi import AstolfiGains
+
+    return {
+        "shim-sung": ("shim-sung", None),
+        "aicardi": ("aicardi", None),
+        "aicardi, backward allowed": ("aicardi", AicardiGains(backward=True)),
+        "astolfi-corke": ("astolfi-corke", None),
+        "astolfi-corke, forward only": ("astolfi-corke", AstolfiGains(backward=False)),
+    }
+
+
+COMPARISON_RUNS = tuple(_comparison_runs())
+
+
+def compare_controllers(
+    n_poses: int = 200_000,
+    *,
+    seed: int = 0,
+    velocity: str = "ideal",
+    chunk: int = DEFAULT_CHUNK,
+    progress: bool = False,
+    x64: bool = True,
+    robot: Robot | None = None,
+    horizon: float | None = None,
+) -> dict[str, Any]:
+    """Compare every controller over the same random docs/model.md §6 poses.
+
+    The poses are ``wmr_jax.sample_poses(seed, n_poses)`` (distance 5–80 cm,
+    any bearing and heading, from ``(0, 0, 0)``), unlike ``map_study``'s
+    grid, so the two report different means. Each controller runs with its
+    published defaults, and the baselines also with their other driving mode
+    (``COMPARISON_RUNS``); on a robot other than the paper's, Shim–Sung runs
+    the paper's feasible gains scaled into that robot's wheel budget
+    (``robot_defaults``), as the horizon is stretched for them.
+
+    Args:
+        n_poses: number of random reference poses.
+        seed: seed of ``sample_poses``.
+        velocity: ``"ideal"`` or ``"nonideal"``.
+        chunk: poses per compiled call.
+        progress: show a progress bar per controller.
+        x64: compute in float64 (see ``evaluate_poses``).
+        robot: the robot (one, a number per field); default ``Robot()``.
+        horizon: simulated time per run, s; default ``horizon_for(robot)``
+            (6 s, longer for a robot too slow for the paper's feasible gains).
+
+    Returns:
+        A JSON-ready dict: ``poses``, ``seed``, ``velocity``, ``dtype``,
+        ``horizon_s``, ``dt_s``, ``robot`` (its fields), ``robot_label`` (the
+        preset's name or ``"custom"``) and ``rows`` (``summarize``, one per
+        run; "over V_max" against this robot's).
+
+    Raises:
+        ValueError: for a bad count, seed or option.
+    """
+    from wmr_jax._src.sim.poses import sample_poses
+
+    n_poses = checks.check_int("n_poses", n_poses, 1, MAX_SAMPLES)
+    seed = checks.check_int("seed", seed, minimum=0)
+    robot = validate_one_robot(robot, "compare_controllers")
+    horizon = _horizon(horizon, robot)
+    refs = np.asarray(sample_poses(seed, n_poses), dtype=float)
+    results = {
+        label: evaluate_poses(
+            refs,
+            robot_defaults(name, robot) if params is None else params,
+            controller=name,
+            steps=horizon_steps(DEFAULT_DT, horizon),
+            robot=robot,
+            velocity=velocity,
+            chunk=chunk,
+            progress=progress,
+            x64=x64,
+        )
+        for label, (name, params) in _comparison_runs().items()
+    }
+    return {
+        "poses": n_poses,
+        "seed": seed,
+        "velocity": velocity,
+        "dtype": "float64" if x64 else "float32",
+        "horizon_s": horizon,
+        "dt_s": DEFAULT_DT,
+        **_robot_record(robot),
+        "rows": summarize(results, v_max=float(robot.v_max)),
+    }

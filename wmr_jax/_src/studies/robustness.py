@@ -1,0 +1,421 @@
+"""Robustness Monte Carlo (docs/model.md §7, §9).
+
+The studies of the disturbed loop (``sensing.loop``): success and arrival
+against the level of pose noise, with wheel-radius and mass mismatch and
+latency (``monte_carlo``, ``robustness_study``), raw feedback or an
+estimator alike, and what the studies share: their horizon on a robot
+(``study_horizon``) and their summary of a run set (``summary_row``). The
+standard conditions, which judge given loops, live in ``conditions``. The
+engine returns values; ``wmr_jax.report`` draws and writes them.
+
+**Your robot.** Every study takes ``robot`` (default: the robot the loops
+record, ``ClosedLoop.robot``, else ``Robot()``, the paper robot) and runs
+its loop on that robot; the peak wheel speeds are judged against that
+robot's ``V_max`` (the ideal loop follows every command, so gains set for a
+faster robot show there), and the Monte Carlo runs the Shim–Sung laws on
+the paper's gains scaled into its budget (``robot_defaults``). The
+references keep the evaluation set of docs/model.md §6
+(5–80 cm, any bearing and heading) whatever the robot, since the arrival
+tolerances (1 cm, 5°) and the sensor noise of §7 are lengths and angles,
+not speeds; the horizon scales instead (``study_horizon``): the paper's
+feasible gains, scaled into a slower robot's wheel budget, drive the same
+paths ``c`` times slower, and the horizon is the paper robot's 6 s over
+``c``, so that they have the time on that robot that they have on the
+paper's. A study given a ``horizon`` runs that one. A robot's acceleration
+limits (``accel_max``, ``angular_accel_max``) limit the ideal loop's commands
+in every study, as in the rollouts (docs/model.md §4.2.2): the disturbed loop
+turns its speed limiter on for such a robot (``sensing.loop``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import jax
+import numpy as np
+
+from wmr_jax._src import checks
+from wmr_jax._src.model import controllers
+from wmr_jax._src.model.params import Robot, validate_one_robot
+from wmr_jax._src.sim.metrics import PoseMetrics
+from wmr_jax._src.sim.poses import HORIZON_S, horizon_steps
+from wmr_jax._src.sim.rollout import DEFAULT_DT
+from wmr_jax._src.sim.sensing.disturbances import (
+    Disturbance,
+    draw_disturbances,
+)
+from wmr_jax._src.sim.sensing.estimators import resolve_estimator
+from wmr_jax._src.sim.sensing.loop import disturbed_metrics
+
+__all__ = [
+    "DEFAULT_NOISE_DEG",
+    "DEFAULT_NOISE_XY",
+    "LATE_SHARE",
+    "ROBUSTNESS_CONDITIONS",
+    "monte_carlo",
+    "robot_defaults",
+    "robustness_study",
+    "settled_at_horizon",
+    "study_horizon",
+    "summary_row",
+]
+
+DEFAULT_NOISE_XY = (0.0, 0.25, 0.5, 1.0, 2.0)  # σ of x and y, cm
+DEFAULT_NOISE_DEG = (0.0, 0.5, 1.0, 2.0, 4.0)  # σ of θ, degrees, paired with the above
+
+# The study's conditions (docs/model.md §7):
+# (label, wheel-radius mismatch bound, body-mass mismatch bound, one-sample latency).
+ROBUSTNESS_CONDITIONS = (
+    ("noise", 0.0, 0.0, False),
+    ("noise + mismatch", 0.03, 0.2, False),
+    ("noise + mismatch + latency", 0.03, 0.2, True),
+)
+
+
+def check_levels(noise_xy: Any, noise_deg: Any) -> tuple[list[float], list[float]]:
+    """Return the noise levels as lists of floats after checking them."""
+    levels = []
+    for name, seq in (("noise_xy", noise_xy), ("noise_deg", noise_deg)):
+        if isinstance(seq, (str, bytes)) or np.ndim(seq) != 1:
+            raise ValueError(
+                f"{name} = {seq!r} is not allowed; allowed: a sequence of levels, one per row"
+            )
+        levels.append(list(seq))
+    noise_xy, noise_deg = levels
+    if len(noise_xy) != len(noise_deg) or not noise_xy:
+        raise ValueError(
+            f"noise_xy has {len(noise_xy)} levels and noise_deg {len(noise_deg)}; "
+            "allowed: the same number, at least one"
+        )
+    limits = (("noise_xy", noise_xy, "cm", 1e6), ("noise_deg", noise_deg, "degrees", 360.0))
+    for name, seq, unit, high in limits:
+        for i, value in enumerate(seq):
+            checks.check_number(f"{name}[{i}]", value, closed=True, high=high, unit=unit)
+    return [float(x) for x in noise_xy], [float(x) for x in noise_deg]
+
+
+def study_horizon(robot: Robot | None = None) -> float:
+    """The studies' default horizon on ``robot``, s: 6 s for the paper robot (docs/model.md §6).
+
+    The paper's feasible gains (``k_r = 60`` cm/s, ``k_θ = 10`` rad/s) fit the
+    paper robot's wheel budget; on a robot where ``60 + 10 L > V_max`` they
+    are scaled by ``c = V_max / (60 + 10 L)`` to fit (docs/robots.md), and
+    both gains scaled by ``c`` drive the same paths ``1 / c`` times slower
+    (in continuous time; the sampled law nearly so).
+    The horizon is ``6 s / c`` (6 s where ``c ≥ 1``), rounded up to 0.1 s:
+    the TurtleBot3 Burger's (``L = 8`` cm, ``V_max = 22.72`` cm/s) is 37 s.
+
+    Raises:
+        ValueError: for anything but one valid robot.
+    """
+    # Imported here: the tuning package imports this module.
+    from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS as PAPER
+
+    robot = validate_one_robot(robot, "the studies' horizon")
+    budget = float(PAPER.kr) + float(robot.half_track) * float(PAPER.k_theta)  # cm/s
+    stretch = max(1.0, budget / float(robot.v_max))
+    return math.ceil(HORIZON_S * stretch * 10 - 1e-9) / 10
+
+
+# A success that settles only in the last quarter of the horizon, after the run
+# had been within the tolerance and left it, is no arrival (settled_at_horizon).
+LATE_SHARE = 0.25
+
+
+def settled_at_horizon(m: PoseMetrics, horizon: float) -> np.ndarray:
+    """Which runs count as arrived (docs/model.md §6) only because the horizon ends, ``(N,)``.
+
+    A run that reached the goal, left its tolerance and is back in it over
+    the final stretch has a finite settled arrival: the start of that
+    stretch, set by where the horizon cuts the run rather than by the run.
+    Under noise such runs hover about the goal and their "arrival" moves
+    with the horizon (the paper's gains under the standard noise "arrive"
+    at 5.7 s of 6 on average). Such a run is one whose settled arrival comes
+    after ``(1 − LATE_SHARE)`` of the horizon and after its first arrival;
+    a run that arrives late without having left the tolerance is not.
+
+    Args:
+        m: the runs' metrics (``first_arrival`` included).
+        horizon: the simulated time of the runs, s.
+
+    Raises:
+        ValueError: for metrics without first arrivals, or a horizon that
+            is not a time.
+    """
+    _check_with_first_arrivals(m, "m")
+    horizon = checks.check_number("horizon", horizon, unit="s")
+    late = m.arrival > (1.0 - LATE_SHARE) * horizon
+    return m.success & late & (m.first_arrival < m.arrival)
+
+
+def _check_with_first_arrivals(m: Any, name: str) -> None:
+    """Raise unless ``m`` is ``PoseMetrics`` that carry each run's first arrival."""
+    if not isinstance(m, PoseMetrics):
+        raise ValueError(
+            f"{name} is a {type(m).__name__}; allowed: a PoseMetrics (disturbed_metrics "
+            "returns one)"
+        )
+    if m.first_arrival is None:
+        raise ValueError(
+            f"{name}.first_arrival is None (evaluate_poses does not record first arrivals); "
+            "allowed: the metrics of disturbed_metrics, which do"
+        )
+
+
+def summary_row(m: PoseMetrics, horizon: float | None = None) -> dict[str, Any]:
+    """Return success, arrival, first arrival, final distance and zig-zag of a batch.
+
+    Given the runs' ``horizon`` (s), also ``"settled at horizon"``: the
+    fraction of the runs that count as successes only because the horizon
+    ends (``settled_at_horizon``), and the mean and median arrival of the
+    other successes (``inf`` if none), which the figures draw.
+
+    Raises:
+        ValueError: for metrics without first arrivals (``evaluate_poses``
+            records none), or a horizon that is not a time.
+    """
+    _check_with_first_arrivals(m, "m")
+    ok = m.success
+    t = m.arrival[ok]
+    row = {
+        "success": float(ok.mean()),
+        "mean arrival s": float(t.mean()) if t.size else math.inf,
+        "median arrival s": float(np.median(t)) if t.size else math.inf,
+        "reached": float(np.isfinite(m.first_arrival).mean()),
+        "median first arrival s": _median_finite(m.first_arrival),
+        "mean final distance cm": float(m.final_distance.mean()),
+        "mean zigzag": float(m.zigzag.mean()),
+    }
+    if horizon is None:
+        return row
+    late = settled_at_horizon(m, horizon)
+    early = m.arrival[ok & ~late]
+    row["settled at horizon"] = float(late.mean())
+    row["mean arrival, not at horizon s"] = float(early.mean()) if early.size else math.inf
+    row["median arrival, not at horizon s"] = float(np.median(early)) if early.size else math.inf
+    return row
+
+
+def _median_finite(times: np.ndarray) -> float:
+    finite = times[np.isfinite(times)]
+    return float(np.median(finite)) if finite.size else math.inf
+
+
+def monte_carlo(
+    key: jax.Array,
+    *,
+    controller: Any = controllers.SHIM_SUNG,
+    params: Any = None,
+    n_runs: int = 256,
+    noise_xy: Sequence[float] = DEFAULT_NOISE_XY,
+    noise_deg: Sequence[float] = DEFAULT_NOISE_DEG,
+    radius_mismatch: float = 0.0,
+    mass_mismatch: float = 0.0,
+    latency: bool = False,
+    velocity: str = "ideal",
+    dt: float = DEFAULT_DT,
+    x64: bool = True,
+    estimator: Any = None,
+    robot: Robot | None = None,
+    horizon: float | None = None,
+) -> list[dict[str, Any]]:
+    """Return success and arrival against noise level for one controller and condition.
+
+    Every noise level reuses the same references, unit noise and mismatch
+    (common random numbers), so differences between levels are the noise's.
+    The references are the evaluation set of ``docs/model.md §6`` on every
+    robot; each run lasts ``horizon`` (default ``study_horizon(robot)``: the
+    paper robot's 6 s, longer on a slower robot).
+
+    Args:
+        key: ``jax.random`` key; the same key gives the same numbers.
+        controller: a ``Controller`` or its registered name.
+        params: its parameters (defaults if ``None``).
+        n_runs: Monte Carlo runs per noise level.
+        noise_xy: σ of the x and y measurement noise per level, cm.
+        noise_deg: σ of the heading measurement noise per level, degrees.
+        radius_mismatch: bound of each wheel's relative radius error, ``[0, 1)``.
+        mass_mismatch: bound of the relative body-mass error (non-ideal loop),
+            ``[0, 1)``.
+        latency: apply each command one sample late.
+        velocity: ``"ideal"`` or ``"nonideal"``.
+        dt: control period, s.
+        x64: compute in float64 (see ``disturbed_metrics``).
+        estimator: between the measurements and the law: ``None`` (raw
+            feedback), ``"observer"``, ``"ekf"`` or their parameters
+            (docs/model.md §9).
+        robot: the robot (the controller's model and, up to the mismatch,
+            the true one); default ``Robot()``. With ``params`` ``None`` on
+            another robot than the paper's, the two Shim–Sung laws run the
+            paper's feasible gains scaled into its wheel budget
+            (``robot_defaults``); the ideal loop does not limit wheel
+            commands, and gains set for a faster robot would drive it beyond
+            its ``V_max``.
+        horizon: simulated time per run, s; default ``study_horizon(robot)``.
+
+    Returns:
+        One row per noise level: success rate, mean and median arrival of the
+        successful runs (s), the fraction of runs ever arrived (if only for a
+        sample) and their median first arrival (s), mean final distance (cm),
+        mean zig-zag count, the fraction of runs that only settle at the
+        horizon (``settled_at_horizon``) and the mean and median arrival of
+        the other successes (s), the horizon (s) and the peak wheel speed
+        (cm/s, the largest of any run).
+
+    Raises:
+        ValueError: for a bad count, noise level, mismatch bound or option.
+    """
+    n_runs = checks.check_int("n_runs", n_runs)
+    checks.check_key("key", key)
+    noise_xy, noise_deg = check_levels(noise_xy, noise_deg)
+    if not isinstance(latency, (bool, np.bool_)):
+        raise ValueError(f"latency = {latency!r} is not allowed; allowed: True or False")
+    for name, value in (("radius_mismatch", radius_mismatch), ("mass_mismatch", mass_mismatch)):
+        checks.check_number(name, value, high=1.0, closed=True)
+    if mass_mismatch > 0 and velocity == "ideal":
+        raise ValueError(
+            f"mass_mismatch = {mass_mismatch!r} is not allowed with velocity = 'ideal', whose "
+            "robot has no mass; allowed: 0, or velocity = 'nonideal'"
+        )
+    name = controllers.get_controller(controller).name
+    estimator_used, _ = resolve_estimator(estimator)
+    steps, horizon = study_steps(robot, horizon, dt)
+    if params is None:
+        params = robot_defaults(name, robot)
+    refs, unit, mismatch = draw_disturbances(
+        key, n_runs, steps, radius_mismatch=radius_mismatch, mass_mismatch=mass_mismatch
+    )
+    delay = np.float64(1.0 if latency else 0.0)
+    rows = []
+    for sxy, sdeg in zip(noise_xy, noise_deg, strict=True):
+        scale = np.array([sxy, sxy, math.radians(sdeg)])
+        m = disturbed_metrics(
+            Disturbance(refs, unit * scale, mismatch, delay),
+            params,
+            controller=name,
+            estimator=estimator,
+            dt=dt,
+            robot=robot,
+            velocity=velocity,
+            x64=x64,
+        )
+        condition = {
+            "controller": name,
+            "feedback": "raw" if estimator_used is None else estimator_used.name,
+            "noise xy cm": float(sxy),
+            "noise theta deg": float(sdeg),
+            "radius mismatch": float(radius_mismatch),
+            "mass mismatch": float(mass_mismatch),
+            "latency": bool(latency),
+            "runs": int(n_runs),
+            "horizon s": horizon,
+        }
+        peak = {"peak wheel cm/s": float(np.max(m.peak_wheel))}
+        rows.append({**condition, **summary_row(m, horizon), **peak})
+    return rows
+
+
+def robot_defaults(controller: Any, robot: Robot | None = None) -> Any:
+    """The parameters a study runs for ``controller`` on ``robot`` when given none.
+
+    On the paper robot (and for ``robot`` ``None``), ``None``: the
+    controller's defaults. On another robot, ``shim-sung`` runs the paper's
+    feasible gains scaled into that robot's wheel budget
+    (``tuning.paper_feasible_gains``: ``k_r : k_θ = 60 : 10``,
+    ``k_r + L k_θ ≤ V_max``) and ``shim-sung-schedule`` the same gains as
+    constant tables capped with that robot's ``V_max`` and ``L``: their
+    defaults are set for the paper robot's wheels. Other controllers keep
+    their defaults (``None``): their commands grow with the distance and
+    are bounded by no wheel budget (docs/model.md §3.8).
+    """
+    from wmr_jax._src.model.controllers.schedule import SCHEDULE, ScheduleParams
+    from wmr_jax._src.model.robots import same_robot
+    from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
+
+    name = controllers.get_controller(controller).name
+    if robot is None or same_robot(validate_one_robot(robot, "the study"), Robot()):
+        return None
+    if name == controllers.SHIM_SUNG.name:
+        return paper_feasible_gains(robot)
+    if name == SCHEDULE.name:
+        return ScheduleParams.from_gains(paper_feasible_gains(robot), robot=robot)
+    return None
+
+
+def study_steps(robot: Any, horizon: Any, dt: float) -> tuple[int, float]:
+    """The periods and the horizon (s, a whole number of periods) of a study's runs.
+
+    ``horizon`` ``None`` is ``study_horizon(robot)``; the robot is checked either way.
+    """
+    default = study_horizon(robot)
+    steps = horizon_steps(dt, default if horizon is None else horizon)
+    return steps, steps * float(dt)
+
+
+def robustness_study(
+    *,
+    seed: int = 0,
+    controller_names: Sequence[str] | None = None,
+    n_runs: int = 256,
+    velocity: str = "ideal",
+    noise_xy: Sequence[float] = DEFAULT_NOISE_XY,
+    noise_deg: Sequence[float] = DEFAULT_NOISE_DEG,
+    x64: bool = True,
+    estimator: Any = None,
+    robot: Robot | None = None,
+    horizon: float | None = None,
+) -> list[dict[str, Any]]:
+    """Run the Monte Carlo for each controller and condition (``docs/model.md §7``).
+
+    Conditions (``ROBUSTNESS_CONDITIONS``): measurement noise alone; noise
+    with ±3 % wheel-radius and ±20 % body-mass mismatch (the latter in the
+    non-ideal loop only: the ideal one has no mass); and the same with
+    one-sample latency. Each controller sees the same draws (one key per
+    condition, from ``seed``). ``wmr_jax.report.write_robustness`` draws and
+    writes the rows.
+
+    Args:
+        seed: PRNG seed, an integer in ``[0, 2³² − 1]``.
+        controller_names: registered controllers; default every one.
+        n_runs: Monte Carlo runs per noise level.
+        velocity: ``"ideal"`` or ``"nonideal"``.
+        noise_xy: σ of the x and y measurement noise per level, cm.
+        noise_deg: σ of the heading measurement noise per level, degrees.
+        x64: compute in float64 (see ``disturbed_metrics``).
+        estimator: the estimator of every controller (``None``: raw feedback).
+        robot: the robot of every run (``monte_carlo``); default ``Robot()``.
+        horizon: simulated time per run, s; default ``study_horizon(robot)``.
+
+    Returns:
+        The rows of every condition, controller and noise level (in that
+        order), each ``monte_carlo``'s row with its ``"condition"`` first.
+    """
+    seed = checks.check_int("seed", seed, 0, 2**32 - 1)
+    names = controllers.controller_names(controller_names)
+    resolve_estimator(estimator)  # refused before any run
+    study_steps(robot, horizon, DEFAULT_DT)  # and the robot and the horizon
+    keys = jax.random.split(jax.random.PRNGKey(seed), len(ROBUSTNESS_CONDITIONS))
+    rows = []
+    for (label, radius, mass, latency), key in zip(ROBUSTNESS_CONDITIONS, keys, strict=True):
+        if velocity == "ideal":
+            mass = 0.0  # the ideal loop has no mass: the rows say so rather than ±20 %
+        for name in names:
+            for row in monte_carlo(
+                key,
+                controller=name,
+                n_runs=n_runs,
+                noise_xy=noise_xy,
+                noise_deg=noise_deg,
+                radius_mismatch=radius,
+                mass_mismatch=mass,
+                latency=latency,
+                velocity=velocity,
+                x64=x64,
+                estimator=estimator,
+                robot=robot,
+                horizon=horizon,
+            ):
+                rows.append({"condition": label, **row})
+    return rows

@@ -1,0 +1,517 @@
+"""Final poses and docs/model.md §6 metrics for millions of poses, in bounded memory.
+
+``sweep(refs, gains, ...)`` runs the closed loop for every reference pose and
+returns, per pose, the final pose and the metrics of docs/model.md §6: arrival
+time, success, path length, peak wheel speed and zig-zag count. The metrics
+are streamed through the time loop (``loops.scan_closed_loop`` with the fold
+of ``metrics.stream_*``), so no trajectory is ever stored, and the poses are
+processed in chunks of a fixed size, so device memory does not grow with
+``N`` and one compiled program serves every chunk. Each chunk is spread over
+all local devices.
+
+With ``out=DIR`` every finished chunk is written to ``DIR`` atomically as soon
+as it is done, as a checksummed array file (``io.save_arrays``) carrying a
+fingerprint of the settings and of its reference poses; a later call with the
+same arguments and ``resume=True`` (the default) loads the finished chunks
+instead of recomputing them, so an interrupted sweep loses nothing it had
+finished. A chunk file that is damaged or was altered is recomputed, with a
+one-line warning, never trusted; temporary files that a killed sweep left in
+``DIR`` are removed first. Host memory holds the inputs and the results
+(about 30 bytes per pose in float32) and little else; ``refs`` may be a NumPy
+memmap.
+
+The steps of a sweep: check the inputs and plan the chunks (``_check``), open
+the chunk folder (``sweep_files.ChunkStore``), then for each chunk either load it or
+launch it on the devices and finish it (copy back, store) while the next one
+runs (``_run_chunks``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import math
+import re
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+
+from wmr_jax._src import checks
+from wmr_jax._src.model.controllers import SHIM_SUNG, Controller
+from wmr_jax._src.model.params import Robot, validate_robot
+from wmr_jax._src.sim import loops, metrics
+from wmr_jax._src.sim import rollout as simulation
+from wmr_jax._src.sim.sharding import checked_devices
+from wmr_jax._src.studies import sweep_files as files
+
+__all__ = ["DEFAULT_CHUNK_SIZE", "SWEEP_FIELDS", "sweep"]
+
+DEFAULT_CHUNK_SIZE = 131_072
+
+
+SWEEP_FIELDS = (
+    "final_x",
+    "final_y",
+    "final_theta",
+    "arrival_time",
+    "success",
+    "path_length",
+    "peak_wheel_speed",
+    "zigzags",
+)
+"""Keys of the dict ``sweep`` returns, each an ``(N,)`` array:
+
+* ``final_x``, ``final_y`` (cm), ``final_theta`` (rad, not wrapped): the pose
+  after the last period;
+* ``arrival_time``: s, ``inf`` where the robot is not arrived at the end
+  (docs/model.md §6, as ``wmr_jax.arrival_time``);
+* ``success``: bool, ``arrival_time`` is finite;
+* ``path_length``: cm, as ``wmr_jax.path_length``;
+* ``peak_wheel_speed``: cm/s, the largest ``|v_L|``, ``|v_R|`` over the run;
+* ``zigzags``: int32, as ``wmr_jax.zigzag_count``.
+"""
+
+
+def _sweep_one(ref, params, init, robot, dt, options: loops.Options):
+    """Return the final pose and the streamed metrics of one run (single pose)."""
+    gains, thresholds = params
+
+    def fold(acc, pose, out):
+        return metrics.stream_update(acc, pose.stacked(), ref, out, thresholds, frame=pose.frame())
+
+    acc = metrics.stream_start(init.dtype)
+    final, acc, _ = loops.scan_closed_loop(ref, gains, init, robot, dt, options, fold=fold, acc=acc)
+    result = metrics.stream_result(acc, dt)
+    return {
+        "final_x": final[0],
+        "final_y": final[1],
+        "final_theta": final[2],
+        **{name: result[name] for name in SWEEP_FIELDS[3:]},
+    }
+
+
+_sweep_jit = loops.EntryJit(loops.batched(_sweep_one), static_argnames=("options",))
+
+
+# ---------------------------------------------------------------- checking and planning
+
+
+@dataclasses.dataclass(frozen=True)
+class _Job:
+    """A checked sweep: its inputs, options, and how it is cut into chunks.
+
+    ``*_mask`` trees say which leaves carry the batch axis ``(n, ...)``.
+    """
+
+    refs: Any
+    n: int
+    gains: Any
+    gains_mask: Any
+    robot: Any
+    robot_mask: Any
+    init: Any
+    batched_init: bool
+    dt: float
+    options: loops.Options
+    thresholds: metrics.Thresholds
+    dtype: np.dtype
+    chunk: int
+    devices: tuple[Any, ...]
+
+    @property
+    def chunks(self) -> int:
+        return math.ceil(self.n / self.chunk)
+
+    def bounds(self, i: int) -> tuple[int, int]:
+        return i * self.chunk, min(self.n, (i + 1) * self.chunk)
+
+
+def _pose_count(refs: Any) -> int:
+    """Return ``N`` of ``(N, 3)`` references from their shape alone (a memmap stays on disk).
+
+    Their values are checked chunk by chunk as they are read (``_chunk_inputs``).
+    """
+    shape = np.shape(refs) if getattr(refs, "shape", None) is None else refs.shape
+    if len(shape) != 2 or shape[1] != 3 or shape[0] < 1:
+        raise ValueError(
+            f"refs has shape {tuple(shape)}; allowed: (N, 3) with N >= 1 [x cm, y cm, theta rad]"
+        )
+    return int(shape[0])
+
+
+def _thresholds(tol_r, tol_theta, v_dead_band, omega_dead_band) -> metrics.Thresholds:
+    return metrics.Thresholds(
+        tol_r=checks.check_number("tol_r", tol_r, low=0.0, unit="cm"),
+        tol_theta=checks.check_number("tol_theta", tol_theta, high=math.pi / 2, unit="rad"),
+        v_dead_band=checks.check_number("v_dead_band", v_dead_band, closed=True, unit="cm/s"),
+        omega_dead_band=checks.check_number(
+            "omega_dead_band", omega_dead_band, closed=True, unit="rad/s"
+        ),
+    )
+
+
+def _per_run_or_shared(tree: Any, n: int, name: str) -> Any:
+    """Leaves with one value per run stay; a batch axis of size 1 is shared (dropped).
+
+    Raises:
+        ValueError: for a batch axis of another size, naming the field.
+    """
+
+    def leaf_of(path, leaf):
+        field = f"{name}{jax.tree_util.keystr(path, simple=True, separator='.')}"
+        if checks.array_kind(leaf) not in "iuf":  # named whole, not as the one-row sample
+            raise ValueError(
+                f"{field} = {checks.described(leaf)} is not allowed; allowed: finite numbers"
+            )
+        if np.ndim(leaf) == 0 or np.shape(leaf)[0] == n:
+            return leaf
+        if np.shape(leaf)[0] == 1:
+            return leaf[0]
+        raise ValueError(
+            f"{field} has {np.shape(leaf)[0]} values; allowed: one, or one per reference ({n})"
+        )
+
+    return jax.tree_util.tree_map_with_path(leaf_of, tree)
+
+
+def _batched_leaves(tree: Any, n: int) -> Any:
+    """Map each leaf to True if it carries the batch axis ``(n, ...)``."""
+    return jax.tree.map(lambda leaf: np.ndim(leaf) >= 1 and np.shape(leaf)[0] == n, tree)
+
+
+def _take(tree: Any, mask: Any, lo: int, hi: int, pad: int) -> Any:
+    """Slice the batched leaves of ``tree`` to rows ``lo:hi``, padded by repeating the last."""
+
+    def cut(leaf, batched):
+        if not batched:
+            return leaf
+        part = np.asarray(leaf[lo:hi])
+        if pad:
+            part = np.concatenate([part, np.repeat(part[-1:], pad, axis=0)])
+        return part
+
+    return jax.tree.map(cut, tree, mask)
+
+
+def _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, devices) -> _Job:
+    """Check every input (on a one-pose sample of the batch) and plan the chunks.
+
+    Every message then names the bad argument or field before anything is traced.
+    """
+    if isinstance(refs, (list, tuple)):  # lists work as arrays (a memmap stays as it is)
+        refs = checks.real_array("refs", refs, "rows of real numbers [x cm, y cm, θ rad]")
+    n = _pose_count(refs)
+    chunk_size = checks.check_int("chunk_size", chunk_size)
+    devices = tuple(checked_devices(jax.local_devices() if devices is None else devices))
+    gains = options.controller.default_params() if gains is None else gains
+    robot = Robot() if robot is None else robot
+    if not isinstance(init, jax.Array):
+        init = checks.real_array("init", init, "real numbers [x cm, y cm, θ rad], (3,) or (N, 3)")
+    if n == 1:  # one reference shared by every run of batched parameters
+        runs = checks.common_batch_size({"gains": gains, "robot": robot}, {"init": init})
+        refs, n = (np.repeat(np.asarray(refs[:1]), runs, axis=0), runs) if runs > 1 else (refs, 1)
+    if n > 1:
+        gains = _per_run_or_shared(gains, n, "gains.")
+        robot = _per_run_or_shared(robot, n, "robot.")
+    if np.ndim(init) == 2 and np.shape(init)[0] == 1:
+        init = init[0]  # one start shared by every run
+    batched_init = np.ndim(init) == 2
+    if batched_init and np.shape(init)[0] != n:
+        raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,), (1, 3) or ({n}, 3)")
+    gains_mask, robot_mask = _batched_leaves(gains, n), _batched_leaves(robot, n)
+    simulation.prepare(
+        np.asarray(refs[:1], dtype=float),
+        _take(gains, gains_mask, 0, 1, 0),
+        init[:1] if batched_init else init,
+        _take(robot, robot_mask, 0, 1, 0),
+        dt,
+        options,
+        batch=None,
+    )
+    return _Job(
+        refs=refs,
+        n=n,
+        gains=gains,
+        gains_mask=gains_mask,
+        robot=robot,
+        robot_mask=robot_mask,
+        init=init,
+        batched_init=batched_init,
+        dt=float(dt),
+        options=loops.for_robot(options, robot, dt),
+        thresholds=thresholds,
+        dtype=np.dtype(checks.float_dtype()),
+        chunk=math.ceil(min(chunk_size, n) / len(devices)) * len(devices),
+        devices=devices,
+    )
+
+
+# ---------------------------------------------------------------- running the chunks
+
+
+@dataclasses.dataclass(frozen=True)
+class _Chunk:
+    """The host inputs of chunk ``i``: rows ``lo:hi`` padded by ``pad`` copies of the last."""
+
+    i: int
+    lo: int
+    hi: int
+    pad: int
+    refs: np.ndarray
+    init: Any
+
+
+def _chunk_inputs(job: _Job, i: int) -> _Chunk:
+    """Read chunk ``i``'s inputs."""
+    lo, hi = job.bounds(i)
+    pad = job.chunk - (hi - lo)
+    refs = _take(job.refs, True, lo, hi, pad)
+    init = _take(job.init, True, lo, hi, pad) if job.batched_init else job.init
+    return _Chunk(i, lo, hi, pad, refs, init)
+
+
+def _chunk_digest(job: _Job, chunk: _Chunk) -> str:
+    """The digest of everything per pose in a chunk (what a stored chunk is matched by).
+
+    Only a sweep with ``out`` needs it: hashing is host work of the order of
+    the chunk's whole run on a GPU.
+    """
+    lo, hi, pad = chunk.lo, chunk.hi, chunk.pad
+    per_pose = [chunk.refs, chunk.init if job.batched_init else np.zeros(0)]
+    for tree, mask in ((job.gains, job.gains_mask), (job.robot, job.robot_mask)):
+        per_pose += jax.tree.leaves(_take(tree, mask, lo, hi, pad))
+    return files.digest(*per_pose)
+
+
+def _check_chunk(job: _Job, chunk: _Chunk) -> None:
+    """Check every row of a chunk as ``final_poses`` checks a batch (before it runs).
+
+    ``_check`` judged one pose; the rest are judged here, chunk by chunk as
+    they are read, so a memory-mapped batch is never loaded whole. Messages
+    give rows of the whole batch.
+    """
+    size = chunk.hi - chunk.lo
+
+    def offset(err: ValueError) -> ValueError:
+        # "refs[3] = ..." within the chunk is row lo + 3 of the batch.
+        text = re.sub(
+            r"^(refs|init)\[(\d+)\]", lambda m: f"{m[1]}[{chunk.lo + int(m[2])}]", str(err)
+        )
+        return ValueError(text)
+
+    try:
+        checks.as_poses("refs", np.asarray(chunk.refs[:size]), batch=True, check_only=True)
+        if job.batched_init:
+            checks.as_poses("init", np.asarray(chunk.init[:size]), batch=True, check_only=True)
+    except ValueError as err:
+        raise offset(err) from None
+    lo, hi = chunk.lo, chunk.hi
+    try:
+        if any(jax.tree.leaves(job.gains_mask)):
+            job.options.controller.validate(_take(job.gains, job.gains_mask, lo, hi, 0))
+        if any(jax.tree.leaves(job.robot_mask)):
+            validate_robot(_take(job.robot, job.robot_mask, lo, hi, 0))
+    except ValueError as err:
+        raise ValueError(f"{err} (among runs {lo} to {hi - 1})") from None
+
+
+def _check_result(job: _Job, chunk: _Chunk, host: dict[str, np.ndarray]) -> None:
+    """Raise, as ``final_poses`` does, if a run of the chunk left the floating-point range."""
+    finite = np.isfinite(host["final_x"])
+    finite &= np.isfinite(host["final_y"])
+    finite &= np.isfinite(host["final_theta"])
+    checks.require_finite_runs(finite, job.dtype, first=chunk.lo)
+
+
+def _launcher(job: _Job) -> Callable[[_Chunk], Any]:
+    """Return ``launch(chunk)``: place a chunk on the devices and dispatch it (asynchronously)."""
+    mesh = jax.sharding.Mesh(np.asarray(job.devices), ("batch",))
+    spread = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
+    shared = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
+
+    def place(tree: Any, mask: Any) -> Any:
+        return jax.tree.map(
+            lambda leaf, batched: jax.device_put(
+                np.asarray(leaf, job.dtype), spread if batched else shared
+            ),
+            tree,
+            mask,
+        )
+
+    def launch(chunk: _Chunk) -> Any:
+        lo, hi, pad = chunk.lo, chunk.hi, chunk.pad
+        params = (_take(job.gains, job.gains_mask, lo, hi, pad), job.thresholds)
+        params_mask = (job.gains_mask, metrics.Thresholds(False, False, False, False))
+        return _sweep_jit(
+            place(chunk.refs, True),
+            place(params, params_mask),
+            place(chunk.init, job.batched_init),
+            place(_take(job.robot, job.robot_mask, lo, hi, pad), job.robot_mask),
+            jax.device_put(np.asarray(job.dt, job.dtype), shared),
+            options=job.options,
+        )
+
+    return launch
+
+
+def _empty_results(job: _Job) -> dict[str, np.ndarray]:
+    kinds = {"success": bool, "zigzags": np.int32}
+    return {name: np.empty(job.n, dtype=kinds.get(name, job.dtype)) for name in SWEEP_FIELDS}
+
+
+def _run_chunks(
+    job: _Job,
+    results: dict[str, np.ndarray],
+    store: files.ChunkStore | None,
+    resume: bool,
+    done: Callable[[int], None],
+) -> None:
+    """Fill ``results`` chunk by chunk, loading finished chunks from ``store`` if ``resume``.
+
+    One chunk is in flight while the previous one is copied back and saved:
+    JAX dispatches asynchronously, so the host work overlaps the next chunk.
+    """
+    launch = _launcher(job)
+
+    def keep(chunk: _Chunk, digest: str | None, values: dict[str, Any], *, computed: bool) -> None:
+        host = {name: np.asarray(values[name])[: chunk.hi - chunk.lo] for name in SWEEP_FIELDS}
+        if computed:
+            _check_result(job, chunk, host)
+        for name in SWEEP_FIELDS:
+            results[name][chunk.lo : chunk.hi] = host[name]
+        if computed and store is not None:
+            store.save(chunk.i, digest, host)
+        done(chunk.i)
+
+    pending = None
+    for i in range(job.chunks):
+        chunk = _chunk_inputs(job, i)
+        digest = None if store is None else _chunk_digest(job, chunk)
+        loaded = None
+        if store is not None and resume:
+            loaded = store.load(i, digest, chunk.hi - chunk.lo, job)
+        if loaded is not None:
+            keep(chunk, digest, loaded, computed=False)
+            continue
+        _check_chunk(job, chunk)
+        launched = (chunk, digest, launch(chunk))
+        if pending is not None:
+            keep(*pending, computed=True)
+        pending = launched
+    if pending is not None:
+        keep(*pending, computed=True)
+
+
+@contextlib.contextmanager
+def _progress(job: _Job, bar: bool, on_chunk: Callable[[int, int], None] | None):
+    """Yield ``done(i)``, called as chunk ``i`` is done: it moves the bar, calls ``on_chunk``."""
+    shown = None
+    if bar:
+        from wmr_jax._src.report.progress import bar as tqdm
+
+        name = job.options.controller.name
+        shown = tqdm(total=job.chunks, unit="chunk", desc=f"{name} sweep, {job.n} poses")
+
+    def done(i: int) -> None:
+        if shown is not None:
+            shown.update(1)
+        if on_chunk is not None:
+            on_chunk(i + 1, job.chunks)
+
+    try:
+        yield done
+    finally:
+        if shown is not None:
+            shown.close()
+
+
+# ---------------------------------------------------------------- the sweep
+
+
+def sweep(
+    refs: Any,
+    gains: Any = None,
+    *,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = simulation.DEFAULT_DT,
+    steps: int = loops.DEFAULT_STEPS,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    controller: Controller | str = SHIM_SUNG,
+    temperature: float | None = None,
+    substeps: int = loops.DEFAULT_SUBSTEPS,
+    wheel_limit: str = "clip",
+    tol_r: float = metrics.DEFAULT_TOL_R,
+    tol_theta: float = metrics.DEFAULT_TOL_THETA,
+    v_dead_band: float = 1.0,
+    omega_dead_band: float = 0.1,
+    chunk_size: int = DEFAULT_CHUNK_SIZE,
+    devices: Sequence[Any] | None = None,
+    out: str | Path | None = None,
+    resume: bool = True,
+    progress: bool = False,
+    on_chunk: Callable[[int, int], None] | None = None,
+) -> dict[str, np.ndarray]:
+    """Run the closed loop for every reference pose; return final poses and metrics.
+
+    Args:
+        refs: ``(N, 3)`` reference poses ``[x cm, y cm, θ rad]``: an array,
+            or a memmap (read a chunk at a time).
+        gains: the controller's parameters (default: its defaults); leaves
+            scalar, or ``(N,)`` for one value per pose.
+        init: ``(3,)`` initial pose, or ``(N, 3)``.
+        dt: control period, s.
+        steps: control periods per run (static).
+        robot: robot parameters (leaves scalar or ``(N,)``); default ``Robot()``.
+        velocity: ``"ideal"`` or ``"nonideal"`` velocity loop (docs/model.md §4).
+        controller: a ``Controller`` or its name; default Shim–Sung.
+        temperature: ``None`` for the hard law, else its smooth relaxation.
+        substeps: inner steps per period (non-ideal loop).
+        wheel_limit: ``"clip"`` or ``"scale"`` (non-ideal loop).
+        tol_r: arrival distance tolerance, cm (docs/model.md §6).
+        tol_theta: arrival heading tolerance, rad, ``< π/2``.
+        v_dead_band: speeds with ``|v| ≤`` this (cm/s) carry no sign (zig-zags).
+        omega_dead_band: turn rates with ``|ω| ≤`` this (rad/s) carry no sign.
+        chunk_size: poses per chunk, rounded up to a multiple of the number
+            of devices; the last chunk is padded to the same size.
+        devices: devices each chunk is spread over; default all local ones.
+        out: folder for the chunk files (checksummed, each written atomically
+            when done), the settings (``sweep.json``) and all results
+            (``results.npz``, also checked; ``np.load`` reads it); ``None``
+            keeps everything in memory.
+        resume: with ``out``, load the chunks finished with the same settings
+            and poses instead of computing them again (see the module docs).
+        progress: show a tqdm progress bar over the chunks.
+        on_chunk: called as ``on_chunk(done, total)`` after every chunk.
+
+    Returns:
+        A dict of ``(N,)`` NumPy arrays keyed by ``SWEEP_FIELDS``.
+
+    Raises:
+        ValueError: naming the argument, its value and what is allowed (before tracing).
+    """
+    options = simulation.make_options(
+        steps=steps,
+        velocity=velocity,
+        controller=controller,
+        temperature=temperature,
+        substeps=substeps,
+        wheel_limit=wheel_limit,
+    )
+    thresholds = _thresholds(tol_r, tol_theta, v_dead_band, omega_dead_band)
+    checks.check_callable("on_chunk", on_chunk)
+    checks.check_bool("resume", resume)
+    checks.check_bool("progress", progress)
+    out = None if out is None else checks.check_folder("out", out)
+    checks.require_concrete("sweep", refs, gains, init, robot, dt)  # it runs chunk by chunk
+    job = _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, devices)
+    store = None if out is None else files.ChunkStore(out, files.settings(job), SWEEP_FIELDS)
+    results = _empty_results(job)
+    with _progress(job, progress, on_chunk) as done:
+        _run_chunks(job, results, store, resume, done)
+    if store is not None:
+        store.save_results(results)
+    return results

@@ -1,0 +1,588 @@
+"""Consecutive motions: a chain of waypoints, and references that move.
+
+Two uses of the one closed loop (``loops.scan_closed_loop``), each over one
+robot, batched by ``loops.batched``; a fold follows the arrivals and
+``aim`` hands the law the reference of each period:
+
+* **Waypoint chain.** The robot is given waypoint 0 and, when it has arrived
+  there, waypoint 1, and so on. Arrived means the test of
+  ``docs/model.md §6`` (``r_e ≤ tol_r`` and ``|θ̄_e| ≤ tol_theta``) after a
+  control period; the intermediate waypoints may use a looser
+  *pass-through* tolerance, so that the robot runs through them instead of
+  settling on each. The arrival time of an intermediate waypoint is the end
+  of the period at which it was reached (when the chain moved on); that of
+  the last one is the arrival time of ``docs/model.md §6``, counted over the
+  samples spent on the last leg.
+* **Moving reference.** One reference per control period, ``(steps, 3)``: the
+  command of period ``k`` is computed for ``refs[k]``. The tracking error and
+  the arrival test after period ``k`` are taken against ``refs[k]``; with a
+  constant reference this is exactly a ``rollout`` and its metrics
+  (``docs/model.md §6``).
+
+``soccer_study`` runs a soccer-like sequence for each controller and returns
+the arrival time per leg; ``wmr_jax.report`` draws and writes it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from wmr_jax._src import checks
+from wmr_jax._src.model import controllers
+from wmr_jax._src.model.params import Robot, validate_one_robot
+from wmr_jax._src.sim import loops, metrics
+from wmr_jax._src.sim import rollout as simulation
+from wmr_jax._src.sim.loops import Options
+from wmr_jax._src.sim.rollout import DEFAULT_DT, Trajectory
+
+__all__ = [
+    "SOCCER_WAYPOINTS_DEG",
+    "ChainRun",
+    "SoccerRun",
+    "SoccerStudy",
+    "TrackRun",
+    "batch_chain_rollout",
+    "batch_track_rollout",
+    "chain_rollout",
+    "soccer_steps",
+    "soccer_study",
+    "soccer_waypoints",
+    "track_rollout",
+]
+
+# A soccer-like sequence on a 160 cm × 120 cm pitch, (x cm, y cm, θ deg): run to
+# the ball, turn it upfield, dribble, cut back, return to defend, face the goal.
+SOCCER_WAYPOINTS_DEG = (
+    (40.0, 10.0, 0.0),
+    (70.0, 40.0, 90.0),
+    (30.0, 60.0, 180.0),
+    (-20.0, 30.0, -90.0),
+    (-40.0, -30.0, 0.0),
+    (20.0, -40.0, 45.0),
+)
+# Control periods of each soccer run for the paper robot (14.85 s at dt = 0.033 s).
+SOCCER_STEPS = 450
+
+
+class ChainRun(NamedTuple):
+    """A run through a chain of ``K`` waypoints (leading batch axes first).
+
+    Attributes:
+        trajectory: the ``Trajectory`` of the run (``steps + 1`` poses).
+        leg: ``(steps,)`` int32 index of the waypoint the command of each
+            period was computed for.
+        arrival: ``(K,)`` arrival time at each waypoint, s; ``inf`` if never.
+    """
+
+    trajectory: Trajectory
+    leg: jax.Array
+    arrival: jax.Array
+
+
+class TrackRun(NamedTuple):
+    """A run after a moving reference (leading batch axes first).
+
+    Attributes:
+        trajectory: the ``Trajectory`` of the run (``steps + 1`` poses).
+        error: ``(steps,)`` distance ``r_e`` after each period to the
+            reference of that period, cm.
+        arrival: ``()`` docs/model.md §6 arrival time against the moving reference, s.
+    """
+
+    trajectory: Trajectory
+    error: jax.Array
+    arrival: jax.Array
+
+
+# ---------------------------------------------------------------- single robot
+
+
+def _chain_single(spec, params, init, robot, dt, options: Options) -> ChainRun:
+    """Run one robot through its waypoints; ``spec = (waypoints (K, 3), tolerances (4,))``.
+
+    The fold carries ``(period, leg, period at which each waypoint was
+    reached (-1: not yet), start of the last run of arrived samples on the
+    last leg (-1: none))``; ``aim`` hands the law the waypoint of the leg.
+    """
+    waypoints, tolerances = spec
+    n_legs = waypoints.shape[0]
+    pass_r, pass_theta, final_r, final_theta = (tolerances[i] for i in range(4))
+    dtype = waypoints.dtype
+
+    def fold(acc, pose, out):
+        k, leg, reached_at, run_start = acc
+        last = leg == n_legs - 1
+        tol_r = jnp.where(last, final_r, pass_r)
+        tol_theta = jnp.where(last, final_theta, pass_theta)
+        ok = metrics.arrived(pose.stacked(), waypoints[leg], tol_r=tol_r, tol_theta=tol_theta)
+        reached = ok & ~last
+        reached_at = jnp.where(reached & (jnp.arange(n_legs) == leg), k, reached_at)
+        # On the last leg, remember where the current run of arrived samples began.
+        run_start = jnp.where(last & ok, jnp.where(run_start < 0, k, run_start), -1)
+        return k + 1, leg + reached.astype(leg.dtype), reached_at, run_start
+
+    start = (
+        jnp.zeros((), jnp.int32),
+        jnp.zeros((), jnp.int32),
+        jnp.full((n_legs,), -1, jnp.int32),
+        jnp.full((), -1, jnp.int32),
+    )
+    _, (_, _, reached_at, run_start), (poses, out) = loops.scan_closed_loop(
+        waypoints[0],
+        params,
+        init,
+        robot,
+        dt,
+        options,
+        aim=lambda acc: waypoints[acc[1]],
+        fold=fold,
+        acc=start,
+        record=True,
+    )
+    arrival = _period_end(reached_at.at[-1].set(run_start), dt, dtype)
+    # The leg of period k: the waypoints reached before it.
+    periods = jnp.arange(options.steps, dtype=jnp.int32)[:, None]
+    passed = (reached_at[None, :-1] >= 0) & (reached_at[None, :-1] < periods)
+    leg = jnp.sum(passed, axis=1, dtype=jnp.int32)
+    return ChainRun(_as_trajectory(init, poses, out), leg, arrival)
+
+
+def _track_single(refs, params, init, robot, dt, options: Options) -> TrackRun:
+    """Run one robot after a reference per period, ``refs (steps, 3)``."""
+    last = refs.shape[0] - 1
+    _, _, (poses, out) = loops.scan_closed_loop(
+        refs[0],
+        params,
+        init,
+        robot,
+        dt,
+        options,
+        aim=lambda k: refs[jnp.minimum(k, last)],
+        fold=lambda k, pose, out: k + 1,
+        acc=jnp.zeros((), jnp.int32),
+        record=True,
+    )
+    ok = metrics.arrived(poses, refs)
+    # The samples from which every later one is arrived: the last run of them.
+    settled = jnp.cumprod(ok[::-1].astype(jnp.int32))[::-1]
+    run_start = jnp.where(ok[-1], settled.shape[0] - jnp.sum(settled), -1)
+    arrival = _period_end(run_start, dt, refs.dtype)
+    return TrackRun(_as_trajectory(init, poses, out), _distance(poses, refs), arrival)
+
+
+def _period_end(period: jax.Array, dt: jax.Array, dtype: Any) -> jax.Array:
+    """The time at the end of ``period`` (int32, ``-1`` for never: ``inf``), s."""
+    return jnp.where(period >= 0, (period + 1).astype(dtype) * dt, jnp.inf)
+
+
+def _distance(pose: jax.Array, ref: jax.Array) -> jax.Array:
+    """Return the distance between the positions of two poses, cm (NaN-safe at 0)."""
+    d_sq = (ref[..., 0] - pose[..., 0]) ** 2 + (ref[..., 1] - pose[..., 1]) ** 2
+    positive = d_sq > 0
+    return jnp.where(positive, jnp.sqrt(jnp.where(positive, d_sq, 1.0)), 0.0)
+
+
+def _as_trajectory(init, poses, out) -> Trajectory:
+    poses = jnp.concatenate([init[None], poses], axis=0)
+    return Trajectory(poses, out.v, out.omega, out.region, out.wheel_speeds, out.distance)
+
+
+_chain_jit = loops.EntryJit(_chain_single, static_argnames=("options",))
+_batch_chain_jit = loops.EntryJit(loops.batched(_chain_single), static_argnames=("options",))
+_track_jit = loops.EntryJit(_track_single, static_argnames=("options",))
+_batch_track_jit = loops.EntryJit(loops.batched(_track_single), static_argnames=("options",))
+
+
+# ---------------------------------------------------------------- boundary checks
+
+
+def _pose_stack(name: str, value: Any, ndim: int, allowed: str) -> jax.Array:
+    """Return ``value`` as checked poses of ``ndim`` dims, the last of length 3."""
+    shape = np.shape(value)
+    if len(shape) != ndim or shape[-1] != 3 or 0 in shape:
+        raise ValueError(f"{name} has shape {shape}; allowed: {allowed} [x cm, y cm, theta rad]")
+    flat = checks.as_poses(name, np.reshape(value, (-1, 3)), batch=True)
+    return flat.reshape(shape)
+
+
+def _tolerances(tol_r, tol_theta, pass_tol_r, pass_tol_theta) -> jax.Array:
+    """Return ``[pass r, pass θ, final r, final θ]`` after checking each (cm, rad)."""
+    tol_r = checks.check_number("tol_r", tol_r, unit="cm")
+    tol_theta = checks.check_number("tol_theta", tol_theta, high=math.pi / 2, unit="rad")
+    pass_r = checks.check_number(
+        "pass_tol_r", tol_r if pass_tol_r is None else pass_tol_r, unit="cm"
+    )
+    pass_theta = tol_theta if pass_tol_theta is None else pass_tol_theta
+    pass_theta = checks.check_number("pass_tol_theta", pass_theta, unit="rad")
+    # π/2 is allowed for passing through: |θ̄_e| ≤ π/2 always holds, heading ignored.
+    checks.require(
+        "pass_tol_theta", np.asarray(pass_theta), pass_theta <= math.pi / 2, "<= pi/2 rad"
+    )
+    return jnp.asarray([pass_r, pass_theta, tol_r, tol_theta], checks.float_dtype())
+
+
+def _prepared(params, init, robot, dt, options: Options, n: int | None, entry):
+    """Check params, init, robot and dt as ``rollout`` does; ``n`` runs for a batch."""
+    if n is not None and np.ndim(init) == 2 and np.shape(init)[0] != n:
+        raise ValueError(f"init has {np.shape(init)[0]} rows; allowed: {n}, one per run")
+    # A stand-in reference: the real ones are checked by the caller, and its
+    # batch size is the one every batched argument must share.
+    dummy = np.zeros((3,) if n is None else (n, 3))
+    _, params, init, robot, dt = simulation.prepare(
+        dummy, params, init, robot, dt, options, batch=False if n is None else None, entry=entry
+    )
+    return params, init, robot, dt
+
+
+# What each loop keeps per run and period, (floats, int32s): a Trajectory
+# (8 floats and the region) and the leg of a chain, or the error of a track.
+_CHAIN_RECORD, _TRACK_RECORD = (8, 2), (9, 1)
+
+
+def _shared_by_every_run(
+    poses: jax.Array, params: Any, robot: Any, init: Any, steps: int, record: tuple[int, int]
+) -> jax.Array:
+    """``poses (1, ...)`` repeated for each run of batched params, robot or init; else as given.
+
+    A batch axis of size 1 is shared by every run, the references' too. A
+    record of the runs larger than the memory is refused first.
+    """
+    runs = checks.common_batch_size({"gains": params, "robot": robot}, {"init": init})
+    simulation.require_memory(max(poses.shape[0], runs), steps, record)
+    if poses.shape[0] == 1 and runs > 1:
+        return jnp.broadcast_to(poses, (runs, *poses.shape[1:]))
+    return poses
+
+
+def _options(steps, velocity, controller, substeps, wheel_limit) -> Options:
+    return simulation.make_options(
+        steps=steps,
+        velocity=velocity,
+        controller=controller,
+        substeps=substeps,
+        wheel_limit=wheel_limit,
+    )
+
+
+# The batched entry point beside each single-run one, for the message that
+# refuses batched parameters in the latter.
+_BATCHED = {"chain_rollout": "batch_chain_rollout", "track_rollout": "batch_track_rollout"}
+
+
+def _run(jitted, spec, params, init, robot, dt, options: Options, n: int | None, entry=""):
+    """Check params, init, robot and dt, then run ``jitted`` on ``spec`` (``n`` runs or one).
+
+    ``entry``: the name of the single-run entry point calling (``n`` None).
+    """
+    params, init, robot, dt = _prepared(
+        params, init, robot, dt, options, n, (entry, _BATCHED.get(entry, ""))
+    )
+    # The robot's speed limiter, as in the rollouts (docs/model.md §4.2.2): the
+    # held command rides in the state's velocity, from rest.
+    options = loops.for_robot(options, robot, dt)
+    return jitted(spec, params, init, robot, dt, options=options)
+
+
+# ---------------------------------------------------------------- entry points
+
+
+def chain_rollout(
+    waypoints: Any,
+    params: Any = None,
+    *,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = DEFAULT_DT,
+    steps: int = 450,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    controller: Any = controllers.SHIM_SUNG,
+    tol_r: float = metrics.DEFAULT_TOL_R,
+    tol_theta: float = metrics.DEFAULT_TOL_THETA,
+    pass_tol_r: float | None = None,
+    pass_tol_theta: float | None = None,
+    substeps: int = loops.DEFAULT_SUBSTEPS,
+    wheel_limit: str = "clip",
+) -> ChainRun:
+    """Drive one robot through ``waypoints`` in order, switching on arrival.
+
+    Args:
+        waypoints: ``(K, 3)`` poses ``[x cm, y cm, θ rad]``, visited in order.
+        params: the controller's parameters (its defaults if ``None``).
+        init: ``(3,)`` initial pose.
+        dt: control period, s.
+        steps: control periods in all (static).
+        robot: robot parameters; default ``Robot()``. Its acceleration
+            limits, where above 0, limit the ideal loop's commands
+            (docs/model.md §4.2.2).
+        velocity: ``"ideal"`` or ``"nonideal"`` (static).
+        controller: a ``Controller`` or its registered name (static).
+        tol_r: arrival distance at the last waypoint, cm (docs/model.md §6: 1).
+        tol_theta: arrival folded-heading error at the last waypoint, rad,
+            ``< π/2`` (docs/model.md §6: 5°).
+        pass_tol_r: distance at which an intermediate waypoint counts as
+            reached, cm; default ``tol_r``.
+        pass_tol_theta: heading tolerance there, rad, ``≤ π/2`` (``π/2``
+            ignores the heading); default ``tol_theta``.
+        substeps: inner steps of the non-ideal loop (static).
+        wheel_limit: ``"clip"`` or ``"scale"``, non-ideal loop (static).
+
+    Returns:
+        A ``ChainRun``; ``arrival`` has one entry per waypoint.
+
+    Raises:
+        ValueError: for misshapen or non-finite poses, bad tolerances, or any
+            bad option or parameter (as ``rollout``).
+    """
+    wp = _pose_stack("waypoints", waypoints, 2, "(K, 3)")
+    tol = _tolerances(tol_r, tol_theta, pass_tol_r, pass_tol_theta)
+    options = _options(steps, velocity, controller, substeps, wheel_limit)
+    simulation.require_memory(1, options.steps, _CHAIN_RECORD)
+    return _run(_chain_jit, (wp, tol), params, init, robot, dt, options, None, "chain_rollout")
+
+
+def batch_chain_rollout(
+    waypoints: Any,
+    params: Any = None,
+    *,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = DEFAULT_DT,
+    steps: int = 450,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    controller: Any = controllers.SHIM_SUNG,
+    tol_r: float = metrics.DEFAULT_TOL_R,
+    tol_theta: float = metrics.DEFAULT_TOL_THETA,
+    pass_tol_r: float | None = None,
+    pass_tol_theta: float | None = None,
+    substeps: int = loops.DEFAULT_SUBSTEPS,
+    wheel_limit: str = "clip",
+) -> ChainRun:
+    """Run ``chain_rollout`` for a batch of ``N`` robots in one call.
+
+    Args:
+        waypoints: ``(N, K, 3)`` one chain per robot, or ``(K, 3)`` shared when
+            ``init`` is ``(N, 3)``.
+        init: ``(3,)`` shared or ``(N, 3)`` initial poses.
+        (the rest as ``chain_rollout``; ``params`` leaves may have shape ``(N,)``.)
+
+    Returns:
+        A ``ChainRun`` whose fields have a leading axis ``N``.
+    """
+    if np.ndim(waypoints) == 2:
+        wp = _pose_stack("waypoints", waypoints, 2, "(K, 3)")
+        if np.ndim(init) != 2:
+            raise ValueError(
+                f"waypoints has shape {wp.shape} and init has shape {np.shape(init)}; "
+                "allowed: waypoints (N, K, 3), or (K, 3) with init (N, 3)"
+            )
+        wp = jnp.broadcast_to(wp, (np.shape(init)[0], *wp.shape))
+    else:
+        wp = _pose_stack("waypoints", waypoints, 3, "(N, K, 3)")
+    tol = _tolerances(tol_r, tol_theta, pass_tol_r, pass_tol_theta)
+    options = _options(steps, velocity, controller, substeps, wheel_limit)
+    wp = _shared_by_every_run(wp, params, robot, init, options.steps, _CHAIN_RECORD)
+    return _run(_batch_chain_jit, (wp, tol), params, init, robot, dt, options, wp.shape[0])
+
+
+def track_rollout(
+    refs: Any,
+    params: Any = None,
+    *,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = DEFAULT_DT,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    controller: Any = controllers.SHIM_SUNG,
+    substeps: int = loops.DEFAULT_SUBSTEPS,
+    wheel_limit: str = "clip",
+) -> TrackRun:
+    """Drive one robot after a moving reference, one reference per period.
+
+    Args:
+        refs: ``(steps, 3)`` reference of each control period; ``steps`` is
+            its length.
+        (the rest as ``chain_rollout``.)
+
+    Returns:
+        A ``TrackRun``.
+    """
+    arr = _pose_stack("refs", refs, 2, "(steps, 3)")
+    options = _options(arr.shape[0], velocity, controller, substeps, wheel_limit)
+    simulation.require_memory(1, options.steps, _TRACK_RECORD)
+    return _run(_track_jit, arr, params, init, robot, dt, options, None, "track_rollout")
+
+
+def batch_track_rollout(
+    refs: Any,
+    params: Any = None,
+    *,
+    init: Any = (0.0, 0.0, 0.0),
+    dt: float = DEFAULT_DT,
+    robot: Robot | None = None,
+    velocity: str = "ideal",
+    controller: Any = controllers.SHIM_SUNG,
+    substeps: int = loops.DEFAULT_SUBSTEPS,
+    wheel_limit: str = "clip",
+) -> TrackRun:
+    """Run ``track_rollout`` for ``N`` robots: ``refs (N, steps, 3)``, ``init (3,)`` or ``(N, 3)``.
+
+    Returns:
+        A ``TrackRun`` whose fields have a leading axis ``N``.
+    """
+    arr = _pose_stack("refs", refs, 3, "(N, steps, 3)")
+    options = _options(arr.shape[1], velocity, controller, substeps, wheel_limit)
+    arr = _shared_by_every_run(arr, params, robot, init, options.steps, _TRACK_RECORD)
+    return _run(_batch_track_jit, arr, params, init, robot, dt, options, arr.shape[0])
+
+
+# ---------------------------------------------------------------- demo
+
+
+def soccer_waypoints() -> np.ndarray:
+    """Return ``SOCCER_WAYPOINTS_DEG`` as ``(K, 3)`` in cm, cm, rad."""
+    wp = np.array(SOCCER_WAYPOINTS_DEG)
+    wp[:, 2] = np.radians(wp[:, 2])
+    return wp
+
+
+class SoccerRun(NamedTuple):
+    """One run of the soccer-like sequence.
+
+    Attributes:
+        controller: the controller's registered name.
+        mode: ``"stop"`` (stop at every waypoint) or ``"pass"`` (pass
+            through the intermediate ones).
+        run: its ``ChainRun``.
+    """
+
+    controller: str
+    mode: str
+    run: ChainRun
+
+
+class SoccerStudy(NamedTuple):
+    """What ``soccer_study`` ran and found.
+
+    Attributes:
+        rows: one per controller and mode: the time since the start of the
+            route at which each waypoint was reached (``"leg i s"``, s,
+            cumulative; ``inf`` if never), the slowest leg (``"slowest leg
+            s"``, the longest time between two waypoints), the path length
+            (``"path cm"``) and the zig-zag count.
+        runs: the ``SoccerRun`` of each row, in the same order.
+        velocity: the velocity loop.
+        steps: control periods of each run.
+        pass_tol_r: pass-through distance, cm.
+        pass_tol_theta: pass-through heading tolerance, rad.
+        robot: the robot run (``Robot``); ``None`` stands for ``Robot()``.
+    """
+
+    rows: list[dict[str, Any]]
+    runs: list[SoccerRun]
+    velocity: str
+    steps: int
+    pass_tol_r: float
+    pass_tol_theta: float
+    robot: Robot | None = None
+
+
+def soccer_study(
+    *,
+    controller_names: Sequence[str] | None = None,
+    velocity: str = "ideal",
+    steps: int = SOCCER_STEPS,
+    pass_tol_r: float = 5.0,
+    pass_tol_theta: float = math.radians(30.0),
+    robot: Robot | None = None,
+) -> SoccerStudy:
+    """Run the soccer-like sequence (``SOCCER_WAYPOINTS_DEG``) for each controller.
+
+    Each controller runs the chain twice: stopping at every waypoint
+    (``docs/model.md §6`` tolerances throughout) and passing through the
+    intermediate ones (``pass_tol_r``, ``pass_tol_theta``). Computed in
+    float64 (the polar baselines' bearing is rounding noise near a goal in
+    float32). ``wmr_jax.report.write_soccer`` draws and writes the result.
+
+    Args:
+        controller_names: registered controllers; default every one.
+        velocity: ``"ideal"`` or ``"nonideal"``.
+        steps: control periods of each run.
+        pass_tol_r: pass-through distance, cm.
+        pass_tol_theta: pass-through heading tolerance, rad, ``≤ π/2``.
+        robot: the robot (one, a number per field); default ``Robot()``.
+            ``soccer_steps(robot)`` gives a slower robot the time it needs;
+            on a robot other than the paper's, Shim–Sung and its schedule
+            run the paper's feasible gains scaled into its wheel budget
+            (``robustness.robot_defaults``).
+
+    Returns:
+        A ``SoccerStudy``: a row and a run per controller and mode, with the
+        settings (and the robot) they were run with.
+    """
+    from wmr_jax._src.studies.robustness import robot_defaults
+
+    names = controllers.controller_names(controller_names)
+    robot = validate_one_robot(robot, "soccer_study")
+    # Every setting is checked before the first controller runs (and compiles).
+    _tolerances(metrics.DEFAULT_TOL_R, metrics.DEFAULT_TOL_THETA, pass_tol_r, pass_tol_theta)
+    for name in names:
+        _options(steps, velocity, name, loops.DEFAULT_SUBSTEPS, "clip")
+    wp = soccer_waypoints()
+    modes = (("stop", None, None), ("pass", pass_tol_r, pass_tol_theta))
+    rows, runs = [], []
+    with jax.enable_x64(True):
+        for name in names:
+            params = robot_defaults(name, robot)
+            for mode, p_r, p_theta in modes:
+                run = chain_rollout(
+                    wp,
+                    params=params,
+                    controller=name,
+                    velocity=velocity,
+                    steps=steps,
+                    pass_tol_r=p_r,
+                    pass_tol_theta=p_theta,
+                    robot=robot,
+                )
+                rows.append({"controller": name, "mode": mode, **_leg_summary(run)})
+                runs.append(SoccerRun(name, mode, run))
+    return SoccerStudy(rows, runs, velocity, steps, pass_tol_r, pass_tol_theta, robot)
+
+
+def soccer_steps(robot: Robot | None = None, steps: int = SOCCER_STEPS) -> int:
+    """Control periods for the soccer-like route on ``robot``: ``steps`` (450, 14.85 s) scaled.
+
+    The route and its 450 periods are the paper robot's. A robot whose wheels
+    cannot follow the paper's feasible gains (``60 + 10 L > V_max``) gets them
+    stretched as every study stretches its horizon (``robustness.study_horizon``:
+    ``(60 + 10 L) / V_max``; the TurtleBot3 Burger: 2775 periods).
+
+    Raises:
+        ValueError: for anything but one valid robot, or ``steps`` not an integer >= 1.
+    """
+    from wmr_jax._src.sim.poses import HORIZON_S
+    from wmr_jax._src.studies.robustness import study_horizon
+
+    steps = checks.check_int("steps", steps)
+    return math.ceil(steps * study_horizon(robot) / HORIZON_S - 1e-9)
+
+
+def _leg_summary(run: ChainRun) -> dict[str, Any]:
+    """Return the arrival at each waypoint, the slowest leg, path and zig-zag of a run."""
+    arrival = np.asarray(run.arrival, dtype=float)
+    row: dict[str, Any] = {f"leg {i + 1} s": float(t) for i, t in enumerate(arrival)}
+    # A waypoint never reached makes its leg, and every later one, infinite
+    # (inf − inf would be NaN).
+    with np.errstate(invalid="ignore"):
+        legs = np.diff(np.concatenate([[0.0], arrival]))
+    legs[~np.isfinite(arrival)] = np.inf
+    row["slowest leg s"] = float(np.max(legs))
+    row["path cm"] = float(np.sum(np.asarray(run.trajectory.distance)))
+    row["zigzag"] = int(metrics.zigzag_count(run.trajectory))
+    return row
