@@ -34,7 +34,7 @@ def test_the_code_version_follows_the_computing_source_only(source_copy):
     provenance.code_version.cache_clear()
     assert provenance.code_version() == before
     # The law does: another version.
-    with (source_copy / "controllers" / "shim_sung.py").open("a") as f:
+    with (source_copy / "model" / "controllers" / "shim_sung.py").open("a") as f:
         f.write("\n# a changed law\n")
     provenance.code_version.cache_clear()
     assert provenance.code_version() != before
