@@ -140,6 +140,8 @@ def assert_metrics_of_runs(m, traj, refs, dt=0.033) -> dict:
 # idle. Seconds per file measured on a 2-core machine (the mean of two runs
 # of the whole suite); a file not listed counts as one second.
 FILE_SECONDS = {
+    "test_identify.py": 70,
+    "test_export.py": 60,
     "test_tuning_robust.py": 56,
     "test_sensing.py": 45,
     "test_tuning.py": 42,
@@ -157,6 +159,8 @@ FILE_SECONDS = {
     "test_controllers.py": 13,
     "test_robot_followups.py": 13,
     "test_usability.py": 12,
+    "test_user_view.py": 12,
+    "test_tuning_best.py": 10,
     "test_maps.py": 12,
     "test_bench.py": 12,
     "test_sharding.py": 12,
@@ -176,7 +180,6 @@ FILE_SECONDS = {
     "test_reference.py": 4,
     "test_metrics.py": 4,
     "test_meaning_metrics.py": 3,
-    "test_dynamics_checked.py": 3,
     "test_params.py": 3,
     "test_accel_limits.py": 2,
     "test_robot_commands.py": 2,
