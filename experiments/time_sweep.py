@@ -32,7 +32,7 @@ def main(argv: list[str]) -> int:
     import wmr_jax as w
 
     if args.cpu_devices is not None:
-        w.use_cpu_devices(args.cpu_devices)
+        w.studies.use_cpu_devices(args.cpu_devices)
     import jax
 
     refs = np.asarray(w.sample_poses(0, args.poses), dtype=np.float32)

@@ -93,10 +93,10 @@ def _run_metrics(traj, refs, dt):
     refs = jnp.asarray(refs)
     return {
         "arrival": w.arrival_time(traj, refs, dt=dt),
-        "zigzag": w.zigzag_count(traj),
-        "path": w.path_length(traj),
+        "zigzag": w.studies.zigzag_count(traj),
+        "path": w.studies.path_length(traj),
         # Whether each sample (the pose after each period) is arrived.
-        "arrived": w.arrived(traj.poses[..., 1:, :], refs[..., None, :]),
+        "arrived": w.studies.arrived(traj.poses[..., 1:, :], refs[..., None, :]),
     }
 
 

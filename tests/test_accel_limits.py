@@ -137,7 +137,7 @@ def test_a_ros_yaml_gives_the_limits_and_says_they_apply(tmp_path):
         "linear: {x: {max_velocity: 0.5, max_acceleration: 0.8, min_acceleration: -0.4}}\n"
         "angular: {z: {max_acceleration: 2.0, max_jerk: 9.0}}\n"
     )
-    read = w.read_robot(str(path))
+    read = w.dynamics.read_robot(str(path))
     assert read.robot.accel_max == pytest.approx(80.0) and read.robot.angular_accel_max == 2.0
     assert read.accelerations == {
         "linear.x.max_acceleration": pytest.approx(80.0),
@@ -155,7 +155,7 @@ def test_a_ros_yaml_gives_the_limits_and_says_they_apply(tmp_path):
         "wheel_separation: 0.3\nwheel_radius: 0.05\n"
         "linear: {x: {has_acceleration_limits: false, max_acceleration: 0.8}}\n"
     )
-    read = w.read_robot(str(path))
+    read = w.dynamics.read_robot(str(path))
     assert read.robot.accel_max == 0.0 and not read.accelerations
     assert "speed limiter" not in read.note
     assert "linear.x.max_acceleration" in read.note.split("ignored: ")[1]

@@ -18,7 +18,7 @@ from wmr_jax import controllers
 def _error(cos_phi, r=10.0):
     """Error coordinates with a given ``cos φ_e`` (``sin φ_e ≥ 0``) and a zero heading error."""
     cos_phi = float(cos_phi)
-    return w.PolarError(
+    return w.controllers.PolarError(
         jnp.float64(r),
         jnp.float64(cos_phi),
         jnp.float64(math.sqrt(max(0.0, 1.0 - cos_phi**2))),
@@ -52,13 +52,16 @@ def test_region_zero_includes_its_radius_and_region_one_excludes_its_outer_one()
     edges = ((1.5, 0), (np.nextafter(1.5, 2.0), 1), (np.nextafter(12.0, 0.0), 1), (12.0, 2))
     for r, want in edges:
         ref = np.array([r, 0.0, 0.0])  # straight ahead: d = 1
-        label = w.region_label(w.polar_error(pose, ref), gains)
+        label = w.controllers.region_label(w.controllers.polar_error(pose, ref), gains)
         assert int(label) == want, (r, want)
 
 
 @pytest.mark.parametrize(
     ("name", "params", "rate"),
-    [("aicardi", w.AicardiGains(k=6.0), 6.0), ("astolfi-corke", w.AstolfiGains(), None)],
+    [
+        ("aicardi", w.controllers.AicardiGains(k=6.0), 6.0),
+        ("astolfi-corke", w.controllers.AstolfiGains(), None),
+    ],
 )
 @pytest.mark.parametrize("heading_deg", [30.0, -100.0, 179.0])
 def test_the_polar_baselines_only_turn_to_the_heading_at_the_goal(name, params, rate, heading_deg):
@@ -84,8 +87,8 @@ def test_a_heading_exactly_tol_theta_off_is_arrived_and_one_ulp_more_is_not(tol_
     ref = np.zeros(3)
     poses = np.array([[0.0, 0.0, tol_theta], [0.0, 0.0, -tol_theta]])
     beyond = np.array([[0.0, 0.0, np.nextafter(tol_theta, 2.0)]])
-    assert np.all(w.arrived(poses, ref, tol_theta=tol_theta))
-    assert not np.any(w.arrived(beyond, ref, tol_theta=tol_theta))
+    assert np.all(w.studies.arrived(poses, ref, tol_theta=tol_theta))
+    assert not np.any(w.studies.arrived(beyond, ref, tol_theta=tol_theta))
     # The arrival time and the streamed metrics of a run that sits there agree.
     traj = w.Trajectory(
         np.tile(poses[:1], (4, 1)), np.zeros(3), np.zeros(3), np.zeros(3, np.int32),

@@ -117,7 +117,7 @@ def test_laws_equal_their_published_coordinates():
     ("command", "gains"),
     [
         (w.control, w.Gains(kr=np.array([60.0, 70.0, 80.0]))),
-        (w.control_diagnostics, w.Gains(kr=np.array([60.0, 70.0, 80.0]))),
+        (w.controllers.control_diagnostics, w.Gains(kr=np.array([60.0, 70.0, 80.0]))),
         (baselines.aicardi_control, AicardiGains(gamma=np.array([1.0, 2.0, 3.0]))),
     ],
 )
@@ -235,7 +235,7 @@ def test_a_new_controller_needs_no_special_case():
     """A user's controller runs through every entry point by declaring what it supports."""
 
     def proportional(pose, ref, params, *, temperature=None, frame=None):
-        err = w.polar_error(pose, ref, frame=frame)
+        err = w.controllers.polar_error(pose, ref, frame=frame)
         return 3.0 * err.r * err.cos_phi, 4.0 * err.sin_phi
 
     custom = w.Controller(
@@ -253,12 +253,12 @@ def test_a_new_controller_needs_no_special_case():
     with pytest.raises(ValueError, match="temperature"):
         w.rollout(refs[0], controller=custom, temperature=0.1)
     w.register_controller(custom)
-    assert "test-proportional" in w.registered_names()
+    assert "test-proportional" in w.controllers.registered_names()
     assert w.get_controller("test-proportional") is custom
     # A built-in name is not taken over by accident, and a name must be a CLI word.
     with pytest.raises(ValueError, match="'shim-sung' is registered already"):
         w.register_controller(dataclasses.replace(custom, name="shim-sung"))
-    assert w.get_controller("shim-sung") is w.SHIM_SUNG
+    assert w.get_controller("shim-sung") is w.controllers.SHIM_SUNG
     for bad in ("../evil", 7, "Two Words"):
         with pytest.raises(ValueError, match=r"controller.name = .* is not allowed"):
             w.register_controller(dataclasses.replace(custom, name=bad))
@@ -287,14 +287,16 @@ def test_a_new_controller_needs_no_special_case():
     with pytest.raises(ValueError, match="backward = 'no' is not allowed"):
         baselines.driving_error(np.zeros(3), refs[0], backward="no")
     with pytest.raises(ValueError, match="warn = 'no' is not allowed"):
-        w.check_feasible(w.Gains(kr=200.0), warn="no")
+        w.controllers.check_feasible(w.Gains(kr=200.0), warn="no")
 
 
 @pytest.mark.parametrize("law", ["aicardi_control", "astolfi_control"])
 def test_the_baselines_refuse_a_temperature_they_would_ignore(law):
     from wmr_jax import controllers
 
-    params = w.AicardiGains() if law == "aicardi_control" else w.AstolfiGains()
+    params = (
+        w.controllers.AicardiGains() if law == "aicardi_control" else w.controllers.AstolfiGains()
+    )
     with pytest.raises(ValueError, match="temperature = 0.5 is not allowed; allowed: None"):
         getattr(controllers, law)(
             jnp.zeros(3), jnp.array([30.0, 30.0, 0.0]), params, temperature=0.5

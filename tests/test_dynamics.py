@@ -91,7 +91,7 @@ def test_the_primitives_keep_the_callers_float_dtype_and_empty_batches():
     assert dynamics.sin_cos(np.float16(0.5))[0].dtype == np.float16
     assert dynamics.arc_step(np.zeros(3, np.float32), 10.0, 1.0, 0.1).dtype == np.float32
     assert dynamics.arc_step(np.zeros((0, 3)), 10.0, 1.0, 0.1).shape == (0, 3)
-    assert dynamics.initial_state([0, 0, 0]).pose.dtype == w.float_dtype()
+    assert dynamics.initial_state([0, 0, 0]).pose.dtype == w.studies.float_dtype()
 
 
 def test_check_stability_names_the_substeps_a_stiff_wheel_loop_needs():

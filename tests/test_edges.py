@@ -25,7 +25,7 @@ STEPS = 60
 
 def error():
     """The error coordinates of the origin with respect to ``REF``."""
-    return w.polar_error([0.0, 0.0, 0.0], REF)
+    return w.controllers.polar_error([0.0, 0.0, 0.0], REF)
 
 
 # ---------------------------------------------------------------- the dtype's range
@@ -84,18 +84,22 @@ def test_gains_the_sampled_law_cannot_follow_warn():
     with pytest.warns(w.SamplingWarning, match=r"k_theta\*dt = 1e\+03"):
         w.rollout(REF, dt=100.0, steps=STEPS)
     # The paper's gains and the tuned ones of the README are well inside.
-    assert w.check_sampling(w.Gains(), 0.033) and w.check_sampling(w.Gains(kr=60.0), 0.033)
-    heading, distance = w.sampling_margins(w.Gains(kr=89.7, r_m=2.79, r_a=2.79), 0.033)
+    assert w.controllers.check_sampling(w.Gains(), 0.033) and w.controllers.check_sampling(
+        w.Gains(kr=60.0), 0.033
+    )
+    heading, distance = w.controllers.sampling_margins(w.Gains(kr=89.7, r_m=2.79, r_a=2.79), 0.033)
     assert float(heading) < 2 and 1.6 < float(distance) < 2
     # Called with values, the helpers check them as a rollout would.
     with pytest.raises(ValueError, match=r"gains.r_a = 20.0 is not allowed; allowed: r_a <= r_m"):
-        w.sampling_margins(w.Gains(r_m=2.79), 0.033)
+        w.controllers.sampling_margins(w.Gains(r_m=2.79), 0.033)
     with pytest.raises(ValueError, match=r"dt = -0.1 is not allowed"):
-        w.sampling_margins(w.Gains(), -0.1)
-    heading, _ = w.sampling_margins(w.Gains(k_theta=10.0), np.array([0.01, 0.02]))  # per period
+        w.controllers.sampling_margins(w.Gains(), -0.1)
+    heading, _ = w.controllers.sampling_margins(
+        w.Gains(k_theta=10.0), np.array([0.01, 0.02])
+    )  # per period
     np.testing.assert_allclose(heading, [0.1, 0.2])
     with pytest.raises(ValueError, match=r"robot.half_track = -2.0 is not allowed"):
-        w.wheel_speed_bound(w.Gains(), w.Robot(half_track=-2.0))
+        w.controllers.wheel_speed_bound(w.Gains(), w.Robot(half_track=-2.0))
 
 
 @pytest.mark.parametrize("dt", [1e-46, 1e39])
@@ -191,43 +195,46 @@ def test_headings_beyond_what_float64_resolves_are_refused():
         (lambda t: w.arrival_time(np.zeros((5, 3)), REF, dt=0.033), "traj is a ndarray"),
         (lambda t: w.arrival_time(t, np.zeros((4, 3)), dt=0.033), "refs has batch shape"),
         (lambda t: w.arrival_time(t, REF, dt=0.033, tol_theta=5.0), "tol_theta = 5.0"),
-        (lambda t: w.arrived(np.zeros((2, 3)), np.zeros((3, 3))), "refs has batch shape"),
-        (lambda t: w.region_time(t, dt=-1.0), "dt = -1.0 is not allowed"),
-        (lambda t: w.zigzag_count(t, v_dead_band=-1.0), "v_dead_band = -1.0 is not allowed"),
-        (lambda t: w.zigzag_count(t, omega_dead_band=np.nan), "omega_dead_band = nan"),
-        (lambda t: w.path_length(np.zeros((5, 3))), "traj is a ndarray"),
+        (lambda t: w.studies.arrived(np.zeros((2, 3)), np.zeros((3, 3))), "refs has batch shape"),
+        (lambda t: w.studies.region_time(t, dt=-1.0), "dt = -1.0 is not allowed"),
+        (
+            lambda t: w.studies.zigzag_count(t, v_dead_band=-1.0),
+            "v_dead_band = -1.0 is not allowed",
+        ),
+        (lambda t: w.studies.zigzag_count(t, omega_dead_band=np.nan), "omega_dead_band = nan"),
+        (lambda t: w.studies.path_length(np.zeros((5, 3))), "traj is a ndarray"),
         (lambda t: w.success_rate([]), r"times has shape \(0,\) \(no runs\); allowed: one or"),
         (lambda t: w.success_rate(t), "times = Trajectory is not allowed"),
         (lambda t: w.success_rate([True, False]), r"times = \[True, False\] is not allowed"),
         (lambda t: w.success_rate([0.5, -0.1]), r"times = .*-0.1.* is not allowed"),
         (lambda t: w.success_rate([0.5, np.nan]), r"times = .*nan.* is not allowed"),
         (
-            lambda t: w.path_length(t._replace(distance=t.distance.at[1, 2].set(np.nan))),
+            lambda t: w.studies.path_length(t._replace(distance=t.distance.at[1, 2].set(np.nan))),
             r"traj.distance = .*nan.* allowed: finite numbers, cm, >= 0",
         ),
         (
-            lambda t: w.path_length(t._replace(distance=-t.distance)),
+            lambda t: w.studies.path_length(t._replace(distance=-t.distance)),
             "traj.distance = .* allowed: finite numbers, cm, >= 0",
         ),
         (
-            lambda t: w.path_length(t._replace(distance=t.distance[:, 1:])),
+            lambda t: w.studies.path_length(t._replace(distance=t.distance[:, 1:])),
             r"traj.distance has shape \(3, 3\); allowed: \(3, 4\), one value per control period",
         ),
-        (lambda t: w.path_length(t._replace(distance=None)), "traj.distance = None is not"),
+        (lambda t: w.studies.path_length(t._replace(distance=None)), "traj.distance = None is not"),
         (
-            lambda t: w.zigzag_count(t._replace(v=t.v > 0)),
+            lambda t: w.studies.zigzag_count(t._replace(v=t.v > 0)),
             r"traj.v = an array of bool \(3, 4\) is not allowed; allowed: finite numbers, cm/s",
         ),
         (
-            lambda t: w.zigzag_count(t._replace(omega=t.omega[0])),
+            lambda t: w.studies.zigzag_count(t._replace(omega=t.omega[0])),
             r"traj.omega has shape \(4,\); allowed: \(3, 4\)",
         ),
         (
-            lambda t: w.region_time(t._replace(region=t.region + 4), dt=0.033),
+            lambda t: w.studies.region_time(t._replace(region=t.region + 4), dt=0.033),
             "traj.region = .* allowed: integer region labels 0 to 3",
         ),
         (
-            lambda t: w.region_time(t._replace(region=t.region * 1.0), dt=0.033),
+            lambda t: w.studies.region_time(t._replace(region=t.region * 1.0), dt=0.033),
             r"traj.region = an array of float\d+ \(3, 4\) is not allowed",
         ),
         (
@@ -266,7 +273,7 @@ def test_lists_are_fields_and_size_one_axes_are_shared():
     for traj in (as_list, one_ref):
         np.testing.assert_array_equal(np.asarray(traj.poses), np.asarray(as_array.poses))
     np.testing.assert_array_equal(np.asarray(final), np.asarray(as_array.poses[:, -1]))
-    assert w.AicardiGains(k=(1.0, 2.0)).k.shape == (2,)
+    assert w.controllers.AicardiGains(k=(1.0, 2.0)).k.shape == (2,)
     with pytest.raises(ValueError, match=r"batch sizes differ \(refs: 2, gains\.kr: 3\)"):
         w.batch_rollout([REF, REF], w.Gains(kr=kr), steps=3)
 
@@ -287,7 +294,10 @@ def test_every_batched_entry_point_shares_one_reference_with_each_run_of_batched
     gains, each = w.Gains(kr=kr), [w.Gains(kr=[k]) for k in kr]
     one = np.array([REF])
     disturbance = studies.sample_disturbance(jax.random.key(0), one, 20, noise_xy=0.5)
-    ekf, ekfs = w.EKFParams(sigma_xy=[0.2, 0.9]), [w.EKFParams(sigma_xy=s) for s in (0.2, 0.9)]
+    ekf, ekfs = (
+        w.studies.EKFParams(sigma_xy=[0.2, 0.9]),
+        [w.studies.EKFParams(sigma_xy=s) for s in (0.2, 0.9)],
+    )
     chain = np.array([[[20.0, 0.0, 0.0], REF]])
     track = np.broadcast_to(np.array(REF), (1, 20, 3))
     for run, batched, singles in (
@@ -337,7 +347,7 @@ def test_a_study_that_judges_one_loop_refuses_a_batch_of_parameters():
         studies.evaluate_loop(batched, np.array([REF]))
     with pytest.raises(ValueError, match=r"^params_by_name\['b'\].params.kr has shape"):
         studies.standard_conditions({"a": w.Gains(), "b": batched}, np.array([REF]), None)
-    loop = studies.ClosedLoop("shim-sung", w.Gains(), w.EKFParams(sigma_xy=[0.2, 0.9]))
+    loop = studies.ClosedLoop("shim-sung", w.Gains(), w.studies.EKFParams(sigma_xy=[0.2, 0.9]))
     with pytest.raises(ValueError, match=r"^loop.estimator.sigma_xy has shape \(2,\)"):
         studies.evaluate_loop(loop, np.array([REF]))
 
@@ -402,9 +412,9 @@ def test_wheel_condition_holds_exactly_at_its_boundary():
     robot = w.Robot()
     k_theta = 10.0
     at = float(robot.v_max) - float(robot.half_track) * k_theta  # k_r + L k_θ = V_max
-    assert bool(w.check_feasible(w.Gains(kr=at - 1e-6, k_theta=k_theta)))
-    assert bool(w.check_feasible(w.Gains(kr=at, k_theta=k_theta)))
-    assert not bool(w.check_feasible(w.Gains(kr=at + 1e-6, k_theta=k_theta)))
+    assert bool(w.controllers.check_feasible(w.Gains(kr=at - 1e-6, k_theta=k_theta)))
+    assert bool(w.controllers.check_feasible(w.Gains(kr=at, k_theta=k_theta)))
+    assert not bool(w.controllers.check_feasible(w.Gains(kr=at + 1e-6, k_theta=k_theta)))
 
 
 def test_the_tuners_box_reaches_the_wheel_limit():
@@ -443,9 +453,12 @@ def test_com_offset_is_allowed_up_to_the_body_edge():
         # A NaN pose is not "at the goal" (r_e = 0), and a (2,) ref is no pose.
         (lambda: w.control(jax.numpy.array([np.nan, 0.0, 0.0]), REF, w.Gains()), "not finite"),
         (lambda: w.control([0.0, 0.0, 0.0], [30.0, 30.0], w.Gains()), r"ref has shape \(2,\)"),
-        (lambda: w.control_diagnostics([0.0, 0.0, 0.0], REF, w.Gains(kr=-1.0)), "gains.kr = -1"),
         (
-            lambda: w.control_diagnostics([0.0, 0.0, 0.0], REF, None),
+            lambda: w.controllers.control_diagnostics([0.0, 0.0, 0.0], REF, w.Gains(kr=-1.0)),
+            "gains.kr = -1",
+        ),
+        (
+            lambda: w.controllers.control_diagnostics([0.0, 0.0, 0.0], REF, None),
             "gains = None is not allowed; allowed: a wmr_jax.Gains",
         ),
     ],
@@ -458,7 +471,9 @@ def test_the_law_functions_check_what_users_pass(call, message):
 def test_a_frame_may_be_one_array_of_four_rows():
     # (x, y, cos θ, sin θ) of two poses as a (4, 2) array, as a tuple of rows would be.
     frame = np.array([[0.0, 1.0], [0.0, 0.0], [1.0, 1.0], [0.0, 0.0]])
-    np.testing.assert_allclose(w.polar_error(None, [10.0, 0.0, 0.0], frame=frame).r, [10.0, 9.0])
+    np.testing.assert_allclose(
+        w.controllers.polar_error(None, [10.0, 0.0, 0.0], frame=frame).r, [10.0, 9.0]
+    )
 
 
 def test_a_bool_among_numbers_is_refused_by_the_batch_and_reference_entry_points():
@@ -472,7 +487,7 @@ def test_a_bool_among_numbers_is_refused_by_the_batch_and_reference_entry_points
 
 def test_the_entry_points_check_concrete_gains_beside_traced_poses():
     # Mapping over poses with concrete, bad gains still names the gains.
-    bad = w.AstolfiGains(k_rho=-3.0)
+    bad = w.controllers.AstolfiGains(k_rho=-3.0)
     with pytest.raises(ValueError, match=r"gains\.k_rho = -3"):
         jax.vmap(lambda q: w.controllers.astolfi_control(q, [30.0, 30.0, 0.0], bad))(
             jax.numpy.zeros((4, 3))
@@ -506,11 +521,15 @@ def test_numpy_baseline_checks_as_final_poses_does():
     ("call", "message"),
     [
         (
-            lambda: w.controllers.aicardi_control([0, 0, 0], REF, w.AicardiGains(gamma=-1.0)),
+            lambda: w.controllers.aicardi_control(
+                [0, 0, 0], REF, w.controllers.AicardiGains(gamma=-1.0)
+            ),
             r"gains\.gamma = -1",
         ),
         (
-            lambda: w.controllers.astolfi_control([0, 0, 0], REF, w.AstolfiGains(k_rho=-3.0)),
+            lambda: w.controllers.astolfi_control(
+                [0, 0, 0], REF, w.controllers.AstolfiGains(k_rho=-3.0)
+            ),
             r"gains\.k_rho = -3",
         ),
         (
@@ -518,7 +537,7 @@ def test_numpy_baseline_checks_as_final_poses_does():
             r"allowed: a wmr_jax\.AicardiGains",
         ),
         (
-            lambda: w.controllers.astolfi_control([0, 0], REF, w.AstolfiGains()),
+            lambda: w.controllers.astolfi_control([0, 0], REF, w.controllers.AstolfiGains()),
             r"pose has shape \(2,\)",
         ),
         (lambda: w.controllers.knot_radii(1), r"knots = 1 is not allowed"),
@@ -591,7 +610,7 @@ def test_a_parameter_below_the_smallest_normal_number_is_told_what_is_allowed():
 def test_wheel_speeds_take_lists():
     """A list raised "can't multiply sequence": lists are arrays, here as everywhere."""
     np.testing.assert_allclose(
-        np.asarray(w.wheel_speeds([1.0, 2.0], [0.0, 1.0], w.Robot(half_track=2.0))),
+        np.asarray(w.controllers.wheel_speeds([1.0, 2.0], [0.0, 1.0], w.Robot(half_track=2.0))),
         [[1.0, 1.0], [0.0, 4.0]],
     )
 
@@ -599,8 +618,8 @@ def test_wheel_speeds_take_lists():
 @pytest.mark.parametrize(
     ("name", "call"),
     [
-        ("time_bounds", lambda x: w.time_bounds(np.array([[30.0, 30.0, 0.0]]) * x)),
-        ("check_feasible", lambda x: w.check_feasible(w.Gains(kr=x))),
+        ("time_bounds", lambda x: w.studies.time_bounds(np.array([[30.0, 30.0, 0.0]]) * x)),
+        ("check_feasible", lambda x: w.controllers.check_feasible(w.Gains(kr=x))),
         ("success_rate", lambda x: w.success_rate(x * np.ones(3))),
         ("sweep", lambda x: w.sweep(np.array([REF]), w.Gains(kr=x), steps=3)),
         ("tuning.evaluate", lambda x: tuning.evaluate(w.Gains(kr=x), np.array([REF]))),
@@ -617,10 +636,13 @@ def test_host_functions_say_they_need_values_inside_a_transformation(name, call)
 
 def test_the_wheel_speed_bound_names_batches_of_two_sizes():
     with pytest.raises(ValueError, match=r"^batch sizes differ \(gains.kr: 2, robot.half_track: 3"):
-        w.wheel_speed_bound(w.Gains(kr=[1.0, 2.0]), w.Robot(half_track=[1.0, 2.0, 3.0]))
-    bound = w.wheel_speed_bound(w.Gains(kr=[1.0, 2.0]), w.Robot(half_track=[2.0]))
+        w.controllers.wheel_speed_bound(w.Gains(kr=[1.0, 2.0]), w.Robot(half_track=[1.0, 2.0, 3.0]))
+    bound = w.controllers.wheel_speed_bound(w.Gains(kr=[1.0, 2.0]), w.Robot(half_track=[2.0]))
     np.testing.assert_allclose(np.asarray(bound), [1.0 + 2.0 * 10.0, 2.0 + 2.0 * 10.0])
-    assert float(jax.jit(lambda k: w.wheel_speed_bound(w.Gains(kr=k)))(60.0)) == 60.0 + 18.5
+    assert (
+        float(jax.jit(lambda k: w.controllers.wheel_speed_bound(w.Gains(kr=k)))(60.0))
+        == 60.0 + 18.5
+    )
 
 
 def test_a_trajectory_larger_than_the_memory_is_refused_before_it_runs(monkeypatch):

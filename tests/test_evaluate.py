@@ -98,7 +98,7 @@ def test_a_single_row_is_one_reference_and_none_arrived_is_said(capsys, tmp_path
 
 def test_the_files_estimator_is_used_unless_overridden(capsys, tmp_path):
     gains = w.Gains(kr=60.0)
-    ekf = w.EKFParams(sigma_xy=0.8)  # not the defaults: --estimator ekf keeps the file's
+    ekf = w.studies.EKFParams(sigma_xy=0.8)  # not the defaults: --estimator ekf keeps the file's
     gfile = _gains_file(tmp_path, ClosedLoop(SHIM_SUNG, gains, ekf))
     refs_file = _npy(tmp_path, REFS[:3])
     base = ["--gains", gfile, "--refs", refs_file, "--condition", "noise", "--seed", "1"]

@@ -178,7 +178,7 @@ def _relative(c_cmd, jax_cmd):
 @pytest.mark.parametrize(
     "label, estimator",
     [("robust", None), ("robust", "observer"), ("robust", "ekf"), ("fixed", None)]
-    + [("fixed", w.ObserverParams(position=0.4, heading=0.6, compensate=False))],
+    + [("fixed", w.studies.ObserverParams(position=0.4, heading=0.6, compensate=False))],
 )
 def test_files_compile_clean_and_stand_alone(
     tmp_path, robust_file, fixed_file, label, estimator, real
@@ -275,17 +275,17 @@ def test_a_library_built_in_a_temporary_folder_goes_with_its_controller(tmp_path
 
 
 def test_c_sources_refuses_what_it_cannot_write():
-    loop = w.ClosedLoop(w.SHIM_SUNG, w.Gains())
+    loop = w.ClosedLoop(w.controllers.SHIM_SUNG, w.Gains())
     with pytest.raises(ValueError, match="real = 'long' is not allowed"):
         export.c_sources(loop, real="long")
     with pytest.raises(ValueError, match="loop.controller = 'aicardi' with Gains is not allowed"):
-        export.c_sources(w.ClosedLoop(w.AICARDI, w.Gains()))
+        export.c_sources(w.ClosedLoop(w.controllers.AICARDI, w.Gains()))
     with pytest.raises(ValueError, match="period = 0"):
         export.c_sources(loop, period=0)
     with pytest.raises(ValueError, match="loop is a Gains"):
         export.c_sources(w.Gains())
     with pytest.raises(ValueError, match="one value"):
-        export.c_sources(w.ClosedLoop(w.SHIM_SUNG, w.Gains(kr=np.array([60.0, 70.0]))))
+        export.c_sources(w.ClosedLoop(w.controllers.SHIM_SUNG, w.Gains(kr=np.array([60.0, 70.0]))))
 
 
 # ---------------------------------------------------------------- one step
@@ -294,8 +294,8 @@ def test_c_sources_refuses_what_it_cannot_write():
 @pytest.mark.parametrize(
     "label, estimator, latency",
     [("robust", "ekf", 1), ("robust", "ekf", 0), ("fixed", "observer", 1), ("fixed", None, 0)]
-    + [("fixed", w.ObserverParams(position=0.4, heading=0.6, compensate=False), 1)]
-    + [("robust", w.EKFParams(wheel_error=0.05, compensate=False), 1)],
+    + [("fixed", w.studies.ObserverParams(position=0.4, heading=0.6, compensate=False), 1)]
+    + [("robust", w.studies.EKFParams(wheel_error=0.05, compensate=False), 1)],
 )
 def test_one_step_equals_the_jax_step(tmp_path, robust_file, fixed_file, label, estimator, latency):
     """10⁴ random states, double: 1e-12 relative (measured: about 1e-13)."""
@@ -387,7 +387,7 @@ def test_fixed_law_equals_the_numpy_reference(tmp_path, fixed_file):
     compiled.start(refs, 0)
     c_cmd = compiled.step(meas)
     expected = np.array(
-        [w.reference_control(m, r, loop.params) for m, r in zip(meas, refs, strict=True)]
+        [w.studies.reference_control(m, r, loop.params) for m, r in zip(meas, refs, strict=True)]
     )
     ok = _relative(c_cmd, expected) < 1e-9
     # The reference's atan2 may put a pose within rounding of a switch on its other side.
@@ -633,8 +633,8 @@ def test_the_deploy_pages_host_loop_drives_a_robot_to_its_goal(tmp_path, robust_
         subprocess.run([str(exe)], capture_output=True, text=True).stdout.split(), float
     )
     # Arrived as docs/model.md §6 counts it: within 1 cm and 5° of the goal.
-    assert np.hypot(final[0] - 30.0, final[1] - 20.0) <= w.DEFAULT_TOL_R
-    assert abs(np.angle(np.exp(1j * (final[2] - 1.0)))) <= w.DEFAULT_TOL_THETA
+    assert np.hypot(final[0] - 30.0, final[1] - 20.0) <= w.studies.DEFAULT_TOL_R
+    assert abs(np.angle(np.exp(1j * (final[2] - 1.0)))) <= w.studies.DEFAULT_TOL_THETA
 
 
 @pytest.mark.parametrize("velocity", ["ideal", "nonideal"])
@@ -678,10 +678,10 @@ def test_compensation_through_a_binding_speed_limiter_beyond_one_period(
 
 
 _BASELINES = [
-    (w.AICARDI, w.AicardiGains()),
-    (w.AICARDI, w.AicardiGains(backward=True)),
-    (w.ASTOLFI, w.AstolfiGains(backward=False)),
-    (w.ASTOLFI, w.AstolfiGains()),
+    (w.controllers.AICARDI, w.controllers.AicardiGains()),
+    (w.controllers.AICARDI, w.controllers.AicardiGains(backward=True)),
+    (w.controllers.ASTOLFI, w.controllers.AstolfiGains(backward=False)),
+    (w.controllers.ASTOLFI, w.controllers.AstolfiGains()),
 ]
 
 

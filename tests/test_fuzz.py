@@ -145,7 +145,9 @@ def test_metrics(refs, dt, tol_r, tol_theta, use_traj):
         names,
         never=True,
     )
-    check_call(lambda: w.arrived(_traj().poses, refs, tol_r=tol_r, tol_theta=tol_theta), names)
+    check_call(
+        lambda: w.studies.arrived(_traj().poses, refs, tol_r=tol_r, tol_theta=tol_theta), names
+    )
 
 
 @fuzz_settings()
@@ -165,7 +167,7 @@ def test_metrics(refs, dt, tol_r, tol_theta, use_traj):
 def test_law_sampler_and_checks(pose, ref, field, value, seed, n):
     gains = w.Gains(**{field: value})
     check_call(lambda: w.sample_poses(seed, n), ["seed", "n"])
-    check_call(lambda: w.check_feasible(gains), [f"gains.{field}", "gains"])
+    check_call(lambda: w.controllers.check_feasible(gains), [f"gains.{field}", "gains"])
     check_call(
         lambda: w.control(pose, ref, gains),
         ["gains", "pose", "ref"],

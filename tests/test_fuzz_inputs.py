@@ -205,7 +205,7 @@ def _estimator_parameters(kind, field, good, bad, use_bad):
     valid = not use_bad or (kind == "ekf" and bad == 2.5)
     # A gain of 0 is an observer that ignores the measurement: allowed.
     valid = valid or (kind == "observer" and (bad == [0.5, 0.5, 0.5] or _is_zero(bad)))
-    params = (w.EKFParams if kind == "ekf" else w.ObserverParams)(**{field: value})
+    params = (w.studies.EKFParams if kind == "ekf" else w.studies.ObserverParams)(**{field: value})
     result = _expect(
         lambda: studies.disturbed_metrics(_disturbance(), estimator=params),
         valid,

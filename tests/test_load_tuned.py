@@ -120,8 +120,8 @@ def test_a_fixed_gain_file_written_by_tune_must_be_whole(tmp_path):
         with pytest.raises(ValueError, match=r"the field 'kr' is missing \(a file that records"):
             tuning.load_tuned(path)
     # Its estimator too (without its σ_xy, the default 0.5 cm was tuned with).
-    loop = w.ObserverParams(position=0.3, heading=0.4)
-    values = tuning.tuned_json(tuning.ScheduleParams(), estimator=w.EKFParams(sigma_xy=0.2))
+    loop = w.studies.ObserverParams(position=0.3, heading=0.4)
+    values = tuning.tuned_json(tuning.ScheduleParams(), estimator=w.studies.EKFParams(sigma_xy=0.2))
     del values["estimator"]["sigma_xy"]
     path.write_text(json.dumps(values))
     with pytest.raises(ValueError, match=r"the estimator field 'sigma_xy' is missing"):
@@ -139,7 +139,9 @@ def test_a_fixed_gain_file_written_by_tune_must_be_whole(tmp_path):
     # A hand-written file of Gains fields only may leave fields out, its estimator's too.
     path.write_text('{"k_theta": 15.0, "estimator": {"kind": "ekf", "sigma_xy": 0.2}}')
     loop = tuning.load_tuned(path)
-    assert loop.params == w.Gains(k_theta=15.0) and loop.estimator == w.EKFParams(sigma_xy=0.2)
+    assert loop.params == w.Gains(k_theta=15.0) and loop.estimator == w.studies.EKFParams(
+        sigma_xy=0.2
+    )
 
 
 def test_a_schedule_file_must_be_whole_and_integers_load_as_floats(tmp_path):

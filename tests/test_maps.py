@@ -32,7 +32,7 @@ def refs():
 def test_streamed_metrics_equal_rollouts_and_metrics(refs, controller, params):
     """Shim–Sung's streamed metrics are checked against rollouts in test_sweep.py."""
     m = evaluate_poses(refs, params, controller=controller, chunk=16)  # 3 calls, the last padded
-    traj = w.batch_rollout(refs, params, steps=w.horizon_steps(DT), controller=controller)
+    traj = w.batch_rollout(refs, params, steps=w.studies.horizon_steps(DT), controller=controller)
     assert_metrics_of_runs(m, traj, refs, DT)
     final = np.asarray(traj.poses[:, -1, :2])
     np.testing.assert_allclose(m.final_distance, np.hypot(*(final - refs[:, :2]).T), atol=1e-12)
@@ -76,7 +76,7 @@ def test_a_small_pose_grid_or_a_thin_annulus_still_has_poses(n, r_min, r_max):
 def test_pose_grid_covers_the_evaluation_annulus():
     grid = pose_grid(4000, (0.0, 90.0))
     dist = np.hypot(grid.refs[:, 0], grid.refs[:, 1])
-    assert dist.min() >= w.EVAL_R_MIN and dist.max() <= w.EVAL_R_MAX
+    assert dist.min() >= w.studies.EVAL_R_MIN and dist.max() <= w.studies.EVAL_R_MAX
     assert abs(len(grid.refs) - 4000) < 0.1 * 4000
     assert len(grid.refs) == 2 * grid.inside.sum()
     np.testing.assert_allclose(np.unique(grid.refs[:, 2]), [0.0, math.pi / 2])

@@ -3,7 +3,7 @@
 Small and fast on purpose: mutation testing (``mutmut``, docs/testing.md)
 runs these for every mutant of ``controllers/shim_sung.py``. The hard law,
 its regions and its diagnostics are held against the plain-float NumPy
-reference (``wmr_jax.reference_diagnostics``) on poses that put every region
+reference (``wmr_jax.studies.reference_diagnostics``) on poses that put every region
 and switch to work, ties included; the relaxed law against the formulas of
 docs/model.md §3.7, written out here in plain ``math``. Nothing here runs
 JAX at import.
@@ -71,7 +71,7 @@ POSES, REFS = _poses()
 
 
 def _reference() -> dict[str, np.ndarray]:
-    rows = [w.reference_diagnostics(p, q, GAINS) for p, q in zip(POSES, REFS, strict=True)]
+    rows = [w.studies.reference_diagnostics(p, q, GAINS) for p, q in zip(POSES, REFS, strict=True)]
     return {k: np.array([row[k] for row in rows]) for k in rows[0]}
 
 
@@ -92,7 +92,7 @@ def test_the_hard_law_is_the_reference():
 
 
 def test_the_diagnostics_are_the_reference():
-    got = w.control_diagnostics(POSES, REFS, GAINS)
+    got = w.controllers.control_diagnostics(POSES, REFS, GAINS)
     np.testing.assert_array_equal(got.region, WANT["region"])
     assert got.region.dtype == np.int32
     for field in ("v", "omega", "d", "eps", "lyapunov", "r_e"):
@@ -348,7 +348,7 @@ def test_poses_are_checked_in_full():
         str(err.value) == "pose has batch shape (2,) and ref (3,); allowed: shapes that broadcast"
     )
     with pytest.raises(ValueError) as err:
-        w.control_diagnostics(np.zeros((2, 4, 3)), np.zeros((3, 4, 3)), GAINS)
+        w.controllers.control_diagnostics(np.zeros((2, 4, 3)), np.zeros((3, 4, 3)), GAINS)
     assert str(err.value) == (
         "pose has batch shape (2, 4) and ref (3, 4); allowed: shapes that broadcast"
     )
@@ -372,7 +372,7 @@ def test_checked_calls_refuse_what_traced_ones_never_see():
     with pytest.raises(ValueError, match=r"^temperature = -1.0 is not allowed"):
         w.control([0.0, 0.0, 0.0], [1.0, 2.0, 0.0], GAINS, temperature=-1.0)
     with pytest.raises(ValueError, match=r"^pose"):
-        w.control_diagnostics([math.nan, 0.0, 0.0], [1.0, 2.0, 0.0], GAINS)
+        w.controllers.control_diagnostics([math.nan, 0.0, 0.0], [1.0, 2.0, 0.0], GAINS)
 
 
 def test_the_entry_points_are_one_program_called_with_values_or_traced():
@@ -387,8 +387,8 @@ def test_the_entry_points_are_one_program_called_with_values_or_traced():
     traced = jax.jit(lambda p, q, g, t: w.control(p, q, g, temperature=t))(POSES, REFS, GAINS, 0.4)
     for e, t in zip(relaxed, traced, strict=True):
         np.testing.assert_array_equal(np.asarray(e), np.asarray(t))
-    eager = w.control_diagnostics(POSES, REFS, GAINS)
-    traced = jax.jit(w.control_diagnostics)(POSES, REFS, GAINS)
+    eager = w.controllers.control_diagnostics(POSES, REFS, GAINS)
+    traced = jax.jit(w.controllers.control_diagnostics)(POSES, REFS, GAINS)
     for field in eager._fields:
         np.testing.assert_array_equal(getattr(eager, field), getattr(traced, field), err_msg=field)
 

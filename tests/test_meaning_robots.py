@@ -18,7 +18,7 @@ from wmr_jax._src.model.robots import describe_robot, robot_json, same_robot
 def _read(tmp_path, name, text):
     path = tmp_path / name
     path.write_text(text)
-    return w.read_robot(path)
+    return w.dynamics.read_robot(path)
 
 
 def test_ros_calibration_multipliers_scale_the_sizes_they_name(tmp_path):
@@ -57,7 +57,7 @@ def test_a_yaml_syntax_error_names_its_line_and_column(tmp_path):
     path = tmp_path / "broken.yaml"
     path.write_text("\n".join(lines) + "\n")
     with pytest.raises(ValueError) as err:
-        w.read_robot(path)
+        w.dynamics.read_robot(path)
     message = str(err.value)
     assert message.startswith(f"{str(path)!r} cannot be read: ")
     assert message.endswith(f"mapping values are not allowed here (line 3, column {column})")
@@ -88,7 +88,7 @@ def test_a_limit_flag_that_is_not_a_boolean_is_refused_naming_the_file(tmp_path)
     path = tmp_path / "flag.yaml"
     path.write_text(text)
     with pytest.raises(ValueError) as err:
-        w.read_robot(path)
+        w.dynamics.read_robot(path)
     assert str(err.value) == (
         f"{str(path)!r}: linear.x.has_velocity_limits = 3 is not allowed; allowed: true or false"
     )
@@ -96,7 +96,7 @@ def test_a_limit_flag_that_is_not_a_boolean_is_refused_naming_the_file(tmp_path)
 
 def test_an_unknown_preset_lists_the_presets_and_the_files_allowed():
     with pytest.raises(ValueError) as err:
-        w.robot_preset("burger")
+        w.dynamics.robot_preset("burger")
     presets = ", ".join(w.ROBOTS)
     assert str(err.value) == (
         f"robot preset 'burger' is not known; allowed: {presets}, or a .json or .yaml file"
@@ -243,7 +243,7 @@ def test_sizes_and_speeds_in_the_wrong_unit_warn_and_run_as_given(tmp_path):
         )
         for name in w.ROBOTS:
             (tmp_path / f"{name}.json").write_text(json.dumps(robot_json(w.ROBOTS[name])))
-            w.read_robot(tmp_path / f"{name}.json")
+            w.dynamics.read_robot(tmp_path / f"{name}.json")
 
 
 def test_a_ros_parameter_given_dotted_and_nested_is_refused(tmp_path):

@@ -45,7 +45,7 @@ def test_heading_tolerance_is_in_radians_and_five_degrees_by_default():
         traj = run_through(start_then(at(0.5, heading)))
         time = float(w.arrival_time(traj, REF, dt=DT))
         assert math.isfinite(time) == arrives, heading
-    assert w.DEFAULT_TOL_THETA == pytest.approx(math.radians(5.0))
+    assert w.studies.DEFAULT_TOL_THETA == pytest.approx(math.radians(5.0))
 
 
 def test_distance_tolerance_is_one_cm_by_default():
@@ -71,27 +71,27 @@ def test_arrival_is_the_settled_one_not_the_first():
 def test_arrived_and_success_rate():
     poses = np.array([at(), at(2.0), at(0.0, 10.0), at(-0.5), at(0.0, -4.0)])
     np.testing.assert_array_equal(
-        np.asarray(w.arrived(poses, REF)), [True, False, False, True, True]
+        np.asarray(w.studies.arrived(poses, REF)), [True, False, False, True, True]
     )
     assert w.success_rate([1.0, np.inf, 2.0, 3.0]) == pytest.approx(0.75)
 
 
 def test_path_length_sums_the_distance_travelled():
     traj = run_through([[0, 0, 0], [3, 4, 0], [3, 4, 0], [6, 8, 0]])
-    assert float(w.path_length(traj)) == pytest.approx(10.0)
+    assert float(w.studies.path_length(traj)) == pytest.approx(10.0)
 
 
 def test_zigzag_counts_sign_changes_beyond_the_dead_bands():
     v = [5.0, 0.5, -5.0, -0.5, 5.0, 5.0]  # 0.5 is inside the 1 cm/s band: 2 changes
     omega = [0.2, -0.05, 0.3, -0.2, -0.2, 0.2]  # -0.05 inside the band: 2 changes
     traj = run_through(np.zeros((7, 3)), v=v, omega=omega)
-    assert int(w.zigzag_count(traj)) == 4
-    assert int(w.zigzag_count(traj, v_dead_band=10.0, omega_dead_band=10.0)) == 0
+    assert int(w.studies.zigzag_count(traj)) == 4
+    assert int(w.studies.zigzag_count(traj, v_dead_band=10.0, omega_dead_band=10.0)) == 0
 
 
 def test_region_time_counts_samples_per_region():
     traj = run_through(np.zeros((6, 3)), regions=[2, 2, 1, 3, 0])
-    np.testing.assert_allclose(np.asarray(w.region_time(traj, dt=DT)), [0.1, 0.1, 0.2, 0.1])
+    np.testing.assert_allclose(np.asarray(w.studies.region_time(traj, dt=DT)), [0.1, 0.1, 0.2, 0.1])
 
 
 def test_batched_trajectories():

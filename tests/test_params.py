@@ -87,11 +87,11 @@ def test_errors_come_before_tracing(caplog):
 def test_infeasible_gains_warn_but_run():
     with pytest.warns(w.WheelSpeedWarning, match=r"138\.5 cm/s exceeds v_max = 125"):
         w.rollout([10.0, 0.0, 0.0], w.Gains(kr=120.0), steps=2)
-    assert w.check_feasible(w.Gains(kr=60.0))
-    assert not w.check_feasible(w.Gains(kr=120.0))
-    bound = w.wheel_speed_bound(w.Gains(kr=60.0), w.Robot())
+    assert w.controllers.check_feasible(w.Gains(kr=60.0))
+    assert not w.controllers.check_feasible(w.Gains(kr=120.0))
+    bound = w.controllers.wheel_speed_bound(w.Gains(kr=60.0), w.Robot())
     assert float(bound) == pytest.approx(60.0 + 1.85 * 10.0)
-    batch = w.check_feasible(w.Gains(kr=np.array([60.0, 120.0])))
+    batch = w.controllers.check_feasible(w.Gains(kr=np.array([60.0, 120.0])))
     np.testing.assert_array_equal(batch, [True, False])
 
 
@@ -106,16 +106,16 @@ def test_tracers_skip_validation_inside_user_transforms():
 
 def test_batch_sizes_underflow_and_sampling_checks_name_the_field():
     with pytest.raises(ValueError, match=r"batch sizes differ \(gains.kr: 4, gains.k_theta: 5\)"):
-        w.control_diagnostics(
+        w.controllers.control_diagnostics(
             [0.0, 0.0, 0.0], [30.0, 30.0, 0.0], w.Gains(kr=[10.0, 20, 30, 40], k_theta=[1.0] * 5)
         )
     with pytest.raises(ValueError, match=r"batch sizes differ \(gains.kr: 3, robot.v_max: 2\)"):
-        w.check_feasible(w.Gains(kr=[10.0, 20, 30]), w.Robot(v_max=[100.0, 200]))
+        w.controllers.check_feasible(w.Gains(kr=[10.0, 20, 30]), w.Robot(v_max=[100.0, 200]))
     # 1e-46 cm is 0 in float32: refused as such, not found as NaN after the run.
     with jax.enable_x64(False), pytest.raises(ValueError, match=r"gains.r_m = 1e-46 is below"):
         w.control([0.0, 0.0, 0.0], [0.0, 0.0, 0.0], w.Gains(r_m=1e-46, r_a=1e-46, r_e=1e-46))
     for dt in (-1.0, 0, True):
         with pytest.raises(ValueError, match=f"dt = {dt!r} is not allowed"):
-            w.check_sampling(w.Gains(), dt)
+            w.controllers.check_sampling(w.Gains(), dt)
     with pytest.raises(ValueError, match="gains.kr = -1.0"):
-        w.check_sampling(w.Gains(kr=-1.0), 0.033)
+        w.controllers.check_sampling(w.Gains(kr=-1.0), 0.033)

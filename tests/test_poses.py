@@ -44,8 +44,8 @@ def test_paper_references_and_horizon():
     refs = w.paper_refs()
     assert refs.shape == (7, 3)
     np.testing.assert_allclose(refs[0], [40.0, 0.0, math.radians(-45.0)])
-    assert w.horizon_steps(0.033) == 182  # 6 s / 33 ms = 181.8 periods
-    assert w.horizon_steps(0.1, 1.0) == 10
+    assert w.studies.horizon_steps(0.033) == 182  # 6 s / 33 ms = 181.8 periods
+    assert w.studies.horizon_steps(0.1, 1.0) == 10
 
 
 @pytest.mark.parametrize(

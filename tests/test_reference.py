@@ -58,9 +58,9 @@ def test_diagnostics_match_reference():
     poses = np.zeros_like(refs)
     poses[:, 2] = rng.uniform(-math.pi, math.pi, len(refs))
     for gains in GAIN_SETS:
-        diag = jax.tree.map(np.asarray, w.control_diagnostics(poses, refs, gains))
+        diag = jax.tree.map(np.asarray, w.controllers.control_diagnostics(poses, refs, gains))
         for i in range(len(refs)):
-            exp = w.reference_diagnostics(poses[i], refs[i], gains)
+            exp = w.studies.reference_diagnostics(poses[i], refs[i], gains)
             assert int(diag.region[i]) == exp["region"]
             for key in ("v", "omega", "d", "eps", "lyapunov", "r_e", "phi_e", "theta_e"):
                 # Same law, float64; a few ulps of reordering.
@@ -93,11 +93,11 @@ def test_the_reference_checks_its_inputs_as_rollout_does(kwargs, message):
 
 def test_the_reference_law_refuses_positions_whose_distance_overflows():
     with pytest.raises(ValueError, match=r"pose = .* allowed: finite numbers, \|x\|, \|y\| <= 1e"):
-        w.reference_control([1e200, 0.0, 0.0], [0.0, 0.0, 0.0], w.Gains())
+        w.studies.reference_control([1e200, 0.0, 0.0], [0.0, 0.0, 0.0], w.Gains())
     with pytest.raises(ValueError, match=r"ref = .* allowed: finite numbers, \|x\|, \|y\| <= 1e"):
-        w.reference_diagnostics([0.0, 0.0, 0.0], [0.0, -1e156, 0.0], w.Gains())
+        w.studies.reference_diagnostics([0.0, 0.0, 0.0], [0.0, -1e156, 0.0], w.Gains())
     # At the limit the law is still defined (and the distance finite).
-    assert w.reference_diagnostics([-1e153, 1e153, 0.0], [1e153, -1e153, 0.0], w.Gains())[
+    assert w.studies.reference_diagnostics([-1e153, 1e153, 0.0], [1e153, -1e153, 0.0], w.Gains())[
         "r_e"
     ] == pytest.approx(8**0.5 * 1e153)
 

@@ -218,7 +218,7 @@ def test_chunk_metadata_of_another_shape_or_edited_is_recomputed_with_one_warnin
     again, messages = _resumed(refs, tmp_path)
     assert len(messages) == 1 and str(first) in messages[0], messages
     assert "that is no JSON object" in messages[0] and os.stat(first).st_ino != inode
-    for name in w.SWEEP_FIELDS:
+    for name in w.studies.SWEEP_FIELDS:
         np.testing.assert_array_equal(again[name], full[name], err_msg=name)
 
     # A dict without a key this sweep writes: one warning naming the file and the key.
@@ -239,7 +239,7 @@ def test_chunk_metadata_of_another_shape_or_edited_is_recomputed_with_one_warnin
     again, messages = _resumed(refs, tmp_path)
     assert len(messages) == 1 and str(first) in messages[0], messages
     assert "checksum does not match" in messages[0] and os.stat(first).st_ino != inode
-    for name in w.SWEEP_FIELDS:
+    for name in w.studies.SWEEP_FIELDS:
         np.testing.assert_array_equal(again[name], full[name], err_msg=name)
 
 

@@ -84,7 +84,7 @@ def test_the_disturbed_loop_runs_the_robots_speed_limiter(estimator, latency):
     assert np.mean(arrival["limited"]) > np.mean(arrival["free"]) + 0.05, arrival
     # Only the ideal loop of a robot with limits has the limiter.
     for robot, limited in ((w.Robot(), False), (LIMITED, True)):
-        args = (spec, GAINS, w.SHIM_SUNG, estimator, (0.0, 0.0, 0.0), 0.033, robot)
+        args = (spec, GAINS, w.controllers.SHIM_SUNG, estimator, (0.0, 0.0, 0.0), 0.033, robot)
         assert sensed.prepare_disturbed(*args, "ideal")[1].accel_limit is limited
         assert not sensed.prepare_disturbed(*args, "nonideal")[1].accel_limit
 

@@ -152,7 +152,7 @@ def test_a_robots_wheels_and_yardstick_are_its_own(no_noise):
         fig7 = studies.evaluate_loop(w.Gains(), near, robot=SLOW, horizon=QUICK_HORIZON)
     assert fig7["peak_wheel_speed"] > 50.0 and not fig7["peak_wheel_speed_ok"]
     # The arrival is set against the robot's own turn-drive-turn time (docs/model.md §8).
-    tdt = w.time_bounds(near, robot=SLOW).turn_drive_turn.mean()
+    tdt = w.studies.time_bounds(near, robot=SLOW).turn_drive_turn.mean()
     assert feasible["turn_drive_turn_s"] == pytest.approx(tdt)
     assert feasible["vs_turn_drive_turn"] == pytest.approx(feasible["mean_arrival_s"] / tdt)
     # A loop tuned for one robot is judged on that one only.

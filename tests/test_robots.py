@@ -47,9 +47,9 @@ def _peak(out: str) -> float:
 
 def test_presets_load_and_validate():
     assert list(w.ROBOTS) == ["paper", TB3, "pioneer-3dx"]
-    assert w.robot_preset("paper") == w.Robot() and w.load_robot("paper") == w.Robot()
+    assert w.dynamics.robot_preset("paper") == w.Robot() and w.load_robot("paper") == w.Robot()
     for name, robot in w.ROBOTS.items():
-        assert w.load_robot(name) is robot and w.robot_preset(name) is robot
+        assert w.load_robot(name) is robot and w.dynamics.robot_preset(name) is robot
         assert robot_json(robot) == {k: float(v) for k, v in vars(robot).items()}
         w.rollout([20.0, 10.0, 0.0], paper_feasible_gains(robot), robot=robot, steps=3)
     burger, pioneer = w.ROBOTS[TB3], w.ROBOTS["pioneer-3dx"]
@@ -60,7 +60,7 @@ def test_presets_load_and_validate():
     assert (pioneer.wheel_radius, pioneer.v_max) == (9.75, 120.0)
     assert pioneer.body_mass + 2 * pioneer.wheel_mass == 9.0
     with pytest.raises(ValueError, match="preset 'burger' is not known; allowed: paper, "):
-        w.robot_preset("burger")
+        w.dynamics.robot_preset("burger")
 
 
 def test_a_json_subset_keeps_the_other_defaults(tmp_path):
@@ -106,7 +106,7 @@ def test_a_missing_robot_file_is_named_on_the_command_line(tmp_path, capsys):
 
 
 def test_a_ros_yaml_converts_metres_to_centimetres(tmp_path, capsys):
-    read = w.read_robot(_file(tmp_path, "tb3.yaml", TB3_YAML))
+    read = w.dynamics.read_robot(_file(tmp_path, "tb3.yaml", TB3_YAML))
     half_track = 0.160 * 100 / 2  # cm: half the separation
     v_max = max(0.22 * 100, 2.84 * half_track)  # cm/s: the rim reaches either limit
     assert read.robot.half_track == pytest.approx(half_track, rel=1e-12) == 8.0
@@ -121,7 +121,7 @@ def test_a_ros_yaml_converts_metres_to_centimetres(tmp_path, capsys):
     # Flat, with a limit switched off (ROS 1's has_velocity_limits): that limit is unused.
     flat = "wheel_separation: 0.5\nwheel_radius: 0.1\nlinear:\n  x:\n    has_velocity_limits: "
     flat += "false\n    max_velocity: 9.0\nangular.z.max_velocity: 4.0\n"
-    read = w.read_robot(_file(tmp_path, "flat.yml", flat))
+    read = w.dynamics.read_robot(_file(tmp_path, "flat.yml", flat))
     assert read.robot.half_track == 25.0 and read.robot.v_max == pytest.approx(4.0 * 25.0)
     assert "linear.x.max_velocity" in read.note.split("ignored: ")[1]
     # The command prints the note as one line before the run.
@@ -152,7 +152,7 @@ def test_paper_feasible_gains_fit_a_slow_robot():
     assert gains.kr + slow.half_track * gains.k_theta <= slow.v_max
     assert gains.kr + slow.half_track * gains.k_theta == pytest.approx(slow.v_max, rel=1e-12)
     assert gains.kr / gains.k_theta == pytest.approx(6.0)  # the paper's shape, 60 : 10
-    assert np.all(w.check_feasible(gains, slow))
+    assert np.all(w.controllers.check_feasible(gains, slow))
     with pytest.raises(ValueError, match="robot.v_max = -1.0 is not allowed"):
         paper_feasible_gains(w.Robot(v_max=-1.0))
 
@@ -167,7 +167,7 @@ def test_tune_writes_the_robot_and_load_tuned_returns_it(tmp_path, capsys):
     saved = json.loads((tmp_path / "tuned_gains.json").read_text())
     assert saved["robot"] == robot_json(robot) and saved["robot_units"] == ROBOT_UNITS
     loop = w.load_tuned(tmp_path / "tuned_gains.json")
-    assert loop.robot == robot and np.all(w.check_feasible(loop.params, robot))
+    assert loop.robot == robot and np.all(w.controllers.check_feasible(loop.params, robot))
     report = json.loads((tmp_path / "evaluation.json").read_text())
     # Every row, the paper's baseline included, within this robot's wheels, row by row.
     assert all(row["peak_wheel_speed_ok"] for row in report["rows"].values())
@@ -239,12 +239,12 @@ def test_load_tuned_reads_the_robot_back_and_checks_it(tmp_path):
 def test_a_ros_yaml_nan_is_no_limit_but_no_size(tmp_path):
     """ros2_controllers reads a .nan limit as none; a .nan wheel size is no robot."""
     text = "wheel_separation: 0.4\nwheel_radius: 0.1\nlinear.x.max_velocity: .nan\n"
-    read = w.read_robot(_file(tmp_path, "nan_limit.yaml", text))
+    read = w.dynamics.read_robot(_file(tmp_path, "nan_limit.yaml", text))
     assert read.robot.v_max == w.Robot().v_max and read.robot.half_track == 20.0
     for key, size in (("wheel_separation", "0.4"), ("wheel_radius", "0.1")):
         bad = text.replace(f"{key}: {size}", f"{key}: .nan")
         with pytest.raises(ValueError, match=f"{key} = nan is not allowed; allowed: a finite"):
-            w.read_robot(_file(tmp_path, f"nan_{key}.yaml", bad))
+            w.dynamics.read_robot(_file(tmp_path, f"nan_{key}.yaml", bad))
 
 
 def test_a_ros_yaml_value_given_as_a_mapping_is_refused(tmp_path):
@@ -252,4 +252,4 @@ def test_a_ros_yaml_value_given_as_a_mapping_is_refused(tmp_path):
     text = "wheel_separation: 0.4\nwheel_radius: 0.1\nlinear:\n  x:\n    max_velocity:\n"
     text += "      value: 0.5\n"
     with pytest.raises(ValueError, match="linear.x.max_velocity is a mapping; allowed: a number"):
-        w.read_robot(_file(tmp_path, "deep.yaml", text))
+        w.dynamics.read_robot(_file(tmp_path, "deep.yaml", text))

@@ -59,7 +59,7 @@ def test_zero_disturbance_is_the_nominal_run_nonideal():
     refs = draw_refs(4, 4)
     m = studies.disturbed_metrics(quiet(refs, 20), controller="aicardi", velocity="nonideal")
     traj = w.batch_rollout(refs, steps=20, controller="aicardi", velocity="nonideal")
-    np.testing.assert_allclose(m.path, np.asarray(w.path_length(traj)), rtol=1e-10)
+    np.testing.assert_allclose(m.path, np.asarray(w.studies.path_length(traj)), rtol=1e-10)
     final = np.asarray(traj.poses[:, -1, :2])
     np.testing.assert_allclose(m.final_distance, np.hypot(*(final - refs[:, :2]).T), atol=1e-9)
 
@@ -71,7 +71,7 @@ def test_equal_wheel_factors_scale_the_gains():
     s = 1.05
     spec = quiet(refs, STEPS)._replace(mismatch=np.tile([s, s, 1.0], (N, 1)))
     m = studies.disturbed_metrics(spec, controller="astolfi-corke")
-    gains = w.AstolfiGains(k_rho=3.0 * s, k_alpha=8.0 * s, k_beta=-3.0 * s)
+    gains = w.controllers.AstolfiGains(k_rho=3.0 * s, k_alpha=8.0 * s, k_beta=-3.0 * s)
     traj = w.batch_rollout(refs, gains, steps=STEPS, controller="astolfi-corke")
     want = run_metrics(traj, refs, DT)
     np.testing.assert_array_equal(m.arrival, want["arrival"])
@@ -319,7 +319,7 @@ def test_standard_conditions_compare_gain_sets_on_the_same_draws():
     assert model["success"] == 1.0 and model["mean arrival s"] < 6.0
     assert model["mismatch"] == 0.0 and nominal["mismatch"] == studies.STANDARD_MISMATCH
     # The model robot's row is the nominal rollout: no noise, no mismatch.
-    steps = w.horizon_steps(w.DEFAULT_DT)
+    steps = w.studies.horizon_steps(w.DEFAULT_DT)
     traj = w.batch_rollout(refs, w.Gains(kr=60.0), steps=steps)
     arrival = np.asarray(w.arrival_time(traj, refs, dt=w.DEFAULT_DT))
     assert model["mean arrival s"] == pytest.approx(arrival[np.isfinite(arrival)].mean(), abs=1e-9)
@@ -345,5 +345,5 @@ def test_a_disturbed_run_that_leaves_the_range_is_an_error_not_nans():
     spec = studies.sample_disturbance(jax.random.key(0), np.array([[30.0, 30.0, 0.0]]), 300)
     with pytest.raises(ValueError, match=r"1 run\(s\), e.g. run 0, left the range of float32"):
         studies.disturbed_metrics(
-            spec, w.AicardiGains(gamma=1000.0), controller="aicardi", x64=False
+            spec, w.controllers.AicardiGains(gamma=1000.0), controller="aicardi", x64=False
         )

@@ -36,12 +36,12 @@ ATOL = 1e-9
 
 ESTIMATORS = {
     "raw": None,
-    "observer": w.ObserverParams(position=0.3, heading=0.4),
-    "observer-table": w.ObserverParams(
+    "observer": w.studies.ObserverParams(position=0.3, heading=0.4),
+    "observer-table": w.studies.ObserverParams(
         position=(0.05, 0.2, 0.5, 0.8), heading=(0.1, 0.3, 0.6, 0.9)
     ),
-    "observer-uncompensated": w.ObserverParams(position=0.3, heading=0.4, compensate=False),
-    "ekf": w.EKFParams(),
+    "observer-uncompensated": w.studies.ObserverParams(position=0.3, heading=0.4, compensate=False),
+    "ekf": w.studies.EKFParams(),
 }
 
 
@@ -207,7 +207,7 @@ def test_observer_of_gain_one_is_raw_feedback_bit_for_bit():
     # A gain of 1 hands the law the measurement itself (the blend is written
     # as z + (1 − g)(prediction − z)); uncompensated, nothing else changes.
     spec = _draw(1)
-    one = w.ObserverParams(position=1.0, heading=1.0, compensate=False)
+    one = w.studies.ObserverParams(position=1.0, heading=1.0, compensate=False)
     got = studies.disturbed_rollout(spec, GAINS, estimator=one)
     raw = studies.disturbed_rollout(spec, GAINS, estimator=None)
     for field in ("poses", "v", "omega", "estimates"):
@@ -235,8 +235,8 @@ def _grad_of_final_distance(estimate, spec, params, init, robot, dt, options):
 @pytest.mark.parametrize(
     ("estimator", "params"),
     [
-        (OBSERVER, w.ObserverParams(position=0.3, heading=0.4)),
-        (EKF, w.EKFParams(wheel_error=0.05, sigma_xy=0.5, sigma_theta=0.02)),
+        (OBSERVER, w.studies.ObserverParams(position=0.3, heading=0.4)),
+        (EKF, w.studies.EKFParams(wheel_error=0.05, sigma_xy=0.5, sigma_theta=0.02)),
     ],
     ids=["observer", "ekf"],
 )
@@ -266,10 +266,10 @@ def test_gradients_through_noisy_runs_are_finite(estimator, params):
     ("estimator", "message"),
     [
         ("kalman", "estimator = 'kalman' is not allowed"),
-        (w.ObserverParams(position=1.5), "estimator.position = 1.5 is not allowed"),
-        (w.ObserverParams(heading=(0.1, 1.2)), "estimator.heading[1] = 1.2 is not allowed"),
-        (w.EKFParams(sigma_xy=-1), "estimator.sigma_xy = -1"),
-        (w.EKFParams(wheel_error=0.0), "estimator.wheel_error = 0"),
+        (w.studies.ObserverParams(position=1.5), "estimator.position = 1.5 is not allowed"),
+        (w.studies.ObserverParams(heading=(0.1, 1.2)), "estimator.heading[1] = 1.2 is not allowed"),
+        (w.studies.EKFParams(sigma_xy=-1), "estimator.sigma_xy = -1"),
+        (w.studies.EKFParams(wheel_error=0.0), "estimator.wheel_error = 0"),
     ],
 )
 def test_bad_estimators_are_refused_by_both(estimator, message):
@@ -292,7 +292,10 @@ def test_bad_estimators_are_refused_by_both(estimator, message):
         ({"delay": 0.5}, "delay = 0.5 is not allowed"),
         ({"delay": -1}, "delay = -1 is not allowed"),
         ({"delay": True}, "delay = True is not allowed"),
-        ({"estimator": w.EKFParams(sigma_xy=np.ones(2))}, "estimator.sigma_xy has shape (2,)"),
+        (
+            {"estimator": w.studies.EKFParams(sigma_xy=np.ones(2))},
+            "estimator.sigma_xy has shape (2,)",
+        ),
         ({"ref": (1.0, 2.0)}, "ref has shape (2,)"),
     ],
 )
@@ -386,7 +389,10 @@ def test_a_saved_estimator_reads_back_whole(tmp_path):
 
     from wmr_jax import tuning
 
-    for estimator in (w.EKFParams(sigma_xy=0.3), w.ObserverParams(position=(0.1, 0.5, 0.9))):
+    for estimator in (
+        w.studies.EKFParams(sigma_xy=0.3),
+        w.studies.ObserverParams(position=(0.1, 0.5, 0.9)),
+    ):
         path = tmp_path / "tuned_gains.json"
         path.write_text(json.dumps(tuning.tuned_json(w.Gains(kr=50.0), estimator)))
         loop = w.load_tuned(path)
@@ -462,11 +468,13 @@ def test_estimator_parameters_per_run_must_match_the_runs():
     """One value per run, or one for all (an axis of 1 too); another count is one clear error."""
     refs = np.array([[30.0, 20.0, 1.0], [-20.0, 15.0, 3.0]])
     spec = studies.sample_disturbance(jax.random.key(1), refs, 20, noise_xy=0.5, noise_theta=0.02)
-    one = studies.disturbed_metrics(spec, estimator=w.EKFParams(wheel_error=0.5))
-    same = studies.disturbed_metrics(spec, estimator=w.EKFParams(wheel_error=[0.5]))
+    one = studies.disturbed_metrics(spec, estimator=w.studies.EKFParams(wheel_error=0.5))
+    same = studies.disturbed_metrics(spec, estimator=w.studies.EKFParams(wheel_error=[0.5]))
     np.testing.assert_array_equal(one.final_distance, same.final_distance)
-    each = studies.disturbed_metrics(spec, estimator=w.EKFParams(wheel_error=[0.5, 0.5]))
+    each = studies.disturbed_metrics(spec, estimator=w.studies.EKFParams(wheel_error=[0.5, 0.5]))
     np.testing.assert_array_equal(one.final_distance, each.final_distance)
     message = r"batch sizes differ \(disturbance.ref: 2, estimator.position\[1\]: 3\)"
     with pytest.raises(ValueError, match=message):
-        studies.disturbed_metrics(spec, estimator=w.ObserverParams(position=(0.5, [0.1] * 3)))
+        studies.disturbed_metrics(
+            spec, estimator=w.studies.ObserverParams(position=(0.5, [0.1] * 3))
+        )

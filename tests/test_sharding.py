@@ -1,7 +1,7 @@
 """Batches sharded over several devices and several processes give the unsharded results.
 
 JAX fixes its device count when it starts, so each scenario runs in a fresh
-Python process: four CPU devices from one process (``wmr_jax.use_cpu_devices(4)``
+Python process: four CPU devices from one process (``wmr_jax.studies.use_cpu_devices(4)``
 before JAX starts), in float64; and two processes on this host joined by
 ``jax.distributed`` with two CPU devices each, in float32.
 
@@ -50,10 +50,10 @@ FOUR_DEVICES = f"""
 import json, warnings
 warnings.simplefilter("ignore")
 import wmr_jax as w
-first = w.use_cpu_devices(4)  # before JAX starts: four CPU devices
+first = w.studies.use_cpu_devices(4)  # before JAX starts: four CPU devices
 import jax, numpy as np, jax.numpy as jnp
 jax.config.update("jax_enable_x64", True)
-report = {{"devices": [first, w.use_cpu_devices(5), len(jax.devices())]}}  # 5: too late
+report = {{"devices": [first, w.studies.use_cpu_devices(5), len(jax.devices())]}}  # 5: too late
 equal = lambda a, b: bool(np.array_equal(np.asarray(a), np.asarray(b)))
 rng = np.random.default_rng(3)
 refs, kr = rng.uniform(-40, 40, (256, 3)), rng.uniform(40, 120, 256)
@@ -184,7 +184,7 @@ def test_shard_validates_its_input():
     with pytest.raises(ValueError, match="at least one device"):
         w.shard(np.zeros((4, 3)), devices=[])
     with pytest.raises(ValueError, match="count = 0"):
-        w.use_cpu_devices(0)
+        w.studies.use_cpu_devices(0)
     one = w.shard(np.zeros((5, 3)), devices=jax.devices()[:1])  # one device: no padding
     assert one.n == one.n_padded == 5
     np.testing.assert_array_equal(w.unpad(np.arange(8), 5), np.arange(5))

@@ -60,15 +60,15 @@ def test_edge_poses_have_finite_values_and_gradients(case):
     relaxed = jax.grad(lambda p, g: sum(w.control(p, ref, g, temperature=0.05)), argnums=(0, 1))
     for leaf in jax.tree.leaves(relaxed(pose, GAINS)):
         assert np.isfinite(np.asarray(leaf)).all()
-    diag = w.control_diagnostics(pose, ref, GAINS)
+    diag = w.controllers.control_diagnostics(pose, ref, GAINS)
     assert all(np.isfinite(np.asarray(x)).all() for x in diag)
 
 
 def test_edge_poses_match_reference():
     for r, phi, theta_e in EDGE_CASES.values():
         pose, ref = _at_polar(r, phi, theta_e)
-        exp = w.reference_diagnostics(np.asarray(pose), np.asarray(ref), GAINS)
-        diag = w.control_diagnostics(pose, ref, GAINS)
+        exp = w.studies.reference_diagnostics(np.asarray(pose), np.asarray(ref), GAINS)
+        diag = w.controllers.control_diagnostics(pose, ref, GAINS)
         assert int(diag.region) == exp["region"], (r, phi, theta_e)
         # The angle inputs above are rounded to float64, so a few ulps.
         assert float(diag.v) == pytest.approx(exp["v"], abs=1e-12)
@@ -100,7 +100,7 @@ def test_region_labels_follow_spec_order():
     ]
     for (r, phi, th), region in cases:
         pose, ref = _at_polar(r, phi, th)
-        assert int(w.control_diagnostics(pose, ref, GAINS).region) == region
+        assert int(w.controllers.control_diagnostics(pose, ref, GAINS).region) == region
 
 
 def test_direction_and_folding_make_backward_motion():
@@ -124,9 +124,11 @@ def test_commands_are_bounded_and_match_reference(x, y, th, xr, yr, thr):
     # for more than k_r + L k_θ.
     assert abs(float(v)) <= float(GAINS.kr) * (1 + 1e-12)
     assert abs(float(omega)) <= float(GAINS.k_theta) * (1 + 1e-12)
-    rims = w.wheel_speeds(v, omega, w.Robot())
-    assert float(jnp.max(jnp.abs(rims))) <= float(w.wheel_speed_bound(GAINS)) * (1 + 1e-12)
-    exp = w.reference_diagnostics((x, y, th), (xr, yr, thr), GAINS)
+    rims = w.controllers.wheel_speeds(v, omega, w.Robot())
+    assert float(jnp.max(jnp.abs(rims))) <= float(w.controllers.wheel_speed_bound(GAINS)) * (
+        1 + 1e-12
+    )
+    exp = w.studies.reference_diagnostics((x, y, th), (xr, yr, thr), GAINS)
     # Equal up to the reordering of float64 arithmetic (angles of up to 4π) ...
     agree = abs(float(v) - exp["v"]) <= 1e-9 and abs(float(omega) - exp["omega"]) <= 1e-9
     # ... except where the law jumps and rounding decides the side.
@@ -212,11 +214,11 @@ def test_lyapunov_can_rise_in_region_3():
     φ̄_e = 75°, θ̄_e = −89° (docs/model.md §3). Check the sign over a short ideal step.
     """
     pose, ref = _at_polar(10.0, math.radians(75), math.radians(-89))
-    diag = w.control_diagnostics(pose, ref, GAINS)
+    diag = w.controllers.control_diagnostics(pose, ref, GAINS)
     assert int(diag.region) == 3 and float(diag.v) == 0.0
     h = 1e-6  # first-order difference: error ~ V̈ h / 2 relative to V̇ ≈ 0.33
     after = w.dynamics.arc_step(pose, diag.v, diag.omega, h)
-    v_after = w.control_diagnostics(after, ref, GAINS).lyapunov
+    v_after = w.controllers.control_diagnostics(after, ref, GAINS).lyapunov
     rate = (float(v_after) - float(diag.lyapunov)) / h
     k_th, phi, th = float(GAINS.k_theta), math.radians(75), math.radians(-89)
     predicted = -k_th * math.sin(phi) * (math.sin(phi) + math.sin(th))
@@ -231,7 +233,7 @@ def test_relaxed_law_tends_to_hard_law(temperature):
     pose = jnp.zeros(3)
     hard = np.stack(w.control(pose, refs, GAINS))
     soft = np.stack(w.control(pose, refs, GAINS, temperature=temperature))
-    diag = w.control_diagnostics(pose, refs, GAINS)
+    diag = w.controllers.control_diagnostics(pose, refs, GAINS)
     # Distance of each pose to the nearest switching surface of the law.
     cos_phi = np.cos(np.asarray(diag.phi_e))
     sin_phi_bar = np.sign(cos_phi + (cos_phi == 0)) * np.sin(np.asarray(diag.phi_e))
@@ -303,7 +305,7 @@ def test_the_elementwise_helpers_give_nan_for_nan_as_numpy_does():
     cos_bar, sin_bar = controllers.fold(jnp.array([nan]), jnp.array([0.5]), temperature=0.1)
     assert np.isnan(cos_bar[0]) and np.isnan(sin_bar[0])
     assert np.isnan(controllers.wrap_angle(nan)) and np.isnan(dynamics.sinc(nan))
-    rims = w.wheel_speeds(jnp.array(nan), jnp.array(1.0), w.Robot())
+    rims = w.controllers.wheel_speeds(jnp.array(nan), jnp.array(1.0), w.Robot())
     assert np.all(np.isnan(rims))
 
 

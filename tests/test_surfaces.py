@@ -58,7 +58,7 @@ def _stand_in_train(monkeypatch, evaluation, gains=TUNED):
 
 
 NONE_ARRIVED = Evaluation(math.inf, 0.0, 55.0, 4)
-BOUNDS = w.time_bounds(np.array([[30.0, 0.0, 0.0], [0.0, 30.0, 1.0]]))
+BOUNDS = w.studies.time_bounds(np.array([[30.0, 0.0, 0.0], [0.0, 30.0, 1.0]]))
 ARRIVED = Evaluation(0.5, 1.0, 100.0, 4)
 
 
@@ -107,7 +107,7 @@ def test_tuned_gains_files_name_their_units_and_old_files_still_load(tmp_path):
     path.write_text(json.dumps({**values, "phi_m": 72.0, "units": {"phi_m": "deg"}}))
     assert tuning.load_tuned(path).params.phi_m == pytest.approx(math.radians(72.0))
     # The estimator's angle too.
-    loop = tuning.tuned_json(TUNED, w.EKFParams())
+    loop = tuning.tuned_json(TUNED, w.studies.EKFParams())
     assert loop["units"]["estimator.sigma_theta"] == "rad"
     loop["estimator"]["sigma_theta"] = 2.0
     loop["units"]["estimator.sigma_theta"] = "deg"

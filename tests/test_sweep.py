@@ -53,7 +53,7 @@ def test_streamed_metrics_equal_trajectory_metrics():
     refs[:3, :2] *= 10.0  # a few too far to reach within the horizon
     gains = w.Gains(kr=60.0)
     got = w.sweep(refs, gains, dt=DT, steps=HORIZON, chunk_size=16)  # 3 chunks, the last padded
-    assert set(got) == set(w.SWEEP_FIELDS)
+    assert set(got) == set(w.studies.SWEEP_FIELDS)
     assert all(v.shape == (N,) for v in got.values())
     want = _expected(refs, gains, steps=HORIZON)
     assert 0 < np.isfinite(want["arrival_time"]).sum() < N  # both outcomes occur
@@ -80,7 +80,7 @@ def test_chunking_does_not_change_results():
     refs = _poses(2, 30)
     whole = w.sweep(refs, steps=STEPS, chunk_size=1000)
     part = w.sweep(refs, steps=STEPS, chunk_size=7)  # 5 chunks, the last padded
-    for name in w.SWEEP_FIELDS:
+    for name in w.studies.SWEEP_FIELDS:
         np.testing.assert_allclose(part[name], whole[name], rtol=0, atol=1e-12, err_msg=name)
 
 
@@ -112,7 +112,7 @@ def test_resume_after_interruption(tmp_path):
     after = _inodes(tmp_path)
     assert len(after) == 5
     assert all(after[name] == ino for name, ino in first.items())  # reused, not recomputed
-    for name in w.SWEEP_FIELDS:
+    for name in w.studies.SWEEP_FIELDS:
         np.testing.assert_array_equal(resumed[name], full[name], err_msg=name)
     with np.load(tmp_path / "results.npz") as saved:
         np.testing.assert_array_equal(saved["arrival_time"], full["arrival_time"])
@@ -151,7 +151,7 @@ def test_damaged_or_altered_chunks_are_recomputed_with_a_warning(tmp_path):
     assert "chunk_000001.npz" in messages[0] and "chunk_000003.npz" in messages[1]
     changed = [name for name, ino in _inodes(tmp_path).items() if before[name] != ino]
     assert changed == ["chunk_000001.npz", "chunk_000003.npz"]
-    for name in w.SWEEP_FIELDS:
+    for name in w.studies.SWEEP_FIELDS:
         np.testing.assert_array_equal(again[name], full[name], err_msg=name)
 
 
@@ -226,7 +226,10 @@ def test_a_run_that_leaves_the_range_is_an_error_not_nans():
         warnings.simplefilter("ignore")
         with pytest.raises(ValueError, match=r"1 run\(s\), e.g. run 0, left the range"):
             w.sweep(
-                [[30.0, 30.0, 0.0]], w.AicardiGains(gamma=1000.0), controller="aicardi", steps=300
+                [[30.0, 30.0, 0.0]],
+                w.controllers.AicardiGains(gamma=1000.0),
+                controller="aicardi",
+                steps=300,
             )
 
 
@@ -291,7 +294,7 @@ def test_a_chunk_rewritten_with_a_valid_checksum_is_checked_like_a_computed_one(
     io.save_arrays(edited, values, meta)
     with pytest.warns(UserWarning, match=f"chunk_000001.npz holds {why}; recomputing it"):
         again = w.sweep(refs, steps=STEPS, chunk_size=10, out=tmp_path)
-    for name in w.SWEEP_FIELDS:
+    for name in w.studies.SWEEP_FIELDS:
         np.testing.assert_array_equal(again[name], full[name], err_msg=name)
 
 
@@ -299,13 +302,15 @@ def test_a_resumed_sweep_sees_a_changed_static_gain_field(tmp_path):
     # backward is a static field: no pytree leaf, yet it decides the run.
     refs = _poses(4, 12)
     refs[:, 0] = -np.abs(refs[:, 0]) - 5.0  # behind the robot: backward driving matters
-    forward = w.sweep(refs, w.AicardiGains(backward=False), controller="aicardi", out=tmp_path,
-                      steps=STEPS)  # fmt: skip
+    gains = w.controllers.AicardiGains(backward=False)
+    forward = w.sweep(refs, gains, controller="aicardi", out=tmp_path, steps=STEPS)
     with pytest.warns(UserWarning, match="other settings \\(gains\\)"):
-        resumed = w.sweep(refs, w.AicardiGains(backward=True), controller="aicardi",
+        resumed = w.sweep(refs, w.controllers.AicardiGains(backward=True), controller="aicardi",
                           out=tmp_path, steps=STEPS)  # fmt: skip
-    fresh = w.sweep(refs, w.AicardiGains(backward=True), controller="aicardi", steps=STEPS)
-    for name in w.SWEEP_FIELDS:
+    fresh = w.sweep(
+        refs, w.controllers.AicardiGains(backward=True), controller="aicardi", steps=STEPS
+    )
+    for name in w.studies.SWEEP_FIELDS:
         np.testing.assert_array_equal(resumed[name], fresh[name], err_msg=name)
     assert not np.array_equal(resumed["final_x"], forward["final_x"])
 
@@ -318,7 +323,7 @@ def test_the_streamed_arrival_is_the_settled_one_for_runs_that_arrive_leave_and_
     refs = _poses(0, 64)
     traj = w.batch_rollout(refs, w.Gains(), steps=100)
     want = np.asarray(w.arrival_time(traj, refs, dt=DT, tol_r=tol_r, tol_theta=tol_theta))
-    inside = np.asarray(w.arrived(traj.poses[:, 1:], refs[:, None, :], tol_r=tol_r,
+    inside = np.asarray(w.studies.arrived(traj.poses[:, 1:], refs[:, None, :], tol_r=tol_r,
                                   tol_theta=tol_theta))  # fmt: skip
     first = (np.argmax(inside, axis=1) + 1) * DT
     came_back = np.isfinite(want) & (np.abs(first - want) > DT / 2)

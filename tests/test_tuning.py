@@ -22,7 +22,7 @@ SHORT = {"horizon": 1.0}
 def assert_feasible(gains: w.Gains) -> None:
     """The docs/model.md §3 ranges (a rollout validates them) and k_r + L k_θ ≤ V_max."""
     gains = jax.tree.map(lambda x: np.asarray(x, np.float64), gains)
-    assert np.all(w.check_feasible(gains)), gains
+    assert np.all(w.controllers.check_feasible(gains)), gains
     for name in ("kr", "k_theta", "r_e", "alpha"):
         assert np.all(np.asarray(getattr(gains, name)) > 0), name
     assert np.all((gains.phi_m > 0) & (gains.phi_m < math.pi / 2))

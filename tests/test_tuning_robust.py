@@ -133,8 +133,8 @@ def test_joint_tuning_moves_the_schedule_and_the_filter_and_saves_them_whole(tmp
     result = tuning.tune_robust(config)
     loop = result["loop"]
     assert loop.controller.name == "shim-sung-schedule"
-    assert isinstance(loop.estimator, w.EKFParams)
-    start = w.EKFParams()
+    assert isinstance(loop.estimator, w.studies.EKFParams)
+    start = w.studies.EKFParams()
     moved = [
         abs(np.log(getattr(loop.estimator, f) / getattr(start, f))) > 1e-3
         for f in ("wheel_error", "sigma_xy", "sigma_theta")
@@ -160,7 +160,7 @@ def test_the_observer_is_tuned_with_gains_in_range():
     loop = tuning.tune_robust(config)["loop"]
     gains = [*loop.estimator.position, *loop.estimator.heading]
     assert len(gains) == 12 and all(0.0 < g <= 1.0 for g in gains)
-    default = w.ObserverParams()
+    default = w.studies.ObserverParams()
     assert loop.estimator.position != default.position
 
 
@@ -316,7 +316,7 @@ def test_robust_command_hands_its_estimator_and_table_sizes_to_the_tuner(tmp_pat
 
     def fake(config, *, progress_fn, on_tuned, **kwargs):
         seen.append(config)
-        on_tuned(ClosedLoop(w.SHIM_SUNG, paper_feasible_gains(w.Robot()), None), [1.0])
+        on_tuned(ClosedLoop(w.controllers.SHIM_SUNG, paper_feasible_gains(w.Robot()), None), [1.0])
         return _fake_result(config)
 
     monkeypatch.setattr(robust, "tune_robust", fake)
@@ -341,7 +341,9 @@ def test_robust_command_tunes_on_the_robot_it_is_given(tmp_path, capsys, monkeyp
     def fake(config, *, progress_fn, on_tuned, **kwargs):
         seen.append(kwargs)
         robot = kwargs.get("robot", w.Robot())
-        on_tuned(ClosedLoop(w.SHIM_SUNG, paper_feasible_gains(robot), None, robot), [1.0])
+        on_tuned(
+            ClosedLoop(w.controllers.SHIM_SUNG, paper_feasible_gains(robot), None, robot), [1.0]
+        )
         return _fake_result(config)
 
     monkeypatch.setattr(robust, "tune_robust", fake)

@@ -62,7 +62,7 @@ def test_train_reports_every_feasible_iterate_and_annealing_does_not_recompile(c
     assert not [r.message for r in caplog.records if "Compiling" in r.message]
     assert [state.iteration for state in seen] == list(range(1, SMALL.iters + 1))
     for state in seen:
-        assert np.all(w.check_feasible(tuning.gains_from_logits(state.z)))
+        assert np.all(w.controllers.check_feasible(tuning.gains_from_logits(state.z)))
     np.testing.assert_array_equal(result.history["gains"], np.asarray(seen[-1].gains))
     assert result.history["temperature"][-1] == pytest.approx(0.02)
     assert set(result.evaluation) == {"paper_feasible", "tuned"} and result.search is None
@@ -92,7 +92,7 @@ def test_cli_writes_the_results_and_a_resumed_run_gives_the_same_gains(tmp_path,
     assert tuning.tuning_of(whole / "tuned_gains.json") == saved["tuning"] == "nominal"
     controller, gains, *_ = tuning.load_tuned(whole / "tuned_gains.json")
     assert controller.name == saved["controller"] == "shim-sung"
-    assert np.all(w.check_feasible(gains))
+    assert np.all(w.controllers.check_feasible(gains))
     # Every tuning report gives the ratio of each mean arrival to the §8 yardsticks.
     assert "vs turn–drive–turn" in printed and "| lower bound (§8) |" in printed
     report = json.loads((whole / "evaluation.json").read_text())

@@ -58,7 +58,9 @@ def test_polar_baselines_arrive_alike_in_float32_and_float64_far_from_the_origin
 def test_polar_goal_floor_is_1e_3_cm_at_ordinary_coordinates(law):
     """Within 1e-3 cm the laws only turn, beyond it they drive (docs/model.md §3.8), any dtype."""
     control = getattr(controllers, law)
-    params = w.AicardiGains() if law == "aicardi_control" else w.AstolfiGains()
+    params = (
+        w.controllers.AicardiGains() if law == "aicardi_control" else w.controllers.AstolfiGains()
+    )
     for x64 in (False, True):
         with jax.enable_x64(x64):
             for origin in (0.0, 100.0):
@@ -79,7 +81,7 @@ def test_polar_goal_floor_is_1e_3_cm_at_ordinary_coordinates(law):
 
 
 def _mine(pose, ref, params, *, temperature=None, frame=None):
-    err = w.polar_error(pose, ref, frame=frame)
+    err = w.controllers.polar_error(pose, ref, frame=frame)
     return 3.0 * err.r * err.cos_phi, 4.0 * err.sin_phi
 
 
@@ -137,7 +139,7 @@ def test_a_command_that_returns_no_pair_of_scalars_is_refused_before_the_loop(re
     """Not JAX's error from inside the traced scan: one line naming the controller."""
 
     def command(pose, ref, params, *, temperature=None, frame=None):
-        return returned(w.polar_error(pose, ref, frame=frame), pose)
+        return returned(w.controllers.polar_error(pose, ref, frame=frame), pose)
 
     odd = w.Controller(name="odd", command=command, params_type=w.Gains, validate=lambda g: g)
     for run in (
@@ -163,7 +165,7 @@ def test_custom_controller_page_runs_as_written(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(base, "_REGISTRY", dict(base._REGISTRY))
     monkeypatch.chdir(tmp_path)
     exec(compile(blocks[0], "docs/custom_controller.md", "exec"), {"__name__": "page"})
-    assert "mine" in w.registered_names()
+    assert "mine" in w.controllers.registered_names()
     out = capsys.readouterr().out
     assert "final pose" in out and "d(miss after 1 s)/d(k_rho)" in out
     arrival = float(re.search(r"arrived after (\S+) s", out).group(1))

@@ -39,7 +39,7 @@ def test_chain_visits_the_waypoints_in_order(controller):
     for i, k in enumerate(switch_samples(run)):
         if i < len(WP) - 1:
             assert np.all(leg[k:] >= i + 1)
-        assert bool(w.arrived(poses[k], WP[i]))
+        assert bool(w.studies.arrived(poses[k], WP[i]))
         # Before it, the robot was still heading for this or an earlier waypoint.
         assert leg[k - 1] <= i
 
@@ -114,7 +114,7 @@ def test_moving_reference_batched():
         ({"tol_theta": math.pi / 2}, "tol_theta"),
         ({"tol_r": 0.0}, "tol_r = 0.0"),
         ({"controller": "nope"}, "controller = 'nope'"),
-        ({"params": w.AicardiGains(k=0.0), "controller": "aicardi"}, "gains.k = 0.0"),
+        ({"params": w.controllers.AicardiGains(k=0.0), "controller": "aicardi"}, "gains.k = 0.0"),
     ],
 )
 def test_bad_chain_inputs_raise_before_tracing(kwargs, message):

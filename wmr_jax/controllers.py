@@ -38,3 +38,7 @@ from wmr_jax._src.model.controllers.shim_sung import saturated_distance as satur
 from wmr_jax._src.model.controllers.shim_sung import sgn as sgn
 from wmr_jax._src.model.controllers.shim_sung import wheel_speeds as wheel_speeds
 from wmr_jax._src.model.controllers.shim_sung import wrap_angle as wrap_angle
+from wmr_jax._src.model.params import check_feasible as check_feasible
+from wmr_jax._src.model.params import check_sampling as check_sampling
+from wmr_jax._src.model.params import sampling_margins as sampling_margins
+from wmr_jax._src.model.params import wheel_speed_bound as wheel_speed_bound

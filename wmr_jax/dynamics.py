@@ -19,6 +19,8 @@ from wmr_jax._src.model.dynamics import arc_step as arc_step
 from wmr_jax._src.model.dynamics import initial_state as initial_state
 from wmr_jax._src.model.dynamics import sin_cos as sin_cos
 from wmr_jax._src.model.dynamics import sinc as sinc
+from wmr_jax._src.model.robots import read_robot as read_robot
+from wmr_jax._src.model.robots import robot_preset as robot_preset
 from wmr_jax._src.model.velocity_loop import DEFAULT_SUBSTEPS as DEFAULT_SUBSTEPS
 from wmr_jax._src.model.velocity_loop import advance as advance
 from wmr_jax._src.model.velocity_loop import body_acceleration as body_acceleration

@@ -9,6 +9,20 @@ benchmark (``run_benchmark``). ``wmr_jax.report``
 draws and saves their results; the ``wmr-jax`` commands do both.
 """
 
+from wmr_jax._src.checks import float_dtype as float_dtype
+from wmr_jax._src.oracle.reference import reference_control as reference_control
+from wmr_jax._src.oracle.reference import reference_diagnostics as reference_diagnostics
+from wmr_jax._src.sim.metrics import DEFAULT_TOL_R as DEFAULT_TOL_R
+from wmr_jax._src.sim.metrics import DEFAULT_TOL_THETA as DEFAULT_TOL_THETA
+from wmr_jax._src.sim.metrics import arrived as arrived
+from wmr_jax._src.sim.metrics import path_length as path_length
+from wmr_jax._src.sim.metrics import region_time as region_time
+from wmr_jax._src.sim.metrics import zigzag_count as zigzag_count
+from wmr_jax._src.sim.poses import EVAL_R_MAX as EVAL_R_MAX
+from wmr_jax._src.sim.poses import EVAL_R_MIN as EVAL_R_MIN
+from wmr_jax._src.sim.poses import HORIZON_S as HORIZON_S
+from wmr_jax._src.sim.poses import PAPER_REFS_DEG as PAPER_REFS_DEG
+from wmr_jax._src.sim.poses import horizon_steps as horizon_steps
 from wmr_jax._src.sim.sensing.disturbances import STANDARD_CONDITIONS as STANDARD_CONDITIONS
 from wmr_jax._src.sim.sensing.disturbances import STANDARD_MISMATCH as STANDARD_MISMATCH
 from wmr_jax._src.sim.sensing.disturbances import Disturbance as Disturbance
@@ -23,6 +37,8 @@ from wmr_jax._src.sim.sensing.estimators import ObserverParams as ObserverParams
 from wmr_jax._src.sim.sensing.loop import ClosedLoop as ClosedLoop
 from wmr_jax._src.sim.sensing.loop import disturbed_metrics as disturbed_metrics
 from wmr_jax._src.sim.sensing.loop import disturbed_rollout as disturbed_rollout
+from wmr_jax._src.sim.sharding import ShardedBatch as ShardedBatch
+from wmr_jax._src.sim.sharding import use_cpu_devices as use_cpu_devices
 from wmr_jax._src.studies.bench import CASES as CASES
 from wmr_jax._src.studies.bench import BenchConfig as BenchConfig
 from wmr_jax._src.studies.bench import numpy_final_poses as numpy_final_poses
@@ -40,6 +56,8 @@ from wmr_jax._src.studies.maps import evaluate_poses as evaluate_poses
 from wmr_jax._src.studies.maps import map_study as map_study
 from wmr_jax._src.studies.maps import pose_grid as pose_grid
 from wmr_jax._src.studies.maps import summarize as summarize
+from wmr_jax._src.studies.optimal import TimeBounds as TimeBounds
+from wmr_jax._src.studies.optimal import time_bounds as time_bounds
 from wmr_jax._src.studies.paper import Fig7Runs as Fig7Runs
 from wmr_jax._src.studies.paper import PaperCase as PaperCase
 from wmr_jax._src.studies.paper import PaperRuns as PaperRuns
@@ -57,6 +75,7 @@ from wmr_jax._src.studies.robustness import robot_defaults as robot_defaults
 from wmr_jax._src.studies.robustness import robustness_study as robustness_study
 from wmr_jax._src.studies.robustness import settled_at_horizon as settled_at_horizon
 from wmr_jax._src.studies.robustness import study_horizon as study_horizon
+from wmr_jax._src.studies.sweep import SWEEP_FIELDS as SWEEP_FIELDS
 from wmr_jax._src.studies.waypoints import SOCCER_WAYPOINTS_DEG as SOCCER_WAYPOINTS_DEG
 from wmr_jax._src.studies.waypoints import ChainRun as ChainRun
 from wmr_jax._src.studies.waypoints import SoccerRun as SoccerRun

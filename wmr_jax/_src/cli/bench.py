@@ -64,7 +64,7 @@ def add_arguments(parser: Any) -> None:
         default=None,
         metavar="K",
         help="split the CPU into K JAX devices for the sharded case (None: two per "
-        "core; 1 keeps one). Only before JAX starts; see wmr_jax.use_cpu_devices",
+        "core; 1 keeps one). Only before JAX starts; see wmr_jax.studies.use_cpu_devices",
     )
     parser.add_argument(
         "--wait-idle",

@@ -27,7 +27,7 @@ COMMANDS = (
 _MODULE_OF = {"demo": "paper"}
 
 # Sweep-like commands spread their batches over every local device; on a CPU
-# that means splitting it into several JAX devices first (wmr_jax.use_cpu_devices).
+# that means splitting it into several JAX devices first (wmr_jax.studies.use_cpu_devices).
 _ALL_DEVICE_COMMANDS = ("sweep", "compare", "bench")
 
 

@@ -69,9 +69,9 @@ SWEEP_FIELDS = (
 * ``arrival_time``: s, ``inf`` where the robot is not arrived at the end
   (docs/model.md §6, as ``wmr_jax.arrival_time``);
 * ``success``: bool, ``arrival_time`` is finite;
-* ``path_length``: cm, as ``wmr_jax.path_length``;
+* ``path_length``: cm, as ``wmr_jax.studies.path_length``;
 * ``peak_wheel_speed``: cm/s, the largest ``|v_L|``, ``|v_R|`` over the run;
-* ``zigzags``: int32, as ``wmr_jax.zigzag_count``.
+* ``zigzags``: int32, as ``wmr_jax.studies.zigzag_count``.
 """
 
 

@@ -146,7 +146,7 @@ def validate_observer(params: ObserverParams, prefix: str = "estimator") -> Obse
     """Check an ``ObserverParams``; return it unchanged (``ValueError`` naming the field)."""
     if not isinstance(params, ObserverParams):
         raise ValueError(
-            f"{prefix} is a {type(params).__name__}; allowed: a wmr_jax.ObserverParams"
+            f"{prefix} is a {type(params).__name__}; allowed: a wmr_jax.studies.ObserverParams"
         )
     check_bool(f"{prefix}.compensate", params.compensate)
     sizes = {}
@@ -169,7 +169,9 @@ def validate_observer(params: ObserverParams, prefix: str = "estimator") -> Obse
 def validate_ekf(params: EKFParams, prefix: str = "estimator") -> EKFParams:
     """Check an ``EKFParams``; return it unchanged (``ValueError`` naming the field)."""
     if not isinstance(params, EKFParams):
-        raise ValueError(f"{prefix} is a {type(params).__name__}; allowed: a wmr_jax.EKFParams")
+        raise ValueError(
+            f"{prefix} is a {type(params).__name__}; allowed: a wmr_jax.studies.EKFParams"
+        )
     check_bool(f"{prefix}.compensate", params.compensate)
     sizes = {}
     units = {"wheel_error": "", "sigma_xy": " cm", "sigma_theta": " rad"}
