@@ -83,21 +83,40 @@ def add_arguments(parser: Any) -> None:
     flags.add_robot_flag(parser)
 
 
+def study_settings(args: Any) -> tuple[Any, dict[str, Any]]:
+    """``--robot``'s ``LoadedRobot`` (or ``None``) and the checked keywords of the study run.
+
+    The keywords every map command passes its engine (``map_study``,
+    ``compare_controllers``): velocity, chunk, progress, dtype, robot, horizon.
+    """
+    velocity = flags.velocity_loop(args.velocity)
+    chunk = flags.positive_int("--chunk", args.chunk)
+    given, robot, horizon = robot_and_horizon(args)
+    return given, {
+        "velocity": velocity,
+        "chunk": chunk,
+        "progress": not args.no_progress,
+        "x64": not args.float32,
+        "robot": robot,
+        "horizon": horizon,
+    }
+
+
 def robot_and_horizon(args: Any) -> tuple[Any, Any, float]:
     """``--robot`` (``LoadedRobot`` or ``None``), the robot to run, and the horizon, s.
 
-    The horizon is ``--horizon``, or ``maps.horizon_for(robot)``: the paper
+    The horizon is ``--horizon``, or ``study_horizon(robot)``: the paper
     robot's 6 s, longer for a robot too slow for the paper's gains. Given a
     ``--robot``, prints the robot and the horizon it runs (and a ROS YAML's note).
     """
     from wmr_jax._src.model.params import Robot
     from wmr_jax._src.model.robots import describe_robot
-    from wmr_jax._src.studies.maps import horizon_for
+    from wmr_jax._src.studies.robustness import study_horizon
 
     given = flags.robot_from(args.robot)
     robot = Robot() if given is None else given.robot
     if args.horizon is None:
-        horizon = horizon_for(robot)
+        horizon = study_horizon(robot)
     else:
         horizon = flags.number("--horizon", args.horizon, low=0.0, closed=False, unit="s")
     if given is not None:
@@ -155,13 +174,11 @@ def _run(args: Any, out: Path, chunks: Path | None, finished: dict) -> int:
     from wmr_jax._src.studies.sweep_files import OtherSettingsWarning
 
     n_poses = flags.positive_int("--poses", args.poses)
-    chunk = flags.positive_int("--chunk", args.chunk)
     headings = [
         flags.number("--headings", h, unit="degrees") for h in args.headings or DEFAULT_HEADINGS_DEG
     ]
     names = flags.controller_names(args.controller)
-    velocity = flags.velocity_loop(args.velocity)
-    given, robot, horizon = robot_and_horizon(args)
+    given, settings = study_settings(args)
 
     def on_chunk(name: str, done: int, total: int) -> None:
         finished[name] = (done, total)
@@ -190,15 +207,10 @@ def _run(args: Any, out: Path, chunks: Path | None, finished: dict) -> int:
             study = map_study(
                 n_poses,
                 controller_names=names,
-                velocity=velocity,
                 headings_deg=headings,
-                chunk=chunk,
-                progress=not args.no_progress,
-                x64=not args.float32,
                 cache=chunks,
-                robot=robot,
-                horizon=horizon,
                 on_chunk=on_chunk,
+                **settings,
             )
         except OtherSettingsWarning as err:
             raise ValueError(

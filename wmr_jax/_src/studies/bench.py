@@ -1,41 +1,19 @@
 """Throughput of the simulator in robot-steps per second (the engine of ``wmr-jax bench``).
 
-One robot-step is one robot simulated over one control period. For each batch
-size ``run_benchmark`` times
-
-* ``final_poses`` with the ideal velocity loop, and with the non-ideal one;
-  with several local devices also the ideal one on a batch spread over all of
-  them (``wmr_jax.shard``); the command splits the CPU into two devices per
-  core first (``--cpu-devices``), which is faster on the CPU;
-* ``batch_rollout`` (whole trajectories), ideal loop;
-* the gradient of a batched loss with respect to the gains: the mean squared
-  final-pose error through ``final_poses``, and ``wmr_jax.tuning``'s loss;
-  each against its own forward evaluation;
-
-and, in the same run, two baselines of the ideal loop:
-
-* the package's scalar NumPy reference (``wmr_jax.reference_rollout``), one
-  pose at a time in a Python loop: a few poses are timed and the rate is per
-  robot-step;
-* ``numpy_final_poses``, the law and the exact arc of ``docs/model.md §2–4``
-  written for NumPy arrays the way a user would without JAX: vectorised over
-  the batch, one Python iteration per control period, angles and ``atan2``.
+One robot-step is one robot simulated over one control period. For each
+batch size ``run_benchmark`` times ``final_poses`` (ideal and non-ideal
+loop, and sharded over several devices), ``batch_rollout``, gradients of a
+final-pose loss and of the tuning loss against their forward passes, the
+disturbed loop with each estimator and the exported C controller, beside
+two baselines of the ideal loop: the scalar NumPy reference
+(``reference_rollout``, one pose at a time) and ``numpy_final_poses``
+(vectorised NumPy, one Python iteration per period).
 
 Each time is the median of ``repeats`` calls after a first call, whose extra
-time is reported apart as the compile time (tracing and XLA compilation).
-Cases compared with each other (``final_poses`` and the baselines, a loss and
-its gradient) are timed in alternation, so that they share the machine's load;
-each timed JAX call follows an untimed one, so that it measures the steady
-state of a loop of calls rather than the wake-up of XLA's threads.
-Every JAX case and the scalar reference run on ``BenchConfig.robot`` (the
-paper robot by default; the NumPy baseline takes no robot: it runs the
-paper robot's ideal loop, which has no speed limiter), with the same steps
-and poses for any robot: throughput does not depend on how far the robot
-gets. The robot is recorded with the results, as are the device, JAX
-version and the machine's load during the run,
-since a shared machine makes every timing noisy: compare ratios taken in the
-same run rather than absolute rates across runs. ``wmr_jax.report.bench_table``
-formats the result; the command prints it.
+time is the compile time. Cases compared with each other are timed in
+alternation, so that they share the machine's load; compare ratios taken in
+one run, not rates across runs. The results record the robot, the
+environment and the machine's load.
 """
 
 from __future__ import annotations
@@ -76,10 +54,9 @@ class BenchConfig:
         dtype: ``"float32"`` or ``"float64"``.
         reference_poses: poses the scalar reference is timed on.
         cases: which cases to run, from ``CASES``; empty: every case.
-        seed: seed of the reference poses (``wmr_jax.sample_poses``, the
-            evaluation set of ``docs/model.md §6``).
+        seed: seed of the reference poses (``wmr_jax.sample_poses``).
         wait_idle: before each round of timed calls, wait up to this many
-            seconds for other processes to leave the CPU (shared machines).
+            seconds for other processes to leave the CPU.
         robot: the robot every case runs (one ``Robot``); ``None``: ``Robot()``.
     """
 
@@ -172,14 +149,12 @@ def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = No
         log: called with one line per finished case (progress).
 
     Returns:
-        ``{"environment": ..., "config": ..., "robot": {field: value},
-        "robot_label": ..., "rows": [...], "ratios": {...}, "peak_rss_mb":
-        ...}``; each row has ``case``, ``n``, ``steps``,
-        ``run_s`` (s), ``compile_s`` (s), ``robot_steps_per_s``, ``runs_s``,
-        ``others_cpu`` (cores), or ``skipped`` with a reason; ``ratios`` maps
-        ``"N=<n>"`` to the speed-ups of ``final_poses`` over the baselines and
-        the cost of each gradient, and of one forward-mode derivative, over
-        its forward pass.
+        ``{"environment", "config", "robot", "robot_label", "rows", "ratios",
+        "peak_rss_mb"}``; each row has ``case``, ``n``, ``steps``, ``run_s``,
+        ``compile_s``, ``robot_steps_per_s``, ``runs_s``, ``others_cpu``
+        (cores), or ``skipped`` with a reason; ``ratios`` maps ``"N=<n>"`` to
+        the speed-ups of ``final_poses`` over the baselines and the cost of
+        each derivative over its forward pass.
 
     Raises:
         ValueError: for a bad ``config``.
@@ -322,10 +297,8 @@ class _SizeBench:
     def disturbed(self) -> list[dict]:
         """The disturbed loop (docs/model.md §7) raw and with each estimator, interleaved.
 
-        Noise σ_xy = 0.5 cm, σ_θ = 1°, ±3 % wheel radius and one sample of
-        latency (so compensation runs too); the jitted core is timed, the
-        checks before it are not. The rows of ``disturbed_observer`` and
-        ``disturbed_ekf`` carry their cost per robot-step over the raw loop.
+        Standard noise, ±3 % wheel radius and one sample of latency; the jitted
+        core is timed, not the checks before it.
         """
 
         import jax
@@ -360,11 +333,9 @@ class _SizeBench:
     def c_controller(self) -> list[dict]:
         """The exported C controller (``wmr_jax.export``): a gain schedule with its EKF.
 
-        ``N`` controllers, one sample of latency (so compensation runs too),
-        each stepped ``steps`` times through noisy poses on the way to its
-        goal; one foreign call steps all ``N``, so the time is the C's. The
-        row carries ``ns_per_step``, ``sizeof(wmr_controller)`` and the bytes
-        of the compiled step.
+        ``N`` controllers with one sample of latency, stepped through noisy poses;
+        one foreign call steps all ``N``. The row carries ``ns_per_step``,
+        ``sizeof(wmr_controller)`` and the bytes of the compiled step.
         """
         import tempfile
         from pathlib import Path
@@ -439,14 +410,8 @@ class _SizeBench:
     ) -> list[dict]:
         """Time ``loss(gains, refs)``, its gradient and one directional derivative, interleaved.
 
-        The directional derivative (forward mode, ``jax.jvp`` along the gains
-        themselves, i.e. ``d/ds loss(s · gains)`` at ``s = 1``) prices what
-        reverse mode cannot avoid: a gradient whose scan recomputes its steps
-        runs the forward pass, then every step again with its transposed
-        linearisation, which costs what the forward-mode step does (the
-        transposition principle) — so ``1 + jvp_over_forward`` is its floor
-        (README, "Speed and scale").
-
+        The forward-mode derivative along the gains prices what reverse mode
+        cannot avoid, so ``1 + jvp_over_forward`` is the gradient's floor.
         ``beside``: ``(case, call)`` timed in the same group, its row first.
         Returns the rows ``[beside,] forward, jvp_<case>, <case>``.
         """
