@@ -27,11 +27,11 @@ SWEEP = ["--poses", "8", "--headings", "0", "90", "--chunk", "4", "--controller"
 @pytest.fixture
 def no_figures(monkeypatch):
     """The commands' figures are other tests' business: drawing them costs seconds."""
+    from wmr_jax._src.report import figures as report_figures
     from wmr_jax._src.report import maps as report_maps
-    from wmr_jax._src.report import waypoints as report_waypoints
 
     monkeypatch.setattr(report_maps, "map_figure", lambda path, *args, **kwargs: path)
-    monkeypatch.setattr(report_waypoints, "save_figure", lambda fig, path, **kwargs: path)
+    monkeypatch.setattr(report_figures, "save_figure", lambda fig, path, **kwargs: path)
 
 
 def _robot_file(tmp_path, name, **fields):
