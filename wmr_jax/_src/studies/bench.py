@@ -117,15 +117,6 @@ def _check_config(config: BenchConfig) -> BenchConfig:
     return dataclasses.replace(config, cases=tuple(config.cases) or CASES)
 
 
-def _robot_record(config: BenchConfig) -> dict[str, Any]:
-    """The robot the cases ran: its fields and a label (a preset's name, or "custom")."""
-    from wmr_jax._src.model.params import Robot
-    from wmr_jax._src.model.robots import robot_json, robot_name
-
-    robot = Robot() if config.robot is None else config.robot
-    return {"robot": robot_json(robot), "robot_label": robot_name(robot) or "custom"}
-
-
 def _row(case: str, n: int | None, steps: int, timing: Timing | None, **extra: Any) -> dict:
     row: dict[str, Any] = {"case": case, "n": n, "steps": steps}
     if timing is not None:
@@ -171,7 +162,8 @@ def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = No
             "dtype = 'float32' is not allowed while jax_enable_x64 is on; "
             "allowed: 'float64', or turn jax_enable_x64 off"
         )
-    from wmr_jax._src.model.params import Gains
+    from wmr_jax._src.model.params import Gains, Robot
+    from wmr_jax._src.studies.maps import robot_record
 
     say = log or (lambda line: None)
     rows: list[dict] = []
@@ -189,7 +181,7 @@ def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = No
     return {
         "environment": environment(),
         "config": {name: value for name, value in fields.items() if name != "robot"},
-        **_robot_record(config),
+        **robot_record(Robot() if config.robot is None else config.robot),
         "rows": rows,
         "ratios": _ratios(rows),
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
@@ -222,8 +214,8 @@ class _SizeBench:
         baselines = self.baselines(scalar=scalar and "scalar_reference" in cases)
         rows = baselines[0]
         for case, step in (
-            ("final_poses_nonideal", self.nonideal),
-            ("batch_rollout", self.batch_rollout),
+            ("final_poses_nonideal", lambda: self.alone("final_poses", "nonideal")),
+            ("batch_rollout", lambda: self.alone("batch_rollout", "ideal")),
             ("grad_final_pose_loss", self.final_pose_loss),
             ("grad_tuning_loss", self.tuning_loss),
             ("disturbed_estimator", self.disturbed),
@@ -379,27 +371,17 @@ class _SizeBench:
             )
         ]
 
-    def nonideal(self) -> list[dict]:
-        from wmr_jax._src.sim.rollout import final_poses
+    def alone(self, entry: str, velocity: str) -> list[dict]:
+        """Time ``final_poses`` or ``batch_rollout`` (``entry``) alone, with ``velocity``'s loop."""
+        from wmr_jax._src.sim import rollout
 
-        gains, steps, refs, robot = self.gains, self.steps, self.refs, self.robot
-
-        def call():
-            return final_poses(refs, gains, steps=steps, velocity="nonideal", robot=robot)
-
-        t = self.time({"nonideal": (call, True)})["nonideal"]
-        return [self.row("final_poses_nonideal", t, velocity="nonideal")]
-
-    def batch_rollout(self) -> list[dict]:
-        from wmr_jax._src.sim.rollout import batch_rollout
-
-        gains, steps, refs, robot = self.gains, self.steps, self.refs, self.robot
+        run = getattr(rollout, entry)
+        case = entry + ("_nonideal" if velocity == "nonideal" else "")
 
         def call():
-            return batch_rollout(refs, gains, steps=steps, robot=robot)
+            return run(self.refs, self.gains, steps=self.steps, velocity=velocity, robot=self.robot)
 
-        t = self.time({"rollout": (call, True)})
-        return [self.row("batch_rollout", t["rollout"], velocity="ideal")]
+        return [self.row(case, self.time({case: (call, True)})[case], velocity=velocity)]
 
     def loss_rows(
         self,
@@ -496,11 +478,21 @@ def _code_bytes(source: Any, build: Any) -> int | None:
     done = subprocess.run(
         [compiler(), *CFLAGS, "-O2", "-c", str(source), "-o", str(obj)], capture_output=True
     )
-    if done.returncode != 0:
-        return None
-    size = subprocess.run(["size", str(obj)], capture_output=True, text=True)
-    lines = size.stdout.splitlines() if size.returncode == 0 else []
-    return int(lines[1].split()[0]) if len(lines) > 1 else obj.stat().st_size
+    return text_bytes(obj) if done.returncode == 0 else None
+
+
+def text_bytes(obj: Any) -> int:
+    """Bytes of code and constants in an object file (``size``'s text), else the file's size."""
+    import shutil
+    import subprocess
+
+    tool = shutil.which("size")
+    if tool:
+        done = subprocess.run([tool, str(obj)], capture_output=True, text=True)
+        lines = done.stdout.split("\n")
+        if done.returncode == 0 and len(lines) > 1:
+            return int(lines[1].split()[0])
+    return obj.stat().st_size
 
 
 def _ratios(rows: list[dict]) -> dict[str, Any]:

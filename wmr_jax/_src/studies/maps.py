@@ -45,7 +45,7 @@ DEFAULT_HEADINGS_DEG = (-90.0, 0.0, 90.0, 180.0)
 DEFAULT_CHUNK = 16384
 
 
-def _robot_record(robot: Robot) -> dict[str, Any]:
+def robot_record(robot: Robot) -> dict[str, Any]:
     """The robot as a summary records it: its fields and a label (preset name or "custom")."""
     from wmr_jax._src.model.robots import robot_json, robot_name
 
@@ -335,12 +335,8 @@ def map_study(
         controller_names: controllers to run; default every registered one.
         velocity: ``"ideal"`` or ``"nonideal"``.
         headings_deg: the reference headings θ_r of the maps, degrees.
-        chunk: poses per compiled call.
-        progress: show a progress bar per controller.
-        x64: compute in float64 (see ``evaluate_poses``).
-        cache: a folder where each controller's finished chunks are kept
-            (``cache/<controller>``) and reused; ``None`` keeps nothing.
-        resume: with ``cache``, reuse the chunks it holds of the same settings.
+        chunk, progress, x64, resume: as ``evaluate_poses`` (a progress bar per controller).
+        cache: a folder for each controller's finished chunks (``cache/<controller>``).
         robot: the robot (one, a number per field); default ``Robot()``.
         horizon: simulated time per run, s; default ``study_horizon(robot)``.
         on_chunk: called as ``on_chunk(controller, done, total)`` after every chunk.
@@ -378,7 +374,7 @@ def map_study(
         "horizon_s": horizon,
         "dt_s": DEFAULT_DT,
         "tolerances": {"r_cm": metrics.DEFAULT_TOL_R, "theta_deg": 5.0},
-        **_robot_record(robot),
+        **robot_record(robot),
         "rows": summarize(results, v_max=float(robot.v_max)),
     }
     return MapStudy(grid, results, summary)
@@ -479,6 +475,6 @@ def compare_controllers(
         "dtype": "float64" if x64 else "float32",
         "horizon_s": horizon,
         "dt_s": DEFAULT_DT,
-        **_robot_record(robot),
+        **robot_record(robot),
         "rows": summarize(results, v_max=float(robot.v_max)),
     }

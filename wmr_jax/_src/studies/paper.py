@@ -127,13 +127,11 @@ class PaperCase:
     """One gain of Figs. 7–10: the seven paper runs with both velocity loops.
 
     Attributes:
-        kr: ``k_r``, cm/s (``k_θ`` and the rest are the paper's).
-        ideal: batched trajectory with the ideal velocity loop.
-        nonideal: the same with the non-ideal loop (wheels ≤ ``V_max``).
+        kr: ``k_r``, cm/s (the rest of the gains are the paper's).
+        ideal, nonideal: batched trajectories of the two velocity loops.
         speed_bound: ``k_r + L k_θ``, cm/s (``docs/model.md §3.5``).
         condition: ``"holds"`` if ``speed_bound ≤ V_max``, else ``"violated"``.
-        deviation: ``(7,)`` largest distance between the ideal and the
-            non-ideal path of each run, cm.
+        deviation: ``(7,)`` largest distance between each run's two paths, cm.
     """
 
     kr: float
@@ -233,13 +231,8 @@ def paper_runs(*, robot: Robot | None = None) -> PaperRuns:
 
 @dataclasses.dataclass(frozen=True)
 class Fig7Runs:
-    """Fig. 7: the seven runs with the ideal velocity loop and the paper's gains.
-
-    Attributes:
-        gains: the gains (default ``Gains()``: ``k_r = 120``).
-        refs: ``(7, 3)`` references ``[x cm, y cm, θ rad]``.
-        trajectory: the batched trajectory.
-        rows: ``run_table`` of the runs.
+    """Fig. 7: the seven runs with the ideal velocity loop and the paper's gains, and
+    their ``run_table`` rows.
     """
 
     gains: Gains

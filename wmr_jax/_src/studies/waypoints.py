@@ -220,19 +220,6 @@ def _tolerances(tol_r, tol_theta, pass_tol_r, pass_tol_theta) -> jax.Array:
     return jnp.asarray([pass_r, pass_theta, tol_r, tol_theta], checks.float_dtype())
 
 
-def _prepared(params, init, robot, dt, options: Options, n: int | None, entry):
-    """Check params, init, robot and dt as ``rollout`` does; ``n`` runs for a batch."""
-    if n is not None and np.ndim(init) == 2 and np.shape(init)[0] != n:
-        raise ValueError(f"init has {np.shape(init)[0]} rows; allowed: {n}, one per run")
-    # A stand-in reference: the real ones are checked by the caller, and its
-    # batch size is the one every batched argument must share.
-    dummy = np.zeros((3,) if n is None else (n, 3))
-    _, params, init, robot, dt = simulation.prepare(
-        dummy, params, init, robot, dt, options, batch=False if n is None else None, entry=entry
-    )
-    return params, init, robot, dt
-
-
 # What each loop keeps per run and period, (floats, int32s): a Trajectory
 # (8 floats and the region) and the leg of a chain, or the error of a track.
 _CHAIN_RECORD, _TRACK_RECORD = (8, 2), (9, 1)
@@ -268,9 +255,18 @@ _BATCHED = {"chain_rollout": "batch_chain_rollout", "track_rollout": "batch_trac
 
 
 def _run(jitted, spec, params, init, robot, dt, options: Options, n: int | None, entry=""):
-    """Check params, init, robot and dt, then run ``jitted`` on ``spec`` (``n`` runs or one)."""
-    params, init, robot, dt = _prepared(
-        params, init, robot, dt, options, n, (entry, _BATCHED.get(entry, ""))
+    """Check params, init, robot and dt as ``rollout`` does, then run ``jitted`` on ``spec``.
+
+    ``n``: the runs of a batch, or ``None`` for ``entry``'s single run.
+    """
+    if n is not None and np.ndim(init) == 2 and np.shape(init)[0] != n:
+        raise ValueError(f"init has {np.shape(init)[0]} rows; allowed: {n}, one per run")
+    # A stand-in reference: the real ones are checked by the caller, and its
+    # batch size is the one every batched argument must share.
+    dummy, names = np.zeros((3,) if n is None else (n, 3)), (entry, _BATCHED.get(entry, ""))
+    batch = False if n is None else None
+    _, params, init, robot, dt = simulation.prepare(
+        dummy, params, init, robot, dt, options, batch=batch, entry=names
     )
     # The robot's speed limiter, as in the rollouts (docs/model.md §4.2.2): the
     # held command rides in the state's velocity, from rest.
