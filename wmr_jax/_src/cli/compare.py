@@ -1,11 +1,7 @@
 """``wmr-jax compare``: every controller over the same random docs/model.md §6 poses.
 
-Runs ``wmr_jax.studies.compare_controllers`` (``sample_poses(--seed,
---poses)``; Shim–Sung with the paper's gains, each baseline with its
-published gains and also with its other driving mode) on the robot of
-``--robot``, writes ``comparison.md`` and ``comparison.json`` (which records
-the robot) into ``--out`` and prints the table docs/maps.md shows. ``wmr-jax
-sweep`` is the grid map, not these random poses.
+Runs ``wmr_jax.studies.compare_controllers``, writes ``comparison.md`` and
+``comparison.json`` into ``--out`` and prints the table docs/maps.md shows.
 """
 
 from __future__ import annotations
