@@ -516,19 +516,18 @@ def _ratios(rows: list[dict]) -> dict[str, Any]:
                 entry[f"{name}vs_numpy_batch"] = value / numpy_rate
             if value and scalar:
                 entry[f"{name}vs_scalar_reference"] = value / scalar
-        for case, key in (
-            ("grad_final_pose_loss", "grad_over_forward"),
-            ("grad_tuning_loss", "grad_over_forward"),
-            ("jvp_final_pose_loss", "jvp_over_forward"),
-            ("jvp_tuning_loss", "jvp_over_forward"),
+        # Ratios the rows carry: a derivative over its forward pass, an estimator over raw.
+        for case, key, name in (
+            ("grad_final_pose_loss", "grad_over_forward", "grad_final_pose_loss_over_forward"),
+            ("grad_tuning_loss", "grad_over_forward", "grad_tuning_loss_over_forward"),
+            ("jvp_final_pose_loss", "jvp_over_forward", "jvp_final_pose_loss_over_forward"),
+            ("jvp_tuning_loss", "jvp_over_forward", "jvp_tuning_loss_over_forward"),
+            ("disturbed_observer", "over_raw", "disturbed_observer_over_raw"),
+            ("disturbed_ekf", "over_raw", "disturbed_ekf_over_raw"),
         ):
             for r in rows:
                 if r["case"] == case and r["n"] == n and key in r:
-                    entry[f"{case}_over_forward"] = r[key]
-        for name in ("observer", "ekf"):
-            for r in rows:
-                if r["case"] == f"disturbed_{name}" and r["n"] == n and "over_raw" in r:
-                    entry[f"disturbed_{name}_over_raw"] = r["over_raw"]
+                    entry[name] = r[key]
         relaxed, loss = rate("final_poses_relaxed", n), rate("tuning_loss", n)
         if relaxed and loss:
             entry["tuning_loss_over_relaxed"] = relaxed / loss
