@@ -52,10 +52,7 @@ def add_arguments(parser: Any) -> None:
 
 
 def _controller_and_gains(args: Any) -> tuple[Any, Any, Any]:
-    """The law, parameters and robot of ``--gains FILE`` (``load_tuned``), else of the gain flags.
-
-    The robot is the file's (``None`` where it records none, and for the flags).
-    """
+    """The law, parameters and robot of ``--gains FILE``, else of the gain flags."""
     from wmr_jax._src.model.controllers.shim_sung import SHIM_SUNG
 
     if args.gains is None:

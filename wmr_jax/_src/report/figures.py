@@ -177,11 +177,7 @@ def plot_paths(
 
 
 def _mark_backwards(ax: Any, paths: Sequence[np.ndarray], refs: np.ndarray) -> None:
-    """Circle the references reached facing backwards (``θ = θ_r ± 180°``, docs/model.md §6).
-
-    Folding makes front and back alike, so such runs count as arrived; the
-    circle tells them apart from the ones that end facing ``θ_r``.
-    """
+    """Circle the references reached facing backwards (``θ = θ_r ± 180°``, arrived all the same)."""
     from wmr_jax._src.sim.metrics import DEFAULT_TOL_R
 
     ends = np.asarray([np.asarray(p)[-1] for p in paths])

@@ -403,10 +403,7 @@ def write_noise_curve(
 
 
 def _write_study(out_dir, name, rows, meta, columns, head, figure) -> list[Path]:
-    """Write ``name``.png (``figure(rows)``), ``.md`` (``head`` and the table) and ``.json``.
-
-    Everything is checked and drawn before the first file is written.
-    """
+    """Write ``name``.png, ``.md`` (``head`` and the table) and ``.json``, all checked first."""
     out, rows = Path(out_dir), require_rows("rows", rows)
     if not isinstance(meta, dict):
         raise ValueError(f"meta = {meta!r:.80} is not allowed; allowed: a dict")

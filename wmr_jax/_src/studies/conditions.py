@@ -204,11 +204,9 @@ def standard_conditions(
 def _study_robot(robot: Any, loops: Mapping[str, ClosedLoop], name: str) -> Robot:
     """The study's robot: ``robot``, else the one the ``loops`` record, else the paper's.
 
-    A loop's gains live in the wheel budget of the robot it was tuned for, so
-    it is judged on that robot only.
-
     Raises:
-        ValueError: naming the loop, for a loop tuned for another robot.
+        ValueError: naming the loop, for a loop tuned for another robot (its
+            gains fit that robot's wheel budget).
     """
     from wmr_jax._src.model.robots import describe_robot, same_robot
 

@@ -390,10 +390,7 @@ def _horizon(horizon: float | None, robot: Robot) -> float:
 
 
 def _metrics(refs, runs, robot, horizon, velocity, chunk, progress, x64, per_run=None):
-    """Each run's ``PoseMetrics`` over ``refs``: ``runs`` maps a label to (controller, params).
-
-    Parameters ``None`` are ``robot_defaults``; ``per_run(label)`` gives more keywords.
-    """
+    """Each run's metrics over ``refs``: ``runs`` maps a label to (controller, params or None)."""
     return {
         label: evaluate_poses(
             refs,

@@ -80,10 +80,7 @@ _sweep_jit = loops.EntryJit(loops.batched(_sweep_one), static_argnames=("options
 
 @dataclasses.dataclass(frozen=True)
 class _Job:
-    """A checked sweep: its inputs, options, and how it is cut into chunks.
-
-    ``*_mask`` trees say which leaves carry the batch axis ``(n, ...)``.
-    """
+    """A checked sweep: its inputs, options and chunks (``*_mask``: which leaves are batched)."""
 
     refs: Any
     n: int
@@ -130,11 +127,7 @@ def _thresholds(tol_r, tol_theta, v_dead_band, omega_dead_band) -> metrics.Thres
 
 
 def _per_run_or_shared(tree: Any, n: int, name: str) -> Any:
-    """Leaves with one value per run stay; a batch axis of size 1 is shared (dropped).
-
-    Raises:
-        ValueError: for a batch axis of another size, naming the field.
-    """
+    """Leaves with one value per run stay, a batch axis of size 1 is dropped, others refused."""
 
     def leaf_of(path, leaf):
         field = f"{name}{jax.tree_util.keystr(path, simple=True, separator='.')}"
@@ -256,11 +249,7 @@ def _chunk_digest(job: _Job, chunk: _Chunk) -> str:
 
 
 def _check_chunk(job: _Job, chunk: _Chunk) -> None:
-    """Check every row of a chunk as ``final_poses`` checks a batch (before it runs).
-
-    Chunk by chunk, so a memory-mapped batch is never loaded whole; messages
-    give rows of the whole batch.
-    """
+    """Check every row of a chunk as ``final_poses`` checks a batch (rows of the whole batch)."""
     size = chunk.hi - chunk.lo
 
     def offset(err: ValueError) -> ValueError:
@@ -337,10 +326,7 @@ def _run_chunks(
     resume: bool,
     done: Callable[[int], None],
 ) -> None:
-    """Fill ``results`` chunk by chunk, loading finished chunks from ``store`` if ``resume``.
-
-    One chunk is in flight while the previous one is copied back and saved.
-    """
+    """Fill ``results`` chunk by chunk, loading finished ones if ``resume``."""
     launch = _launcher(job)
 
     def keep(chunk: _Chunk, digest: str | None, values: dict[str, Any], *, computed: bool) -> None:

@@ -100,8 +100,7 @@ def _chain_single(spec, params, init, robot, dt, options: Options) -> ChainRun:
     """Run one robot through its waypoints; ``spec = (waypoints (K, 3), tolerances (4,))``.
 
     The fold carries the period, the leg, the period each waypoint was reached
-    at (-1: not yet) and where the last run of arrived samples on the last leg
-    began (-1: none).
+    at and where the last run of arrived samples on the last leg began (-1: none).
     """
     waypoints, tolerances = spec
     n_legs = waypoints.shape[0]
@@ -228,10 +227,7 @@ _CHAIN_RECORD, _TRACK_RECORD = (8, 2), (9, 1)
 def _shared_by_every_run(
     poses: jax.Array, params: Any, robot: Any, init: Any, steps: int, record: tuple[int, int]
 ) -> jax.Array:
-    """``poses (1, ...)`` repeated for each run of batched params, robot or init; else as given.
-
-    A record of the runs larger than the memory is refused first.
-    """
+    """``poses (1, ...)`` repeated for each run of batched params, robot or init."""
     runs = checks.common_batch_size({"gains": params, "robot": robot}, {"init": init})
     simulation.require_memory(max(poses.shape[0], runs), steps, record)
     if poses.shape[0] == 1 and runs > 1:
@@ -255,10 +251,7 @@ _BATCHED = {"chain_rollout": "batch_chain_rollout", "track_rollout": "batch_trac
 
 
 def _run(jitted, spec, params, init, robot, dt, options: Options, n: int | None, entry=""):
-    """Check params, init, robot and dt as ``rollout`` does, then run ``jitted`` on ``spec``.
-
-    ``n``: the runs of a batch, or ``None`` for ``entry``'s single run.
-    """
+    """Check params, init, robot and dt as ``rollout`` does (``n`` runs, or one), then run."""
     if n is not None and np.ndim(init) == 2 and np.shape(init)[0] != n:
         raise ValueError(f"init has {np.shape(init)[0]} rows; allowed: {n}, one per run")
     # A stand-in reference: the real ones are checked by the caller, and its
