@@ -18,6 +18,7 @@ from wmr_jax._src.cli.main import main
 from wmr_jax._src.model.params import Robot
 from wmr_jax._src.model.robots import TURTLEBOT3_BURGER, robot_json
 from wmr_jax._src.studies import maps
+from wmr_jax._src.studies.robustness import study_horizon
 
 # Eight poses (two headings), two chunks of four: the compiled sweep every test shares.
 SWEEP = ["--poses", "8", "--headings", "0", "90", "--chunk", "4", "--controller", "shim-sung"]
@@ -26,11 +27,11 @@ SWEEP = ["--poses", "8", "--headings", "0", "90", "--chunk", "4", "--controller"
 @pytest.fixture
 def no_figures(monkeypatch):
     """The commands' figures are other tests' business: drawing them costs seconds."""
+    from wmr_jax._src.report import figures as report_figures
     from wmr_jax._src.report import maps as report_maps
-    from wmr_jax._src.report import waypoints as report_waypoints
 
     monkeypatch.setattr(report_maps, "map_figure", lambda path, *args, **kwargs: path)
-    monkeypatch.setattr(report_waypoints, "save_figure", lambda fig, path, **kwargs: path)
+    monkeypatch.setattr(report_figures, "save_figure", lambda fig, path, **kwargs: path)
 
 
 def _robot_file(tmp_path, name, **fields):
@@ -98,9 +99,9 @@ def test_a_slower_robot_gets_a_longer_horizon(monkeypatch):
     monkeypatch.setattr(maps, "evaluate_poses", fake)
     # The paper's feasible gains ask 60 + 10 L = 100 cm/s, twice this robot's wheels.
     half = Robot(half_track=4.0, v_max=50.0)
-    assert maps.horizon_for(half) == 12.0 and maps.horizon_for() == 6.0
-    assert maps.horizon_for(Robot(v_max=250.0)) == 6.0  # a faster robot keeps 6 s
-    assert maps.horizon_for(TURTLEBOT3_BURGER) == 37.0
+    assert study_horizon(half) == 12.0 and study_horizon() == 6.0
+    assert study_horizon(Robot(v_max=250.0)) == 6.0  # a faster robot keeps 6 s
+    assert study_horizon(TURTLEBOT3_BURGER) == 37.0
     study = maps.map_study(8, controller_names=["shim-sung"], robot=half)
     assert steps == [math.ceil(12.0 / 0.033)] and study.summary["horizon_s"] == 12.0
     assert study.summary["robot_label"] == "custom"

@@ -209,7 +209,7 @@ def test_evaluate_runs_a_tuned_file_on_its_robot(tmp_path, capsys, monkeypatch, 
 
 
 def test_robustness_runs_the_files_robot_and_prints_percentages(tmp_path, capsys, monkeypatch):
-    from wmr_jax._src.report import robustness as report
+    from wmr_jax._src.report import figures as report
     from wmr_jax._src.tuning import evaluation
 
     # The studies' rows, as they return them (their robot and horizon are tested above).

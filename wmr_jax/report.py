@@ -1,9 +1,7 @@
 """The reporting layer: figures, GIFs, Markdown tables and result files.
 
-Every function here draws or writes what an engine of ``wmr_jax.studies`` or
-``wmr_jax.tuning`` returned; nothing computes a rollout except ``animate``,
-which drives the robots it draws. File writes are atomic, and the checksummed
-array files (``save_arrays``/``load_arrays``) refuse a damaged file.
+It draws and writes what ``wmr_jax.studies`` and ``wmr_jax.tuning`` return
+(``animate`` also runs the robots it draws); every file is written atomically.
 """
 
 from wmr_jax._src.io import DamagedFileError as DamagedFileError

@@ -1,12 +1,8 @@
 """Engines of the experiments; each returns values and writes no files.
 
-The paper's figures (``paper_runs``, ``fig7_runs``, ``fig6_curve``), pose-space
-maps (``map_study``, ``evaluate_poses``), waypoint chains (``chain_rollout``,
-``soccer_study``), robustness Monte Carlo (``monte_carlo``,
-``robustness_study``; on a robot of your own, ``study_horizon`` and
-``robot_defaults`` give the horizon and gains its studies run) and the
-benchmark (``run_benchmark``). ``wmr_jax.report``
-draws and saves their results; the ``wmr-jax`` commands do both.
+The paper's figures, pose-space maps, waypoint chains, robustness Monte
+Carlo (``study_horizon`` and ``robot_defaults`` say what runs on your
+robot) and the benchmark; ``wmr_jax.report`` draws and saves their results.
 """
 
 from wmr_jax._src.checks import float_dtype as float_dtype

@@ -1,11 +1,7 @@
 """``wmr-jax animate``: animated GIF of a batch of robots driving to their poses.
 
-The references are ``--robots`` random docs/model.md §6 poses drawn with
-``wmr_jax.sample_poses(--seed, --robots)``, or with ``--paper`` the seven of
-the paper's Fig. 7 (``wmr_jax.paper_refs``), on the robot of ``--robot``
-(Shim–Sung and its schedule with the paper's feasible gains scaled into
-that robot's wheels, ``studies.robot_defaults``); ``wmr_jax.report.animate``
-records the runs and draws them.
+The references are ``sample_poses(--seed, --robots)`` or, with ``--paper``,
+the seven of Fig. 7; ``wmr_jax.report.animate`` runs and draws them.
 """
 
 from __future__ import annotations
@@ -47,7 +43,6 @@ def _flags() -> dict[str, dict[str, Any]]:
 
 def run(args: Any) -> int:
     """Run ``wmr-jax animate``; return the exit status."""
-    from wmr_jax._src.model.robots import describe_robot
     from wmr_jax._src.report.animation import animate, gif_path
     from wmr_jax._src.sim.poses import horizon_steps, paper_refs
     from wmr_jax._src.sim.rollout import DEFAULT_DT
@@ -67,10 +62,7 @@ def run(args: Any) -> int:
         "--speed", args.speed, low=0.0, closed=False, high=100.0, unit="× real time"
     )
     params = robot_defaults(name, robot)
-    if given is not None:
-        if given.note:
-            print(given.note)
-        print(f"robot {given.label!r}: {describe_robot(robot)}" + flags.scaled_gains_note(robot))
+    flags.say_robot(given)
     path = animate(
         out,
         paper_refs() if args.paper else None,

@@ -101,7 +101,6 @@ def _config_from(args: Any, robot: Any = None) -> bench.BenchConfig:
 def run(args: Any) -> int:
     """Run ``wmr-jax bench``: print the table (progress on stderr); return 0."""
     from wmr_jax._src.io import atomic_write_json
-    from wmr_jax._src.model.robots import describe_robot
     from wmr_jax._src.report.bench import bench_table
     from wmr_jax._src.sim.sharding import MAX_CPU_DEVICES, use_cpu_devices
 
@@ -114,13 +113,8 @@ def run(args: Any) -> int:
         else flags.positive_int("--cpu-devices", args.cpu_devices, 1, MAX_CPU_DEVICES)
     )
     use_cpu_devices(cpu_devices)
-    if given is not None:
-        if given.note:
-            print(given.note)
-        print(
-            f"robot {given.label!r}: {describe_robot(given.robot)}; {config.steps} control "
-            "periods per run and the paper robot's poses (5-80 cm), as for any robot"
-        )
+    detail = f"; {config.steps} control periods per run and the paper robot's poses (5-80 cm)"
+    flags.say_robot(given, detail + ", as for any robot", gains=False)
     result = bench.run_benchmark(config, log=lambda line: print(line, file=sys.stderr, flush=True))
     if given is not None:
         result["robot_label"] = given.label  # the preset's name or the file

@@ -1,12 +1,9 @@
 """``wmr-jax evaluate``: judge a tuned loop on the user's references under one condition.
 
-The loop (controller, parameters and estimator) comes from a
-``tuned_gains.json`` or a ``Gains`` JSON (``load_tuned`` reads both); the
-references from an ``(N, 3)`` ``.npy`` or ``.csv`` file ``[x cm, y cm, θ rad]``;
-``evaluate_loop`` runs them under one standard condition (docs/model.md §7,
-§9) on the robot the file records (``--robot`` for a file that records
-none; another robot than the file's is refused). Every flag and both files
-are checked before any run.
+The loop comes from ``--gains`` (``load_tuned``), the references from an
+``(N, 3)`` ``.npy`` or ``.csv`` ``[x cm, y cm, θ rad]``; ``evaluate_loop``
+runs them under one standard condition (docs/model.md §7, §9) on the robot
+the file records. Every flag and both files are checked before any run.
 """
 
 from __future__ import annotations
@@ -31,12 +28,8 @@ _MAX_HORIZON_S = 3600.0
 
 def add_arguments(parser: Any) -> None:
     """Add the flags of ``wmr-jax evaluate``."""
-    parser.add_argument(
-        "--gains",
-        metavar="FILE.json",
-        help="tuned_gains.json of wmr-jax tune (fixed gains or a schedule, with its estimator) "
-        "or a JSON of Gains fields (required, unless --c)",
-    )
+    gains_help = flags.GAINS_FILE_HELP + " (required, unless --c)"
+    parser.add_argument("--gains", metavar="FILE.json", help=gains_help)
     parser.add_argument(
         "--refs",
         required=True,
@@ -49,9 +42,7 @@ def add_arguments(parser: Any) -> None:
         "--condition",
         default="nominal",
         metavar="NAME",
-        help="standard condition (docs/model.md §7): "
-        + ", ".join(_CONDITIONS)
-        + " (default: nominal)",
+        help=f"standard condition (docs/model.md §7): {', '.join(_CONDITIONS)} (default: nominal)",
     )
     parser.add_argument(
         "--mismatch",
@@ -95,11 +86,21 @@ def add_arguments(parser: Any) -> None:
         "whether it arrived, its arrival time, its final distance and whether it settled only "
         "at the horizon",
     )
-    add_compiled_argument(parser)
+    parser.add_argument(
+        "--c",
+        default=None,
+        metavar="DIR",
+        help="judge the C controller wmr-jax export wrote into DIR, compiled with the system "
+        "C compiler, in place of --gains (the same runs; float64 loop, docs/deploy.md)",
+    )
 
 
 def _refs_error(path: str, what: str) -> ValueError:
     return ValueError(f"--refs {path!r} is not allowed: {what}")
+
+
+def _unreadable(path: str, err: Any) -> ValueError:
+    return ValueError(f"--refs {path!r} cannot be read: {' '.join(str(err).split())}")
 
 
 def _float_or_none(cell: str) -> float | None:
@@ -138,7 +139,7 @@ def _read_csv(path: str) -> tuple[Any, list[str]]:
     try:
         text = Path(path).read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as err:
-        raise ValueError(f"--refs {path!r} cannot be read: {' '.join(str(err).split())}") from None
+        raise _unreadable(path, err) from None
     rows: list[list[float]] = []
     lines: list[str] = []
     first = True
@@ -187,9 +188,6 @@ def _read_npy(path: str) -> tuple[Any, list[str] | None]:
     """The array of a ``.npy`` of references (never unpickled)."""
     import numpy as np
 
-    def unreadable(err: Any) -> ValueError:
-        return ValueError(f"--refs {path!r} cannot be read: {' '.join(str(err).split())}")
-
     try:
         with open(path, "rb") as f:
             start = f.read(len(_NPY_MAGIC))
@@ -206,28 +204,23 @@ def _read_npy(path: str) -> tuple[Any, list[str] | None]:
             raise _refs_error(
                 path, "it holds Python objects (a pickle); allowed: an array of numbers"
             ) from None
-        raise unreadable(err) from None
+        raise _unreadable(path, err) from None
     except (OSError, EOFError) as err:  # unreadable, truncated
-        raise unreadable(err) from None
+        raise _unreadable(path, err) from None
     if arr.dtype.kind not in "iuf":
         raise _refs_error(path, f"its dtype is {arr.dtype}; allowed: real numbers")
     return arr.astype(float), None
 
 
-def load_refs(path: str, *, x64: bool = True) -> Any:
-    """Return the ``(N, 3)`` references of ``--refs`` (``.npy`` or ``.csv``), checked.
+def load_refs(path: str, *, x64: bool = True) -> tuple[Any, list[str]]:
+    """The ``(N, 3)`` references of ``--refs`` (``.npy`` or ``.csv``), checked, and where each is.
 
-    A single row of 3 (a 1-D ``.npy`` of 3 values, or one CSV line) is one
-    reference.
+    Where: ``line 3`` of a CSV, ``row 0 (from 0)`` of an array. A single row of
+    3 is one reference.
 
     Raises:
         ValueError: one line naming ``--refs``, the file and what is wrong.
     """
-    return _labelled_refs(path, x64=x64)[0]
-
-
-def _labelled_refs(path: str, *, x64: bool = True) -> tuple[Any, list[str]]:
-    """``load_refs`` and where each reference is in the file (``line 3``, ``row 0 (from 0)``)."""
     import jax
     import numpy as np
 
@@ -274,12 +267,8 @@ def _labelled_refs(path: str, *, x64: bool = True) -> tuple[Any, list[str]]:
 def unit_warnings(path: str, refs: Any) -> list[str]:
     """One-line warnings for references whose numbers look like another unit.
 
-    The columns are read as cm, cm and rad whatever their scale. References
-    that all lie within the arrival distance (docs/model.md §6) of the start
-    are judged arrived in position from the first period, as a file in
-    metres would be; headings beyond 2π rad look like degrees. Both are legal
-    (a set of turns in place; headings are reduced modulo 2π), so they are
-    warned about, not refused.
+    References all within the arrival distance of the start look like metres,
+    headings beyond 2π rad like degrees; both are legal, so warned about.
     """
     import numpy as np
 
@@ -412,45 +401,42 @@ def _failed(result: dict[str, Any], labels: list[str] | None) -> str:
 def summary_rows(result: dict[str, Any], labels: list[str] | None = None) -> list[dict[str, str]]:
     """The printed table of a result: one quantity a row, with its unit.
 
-    ``labels`` says where each reference is in ``--refs`` (``line 3``), for
-    the row of those that did not arrive.
+    ``labels`` says where each reference is in ``--refs``, for the row of
+    those that did not arrive.
     """
     from wmr_jax._src.model.robots import describe_robot, robot_from_values
 
-    robot = describe_robot(robot_from_values(result["robot"], "robot"))
+    robot = base = describe_robot(robot_from_values(result["robot"], "robot"))
     if result.get("robot_file"):
         robot += f", from {result['robot_file']}"
     if result["condition"] == "identified":
         robot = (
             f"runs on the robot identified in {result.get('robot_file', 'identified.json')} "
             f"(wheel scales, half-track, wheel lag, latency, tracker noise); the loop believes "
-            f"its base: {describe_robot(robot_from_values(result['robot'], 'robot'))}"
+            f"its base: {base}"
         )
-    rows = [
-        {"quantity": "success", "value": _percent(result["success"])},
-    ]
+    rows = [("success", _percent(result["success"]))]
     if "per_reference" in result:
-        rows.append({"quantity": "not arrived", "value": _failed(result, labels)})
-    return rows + [
-        {"quantity": "mean arrival", "value": _seconds(result["mean_arrival_s"])},
-        {"quantity": "median arrival", "value": _seconds(result["median_arrival_s"])},
-        {"quantity": "vs turn–drive–turn time", "value": _versus_optimal(result)},
-        {
-            "quantity": "settled only at the horizon",
-            "value": _percent(result["settled_at_horizon"]) + " of the runs (counted as arrived)",
-        },
-        {"quantity": "peak wheel speed", "value": _peak(result)},
-        {"quantity": "V_max", "value": f"{result['v_max']:g} cm/s, {_within(result)}"},
-        {"quantity": "robot", "value": robot},
-        {"quantity": "references (n)", "value": str(result["n"])},
-        {"quantity": "condition", "value": result["condition"]},
-        {"quantity": "wheel-radius mismatch", "value": f"±{100 * result['mismatch']:g} %"},
-        {"quantity": "seed", "value": str(result["seed"])},
-        {"quantity": "horizon", "value": f"{result['horizon_s']:g} s"},
-        {"quantity": "velocity loop", "value": result["velocity"]},
-        {"quantity": "controller", "value": result["controller"]},
-        {"quantity": "feedback", "value": result["feedback"]},
+        rows.append(("not arrived", _failed(result, labels)))
+    settled = _percent(result["settled_at_horizon"]) + " of the runs (counted as arrived)"
+    rows += [
+        ("mean arrival", _seconds(result["mean_arrival_s"])),
+        ("median arrival", _seconds(result["median_arrival_s"])),
+        ("vs turn–drive–turn time", _versus_optimal(result)),
+        ("settled only at the horizon", settled),
+        ("peak wheel speed", _peak(result)),
+        ("V_max", f"{result['v_max']:g} cm/s, {_within(result)}"),
+        ("robot", robot),
+        ("references (n)", str(result["n"])),
+        ("condition", result["condition"]),
+        ("wheel-radius mismatch", f"±{100 * result['mismatch']:g} %"),
+        ("seed", str(result["seed"])),
+        ("horizon", f"{result['horizon_s']:g} s"),
+        ("velocity loop", result["velocity"]),
+        ("controller", result["controller"]),
+        ("feedback", result["feedback"]),
     ]
+    return [{"quantity": quantity, "value": value} for quantity, value in rows]
 
 
 # Below this success under noise, the hint to tune for it is printed.
@@ -491,18 +477,43 @@ def per_ref_csv(result: dict[str, Any], labels: list[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _settings(args: Any) -> tuple[Any, dict[str, Any]]:
+    """``--json``'s path and the checked settings of the runs, ``--c`` or not."""
+    out = None if args.json is None else flags.output_file("--json", args.json)
+    return out, {
+        "condition": flags.choice("--condition", args.condition, _CONDITIONS),
+        "mismatch": _mismatch(args.mismatch),
+        "seed": flags.positive_int("--seed", args.seed, 0, 2**32 - 1),
+        "velocity": flags.velocity_loop(args.velocity),
+    }
+
+
+# The library's names of the flags, in its errors.
+_AS_FLAGS = {"refs": "--refs", "horizon": "--horizon", "mismatch": "--mismatch"}
+
+
+def _finish(out: Any, result: dict[str, Any], labels: Any = None, per_ref: Any = None) -> None:
+    """Write ``--json`` and ``--per-ref`` where given, and print the table."""
+    from wmr_jax._src.io import atomic_write_json, atomic_write_text
+    from wmr_jax._src.report.tables import markdown_table
+
+    if out is not None:
+        atomic_write_json(out, result)
+        print(f"evaluate -> {out}")
+    if per_ref is not None:
+        atomic_write_text(per_ref, per_ref_csv(result, labels))
+        print(f"per reference -> {per_ref}")
+    print(markdown_table(summary_rows(result, labels), ["quantity", "value"]), end="")
+
+
 def run(args: Any) -> int:
     """Run ``wmr-jax evaluate``; return the exit status."""
     if args.c is not None:
         return run_compiled(args)
     if args.gains is None:
         raise ValueError("--gains is required; allowed: a tuned_gains.json (or --c DIR)")
-    out = None if args.json is None else flags.output_file("--json", args.json)
+    out, settings = _settings(args)
     per_ref = None if args.per_ref is None else flags.output_file("--per-ref", args.per_ref)
-    condition = flags.choice("--condition", args.condition, _CONDITIONS)
-    mismatch = _mismatch(args.mismatch)
-    seed = flags.positive_int("--seed", args.seed, 0, 2**32 - 1)
-    velocity = flags.velocity_loop(args.velocity)
     estimator = None
     if args.estimator is not None:
         estimator = flags.choice("--estimator", args.estimator, _ESTIMATOR_CHOICES)
@@ -510,14 +521,16 @@ def run(args: Any) -> int:
     from wmr_jax._src.identify.closed_loop import loaded_identified
 
     identified = loaded_identified(args.robot)
-    if identified is not None and (condition != "nominal" or isinstance(args.mismatch, str)):
-        flag = "--condition" if condition != "nominal" else "--mismatch"
+    if identified is not None and (
+        settings["condition"] != "nominal" or isinstance(args.mismatch, str)
+    ):
+        flag = "--condition" if settings["condition"] != "nominal" else "--mismatch"
         raise ValueError(
             f"{flag} is not allowed with --robot {args.robot}; allowed: the identified robot's "
             "own latency, tracker noise and wheel scales"
         )
     given = flags.robot_from(args.robot) if identified is None else identified[0]
-    refs, labels = _labelled_refs(args.refs, x64=x64)
+    refs, labels = load_refs(args.refs, x64=x64)
     loop = _loop(args.gains, estimator)
     if identified is not None and _tuned_for_identified(loop.robot, identified[1]):
         # Gains tuned with --robot identified.json run on the controller that believes the base.
@@ -531,89 +544,47 @@ def run(args: Any) -> int:
     for text in unit_warnings(args.refs, refs):
         warnings.warn(text, UserWarning, stacklevel=1)
 
-    from wmr_jax._src.io import atomic_write_json, atomic_write_text
-    from wmr_jax._src.report.tables import markdown_table
     from wmr_jax._src.studies.conditions import evaluate_loop
     from wmr_jax._src.tuning.saved import tuned_json
 
-    with flags.as_flags({"refs": "--refs", "horizon": "--horizon", "mismatch": "--mismatch"}):
+    with flags.as_flags(_AS_FLAGS):
+        content = None if identified is None else identified[1]
         result = evaluate_loop(
-            loop,
-            refs,
-            condition=condition,
-            mismatch=mismatch,
-            seed=seed,
-            horizon=horizon,
-            velocity=velocity,
-            x64=x64,
-            robot=robot,
-            identified=None if identified is None else identified[1],
+            loop, refs, horizon=horizon, x64=x64, robot=robot, identified=content, **settings
         )
     # The gains themselves, not only where they were: the file may be tuned again.
     gains = tuned_json(loop.params, loop.estimator)
     result = {**result, "gains_file": str(args.gains), "gains": gains, "refs_file": str(args.refs)}
     if given is not None and flags.is_robot_file(args.robot):
         result["robot_file"] = str(args.robot)
-    if out is not None:
-        atomic_write_json(out, result)
-        print(f"evaluate -> {out}")
-    if per_ref is not None:
-        atomic_write_text(per_ref, per_ref_csv(result, labels))
-        print(f"per reference -> {per_ref}")
-    print(markdown_table(summary_rows(result, labels), ["quantity", "value"]), end="")
+    _finish(out, result, labels, per_ref)
     advice = hint(result, args)
     if advice:
         print(advice)
     return 0
 
 
-# ---------------------------------------------------------------- --c: a compiled controller
-
-
-def add_compiled_argument(parser: Any) -> None:
-    """Add ``--c DIR``: judge the C controller ``wmr-jax export`` wrote there instead."""
-    parser.add_argument(
-        "--c",
-        default=None,
-        metavar="DIR",
-        help="judge the C controller wmr-jax export wrote into DIR, compiled with the system "
-        "C compiler, in place of --gains (the same runs; float64 loop, docs/deploy.md)",
-    )
-
-
 def run_compiled(args: Any) -> int:
     """``wmr-jax evaluate --c DIR``: the runs of ``--gains``, the commands of the compiled C."""
     from wmr_jax._src.export.compiled import compile_controller
     from wmr_jax._src.export.host import evaluate_compiled, exported_loop
-    from wmr_jax._src.io import atomic_write_json
-    from wmr_jax._src.report.tables import markdown_table
 
     for flag, value in (("--gains", args.gains), ("--estimator", args.estimator)):
         if value is not None:
             raise ValueError(f"{flag} is not allowed with --c; allowed: the loop baked into the C")
     if args.float32:
         raise ValueError("--float32 is not allowed with --c; allowed: wmr-jax export --real float")
-    out = None if args.json is None else flags.output_file("--json", args.json)
-    condition = flags.choice("--condition", args.condition, _CONDITIONS)
-    mismatch = _mismatch(args.mismatch)
-    seed = flags.positive_int("--seed", args.seed, 0, 2**32 - 1)
-    velocity = flags.velocity_loop(args.velocity)
+    out, settings = _settings(args)
     given = flags.robot_from(args.robot)
-    refs = load_refs(args.refs)
+    refs = load_refs(args.refs)[0]
     loop, meta = exported_loop(args.c)
     robot = flags.robot_for_gains(given, loop.robot, "--c", args.c)
     horizon = _horizon(args.horizon, len(refs), robot)
     compiled = compile_controller(args.c)
-    with flags.as_flags({"refs": "--refs", "horizon": "--horizon", "mismatch": "--mismatch"}):
-        result = evaluate_compiled(
-            compiled, loop, refs, condition=condition, mismatch=mismatch, seed=seed,
-            horizon=horizon, velocity=velocity, robot=robot,
-        )  # fmt: skip
+    with flags.as_flags(_AS_FLAGS):
+        result = evaluate_compiled(compiled, loop, refs, horizon=horizon, robot=robot, **settings)
     result = {**result, "c_folder": str(args.c), "gains": meta["gains"], "refs_file": args.refs}
-    if out is not None:
-        atomic_write_json(out, result)
-        print(f"evaluate -> {out}")
-    print(markdown_table(summary_rows(result), ["quantity", "value"]), end="")
+    _finish(out, result)
     return 0
 
 

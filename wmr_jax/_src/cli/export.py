@@ -1,11 +1,8 @@
 """``wmr-jax export``: a tuned loop as a C controller for the robot (docs/deploy.md).
 
-Reads a ``tuned_gains.json`` (``load_tuned``: fixed gains or a schedule, its
-estimator and robot) and writes ``wmr_controller.h``, ``wmr_controller.c`` and
-``wmr_controller.json`` (the loop they were generated from and the period
-``--period`` bakes in, for ``wmr-jax evaluate --c``) into ``--out``. Where
-the machine has a C compiler, the files are compiled once with the flags they
-promise to pass, and the state's and the object's sizes printed.
+Writes ``wmr_controller.h``, ``.c`` and ``.json`` (the loop and the period,
+for ``wmr-jax evaluate --c``) into ``--out``; with a C compiler, compiles
+them once and prints the state's and the object's sizes.
 """
 
 from __future__ import annotations
@@ -21,13 +18,7 @@ __all__ = ["SUBCOMMANDS"]
 
 def add_arguments(parser: Any) -> None:
     """Add the flags of ``wmr-jax export``."""
-    parser.add_argument(
-        "--gains",
-        required=True,
-        metavar="FILE.json",
-        help="tuned_gains.json of wmr-jax tune (fixed gains or a schedule, with its estimator) "
-        "or a JSON of Gains fields",
-    )
+    parser.add_argument("--gains", required=True, metavar="FILE.json", help=flags.GAINS_FILE_HELP)
     parser.add_argument(
         "--out", required=True, metavar="DIR", help="folder to write the C files into"
     )
@@ -52,6 +43,7 @@ def _object_size(folder: Path) -> tuple[int, int] | None:
     import subprocess
 
     from wmr_jax._src.export.compiled import CFLAGS, compiler
+    from wmr_jax._src.studies.bench import text_bytes
 
     cc = compiler()
     if cc is None:
@@ -73,22 +65,7 @@ def _object_size(folder: Path) -> tuple[int, int] | None:
             [cc, f"-I{folder}", str(main), str(obj), "-o", str(probe), "-lm"], check=True
         )
         size = int(subprocess.run([str(probe)], capture_output=True, text=True).stdout)
-        text = _text_size(obj)
-        return size, text
-
-
-def _text_size(obj: Path) -> int:
-    """Bytes of code and constants in an object file (``size``'s text), else the file's size."""
-    import shutil
-    import subprocess
-
-    tool = shutil.which("size")
-    if tool:
-        done = subprocess.run([tool, str(obj)], capture_output=True, text=True)
-        lines = done.stdout.split("\n")
-        if done.returncode == 0 and len(lines) > 1:
-            return int(lines[1].split()[0])
-    return obj.stat().st_size
+        return size, text_bytes(obj)
 
 
 def run(args: Any) -> int:

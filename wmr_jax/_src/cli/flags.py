@@ -1,9 +1,8 @@
 """Flag values of the command line, checked: one line naming the flag when one is bad.
 
 Flags arrive as text and are checked here rather than by ``argparse`` types,
-so that a bad value gives the same one-line error as every other mistake
-(``wmr-jax: error: --steps '0' is not allowed; allowed: ...``), in the flag's
-own unit (degrees stay degrees).
+so that a bad value gives the same one-line error as every other mistake, in
+the flag's own unit.
 """
 
 from __future__ import annotations
@@ -78,21 +77,18 @@ def number(
     return value
 
 
-def _writable(flag: str, text: str, *, folder: bool) -> Path:
-    """Return ``text`` as a path the command may write (a folder or a file), or say why not."""
-    from wmr_jax._src.io import writable_path
-
-    return writable_path(f"{flag} {text!r}", text, folder=folder)
-
-
 def output_dir(flag: str, text: str) -> Path:
     """Return a folder the command may write to (created later), or say why not."""
-    return _writable(flag, text, folder=True)
+    from wmr_jax._src.io import writable_path
+
+    return writable_path(f"{flag} {text!r}", text, folder=True)
 
 
 def output_file(flag: str, text: str) -> Path:
     """Return a file path the command may write to, or say why not."""
-    return _writable(flag, text, folder=False)
+    from wmr_jax._src.io import writable_path
+
+    return writable_path(f"{flag} {text!r}", text, folder=False)
 
 
 def image_file(flag: str, text: str) -> Path:
@@ -197,8 +193,7 @@ def add_gain_flags(parser: Any) -> None:
 def gain_flag_values(params: Any) -> list[str]:
     """``Gains`` as the gain flags that give them: ``["--k-r", "65.592", ...]`` (Φ_m in degrees).
 
-    Six significant digits: what ``wmr-jax tune`` prints here, typed back
-    into ``wmr-jax simulate``, gives the same gains to six digits.
+    Six significant digits: typed back into ``wmr-jax simulate`` they give the same gains.
     """
     argv = []
     for flag, field, *_ in _GAIN_FLAGS:
@@ -209,10 +204,9 @@ def gain_flag_values(params: Any) -> list[str]:
 
 
 def gains_from(args: Any) -> Any:
-    """Return the ``Gains`` of the gain flags; out-of-range values are named in flag units.
+    """Return the ``Gains`` of the gain flags, or of ``--gains FILE`` (not both).
 
-    With a ``--gains FILE`` flag (``args.gains``), the gains come from that file
-    instead, and a gain flag given beside it is an error.
+    Out-of-range values are named in the flags' units.
     """
     from wmr_jax._src.model.params import Gains, validate_gains
 
@@ -245,10 +239,7 @@ _JSON_AT = re.compile(r"^(Expecting|Extra data|Unterminated|Invalid)\b.*?(line \
 
 
 def os_reason(text: str) -> str:
-    """An ``OSError``'s text in the commands' words: ``there is no such file``, not ``[Errno 2]…``.
-
-    The path the OS repeats at the end is left out (the message names it).
-    """
+    """An ``OSError``'s text in the commands' words (``there is no such file``), no path."""
     text = " ".join(str(text).split())
     found = _ERRNO.search(text)
     if found is None:
@@ -259,10 +250,6 @@ def os_reason(text: str) -> str:
 
 def tuned_file(flag: str, path: Any) -> Any:
     """``load_tuned_and_tuning(path)`` for a command's flag: ``(ClosedLoop, tuning)``.
-
-    A missing file, a folder or a file that is no JSON (a ``.csv`` of
-    references given as the gains) is said in the commands' words, naming
-    the flag and the file.
 
     Raises:
         ValueError: one line naming ``flag``, the file and what is wrong.
@@ -286,11 +273,7 @@ def tuned_file(flag: str, path: Any) -> Any:
 
 
 def gains_file(flag: str, text: str) -> Any:
-    """Return the fixed ``Gains`` stored in a file such as ``tuned_gains.json`` of ``wmr-jax tune``.
-
-    Read by ``load_tuned``, with the units the file names (a file without
-    them, from before units were recorded, holds ``phi_m`` in radians); a
-    field it leaves out keeps the paper's value.
+    """Return the fixed ``Gains`` stored in a file such as ``tuned_gains.json``.
 
     Raises:
         ValueError: one line naming ``flag`` and the file, for a file
@@ -307,12 +290,15 @@ def gains_file(flag: str, text: str) -> Any:
     return loop.params
 
 
-def add_robot_flag(parser: Any, default: str = "paper") -> None:
-    """Add ``--robot NAME|FILE``: a preset, a JSON of ``Robot`` fields or a ROS YAML.
+# What --gains FILE takes, in the help of every command that reads one.
+GAINS_FILE_HELP = (
+    "tuned_gains.json of wmr-jax tune (fixed gains or a schedule, with its estimator) "
+    "or a JSON of Gains fields"
+)
 
-    ``default`` names what runs without the flag, in the help only (``None``
-    stands for it in ``args.robot``).
-    """
+
+def add_robot_flag(parser: Any, default: str = "paper") -> None:
+    """Add ``--robot NAME|FILE``; ``default`` names what runs without it, in the help only."""
     parser.add_argument("--robot", **robot_flag_options(default))
 
 
@@ -330,11 +316,7 @@ def robot_flag_options(default: str = "paper") -> dict[str, Any]:
 
 
 def scaled_gains_note(robot: Any) -> str:
-    """What Shim–Sung runs on ``robot`` in a study given no gains, for a command to print.
-
-    ``studies.robot_defaults``: on a robot other than the paper's, the
-    paper's feasible gains scaled into its wheel budget.
-    """
+    """What Shim–Sung runs on ``robot`` in a study given no gains (``robot_defaults``)."""
     from wmr_jax._src.studies.robustness import robot_defaults
 
     gains = robot_defaults("shim-sung", robot)
@@ -346,11 +328,23 @@ def scaled_gains_note(robot: Any) -> str:
     )
 
 
+def say_robot(given: Any, detail: str = "", gains: bool = True) -> None:
+    """Print ``--robot``'s robot (and a ROS YAML's note), if given, for a command that runs it.
+
+    ``detail`` follows its description; ``gains`` adds ``scaled_gains_note``.
+    """
+    from wmr_jax._src.model.robots import describe_robot
+
+    if given is None:
+        return
+    if given.note:
+        print(given.note)
+    note = scaled_gains_note(given.robot) if gains else ""
+    print(f"robot {given.label!r}: {describe_robot(given.robot)}{detail}{note}")
+
+
 def robot_from(text: Any) -> Any:
     """Return the robot of ``--robot`` (a ``robots.LoadedRobot``), or ``None`` if not given.
-
-    Read and checked before any run; a YAML's note says which of its fields
-    were used (the command prints it).
 
     Raises:
         ValueError: one line naming ``--robot``, the file, the key, its value
@@ -386,12 +380,8 @@ def robot_shown(given: Any, robot: Any) -> str:
 def robot_for_gains(given: Any, saved: Any, gains_flag: str, path: Any) -> Any:
     """The robot to run a tuned file's parameters on: ``--robot``'s, else the file's.
 
-    Gains are tuned within one robot's wheel budget ``k_r + L k_θ ≤ V_max``
-    (and a schedule caps its commands with that robot's ``V_max`` and
-    ``L``): on another robot they may ask a wheel for more than it can give,
-    or waste what it has. So a ``--robot`` other than the one the file
-    records is refused rather than quietly run; a file that records none
-    (from before robots were recorded) runs on ``--robot``'s.
+    Gains fit one robot's wheel budget, so a ``--robot`` other than the one the
+    file records is refused; a file that records none runs on ``--robot``'s.
 
     Args:
         given: the ``LoadedRobot`` of ``--robot``, or ``None``.
@@ -434,10 +424,8 @@ def short_robot(robot: Any) -> str:
 def as_flags(names: dict[str, str]) -> Iterator[None]:
     """Name the command's flags in the library's errors raised inside the block.
 
-    A library error reads ``"n_poses = 10 is not allowed; ..."``; a command
-    line user typed ``--poses``, so it becomes ``"--poses: n_poses = 10 is not
-    allowed; ..."``. Advice to switch JAX to float64, which no flag does, is
-    left out.
+    ``"n_poses = 10 is not allowed; ..."`` becomes ``"--poses: n_poses = 10 ..."``;
+    the advice to switch JAX to float64, which no flag does, is left out.
     """
     from wmr_jax._src.checks import _FLOAT64_HINT
 

@@ -1,9 +1,7 @@
 """``wmr-jax identify``: fit the true robot to its logs, or plan the driving that does.
 
-``--log FILE [FILE ...] --robot BASE --out DIR`` writes ``DIR/identified.json``
-(usable as ``--robot`` of ``simulate``, ``evaluate``, ``tune``) and
-``DIR/fit.png``, and prints the table. ``--plan OUT.csv --robot BASE
---minutes 5`` writes the commands to drive (docs/robots.md).
+``--log ... --out DIR`` writes ``DIR/identified.json`` and ``DIR/fit.png``;
+``--plan OUT.csv`` writes the commands to drive (docs/robots.md).
 """
 
 from __future__ import annotations
@@ -100,11 +98,8 @@ def _plan(args: Any, robot: Any) -> int:
     seed = flags.positive_int("--seed", args.seed, minimum=0)
     path = Path(flags.output_file("--plan", args.plan))
     commands = plan.plan_commands(robot, dt, minutes, seed)
-    t = np.arange(len(commands)) * dt
-    with open(path, "w") as f:
-        f.write("t,v_cmd,omega_cmd\n")
-        for row in np.column_stack([t, commands]):
-            f.write(",".join(f"{x:.6f}" for x in row) + "\n")
+    rows = np.column_stack([np.arange(len(commands)) * dt, commands])
+    np.savetxt(path, rows, fmt="%.6f", delimiter=",", header="t,v_cmd,omega_cmd", comments="")
     print(f"wrote {len(commands)} commands ({minutes:g} min at {dt:g} s) to {path}")
     return 0
 

@@ -1,10 +1,8 @@
 """The ``wmr-jax`` command line: the one place that parses arguments.
 
-Each command lives in its own module of this package with ``HELP``,
-``add_arguments(parser)`` and ``run(args) -> int``; the engines it calls
-return values, and the command writes the files and prints. Every user
-error (a bad flag value, out-of-range gains, an unwritable output path) ends
-in one line on stderr and exit status 2, never a traceback.
+Each command's module has ``SUBCOMMANDS``: its help, its flags and
+``run(args) -> int``. Every user error ends in one line on stderr and exit
+status 2, never a traceback.
 """
 
 from __future__ import annotations
@@ -154,12 +152,9 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
 def entry() -> None:
     """The ``wmr-jax`` program: ``main`` with the process's arguments, then exit with its status.
 
-    After an interruption (status 130) the process ends at once, without the
-    interpreter's clean-up: a computation cut mid-way (say, while XLA
-    compiled) leaves JAX's threads running, and tearing the interpreter down
-    under them could crash it (a segmentation fault, status 139) after the
-    interruption was reported, hiding the status 130. Everything written
-    was written atomically and is flushed.
+    After an interruption (status 130) the process ends at once: tearing the
+    interpreter down under JAX's running threads could crash it and hide the
+    status. Everything written was written atomically.
     """
     status = main()
     if status == 130:

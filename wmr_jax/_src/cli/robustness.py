@@ -1,13 +1,9 @@
 """``wmr-jax robustness``: Monte Carlo of noise, model mismatch and latency (docs/model.md §7).
 
-On the robot of ``--robot``, else the one the ``--nominal-gains`` and
-``--robust-gains`` files record, else the paper robot; a file tuned for
-another robot than ``--robot`` (or than the other file) is refused, and so
-is a file that says another problem tuned it (``"tuning"``) than its flag
-names: the tables label its rows by the flag. The
-runs last the robot's horizon (``wmr_jax.studies.study_horizon``: 6 s on the
-paper robot, longer on a slower one), from the references of
-docs/model.md §6.
+On the robot of ``--robot``, else the one the gain files record, else the
+paper robot; the runs last that robot's horizon (``study_horizon``). A gain
+file tuned for another robot, or by another problem than its flag names, is
+refused.
 """
 
 from __future__ import annotations
@@ -146,9 +142,8 @@ def _is_paper(robot: Any) -> bool:
 def _meta(seed: int, robot: Any, sets: dict[str, Any], args: Any) -> dict[str, Any]:
     """What the standard conditions and the noise curve record beside their rows.
 
-    Beside the seed, the poses and the robot: the dtype, the gain files given
-    and every set's parameters and estimator (as ``tuned_gains.json`` holds
-    them), so that two runs on other files or dtypes never read alike.
+    The seed, poses, robot, dtype, gain files and every set's parameters, so
+    that two runs on other files or dtypes never read alike.
     """
     from wmr_jax._src.model.robots import robot_json
     from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED
@@ -218,10 +213,7 @@ def _noise_curve(
 def _gain_sets(args: Any) -> tuple[dict[str, Any], Any]:
     """The gain sets and the robot they run on (checked before any computation).
 
-    The robot is ``--robot``'s, else the one the files record (they must
-    agree), else the paper robot. The first set is the paper's gains scaled
-    into that robot's wheel budget (``k_r = 60``, ``k_θ = 10`` on the paper
-    robot, docs/robots.md).
+    The first set is the paper's feasible gains scaled into that robot's wheel budget.
     """
     from wmr_jax._src.model.params import Robot
     from wmr_jax._src.model.robots import same_robot

@@ -52,10 +52,7 @@ def add_arguments(parser: Any) -> None:
 
 
 def _controller_and_gains(args: Any) -> tuple[Any, Any, Any]:
-    """The law, parameters and robot of ``--gains FILE`` (``load_tuned``), else of the gain flags.
-
-    The robot is the file's (``None`` where it records none, and for the flags).
-    """
+    """The law, parameters and robot of ``--gains FILE``, else of the gain flags."""
     from wmr_jax._src.model.controllers.shim_sung import SHIM_SUNG
 
     if args.gains is None:
@@ -115,17 +112,11 @@ def plot_title(ref: Any, controller: Any, gains: Any, gains_file: Any) -> str:
     return f"{where}; {what}"
 
 
-def _identified(source: Any) -> Any:
-    """``(LoadedRobot of the base, content)`` of an ``identify`` output, else ``None``."""
-    from wmr_jax._src.identify.closed_loop import loaded_identified
-
-    return loaded_identified(source)
-
-
 def run(args: Any) -> int:
     """Run ``wmr-jax simulate``; return the exit status."""
     import numpy as np
 
+    from wmr_jax._src.identify.closed_loop import identified_rollout, loaded_identified
     from wmr_jax._src.model.params import Robot
     from wmr_jax._src.model.robots import same_robot
     from wmr_jax._src.sim import metrics
@@ -138,7 +129,7 @@ def run(args: Any) -> int:
     if args.steps is not None:
         steps = flags.positive_int("--steps", args.steps, 1, 10**7)
     velocity = flags.velocity_loop(args.velocity)
-    identified = _identified(args.robot)
+    identified = loaded_identified(args.robot)
     given = flags.robot_from(args.robot) if identified is None else identified[0]
     controller, gains, saved = _controller_and_gains(args)
     robot = flags.robot_for_gains(given, saved, "--gains", args.gains)
@@ -146,25 +137,12 @@ def run(args: Any) -> int:
         print(given.note)
     if args.steps is None:
         steps = default_steps(robot)
+    same = {"init": init, "dt": dt, "steps": steps, "velocity": velocity, "controller": controller}
     if identified is not None:
-        from wmr_jax._src.identify.closed_loop import identified_rollout
-
-        traj = identified_rollout(
-            ref, gains, controller=controller, init=init, dt=dt, steps=steps,
-            velocity=velocity, base=robot, identified=identified[1],
-        )  # fmt: skip
+        traj = identified_rollout(ref, gains, base=robot, identified=identified[1], **same)
     else:
         with flags.as_flags({"ref": "--ref", "init": "--init", "dt": "--dt"}):
-            traj = rollout(
-                ref,
-                gains,
-                init=init,
-                dt=dt,
-                steps=steps,
-                velocity=velocity,
-                controller=controller,
-                robot=robot,
-            )
+            traj = rollout(ref, gains, robot=robot, **same)
     t_arrive = float(metrics.arrival_time(traj, np.asarray(ref), dt=dt))
     per_region = np.asarray(metrics.region_time(traj, dt=dt))
     final = np.asarray(traj.poses[-1])

@@ -1,12 +1,8 @@
 """``wmr-jax sweep``: map success, arrival, path, wheel speed and zig-zag over a pose space.
 
-Runs ``wmr_jax.studies.map_study`` on a grid of reference poses for every
-controller asked for (a square grid inside the 5–80 cm annulus at a few
-headings: its means differ from ``wmr-jax compare``'s random poses) on the
-robot of ``--robot``, then writes ``maps_<controller>.png``, ``winner.png``,
-``summary.md`` and ``summary.json`` (which records the robot) into ``--out``
-(``wmr_jax.report.save_map_study``) and prints the summary table. Ctrl-C
-says which finished chunks were kept (``--resume`` keeps them).
+Runs ``wmr_jax.studies.map_study`` for every controller asked for, writes
+its maps and summary into ``--out`` (``wmr_jax.report.save_map_study``) and
+prints the summary table. Ctrl-C says which finished chunks were kept.
 """
 
 from __future__ import annotations
@@ -83,35 +79,38 @@ def add_arguments(parser: Any) -> None:
     flags.add_robot_flag(parser)
 
 
+def study_settings(args: Any) -> tuple[Any, dict[str, Any]]:
+    """``--robot``'s ``LoadedRobot`` (or ``None``) and the checked keywords of a map study."""
+    velocity = flags.velocity_loop(args.velocity)
+    chunk = flags.positive_int("--chunk", args.chunk)
+    given, robot, horizon = robot_and_horizon(args)
+    return given, {
+        "velocity": velocity,
+        "chunk": chunk,
+        "progress": not args.no_progress,
+        "x64": not args.float32,
+        "robot": robot,
+        "horizon": horizon,
+    }
+
+
 def robot_and_horizon(args: Any) -> tuple[Any, Any, float]:
     """``--robot`` (``LoadedRobot`` or ``None``), the robot to run, and the horizon, s.
 
-    The horizon is ``--horizon``, or ``maps.horizon_for(robot)``: the paper
-    robot's 6 s, longer for a robot too slow for the paper's gains. Given a
-    ``--robot``, prints the robot and the horizon it runs (and a ROS YAML's note).
+    Given a ``--robot``, prints it and the horizon it runs (and a ROS YAML's note).
     """
     from wmr_jax._src.model.params import Robot
-    from wmr_jax._src.model.robots import describe_robot
-    from wmr_jax._src.studies.maps import horizon_for
+    from wmr_jax._src.studies.robustness import study_horizon
 
     given = flags.robot_from(args.robot)
     robot = Robot() if given is None else given.robot
     if args.horizon is None:
-        horizon = horizon_for(robot)
+        horizon = study_horizon(robot)
     else:
         horizon = flags.number("--horizon", args.horizon, low=0.0, closed=False, unit="s")
-    if given is not None:
-        if given.note:
-            print(given.note)
-        scaled = (
-            " (6 s × (60 + 10 L) / v_max, rounded up to 0.1 s)"
-            if args.horizon is None and horizon > 6
-            else ""
-        )
-        print(
-            f"robot {given.label!r}: {describe_robot(robot)}; horizon {horizon:.4g} s{scaled}"
-            + flags.scaled_gains_note(robot)
-        )
+    scaled = args.horizon is None and horizon > 6
+    scaled = " (6 s × (60 + 10 L) / v_max, rounded up to 0.1 s)" if scaled else ""
+    flags.say_robot(given, f"; horizon {horizon:.4g} s{scaled}")
     return given, robot, horizon
 
 
@@ -155,13 +154,11 @@ def _run(args: Any, out: Path, chunks: Path | None, finished: dict) -> int:
     from wmr_jax._src.studies.sweep_files import OtherSettingsWarning
 
     n_poses = flags.positive_int("--poses", args.poses)
-    chunk = flags.positive_int("--chunk", args.chunk)
     headings = [
         flags.number("--headings", h, unit="degrees") for h in args.headings or DEFAULT_HEADINGS_DEG
     ]
     names = flags.controller_names(args.controller)
-    velocity = flags.velocity_loop(args.velocity)
-    given, robot, horizon = robot_and_horizon(args)
+    given, settings = study_settings(args)
 
     def on_chunk(name: str, done: int, total: int) -> None:
         finished[name] = (done, total)
@@ -190,15 +187,10 @@ def _run(args: Any, out: Path, chunks: Path | None, finished: dict) -> int:
             study = map_study(
                 n_poses,
                 controller_names=names,
-                velocity=velocity,
                 headings_deg=headings,
-                chunk=chunk,
-                progress=not args.no_progress,
-                x64=not args.float32,
                 cache=chunks,
-                robot=robot,
-                horizon=horizon,
                 on_chunk=on_chunk,
+                **settings,
             )
         except OtherSettingsWarning as err:
             raise ValueError(

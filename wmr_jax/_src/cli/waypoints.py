@@ -1,9 +1,7 @@
 """``wmr-jax waypoints``: consecutive motions through a chain of waypoints.
 
-Runs ``wmr_jax.studies.soccer_study`` on the robot of ``--robot``, writes
-``soccer.png``, ``soccer.md`` and ``soccer.json`` (which records the robot)
-into ``--out`` and prints the table: the time since the start of the route
-at which each waypoint was reached.
+Runs ``wmr_jax.studies.soccer_study``, writes ``soccer.png``, ``.md`` and
+``.json`` into ``--out`` and prints when each waypoint was reached.
 """
 
 from __future__ import annotations
@@ -60,7 +58,7 @@ def _shown(row: dict[str, Any]) -> dict[str, Any]:
 def run(args: Any) -> int:
     """Run ``wmr-jax waypoints``; return the exit status."""
     from wmr_jax._src.model.params import Robot
-    from wmr_jax._src.model.robots import describe_robot, robot_json
+    from wmr_jax._src.model.robots import robot_json
     from wmr_jax._src.studies.robustness import study_horizon
     from wmr_jax._src.studies.waypoints import soccer_steps
 
@@ -82,40 +80,21 @@ def run(args: Any) -> int:
         "pass_tol_theta": math.radians(pass_deg),
         "robot": robot,
     }
-    if given is not None:
-        if given.note:
-            print(given.note)
-        scaled = (
-            f" (450 × {study_horizon(robot):g} s / 6 s, the studies' horizon on it)"
-            if args.steps is None and steps > 450
-            else ""
-        )
-        print(
-            f"robot {given.label!r}: {describe_robot(robot)}; {steps} control periods{scaled}"
-            + flags.scaled_gains_note(robot)
-        )
+    scaled = ""
+    if given is not None and args.steps is None and steps > 450:
+        scaled = f" (450 × {study_horizon(robot):g} s / 6 s, the studies' horizon on it)"
+    flags.say_robot(given, f"; {steps} control periods{scaled}")
 
-    from wmr_jax._src.io import atomic_write_json
     from wmr_jax._src.report.tables import markdown_table
     from wmr_jax._src.report.waypoints import write_soccer
     from wmr_jax._src.studies.waypoints import soccer_study
 
     study = soccer_study(**settings)
-    write_soccer(out, study)
-    # soccer.json records the robot beside the settings write_soccer records.
-    record = _read_json(out / "soccer.json")
     label = given.label if given is not None else "paper"
-    record.update(robot=robot_json(robot), robot_label=label)
-    atomic_write_json(out / "soccer.json", record)
+    write_soccer(out, study, extra={"robot": robot_json(robot), "robot_label": label})
     table = markdown_table([_shown(row) for row in study.rows])
     print(f"soccer-like sequence -> {out}/soccer.png, soccer.md, soccer.json\n{table}", end="")
     return 0
-
-
-def _read_json(path: Any) -> dict[str, Any]:
-    import json
-
-    return json.loads(path.read_text(encoding="utf-8"))
 
 
 SUBCOMMANDS = {

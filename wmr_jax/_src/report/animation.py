@@ -1,13 +1,9 @@
 """Animated GIF of a batch of robots driving to their reference poses (matplotlib only).
 
-Each robot is drawn as its body (a disc of the robot's diameter, scaled up so
-it shows at the pitch's scale) with a heading tick and a fading trail; its
-reference is a cross with a heading arrow, green while the robot is within
-the docs/model.md §6 arrival tolerances. Frames come from
-``matplotlib.animation`` and are encoded by its ``PillowWriter`` (Pillow is a
-dependency of matplotlib) into a temporary file that then atomically replaces
-the target. ``animate`` records the runs itself (``wmr_jax.batch_rollout``):
-drawing a run is reporting; ``wmr-jax animate`` is the command.
+Each robot is a disc with a heading tick and a fading trail; its reference
+a cross with a heading arrow, green while the robot is arrived
+(docs/model.md §6). ``PillowWriter`` encodes the frames into a temporary
+file that then atomically replaces the target.
 """
 
 from __future__ import annotations
@@ -66,16 +62,10 @@ _MAX_FRAME_MS = 655_350
 def frame_timing(dt: float, stride: int | None = None, speed: float = 1.0) -> tuple[int, int]:
     """Return ``(stride, frame_ms)``: samples per frame and the GIF's delay per frame, ms.
 
-    A GIF stores each frame's delay in whole hundredths of a second (and
-    browsers play delays under 20 ms at 100 ms), so the delay cannot be any
-    ``stride · dt``: with ``stride=None`` the smallest stride whose delay is
-    within 2 % of ``stride · dt / speed`` is chosen (3 samples, 100 ms at
-    ``dt = 0.033 s``: 1 % slow). A given ``stride`` gets the nearest delay.
-
-    Args:
-        dt: control period, s.
-        stride: samples per frame; ``None`` picks one as above.
-        speed: playback speed, 1 for real time.
+    A GIF stores delays in whole hundredths of a second (browsers play those
+    under 20 ms at 100 ms): with ``stride=None`` the smallest stride whose delay
+    is within 2 % of ``stride · dt / speed`` is chosen; a given ``stride`` gets
+    the nearest delay.
 
     Raises:
         ValueError: for a non-positive ``dt``, ``stride`` or ``speed``, or a
@@ -146,8 +136,7 @@ def write_gif(
         refs: ``(N, 3)`` their references.
         dt: control period of the samples, s (for the clock).
         title: text above the pitch.
-        speed: playback speed, 1 (default) for real time: each frame shows
-            for ``stride · dt / speed`` to within 2 % (``frame_timing``).
+        speed: playback speed, 1 (default) for real time (``frame_timing``).
         stride: samples per frame; default the smallest that plays at ``speed``.
         trail: samples of path drawn behind each robot.
         body_radius: drawn radius of each robot, cm.
@@ -240,24 +229,17 @@ def animate(
 ) -> Path:
     """Simulate a batch of robots and write the GIF of them driving to their poses.
 
-    The runs are recorded whole (``wmr_jax.batch_rollout``), in float64 like
-    the maps (see ``wmr_jax.studies.evaluate_poses`` why).
+    The runs are recorded whole (``batch_rollout``) in float64, like the maps.
 
     Args:
         path: the ``.gif`` to write (atomically).
-        refs: ``(N, 3)`` references; default ``n_robots`` random docs/model.md §6
-            poses (``wmr_jax.sample_poses(seed, n_robots)``).
+        refs: ``(N, 3)`` references; default ``sample_poses(seed, n_robots)``.
         params: the controller's parameters (its defaults if ``None``).
         n_robots: number of random references when ``refs`` is ``None``.
         seed: seed of the random references.
-        controller: a ``Controller`` or its registered name.
-        init: ``(3,)`` or ``(N, 3)`` initial poses.
-        dt: control period, s.
+        controller, init, dt, robot, velocity: as ``batch_rollout``.
         steps: control periods; default the docs/model.md §6 horizon (6 s).
-        robot: robot parameters; default ``Robot()``.
-        velocity: ``"ideal"`` or ``"nonideal"``.
-        speed: playback speed, 1 for real time (see ``write_gif``).
-        stride: samples per frame; default the smallest that plays at ``speed``.
+        speed, stride: as ``write_gif``.
 
     Returns:
         The path written.

@@ -75,16 +75,9 @@ def _ratio_lines(ratios: dict[str, dict[str, float]]) -> list[str]:
 
 
 def bench_table(result: dict[str, Any]) -> str:
-    """Return a benchmark result as Markdown: environment, rates, then ratios.
+    """Return a ``run_benchmark`` result as Markdown: environment, rates, then ratios.
 
-    Args:
-        result: what ``wmr_jax.studies.run_benchmark`` returned.
-
-    Returns:
-        The text, ending in a newline: the device and versions, one row per
-        case (robot-steps/s, median run s, compile s, other processes' CPU in
-        cores), the speed-ups per batch size, and a note when other processes
-        loaded the machine (over 0.2 cores) while it was timed.
+    A note follows when other processes used over 0.2 cores while it was timed.
     """
     keys = ("environment", "config", "rows")
     if not isinstance(result, dict) or any(k not in result for k in keys) or not result["rows"]:

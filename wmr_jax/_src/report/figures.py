@@ -25,6 +25,7 @@ from wmr_jax._src import checks  # noqa: E402
 from wmr_jax._src.io import save_figure  # noqa: E402
 
 __all__ = [
+    "built",
     "closed_after",
     "image_formats",
     "ListedColormap",
@@ -34,6 +35,7 @@ __all__ = [
     "plot_paths",
     "plot_wheel_speeds",
     "plt",
+    "save_closed",
 ]
 
 
@@ -54,6 +56,25 @@ def closed_after(*args: Any, **kwargs: Any) -> Iterator[tuple[Any, Any]]:
     fig, axes = plt.subplots(*args, **kwargs)
     try:
         yield fig, axes
+    finally:
+        plt.close(fig)
+
+
+def built(draw: Any, *args: Any, **kwargs: Any) -> Any:
+    """``plt.subplots(*args, **kwargs)`` drawn by ``draw(fig, axes)``; closed if drawing fails."""
+    fig, axes = plt.subplots(*args, **kwargs)
+    try:
+        draw(fig, axes)
+    except BaseException:
+        plt.close(fig)
+        raise
+    return fig
+
+
+def save_closed(fig: Any, path: Any, **kwargs: Any) -> Any:
+    """Save ``fig`` atomically (``io.save_figure``) and close it, saved or not; return the path."""
+    try:
+        return save_figure(fig, path, **kwargs)
     finally:
         plt.close(fig)
 
@@ -95,14 +116,11 @@ def plot_paths(
     Args:
         ax: a matplotlib Axes.
         paths: each ``(steps + 1, 3)`` poses in cm, cm, rad.
-        refs: ``(M, 3)`` reference poses, ``M ≥ len(paths)``: the first
-            ``len(paths)`` are the paths' own, any more are marked too
-            (waypoints).
+        refs: ``(M, 3)`` reference poses, ``M ≥ len(paths)``: the paths' own,
+            then any more to mark (waypoints).
         color: one colour for all paths (default: one per path).
-        label: legend label of the paths: with one colour, of the first
-            path, which stands for them all; with one colour per path, each
-            path is entered as ``to (x, y, θ°)``, its reference, and
-            ``label`` is left to the legend's title.
+        label: legend label of the paths (with one colour per path, each is
+            entered by its reference and ``label`` is the legend's title).
         linestyle: matplotlib line style.
         heading_spacing: draw the heading every this many cm of travel.
         arrow_length: heading arrow length, cm.
@@ -159,11 +177,7 @@ def plot_paths(
 
 
 def _mark_backwards(ax: Any, paths: Sequence[np.ndarray], refs: np.ndarray) -> None:
-    """Circle the references reached facing backwards (``θ = θ_r ± 180°``, docs/model.md §6).
-
-    Folding makes front and back alike, so such runs count as arrived; the
-    circle tells them apart from the ones that end facing ``θ_r``.
-    """
+    """Circle the references reached facing backwards (``θ = θ_r ± 180°``, arrived all the same)."""
     from wmr_jax._src.sim.metrics import DEFAULT_TOL_R
 
     ends = np.asarray([np.asarray(p)[-1] for p in paths])

@@ -1,10 +1,8 @@
 """Figures and files of a pose-space study: heat maps, the first-to-arrive map, the summary.
 
-``save_map_study(out_dir, study)`` writes what ``wmr-jax sweep`` leaves in
-its folder: ``maps_<controller>.png`` (metrics × headings, with one colour
-range per metric shared by every controller so that their maps compare),
-``winner.png`` (which controller arrives first) and the summary table as
-``summary.md`` and ``summary.json``. Every file is written atomically.
+``save_map_study`` writes what ``wmr-jax sweep`` leaves in its folder:
+``maps_<controller>.png`` (metrics × headings, one colour range per metric
+shared by every controller), ``winner.png``, ``summary.md`` and ``summary.json``.
 """
 
 from __future__ import annotations
@@ -20,7 +18,7 @@ from wmr_jax._src.io import atomic_write_text, json_text, save_figure
 from wmr_jax._src.model.controllers import registered_names
 from wmr_jax._src.model.params import Robot
 from wmr_jax._src.model.robots import robot_from_values, same_robot
-from wmr_jax._src.report.figures import plt
+from wmr_jax._src.report.figures import closed_after, plt
 from wmr_jax._src.report.tables import (
     json_number,
     markdown_table,
@@ -74,16 +72,12 @@ def _ranges(results: dict[str, PoseMetrics]) -> dict[str, tuple[float, float]]:
 
 
 def comparison_table(rows: list[dict[str, Any]]) -> str:
-    """The Markdown table of ``summarize`` rows that docs/maps.md shows, success in percent.
+    """The Markdown table of ``summarize`` rows (or their JSON) that docs/maps.md shows.
 
-    Args:
-        rows: what ``wmr_jax.studies.summarize`` returned (or its JSON).
-
-    Returns:
-        One line per controller: success, mean / median / p90 arrival of the
-        successful runs, mean path, mean / largest peak wheel speed, share of
-        runs over V_max, mean zig-zag count and, where present, the share of
-        poses where it arrives strictly before the reference controller.
+    One line per controller: success, mean / median / p90 arrival, mean path,
+    mean / largest peak wheel speed, runs over V_max, mean zig-zag count and,
+    where present, the share of poses where it arrives before the reference
+    controller.
     """
     rows = require_rows("rows", rows)
     ahead = [k for k in rows[0] if k.startswith("faster than ")]
@@ -129,12 +123,7 @@ _SUMMARY_NUMBERS = (
 def save_comparison(out_dir: str | Path, comparison: dict[str, Any]) -> list[Path]:
     """Write ``comparison.md`` and ``comparison.json`` of ``wmr_jax.studies.compare_controllers``.
 
-    Args:
-        out_dir: output folder (created if needed).
-        comparison: what ``compare_controllers`` returned.
-
-    Returns:
-        The paths written.
+    Returns the paths written.
     """
     out = Path(out_dir)
     keys = ("poses", "seed", "velocity", "horizon_s", "dtype", "rows")
@@ -276,18 +265,10 @@ def map_figure(
         )
     v_max = float(Robot().v_max) if v_max is None else check_number("v_max", v_max, unit="cm/s")
     n_h, n_rows = len(grid.headings), len(_MAP_FIELDS)
-    fig, axes = plt.subplots(
-        n_rows,
-        n_h,
-        figsize=(2.5 * n_h + 1.3, 2.4 * n_rows + 0.9),
-        squeeze=False,
-        layout="constrained",
-    )
-    try:
-        _draw_maps(fig, axes, grid, m, ranges, v_max, title)
-        save_figure(fig, path, dpi=100)
-    finally:
-        plt.close(fig)
+    size = (2.5 * n_h + 1.3, 2.4 * n_rows + 0.9)
+    with closed_after(n_rows, n_h, figsize=size, squeeze=False, layout="constrained") as drawn:
+        _draw_maps(*drawn, grid, m, ranges, v_max, title)
+        save_figure(drawn[0], path, dpi=100)
     return Path(path)
 
 
@@ -349,14 +330,8 @@ def winner_figure(
 ) -> Path:
     """Save the map of the controller that arrives first at each pose (grey: none arrives).
 
-    Args:
-        path: the image to write (atomically).
-        grid: the references run.
-        results: controller name → its metrics over ``grid.refs``.
-        title: text above the figure.
-
-    Returns:
-        The path written.
+    ``results`` maps a controller's name to its metrics over ``grid.refs``;
+    returns the path written.
     """
     from wmr_jax._src.report.figures import ListedColormap
 
@@ -373,12 +348,10 @@ def winner_figure(
     colours = [plt.get_cmap("tab10")(i) for i in range(len(names))] + [(0.6, 0.6, 0.6, 1)]
     cmap = ListedColormap(colours).with_extremes(bad=(1, 1, 1, 0))
     n_h = len(grid.headings)
-    fig, axes = plt.subplots(1, n_h, figsize=(2.9 * n_h, 3.8), squeeze=False, layout="constrained")
-    try:
-        _draw_winner(fig, axes, grid, names, best, colours, cmap, title)
-        save_figure(fig, path, dpi=100)
-    finally:
-        plt.close(fig)
+    size = (2.9 * n_h, 3.8)
+    with closed_after(1, n_h, figsize=size, squeeze=False, layout="constrained") as drawn:
+        _draw_winner(*drawn, grid, names, best, colours, cmap, title)
+        save_figure(drawn[0], path, dpi=100)
     return Path(path)
 
 
@@ -410,18 +383,10 @@ def _draw_winner(fig, axes, grid, names, best, colours, cmap, title) -> None:
 def save_map_study(out_dir: str | Path, study: MapStudy) -> list[Path]:
     """Write the figures and the summary of a ``map_study`` into ``out_dir``.
 
-    Writes ``maps_<controller>.png`` (metrics × headings), ``winner.png``
-    (which controller arrives first; only with two controllers or more),
-    ``summary.md`` and ``summary.json``, each atomically, and removes the
-    maps (``maps_<registered controller>.png``) and ``winner.png`` of an
-    earlier study that this one does not draw.
-
-    Args:
-        out_dir: output folder (created if needed).
-        study: what ``wmr_jax.studies.map_study`` returned.
-
-    Returns:
-        The paths written.
+    ``maps_<controller>.png``, ``winner.png`` (with two controllers or more),
+    ``summary.md`` and ``summary.json``; the maps and ``winner.png`` of an
+    earlier study that this one does not draw are removed. Returns the paths
+    written.
     """
     out = Path(out_dir)
     # Everything is checked, and the texts made, before the first file is written.

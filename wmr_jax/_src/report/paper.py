@@ -1,8 +1,7 @@
 """The paper's figures and tables (``docs/model.md §5``) from ``wmr_jax.studies.paper_runs``.
 
-``save_paper`` writes ``fig6.png`` … ``fig10.png``, ``wheels_k120.png``,
-``wheels_k60.png`` and ``paper_table.md``/``.json``; ``save_fig7`` writes
-``fig7.png``, ``fig7.md`` and ``fig7.json``. Every file is written atomically.
+``save_paper`` writes ``fig6.png`` … ``fig10.png``, the wheel speeds and
+``paper_table.md``/``.json``; ``save_fig7`` writes ``fig7.png``/``.md``/``.json``.
 """
 
 from __future__ import annotations
@@ -16,7 +15,7 @@ import numpy as np
 from wmr_jax._src.checks import check_number
 from wmr_jax._src.io import atomic_write_text, json_text, save_figure
 from wmr_jax._src.model.params import Gains
-from wmr_jax._src.report.figures import closed_after, plot_paths, plot_wheel_speeds, plt
+from wmr_jax._src.report.figures import closed_after, plot_paths, plot_wheel_speeds
 from wmr_jax._src.report.tables import markdown_table, number, percent, row_numbers
 from wmr_jax._src.sim.rollout import DEFAULT_DT
 
@@ -38,13 +37,7 @@ _TABLE_COLUMNS = [
 
 
 def _fig6(path: Path, curve: dict[str, Any], r_e: float = 1.0) -> None:
-    """Fig. 6: the least ``R_e`` the proof covers against ``Φ_m``, log scale, 70° marked.
-
-    Args:
-        path: the image to write.
-        curve: ``wmr_jax.studies.fig6_curve()``.
-        r_e: the ``R_e`` in use, cm, drawn as a dashed line.
-    """
+    """Fig. 6: the least ``R_e`` the proof covers against ``Φ_m``, log scale, 70° marked."""
     with closed_after(figsize=(6, 4)) as (fig, ax):
         ax.semilogy(curve["phi_m_deg"], curve["bound_cm"])
         mark_deg, mark_cm = curve["mark_deg"], curve["mark_cm"]
@@ -59,10 +52,7 @@ def _fig6(path: Path, curve: dict[str, Any], r_e: float = 1.0) -> None:
         ax.legend(loc="lower right", fontsize=8)
         ax.set_xlabel("Φ_m [deg]")
         ax.set_ylabel("least R_e = √(sin Φ_m tan Φ_m) [cm]")
-        # The paper's Fig. 6 is the "error range of R_e": V̇ ≤ 0 (docs/model.md §3.6)
-        # is proven only for r_e ≥ √(sin Φ_m tan Φ_m), so a Region 0 of radius R_e at
-        # least that large covers every distance the proof leaves out. V adds r_e² in
-        # cm² to dimensionless terms, so the bound is in cm and does not scale with R_e.
+        # A Region 0 of radius R_e above the curve covers every distance the proof leaves out.
         ax.set_title(
             "Fig. 6: error range of R_e: R_e ≥ √(sin Φ_m tan Φ_m) cm\n"
             "(V̇ ≤ 0 is proven only for r_e above the curve, docs/model.md §3.6)",
@@ -231,18 +221,10 @@ _SUMMARY_NUMBERS = (
 def save_paper(out_dir: str | Path, runs: Any) -> dict[str, Any]:
     """Write the paper's figures and table into ``out_dir`` (created if missing).
 
-    Writes ``fig6.png`` … ``fig10.png``, ``wheels_k120.png``, ``wheels_k60.png``
-    and ``paper_table.md`` / ``paper_table.json``: one row per reference and
-    case (k_r = 120 and 60, ideal and non-ideal) with arrival time, path
-    length, peak wheel speed, fraction of samples saturated, zig-zag count and
-    the largest distance between the ideal and non-ideal paths.
-
-    Args:
-        out_dir: the folder.
-        runs: what ``wmr_jax.studies.paper_runs`` returned.
-
-    Returns:
-        The table as written to ``paper_table.json``.
+    ``fig6.png`` … ``fig10.png``, ``wheels_k120.png``, ``wheels_k60.png`` and
+    ``paper_table.md`` / ``.json``: one row per reference and case with the
+    run's metrics and the largest gap between its ideal and non-ideal paths.
+    Returns the table as written to ``paper_table.json``.
     """
     out_dir = Path(out_dir)
     v_max = float(runs.robot.v_max)
@@ -270,18 +252,11 @@ def save_fig7(out_dir: str | Path, fig7: Any) -> None:
     # The table is made (and checked) before the first file is written.
     text = markdown_table(fig7.rows)
     record = json_text(fig7.table(), "fig7.table()", indent=2, sort_keys=False) + "\n"
-    fig, ax = plt.subplots(figsize=(6.5, 6.5))
-    try:
-        label = "robot paths (ideal loop)"
-        plot_paths(ax, np.asarray(fig7.trajectory.poses), fig7.refs, label=label)
-        ax.plot([0], [0], "ko", ms=5)
-        ax.set_title(
-            f"Fig. 7: ideal velocity loop, k_r = {float(gains.kr):g}, "
-            f"k_θ = {float(gains.k_theta):g}, Φ_m = {math.degrees(float(gains.phi_m)):g}°"
-        )
-        _legend_below(ax, label)
-        save_figure(fig, out_dir / "fig7.png", dpi=120, bbox_inches="tight")
-    finally:
-        plt.close(fig)
+    title = (
+        f"Fig. 7: ideal velocity loop, k_r = {float(gains.kr):g}, "
+        f"k_θ = {float(gains.k_theta):g}, Φ_m = {math.degrees(float(gains.phi_m)):g}°"
+    )
+    runs = [("robot paths (ideal loop)", fig7.trajectory, "-", None)]
+    _paths_figure(out_dir / "fig7.png", title, fig7.refs, runs)
     atomic_write_text(out_dir / "fig7.md", text)
     atomic_write_text(out_dir / "fig7.json", record)

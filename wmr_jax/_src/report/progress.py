@@ -1,11 +1,7 @@
 """Progress bars on a terminal, plain progress lines everywhere else.
 
-A ``tqdm`` bar redraws itself in place with carriage returns and cursor
-moves; written to a file or a pipe (``wmr-jax tune > log``, CI), those
-escapes are what the reader gets. ``bar`` takes ``tqdm``'s keywords and
-gives a bar where the output is a terminal (or a notebook), and otherwise
-the same ``tqdm`` drawn as whole lines with no bar, at most one every
-``PLAIN_INTERVAL_S`` seconds, and one when it ends.
+A bar's escapes are noise in a file or a pipe: there ``bar`` draws the same
+``tqdm`` as whole lines, at most one every ``PLAIN_INTERVAL_S`` seconds.
 """
 
 from __future__ import annotations
@@ -34,11 +30,7 @@ def on_terminal(stream: Any = None) -> bool:
 
 
 class _Lines:
-    """A stream for ``tqdm`` that turns each redraw into one plain line.
-
-    The lines of a bar that has not moved yet (``desc: 0/…``) are left out:
-    a bar made ahead of its stage says nothing until that stage begins.
-    """
+    """A stream for ``tqdm`` that turns each redraw into one plain line (none before it moves)."""
 
     def __init__(self, stream: Any, desc: str) -> None:
         self._stream = stream

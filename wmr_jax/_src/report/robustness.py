@@ -1,10 +1,9 @@
-"""The robustness study's figure, tables and result file (``docs/model.md §7``).
+"""The robustness study's figure, tables and result files (``docs/model.md §7``).
 
-The tables print fractions of runs as percentages (``99.8 %``), as the
-README does; the JSON files keep the fractions. The figures draw the arrival
-time of the runs that arrive and mark apart the runs that count as arrived
-only because the horizon ends (``wmr_jax.studies.settled_at_horizon``), so
-that no bar or point at the horizon reads as an arrival time.
+Tables print fractions of runs as percentages, the JSON files keep the
+fractions. Figures draw the arrival of the runs that arrive and mark apart
+those that count as arrived only because the horizon ends
+(``wmr_jax.studies.settled_at_horizon``).
 """
 
 from __future__ import annotations
@@ -15,8 +14,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from wmr_jax._src.io import atomic_write_text, json_text, save_figure
-from wmr_jax._src.report.figures import plt
+from wmr_jax._src.io import atomic_write_text, json_text
+from wmr_jax._src.report.figures import built, plt, save_closed
 from wmr_jax._src.report.tables import markdown_table, percent, require_rows
 from wmr_jax._src.sim.poses import HORIZON_S
 
@@ -89,8 +88,7 @@ _LATE_MARK = 0.5
 def robustness_table(rows: Sequence[dict[str, Any]], columns: Sequence[str]) -> str:
     """A Markdown table of study rows, fractions of runs as percentages (``'99.8 %'``).
 
-    ``"settled at horizon"`` is shown after the last arrival column of
-    ``columns`` where every row has it.
+    ``"settled at horizon"`` is shown after the last arrival column where every row has it.
 
     Raises:
         ValueError: for no rows or a row without one of ``columns``.
@@ -176,12 +174,10 @@ def write_robustness(
     Args:
         out_dir: the folder (created if missing).
         rows: ``robustness_study`` rows.
-        seed: the study's seed.
-        velocity: its velocity loop.
-        n_runs: its runs per noise level.
+        seed, velocity, n_runs: the study's seed, velocity loop and runs per level.
         robot: the study's ``Robot`` (recorded and named); ``None``: the paper robot.
-        x64: whether the study computed in float64, recorded as its
-            ``dtype``; ``None`` records none (rather than guess one).
+        x64: whether the study computed in float64, recorded as its ``dtype``;
+            ``None`` records none.
 
     Returns:
         The paths written.
@@ -213,10 +209,8 @@ def write_robustness(
         "wheel radius" + (", ±20 % mass" if velocity == "nonideal" else "") + "; latency one sample"
     )
     fig = robustness_figure(rows, title=title)
-    try:  # "tight": the legend lies outside the axes
-        png = save_figure(fig, out / "robustness.png", dpi=110, bbox_inches="tight")
-    finally:
-        plt.close(fig)
+    # "tight": the legend lies outside the axes.
+    png = save_closed(fig, out / "robustness.png", dpi=110, bbox_inches="tight")
     md = atomic_write_text(out / "robustness.md", text)
     return [png, md, atomic_write_text(out / "robustness.json", record)]
 
@@ -224,31 +218,21 @@ def write_robustness(
 def robustness_figure(rows: Sequence[dict[str, Any]], *, title: str) -> Any:
     """Draw success rate and median arrival against noise level, one line per row group.
 
-    The arrival panel draws the median over the runs that arrive; a point
-    where at least half of the successes only settle at the horizon
-    (``"settled at horizon"``) is an x, and has no arrival point unless
-    some runs arrive.
-
-    Args:
-        rows: ``robustness_study`` rows: one colour per controller, one line
-            style per condition.
-        title: the figure's title.
-
-    Returns:
-        The matplotlib ``Figure`` (the caller saves and closes it).
+    One colour per controller, one line style per condition; the arrival is
+    the median over the runs that arrive, and a point where at least half of
+    the successes only settle at the horizon is an x. The caller saves and
+    closes the returned ``Figure``.
     """
     rows = require_rows("rows", rows)
     markdown_table(rows, _FIGURE_KEYS)  # names a row without one of them
     names = list(dict.fromkeys(r["controller"] for r in rows))
     conditions = list(dict.fromkeys(r["condition"] for r in rows))
     first = [r for r in rows if (r["controller"], r["condition"]) == (names[0], conditions[0])]
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
-    try:
+
+    def draw(fig, axes):
         _draw_robustness(fig, axes, rows, names, conditions, first, title)
-    except BaseException:
-        plt.close(fig)
-        raise
-    return fig
+
+    return built(draw, 1, 2, figsize=(11, 4.2))
 
 
 def _late_points(rows: Sequence[dict[str, Any]]) -> list[int]:
@@ -315,35 +299,28 @@ def write_standard_conditions(
 ) -> list[Path]:
     """Write ``standard_conditions.png``, ``.md`` and ``.json`` (``docs/model.md §7``).
 
-    Args:
-        out_dir: the folder (created if missing).
-        rows: ``standard_conditions`` rows.
-        meta: what produced them (seed, runs, where the gains came from; the
-            robot as ``{field: value}`` under ``"robot"``, named in the text).
-
-    Returns:
-        The paths written.
+    ``rows`` are ``standard_conditions``'s; ``meta`` says what produced them
+    (seed, runs, the gain files; the robot's ``{field: value}`` under
+    ``"robot"``, named in the text). Returns the paths written.
     """
-    out, rows = Path(out_dir), require_rows("rows", rows)
-    if not isinstance(meta, dict):
-        raise ValueError(f"meta = {meta!r:.80} is not allowed; allowed: a dict")
-    # Everything is checked and drawn before the first file is written.
-    table = robustness_table(rows, STANDARD_COLUMNS)
-    head = (
-        "Gain sets under the standard conditions of docs/model.md §7 (hard law, ideal loop"
-        f"{_robot_text(meta)}, {rows[0]['runs']} held-out poses of docs/model.md §6, horizon "
-        f"{_horizon_of(rows):g} s); every condition but the model robot's with each wheel's "
-        "radius off by up to the mismatch column, drawn per run (docs/model.md §9)\n\n"
-    )
-    return _write_study(out, "standard_conditions", head + table, meta, rows, standard_figure)
+
+    def head(rows: list[dict[str, Any]], meta: dict[str, Any]) -> str:
+        return (
+            "Gain sets under the standard conditions of docs/model.md §7 (hard law, ideal loop"
+            f"{_robot_text(meta)}, {rows[0]['runs']} held-out poses of docs/model.md §6, horizon "
+            f"{_horizon_of(rows):g} s); every condition but the model robot's with each wheel's "
+            "radius off by up to the mismatch column, drawn per run (docs/model.md §9)\n\n"
+        )
+
+    columns, figure = STANDARD_COLUMNS, standard_figure
+    return _write_study(out_dir, "standard_conditions", rows, meta, columns, head, figure)
 
 
 def standard_figure(rows: Sequence[dict[str, Any]]) -> Any:
     """Draw success and mean arrival per condition, one bar per gain set (legend outside).
 
-    The success bar is solid for the runs that arrive and hatched for those
-    that only settle at the horizon (``"settled at horizon"``); the arrival
-    bar is the mean over the runs that arrive, absent where none does.
+    The success bar is hatched for the runs that only settle at the horizon;
+    the arrival bar is the mean over the runs that arrive, absent where none does.
     """
     rows = require_rows("rows", rows)
     markdown_table(rows, ["condition", "gains", "success", "mean arrival s"])  # names a gap
@@ -358,13 +335,11 @@ def standard_figure(rows: Sequence[dict[str, Any]]) -> Any:
                 "one row per gain set and condition"
             )
     width = 0.8 / len(sets)
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.0))
-    try:
+
+    def draw(fig, axes):
         _draw_standard(fig, axes, rows, conditions, sets, width)
-    except BaseException:
-        plt.close(fig)
-        raise
-    return fig
+
+    return built(draw, 1, 2, figsize=(11, 4.0))
 
 
 def _draw_standard(fig, axes, rows, conditions, sets, width) -> None:
@@ -413,40 +388,29 @@ def _draw_standard(fig, axes, rows, conditions, sets, width) -> None:
 def write_noise_curve(
     out_dir: str | os.PathLike, rows: Sequence[dict[str, Any]], *, meta: dict[str, Any]
 ) -> list[Path]:
-    """Write ``noise_curve.png``, ``.md`` and ``.json`` (``noise_curve`` rows).
+    """Write ``noise_curve.png``, ``.md`` and ``.json`` of ``noise_curve`` rows, as above."""
 
-    Args:
-        out_dir: the folder (created if missing).
-        rows: ``noise_curve`` rows.
-        meta: what produced them (seed, where the gains came from).
+    def head(rows: list[dict[str, Any]], meta: dict[str, Any]) -> str:
+        return (
+            "Success and mean arrival against pose noise (σ_θ = 2° per cm of σ_xy; hard law, "
+            f"ideal loop{_robot_text(meta)}, {rows[0]['runs']} held-out poses, horizon "
+            f"{_horizon_of(rows):g} s, each wheel's radius off by up to "
+            f"{100 * float(rows[0]['mismatch']):g} % per run; docs/model.md §7, §9)\n\n"
+        )
 
-    Returns:
-        The paths written.
-    """
+    columns, figure = NOISE_CURVE_COLUMNS, noise_curve_figure
+    return _write_study(out_dir, "noise_curve", rows, meta, columns, head, figure)
+
+
+def _write_study(out_dir, name, rows, meta, columns, head, figure) -> list[Path]:
+    """Write ``name``.png, ``.md`` (``head`` and the table) and ``.json``, all checked first."""
     out, rows = Path(out_dir), require_rows("rows", rows)
     if not isinstance(meta, dict):
         raise ValueError(f"meta = {meta!r:.80} is not allowed; allowed: a dict")
-    table = robustness_table(rows, NOISE_CURVE_COLUMNS)
-    head = (
-        "Success and mean arrival against pose noise (σ_θ = 2° per cm of σ_xy; hard law, "
-        f"ideal loop{_robot_text(meta)}, {rows[0]['runs']} held-out poses, horizon "
-        f"{_horizon_of(rows):g} s, each wheel's radius off by up to "
-        f"{100 * float(rows[0]['mismatch']):g} % per run; docs/model.md §7, §9)\n\n"
-    )
-    return _write_study(out, "noise_curve", head + table, meta, rows, noise_curve_figure)
-
-
-def _write_study(out: Path, name: str, text: str, meta: dict, rows: Any, figure: Any) -> list[Path]:
-    """Write ``name``.png (``figure(rows)``), ``.md`` (``text``) and ``.json`` (meta and rows).
-
-    The record and the figure are made before the first file is written.
-    """
+    table = robustness_table(rows, columns)
+    text = head(rows, meta) + table
     record = json_text({**meta, "rows": rows}, "meta and rows", indent=2, sort_keys=False) + "\n"
-    fig = figure(rows)
-    try:
-        png = save_figure(fig, out / f"{name}.png", dpi=110)
-    finally:
-        plt.close(fig)
+    png = save_closed(figure(rows), out / f"{name}.png", dpi=110)
     md = atomic_write_text(out / f"{name}.md", text)
     return [png, md, atomic_write_text(out / f"{name}.json", record)]
 
@@ -454,16 +418,14 @@ def _write_study(out: Path, name: str, text: str, meta: dict, rows: Any, figure:
 def noise_curve_figure(rows: Sequence[dict[str, Any]]) -> Any:
     """Draw success and mean arrival against σ_xy, one line per loop (legend outside).
 
-    A level where no run of a loop arrived has no arrival point (not a value
-    at the horizon); its success point at 0 says why. The arrival is the
-    mean over the runs that arrive; a level where at least half of the
-    successes only settle at the horizon (``"settled at horizon"``) is an x.
+    Arrivals are over the runs that arrive (no point where none does); a level
+    where at least half of the successes only settle at the horizon is an x.
     """
     rows = require_rows("rows", rows)
     markdown_table(rows, ["gains", "feedback", "noise xy cm", "success", "mean arrival s"])
     names = list(dict.fromkeys(r["gains"] for r in rows))
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.0))
-    try:
+
+    def draw(fig, axes):
         for j, name in enumerate(names):
             mine = sorted((r for r in rows if r["gains"] == name), key=lambda r: r["noise xy cm"])
             x = [r["noise xy cm"] for r in mine]
@@ -490,7 +452,5 @@ def noise_curve_figure(rows: Sequence[dict[str, Any]]) -> Any:
         fig.tight_layout(rect=(0, 0, 0.78, 1))
         handles, labels = _with_late_mark(axes[0], rows)
         fig.legend(handles, labels, fontsize=8, loc="center left", bbox_to_anchor=(0.78, 0.5))
-    except BaseException:
-        plt.close(fig)
-        raise
-    return fig
+
+    return built(draw, 1, 2, figsize=(11, 4.0))

@@ -12,11 +12,7 @@ __all__ = ["json_number", "markdown_table", "number", "percent", "require_rows",
 
 
 def markdown_table(rows: list[dict[str, Any]], columns: list[str] | None = None) -> str:
-    """Format rows of scalars (lists shown compactly) as a Markdown table.
-
-    NumPy and JAX float scalars are formatted as Python floats; a ``|`` in a
-    cell or a column name is escaped and a line break becomes a space, so
-    that any text keeps the table whole.
+    """Format rows of scalars (lists shown compactly) as a Markdown table, ``|`` escaped.
 
     Raises:
         ValueError: for no rows, a row that is not a dict, or a row without
@@ -70,9 +66,6 @@ _JSON_FLOATS = {"inf": math.inf, "-inf": -math.inf, "nan": math.nan, None: math.
 
 def json_number(name: str, value: Any) -> float:
     """Return ``value`` as a float, reading back what ``atomic_write_json`` wrote for inf or NaN.
-
-    ``"inf"``, ``"-inf"``, ``"nan"`` and ``None`` (JSON's null) become the
-    floats they stand for, so that a table accepts its own JSON file.
 
     Raises:
         ValueError: naming ``name``, for a bool, any other string or a non-number.

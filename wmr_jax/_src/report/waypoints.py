@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from wmr_jax._src.io import atomic_write_text, json_text, save_figure
-from wmr_jax._src.report.figures import plot_paths, plt
+from wmr_jax._src.io import atomic_write_text, json_text
+from wmr_jax._src.report.figures import built, plot_paths, save_closed
 from wmr_jax._src.report.tables import markdown_table
 from wmr_jax._src.sim.rollout import DEFAULT_DT
 from wmr_jax._src.studies.waypoints import (
@@ -27,13 +27,8 @@ __all__ = ["soccer_figure", "write_soccer"]
 def soccer_figure(runs: Sequence[SoccerRun], *, title: str) -> Any:
     """Draw the path of every run through the soccer waypoints, one column per controller.
 
-    Args:
-        runs: ``soccer_study`` runs, a stopping and a passing run per
-            controller, in that order (top and bottom row).
-        title: the figure's title.
-
-    Returns:
-        The matplotlib ``Figure`` (the caller saves and closes it).
+    ``runs`` are ``soccer_study``'s, a stopping and a passing run per
+    controller (top and bottom row); the caller saves and closes the figure.
     """
     wp = soccer_waypoints()
     cols = max(1, len(runs) // 2)
@@ -42,8 +37,8 @@ def soccer_figure(runs: Sequence[SoccerRun], *, title: str) -> Any:
             f"runs has {len(runs)} runs; allowed: a stopping and a passing run per "
             "controller (an even number >= 2)"
         )
-    fig, axes = plt.subplots(2, cols, figsize=(4.2 * cols, 8.0), squeeze=False)
-    try:
+
+    def draw(fig, axes):
         for (name, mode, run), ax in zip(runs, axes.T.flat, strict=True):
             plot_paths(ax, [np.asarray(run.trajectory.poses)], wp, color="tab:blue")
             for i, (x, y, _) in enumerate(wp):
@@ -52,21 +47,16 @@ def soccer_figure(runs: Sequence[SoccerRun], *, title: str) -> Any:
             ax.set_title(f"{name}, {mode} ({done}/{len(wp)} reached)", fontsize=9)
         fig.suptitle(title, fontsize=10)
         fig.tight_layout()
-    except BaseException:
-        plt.close(fig)
-        raise
-    return fig
+
+    return built(draw, 2, cols, figsize=(4.2 * cols, 8.0), squeeze=False)
 
 
-def write_soccer(out_dir: str | os.PathLike, study: SoccerStudy) -> list[Path]:
-    """Write ``soccer.png`` (paths), ``soccer.md`` and ``soccer.json`` into ``out_dir``.
+def write_soccer(
+    out_dir: str | os.PathLike, study: SoccerStudy, *, extra: dict[str, Any] | None = None
+) -> list[Path]:
+    """Write ``soccer.png`` (paths), ``soccer.md`` and ``soccer.json`` of a ``soccer_study``.
 
-    Args:
-        out_dir: the folder (created if missing).
-        study: what ``soccer_study`` returned.
-
-    Returns:
-        The paths written.
+    ``extra``: more fields for ``soccer.json``, after the rows (a command's robot).
     """
     out, degrees = Path(out_dir), math.degrees(study.pass_tol_theta)
     meta = {
@@ -77,6 +67,7 @@ def write_soccer(out_dir: str | os.PathLike, study: SoccerStudy) -> list[Path]:
         "pass_tol_r_cm": study.pass_tol_r,
         "pass_tol_theta_deg": degrees,
         "rows": study.rows,
+        **(extra or {}),
     }
     # The texts are made (and checked) before the first file is written.
     head = "Arrival time at each waypoint (s from the start; inf: not reached)\n\n"
@@ -87,9 +78,6 @@ def write_soccer(out_dir: str | os.PathLike, study: SoccerStudy) -> list[Path]:
         title=f"Soccer-like sequence ({study.velocity} loop): stop at each waypoint (top), "
         f"pass through within {study.pass_tol_r:g} cm / {degrees:g}° (bottom)",
     )
-    try:
-        png = save_figure(fig, out / "soccer.png", dpi=110)
-    finally:
-        plt.close(fig)
+    png = save_closed(fig, out / "soccer.png", dpi=110)
     md = atomic_write_text(out / "soccer.md", text)
     return [png, atomic_write_text(out / "soccer.json", record), md]

@@ -1,41 +1,19 @@
 """Throughput of the simulator in robot-steps per second (the engine of ``wmr-jax bench``).
 
-One robot-step is one robot simulated over one control period. For each batch
-size ``run_benchmark`` times
-
-* ``final_poses`` with the ideal velocity loop, and with the non-ideal one;
-  with several local devices also the ideal one on a batch spread over all of
-  them (``wmr_jax.shard``); the command splits the CPU into two devices per
-  core first (``--cpu-devices``), which is faster on the CPU;
-* ``batch_rollout`` (whole trajectories), ideal loop;
-* the gradient of a batched loss with respect to the gains: the mean squared
-  final-pose error through ``final_poses``, and ``wmr_jax.tuning``'s loss;
-  each against its own forward evaluation;
-
-and, in the same run, two baselines of the ideal loop:
-
-* the package's scalar NumPy reference (``wmr_jax.reference_rollout``), one
-  pose at a time in a Python loop: a few poses are timed and the rate is per
-  robot-step;
-* ``numpy_final_poses``, the law and the exact arc of ``docs/model.md §2–4``
-  written for NumPy arrays the way a user would without JAX: vectorised over
-  the batch, one Python iteration per control period, angles and ``atan2``.
+One robot-step is one robot simulated over one control period. For each
+batch size ``run_benchmark`` times ``final_poses`` (ideal and non-ideal
+loop, and sharded over several devices), ``batch_rollout``, gradients of a
+final-pose loss and of the tuning loss against their forward passes, the
+disturbed loop with each estimator and the exported C controller, beside
+two baselines of the ideal loop: the scalar NumPy reference
+(``reference_rollout``, one pose at a time) and ``numpy_final_poses``
+(vectorised NumPy, one Python iteration per period).
 
 Each time is the median of ``repeats`` calls after a first call, whose extra
-time is reported apart as the compile time (tracing and XLA compilation).
-Cases compared with each other (``final_poses`` and the baselines, a loss and
-its gradient) are timed in alternation, so that they share the machine's load;
-each timed JAX call follows an untimed one, so that it measures the steady
-state of a loop of calls rather than the wake-up of XLA's threads.
-Every JAX case and the scalar reference run on ``BenchConfig.robot`` (the
-paper robot by default; the NumPy baseline takes no robot: it runs the
-paper robot's ideal loop, which has no speed limiter), with the same steps
-and poses for any robot: throughput does not depend on how far the robot
-gets. The robot is recorded with the results, as are the device, JAX
-version and the machine's load during the run,
-since a shared machine makes every timing noisy: compare ratios taken in the
-same run rather than absolute rates across runs. ``wmr_jax.report.bench_table``
-formats the result; the command prints it.
+time is the compile time. Cases compared with each other are timed in
+alternation, so that they share the machine's load; compare ratios taken in
+one run, not rates across runs. The results record the robot, the
+environment and the machine's load.
 """
 
 from __future__ import annotations
@@ -76,10 +54,9 @@ class BenchConfig:
         dtype: ``"float32"`` or ``"float64"``.
         reference_poses: poses the scalar reference is timed on.
         cases: which cases to run, from ``CASES``; empty: every case.
-        seed: seed of the reference poses (``wmr_jax.sample_poses``, the
-            evaluation set of ``docs/model.md §6``).
+        seed: seed of the reference poses (``wmr_jax.sample_poses``).
         wait_idle: before each round of timed calls, wait up to this many
-            seconds for other processes to leave the CPU (shared machines).
+            seconds for other processes to leave the CPU.
         robot: the robot every case runs (one ``Robot``); ``None``: ``Robot()``.
     """
 
@@ -140,15 +117,6 @@ def _check_config(config: BenchConfig) -> BenchConfig:
     return dataclasses.replace(config, cases=tuple(config.cases) or CASES)
 
 
-def _robot_record(config: BenchConfig) -> dict[str, Any]:
-    """The robot the cases ran: its fields and a label (a preset's name, or "custom")."""
-    from wmr_jax._src.model.params import Robot
-    from wmr_jax._src.model.robots import robot_json, robot_name
-
-    robot = Robot() if config.robot is None else config.robot
-    return {"robot": robot_json(robot), "robot_label": robot_name(robot) or "custom"}
-
-
 def _row(case: str, n: int | None, steps: int, timing: Timing | None, **extra: Any) -> dict:
     row: dict[str, Any] = {"case": case, "n": n, "steps": steps}
     if timing is not None:
@@ -172,14 +140,12 @@ def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = No
         log: called with one line per finished case (progress).
 
     Returns:
-        ``{"environment": ..., "config": ..., "robot": {field: value},
-        "robot_label": ..., "rows": [...], "ratios": {...}, "peak_rss_mb":
-        ...}``; each row has ``case``, ``n``, ``steps``,
-        ``run_s`` (s), ``compile_s`` (s), ``robot_steps_per_s``, ``runs_s``,
-        ``others_cpu`` (cores), or ``skipped`` with a reason; ``ratios`` maps
-        ``"N=<n>"`` to the speed-ups of ``final_poses`` over the baselines and
-        the cost of each gradient, and of one forward-mode derivative, over
-        its forward pass.
+        ``{"environment", "config", "robot", "robot_label", "rows", "ratios",
+        "peak_rss_mb"}``; each row has ``case``, ``n``, ``steps``, ``run_s``,
+        ``compile_s``, ``robot_steps_per_s``, ``runs_s``, ``others_cpu``
+        (cores), or ``skipped`` with a reason; ``ratios`` maps ``"N=<n>"`` to
+        the speed-ups of ``final_poses`` over the baselines and the cost of
+        each derivative over its forward pass.
 
     Raises:
         ValueError: for a bad ``config``.
@@ -196,7 +162,8 @@ def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = No
             "dtype = 'float32' is not allowed while jax_enable_x64 is on; "
             "allowed: 'float64', or turn jax_enable_x64 off"
         )
-    from wmr_jax._src.model.params import Gains
+    from wmr_jax._src.model.params import Gains, Robot
+    from wmr_jax._src.studies.maps import robot_record
 
     say = log or (lambda line: None)
     rows: list[dict] = []
@@ -214,7 +181,7 @@ def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = No
     return {
         "environment": environment(),
         "config": {name: value for name, value in fields.items() if name != "robot"},
-        **_robot_record(config),
+        **robot_record(Robot() if config.robot is None else config.robot),
         "rows": rows,
         "ratios": _ratios(rows),
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
@@ -247,8 +214,8 @@ class _SizeBench:
         baselines = self.baselines(scalar=scalar and "scalar_reference" in cases)
         rows = baselines[0]
         for case, step in (
-            ("final_poses_nonideal", self.nonideal),
-            ("batch_rollout", self.batch_rollout),
+            ("final_poses_nonideal", lambda: self.alone("final_poses", "nonideal")),
+            ("batch_rollout", lambda: self.alone("batch_rollout", "ideal")),
             ("grad_final_pose_loss", self.final_pose_loss),
             ("grad_tuning_loss", self.tuning_loss),
             ("disturbed_estimator", self.disturbed),
@@ -322,10 +289,8 @@ class _SizeBench:
     def disturbed(self) -> list[dict]:
         """The disturbed loop (docs/model.md §7) raw and with each estimator, interleaved.
 
-        Noise σ_xy = 0.5 cm, σ_θ = 1°, ±3 % wheel radius and one sample of
-        latency (so compensation runs too); the jitted core is timed, the
-        checks before it are not. The rows of ``disturbed_observer`` and
-        ``disturbed_ekf`` carry their cost per robot-step over the raw loop.
+        Standard noise, ±3 % wheel radius and one sample of latency; the jitted
+        core is timed, not the checks before it.
         """
 
         import jax
@@ -360,11 +325,9 @@ class _SizeBench:
     def c_controller(self) -> list[dict]:
         """The exported C controller (``wmr_jax.export``): a gain schedule with its EKF.
 
-        ``N`` controllers, one sample of latency (so compensation runs too),
-        each stepped ``steps`` times through noisy poses on the way to its
-        goal; one foreign call steps all ``N``, so the time is the C's. The
-        row carries ``ns_per_step``, ``sizeof(wmr_controller)`` and the bytes
-        of the compiled step.
+        ``N`` controllers with one sample of latency, stepped through noisy poses;
+        one foreign call steps all ``N``. The row carries ``ns_per_step``,
+        ``sizeof(wmr_controller)`` and the bytes of the compiled step.
         """
         import tempfile
         from pathlib import Path
@@ -408,27 +371,17 @@ class _SizeBench:
             )
         ]
 
-    def nonideal(self) -> list[dict]:
-        from wmr_jax._src.sim.rollout import final_poses
+    def alone(self, entry: str, velocity: str) -> list[dict]:
+        """Time ``final_poses`` or ``batch_rollout`` (``entry``) alone, with ``velocity``'s loop."""
+        from wmr_jax._src.sim import rollout
 
-        gains, steps, refs, robot = self.gains, self.steps, self.refs, self.robot
-
-        def call():
-            return final_poses(refs, gains, steps=steps, velocity="nonideal", robot=robot)
-
-        t = self.time({"nonideal": (call, True)})["nonideal"]
-        return [self.row("final_poses_nonideal", t, velocity="nonideal")]
-
-    def batch_rollout(self) -> list[dict]:
-        from wmr_jax._src.sim.rollout import batch_rollout
-
-        gains, steps, refs, robot = self.gains, self.steps, self.refs, self.robot
+        run = getattr(rollout, entry)
+        case = entry + ("_nonideal" if velocity == "nonideal" else "")
 
         def call():
-            return batch_rollout(refs, gains, steps=steps, robot=robot)
+            return run(self.refs, self.gains, steps=self.steps, velocity=velocity, robot=self.robot)
 
-        t = self.time({"rollout": (call, True)})
-        return [self.row("batch_rollout", t["rollout"], velocity="ideal")]
+        return [self.row(case, self.time({case: (call, True)})[case], velocity=velocity)]
 
     def loss_rows(
         self,
@@ -439,14 +392,8 @@ class _SizeBench:
     ) -> list[dict]:
         """Time ``loss(gains, refs)``, its gradient and one directional derivative, interleaved.
 
-        The directional derivative (forward mode, ``jax.jvp`` along the gains
-        themselves, i.e. ``d/ds loss(s · gains)`` at ``s = 1``) prices what
-        reverse mode cannot avoid: a gradient whose scan recomputes its steps
-        runs the forward pass, then every step again with its transposed
-        linearisation, which costs what the forward-mode step does (the
-        transposition principle) — so ``1 + jvp_over_forward`` is its floor
-        (README, "Speed and scale").
-
+        The forward-mode derivative along the gains prices what reverse mode
+        cannot avoid, so ``1 + jvp_over_forward`` is the gradient's floor.
         ``beside``: ``(case, call)`` timed in the same group, its row first.
         Returns the rows ``[beside,] forward, jvp_<case>, <case>``.
         """
@@ -531,11 +478,21 @@ def _code_bytes(source: Any, build: Any) -> int | None:
     done = subprocess.run(
         [compiler(), *CFLAGS, "-O2", "-c", str(source), "-o", str(obj)], capture_output=True
     )
-    if done.returncode != 0:
-        return None
-    size = subprocess.run(["size", str(obj)], capture_output=True, text=True)
-    lines = size.stdout.splitlines() if size.returncode == 0 else []
-    return int(lines[1].split()[0]) if len(lines) > 1 else obj.stat().st_size
+    return text_bytes(obj) if done.returncode == 0 else None
+
+
+def text_bytes(obj: Any) -> int:
+    """Bytes of code and constants in an object file (``size``'s text), else the file's size."""
+    import shutil
+    import subprocess
+
+    tool = shutil.which("size")
+    if tool:
+        done = subprocess.run([tool, str(obj)], capture_output=True, text=True)
+        lines = done.stdout.split("\n")
+        if done.returncode == 0 and len(lines) > 1:
+            return int(lines[1].split()[0])
+    return obj.stat().st_size
 
 
 def _ratios(rows: list[dict]) -> dict[str, Any]:
@@ -559,19 +516,18 @@ def _ratios(rows: list[dict]) -> dict[str, Any]:
                 entry[f"{name}vs_numpy_batch"] = value / numpy_rate
             if value and scalar:
                 entry[f"{name}vs_scalar_reference"] = value / scalar
-        for case, key in (
-            ("grad_final_pose_loss", "grad_over_forward"),
-            ("grad_tuning_loss", "grad_over_forward"),
-            ("jvp_final_pose_loss", "jvp_over_forward"),
-            ("jvp_tuning_loss", "jvp_over_forward"),
+        # Ratios the rows carry: a derivative over its forward pass, an estimator over raw.
+        for case, key, name in (
+            ("grad_final_pose_loss", "grad_over_forward", "grad_final_pose_loss_over_forward"),
+            ("grad_tuning_loss", "grad_over_forward", "grad_tuning_loss_over_forward"),
+            ("jvp_final_pose_loss", "jvp_over_forward", "jvp_final_pose_loss_over_forward"),
+            ("jvp_tuning_loss", "jvp_over_forward", "jvp_tuning_loss_over_forward"),
+            ("disturbed_observer", "over_raw", "disturbed_observer_over_raw"),
+            ("disturbed_ekf", "over_raw", "disturbed_ekf_over_raw"),
         ):
             for r in rows:
                 if r["case"] == case and r["n"] == n and key in r:
-                    entry[f"{case}_over_forward"] = r[key]
-        for name in ("observer", "ekf"):
-            for r in rows:
-                if r["case"] == f"disturbed_{name}" and r["n"] == n and "over_raw" in r:
-                    entry[f"disturbed_{name}_over_raw"] = r["over_raw"]
+                    entry[name] = r[key]
         relaxed, loss = rate("final_poses_relaxed", n), rate("tuning_loss", n)
         if relaxed and loss:
             entry["tuning_loss_over_relaxed"] = relaxed / loss

@@ -1,9 +1,7 @@
 """How ``wmr-jax bench`` times a case, and what it records of the machine.
 
-A case is timed as the median of repeated calls after a first one (the
-compile time is the first call's extra); the CPU time of other processes
-during each call is recorded, since a shared machine makes every timing
-noisy.
+A case is timed as the median of repeated calls after a first one; the CPU
+time of other processes during each call is recorded beside it.
 """
 
 from __future__ import annotations
@@ -47,8 +45,7 @@ class Timing:
         run_s: median wall time of one call, s.
         compile_s: extra time of the first call (trace and compile), s.
         runs_s: every timed call, s.
-        others_cpu: CPU other processes used while the case was timed, in
-            cores (0 on an idle machine; Linux only, else ``None``).
+        others_cpu: CPU other processes used meanwhile, cores (Linux, else ``None``).
     """
 
     run_s: float

@@ -1,14 +1,11 @@
 """The standard conditions: judging closed loops (docs/model.md §7, §9).
 
-Given loops (a controller, its parameters and an estimator, as
-``load_tuned`` returns them, or plain parameters) are judged on held-out or
-the user's own references under the conditions of docs/model.md §7, each with
-the per-run wheel-radius mismatch of §9: all of them side by side
-(``standard_conditions``), one loop under one condition with the figures
-``wmr-jax evaluate`` prints (``evaluate_loop``), and success and arrival
-against the level of pose noise (``noise_curve``). Every loop and condition
-sees the same draws (common random numbers). The horizon, the robot and the
-summary of a run set are the robustness study's (``robustness``).
+Given loops (a ``ClosedLoop`` as ``load_tuned`` returns it, or plain
+parameters) are judged on held-out or the user's references, each run with
+the wheel-radius mismatch of §9: under every condition side by side
+(``standard_conditions``), under one with the figures ``wmr-jax evaluate``
+prints (``evaluate_loop``), and against the level of pose noise
+(``noise_curve``). Every loop and condition sees the same draws.
 """
 
 from __future__ import annotations
@@ -52,9 +49,7 @@ def _closed_loop(value: Any, controller: Any, estimator: Any, where: str) -> Clo
     """A set of ``standard_conditions``: a ``ClosedLoop`` as it is, or params of ``controller``.
 
     Raises:
-        ValueError: naming ``where``, for parameters with a batch axis: each
-            set is one loop, judged over the references (its table would
-            mix several loops' runs).
+        ValueError: naming ``where``, for parameters with a batch axis.
     """
     loop = value if isinstance(value, ClosedLoop) else ClosedLoop(controller, value, estimator)
     allowed = "scalars: one loop (disturbed_metrics runs a batch of parameters)"
@@ -67,9 +62,7 @@ def _closed_loop(value: Any, controller: Any, estimator: Any, where: str) -> Clo
 def _unit_draws(key: jax.Array, refs: np.ndarray, steps: int, mismatch: float):
     """Unit noise ``(N, steps, 3)`` and wheel factors ``(N, 3)`` (mass 1) of ``key``.
 
-    What standard_conditions, evaluate_loop and noise_curve scale per level:
-    the draws depend on the key and the number of runs only (drawn in the
-    session's dtype), while the poses themselves stay in float64.
+    The draws depend on the key and the number of runs only; the poses stay in float64.
     """
     unit = sample_disturbance(
         key, np.zeros_like(refs), steps, noise_xy=1.0, noise_theta=1.0, radius_mismatch=mismatch
@@ -114,44 +107,33 @@ def standard_conditions(
 ) -> list[dict[str, Any]]:
     """Judge closed loops under the standard conditions of docs/model.md §7 and §9 (hard law).
 
-    The conditions: the model robot (no mismatch, no noise, no latency),
-    then nominal, latency, noise and both, each with every wheel's radius
-    off by ``δ ~ U(−mismatch, mismatch)`` drawn per run (docs/model.md §9:
-    without it, dead reckoning would be exact). Every set and condition sees
-    the same draws (common random numbers, from ``key`` by
-    ``sample_disturbance``); ideal loop, the estimate starting from the
-    first measurement, on ``robot`` for ``horizon`` (by default the paper
-    robot's 6 s, longer on a slower robot: ``study_horizon``).
+    The model robot (no mismatch, noise or latency), then nominal, latency,
+    noise and both, each with every wheel's radius off by
+    ``δ ~ U(−mismatch, mismatch)`` per run. Ideal loop; every set and condition
+    sees the same draws (``sample_disturbance`` of ``key``).
 
     Args:
         params_by_name: ``{label: params of controller}`` or ``{label:
-            ClosedLoop}`` (a controller, its parameters and an estimator,
-            as ``load_tuned`` returns them); each one loop, its parameters
-            without a batch axis (refused, naming the label).
+            ClosedLoop}``; each one loop, without a batch axis.
         refs: ``(N, 3)`` reference poses (held-out poses of ``docs/model.md §6``).
         key: ``jax.random`` key of the noise and the mismatch.
         controller: a ``Controller`` or its registered name, for plain params.
         estimator: the estimator of plain params (``None``: raw feedback).
-        mismatch: bound of each wheel's relative radius error, ``[0, 1)``;
-            0 judges the model robot under every condition.
+        mismatch: bound of each wheel's relative radius error, ``[0, 1)``.
         dt: control period, s.
         x64: compute in float64.
-        robot: the robot of every run; default: the robot the loops record
-            (``ClosedLoop.robot``), else ``Robot()``. A loop tuned for
-            another robot is refused.
+        robot: the robot of every run; default the loops' own, else
+            ``Robot()``. A loop tuned for another robot is refused.
         horizon: simulated time per run, s; default ``study_horizon(robot)``.
         noise: ``(σ_xy cm, σ_θ degrees)`` of the noise and both conditions;
             default the standard 0.5 cm, 1°.
 
     Returns:
-        One row per (condition, set): ``condition``, ``gains``, ``feedback``
-        (``raw`` or the estimator's name), ``success``, ``mean arrival s``
-        and ``median arrival s`` of the successful runs (``inf`` if none),
-        ``mean final distance cm``, ``peak wheel cm/s`` (the largest over the
-        runs, the mismatch included), ``mismatch``, ``runs``, ``settled at
-        horizon`` (the fraction of runs that only settle at the horizon,
-        ``settled_at_horizon``), ``mean arrival, not at horizon s`` (of the
-        other successes), ``horizon s``.
+        One row per (condition, set): ``condition``, ``gains``, ``feedback``,
+        ``success``, the mean and median arrival of the successes (``inf`` if
+        none), ``mean final distance cm``, ``peak wheel cm/s``, ``mismatch``,
+        ``runs``, ``settled at horizon``, ``mean arrival, not at horizon s``,
+        ``horizon s``.
     """
     if not isinstance(params_by_name, Mapping) or not params_by_name:
         raise ValueError(
@@ -222,14 +204,9 @@ def standard_conditions(
 def _study_robot(robot: Any, loops: Mapping[str, ClosedLoop], name: str) -> Robot:
     """The study's robot: ``robot``, else the one the ``loops`` record, else the paper's.
 
-    A loop that records the robot it was tuned for (``ClosedLoop.robot``,
-    as ``load_tuned`` returns it) is judged on that robot only: its gains
-    live in that robot's wheel budget, and a schedule caps its commands
-    with that robot's ``V_max`` and ``L``, so on another robot the numbers
-    would belong to neither.
-
     Raises:
-        ValueError: naming the loop, for a loop tuned for another robot.
+        ValueError: naming the loop, for a loop tuned for another robot (its
+            gains fit that robot's wheel budget).
     """
     from wmr_jax._src.model.robots import describe_robot, same_robot
 
@@ -265,57 +242,34 @@ def evaluate_loop(
     """Judge one closed loop on the user's own references under one standard condition.
 
     The robot starts at the origin facing +x; hard law; the metrics of
-    docs/model.md §6 on the true pose. The noise and each wheel's radius
-    error (``δ ~ U(−mismatch, mismatch)`` per run) are drawn from ``seed``
-    by ``sample_disturbance``, as ``standard_conditions`` draws them.
+    docs/model.md §6 on the true pose, with the draws of
+    ``standard_conditions`` from ``seed``.
 
     Args:
-        loop: a ``ClosedLoop`` (``load_tuned`` returns one) or ``Gains``
-            (Shim–Sung, raw feedback).
+        loop: a ``ClosedLoop`` or ``Gains`` (Shim–Sung, raw feedback).
         refs: ``(N, 3)`` references ``[x cm, y cm, θ rad]``.
-        condition: ``"nominal"``, ``"latency"``, ``"noise"`` or ``"both"``
-            (docs/model.md §7).
-        mismatch: bound of each wheel's relative radius error, ``[0, 1)``;
-            0 for the model robot.
+        condition: ``"nominal"``, ``"latency"``, ``"noise"`` or ``"both"``.
+        mismatch: bound of each wheel's relative radius error, ``[0, 1)``.
         seed: seed of the draws, an integer in ``[0, 2³² − 1]``.
-        horizon: simulated time per run, s; default ``study_horizon(robot)``
-            (6 s on the paper robot, longer on a slower one).
+        horizon: simulated time per run, s; default ``study_horizon(robot)``.
         velocity: ``"ideal"`` or ``"nonideal"``.
         dt: control period, s.
         x64: compute in float64.
-        robot: the robot; default the one the loop records
-            (``ClosedLoop.robot``), else ``Robot()``. Another robot than the
-            loop's is refused.
+        robot: the robot; default the loop's own, else ``Robot()``.
         identified: the content of an ``identified.json`` whose base is
-            ``robot``: the runs are on the identified robot (its wheel scales,
-            half-track, wheel lag, latency and tracker noise;
-            ``identify.closed_loop.identified_metrics``) while the loop
-            believes ``robot``; ``condition`` must be ``"nominal"`` and
-            ``mismatch`` is set aside. The result's condition is
-            ``"identified"``, its mismatch the largest wheel scale's departure.
+            ``robot``: the runs are on the identified robot while the loop
+            believes ``robot``; ``condition`` must be ``"nominal"``. The
+            result's condition is then ``"identified"``, its mismatch the
+            largest wheel scale's departure from 1.
 
     Returns:
-        ``{"success": fraction, "mean_arrival_s": mean over the successful
-        runs (None if none arrived), "median_arrival_s", "settled_at_horizon":
-        the fraction of runs that only settle at the horizon
-        (``settled_at_horizon``), "peak_wheel_speed": cm/s (the largest rim
-        speed of any run, mismatch included), "v_max": the robot's rim limit,
-        cm/s, "peak_wheel_speed_ok": whether the commands stayed within
-        ``V_max``, i.e. every rim within ``V_max (1 + mismatch)`` (a wheel
-        larger than modelled by ``δ`` turns ``V_max`` into ``(1 + δ) V_max``
-        at its rim), "turn_drive_turn_s": the mean time-optimal turn–drive–turn time
-        of docs/model.md §8 over the references that arrived (None if none),
-        "vs_turn_drive_turn": the mean arrival over it, "n", "condition",
-        "mismatch", "seed", "horizon_s", "velocity", "controller",
-        "feedback", "robot": {field: value}, "dtype": "float64" or
-        "float32", "per_reference": one entry per reference, in order,
-        {"ref": [x cm, y cm, θ rad], "success": bool, "arrival_s": s (None
-        where it did not arrive), "final_distance_cm": distance to the
-        reference at the end, "settled_at_horizon": bool}}``.
+        ``figures``'s dict with ``controller``, ``feedback``, ``robot``,
+        ``dtype`` and ``per_reference``: one ``{"ref", "success",
+        "arrival_s" (None if not arrived), "final_distance_cm",
+        "settled_at_horizon"}`` per reference, in order.
 
     Raises:
-        ValueError: for a bad argument, before any run; for parameters with
-            a batch axis (one loop is judged; ``disturbed_metrics`` runs a batch).
+        ValueError: for a bad argument, before any run.
     """
     from wmr_jax._src.model.robots import robot_json
 
@@ -373,9 +327,9 @@ def evaluate_loop(
 def figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity) -> dict[str, Any]:
     """The figures of one condition's runs and the settings that drew them.
 
-    The mean arrival is compared with the turn–drive–turn bound of the same
-    references (those that arrived); the peak wheel speed with ``v_max``, which
-    a wheel up to ``mismatch`` larger may exceed by as much.
+    The mean arrival is compared with the turn–drive–turn bound of the
+    references that arrived; the peak wheel speed is within ``v_max`` when
+    every rim stays within ``v_max (1 + mismatch)``.
     """
     from wmr_jax._src.studies.optimal import time_bounds
 
@@ -444,31 +398,22 @@ def noise_curve(
 ) -> list[dict[str, Any]]:
     """Success and mean arrival of closed loops against the level of pose noise.
 
-    ``σ_θ`` follows ``σ_xy`` as in the standard conditions (1° per 0.5 cm,
-    docs/model.md §7); every wheel's radius is off by ``δ ~ U(−mismatch,
-    mismatch)`` per run (docs/model.md §9). Every loop and level sees the
-    same unit noise and mismatch (common random numbers, from ``key``).
+    ``σ_θ`` follows ``σ_xy`` at 2° per cm, as the standard conditions; the
+    draws are shared by every loop and level, as in ``standard_conditions``.
 
     Args:
         loops_by_name: ``{label: ClosedLoop or Shim–Sung Gains (raw feedback)}``.
         refs: ``(N, 3)`` references (held-out poses of docs/model.md §6).
         key: ``jax.random`` key of the draws.
         noise_xy: the levels of ``σ_xy``, cm, each in ``[0, 1e6]``.
-        mismatch: bound of each wheel's relative radius error, ``[0, 1)``.
+        mismatch, dt, x64, robot, horizon: as ``standard_conditions``.
         latency: one sample of latency in every run.
-        dt: control period, s.
-        x64: compute in float64.
-        robot: the robot of every run; default: the robot the loops record
-            (``ClosedLoop.robot``), else ``Robot()``. A loop tuned for
-            another robot is refused.
-        horizon: simulated time per run, s; default ``study_horizon(robot)``.
 
     Returns:
         One row per (loop, level): ``gains``, ``feedback``, ``noise xy cm``,
-        ``noise theta deg``, ``success``, ``mean arrival s`` (``inf`` if
-        none arrived), ``mismatch``, ``latency``, ``runs``, ``settled at
-        horizon`` (``settled_at_horizon``), ``mean arrival, not at horizon
-        s`` (of the other successes), ``horizon s``.
+        ``noise theta deg``, ``success``, ``mean arrival s``, ``mismatch``,
+        ``latency``, ``runs``, ``settled at horizon``, ``mean arrival, not at
+        horizon s``, ``horizon s``.
     """
     if not isinstance(loops_by_name, Mapping) or not loops_by_name:
         raise ValueError(

@@ -1,18 +1,11 @@
 """Pose-space maps: docs/model.md §6 metrics over grids of reference poses, per controller.
 
-For a grid of reference positions ``(x_r, y_r)`` at several headings ``θ_r``,
-with the robot starting at the origin, every pose is run to the
-docs/model.md §6 horizon by ``wmr_jax.sweep``, which reduces each run to its
-metrics inside the time loop (success, arrival time, path length, peak wheel
-speed, zig-zag count) and feeds the poses in fixed-size chunks: no trajectory
-is stored, memory grows with the number of poses only (a few numbers each),
-and one compiled program serves any count. A million poses is an ordinary run.
-
-``map_study`` runs the grid for every controller and returns the metrics and
-a side-by-side summary table; ``summarize`` gives the same table for any set
-of poses (the comparison over random docs/model.md §6 poses uses it). This
-module returns values and writes no files: ``wmr_jax.report.save_map_study``
-draws the heat maps and the first-to-arrive map and writes the summary.
+Every pose of a grid (reference positions at several headings, the robot
+starting at the origin) is run to the horizon by ``wmr_jax.sweep``, which
+reduces each run to its metrics inside the time loop and feeds the poses in
+fixed-size chunks: memory grows with the number of poses only.
+``map_study`` runs the grid for every controller, ``compare_controllers``
+random poses, and ``summarize`` tabulates either side by side.
 """
 
 from __future__ import annotations
@@ -32,7 +25,7 @@ from wmr_jax._src.sim import metrics
 from wmr_jax._src.sim.metrics import PoseMetrics
 from wmr_jax._src.sim.poses import EVAL_R_MAX, EVAL_R_MIN, MAX_SAMPLES, horizon_steps
 from wmr_jax._src.sim.rollout import DEFAULT_DT
-from wmr_jax._src.studies.robustness import robot_defaults
+from wmr_jax._src.studies.robustness import robot_defaults, study_horizon
 from wmr_jax._src.studies.sweep import sweep
 
 __all__ = [
@@ -43,7 +36,6 @@ __all__ = [
     "PoseMetrics",
     "compare_controllers",
     "evaluate_poses",
-    "horizon_for",
     "map_study",
     "pose_grid",
     "summarize",
@@ -53,24 +45,7 @@ DEFAULT_HEADINGS_DEG = (-90.0, 0.0, 90.0, 180.0)
 DEFAULT_CHUNK = 16384
 
 
-def horizon_for(robot: Robot | None = None) -> float:
-    """The docs/model.md §6 horizon for ``robot``, s: 6 s, or longer for a slower robot.
-
-    The evaluation set (5–80 cm) and its 6 s are the paper robot's. On a
-    robot whose wheels cannot follow the paper's feasible gains
-    (``60 + 10 L > V_max``) they are scaled by ``V_max / (60 + 10 L)``, and
-    the horizon by its inverse (the TurtleBot3 Burger: 37 s): the rule of
-    every study (``robustness.study_horizon``).
-
-    Raises:
-        ValueError: for anything but one valid robot.
-    """
-    from wmr_jax._src.studies.robustness import study_horizon
-
-    return study_horizon(robot)
-
-
-def _robot_record(robot: Robot) -> dict[str, Any]:
+def robot_record(robot: Robot) -> dict[str, Any]:
     """The robot as a summary records it: its fields and a label (preset name or "custom")."""
     from wmr_jax._src.model.robots import robot_json, robot_name
 
@@ -117,8 +92,8 @@ def pose_grid(
     """Return a square grid over ``[−r_max, r_max]²`` with about ``n_poses`` references.
 
     Only positions at distance ``r_min``–``r_max`` from the origin are run (the
-    docs/model.md §6 set); the grid side is chosen so that their number times
-    the number of headings is close to ``n_poses``.
+    docs/model.md §6 set); the side is chosen so that their number times the
+    number of headings is close to ``n_poses``.
 
     Args:
         n_poses: about how many references in all, ``>= 1``.
@@ -192,16 +167,12 @@ def evaluate_poses(
         velocity: ``"ideal"`` or ``"nonideal"``.
         chunk: poses per compiled call (the last chunk is padded to it).
         progress: show a progress bar (stderr).
-        x64: compute in float64 (default), whatever JAX's default dtype.
-            The polar-coordinate baselines are singular at their goal: in
-            float32 the rounding of positions (about 4e-6 cm at 40 cm) makes
-            their bearing ``α`` random once ``ρ`` gets that small, within the
-            6 s horizon, and their heading drifts off again; ``False`` shows it.
-        cache: a folder where each finished chunk is kept, so that a run
-            interrupted and started again with the same arguments resumes
-            (``wmr_jax.sweep``'s ``out``); ``None`` keeps nothing.
-        resume: with ``cache``, reuse the chunks it holds of the same
-            settings (``False``: compute every chunk, and keep it there).
+        x64: compute in float64 (default), whatever JAX's default dtype: in
+            float32 the polar baselines' bearing is rounding noise near their
+            goal, and their heading drifts off again.
+        cache: a folder where each finished chunk is kept (``wmr_jax.sweep``'s
+            ``out``), so that an interrupted run resumes; ``None`` keeps nothing.
+        resume: with ``cache``, reuse the chunks it holds of the same settings.
         on_chunk: called as ``on_chunk(done, total)`` after every chunk.
 
     Returns:
@@ -269,11 +240,10 @@ def summarize(
             (default: Shim–Sung if present).
 
     Returns:
-        Rows with: poses, success rate, mean/median/90th-percentile arrival
-        time of the successful runs, mean path length, mean and largest peak
-        wheel speed, fraction of runs over ``v_max``, mean zig-zag count,
-        fraction of runs with any zig-zag, and against ``reference``: the
-        fraction of poses where this controller arrives strictly earlier.
+        Rows with the poses, success rate, mean/median/90th-percentile arrival
+        of the successes, mean path, mean and largest peak wheel speed, the
+        fraction over ``v_max``, mean zig-zag count, the fraction with any
+        zig-zag, and the fraction of poses arriving strictly before ``reference``.
     """
     v_max = checks.check_number("v_max", v_max, unit="cm/s")
     if not isinstance(results, Mapping) or not all(
@@ -326,9 +296,7 @@ class MapStudy(NamedTuple):
     Attributes:
         grid: the references run (``PoseGrid``).
         results: controller name → its ``PoseMetrics`` over ``grid.refs``.
-        summary: JSON-ready description of the run (``poses``, ``grid_side``,
-            ``headings_deg``, ``velocity``, ``dtype``, ``horizon_s``, ``dt_s``,
-            ``tolerances``, ``robot``, ``robot_label``) and its ``rows``
+        summary: JSON-ready settings of the run, the robot and its ``rows``
             (``summarize``).
     """
 
@@ -359,33 +327,22 @@ def map_study(
 ) -> MapStudy:
     """Run the pose-space maps of every controller; return the metrics and the summary.
 
-    Every controller runs the same grid (``pose_grid``) from ``(0, 0, 0)`` to
-    the docs/model.md §6 horizon (``horizon_for(robot)``), with its default
-    parameters, on ``robot``; on a robot other than the paper's, Shim–Sung
-    and its schedule run the paper's feasible gains scaled into that robot's
-    wheel budget (``robot_defaults``), as the horizon is stretched for them.
+    Every controller runs the same grid (``pose_grid``) from ``(0, 0, 0)`` on
+    ``robot``, with its default parameters (``robot_defaults``).
 
     Args:
         n_poses: about how many reference poses in all (grid × headings).
         controller_names: controllers to run; default every registered one.
         velocity: ``"ideal"`` or ``"nonideal"``.
         headings_deg: the reference headings θ_r of the maps, degrees.
-        chunk: poses per compiled call.
-        progress: show a progress bar per controller.
-        x64: compute in float64 (see ``evaluate_poses``).
-        cache: a folder where each controller's finished chunks are kept
-            (``cache/<controller>``) and reused when run again, so that an
-            interrupted study goes on; ``None`` keeps nothing.
-        resume: with ``cache``, reuse the chunks it holds of the same
-            settings (``False``: compute them all again, keeping each there).
+        chunk, progress, x64, resume: as ``evaluate_poses`` (a progress bar per controller).
+        cache: a folder for each controller's finished chunks (``cache/<controller>``).
         robot: the robot (one, a number per field); default ``Robot()``.
-        horizon: simulated time per run, s; default ``horizon_for(robot)``
-            (6 s, longer for a robot too slow for the paper's feasible gains).
+        horizon: simulated time per run, s; default ``study_horizon(robot)``.
         on_chunk: called as ``on_chunk(controller, done, total)`` after every chunk.
 
     Returns:
-        A ``MapStudy``; its summary records the robot (``robot``: its fields,
-        ``robot_label``: the preset's name or ``"custom"``) and the horizon.
+        A ``MapStudy``.
 
     Raises:
         ValueError: for a bad count, heading, controller or option.
@@ -397,26 +354,16 @@ def map_study(
     horizon = _horizon(horizon, robot)
     grid = pose_grid(n_poses, headings_deg)
 
-    def told(name: str) -> Callable[[int, int], None] | None:
-        return None if on_chunk is None else (lambda done, total: on_chunk(name, done, total))
+    def per_run(name: str) -> dict[str, Any]:
+        told = None if on_chunk is None else (lambda done, total: on_chunk(name, done, total))
+        return {
+            "cache": None if cache is None else cache / name,
+            "resume": resume,
+            "on_chunk": told,
+        }
 
-    results = {
-        name: evaluate_poses(
-            grid.refs,
-            robot_defaults(name, robot),
-            controller=name,
-            steps=horizon_steps(DEFAULT_DT, horizon),
-            robot=robot,
-            velocity=velocity,
-            chunk=chunk,
-            progress=progress,
-            x64=x64,
-            cache=None if cache is None else cache / name,
-            resume=resume,
-            on_chunk=told(name),
-        )
-        for name in names
-    }
+    runs = {name: (name, None) for name in names}
+    results = _metrics(grid.refs, runs, robot, horizon, velocity, chunk, progress, x64, per_run)
     summary = {
         "poses": int(len(grid.refs)),
         "grid_side": int(len(grid.xs)),
@@ -427,19 +374,38 @@ def map_study(
         "horizon_s": horizon,
         "dt_s": DEFAULT_DT,
         "tolerances": {"r_cm": metrics.DEFAULT_TOL_R, "theta_deg": 5.0},
-        **_robot_record(robot),
+        **robot_record(robot),
         "rows": summarize(results, v_max=float(robot.v_max)),
     }
     return MapStudy(grid, results, summary)
 
 
 def _horizon(horizon: float | None, robot: Robot) -> float:
-    """The horizon asked for, checked, or the robot's default (``horizon_for``)."""
+    """The horizon asked for, checked, or the robot's default (``study_horizon``)."""
     if horizon is None:
-        return horizon_for(robot)
+        return study_horizon(robot)
     horizon = checks.check_number("horizon", horizon, unit="s")
     horizon_steps(DEFAULT_DT, horizon)  # at least a period, at most MAX_STEPS of them
     return horizon
+
+
+def _metrics(refs, runs, robot, horizon, velocity, chunk, progress, x64, per_run=None):
+    """Each run's metrics over ``refs``: ``runs`` maps a label to (controller, params or None)."""
+    return {
+        label: evaluate_poses(
+            refs,
+            robot_defaults(name, robot) if params is None else params,
+            controller=name,
+            steps=horizon_steps(DEFAULT_DT, horizon),
+            robot=robot,
+            velocity=velocity,
+            chunk=chunk,
+            progress=progress,
+            x64=x64,
+            **({} if per_run is None else per_run(label)),
+        )
+        for label, (name, params) in runs.items()
+    }
 
 
 # ---------------------------------------------------------------- random-pose comparison
@@ -475,30 +441,18 @@ def compare_controllers(
 ) -> dict[str, Any]:
     """Compare every controller over the same random docs/model.md §6 poses.
 
-    The poses are ``wmr_jax.sample_poses(seed, n_poses)`` (distance 5–80 cm,
-    any bearing and heading, from ``(0, 0, 0)``), unlike ``map_study``'s
-    grid, so the two report different means. Each controller runs with its
-    published defaults, and the baselines also with their other driving mode
-    (``COMPARISON_RUNS``); on a robot other than the paper's, Shim–Sung runs
-    the paper's feasible gains scaled into that robot's wheel budget
-    (``robot_defaults``), as the horizon is stretched for them.
+    The poses are ``wmr_jax.sample_poses(seed, n_poses)`` from ``(0, 0, 0)``,
+    not ``map_study``'s grid. Each run of ``COMPARISON_RUNS`` has its published
+    defaults (``robot_defaults`` on another robot than the paper's).
 
     Args:
         n_poses: number of random reference poses.
         seed: seed of ``sample_poses``.
-        velocity: ``"ideal"`` or ``"nonideal"``.
-        chunk: poses per compiled call.
-        progress: show a progress bar per controller.
-        x64: compute in float64 (see ``evaluate_poses``).
-        robot: the robot (one, a number per field); default ``Robot()``.
-        horizon: simulated time per run, s; default ``horizon_for(robot)``
-            (6 s, longer for a robot too slow for the paper's feasible gains).
+        velocity, chunk, progress, x64, robot, horizon: as ``map_study``.
 
     Returns:
-        A JSON-ready dict: ``poses``, ``seed``, ``velocity``, ``dtype``,
-        ``horizon_s``, ``dt_s``, ``robot`` (its fields), ``robot_label`` (the
-        preset's name or ``"custom"``) and ``rows`` (``summarize``, one per
-        run; "over V_max" against this robot's).
+        A JSON-ready dict of the settings, the robot and ``rows``
+        (``summarize``, one per run).
 
     Raises:
         ValueError: for a bad count, seed or option.
@@ -510,20 +464,7 @@ def compare_controllers(
     robot = validate_one_robot(robot, "compare_controllers")
     horizon = _horizon(horizon, robot)
     refs = np.asarray(sample_poses(seed, n_poses), dtype=float)
-    results = {
-        label: evaluate_poses(
-            refs,
-            robot_defaults(name, robot) if params is None else params,
-            controller=name,
-            steps=horizon_steps(DEFAULT_DT, horizon),
-            robot=robot,
-            velocity=velocity,
-            chunk=chunk,
-            progress=progress,
-            x64=x64,
-        )
-        for label, (name, params) in _comparison_runs().items()
-    }
+    results = _metrics(refs, _comparison_runs(), robot, horizon, velocity, chunk, progress, x64)
     return {
         "poses": n_poses,
         "seed": seed,
@@ -531,6 +472,6 @@ def compare_controllers(
         "dtype": "float64" if x64 else "float32",
         "horizon_s": horizon,
         "dt_s": DEFAULT_DT,
-        **_robot_record(robot),
+        **robot_record(robot),
         "rows": summarize(results, v_max=float(robot.v_max)),
     }

@@ -1,11 +1,8 @@
 """The time-optimal yardstick for arrival times (docs/model.md §8), vectorised over references.
 
-With the ideal loop and ``|v| + L|ω| ≤ V_max`` the robot can spin in place
-at ``ω_max = V_max / L`` and drive straight at ``V_max``, forwards or
-backwards. ``time_bounds`` returns, per reference seen from the origin
-facing +x, the turn–drive–turn time (a reference to compare with) and the
-lower bound ``(r − tol_r) / V_max`` that no controller can beat, both rounded
-up to whole control periods. Plain NumPy: these are numbers for reports.
+``time_bounds`` returns, per reference seen from the origin facing +x, the
+turn–drive–turn time (spinning at ``V_max / L``, driving at ``V_max``) and
+the lower bound ``(r − tol_r) / V_max``, both rounded up to whole periods.
 """
 
 from __future__ import annotations
@@ -32,8 +29,7 @@ class TimeBounds(NamedTuple):
 
     Attributes:
         turn_drive_turn: turn in place, drive straight at ``V_max``, turn in
-            place (best of forward and backward, final heading modulo π),
-            rounded up to whole samples.
+            place (best of forward and backward), rounded up to whole samples.
         lower_bound: ``⌈(r − tol_r) / (V_max dt)⌉ dt``.
     """
 

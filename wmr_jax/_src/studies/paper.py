@@ -1,9 +1,6 @@
 """The paper's experiments (``docs/model.md §5``): the runs and numbers behind Figs. 6–10.
 
-This module simulates and tabulates; it writes no files and draws nothing.
-``wmr_jax.report.save_paper`` and ``save_fig7`` turn its results into the
-figures, ``paper_table.md``/``.json`` and ``fig7.md``/``.json`` that
-``wmr-jax paper`` and ``wmr-jax demo`` write.
+``wmr_jax.report.save_paper`` and ``save_fig7`` draw and write them.
 """
 
 from __future__ import annotations
@@ -97,16 +94,13 @@ def run_table(
 def residual_bound(phi_m: Any) -> Any:
     """Return the paper's residual distance bound ``sqrt(sin Φ_m tan Φ_m)``, cm (Fig. 6).
 
-    The Lyapunov function of ``docs/model.md §3.6`` adds ``r_e²/2`` in cm² to
-    dimensionless terms, so the bound is in cm (it does not depend on
-    ``R_e``): ``V̇ ≤ 0`` is proven only for ``r_e`` above it, and the paper
-    picks ``R_e`` from this range (its Fig. 6, "error ranges of R_e").
+    ``V̇ ≤ 0`` (docs/model.md §3.6) is proven only for ``r_e`` above it.
 
     Args:
         phi_m: ``Φ_m`` in rad, ``0 ≤ Φ_m < π/2``; any array shape.
 
     Raises:
-        ValueError: for a ``Φ_m`` outside ``[0, π/2)`` (the bound has no meaning there).
+        ValueError: for a ``Φ_m`` outside ``[0, π/2)``.
     """
     arr = real_array("phi_m", phi_m, "numbers 0 <= phi_m < pi/2 rad")
     require("phi_m", arr, (arr >= 0) & (arr < math.pi / 2), "0 <= phi_m < pi/2 rad")
@@ -133,13 +127,11 @@ class PaperCase:
     """One gain of Figs. 7–10: the seven paper runs with both velocity loops.
 
     Attributes:
-        kr: ``k_r``, cm/s (``k_θ`` and the rest are the paper's).
-        ideal: batched trajectory with the ideal velocity loop.
-        nonideal: the same with the non-ideal loop (wheels ≤ ``V_max``).
+        kr: ``k_r``, cm/s (the rest of the gains are the paper's).
+        ideal, nonideal: batched trajectories of the two velocity loops.
         speed_bound: ``k_r + L k_θ``, cm/s (``docs/model.md §3.5``).
         condition: ``"holds"`` if ``speed_bound ≤ V_max``, else ``"violated"``.
-        deviation: ``(7,)`` largest distance between the ideal and the
-            non-ideal path of each run, cm.
+        deviation: ``(7,)`` largest distance between each run's two paths, cm.
     """
 
     kr: float
@@ -159,11 +151,9 @@ class PaperRuns:
         robot: the robot that ran.
         fig6: Fig. 6's curve (``fig6_curve``).
         cases: one ``PaperCase`` per ``k_r`` (120, then 60 cm/s).
-        runs: table rows, one per reference, gain and loop (``run_table``'s
-            columns plus ``kr``, ``loop``, ``condition``, ``max_deviation_cm``).
+        runs: table rows, one per reference, gain and loop.
         summary: ``"fig6"`` (the bound at 70°) and, per ``"kr=<k_r>"``, the
-            speed bound, condition, deviations and the means over the
-            references of arrival, path, zig-zag and saturation per loop.
+            speed bound, condition, deviations and the means per loop.
     """
 
     refs: np.ndarray
@@ -216,17 +206,12 @@ def _case_summary(case: PaperCase, rows: dict[str, list[dict]]) -> dict[str, Any
 def paper_runs(*, robot: Robot | None = None) -> PaperRuns:
     """Run the paper's experiments (``docs/model.md §5``) and tabulate them.
 
-    The seven references of Fig. 7 from ``(0, 0, 0)``, ``dt = 33 ms`` for 3 s,
-    with ``k_r = 120`` (Figs. 7–9, wheel-speed condition violated) and
-    ``k_r = 60`` (Fig. 10, condition held), each with the ideal and the
-    non-ideal velocity loop. ``WheelSpeedWarning`` is silenced: the paper's
-    gains violate the condition on purpose.
+    The seven references of Fig. 7 from ``(0, 0, 0)`` for 3 s, with ``k_r =
+    120`` (Figs. 7–9, wheel-speed condition violated, its warning silenced) and
+    ``k_r = 60`` (Fig. 10), each with the ideal and the non-ideal loop.
 
     Args:
         robot: the robot; default ``Robot()`` (the paper's).
-
-    Returns:
-        The trajectories, the table rows and the summary, as a ``PaperRuns``.
     """
     robot = Robot() if robot is None else robot
     refs = paper_refs()
@@ -246,13 +231,8 @@ def paper_runs(*, robot: Robot | None = None) -> PaperRuns:
 
 @dataclasses.dataclass(frozen=True)
 class Fig7Runs:
-    """Fig. 7: the seven runs with the ideal velocity loop and the paper's gains.
-
-    Attributes:
-        gains: the gains (default ``Gains()``: ``k_r = 120``).
-        refs: ``(7, 3)`` references ``[x cm, y cm, θ rad]``.
-        trajectory: the batched trajectory.
-        rows: ``run_table`` of the runs.
+    """Fig. 7: the seven runs with the ideal velocity loop and the paper's gains, and
+    their ``run_table`` rows.
     """
 
     gains: Gains

@@ -1,30 +1,17 @@
 """Robustness Monte Carlo (docs/model.md §7, §9).
 
-The studies of the disturbed loop (``sensing.loop``): success and arrival
-against the level of pose noise, with wheel-radius and mass mismatch and
-latency (``monte_carlo``, ``robustness_study``), raw feedback or an
-estimator alike, and what the studies share: their horizon on a robot
-(``study_horizon``) and their summary of a run set (``summary_row``). The
-standard conditions, which judge given loops, live in ``conditions``. The
-engine returns values; ``wmr_jax.report`` draws and writes them.
+Success and arrival of the disturbed loop (``sensing.loop``) against the
+level of pose noise, with wheel-radius and mass mismatch and latency
+(``monte_carlo``, ``robustness_study``), and what the studies share: their
+horizon on a robot (``study_horizon``) and their summary of a run set
+(``summary_row``). The standard conditions live in ``conditions``.
 
-**Your robot.** Every study takes ``robot`` (default: the robot the loops
-record, ``ClosedLoop.robot``, else ``Robot()``, the paper robot) and runs
-its loop on that robot; the peak wheel speeds are judged against that
-robot's ``V_max`` (the ideal loop follows every command, so gains set for a
-faster robot show there), and the Monte Carlo runs the Shim–Sung laws on
-the paper's gains scaled into its budget (``robot_defaults``). The
-references keep the evaluation set of docs/model.md §6
-(5–80 cm, any bearing and heading) whatever the robot, since the arrival
-tolerances (1 cm, 5°) and the sensor noise of §7 are lengths and angles,
-not speeds; the horizon scales instead (``study_horizon``): the paper's
-feasible gains, scaled into a slower robot's wheel budget, drive the same
-paths ``c`` times slower, and the horizon is the paper robot's 6 s over
-``c``, so that they have the time on that robot that they have on the
-paper's. A study given a ``horizon`` runs that one. A robot's acceleration
-limits (``accel_max``, ``angular_accel_max``) limit the ideal loop's commands
-in every study, as in the rollouts (docs/model.md §4.2.2): the disturbed loop
-turns its speed limiter on for such a robot (``sensing.loop``).
+Every study runs on ``robot`` (default: the loops' own, else ``Robot()``)
+and judges peak wheel speeds against its ``V_max``. The references keep the
+evaluation set of docs/model.md §6 on any robot, since the tolerances and
+the noise are lengths and angles; the horizon scales instead
+(``study_horizon``), as the paper's gains scaled into a slower robot's
+wheel budget (``robot_defaults``) drive the same paths more slowly.
 """
 
 from __future__ import annotations
@@ -99,13 +86,10 @@ def check_levels(noise_xy: Any, noise_deg: Any) -> tuple[list[float], list[float
 def study_horizon(robot: Robot | None = None) -> float:
     """The studies' default horizon on ``robot``, s: 6 s for the paper robot (docs/model.md §6).
 
-    The paper's feasible gains (``k_r = 60`` cm/s, ``k_θ = 10`` rad/s) fit the
-    paper robot's wheel budget; on a robot where ``60 + 10 L > V_max`` they
-    are scaled by ``c = V_max / (60 + 10 L)`` to fit (docs/robots.md), and
-    both gains scaled by ``c`` drive the same paths ``1 / c`` times slower
-    (in continuous time; the sampled law nearly so).
-    The horizon is ``6 s / c`` (6 s where ``c ≥ 1``), rounded up to 0.1 s:
-    the TurtleBot3 Burger's (``L = 8`` cm, ``V_max = 22.72`` cm/s) is 37 s.
+    On a robot where the paper's feasible gains do not fit (``60 + 10 L >
+    V_max``) they are scaled by ``c = V_max / (60 + 10 L)`` (docs/robots.md),
+    which drives the same paths ``1 / c`` times slower: the horizon is
+    ``6 s / c``, rounded up to 0.1 s.
 
     Raises:
         ValueError: for anything but one valid robot.
@@ -127,14 +111,10 @@ LATE_SHARE = 0.25
 def settled_at_horizon(m: PoseMetrics, horizon: float) -> np.ndarray:
     """Which runs count as arrived (docs/model.md §6) only because the horizon ends, ``(N,)``.
 
-    A run that reached the goal, left its tolerance and is back in it over
-    the final stretch has a finite settled arrival: the start of that
-    stretch, set by where the horizon cuts the run rather than by the run.
-    Under noise such runs hover about the goal and their "arrival" moves
-    with the horizon (the paper's gains under the standard noise "arrive"
-    at 5.7 s of 6 on average). Such a run is one whose settled arrival comes
-    after ``(1 − LATE_SHARE)`` of the horizon and after its first arrival;
-    a run that arrives late without having left the tolerance is not.
+    A run that reached the goal, left its tolerance and is back in it at the
+    end has an arrival set by where the horizon cuts it: under noise such runs
+    hover about the goal. Such a run is one whose settled arrival comes after
+    ``(1 − LATE_SHARE)`` of the horizon and after its first arrival.
 
     Args:
         m: the runs' metrics (``first_arrival`` included).
@@ -167,14 +147,13 @@ def _check_with_first_arrivals(m: Any, name: str) -> None:
 def summary_row(m: PoseMetrics, horizon: float | None = None) -> dict[str, Any]:
     """Return success, arrival, first arrival, final distance and zig-zag of a batch.
 
-    Given the runs' ``horizon`` (s), also ``"settled at horizon"``: the
-    fraction of the runs that count as successes only because the horizon
-    ends (``settled_at_horizon``), and the mean and median arrival of the
-    other successes (``inf`` if none), which the figures draw.
+    Given the runs' ``horizon`` (s), also ``"settled at horizon"``
+    (``settled_at_horizon``) and the mean and median arrival of the other
+    successes (``inf`` if none).
 
     Raises:
-        ValueError: for metrics without first arrivals (``evaluate_poses``
-            records none), or a horizon that is not a time.
+        ValueError: for metrics without first arrivals, or a horizon that is
+            not a time.
     """
     _check_with_first_arrivals(m, "m")
     ok = m.success
@@ -225,14 +204,11 @@ def monte_carlo(
 
     Every noise level reuses the same references, unit noise and mismatch
     (common random numbers), so differences between levels are the noise's.
-    The references are the evaluation set of ``docs/model.md §6`` on every
-    robot; each run lasts ``horizon`` (default ``study_horizon(robot)``: the
-    paper robot's 6 s, longer on a slower robot).
 
     Args:
         key: ``jax.random`` key; the same key gives the same numbers.
         controller: a ``Controller`` or its registered name.
-        params: its parameters (defaults if ``None``).
+        params: its parameters; default ``robot_defaults(controller, robot)``.
         n_runs: Monte Carlo runs per noise level.
         noise_xy: σ of the x and y measurement noise per level, cm.
         noise_deg: σ of the heading measurement noise per level, degrees.
@@ -243,26 +219,14 @@ def monte_carlo(
         velocity: ``"ideal"`` or ``"nonideal"``.
         dt: control period, s.
         x64: compute in float64 (see ``disturbed_metrics``).
-        estimator: between the measurements and the law: ``None`` (raw
-            feedback), ``"observer"``, ``"ekf"`` or their parameters
-            (docs/model.md §9).
-        robot: the robot (the controller's model and, up to the mismatch,
-            the true one); default ``Robot()``. With ``params`` ``None`` on
-            another robot than the paper's, the two Shim–Sung laws run the
-            paper's feasible gains scaled into its wheel budget
-            (``robot_defaults``); the ideal loop does not limit wheel
-            commands, and gains set for a faster robot would drive it beyond
-            its ``V_max``.
+        estimator: ``None`` (raw feedback), ``"observer"``, ``"ekf"`` or their
+            parameters (docs/model.md §9).
+        robot: the robot; default ``Robot()``.
         horizon: simulated time per run, s; default ``study_horizon(robot)``.
 
     Returns:
-        One row per noise level: success rate, mean and median arrival of the
-        successful runs (s), the fraction of runs ever arrived (if only for a
-        sample) and their median first arrival (s), mean final distance (cm),
-        mean zig-zag count, the fraction of runs that only settle at the
-        horizon (``settled_at_horizon``) and the mean and median arrival of
-        the other successes (s), the horizon (s) and the peak wheel speed
-        (cm/s, the largest of any run).
+        One row per noise level: the condition, ``summary_row`` with the
+        horizon, and the peak wheel speed of any run (cm/s).
 
     Raises:
         ValueError: for a bad count, noise level, mismatch bound or option.
@@ -320,15 +284,10 @@ def monte_carlo(
 def robot_defaults(controller: Any, robot: Robot | None = None) -> Any:
     """The parameters a study runs for ``controller`` on ``robot`` when given none.
 
-    On the paper robot (and for ``robot`` ``None``), ``None``: the
-    controller's defaults. On another robot, ``shim-sung`` runs the paper's
-    feasible gains scaled into that robot's wheel budget
-    (``tuning.paper_feasible_gains``: ``k_r : k_θ = 60 : 10``,
-    ``k_r + L k_θ ≤ V_max``) and ``shim-sung-schedule`` the same gains as
-    constant tables capped with that robot's ``V_max`` and ``L``: their
-    defaults are set for the paper robot's wheels. Other controllers keep
-    their defaults (``None``): their commands grow with the distance and
-    are bounded by no wheel budget (docs/model.md §3.8).
+    ``None`` (the controller's defaults) on the paper robot and for other
+    controllers than Shim–Sung's two, whose defaults fit the paper robot's
+    wheels: there ``shim-sung`` runs ``tuning.paper_feasible_gains(robot)`` and
+    ``shim-sung-schedule`` the same gains as constant tables for that robot.
     """
     from wmr_jax._src.model.controllers.schedule import SCHEDULE, ScheduleParams
     from wmr_jax._src.model.robots import same_robot
@@ -369,24 +328,15 @@ def robustness_study(
 ) -> list[dict[str, Any]]:
     """Run the Monte Carlo for each controller and condition (``docs/model.md §7``).
 
-    Conditions (``ROBUSTNESS_CONDITIONS``): measurement noise alone; noise
-    with ±3 % wheel-radius and ±20 % body-mass mismatch (the latter in the
-    non-ideal loop only: the ideal one has no mass); and the same with
-    one-sample latency. Each controller sees the same draws (one key per
-    condition, from ``seed``). ``wmr_jax.report.write_robustness`` draws and
-    writes the rows.
+    The conditions are ``ROBUSTNESS_CONDITIONS`` (body-mass mismatch in the
+    non-ideal loop only); each controller sees the same draws (one key per
+    condition, from ``seed``).
 
     Args:
         seed: PRNG seed, an integer in ``[0, 2³² − 1]``.
         controller_names: registered controllers; default every one.
-        n_runs: Monte Carlo runs per noise level.
-        velocity: ``"ideal"`` or ``"nonideal"``.
-        noise_xy: σ of the x and y measurement noise per level, cm.
-        noise_deg: σ of the heading measurement noise per level, degrees.
-        x64: compute in float64 (see ``disturbed_metrics``).
-        estimator: the estimator of every controller (``None``: raw feedback).
-        robot: the robot of every run (``monte_carlo``); default ``Robot()``.
-        horizon: simulated time per run, s; default ``study_horizon(robot)``.
+        n_runs, velocity, noise_xy, noise_deg, x64, estimator, robot, horizon:
+            as ``monte_carlo``.
 
     Returns:
         The rows of every condition, controller and noise level (in that

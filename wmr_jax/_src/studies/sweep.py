@@ -1,29 +1,15 @@
 """Final poses and docs/model.md §6 metrics for millions of poses, in bounded memory.
 
-``sweep(refs, gains, ...)`` runs the closed loop for every reference pose and
-returns, per pose, the final pose and the metrics of docs/model.md §6: arrival
-time, success, path length, peak wheel speed and zig-zag count. The metrics
-are streamed through the time loop (``loops.scan_closed_loop`` with the fold
-of ``metrics.stream_*``), so no trajectory is ever stored, and the poses are
-processed in chunks of a fixed size, so device memory does not grow with
-``N`` and one compiled program serves every chunk. Each chunk is spread over
-all local devices.
+``sweep`` runs the closed loop for every reference pose with the metrics
+streamed through the time loop (``metrics.stream_*``), so no trajectory is
+stored, and the poses in chunks of a fixed size spread over all local
+devices, so one compiled program serves every chunk.
 
-With ``out=DIR`` every finished chunk is written to ``DIR`` atomically as soon
-as it is done, as a checksummed array file (``io.save_arrays``) carrying a
-fingerprint of the settings and of its reference poses; a later call with the
-same arguments and ``resume=True`` (the default) loads the finished chunks
-instead of recomputing them, so an interrupted sweep loses nothing it had
-finished. A chunk file that is damaged or was altered is recomputed, with a
-one-line warning, never trusted; temporary files that a killed sweep left in
-``DIR`` are removed first. Host memory holds the inputs and the results
-(about 30 bytes per pose in float32) and little else; ``refs`` may be a NumPy
-memmap.
-
-The steps of a sweep: check the inputs and plan the chunks (``_check``), open
-the chunk folder (``sweep_files.ChunkStore``), then for each chunk either load it or
-launch it on the devices and finish it (copy back, store) while the next one
-runs (``_run_chunks``).
+With ``out=DIR`` every finished chunk is written atomically as a checksummed
+file carrying a fingerprint of the settings and its poses
+(``sweep_files.ChunkStore``); a later call with the same arguments and
+``resume=True`` loads them instead of recomputing, so an interrupted sweep
+loses nothing it had finished. ``refs`` may be a NumPy memmap.
 """
 
 from __future__ import annotations
@@ -62,16 +48,9 @@ SWEEP_FIELDS = (
     "peak_wheel_speed",
     "zigzags",
 )
-"""Keys of the dict ``sweep`` returns, each an ``(N,)`` array:
-
-* ``final_x``, ``final_y`` (cm), ``final_theta`` (rad, not wrapped): the pose
-  after the last period;
-* ``arrival_time``: s, ``inf`` where the robot is not arrived at the end
-  (docs/model.md §6, as ``wmr_jax.arrival_time``);
-* ``success``: bool, ``arrival_time`` is finite;
-* ``path_length``: cm, as ``wmr_jax.studies.path_length``;
-* ``peak_wheel_speed``: cm/s, the largest ``|v_L|``, ``|v_R|`` over the run;
-* ``zigzags``: int32, as ``wmr_jax.studies.zigzag_count``.
+"""Keys of the dict ``sweep`` returns, each ``(N,)``: the final pose (cm, cm, rad
+unwrapped) and the docs/model.md §6 metrics (``arrival_time`` s, ``inf`` if not
+arrived; ``success``; ``path_length`` cm; ``peak_wheel_speed`` cm/s; ``zigzags``).
 """
 
 
@@ -101,10 +80,7 @@ _sweep_jit = loops.EntryJit(loops.batched(_sweep_one), static_argnames=("options
 
 @dataclasses.dataclass(frozen=True)
 class _Job:
-    """A checked sweep: its inputs, options, and how it is cut into chunks.
-
-    ``*_mask`` trees say which leaves carry the batch axis ``(n, ...)``.
-    """
+    """A checked sweep: its inputs, options and chunks (``*_mask``: which leaves are batched)."""
 
     refs: Any
     n: int
@@ -130,10 +106,7 @@ class _Job:
 
 
 def _pose_count(refs: Any) -> int:
-    """Return ``N`` of ``(N, 3)`` references from their shape alone (a memmap stays on disk).
-
-    Their values are checked chunk by chunk as they are read (``_chunk_inputs``).
-    """
+    """Return ``N`` of ``(N, 3)`` references from their shape alone (a memmap stays on disk)."""
     shape = np.shape(refs) if getattr(refs, "shape", None) is None else refs.shape
     if len(shape) != 2 or shape[1] != 3 or shape[0] < 1:
         raise ValueError(
@@ -154,11 +127,7 @@ def _thresholds(tol_r, tol_theta, v_dead_band, omega_dead_band) -> metrics.Thres
 
 
 def _per_run_or_shared(tree: Any, n: int, name: str) -> Any:
-    """Leaves with one value per run stay; a batch axis of size 1 is shared (dropped).
-
-    Raises:
-        ValueError: for a batch axis of another size, naming the field.
-    """
+    """Leaves with one value per run stay, a batch axis of size 1 is dropped, others refused."""
 
     def leaf_of(path, leaf):
         field = f"{name}{jax.tree_util.keystr(path, simple=True, separator='.')}"
@@ -197,10 +166,7 @@ def _take(tree: Any, mask: Any, lo: int, hi: int, pad: int) -> Any:
 
 
 def _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, devices) -> _Job:
-    """Check every input (on a one-pose sample of the batch) and plan the chunks.
-
-    Every message then names the bad argument or field before anything is traced.
-    """
+    """Check every input (on a one-pose sample of the batch) and plan the chunks."""
     if isinstance(refs, (list, tuple)):  # lists work as arrays (a memmap stays as it is)
         refs = checks.real_array("refs", refs, "rows of real numbers [x cm, y cm, θ rad]")
     n = _pose_count(refs)
@@ -274,11 +240,7 @@ def _chunk_inputs(job: _Job, i: int) -> _Chunk:
 
 
 def _chunk_digest(job: _Job, chunk: _Chunk) -> str:
-    """The digest of everything per pose in a chunk (what a stored chunk is matched by).
-
-    Only a sweep with ``out`` needs it: hashing is host work of the order of
-    the chunk's whole run on a GPU.
-    """
+    """The digest of everything per pose in a chunk (what a stored chunk is matched by)."""
     lo, hi, pad = chunk.lo, chunk.hi, chunk.pad
     per_pose = [chunk.refs, chunk.init if job.batched_init else np.zeros(0)]
     for tree, mask in ((job.gains, job.gains_mask), (job.robot, job.robot_mask)):
@@ -287,12 +249,7 @@ def _chunk_digest(job: _Job, chunk: _Chunk) -> str:
 
 
 def _check_chunk(job: _Job, chunk: _Chunk) -> None:
-    """Check every row of a chunk as ``final_poses`` checks a batch (before it runs).
-
-    ``_check`` judged one pose; the rest are judged here, chunk by chunk as
-    they are read, so a memory-mapped batch is never loaded whole. Messages
-    give rows of the whole batch.
-    """
+    """Check every row of a chunk as ``final_poses`` checks a batch (rows of the whole batch)."""
     size = chunk.hi - chunk.lo
 
     def offset(err: ValueError) -> ValueError:
@@ -369,11 +326,7 @@ def _run_chunks(
     resume: bool,
     done: Callable[[int], None],
 ) -> None:
-    """Fill ``results`` chunk by chunk, loading finished chunks from ``store`` if ``resume``.
-
-    One chunk is in flight while the previous one is copied back and saved:
-    JAX dispatches asynchronously, so the host work overlaps the next chunk.
-    """
+    """Fill ``results`` chunk by chunk, loading finished ones if ``resume``."""
     launch = _launcher(job)
 
     def keep(chunk: _Chunk, digest: str | None, values: dict[str, Any], *, computed: bool) -> None:
@@ -478,12 +431,10 @@ def sweep(
         chunk_size: poses per chunk, rounded up to a multiple of the number
             of devices; the last chunk is padded to the same size.
         devices: devices each chunk is spread over; default all local ones.
-        out: folder for the chunk files (checksummed, each written atomically
-            when done), the settings (``sweep.json``) and all results
-            (``results.npz``, also checked; ``np.load`` reads it); ``None``
-            keeps everything in memory.
+        out: folder for the chunk files, the settings (``sweep.json``) and
+            all results (``results.npz``); ``None`` keeps everything in memory.
         resume: with ``out``, load the chunks finished with the same settings
-            and poses instead of computing them again (see the module docs).
+            and poses instead of computing them again.
         progress: show a tqdm progress bar over the chunks.
         on_chunk: called as ``on_chunk(done, total)`` after every chunk.
 

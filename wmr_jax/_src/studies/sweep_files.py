@@ -1,10 +1,8 @@
 """The folder of a resumable sweep: its settings' fingerprint and one checked file per chunk.
 
-Every chunk file carries the fingerprint of the sweep's settings (all but the
-reference poses, the code's version included) and the digest of its own
-per-pose inputs; a chunk is reused only when both match and its values are
-what a sweep can compute (``implausible``). A damaged or altered file is
-recomputed with a one-line warning, never trusted.
+A chunk is reused only when the fingerprint of the sweep's settings and the
+digest of its own inputs match and its values are plausible; a damaged or
+altered file is recomputed with a one-line warning.
 """
 
 from __future__ import annotations
@@ -48,12 +46,7 @@ def digest(*arrays: Any) -> str:
 
 
 def tree_description(tree: Any) -> dict[str, Any]:
-    """Scalars by value, batched leaves by shape and digest (for the fingerprint).
-
-    The static fields of a parameter dataclass (``AicardiGains.backward``,
-    ``compensate``) are no pytree leaves but decide the results as much as
-    the leaves do: they are described too, with the class's name.
-    """
+    """Scalars by value, batched leaves by shape and digest, static fields by ``repr``."""
     out: dict[str, Any] = {"type": type(tree).__name__}
     for path, leaf in jax.tree_util.tree_leaves_with_path(tree):
         arr = np.asarray(leaf)
@@ -161,8 +154,8 @@ class ChunkStore:
     ) -> dict[str, np.ndarray] | None:
         """Return chunk ``i``'s results if its file is intact and was made from these inputs.
 
-        A file from other settings or poses is silently not used; a damaged or
-        altered one is not used either, with a one-line warning.
+        A file from other settings or poses is not used; a damaged or altered one
+        is not used either, with a one-line warning.
         """
         try:
             values, meta = io.load_arrays(self.path(i))
@@ -204,10 +197,9 @@ class ChunkStore:
 def implausible(job: _Job, values: dict[str, np.ndarray]) -> str | None:
     """Why a chunk read back cannot be this sweep's result, or ``None`` if it can be.
 
-    What a computed chunk must be: finite final poses (``_check_result``),
-    arrival times that are ``inf`` or whole periods within the horizon,
-    success exactly where the arrival is finite, and non-negative path
-    lengths, wheel speeds and zig-zag counts.
+    Its final poses must be finite, its arrivals ``inf`` or whole periods
+    within the horizon, its successes where the arrival is finite, and its
+    paths, wheel speeds and zig-zag counts non-negative.
     """
     pose = np.stack([values[name] for name in ("final_x", "final_y", "final_theta")], axis=1)
     if not np.isfinite(pose).all():

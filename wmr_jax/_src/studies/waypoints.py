@@ -1,31 +1,26 @@
 """Consecutive motions: a chain of waypoints, and references that move.
 
-Two uses of the one closed loop (``loops.scan_closed_loop``), each over one
-robot, batched by ``loops.batched``; a fold follows the arrivals and
-``aim`` hands the law the reference of each period:
+Two uses of the one closed loop (``loops.scan_closed_loop``), batched by
+``loops.batched``; a fold follows the arrivals and ``aim`` hands the law the
+reference of each period:
 
-* **Waypoint chain.** The robot is given waypoint 0 and, when it has arrived
-  there, waypoint 1, and so on. Arrived means the test of
-  ``docs/model.md §6`` (``r_e ≤ tol_r`` and ``|θ̄_e| ≤ tol_theta``) after a
-  control period; the intermediate waypoints may use a looser
-  *pass-through* tolerance, so that the robot runs through them instead of
-  settling on each. The arrival time of an intermediate waypoint is the end
-  of the period at which it was reached (when the chain moved on); that of
-  the last one is the arrival time of ``docs/model.md §6``, counted over the
-  samples spent on the last leg.
-* **Moving reference.** One reference per control period, ``(steps, 3)``: the
-  command of period ``k`` is computed for ``refs[k]``. The tracking error and
-  the arrival test after period ``k`` are taken against ``refs[k]``; with a
-  constant reference this is exactly a ``rollout`` and its metrics
-  (``docs/model.md §6``).
+* **Waypoint chain.** The robot is given waypoint 0 and, once arrived there
+  (docs/model.md §6), waypoint 1, and so on; intermediate waypoints may use
+  a looser *pass-through* tolerance, so that the robot runs through them.
+  An intermediate waypoint's arrival time is the end of the period it was
+  reached at; the last one's is the docs/model.md §6 arrival time.
+* **Moving reference.** One reference per control period, ``(steps, 3)``;
+  the error and the arrival test after period ``k`` are taken against
+  ``refs[k]``. A constant reference gives exactly a ``rollout``.
 
-``soccer_study`` runs a soccer-like sequence for each controller and returns
-the arrival time per leg; ``wmr_jax.report`` draws and writes it.
+``soccer_study`` runs a soccer-like sequence for each controller.
 """
 
 from __future__ import annotations
 
+import inspect
 import math
+import types
 from collections.abc import Sequence
 from typing import Any, NamedTuple
 
@@ -75,8 +70,7 @@ class ChainRun(NamedTuple):
 
     Attributes:
         trajectory: the ``Trajectory`` of the run (``steps + 1`` poses).
-        leg: ``(steps,)`` int32 index of the waypoint the command of each
-            period was computed for.
+        leg: ``(steps,)`` int32 index of the waypoint each period aimed at.
         arrival: ``(K,)`` arrival time at each waypoint, s; ``inf`` if never.
     """
 
@@ -90,8 +84,7 @@ class TrackRun(NamedTuple):
 
     Attributes:
         trajectory: the ``Trajectory`` of the run (``steps + 1`` poses).
-        error: ``(steps,)`` distance ``r_e`` after each period to the
-            reference of that period, cm.
+        error: ``(steps,)`` distance ``r_e`` after each period to its reference, cm.
         arrival: ``()`` docs/model.md §6 arrival time against the moving reference, s.
     """
 
@@ -106,9 +99,8 @@ class TrackRun(NamedTuple):
 def _chain_single(spec, params, init, robot, dt, options: Options) -> ChainRun:
     """Run one robot through its waypoints; ``spec = (waypoints (K, 3), tolerances (4,))``.
 
-    The fold carries ``(period, leg, period at which each waypoint was
-    reached (-1: not yet), start of the last run of arrived samples on the
-    last leg (-1: none))``; ``aim`` hands the law the waypoint of the leg.
+    The fold carries the period, the leg, the period each waypoint was reached
+    at and where the last run of arrived samples on the last leg began (-1: none).
     """
     waypoints, tolerances = spec
     n_legs = waypoints.shape[0]
@@ -227,19 +219,6 @@ def _tolerances(tol_r, tol_theta, pass_tol_r, pass_tol_theta) -> jax.Array:
     return jnp.asarray([pass_r, pass_theta, tol_r, tol_theta], checks.float_dtype())
 
 
-def _prepared(params, init, robot, dt, options: Options, n: int | None, entry):
-    """Check params, init, robot and dt as ``rollout`` does; ``n`` runs for a batch."""
-    if n is not None and np.ndim(init) == 2 and np.shape(init)[0] != n:
-        raise ValueError(f"init has {np.shape(init)[0]} rows; allowed: {n}, one per run")
-    # A stand-in reference: the real ones are checked by the caller, and its
-    # batch size is the one every batched argument must share.
-    dummy = np.zeros((3,) if n is None else (n, 3))
-    _, params, init, robot, dt = simulation.prepare(
-        dummy, params, init, robot, dt, options, batch=False if n is None else None, entry=entry
-    )
-    return params, init, robot, dt
-
-
 # What each loop keeps per run and period, (floats, int32s): a Trajectory
 # (8 floats and the region) and the leg of a chain, or the error of a track.
 _CHAIN_RECORD, _TRACK_RECORD = (8, 2), (9, 1)
@@ -248,11 +227,7 @@ _CHAIN_RECORD, _TRACK_RECORD = (8, 2), (9, 1)
 def _shared_by_every_run(
     poses: jax.Array, params: Any, robot: Any, init: Any, steps: int, record: tuple[int, int]
 ) -> jax.Array:
-    """``poses (1, ...)`` repeated for each run of batched params, robot or init; else as given.
-
-    A batch axis of size 1 is shared by every run, the references' too. A
-    record of the runs larger than the memory is refused first.
-    """
+    """``poses (1, ...)`` repeated for each run of batched params, robot or init."""
     runs = checks.common_batch_size({"gains": params, "robot": robot}, {"init": init})
     simulation.require_memory(max(poses.shape[0], runs), steps, record)
     if poses.shape[0] == 1 and runs > 1:
@@ -276,17 +251,37 @@ _BATCHED = {"chain_rollout": "batch_chain_rollout", "track_rollout": "batch_trac
 
 
 def _run(jitted, spec, params, init, robot, dt, options: Options, n: int | None, entry=""):
-    """Check params, init, robot and dt, then run ``jitted`` on ``spec`` (``n`` runs or one).
-
-    ``entry``: the name of the single-run entry point calling (``n`` None).
-    """
-    params, init, robot, dt = _prepared(
-        params, init, robot, dt, options, n, (entry, _BATCHED.get(entry, ""))
+    """Check params, init, robot and dt as ``rollout`` does (``n`` runs, or one), then run."""
+    if n is not None and np.ndim(init) == 2 and np.shape(init)[0] != n:
+        raise ValueError(f"init has {np.shape(init)[0]} rows; allowed: {n}, one per run")
+    # A stand-in reference: the real ones are checked by the caller, and its
+    # batch size is the one every batched argument must share.
+    dummy, names = np.zeros((3,) if n is None else (n, 3)), (entry, _BATCHED.get(entry, ""))
+    batch = False if n is None else None
+    _, params, init, robot, dt = simulation.prepare(
+        dummy, params, init, robot, dt, options, batch=batch, entry=names
     )
     # The robot's speed limiter, as in the rollouts (docs/model.md §4.2.2): the
     # held command rides in the state's velocity, from rest.
     options = loops.for_robot(options, robot, dt)
     return jitted(spec, params, init, robot, dt, options=options)
+
+
+def _keywords_of(single: Any) -> Any:
+    """Give a batched entry point the signature of its single-run one (``help`` shows it)."""
+
+    def adopt(batched: Any) -> Any:
+        batched.__signature__ = inspect.signature(single)
+        return batched
+
+    return adopt
+
+
+def _bound(single: Any, first: Any, params: Any, keywords: dict[str, Any]) -> Any:
+    """Every argument of ``single`` as given to its batched twin, defaults filled in."""
+    bound = inspect.signature(single).bind(first, params, **keywords)
+    bound.apply_defaults()
+    return types.SimpleNamespace(**bound.arguments)
 
 
 # ---------------------------------------------------------------- entry points
@@ -317,14 +312,11 @@ def chain_rollout(
         init: ``(3,)`` initial pose.
         dt: control period, s.
         steps: control periods in all (static).
-        robot: robot parameters; default ``Robot()``. Its acceleration
-            limits, where above 0, limit the ideal loop's commands
-            (docs/model.md §4.2.2).
+        robot: robot parameters; default ``Robot()``.
         velocity: ``"ideal"`` or ``"nonideal"`` (static).
         controller: a ``Controller`` or its registered name (static).
-        tol_r: arrival distance at the last waypoint, cm (docs/model.md §6: 1).
-        tol_theta: arrival folded-heading error at the last waypoint, rad,
-            ``< π/2`` (docs/model.md §6: 5°).
+        tol_r: arrival distance at the last waypoint, cm.
+        tol_theta: arrival folded-heading error at the last waypoint, rad, ``< π/2``.
         pass_tol_r: distance at which an intermediate waypoint counts as
             reached, cm; default ``tol_r``.
         pass_tol_theta: heading tolerance there, rad, ``≤ π/2`` (``π/2``
@@ -346,23 +338,8 @@ def chain_rollout(
     return _run(_chain_jit, (wp, tol), params, init, robot, dt, options, None, "chain_rollout")
 
 
-def batch_chain_rollout(
-    waypoints: Any,
-    params: Any = None,
-    *,
-    init: Any = (0.0, 0.0, 0.0),
-    dt: float = DEFAULT_DT,
-    steps: int = 450,
-    robot: Robot | None = None,
-    velocity: str = "ideal",
-    controller: Any = controllers.SHIM_SUNG,
-    tol_r: float = metrics.DEFAULT_TOL_R,
-    tol_theta: float = metrics.DEFAULT_TOL_THETA,
-    pass_tol_r: float | None = None,
-    pass_tol_theta: float | None = None,
-    substeps: int = loops.DEFAULT_SUBSTEPS,
-    wheel_limit: str = "clip",
-) -> ChainRun:
+@_keywords_of(chain_rollout)
+def batch_chain_rollout(waypoints: Any, params: Any = None, **keywords: Any) -> ChainRun:
     """Run ``chain_rollout`` for a batch of ``N`` robots in one call.
 
     Args:
@@ -374,20 +351,21 @@ def batch_chain_rollout(
     Returns:
         A ``ChainRun`` whose fields have a leading axis ``N``.
     """
+    a = _bound(chain_rollout, waypoints, params, keywords)
     if np.ndim(waypoints) == 2:
         wp = _pose_stack("waypoints", waypoints, 2, "(K, 3)")
-        if np.ndim(init) != 2:
+        if np.ndim(a.init) != 2:
             raise ValueError(
-                f"waypoints has shape {wp.shape} and init has shape {np.shape(init)}; "
+                f"waypoints has shape {wp.shape} and init has shape {np.shape(a.init)}; "
                 "allowed: waypoints (N, K, 3), or (K, 3) with init (N, 3)"
             )
-        wp = jnp.broadcast_to(wp, (np.shape(init)[0], *wp.shape))
+        wp = jnp.broadcast_to(wp, (np.shape(a.init)[0], *wp.shape))
     else:
         wp = _pose_stack("waypoints", waypoints, 3, "(N, K, 3)")
-    tol = _tolerances(tol_r, tol_theta, pass_tol_r, pass_tol_theta)
-    options = _options(steps, velocity, controller, substeps, wheel_limit)
-    wp = _shared_by_every_run(wp, params, robot, init, options.steps, _CHAIN_RECORD)
-    return _run(_batch_chain_jit, (wp, tol), params, init, robot, dt, options, wp.shape[0])
+    tol = _tolerances(a.tol_r, a.tol_theta, a.pass_tol_r, a.pass_tol_theta)
+    options = _options(a.steps, a.velocity, a.controller, a.substeps, a.wheel_limit)
+    wp = _shared_by_every_run(wp, params, a.robot, a.init, options.steps, _CHAIN_RECORD)
+    return _run(_batch_chain_jit, (wp, tol), params, a.init, a.robot, a.dt, options, wp.shape[0])
 
 
 def track_rollout(
@@ -405,8 +383,7 @@ def track_rollout(
     """Drive one robot after a moving reference, one reference per period.
 
     Args:
-        refs: ``(steps, 3)`` reference of each control period; ``steps`` is
-            its length.
+        refs: ``(steps, 3)`` reference of each control period.
         (the rest as ``chain_rollout``.)
 
     Returns:
@@ -418,27 +395,18 @@ def track_rollout(
     return _run(_track_jit, arr, params, init, robot, dt, options, None, "track_rollout")
 
 
-def batch_track_rollout(
-    refs: Any,
-    params: Any = None,
-    *,
-    init: Any = (0.0, 0.0, 0.0),
-    dt: float = DEFAULT_DT,
-    robot: Robot | None = None,
-    velocity: str = "ideal",
-    controller: Any = controllers.SHIM_SUNG,
-    substeps: int = loops.DEFAULT_SUBSTEPS,
-    wheel_limit: str = "clip",
-) -> TrackRun:
+@_keywords_of(track_rollout)
+def batch_track_rollout(refs: Any, params: Any = None, **keywords: Any) -> TrackRun:
     """Run ``track_rollout`` for ``N`` robots: ``refs (N, steps, 3)``, ``init (3,)`` or ``(N, 3)``.
 
     Returns:
         A ``TrackRun`` whose fields have a leading axis ``N``.
     """
+    a = _bound(track_rollout, refs, params, keywords)
     arr = _pose_stack("refs", refs, 3, "(N, steps, 3)")
-    options = _options(arr.shape[1], velocity, controller, substeps, wheel_limit)
-    arr = _shared_by_every_run(arr, params, robot, init, options.steps, _TRACK_RECORD)
-    return _run(_batch_track_jit, arr, params, init, robot, dt, options, arr.shape[0])
+    options = _options(arr.shape[1], a.velocity, a.controller, a.substeps, a.wheel_limit)
+    arr = _shared_by_every_run(arr, params, a.robot, a.init, options.steps, _TRACK_RECORD)
+    return _run(_batch_track_jit, arr, params, a.init, a.robot, a.dt, options, arr.shape[0])
 
 
 # ---------------------------------------------------------------- demo
@@ -452,13 +420,9 @@ def soccer_waypoints() -> np.ndarray:
 
 
 class SoccerRun(NamedTuple):
-    """One run of the soccer-like sequence.
-
-    Attributes:
-        controller: the controller's registered name.
-        mode: ``"stop"`` (stop at every waypoint) or ``"pass"`` (pass
-            through the intermediate ones).
-        run: its ``ChainRun``.
+    """One run of the soccer-like sequence: the controller's name, its mode
+    (``"stop"`` at every waypoint or ``"pass"`` through the intermediate ones)
+    and its ``ChainRun``.
     """
 
     controller: str
@@ -470,17 +434,12 @@ class SoccerStudy(NamedTuple):
     """What ``soccer_study`` ran and found.
 
     Attributes:
-        rows: one per controller and mode: the time since the start of the
-            route at which each waypoint was reached (``"leg i s"``, s,
-            cumulative; ``inf`` if never), the slowest leg (``"slowest leg
-            s"``, the longest time between two waypoints), the path length
-            (``"path cm"``) and the zig-zag count.
+        rows: one per controller and mode: the time since the start at which
+            each waypoint was reached (``"leg i s"``, ``inf`` if never), the
+            slowest leg (``"slowest leg s"``), ``"path cm"`` and ``"zigzag"``.
         runs: the ``SoccerRun`` of each row, in the same order.
-        velocity: the velocity loop.
-        steps: control periods of each run.
-        pass_tol_r: pass-through distance, cm.
-        pass_tol_theta: pass-through heading tolerance, rad.
-        robot: the robot run (``Robot``); ``None`` stands for ``Robot()``.
+        velocity, steps, pass_tol_r (cm), pass_tol_theta (rad): the settings.
+        robot: the robot run; ``None`` stands for ``Robot()``.
     """
 
     rows: list[dict[str, Any]]
@@ -503,27 +462,22 @@ def soccer_study(
 ) -> SoccerStudy:
     """Run the soccer-like sequence (``SOCCER_WAYPOINTS_DEG``) for each controller.
 
-    Each controller runs the chain twice: stopping at every waypoint
-    (``docs/model.md §6`` tolerances throughout) and passing through the
-    intermediate ones (``pass_tol_r``, ``pass_tol_theta``). Computed in
-    float64 (the polar baselines' bearing is rounding noise near a goal in
-    float32). ``wmr_jax.report.write_soccer`` draws and writes the result.
+    Each controller runs the chain twice: stopping at every waypoint and
+    passing through the intermediate ones. Computed in float64 (the polar
+    baselines' bearing is rounding noise near a goal in float32).
 
     Args:
         controller_names: registered controllers; default every one.
         velocity: ``"ideal"`` or ``"nonideal"``.
-        steps: control periods of each run.
+        steps: control periods of each run (``soccer_steps(robot)`` suits a
+            slower robot).
         pass_tol_r: pass-through distance, cm.
         pass_tol_theta: pass-through heading tolerance, rad, ``≤ π/2``.
-        robot: the robot (one, a number per field); default ``Robot()``.
-            ``soccer_steps(robot)`` gives a slower robot the time it needs;
-            on a robot other than the paper's, Shim–Sung and its schedule
-            run the paper's feasible gains scaled into its wheel budget
-            (``robustness.robot_defaults``).
+        robot: the robot; default ``Robot()``. Shim–Sung runs
+            ``robustness.robot_defaults`` there.
 
     Returns:
-        A ``SoccerStudy``: a row and a run per controller and mode, with the
-        settings (and the robot) they were run with.
+        A ``SoccerStudy``.
     """
     from wmr_jax._src.studies.robustness import robot_defaults
 
@@ -556,12 +510,10 @@ def soccer_study(
 
 
 def soccer_steps(robot: Robot | None = None, steps: int = SOCCER_STEPS) -> int:
-    """Control periods for the soccer-like route on ``robot``: ``steps`` (450, 14.85 s) scaled.
+    """Control periods for the soccer-like route on ``robot``: ``steps`` scaled.
 
-    The route and its 450 periods are the paper robot's. A robot whose wheels
-    cannot follow the paper's feasible gains (``60 + 10 L > V_max``) gets them
-    stretched as every study stretches its horizon (``robustness.study_horizon``:
-    ``(60 + 10 L) / V_max``; the TurtleBot3 Burger: 2775 periods).
+    The route's 450 periods are the paper robot's; a slower robot gets them
+    stretched as the studies' horizon (``robustness.study_horizon``).
 
     Raises:
         ValueError: for anything but one valid robot, or ``steps`` not an integer >= 1.
