@@ -157,24 +157,13 @@ def compare(
 def saved_rows(
     rows: Any, where: str, problems: dict[str, int], seeds: tuple[int, ...]
 ) -> list[dict[str, Any]]:
-    """Check the rows of a saved comparison (``compare.json``) before a resumed one keeps them.
+    """Check the rows of a saved ``compare.json`` before a resumed comparison keeps them.
 
-    Every row must be one ``compare`` writes for this comparison: a problem
-    compared now (of its parameter count), one of ``seeds``, one of
-    ``METHODS``, each number the table shows; each (problem, seed) whole
-    (all three methods, once each).
-
-    Args:
-        rows: the file's content.
-        where: the file, for messages.
-        problems: the parameter count of each problem compared now.
-        seeds: the seeds compared now.
-
-    Returns:
-        ``rows``.
-
-    Raises:
-        ValueError: one line naming ``where``, the row and what is wrong.
+    Every row must be one ``compare`` writes for this comparison: a problem of
+    ``problems`` (name → parameter count), a seed of ``seeds``, a method of
+    ``METHODS``, each number the table shows; each (problem, seed) with all
+    three methods once. Returns ``rows``; ``ValueError``: one line naming
+    ``where``, the row and what is wrong.
     """
     from wmr_jax._src.report.tuning import _compare_numbers
 

@@ -498,18 +498,10 @@ def tuning_loss(
 
 
 def loss_terms(gains: Gains, refs: Any, *, temperature: float | None, **options: Any) -> LossTerms:
-    """Return the per-run terms of ``tuning_loss`` (before weighting and averaging).
+    """Return the per-run terms of ``tuning_loss``, ``LossTerms`` of ``(N,)`` arrays, s.
 
-    Args:
-        gains: the gains.
-        refs: ``(N, 3)`` reference poses.
-        temperature: smooth-law temperature ``> 0``, or ``None`` for the hard law.
-        **options: ``init``, ``robot``, ``dt``, ``horizon``, ``velocity``,
-            ``substeps``, ``wheel_limit``, ``tol_r``, ``tol_theta``,
-            ``weights``, ``remat``: as for ``tuning_loss``.
-
-    Returns:
-        ``LossTerms`` of ``(N,)`` arrays, s.
+    Before weighting and averaging; ``**options`` as ``tuning_loss``'s keyword
+    arguments (``init``, ``robot``, ``dt``, ``horizon``, ``velocity``, …).
     """
     spec, temperature, args = _prepared(gains, refs, temperature, options)
     return _batch_terms_jit(*args, spec=spec, temperature=temperature)

@@ -88,33 +88,21 @@ class RobustConfig:
     """Settings of ``tune_robust``; the loop's fields as ``TuneConfig`` names them.
 
     Attributes:
-        iters: Adam iterations.
+        iters, seed, learning_rate, temperature_start, temperature_end,
+        eval_poses, validate_every, validation_poses: as ``TuneConfig``'s;
+            the validation score is ``robust_score`` under the standard conditions.
         poses: reference poses per standard condition per iteration (ideal loop).
-        nonideal_poses: poses of the randomised non-ideal group per iteration
-            (0: none).
-        seed: seed of the training draws and of the searches.
-        learning_rate: Adam's step in logit space (cosine-decayed to a tenth).
-        temperature_start: smooth-law temperature of the first iteration.
-        temperature_end: of the last (annealed geometrically).
-        eval_poses: held-out poses of the hard-law table.
+        nonideal_poses: poses of the randomised non-ideal group per iteration (0: none).
         search_poses: poses per condition that random search and CMA-ES score on.
         compare: also run random search and CMA-ES for the tuning's wall time.
-        law: ``"schedule"`` (the gain schedule, default) or ``"fixed"`` (the
-            7 gains): the controller's searched set.
+        law: ``"schedule"`` (the gain schedule, default) or ``"fixed"`` (the 7
+            gains): the controller's searched set.
         estimator: ``"ekf"`` (default), ``"observer"``, or ``None`` (raw
             feedback), tuned together with the controller.
         knots: knots per table of the schedule.
         observer_knots: knots per gain table of the observer.
-        validate_every: iterations between hard-law scores of the iterate
-            under the standard conditions (``robust_score``) on the
-            validation poses; the start and the last iterate are always
-            scored, and the best scored iterate is the result.
-        validation_poses: poses of that score, drawn from ``seed`` apart from
-            the training, search and held-out poses.
-        noise_xy: the sensor's position noise σ_xy, cm: the training draws
-            it up to twice this (``U(0, 2)`` per run), and the validation,
-            the searches and the evaluation judge the noise and both
-            conditions at it.
+        noise_xy: the sensor's position noise σ_xy, cm: the training draws up to
+            twice it per run; the validation, searches and evaluation judge at it.
         noise_theta: the sensor's heading noise σ_θ, degrees (as ``noise_xy``).
     """
 
@@ -428,10 +416,8 @@ def robust_problem(config: RobustConfig, robot: Robot) -> trainer.TrainingProble
 def black_box(method, key, refs, budget_s, robot, dt, joint, noise=None):
     """Random search or CMA-ES on the logits for ``budget_s`` s: ``(ClosedLoop, candidates)``.
 
-    Both start from the joint problem's start, propose 8 candidates per
-    generation (random search: logistic draws, uniform in the cube) and
-    score each with ``robust_score`` on ``refs``; ``search.search_loop``
-    drives them.
+    8 candidates per generation (random search: logistic draws, uniform in the
+    cube), each scored with ``robust_score`` on ``refs``, through ``search_loop``.
     """
     start = jnp.asarray(joint.start_logits(robot), float_dtype())
     score_key = jax.random.fold_in(key, 7)
@@ -478,27 +464,21 @@ def tune_robust(
 
     Args:
         config: the settings; default ``RobustConfig()`` (schedule and EKF).
-        robot: robot parameters; default ``Robot()``, the paper robot. The
-            loop is tuned on it (its wheel budget, its speed limiter where it
-            gives acceleration limits) over its horizon
-            (``robustness.study_horizon``), and judged, and the searches
-            scored, on it under the standard conditions.
-        state: continue from this ``TrainState`` (one handed to
-            ``progress_fn`` by a run of the same ``config`` and ``robot``).
+        robot: robot parameters; default the paper robot. The loop is tuned on
+            it (wheel budget, speed limiter) over its horizon
+            (``robustness.study_horizon``), and judged, and searched, there.
+        state: continue from this ``TrainState`` (from ``progress_fn`` of a run
+            of the same ``config`` and ``robot``).
         progress_fn: called with the ``TrainState`` after each iteration.
         on_tuned: called with ``(ClosedLoop, losses)`` as soon as the
-            iterations end, before the searches and the evaluation (which
-            take longer than the tuning itself): a caller can keep the result
-            from there.
+            iterations end, before the searches and the evaluation.
 
     Returns:
-        A ``TuneResult`` of problem ``"robust"``: ``loop``, the tuned
-        ``ClosedLoop`` (controller, params, estimator, robot), ``gains`` its
-        params, ``searches`` ``{method: (ClosedLoop, candidates)}``, ``rows``
-        the ``standard_conditions`` rows of the paper's gains (raw feedback,
-        ``paper_feasible_gains``), the tuned loop and the searches' loops,
-        and ``note`` one line if the tuned loop scores no better than the
-        paper's gains over the rows' conditions.
+        A ``TuneResult`` of problem ``"robust"``: ``loop`` the tuned
+        ``ClosedLoop``, ``gains`` its params, ``searches``, ``rows`` (the paper's
+        feasible gains with raw feedback, the tuned loop and the searches' loops
+        under the standard conditions), ``note`` if it scores no better than the
+        paper's gains.
     """
     if config is not None and not isinstance(config, RobustConfig):
         raise ValueError(
@@ -510,9 +490,7 @@ def tune_robust(
     check_callable("on_tuned", on_tuned)
     robot = validate_one_robot(robot, "tuning")
     problem, run = robust_problem(config, robot), trainer.run_text(config, robot)
-    state = trainer.start_state(problem, run) if state is None else state
-    state = trainer.iterate(problem, trainer.own_state(state, problem, run), progress_fn)
-    tuned, best, history = trainer.finish(problem, state)
+    tuned, best, history, state = trainer.fit(problem, run, state, progress_fn)
     tuned, wall = tuned._replace(robot=robot), state.elapsed_s
     if on_tuned is not None:
         on_tuned(tuned, list(state.losses))

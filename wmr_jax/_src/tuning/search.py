@@ -157,14 +157,11 @@ def search_loop(
     """The loop of every black-box search: propose, score, keep the best, until the budget.
 
     Args:
-        propose: ``propose(generation)`` → candidates ``(P, dim)``, or
-            ``None`` to stop (a strategy that broke down).
+        propose: ``propose(generation)`` → candidates ``(P, dim)``, or ``None``
+            to stop (a strategy that broke down).
         score: ``score(candidates)`` → ``(P,)`` scores, lower is better.
-        budget_s: wall-time budget, s, counted from ``began``
-            (``time.perf_counter``).
-        best: ``(candidate, score)`` to beat (a start scored already, or
-            ``(start, inf)``).
-        count: candidates scored already.
+        budget_s: wall-time budget, s, from ``began`` (``time.perf_counter``).
+        best: ``(candidate, score)`` to beat; ``count``: candidates scored already.
         tell: ``tell(generation, candidates, scores)`` after each scoring.
         progress: called with the generation's size after each.
         at_least_once: run one generation whatever the budget.
@@ -298,20 +295,11 @@ def cma_es_search(
 ) -> SearchResult:
     """CMA-ES on the logits of ``problem``'s feasible set for ``budget_s`` seconds.
 
-    Candidates are scored as by ``random_search``; the search starts at the
-    problem's starting point with step ``std_init`` in logit space. At least
-    one generation runs whatever the budget.
-
-    Args:
-        key: PRNG key.
-        refs: ``(N, 3)`` reference poses the candidates are scored on.
-        budget_s: wall-time budget, s, compile included.
-        problem: ``"fixed"`` or ``"schedule"``.
-        robot: robot parameters; default ``Robot()``.
-        population: candidates per generation.
-        std_init: initial step size in logit space.
-        progress: called with the number of candidates after each generation.
-        **run: ``dt``, ``horizon``, ``velocity``, ``substeps``, ``wheel_limit``.
+    Scored as by ``random_search``, from the problem's start with step
+    ``std_init`` in logit space; at least one generation whatever the budget.
+    ``population``: candidates per generation; ``**run``: ``dt``, ``horizon``,
+    ``velocity``, ``substeps``, ``wheel_limit``; the other arguments as for
+    ``random_search``.
 
     Raises:
         ValueError: if evosax is missing (one line) or for bad options.

@@ -1,13 +1,10 @@
 """The one gradient trainer: optax on a problem's logits, annealed, best iterate by validation.
 
-A ``TrainingProblem`` holds what differs between the tuning problems (the
-fixed gains and the gain schedule of ``training``, the robust joint loop of
-``robust``): the start, the loss and its gradient per iteration, the
-iteration's draw, the hard-law validation score, and how an iterate becomes a
-flat row and back. ``iterate`` runs the same loop for each: ``optimizer``,
-``anneal``, a validation score every few iterations, and ``finish`` keeps the
-iterate of ``best_iteration``. ``progress_fn(state)`` sees a ``TrainState``
-after every iteration, from which the run continues bit for bit.
+A ``TrainingProblem`` holds what differs between the tuning problems (fixed
+gains and schedules in ``training``, the robust joint loop in ``robust``);
+``fit`` runs the one loop (``iterate``) for any of them and keeps the
+iterate of ``best_iteration``. A run continues bit for bit from any
+``TrainState`` that ``progress_fn`` saw.
 """
 
 from __future__ import annotations
@@ -40,10 +37,12 @@ __all__ = [
     "best_iteration",
     "check_loop",
     "differences",
-    "finish",
+    "fit",
     "iterate",
     "optimizer",
+    "own_state",
     "restore_state",
+    "run_text",
     "start_state",
     "state_arrays",
     "train_step",
@@ -66,20 +65,17 @@ class TrainingProblem(NamedTuple):
     Attributes:
         name: ``"fixed"``, ``"schedule"`` or ``"robust"``.
         z0: ``(dim,)`` logits of the start.
-        loss: ``loss(z, batch, temperature, consts) -> (loss s, gradient
-            (dim,))``, traceable and hashable (a static argument of the
-            compiled step).
-        consts: the traced arguments of ``loss`` that every iteration shares
-            (the robot, the control period, …).
-        batch: ``batch(iteration)``, the iteration's draw: a pure function of
-            the seed and the iteration, so a resumed run draws the same.
-        row: ``row(z)``, the parameters of logits ``z`` as a flat tuple of floats.
+        loss: ``loss(z, batch, temperature, consts) -> (loss s, gradient (dim,))``,
+            traceable and hashable (static in the compiled step).
+        consts: traced arguments of ``loss`` shared by every iteration (robot, dt).
+        batch: ``batch(iteration)``, the iteration's draw, a pure function of
+            the seed and the iteration.
+        row: ``row(z)``, the parameters of ``z`` as a flat tuple of floats.
         from_row: ``from_row(row)``, the parameters a result holds.
-        score: ``score(params)``, the hard-law validation score, s (lower is
-            better).
+        score: ``score(params)``, the hard-law validation score, s.
         hyper: the optimiser settings.
-        temperature_start: smooth-law temperature of the first iteration.
-        temperature_end: of the last.
+        temperature_start, temperature_end: smooth-law temperatures of the
+            first and the last iteration.
         validate_every: iterations between validation scores.
     """
 
@@ -104,17 +100,13 @@ class TrainState(NamedTuple):
         iteration: iterations done.
         z: ``(dim,)`` logits of the current parameters.
         opt_state: the optax state.
-        losses: loss of each iteration done, s.
-        temperatures: smooth-law temperature of each iteration done.
-        gains: the parameters after each iteration, as flat rows
-            (``TrainingProblem.row``).
+        losses, temperatures: of each iteration done (s; the smooth law's).
+        gains: the parameters after each iteration as rows (``TrainingProblem.row``).
         elapsed_s: wall time of the iterations done (all sessions), s.
-        run: the run's identity (settings, robot, code) as JSON text; a
-            state of another run is refused. Empty: not recorded (a state
-            built by hand), then not checked.
-        validated: ``(iteration, score s)`` of each validation score so far
-            (iteration 0: the start), in order.
-        start: the start's parameters as a flat row.
+        run: the run's identity (``run_text``); a state of another run is
+            refused. Empty (a state built by hand): not checked.
+        validated: ``(iteration, score s)`` of each validation score so far, in order.
+        start: the start's parameters as a row.
     """
 
     iteration: int
@@ -133,29 +125,23 @@ class TuneResult(NamedTuple):
     """What a tuning run returns, whatever its problem.
 
     Attributes:
-        gains: the tuned parameters (floats): ``Gains``, or ``ScheduleParams``
-            for a schedule.
+        gains: the tuned parameters (floats): ``Gains`` or ``ScheduleParams``.
         evaluation: hard-law ``Evaluation`` on the held-out poses, keyed
-            ``"paper_feasible"``, ``"tuned"`` and, if run,
-            ``"random_search"`` (empty for the robust problem, judged by
-            ``rows``).
+            ``"paper_feasible"``, ``"tuned"`` and ``"random_search"`` if run
+            (empty for the robust problem, judged by ``rows``).
         history: per-iteration ``loss`` (s), ``temperature`` and ``gains``
-            ``(iters, columns)`` (``TrainingProblem.row``), and the
-            validation scores: ``validated_at`` (iterations, 0 the start)
-            and ``validation`` (s), as NumPy arrays.
+            rows, and the validation scores ``validated_at`` (iterations) and
+            ``validation`` (s), as NumPy arrays.
         tune_wall_s: wall time of the gradient iterations (all sessions), s.
         search: the random search's ``SearchResult``, or ``None``.
         problem: ``"fixed"``, ``"schedule"`` or ``"robust"``.
         best_iteration: the iterate returned (0: the start), by ``best_iteration``.
-        note: one line when the tuned parameters are no better than the
-            baseline on the held-out poses, else ``None``.
-        loop: the tuned ``ClosedLoop`` (controller, parameters, estimator,
-            robot) of the robust problem, else ``None``.
-        rows: the robust problem's ``standard_conditions`` rows of the
-            paper's feasible gains, the tuned loop and the searches' loops,
+        note: one line when the result is no better than the baseline, else ``None``.
+        loop: the robust problem's tuned ``ClosedLoop``, else ``None``.
+        rows: the robust problem's ``standard_conditions`` rows of the paper's
+            gains, the tuned loop and the searches' loops, else ``None``.
+        searches: the robust problem's ``{method: (ClosedLoop, candidates)}``,
             else ``None``.
-        searches: the robust problem's ``{method: (ClosedLoop, candidates)}``
-            of random search and CMA-ES, else ``None``.
     """
 
     gains: Any
@@ -183,14 +169,7 @@ _LOOP_INTS = (
 
 
 def check_loop(config: Any) -> None:
-    """Check the fields every tuning config shares (``TuneConfig``, ``RobustConfig``).
-
-    ``iters``, ``poses``, ``seed``, ``eval_poses``, ``validate_every``,
-    ``validation_poses``, ``learning_rate`` and the temperatures.
-
-    Raises:
-        ValueError: naming the field, its value and what is allowed.
-    """
+    """Check the loop fields every tuning config shares (``ValueError`` naming the field)."""
     for name, minimum, maximum in _LOOP_INTS:
         check_int(name, getattr(config, name), minimum, maximum)
     check_number("learning_rate", config.learning_rate)
@@ -309,12 +288,19 @@ def iterate(
     return state
 
 
-def finish(problem: TrainingProblem, state: TrainState) -> tuple[Any, int, dict[str, np.ndarray]]:
-    """``(parameters kept, their iteration, history)`` of a run's last state.
+def fit(
+    problem: TrainingProblem, run: str, state: TrainState | None = None, progress_fn: Any = None
+) -> tuple[Any, int, dict[str, np.ndarray], TrainState]:
+    """Train ``problem`` from ``state`` (default its start) to its last iteration.
+
+    ``run``: the run's identity (``run_text``), which ``state`` must share.
+    Returns ``(parameters kept, their iteration, history, last state)``.
 
     Raises:
-        ValueError: for a state of no iteration.
+        ValueError: for a state of another run or problem, or of no iteration.
     """
+    state = start_state(problem, run) if state is None else own_state(state, problem, run)
+    state = iterate(problem, state, progress_fn)
     if not state.gains:
         raise ValueError("state holds no iteration; allowed: a state after at least one")
     if not state.validated or state.validated[-1][0] != state.iteration:
@@ -328,7 +314,7 @@ def finish(problem: TrainingProblem, state: TrainState) -> tuple[Any, int, dict[
         "validated_at": np.asarray([i for i, _ in state.validated], dtype=int),
         "validation": np.asarray([v for _, v in state.validated], dtype=float),
     }
-    return problem.from_row(state.gains[best - 1] if best else state.start), best, history
+    return problem.from_row(state.gains[best - 1] if best else state.start), best, history, state
 
 
 def verdict(result: TuneResult, validation_poses: int) -> dict[str, Any]:
@@ -349,11 +335,7 @@ def verdict(result: TuneResult, validation_poses: int) -> dict[str, Any]:
 
 
 def run_text(config: Any, robot: Robot) -> str:
-    """The identity of a run as canonical JSON text (``TrainState.run``).
-
-    The settings (``config.as_dict()``), every robot field and ``code``, the
-    code that computes (``provenance.code_version``): another one is another run.
-    """
+    """The identity of a run as canonical JSON text: settings, robot, code version."""
     robot_values = {f.name: float(getattr(robot, f.name)) for f in dataclasses.fields(Robot)}
     identity = {"config": config.as_dict(), "robot": robot_values, "code": code_version()}
     return json.dumps(identity, sort_keys=True)
@@ -423,14 +405,9 @@ def state_arrays(state: TrainState) -> dict[str, np.ndarray]:
 def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainState:
     """Rebuild the state of ``state_arrays`` in the structure of ``fresh`` (``init_state``).
 
-    A saved state is never trusted: one whose values are not all finite, whose
-    iteration count, history lengths and optimiser step counts disagree,
-    whose temperatures or elapsed time are not positive, or whose parameter
-    rows are not as long as ``fresh``'s start, is refused.
-
-    Raises:
-        ValueError: one line, if an array is missing, of the wrong shape,
-            non-finite, out of range, or the lengths disagree.
+    A saved state is never trusted: non-finite values, disagreeing counts or
+    lengths, and rows not as long as ``fresh``'s start are refused in one
+    line (``ValueError``).
     """
     leaves, treedef = jax.tree.flatten(fresh.opt_state)
     try:

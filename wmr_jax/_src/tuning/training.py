@@ -1,13 +1,10 @@
 """The fixed-gain and gain-schedule problems of the trainer, and ``train``.
 
-``train`` starts from the paper's feasible gains (``PAPER_FEASIBLE_GAINS``,
-moved just inside the search box, whose budget is the robot's), runs
-``config.iters`` iterations of the trainer (``trainer.iterate``) on the
-robust batch gradient of ``tuning_loss`` over a fresh batch of
-``config.poses`` references each, and then, with the hard law, runs
-``random_search`` for the same wall time and evaluates the paper's, the
-tuned and the random search's gains on held-out poses. It writes no files;
-``wmr-jax tune`` checkpoints from ``progress_fn``.
+``train`` runs the trainer from the paper's feasible gains (moved just
+inside the search box, whose budget is the robot's) on the robust batch
+gradient of ``tuning_loss`` over a fresh batch of poses per iteration, then
+judges the paper's, the tuned and a random search's gains (same wall time)
+with the hard law on held-out poses. It writes no files.
 """
 
 from __future__ import annotations
@@ -407,9 +404,7 @@ def train(
     ):
         check_callable(name, fn)
     problem, run = gain_problem(config, robot), trainer.run_text(config, robot)
-    state = trainer.start_state(problem, run) if state is None else state
-    state = trainer.iterate(problem, trainer.own_state(state, problem, run), progress_fn)
-    tuned, best, history = trainer.finish(problem, state)
+    tuned, best, history, state = trainer.fit(problem, run, state, progress_fn)
     evaluation, search = _compare(
         config, robot, tuned, state.elapsed_s, search_progress, eval_progress
     )
