@@ -24,7 +24,7 @@ from wmr_jax._src.sim.sensing import loop as sensed
 from wmr_jax._src.sim.sensing.disturbances import Disturbance, draw_disturbances
 from wmr_jax._src.studies import waypoints
 from wmr_jax._src.studies.conditions import evaluate_loop
-from wmr_jax._src.tuning import training
+from wmr_jax._src.tuning import trainer, training
 
 # The paper's feasible gains turn at up to 10 rad/s: at 30 rad/s² the turn
 # takes a third of a second to build up, against one sample without a limit.
@@ -50,14 +50,15 @@ def test_the_tuner_iterates_on_the_limited_loop(monkeypatch):
     # What the training step is compiled with, without compiling it.
     seen = []
 
-    def step(z, opt_state, refs, temperature, init, robot, dt, *, spec, hyper, problem):
-        seen.append(spec.accel_limit)
-        return z, opt_state, jnp.zeros(()), {}
+    def step(z, opt_state, refs, temperature, consts, *, loss, hyper):
+        seen.append(loss.spec.accel_limit)
+        return z, opt_state, jnp.zeros(())
 
-    monkeypatch.setattr(training, "_train_step_jit", step)
+    monkeypatch.setattr(trainer, "train_step", step)
     config = training.TuneConfig(iters=1, poses=2)
     for robot in (w.Robot(), LIMITED):
-        training._iterate(config, robot, training.init_state(config, robot), None)
+        problem = training.gain_problem(config, robot)
+        trainer.iterate(problem, trainer.start_state(problem), None)
     assert seen == [False, True]
 
 
@@ -140,14 +141,16 @@ def test_a_checkpoints_identity_holds_every_robot_field():
         "code": code_version(),
     }
     assert now == json.loads(json.dumps(expected))
-    assert training._run_text(config, w.Robot()) == json.dumps(expected, sort_keys=True)
+    assert trainer.run_text(config, w.Robot()) == json.dumps(expected, sort_keys=True)
     # A robot with a limit is another run; the limit it gives is in its identity.
     limited = tuning.run_identity(config, LIMITED)
     assert limited != now and limited["robot"]["angular_accel_max"] == SLOW_TURN
     state = training.init_state(config, w.Robot())
     with pytest.raises(ValueError, match="state is of another run"):
-        training._own_state(state, config, LIMITED)
-    assert training._own_state(state, config, w.Robot()) is state
+        run = trainer.run_text(config, LIMITED)
+        trainer.own_state(state, training.gain_problem(config, LIMITED), run)
+    run = trainer.run_text(config, w.Robot())
+    assert trainer.own_state(state, training.gain_problem(config, w.Robot()), run) is state
 
 
 def test_tune_runs_a_slow_robot_for_the_horizon_its_wheels_need(tmp_path, capsys, monkeypatch):

@@ -452,7 +452,7 @@ def test_the_robust_tuner_draws_the_standard_noise_in_its_units():
 
     refs = jnp.asarray(random_refs(8, 256))
     joint = robust.joint_problem(robust.RobustConfig())
-    batches = robust._specs(jax.random.PRNGKey(0), refs, refs[:0], 182, 0.1, joint)
+    batches = robust.sample_conditions(jax.random.PRNGKey(0), refs, refs[:0], 182, 0.1, joint)
     noise = np.asarray(batches[0][0].noise).reshape(4, 256, 182, 3)  # the 4 conditions
     for condition, (label, sxy, sdeg, _) in zip(noise, studies.STANDARD_CONDITIONS, strict=True):
         if sxy == 0:

@@ -8,7 +8,7 @@ import pytest
 
 import wmr_jax as w
 from wmr_jax import tuning
-from wmr_jax._src.tuning import training
+from wmr_jax._src.tuning import trainer, training
 from wmr_jax._src.tuning.evaluation import Evaluation
 from wmr_jax.cli import main
 
@@ -36,8 +36,8 @@ def _train(config, **kwargs):
     ],
 )
 def test_the_best_iterate_is_the_last_unless_an_earlier_one_is_clearly_better(validated, best):
-    assert training.best_iteration(validated) == best
-    assert training.BEST_MARGIN == 0.01
+    assert trainer.best_iteration(validated) == best
+    assert trainer.BEST_MARGIN == 0.01
 
 
 def test_train_scores_the_start_every_few_iterations_and_the_last(monkeypatch):

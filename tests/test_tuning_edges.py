@@ -10,6 +10,7 @@ import pytest
 import wmr_jax as w
 from wmr_jax import studies, tuning
 from wmr_jax._src.tuning import compare as compare_module
+from wmr_jax._src.tuning import search as search_module
 
 KEY = jax.random.key(0)
 REFS = np.array([[30.0, 10.0, 1.0], [-20.0, 15.0, -2.0]])
@@ -148,7 +149,7 @@ def test_cma_es_asks_and_tells_with_the_keys_of_its_generation(generation):
     # docs' comparison tables were drawn: computed in one compiled call.
     key = jax.random.fold_in(KEY, 2)
     want = jax.random.split(jax.random.fold_in(key, generation + 1))
-    got = compare_module._generation_keys(key, generation)
+    got = search_module._generation_keys(key, generation)
     np.testing.assert_array_equal(jax.random.key_data(got), jax.random.key_data(want))
 
 
@@ -163,7 +164,7 @@ def test_cma_es_keeps_its_best_when_a_flat_landscape_breaks_it(monkeypatch):
         scored.append(np.asarray(u))
         return jax.numpy.full((u.shape[0],), 0.66)
 
-    monkeypatch.setattr(compare_module, "population_scores", flat)
+    monkeypatch.setattr(search_module, "population_scores", flat)
     result = tuning.cma_es_search(KEY, REFS, budget_s=600.0, horizon=0.3)
     assert result.wall_s < 600.0  # stopped by the breakdown, not by the budget
     assert all(np.all(np.isfinite(u)) for u in scored)

@@ -9,12 +9,13 @@ import pytest
 import wmr_jax as w
 from wmr_jax import tuning
 from wmr_jax.cli import main
+from wmr_jax.tuning import TuneResult
 
 
 def small_config(**changes):
     # eval_poses = poses: the held-out draw reuses the training draw's compiled sampler.
     base = dict(
-        iters=3, poses=3, nonideal_poses=0, eval_poses=3, compare=False, problem="fixed",
+        iters=3, poses=3, nonideal_poses=0, eval_poses=3, compare=False, law="fixed",
         estimator=None,
     )  # fmt: skip
     return tuning.RobustConfig(**{**base, **changes})
@@ -31,17 +32,42 @@ def _scores(monkeypatch, values):
 def test_robust_tuning_keeps_the_iterate_of_the_best_validation_score(monkeypatch):
     _scores(monkeypatch, [1.0, 2.0, 0.5, 3.0])  # iterations 0, 1, 2, 3: 2 is the best
     result = tuning.tune_robust(small_config(validate_every=1))
-    assert result["best_iteration"] == 2
-    assert result["history"]["validated_at"].tolist() == [0, 1, 2, 3]
-    assert result["history"]["validation"].tolist() == [1.0, 2.0, 0.5, 3.0]
+    assert result.best_iteration == 2
+    assert result.history["validated_at"].tolist() == [0, 1, 2, 3]
+    assert result.history["validation"].tolist() == [1.0, 2.0, 0.5, 3.0]
     _scores(monkeypatch, [1.0, 2.0, 3.0, 4.0])  # nothing beats the start
     start = tuning.tune_robust(small_config(validate_every=1))
-    assert start["best_iteration"] == 0
+    assert start.best_iteration == 0
     first = tuning.robust_gains(tuning.FIXED.start_logits(w.Robot()), w.Robot())
     expected = {f: float(getattr(first, f)) for f in tuning.GAIN_FIELDS}
-    assert tuning.gains_as_dict(start["gains"]) == expected
-    note = start["note"]
+    assert tuning.gains_as_dict(start.gains) == expected
+    note = start.note
     assert note is None or ("\n" not in note and note.startswith("warning: the tuned loop"))
+
+
+def test_the_robust_loss_and_its_step_run_on_their_own():
+    """The robust problem is a trainer problem: its loss and one optimiser step, called alone."""
+    import jax
+    import jax.numpy as jnp
+
+    from wmr_jax._src.tuning import robust, trainer
+
+    problem = robust.robust_problem(small_config().validate(), w.Robot())
+    assert problem.name == "robust" and problem.hyper.iters == 3
+    batch, temperature = problem.batch(0), jnp.asarray(0.1, problem.z0.dtype)
+    loss, grad = jax.jit(problem.loss)(problem.z0, batch, temperature, problem.consts)
+    assert np.isfinite(float(loss)) and grad.shape == (7,) and np.any(grad != 0)
+    state = trainer.start_state(problem)
+    z, _, value = trainer.train_step(
+        state.z, state.opt_state, batch, temperature, problem.consts,
+        loss=problem.loss, hyper=problem.hyper,
+    )  # fmt: skip
+    assert float(value) == pytest.approx(float(loss), rel=1e-5)
+    # Adam's first step moves every logit with a gradient by the step size, against it.
+    moved = np.asarray(z - state.z)
+    assert np.all(np.sign(moved[grad != 0]) == -np.sign(np.asarray(grad)[grad != 0]))
+    # The same draw for the same iteration: a resumed run trains on what it would have.
+    np.testing.assert_array_equal(problem.batch(0)[1], batch[1])
 
 
 def test_robust_tuning_moves_feasible_gains_and_judges_them_under_every_condition(
@@ -51,14 +77,15 @@ def test_robust_tuning_moves_feasible_gains_and_judges_them_under_every_conditio
     seen, tuned = [], []
     result = tuning.tune_robust(
         small_config(),
-        progress_fn=lambda i, loss: seen.append(loss),
+        progress_fn=lambda state: seen.append(state.losses[-1]),
         on_tuned=lambda gains, losses: tuned.append((gains, losses)),
     )
-    gains = result["gains"]
+    gains = result.gains
     assert len(seen) == 3 and np.all(np.isfinite(seen))
-    assert tuned == [(result["loop"], seen)]  # handed over once, before the judging
-    assert result["loop"].params == gains and result["loop"].estimator is None
-    assert np.array_equal(result["history"]["loss"], seen)
+    assert tuned == [(result.loop, seen)]  # handed over once, before the judging
+    assert result.problem == "robust" and result.evaluation == {} and result.searches == {}
+    assert result.loop.params == gains and result.loop.estimator is None
+    assert np.array_equal(result.history["loss"], seen)
     robot = w.Robot()
     # Feasible by construction, R_e within the arrival tolerance, and moved from the start.
     assert gains.kr + float(robot.half_track) * gains.k_theta <= float(robot.v_max)
@@ -70,15 +97,15 @@ def test_robust_tuning_moves_feasible_gains_and_judges_them_under_every_conditio
         - np.asarray(tuning.logits_from_gains(tuning.PAPER_FEASIBLE_GAINS, robot))
     )
     assert np.sum(moved > 0.05) >= 4, moved
-    conditions = [r["condition"] for r in result["rows"]]
+    conditions = [r["condition"] for r in result.rows]
     standard = ("model robot", "nominal", "latency", "noise", "both")
     assert conditions == [c for c in standard for _ in range(2)]
-    assert {r["feedback"] for r in result["rows"]} == {"raw"}
-    assert all(0.0 <= r["success"] <= 1.0 and r["runs"] == 3 for r in result["rows"])
+    assert {r["feedback"] for r in result.rows} == {"raw"}
+    assert all(0.0 <= r["success"] <= 1.0 and r["runs"] == 3 for r in result.rows)
     # Reproducible: the same settings give the same gains and losses.
     again = tuning.tune_robust(small_config())
-    assert again["gains"] == gains and again["rows"] == result["rows"]
-    np.testing.assert_array_equal(again["history"]["loss"], seen)
+    assert again.gains == gains and again.rows == result.rows
+    np.testing.assert_array_equal(again.history["loss"], seen)
     # The saved file loads as fixed Shim-Sung gains.
     path = tmp_path / "tuned_gains.json"
     path.write_text(json.dumps(tuning.tuned_json(gains)))
@@ -128,10 +155,10 @@ def test_joint_tuning_moves_the_schedule_and_the_filter_and_saves_them_whole(tmp
     # The settings of the command's test below (2 iterations of 2 poses): one
     # compiled step serves both.
     config = tuning.RobustConfig(iters=2, poses=2, eval_poses=3, compare=False)
-    assert (config.problem, config.estimator, config.nonideal_poses) == ("schedule", "ekf", 8)
+    assert (config.law, config.estimator, config.nonideal_poses) == ("schedule", "ekf", 8)
     config = dataclasses.replace(config, knots=2)
     result = tuning.tune_robust(config)
-    loop = result["loop"]
+    loop = result.loop
     assert loop.controller.name == "shim-sung-schedule"
     assert isinstance(loop.estimator, w.studies.EKFParams)
     start = w.studies.EKFParams()
@@ -143,7 +170,7 @@ def test_joint_tuning_moves_the_schedule_and_the_filter_and_saves_them_whole(tmp
     # Feasible by construction: every knot's wheel budget within V_max.
     robot = w.Robot()
     assert max(loop.params.kr) <= float(robot.v_max) and loop.params.r_e <= 1.0
-    assert {r["feedback"] for r in result["rows"] if r["gains"] == "robust-tuned"} == {"ekf"}
+    assert {r["feedback"] for r in result.rows if r["gains"] == "robust-tuned"} == {"ekf"}
     # Saved whole and read back whole.
     path = tmp_path / "tuned_gains.json"
     path.write_text(json.dumps(tuning.tuned_json(loop)))
@@ -156,8 +183,8 @@ def test_joint_tuning_moves_the_schedule_and_the_filter_and_saves_them_whole(tmp
 
 def test_the_observer_is_tuned_with_gains_in_range():
     # The ideal-loop group only: the non-ideal one is the filter's test's.
-    config = small_config(problem="schedule", estimator="observer", knots=2, iters=2, poses=2)
-    loop = tuning.tune_robust(config)["loop"]
+    config = small_config(law="schedule", estimator="observer", knots=2, iters=2, poses=2)
+    loop = tuning.tune_robust(config).loop
     gains = [*loop.estimator.position, *loop.estimator.heading]
     assert len(gains) == 12 and all(0.0 < g <= 1.0 for g in gains)
     default = w.studies.ObserverParams()
@@ -167,7 +194,7 @@ def test_the_observer_is_tuned_with_gains_in_range():
 @pytest.mark.parametrize(
     ("changes", "message"),
     [
-        (dict(problem="fixd"), "problem = 'fixd' is not allowed"),
+        (dict(law="fixd"), "law = 'fixd' is not allowed"),
         (dict(estimator="kalman"), "estimator = 'kalman' is not allowed"),
         (dict(observer_knots=1), "knots = 1"),
     ],
@@ -223,10 +250,10 @@ def _fake_result(config):
                  "mean arrival s": 0.5 + config.seed, "median arrival s": 0.5}
             )  # fmt: skip
     history = {"validated_at": np.array([0, config.iters]), "validation": np.array([2.0, 1.0])}
-    return {
-        "tune_wall_s": 1.0, "searches": {"random search": (None, 8)}, "rows": rows,
-        "best_iteration": config.iters, "note": None, "history": history,
-    }  # fmt: skip
+    return TuneResult(
+        None, {}, history, 1.0, None, "robust", config.iters, None, None, rows,
+        {"random search": (None, 8)},
+    )  # fmt: skip
 
 
 def test_robust_compare_without_evosax_says_so_and_keeps_each_seed(tmp_path, capsys, monkeypatch):
@@ -296,15 +323,15 @@ def test_robust_tuning_on_another_robot_tunes_and_judges_on_it():
     # Slower than the paper robot (its horizon 7.9 s, not 6 s) and slow to turn.
     robot = w.Robot(v_max=60.0, angular_accel_max=30.0)
     result = tuning.tune_robust(small_config(iters=2, poses=2, eval_poses=2), robot=robot)
-    loop, gains = result["loop"], result["gains"]
+    loop, gains = result.loop, result.gains
     assert loop.robot == robot
     assert gains.kr + float(robot.half_track) * gains.k_theta <= 60.0 * (1 + 1e-6)
     # Judged on it: over its horizon, the paper's gains scaled into its wheels.
     horizon = w.studies.study_horizon(robot)
     assert horizon == 7.9
-    assert {r["gains"] for r in result["rows"]} == {"paper", "robust-tuned"}
-    assert all(r["horizon s"] == pytest.approx(horizon, abs=0.033) for r in result["rows"])
-    assert all(r["peak wheel cm/s"] <= 60.0 * 1.03 * (1 + 1e-6) for r in result["rows"])
+    assert {r["gains"] for r in result.rows} == {"paper", "robust-tuned"}
+    assert all(r["horizon s"] == pytest.approx(horizon, abs=0.033) for r in result.rows)
+    assert all(r["peak wheel cm/s"] <= 60.0 * 1.03 * (1 + 1e-6) for r in result.rows)
 
 
 def test_robust_command_hands_its_estimator_and_table_sizes_to_the_tuner(tmp_path, monkeypatch):
@@ -322,13 +349,13 @@ def test_robust_command_hands_its_estimator_and_table_sizes_to_the_tuner(tmp_pat
     monkeypatch.setattr(robust, "tune_robust", fake)
     argv = ["tune", "--robust", "--out", str(tmp_path), "--iters", "2"]
     assert main([*argv, "--estimator", "observer", "--knots", "3"]) == 0
-    assert (seen[-1].problem, seen[-1].estimator, seen[-1].knots) == ("schedule", "observer", 3)
+    assert (seen[-1].law, seen[-1].estimator, seen[-1].knots) == ("schedule", "observer", 3)
     assert main(argv) == 0
-    assert (seen[-1].problem, seen[-1].estimator) == ("schedule", "ekf")
+    assert (seen[-1].law, seen[-1].estimator) == ("schedule", "ekf")
     assert seen[-1].knots == tuning.RobustConfig().knots
     # --fixed: the 7 gains with raw feedback.
     assert main([*argv, "--fixed"]) == 0
-    assert (seen[-1].problem, seen[-1].estimator) == ("fixed", None)
+    assert (seen[-1].law, seen[-1].estimator) == ("fixed", None)
 
 
 def test_robust_command_tunes_on_the_robot_it_is_given(tmp_path, capsys, monkeypatch):
@@ -375,7 +402,7 @@ def test_sensor_noise_sets_the_training_draws_and_is_recorded(tmp_path, monkeypa
     key = jax.random.key(3)
 
     def drawn(noise):
-        batches = robust._specs(key, refs, refs, 4, 0.1, joint, noise=noise)
+        batches = robust.sample_conditions(key, refs, refs, 4, 0.1, joint, noise=noise)
         return [np.asarray(spec.noise) for spec, _ in batches]
 
     standard, doubled = drawn(None), drawn((1.0, 3.0))

@@ -66,6 +66,8 @@ def test_train_reports_every_feasible_iterate_and_annealing_does_not_recompile(c
     np.testing.assert_array_equal(result.history["gains"], np.asarray(seen[-1].gains))
     assert result.history["temperature"][-1] == pytest.approx(0.02)
     assert set(result.evaluation) == {"paper_feasible", "tuned"} and result.search is None
+    # One result type for every problem: the robust problem's outputs are absent here.
+    assert result.problem == "fixed" and result.loop is result.rows is result.searches is None
     assert np.all(np.isfinite(result.history["loss"]))
 
 
@@ -197,8 +199,8 @@ def test_out_must_be_a_folder_and_help_shows_the_defaults(tmp_path, capsys):
 
 def test_each_problem_has_its_own_recommended_settings():
     fixed, schedule = tuning.TuneConfig.for_problem(), tuning.TuneConfig.for_problem("schedule")
-    assert fixed == tuning.TuneConfig() and not fixed.schedule
-    assert schedule.schedule and schedule.problem.name == "schedule"
+    assert fixed == tuning.TuneConfig() and fixed.problem == "fixed"
+    assert schedule.problem == "schedule" and schedule.space.name == "schedule"
     # More, longer steps and a colder end for 35 parameters than for 7.
     assert schedule.iters > fixed.iters and schedule.learning_rate > fixed.learning_rate
     assert schedule.temperature_end < fixed.temperature_end
@@ -228,7 +230,7 @@ def test_a_schedule_of_any_size_is_a_problem_of_its_own():
 
 def test_tuning_a_schedule_of_four_knots(tmp_path):
     config = tuning.TuneConfig.for_problem("schedule", knots=4, **_small_settings())
-    assert config.problem is tuning.schedule_problem(4)
+    assert config.space is tuning.schedule_problem(4)
     result = tuning.tune(tmp_path, config, progress=False)
     assert len(result.gains.kr) == 4 and result.history["gains"].shape == (SMALL.iters, 19)
     controller, params, *_ = w.load_tuned(tmp_path / "tuned_gains.json")
@@ -238,7 +240,7 @@ def test_tuning_a_schedule_of_four_knots(tmp_path):
     with pytest.raises(ValueError, match="knots = 4 there, 5 now"):
         tuning.tune(tmp_path, config.replace(knots=5), resume=True)
     # Knots are the schedule's; every size, the default's too, is in the saved settings.
-    with pytest.raises(ValueError, match="knots = 4 is not allowed with schedule = False"):
+    with pytest.raises(ValueError, match="knots = 4 is not allowed with problem = 'fixed'"):
         tuning.TuneConfig(knots=4).validate()
     assert tuning.TuneConfig.for_problem("schedule").as_dict()["knots"] == 10
     assert config.as_dict()["knots"] == 4

@@ -118,13 +118,13 @@ def add_arguments(parser: Any) -> None:
     )
 
 
-def _config_from(args: Any, *, schedule: bool) -> Any:
+def _config_from(args: Any, *, problem: str) -> Any:
     """The ``TuneConfig`` of the flags, each checked (one line naming a bad one)."""
     from wmr_jax._src.sim.poses import MAX_SAMPLES
     from wmr_jax._src.tuning.problems import MAX_TUNED_KNOTS
     from wmr_jax._src.tuning.training import TuneConfig
 
-    base = TuneConfig.for_problem("schedule" if schedule else "fixed")
+    base = TuneConfig.for_problem(problem)
 
     def given(name: str) -> Any:
         # A flag left alone keeps the problem's default.
@@ -141,7 +141,7 @@ def _config_from(args: Any, *, schedule: bool) -> Any:
         checkpoint_every=flags.positive_int("--checkpoint-every", given("checkpoint_every"), 1),
         random_search=not args.no_random_search,
     )
-    if schedule and args.knots is not None:
+    if problem == "schedule" and args.knots is not None:
         knots = flags.positive_int("--knots", args.knots, 2, MAX_TUNED_KNOTS)
         config = config.replace(knots=knots)
     return config.validate()  # the horizon against dt, before any work
@@ -242,10 +242,10 @@ def _compare(out: Path, args: Any, robot: Any) -> int:
     from wmr_jax._src.tuning.compare import run_comparison
 
     # Each problem over the robot's horizon, as a single tuning run has it.
-    schedule = _config_from(args, schedule=True)
+    schedule = _config_from(args, problem="schedule")
     configs = {"schedule": _robot_horizon(args, schedule, robot)}
     if not args.schedule:  # both problems, unless --schedule asks for the schedule alone
-        fixed = _config_from(args, schedule=False)
+        fixed = _config_from(args, problem="fixed")
         if configs["schedule"].horizon != schedule.horizon:  # stretched (and said) above
             fixed = fixed.replace(horizon=configs["schedule"].horizon).validate()
         configs = {"fixed": fixed, **configs}
@@ -287,7 +287,7 @@ def run(args: Any) -> int:
 
         return tune_robust.run(args)
     out = flags.output_dir("--out", args.out)
-    config = _config_from(args, schedule=args.schedule)
+    config = _config_from(args, problem="schedule" if args.schedule else "fixed")
     if args.gradient_cost:
         return _gradient_cost(out)
     given = flags.robot_from(args.robot)
@@ -302,7 +302,7 @@ def run(args: Any) -> int:
 
     result = tuning_run.tune(out, config, robot=robot, resume=args.resume)
     robot = Robot() if robot is None else robot
-    kind = "gain schedule" if config.schedule else "gains"
+    kind = "gain schedule" if config.problem == "schedule" else "gains"
     print(f"tuned {kind} ({config.velocity} loop) -> {out / 'tuned_gains.json'}")
     for line in _shown(result.gains):
         print("  " + line)

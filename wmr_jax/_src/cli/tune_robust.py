@@ -4,7 +4,7 @@ Called by ``wmr-jax tune`` with its parsed flags (``out``, ``seed``,
 ``iters``, ``poses``, ``velocity``, ``resume``, ``fixed``, ``estimator``,
 ``knots``, ``compare``, ``noise``, ``noise_theta``). By default the gain
 schedule and the estimator are tuned together (``--fixed``: the 7 fixed
-gains with raw feedback, as before estimators). Writes ``tuned_gains.json`` (controller, parameters,
+gains with raw feedback). Writes ``tuned_gains.json`` (controller, parameters,
 estimator and robot, which ``load_tuned`` reads whole), ``robust_evaluation.json``
 and ``.md`` (the hard-law table under the standard conditions, each with ±3 %
 wheel mismatch, and the model robot) and ``robust_loss.json`` (the loss per
@@ -75,7 +75,7 @@ def config_from(args: Any) -> Any:
         "iters": iters,
         "poses": poses,
         "seed": seed,
-        "problem": "fixed" if fixed else "schedule",
+        "law": "fixed" if fixed else "schedule",
         "estimator": _estimator(args),
         "compare": False,
     }
@@ -131,9 +131,10 @@ def run(args: Any) -> int:
         flush=True,
     )
 
-    def progress(i: int, loss: float) -> None:
+    def progress(state: Any) -> None:
+        i = state.iteration
         if i == 1 or i % 25 == 0 or i == config.iters:
-            print(f"iteration {i}/{config.iters}: loss {loss:.3f} s", flush=True)
+            print(f"iteration {i}/{config.iters}: loss {state.losses[-1]:.3f} s", flush=True)
 
     def keep(loop: Any, losses: list[float]) -> None:
         # Written before the evaluation: an interruption there loses no tuning.
@@ -144,10 +145,10 @@ def run(args: Any) -> int:
     table = write_evaluation(out, config, robot, result)
     print(f"robust_evaluation.md/json -> {out}")
     print(table, end="")
-    kept = f"kept iteration {result['best_iteration']} (best validation score)"
-    print(f"tuning wall time {result['tune_wall_s']:.1f} s; {kept}")
-    if result["note"] is not None:
-        print(result["note"])
+    kept = f"kept iteration {result.best_iteration} (best validation score)"
+    print(f"tuning wall time {result.tune_wall_s:.1f} s; {kept}")
+    if result.note is not None:
+        print(result.note)
     return 0
 
 

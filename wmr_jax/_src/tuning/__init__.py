@@ -7,21 +7,12 @@ smooth relaxation, the relaxation is annealed towards the hard law, and the
 result is compared, with the hard law, against the paper's feasible gains and
 against a plain random search given the same wall time.
 
-One concept per module:
-
-* ``parametrisation``: the feasible set as an image of the unit cube
-  (``gains_from_unit``, ``unit_from_gains``, the logits).
-* ``loss``: ``LossWeights``, ``tuning_loss`` and the robust per-pose gradient.
-* ``training``: ``TuneConfig``, the optimiser, the train step and ``train``,
-  which reports through ``progress_fn`` and writes no files.
-* ``search``: ``random_search``, the baseline.
-* ``evaluation``: ``Evaluation`` and ``evaluate`` with the hard law.
-* ``cost``: ``gradient_cost``, the gradient's time and memory.
-* ``problems``: the fixed-gain and gain-schedule problems as values.
-* ``saved``: ``tuned_gains.json`` and ``load_tuned``.
-* ``compare``: CMA-ES (``evosax``) and the equal-wall-time comparison,
-  resumable into a folder (``run_comparison``).
-* ``run``: ``tune``, a run with its checkpoints and result files.
+The modules, one concept each, are listed in ``docs/custom_controller.md``:
+the feasible sets (``parametrisation``, ``problems``, ``estimation``), the
+loss, the one gradient loop (``trainer``) and its problems (``training``:
+fixed gains and schedules; ``robust``: the joint robust problem), the
+black-box baselines (``search``), their comparison, the hard-law evaluation,
+a run's files (``run``, ``robust_run``) and tuned files (``saved``).
 """
 
 from wmr_jax._src.tuning.cost import GradientCost as GradientCost
@@ -51,13 +42,14 @@ from wmr_jax._src.tuning.problems import schedule_problem as schedule_problem
 from wmr_jax._src.tuning.saved import load_tuned as load_tuned
 from wmr_jax._src.tuning.saved import tuned_json as tuned_json
 from wmr_jax._src.tuning.search import SearchResult as SearchResult
+from wmr_jax._src.tuning.search import cma_es_search as cma_es_search
 from wmr_jax._src.tuning.search import random_search as random_search
-from wmr_jax._src.tuning.training import TrainState as TrainState
+from wmr_jax._src.tuning.trainer import TrainState as TrainState
+from wmr_jax._src.tuning.trainer import TuneResult as TuneResult
+from wmr_jax._src.tuning.trainer import restore_state as restore_state
+from wmr_jax._src.tuning.trainer import state_arrays as state_arrays
 from wmr_jax._src.tuning.training import TuneConfig as TuneConfig
-from wmr_jax._src.tuning.training import TuneResult as TuneResult
 from wmr_jax._src.tuning.training import init_state as init_state
-from wmr_jax._src.tuning.training import restore_state as restore_state
 from wmr_jax._src.tuning.training import run_identity as run_identity
-from wmr_jax._src.tuning.training import state_arrays as state_arrays
 from wmr_jax._src.tuning.training import train as train
 from wmr_jax._src.tuning.training import training_poses as training_poses

@@ -1,8 +1,7 @@
 """Gradient descent against black-box search at equal wall time, on both tuning problems.
 
-``cma_es_search`` runs CMA-ES (``evosax``, the optional extra ``[search]``)
-on the logits of a problem's feasible set, so every candidate is feasible;
-``compare`` gives CMA-ES and random search the gradient tuner's wall time,
+``compare`` gives CMA-ES (``search.cma_es_search``, ``evosax``, the optional
+extra ``[search]``) and random search the gradient tuner's wall time,
 compile included, per problem and seed, and judges all three with the hard
 law on the same held-out poses, with the time-optimal yardsticks of
 ``docs/model.md §8``.
@@ -10,154 +9,36 @@ law on the same held-out poses, with the time-optimal yardsticks of
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import jax
-import jax.numpy as jnp
-import numpy as np
 
 from wmr_jax._src.checks import (
-    as_poses,
-    check_budget,
     check_callable,
     check_int,
-    check_key,
-    check_number,
-    float_dtype,
 )
 from wmr_jax._src.model.params import Robot, validate_one_robot
 from wmr_jax._src.sim.poses import sample_poses
 from wmr_jax._src.studies.optimal import time_bounds
 from wmr_jax._src.tuning.evaluation import (
     RUN_OPTIONS,
-    check_run,
     evaluate,
     held_out_poses,
     report_ratios,
 )
 from wmr_jax._src.tuning.problems import get_problem
-from wmr_jax._src.tuning.search import (
-    SearchResult,
-    population_scores,
-    random_search,
-    search_loop,
-)
-from wmr_jax._src.tuning.training import TuneConfig, differences, train
+from wmr_jax._src.tuning.search import _evosax_cma_es, cma_es_search, random_search
+from wmr_jax._src.tuning.trainer import differences
+from wmr_jax._src.tuning.training import TuneConfig, train
 
-__all__ = ["COMPARE_SEEDS", "METHODS", "cma_es_search", "compare", "run_comparison", "saved_rows"]
+__all__ = ["COMPARE_SEEDS", "METHODS", "compare", "run_comparison", "saved_rows"]
 
 # The methods compared, in the order of each (problem, seed)'s rows.
 METHODS = ("gradient", "cma-es", "random search")
-
-
-def _evosax_cma_es() -> Any:
-    try:
-        from evosax.algorithms import CMA_ES
-    except ImportError:
-        raise ValueError(
-            "CMA-ES needs evosax; allowed: pip install 'wmr-jax[search]' (evosax >= 0.3)"
-        ) from None
-    return CMA_ES
-
-
-def cma_es_search(
-    key: jax.Array,
-    refs: Any,
-    *,
-    budget_s: float,
-    problem: Any = "fixed",
-    robot: Robot | None = None,
-    population: int = 16,
-    std_init: float = 1.0,
-    progress: Callable[[int], Any] | None = None,
-    **run: Any,
-) -> SearchResult:
-    """CMA-ES on the logits of ``problem``'s feasible set for ``budget_s`` seconds.
-
-    Candidates are scored as by ``random_search`` (hard law, mean arrival on
-    ``refs``, failures counted as twice the horizon); the search starts at
-    the problem's starting point with step ``std_init`` in logit space. At
-    least one generation runs whatever the budget.
-
-    Args:
-        key: PRNG key.
-        refs: ``(N, 3)`` reference poses the candidates are scored on.
-        budget_s: wall-time budget, s, compile included.
-        problem: ``"fixed"`` or ``"schedule"``.
-        robot: robot parameters; default ``Robot()``.
-        population: candidates per generation.
-        std_init: initial step size in logit space.
-        progress: called with the number of candidates after each generation.
-        **run: ``dt``, ``horizon``, ``velocity``, ``substeps``, ``wheel_limit``.
-
-    Raises:
-        ValueError: if evosax is missing (one line) or for bad options.
-    """
-    check_key("key", key)
-    budget_s = check_budget("budget_s", budget_s)
-    population = check_int("population", population, 2)
-    std_init = check_number("std_init", std_init)
-    check_callable("progress", progress)
-    problem = get_problem(problem)
-    robot = validate_one_robot(robot, "tuning")
-    refs = as_poses("refs", refs, batch=True)
-    run = {**_run_defaults(), **run, "robot": robot}
-    check_run(run)
-    cma_class = _evosax_cma_es()
-    n = refs.shape[0]
-    tiled = jnp.tile(refs, (population, 1))
-    start = jnp.asarray(problem.start_logits(robot), float_dtype())
-    strategy = cma_class(population_size=population, solution=start)
-    params = dataclasses.replace(strategy.default_params, std_init=std_init)
-    began = time.perf_counter()
-    state = strategy.init(jax.random.fold_in(key, 0), start, params)
-    tell_keys = {}
-
-    def propose(generation: int) -> Any:
-        nonlocal state
-        ask_key, tell_keys[generation] = _generation_keys(key, generation)
-        z, state = strategy.ask(ask_key, state, params)
-        if generation and not np.all(np.isfinite(np.asarray(z))):
-            # The strategy broke down: on a flat landscape (every candidate
-            # scored alike) its step size can overflow. Keep the best so far.
-            return None
-        return z
-
-    def tell(generation: int, z: Any, scores: Any) -> None:
-        nonlocal state
-        state, _ = strategy.tell(tell_keys.pop(generation), z, scores, state, params)
-
-    def score(z: Any) -> Any:
-        return population_scores(problem, jax.nn.sigmoid(z), tiled, n, robot, run)
-
-    best_z, best_score, count = search_loop(
-        propose, score, budget_s, began=began, best=(start, math.inf), tell=tell,
-        progress=progress,
-    )  # fmt: skip
-    best = jax.tree.map(float, problem.from_logits(best_z, robot))
-    return SearchResult(best, best_score, count, time.perf_counter() - began)
-
-
-@jax.jit
-def _generation_keys(key: jax.Array, generation: Any) -> jax.Array:
-    """The ask and tell keys of a generation: ``split(fold_in(key, generation + 1))``.
-
-    One compiled call per generation, not two operations dispatched one by
-    one: the loop's own time counts against the search's wall-time budget.
-    The keys are the same bits either way (integer arithmetic).
-    """
-    return jax.random.split(jax.random.fold_in(key, generation + 1))
-
-
-def _run_defaults() -> dict[str, Any]:
-    config = TuneConfig()
-    return {name: getattr(config, name) for name in RUN_OPTIONS if name != "robot"}
 
 
 def _checked_plan(seeds: Any, problems: Any, configs: Any) -> dict[str, TuneConfig]:
@@ -181,7 +62,7 @@ def _checked_plan(seeds: Any, problems: Any, configs: Any) -> dict[str, TuneConf
     bases = {}
     for name in names:
         base = configs.get(name, TuneConfig.for_problem(name))
-        if not isinstance(base, TuneConfig) or base.problem.name != name:
+        if not isinstance(base, TuneConfig) or base.problem != name:
             raise ValueError(
                 f"configs[{name!r}] = {base!r:.80} is not allowed; allowed: a TuneConfig of the "
                 f"{name!r} problem (TuneConfig.for_problem({name!r}, ...))"
@@ -231,7 +112,7 @@ def compare(
     _evosax_cma_es()  # refused now, not after the first gradient run
     rows = []
     for base in bases.values():
-        problem = base.problem  # for a schedule, of base.knots knots
+        problem = base.space  # for a schedule, of base.knots knots
         held_out = held_out_poses(base.eval_poses, base.eval_seed)
         bounds = time_bounds(held_out, robot=robot, dt=base.dt)
         run = {k: getattr(base, k) for k in RUN_OPTIONS if k != "robot"}
@@ -276,24 +157,13 @@ def compare(
 def saved_rows(
     rows: Any, where: str, problems: dict[str, int], seeds: tuple[int, ...]
 ) -> list[dict[str, Any]]:
-    """Check the rows of a saved comparison (``compare.json``) before a resumed one keeps them.
+    """Check the rows of a saved ``compare.json`` before a resumed comparison keeps them.
 
-    Every row must be one ``compare`` writes for this comparison: a problem
-    compared now (of its parameter count), one of ``seeds``, one of
-    ``METHODS``, each number the table shows; each (problem, seed) whole
-    (all three methods, once each).
-
-    Args:
-        rows: the file's content.
-        where: the file, for messages.
-        problems: the parameter count of each problem compared now.
-        seeds: the seeds compared now.
-
-    Returns:
-        ``rows``.
-
-    Raises:
-        ValueError: one line naming ``where``, the row and what is wrong.
+    Every row must be one ``compare`` writes for this comparison: a problem of
+    ``problems`` (name → parameter count), a seed of ``seeds``, a method of
+    ``METHODS``, each number the table shows; each (problem, seed) with all
+    three methods once. Returns ``rows``; ``ValueError``: one line naming
+    ``where``, the row and what is wrong.
     """
     from wmr_jax._src.report.tuning import _compare_numbers
 
@@ -395,7 +265,7 @@ def run_comparison(
         "code": code_version(),
     }
     settings = json.loads(json.dumps(settings))  # as it reads back from the file
-    problems = {name: config.problem.dim for name, config in configs.items()}
+    problems = {name: config.space.dim for name, config in configs.items()}
     rows = _compare_rows(out, settings, resume, problems)
     done = {(row["problem"], row["seed"]) for row in rows}
     for name, config in configs.items():

@@ -201,6 +201,28 @@ def arrival_terms(dist: jax.Array, head: jax.Array, softness: Any) -> tuple[jax.
     return arrived, jnp.log(1.0 + (dist + head))
 
 
+def recorded_arrival(poses: jax.Array, ref: jax.Array, dt: jax.Array) -> jax.Array:
+    """Relaxed arrival time plus log-error shaping of one recorded run ``poses (steps, 3)``, s.
+
+    The per-run term of ``tuning_loss`` in the ideal loop (the same
+    ``arrival_terms``, tolerances and default weights), for the robust loss,
+    whose ``disturbed_run`` records the trajectory. It is not merged with
+    ``_pose_loss_terms``: that one streams the sum through the rollout's scan
+    (``S ← a (S + 1)`` forwards), this one takes the reversed cumulative
+    product of the recorded samples; the two agree to rounding, not bit for
+    bit, and each tuner's results are kept as they are.
+    """
+    weights = LossWeights()
+    err = law.polar_error(poses, ref)
+    dist = err.r**2 / DEFAULT_TOL_R**2
+    head = err.sin_theta**2 / math.sin(DEFAULT_TOL_THETA) ** 2
+    arrived, log_error = arrival_terms(dist, head, weights.arrival_softness)
+    # Σ_k Π_{j≥k} a_j: the runs of arrived samples that last to the end.
+    settled = jnp.sum(jnp.cumprod(arrived[::-1]))
+    soft = dt * (1.0 + arrived.shape[0] - settled)
+    return soft + weights.shaping * dt * jnp.sum(log_error)
+
+
 def _pose_loss_terms(ref, gains, init, robot, dt, spec: LossSpec, temperature):
     """Return ``(relaxed arrival s, integrated log-error s, saturation s)`` of one run.
 
@@ -476,18 +498,10 @@ def tuning_loss(
 
 
 def loss_terms(gains: Gains, refs: Any, *, temperature: float | None, **options: Any) -> LossTerms:
-    """Return the per-run terms of ``tuning_loss`` (before weighting and averaging).
+    """Return the per-run terms of ``tuning_loss``, ``LossTerms`` of ``(N,)`` arrays, s.
 
-    Args:
-        gains: the gains.
-        refs: ``(N, 3)`` reference poses.
-        temperature: smooth-law temperature ``> 0``, or ``None`` for the hard law.
-        **options: ``init``, ``robot``, ``dt``, ``horizon``, ``velocity``,
-            ``substeps``, ``wheel_limit``, ``tol_r``, ``tol_theta``,
-            ``weights``, ``remat``: as for ``tuning_loss``.
-
-    Returns:
-        ``LossTerms`` of ``(N,)`` arrays, s.
+    Before weighting and averaging; ``**options`` as ``tuning_loss``'s keyword
+    arguments (``init``, ``robot``, ``dt``, ``horizon``, ``velocity``, …).
     """
     spec, temperature, args = _prepared(gains, refs, temperature, options)
     return _batch_terms_jit(*args, spec=spec, temperature=temperature)

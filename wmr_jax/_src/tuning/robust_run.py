@@ -18,7 +18,7 @@ from typing import Any
 
 from wmr_jax._src import io
 from wmr_jax._src.model.params import Robot, validate_one_robot
-from wmr_jax._src.tuning import robust
+from wmr_jax._src.tuning import robust, trainer
 from wmr_jax._src.tuning.robust import RobustConfig
 
 __all__ = [
@@ -37,7 +37,7 @@ COMPARE_FORMAT = 2
 
 def described(config: RobustConfig) -> str:
     """What ``config`` tunes, in words: the law and its feedback."""
-    law = "7 fixed gains" if config.problem == "fixed" else f"gain schedule ({config.knots} knots)"
+    law = "7 fixed gains" if config.law == "fixed" else f"gain schedule ({config.knots} knots)"
     sensing = "raw feedback" if config.estimator is None else f"the {config.estimator}"
     noise = f"pose noise {config.noise_xy:g} cm, {config.noise_theta:g}°"
     return f"{law} with {sensing}, for {noise}"
@@ -54,7 +54,7 @@ def save_tuned(out: Path, loop: Any, losses: list[float], robot: Robot) -> None:
     io.atomic_write_json(out / "robust_loss.json", {"loss": losses})
 
 
-def write_evaluation(out: Path, config: RobustConfig, robot: Robot, result: dict) -> str:
+def write_evaluation(out: Path, config: RobustConfig, robot: Robot, result: Any) -> str:
     """Write ``robust_evaluation.json`` and ``.md`` of a robust result; return the table."""
     from wmr_jax._src.model.robots import robot_json
     from wmr_jax._src.report.robustness import robustness_table
@@ -62,23 +62,16 @@ def write_evaluation(out: Path, config: RobustConfig, robot: Robot, result: dict
     record = {
         "config": dataclasses.asdict(config),
         "robot": robot_json(robot),
-        "tune_wall_s": result["tune_wall_s"],
+        "tune_wall_s": result.tune_wall_s,
         "law": "hard (temperature None)",
         # The sensor tuned for: the training's noise up to twice it, the table's at it.
         "noise": {"xy cm": config.noise_xy, "theta degrees": config.noise_theta},
-        "rows": result["rows"],
+        "rows": result.rows,
         # The iterate kept: the best hard-law score on the validation poses.
-        "best_iteration": result["best_iteration"],
-        "validation": {
-            "poses": config.validation_poses,
-            "scored_at": [int(i) for i in result["history"]["validated_at"]],
-            "score_s": [float(v) for v in result["history"]["validation"]],
-        },
-        "no_better_than_baseline": result["note"] is not None,
-        "note": result["note"],
+        **trainer.verdict(result, config.validation_poses),
     }
     io.atomic_write_json(out / "robust_evaluation.json", record)
-    table = robustness_table(result["rows"], COLUMNS)
+    table = robustness_table(result.rows, COLUMNS)
     io.atomic_write_text(out / "robust_evaluation.md", table)
     return table
 
@@ -155,9 +148,9 @@ def run_comparison(
         say(f"seed {seed}: tuning the {described(config)}, then the searches")
         config_seed = dataclasses.replace(config, seed=seed, compare=True)
         result = robust.tune_robust(config_seed, robot=robot)
-        budget = result["tune_wall_s"]
-        counts = {"gradient": config.iters, **{m: n for m, (_, n) in result["searches"].items()}}
-        for row in result["rows"]:
+        budget = result.tune_wall_s
+        counts = {"gradient": config.iters, **{m: n for m, (_, n) in result.searches.items()}}
+        for row in result.rows:
             if row["gains"] == "paper":
                 continue
             method = "gradient" if row["gains"] == "robust-tuned" else row["gains"]

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from wmr_jax._src import io
-from wmr_jax._src.tuning import training
+from wmr_jax._src.tuning import trainer, training
 
 __all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_NAME", "held_out_bounds", "tune", "write_results"]
 
@@ -30,7 +30,7 @@ CHECKPOINT_FORMAT = 3
 def save_checkpoint(path: Path, state: Any, identity: dict[str, Any]) -> None:
     """Write ``state`` and the run's ``identity`` to ``path`` (checksummed, atomically)."""
     meta = {"format": CHECKPOINT_FORMAT, "identity": identity}
-    io.save_arrays(path, training.state_arrays(state), meta)
+    io.save_arrays(path, trainer.state_arrays(state), meta)
 
 
 def load_checkpoint(path: Path, fresh: Any, identity: dict[str, Any]) -> Any:
@@ -68,11 +68,11 @@ def load_checkpoint(path: Path, fresh: Any, identity: dict[str, Any]) -> Any:
     if saved != now:
         raise ValueError(
             f"--resume: checkpoint {path} is of another run "
-            f"({training.differences(saved, now)}); "
+            f"({trainer.differences(saved, now)}); "
             "allowed: the same settings, or a fresh --out"
         )
     try:
-        return training.restore_state(arrays, fresh)
+        return trainer.restore_state(arrays, fresh)
     except ValueError as err:
         raise ValueError(f"--resume: checkpoint {path}: {err}; {advice}") from None
 
@@ -166,14 +166,7 @@ def write_results(
         "resumed_at_iteration": resumed_at,
         "random_search_candidates": None if search is None else search.candidates,
         # The iterate kept: the best hard-law score on the validation poses.
-        "best_iteration": result.best_iteration,
-        "validation": {
-            "poses": config.validation_poses,
-            "scored_at": [int(i) for i in result.history["validated_at"]],
-            "score_s": [float(v) for v in result.history["validation"]],
-        },
-        "no_better_than_baseline": result.note is not None,
-        "note": result.note,
+        **trainer.verdict(result, config.validation_poses),
         "config": config.as_dict(),
     }
     io.atomic_write_json(out / "evaluation.json", report)

@@ -1,29 +1,16 @@
 """Tuned parameters as files: ``tuned_gains.json`` and ``load_tuned``.
 
-A ``tuned_gains.json`` of ``wmr-jax tune`` names its controller and kind
-(``"controller": "shim-sung"`` or ``"shim-sung-schedule"``, ``"kind": "fixed"``
-or ``"schedule"``) beside the parameters, and the estimator tuned with them
+A ``tuned_gains.json`` names its controller and kind (``"controller":
+"shim-sung"`` or ``"shim-sung-schedule"``, ``"kind": "fixed"`` or
+``"schedule"``) beside the parameters, the estimator tuned with them
 (``"estimator": {"kind": "observer", ...}``; absent or null: raw feedback,
-docs/model.md §9). Files from before the schedules, which hold only
-``Gains`` field names, load as fixed gains.
-
-Each number's unit is named under ``"units"`` (``{"kr": "cm/s", "phi_m":
-"rad", ..., "estimator.sigma_theta": "rad"}``): the file holds the Python
-API's units, angles in radians. A file may name an angle ``"deg"`` instead
-(one written by hand), and is read in degrees then; a file without
-``"units"`` (from before they were recorded) holds radians.
-
-It also records the robot the parameters were tuned for (``"robot":
-{field: value}``, with ``"robot_units"``): gains are tuned within that
-robot's wheel budget ``k_r + L k_θ ≤ V_max``, so they travel with it. Files
-from before robots were recorded load with ``robot`` ``None``.
-
-The files of ``wmr-jax tune`` also say which problem tuned them:
-``"tuning": "nominal"`` (the nominal loop, ``wmr-jax tune``) or
-``"robust"`` (under noise, mismatch and latency, ``wmr-jax tune --robust``),
-so that a study labels them by what they are (``tuning_of``). A file
-without it (written before, or by ``tuned_json`` without ``tuning=``) says
-nothing about it.
+docs/model.md §9), the unit of each number under ``"units"`` (the Python
+API's, angles in radians; a file may name an angle ``"deg"``), the robot they
+were tuned for (``"robot"``, ``"robot_units"``: gains are tuned within its
+wheel budget ``k_r + L k_θ ≤ V_max``) and the problem that tuned them
+(``"tuning": "nominal"`` or ``"robust"``, ``tuning_of``). A file with only
+``Gains`` field names loads as fixed gains; one without ``"units"`` holds
+radians; one without a robot or a tuning says nothing of them.
 """
 
 from __future__ import annotations

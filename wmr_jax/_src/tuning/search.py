@@ -1,7 +1,15 @@
-"""Random search over the tuner's feasible set: the baseline the tuned gains must beat."""
+"""The black-box searches, the baselines the gradient must beat: random search and CMA-ES.
+
+``search_loop`` is the one driver of every search (propose, score, keep the
+best, until the wall-time budget); ``random_search`` and ``cma_es_search``
+search a problem's feasible set with the hard law, and the robust tuner's
+searches (``robust.black_box``) go through the same driver and
+``cma_es_proposals``.
+"""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import warnings
@@ -17,6 +25,7 @@ from wmr_jax._src.checks import (
     check_callable,
     check_int,
     check_key,
+    check_number,
     float_dtype,
 )
 from wmr_jax._src.model.params import Gains, Robot, validate_one_robot
@@ -27,7 +36,15 @@ from wmr_jax._src.tuning.evaluation import check_run, hard_runs, run_options
 from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS, unit_from_gains
 from wmr_jax._src.tuning.problems import FIXED, Problem, get_problem
 
-__all__ = ["SearchResult", "population_scores", "random_search", "search_loop"]
+__all__ = [
+    "SearchResult",
+    "cma_es_proposals",
+    "cma_es_search",
+    "evosax_available",
+    "population_scores",
+    "random_search",
+    "search_loop",
+]
 
 # Random search scores a run that never arrives as twice the horizon: worse
 # than any arrival, but finite, so that candidates' means stay comparable.
@@ -67,7 +84,7 @@ def random_search(
     problem: Any = "fixed",
     progress: Any = None,
 ) -> SearchResult:
-    """Search the feasible set of ``gains_from_unit`` at random for ``budget_s`` seconds.
+    """Search the feasible set of ``problem`` at random for ``budget_s`` seconds.
 
     Candidates are ``u ~ U[0, 1]^dim`` of the problem's feasible set, scored
     ``chunk`` at a time with the hard law on ``refs`` (mean arrival time,
@@ -139,18 +156,12 @@ def search_loop(
 ) -> tuple[Any, float, int]:
     """The loop of every black-box search: propose, score, keep the best, until the budget.
 
-    Random search, CMA-ES (``cma_es_search``) and the robust tuner's
-    searches differ only in how they propose a generation and score it.
-
     Args:
-        propose: ``propose(generation)`` → candidates ``(P, dim)``, or
-            ``None`` to stop (a strategy that broke down).
+        propose: ``propose(generation)`` → candidates ``(P, dim)``, or ``None``
+            to stop (a strategy that broke down).
         score: ``score(candidates)`` → ``(P,)`` scores, lower is better.
-        budget_s: wall-time budget, s, counted from ``began``
-            (``time.perf_counter``).
-        best: ``(candidate, score)`` to beat (a start scored already, or
-            ``(start, inf)``).
-        count: candidates scored already.
+        budget_s: wall-time budget, s, from ``began`` (``time.perf_counter``).
+        best: ``(candidate, score)`` to beat; ``count``: candidates scored already.
         tell: ``tell(generation, candidates, scores)`` after each scoring.
         progress: called with the generation's size after each.
         at_least_once: run one generation whatever the budget.
@@ -195,3 +206,127 @@ def population_scores(problem: Problem, u: jax.Array, tiled: jax.Array, n: int, 
         _, times, steps = hard_runs(tiled, population, **run, controller=problem.controller)
     times = times.reshape(u.shape[0], n)
     return jnp.mean(jnp.minimum(times, FAILURE_FACTOR * steps * run["dt"]), axis=1)
+
+
+# ---------------------------------------------------------------- CMA-ES
+
+# The run options of ``cma_es_search`` not given: ``random_search``'s defaults.
+_RUN_DEFAULTS = {
+    "dt": simulation.DEFAULT_DT,
+    "horizon": HORIZON_S,
+    "velocity": "ideal",
+    "substeps": loops.DEFAULT_SUBSTEPS,
+    "wheel_limit": "clip",
+}
+
+
+def evosax_available() -> bool:
+    """Whether the CMA-ES baseline's library (evosax) can be imported."""
+    try:
+        import evosax.algorithms  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _evosax_cma_es() -> Any:
+    try:
+        from evosax.algorithms import CMA_ES
+    except ImportError:
+        raise ValueError(
+            "CMA-ES needs evosax; allowed: pip install 'wmr-jax[search]' (evosax >= 0.3)"
+        ) from None
+    return CMA_ES
+
+
+@jax.jit
+def _generation_keys(key: jax.Array, generation: Any) -> jax.Array:
+    """The ask and tell keys of a generation: ``split(fold_in(key, generation + 1))``.
+
+    One compiled call per generation, not two operations dispatched one by
+    one: the loop's own time counts against the search's wall-time budget.
+    """
+    return jax.random.split(jax.random.fold_in(key, generation + 1))
+
+
+def cma_es_proposals(
+    key: jax.Array, start: jax.Array, population: int, std_init: float = 1.0, *, split: bool = True
+) -> tuple[Any, Any]:
+    """``(propose, tell)`` of CMA-ES from ``start`` (logits), for ``search_loop``.
+
+    Generation ``g`` asks and tells with ``split(fold_in(key, g + 1))``, or
+    with ``fold_in(key, g + 1)`` for both where ``split`` is off (the robust
+    tuner's searches, whose documented comparison was drawn so).
+    """
+    strategy = _evosax_cma_es()(population_size=population, solution=start)
+    params = dataclasses.replace(strategy.default_params, std_init=std_init)
+    state = strategy.init(jax.random.fold_in(key, 0), start, params)
+    tell_keys = {}
+
+    def propose(generation: int) -> Any:
+        nonlocal state
+        if split:
+            ask_key, tell_keys[generation] = _generation_keys(key, generation)
+        else:
+            ask_key = tell_keys[generation] = jax.random.fold_in(key, generation + 1)
+        z, state = strategy.ask(ask_key, state, params)
+        # The strategy broke down: on a flat landscape (every candidate scored
+        # alike) its step size can overflow. Keep the best so far.
+        return z if np.all(np.isfinite(np.asarray(z))) else None
+
+    def tell(generation: int, z: Any, scores: Any) -> None:
+        nonlocal state
+        state, _ = strategy.tell(tell_keys.pop(generation), z, scores, state, params)
+
+    return propose, tell
+
+
+def cma_es_search(
+    key: jax.Array,
+    refs: Any,
+    *,
+    budget_s: float,
+    problem: Any = "fixed",
+    robot: Robot | None = None,
+    population: int = 16,
+    std_init: float = 1.0,
+    progress: Any = None,
+    **run: Any,
+) -> SearchResult:
+    """CMA-ES on the logits of ``problem``'s feasible set for ``budget_s`` seconds.
+
+    Scored as by ``random_search``, from the problem's start with step
+    ``std_init`` in logit space; at least one generation whatever the budget.
+    ``population``: candidates per generation; ``**run``: ``dt``, ``horizon``,
+    ``velocity``, ``substeps``, ``wheel_limit``; the other arguments as for
+    ``random_search``.
+
+    Raises:
+        ValueError: if evosax is missing (one line) or for bad options.
+    """
+    check_key("key", key)
+    budget_s = check_budget("budget_s", budget_s)
+    population = check_int("population", population, 2)
+    std_init = check_number("std_init", std_init)
+    check_callable("progress", progress)
+    problem = get_problem(problem)
+    robot = validate_one_robot(robot, "tuning")
+    refs = as_poses("refs", refs, batch=True)
+    run = {**_RUN_DEFAULTS, **run, "robot": robot}
+    check_run(run)
+    _evosax_cma_es()
+    n = refs.shape[0]
+    tiled = jnp.tile(refs, (population, 1))
+    start = jnp.asarray(problem.start_logits(robot), float_dtype())
+    began = time.perf_counter()
+    propose, tell = cma_es_proposals(key, start, population, std_init)
+
+    def score(z: Any) -> Any:
+        return population_scores(problem, jax.nn.sigmoid(z), tiled, n, robot, run)
+
+    best_z, best_score, count = search_loop(
+        propose, score, budget_s, began=began, best=(start, math.inf), tell=tell,
+        progress=progress,
+    )  # fmt: skip
+    best = jax.tree.map(float, problem.from_logits(best_z, robot))
+    return SearchResult(best, best_score, count, time.perf_counter() - began)

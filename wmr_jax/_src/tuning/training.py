@@ -1,32 +1,23 @@
-"""The tuner: Adam on the logits of the feasible set, with an annealed smooth law.
+"""The fixed-gain and gain-schedule problems of the trainer, and ``train``.
 
-``train`` starts from the paper's feasible gains (``PAPER_FEASIBLE_GAINS``,
-moved just inside the search box, whose budget is the robot's), runs ``config.iters`` iterations of
-``optax.chain(clip_by_global_norm, adam)`` on the robust batch gradient of
-``tuning_loss`` over a fresh batch of ``config.poses`` references each,
-annealing the smooth law's temperature, and then, with the hard law, runs
-``random_search`` for the same wall time and evaluates the paper's, the
-tuned and the random search's gains on held-out poses.
-
-Like brax's ``train``, it reports through a callback and returns a result:
-``progress_fn(state)`` is called after every iteration with a ``TrainState``
-that holds everything needed to continue (``state=``) from there, bit for
-bit. It writes no files; ``wmr-jax tune`` checkpoints from the callback.
+``train`` runs the trainer from the paper's feasible gains (moved just
+inside the search box, whose budget is the robot's) on the robust batch
+gradient of ``tuning_loss`` over a fresh batch of poses per iteration, then
+judges the paper's, the tuned and a random search's gains (same wall time)
+with the hard law on held-out poses. It writes no files.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
-import time
 import warnings
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
 
 from wmr_jax._src.checks import (
     as_float_tree,
@@ -37,17 +28,16 @@ from wmr_jax._src.checks import (
     float_dtype,
 )
 from wmr_jax._src.model.controllers.schedule import KNOTS
-from wmr_jax._src.model.params import Gains, Robot, validate_one_robot
-from wmr_jax._src.provenance import code_version
+from wmr_jax._src.model.params import Robot, validate_one_robot
 from wmr_jax._src.sim import loops
 from wmr_jax._src.sim import rollout as simulation
 from wmr_jax._src.sim.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
-from wmr_jax._src.sim.poses import HORIZON_S, MAX_SAMPLES, sample_poses
+from wmr_jax._src.sim.poses import HORIZON_S, sample_poses
+from wmr_jax._src.tuning import trainer
 from wmr_jax._src.tuning.evaluation import (
     EVAL_POSES,
     EVAL_SEED,
     RUN_OPTIONS,
-    Evaluation,
     evaluate,
     hard_runs,
     held_out_poses,
@@ -55,39 +45,22 @@ from wmr_jax._src.tuning.evaluation import (
 from wmr_jax._src.tuning.loss import LossSpec, LossWeights, make_spec, robust_value_and_grad
 from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
 from wmr_jax._src.tuning.problems import FIXED, MAX_TUNED_KNOTS, Problem, schedule_problem
-from wmr_jax._src.tuning.search import FAILURE_FACTOR, SearchResult, random_search
+from wmr_jax._src.tuning.search import FAILURE_FACTOR, random_search
+from wmr_jax._src.tuning.trainer import TrainState, TuneResult
 
 __all__ = [
-    "TrainState",
     "TuneConfig",
-    "TuneResult",
+    "gain_problem",
     "init_state",
-    "restore_state",
-    "differences",
     "run_identity",
-    "state_arrays",
     "train",
     "training_poses",
 ]
 
 
-@dataclasses.dataclass(frozen=True)
-class _OptimHyper:
-    """Static optimiser settings (part of the train step's compile key)."""
-
-    learning_rate: float
-    iters: int
-    grad_clip: float
-    pose_clip: float | None
-
-
-# The gain schedule's settings where they differ from the fixed gains'. Its
-# 35 parameters need more and longer steps than seven (held-out poses, seed 0:
-# 400 iterations at 0.1 reach 0.45 s, 600 or 800 at 0.2 reach 0.41 s), and
-# annealing the law down to T = 0.003 rather than 0.01 shortens the tuned
-# arrival by another 0.008 s (1,000 validation poses of seed 777, not the
-# held-out set: 0.428 -> 0.419 s, mean of training seeds 0-2; for the fixed
-# gains it changes nothing, 0.607 -> 0.606 s).
+# The gain schedule's settings where they differ from the fixed gains': its
+# parameters need more and longer steps than seven, and a colder end of the
+# annealing helps it (not the fixed gains); docs/tuning.md.
 SCHEDULE_SETTINGS = {"iters": 600, "learning_rate": 0.2, "temperature_end": 0.003}
 
 
@@ -116,10 +89,9 @@ class TuneConfig:
         weights: terms of the loss (see ``tuning_loss``).
         substeps: inner steps per period (non-ideal loop).
         wheel_limit: ``"clip"`` or ``"scale"`` (non-ideal loop).
-        schedule: tune the gain-scheduled law (``ScheduleParams``, 35
-            parameters) instead of the seven fixed gains.
-        knots: knots per table of the schedule (``3 knots + 5`` parameters;
-            schedules only).
+        problem: ``"fixed"`` (the seven gains) or ``"schedule"`` (the
+            gain-scheduled law, ``ScheduleParams``, ``3 knots + 5`` parameters).
+        knots: knots per table of the schedule (schedules only).
         validate_every: iterations between hard-law scores of the iterate
             on the validation poses; the start and the last iterate are
             always scored, and the best scored iterate is the result.
@@ -145,7 +117,7 @@ class TuneConfig:
     weights: LossWeights = LossWeights()
     substeps: int = loops.DEFAULT_SUBSTEPS
     wheel_limit: str = "clip"
-    schedule: bool = False
+    problem: str = "fixed"
     knots: int = KNOTS
     validate_every: int = 25
     validation_poses: int = 128
@@ -155,9 +127,8 @@ class TuneConfig:
         """The recommended settings of ``problem``, with ``changes`` on top.
 
         ``"fixed"`` is ``TuneConfig()``; ``"schedule"`` also sets
-        ``schedule=True`` and ``SCHEDULE_SETTINGS`` (600 iterations, a step
-        of 0.2, the law annealed to T = 0.003), which ``wmr-jax tune
-        --schedule`` and ``compare`` use.
+        ``SCHEDULE_SETTINGS``, which ``wmr-jax tune --schedule`` and
+        ``compare`` use.
 
         Raises:
             ValueError: for another ``problem``, naming it.
@@ -169,13 +140,13 @@ class TuneConfig:
         if problem == "fixed":
             return cls(**changes)
         if problem == "schedule":
-            return cls(**{"schedule": True, **SCHEDULE_SETTINGS, **changes})
+            return cls(**{"problem": "schedule", **SCHEDULE_SETTINGS, **changes})
         raise ValueError(f"problem = {problem!r} is not allowed; allowed: 'fixed', 'schedule'")
 
     @property
-    def problem(self) -> Problem:
-        """The tuning problem: gain schedules of ``knots`` if ``schedule``, else fixed gains."""
-        return schedule_problem(self.knots) if self.schedule else FIXED
+    def space(self) -> Problem:
+        """The searched set: gain schedules of ``knots`` knots, or the fixed gains."""
+        return schedule_problem(self.knots) if self.problem == "schedule" else FIXED
 
     def replace(self, **changes: Any) -> TuneConfig:
         """Return a copy with the given fields changed."""
@@ -187,19 +158,21 @@ class TuneConfig:
         Raises:
             ValueError: naming the field, its value and what is allowed.
         """
+        trainer.check_loop(self)
         for name, minimum, maximum in _INT_FIELDS:
             check_int(name, getattr(self, name), minimum, maximum)
-        for name in _POSITIVE_FIELDS:
-            check_number(name, getattr(self, name))
-        for name in ("temperature_start", "temperature_end"):
-            simulation.check_temperature(name, getattr(self, name))
+        check_number("grad_clip", self.grad_clip)
         if self.pose_clip is not None:
             check_number("pose_clip", self.pose_clip)
-        for name in ("random_search", "schedule"):
-            check_bool(name, getattr(self, name))
-        if not self.schedule and self.knots != KNOTS:
+        check_bool("random_search", self.random_search)
+        if self.problem not in ("fixed", "schedule"):
             raise ValueError(
-                f"knots = {self.knots!r} is not allowed with schedule = False; allowed: knots "
+                f"problem = {self.problem!r} is not allowed; allowed: 'fixed', 'schedule' "
+                "('robust': RobustConfig)"
+            )
+        if self.problem == "fixed" and self.knots != KNOTS:
+            raise ValueError(
+                f"knots = {self.knots!r} is not allowed with problem = 'fixed'; allowed: knots "
                 "for a gain schedule only (TuneConfig.for_problem('schedule', knots=...))"
             )
         self.spec()
@@ -217,14 +190,7 @@ class TuneConfig:
             tol_theta=DEFAULT_TOL_THETA,
             weights=self.weights,
             remat=True,
-            controller=self.problem.controller,
-        )
-
-    def hyper(self) -> _OptimHyper:
-        """The static optimiser settings of this configuration."""
-        pose_clip = None if self.pose_clip is None else float(self.pose_clip)
-        return _OptimHyper(
-            float(self.learning_rate), int(self.iters), float(self.grad_clip), pose_clip
+            controller=self.space.controller,
         )
 
     def as_dict(self) -> dict[str, Any]:
@@ -234,133 +200,58 @@ class TuneConfig:
         return out
 
 
-# name, minimum, maximum of the integer fields of TuneConfig.
+# name, minimum, maximum of the integer fields of TuneConfig beyond the loop's.
 _INT_FIELDS = (
-    ("iters", 1, None),
-    ("poses", 1, MAX_SAMPLES),
-    ("seed", 0, 2**32 - 1),
     ("checkpoint_every", 1, None),
-    ("eval_poses", 1, MAX_SAMPLES),
     ("eval_seed", 0, 2**32 - 1),
     ("knots", 2, MAX_TUNED_KNOTS),
-    ("validate_every", 1, None),
-    ("validation_poses", 1, MAX_SAMPLES),
 )
-_POSITIVE_FIELDS = ("learning_rate", "grad_clip", "temperature_start", "temperature_end")
 
 
-class TrainState(NamedTuple):
-    """The whole state of a tuning run after ``iteration`` iterations.
+@dataclasses.dataclass(frozen=True)
+class GainLoss:
+    """The fixed-gain or schedule loss of one iteration (``TrainingProblem.loss``).
 
-    Attributes:
-        iteration: iterations done.
-        z: ``(dim,)`` logits of the current parameters (``Problem.from_logits``).
-        opt_state: the optax state.
-        losses: loss of each iteration done, s.
-        temperatures: smooth-law temperature of each iteration done.
-        gains: the parameters after each iteration, as flat rows (``Problem.columns``).
-        elapsed_s: wall time of the iterations done (all sessions), s.
-        run: the ``run_identity`` of the settings and robot it belongs to, as
-            JSON text; ``train`` refuses a state of another run. Empty: not
-            recorded (a state built by hand), then not checked.
-        validated: ``(iteration, score s)`` of each hard-law score on the
-            validation poses so far (iteration 0: the start), in order.
-        start: the start's parameters as a flat row (``Problem.columns``).
+    ``self(z, refs, temperature, (init, robot, dt))`` is ``robust_value_and_grad``:
+    the mean ``tuning_loss`` over ``refs`` and its per-pose capped gradient.
     """
 
-    iteration: int
-    z: jax.Array
-    opt_state: Any
-    losses: tuple[float, ...]
-    temperatures: tuple[float, ...]
-    gains: tuple[tuple[float, ...], ...]
-    elapsed_s: float
-    run: str = ""
-    validated: tuple[tuple[int, float], ...] = ()
-    start: tuple[float, ...] = ()
+    spec: LossSpec
+    problem: Problem
+    pose_clip: float | None
+
+    def __call__(self, z, refs, temperature, consts):
+        init, robot, dt = consts
+        loss, grad, _ = robust_value_and_grad(
+            z, refs, init, robot, dt, self.spec, temperature, self.pose_clip, self.problem
+        )
+        return loss, grad
 
 
-class TuneResult(NamedTuple):
-    """What ``train`` returns.
-
-    Attributes:
-        gains: the tuned parameters (feasible; floats): ``Gains``, or
-            ``ScheduleParams`` for a schedule.
-        evaluation: hard-law ``Evaluation`` on the held-out poses, keyed
-            ``"paper_feasible"`` (``paper_feasible_gains(robot)``), ``"tuned"``
-            and, if run, ``"random_search"``.
-        history: per-iteration ``loss`` (s), ``temperature`` and ``gains``
-            ``(iters, columns)`` (``Problem.columns``), and the validation
-            scores: ``validated_at`` (iterations, 0 the start) and
-            ``validation`` (s), as NumPy arrays.
-        tune_wall_s: wall time of the gradient iterations (all sessions), s.
-        search: the random search's result, or ``None``.
-        problem: ``"fixed"`` or ``"schedule"``.
-        best_iteration: the iterate returned (0: the start): the last,
-            unless an earlier one has a validation score lower by more than
-            ``BEST_MARGIN``; then the lowest, the later of equal ones.
-        note: one line when the tuned parameters are no better than the
-            baseline on the held-out poses (``no_better_than_baseline``),
-            else ``None``.
-    """
-
-    gains: Gains
-    evaluation: dict[str, Evaluation]
-    history: dict[str, np.ndarray]
-    tune_wall_s: float
-    search: SearchResult | None
-    problem: str = "fixed"
-    best_iteration: int = 0
-    note: str | None = None
-
-
-# ---------------------------------------------------------------- optimiser
-
-
-def optimizer(
-    learning_rate: float, iters: int, grad_clip: float = 1.0
-) -> optax.GradientTransformation:
-    """The tuners' optimiser: ``clip_by_global_norm`` then Adam, its step cosine-decayed.
-
-    Cosine decay to a tenth: large steps while the temperature is high and
-    the landscape smooth, small ones once it is close to the hard law. The
-    fixed-gain and schedule tuner (``train``) and the robust one
-    (``tune_robust``) share it.
-    """
-    schedule = optax.cosine_decay_schedule(learning_rate, iters, alpha=0.1)
-    return optax.chain(optax.clip_by_global_norm(grad_clip), optax.adam(schedule))
-
-
-def anneal(start: float, end: float, iteration: int, iters: int) -> float:
-    """The smooth law's temperature, geometric: ``start`` at 0, ``end`` at ``iters − 1``.
-
-    The one schedule of both tuners.
-    """
-    frac = iteration / max(iters - 1, 1)
-    return start * (end / start) ** frac
-
-
-def _optimizer(hyper: _OptimHyper) -> optax.GradientTransformation:
-    return optimizer(hyper.learning_rate, hyper.iters, hyper.grad_clip)
-
-
-def _train_step(z, opt_state, refs, temperature, init, robot, dt, *, spec, hyper, problem):
-    loss, grad, stats = robust_value_and_grad(
-        z, refs, init, robot, dt, spec, temperature, hyper.pose_clip, problem
+def gain_problem(config: TuneConfig, robot: Robot) -> trainer.TrainingProblem:
+    """The ``TrainingProblem`` of a checked ``config`` on a checked ``robot``."""
+    space, dtype = config.space, float_dtype()
+    dt = jnp.asarray(config.dt, dtype)
+    # The loss runs the loop the evaluation judges: the robot's speed limiter included.
+    spec = config.spec().for_robot(robot, dt)
+    pose_clip = None if config.pose_clip is None else float(config.pose_clip)
+    refs = validation_poses(config)
+    return trainer.TrainingProblem(
+        name=space.name,
+        z0=jnp.asarray(space.start_logits(robot), dtype),
+        loss=GainLoss(spec, space, pose_clip),
+        consts=(jnp.zeros((3,), dtype), robot, dt),
+        batch=lambda iteration: training_poses(config.seed, iteration, config.poses),
+        row=lambda z: space.row(space.from_logits(z, robot)),
+        from_row=space.from_row,
+        score=lambda params: validation_score(config, robot, params, refs),
+        hyper=trainer.Hyper(
+            float(config.learning_rate), int(config.iters), float(config.grad_clip)
+        ),
+        temperature_start=config.temperature_start,
+        temperature_end=config.temperature_end,
+        validate_every=config.validate_every,
     )
-    updates, opt_state = _optimizer(hyper).update(grad, opt_state, z)
-    # Feasibility needs no projection: every z maps into the feasible set.
-    z = optax.apply_updates(z, updates)
-    stats = dict(stats, grad_norm=jnp.linalg.norm(grad))
-    return z, opt_state, loss, stats
-
-
-_train_step_jit = loops.jit_top_level(_train_step, static_argnames=("spec", "hyper", "problem"))
-
-
-def _temperature(config: TuneConfig, iteration: int) -> float:
-    """Geometric annealing from ``temperature_start`` to ``temperature_end`` (``anneal``)."""
-    return anneal(config.temperature_start, config.temperature_end, iteration, config.iters)
 
 
 def training_poses(seed: int, iteration: int, n: int) -> jax.Array:
@@ -387,15 +278,8 @@ def _checked(config: TuneConfig | None, robot: Robot | None) -> tuple[TuneConfig
     return checked_config(config), as_float_tree(validate_one_robot(robot, "tuning"))
 
 
-def _run_text(config: TuneConfig, robot: Robot) -> str:
-    """``run_identity`` of checked settings as canonical JSON text (``TrainState.run``).
-
-    Every robot field is part of it, and ``code``, the code that computes
-    (``provenance.code_version``): another one is another run.
-    """
-    robot_values = {f.name: float(getattr(robot, f.name)) for f in dataclasses.fields(Robot)}
-    identity = {"config": config.as_dict(), "robot": robot_values, "code": code_version()}
-    return json.dumps(identity, sort_keys=True)
+def _checked(config: TuneConfig | None, robot: Robot | None) -> tuple[TuneConfig, Robot]:
+    return checked_config(config), as_float_tree(validate_one_robot(robot, "tuning"))
 
 
 def init_state(config: TuneConfig | None = None, robot: Robot | None = None) -> TrainState:
@@ -407,136 +291,15 @@ def init_state(config: TuneConfig | None = None, robot: Robot | None = None) -> 
         ValueError: for bad settings, naming the field.
     """
     config, robot = _checked(config, robot)
-    problem = config.problem
-    z0 = jnp.asarray(problem.start_logits(robot), float_dtype())
-    opt_state = _optimizer(config.hyper()).init(z0)
-    start = problem.row(problem.from_logits(z0, robot))
-    return TrainState(0, z0, opt_state, (), (), (), 0.0, _run_text(config, robot), (), start)
+    return trainer.start_state(gain_problem(config, robot), trainer.run_text(config, robot))
 
 
 def run_identity(config: TuneConfig | None = None, robot: Robot | None = None) -> dict[str, Any]:
     """What a saved state must match to be resumed: the settings and the robot (JSON-ready)."""
-    return json.loads(_run_text(*_checked(config, robot)))
+    return json.loads(trainer.run_text(*_checked(config, robot)))
 
 
-def differences(saved: dict[str, Any], now: dict[str, Any]) -> str:
-    """Name what differs between two ``run_identity``s: settings, the robot, the code."""
-    there, here = saved.get("config", {}), now["config"]
-    if not isinstance(there, dict):
-        there = {}
-    diffs = [
-        f"{key} = {there.get(key)!r} there, {here.get(key)!r} now"
-        for key in dict.fromkeys([*here, *there])
-        if there.get(key) != here.get(key)
-    ]
-    if saved.get("robot") != now.get("robot"):
-        diffs.append("the robot differs")
-    if saved.get("code") != now.get("code"):
-        diffs.append(f"computed by wmr_jax {saved.get('code')}, this is {now.get('code')}")
-    return "; ".join(diffs) or "the format differs"
-
-
-def state_arrays(state: TrainState) -> dict[str, np.ndarray]:
-    """Return ``state`` as named NumPy arrays, exactly (for a checkpoint file)."""
-    leaves = jax.tree.leaves(state.opt_state)
-    return {
-        "iteration": np.asarray(state.iteration),
-        "z": np.asarray(state.z),
-        "losses": np.asarray(state.losses, dtype=float),
-        "temperatures": np.asarray(state.temperatures, dtype=float),
-        "gains": np.asarray(state.gains, dtype=float) if state.gains else np.zeros((0, 0)),
-        "elapsed_s": np.asarray(state.elapsed_s, dtype=float),
-        "validated": np.asarray(state.validated, dtype=float).reshape(-1, 2),
-        "start": np.asarray(state.start, dtype=float),
-        **{f"opt_{i}": np.asarray(leaf) for i, leaf in enumerate(leaves)},
-    }
-
-
-def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainState:
-    """Rebuild the state of ``state_arrays`` in the structure of ``fresh`` (``init_state``).
-
-    A saved state is never trusted: one whose values are not all finite, whose
-    iteration count, history lengths and optimiser step counts disagree,
-    whose temperatures or elapsed time are not positive, or whose parameter
-    rows are not those of ``fresh``'s problem, is refused.
-
-    Raises:
-        ValueError: one line, if an array is missing, of the wrong shape,
-            non-finite, out of range, or the lengths disagree.
-    """
-    leaves, treedef = jax.tree.flatten(fresh.opt_state)
-    try:
-        restored = [
-            jnp.asarray(arrays[f"opt_{i}"], dtype=jnp.asarray(leaf).dtype).reshape(jnp.shape(leaf))
-            for i, leaf in enumerate(leaves)
-        ]
-        gains = np.asarray(arrays["gains"], dtype=float)
-        iteration = np.asarray(arrays["iteration"])
-        if iteration.shape != () or iteration.dtype.kind not in "iu":
-            raise ValueError(f"iteration = {iteration!r} is not a whole number")
-        state = TrainState(
-            iteration=int(iteration),
-            z=jnp.asarray(arrays["z"], dtype=fresh.z.dtype).reshape(fresh.z.shape),
-            opt_state=jax.tree.unflatten(treedef, restored),
-            losses=tuple(float(x) for x in arrays["losses"]),
-            temperatures=tuple(float(x) for x in arrays["temperatures"]),
-            gains=tuple(tuple(float(x) for x in row) for row in gains.reshape(-1, gains.shape[-1]))
-            if gains.size
-            else (),
-            elapsed_s=float(arrays["elapsed_s"]),
-            run=fresh.run,
-            validated=tuple(
-                (int(i), float(v)) for i, v in np.asarray(arrays["validated"], float).reshape(-1, 2)
-            ),
-            start=tuple(float(x) for x in np.asarray(arrays["start"], float).reshape(-1)),
-        )
-    except (KeyError, TypeError, ValueError, IndexError) as err:
-        # IndexError: an array of no axes where rows were saved.
-        raise ValueError(f"the saved state is incomplete ({type(err).__name__}: {err})") from None
-    lengths = {len(state.losses), len(state.temperatures), len(state.gains)}
-    if lengths != {state.iteration}:
-        raise ValueError(
-            f"the saved state is inconsistent: iteration {state.iteration} with histories of "
-            f"{len(state.losses)}, {len(state.temperatures)} and {len(state.gains)} rows"
-        )
-    temperatures = np.asarray(state.temperatures, dtype=float)
-    validated = np.asarray(state.validated, dtype=float).reshape(-1, 2)
-    values = [state.z, *restored, np.asarray(state.losses), gains, temperatures, validated]
-    values.append(np.asarray(state.start, dtype=float))
-    if not all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in values):
-        raise ValueError("the saved state holds non-finite values (NaN or inf)")
-    if not (np.all(temperatures > 0) and np.isfinite(state.elapsed_s) and state.elapsed_s >= 0):
-        raise ValueError(
-            "the saved state is inconsistent: its temperatures must be > 0 and its elapsed "
-            f"time finite and >= 0 (elapsed_s = {state.elapsed_s!r})"
-        )
-    # Every step count of the optimiser (Adam's, the schedule's) is the iteration.
-    counts = [int(leaf) for leaf in restored if leaf.ndim == 0 and leaf.dtype.kind in "iu"]
-    if any(count != state.iteration for count in counts):
-        raise ValueError(
-            f"the saved state is inconsistent: iteration {state.iteration} with optimiser "
-            f"step counts {counts}"
-        )
-    at = [i for i, _ in state.validated]
-    if at != sorted(set(at)) or any(not 0 <= i <= state.iteration for i in at):
-        raise ValueError(
-            f"the saved state is inconsistent: validation scores at iterations {at} "
-            f"after {state.iteration}"
-        )
-    if state.start != fresh.start:
-        raise ValueError("the saved state is inconsistent: its start is not this run's")
-    # The fixed problem has 7 logits, a schedule of K knots 3K + 5.
-    dim = fresh.z.shape[-1]
-    problem = FIXED if dim == FIXED.dim else schedule_problem((dim - 5) // 3)
-    if state.gains and gains.shape[-1] != len(problem.columns):
-        raise ValueError(
-            f"the saved state is inconsistent: rows of {gains.shape[-1]} parameters; "
-            f"allowed: {len(problem.columns)}, the {problem.name!r} problem's columns"
-        )
-    return state
-
-
-# ---------------------------------------------------------------- the loop
+# ---------------------------------------------------------------- validation and judging
 
 
 def validation_poses(config: TuneConfig) -> jax.Array:
@@ -558,87 +321,10 @@ def validation_score(config: TuneConfig, robot: Robot, params: Any, refs: Any) -
         # sampling margins) are the tuner's business; its score says it.
         warnings.simplefilter("ignore")
         _, times, steps = hard_runs(
-            refs, params, robot=robot, **run, controller=config.problem.controller
+            refs, params, robot=robot, **run, controller=config.space.controller
         )
     times = np.asarray(times, dtype=float)
     return float(np.mean(np.minimum(times, FAILURE_FACTOR * steps * config.dt)))
-
-
-# How much lower an earlier iterate must score than the last to replace it:
-# the validation poses are a sample, and the last iterate, annealed to the
-# coldest temperature, is what the method aims at. On the paper robot the
-# iterates of the last hundred iterations score within 0.2 % of each other;
-# where the smooth loss climbs (a slow, wide robot) the last scores 2-3x the best.
-BEST_MARGIN = 0.01
-
-
-def best_iteration(validated: Any, margin: float = BEST_MARGIN) -> int:
-    """The iterate to keep, from ``(iteration, score)`` pairs in order (the last one last).
-
-    The last iterate, unless an earlier one scores lower by more than
-    ``margin`` (relative); then the lowest score, the later of equal ones.
-    """
-    validated = [(int(i), float(v)) for i, v in validated]
-    last, last_score = validated[-1]
-    lowest = min(score for _, score in validated)
-    if last_score <= lowest * (1.0 + margin):
-        return last
-    return max(i for i, score in validated if score == lowest)
-
-
-def _scored(config, robot, state, refs) -> TrainState:
-    """``state`` with its current iterate's validation score appended."""
-    problem = config.problem
-    row = state.gains[-1] if state.iteration else state.start
-    score = validation_score(config, robot, problem.from_row(row), refs)
-    return state._replace(validated=state.validated + ((state.iteration, score),))
-
-
-def _iterate(config, robot, state, progress_fn) -> TrainState:
-    """Run the iterations from ``state.iteration`` to ``config.iters``, scoring every few."""
-    hyper, dtype = config.hyper(), float_dtype()
-    problem = config.problem
-    dt = jnp.asarray(config.dt, dtype)
-    # The loss runs the loop the evaluation judges: the robot's speed limiter included.
-    spec = config.spec().for_robot(robot, dt)
-    init = jnp.zeros((3,), dtype)
-    refs_val = validation_poses(config)
-    if state.iteration == 0 and not state.validated:
-        began = time.perf_counter()
-        state = _scored(config, robot, state, refs_val)
-        state = state._replace(elapsed_s=state.elapsed_s + time.perf_counter() - began)
-    for iteration in range(state.iteration, config.iters):
-        began = time.perf_counter()
-        temperature = _temperature(config, iteration)
-        refs = training_poses(config.seed, iteration, config.poses)
-        z, opt_state, loss, _ = _train_step_jit(
-            state.z,
-            state.opt_state,
-            refs,
-            jnp.asarray(temperature, dtype),
-            init,
-            robot,
-            dt,
-            spec=spec,
-            hyper=hyper,
-            problem=problem,
-        )
-        loss = float(loss)
-        row = problem.row(problem.from_logits(z, robot))
-        state = state._replace(
-            iteration=iteration + 1,
-            z=z,
-            opt_state=opt_state,
-            losses=state.losses + (loss,),
-            temperatures=state.temperatures + (temperature,),
-            gains=state.gains + (row,),
-        )
-        if state.iteration % config.validate_every == 0 or state.iteration == config.iters:
-            state = _scored(config, robot, state, refs_val)
-        state = state._replace(elapsed_s=state.elapsed_s + time.perf_counter() - began)
-        if progress_fn is not None:
-            progress_fn(state)
-    return state
 
 
 def _compare(
@@ -660,7 +346,7 @@ def _compare(
             stream,
             refs,
             budget_s=tune_wall_s,
-            problem=config.problem,
+            problem=config.space,
             progress=search_progress,
             **run,
         )
@@ -676,32 +362,6 @@ def _compare(
         if eval_progress is not None:
             eval_progress(name)
     return evaluation, search
-
-
-def _own_state(state: Any, config: TuneConfig, robot: Robot) -> TrainState:
-    """``state`` if it can continue the run of ``config`` and ``robot``, else say why not."""
-    if not isinstance(state, TrainState):
-        raise ValueError(
-            f"state = {state!r:.80} is not allowed; allowed: a TrainState (init_state, or "
-            "one handed to progress_fn)"
-        )
-    dim = config.problem.dim
-    if np.shape(state.z) != (dim,):
-        raise ValueError(
-            f"state holds {np.shape(state.z)} logits; allowed: ({dim},), those of the "
-            f"{config.problem.name!r} problem of config"
-        )
-    if not state.start:  # built by hand: the start is this run's
-        problem = config.problem
-        start = problem.row(problem.from_logits(problem.start_logits(robot), robot))
-        state = state._replace(start=start)
-    now = _run_text(config, robot)
-    if state.run and state.run != now:
-        raise ValueError(
-            f"state is of another run ({differences(json.loads(state.run), json.loads(now))}); "
-            "allowed: a state of this config and robot"
-        )
-    return state
 
 
 def train(
@@ -743,28 +403,8 @@ def train(
         ("eval_progress", eval_progress),
     ):
         check_callable(name, fn)
-    state = init_state(config, robot) if state is None else _own_state(state, config, robot)
-    if not 0 <= state.iteration <= config.iters:
-        raise ValueError(
-            f"state.iteration = {state.iteration!r} is not allowed; "
-            f"allowed: 0 to iters = {config.iters}"
-        )
-    state = _iterate(config, robot, state, progress_fn)
-    if not state.gains:
-        raise ValueError("state holds no iteration; allowed: a state after at least one")
-    problem = config.problem
-    if not state.validated or state.validated[-1][0] != state.iteration:
-        # A state handed in after its last iteration, not scored there yet.
-        state = _scored(config, robot, state, validation_poses(config))
-    best = best_iteration(state.validated)
-    tuned = problem.from_row(state.gains[best - 1] if best else state.start)
-    history = {
-        "loss": np.asarray(state.losses),
-        "temperature": np.asarray(state.temperatures),
-        "gains": np.asarray(state.gains).reshape(len(state.gains), -1),
-        "validated_at": np.asarray([i for i, _ in state.validated], dtype=int),
-        "validation": np.asarray([v for _, v in state.validated], dtype=float),
-    }
+    problem, run = gain_problem(config, robot), trainer.run_text(config, robot)
+    tuned, best, history, state = trainer.fit(problem, run, state, progress_fn)
     evaluation, search = _compare(
         config, robot, tuned, state.elapsed_s, search_progress, eval_progress
     )

@@ -1,0 +1,478 @@
+"""The one gradient trainer: optax on a problem's logits, annealed, best iterate by validation.
+
+A ``TrainingProblem`` holds what differs between the tuning problems (fixed
+gains and schedules in ``training``, the robust joint loop in ``robust``);
+``fit`` runs the one loop (``iterate``) for any of them and keeps the
+iterate of ``best_iteration``. A run continues bit for bit from any
+``TrainState`` that ``progress_fn`` saw.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from wmr_jax._src.checks import check_int, check_number, float_dtype
+from wmr_jax._src.model.params import Robot
+from wmr_jax._src.provenance import code_version
+from wmr_jax._src.sim import loops
+from wmr_jax._src.sim.poses import MAX_SAMPLES
+from wmr_jax._src.sim.rollout import check_temperature
+
+__all__ = [
+    "BEST_MARGIN",
+    "Hyper",
+    "TrainState",
+    "TrainingProblem",
+    "TuneResult",
+    "anneal",
+    "best_iteration",
+    "check_loop",
+    "differences",
+    "fit",
+    "iterate",
+    "optimizer",
+    "own_state",
+    "restore_state",
+    "run_text",
+    "start_state",
+    "state_arrays",
+    "train_step",
+    "verdict",
+]
+
+
+@dataclasses.dataclass(frozen=True)
+class Hyper:
+    """Static optimiser settings (part of the train step's compile key)."""
+
+    learning_rate: float
+    iters: int
+    grad_clip: float = 1.0
+
+
+class TrainingProblem(NamedTuple):
+    """A tuning problem as the trainer runs it.
+
+    Attributes:
+        name: ``"fixed"``, ``"schedule"`` or ``"robust"``.
+        z0: ``(dim,)`` logits of the start.
+        loss: ``loss(z, batch, temperature, consts) -> (loss s, gradient (dim,))``,
+            traceable and hashable (static in the compiled step).
+        consts: traced arguments of ``loss`` shared by every iteration (robot, dt).
+        batch: ``batch(iteration)``, the iteration's draw, a pure function of
+            the seed and the iteration.
+        row: ``row(z)``, the parameters of ``z`` as a flat tuple of floats.
+        from_row: ``from_row(row)``, the parameters a result holds.
+        score: ``score(params)``, the hard-law validation score, s.
+        hyper: the optimiser settings.
+        temperature_start, temperature_end: smooth-law temperatures of the
+            first and the last iteration.
+        validate_every: iterations between validation scores.
+    """
+
+    name: str
+    z0: jax.Array
+    loss: Any
+    consts: Any
+    batch: Callable[[int], Any]
+    row: Callable[[Any], tuple[float, ...]]
+    from_row: Callable[[Any], Any]
+    score: Callable[[Any], float]
+    hyper: Hyper
+    temperature_start: float
+    temperature_end: float
+    validate_every: int
+
+
+class TrainState(NamedTuple):
+    """The whole state of a tuning run after ``iteration`` iterations.
+
+    Attributes:
+        iteration: iterations done.
+        z: ``(dim,)`` logits of the current parameters.
+        opt_state: the optax state.
+        losses, temperatures: of each iteration done (s; the smooth law's).
+        gains: the parameters after each iteration as rows (``TrainingProblem.row``).
+        elapsed_s: wall time of the iterations done (all sessions), s.
+        run: the run's identity (``run_text``); a state of another run is
+            refused. Empty (a state built by hand): not checked.
+        validated: ``(iteration, score s)`` of each validation score so far, in order.
+        start: the start's parameters as a row.
+    """
+
+    iteration: int
+    z: jax.Array
+    opt_state: Any
+    losses: tuple[float, ...]
+    temperatures: tuple[float, ...]
+    gains: tuple[tuple[float, ...], ...]
+    elapsed_s: float
+    run: str = ""
+    validated: tuple[tuple[int, float], ...] = ()
+    start: tuple[float, ...] = ()
+
+
+class TuneResult(NamedTuple):
+    """What a tuning run returns, whatever its problem.
+
+    Attributes:
+        gains: the tuned parameters (floats): ``Gains`` or ``ScheduleParams``.
+        evaluation: hard-law ``Evaluation`` on the held-out poses, keyed
+            ``"paper_feasible"``, ``"tuned"`` and ``"random_search"`` if run
+            (empty for the robust problem, judged by ``rows``).
+        history: per-iteration ``loss`` (s), ``temperature`` and ``gains``
+            rows, and the validation scores ``validated_at`` (iterations) and
+            ``validation`` (s), as NumPy arrays.
+        tune_wall_s: wall time of the gradient iterations (all sessions), s.
+        search: the random search's ``SearchResult``, or ``None``.
+        problem: ``"fixed"``, ``"schedule"`` or ``"robust"``.
+        best_iteration: the iterate returned (0: the start), by ``best_iteration``.
+        note: one line when the result is no better than the baseline, else ``None``.
+        loop: the robust problem's tuned ``ClosedLoop``, else ``None``.
+        rows: the robust problem's ``standard_conditions`` rows of the paper's
+            gains, the tuned loop and the searches' loops, else ``None``.
+        searches: the robust problem's ``{method: (ClosedLoop, candidates)}``,
+            else ``None``.
+    """
+
+    gains: Any
+    evaluation: dict[str, Any]
+    history: dict[str, np.ndarray]
+    tune_wall_s: float
+    search: Any
+    problem: str = "fixed"
+    best_iteration: int = 0
+    note: str | None = None
+    loop: Any = None
+    rows: list[dict[str, Any]] | None = None
+    searches: dict[str, Any] | None = None
+
+
+# name, minimum, maximum of the integer fields every tuning config has.
+_LOOP_INTS = (
+    ("iters", 1, None),
+    ("poses", 1, MAX_SAMPLES),
+    ("seed", 0, 2**32 - 1),
+    ("eval_poses", 1, MAX_SAMPLES),
+    ("validate_every", 1, None),
+    ("validation_poses", 1, MAX_SAMPLES),
+)
+
+
+def check_loop(config: Any) -> None:
+    """Check the loop fields every tuning config shares (``ValueError`` naming the field)."""
+    for name, minimum, maximum in _LOOP_INTS:
+        check_int(name, getattr(config, name), minimum, maximum)
+    check_number("learning_rate", config.learning_rate)
+    for name in ("temperature_start", "temperature_end"):
+        check_temperature(name, getattr(config, name))
+
+
+# ---------------------------------------------------------------- optimiser
+
+
+def optimizer(
+    learning_rate: float, iters: int, grad_clip: float = 1.0
+) -> optax.GradientTransformation:
+    """``clip_by_global_norm`` then Adam, its step cosine-decayed to a tenth.
+
+    Large steps while the temperature is high and the landscape smooth, small
+    ones once it is close to the hard law.
+    """
+    schedule = optax.cosine_decay_schedule(learning_rate, iters, alpha=0.1)
+    return optax.chain(optax.clip_by_global_norm(grad_clip), optax.adam(schedule))
+
+
+def anneal(start: float, end: float, iteration: int, iters: int) -> float:
+    """The smooth law's temperature, geometric: ``start`` at 0, ``end`` at ``iters − 1``."""
+    frac = iteration / max(iters - 1, 1)
+    return start * (end / start) ** frac
+
+
+def _train_step(z, opt_state, batch, temperature, consts, *, loss, hyper):
+    value, grad = loss(z, batch, temperature, consts)
+    update = optimizer(hyper.learning_rate, hyper.iters, hyper.grad_clip).update
+    updates, opt_state = update(grad, opt_state, z)
+    # Feasibility needs no projection: every z maps into the feasible set.
+    return optax.apply_updates(z, updates), opt_state, value
+
+
+# ``train_step(z, opt_state, batch, temperature, consts, loss=, hyper=)``:
+# one compiled optimiser step of any problem, ``(z, opt_state, loss)``.
+train_step = loops.jit_top_level(_train_step, static_argnames=("loss", "hyper"))
+
+
+# How much lower an earlier iterate must score than the last to replace it:
+# the validation poses are a sample, and the last iterate, annealed to the
+# coldest temperature, is what the method aims at. On the paper robot the
+# iterates of the last hundred iterations score within 0.2 % of each other;
+# where the smooth loss climbs (a slow, wide robot) the last scores 2-3x the best.
+BEST_MARGIN = 0.01
+
+
+def best_iteration(validated: Any, margin: float = BEST_MARGIN) -> int:
+    """The iterate to keep, from ``(iteration, score)`` pairs in order (the last one last).
+
+    The last iterate, unless an earlier one scores lower by more than
+    ``margin`` (relative); then the lowest score, the later of equal ones.
+    """
+    validated = [(int(i), float(v)) for i, v in validated]
+    last, last_score = validated[-1]
+    lowest = min(score for _, score in validated)
+    if last_score <= lowest * (1.0 + margin):
+        return last
+    return max(i for i, score in validated if score == lowest)
+
+
+# ---------------------------------------------------------------- the loop
+
+
+def start_state(problem: TrainingProblem, run: str = "") -> TrainState:
+    """The state before the first iteration: the problem's start, Adam at rest."""
+    hyper = problem.hyper
+    opt_state = optimizer(hyper.learning_rate, hyper.iters, hyper.grad_clip).init(problem.z0)
+    start = problem.row(problem.z0)
+    return TrainState(0, problem.z0, opt_state, (), (), (), 0.0, run, (), start)
+
+
+def _scored(problem: TrainingProblem, state: TrainState) -> TrainState:
+    """``state`` with its current iterate's validation score appended."""
+    row = state.gains[-1] if state.iteration else state.start
+    score = problem.score(problem.from_row(row))
+    return state._replace(validated=state.validated + ((state.iteration, score),))
+
+
+def iterate(
+    problem: TrainingProblem, state: TrainState, progress_fn: Callable | None = None
+) -> TrainState:
+    """Run the iterations from ``state.iteration`` to ``hyper.iters``, scoring every few."""
+    dtype, iters = float_dtype(), problem.hyper.iters
+    if state.iteration == 0 and not state.validated:
+        began = time.perf_counter()
+        state = _scored(problem, state)
+        state = state._replace(elapsed_s=state.elapsed_s + time.perf_counter() - began)
+    for iteration in range(state.iteration, iters):
+        began = time.perf_counter()
+        temperature = anneal(problem.temperature_start, problem.temperature_end, iteration, iters)
+        z, opt_state, loss = train_step(
+            state.z,
+            state.opt_state,
+            problem.batch(iteration),
+            jnp.asarray(temperature, dtype),
+            problem.consts,
+            loss=problem.loss,
+            hyper=problem.hyper,
+        )
+        state = state._replace(
+            iteration=iteration + 1,
+            z=z,
+            opt_state=opt_state,
+            losses=state.losses + (float(loss),),
+            temperatures=state.temperatures + (temperature,),
+            gains=state.gains + (problem.row(z),),
+        )
+        if state.iteration % problem.validate_every == 0 or state.iteration == iters:
+            state = _scored(problem, state)
+        state = state._replace(elapsed_s=state.elapsed_s + time.perf_counter() - began)
+        if progress_fn is not None:
+            progress_fn(state)
+    return state
+
+
+def fit(
+    problem: TrainingProblem, run: str, state: TrainState | None = None, progress_fn: Any = None
+) -> tuple[Any, int, dict[str, np.ndarray], TrainState]:
+    """Train ``problem`` from ``state`` (default its start) to its last iteration.
+
+    ``run``: the run's identity (``run_text``), which ``state`` must share.
+    Returns ``(parameters kept, their iteration, history, last state)``.
+
+    Raises:
+        ValueError: for a state of another run or problem, or of no iteration.
+    """
+    state = start_state(problem, run) if state is None else own_state(state, problem, run)
+    state = iterate(problem, state, progress_fn)
+    if not state.gains:
+        raise ValueError("state holds no iteration; allowed: a state after at least one")
+    if not state.validated or state.validated[-1][0] != state.iteration:
+        # A state handed in after its last iteration, not scored there yet.
+        state = _scored(problem, state)
+    best = best_iteration(state.validated)
+    history = {
+        "loss": np.asarray(state.losses),
+        "temperature": np.asarray(state.temperatures),
+        "gains": np.asarray(state.gains).reshape(len(state.gains), -1),
+        "validated_at": np.asarray([i for i, _ in state.validated], dtype=int),
+        "validation": np.asarray([v for _, v in state.validated], dtype=float),
+    }
+    return problem.from_row(state.gains[best - 1] if best else state.start), best, history, state
+
+
+def verdict(result: TuneResult, validation_poses: int) -> dict[str, Any]:
+    """The iterate kept, its validation scores and the baseline note, JSON-ready (result files)."""
+    return {
+        "best_iteration": result.best_iteration,
+        "validation": {
+            "poses": validation_poses,
+            "scored_at": [int(i) for i in result.history["validated_at"]],
+            "score_s": [float(v) for v in result.history["validation"]],
+        },
+        "no_better_than_baseline": result.note is not None,
+        "note": result.note,
+    }
+
+
+# ---------------------------------------------------------------- identity and state files
+
+
+def run_text(config: Any, robot: Robot) -> str:
+    """The identity of a run as canonical JSON text: settings, robot, code version."""
+    robot_values = {f.name: float(getattr(robot, f.name)) for f in dataclasses.fields(Robot)}
+    identity = {"config": config.as_dict(), "robot": robot_values, "code": code_version()}
+    return json.dumps(identity, sort_keys=True)
+
+
+def differences(saved: dict[str, Any], now: dict[str, Any]) -> str:
+    """Name what differs between two run identities: settings, the robot, the code."""
+    there, here = saved.get("config", {}), now["config"]
+    if not isinstance(there, dict):
+        there = {}
+    diffs = [
+        f"{key} = {there.get(key)!r} there, {here.get(key)!r} now"
+        for key in dict.fromkeys([*here, *there])
+        if there.get(key) != here.get(key)
+    ]
+    if saved.get("robot") != now.get("robot"):
+        diffs.append("the robot differs")
+    if saved.get("code") != now.get("code"):
+        diffs.append(f"computed by wmr_jax {saved.get('code')}, this is {now.get('code')}")
+    return "; ".join(diffs) or "the format differs"
+
+
+def own_state(state: Any, problem: TrainingProblem, run: str) -> TrainState:
+    """``state`` if it can continue the run ``run`` of ``problem``, else say why not."""
+    if not isinstance(state, TrainState):
+        raise ValueError(
+            f"state = {state!r:.80} is not allowed; allowed: a TrainState (init_state, or "
+            "one handed to progress_fn)"
+        )
+    dim = np.shape(problem.z0)
+    if np.shape(state.z) != dim:
+        raise ValueError(
+            f"state holds {np.shape(state.z)} logits; allowed: {dim}, those of the "
+            f"{problem.name!r} problem of config"
+        )
+    if not state.start:  # built by hand: the start is this run's
+        state = state._replace(start=problem.row(problem.z0))
+    if state.run and state.run != run:
+        raise ValueError(
+            f"state is of another run ({differences(json.loads(state.run), json.loads(run))}); "
+            "allowed: a state of this config and robot"
+        )
+    if not 0 <= state.iteration <= problem.hyper.iters:
+        raise ValueError(
+            f"state.iteration = {state.iteration!r} is not allowed; "
+            f"allowed: 0 to iters = {problem.hyper.iters}"
+        )
+    return state
+
+
+def state_arrays(state: TrainState) -> dict[str, np.ndarray]:
+    """Return ``state`` as named NumPy arrays, exactly (for a checkpoint file)."""
+    leaves = jax.tree.leaves(state.opt_state)
+    return {
+        "iteration": np.asarray(state.iteration),
+        "z": np.asarray(state.z),
+        "losses": np.asarray(state.losses, dtype=float),
+        "temperatures": np.asarray(state.temperatures, dtype=float),
+        "gains": np.asarray(state.gains, dtype=float) if state.gains else np.zeros((0, 0)),
+        "elapsed_s": np.asarray(state.elapsed_s, dtype=float),
+        "validated": np.asarray(state.validated, dtype=float).reshape(-1, 2),
+        "start": np.asarray(state.start, dtype=float),
+        **{f"opt_{i}": np.asarray(leaf) for i, leaf in enumerate(leaves)},
+    }
+
+
+def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainState:
+    """Rebuild the state of ``state_arrays`` in the structure of ``fresh`` (``init_state``).
+
+    A saved state is never trusted: non-finite values, disagreeing counts or
+    lengths, and rows not as long as ``fresh``'s start are refused in one
+    line (``ValueError``).
+    """
+    leaves, treedef = jax.tree.flatten(fresh.opt_state)
+    try:
+        restored = [
+            jnp.asarray(arrays[f"opt_{i}"], dtype=jnp.asarray(leaf).dtype).reshape(jnp.shape(leaf))
+            for i, leaf in enumerate(leaves)
+        ]
+        gains = np.asarray(arrays["gains"], dtype=float)
+        iteration = np.asarray(arrays["iteration"])
+        if iteration.shape != () or iteration.dtype.kind not in "iu":
+            raise ValueError(f"iteration = {iteration!r} is not a whole number")
+        state = TrainState(
+            iteration=int(iteration),
+            z=jnp.asarray(arrays["z"], dtype=fresh.z.dtype).reshape(fresh.z.shape),
+            opt_state=jax.tree.unflatten(treedef, restored),
+            losses=tuple(float(x) for x in arrays["losses"]),
+            temperatures=tuple(float(x) for x in arrays["temperatures"]),
+            gains=tuple(tuple(float(x) for x in row) for row in gains.reshape(-1, gains.shape[-1]))
+            if gains.size
+            else (),
+            elapsed_s=float(arrays["elapsed_s"]),
+            run=fresh.run,
+            validated=tuple(
+                (int(i), float(v)) for i, v in np.asarray(arrays["validated"], float).reshape(-1, 2)
+            ),
+            start=tuple(float(x) for x in np.asarray(arrays["start"], float).reshape(-1)),
+        )
+    except (KeyError, TypeError, ValueError, IndexError) as err:
+        # IndexError: an array of no axes where rows were saved.
+        raise ValueError(f"the saved state is incomplete ({type(err).__name__}: {err})") from None
+    lengths = {len(state.losses), len(state.temperatures), len(state.gains)}
+    if lengths != {state.iteration}:
+        raise ValueError(
+            f"the saved state is inconsistent: iteration {state.iteration} with histories of "
+            f"{len(state.losses)}, {len(state.temperatures)} and {len(state.gains)} rows"
+        )
+    temperatures = np.asarray(state.temperatures, dtype=float)
+    validated = np.asarray(state.validated, dtype=float).reshape(-1, 2)
+    values = [state.z, *restored, np.asarray(state.losses), gains, temperatures, validated]
+    values.append(np.asarray(state.start, dtype=float))
+    if not all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in values):
+        raise ValueError("the saved state holds non-finite values (NaN or inf)")
+    if not (np.all(temperatures > 0) and np.isfinite(state.elapsed_s) and state.elapsed_s >= 0):
+        raise ValueError(
+            "the saved state is inconsistent: its temperatures must be > 0 and its elapsed "
+            f"time finite and >= 0 (elapsed_s = {state.elapsed_s!r})"
+        )
+    # Every step count of the optimiser (Adam's, the schedule's) is the iteration.
+    counts = [int(leaf) for leaf in restored if leaf.ndim == 0 and leaf.dtype.kind in "iu"]
+    if any(count != state.iteration for count in counts):
+        raise ValueError(
+            f"the saved state is inconsistent: iteration {state.iteration} with optimiser "
+            f"step counts {counts}"
+        )
+    at = [i for i, _ in state.validated]
+    if at != sorted(set(at)) or any(not 0 <= i <= state.iteration for i in at):
+        raise ValueError(
+            f"the saved state is inconsistent: validation scores at iterations {at} "
+            f"after {state.iteration}"
+        )
+    if state.start != fresh.start:
+        raise ValueError("the saved state is inconsistent: its start is not this run's")
+    if state.gains and gains.shape[-1] != len(fresh.start):
+        raise ValueError(
+            f"the saved state is inconsistent: rows of {gains.shape[-1]} parameters; "
+            f"allowed: {len(fresh.start)}, the problem's columns"
+        )
+    return state
