@@ -269,14 +269,8 @@ def _is_number(value: Any) -> bool:
 def robot_from_values(values: Any, where: str) -> Robot:
     """Return the ``Robot`` of ``{field: number}`` (a subset; the rest keep the paper's values).
 
-    Args:
-        values: the parsed object (a JSON object of ``Robot`` fields).
-        where: what the values came from, first in every message (a file name).
-
-    Raises:
-        ValueError: one line naming ``where``, the key, its value and what is
-            allowed: an unknown key, a value that is no finite number, or one
-            out of range.
+    ``where`` (a file name) opens every message: one line naming the key,
+    its value and what is allowed.
     """
     if not isinstance(values, Mapping):
         raise ValueError(
@@ -340,14 +334,11 @@ class LoadedRobot(NamedTuple):
     Attributes:
         robot: the checked ``Robot``.
         label: the preset name or the file's path.
-        note: one line saying which fields of a ROS YAML were used (and into
-            which ``Robot`` fields) and which ignored; ``None`` for presets
-            and JSON.
-        accelerations: the YAML's acceleration limits as read,
-            ``{"linear.x.max_acceleration": cm/s²,
-            "angular.z.max_acceleration": rad/s²}`` (those given and switched
-            on); they are the robot's ``accel_max`` and ``angular_accel_max``.
-            ``None`` for presets and JSON.
+        note: which fields of a ROS YAML were used and which ignored, one
+            line (an identified robot's too); else ``None``.
+        accelerations: the YAML's acceleration limits given and switched on,
+            ``{"linear.x.max_acceleration": cm/s², "angular.z.max_acceleration":
+            rad/s²}``; else ``None``.
     """
 
     robot: Robot

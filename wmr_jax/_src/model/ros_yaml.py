@@ -110,16 +110,24 @@ def _positive(
     return float(value)
 
 
-def _limited(params: dict[str, Any], axis: str, where: str, kind: str = "velocity") -> bool:
-    """Whether the file enables the ``kind`` limit of ``axis`` (``has_velocity_limits``, ...).
+def _axis_limit(params: dict, axis: str, kind: str, unit: str, where: str, used: list) -> Any:
+    """The ``{axis}.max_{kind}`` limit given and switched on (file's unit), else ``None``.
 
-    Without the flag, a limit given is a limit, as recent ros2_controllers
-    read it (they dropped the flags; ``.nan`` is no limit there).
+    Without the ``has_{kind}_limits`` flag a limit given is a limit, as recent
+    ros2_controllers read it. The keys read are appended to ``used``.
     """
-    key = f"{axis}.has_{kind}_limits"
-    value = params.get(key, True)
-    if not isinstance(value, bool):
-        raise ValueError(f"{where}: {key} = {value!r:.40} is not allowed; allowed: true or false")
+    flag, key = f"{axis}.has_{kind}_limits", f"{axis}.max_{kind}"
+    enabled = params.get(flag, True)
+    if not isinstance(enabled, bool):
+        raise ValueError(
+            f"{where}: {flag} = {enabled!r:.40} is not allowed; allowed: true or false"
+        )
+    if flag in params:
+        used.append(flag)
+    value = _positive(params, key, unit, where, limit=True)
+    if value is None or not enabled:
+        return None
+    used.append(key)
     return value
 
 
@@ -202,18 +210,12 @@ def robot_from_ros_yaml(content: str, where: str) -> tuple[Robot, str, dict[str,
 
     half_track = values.get("half_track", float(Robot().half_track))
     speeds = []
-    for axis, key, unit, to_rim in (
-        ("linear.x", "linear.x.max_velocity", "m/s", _centi),  # m/s -> cm/s
-        # rad/s -> cm/s at the rim, turning in place: ω L.
-        ("angular.z", "angular.z.max_velocity", "rad/s", lambda w: w * half_track),
+    for axis, unit, to_rim in (
+        ("linear.x", "m/s", _centi),  # m/s -> cm/s
+        ("angular.z", "rad/s", lambda w: w * half_track),  # at the rim, turning in place
     ):
-        flag = f"{axis}.has_velocity_limits"
-        limited = _limited(params, axis, where)
-        if flag in params:
-            used.append(flag)
-        value = _positive(params, key, unit, where, limit=True)
-        if value is not None and limited:
-            used.append(key)
+        value = _axis_limit(params, axis, "velocity", unit, where, used)
+        if value is not None:
             speeds.append(to_rim(value))
     if speeds:
         # The rim must reach either limit: it is at least the larger.
@@ -228,14 +230,9 @@ def robot_from_ros_yaml(content: str, where: str) -> tuple[Robot, str, dict[str,
         ("linear.x", "accel_max", "m/s^2", _centi),  # m/s² -> cm/s²
         ("angular.z", "angular_accel_max", "rad/s^2", float),
     ):
-        flag, key = f"{axis}.has_acceleration_limits", f"{axis}.max_acceleration"
-        limited = _limited(params, axis, where, "acceleration")
-        if flag in params:
-            used.append(flag)
-        value = _positive(params, key, unit, where, limit=True)
-        if value is not None and limited:
-            used.append(key)
-            accelerations[key] = values[field] = convert(value)
+        value = _axis_limit(params, axis, "acceleration", unit, where, used)
+        if value is not None:
+            accelerations[f"{axis}.max_acceleration"] = values[field] = convert(value)
             shown.append(f"{field} {values[field]:.6g} {_UNIT[field]}")
 
     missing = [key for key in _BLOCK_KEYS if key not in used]
