@@ -474,10 +474,3 @@ class EntryJit:
         if traced:
             return self.nested(*args, **kwargs)
         return self.top(*args, **_untraced(kwargs))
-
-    def lower(self, *args: Any, **kwargs: Any) -> Any:
-        """Lower the top-level version (for inspecting the compiled program)."""
-        return self.top.lower(*args, **_untraced(kwargs))
-
-    def _cache_size(self) -> int:
-        return self.top._cache_size() + self.nested._cache_size()
