@@ -59,7 +59,7 @@ def _split(x, y, theta):
 def test_the_measured_pose_is_the_pose_plus_noise():
     x, y, theta = 3.0, -4.0, 2.9
     noise = jnp.asarray([0.25, -0.5, 0.4])
-    m = d.measured(_split(x, y, theta), noise)
+    m = d.measurement(_split(x, y, theta), noise).pose()
     assert complex(m.position) == pytest.approx(complex(3.25, -4.5), abs=1e-12)
     assert complex(m.heading) == pytest.approx(cmath.exp(1j * 3.3), abs=1e-12)
     assert float(m.theta) == pytest.approx(3.3, abs=1e-12)
@@ -72,7 +72,7 @@ def test_the_measured_pose_is_the_pose_plus_noise():
 
 def test_with_zero_noise_the_measured_pose_is_the_pose_exactly():
     pose = _split(1 / 3, 2 / 7, 0.1 + 0.2)
-    m = d.measured(pose, jnp.zeros(3))
+    m = d.measurement(pose, jnp.zeros(3)).pose()
     assert complex(m.position) == complex(1 / 3, 2 / 7)
     assert complex(m.heading) == complex(pose.heading)
     assert float(m.theta) == 0.1 + 0.2

@@ -2,16 +2,9 @@
 
 ``docs/model.md §4``: the ideal loop integrates each held ``(v, ω)`` exactly
 (``arc_step``); the non-ideal loop runs a computed-torque wheel-speed loop on
-the Euler–Lagrange dynamics of Eq. 5 with wheel limits (``advance``).
-
-These are the pure primitives the rollouts are built of, the same functions
-called with values or inside ``jit``, ``grad`` and ``vmap``: they check
-nothing. A ``(2,)`` pose is read as JAX indexes it, a negative period runs
-backwards, and ``sin_cos`` is accurate for angles up to about 1e5 rad
-(float32). Check your inputs (``check_stability`` tells whether the wheel
-loop's sub-steps are short enough for a robot and period), or use the entry
-points (``wmr_jax.rollout``, ``batch_rollout``, ``final_poses``), which check
-theirs on the host before tracing.
+the dynamics of Eq. 5 (``advance``). These pure primitives check nothing
+(``check_stability`` tells whether the sub-steps are short enough); the
+entry points (``wmr_jax.rollout``, ...) check their inputs before tracing.
 """
 
 from wmr_jax._src.model.dynamics import RobotState as RobotState

@@ -1,8 +1,7 @@
 """Output files: atomic writes, and checksummed array files for chunks and checkpoints.
 
-A crash or a kill never leaves a half-written result (every write goes
-through a temporary file and a rename), and a results file that was damaged
-or edited afterwards is detected by its checksum, never trusted.
+A kill never leaves a half-written result (a temporary file and a rename),
+and a results file damaged or edited afterwards fails its checksum.
 """
 
 from __future__ import annotations
@@ -37,11 +36,7 @@ __all__ = [
 
 
 def _write_atomically(path: str | os.PathLike, write: Callable[[Any], None]) -> Path:
-    """Call ``write(file)`` on a temporary file beside ``path``, then rename it over ``path``.
-
-    A kill at any moment leaves either the old file or the new one, never a
-    half-written one; the temporary file is removed if ``write`` fails.
-    """
+    """Call ``write(file)`` on a temporary file beside ``path``, then rename it over ``path``."""
     if not isinstance(path, (str, os.PathLike)) or str(path) in ("", "."):
         raise ValueError(f"path = {path!r} is not allowed; allowed: a file path")
     path = Path(path)
@@ -66,11 +61,7 @@ def _write_atomically(path: str | os.PathLike, write: Callable[[Any], None]) -> 
 
 
 def json_object_once(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    """``json.loads``'s ``object_pairs_hook`` that refuses a key given twice.
-
-    ``json`` keeps the last of a repeated key without a word; in a file of
-    parameters edited by hand that hides a typo.
-    """
+    """``json.loads``'s ``object_pairs_hook`` that refuses a key given twice."""
     out: dict[str, Any] = {}
     for key, value in pairs:
         if key in out:
@@ -123,8 +114,6 @@ def _jsonable(obj: Any) -> Any:
 def atomic_write_json(path: str | os.PathLike, obj: Any) -> Path:
     """Write ``obj`` as indented JSON atomically; ``inf`` and NaN become "inf" and "nan".
 
-    (JSON has no literal for them; the report tables read these strings back.)
-
     Raises:
         ValueError: ``obj`` holds a value JSON cannot store (nothing is written).
     """
@@ -151,8 +140,7 @@ def save_figure(fig: Any, path: str | os.PathLike, **kwargs: Any) -> Path:
     """Render a matplotlib figure to ``path`` atomically (format from the suffix).
 
     Raises:
-        ValueError: ``path`` does not end in an image format matplotlib can
-            write (``.png``, ``.pdf``, ``.svg``, ...), naming it.
+        ValueError: ``path`` does not end in an image format matplotlib can write.
     """
     canvas = getattr(fig, "canvas", None)
     if not hasattr(canvas, "get_supported_filetypes"):
@@ -220,14 +208,10 @@ def _checked_arrays(arrays: Any) -> dict[str, np.ndarray]:
 def save_arrays(path: str | os.PathLike, arrays: dict[str, Any], meta: dict[str, Any]) -> Path:
     """Write arrays and a JSON-able ``meta`` dict as a checksummed ``.npz``, atomically.
 
-    ``load_arrays`` refuses the file if any byte of the arrays or the meta
-    data changed since, so a damaged or edited file is never trusted.
-
     Raises:
         ValueError: before anything is written, for ``arrays`` not a mapping
-            of str names to numeric, bool or string arrays (an object array,
-            ``None`` or a dict cannot be stored without pickle), a reserved
-            name (``__meta__``, ``__sha256__``), or a ``meta`` JSON cannot store.
+            of str names to numeric, bool or string arrays, a reserved name,
+            or a ``meta`` JSON cannot store.
     """
     arrays = _checked_arrays(arrays)
     meta_text = json_text(meta, "meta", sort_keys=True)
@@ -250,8 +234,7 @@ def load_arrays(path: str | os.PathLike) -> tuple[dict[str, np.ndarray], dict[st
         raise DamagedFileError(f"{path} is a folder; allowed: a file written by save_arrays")
     try:
         with open(path, "rb") as f:
-            # NumPy reads anything that is not a zip archive as a pickle, and
-            # then blames "pickled data" for what is simply another kind of file.
+            # NumPy would read anything but a zip archive as a pickle.
             start = f.read(4)
             if not start:
                 raise DamagedFileError(f"{path} is damaged (it is empty)")
@@ -287,9 +270,7 @@ def _record_digest(record: dict[str, Any]) -> str:
 def sealed(record: Mapping[str, Any]) -> dict[str, Any]:
     """``record`` as it reads back from JSON, with a ``"sha256"`` of its content added.
 
-    For the JSON results a resumed run keeps (a tuning comparison's rows):
-    ``unsealed`` then refuses a record whose values were changed after it
-    was written, as ``load_arrays`` does for array files.
+    ``unsealed`` refuses a record changed after it was written.
 
     Raises:
         ValueError: ``record`` is not a mapping of str keys without
@@ -306,13 +287,8 @@ def sealed(record: Mapping[str, Any]) -> dict[str, Any]:
 def unsealed(record: Any, where: str) -> dict[str, Any]:
     """The content of a record ``sealed`` wrote, checked against its ``"sha256"``.
 
-    Args:
-        record: the record as read from the file.
-        where: what it is (the file and the row), for the message.
-
     Raises:
-        DamagedFileError: ``record`` has no checksum, or one its content does
-            not match (one line, naming ``where``).
+        DamagedFileError: no checksum, or one the content does not match (naming ``where``).
     """
     if not isinstance(record, dict) or not isinstance(record.get(_SEAL), str):
         raise DamagedFileError(
@@ -337,9 +313,8 @@ def unsealed(record: Any, where: str) -> dict[str, Any]:
 def writable_path(shown: str, value: Any, *, folder: bool) -> Path:
     """Return ``value`` as a path to write (a folder or a file), or say why not.
 
-    Tried at once, before any work, and nothing is created: a file is written
-    in (and removed from) the deepest folder of the path that exists.
-    ``shown`` introduces the value in messages (``"out = '/x'"``, ``"--out '/x'"``).
+    Tried before any work by a temporary file in the deepest existing folder.
+    ``shown`` introduces the value in messages (``"out = '/x'"``).
     """
     text = os.fspath(value) if isinstance(value, (str, os.PathLike)) else ""
     if not text:  # Path("") is the current folder

@@ -1,12 +1,9 @@
 """Which code computed a result: the package version and a digest of its source.
 
-Caches (sweep chunks, tuning checkpoints, tuning comparisons) record
-``code_version()`` beside their settings and are reused only by the same
-code: a change to the law, a loop, an estimator or the tuner, even between
-two installs of one version number, recomputes instead of mixing results of
-two models. The digest covers every module under ``wmr_jax/_src`` but the
-command line and the figures (``cli/``, ``report/``), which compute nothing
-that is cached.
+Caches record ``code_version()`` beside their settings and are reused only
+by the same code, even between two installs of one version number. The
+digest covers every module under ``wmr_jax/_src`` but ``cli/`` and
+``report/``, which compute nothing that is cached.
 """
 
 from __future__ import annotations

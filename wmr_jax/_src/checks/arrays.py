@@ -46,16 +46,8 @@ def field_values(
     """Return the numeric fields of a parameter dataclass as checked NumPy arrays.
 
     Every field not in ``skip`` must be a finite number, a scalar or with one
-    leading batch axis; tracers map to ``None`` (not checkable).
-
-    Args:
-        obj: the instance to check.
-        cls: the class it must be (``Gains``, ``Robot``, ...).
-        prefix: the argument's name in messages (``"gains"``, ``"robot"``).
-        skip: fields that are not numbers (static flags).
-
-    Raises:
-        ValueError: naming the field, its value and what is allowed.
+    leading batch axis; tracers map to ``None``. ``prefix`` names ``obj`` in
+    messages.
     """
     if not isinstance(obj, cls):
         raise ValueError(f"{prefix} is a {type(obj).__name__}; allowed: a wmr_jax.{cls.__name__}")
@@ -92,13 +84,7 @@ def field_values(
 
 
 def require_one_batch_size(sizes: dict[str, int]) -> int | None:
-    """Return the common batch size ``N`` of ``sizes`` (name → leading size), or ``None``.
-
-    An axis of size 1 is shared by every run.
-
-    Raises:
-        ValueError: listing the sizes when two of them, neither 1, differ.
-    """
+    """Return the common batch size ``N`` of ``sizes`` (name → size; 1 is shared), or ``None``."""
     if not sizes:
         return None
     n = max(sizes.values())
@@ -111,10 +97,8 @@ def require_one_batch_size(sizes: dict[str, int]) -> int | None:
 def batch_sizes(trees: dict[str, Any], poses: dict[str, Any] | None = None) -> dict[str, int]:
     """The leading size of every batched input, by name (``refs``, ``gains.kr``, ...).
 
-    Args:
-        trees: name → parameter tree (gains, robot, estimator), whose leaves
-            are scalars or ``(N,)``.
-        poses: name → poses, ``(3,)`` or ``(N, 3)``.
+    ``trees``: name → parameter tree, leaves scalars or ``(N,)``; ``poses``:
+    name → poses ``(3,)`` or ``(N, 3)``.
     """
     poses = poses or {}
     sizes = {name: np.shape(value)[0] for name, value in poses.items() if np.ndim(value) == 2}
@@ -126,11 +110,7 @@ def batch_sizes(trees: dict[str, Any], poses: dict[str, Any] | None = None) -> d
 
 
 def common_batch_size(trees: dict[str, Any], poses: dict[str, Any] | None = None) -> int:
-    """The batch size ``N`` shared by every batched input (``batch_sizes``); 1 if none is.
-
-    Raises:
-        ValueError: naming each size, when two of them, neither 1, differ.
-    """
+    """The batch size ``N`` shared by every batched input (``batch_sizes``); 1 if none is."""
     return require_one_batch_size(batch_sizes(trees, poses)) or 1
 
 
@@ -176,15 +156,12 @@ def _float_limits(dtype: np.dtype) -> tuple[float, float]:
 def require_representable(name: str, value: np.ndarray, *, tiny_ok: bool = False) -> None:
     """Raise unless ``value`` stays finite, and nonzero if it is, in the compute dtype.
 
-    A parameter below the dtype's smallest normal number (``1e-46`` in
-    float32) would become 0 or lose its precision there; ``tiny_ok`` allows
-    such values (data rather than parameters).
+    ``tiny_ok`` allows values below the smallest normal number (data, not parameters).
     """
     dtype = np.dtype(float_dtype())
     largest, tiny = _float_limits(dtype)
     if value.ndim == 0 and value.dtype.kind in "fiu":
-        # One number, as most parameters are: Python arithmetic, a tenth of
-        # the cost of the array path below (which gives the messages).
+        # One number: Python arithmetic, much cheaper than the array path.
         magnitude = abs(float(value))
         if magnitude <= largest and (tiny_ok or magnitude == 0 or magnitude >= tiny):
             return
@@ -222,20 +199,14 @@ class Parameters:
 def lists_to_arrays(params: Any) -> None:
     """Store the list or tuple fields of a frozen parameter dataclass as NumPy arrays.
 
-    Called from ``__post_init__``: a Python list would otherwise be a pytree
-    node with one leaf per element, not one batched field. Lists that are not
-    numbers stay as they are, for ``field_values`` to name.
+    A Python list would otherwise be a pytree node, not one batched field.
     """
     for field in dataclasses.fields(params):
         object.__setattr__(params, field.name, list_as_array(getattr(params, field.name)))
 
 
 def list_as_array(value: Any) -> Any:
-    """A list or tuple of numbers as one float NumPy array; anything else as it is.
-
-    Lists that are not numbers (bools, strings, ragged rows) stay as they
-    are, for the checks to name.
-    """
+    """A list or tuple of numbers as one float NumPy array; anything else as it is."""
     if not isinstance(value, (list, tuple)):
         return value
     try:
@@ -247,11 +218,7 @@ def list_as_array(value: Any) -> Any:
 
 
 def as_float_tree(tree: Any) -> Any:
-    """Convert every concrete leaf to an array of the default float dtype.
-
-    Python floats, NumPy scalars and arrays then all reach ``jit`` with one
-    signature, so changing a gain's type does not recompile.
-    """
+    """Convert every concrete leaf to the default float dtype: one ``jit`` signature for all."""
     dtype = float_dtype()
 
     def convert(leaf):
@@ -259,8 +226,7 @@ def as_float_tree(tree: Any) -> Any:
             return leaf
         if isinstance(leaf, jax.Array):
             return leaf if leaf.dtype == dtype else leaf.astype(dtype)
-        # Host values stay NumPy: jit transfers them with the call, which is
-        # much cheaper than one device transfer per leaf here.
+        # Host values stay NumPy: jit transfers them with the call, cheaper.
         return np.asarray(leaf, dtype)
 
     return jax.tree.map(convert, tree)

@@ -27,11 +27,7 @@ def as_poses(
         name: the argument's name, for error messages.
         value: a pose ``(3,)`` or, where ``batch`` allows, a batch ``(N, 3)``.
         batch: ``False`` for a single pose, ``True`` for ``(N, 3)``, ``None`` for either.
-        check_only: only check, return ``None`` (no converted copy is made
-            or placed on a device: for callers that read the poses themselves).
-
-    Raises:
-        ValueError: naming the argument, its shape or bad value, and what is allowed.
+        check_only: only check, return ``None`` (no converted copy is made).
     """
     if isinstance(value, jax.core.Tracer):
         return value
@@ -56,48 +52,30 @@ def as_poses(
     if len(shape) not in ok_ndim or shape[-1] != 3 or (len(shape) == 2 and shape[0] == 0):
         raise ValueError(f"{name} has shape {shape}; allowed: {allowed} [x cm, y cm, theta rad]")
     limit = position_limit()
-    if arr is not None:
-        # Concrete, but maybe closed over by a caller's jit: check it eagerly,
-        # as one program (op by op, each of them compiled for each new shape).
-        with jax.ensure_compile_time_eval():
-            flags, reduced = _device_pose_checks(arr, limit)
-            finite, spun, too_far = (bool(f) for f in flags)
-    else:
-        finite = bool(np.isfinite(host).all())
-    if not finite:
-        _raise_row(
-            name,
-            shape,
-            arr,
-            host,
-            lambda rows: ~np.isfinite(rows),
-            "is not finite; allowed: finite numbers",
-        )
-    if arr is None:
-        spun = bool(np.any(np.abs(host[..., 2]) > MAX_HEADING))
-    if spun:
-        _raise_row(
-            name,
-            shape,
-            arr,
-            host,
-            lambda rows: np.abs(rows[:, 2:]) > MAX_HEADING,
+    dtype = np.dtype(float_dtype()).name
+    problems = (
+        (lambda rows: ~np.isfinite(rows), "is not finite; allowed: finite numbers"),
+        (
+            lambda rows: np.abs(rows[..., 2:]) > MAX_HEADING,
             f"has a heading beyond {MAX_HEADING:.0e} rad, where float64 no longer holds "
             "the angle modulo 2π; allowed: |theta| <= 1e+12 rad",
-        )
-    if arr is None:
-        too_far = bool(np.any(np.abs(host[..., :2]) > limit))
-    if too_far:
-        dtype = np.dtype(float_dtype()).name
-        _raise_row(
-            name,
-            shape,
-            arr,
-            host,
-            lambda rows: np.abs(rows[:, :2]) > limit,
+        ),
+        (
+            lambda rows: np.abs(rows[..., :2]) > limit,
             f"is too far for {dtype}; allowed: |x|, |y| <= {limit:.0e} cm (squared distances "
             f"must stay finite){_FLOAT64_HINT if dtype != 'float64' else ''}",
-        )
+        ),
+    )
+    if arr is not None:
+        # Maybe closed over by a caller's jit: checked eagerly, as one program.
+        with jax.ensure_compile_time_eval():
+            flags, reduced = _device_pose_checks(arr, limit)
+            flags = [bool(f) for f in flags]
+    else:
+        flags = [bool(np.any(bad(host))) for bad, _ in problems]
+    for flag, (bad, message) in zip(flags, problems, strict=True):
+        if flag:
+            _raise_row(name, shape, arr, host, bad, message)
     if arr is not None:
         return None if check_only else reduced
     if check_only:
@@ -109,13 +87,9 @@ def as_poses(
 
 @jax.jit
 def _device_pose_checks(arr: jax.Array, limit: Any) -> tuple[tuple[jax.Array, ...], jax.Array]:
-    """``as_poses``'s checks of a device array, and the array with its headings reduced.
-
-    ``((all finite, any heading beyond MAX_HEADING, any |x|, |y| beyond
-    limit), reduced array)``.
-    """
+    """Whether each check of ``as_poses`` fails on a device array; the array, headings reduced."""
     flags = (
-        jnp.all(jnp.isfinite(arr)),
+        ~jnp.all(jnp.isfinite(arr)),
         jnp.any(jnp.abs(arr[..., 2]) > MAX_HEADING),
         jnp.any(jnp.abs(arr[..., :2]) > limit),
     )
@@ -130,9 +104,8 @@ def _raise_row(name, shape, arr, host, bad, message: str):
     raise ValueError(f"{where} = {flat[row].tolist()} {message}")
 
 
-# Headings beyond this many radians are reduced modulo 2π on the way in (in
-# float64 on the host): the fast sine and cosine of the rollouts are accurate
-# only up to about 1e5 rad in float32. Smaller headings are kept as given.
+# Headings beyond this many radians are reduced modulo 2π on the way in: the
+# rollouts' fast sine and cosine hold up to about 1e5 rad in float32.
 HEADING_REDUCE_ABOVE = 1e4
 # Beyond this a float64 heading is a multiple of 2π only to ±1e-4 rad and worse.
 MAX_HEADING = 1e12
@@ -151,8 +124,7 @@ def position_limit(dtype: Any = None) -> float:
     """Return the largest ``|x|``, ``|y|`` (cm) a pose may have in ``dtype`` (default: compute).
 
     Squared distances must stay finite: ``(2 limit)² · 2`` below the dtype's
-    largest number, rounded down to a power of ten (1e18 cm in float32,
-    1e153 cm in float64).
+    largest number, rounded down to a power of ten.
     """
     largest = float(np.finfo(np.dtype(float_dtype() if dtype is None else dtype)).max)
     return float(10.0 ** math.floor(math.log10(math.sqrt(largest / 8))))
@@ -161,8 +133,7 @@ def position_limit(dtype: Any = None) -> float:
 def as_pose_array(name: str, value: Any) -> Any:
     """Return ``value`` as checked float poses of any batch shape ``(..., 3)`` (tracers pass).
 
-    The same checks as ``as_poses`` (finite, within the dtype's range, huge
-    headings reduced), for functions that broadcast poses against each other.
+    The checks of ``as_poses``, for functions that broadcast poses.
     """
     if is_traced(value):
         return value

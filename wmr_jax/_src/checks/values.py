@@ -16,9 +16,7 @@ import numpy as np
 
 MAX_STEPS = 2**31 - 1  # a scan's length is an int32
 MAX_TEMPERATURE = 10.0
-# At 1e-12 the relaxed law is the hard one except within ~1e-10 of a switch
-# (in its dimensionless arguments); far below, those arguments divided by the
-# temperature would leave the float32 range.
+# Far below, the relaxed switches' arguments would leave the float32 range.
 MIN_TEMPERATURE = 1e-12
 _FLOAT64_HINT = ", or float64 (jax.config.update('jax_enable_x64', True))"
 
@@ -35,14 +33,7 @@ def is_traced(tree: Any) -> bool:
 
 
 def require_concrete(function: str, *trees: Any) -> None:
-    """Refuse a traced argument of a ``function`` that computes on the host with values.
-
-    Such a function called inside ``jax.jit``, ``vmap`` or ``grad`` would
-    fail converting a tracer to NumPy, in JAX's words, several lines long.
-
-    Raises:
-        ValueError: one line naming ``function`` and what to do instead.
-    """
+    """Refuse a traced argument of a ``function`` that computes on the host with values."""
     if is_traced(trees):
         raise ValueError(
             f"{function} is called with traced values (inside jax.jit, vmap or grad); allowed: "
@@ -54,10 +45,7 @@ def require_concrete(function: str, *trees: Any) -> None:
 def array_kind(value: Any) -> str:
     """Return the dtype kind NumPy gives ``value``, ``"b"`` if any element is a bool.
 
-    ``np.asarray([30, 30, True])`` is an integer array: the bool is read as 1
-    and no longer seen. A list (nested or not), or an object array, holding a
-    bool among numbers is therefore reported as kind ``"b"``, so that the
-    checks refuse it as they refuse an array of bools.
+    ``np.asarray([30, 30, True])`` is an integer array, the bool no longer seen.
     """
     kind = np.asarray(value).dtype.kind
     if kind in "iufO" and _holds_bool(value):
@@ -69,9 +57,8 @@ def real_array(name: str, value: Any, allowed: str) -> np.ndarray:
     """Return ``value`` as a float64 NumPy array if it holds real numbers only.
 
     Raises:
-        ValueError: ``"{name} = {value!r} is not allowed; allowed: {allowed}"`` for
-            ``None``, bools, strings, complex numbers or anything else NumPy
-            cannot read as real numbers.
+        ValueError: naming ``name`` and ``allowed``, for ``None``, bools,
+            strings, complex numbers or anything else.
     """
     try:
         if value is None or array_kind(value) not in "iuf":
@@ -83,11 +70,7 @@ def real_array(name: str, value: Any, allowed: str) -> np.ndarray:
 
 
 def described(value: Any) -> str:
-    """Return ``repr(value)`` on one line, or its type, shape and dtype if it is a large array.
-
-    An integer too large for any float is described by its size, not its
-    hundreds of digits.
-    """
+    """Return ``repr(value)`` on one line, or its type, shape and dtype if it is a large array."""
     if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 1024:
         return f"an integer of about {int(value.bit_length() * math.log10(2)) + 1} digits"
     shape, dtype = getattr(value, "shape", None), getattr(value, "dtype", None)
@@ -129,15 +112,8 @@ def check_int(name: str, value: Any, minimum: int = 1, maximum: int | None = Non
 def check_substeps(value: Any) -> int:
     """Return the non-ideal loop's ``substeps`` after checking it in the compute dtype.
 
-    Each sub-step adds its motion to the pose, and each addition rounds by up
-    to half an ulp of the pose; over ``substeps`` of them per period that
-    rounding grows with ``substeps · eps`` while the motion of a sub-step
-    shrinks. Beyond ``1 / (1000 eps)`` sub-steps (8388 in float32) the pose
-    loses a visible part of its motion (about 2e-3 cm per 0.7 s at 10⁴ in
-    float32, 3 cm at 10⁶), so they are refused.
-
-    Raises:
-        ValueError: for a non-integer, ``< 1`` or more than the dtype resolves.
+    Beyond ``1 / (1000 eps)`` sub-steps (8388 in float32) the rounding of
+    each addition to the pose swamps a visible part of the motion.
     """
     dtype = np.dtype(float_dtype())
     most = int(1 / (1000 * float(np.finfo(dtype).eps)))
@@ -166,10 +142,7 @@ def check_callable(name: str, value: Any) -> Any:
 
 
 def check_key(name: str, key: Any) -> Any:
-    """Return ``key`` if it is a ``jax.random`` key (new style, or a legacy ``uint32[2]``).
-
-    Traced keys pass (they were checked where they were made).
-    """
+    """Return ``key`` if it is a ``jax.random`` key (new style, or a legacy ``uint32[2]``)."""
     if is_traced(key):
         return key
     typed = isinstance(key, jax.Array) and jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)
@@ -195,12 +168,7 @@ def check_path(name: str, value: Any) -> Path:
 
 
 def check_folder(name: str, value: Any) -> Path:
-    """Return ``value`` as a folder this process can create or write in, checked now.
-
-    Raises:
-        ValueError: naming ``name``, for no path, a file, a path under a file,
-            or a place this process cannot write.
-    """
+    """Return ``value`` as a folder this process can create or write in, checked now."""
     from wmr_jax._src.io import writable_path
 
     return writable_path(f"{name} = {os.fspath(check_path(name, value))!r}", value, folder=True)
@@ -221,7 +189,6 @@ def check_number(
         ValueError: for a non-number, NaN or a value out of range.
     """
     try:
-        # A bool, a string or a complex number is not a number here, though
         # Python would read True as 1 and "0.5" as 0.5.
         if isinstance(value, (bool, np.bool_, str, bytes)) or np.iscomplexobj(value):
             raise TypeError(value)
@@ -242,8 +209,7 @@ def check_number(
 def check_temperature(name: str, value: Any) -> float:
     """Return a smooth-law temperature as a float in ``[MIN_TEMPERATURE, MAX_TEMPERATURE)``.
 
-    The relaxed switches act on dimensionless arguments of order one; far
-    above 1 the relaxation no longer resembles the law (docs/model.md §3).
+    Far above 1 the relaxation no longer resembles the law (docs/model.md §3).
     """
     return check_number(name, value, low=MIN_TEMPERATURE, closed=True, high=MAX_TEMPERATURE)
 
@@ -251,8 +217,7 @@ def check_temperature(name: str, value: Any) -> float:
 def check_dt(dt: Any) -> Any:
     """Return the control period ``dt`` as a float: finite, > 0, and so in the compute dtype.
 
-    A period the compute dtype rounds to zero or to infinity (``1e-46`` or
-    ``1e39`` s in float32) is refused here, not found after the run.
+    A period the compute dtype rounds to zero or infinity is refused here.
     """
     if isinstance(dt, jax.core.Tracer):
         return dt

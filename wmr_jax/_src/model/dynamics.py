@@ -1,20 +1,11 @@
 """Robot motion over one control period: the ideal velocity loop (docs/model.md §4).
 
-The controller is sampled: its command is held constant over each ``dt``
-(zero-order hold). With the ideal velocity controller the robot moves at the
-command at once, so the unicycle kinematics (Eq. 2) are integrated exactly over
-the interval: a circular arc, or a straight segment when ``ω = 0``.
-
-The arc has one home, ``arc_advance``, which works on the position as the
-complex number ``x + i y`` and the heading as the unit complex number
-``cos θ + i sin θ``: turning by an angle is then one complex product, and a
-rollout can carry the heading without a trigonometric call per step.
-``arc_step`` is the same arc on a pose ``[x, y, θ]``.
-
-``sin_cos`` is the cosine and sine used by the rollouts. XLA on the CPU
-evaluates ``jnp.sin``/``jnp.cos`` about ten times slower than a polynomial of
-the same accuracy (they do not vectorise well), and they were the largest
-single cost of a rollout step.
+The command is held over each ``dt`` and the ideal robot follows it at once,
+so the unicycle kinematics (Eq. 2) integrate exactly to an arc. The arc has
+one home, ``arc_advance``, on the position ``x + i y`` and the heading
+``cos θ + i sin θ`` as complex numbers (a turn is one product); ``arc_step``
+is the same arc on a pose. ``sin_cos`` is a polynomial cosine and sine, which
+XLA:CPU vectorises where ``jnp.sin``/``jnp.cos`` do not.
 """
 
 from __future__ import annotations
@@ -47,10 +38,8 @@ _NEAREST_EVEN = lax.RoundingMethod.TO_NEAREST_EVEN  # what jnp.round does
 # precision (the next term is u⁶/5040 < 1e-27), and sin(u)/u would lose digits.
 _SINC_SERIES_BELOW = 1e-3
 
-# π/2 split in three (Cody–Waite): the leading parts have enough trailing zero
-# bits that k·part is exact for |k| < 2^20 (float64) or 2^16 (float32), so the
-# reduced argument keeps full precision for |angle| up to about 1e6 rad
-# (float64) or 1e5 rad (float32). Rollout angles stay far below that.
+# π/2 split in three (Cody–Waite): k·part is exact for |k| < 2^20 (float64) or
+# 2^16 (float32), so the reduction is precise for |angle| up to 1e6 or 1e5 rad.
 _PIO2 = {
     np.dtype(np.float64): (
         1.57079632673412561417e00,
@@ -113,10 +102,8 @@ def initial_state(init: jax.Array) -> RobotState:
 def rate_limit(value: jax.Array, previous: jax.Array, rate: jax.Array, dt: jax.Array) -> jax.Array:
     """``value`` moved from ``previous`` by at most ``rate · dt`` (docs/model.md §4.2.2).
 
-    One axis of a speed limiter's acceleration limit. A ``rate`` of 0 means
-    no limit: ``value`` passes unchanged, bit for bit. Differentiable in all
-    four arguments: where the limit binds the result is ``previous ± rate dt``,
-    elsewhere ``value``.
+    One axis of a speed limiter; a ``rate`` of 0 is no limit (``value``
+    passes bit for bit). Differentiable in all four arguments.
     """
     step = jnp.where(rate > 0, rate * dt, jnp.inf)
     return jnp.clip(value, previous - step, previous + step)
@@ -132,11 +119,7 @@ def _polynomial(z: jax.Array, coefficients: tuple[float, ...]) -> jax.Array:
 
 
 def _constants(x: jax.Array) -> Callable:
-    """Scalar constants in ``x``'s dtype, weakly typed as ``x`` is.
-
-    Mixed with ``x`` in ``lax`` they act as Python numbers do in ``jnp``: a
-    result is weakly typed (takes a caller's dtype) only if ``x`` was.
-    """
+    """Scalar constants in ``x``'s dtype, weakly typed as ``x`` is (as numbers in ``jnp``)."""
     if x.weak_type:
         return lambda c: lax.full_like(x, c, shape=())
     return lambda c: np.asarray(c, x.dtype)
@@ -146,10 +129,8 @@ def _constants(x: jax.Array) -> Callable:
 def sin_cos(angle: jax.Array) -> tuple[jax.Array, jax.Array]:
     """Return ``(cos angle, sin angle)`` within an ulp or two, elementwise.
 
-    Cody–Waite reduction to ``r ∈ [−π/4, π/4]`` and ``angle = r + k π/2``,
-    minimax polynomials for ``cos r`` and ``sin r``, then the quadrant ``k``
-    permutes and negates them. Only float32 and float64 have coefficients;
-    other dtypes fall back to ``jnp.cos``/``jnp.sin``.
+    Cody–Waite reduction to ``r ∈ [−π/4, π/4]``, minimax polynomials, then
+    the quadrant; dtypes other than float32/float64 use ``jnp.cos``/``jnp.sin``.
 
     Args:
         angle: angle in rad, any shape; accurate for ``|angle|`` up to about
@@ -162,9 +143,7 @@ def sin_cos(angle: jax.Array) -> tuple[jax.Array, jax.Array]:
     dtype = np.dtype(angle.dtype)
     if dtype not in _PIO2:
         return jnp.cos(angle), jnp.sin(angle)
-    # Written in lax, each constant in the angle's dtype: the same operations
-    # as the jnp spelling, bit for bit, at half its cost to trace (the
-    # rollouts call this a dozen times per step they trace).
+    # In lax: the jnp spelling's operations bit for bit, at half its cost to trace.
     const = _constants(angle)
     p1, p2, p3 = (const(p) for p in _PIO2[dtype])
     k = lax.round(lax.mul(angle, const(2 / np.pi)), _NEAREST_EVEN)
@@ -204,9 +183,7 @@ _SIN_TAYLOR = {
 def sin_small(angle: jax.Array) -> jax.Array:
     """Return ``sin angle`` for ``|angle| ≤ π/2``, by its Taylor series.
 
-    No range reduction, so cheaper than ``sin_cos``; outside ``[−π/2, π/2]``
-    the result is wrong. The law uses it for the saturated distance
-    ``r̄_e ∈ [0, π/2]`` (Eq. 6).
+    No range reduction, so cheaper than ``sin_cos``; for ``r̄_e ∈ [0, π/2]`` (Eq. 6).
     """
     angle = jnp.asarray(angle)
     dtype = np.dtype(angle.dtype)
@@ -229,11 +206,7 @@ def sinc(u: jax.Array) -> jax.Array:
 
 
 def _half_turn_small(u: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """Return ``(cos u, sin u, sin(u)/u)`` for ``|u| ≤ π/4``: ``sin_cos`` without its reduction.
-
-    On ``[−π/4, π/4]`` the kernels of ``sin_cos`` apply directly, and
-    ``sin(u)/u = 1 + u² S(u²)`` needs neither a division nor a branch at 0.
-    """
+    """Return ``(cos u, sin u, sin(u)/u)`` for ``|u| ≤ π/4``: ``sin_cos`` without its reduction."""
     dtype = np.dtype(u.dtype)
     if dtype not in _SIN:
         cos_u, sin_u = sin_cos(u)
@@ -255,22 +228,10 @@ def arc_advance(
 ) -> tuple[jax.Array, jax.Array]:
     """Advance the robot by ``h`` seconds at constant ``(v, ω)``, exactly (docs/model.md §4).
 
-    The robot turns by ``ω h`` and moves along the chord of length
-    ``v h sinc(ω h / 2)`` in the direction ``θ + ω h / 2``. With ``u = ω h / 2``
-    and ``e = cos u + i sin u``: ``position += chord · heading · e`` and
-    ``heading ← heading · e²``.
-
-    Args:
-        position: complex ``x + i y``, cm.
-        heading: complex ``cos θ + i sin θ``.
-        v: linear velocity, cm/s.
-        omega: angular velocity, rad/s.
-        h: duration, s.
-        small_turn: the caller guarantees ``|ω h| ≤ π/2`` (static): the
-            turn's cosine and sine then need no range reduction.
-
-    Returns:
-        ``(position, heading)`` after ``h``, complex, broadcast shape.
+    The robot turns by ``ω h`` and moves along the chord ``v h sinc(ω h / 2)``
+    in the direction ``θ + ω h / 2``. ``position`` ``x + i y`` cm and
+    ``heading`` ``cos θ + i sin θ`` are complex; ``small_turn``: the caller
+    guarantees ``|ω h| ≤ π/2`` (static).
     """
     turn, chord = arc_factors(v, omega, h, small_turn=small_turn)
     return arc_apply(position, heading, turn, chord)
@@ -281,9 +242,8 @@ def arc_factors(
 ) -> tuple[jax.Array, jax.Array]:
     """The parts of ``arc_advance`` that depend on the motion only: ``(e, chord)``.
 
-    ``e = cos(ω h / 2) + i sin(ω h / 2)`` (complex) and ``chord = v h sinc(ω h / 2)``
-    (cm). Computed once, they move any pose by the same arc (``arc_apply``):
-    an estimator and its latency compensation share them.
+    ``e = cos(ω h / 2) + i sin(ω h / 2)`` and ``chord = v h sinc(ω h / 2)`` cm;
+    computed once, they move any pose by the same arc (``arc_apply``).
     """
     half_turn = 0.5 * omega * h
     if small_turn:
@@ -299,25 +259,14 @@ def arc_apply(
 ) -> tuple[jax.Array, jax.Array]:
     """Move ``(position, heading)`` along the arc of ``arc_factors``; returns both, complex."""
     mid_heading = heading * turn
-    # As one complex expression: written on the real and imaginary parts, the
-    # ideal loop ran 1.6x slower on XLA:CPU (2.2e8 against 3.5e8 robot-steps/s
-    # at N = 10^5), and the non-ideal loop no faster.
+    # One complex expression: on the real and imaginary parts XLA:CPU is slower.
     return position + chord * mid_heading, mid_heading * turn
 
 
 def arc_step(pose: jax.Array, v: jax.Array, omega: jax.Array, h: jax.Array) -> jax.Array:
-    """Advance ``pose`` by ``h`` seconds at constant ``(v, ω)``, exactly (docs/model.md §4).
+    """Advance ``pose`` by ``h`` seconds at constant ``(v, ω)``: ``arc_advance`` on a pose.
 
-    The same arc as ``arc_advance``, on a pose.
-
-    Args:
-        pose: ``(..., 3)`` ``[x cm, y cm, θ rad]``.
-        v: linear velocity, cm/s.
-        omega: angular velocity, rad/s.
-        h: duration, s.
-
-    Returns:
-        The pose after ``h``, same shape as ``pose``.
+    ``pose``: ``(..., 3)`` ``[x cm, y cm, θ rad]``; ``v`` cm/s, ``omega`` rad/s, ``h`` s.
     """
     x, y, theta = pose[..., 0], pose[..., 1], pose[..., 2]
     cos_theta, sin_theta = sin_cos(theta)

@@ -1,16 +1,10 @@
 """Controller gains and robot parameters as immutable pytrees, with boundary checks.
 
-Both classes are frozen dataclasses registered with ``jax.tree_util`` so that
-every field is a traced leaf: gains and robot parameters can be differentiated,
-vmapped (give a field a leading batch axis) and passed through ``jax.jit``
-without retracing when only their values change.
-
-Their checks (``validate_gains``, ``validate_robot``) live here, in plain
-Python, and the entry points call them before any tracing (docs/model.md §3).
-Building a ``Gains`` or ``Robot`` checks nothing: JAX rebuilds them through
-``__init__`` on every tree operation. Leaves that are tracers (a user calling
-an entry point inside their own ``jit`` or ``grad``) cannot be inspected and
-are skipped.
+Every field is a leaf: gains and robots can be differentiated, vmapped (a
+leading batch axis on a field) and passed through ``jax.jit`` without
+retracing. Building one checks nothing (JAX rebuilds them on every tree
+operation); the entry points call ``validate_gains`` / ``validate_robot``
+before tracing, skipping traced leaves (docs/model.md §3).
 """
 
 from __future__ import annotations
@@ -92,13 +86,9 @@ _WHEEL_MASS = 0.010
 class Robot(Parameters):
     """Differential-drive robot of the paper's Table 1 (docs/model.md §1, §4).
 
-    Units: cm, kg, s; torques in kg·cm²/s² (1 N·m = 1e4 kg·cm²/s²). A robot
-    8 cm across the wheels is ``Robot(half_track=4.0)``, not ``0.04``: the
-    constructor takes the numbers as given. The robots read from a file or a
-    ``--robot`` flag (``load_robot``, ``read_robot``) warn
-    (``RobotUnitsWarning``) when a size or speed looks written in metres.
-    Ranges are checked where a robot is used (``rollout`` and the other
-    entry points), not here.
+    Units: cm, kg, s; torques in kg·cm²/s² (1 N·m = 1e4 kg·cm²/s²): a robot
+    8 cm across the wheels is ``Robot(half_track=4.0)``. Ranges are checked
+    where a robot is used, not here.
 
     Attributes:
         half_track: ``L``, distance from the centre C to each wheel, cm.
@@ -109,15 +99,12 @@ class Robot(Parameters):
         wheel_mass: ``m``, kg (each wheel a uniform disc of radius ``r``).
         com_offset: ``a``, distance of the centre of mass ahead of the axle, cm.
         torque_max: largest torque magnitude per wheel motor, kg·cm²/s².
-        speed_gain: proportional gain ``k_p`` of the wheel-speed loop, 1/s: its
-            velocity time constant is ``1/k_p`` (``docs/model.md §4``).
-        integral_gain: integral gain ``k_i`` of the wheel-speed loop, 1/s²
-            (0: none; useful when the loop's model differs from the robot).
-        accel_max: largest change of the linear-velocity command per second,
-            cm/s², that the ideal loop's speed limiter lets through (0: no
-            limit; ``docs/model.md §4.2.2``).
-        angular_accel_max: the same for the angular-velocity command, rad/s²
-            (0: no limit).
+        speed_gain: proportional gain ``k_p`` of the wheel-speed loop, 1/s
+            (time constant ``1/k_p``, ``docs/model.md §4``).
+        integral_gain: integral gain ``k_i`` of the wheel-speed loop, 1/s² (0: none).
+        accel_max: the ideal loop's speed limiter on the linear-velocity
+            command, cm/s² (0: no limit; ``docs/model.md §4.2.2``).
+        angular_accel_max: the same for the angular-velocity command, rad/s².
     """
 
     # choice (docs/model.md §1): L = D/2.
@@ -148,8 +135,6 @@ class SamplingWarning(UserWarning):
 
 def validate_gains(gains: Gains, prefix: str = "gains") -> Gains:
     """Check ``gains`` against the ranges of docs/model.md §3; return it unchanged.
-
-    ``prefix`` names the argument in messages (``"gains"``).
 
     Raises:
         ValueError: naming the field, its value and the allowed range.
@@ -229,8 +214,7 @@ def validate_one_robot(robot: Robot | None, purpose: str) -> Robot:
 def wheel_speed_bound(gains: Gains, robot: Robot | None = None) -> Any:
     """Return ``k_r + L k_θ``, the largest rim speed the law can command (docs/model.md §3).
 
-    Since ``|v_m| ≤ k_r`` and ``|ω_m| ≤ k_θ``, no wheel command ``v ± L ω``
-    exceeds this bound. Works on scalars, batches and tracers.
+    Since ``|v_m| ≤ k_r`` and ``|ω_m| ≤ k_θ``. Works on scalars, batches and tracers.
     """
     robot = Robot() if robot is None else robot
     if not is_traced((gains, robot)):  # called with values: check them
@@ -279,10 +263,7 @@ def feasible(gains: Gains, robot: Robot, *, warn: bool, stacklevel: int) -> np.n
 def sampling_margins(gains: Gains, dt: Any) -> tuple[Any, Any]:
     """Return ``(k_θ dt, k_r π dt / (2 R_m))``, the per-period gains of the sampled law.
 
-    Near the goal the law is ``θ_e ← θ_e − k_θ dt sin θ_e`` for the heading and
-    ``r_e ← r_e − (k_r π dt / 2 R_m) r_e`` for the distance (docs/model.md §4):
-    each settles only while its factor stays below 2, and overshoots
-    without settling above it.
+    Near the goal each settles only while its factor stays below 2 (docs/model.md §4).
     """
     if not is_traced((gains, dt)):  # called with values: check them (dt may be an array)
         validate_gains(gains)

@@ -1,25 +1,16 @@
 """Robots as data: presets, JSON files of ``Robot`` fields, ROS ``diff_drive_controller`` YAML.
 
-A robot is named by a preset (``ROBOTS``: ``paper``, ``turtlebot3-burger``,
-``pioneer-3dx``) or read from a file:
-
-* ``.json``: one object of ``Robot`` fields in the library's units (cm, kg,
-  s; ``ROBOT_UNITS``); a field left out keeps the paper robot's value.
-* ``.yaml`` / ``.yml``: the parameters of a ros2_controllers (or ROS 1)
-  ``diff_drive_controller``, nested under ``<node>: ros__parameters:`` or
-  flat; metres become centimetres (``docs/robots.md``). Its acceleration
-  limits become ``accel_max`` and ``angular_accel_max``, which the ideal
-  loop's speed limiter applies (``docs/model.md §4.2.2``).
-
-Every file is checked before anything runs, and a mistake is one line
-naming the file, the key, its value and what is allowed. The sources of the
-presets' numbers are in each preset's comment and in ``docs/robots.md``.
+A robot is a preset (``ROBOTS``) or a file: ``.json``, an object of ``Robot``
+fields in the library's units (``ROBOT_UNITS``; a field left out keeps the
+paper robot's value), or ``.yaml`` / ``.yml``, a ROS ``diff_drive_controller``
+(``ros_yaml.py``). Every file is checked before anything runs; a mistake is
+one line naming the file, the key, its value and what is allowed. The
+presets' sources are in their comments and in ``docs/robots.md``.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import json
 import math
 import os
@@ -278,14 +269,8 @@ def _is_number(value: Any) -> bool:
 def robot_from_values(values: Any, where: str) -> Robot:
     """Return the ``Robot`` of ``{field: number}`` (a subset; the rest keep the paper's values).
 
-    Args:
-        values: the parsed object (a JSON object of ``Robot`` fields).
-        where: what the values came from, first in every message (a file name).
-
-    Raises:
-        ValueError: one line naming ``where``, the key, its value and what is
-            allowed: an unknown key, a value that is no finite number, or one
-            out of range.
+    ``where`` (a file name) opens every message: one line naming the key,
+    its value and what is allowed.
     """
     if not isinstance(values, Mapping):
         raise ValueError(
@@ -349,14 +334,11 @@ class LoadedRobot(NamedTuple):
     Attributes:
         robot: the checked ``Robot``.
         label: the preset name or the file's path.
-        note: one line saying which fields of a ROS YAML were used (and into
-            which ``Robot`` fields) and which ignored; ``None`` for presets
-            and JSON.
-        accelerations: the YAML's acceleration limits as read,
-            ``{"linear.x.max_acceleration": cm/s²,
-            "angular.z.max_acceleration": rad/s²}`` (those given and switched
-            on); they are the robot's ``accel_max`` and ``angular_accel_max``.
-            ``None`` for presets and JSON.
+        note: which fields of a ROS YAML were used and which ignored, one
+            line (an identified robot's too); else ``None``.
+        accelerations: the YAML's acceleration limits given and switched on,
+            ``{"linear.x.max_acceleration": cm/s², "angular.z.max_acceleration":
+            rad/s²}``; else ``None``.
     """
 
     robot: Robot
@@ -408,7 +390,9 @@ def read_robot(source: Any) -> LoadedRobot:
             )
             return LoadedRobot(robot, text, note)
         return LoadedRobot(robot, text)
-    robot, note, accelerations = _robot_from_ros_yaml(content, where)
+    from wmr_jax._src.model.ros_yaml import robot_from_ros_yaml
+
+    robot, note, accelerations = robot_from_ros_yaml(content, where)
     _warn_unit_slips(robot, where, ros=True)
     return LoadedRobot(robot, text, note, accelerations)
 
@@ -451,264 +435,3 @@ def _robot_from_json(content: str, where: str) -> Robot:
             f"(keys among {', '.join(ROBOT_FIELDS)})"
         )
     return robot_from_values(values, where)
-
-
-# ---------------------------------------------------------------- ROS diff_drive_controller
-
-# The parameter blocks are found by these keys (every diff_drive_controller has them).
-_BLOCK_KEYS = ("wheel_separation", "wheel_radius")
-_MAX_DEPTH = 12
-
-
-def _yaml_mapping_once(loader: Any, node: Any, deep: bool = False) -> Any:
-    """Build a YAML mapping, refusing a key given twice (YAML keeps the last without a word)."""
-    import yaml
-
-    seen = set()
-    for key_node, _ in node.value:
-        key = loader.construct_object(key_node, deep=True)
-        try:
-            twice = key in seen
-            seen.add(key)
-        except TypeError:  # an unhashable key: SafeLoader names it below
-            continue
-        if twice:
-            raise yaml.constructor.ConstructorError(
-                None, None, f"the key {key!r} is given twice", key_node.start_mark
-            )
-    return yaml.SafeLoader.construct_mapping(loader, node, deep=deep)
-
-
-def _yaml_loader() -> type:
-    import yaml
-
-    # yaml.safe_load's loader (plain data, no objects), with repeated keys refused.
-    class _Loader(yaml.SafeLoader):
-        pass
-
-    _Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _yaml_mapping_once)
-    return _Loader
-
-
-def _blocks(tree: Any, path: tuple[str, ...], seen: set[int], out: list) -> None:
-    """Collect the mappings that hold ``wheel_separation`` or ``wheel_radius``, with their paths."""
-    if not isinstance(tree, dict) or id(tree) in seen or len(path) > _MAX_DEPTH:
-        return  # an alias shares its mapping: walked once
-    seen.add(id(tree))
-    if any(key in tree for key in _BLOCK_KEYS):
-        out.append((path, tree))
-        return
-    for key, value in tree.items():
-        _blocks(value, (*path, str(key)), seen, out)
-
-
-def _flat(tree: dict, prefix: str = "", depth: int = 0, where: str = "") -> dict[str, Any]:
-    """``{"linear": {"x": {"max_velocity": v}}}`` as ``{"linear.x.max_velocity": v}``.
-
-    Raises:
-        ValueError: for a parameter given twice, dotted and nested
-            (``linear.x.max_velocity`` beside ``linear: x: max_velocity``).
-    """
-    out: dict[str, Any] = {}
-    for key, value in tree.items():
-        name = f"{prefix}{key}"
-        if isinstance(value, dict) and depth < _MAX_DEPTH:
-            inner = _flat(value, name + ".", depth + 1, where)
-        else:
-            inner = {name: value}
-        for twice in inner.keys() & out.keys():
-            raise ValueError(
-                f"{where}: {twice} is given twice (= {out[twice]!r:.20} and {inner[twice]!r:.20}, "
-                "dotted and nested); allowed: each parameter once"
-            )
-        out.update(inner)
-    return out
-
-
-def _centi(value: float) -> float:
-    """``100 value`` (m to cm), without the binary noise of the product (0.033 m is 3.3 cm)."""
-    return float(f"{100.0 * value:.15g}")
-
-
-def _positive(
-    params: dict[str, Any], key: str, unit: str, where: str, *, limit: bool = False
-) -> float | None:
-    """The finite positive number of ``key`` (in the file's unit), ``None`` if absent.
-
-    A ``limit`` (a velocity or acceleration bound) may also be ``.nan``, which
-    ros2_controllers reads as "no limit": ``None`` too. A NaN size is refused.
-    """
-    if key not in params:
-        return None
-    value = params[key]
-    if limit and _is_number(value) and math.isnan(float(value)):
-        return None
-    if not _is_number(value) or not (math.isfinite(float(value)) and float(value) > 0):
-        raise ValueError(
-            f"{where}: {key} = {value!r:.40} is not allowed; allowed: a finite number > 0 ({unit})"
-        )
-    return float(value)
-
-
-def _limited(params: dict[str, Any], axis: str, where: str, kind: str = "velocity") -> bool:
-    """Whether the file enables the ``kind`` limit of ``axis`` (``has_velocity_limits``, ...).
-
-    Without the flag, a limit given is a limit, as recent ros2_controllers
-    read it (they dropped the flags; ``.nan`` is no limit there).
-    """
-    key = f"{axis}.has_{kind}_limits"
-    value = params.get(key, True)
-    if not isinstance(value, bool):
-        raise ValueError(f"{where}: {key} = {value!r:.40} is not allowed; allowed: true or false")
-    return value
-
-
-def _multiplier(params: dict[str, Any], keys: tuple[str, ...], where: str) -> tuple[float, list]:
-    """The mean of the calibration multipliers given among ``keys`` (1 if none), and their keys."""
-    given = [(k, _positive(params, k, "a factor", where)) for k in keys if k in params]
-    given = [(k, v) for k, v in given if v is not None]
-    if not given:
-        return 1.0, []
-    return sum(v for _, v in given) / len(given), [k for k, _ in given]
-
-
-def _robot_from_ros_yaml(content: str, where: str) -> tuple[Robot, str, dict[str, float]]:
-    """The robot of a ``diff_drive_controller`` parameter file, the note of its fields, limits."""
-    import yaml
-
-    try:
-        tree = yaml.load(content, Loader=_yaml_loader())  # a SafeLoader: plain data only
-    except (yaml.YAMLError, RecursionError) as err:
-        mark = getattr(err, "problem_mark", None)
-        problem = getattr(err, "problem", None)
-        text = (
-            str(err)
-            if problem is None or mark is None
-            else (f"{problem} (line {mark.line + 1}, column {mark.column + 1})")
-        )
-        raise ValueError(f"{where} cannot be read: {' '.join(text.split())}") from None
-    if not isinstance(tree, dict):
-        raise ValueError(
-            f"{where} is not allowed; allowed: a YAML mapping holding diff_drive_controller "
-            "parameters (wheel_separation, wheel_radius, in metres)"
-        )
-    found: list = []
-    _blocks(tree, (), set(), found)
-    if not found:
-        raise ValueError(
-            f"{where} holds no diff_drive_controller parameters; allowed: a mapping with "
-            "wheel_separation and wheel_radius (m), flat or under <node>: ros__parameters:"
-        )
-    if len(found) > 1:
-        places = ", ".join(".".join(p) or "(top level)" for p, _ in found)
-        raise ValueError(
-            f"{where} holds {len(found)} sets of diff_drive_controller parameters ({places}); "
-            "allowed: one robot's"
-        )
-    path, block = found[0]
-    params = _flat(block, where=where)
-    # A value the model reads, given as a mapping, would otherwise be flattened
-    # under its name and ignored with the unknown keys.
-    read = (*_BLOCK_KEYS, "max_velocity", "max_acceleration", "multiplier", "has_")
-    for key in params:
-        parent = key.rsplit(".", 1)[0] if "." in key else ""
-        if parent and any(part in parent.rsplit(".", 1)[-1] for part in read):
-            raise ValueError(
-                f"{where}: {parent} is a mapping; allowed: a number (or true/false for a "
-                "has_*_limits flag)"
-            )
-    values: dict[str, float] = {}
-    used: list[str] = []
-    shown: list[str] = []
-
-    separation = _positive(params, "wheel_separation", "m", where)
-    if separation is not None:
-        factor, keys = _multiplier(params, ("wheel_separation_multiplier",), where)
-        used += ["wheel_separation", *keys]
-        values["half_track"] = _centi(separation * factor / 2)  # m -> cm, half of it
-        shown.append(f"half_track {values['half_track']:.6g} cm")
-    radius = _positive(params, "wheel_radius", "m", where)
-    if radius is not None:
-        # ROS 2 scales each wheel; this model has one radius: their mean.
-        keys_r = (
-            "wheel_radius_multiplier",
-            "left_wheel_radius_multiplier",
-            "right_wheel_radius_multiplier",
-        )
-        factor, keys = _multiplier(params, keys_r, where)
-        used += ["wheel_radius", *keys]
-        values["wheel_radius"] = _centi(radius * factor)  # m -> cm
-        shown.append(f"wheel_radius {values['wheel_radius']:.6g} cm")
-
-    half_track = values.get("half_track", float(Robot().half_track))
-    speeds = []
-    for axis, key, unit, to_rim in (
-        ("linear.x", "linear.x.max_velocity", "m/s", _centi),  # m/s -> cm/s
-        # rad/s -> cm/s at the rim, turning in place: ω L.
-        ("angular.z", "angular.z.max_velocity", "rad/s", lambda w: w * half_track),
-    ):
-        flag = f"{axis}.has_velocity_limits"
-        limited = _limited(params, axis, where)
-        if flag in params:
-            used.append(flag)
-        value = _positive(params, key, unit, where, limit=True)
-        if value is not None and limited:
-            used.append(key)
-            speeds.append(to_rim(value))
-    if speeds:
-        # The rim must reach either limit: it is at least the larger.
-        values["v_max"] = max(speeds)
-        shown.append(f"v_max {values['v_max']:.6g} cm/s")
-
-    # The speed limiter's acceleration limits, symmetric: ±max_acceleration
-    # (min_acceleration, max_deceleration and the *_reverse limits of an
-    # asymmetric limiter are not modelled, and land among the ignored).
-    accelerations = {}
-    for axis, field, unit, convert in (
-        ("linear.x", "accel_max", "m/s^2", _centi),  # m/s² -> cm/s²
-        ("angular.z", "angular_accel_max", "rad/s^2", float),
-    ):
-        flag, key = f"{axis}.has_acceleration_limits", f"{axis}.max_acceleration"
-        limited = _limited(params, axis, where, "acceleration")
-        if flag in params:
-            used.append(flag)
-        value = _positive(params, key, unit, where, limit=True)
-        if value is not None and limited:
-            used.append(key)
-            accelerations[key] = values[field] = convert(value)
-            shown.append(f"{field} {values[field]:.6g} {_UNIT[field]}")
-
-    missing = [key for key in _BLOCK_KEYS if key not in used]
-    if missing:
-        # diff_drive_controller needs both; the paper robot's in their place
-        # would be a robot of another size, run without a word.
-        unknown = [key for key in params if "." not in key and key not in used]
-        close = difflib.get_close_matches(missing[0], unknown, n=1)
-        hint = f" ({close[0]!r} is not a diff_drive_controller parameter)" if close else ""
-        raise ValueError(
-            f"{where}: the diff_drive_controller parameters at "
-            f"'{'.'.join(path) or '(top level)'}' give no {missing[0]}{hint}; allowed: both "
-            "wheel_separation and wheel_radius, in metres"
-        )
-    ignored = [k for k in params if k not in used]
-    robot = robot_from_values(values, where)
-    # No acceleration limit given is none (the paper robot's 0), not a value kept.
-    kept = [
-        name
-        for name in ROBOT_FIELDS
-        if name not in values and name not in ("accel_max", "angular_accel_max")
-    ]
-    note = (
-        f"robot from {where}, diff_drive_controller parameters at "
-        f"'{'.'.join(path) or '(top level)'}': used {', '.join(used) or 'nothing'} -> "
-        f"{', '.join(shown) or 'no field'}"
-        + (
-            "; the ideal loop's speed limiter applies these acceleration limits to its "
-            "commands (docs/model.md §4.2.2)"
-            if accelerations
-            else ""
-        )
-        + f"; ignored: {', '.join(ignored) or 'nothing'}"
-        + (f"; the paper robot's values kept: {', '.join(kept)}" if kept else "")
-    )
-    return robot, note, accelerations

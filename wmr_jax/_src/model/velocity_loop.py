@@ -1,43 +1,12 @@
 """The non-ideal velocity loop: wheel-speed control of the Eq. 5 dynamics (docs/model.md §4).
 
-Between the pose controller and the robot sits a wheel-speed controller that
-can only do so much. Over each control period ``dt``:
-
-1. The command ``(v_m, ω_m)`` becomes rim-speed set points
-   ``v_R* = v_m + L ω_m``, ``v_L* = v_m − L ω_m``, limited to ``±V_max``:
-   choice (docs/model.md §4) per-wheel clipping by default, as the paper's uneven
-   trajectories suggest; ``wheel_limit="scale"`` divides both by one factor
-   instead, which keeps the commanded curvature.
-2. choice (docs/model.md §4): the wheel-speed controller is a model-based
-   (computed-torque) loop with proportional and optional integral action on
-   the body velocity ``q = (v, ω)``:
-   ``B τ = H (k_p (q* − q) + k_i z) + G(q)``, ``ż = q* − q``, each wheel's
-   torque then clipped at ``±τ_max``. Computed torque was chosen over a plain
-   PI on each wheel because, with an exact model and unsaturated torques, it
-   makes every component of ``q`` a first-order lag ``1/k_p``, so one number
-   states how stiff the loop is, and the limit ``k_p → ∞`` is the ideal loop.
-   The paper used an adaptive controller (its ref. [14]), whose details it
-   does not give.
-3. The robot obeys the Euler–Lagrange dynamics of Eq. 5, ``H q̇ + G(q) = B τ``
-   with ``τ = (τ_L, τ_R)``:
-   ``m₁₁ v̇ − M a ω² = (τ_L + τ_R)/r`` and ``m₂₂ ω̇ + M a v ω = L (τ_R − τ_L)/r``,
-   where ``a`` is the centre-of-mass offset ahead of the axle,
-   ``m₁₁ = M + 2m + 2 I_w/r²`` and ``m₂₂ = I_b + M a² + 2 m L² + 2 I_d + 2 I_w L²/r²``,
-   with the body a uniform disc of diameter ``D`` (``I_b = M D²/8``) and each
-   wheel a uniform disc of radius ``r`` (``I_w = m r²/2`` about its axle,
-   ``I_d = m r²/4`` about a diameter). Under zero torque the kinetic energy
-   ``(m₁₁ v² + m₂₂ ω²)/2`` is conserved.
-4. Integration: ``substeps`` inner steps of ``h = dt/substeps``. Velocity and
-   integral advance by classical RK4 (torque clipping included in the
-   right-hand side); the pose advances by the exact arc (``dynamics.arc_step``)
-   at the mean of the sub-step's start and end velocities, which is second
-   order and exact once the velocity has settled. After each sub-step each
-   wheel's rim speed is held within ``±V_max`` (the motors cannot go faster).
-
-The rollouts leave out what vanishes for the robot at hand (``integral``,
-``coriolis`` and ``small_turn`` of ``advance_split``, chosen by
-``loops.for_robot``): with ``k_i = 0`` and ``a = 0`` a sub-step is one RK4
-step of the velocity alone, which XLA:CPU computes once and stores.
+Over each control period ``dt``: the command becomes rim-speed set points
+limited to ``±V_max`` (clipped per wheel, or scaled to keep the curvature);
+a computed-torque loop ``B τ = H (k_p (q* − q) + k_i z) + G(q)``, torques
+clipped at ``±τ_max``, drives the Euler–Lagrange dynamics ``H q̇ + G(q) = B τ``
+of Eq. 5; ``substeps`` RK4 steps advance the velocity, and the exact arc at
+the mean velocity the pose, the rims held within ``±V_max``. The choices and
+the inertias are in docs/model.md §4.
 """
 
 from __future__ import annotations
@@ -188,15 +157,9 @@ def _limit_split(v, w, robot: Robot, mode: str):
 def _loop_rates(target, robot: Robot, model: Robot, with_integral: bool, with_coriolis: bool):
     """Return ``f(wheel) -> d wheel/dt`` of the closed wheel loop (Eq. 5 and its controller).
 
-    ``wheel`` is the velocity ``v + i ω``, with the integral ``z_v + i z_ω``
-    beside it if ``with_integral``; without, the integral term is left out
-    (exactly what it contributes when ``integral_gain`` is zero). Likewise
-    ``with_coriolis=False`` leaves out ``G(q)``, which is zero when both
-    robots have their centre of mass on the axle.
-
-    The arithmetic of ``wheel_torques`` followed by ``body_acceleration``,
-    written on separate scalars so that a batched rollout carries no
-    ``(N, 2)`` arrays (XLA rebuilds those column by column every step).
+    ``wheel`` is ``v + i ω``, with ``z_v + i z_ω`` beside it if
+    ``with_integral``. ``wheel_torques`` then ``body_acceleration`` on
+    separate scalars, so that a batched rollout carries no ``(N, 2)`` arrays.
     """
     target_v, target_w = target
     m11, m22 = inertia(model)
@@ -204,8 +167,7 @@ def _loop_rates(target, robot: Robot, model: Robot, with_integral: bool, with_co
     model_ma = model.body_mass * model.com_offset
     true_ma = robot.body_mass * robot.com_offset
     r, limit = model.wheel_radius, model.torque_max
-    # Reciprocals once per period: a division is an "expensive" operation to
-    # XLA, which then stores its result instead of fusing it into its users.
+    # Reciprocals once per period: XLA stores a division instead of fusing it.
     inv_l = 1.0 / model.half_track
     to_v, to_w = (
         1.0 / (robot.wheel_radius * true_m11),
@@ -214,10 +176,7 @@ def _loop_rates(target, robot: Robot, model: Robot, with_integral: bool, with_co
     inv_m11, inv_m22 = 1.0 / true_m11, 1.0 / true_m22
 
     def rates(y):
-        # y = v + i ω, or (v + i ω, z_v + i z_ω) with the integral: complex
-        # pairs, so that XLA computes both parts of each in one loop (it
-        # compiles one loop per output array and repeats in each the work
-        # they share).
+        # Complex pairs, so that XLA computes both parts of each in one loop.
         velocity, integral = y if with_integral else (y, None)
         v, w = velocity.real, velocity.imag
         error_v, error_w = target_v - v, target_w - w
@@ -241,11 +200,7 @@ def _loop_rates(target, robot: Robot, model: Robot, with_integral: bool, with_co
 
 
 def _along(y, c, k):
-    """Return ``y + c k`` for complex ``y``, ``k`` and a real ``c``.
-
-    Written on the parts: ``c`` times a complex number is otherwise a full
-    complex product (``c`` promoted to complex), three times the work.
-    """
+    """Return ``y + c k`` for complex ``y``, ``k`` and a real ``c``, without a complex product."""
     return jax.lax.complex(y.real + c * k.real, y.imag + c * k.imag)
 
 
@@ -281,33 +236,13 @@ def advance_split(
 ) -> tuple[jax.Array, jax.Array, jax.Array, WheelState, jax.Array]:
     """Move the robot over one control period under the non-ideal loop (docs/model.md §4).
 
-    ``advance`` on a pose split as the rollouts carry it: position ``x + i y``
-    and heading ``cos θ + i sin θ`` as complex numbers, θ beside them, the
-    wheel loop as two complex numbers inside (``v + i ω``, ``z_v + i z_ω``),
-    so that a batched rollout carries no ``(N, 2)`` arrays.
-
-    Args:
-        position: complex ``x + i y``, cm.
-        heading: complex ``cos θ + i sin θ``.
-        theta: heading angle, rad (not wrapped).
-        wheel: the wheel loop's state at the sample.
-        command: held command ``(v_m cm/s, ω_m rad/s)``.
-        robot: the robot that moves.
-        dt: control period, s.
-        substeps: inner steps (static).
-        wheel_limit: ``"clip"`` or ``"scale"`` the rim-speed set points (static).
-        model: the robot the wheel controller believes in (default ``robot``).
-        integral: carry the loop's integral (static); ``False`` is exact only
-            when ``model.integral_gain`` is zero, and leaves ``z`` unchanged.
-        coriolis: include ``G(q)`` (static); ``False`` is exact only when
-            ``robot.com_offset`` and ``model.com_offset`` are zero.
-        small_turn: ``robot.v_max · dt / (robot.half_track · substeps) ≤ π/2``
-            holds (static), so no sub-step turns further than ``π/2``
-            (``dynamics.arc_advance``).
+    ``advance`` on a pose split as the rollouts carry it: complex position
+    ``x + i y`` and heading ``cos θ + i sin θ``, θ beside them. The static
+    ``integral=False`` is exact only for ``integral_gain = 0``, ``coriolis=False``
+    only for ``com_offset = 0``, ``small_turn`` only if ``V_max dt / (L substeps) ≤ π/2``.
 
     Returns:
-        ``(position, heading, theta, wheel, distance cm)`` at the next sample;
-        the heading renormalised to unit modulus.
+        ``(position, heading, theta, wheel, distance cm)`` at the next sample.
     """
     model = robot if model is None else model
     target = _limit_split(command[0], command[1], model, wheel_limit)
@@ -322,8 +257,7 @@ def advance_split(
         new_v, new_w = _limit_split(new.real, new.imag, robot, "clip")
         new = jax.lax.complex(new_v, new_w)
         wheel = (new, wheel[1]) if integral else new
-        # Stored once: XLA:CPU compiles one loop per output of the sub-step
-        # and would otherwise repeat the whole RK4 step in each of them.
+        # Stored once, or XLA:CPU repeats the RK4 step in each output's loop.
         wheel = jax.lax.optimization_barrier(wheel)
         new = wheel[0] if integral else wheel  # the stored one (not new_v, new_w)
         mean_v, mean_w = 0.5 * (velocity.real + new.real), 0.5 * (velocity.imag + new.imag)
@@ -338,9 +272,7 @@ def advance_split(
     z = jax.lax.complex(wheel.z_v, wheel.z_omega)
     start = (velocity, z) if integral else velocity
     carry = (position, heading, start, jnp.zeros_like(position))
-    # An inner scan, not an unrolled chain: unrolled, XLA fuses the stages
-    # of consecutive sub-steps into each other and repeats their shared work
-    # in every output (measured 1.5-2x slower at 10 sub-steps).
+    # An inner scan: unrolled, XLA fuses consecutive sub-steps and repeats their work.
     (position, heading, state, covered), _ = jax.lax.scan(substep, carry, None, length=substeps)
     velocity, z = state if integral else (state, z)
     wheel = WheelState(velocity.real, velocity.imag, z.real, z.imag)

@@ -26,11 +26,7 @@ def numpy_final_poses(
 ) -> np.ndarray:
     """Return the final poses of the ideal closed loop, vectorised with NumPy.
 
-    The baseline a user would write without JAX: the law with angles and
-    ``atan2`` as ``docs/model.md §3`` states it, the exact arc of
-    ``docs/model.md §4``, arrays over the batch and one Python iteration per
-    control period. The arithmetic is in the dtype of ``refs`` (float32 or
-    float64).
+    The arithmetic is in the dtype of ``refs`` (float32 or float64).
 
     Args:
         refs: ``(N, 3)`` reference poses ``[x cm, y cm, θ rad]``.

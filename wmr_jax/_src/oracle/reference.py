@@ -1,9 +1,8 @@
 """A plain NumPy/``math`` reference of docs/model.md §2–4, §7 and §9, one pose at a time, no JAX.
 
-It is written straight from ``docs/model.md`` with angles and ``atan2``, independently of
-``wmr_jax.controllers`` (the Shim–Sung law there avoids angles for speed and differentiability). The
-tests hold the JAX rollouts equal to it in float64, and the benchmark uses it
-as the honest baseline of what a scalar simulator costs.
+Written straight from ``docs/model.md`` with angles and ``atan2``,
+independently of ``wmr_jax.controllers``; the tests hold the JAX rollouts
+equal to it in float64, and the benchmark times it as a scalar simulator.
 """
 
 from __future__ import annotations
@@ -69,12 +68,7 @@ def _sgn(x: float) -> float:
 
 
 def _in_float64(fn: Callable) -> Callable:
-    """Check the arguments of ``fn`` against float64's range, which it computes in.
-
-    The checks follow JAX's default dtype; without this, a float32 session
-    would refuse ``kr = 1e40`` as "beyond float32" in a function that never
-    uses float32.
-    """
+    """Check the arguments of ``fn`` against float64's range, which it computes in."""
 
     @functools.wraps(fn)
     def wrapped(*args: Any, **kwargs: Any) -> Any:
@@ -287,16 +281,10 @@ def reference_rollout(
 ) -> dict[str, np.ndarray]:
     """Simulate one closed-loop run with a Python loop (docs/model.md §4).
 
-    Args:
-        ref, gains, init, dt, steps, robot, velocity, substeps, wheel_limit:
-            as for ``wmr_jax.rollout`` (Shim–Sung controller only). A robot
-            with ``accel_max`` or ``angular_accel_max`` above 0 has its ideal
-            loop's commands pass its speed limiter (§4.2.2).
+    The arguments are those of ``wmr_jax.rollout`` (Shim–Sung only).
 
     Returns:
-        A dict with the fields of ``wmr_jax.Trajectory`` as float64 NumPy
-        arrays: ``poses (steps + 1, 3)``, ``v``, ``omega``, ``region``,
-        ``wheel_speeds (steps, 2)``, ``distance``.
+        The fields of ``wmr_jax.Trajectory`` as float64 NumPy arrays in a dict.
     """
     gains = _one_set(Gains() if gains is None else gains, validate_gains, "gains")
     robot = _one_set(Robot() if robot is None else robot, validate_robot, "robot")
@@ -467,31 +455,18 @@ def reference_disturbed_rollout(
 ) -> dict[str, np.ndarray]:
     """Simulate one disturbed run of the ideal loop with a Python loop (docs/model.md §7, §9).
 
-    The same run as one row of ``wmr_jax.studies.disturbed_rollout`` (Shim–Sung
-    law, ideal velocity loop), written in angles and plain floats.
+    One row of ``wmr_jax.studies.disturbed_rollout`` (Shim–Sung law, ideal
+    loop) in angles and plain floats, and its return values.
 
     Args:
-        ref: ``(3,)`` reference pose ``[cm, cm, rad]``.
-        gains: ``Gains`` (default ``Gains()``).
-        noise: ``(steps, 3)`` measurement error added to the true pose at each
-            sample ``k = 0 … steps − 1`` (sample ``k`` ends period ``k − 1``);
-            sets the number of periods.
-        mismatch: ``(left, right)`` realised over commanded rim speed; a
-            Disturbance's ``(left, right, mass)`` row is accepted too (the
-            ideal loop has no mass).
-        delay: the latency ``m``, samples: the command of sample ``k`` is
-            applied over period ``k + m``, zero over the first ``m``.
-        estimator: ``None`` (the law sees the raw measurement), ``"observer"``
-            or ``"ekf"`` (defaults), or one ``ObserverParams``/``EKFParams``.
-        init: ``(3,)`` initial pose, true and measured alike.
-        dt: control period, s.
-        robot: the robot (only ``half_track`` matters); default ``Robot()``.
-
-    Returns:
-        float64 arrays: ``poses (steps + 1, 3)`` true poses, ``v``, ``omega``
-        ``(steps,)`` the command applied over each period (before the rim
-        factors), ``estimates (steps, 3)`` the estimate (or the measurement
-        without an estimator) at the end of each period.
+        noise: ``(steps, 3)`` measurement error at each sample ``k`` (which
+            ends period ``k − 1``); sets the number of periods.
+        mismatch: ``(left, right)`` rim factors (a ``(left, right, mass)`` row
+            too: the ideal loop has no mass).
+        delay: the latency, samples.
+        estimator: ``None``, ``"observer"``, ``"ekf"`` or one
+            ``ObserverParams``/``EKFParams``.
+        ref, gains, init, dt, robot: as for ``reference_rollout``.
     """
     gains = _one_set(Gains() if gains is None else gains, validate_gains, "gains")
     robot = _one_set(Robot() if robot is None else robot, validate_robot, "robot")

@@ -1,12 +1,8 @@
 """The closed loop of one pose as a ``lax.scan``, and the one ``vmap`` that batches it.
 
-``ClosedLoopStep`` samples the controller and moves the robot over one
-control period (``docs/model.md §4``), with an optional disturbance and
-estimator (§7, §9); ``scan_closed_loop`` runs it for a number of periods,
-recording the run or folding it into streamed metrics. Every run of the
-package is that one scan. ``batched`` lifts any single-pose function to
-batches. Nothing here checks its inputs: the entry points do that first
-(``wmr_jax._src.checks``).
+``ClosedLoopStep`` is one control period (``docs/model.md §4, §7, §9``);
+``scan_closed_loop`` runs it, recording the run or folding it into streamed
+metrics. Nothing here checks its inputs: the entry points do that first.
 """
 
 from __future__ import annotations
@@ -19,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.model import dynamics, velocity_loop
+from wmr_jax._src.model import velocity_loop
 from wmr_jax._src.model.controllers.base import Controller
 from wmr_jax._src.model.controllers.shim_sung import SHIM_SUNG
 from wmr_jax._src.model.params import Robot
@@ -49,7 +45,6 @@ __all__ = [
     "ClosedLoopStep",
     "LoopCarry",
     "for_robot",
-    "initial_state",
     "jit_top_level",
     "remat",
     "scan_closed_loop",
@@ -76,30 +71,18 @@ class Options:
         substeps: inner integration steps per period (non-ideal loop).
         wheel_limit: ``"clip"`` each wheel command at ``±v_max`` or ``"scale"``
             both by one factor, keeping the curvature (non-ideal loop).
-        wheel_integral: integrate the wheel loop's velocity error (non-ideal
-            loop). ``for_robot`` turns it off for robots whose
-            ``integral_gain`` is zero, where the integral has no effect.
-        wheel_coriolis: include the Coriolis terms ``G(q)`` (non-ideal loop);
-            ``for_robot`` turns them off for robots whose ``com_offset`` is
-            zero, where they vanish.
-        small_turn: every sub-step turns by at most ``π/2``, because
-            ``V_max h / L ≤ π/2`` (``h = dt / substeps``; the rim speeds are
-            held within ``±V_max``), so the arcs need no range reduction
-            (non-ideal loop; set by ``for_robot``).
+        wheel_integral: integrate the wheel loop's velocity error (non-ideal loop).
+        wheel_coriolis: include the Coriolis terms ``G(q)`` (non-ideal loop).
+        small_turn: every sub-step turns by at most ``π/2``, so the arcs need
+            no range reduction (non-ideal loop).
         estimator: the pose estimator between the measurements and the law
-            (a ``sensing.estimators.Estimator``), or ``None`` for raw feedback;
-            used by the disturbed loop only (docs/model.md §9).
-        remat: in reverse-mode differentiation, recompute each step in the
-            backward pass instead of storing its intermediates (see
-            ``remat``). ``False`` stores them: more memory, and on XLA:CPU
-            slower too; no effect on evaluation.
-        accel_limit: pass each command through the speed limiter of the
-            robot's ``accel_max`` and ``angular_accel_max`` before the ideal
-            robot follows it (ideal loop; docs/model.md §4.2.2). ``for_robot``
-            turns it on for robots that give either limit; off, the loop has
-            no limiter at all.
-        max_delay: the longest latency, in samples, a disturbed run can have:
-            that many commands ride in flight (at least one; docs/model.md §7).
+            (``sensing.estimators.Estimator``), or ``None``; disturbed loop only.
+        remat: recompute each step in the backward pass instead of storing
+            its intermediates (``remat``); no effect on evaluation.
+        accel_limit: pass each command through the robot's speed limiter
+            (ideal loop; docs/model.md §4.2.2).
+        max_delay: the longest latency in samples of a disturbed run: that
+            many commands ride in flight (docs/model.md §7).
     """
 
     steps: int = DEFAULT_STEPS
@@ -120,20 +103,11 @@ class Options:
 def for_robot(options: Options, robot: Robot, dt: Any) -> Options:
     """Return ``options`` fitted to ``robot``: its speed limiter on, vanishing terms left out.
 
-    Ideal loop: the speed limiter (``accel_limit``) is turned on where the
-    robot gives an acceleration limit (``accel_max`` or
-    ``angular_accel_max`` above 0, docs/model.md §4.2.2), and for a traced
-    robot, whose limits cannot be seen (the limiter then lets an unlimited
-    axis through unchanged).
-
-    Non-ideal loop: a computed-torque loop with ``integral_gain = 0`` is a
-    proportional loop: its integral state changes nothing but costs a second
-    RK4 step per sub-step. With ``com_offset = 0`` the Coriolis terms
-    ``G(q)`` are zero. Leaving them out gives the same results, faster. When
-    ``V_max dt / (L substeps) ≤ π/2`` no sub-step can turn further than that
-    (``small_turn``). Decided on the concrete robot and ``dt`` before
-    tracing; traced values keep the general loop. Only for runs where the
-    wheel controller's model is ``robot`` itself.
+    Ideal loop: the speed limiter is on where the robot gives an acceleration
+    limit, or is traced (docs/model.md §4.2.2). Non-ideal loop: the integral
+    state is left out where ``integral_gain = 0``, the Coriolis terms where
+    ``com_offset = 0`` (same results, faster), and ``small_turn`` is set when
+    ``V_max dt / (L substeps) ≤ π/2``. Traced values keep the general loop.
     """
 
     def concrete(value: Any) -> np.ndarray | None:
@@ -162,18 +136,11 @@ def for_robot(options: Options, robot: Robot, dt: Any) -> Options:
     )
 
 
-def initial_state(init: jax.Array) -> dynamics.RobotState:
-    """Return the robot at rest at ``init`` ``(3,)``."""
-    zeros = jnp.zeros((2,), init.dtype)
-    return dynamics.RobotState(pose=init, velocity=zeros, integral=zeros)
-
-
 class StepOutput(NamedTuple):
     """What one control period reports (one sample of a ``Trajectory``).
 
-    ``v`` and ``ω`` are the command applied over the period (before a speed
-    limiter and the wheels' mismatch); ``region`` is ``-1`` in a disturbed
-    run, whose law sees a measured pose, not the true one.
+    ``v``, ``ω``: the command applied (before a speed limiter and the wheels'
+    mismatch); ``region`` is ``-1`` in a disturbed run.
     """
 
     v: jax.Array
@@ -189,19 +156,9 @@ Fold = Callable[[Any, "SplitPose", StepOutput], Any]
 class LoopCarry(NamedTuple):
     """What the one closed-loop step carries from period to period.
 
-    Attributes:
-        pose: the true pose at the sample (``SplitPose``).
-        wheel: the velocity loop's state (``initial_wheel``).
-        command: the command computed at the sample, ``v + i ω`` (computed
-            at the end of the previous period, see ``ClosedLoopStep``).
-        in_flight: the commands computed at the ``max_delay`` samples before
-            it, newest first (disturbed runs only; ``()`` otherwise).
-        moves: their arcs (``ArcMove``), for an estimator without a speed
-            limiter; ``()`` otherwise.
-        estimate: the estimator's state, or ``None``.
-        ref: the reference of the command (with ``aim`` only; ``None``
-            otherwise, so that a constant one is not carried).
-        acc: the fold's accumulator.
+    ``command`` is computed at the sample (``v + i ω``); ``in_flight`` the
+    commands of the ``max_delay`` samples before it, newest first, and
+    ``moves`` their arcs (disturbed runs); ``ref`` is carried with ``aim`` only.
     """
 
     pose: Any
@@ -218,38 +175,16 @@ class LoopCarry(NamedTuple):
 class ClosedLoopStep:
     """One control period of the closed loop: law → commands in flight → velocity loop → robot.
 
-    The one step of every run (docs/model.md §4, §7, §9). Its optional parts
-    are ``None`` where a run has none:
+    The one step of every run (docs/model.md §4, §7, §9). Optional parts,
+    ``None`` where a run has none: ``disturbance`` (noise, latency, wheel and
+    mass mismatch of one run), ``options.estimator`` with its parameters
+    ``estimate``, and ``aim(acc) -> ref``, the reference of the next command
+    from the fold's accumulator (waypoint chains, moving references).
 
-    * ``disturbance`` (a ``sensing.Disturbance`` of one run): the law sees
-      ``pose + noise``, the command computed at sample ``k`` acts from sample
-      ``k + delay`` (zero before; ``options.max_delay`` commands are carried
-      in flight), the wheels' radii scale the rims and the body mass is off
-      by its factor. ``None`` is the nominal run, with none of these.
-    * ``options.estimator`` with its parameters ``estimate`` (in a disturbed
-      run: it filters the disturbance's sensor): between the measurement and
-      the law; it predicts with the command followed and corrects toward each
-      measurement, and with ``compensate`` the law sees its estimate rolled
-      forward over the commands in flight.
-    * ``aim(acc) -> ref``: the reference of the next command, from the fold's
-      accumulator (waypoint chains, moving references); ``None`` keeps
-      ``ref``.
-
-    Arranged for speed, which makes the rollouts several times faster than
-    a plain step:
-
-    * The position and heading ride as complex numbers ``x + i y`` and
-      ``cos θ + i sin θ`` (``SplitPose``), so no step recomputes the
-      heading's cosine and sine for the law (``frame=`` of
-      ``Controller.command``) or the arc. θ itself is carried too, for the
-      pose; the non-ideal wheel loop rides as four scalars
-      (``velocity_loop.WheelState``), never as ``(N, 2)`` arrays.
-    * The command of the next period is computed at the end of each period
-      and carried as ``v + i ω``. XLA on the CPU compiles a step into one
-      loop per output of the step and repeats in each whatever they share;
-      carried this way, the law is evaluated in one loop only.
-    * The heading is renormalised every period by one Newton step towards
-      ``|heading| = 1``, so rounding does not make it drift over long runs.
+    Arranged for speed: the pose rides as complex ``x + i y`` and
+    ``cos θ + i sin θ`` (``SplitPose``), so no step recomputes the heading's
+    cosine and sine; the next command is computed at the end of each period
+    and carried as ``v + i ω``, so XLA:CPU evaluates the law in one loop only.
     """
 
     ref: jax.Array
@@ -341,13 +276,9 @@ class ClosedLoopStep:
     ) -> tuple[SplitPose, Any, jax.Array, StepOutput, Any]:
         """The plant's half of a period: the robot moves under ``applied`` (``v + i ω``).
 
-        The command passes the speed limiter (where the loop has one), the
-        disturbance's wheels realise it on its true robot (where there is
-        one), the velocity loop and the robot advance over the period
-        (``advance_period``), and the fold takes the period's ``StepOutput``.
-        What the command side does (the law, the commands in flight, the
-        estimator) is left to the caller: ``__call__`` here, or a host loop
-        whose commands come from elsewhere (``wmr_jax.export``).
+        Speed limiter, the disturbance's wheels, the velocity loop and the
+        robot, then the fold. The command side is the caller's: ``__call__``,
+        or a host loop whose commands come from elsewhere (``wmr_jax.export``).
 
         Returns:
             ``(pose, wheel, followed, out, acc)`` at the end of the period;
@@ -385,9 +316,8 @@ class ClosedLoopStep:
         spec, estimator, dt = self.disturbance, self.estimator, self.dt
         applied = fresh if spec is None else self.delayed(fresh, queue)
         if estimator is not None and moves:
-            # The arc of the carried command is computed here, not where the
-            # law returns it: XLA would fuse the law into each of the arc's
-            # parts and compute it four times.
+            # The arc is computed here, not where the law returns it: XLA would
+            # fuse the law into each of the arc's parts.
             fresh_move = ArcMove.of(fresh.real, fresh.imag, dt)
             move = self.delayed(fresh_move, moves)
             moves = (fresh_move, *moves[:-1])
@@ -440,36 +370,12 @@ def scan_closed_loop(
 ) -> tuple[jax.Array, Any, Any]:
     """Run the closed loop of one pose: the one ``lax.scan`` of ``ClosedLoopStep``.
 
-    Every run is this scan: rollouts, streamed metrics, sweeps, waypoint
-    chains, moving references, the disturbed runs and the tuning losses.
-
-    Args:
-        ref: ``(3,)`` reference pose (of the first command, with ``aim``).
-        params: the controller's parameters.
-        init: ``(3,)`` initial pose.
-        robot: robot parameters (the nominal one: the law's, the wheel
-            controller's and the estimator's model).
-        dt: control period, s.
-        options: static rollout options.
-        disturbance: a ``sensing.Disturbance`` of one run (no batch axes;
-            its ``noise (steps, 3)`` sets the number of periods), or ``None``.
-        estimate: the estimator's parameters (``options.estimator``; a
-            disturbed run only).
-        aim: ``aim(acc) -> ref``, the reference of the command computed after
-            each period, from the fold's accumulator.
-        fold: ``fold(acc, pose, out) -> acc``, called after every period with
-            the true pose at its end as a ``SplitPose`` (``pose.stacked()`` is
-            ``[x, y, θ]``, ``pose.frame()`` gives ``cos θ`` and ``sin θ``
-            without computing them) and its ``StepOutput``: metrics that
-            stream through the scan instead of storing the trajectory.
-        acc: the initial value of the fold's accumulator (a pytree).
-        record: also return every pose and ``StepOutput`` (stacked over
-            steps) and, in a disturbed run, the pose the law's side holds at
-            each sample: the estimate (before compensation), or the
-            measurement without an estimator.
-
-    Returns:
-        ``(final pose (3,), acc, records or None)``.
+    ``ref``, ``init``: ``(3,)`` poses; ``robot``: the nominal one (the law's,
+    wheel controller's and estimator's model). A ``disturbance`` of one run
+    sets the number of periods by its noise; ``fold(acc, pose, out) -> acc``
+    streams metrics after every period (``pose`` a ``SplitPose``); ``record``
+    also returns every pose and ``StepOutput`` (and, disturbed, the pose the
+    law's side holds). Returns ``(final pose (3,), acc, records or None)``.
     """
     step = ClosedLoopStep(ref, params, robot, dt, options, disturbance, estimate, aim, fold, record)
     carry = step.start(ref, init, acc)
@@ -492,11 +398,8 @@ def scan_closed_loop(
 def remat(body: Callable) -> Callable:
     """Differentiate ``body`` by recomputing it, not by storing its intermediates.
 
-    Reverse-mode through a scan otherwise keeps every intermediate of every
-    step (some fifty arrays of ``N × steps`` for the ideal loop, gigabytes at
-    ``N = 10⁵``); with this only the carry is kept per step and the backward
-    pass recomputes the step, which is cheaper than writing it all to memory.
-    No effect on evaluation without differentiation.
+    Reverse mode through a scan otherwise keeps every intermediate of every
+    step; recomputing is cheaper than writing them all to memory.
     """
     return jax.checkpoint(body, prevent_cse=False)
 
@@ -512,9 +415,8 @@ def batch_axes(tree: Any, single_ndim: int) -> Any:
 def batched(single: Callable) -> Callable:
     """Lift ``single(ref, params, init, robot, dt, options)`` to batched inputs.
 
-    A leading axis on ``ref``/``init`` (beyond ``(3,)``) or on any leaf of
-    ``params``/``robot`` (beyond a scalar) is mapped over; the others are
-    shared. This is the one place where ``vmap`` is applied.
+    A leading axis on ``ref``/``init`` or on any leaf of ``params``/``robot``
+    is mapped over; the others are shared. The one place ``vmap`` is applied.
     """
 
     def run(ref, params, init, robot, dt, options):
@@ -532,18 +434,13 @@ def batched(single: Callable) -> Callable:
     return run
 
 
-# XLA:CPU targets 256-bit vectors unless told otherwise; on a CPU with AVX-512
-# the rollouts run about 20 % faster with 512-bit ones (measured on AMD Zen 4).
-# Other backends ignore the option, and a CPU without AVX-512 uses what it has.
+# XLA:CPU targets 256-bit vectors unless told otherwise; a CPU with AVX-512
+# runs the rollouts faster with 512-bit ones. Other backends ignore it.
 COMPILER_OPTIONS = {"xla_cpu_prefer_vector_width": "512"}
 
 
 def jit_top_level(fn: Callable, **kwargs: Any) -> Callable:
-    """Return ``jax.jit(fn, **kwargs)`` compiled with ``COMPILER_OPTIONS``.
-
-    For a function of the caller's that runs rollouts inside (a loss, its
-    gradient): only the outermost ``jit`` can carry compiler options.
-    """
+    """Return ``jax.jit(fn, **kwargs)`` compiled with ``COMPILER_OPTIONS`` (top level only)."""
     try:
         return jax.jit(fn, compiler_options=COMPILER_OPTIONS, **kwargs)
     except TypeError:  # a JAX without per-function compiler options
@@ -553,9 +450,7 @@ def jit_top_level(fn: Callable, **kwargs: Any) -> Callable:
 def _untraced(kwargs: dict[str, Any]) -> dict[str, Any]:
     """The static ``options`` of a call with concrete arguments, without ``remat``.
 
-    Nothing differentiates such a call, and ``remat`` changes only what a
-    reverse pass stores: the compiled program is the same, but a checkpointed
-    scan body costs about a fifth more to trace under ``vmap``.
+    Nothing differentiates such a call, and a checkpointed body costs more to trace.
     """
     options = kwargs.get("options")
     if isinstance(options, Options) and options.remat:
@@ -566,10 +461,8 @@ def _untraced(kwargs: dict[str, Any]) -> dict[str, Any]:
 class EntryJit:
     """A jitted entry point, compiled with ``COMPILER_OPTIONS`` when called at top level.
 
-    JAX accepts compiler options only on a top-level ``jit``; inside a
-    caller's own ``jit``/``grad``/``vmap`` (traced arguments) the same
-    function runs as a plain nested ``jit``. At top level nothing can
-    differentiate the call, so its options drop ``remat`` (``_untraced``).
+    JAX accepts compiler options only on a top-level ``jit``; with traced
+    arguments the function runs as a plain nested ``jit``.
     """
 
     def __init__(self, fn: Callable, **kwargs: Any):
@@ -581,10 +474,3 @@ class EntryJit:
         if traced:
             return self.nested(*args, **kwargs)
         return self.top(*args, **_untraced(kwargs))
-
-    def lower(self, *args: Any, **kwargs: Any) -> Any:
-        """Lower the top-level version (for inspecting the compiled program)."""
-        return self.top.lower(*args, **_untraced(kwargs))
-
-    def _cache_size(self) -> int:
-        return self.top._cache_size() + self.nested._cache_size()

@@ -54,15 +54,13 @@ class PoseMetrics(NamedTuple):
     """docs/model.md §6 metrics of ``N`` runs, each a NumPy ``(N,)`` array.
 
     Attributes:
-        arrival: arrival time, s; ``inf`` where the robot is not arrived at
-            the end of the horizon.
+        arrival: arrival time, s; ``inf`` where not arrived at the end.
         path: distance travelled by the centre, cm.
         peak_wheel: largest rim speed ``|v ± L ω|`` over the run, cm/s.
         zigzag: sign changes of ``v`` plus those of ``ω`` beyond the dead bands.
         final_distance: distance to the reference at the end, cm.
-        first_arrival: ``(k + 1) dt`` for the first sample ``k`` at which the
-            robot is arrived, whether or not it stays, s; ``inf`` if never
-            (``None`` where not computed: ``evaluate_poses`` does not).
+        first_arrival: the first time the robot is arrived, whether or not
+            it stays, s; ``inf`` if never (``None`` where not computed).
     """
 
     arrival: np.ndarray
@@ -119,11 +117,8 @@ def _is_arrived(
     poses: jax.Array, refs: jax.Array, tol_r: Any, tol_theta: Any, frame: Any = None
 ) -> jax.Array:
     err = law.polar_error(poses, refs, frame=frame)
-    # |θ̄_e| from the headings themselves, not through cosines: a heading
-    # exactly tol_theta off is then arrived, as ≤ says (cos θ̄_e ≥ cos tol put
-    # 5° on either side of the boundary, as the two cosines happened to round).
-    # Beyond ±π the turn is reduced by whole turns, 2π·round(turn / 2π):
-    # with jnp.mod (wrap_angle) instead, a sweep on XLA:CPU took 1.45× as long.
+    # |θ̄_e| from the headings, not cosines: a heading exactly tol_theta off is
+    # arrived, as ≤ says. Whole turns by round, faster than jnp.mod on XLA:CPU.
     turn = poses[..., 2] - refs[..., 2]
     whole = 2 * jnp.pi * jnp.round(turn / (2 * jnp.pi))
     turn = jnp.abs(jnp.where(jnp.abs(turn) <= jnp.pi, turn, turn - whole))
@@ -140,11 +135,7 @@ def arrived(
 ) -> jax.Array:
     """Return whether each pose is arrived: ``r_e ≤ tol_r`` and ``|θ̄_e| ≤ tol_theta``.
 
-    Args:
-        poses: ``(..., 3)`` poses.
-        refs: ``(..., 3)`` references, broadcastable against ``poses``.
-        tol_r: distance tolerance, cm.
-        tol_theta: folded-heading tolerance, rad, ``< π/2``.
+    ``poses`` and ``refs`` ``(..., 3)`` broadcast; ``tol_r`` cm, ``tol_theta`` rad ``< π/2``.
 
     Raises:
         ValueError: for misshapen or non-finite poses, or tolerances out of range.
@@ -155,9 +146,7 @@ def arrived(
     return _arrived_jit(poses, refs, tol_r, tol_theta)
 
 
-# The metrics of whole trajectories as one compiled program each, not op by
-# op: dozens of operations (the polar error, its sine and cosine) would each
-# be compiled for every new shape of a batch.
+# One compiled program each, not dozens of ops compiled for every batch shape.
 _arrived_jit = jax.jit(_is_arrived)
 
 
@@ -181,9 +170,8 @@ def arrival_time(
 ) -> jax.Array:
     """Return the arrival time of each run in s, ``inf`` where it never settles (docs/model.md §6).
 
-    The arrival time is ``(k + 1) dt`` for the smallest ``k`` such that the
-    robot is arrived at every sample from ``k`` to the end of the horizon; the
-    samples are the poses after each control period (``traj.poses[..., 1:, :]``).
+    ``(k + 1) dt`` for the smallest sample ``k`` from which the robot stays
+    arrived to the end of the horizon.
 
     Args:
         traj: a ``Trajectory`` (poses ``(..., steps + 1, 3)``).
@@ -192,21 +180,15 @@ def arrival_time(
         tol_r: distance tolerance, cm.
         tol_theta: folded-heading tolerance, rad.
 
-    Returns:
-        ``(...)`` arrival times, s.
-
     Raises:
-        ValueError: for something that is not a trajectory, references that
-            are misshapen, non-finite or of another batch, ``dt ≤ 0`` or
-            tolerances out of range.
+        ValueError: for something that is not a trajectory, bad references,
+            ``dt ≤ 0`` or tolerances out of range.
     """
     tol_r, tol_theta = _check_tolerances(tol_r, tol_theta)
     dt = check_dt(dt)
     poses = _poses_of(traj)
     refs = as_pose_array("refs", refs)
     _check_broadcast("traj", jnp.shape(poses)[:-2], "refs", jnp.shape(refs)[:-1])
-    # The samples get the checks polar_error gives poses called with values
-    # (range, headings reduced); refs had them above.
     samples = as_pose_array("pose", poses[..., 1:, :])
     return _arrival_time_jit(samples, refs[..., None, :], tol_r, tol_theta, dt)
 
@@ -225,9 +207,8 @@ def success_rate(times: Any) -> float:
     """Return the fraction of finite arrival times (of ``arrival_time``, say).
 
     Raises:
-        ValueError: for no times at all, or for something that is not arrival
-            times: bools, NaN or negative numbers (``inf`` is a run that never
-            settled, and counts as a failure).
+        ValueError: for no times, or bools, NaN or negative numbers (``inf``
+            is a run that never settled: a failure).
     """
     require_concrete("success_rate", times)  # a float of NumPy's count, on the host
     allowed = "one or more arrival times, s (from arrival_time; inf where a run never settles)"
@@ -243,12 +224,7 @@ def success_rate(times: Any) -> float:
 
 
 def _field_of(traj: Any, name: str) -> Any:
-    """Return ``traj.<name>``, one value per control period, after checking it.
-
-    ``v``, ``omega`` and ``distance`` must be finite real numbers (``distance``
-    non-negative), ``region`` integer labels −1 to 3, each of the shape that
-    ``traj.poses`` implies: ``(..., steps)``.
-    """
+    """Return ``traj.<name>``, ``(..., steps)``, after checking its shape and values."""
     poses = _poses_of(traj)
     value = getattr(traj, name, None)
     if is_traced((poses, value)):
@@ -284,24 +260,22 @@ def _field_of(traj: Any, name: str) -> Any:
 def path_length(traj: Any) -> jax.Array:
     """Return the distance the centre travelled over the run, cm (docs/model.md §6).
 
-    The sum of ``|v| dt`` for the ideal loop; the integrated centre speed over
-    the inner sub-steps for the non-ideal one (``Trajectory.distance``).
+    The sum of ``Trajectory.distance``.
     """
     return jnp.sum(_field_of(traj, "distance"), axis=-1)
 
 
 def _sign_changes(x: jax.Array, dead_band: float) -> jax.Array:
     """Count sign changes along the last axis, ignoring samples with ``|x| ≤ dead_band``."""
-    signs = jnp.where(x > dead_band, 1, jnp.where(x < -dead_band, -1, 0))
-    signs = jnp.moveaxis(signs, -1, 0)
+    x = jnp.moveaxis(x, -1, 0)
 
-    def body(carry, s):
+    def body(carry, sample):
         last, count = carry
-        flipped = (s != 0) & (last != 0) & (s != last)
-        return (jnp.where(s != 0, s, last), count + flipped), None
+        last, flipped = _flip(last, sample, dead_band)
+        return (last, count + flipped), None
 
-    init = (jnp.zeros(signs.shape[1:], signs.dtype), jnp.zeros(signs.shape[1:], jnp.int32))
-    (_, count), _ = jax.lax.scan(body, init, signs)
+    zeros = jnp.zeros(x.shape[1:], jnp.int32)
+    (_, count), _ = jax.lax.scan(body, (zeros, zeros), x)
     return count
 
 
@@ -344,9 +318,7 @@ def region_time(traj: Any, *, dt: float) -> jax.Array:
 
 
 # ---------------------------------------------------------------- streamed metrics
-# The same metrics folded period by period into a few scalars per run, so that
-# sweeps and Monte Carlo runs never store a trajectory. Each agrees with its
-# function above on the same run (tested).
+# The same metrics folded period by period, so that no trajectory is stored.
 
 
 class Thresholds(NamedTuple):
@@ -400,11 +372,9 @@ def stream_update(
         acc: the metrics so far.
         pose: ``(3,)`` true pose at the end of the period.
         ref: ``(3,)`` reference.
-        out: what the period reported (a ``StepOutput``: ``v``, ``omega``,
-            ``wheel_speeds (2,)``, ``distance``).
+        out: what the period reported (a ``StepOutput``).
         thresholds: tolerances and dead bands.
-        frame: the pose as ``(x, y, cos θ, sin θ)`` if the caller has it
-            (``SplitPose.frame()``), so that no step recomputes the cosine.
+        frame: the pose as ``(x, y, cos θ, sin θ)`` if the caller has it.
     """
     ok = _is_arrived(pose, ref, thresholds.tol_r, thresholds.tol_theta, frame)
     k = acc.step
@@ -416,8 +386,7 @@ def stream_update(
         settled_from=jnp.where(ok, jnp.where(acc.settled_from < 0, k, acc.settled_from), -1),
         first=jnp.where(ok & (acc.first < 0), k, acc.first),
         path=acc.path + out.distance,
-        # Two wheels: an elementwise maximum, not a reduction (XLA would run a
-        # reduction over a length-2 axis as a slow library call).
+        # An elementwise maximum: XLA runs a length-2 reduction as a slow call.
         peak_wheel=jnp.maximum(acc.peak_wheel, jnp.maximum(rims[..., 0], rims[..., 1])),
         v_sign=v_sign,
         omega_sign=omega_sign,
@@ -426,14 +395,7 @@ def stream_update(
 
 
 def stream_result(acc: RunMetrics, dt: jax.Array) -> dict[str, jax.Array]:
-    """Return the finished metrics of a run.
-
-    Returns:
-        ``arrival_time`` (s, ``inf`` if not arrived at the last sample, as
-        ``arrival_time``), ``first_arrival`` (s, the first arrived sample
-        whether or not the robot stays), ``success``, ``path_length`` (cm),
-        ``peak_wheel_speed`` (cm/s) and ``zigzags``.
-    """
+    """Return the finished metrics of a run (times in s, as ``PoseMetrics``)."""
 
     def time_of(sample):
         return jnp.where(sample >= 0, (sample + 1).astype(acc.path.dtype) * dt, jnp.inf)

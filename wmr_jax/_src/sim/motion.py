@@ -1,10 +1,8 @@
 """The pose as the loops carry it, and its motion over one control period.
 
-``SplitPose`` holds the position and heading as complex numbers, so that
-the exact arc of the ideal robot (``ideal_move``, docs/model.md §4) is two
-complex products; ``advance_period`` moves it under either velocity loop.
-``HeldCommand`` and ``speed_limit`` are the ideal loop's speed limiter
-(§4.2.2). Nothing here checks its inputs.
+``SplitPose`` holds the position and heading as complex numbers, so that the
+ideal robot's exact arc (``ideal_move``) is two complex products. Nothing
+here checks its inputs.
 """
 
 from __future__ import annotations
@@ -26,7 +24,6 @@ __all__ = [
     "HeldCommand",
     "SplitPose",
     "advance_period",
-    "ideal_arc",
     "ideal_move",
     "initial_wheel",
     "speed_limit",
@@ -36,13 +33,7 @@ __all__ = [
 
 
 class SplitPose(NamedTuple):
-    """A pose as the fast loops carry it (leading batch axes allowed).
-
-    Attributes:
-        position: complex ``x + i y``, cm.
-        heading: complex ``cos θ + i sin θ``.
-        theta: θ, rad (not wrapped).
-    """
+    """A pose as the loops carry it: complex ``x + i y`` cm, ``cos θ + i sin θ``, θ rad."""
 
     position: jax.Array
     heading: jax.Array
@@ -79,14 +70,9 @@ def split_region(pose: SplitPose, ref, params, options: Options) -> jax.Array:
 
 
 class HeldCommand(NamedTuple):
-    """The command the ideal loop's speed limiter last let through (docs/model.md §4.2.2).
+    """The command ``(v cm/s, ω rad/s)`` the speed limiter last let through (docs/model.md §4.2.2).
 
-    The ideal loop's state beside the pose when ``Options.accel_limit`` is
-    on (leading batch axes allowed); the robot starts at rest, ``(0, 0)``.
-
-    Attributes:
-        v: linear velocity, cm/s.
-        omega: angular velocity, rad/s.
+    The ideal loop's state when ``Options.accel_limit`` is on; at rest ``(0, 0)``.
     """
 
     v: jax.Array
@@ -96,11 +82,7 @@ class HeldCommand(NamedTuple):
 def speed_limit(
     previous: HeldCommand, v: jax.Array, omega: jax.Array, robot: Robot, dt: jax.Array
 ) -> tuple[jax.Array, jax.Array]:
-    """The command ``(v, ω)`` after the robot's speed limiter (docs/model.md §4.2.2).
-
-    Each axis moves from ``previous`` by at most its acceleration limit
-    times ``dt``; an axis whose limit is 0 (none) passes unchanged.
-    """
+    """The command ``(v, ω)`` after the robot's speed limiter (docs/model.md §4.2.2)."""
     return (
         dynamics.rate_limit(v, previous.v, robot.accel_max, dt),
         dynamics.rate_limit(omega, previous.omega, robot.angular_accel_max, dt),
@@ -110,10 +92,7 @@ def speed_limit(
 def initial_wheel(
     init: jax.Array, options: Options
 ) -> velocity_loop.WheelState | HeldCommand | None:
-    """The velocity loop at rest: the wheel loop's state, or the ideal loop's held command.
-
-    ``None`` for the ideal loop without a speed limiter, which has no state.
-    """
+    """The velocity loop at rest: the wheel loop's state, the held command, or ``None``."""
     zero = jnp.zeros((), init.dtype)
     if options.velocity == "ideal":
         return HeldCommand(zero, zero) if options.accel_limit else None
@@ -121,13 +100,7 @@ def initial_wheel(
 
 
 class ArcMove(NamedTuple):
-    """One period's motion at a held command, apart from the pose it moves (``ideal_move``).
-
-    Attributes:
-        turn: ``cos(ω dt/2) + i sin(ω dt/2)``.
-        chord: ``v dt sinc(ω dt/2)``, cm.
-        rotation: ``ω dt``, rad.
-    """
+    """One period's arc at a held command, apart from the pose it moves (``ideal_move``)."""
 
     turn: jax.Array
     chord: jax.Array
@@ -141,20 +114,11 @@ class ArcMove(NamedTuple):
 
 
 def ideal_move(pose: SplitPose, move: ArcMove) -> SplitPose:
-    """Move ``pose`` by ``move``: the exact arc of docs/model.md §4 (``ideal_arc``)."""
+    """Move ``pose`` by ``move``: the exact arc of docs/model.md §4 (estimators predict so)."""
     position, heading = dynamics.arc_apply(pose.position, pose.heading, move.turn, move.chord)
     # One Newton step towards |heading| = 1, so that rounding does not drift.
     heading = heading * (1.5 - 0.5 * (heading.real**2 + heading.imag**2))
     return SplitPose(position, heading, pose.theta + move.rotation)
-
-
-def ideal_arc(pose: SplitPose, v: jax.Array, omega: jax.Array, dt: jax.Array) -> SplitPose:
-    """Move ``pose`` over ``dt`` at the held ``(v, ω)`` on the exact arc of docs/model.md §4.
-
-    The ideal loop's motion, and the prediction of every estimator (whose
-    model is the ideal robot, docs/model.md §9).
-    """
-    return ideal_move(pose, ArcMove.of(v, omega, dt))
 
 
 def advance_period(
@@ -169,27 +133,13 @@ def advance_period(
 ) -> tuple[SplitPose, Any, jax.Array, jax.Array]:
     """Move the robot over one period under the held ``command = (v, ω)`` (docs/model.md §4).
 
-    Args:
-        pose: the pose at the sample.
-        wheel: the velocity loop's state (``initial_wheel``): the wheel loop's,
-            the ideal loop's last held command under a speed limiter, or
-            ``None``.
-        command: ``(v cm/s, ω rad/s)``, held over the period (after the speed
-            limiter, which ``ClosedLoopStep`` applies).
-        robot: the robot that moves.
-        dt: control period, s.
-        options: ``velocity``, ``substeps``, ``wheel_limit`` and the wheel
-            loop's flags are used.
-        model: the robot the wheel controller believes in (non-ideal loop;
-            default ``robot``).
-
-    Returns:
-        ``(pose, wheel, rim speeds (2,) [v_L, v_R] cm/s, distance cm)`` at the
-        end of the period.
+    ``wheel`` is the velocity loop's state (``initial_wheel``), ``model`` the
+    robot the wheel controller believes in. Returns ``(pose, wheel, rim
+    speeds (2,) cm/s, distance cm)`` at the end of the period.
     """
     v, omega = command
     if options.velocity == "ideal":
-        new = ideal_arc(pose, v, omega, dt)
+        new = ideal_move(pose, ArcMove.of(v, omega, dt))
         return new, wheel, law.wheel_speeds(v, omega, robot), jnp.abs(v) * dt
     position, heading, theta, wheel, distance = velocity_loop.advance_split(
         pose.position,

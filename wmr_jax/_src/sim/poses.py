@@ -1,8 +1,7 @@
 """Reference poses: the evaluation set of ``docs/model.md §6``, the paper's seven, the horizon.
 
-``sample_poses`` is the one sampler of evaluation poses in the package:
-tuning, sweeps, maps, robustness, the benchmark and the tests all draw from
-it, so "the same seed" means the same poses everywhere.
+``sample_poses`` is the one sampler of evaluation poses, so "the same seed"
+means the same poses everywhere.
 """
 
 from __future__ import annotations
@@ -72,16 +71,14 @@ def sample_poses(
     """Draw ``n`` reference poses of the evaluation set, for a robot at ``(0, 0, 0)``.
 
     Distance uniform in ``[r_min, r_max]`` cm; bearing and heading uniform in
-    ``[−π, π)`` (``docs/model.md §6``). The draw is made in float32 and then
-    cast, so a key gives the same poses whatever the precision.
+    ``[−π, π)`` (``docs/model.md §6``); drawn in float32 whatever the precision.
 
     Args:
         key: a JAX PRNG key, or an integer seed.
         n: number of poses.
         r_min: least distance, cm, ``>= 0``.
         r_max: largest distance, cm, ``>= r_min``.
-        dtype: of the result; default JAX's default float dtype (float64
-            only when JAX has it enabled).
+        dtype: of the result; default JAX's default float dtype.
 
     Returns:
         ``(n, 3)`` poses ``[x cm, y cm, θ rad]``.

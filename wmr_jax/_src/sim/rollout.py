@@ -1,14 +1,9 @@
 """Closed-loop rollouts: the entry points ``rollout``, ``batch_rollout``, ``final_poses``.
 
-The entry points check their inputs in plain Python (``docs/model.md §3``
-ranges, shapes, finiteness, options) and then call a jitted core whose static
-arguments are the shape-deciding options. Calling them again with the same
-shapes and options reuses the compiled code; for the non-ideal loop the
-robot's vanishing terms are options too (``loops.for_robot``,
-``docs/model.md §4.3``), so a robot that crosses one compiles anew, and so
-is the ideal loop's speed limiter, on for a robot that gives acceleration
-limits (``docs/model.md §4.2.2``). The loop itself is in ``loops.py``; the
-checks in ``checks.py``.
+The entry points check their inputs in plain Python, then call a jitted core
+whose static arguments are the shape-deciding options, among them the robot's
+vanishing terms and speed limiter (``loops.for_robot``, ``docs/model.md
+§4.2.2, §4.3``). The loop itself is in ``loops.py``.
 """
 
 from __future__ import annotations
@@ -80,10 +75,8 @@ class Trajectory(NamedTuple):
     Attributes:
         poses: ``(steps + 1, 3)`` poses ``[x cm, y cm, θ rad]``, the initial one first.
         v: ``(steps,)`` linear-velocity command of the law over each period,
-            cm/s: what the ideal robot follows, unless the robot's speed
-            limiter changes it (``accel_max``, docs/model.md §4.2.2), or the
-            non-ideal loop's set point.
-        omega: ``(steps,)`` angular-velocity command, rad/s (likewise).
+            cm/s (before a speed limiter, docs/model.md §4.2.2).
+        omega: ``(steps,)`` angular-velocity command, rad/s.
         region: ``(steps,)`` int32 region label 0–3 of the command (docs/model.md §3).
         wheel_speeds: ``(steps, 2)`` rim speeds ``[v_L, v_R]`` of the robot
             at the end of each period, cm/s (after the speed limiter, if any).
@@ -99,27 +92,17 @@ class Trajectory(NamedTuple):
 
 
 # choice: where the compute dtype spaces positions near the reference more than
-# this apart, cm (a reference beyond 524 cm of the origin in float32, 3e11 cm in
-# float64), a run that starts nearer its reference than the farther of the two
-# is from the origin is computed in the reference's frame: translated so that
-# the reference is at the origin, and its poses translated back. The laws and
-# the robot do not depend on where the origin is, but the rounding does: in
-# the world frame the last millimetres to a reference 1e4 cm out are a few
-# float32 spacings, and a step of the robot rounds to a different direction or
-# none (the polar baselines then never settled, docs/model.md §3.8). In the
-# reference's frame the run has the resolution of a run near the origin, and
-# float32 arrives when float64 does. A run from near the origin to a far
-# reference stays in the world frame: translated, its goal would be resolved
-# and its start no longer, which is no better. Nearer the origin nothing
-# changes: the translation is by 0, and the run is the same bit for bit.
+# this apart, cm (beyond 524 cm of the origin in float32), a run that starts
+# nearer its reference than the farther of the two is from the origin is
+# computed in the reference's frame and translated back: the law does not
+# depend on the origin but the rounding does, and far out the last millimetres
+# are a few float32 spacings (docs/model.md §3.8). Nearer the origin the
+# translation is by 0 and the run is the same bit for bit.
 GOAL_FRAME_SPACING = AT_GOAL / GOAL_EPS
 
 
 def _goal_frame(ref: jax.Array, init: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """Return ``(ref, init, shift)``, translated by ``-shift`` (see ``GOAL_FRAME_SPACING``).
-
-    ``shift`` is ``[x_r, y_r, 0]`` for a run computed in the reference's frame, else zeros.
-    """
+    """Return ``(ref, init, shift)`` translated by ``-shift`` (``[x_r, y_r, 0]`` or zeros)."""
     far = jnp.max(jnp.abs(ref[:2]))
     coarse = jnp.finfo(ref.dtype).eps * far > GOAL_FRAME_SPACING
     nearer = jnp.max(jnp.abs(init[:2] - ref[:2])) < jnp.maximum(far, jnp.max(jnp.abs(init[:2])))
@@ -193,11 +176,7 @@ def make_options(
 
 
 def _common_batch(refs, params, init, robot):
-    """Check the batch sizes agree; an axis of size 1 is shared by every run.
-
-    Returns:
-        ``(refs, params, init, robot)`` with the size-1 axes removed.
-    """
+    """Check the batch sizes agree; return the arguments with size-1 axes (shared) removed."""
     n = require_one_batch_size(
         batch_sizes({"gains": params, "robot": robot}, {"refs": refs, "init": init})
     )
@@ -242,14 +221,9 @@ def prepare(
 ):
     """Check and convert every argument of a rollout entry point (before tracing).
 
-    Args:
-        batch: ``False`` for one run (``refs`` and ``init`` ``(3,)``), ``None``
-            for a batch over any of refs/init/params/robot.
-        entry: for one run, the entry point's name and those that run a batch
-            instead, for the message that refuses batched parameters.
-
-    Returns:
-        ``(refs, params, init, robot, dt)`` ready for the jitted cores.
+    ``batch``: ``False`` for one run, ``None`` for a batch over any of
+    refs/init/params/robot; ``entry``: for one run, the names for the message
+    that refuses batched parameters. Returns ``(refs, params, init, robot, dt)``.
     """
     control = options.controller
     params = control.default_params() if params is None else params
@@ -281,15 +255,13 @@ def prepare(
 def finite_result(poses: Any, result: Any, *, pose_axes: int = 1) -> Any:
     """Return ``result``, or raise if a pose of the run left the floating-point range.
 
-    The inputs passed their checks, but some gains or periods drive the robot
-    (or its heading) beyond what the compute dtype can hold; a run with an
-    ``inf`` or ``NaN`` pose is reported, not returned (as diffrax throws on a
-    failed solve). Skipped inside a caller's own transformations.
+    Some valid gains or periods drive the robot beyond what the compute dtype
+    holds; such a run is reported, not returned. Skipped under a caller's
+    own transformations.
     """
     if is_traced(poses):
         return result
-    # One flag per run: the trailing axes (the pose, and the time axis of a
-    # trajectory) are reduced, the leading batch axes kept.
+    # One flag per run: the pose (and time) axes reduced, the batch axes kept.
     axes = tuple(range(-pose_axes, 0))
     if isinstance(poses, jax.Array) and not poses.is_fully_addressable:
         # Spread over several processes: each checks the runs it holds.
@@ -317,6 +289,15 @@ def _static_options(arguments: dict[str, Any]) -> dict[str, Any]:
     return {name: arguments[name] for name in _STATIC}
 
 
+def _run(jitted: EntryJit, args: tuple, options: Options, *, record: bool) -> Any:
+    """Run ``jitted`` on an entry point's prepared ``args``; refuse a run that left the range."""
+    if record:
+        require_trajectory_fits(args, options.steps)
+    options = for_robot(options, args[3], args[4])
+    out = jitted(*args, options=options)
+    return finite_result(out.poses, out, pose_axes=2) if record else finite_result(out, out)
+
+
 _OPTIONS_DOC = """
         init: ``(3,)`` initial pose, or ``(N, 3)`` for a batch.
         dt: control period in s; commands are held over it (docs/model.md §4).
@@ -340,12 +321,7 @@ TRAJECTORY_RECORD = (8, 1)
 
 
 def _memory_bytes(inputs: Any = None) -> int | None:
-    """The memory the arrays of a run on ``inputs`` may take (None: unknown).
-
-    The host's for a run on the CPU; on an accelerator, the ``bytes_limit``
-    of each device the inputs span (one device, the default, for inputs not
-    on devices), times the processes when they are spread over several.
-    """
+    """The memory a run on ``inputs`` may take: the host's, or its devices' (None: unknown)."""
     arrays = [x for x in jax.tree.leaves(inputs) if isinstance(x, jax.Array)]
     spans = [x.sharding.device_set for x in arrays if not is_traced(x)]
     devices = max(spans, key=len, default=None)
@@ -369,38 +345,25 @@ def _memory_bytes(inputs: Any = None) -> int | None:
 
 
 def record_bytes(runs: int, steps: int, record: tuple[int, int]) -> int:
-    """Bytes of a record of ``runs`` runs: ``(floats, int32s)`` per period, ``steps + 1`` periods.
-
-    An upper bound of the arrays returned (the poses have ``steps + 1``
-    rows, the commands ``steps``), in the compute dtype.
-    """
+    """An upper bound of the bytes of ``runs`` records of ``(floats, int32s)`` per period."""
     floats, ints = record
     return runs * (steps + 1) * (floats * np.dtype(float_dtype()).itemsize + ints * 4)
 
 
 def require_trajectory_fits(args: tuple, steps: int) -> None:
-    """Refuse, before it runs, a ``Trajectory`` larger than the machine's memory.
-
-    ``args``: the rollout's prepared ``(refs, params, init, robot, dt)``.
-    """
+    """Refuse a ``Trajectory`` of the prepared ``args`` larger than the machine's memory."""
     refs, params, init, robot, _ = args
     runs = common_batch_size({"gains": params, "robot": robot}, {"refs": refs, "init": init})
     require_memory(runs, steps, TRAJECTORY_RECORD, args)
 
 
 def require_memory(runs: int, steps: int, record: tuple[int, int], inputs: Any = None) -> None:
-    """Refuse, before it runs, a record of ``runs`` runs larger than the memory it would take.
+    """Refuse, before it runs, a record of ``runs`` runs larger than the memory.
 
-    XLA would try to allocate it whole: on a host that overcommits memory,
-    the system may stall or kill the process rather than fail.
+    XLA would allocate it whole, and an overcommitting host may stall rather than fail.
 
-    Args:
-        record: ``(floats, int32s)`` recorded per run and period.
-        inputs: the run's inputs, whose devices it runs on (default: the
-            default device).
-
-    Raises:
-        ValueError: naming the runs, the steps and the bytes needed.
+    ``record``: ``(floats, int32s)`` per run and period; ``inputs``: the
+    run's inputs, whose devices it runs on (default: the default device).
     """
     needed = record_bytes(runs, steps, record)
     memory = _memory_bytes(inputs)
@@ -442,10 +405,7 @@ def rollout(
     """
     options = make_options(**_static_options(locals()))
     args = prepare(ref, gains, init, robot, dt, options, batch=False)
-    require_trajectory_fits(args, options.steps)
-    options = for_robot(options, args[3], args[4])
-    traj = _rollout_jit(*args, options=options)
-    return finite_result(traj.poses, traj, pose_axes=2)
+    return _run(_rollout_jit, args, options, record=True)
 
 
 def batch_rollout(
@@ -478,10 +438,7 @@ def batch_rollout(
     """
     options = make_options(**_static_options(locals()))
     args = prepare(refs, gains, init, robot, dt, options, batch=None)
-    require_trajectory_fits(args, options.steps)
-    options = for_robot(options, args[3], args[4])
-    traj = _batch_rollout_jit(*args, options=options)
-    return finite_result(traj.poses, traj, pose_axes=2)
+    return _run(_batch_rollout_jit, args, options, record=True)
 
 
 def final_poses(
@@ -507,9 +464,7 @@ def final_poses(
     """
     options = make_options(**_static_options(locals()))
     args = prepare(refs, gains, init, robot, dt, options, batch=None)
-    options = for_robot(options, args[3], args[4])
-    final = _final_poses_jit(*args, options=options)
-    return finite_result(final, final)
+    return _run(_final_poses_jit, args, options, record=False)
 
 
 for _entry in (rollout, batch_rollout, final_poses):

@@ -1,27 +1,14 @@
 """Spread a batch of runs over devices, and over hosts, with JAX sharding.
 
-The batch entry points (``batch_rollout``, ``final_poses``) take
-``jax.Array`` inputs sharded along their batch axis and return results
-sharded the same way: each device simulates its own rows, with no
-communication until the results are gathered. ``shard`` places a batch so:
+The batch entry points take ``jax.Array`` inputs sharded along their batch
+axis and return results sharded alike, each device simulating its own rows:
 
 >>> batch = shard(refs)                      # over all devices
->>> final = final_poses(batch.array)         # sharded (N_padded, 3)
->>> final = final[: batch.n]                 # drop the padding rows
+>>> final = final_poses(batch.array)[: batch.n]
 
-The batch axis must divide evenly among the devices, so ``shard`` pads it
-with copies of the last row up to a multiple of the device count; the padded
-rows are ordinary runs whose results are simply dropped (``[: batch.n]``, or
-``unpad``). Several arrays (reference poses, per-pose gains, initial poses)
-can be sharded together as one pytree, so that they are padded alike.
-
-On the CPU, one process sees one device unless told otherwise:
-``use_cpu_devices(K)`` (or ``XLA_FLAGS=--xla_force_host_platform_device_count=K``),
-before JAX starts, splits it into ``K`` devices, which is also faster (see
-``use_cpu_devices``). Across hosts, start every process with
-``jax.distributed.initialize(...)`` (see ``multihost_recipe``); ``jax.devices()``
-then lists every device of every host, and ``shard`` with the default devices
-builds one global array from the same host data given to every process.
+``shard`` pads the batch axis with copies of the last row to a multiple of
+the device count; ``[: batch.n]`` or ``unpad`` drops them. Several hosts:
+docs/scale.md.
 """
 
 from __future__ import annotations
@@ -40,7 +27,6 @@ __all__ = [
     "ShardedBatch",
     "batch_sharding",
     "checked_devices",
-    "multihost_recipe",
     "shard",
     "unpad",
     "use_cpu_devices",
@@ -73,12 +59,9 @@ MAX_CPU_DEVICES = 1024
 def use_cpu_devices(count: int | None = None) -> int:
     """Split the CPU into ``count`` JAX devices; return the number of local devices.
 
-    XLA runs the kernels of one program one after another, so on the CPU one
-    device leaves cores idle; a batch sharded over several CPU devices runs
-    one stream of kernels per device, which the cores then share
-    (``wmr-jax bench`` measures the gain). This only takes effect before JAX
-    has started (no JAX computation yet in this process); later it changes
-    nothing. It has no effect on accelerator backends.
+    XLA runs one program's kernels one after another, so one CPU device
+    leaves cores idle. Takes effect only before JAX has started; no effect
+    on accelerators.
 
     Args:
         count: devices to make; default twice the number of cores this
@@ -93,8 +76,7 @@ def use_cpu_devices(count: int | None = None) -> int:
         except AttributeError:  # not Linux
             cores = os.cpu_count() or 1
         count = 2 * cores
-    # Each device holds threads and buffers of its own: far beyond the cores it
-    # only slows the start (100,000 of them did not start in minutes).
+    # Each device holds threads and buffers: far beyond the cores it only slows the start.
     count = check_int("count", count, 1, MAX_CPU_DEVICES)
     try:
         jax.config.update("jax_num_cpu_devices", count)
@@ -144,19 +126,13 @@ def shard(batch: Any, devices: Sequence[Any] | None = None) -> ShardedBatch:
     """Place a batch across ``devices``, padding its leading axis to a multiple of their count.
 
     Args:
-        batch: an ``(N, ...)`` array (e.g. reference poses ``(N, 3)``; a
-            nested list of numbers reads as one), or a pytree of arrays that
-            all have the same leading length ``N`` (a list of 1-D arrays is
-            ambiguous, rows or batches, and refused).
-        devices: default ``jax.devices()``. With several processes
-            (``jax.distributed``), every process passes the same ``batch`` and
-            places the rows that belong to its own devices.
+        batch: an ``(N, ...)`` array (or nested list of numbers), or a
+            pytree of arrays of one leading length ``N``.
+        devices: default ``jax.devices()``. With several processes, every
+            process passes the same ``batch``.
 
     Returns:
-        ``ShardedBatch(array, n)``: ``array`` has leading length
-        ``n_padded = ceil(N / D) · D`` for ``D`` devices, its extra rows
-        copies of row ``N − 1``; results computed from it are sharded alike,
-        and ``result[:n]`` (or ``unpad(result, n)``) drops the padding.
+        ``ShardedBatch(array, n)``, ``array`` padded to ``ceil(N / D) · D`` rows.
 
     Raises:
         ValueError: if the leaves do not share one leading length ``N ≥ 1``.
@@ -198,8 +174,7 @@ def shard(batch: Any, devices: Sequence[Any] | None = None) -> ShardedBatch:
 def _rows(name: str, batch: list) -> Any:
     """Read a list as rows of one batch (numbers), or as a pytree of batches (arrays).
 
-    A list of one-dimensional arrays alone is both: ``[pose, pose]`` reads as
-    two rows, or as two batches of 3. It is refused rather than guessed.
+    A list of one-dimensional arrays could be either, and is refused.
     """
     arrays = [isinstance(row, (np.ndarray, jax.Array)) for row in batch]
     if any(arrays):
@@ -235,24 +210,3 @@ def unpad(result: Any, n: int) -> Any:
         raise ValueError("result has no rows (a leading length of 0); allowed: shard's output")
     n = check_int("n", n, 1, shortest)
     return jax.tree.map(lambda leaf: leaf[:n], result)
-
-
-def multihost_recipe() -> str:
-    """Return the steps to run a batch over several hosts (also in the module docs)."""
-    return """\
-Multi-host runs (one process per host, or per accelerator):
-1. Start the same script on every host with the same arguments, and in it,
-   before any other JAX call:
-       jax.distributed.initialize(coordinator_address="HOST0:PORT",
-                                  num_processes=P, process_id=i)
-   (on CPU hosts also: jax.config.update("jax_cpu_collectives_implementation",
-   "gloo"); on SLURM, Cloud TPU or Kubernetes initialize() needs no arguments).
-2. Build the same reference poses on every host (same seed or file) and call
-   batch = wmr_jax.shard(refs): jax.devices() now lists the devices of
-   every host, and each process places only the rows of its own devices.
-3. Call wmr_jax.final_poses(batch.array, ...) (or batch_rollout) on every host:
-   each device simulates its rows, with no communication between hosts.
-4. Gather what you need: jax.experimental.multihost_utils.process_allgather(
-   result)[:batch.n] on every host, or each process writes its own shards
-   (result.addressable_shards) to shared storage.
-"""

@@ -1,7 +1,4 @@
-"""The Astolfi polar law in Corke's form, a baseline (``docs/model.md §3``).
-
-Its error coordinates and backward-driving rule are those of ``polar.py``.
-"""
+"""The Astolfi polar law in Corke's form, a baseline (``docs/model.md §3``)."""
 
 from __future__ import annotations
 
@@ -13,14 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from wmr_jax._src.checks import Parameters, require
-from wmr_jax._src.model.controllers.base import Controller, register_controller
-from wmr_jax._src.model.controllers.polar import (
-    driving_error,
-    entry_point,
-    gain_values,
-    goal_floor,
-    hold_at_goal,
-)
+from wmr_jax._src.model.controllers import polar
 
 __all__ = ["ASTOLFI", "AstolfiGains", "astolfi_control", "validate_astolfi_gains"]
 
@@ -30,12 +20,10 @@ __all__ = ["ASTOLFI", "AstolfiGains", "astolfi_control", "validate_astolfi_gains
 class AstolfiGains(Parameters):
     """Gains of the Astolfi polar law as given by Corke, *Robotics, Vision and Control*.
 
-    Defaults ``k_ρ = 3``, ``k_α = 8``, ``k_β = −3`` are the gains of the book's
-    "moving to a pose" example (P. Corke, *Robotics, Vision and Control*,
-    Springer 2011, §4.2.4; 2nd ed. 2017, §4.1.1.4), as set in the
-    ``sl_drivepose`` model of the Robotics Toolbox for MATLAB that goes with it.
-    The law is A. Astolfi, "Exponential stabilization of a wheeled mobile robot
-    via discontinuous control", J. Dyn. Sys., Meas., Control 121(1), 1999.
+    Defaults are the book's "moving to a pose" example (P. Corke, Springer
+    2011, §4.2.4; 2nd ed. 2017, §4.1.1.4, the ``sl_drivepose`` model). The law
+    is A. Astolfi, "Exponential stabilization of a wheeled mobile robot via
+    discontinuous control", J. Dyn. Sys., Meas., Control 121(1), 1999.
 
     Attributes:
         k_rho: ``k_ρ > 0``, 1/s: ``v = k_ρ ρ``.
@@ -51,41 +39,21 @@ class AstolfiGains(Parameters):
     backward: bool = dataclasses.field(default=True, metadata={"static": True})
 
 
-def _astolfi_control(
-    pose: jax.Array,
-    ref: jax.Array,
-    gains: AstolfiGains,
-    *,
-    temperature: float | None = None,
-    frame: Any = None,
-) -> tuple[jax.Array, jax.Array]:
-    """Return ``(v cm/s, ω rad/s)`` of the Astolfi polar law in Corke's form.
+def _astolfi_control(pose, ref, gains, *, temperature=None, frame=None):
+    """Return ``(v cm/s, ω rad/s)`` of the Astolfi law in Corke's form (``polar.polar_command``).
 
-    ``v = k_ρ ρ`` and ``ω = k_α α + k_β β`` with ``β = −θ_A`` (Corke's "moving to
-    a pose"); ``v`` changes sign when driving backwards. choice: ``α`` is held
-    within ``[−π/2, π/2]`` as the Toolbox's polar-coordinate block does, which
-    matters only when backward driving is off. Within ``goal_floor`` of the
-    reference (``AT_GOAL`` = 1e-3 cm, more far from the origin) it only turns,
-    ``ω = k_α θ_e`` (``polar.py``).
-
-    Args:
-        pose: ``(..., 3)`` current pose ``[x cm, y cm, θ rad]``.
-        ref: ``(..., 3)`` reference pose.
-        gains: ``AstolfiGains``.
-        temperature: ``None``: the law has no smooth relaxation (``astolfi_control``
-            refuses any other value).
-        frame: the pose as ``(x, y, cos θ, sin θ)``, as the rollouts hand it to
-            the registered law (see ``shim_sung.polar_error``).
+    ``v = k_ρ ρ`` and ``ω = k_α α + k_β β`` with ``β = −θ_A``. choice: ``α``
+    is held within ``[−π/2, π/2]`` as the Toolbox's block does. At the goal
+    it turns at ``k_α``. ``temperature``: ``None`` only.
     """
-    rho, alpha, theta_a, direction = driving_error(pose, ref, backward=gains.backward, frame=frame)
-    alpha = jnp.clip(alpha, -jnp.pi / 2, jnp.pi / 2)
-    v = direction * gains.k_rho * rho
-    omega = gains.k_alpha * alpha - gains.k_beta * theta_a
-    floor = goal_floor(pose, ref, frame=frame)
-    return hold_at_goal(rho, alpha, theta_a, v, omega, gains.k_alpha, floor)
 
+    def speeds(rho, alpha, theta_a, direction):
+        alpha = jnp.clip(alpha, -jnp.pi / 2, jnp.pi / 2)
+        v = direction * gains.k_rho * rho
+        omega = gains.k_alpha * alpha - gains.k_beta * theta_a
+        return alpha, v, omega, gains.k_alpha
 
-# ---------------------------------------------------------------- boundary checks
+    return polar.polar_command(pose, ref, backward=gains.backward, frame=frame, speeds=speeds)
 
 
 def validate_astolfi_gains(gains: AstolfiGains) -> AstolfiGains:
@@ -96,7 +64,7 @@ def validate_astolfi_gains(gains: AstolfiGains) -> AstolfiGains:
     Raises:
         ValueError: naming the field, its value and the allowed range.
     """
-    g = gain_values(gains, AstolfiGains)
+    g = polar.gain_values(gains, AstolfiGains)
     if g["k_rho"] is not None:
         require("gains.k_rho", g["k_rho"], g["k_rho"] > 0, "k_rho > 0 1/s")
     if g["k_beta"] is not None:
@@ -112,14 +80,6 @@ def validate_astolfi_gains(gains: AstolfiGains) -> AstolfiGains:
     return gains
 
 
-ASTOLFI = register_controller(
-    Controller(
-        name="astolfi-corke",
-        command=_astolfi_control,
-        params_type=AstolfiGains,
-        validate=validate_astolfi_gains,
-    )
+ASTOLFI, astolfi_control = polar.polar_controller(
+    "astolfi-corke", _astolfi_control, AstolfiGains, validate_astolfi_gains
 )
-
-astolfi_control = entry_point(_astolfi_control, AstolfiGains, validate_astolfi_gains)
-"""The law called by hand: poses and gains checked first, no ``temperature``."""

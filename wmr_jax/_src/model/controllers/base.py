@@ -1,11 +1,8 @@
 """Controllers as values: a pure command law plus the type of its parameter pytree.
 
 A ``Controller`` bundles ``command(pose, ref, params, *, temperature, frame)``
-→ ``(v cm/s, ω rad/s)`` with what a rollout needs around it: a region label
-for diagnostics, a boundary check of its parameters, their defaults, and
-what it supports (a smooth relaxation, a check against the robot). Rollouts,
-batching, metrics, sweeps and tuning take any ``Controller`` and ask it, never
-which one it is.
+→ ``(v cm/s, ω rad/s)`` with what a rollout needs around it; the rest of the
+package asks it, never which one it is.
 """
 
 from __future__ import annotations
@@ -46,22 +43,16 @@ class Controller:
 
     Attributes:
         name: short name used by the CLI and in tables.
-        command: ``(pose (…,3), ref (…,3), params, *, temperature, frame) -> (v, ω)``.
-            ``frame`` is ``None`` or the pose as ``(x, y, cos θ, sin θ)``, for
-            rollouts that carry the heading that way; the law reads it instead
-            of ``pose`` when given.
-        params_type: the class of its parameter pytree (built with defaults
-            when a rollout gets ``None``).
+        command: ``(pose (…,3), ref (…,3), params, *, temperature, frame) -> (v, ω)``;
+            ``frame``, when given, is the pose as ``(x, y, cos θ, sin θ)``.
+        params_type: the class of its parameter pytree (its defaults the default).
         validate: checks a parameter pytree before tracing; returns it.
         region: ``(pose, ref, params, *, frame) -> int32`` diagnostic label, or
             ``None`` for a controller without regions (labels are then −1).
         smooth: whether ``command`` accepts a positive ``temperature``.
-        check_robot: ``(params, robot) -> None``, called with concrete values
-            before a rollout, to warn about parameters that are legal but
-            unsuited to the robot (Shim–Sung: ``k_r + L k_θ > V_max``); or ``None``.
-        check_sampling: ``(params, dt) -> None``, called likewise, to warn
-            about gains the sampled law cannot follow at the period ``dt``
-            (Shim–Sung: ``k_θ dt ≥ 2``); or ``None``.
+        check_robot: ``(params, robot) -> None`` before a rollout, to warn
+            about parameters unsuited to the robot; or ``None``.
+        check_sampling: ``(params, dt) -> None``, likewise for the period; or ``None``.
     """
 
     name: str
@@ -88,8 +79,7 @@ class Controller:
                     f"controller {self.name!r}: controller.{field} = {described(value):.60} is not "
                     f"allowed; allowed: {allowed} {_CALLS[field][2]}"
                 )
-            # A function the loop cannot call would fail only inside the traced
-            # scan, as a TypeError far from its cause: refuse it here instead.
+            # Else it would fail inside the traced scan, far from its cause.
             _check_signature(self.name, field, value)
         if not isinstance(self.params_type, type):
             raise ValueError(
@@ -99,8 +89,7 @@ class Controller:
             )
 
     def __repr__(self) -> str:
-        # The generated repr lists every function with its address, which
-        # buries a rollout's signature in help() under lines of noise.
+        # The generated repr would bury a rollout's signature in help().
         return f"<Controller {self.name!r}>"
 
     def default_params(self) -> Any:
@@ -139,12 +128,7 @@ _REQUIRED = ("command", "validate")  # the rest may be None
 def _check_signature(name: Any, field: str, function: Any) -> None:
     """Refuse a function of a ``Controller`` that cannot be called as the package calls it.
 
-    A function whose signature Python cannot read (some builtins) passes;
-    one that is not callable is refused by ``Controller`` before this.
-
-    Raises:
-        ValueError: naming the controller, the field, the function's signature
-            and the one allowed.
+    A signature Python cannot read (some builtins) passes.
     """
     if not callable(function):
         return
@@ -167,20 +151,9 @@ def _check_signature(name: Any, field: str, function: Any) -> None:
 def check_command_output(controller: Controller, params: Any) -> None:
     """Refuse a command law that does not return ``(v, ω)`` as the loops use them.
 
-    The law is traced alone, abstractly (``jax.eval_shape``), at one pose
-    ``(3,)``: it must return two real scalars. A law that returns another
-    shape or count would otherwise fail deep inside the traced scan, in
-    JAX's words. The package's own laws are not traced again here, and a
-    law passes once per parameter structure and dtype (the answer is kept).
-
-    Args:
-        controller: the controller.
-        params: its (validated) parameters; one run's, or a batch's, whose
-            structure the check keeps (their defaults where a leaf is not a
-            scalar, which the loops may map over).
-
-    Raises:
-        ValueError: one line naming the controller and what the law returned.
+    The law is traced abstractly (``jax.eval_shape``) at one pose ``(3,)``
+    and must return two real scalars; otherwise it would fail deep inside the
+    scan. Kept per parameter structure and dtype; the package's laws pass.
     """
     if getattr(controller.command, "__module__", "").startswith("wmr_jax."):
         return
@@ -223,14 +196,9 @@ def register_controller(controller: Controller, *, replace: bool = False) -> Con
     """Make ``controller`` known by name to the CLI and ``get_controller``.
 
     Args:
-        controller: the controller; its name must be lower-case letters,
-            digits, ``-`` and ``_`` (it appears on the command line and in
-            file names).
+        controller: the controller; its name lower-case letters, digits,
+            ``-`` and ``_`` (a CLI word and part of file names).
         replace: allow a name already registered to another controller.
-
-    Raises:
-        ValueError: for something that is not a ``Controller``, a bad name or
-            field, or a name taken (without ``replace``).
     """
     if not isinstance(controller, Controller):
         raise ValueError(
@@ -273,11 +241,7 @@ def get_controller(name: str | Controller) -> Controller:
 def controller_names(names: Any) -> list[str]:
     """Return the registered names a study runs, checked before any runs.
 
-    ``names``: names or ``Controller`` values (registered), one name alone, or
-    ``None`` for every registered controller.
-
-    Raises:
-        ValueError: naming the first one that is not registered.
+    ``names``: registered names or ``Controller`` values, one alone, or ``None`` for all.
     """
     if names is None:
         return registered_names()
@@ -302,14 +266,9 @@ def check_law_inputs(
 ) -> tuple[Any, Any, Any]:
     """Check the arguments of a law's entry point (``control``; traced ones pass).
 
-    ``pose`` and ``ref`` must be poses ``(..., 3)`` that broadcast together,
-    ``params`` a ``params_type`` that ``validate`` accepts.
-
-    Raises:
-        ValueError: naming the argument, its value and what is allowed.
+    ``pose`` and ``ref`` poses ``(..., 3)`` that broadcast, ``params`` a
+    ``params_type`` that ``validate`` accepts.
     """
-    # Each argument is checked unless it is itself traced (vmap over the poses
-    # with concrete gains still checks the gains).
     pose, ref = as_pose_array("pose", pose), as_pose_array("ref", ref)
     try:
         np.broadcast_shapes(np.shape(pose)[:-1], np.shape(ref)[:-1])

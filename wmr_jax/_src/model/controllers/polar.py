@@ -1,31 +1,13 @@
-"""Two classic polar-coordinate pose controllers, as baselines for Shim–Sung.
+"""What the two polar-coordinate baselines of Shim–Sung share (docs/model.md §3).
 
-Both steer a unicycle to a pose from the same three error coordinates, which
-are restated here in the terms of docs/model.md §2 (robot-frame bearing ``φ_e`` of the
-reference and heading error ``θ_e = θ_r − θ_c``):
-
-* ``ρ = r_e``, the distance to the reference, cm;
-* ``α``, the bearing of the reference from the direction of travel: ``φ_e``
-  when driving forwards, ``φ_e + π`` (wrapped) when driving backwards;
-* ``θ_A = α − θ_e`` (wrapped), the bearing of the line robot→reference
-  measured from the reference's own heading (Aicardi's ``θ``); Astolfi's and
-  Corke's ``β`` is ``−θ_A`` (``β = −θ − α`` with the reference at the origin,
-  plus the reference heading).
-
-Backward driving follows one rule for both laws: a robot driving backwards is
-a robot turned by ``π`` whose reference is turned by ``π`` too. Its ``α`` is
-then ``φ_e + π`` (the bearing from its rear), ``θ_e`` is unchanged, ``v``
-changes sign and ``ω`` does not. choice: the direction is decided afresh at
-every sample, backwards when the reference lies in the rear half-plane
-(``cos φ_e < 0``). Corke's block diagram decides once, at the start; for the
-default gains both rules agree, since Astolfi (1999) shows ``α`` then stays
-within ``(−π/2, π/2]`` once it starts there (``k_α + 5/3 k_β − 2/π k_ρ > 0``).
-
-The laws are pure and elementwise, like the Shim–Sung law; the ``backward`` flag
-is a static field, so it picks code, not values. At ``ρ = 0`` (robot on the
-reference) ``polar_error`` sets ``φ_e = 0`` with finite gradients, the only
-division (``sin α / α``) goes through the NaN-safe ``dynamics.sinc``, and the
-commands and their gradients are finite.
+Both steer from ``ρ = r_e``; ``α``, the bearing of the reference from the
+direction of travel (``φ_e``, or ``φ_e + π`` wrapped when driving backwards);
+and ``θ_A = α − θ_e`` (wrapped; Astolfi's and Corke's ``β`` is ``−θ_A``). A
+robot driving backwards is a robot turned by ``π`` whose reference is turned
+too: ``v`` changes sign, ``ω`` does not. choice: the direction is decided
+afresh at every sample, backwards when ``cos φ_e < 0``. The static
+``backward`` flag picks code, not values; commands and gradients are finite
+at ``ρ = 0``.
 """
 
 from __future__ import annotations
@@ -39,7 +21,7 @@ import numpy as np
 
 from wmr_jax._src.checks import check_bool, field_values
 from wmr_jax._src.model.controllers import shim_sung as law
-from wmr_jax._src.model.controllers.base import check_law_inputs
+from wmr_jax._src.model.controllers.base import Controller, check_law_inputs, register_controller
 
 __all__ = [
     "AT_GOAL",
@@ -49,26 +31,20 @@ __all__ = [
     "gain_values",
     "goal_floor",
     "hold_at_goal",
+    "polar_command",
+    "polar_controller",
 ]
 
 # choice (docs/model.md §3): within this distance of the reference, cm, the
-# polar laws stop driving and only turn to the reference heading. Their
-# bearing α is undefined at ρ = 0, and once ρ is down to rounding it is noise
-# that ω would follow (PythonRobotics' move_to_pose stops at 0.001 too).
+# polar laws only turn to the reference heading: their bearing α is undefined
+# at ρ = 0, and rounding noise near it.
 AT_GOAL = 1e-3
 
-# choice: far from the origin the positions themselves are coarser than
-# AT_GOAL (float32 spaces them 1e-3 cm apart near 1e4 cm), so the floor grows
-# to this many machine epsilons ε of the largest coordinate magnitude. Within
-# a few spacings of the goal a step of v dt = k ρ dt rounds away (k dt ≈ 0.1
-# at the default gains and period: below ρ ≈ 5 spacings the robot no longer
-# moves), ρ stalls above a fixed floor and ω chases the bearing of a rounding
-# error instead of the reference heading, 90° off. 16 ε m is 16 to 32
-# spacings, enough for k dt down to 1/32; it changes nothing while the largest
-# coordinate is below AT_GOAL / (16 ε), 524 cm in float32 and 3e11 cm in
-# float64. The rollout entry points compute such runs in the reference's
-# frame instead (rollout.GOAL_FRAME_SPACING), where the floor is AT_GOAL
-# again; loops that run in the world frame (sweeps, studies) use this one.
+# choice: far from the origin positions are coarser than AT_GOAL, so the floor
+# grows to this many machine epsilons of the largest coordinate (16 to 32
+# spacings, where a step of k ρ dt no longer rounds away). Nothing changes
+# below 524 cm in float32; the rollouts compute such runs in the reference's
+# frame (rollout.GOAL_FRAME_SPACING), the world-frame loops use this floor.
 GOAL_EPS = 16
 
 
@@ -113,20 +89,9 @@ def gain_values(params: Any, cls: type) -> dict[str, np.ndarray | None]:
 def goal_floor(pose: Any, ref: jax.Array, *, frame: Any = None) -> jax.Array:
     """Return the distance in cm within which the polar laws only turn (``hold_at_goal``).
 
-    ``max(AT_GOAL, GOAL_EPS · ε · m)`` for the machine epsilon ``ε`` of the
-    compute dtype and the largest of ``|x|, |y|`` of the pose and of the
-    reference, ``m`` in cm: ``AT_GOAL`` at ordinary coordinates, and a few
-    spacings of the representable positions far from the origin, so that the
-    floor lies above the distances that rounding leaves (see ``GOAL_EPS``).
-
-    Args:
-        pose: ``(..., 3)`` current pose ``[x cm, y cm, θ rad]``; not read when
-            ``frame`` is given.
-        ref: ``(..., 3)`` reference pose.
-        frame: the pose as ``(x, y, cos θ, sin θ)`` (see ``shim_sung.polar_error``).
-
-    Returns:
-        The broadcast leading shape of ``pose`` (or ``frame``) and ``ref``.
+    ``max(AT_GOAL, GOAL_EPS · ε · m)`` for the machine epsilon ``ε`` and the
+    largest ``m`` of ``|x|, |y|`` of pose and reference (see ``GOAL_EPS``).
+    ``pose`` is not read when ``frame`` is given.
     """
     x, y = (frame[0], frame[1]) if frame is not None else (pose[..., 0], pose[..., 1])
     x, y, ref = jnp.asarray(x), jnp.asarray(y), jnp.asarray(ref)
@@ -138,34 +103,43 @@ def goal_floor(pose: Any, ref: jax.Array, *, frame: Any = None) -> jax.Array:
     return jnp.maximum(jnp.asarray(AT_GOAL, dtype), GOAL_EPS * jnp.finfo(dtype).eps * magnitude)
 
 
-def hold_at_goal(
-    rho: jax.Array,
-    alpha: jax.Array,
-    theta_a: jax.Array,
-    v: jax.Array,
-    omega: jax.Array,
-    rate: jax.Array,
-    floor: Any = AT_GOAL,
-) -> tuple[jax.Array, jax.Array]:
-    """Return ``(v, ω)``, or ``(0, rate · θ_e)`` where ``ρ < floor``.
+def hold_at_goal(error: tuple, command: tuple, rate: Any, floor: Any = AT_GOAL) -> tuple:
+    """Return ``command`` ``(v, ω)``, or ``(0, rate · θ_e)`` where ``ρ < floor`` cm.
 
-    At the goal the robot holds its position and turns to the reference
-    heading, ``θ_e = α − θ_A`` (wrapped), at the law's own heading rate.
-    ``floor``, cm: ``AT_GOAL``, or ``goal_floor`` of the pose (the laws pass it).
+    ``error`` is ``(ρ, α, θ_A)``: at the goal the robot holds its position and
+    turns to the reference heading, ``θ_e = α − θ_A`` (wrapped).
     """
+    rho, alpha, theta_a = error
+    v, omega = command
     near = rho < floor
     theta_e = law.wrap_angle(alpha - theta_a)
     return jnp.where(near, 0.0, v), jnp.where(near, rate * theta_e, omega)
 
 
-def entry_point(law: Callable, params_type: type, validate: Callable) -> Callable:
-    """The public form of a polar law: its arguments checked on the host, then the law.
+def polar_command(
+    pose: Any, ref: Any, *, backward: bool, frame: Any, speeds: Callable
+) -> tuple[jax.Array, jax.Array]:
+    """Return ``(v cm/s, ω rad/s)`` of a polar law, held within ``goal_floor`` of ``ref``.
 
-    ``law`` is the pure ``Controller.command`` the loops call (with ``frame``);
-    the returned function takes poses, refuses a ``temperature`` (these laws
-    have no smooth relaxation) and checks the poses and gains as ``control``
-    does, naming the argument.
+    ``speeds(ρ, α, θ_A, direction) -> (α, v, ω, rate)`` is the law; ``rate``
+    is its heading rate at the goal, ``α`` the bearing it used.
     """
+    rho, alpha, theta_a, direction = driving_error(pose, ref, backward=backward, frame=frame)
+    alpha, v, omega, rate = speeds(rho, alpha, theta_a, direction)
+    floor = goal_floor(pose, ref, frame=frame)
+    return hold_at_goal((rho, alpha, theta_a), (v, omega), rate, floor)
+
+
+def polar_controller(
+    name: str, command: Callable, params_type: type, validate: Callable
+) -> tuple[Controller, Callable]:
+    """Register the polar law ``command`` as ``name``; return it and its ``entry_point``."""
+    controller = Controller(name=name, command=command, params_type=params_type, validate=validate)
+    return register_controller(controller), entry_point(command, params_type, validate)
+
+
+def entry_point(law: Callable, params_type: type, validate: Callable) -> Callable:
+    """The public form of a polar law: poses and gains checked on the host, no ``temperature``."""
 
     def checked(pose: Any, ref: Any, gains: Any, *, temperature: Any = None) -> Any:
         if temperature is not None:

@@ -1,26 +1,11 @@
 """The Shim–Sung law with gain schedules: gains as functions of the error state (docs/model.md §3).
 
-The fixed-gain law must keep ``k_r + L k_θ ≤ V_max`` for the worst case of
-both commands together, so neither can use the wheel budget the other leaves
-unused. Here the gains are tables over the distance ``r_e`` and the wheel
-condition is met by construction instead, at every state:
-
-* ``ω = k_θ(r_e) (ε sin φ̄_e + (1 − ε) sin θ̄_e)`` where ``d ≠ 0`` and
-  ``ω = k_turn(r_e) sin φ̄_e`` where ``d = 0`` (Region 3: the robot turns in
-  place, so the whole budget may go to turning), blended by ``1 − d²``;
-  then ``|ω| ≤ V_max / L``.
-* ``v = k_r(r_e) d sin(r̄_e) cos φ̄_e``, then ``|v| ≤ V_max − L |ω|``: the
-  speed uses whatever the turn leaves, which makes the effective ``k_r``
-  depend on the angles as well.
-
-So ``|v| + L|ω| ≤ V_max``: every wheel command ``v ± L ω`` is within
-``±V_max``. The tables are piecewise linear in ``r_e`` with knots at
-``r_k = R_KNOT (k / (K − 1))²`` (dense near the goal, where the law switches
-most), constant beyond the last. With constant tables (``k_turn = k_θ``) that
-meet ``k_r + L k_θ ≤ V_max`` neither cap is active and the command equals
-the fixed-gain law's exactly: the regions, blend, fold and saturation are
-``shim_sung.commands`` itself, evaluated with the gains of the state, not a
-copy of the law.
+The gains are tables over the distance ``r_e`` (knots dense near the goal),
+``k_turn`` the turn gain where ``d = 0``; then ``|ω| ≤ V_max / L`` and
+``|v| ≤ V_max − L |ω|``, so every wheel command is within ``±V_max`` by
+construction, and the speed uses whatever the turn leaves. The law is
+``shim_sung.commands`` itself with the gains of the state: constant tables
+that meet ``k_r + L k_θ ≤ V_max`` give the fixed-gain law exactly.
 """
 
 from __future__ import annotations
@@ -64,8 +49,7 @@ __all__ = [
 ]
 
 KNOTS = 10  # knots per table by default
-# Each knot is a term of the compiled law: a rollout of 200 knots compiles in
-# 7 s, of 300 in 20 s and 1.3 GB, of 1000 not at all (tuning stops at 60).
+# Each knot is a term of the compiled law: many more no longer compile.
 MAX_KNOTS = 200
 R_KNOT = 81.0  # cm, the last knot: just beyond the 80 cm of the evaluation set (§6)
 TABLES = ("kr", "k_theta", "k_turn")
@@ -103,12 +87,7 @@ class ScheduleParams(Parameters):
     half_track: Any = float(_ROBOT.half_track)
 
     def __post_init__(self) -> None:
-        """Keep each table a tuple of knots, one leaf per knot.
-
-        A list given for a table becomes a tuple; a list given for one knot,
-        or for any other field, becomes one array (a batched value), as in
-        ``Gains``.
-        """
+        """Keep each table a tuple of knots (one leaf each); other lists become arrays."""
         for name in TABLES:
             table = getattr(self, name)
             if isinstance(table, (list, tuple)):
@@ -144,12 +123,15 @@ def knot_radii(knots: int = KNOTS) -> np.ndarray:
 
 
 def _table(values: tuple, r: jax.Array) -> jax.Array:
-    """Piecewise-linear table over ``knot_radii`` at ``r`` (constant beyond the last knot).
+    return table_at(values, r, knot_radii(len(values)))
 
-    Written as the first knot plus each increment times its ramp, so that a
-    constant table gives its value exactly (no ``w c + (1 − w) c`` rounding).
+
+def table_at(values: tuple, r: jax.Array, radii: np.ndarray) -> jax.Array:
+    """The piecewise-linear table of knots ``values`` at ``radii`` cm, at ``r`` (constant beyond).
+
+    The first knot plus each increment times its ramp, so that a constant
+    table gives its value exactly.
     """
-    radii = knot_radii(len(values))
     out = values[0]
     for k in range(1, len(values)):
         ramp = jnp.clip((r - radii[k - 1]) * (1.0 / (radii[k] - radii[k - 1])), 0.0, 1.0)
@@ -162,22 +144,14 @@ def schedule_commands(
 ) -> tuple[jax.Array, jax.Array]:
     """Return the scheduled command ``(v cm/s, ω rad/s)``; ``|v| + L|ω| ≤ V_max`` always.
 
-    Args:
-        err: the error coordinates of ``shim_sung.polar_error``.
-        params: the schedule.
-        temperature: ``None`` for the hard law, positive for its smooth
-            relaxation (the switches of ``shim_sung``; the caps stay hard,
-            they are continuous).
-
-    A pure building block like those of ``shim_sung``: ``params`` is not
-    checked here (``validate_schedule`` checks it, as the rollouts do).
+    A pure building block: ``params`` is not checked here (``validate_schedule``).
+    ``temperature`` relaxes the switches of ``shim_sung``; the caps stay hard.
     """
     d = direction_flag(err, params.phi_m, temperature=temperature)
     k_theta = _table(params.k_theta, err.r)
     # Where d = 0 the robot does not drive (v = 0), so its turn gain may be other.
     k_theta = k_theta + (1 - d * d) * (_table(params.k_turn, err.r) - k_theta)
-    # The fixed-gain law itself, with the gains of this state (blend reads
-    # r_e, r_a and alpha, which the schedule shares with Gains).
+    # The fixed-gain law itself, with the gains of this state.
     gains = Gains(
         kr=_table(params.kr, err.r),
         k_theta=k_theta,
@@ -266,10 +240,8 @@ def _check_robot(params: ScheduleParams, robot: Robot) -> None:
 
 
 def _check_sampling(params: ScheduleParams, dt: Any) -> None:
-    # Settling is decided at the goal, r_e -> 0, where the tables take their
-    # first knots: there the law is the fixed-gain one with those gains, and
-    # the same condition applies (docs/model.md §4). The caps cannot rescue
-    # it: near the goal the commands are small and no cap is active.
+    # Settling is decided at the goal, where the law is the fixed-gain one with
+    # the first knots and no cap is active (docs/model.md §4).
     at_goal = Gains(
         kr=params.kr[0],
         k_theta=params.k_theta[0],

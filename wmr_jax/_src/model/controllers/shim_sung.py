@@ -1,36 +1,20 @@
 """The Shim–Sung asymptotic pose controller, one equation per function (docs/model.md §2–3).
 
-Every function here but ``control`` and ``control_diagnostics`` is a pure,
-unjitted, elementwise building block: it takes single-pose quantities (or
-arrays that broadcast together) and returns the same, and it checks nothing,
-called with values or traced alike (a NaN in gives NaN out; a ``(2,)`` pose
-is read as JAX indexes it). Check your inputs, or call the entry points
-(``control``, ``control_diagnostics``, ``rollout``), which check theirs on
-the host before tracing. Batching is done once, in ``loops.batched``.
+Every function but ``control`` and ``control_diagnostics`` is a pure,
+unjitted, elementwise building block that checks nothing; the entry points
+check their inputs on the host before tracing.
 
-The angles ``φ_e`` and ``θ_e`` travel as their cosine and sine. This is the
-same law as the paper's, only stated without ``atan2``:
+The angles ``φ_e`` and ``θ_e`` travel as their cosine and sine: the paper's
+law stated without ``atan2`` (``|φ_e| ≤ Φ_m ⇔ cos φ_e ≥ cos Φ_m``; ``fold``
+flips both signs exactly when ``cos a < 0``). It saves the transcendental
+calls that dominate a rollout and keeps values and gradients finite at
+``r_e = 0``; ``wmr_jax.reference`` states the law literally, and the tests
+hold the two equal. A caller carrying the heading as ``(cos θ, sin θ)``
+passes ``frame=(x, y, cos θ, sin θ)``.
 
-* ``cos φ_e = e_x / r_e``, ``sin φ_e = e_y / r_e`` (and ``φ_e = 0`` at ``r_e = 0``);
-* ``|φ_e| ≤ Φ_m``  ⇔ ``cos φ_e ≥ cos Φ_m`` and ``|φ_e| > π − Φ_m`` ⇔
-  ``cos φ_e < −cos Φ_m``, for ``φ_e ∈ (−π, π]``;
-* ``fold(a)`` shifts by ``±π`` exactly when ``|a| > π/2``, i.e. when
-  ``cos a < 0``, and a shift by ``π`` flips the signs of both cosine and sine.
-
-It saves the transcendental calls that dominate a rollout's cost, and it keeps
-the values and gradients finite at ``r_e = 0``. ``wmr_jax.reference`` states the
-same law literally with angles and ``atan2``; the tests hold the two equal.
-The few sines and cosines left are ``dynamics.sin_cos`` (see there why), and a
-rollout that carries the robot's heading as ``(cos θ, sin θ)`` passes the pose
-as ``frame=(x, y, cos θ, sin θ)`` so that not even those are recomputed.
-
-Smooth relaxation: every switching function takes ``temperature``. ``None``
-(the default) is the hard law of the paper. A positive temperature replaces
-each switch by a smooth one (sigmoid for a step, ``tanh`` for a sign, a
-soft minimum for the saturation), which tends to the hard law as the
-temperature goes to zero. Arguments of the relaxed switches are made
-dimensionless first (distances relative to their threshold radius, angles as
-cosines), so one temperature fits them all.
+Smooth relaxation: a positive ``temperature`` replaces each switch by a
+smooth one (sigmoid, ``tanh``, soft minimum) on dimensionless arguments,
+tending to the hard law (``None``) as it goes to zero.
 """
 
 from __future__ import annotations
@@ -115,9 +99,8 @@ def polar_error(
         pose: ``(..., 3)`` current pose ``[x cm, y cm, θ rad]``; not read
             (may be ``None``) when ``frame`` is given.
         ref: ``(..., 3)`` reference pose, broadcastable against ``pose``.
-        frame: the same pose as ``(x, y, cos θ, sin θ)`` when the caller
-            carries it that way (the rollouts do), so that no step recomputes
-            ``cos θ`` and ``sin θ``.
+        frame: the same pose as ``(x, y, cos θ, sin θ)``, when the caller
+            carries it that way (the rollouts do).
 
     Returns:
         A ``PolarError`` whose fields have the broadcast leading shape.
@@ -131,21 +114,16 @@ def polar_error(
         x, y, cos_c, sin_c = frame
     cos_r, sin_r = sin_cos(ref[..., 2])
     dx, dy = ref[..., 0] - x, ref[..., 1] - y
-    # e_x + i e_y = (cos θ_c − i sin θ_c)(Δx + i Δy): the rotation into the
-    # robot frame as one complex product. It is the same arithmetic as
-    # e_x = cos θ_c Δx + sin θ_c Δy, e_y = −sin θ_c Δx + cos θ_c Δy, but XLA then
-    # keeps it inside the law's loop instead of storing e_x and e_y between loops.
+    # e_x + i e_y = (cos θ_c − i sin θ_c)(Δx + i Δy): as one complex product
+    # XLA keeps the rotation inside the law's loop.
     dtype = jnp.result_type(cos_c, sin_c, dx, dy, float)
     e = jax.lax.complex(jnp.asarray(cos_c, dtype), -jnp.asarray(sin_c, dtype)) * jax.lax.complex(
         jnp.asarray(dx, dtype), jnp.asarray(dy, dtype)
     )
     e_x, e_y = e.real, e.imag
-    # Double-where keeps both the value and the gradient finite at r_e = 0.
-    # r_e² underflows to 0 below r_e ≈ 1e-19 cm (float32) or 1e-154 cm
-    # (float64); such a robot is taken to be on the reference (φ_e = 0). It is
-    # in Region 0 either way, and v differs from the exact law by less than
-    # k_r r_e. (hypot would avoid the underflow at a division and a
-    # comparison more per step, in the hottest loop of the package.)
+    # Double-where keeps value and gradient finite at r_e = 0. Where r_e²
+    # underflows (r_e ≈ 1e-19 cm in float32) the robot is on the reference
+    # (φ_e = 0), in Region 0 either way.
     r_sq = e_x * e_x + e_y * e_y
     positive = r_sq > 0
     safe_r = jnp.sqrt(jnp.where(positive, r_sq, 1.0))
@@ -160,10 +138,7 @@ def polar_error(
 
 
 def error_angles(err: PolarError) -> tuple[jax.Array, jax.Array]:
-    """Return ``(φ_e, θ_e)`` in rad, ``φ_e ∈ (−π, π]`` and ``θ_e ∈ [−π, π)``.
-
-    For diagnostics and plots only; the law itself never needs the angles.
-    """
+    """Return ``(φ_e, θ_e)`` in rad, ``φ_e ∈ (−π, π]`` and ``θ_e ∈ [−π, π)`` (diagnostics)."""
     phi = jnp.arctan2(err.sin_phi, err.cos_phi)
     theta = wrap_angle(jnp.arctan2(err.sin_theta, err.cos_theta))
     return phi, theta
@@ -172,11 +147,7 @@ def error_angles(err: PolarError) -> tuple[jax.Array, jax.Array]:
 def _step(
     x: jax.Array, *, strict: bool, temperature: float | None, scale: jax.Array = 1.0
 ) -> jax.Array:
-    """Return the indicator of ``x > 0`` (strict) or ``x ≥ 0``, or its sigmoid relaxation.
-
-    ``scale > 0`` makes ``x`` dimensionless for the relaxation,
-    ``sigmoid(x / (scale · temperature))``; the hard test does not need it.
-    """
+    """Return the indicator of ``x > 0`` (strict) or ``x ≥ 0``, or ``sigmoid(x / (scale T))``."""
     x = jnp.asarray(x)
     if temperature is None:
         return jnp.where(x > 0 if strict else x >= 0, 1.0, 0.0).astype(x.dtype)
@@ -185,16 +156,10 @@ def _step(
 
 
 def _tie_break(temperature: float) -> float:
-    """Return the offset that makes a relaxed switch decide its tie as the hard one does.
+    """Return the offset ``log(1 + 1/T)`` that makes a relaxed switch decide a tie as the hard one.
 
-    A relaxed switch centred on its threshold sits half-way there at every
-    temperature, so at a pose exactly on a threshold (e.g. a reference
-    straight to the side, ``cos φ_e = 0``) the relaxed law could stall where
-    the hard law drives. Shifting the argument by ``log(1 + 1/T)`` towards the
-    hard law's side keeps the switch smooth and makes it tend to the hard law
-    everywhere as ``T → 0``, ties included: the shift in the threshold,
-    ``T log(1 + 1/T)``, vanishes, while the switch's value at the tie tends to
-    the hard one (docs/model.md §3).
+    Centred on its threshold, a relaxed switch would sit half-way at a tie and
+    could stall where the hard law drives (docs/model.md §3).
     """
     return jnp.log1p(1.0 / temperature)
 
@@ -202,8 +167,7 @@ def _tie_break(temperature: float) -> float:
 def sgn(x: jax.Array, *, temperature: float | None = None) -> jax.Array:
     """Return the paper's ``Sgn(x)``: 1 if ``x > 0``, else −1 (so ``Sgn(0) = −1``) (Eq. 8).
 
-    NaN in gives NaN out, as NumPy's ``sign`` does: a NaN is no number below
-    or at zero, and a sign made up for it would hide where a run diverged.
+    NaN in gives NaN out, as NumPy's ``sign`` does, not to hide where a run diverged.
     """
     x = jnp.asarray(x)
     if temperature is None:
@@ -214,15 +178,9 @@ def sgn(x: jax.Array, *, temperature: float | None = None) -> jax.Array:
 def saturated_distance(r: jax.Array, r_m: jax.Array, *, temperature: float | None = None):
     """Return ``r̄_e = min(π r_e / (2 R_m), π/2)`` in rad (docs/model.md §3, before Eq. 6).
 
-    The relaxed form is a soft minimum with width ``temperature`` in rad,
-    ``ℓ − T softplus((ℓ − π/2)/T)`` for ``ℓ = π r_e / (2 R_m)``, evaluated as
-    ``min(ℓ, π/2) − T log(1 + e^{−|ℓ − π/2|/T})``. That equal form never
-    subtracts two large numbers: written as the first, a reference
-    3e8 cm away (float32) gave ``r̄_e`` as rounding noise and ``|v| > k_r``.
-    ``min`` and ``|·|`` are selections on ``ℓ > π/2``, so the slope is
-    ``1 − σ((ℓ − π/2)/T)`` everywhere, ``1/2`` at the tie included. ``log`` of
-    a number in ``[1, 2]`` rather than ``log1p``, which XLA:CPU evaluates
-    several times slower: the absolute error is about an ulp of 1.
+    The relaxed form is the soft minimum ``ℓ − T softplus((ℓ − π/2)/T)`` for
+    ``ℓ = π r_e / (2 R_m)``, evaluated as ``min(ℓ, π/2) − T log(1 +
+    e^{−|ℓ − π/2|/T})``, which never subtracts two large numbers.
     """
     linear = r * ((jnp.pi / 2) / jnp.asarray(r_m))  # the factor is per gain set, not per step
     if temperature is None:
@@ -248,10 +206,8 @@ def direction_flag(err: PolarError, phi_m: jax.Array, *, temperature: float | No
 def fold(cos_a: jax.Array, sin_a: jax.Array, *, temperature: float | None = None):
     """Return ``(cos ā, sin ā)`` of ``ā = fold(a)``, front and back alike (docs/model.md §3).
 
-    ``fold(a) = a ∓ π`` when ``|a| > π/2``, which flips both signs; so
     ``cos ā = |cos a|`` and ``sin ā = sign(cos a) sin a`` (no flip at
-    ``cos a = 0``). The relaxed sign is ``tanh(cos a / T + log(1 + 1/T))``,
-    which keeps that tie (see ``_tie_break``).
+    ``cos a = 0``, in the relaxed form too).
     """
     cos_a, sin_a = jnp.asarray(cos_a), jnp.asarray(sin_a)
     if temperature is None:
@@ -273,15 +229,13 @@ def blend(
     """Return the blend ``ε`` of Eq. 8, with the region tests in docs/model.md §3 order.
 
     1. ``r_e ≤ R_e`` (Region 0): ``ε = 0``.
-    2. ``d = 0`` (Region 3): ``ε = 1``. choice (docs/model.md §3): the paper's proof
-       (Case 1) sets ``ε = 1`` here; its Eq. 8 would mix ``θ̄_e`` into ``ω``
-       while ``v = 0`` and can stall the robot for ever.
+    2. ``d = 0`` (Region 3): ``ε = 1``, as the paper's proof (Case 1) has it
+       (choice, docs/model.md §3).
     3. ``r_e < R_a`` (Region 1): ``ε = 0.5 − α Sgn(sin θ̄_e) Sgn(sin θ̄_e + sin φ̄_e)``.
     4. otherwise (Region 2): ``ε = 1``.
 
     Written as ``ε = (1 − [0]) (1 − d² [1] (1 − ε₁))`` with ``[k]`` the
-    indicator of the region test, which is exact for ``d ∈ {−1, 0, 1}`` and
-    smooth when the indicators are relaxed.
+    region indicators: exact for ``d ∈ {−1, 0, 1}``, smooth when relaxed.
     """
     _, sin_phi_bar = fold(err.cos_phi, err.sin_phi, temperature=temperature)
     _, sin_theta_bar = fold(err.cos_theta, err.sin_theta, temperature=temperature)
@@ -342,20 +296,14 @@ def control(
 ) -> tuple[jax.Array, jax.Array]:
     """Return the command ``(v cm/s, ω rad/s)`` of the asymptotic controller.
 
-    An entry point: its arguments are checked on the host, then the law runs
-    as one compiled program, the same one whether called with values or
-    inside a caller's ``jit``, ``grad`` or ``vmap`` (traced values cannot be
-    read, so they are not checked).
+    An entry point: its arguments are checked on the host (traced values
+    cannot be), then the law runs as one compiled program.
 
     Args:
         pose: ``(..., 3)`` current pose ``[x cm, y cm, θ rad]``.
         ref: ``(..., 3)`` reference pose, broadcastable against ``pose``.
         gains: controller gains (scalars, or arrays that broadcast against the poses).
-        temperature: ``None`` for the paper's law; positive for its smooth
-            relaxation (see the module docstring).
-
-    Raises:
-        ValueError: naming the argument, its value and what is allowed.
+        temperature: ``None`` for the paper's law; positive for its smooth relaxation.
     """
     if temperature is not None and not is_traced(temperature):  # a tuner's traced one passes
         temperature = check_temperature("temperature", temperature)

@@ -1,23 +1,10 @@
 """The disturbances of docs/model.md §7, drawn from a PRNG key, and how they act on a run.
 
 A ``Disturbance`` holds what makes one run differ from the nominal one:
-pose-measurement noise at every sample, each wheel's radius error, the body
-mass error (non-ideal loop) and a latency of a whole number of samples. ``sample_disturbance``
-is the one place they are drawn (the Monte Carlo, the standard conditions
-and the robust tuner's loss alike); ``realised`` and ``measured`` are how the
-disturbed loop (``sensing.loop``) applies them.
-
-* **Latency** of ``m`` samples (``delay``, any integer ``m >= 0``): the
-  command computed at sample ``k`` acts from sample ``k + m``, zero before.
-* **Wheel-radius mismatch.** The controller converts rim speeds to wheel
-  turns with the nominal radius, so a wheel of radius ``r (1 + δ)`` moves its
-  rim ``1 + δ`` times as fast as commanded; each wheel has its own ``δ``.
-  choice: in the non-ideal loop the scaled rim set points go to the wheel-speed
-  controller, as if it regulated the speeds it believes it measures; the
-  ``±V_max`` limit is then applied to the scaled set points.
-* **Mass mismatch** (non-ideal loop only; the ideal loop has no dynamics): the
-  robot's body mass is ``M (1 + μ)`` while the wheel-speed controller's model
-  keeps ``M`` (``velocity_loop.advance(model=...)``).
+pose-measurement noise at every sample, each wheel's radius error (its rim
+moves ``1 + δ`` times as fast as commanded), the body-mass error (non-ideal
+loop; the wheel controller keeps the nominal model) and a latency of a whole
+number of samples. ``sample_disturbance`` is the one place they are drawn.
 """
 
 from __future__ import annotations
@@ -43,7 +30,6 @@ __all__ = [
     "checked_disturbance",
     "draw_disturbances",
     "Measurement",
-    "measured",
     "measurement",
     "realised",
     "sample_disturbance",
@@ -59,9 +45,8 @@ STANDARD_CONDITIONS = (
     ("both", 0.5, 1.0, True),
 )
 
-# The wheel-radius mismatch bound every standard condition is judged with when
-# the loop has an estimator (docs/model.md §9): without it, dead reckoning of
-# the ideal robot would be exact and the measurements needless.
+# The wheel-radius mismatch bound of the standard conditions for a loop with an
+# estimator (docs/model.md §9): without it, dead reckoning would be exact.
 STANDARD_MISMATCH = 0.03
 
 
@@ -72,12 +57,10 @@ class Disturbance(NamedTuple):
         ref: ``(3,)`` reference pose ``[cm, cm, rad]``.
         noise: ``(steps, 3)`` measurement error added to the pose at each
             sample, ``[cm, cm, rad]``.
-        mismatch: ``(3,)`` ``[left rim factor, right rim factor, mass factor]``:
-            realised over commanded rim speed per wheel, and true over model
-            body mass (1: no mismatch).
-        delay: ``()`` the latency in samples, an integer ``m >= 0``: the
-            command computed at sample ``k`` acts from sample ``k + m`` (per
-            run, or one value shared by a batch; stored as a float).
+        mismatch: ``(3,)`` ``[left rim factor, right rim factor, mass factor]``
+            (1: no mismatch).
+        delay: ``()`` the latency in samples, an integer ``m >= 0`` stored as
+            a float: the command of sample ``k`` acts from sample ``k + m``.
     """
 
     ref: jax.Array
@@ -102,8 +85,7 @@ def realised(command: jax.Array, mismatch: jax.Array, robot: Robot) -> tuple[jax
     """Return the body velocity ``(v, ω)`` whose rims are the commanded ``v + i ω``, scaled."""
     v, omega = command.real, command.imag
     rims = law.wheel_speeds(v, omega, robot)  # [v_L, v_R]
-    # Written as a correction of the command, so that factors of exactly 1
-    # return it bit for bit (no rounding from the round trip through the rims).
+    # A correction of the command, so that factors of 1 return it bit for bit.
     extra_left, extra_right = rims[0] * (mismatch[0] - 1), rims[1] * (mismatch[1] - 1)
     return (
         v + 0.5 * (extra_left + extra_right),
@@ -112,19 +94,7 @@ def realised(command: jax.Array, mismatch: jax.Array, robot: Robot) -> tuple[jax
 
 
 class Measurement(NamedTuple):
-    """A measured pose ``pose + noise``, its heading kept as the pose's heading and the noise angle.
-
-    An estimator needs the measured heading only relative to its own (a
-    residual angle), which this form gives without rotating the heading by
-    the noise first (one sine and cosine fewer per period).
-
-    Attributes:
-        position: measured ``x + i y``, cm.
-        base: the heading ``cos θ + i sin θ`` of the pose measured.
-        offset: the heading noise, rad: the measured heading is ``base``
-            turned by ``offset``.
-        theta: measured θ, rad.
-    """
+    """A measured pose ``pose + noise``: the true heading ``base`` turned by ``offset`` rad."""
 
     position: jax.Array
     base: jax.Array
@@ -145,9 +115,7 @@ class Measurement(NamedTuple):
 
     def residual(self, estimate: motion.SplitPose) -> jax.Array:
         """Return ``θ_measured − θ_estimate`` wrapped to ``[−π, π)``, rad."""
-        # From the unwrapped angles both carry (each equal to its heading's
-        # angle): an arctangent of the heading difference costs about a
-        # third of the raw loop per period on XLA:CPU.
+        # From the unwrapped angles both carry: cheaper than an arctangent.
         return law.wrap_angle(self.theta - estimate.theta)
 
 
@@ -159,11 +127,6 @@ def measurement(pose: motion.SplitPose, noise: jax.Array) -> Measurement:
         noise[2],
         pose.theta + noise[2],
     )
-
-
-def measured(pose: motion.SplitPose, noise: jax.Array) -> motion.SplitPose:
-    """The pose the controller sees: ``pose + noise`` (exactly ``pose`` for zero noise)."""
-    return measurement(pose, noise).pose()
 
 
 def checked_disturbance(disturbance: Disturbance) -> tuple[np.ndarray, ...]:
@@ -213,16 +176,12 @@ def checked_disturbance(disturbance: Disturbance) -> tuple[np.ndarray, ...]:
     return refs, noise, mismatch, delay
 
 
-# Beyond these a level no longer describes a sensor: σ_θ of 2π already makes
-# the measured heading uniform, and σ_xy of 10 km is far beyond any workspace.
+# Beyond these a level no longer describes a sensor (σ_θ of 2π is uniform).
 _LEVEL_LIMITS = {"noise_xy": 1e6, "noise_theta": 2 * math.pi, "latency": 1.0}
 
 
 def _check_draw(key: Any, steps: Any, n: int | None, **levels: Any) -> None:
-    """Check a draw's key, length and levels where they are concrete (traced ones pass).
-
-    ``n`` is the number of runs (``None`` if unknown): a level is a scalar or ``(n,)``.
-    """
+    """Check a draw's key, length and levels (scalars or ``(n,)``) where concrete."""
     checks.check_key("key", key)
     checks.check_int("steps", steps)
     for name, value in levels.items():
@@ -256,9 +215,7 @@ def sample_disturbance(
 ) -> Disturbance:
     """Draw one ``Disturbance`` per reference from ``key`` (``docs/model.md §7``); traceable.
 
-    The one source of disturbances: the Monte Carlo and the robust tuner's
-    loss (inside ``jit``) both draw here. Each level may be a scalar or one
-    value per run ``(N,)``.
+    Each level may be a scalar or one value per run ``(N,)``.
 
     Args:
         key: a ``jax.random`` key.
@@ -266,20 +223,17 @@ def sample_disturbance(
         steps: control periods per run (static).
         noise_xy: σ of the x and y measurement noise, cm.
         noise_theta: σ of the heading measurement noise, rad.
-        latency: probability that a run has a one-sample latency (0 or 1:
-            none or all).
+        latency: probability that a run has a one-sample latency.
         radius_mismatch: each wheel's radius error ``δ ~ U(−m, m)``.
         mass_mismatch: the body-mass error ``μ ~ U(−m, m)``.
 
     Returns:
-        A ``Disturbance`` with ``noise (N, steps, 3) ~ N(0, diag(σ_xy², σ_xy², σ_θ²))``
-        drawn independently at every sample, ``mismatch (N, 3)`` and
-        ``delay (N,)`` in {0, 1}.
+        A ``Disturbance``: ``noise (N, steps, 3)`` Gaussian, independent per
+        sample; ``mismatch (N, 3)``; ``delay (N,)`` in {0, 1}.
     """
     if not checks.is_traced(refs):
         checked = checks.as_poses("refs", refs, batch=True)
-        # Draw in the poses' own float dtype (float32 poses give the same draws
-        # in a float64 session); other numbers in JAX's default one.
+        # Draw in the poses' own float dtype, else JAX's default one.
         own = getattr(refs, "dtype", None)
         floating = own is not None and jnp.issubdtype(own, jnp.floating)
         refs = jnp.asarray(refs) if floating else checked
@@ -319,17 +273,11 @@ def draw_disturbances(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Draw references, unit noise and mismatch factors from ``key`` (via ``sample_disturbance``).
 
-    Args:
-        key: a ``jax.random`` key.
-        n: number of runs.
-        steps: control periods per run.
-        radius_mismatch: each wheel's radius error ``δ ~ U(−m, m)``.
-        mass_mismatch: the body-mass error ``μ ~ U(−m, m)``.
+    ``n`` runs of ``steps`` periods; the mismatch levels as for ``sample_disturbance``.
 
     Returns:
         ``(refs (n, 3), unit noise (n, steps, 3) ~ N(0, 1), mismatch (n, 3))``;
-        the references follow the evaluation set of ``docs/model.md §6``
-        (distance 5–80 cm, any bearing, any heading), drawn by ``sample_poses``.
+        the references as ``sample_poses`` draws them (``docs/model.md §6``).
     """
     n = checks.check_int("n", n)
     _check_draw(key, steps, n, radius_mismatch=radius_mismatch, mass_mismatch=mass_mismatch)

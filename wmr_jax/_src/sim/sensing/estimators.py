@@ -1,27 +1,11 @@
 """Pose estimators of the sensed loop (docs/model.md §9): an observer and an extended Kalman filter.
 
-An estimator sees what a robot has: each noisy measurement and the commands
-it sent. Every period it **predicts** its pose over the period with the
-command actually applied, on the exact arc of the ideal robot
-(``motion.ideal_arc``, docs/model.md §4), then **corrects** it toward the
-measurement at the period's end; heading residuals are wrapped to
-``[−π, π)``. It starts from the first measurement. Latency compensation
-(rolling the estimate over the command in flight) is the disturbed loop's
-(``sensing.loop``), for every estimator alike.
-
-* ``OBSERVER`` (``ObserverParams``): a fixed-structure observer. Position
-  and heading are pulled toward the measurement by gains in ``[0, 1]``
-  (0: dead reckoning; 1: the measurement itself), each either a constant or
-  a table over the estimated distance to the goal, like the controller's
-  gain schedule: a robot can trust its odometry near the goal, where noise
-  matters most, and its sensor far away, where odometry errors add up.
-* ``EKF`` (``EKFParams``): the extended Kalman filter of the ideal robot,
-  with the measurement noise and each wheel's odometry error as its tunable
-  covariances (the process noise grows with each wheel's travel, as a
-  wheel-radius error does).
-
-Like controllers, estimators are values: pure functions of one pose and a
-pytree of parameters, batched by the loop's single ``vmap``.
+Every period an estimator predicts its pose on the ideal robot's arc under
+the command applied, then corrects it toward the measurement; it starts from
+the first measurement. ``OBSERVER`` pulls toward the measurement by gains in
+``[0, 1]``, constants or tables over the estimated distance to the goal;
+``EKF`` is the extended Kalman filter of the ideal robot, its process noise
+growing with each wheel's travel. Latency compensation is the loop's.
 """
 
 from __future__ import annotations
@@ -44,6 +28,7 @@ from wmr_jax._src.checks import (
     require_one_batch_size,
     require_representable,
 )
+from wmr_jax._src.model.controllers.schedule import table_at
 from wmr_jax._src.model.dynamics import sin_cos
 from wmr_jax._src.model.params import Robot
 from wmr_jax._src.sim import motion
@@ -72,9 +57,8 @@ def observer_radii(knots: int) -> np.ndarray:
     return OBSERVER_R * (np.arange(knots) / (knots - 1)) ** 2
 
 
-# choice: the hand-set default of the tables, from 0.05 at the goal (where a
-# 0.5 cm noise would otherwise move the robot back and forth) up to 0.7
-# beyond about 7 cm; tuned tables replace it (wmr-jax tune --robust).
+# choice: hand-set tables, low at the goal (where noise would move the robot
+# back and forth) up to 0.7 beyond about 7 cm; tuned tables replace them.
 _DEFAULT_POSITION = (0.05, 0.1, 0.4, 0.7, 0.7, 0.7)
 _DEFAULT_HEADING = (0.05, 0.1, 0.4, 0.7, 0.7, 0.7)
 
@@ -87,14 +71,11 @@ class ObserverParams(Parameters):
     Attributes:
         position: gain toward the measured position, in ``[0, 1]``: a
             constant, or a tuple (or list) of ``K ≥ 2`` knots at
-            ``observer_radii(K)`` cm of estimated distance to the goal
-            (linear between, constant beyond the last). An array is not a
-            table but one constant per run, a batch axis as for every
-            parameter: write a table of an array as ``tuple(array)``.
+            ``observer_radii(K)`` cm (linear between). An array is one
+            constant per run (a batch axis), not a table.
         heading: gain toward the measured heading, likewise.
         compensate: static; hand the law the estimate rolled forward over the
-            command in flight under latency (docs/model.md §9). ``False``
-            hands it the estimate of the measurement's time.
+            commands in flight (docs/model.md §9).
     """
 
     position: Any = _DEFAULT_POSITION
@@ -196,15 +177,10 @@ class ObserverState(NamedTuple):
 
 
 def _table(values: Any, r: jax.Array) -> jax.Array:
-    """A gain table at distance ``r``: piecewise linear over ``observer_radii``."""
+    """A gain (or table, piecewise linear over ``observer_radii``) at distance ``r``."""
     if not isinstance(values, tuple):
         return values + jnp.zeros_like(r)
-    radii = observer_radii(len(values))
-    out = values[0] + jnp.zeros_like(r)
-    for k in range(1, len(values)):
-        ramp = jnp.clip((r - radii[k - 1]) * (1.0 / (radii[k] - radii[k - 1])), 0.0, 1.0)
-        out = out + (values[k] - values[k - 1]) * ramp
-    return out
+    return table_at((values[0] + jnp.zeros_like(r), *values[1:]), r, observer_radii(len(values)))
 
 
 def _rotation(angle: jax.Array) -> jax.Array:
@@ -221,15 +197,12 @@ def _observer_start(measured: motion.SplitPose, params: Any, robot: Robot) -> Ob
 def _observer_update(state, predicted, command, measured, ref, params, robot, dt):
     """Blend the prediction over the period toward ``measured``."""
     del state, command, robot, dt
-    # |ref − estimate| as a plain square root: the complex absolute value
-    # guards against overflow (positions here are bounded by the input
-    # checks) and cost about a quarter of the raw loop on XLA:CPU.
+    # A plain square root: the complex absolute value's overflow guard is slow.
     d = jax.lax.complex(ref[0], ref[1]) - predicted.position
     distance = jnp.sqrt(d.real * d.real + d.imag * d.imag)
     g_position = _table(params.position, distance)
     g_heading = _table(params.heading, distance)
-    # Written as the measurement plus (1 − g) of the way back to the
-    # prediction, so that a gain of 1 returns the measurement bit for bit.
+    # So that a gain of 1 returns the measurement bit for bit.
     position = measured.position + (1.0 - g_position) * (predicted.position - measured.position)
     back = (1.0 - g_heading) * measured.residual(predicted)
     return ObserverState(motion.SplitPose(position, measured.turned(-back), measured.theta - back))
@@ -259,15 +232,9 @@ def _ekf_start(measured: motion.SplitPose, params: EKFParams, robot: Robot) -> E
 def _ekf_update(state, predicted, command, measured, ref, params, robot, dt) -> EKFState:
     """Predict the covariance over the period, then the Kalman correction toward ``measured``.
 
-    With ``M`` the predicted covariance, ``R`` the measurement's and
-    ``S = M + R``, the corrected covariance ``P = M − M S⁻¹ M`` is also
-    ``R S⁻¹ M``, and the gain ``K = M S⁻¹`` is ``P R⁻¹``: the filter computes
-    the six entries of ``R S⁻¹ M`` (one array, divided by ``det S`` once) and
-    corrects the pose with them. Every product is written out: under
-    ``vmap`` a batch of 3 × 3 matrix products is slower on XLA:CPU than the
-    same arithmetic elementwise, and in the textbook order (``K``, then
-    ``(I − K) M``) XLA recomputes ``K`` in each of the nine quantities that
-    read it.
+    With ``S = M + R``, ``P = M − M S⁻¹ M = R S⁻¹ M`` and ``K = P R⁻¹``: the
+    six entries of ``R S⁻¹ M`` are written out elementwise, faster under
+    ``vmap`` on XLA:CPU than 3 × 3 matrix products.
     """
     del ref
     v, omega = command.real, command.imag
@@ -332,12 +299,10 @@ class Estimator:
         name: short name for the CLI and tables (``"observer"``, ``"ekf"``).
         params_type: the class of its parameter pytree.
         validate: checks a parameter pytree before tracing; returns it.
-        start: ``(measured SplitPose, params, robot) -> state`` from the first
-            measurement.
+        start: ``(measured SplitPose, params, robot) -> state``.
         update: ``(state, predicted SplitPose, applied command v + iω,
-            ``disturbances.Measurement``, ref (3,), params, robot, dt) -> state``: the
-            estimate moved over the period by the loop (``motion.ideal_move``,
-            shared with the latency compensation), then corrected.
+            Measurement, ref (3,), params, robot, dt) -> state``: the
+            correction of the loop's prediction.
     """
 
     name: str
@@ -359,15 +324,7 @@ ESTIMATORS = {e.name: e for e in (OBSERVER, EKF)}
 
 
 def resolve_estimator(value: Any) -> tuple[Estimator | None, Any]:
-    """Return ``(Estimator, checked params)`` of an ``estimator=`` argument.
-
-    Args:
-        value: ``None`` (raw feedback), a name of ``ESTIMATORS`` (its default
-            parameters), or an ``ObserverParams``/``EKFParams``.
-
-    Raises:
-        ValueError: for anything else, naming what is allowed.
-    """
+    """Return ``(Estimator, checked params)`` of ``None``, a name or estimator parameters."""
     if value is None:
         return None, None
     if isinstance(value, str) and value in ESTIMATORS:

@@ -1,23 +1,11 @@
 """The disturbed closed loop (docs/model.md §7), with or without an estimator (§9).
 
-The one closed-loop step of every run (``loops.ClosedLoopStep``), given a
-``sensing.disturbances.Disturbance``: four departures from the nominal run,
-which is the same step without one.
-
-* **Pose-measurement noise.** The controller's side sees ``pose + n_k``;
-  arrival is judged on the true pose.
-* **Wheel-radius mismatch** and **mass mismatch** (``disturbances.realised``).
-* **Latency** of ``delay`` samples: the command computed at sample ``k`` is
-  applied from period ``k + delay`` (zero before).
-
-Between the measurement and the law sits the loop's estimator
-(``Options.estimator``, docs/model.md §9): ``None`` hands the law the raw
-measurement; an estimator predicts over each period with the command
-applied, corrects toward the measurement, and under latency the law sees its
-estimate rolled forward over the commands in flight (compensation). With no
-noise, no mismatch and no latency the run is the nominal rollout, and its
-metrics those of ``docs/model.md §6`` (tested). The metrics stream through the scan
-(``metrics.stream_update``), so batches are bounded in memory.
+The one closed-loop step (``loops.ClosedLoopStep``) given a ``Disturbance``:
+pose-measurement noise (arrival is judged on the true pose), wheel-radius and
+mass mismatch, and a latency of ``delay`` samples. The estimator, if any,
+sits between the measurement and the law. Without a disturbance the run is
+the nominal rollout. The metrics stream through the scan, so batches are
+bounded in memory.
 """
 
 from __future__ import annotations
@@ -64,7 +52,7 @@ class ClosedLoop(NamedTuple):
             parameters (``ObserverParams`` / ``EKFParams``), docs/model.md §9.
         robot: the ``Robot`` the parameters were tuned for (their wheel
             budget ``k_r + L k_θ ≤ V_max`` is that robot's), or ``None``
-            where unknown (files from before robots were recorded).
+            where unknown.
     """
 
     controller: Any
@@ -88,33 +76,9 @@ def disturbed_run(
 ) -> tuple[jax.Array, Any, Any]:
     """Run one pose under its ``Disturbance`` (docs/model.md §7, §9): the one step, disturbed.
 
-    ``loops.scan_closed_loop`` with ``disturbance=spec``. Over period ``k``
-    the robot moves under the command computed at sample ``k − delay`` (zero
-    before the first), its rims scaled by the wheel-radius factors; in the
-    non-ideal loop the true robot's mass is ``M`` times the mass factor while
-    the wheel controller keeps the nominal model. The law sees the
-    measurement (``options.estimator`` ``None``) or the estimator's
-    estimate, compensated for latency. Arrival is judged on the true pose.
-    With ``options.accel_limit`` the command passes through the robot's speed
-    limiter before the wheels' radii scale it (a base's limiter is software,
-    the mismatch is in its wheels), and the estimator predicts with what the
-    limiter let through.
-
-    Args:
-        spec: the disturbance of this run (no batch axes; ``noise (steps, 3)``;
-            ``delay`` at most ``options.max_delay``).
-        params: the controller's parameters.
-        init: ``(3,)`` initial pose.
-        robot: the nominal robot (the controller's and estimator's model).
-        dt: control period, s.
-        options: static options.
-        estimate: the estimator's parameters (unused without one).
-        fold: ``fold(acc, true pose (a motion.SplitPose), StepOutput) -> acc``
-            after every period.
-        acc: the fold's initial accumulator.
-        record: also return every true pose ``(steps, 3)``, ``StepOutput`` and
-            the pose the estimator holds at each sample (the measurement
-            without one) ``(steps, 3)``.
+    ``loops.scan_closed_loop`` with ``disturbance=spec`` (no batch axes)
+    toward ``spec.ref``; ``robot`` is the nominal one, the controller's and
+    estimator's model.
 
     Returns:
         ``(final true pose (3,), acc, (poses, outputs, estimates) or None)``.
@@ -228,11 +192,9 @@ def disturbed_metrics(
         init: ``(3,)`` initial pose (true and measured alike), ``[cm, cm, rad]``.
         dt: control period, s.
         robot: the nominal robot (the controller's model); default ``Robot()``.
-            Its acceleration limits, where above 0, limit the ideal loop's
-            commands (docs/model.md §4.2.2).
         velocity: ``"ideal"`` or ``"nonideal"``.
-        x64: compute in float64 (default): the polar baselines' bearing is
-            rounding noise near the goal in float32.
+        x64: compute in float64 (default): near the goal the polar baselines'
+            bearing is rounding noise in float32.
 
     Returns:
         ``PoseMetrics`` of ``(N,)`` NumPy arrays, ``first_arrival`` included.
@@ -265,12 +227,8 @@ def prepare_disturbed(
 ) -> tuple[tuple, Options]:
     """Check a batch of disturbances and the run's settings; return the jitted core's arguments.
 
-    ``record``: ``(floats, int32s)`` the caller keeps per run and period, for
-    a run that keeps every period: one larger than the memory is refused
-    before anything grows with the runs.
-
-    Returns:
-        ``((spec, params, estimate, init, robot, dt), options)``.
+    ``record``: ``(floats, int32s)`` kept per run and period, refused beyond the
+    memory. Returns ``((spec, params, estimate, init, robot, dt), options)``.
     """
     refs, noise, mismatch, delay = checked_disturbance(disturbance)
     estimator, estimate = resolve_estimator(estimator)
