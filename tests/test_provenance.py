@@ -11,7 +11,7 @@ import wmr_jax as w
 from wmr_jax import tuning
 from wmr_jax._src import provenance
 from wmr_jax._src.studies import sweep_files
-from wmr_jax._src.tuning.training import differences
+from wmr_jax._src.tuning.trainer import differences
 
 
 @pytest.fixture
