@@ -61,6 +61,7 @@ from wmr_jax._src.sim.sensing.disturbances import STANDARD_MISMATCH
 from wmr_jax._src.sim.sensing.estimators import ESTIMATORS, OBSERVER_KNOTS
 from wmr_jax._src.sim.sensing.loop import ClosedLoop
 from wmr_jax._src.studies import conditions, robustness
+from wmr_jax._src.tuning import centred
 from wmr_jax._src.tuning.estimation import EstimatorBox, estimator_box
 from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
 from wmr_jax._src.tuning.loss import LossWeights, arrival_terms, capped_mean
@@ -123,6 +124,9 @@ class RobustConfig:
             the searches and the evaluation judge the noise and both
             conditions at it.
         noise_theta: the sensor's heading noise σ_θ, degrees (as ``noise_xy``).
+        around: ``centred.Centred`` ranges of an identified robot: the
+            training draws its runs from them instead of the standard
+            conditions (``centred.for_config``); ``None``: the standard ones.
     """
 
     # choice: 600. At 300 the loop under noise and latency together came out
@@ -146,6 +150,7 @@ class RobustConfig:
     validation_poses: int = 32
     noise_xy: float = 0.5
     noise_theta: float = 1.0
+    around: centred.Centred | None = None
 
     def validate(self) -> RobustConfig:
         """Check every field; return ``self`` (``ValueError`` naming the field)."""
@@ -297,7 +302,6 @@ def _specs(key, refs, nonideal_refs, steps, temperature, joint, accel_limit=Fals
     ``noise``: ``(σ_xy cm, σ_θ degrees)`` of the noisy runs, each scaled by
     a level ``U(0, 2)`` (default the standard 0.5 cm, 1°).
     """
-    noise_xy, noise_deg = _STANDARD_NOISE if noise is None else noise
     keys = jax.random.split(key, 2 * len(disturbances.STANDARD_CONDITIONS) + 1)
     ideal = loops.Options(
         steps=steps,
@@ -306,6 +310,9 @@ def _specs(key, refs, nonideal_refs, steps, temperature, joint, accel_limit=Fals
         estimator=joint.options_estimator,
         accel_limit=accel_limit,
     )
+    if isinstance(noise, centred.Centred):  # around an identified robot (RobustConfig.around)
+        return centred.batches(key, refs, nonideal_refs, steps, ideal, noise)
+    noise_xy, noise_deg = _STANDARD_NOISE if noise is None else noise
     n = refs.shape[0]
     specs = []
     for i, (_, sxy, sdeg, latency) in enumerate(disturbances.STANDARD_CONDITIONS):
@@ -380,7 +387,8 @@ def robust_loss(
             ``loops.for_robot`` (on for a traced robot, whose limits cannot
             be seen).
         noise: ``(σ_xy cm, σ_θ degrees)`` of the sensor (``RobustConfig.noise``);
-            default the standard 0.5 cm, 1°.
+            default the standard 0.5 cm, 1°; a ``centred.Centred`` draws
+            every run from its ranges instead (``RobustConfig.around``).
 
     Returns:
         ``(mean loss s, gradient (dim,))``.
@@ -617,7 +625,7 @@ def tune_robust(
         z, opt_state, loss = _step_jit(
             z, opt_state, k_dist, refs, ni_refs, jnp.asarray(temp, dtype), robot,
             jnp.asarray(dt, dtype), steps=steps, hyper=hyper, joint=joint, limit=limit,
-            noise=noise,
+            noise=noise if config.around is None else config.around,
         )  # fmt: skip
         losses.append(float(loss))
         if (i + 1) % config.validate_every == 0 or i + 1 == config.iters:
