@@ -355,7 +355,7 @@ def test_evaluate_on_an_identified_robot_runs_each_reference_as_simulate_does(tm
 
 def test_evaluate_takes_gains_tuned_for_the_identified_robot():
     """tune --robot identified.json records the fitted robot; evaluate runs them on the base."""
-    from wmr_jax._src.cli.evaluate import _tuned_for_identified
+    from wmr_jax._src.identify.closed_loop import tuned_for_identified
     from wmr_jax._src.model.robots import robot_json
 
     content = {
@@ -363,9 +363,9 @@ def test_evaluate_takes_gains_tuned_for_the_identified_robot():
         "base_robot": robot_json(BASE),
     }
     fitted = BASE.replace(half_track=float(BASE.half_track) * 1.04)
-    assert _tuned_for_identified(fitted, content)
-    assert not _tuned_for_identified(BASE.replace(half_track=3.0), content)
-    assert not _tuned_for_identified(None, content)
+    assert tuned_for_identified(fitted, content)
+    assert not tuned_for_identified(BASE.replace(half_track=3.0), content)
+    assert not tuned_for_identified(None, content)
 
 
 def test_robustness_runs_the_gain_sets_on_an_identified_robot(tmp_path, capsys, monkeypatch):
