@@ -4,7 +4,7 @@ A synthetic true robot (the base with wheel scales 1.015 / 0.99, half-track
 +4 %, latency 2 samples, tracker noise σ_xy = 0.3 cm and σ_θ = 0.5°) drives
 the 5-minute plan that ``wmr-jax identify --plan`` writes; its log (a CSV,
 as a tracker would give it) goes through ``wmr-jax identify`` in a fresh
-process (its wall time is recorded). Six loops are then tuned, each with
+process (its wall time is recorded). Four loops are then tuned, each with
 the command a user would type:
 
 * ``tune --robot BASE`` and ``tune --robot identified.json``: the 7 fixed
@@ -14,8 +14,9 @@ the command a user would type:
   standard conditions (±3 % wheels, up to one sample of latency, noise up
   to twice 0.5 cm and 1°), and ``tune --robust --fixed --robot
   identified.json``: the same tuner with its training centred on the
-  identified values (``tuning/centred.py``, docs/model.md §10); both again
-  without ``--fixed`` (the gain schedule and the EKF tuned together).
+  identified values (``tuning/centred.py``, docs/model.md §10); with
+  ``--schedule-iters N`` both again without ``--fixed`` (the gain schedule
+  and the EKF tuned together; far slower to compile and run).
 
 Each is judged, with raw feedback and (where it was tuned without one)
 with an EKF of default parameters added, which compensates the latency,
@@ -27,7 +28,7 @@ Every stage is kept in ``--out`` and skipped when its file is there
 (remove the folder to start again); the table goes to docs/robots.md §6.
 
     python experiments/identified_vs_base.py [--robot paper] [--iters 80] [--poses 64] \\
-        [--robust-iters 120] [--schedule-iters 120] [--refs 200] [--out results/identified_vs_base]
+        [--robust-iters 120] [--schedule-iters 0] [--refs 200] [--out results/identified_vs_base]
 """
 
 from __future__ import annotations
@@ -119,7 +120,7 @@ def main() -> None:
     parser.add_argument("--poses", type=int, default=64)
     parser.add_argument("--robust-iters", type=int, default=120, help="0: no --fixed rows")
     parser.add_argument(
-        "--schedule-iters", type=int, default=120, help="of the schedule and EKF; 0: no rows"
+        "--schedule-iters", type=int, default=0, help="of the schedule and EKF; 0: no rows"
     )
     parser.add_argument("--refs", type=int, default=200)
     parser.add_argument("--seed", type=int, default=0)
