@@ -360,7 +360,6 @@ def _on_identified(
     atomic_write_text(out / "identified_conditions.md", head + table)
     record = {**meta, "identified_file": identified[0].label, "rows": rows}
     atomic_write_json(out / "identified_conditions.json", record)
-    print(identified[0].note)
     print(f"identified conditions -> {out}/identified_conditions.md, .json")
     print(robustness_table(rows, STANDARD_COLUMNS[:6]), end="")
 
