@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -119,6 +120,8 @@ def test_tune_robust_with_an_identified_json_sets_the_ranges_and_its_noise(tmp_p
     assert "training centred on the robot identified in" in capsys.readouterr().out
     plain = SimpleNamespace(robot="paper", fixed=True)
     assert tune_robust._around_identified(tune_robust.config_from(plain), plain).around is None
+    with pytest.raises(ValueError, match="around = "):
+        dataclasses.replace(config, around=(1.0, 1.0)).validate()
     noisy = SimpleNamespace(robot=str(path), fixed=True, noise=0.5)
     with pytest.raises(ValueError, match="--noise is not allowed with --robot"):
         tune_robust._around_identified(tune_robust.config_from(noisy), noisy)

@@ -175,6 +175,11 @@ class RobustConfig:
                 f"estimator = {self.estimator!r} is not allowed; allowed: None, "
                 f"{', '.join(repr(n) for n in ESTIMATORS)}"
             )
+        if self.around is not None and not isinstance(self.around, centred.Centred):
+            raise ValueError(
+                f"around = {self.around!r:.80} is not allowed; allowed: None or centred.around "
+                "of an identified.json"
+            )
         joint_problem(self)  # checks the knot counts
         return self
 
