@@ -274,7 +274,7 @@ def test_an_identified_json_reads_as_its_true_robot(tmp_path):
     path.write_text(json.dumps(content))
     found = read_robot(str(path))
     assert (found.robot.half_track, found.robot.speed_gain) == (17.2, 64.0)
-    assert "simulate and evaluate only" in found.note
+    assert "simulate, evaluate and robustness only" in found.note
 
 
 def test_cli_plan_and_a_bad_log(tmp_path, capsys, good):
