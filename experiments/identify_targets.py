@@ -111,7 +111,15 @@ def coverage(base, rng, robots, minutes):
             f.ci95[name][0] <= value(t) <= f.ci95[name][1]
             for f, t in zip(found, truths, strict=True)
         ]
-        print(f"  95 % interval of {name:<18} covers the truth in {100 * np.mean(inside):.0f} %")
+        # The error in units of the interval's σ: a bias moves the mean, a σ too small the spread.
+        z = [
+            (sum(f.ci95[name]) / 2 - value(t)) / ((f.ci95[name][1] - f.ci95[name][0]) / 2 / 1.96)
+            for f, t in zip(found, truths, strict=True)
+        ]
+        print(
+            f"  95 % interval of {name:<18} covers the truth in {100 * np.mean(inside):.0f} % "
+            f"(error / σ: mean {np.mean(z):+.2f}, spread {np.std(z):.2f})"
+        )
     latency = np.mean([f.latency == t["latency"] for f, t in zip(found, truths, strict=True)])
     print(f"  latency exact in {100 * latency:.0f} %")
 

@@ -170,6 +170,7 @@ FILE_SECONDS = {
     "test_velocity_loop_paths.py": 10,
     "test_evaluate.py": 9,
     "test_meaning_law.py": 8,
+    "test_centred.py": 8,
     "test_waypoints.py": 8,
     "test_docs_current.py": 7,
     "test_meaning_estimators.py": 6,

@@ -274,7 +274,7 @@ def test_an_identified_json_reads_as_its_true_robot(tmp_path):
     path.write_text(json.dumps(content))
     found = read_robot(str(path))
     assert (found.robot.half_track, found.robot.speed_gain) == (17.2, 64.0)
-    assert "simulate and evaluate only" in found.note
+    assert "simulate, evaluate and robustness only" in found.note
 
 
 def test_cli_plan_and_a_bad_log(tmp_path, capsys, good):
@@ -355,7 +355,7 @@ def test_evaluate_on_an_identified_robot_runs_each_reference_as_simulate_does(tm
 
 def test_evaluate_takes_gains_tuned_for_the_identified_robot():
     """tune --robot identified.json records the fitted robot; evaluate runs them on the base."""
-    from wmr_jax._src.cli.evaluate import _tuned_for_identified
+    from wmr_jax._src.identify.closed_loop import tuned_for_identified
     from wmr_jax._src.model.robots import robot_json
 
     content = {
@@ -363,6 +363,71 @@ def test_evaluate_takes_gains_tuned_for_the_identified_robot():
         "base_robot": robot_json(BASE),
     }
     fitted = BASE.replace(half_track=float(BASE.half_track) * 1.04)
-    assert _tuned_for_identified(fitted, content)
-    assert not _tuned_for_identified(BASE.replace(half_track=3.0), content)
-    assert not _tuned_for_identified(None, content)
+    assert tuned_for_identified(fitted, content)
+    assert not tuned_for_identified(BASE.replace(half_track=3.0), content)
+    assert not tuned_for_identified(None, content)
+
+
+def test_robustness_runs_the_gain_sets_on_an_identified_robot(tmp_path, capsys, monkeypatch):
+    """Wheel scales 1.02 / 0.98 and latency 2 without tracker noise (the identified robot's
+    wheel-loop gain plays no part in the ideal loop): each set's arrivals are those of the
+    disturbed loop with the same wheel factors and latency, the controller believing the base;
+    a file tuned for the identified robot runs there; no Monte Carlo, no noise curve."""
+    import json
+
+    from wmr_jax._src.cli.main import main
+    from wmr_jax._src.model.robots import robot_json
+    from wmr_jax._src.sim.poses import horizon_steps
+    from wmr_jax._src.sim.rollout import DEFAULT_DT
+    from wmr_jax._src.sim.sensing.disturbances import Disturbance
+    from wmr_jax._src.sim.sensing.loop import disturbed_metrics
+    from wmr_jax._src.studies.robustness import study_horizon
+    from wmr_jax._src.tuning import evaluation
+    from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
+    from wmr_jax._src.tuning.saved import tuned_json
+
+    monkeypatch.setattr(evaluation, "EVAL_POSES", 4)
+    fitted = BASE.replace(speed_gain=float(BASE.speed_gain) * 1.3)
+    content = {
+        "robot": robot_json(fitted),
+        "base_robot": robot_json(BASE),
+        "wheel_scale": {"left": 1.02, "right": 0.98},
+        "latency_samples": 2,
+        "noise": {"sigma_xy": 0.0, "sigma_theta": 0.0},
+    }
+    path = tmp_path / "identified.json"
+    path.write_text(json.dumps(content))
+    tuned = Gains(kr=100.0, k_theta=12.0, phi_m=math.radians(60))
+    gains_file = tmp_path / "tuned_gains.json"
+    gains_file.write_text(json.dumps(tuned_json(tuned, robot=fitted, tuning="nominal")))
+    out = tmp_path / "out"
+    args = ["robustness", "--out", str(out), "--robot", str(path), "--controller", "shim-sung"]
+    assert main(args + ["--nominal-gains", str(gains_file)]) == 0
+    assert "believes its base robot" in capsys.readouterr().out
+    assert not (out / "robustness.json").exists()
+    rows = json.loads((out / "identified_conditions.json").read_text())["rows"]
+    assert {r["condition"] for r in rows} == {
+        "identified robot", "identified robot, no tracker noise", "base robot"
+    }  # fmt: skip
+    refs = np.asarray(evaluation.held_out_poses(4, evaluation.EVAL_SEED))
+    steps = horizon_steps(DEFAULT_DT, study_horizon(BASE))
+    for label, params in (("paper", paper_feasible_gains(BASE)), ("nominal-tuned", tuned)):
+        for condition, factors, delay in (
+            ("identified robot", [1.02, 0.98, 1.0], 2.0),
+            ("base robot", [1.0, 1.0, 1.0], 0.0),
+        ):
+            spec = Disturbance(
+                refs, np.zeros((4, steps, 3)), np.tile(factors, (4, 1)), np.float64(delay)
+            )
+            m = disturbed_metrics(spec, params, robot=BASE)
+            (row,) = [
+                r for r in rows if r["condition"] == condition and r["gains"].startswith(label)
+            ]
+            assert row["runs"] == 4 and row["success"] == pytest.approx(float(m.success.mean()))
+            arrived = m.arrival[m.success]
+            expected = float(arrived.mean()) if arrived.size else math.inf
+            assert row["mean arrival s"] == pytest.approx(expected, abs=1e-9)
+    # Latency 2 and 2 % between the wheels slow the paper's gains down: the robot acted.
+    slow = {r["condition"]: r["mean arrival s"] for r in rows if r["gains"].startswith("paper")}
+    assert slow["identified robot"] != pytest.approx(slow["base robot"], abs=1e-3)
+    assert main(args + ["--noise-curve"]) == 2

@@ -335,20 +335,6 @@ def _loop(path: str, estimator: str | None) -> Any:
     return loop._replace(estimator=chosen)
 
 
-def _tuned_for_identified(saved: Any, content: dict[str, Any]) -> bool:
-    """Whether ``saved`` (a file's robot) is the robot ``tune --robot identified.json`` reads."""
-    import dataclasses
-
-    from wmr_jax._src.model.params import Robot
-    from wmr_jax._src.model.robots import same_robot
-
-    if saved is None:
-        return False
-    names = {f.name for f in dataclasses.fields(Robot)}
-    base = {**content["base_robot"], **content["robot"]}
-    return same_robot(saved, Robot(**{f: float(v) for f, v in base.items() if f in names}))
-
-
 def _percent(value: float) -> str:
     return f"{100 * value:.1f} %"
 
@@ -518,7 +504,7 @@ def run(args: Any) -> int:
     if args.estimator is not None:
         estimator = flags.choice("--estimator", args.estimator, _ESTIMATOR_CHOICES)
     x64 = not args.float32
-    from wmr_jax._src.identify.closed_loop import loaded_identified
+    from wmr_jax._src.identify.closed_loop import loaded_identified, tuned_for_identified
 
     identified = loaded_identified(args.robot)
     if identified is not None and (
@@ -532,7 +518,7 @@ def run(args: Any) -> int:
     given = flags.robot_from(args.robot) if identified is None else identified[0]
     refs, labels = load_refs(args.refs, x64=x64)
     loop = _loop(args.gains, estimator)
-    if identified is not None and _tuned_for_identified(loop.robot, identified[1]):
+    if identified is not None and tuned_for_identified(loop.robot, identified[1]):
         # Gains tuned with --robot identified.json run on the controller that believes the base.
         loop = loop._replace(robot=identified[0].robot)
     robot = flags.robot_for_gains(given, loop.robot, "--gains", args.gains)

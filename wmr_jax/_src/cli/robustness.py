@@ -3,11 +3,16 @@
 On the robot of ``--robot``, else the one the gain files record, else the
 paper robot; the runs last that robot's horizon (``study_horizon``). A gain
 file tuned for another robot, or by another problem than its flag names, is
-refused.
+refused. With ``--robot DIR/identified.json`` the gain sets run on the
+identified robot while the controller believes its base: the conditions are
+that robot as identified, without its tracker noise, and the base
+(``identified_conditions.{md,json}``); the Monte Carlo, whose drawn mismatch,
+latency and noise the identification replaces, is not run.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from wmr_jax._src.cli import flags
@@ -17,7 +22,7 @@ __all__ = ["SUBCOMMANDS"]
 # What the command writes into --out (the noise curve only with --noise-curve).
 _OUTPUTS = tuple(
     f"{stem}.{ext}"
-    for stem in ("robustness", "standard_conditions", "noise_curve")
+    for stem in ("robustness", "standard_conditions", "noise_curve", "identified_conditions")
     for ext in ("png", "md", "json")
 )
 _GAIN_FLAGS = ("--nominal-gains", "--robust-gains")
@@ -90,12 +95,23 @@ def run(args: Any) -> int:
     names = flags.controller_names(args.controller)
     velocity = flags.velocity_loop(args.velocity)
     estimator = _estimator(args.estimator)
-    sets, robot = _gain_sets(args)
+    from wmr_jax._src.identify.closed_loop import loaded_identified
+
+    identified = loaded_identified(getattr(args, "robot", None))
+    if identified is not None and args.noise_curve:
+        raise ValueError(
+            f"--noise-curve is not allowed with --robot {args.robot}; allowed: the identified "
+            "robot's own tracker noise"
+        )
+    sets, robot = _gain_sets(args, identified)
     meta = _meta(seed, robot, sets, args)
     # The folder holds this run's results only: an earlier run's (a noise
     # curve not asked for now, or what an interruption would leave) go first.
     for name in _OUTPUTS:
         (out / name).unlink(missing_ok=True)
+    if identified is not None:
+        _on_identified(out, sets, seed, identified, meta, x64=not args.float32)
+        return 0
 
     from wmr_jax._src.model.robots import describe_robot
     from wmr_jax._src.report.robustness import robustness_table, write_robustness
@@ -210,17 +226,20 @@ def _noise_curve(
     print(f"noise curve -> {out}/noise_curve.png, .md, .json")
 
 
-def _gain_sets(args: Any) -> tuple[dict[str, Any], Any]:
+def _gain_sets(args: Any, identified: Any = None) -> tuple[dict[str, Any], Any]:
     """The gain sets and the robot they run on (checked before any computation).
 
-    The first set is the paper's feasible gains scaled into that robot's wheel budget.
+    The first set is the paper's feasible gains scaled into that robot's wheel
+    budget. With ``identified`` (``loaded_identified`` of ``--robot``) the robot
+    is its base, and files tuned for the identified robot run there too.
     """
+    from wmr_jax._src.identify.closed_loop import tuned_for_identified
     from wmr_jax._src.model.params import Robot
     from wmr_jax._src.model.robots import same_robot
     from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
     from wmr_jax._src.tuning.saved import TUNINGS
 
-    given = flags.robot_from(getattr(args, "robot", None))
+    given = flags.robot_from(getattr(args, "robot", None)) if identified is None else identified[0]
     if given is not None and given.note:
         print(given.note)
     loops = {}
@@ -233,6 +252,8 @@ def _gain_sets(args: Any) -> tuple[dict[str, Any], Any]:
         if path is None:
             continue
         loop, tuning = flags.tuned_file(flag, path)  # run whole: its law and estimator
+        if identified is not None and tuned_for_identified(loop.robot, identified[1]):
+            loop = loop._replace(robot=given.robot)  # its controller believes the base
         if tuning is not None and tuning != wanted:
             # Its rows would be labelled by the flag: a nominal file called robust-tuned.
             other = "--nominal-gains" if tuning == "nominal" else "--robust-gains"
@@ -280,6 +301,64 @@ def _standard(
     write_standard_conditions(out, rows, meta=meta)
     print(f"standard conditions -> {out}/standard_conditions.png, .md, .json")
     print(robustness_table(rows, STANDARD_COLUMNS[:6]), end="")
+
+
+def _on_identified(
+    out: Any, sets: dict[str, Any], seed: int, identified: Any, meta: dict[str, Any], *, x64: bool
+) -> None:
+    """Judge the gain sets on the identified robot, without its tracker noise, and on the base."""
+    import numpy as np
+
+    from wmr_jax._src.io import atomic_write_json, atomic_write_text
+    from wmr_jax._src.report.robustness import STANDARD_COLUMNS, robustness_table
+    from wmr_jax._src.studies.conditions import evaluate_loop
+    from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
+
+    base, content = identified[0].robot, identified[1]
+    quiet = {**content, "noise": {"sigma_xy": 0.0, "sigma_theta": 0.0}}
+    conditions = {
+        "identified robot": {"identified": content},
+        "identified robot, no tracker noise": {"identified": quiet},
+        "base robot": {"mismatch": 0.0},
+    }
+    refs = held_out_poses(EVAL_POSES, EVAL_SEED)
+    rows = []
+    for label, how in conditions.items():
+        for name, value in sets.items():
+            got = evaluate_loop(value, refs, seed=seed, x64=x64, robot=base, **how)
+            rows.append(
+                {
+                    "condition": label,
+                    "gains": name,
+                    "feedback": got["feedback"],
+                    "success": got["success"],
+                    "mean arrival s": _finite(got["mean_arrival_s"]),
+                    "median arrival s": _finite(got["median_arrival_s"]),
+                    "mean final distance cm": float(
+                        np.mean([r["final_distance_cm"] for r in got["per_reference"]])
+                    ),
+                    "mismatch": got["mismatch"],
+                    "runs": got["n"],
+                    "settled at horizon": got["settled_at_horizon"],
+                    "horizon s": got["horizon_s"],
+                }
+            )
+    table = robustness_table(rows, STANDARD_COLUMNS)
+    head = (
+        f"Gain sets on the robot identified in {identified[0].label} (its wheel scales, "
+        "half-track, wheel lag, latency and tracker noise; the controller believes the base "
+        f"robot), hard law, ideal loop, {len(refs)} held-out poses of docs/model.md §6\n\n"
+    )
+    atomic_write_text(out / "identified_conditions.md", head + table)
+    record = {**meta, "identified_file": identified[0].label, "rows": rows}
+    atomic_write_json(out / "identified_conditions.json", record)
+    print(f"identified conditions -> {out}/identified_conditions.md, .json")
+    print(robustness_table(rows, STANDARD_COLUMNS[:6]), end="")
+
+
+def _finite(value: Any) -> float:
+    """An arrival of ``evaluate_loop`` as the tables hold it: ``inf`` where none arrived."""
+    return math.inf if value is None else float(value)
 
 
 SUBCOMMANDS = {

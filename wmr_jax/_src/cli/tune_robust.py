@@ -110,11 +110,40 @@ def _robot(args: Any) -> tuple[Any, dict[str, Any]]:
     return robot, ({} if same_robot(robot, Robot()) else {"robot": robot})
 
 
+def _around_identified(config: Any, args: Any) -> Any:
+    """With ``--robot`` an ``identified.json``: training centred on it (``tuning/centred.py``)."""
+    import math
+
+    from wmr_jax._src.identify.closed_loop import is_identified, read_identified
+    from wmr_jax._src.tuning.centred import for_config
+
+    source = getattr(args, "robot", None)
+    if not is_identified(source):
+        return config
+    for flag in ("--noise", "--noise-theta"):
+        if getattr(args, flag[2:].replace("-", "_"), None) is not None:
+            raise ValueError(
+                f"{flag} is not allowed with --robot {source}; allowed: the tracker noise it "
+                "identified"
+            )
+    config = for_config(config, read_identified(source)[1])
+    r = config.around
+    print(
+        f"training centred on the robot identified in {source}: wheel scales "
+        f"U[{r.scale_left[0]:.5g}, {r.scale_left[1]:.5g}] and U[{r.scale_right[0]:.5g}, "
+        f"{r.scale_right[1]:.5g}], latency {' or '.join(map(str, r.latency))} samples, "
+        f"σ_xy U[{r.noise_xy[0]:.3g}, {r.noise_xy[1]:.3g}] cm, σ_θ "
+        f"U[{math.degrees(r.noise_theta[0]):.3g}, {math.degrees(r.noise_theta[1]):.3g}]°"
+    )
+    return config
+
+
 def run(args: Any) -> int:
     """Run ``wmr-jax tune --robust``; return the exit status."""
     out = flags.output_dir("--out", getattr(args, "out", None))
     config = config_from(args)
     robot, on_robot = _robot(args)
+    config = _around_identified(config, args)
     if getattr(args, "compare", False):
         return _compare(out, config, robot, resume=bool(getattr(args, "resume", False)))
 

@@ -36,6 +36,7 @@ __all__ = [
     "is_identified",
     "loaded_identified",
     "read_identified",
+    "tuned_for_identified",
 ]
 
 _KEYS = ("robot", "base_robot", "wheel_scale", "latency_samples", "noise")
@@ -85,6 +86,20 @@ def loaded_identified(source: Any) -> Any:
         "tracker noise); the controller believes its base robot"
     )
     return LoadedRobot(base, str(source), note), content
+
+
+def tuned_for_identified(saved: Any, content: dict[str, Any]) -> bool:
+    """Whether ``saved`` (a gain file's robot) is the robot ``tune --robot identified.json`` reads.
+
+    Such gains run on the controller that believes the base robot.
+    """
+    from wmr_jax._src.model.robots import same_robot
+
+    if saved is None:
+        return False
+    names = {f.name for f in dataclasses.fields(Robot)}
+    fields = {**content["base_robot"], **content["robot"]}
+    return same_robot(saved, Robot(**{f: float(v) for f, v in fields.items() if f in names}))
 
 
 def true_robot(identified: dict[str, Any], base: Robot, noise: Any, dtype: Any) -> model.TrueRobot:

@@ -143,17 +143,10 @@ def _normal_fd_one(theta, delay, commands, measured, mask, base_half_track, base
     return r @ r, jac.T @ jac, jac.T @ r, r
 
 
-def _cost_one(theta, delay, commands, measured, mask, base_half_track, base, dt, sigma):
-    r = _residuals(theta, delay, Segments(commands, measured), base_half_track, base, dt, sigma)
-    r = r * mask[:, None, None]
-    return jnp.sum(r * r)
-
-
 # Batched over robots (leading axis of every argument but the base robot):
 # one log is a batch of one, a coverage study a batch of many, one program each.
 _AXES = (0, 0, 0, 0, 0, 0, None, 0, 0)
 _normal = jax.jit(jax.vmap(_normal_one, in_axes=_AXES))
-_cost = jax.jit(jax.vmap(_cost_one, in_axes=_AXES))
 _normal_fd = jax.jit(jax.vmap(_normal_fd_one, in_axes=_AXES))
 FD_STEP = 1e-6
 # The wheel loop's gain is fitted as its logarithm (always positive, and a
@@ -223,24 +216,32 @@ def levenberg_marquardt(
 ):
     """Levenberg–Marquardt on a batch: ``θ (B, 4)`` → ``(θ, cost, JᵀJ, r)``, host-side loop.
 
-    ``fixed``: ``(base half-track (B,), base robot, dt (B,))``.
+    ``fixed``: ``(base half-track (B,), base robot, dt (B,))``. A trial point
+    is evaluated with its Jacobian: an accepted step (the usual case) needs
+    nothing more for the next one, and the fit compiles one program, not a
+    second for the cost alone.
     """
     ids = range(chunks.commands.shape[1]) if chunk_ids is None else chunk_ids
     normal = _normal if normal is None else normal
     theta = np.asarray(theta, float)
     lam = np.full(theta.shape[0], 1e-3)
+    current = _summed(normal, theta, delay, chunks, ids, fixed, sigma)
     for _ in range(iterations):
-        cost, jtj, g, _ = _summed(normal, theta, delay, chunks, ids, fixed, sigma)
+        cost, jtj, g, _ = current
         damped = jtj + lam[:, None, None] * (
             np.eye(4) * np.diagonal(jtj, axis1=1, axis2=2)[:, None]
         )
-        step = -np.linalg.solve(damped, g[..., None])[..., 0]
-        trial = _summed(_cost, theta + step, delay, chunks, ids, fixed, sigma)
-        better = trial < cost
-        theta = np.where(better[:, None], theta + step, theta)
-        theta[:, 3] = np.clip(theta[:, 3], _LOG_GAIN_LOW, np.log(_STABLE / fixed[2]))
+        trial = theta - np.linalg.solve(damped, g[..., None])[..., 0]
+        trial[:, 3] = np.clip(trial[:, 3], _LOG_GAIN_LOW, np.log(_STABLE / fixed[2]))
+        found = _summed(normal, trial, delay, chunks, ids, fixed, sigma)
+        better = found[0] < cost
+        theta = np.where(better[:, None], trial, theta)
+        current = [
+            np.where(better.reshape(-1, *[1] * (new.ndim - 1)), new, old)
+            for new, old in zip(found, current, strict=True)
+        ]
         lam = np.where(better, lam * 0.3, lam * 10.0)
-    cost, jtj, _, r = _summed(normal, theta, delay, chunks, ids, fixed, sigma)
+    cost, jtj, _, r = current
     return theta, cost, jtj, r
 
 

@@ -386,7 +386,8 @@ def read_robot(source: Any) -> LoadedRobot:
         if identified is not None:
             note = (
                 f"{text}: the identified robot (its half-track and wheel-loop gain); its "
-                "wheel scales, latency and tracker noise act in simulate and evaluate only"
+                "wheel scales, latency and tracker noise act in simulate, evaluate and robustness "
+                "only, and centre tune --robust's training"
             )
             return LoadedRobot(robot, text, note)
         return LoadedRobot(robot, text)

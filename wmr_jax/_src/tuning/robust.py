@@ -46,7 +46,7 @@ from wmr_jax._src.sim.sensing.disturbances import STANDARD_MISMATCH
 from wmr_jax._src.sim.sensing.estimators import ESTIMATORS, OBSERVER_KNOTS
 from wmr_jax._src.sim.sensing.loop import ClosedLoop
 from wmr_jax._src.studies import conditions, robustness
-from wmr_jax._src.tuning import trainer
+from wmr_jax._src.tuning import centred, trainer
 from wmr_jax._src.tuning.estimation import JointProblem, concrete_loop, estimator_box
 from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
 from wmr_jax._src.tuning.loss import capped_mean, recorded_arrival
@@ -104,6 +104,9 @@ class RobustConfig:
         noise_xy: the sensor's position noise σ_xy, cm: the training draws up to
             twice it per run; the validation, searches and evaluation judge at it.
         noise_theta: the sensor's heading noise σ_θ, degrees (as ``noise_xy``).
+        around: ``centred.Centred`` ranges of an identified robot: the
+            training draws its runs from them instead of the standard
+            conditions (``centred.for_config``); ``None``: the standard ones.
     """
 
     problem: ClassVar[str] = "robust"
@@ -128,6 +131,7 @@ class RobustConfig:
     validation_poses: int = 32
     noise_xy: float = 0.5
     noise_theta: float = 1.0
+    around: centred.Centred | None = None
 
     def validate(self) -> RobustConfig:
         """Check every field; return ``self`` (``ValueError`` naming the field)."""
@@ -143,6 +147,11 @@ class RobustConfig:
             raise ValueError(
                 f"estimator = {self.estimator!r} is not allowed; allowed: None, "
                 f"{', '.join(repr(n) for n in ESTIMATORS)}"
+            )
+        if self.around is not None and not isinstance(self.around, centred.Centred):
+            raise ValueError(
+                f"around = {self.around!r:.80} is not allowed; allowed: None or centred.around "
+                "of an identified.json"
             )
         joint_problem(self)  # checks the knot counts
         return self
@@ -193,9 +202,9 @@ def sample_conditions(
 
     ``accel_limit``: the ideal loop's speed limiter (docs/model.md §4.2.2);
     ``noise``: ``(σ_xy cm, σ_θ degrees)`` of the noisy runs, each scaled by
-    a level ``U(0, 2)`` (default the standard 0.5 cm, 1°).
+    a level ``U(0, 2)`` (default the standard 0.5 cm, 1°); a
+    ``centred.Centred`` draws every run from its ranges instead.
     """
-    noise_xy, noise_deg = _STANDARD_NOISE if noise is None else noise
     keys = jax.random.split(key, 2 * len(disturbances.STANDARD_CONDITIONS) + 1)
     ideal = loops.Options(
         steps=steps,
@@ -204,6 +213,9 @@ def sample_conditions(
         estimator=joint.options_estimator,
         accel_limit=accel_limit,
     )
+    if isinstance(noise, centred.Centred):  # around an identified robot (RobustConfig.around)
+        return centred.batches(key, refs, nonideal_refs, steps, ideal, noise)
+    noise_xy, noise_deg = _STANDARD_NOISE if noise is None else noise
     n = refs.shape[0]
     specs = []
     for i, (_, sxy, sdeg, latency) in enumerate(disturbances.STANDARD_CONDITIONS):
@@ -264,7 +276,8 @@ def robust_loss(
             ``loops.for_robot`` (on for a traced robot, whose limits cannot
             be seen).
         noise: ``(σ_xy cm, σ_θ degrees)`` of the sensor (``RobustConfig.noise``);
-            default the standard 0.5 cm, 1°.
+            default the standard 0.5 cm, 1°; a ``centred.Centred`` draws
+            every run from its ranges instead (``RobustConfig.around``).
 
     Returns:
         ``(mean loss s, gradient (dim,))``.
@@ -344,7 +357,7 @@ class RobustLoss:
     steps: int
     joint: JointProblem
     accel_limit: bool
-    noise: tuple[float, float] | None
+    noise: tuple[float, float] | centred.Centred | None
 
     def __call__(self, z, batch, temperature, consts):
         key, refs, nonideal_refs = batch
@@ -400,7 +413,12 @@ def robust_problem(config: RobustConfig, robot: Robot) -> trainer.TrainingProble
     return trainer.TrainingProblem(
         name="robust",
         z0=z0,
-        loss=RobustLoss(horizon_steps(dt, horizon), joint, _accel_limit(robot, dt), config.noise),
+        loss=RobustLoss(
+            horizon_steps(dt, horizon),
+            joint,
+            _accel_limit(robot, dt),
+            config.noise if config.around is None else config.around,
+        ),
         consts=(robot, jnp.asarray(dt, dtype)),
         batch=batch,
         row=row,
