@@ -137,8 +137,10 @@ def assert_metrics_of_runs(m, traj, refs, dt=0.033) -> dict:
 # each file goes whole to one worker (its compiled programs are reused within
 # it), in the order below. Handing out the longest files first keeps both
 # workers busy to the end, where a long file handed out last would leave one
-# idle. Seconds per file measured on a 2-core machine (the mean of two runs
-# of the whole suite); a file not listed counts as one second.
+# idle. CPU seconds per file, each file run alone in one process from an
+# empty compilation cache (``WMR_JAX_TEST_CPU``, below): on a shared machine
+# CPU time ranks the files where wall time would rank the load. A file not
+# listed counts as one second.
 FILE_SECONDS = {
     "test_identify.py": 70,
     "test_export.py": 60,
@@ -257,3 +259,40 @@ def pytest_runtest_setup(item):
     """
     if "MUTANT_UNDER_TEST" in os.environ:
         jax.clear_caches()
+
+
+# ------------------------------------------------------------ CPU-time record
+#
+# WMR_JAX_TEST_CPU=FILE appends one line per test to FILE, tab-separated: the
+# file, the test, the CPU seconds of its process over its setup, call and
+# teardown (XLA's threads included), those of the subprocesses it waited for,
+# and the wall seconds XLA's backend spent compiling for it. A loaded machine
+# inflates wall time but hardly CPU time, so CPU time ranks the files
+# (FILE_SECONDS) and finds the slow tests. Each xdist worker appends its own.
+_CPU_RECORD = os.environ.get("WMR_JAX_TEST_CPU")
+_compile_seconds = [0.0]
+
+if _CPU_RECORD:
+    import time
+
+    def _on_duration(event, seconds, **_):
+        if event == "/jax/core/compile/backend_compile_duration":
+            _compile_seconds[0] += seconds
+
+    jax.monitoring.register_event_duration_secs_listener(_on_duration)
+
+    @pytest.hookimpl(wrapper=True)
+    def pytest_runtest_protocol(item, nextitem):
+        start = time.process_time(), _children_seconds(), _compile_seconds[0]
+        result = yield
+        cpu = time.process_time() - start[0]
+        children = _children_seconds() - start[1]
+        compiled = _compile_seconds[0] - start[2]
+        line = f"{item.path.name}\t{item.name}\t{cpu:.2f}\t{children:.2f}\t{compiled:.2f}\n"
+        with open(_CPU_RECORD, "a") as record:
+            record.write(line)
+        return result
+
+    def _children_seconds():
+        times = os.times()
+        return times.children_user + times.children_system
