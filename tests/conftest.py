@@ -137,60 +137,66 @@ def assert_metrics_of_runs(m, traj, refs, dt=0.033) -> dict:
 # each file goes whole to one worker (its compiled programs are reused within
 # it), in the order below. Handing out the longest files first keeps both
 # workers busy to the end, where a long file handed out last would leave one
-# idle. Seconds per file measured on a 2-core machine (the mean of two runs
-# of the whole suite); a file not listed counts as one second.
+# idle. CPU seconds per file, each file run alone in one process from an
+# empty compilation cache (``WMR_JAX_TEST_CPU``, below): on a shared machine
+# CPU time ranks the files where wall time would rank the load. A file not
+# listed counts as one second.
 FILE_SECONDS = {
-    "test_identify.py": 70,
-    "test_export.py": 60,
-    "test_tuning_robust.py": 56,
-    "test_sensing.py": 45,
-    "test_tuning.py": 42,
-    "test_fuzz.py": 26,
-    "test_velocity_loop.py": 25,
-    "test_tuning_edges.py": 24,
-    "test_schedule.py": 22,
-    "test_robustness.py": 22,
+    "test_tuning_robust.py": 81,
+    "test_sensing.py": 63,
+    "test_export.py": 62,
+    "test_tuning.py": 40,
+    "test_edges.py": 39,
+    "test_identify.py": 35,
+    "test_fuzz.py": 30,
+    "test_tuning_edges.py": 26,
+    "test_user_view.py": 26,
+    "test_robustness.py": 25,
+    "test_tuning_train.py": 24,
+    "test_velocity_loop.py": 24,
+    "test_fuzz_inputs.py": 22,
+    "test_schedule.py": 21,
     "test_sweep.py": 20,
-    "test_fuzz_inputs.py": 19,
-    "test_tuning_train.py": 18,
-    "test_edges.py": 16,
-    "test_shim_sung.py": 14,
-    "test_cli.py": 14,
-    "test_controllers.py": 13,
-    "test_robot_followups.py": 13,
-    "test_usability.py": 12,
-    "test_user_view.py": 12,
-    "test_tuning_best.py": 10,
-    "test_maps.py": 12,
-    "test_bench.py": 12,
-    "test_sharding.py": 12,
-    "test_robots.py": 11,
-    "test_readme.py": 11,
-    "test_rollout.py": 10,
+    "test_cli.py": 18,
+    "test_robot_followups.py": 16,
+    "test_maps.py": 15,
+    "test_robots.py": 15,
+    "test_tuning_best.py": 15,
+    "test_usability.py": 15,
+    "test_controllers.py": 14,
+    "test_readme.py": 14,
+    "test_sharding.py": 14,
+    "test_bench.py": 13,
+    "test_evaluate.py": 13,
+    "test_rollout.py": 13,
+    "test_meaning_estimators.py": 11,
+    "test_shim_sung.py": 11,
     "test_velocity_loop_paths.py": 10,
-    "test_evaluate.py": 9,
-    "test_meaning_law.py": 8,
+    "test_docs_current.py": 9,
+    "test_meaning_disturbances.py": 8,
     "test_centred.py": 8,
     "test_waypoints.py": 8,
-    "test_docs_current.py": 7,
-    "test_meaning_estimators.py": 6,
-    "test_animation.py": 5,
+    "test_load_tuned.py": 7,
+    "test_meaning_law.py": 7,
+    "test_animation.py": 6,
+    "test_dynamics.py": 6,
+    "test_reference.py": 6,
+    "test_metrics.py": 5,
     "test_report_edges.py": 5,
-    "test_load_tuned.py": 5,
-    "test_meaning_disturbances.py": 5,
-    "test_reference.py": 4,
-    "test_metrics.py": 4,
-    "test_meaning_metrics.py": 3,
-    "test_params.py": 3,
+    "test_meaning_metrics.py": 4,
+    "test_robot_commands.py": 3,
+    "test_robot_studies.py": 3,
+    "test_surfaces.py": 3,
     "test_accel_limits.py": 2,
-    "test_robot_commands.py": 2,
-    "test_dynamics.py": 2,
-    "test_robot_studies.py": 1,
-    "test_provenance.py": 1,
-    "test_boundaries.py": 1,
-    "test_poses.py": 1,
-    "test_surfaces.py": 1,
+    "test_boundaries.py": 2,
+    "test_params.py": 2,
+    "test_io.py": 1,
+    "test_meaning_io.py": 1,
     "test_meaning_parametrisation.py": 1,
+    "test_meaning_robots.py": 1,
+    "test_optimal.py": 1,
+    "test_poses.py": 1,
+    "test_provenance.py": 1,
 }
 
 
@@ -258,3 +264,44 @@ def pytest_runtest_setup(item):
     """
     if "MUTANT_UNDER_TEST" in os.environ:
         jax.clear_caches()
+
+
+# ------------------------------------------------------------ CPU-time record
+#
+# WMR_JAX_TEST_CPU=FILE appends one line per test to FILE, tab-separated: the
+# file, the test, the CPU seconds of its process over its setup, call and
+# teardown (XLA's threads included), those of the subprocesses it waited for,
+# the wall seconds XLA's backend spent compiling for it, and the xdist worker
+# that ran it ("-" without xdist). A loaded machine inflates wall time but
+# hardly CPU time, so CPU time ranks the files (FILE_SECONDS), finds the slow
+# tests and shows how evenly the workers were loaded.
+_CPU_RECORD = os.environ.get("WMR_JAX_TEST_CPU")
+_compile_seconds = [0.0]
+
+if _CPU_RECORD:
+    import time
+
+    def _on_duration(event, seconds, **_):
+        if event == "/jax/core/compile/backend_compile_duration":
+            _compile_seconds[0] += seconds
+
+    jax.monitoring.register_event_duration_secs_listener(_on_duration)
+
+    @pytest.hookimpl(wrapper=True)
+    def pytest_runtest_protocol(item, nextitem):
+        start = time.process_time(), _children_seconds(), _compile_seconds[0]
+        result = yield
+        cpu = time.process_time() - start[0]
+        children = _children_seconds() - start[1]
+        compiled = _compile_seconds[0] - start[2]
+        worker = os.environ.get("PYTEST_XDIST_WORKER", "-")
+        line = (
+            f"{item.path.name}\t{item.name}\t{cpu:.2f}\t{children:.2f}\t{compiled:.2f}\t{worker}\n"
+        )
+        with open(_CPU_RECORD, "a") as record:
+            record.write(line)
+        return result
+
+    def _children_seconds():
+        times = os.times()
+        return times.children_user + times.children_system

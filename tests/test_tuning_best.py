@@ -12,10 +12,12 @@ from wmr_jax._src.tuning import trainer, training
 from wmr_jax._src.tuning.evaluation import Evaluation
 from wmr_jax.cli import main
 
+# The command's test below runs the same problem (its flags leave the
+# validation poses at their default; how often they are scored compiles
+# nothing), so the file compiles one training step, score and evaluation.
 TINY = tuning.TuneConfig(
-    iters=6, poses=2, eval_poses=2, horizon=0.3, random_search=False, validate_every=2,
-    validation_poses=3,
-)  # fmt: skip
+    iters=6, poses=2, eval_poses=2, horizon=0.3, random_search=False, validate_every=2
+)
 
 
 def _train(config, **kwargs):
@@ -44,8 +46,8 @@ def test_train_scores_the_start_every_few_iterations_and_the_last(monkeypatch):
     result = _train(TINY)
     assert result.history["validated_at"].tolist() == [0, 2, 4, 6]
     assert np.all(np.isfinite(result.history["validation"]))
-    # 7 is not a multiple of 2: the last iteration is scored all the same.
-    assert _train(TINY.replace(iters=7)).history["validated_at"].tolist() == [0, 2, 4, 6, 7]
+    # 6 is not a multiple of 4: the last iteration is scored all the same.
+    assert _train(TINY.replace(validate_every=4)).history["validated_at"].tolist() == [0, 4, 6]
 
 
 def test_train_returns_the_iterate_of_the_best_validation_score(monkeypatch):
@@ -113,7 +115,7 @@ def test_a_result_no_better_than_the_baseline_is_said_in_one_line(tuned, paper, 
 def test_the_command_prints_the_note_once_and_records_it(tmp_path, monkeypatch, capsys):
     line = "warning: the tuned parameters are no better than the baseline (paper_feasible): x"
     monkeypatch.setattr(training, "baseline_note", lambda *args: line)
-    flags = ["--iters", "2", "--poses", "2", "--eval-poses", "2", "--horizon", "0.3"]
+    flags = ["--iters", "6", "--poses", "2", "--eval-poses", "2", "--horizon", "0.3"]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         assert main(["tune", "--out", str(tmp_path), *flags, "--no-random-search"]) == 0

@@ -427,6 +427,13 @@ def test_sensor_noise_sets_the_training_draws_and_is_recorded(tmp_path, monkeypa
         return judge(sets, refs, key, **kwargs)
 
     monkeypatch.setattr(conditions, "standard_conditions", recording)
+    # The command's problem at small_config's sizes, whose programs this file
+    # compiled already; the noise is the command's.
+    tune, small = robust.tune_robust, small_config()
+    sizes = {f: getattr(small, f) for f in ("iters", "poses", "nonideal_poses", "eval_poses")}
+    monkeypatch.setattr(
+        robust, "tune_robust", lambda config, **kw: tune(dataclasses.replace(config, **sizes), **kw)
+    )
     argv = ["tune", "--robust", "--fixed", "--out", str(tmp_path), "--iters", "1", "--poses", "2"]
     assert main([*argv, "--noise", "1", "--noise-theta", "3"]) == 0
     assert seen and all(n == (1.0, 3.0) for n in seen)
