@@ -56,6 +56,15 @@ import wmr_jax as w
 
 jax.config.update("jax_enable_x64", True)
 
+# pyproject.toml's filterwarnings names wmr_jax.WheelSpeedWarning, so pytest
+# imports wmr_jax, and JAX with it, before this file runs: JAX has read its
+# settings from the environment already, and the cache set there above would
+# reach only the subprocesses. Set it on JAX's config as well.
+if os.environ.get("WMR_JAX_TEST_CACHE", "1") != "0":
+    jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+
 
 @pytest.fixture
 def paper_refs() -> np.ndarray:
