@@ -87,7 +87,9 @@ def test_the_robust_loss_draws_the_centred_runs(monkeypatch):
     ranges = centred.around({**CONTENT, "latency_samples": 3, "latency_profile": [9, 9, 9, 1, 9]})
     joint = robust.joint_problem(robust.RobustConfig(law="fixed", estimator=None))
     refs = sample_poses(jax.random.key(0), 64)
-    batches = robust.sample_conditions(jax.random.key(1), refs, refs[:8], 20, 0.1, joint, False, ranges)
+    batches = robust.sample_conditions(
+        jax.random.key(1), refs, refs[:8], 20, 0.1, joint, False, ranges
+    )
     assert [o.velocity for _, o in batches] == ["ideal", "nonideal"]
     assert all(o.max_delay == 3 for _, o in batches)
     ideal, nonideal = batches[0][0], batches[1][0]
@@ -99,7 +101,9 @@ def test_the_robust_loss_draws_the_centred_runs(monkeypatch):
     mass = np.asarray(nonideal.mismatch)[:, 2]
     assert np.all(np.abs(mass - 1.0) <= 0.2) and np.any(mass != 1.0)
     # Without it, the standard batch: one-sample latency at most, ±3 % wheels.
-    standard = robust.sample_conditions(jax.random.key(1), refs, refs[:0], 20, 0.1, joint, False, None)
+    standard = robust.sample_conditions(
+        jax.random.key(1), refs, refs[:0], 20, 0.1, joint, False, None
+    )
     assert len(standard) == 1 and set(np.unique(np.asarray(standard[0][0].delay))) <= {0.0, 1.0}
 
 

@@ -224,9 +224,13 @@ def test_an_array_of_gains_is_one_constant_per_run_not_a_table():
 
 
 def test_each_validator_refuses_the_other_kind():
-    with pytest.raises(ValueError, match="estimator is a EKFParams; allowed: a wmr_jax.studies.ObserverParams$"):
+    with pytest.raises(
+        ValueError, match="estimator is a EKFParams; allowed: a wmr_jax.studies.ObserverParams$"
+    ):
         validate_observer(EKFParams())
-    with pytest.raises(ValueError, match="estimator is a ObserverParams; allowed: a wmr_jax.studies.EKFParams$"):
+    with pytest.raises(
+        ValueError, match="estimator is a ObserverParams; allowed: a wmr_jax.studies.EKFParams$"
+    ):
         validate_ekf(ObserverParams())
     with pytest.raises(ValueError, match="^loop.estimator.position"):
         validate_observer(ObserverParams(position=2.0), prefix="loop.estimator")
