@@ -123,13 +123,18 @@ def _check_values(name: str, value: Any, ok: Callable, allowed: str) -> int | No
     return arr.shape[0] if arr.ndim else None
 
 
-def validate_observer(params: ObserverParams, prefix: str = "estimator") -> ObserverParams:
-    """Check an ``ObserverParams``; return it unchanged (``ValueError`` naming the field)."""
-    if not isinstance(params, ObserverParams):
+def _check_kind(params: Any, kind: type, prefix: str) -> None:
+    """Refuse parameters of another estimator; check the static ``compensate`` flag."""
+    if not isinstance(params, kind):
         raise ValueError(
-            f"{prefix} is a {type(params).__name__}; allowed: a wmr_jax.studies.ObserverParams"
+            f"{prefix} is a {type(params).__name__}; allowed: a wmr_jax.studies.{kind.__name__}"
         )
     check_bool(f"{prefix}.compensate", params.compensate)
+
+
+def validate_observer(params: ObserverParams, prefix: str = "estimator") -> ObserverParams:
+    """Check an ``ObserverParams``; return it unchanged (``ValueError`` naming the field)."""
+    _check_kind(params, ObserverParams, prefix)
     sizes = {}
     for name in ("position", "heading"):
         table = getattr(params, name)
@@ -149,11 +154,7 @@ def validate_observer(params: ObserverParams, prefix: str = "estimator") -> Obse
 
 def validate_ekf(params: EKFParams, prefix: str = "estimator") -> EKFParams:
     """Check an ``EKFParams``; return it unchanged (``ValueError`` naming the field)."""
-    if not isinstance(params, EKFParams):
-        raise ValueError(
-            f"{prefix} is a {type(params).__name__}; allowed: a wmr_jax.studies.EKFParams"
-        )
-    check_bool(f"{prefix}.compensate", params.compensate)
+    _check_kind(params, EKFParams, prefix)
     sizes = {}
     units = {"wheel_error": "", "sigma_xy": " cm", "sigma_theta": " rad"}
     for name, unit in units.items():
