@@ -142,6 +142,15 @@ def random_search(
     return SearchResult(best, best_score, count, time.perf_counter() - began)
 
 
+def clock() -> float:
+    """Process CPU time, s: the clock that budgets of tuning and search are counted in.
+
+    CPU time rather than wall time, so that a budget buys the same work
+    however busy the machine is with other processes.
+    """
+    return time.process_time()
+
+
 def search_loop(
     propose: Any,
     score: Any,
