@@ -1,11 +1,7 @@
-"""The standard conditions: judging closed loops (docs/model.md §7, §9).
+"""Judging closed loops under the standard conditions (docs/model.md §7, §9).
 
-Given loops (a ``ClosedLoop`` as ``load_tuned`` returns it, or plain
-parameters) are judged on held-out or the user's references, each run with
-the wheel-radius mismatch of §9: under every condition side by side
-(``standard_conditions``), under one with the figures ``wmr-jax evaluate``
-prints (``evaluate_loop``), and against the level of pose noise
-(``noise_curve``). Every loop and condition sees the same draws.
+Every loop and condition of a study sees the same draws of noise and
+wheel-radius mismatch.
 """
 
 from __future__ import annotations
@@ -46,11 +42,7 @@ __all__ = [
 
 
 def _closed_loop(value: Any, controller: Any, estimator: Any, where: str) -> ClosedLoop:
-    """A set of ``standard_conditions``: a ``ClosedLoop`` as it is, or params of ``controller``.
-
-    Raises:
-        ValueError: naming ``where``, for parameters with a batch axis.
-    """
+    """A ``ClosedLoop`` as it is, or params of ``controller``; refused if batched."""
     loop = value if isinstance(value, ClosedLoop) else ClosedLoop(controller, value, estimator)
     allowed = "scalars: one loop (disturbed_metrics runs a batch of parameters)"
     checks.require_unbatched(loop.params, f"{where}.params", allowed)
@@ -60,10 +52,7 @@ def _closed_loop(value: Any, controller: Any, estimator: Any, where: str) -> Clo
 
 
 def _unit_draws(key: jax.Array, refs: np.ndarray, steps: int, mismatch: float):
-    """Unit noise ``(N, steps, 3)`` and wheel factors ``(N, 3)`` (mass 1) of ``key``.
-
-    The draws depend on the key and the number of runs only; the poses stay in float64.
-    """
+    """Unit noise ``(N, steps, 3)`` and wheel factors ``(N, 3)`` (mass 1) of ``key``."""
     unit = sample_disturbance(
         key, np.zeros_like(refs), steps, noise_xy=1.0, noise_theta=1.0, radius_mismatch=mismatch
     )
@@ -135,11 +124,6 @@ def standard_conditions(
         ``runs``, ``settled at horizon``, ``mean arrival, not at horizon s``,
         ``horizon s``.
     """
-    if not isinstance(params_by_name, Mapping) or not params_by_name:
-        raise ValueError(
-            f"params_by_name = {params_by_name!r:.80} is not allowed; allowed: a dict of "
-            "label -> parameters or ClosedLoop, at least one"
-        )
     mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
     sensor = noise
     if sensor is not None:
@@ -151,14 +135,7 @@ def standard_conditions(
             checks.check_number(f"noise[{i}]", v, closed=True, unit=u)
             for i, (v, u) in enumerate(zip(sensor, ("cm", "degrees"), strict=True))
         )
-    sets = {
-        name: _closed_loop(value, controller, estimator, f"params_by_name[{name!r}]")
-        for name, value in params_by_name.items()
-    }
-    for loop in sets.values():  # every set is refused before any runs
-        resolve_estimator(loop.estimator)
-        controllers.get_controller(loop.controller)
-    robot = _study_robot(robot, sets, "params_by_name")
+    sets, robot = _loops(params_by_name, "params_by_name", controller, estimator, robot)
     refs, noise, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
     ones = np.ones((len(refs), 3))
     conditions = [(MODEL_ROBOT, 0.0, 0.0, False, ones)]
@@ -170,44 +147,62 @@ def standard_conditions(
     for label, sxy, sdeg, latency, wheels in conditions:
         spec = _scaled(refs, noise, wheels, sxy, sdeg, latency)
         for name, loop in sets.items():
-            m = disturbed_metrics(
-                spec,
-                loop.params,
-                controller=loop.controller,
-                estimator=loop.estimator,
-                dt=dt,
-                robot=robot,
-                x64=x64,
-            )
-            summary = summary_row(m, horizon)
-            estimator_used, _ = resolve_estimator(loop.estimator)
+            row, m = _judged(spec, loop, dt, robot, x64, horizon)
             rows.append(
                 {
                     "condition": label,
                     "gains": name,
-                    "feedback": "raw" if estimator_used is None else estimator_used.name,
-                    "success": summary["success"],
-                    "mean arrival s": summary["mean arrival s"],
-                    "median arrival s": summary["median arrival s"],
-                    "mean final distance cm": summary["mean final distance cm"],
+                    "feedback": row.pop("feedback"),
+                    "success": row["success"],
+                    "mean arrival s": row["mean arrival s"],
+                    "median arrival s": row["median arrival s"],
+                    "mean final distance cm": row["mean final distance cm"],
                     "peak wheel cm/s": float(np.max(m.peak_wheel)),
                     "mismatch": 0.0 if label == MODEL_ROBOT else mismatch,
                     "runs": len(refs),
-                    "settled at horizon": summary["settled at horizon"],
-                    "mean arrival, not at horizon s": summary["mean arrival, not at horizon s"],
-                    "horizon s": horizon,
+                    **_horizon_columns(row, horizon),
                 }
             )
     return rows
 
 
-def _study_robot(robot: Any, loops: Mapping[str, ClosedLoop], name: str) -> Robot:
-    """The study's robot: ``robot``, else the one the ``loops`` record, else the paper's.
+def _loops(given: Any, name: str, controller: Any, estimator: Any, robot: Any):
+    """The loops of a study, each checked before any run, and the study's robot."""
+    if not isinstance(given, Mapping) or not given:
+        raise ValueError(
+            f"{name} = {given!r:.80} is not allowed; allowed: a dict of label -> parameters, "
+            "ClosedLoop or Gains, at least one"
+        )
+    sets = {
+        label: _closed_loop(value, controller, estimator, f"{name}[{label!r}]")
+        for label, value in given.items()
+    }
+    for loop in sets.values():
+        resolve_estimator(loop.estimator)
+        controllers.get_controller(loop.controller)
+    return sets, _study_robot(robot, sets, name)
 
-    Raises:
-        ValueError: naming the loop, for a loop tuned for another robot (its
-            gains fit that robot's wheel budget).
-    """
+
+def _judged(spec: Disturbance, loop: ClosedLoop, dt, robot, x64, horizon):
+    """``summary_row`` of one loop's runs, with its ``feedback``, and the runs' metrics."""
+    m = disturbed_metrics(
+        spec, loop.params, controller=loop.controller, estimator=loop.estimator,
+        dt=dt, robot=robot, x64=x64,
+    )  # fmt: skip
+    used, _ = resolve_estimator(loop.estimator)
+    return {"feedback": "raw" if used is None else used.name, **summary_row(m, horizon)}, m
+
+
+def _horizon_columns(row: dict[str, Any], horizon: float) -> dict[str, Any]:
+    return {
+        "settled at horizon": row["settled at horizon"],
+        "mean arrival, not at horizon s": row["mean arrival, not at horizon s"],
+        "horizon s": horizon,
+    }
+
+
+def _study_robot(robot: Any, loops: Mapping[str, ClosedLoop], name: str) -> Robot:
+    """``robot``, else the one the ``loops`` record, else the paper's; other robots refused."""
     from wmr_jax._src.model.robots import describe_robot, same_robot
 
     recorded = {label: loop.robot for label, loop in loops.items() if loop.robot is not None}
@@ -327,9 +322,8 @@ def evaluate_loop(
 def figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity) -> dict[str, Any]:
     """The figures of one condition's runs and the settings that drew them.
 
-    The mean arrival is compared with the turn–drive–turn bound of the
-    references that arrived; the peak wheel speed is within ``v_max`` when
-    every rim stays within ``v_max (1 + mismatch)``.
+    The peak wheel speed is within ``v_max`` when every rim stays within
+    ``v_max (1 + mismatch)``.
     """
     from wmr_jax._src.studies.optimal import time_bounds
 
@@ -415,48 +409,29 @@ def noise_curve(
         ``latency``, ``runs``, ``settled at horizon``, ``mean arrival, not at
         horizon s``, ``horizon s``.
     """
-    if not isinstance(loops_by_name, Mapping) or not loops_by_name:
-        raise ValueError(
-            f"loops_by_name = {loops_by_name!r:.80} is not allowed; allowed: a dict of "
-            "label -> ClosedLoop or Gains, at least one"
-        )
     levels, _ = check_levels(list(noise_xy), [_DEG_PER_CM * float(x) for x in noise_xy])
     mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
     latency = checks.check_bool("latency", latency)
-    sets = {
-        name: _closed_loop(v, controllers.SHIM_SUNG, None, f"loops_by_name[{name!r}]")
-        for name, v in loops_by_name.items()
-    }
-    for loop in sets.values():
-        resolve_estimator(loop.estimator)
-        controllers.get_controller(loop.controller)
-    robot = _study_robot(robot, sets, "loops_by_name")
+    sets, robot = _loops(loops_by_name, "loops_by_name", controllers.SHIM_SUNG, None, robot)
     refs, noise, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
     rows = []
     for name, loop in sets.items():
-        used, _ = resolve_estimator(loop.estimator)
         for sxy in levels:
             sdeg = _DEG_PER_CM * sxy
             spec = _scaled(refs, noise, factors, sxy, sdeg, latency)
-            m = disturbed_metrics(
-                spec, loop.params, controller=loop.controller, estimator=loop.estimator,
-                dt=dt, robot=robot, x64=x64,
-            )  # fmt: skip
-            summary = summary_row(m, horizon)
+            row, _ = _judged(spec, loop, dt, robot, x64, horizon)
             rows.append(
                 {
                     "gains": name,
-                    "feedback": "raw" if used is None else used.name,
+                    "feedback": row["feedback"],
                     "noise xy cm": sxy,
                     "noise theta deg": sdeg,
-                    "success": summary["success"],
-                    "mean arrival s": summary["mean arrival s"],
+                    "success": row["success"],
+                    "mean arrival s": row["mean arrival s"],
                     "mismatch": mismatch,
                     "latency": latency,
                     "runs": len(refs),
-                    "settled at horizon": summary["settled at horizon"],
-                    "mean arrival, not at horizon s": summary["mean arrival, not at horizon s"],
-                    "horizon s": horizon,
+                    **_horizon_columns(row, horizon),
                 }
             )
     return rows
