@@ -1,9 +1,8 @@
-"""Animated GIF of a batch of robots driving to their reference poses (matplotlib only).
+"""Animated GIF of a batch of robots driving to their reference poses.
 
 Each robot is a disc with a heading tick and a fading trail; its reference
 a cross with a heading arrow, green while the robot is arrived
-(docs/model.md §6). ``PillowWriter`` encodes the frames into a temporary
-file that then atomically replaces the target.
+(docs/model.md §6).
 """
 
 from __future__ import annotations
@@ -21,7 +20,7 @@ from wmr_jax._src import checks
 from wmr_jax._src.io import atomic_write_bytes
 from wmr_jax._src.model import controllers
 from wmr_jax._src.model.params import Robot
-from wmr_jax._src.report.figures import plt
+from wmr_jax._src.report.figures import plt, reference_arrows
 from wmr_jax._src.sim import metrics
 from wmr_jax._src.sim import rollout as simulation
 from wmr_jax._src.sim.poses import horizon_steps, sample_poses
@@ -31,7 +30,7 @@ __all__ = ["animate", "frame_timing", "gif_path", "write_gif"]
 
 
 def _pitch(poses: np.ndarray, refs: np.ndarray, title: str, arrow: float) -> tuple[Any, Any]:
-    """Return ``(fig, ax)`` framing the runs, with the references' heading arrows (``arrow`` cm)."""
+    """``(fig, ax)`` framing the runs, with the references' heading arrows (``arrow`` cm)."""
     span = np.concatenate([poses[..., :2].reshape(-1, 2), refs[:, :2]])
     lo, hi = span.min(axis=0) - 8, span.max(axis=0) + 8
     fig, ax = plt.subplots(figsize=(6, 6 * (hi[1] - lo[1]) / max(hi[0] - lo[0], 1e-9) + 0.3))
@@ -42,8 +41,7 @@ def _pitch(poses: np.ndarray, refs: np.ndarray, title: str, arrow: float) -> tup
     ax.set_xlabel("x [cm]")
     ax.set_ylabel("y [cm]")
     ax.set_title(title, fontsize=9, pad=16)
-    ends = arrow * np.stack([np.cos(refs[:, 2]), np.sin(refs[:, 2])])
-    ax.quiver(*refs[:, :2].T, *ends, angles="xy", scale_units="xy", scale=1, color="k", width=0.004)
+    reference_arrows(ax, refs, arrow)
     return fig, ax
 
 
@@ -60,16 +58,12 @@ _MAX_FRAME_MS = 655_350
 
 
 def frame_timing(dt: float, stride: int | None = None, speed: float = 1.0) -> tuple[int, int]:
-    """Return ``(stride, frame_ms)``: samples per frame and the GIF's delay per frame, ms.
+    """``(stride, frame_ms)``: samples per frame and the GIF's delay per frame, ms.
 
     A GIF stores delays in whole hundredths of a second (browsers play those
     under 20 ms at 100 ms): with ``stride=None`` the smallest stride whose delay
     is within 2 % of ``stride · dt / speed`` is chosen; a given ``stride`` gets
     the nearest delay.
-
-    Raises:
-        ValueError: for a non-positive ``dt``, ``stride`` or ``speed``, or a
-            delay over 655.35 s per frame (the most a GIF can store).
     """
     dt = checks.check_dt(dt)
     speed = checks.check_number("speed", speed, unit="× real time")
@@ -106,7 +100,7 @@ def _save(anim: Any, fig: Any, path: str | os.PathLike, frame_ms: int) -> Path:
 
 
 def gif_path(name: str, path: Any) -> Path:
-    """Return ``path`` if it ends in ``.gif``, else say so naming ``name``."""
+    """``path`` if it ends in ``.gif``, else refused naming ``name``."""
     text = os.fspath(path) if isinstance(path, (str, os.PathLike)) else None
     if not isinstance(text, str) or Path(text).suffix.lower() != ".gif":
         shown = path if text is None else text
@@ -145,10 +139,6 @@ def write_gif(
 
     Returns:
         The path written.
-
-    Raises:
-        ValueError: for a path not ending in ``.gif``, misshapen poses or
-            references, or a bad ``speed``, ``stride``, ``trail`` or ``body_radius``.
     """
     from wmr_jax._src.report.figures import mpl_animation
 
@@ -243,9 +233,6 @@ def animate(
 
     Returns:
         The path written.
-
-    Raises:
-        ValueError: for a bad count, seed, option or pose, before anything runs.
     """
     path = gif_path("path =", path)
     if refs is None:

@@ -1,8 +1,7 @@
-"""Figures: the one module that imports matplotlib (the reporting layer draws with its ``plt``).
+"""Figures: the one module that imports matplotlib; the other report modules use its ``plt``.
 
 Paths with the robot's heading and the references marked, wheel speeds
-against time, and ``path_figure`` for one run. The other report modules
-draw with ``plt`` from here; nothing else in the package imports matplotlib.
+against time, and ``path_figure`` for one run.
 """
 
 from __future__ import annotations
@@ -48,11 +47,7 @@ def image_formats() -> list[str]:
 
 @contextlib.contextmanager
 def closed_after(*args: Any, **kwargs: Any) -> Iterator[tuple[Any, Any]]:
-    """``plt.subplots(*args, **kwargs)`` as ``(fig, axes)``, closed on leaving, error or not.
-
-    A figure that failed before it was saved is not left open (a long
-    session would otherwise gather them).
-    """
+    """``plt.subplots(*args, **kwargs)`` as ``(fig, axes)``, closed on leaving, error or not."""
     fig, axes = plt.subplots(*args, **kwargs)
     try:
         yield fig, axes
@@ -84,19 +79,15 @@ def _heading_arrows(ax, poses: np.ndarray, spacing: float, color, length: float,
     step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
     travelled = np.concatenate([[0.0], np.cumsum(step)])
     marks = np.flatnonzero(np.diff(np.floor(travelled / spacing), prepend=-1.0) > 0)
-    picked = poses[np.union1d(marks, [len(poses) - 1])]
-    ax.quiver(
-        picked[:, 0],
-        picked[:, 1],
-        length * np.cos(picked[:, 2]),
-        length * np.sin(picked[:, 2]),
-        angles="xy",
-        scale_units="xy",
-        scale=1,
-        color=color,
-        width=0.004,
-        **kw,
-    )
+    reference_arrows(ax, poses[np.union1d(marks, [len(poses) - 1])], length, color=color, **kw)
+
+
+def reference_arrows(ax: Any, poses: np.ndarray, length: float, color: Any = "k", **kw) -> Any:
+    """Draw each pose's heading as an arrow ``length`` cm long from its position."""
+    tips = length * np.stack([np.cos(poses[:, 2]), np.sin(poses[:, 2])], axis=-1)
+    style = {"angles": "xy", "scale_units": "xy", "scale": 1, "width": 0.004}
+    ax.quiver(*poses[:, :2].T, *tips.T, color=color, **style, **kw)
+    return tips
 
 
 def plot_paths(
@@ -155,16 +146,7 @@ def plot_paths(
     if mark_refs:
         refs = np.asarray(refs)
         ax.plot(refs[:, 0], refs[:, 1], "kx", ms=8, mew=2, label="reference" if label else None)
-        tips = 2.5 * arrow_length * np.stack([np.cos(refs[:, 2]), np.sin(refs[:, 2])], axis=-1)
-        ax.quiver(
-            *refs[:, :2].T,
-            *tips.T,
-            angles="xy",
-            scale_units="xy",
-            scale=1,
-            color="k",
-            width=0.004,
-        )
+        tips = reference_arrows(ax, refs, 2.5 * arrow_length)
         # quiver does not widen the data limits: take the arrow tips in, or they are clipped.
         ax.update_datalim(refs[:, :2] + tips)
         ax.autoscale_view()

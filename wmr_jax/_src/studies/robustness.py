@@ -1,17 +1,13 @@
 """Robustness Monte Carlo (docs/model.md §7, §9).
 
-Success and arrival of the disturbed loop (``sensing.loop``) against the
-level of pose noise, with wheel-radius and mass mismatch and latency
-(``monte_carlo``, ``robustness_study``), and what the studies share: their
-horizon on a robot (``study_horizon``) and their summary of a run set
-(``summary_row``). The standard conditions live in ``conditions``.
+Success and arrival of the disturbed loop against the level of pose noise,
+with wheel-radius and mass mismatch and latency, and what the studies share:
+their horizon on a robot and their summary of a run set.
 
-Every study runs on ``robot`` (default: the loops' own, else ``Robot()``)
-and judges peak wheel speeds against its ``V_max``. The references keep the
-evaluation set of docs/model.md §6 on any robot, since the tolerances and
-the noise are lengths and angles; the horizon scales instead
-(``study_horizon``), as the paper's gains scaled into a slower robot's
-wheel budget (``robot_defaults``) drive the same paths more slowly.
+The references keep the evaluation set of docs/model.md §6 on any robot,
+since the tolerances and the noise are lengths and angles; the horizon
+scales instead, as the paper's gains scaled into a slower robot's wheel
+budget drive the same paths more slowly.
 """
 
 from __future__ import annotations
@@ -62,7 +58,7 @@ ROBUSTNESS_CONDITIONS = (
 
 
 def check_levels(noise_xy: Any, noise_deg: Any) -> tuple[list[float], list[float]]:
-    """Return the noise levels as lists of floats after checking them."""
+    """The noise levels, checked, as lists of floats."""
     levels = []
     for name, seq in (("noise_xy", noise_xy), ("noise_deg", noise_deg)):
         if isinstance(seq, (str, bytes)) or np.ndim(seq) != 1:
@@ -86,13 +82,10 @@ def check_levels(noise_xy: Any, noise_deg: Any) -> tuple[list[float], list[float
 def study_horizon(robot: Robot | None = None) -> float:
     """The studies' default horizon on ``robot``, s: 6 s for the paper robot (docs/model.md §6).
 
-    On a robot where the paper's feasible gains do not fit (``60 + 10 L >
-    V_max``) they are scaled by ``c = V_max / (60 + 10 L)`` (docs/robots.md),
-    which drives the same paths ``1 / c`` times slower: the horizon is
-    ``6 s / c``, rounded up to 0.1 s.
-
-    Raises:
-        ValueError: for anything but one valid robot.
+    Where the paper's feasible gains do not fit (``60 + 10 L > V_max``) they
+    are scaled by ``c = V_max / (60 + 10 L)`` (docs/robots.md) and drive the
+    same paths ``1 / c`` times slower: the horizon is ``6 s / c``, rounded up
+    to 0.1 s.
     """
     # Imported here: the tuning package imports this module.
     from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS as PAPER
@@ -111,18 +104,13 @@ LATE_SHARE = 0.25
 def settled_at_horizon(m: PoseMetrics, horizon: float) -> np.ndarray:
     """Which runs count as arrived (docs/model.md §6) only because the horizon ends, ``(N,)``.
 
-    A run that reached the goal, left its tolerance and is back in it at the
-    end has an arrival set by where the horizon cuts it: under noise such runs
-    hover about the goal. Such a run is one whose settled arrival comes after
-    ``(1 − LATE_SHARE)`` of the horizon and after its first arrival.
+    Under noise a run may reach the goal, leave its tolerance and hover back
+    into it, its arrival then set by where the horizon cuts it: a settled
+    arrival after ``(1 − LATE_SHARE)`` of the horizon and after its first arrival.
 
     Args:
         m: the runs' metrics (``first_arrival`` included).
         horizon: the simulated time of the runs, s.
-
-    Raises:
-        ValueError: for metrics without first arrivals, or a horizon that
-            is not a time.
     """
     _check_with_first_arrivals(m, "m")
     horizon = checks.check_number("horizon", horizon, unit="s")
@@ -145,15 +133,10 @@ def _check_with_first_arrivals(m: Any, name: str) -> None:
 
 
 def summary_row(m: PoseMetrics, horizon: float | None = None) -> dict[str, Any]:
-    """Return success, arrival, first arrival, final distance and zig-zag of a batch.
+    """Success, arrival, first arrival, final distance and zig-zag of a batch.
 
-    Given the runs' ``horizon`` (s), also ``"settled at horizon"``
-    (``settled_at_horizon``) and the mean and median arrival of the other
-    successes (``inf`` if none).
-
-    Raises:
-        ValueError: for metrics without first arrivals, or a horizon that is
-            not a time.
+    Given the runs' ``horizon`` (s), also ``"settled at horizon"`` and the
+    mean and median arrival of the other successes (``inf`` if none).
     """
     _check_with_first_arrivals(m, "m")
     ok = m.success
@@ -202,8 +185,7 @@ def monte_carlo(
 ) -> list[dict[str, Any]]:
     """Return success and arrival against noise level for one controller and condition.
 
-    Every noise level reuses the same references, unit noise and mismatch
-    (common random numbers), so differences between levels are the noise's.
+    Every noise level reuses the same references, unit noise and mismatch.
 
     Args:
         key: ``jax.random`` key; the same key gives the same numbers.
@@ -227,9 +209,6 @@ def monte_carlo(
     Returns:
         One row per noise level: the condition, ``summary_row`` with the
         horizon, and the peak wheel speed of any run (cm/s).
-
-    Raises:
-        ValueError: for a bad count, noise level, mismatch bound or option.
     """
     n_runs = checks.check_int("n_runs", n_runs)
     checks.check_key("key", key)
@@ -304,10 +283,7 @@ def robot_defaults(controller: Any, robot: Robot | None = None) -> Any:
 
 
 def study_steps(robot: Any, horizon: Any, dt: float) -> tuple[int, float]:
-    """The periods and the horizon (s, a whole number of periods) of a study's runs.
-
-    ``horizon`` ``None`` is ``study_horizon(robot)``; the robot is checked either way.
-    """
+    """The periods and the horizon (s, whole periods; default ``study_horizon(robot)``)."""
     default = study_horizon(robot)
     steps = horizon_steps(dt, default if horizon is None else horizon)
     return steps, steps * float(dt)

@@ -1,19 +1,13 @@
 """Consecutive motions: a chain of waypoints, and references that move.
 
-Two uses of the one closed loop (``loops.scan_closed_loop``), batched by
-``loops.batched``; a fold follows the arrivals and ``aim`` hands the law the
-reference of each period:
-
 * **Waypoint chain.** The robot is given waypoint 0 and, once arrived there
   (docs/model.md §6), waypoint 1, and so on; intermediate waypoints may use
-  a looser *pass-through* tolerance, so that the robot runs through them.
-  An intermediate waypoint's arrival time is the end of the period it was
-  reached at; the last one's is the docs/model.md §6 arrival time.
+  a looser *pass-through* tolerance. An intermediate waypoint's arrival time
+  is the end of the period it was reached at; the last one's is the
+  docs/model.md §6 arrival time.
 * **Moving reference.** One reference per control period, ``(steps, 3)``;
   the error and the arrival test after period ``k`` are taken against
   ``refs[k]``. A constant reference gives exactly a ``rollout``.
-
-``soccer_study`` runs a soccer-like sequence for each controller.
 """
 
 from __future__ import annotations
@@ -97,11 +91,7 @@ class TrackRun(NamedTuple):
 
 
 def _chain_single(spec, params, init, robot, dt, options: Options) -> ChainRun:
-    """Run one robot through its waypoints; ``spec = (waypoints (K, 3), tolerances (4,))``.
-
-    The fold carries the period, the leg, the period each waypoint was reached
-    at and where the last run of arrived samples on the last leg began (-1: none).
-    """
+    """Run one robot through its waypoints; ``spec = (waypoints (K, 3), tolerances (4,))``."""
     waypoints, tolerances = spec
     n_legs = waypoints.shape[0]
     pass_r, pass_theta, final_r, final_theta = (tolerances[i] for i in range(4))
@@ -174,7 +164,7 @@ def _period_end(period: jax.Array, dt: jax.Array, dtype: Any) -> jax.Array:
 
 
 def _distance(pose: jax.Array, ref: jax.Array) -> jax.Array:
-    """Return the distance between the positions of two poses, cm (NaN-safe at 0)."""
+    """The distance between the positions of two poses, cm (NaN-safe at 0)."""
     d_sq = (ref[..., 0] - pose[..., 0]) ** 2 + (ref[..., 1] - pose[..., 1]) ** 2
     positive = d_sq > 0
     return jnp.where(positive, jnp.sqrt(jnp.where(positive, d_sq, 1.0)), 0.0)
@@ -195,7 +185,7 @@ _batch_track_jit = loops.EntryJit(loops.batched(_track_single), static_argnames=
 
 
 def _pose_stack(name: str, value: Any, ndim: int, allowed: str) -> jax.Array:
-    """Return ``value`` as checked poses of ``ndim`` dims, the last of length 3."""
+    """``value`` as checked poses of ``ndim`` dims, the last of length 3."""
     shape = np.shape(value)
     if len(shape) != ndim or shape[-1] != 3 or 0 in shape:
         raise ValueError(f"{name} has shape {shape}; allowed: {allowed} [x cm, y cm, theta rad]")
@@ -204,7 +194,7 @@ def _pose_stack(name: str, value: Any, ndim: int, allowed: str) -> jax.Array:
 
 
 def _tolerances(tol_r, tol_theta, pass_tol_r, pass_tol_theta) -> jax.Array:
-    """Return ``[pass r, pass θ, final r, final θ]`` after checking each (cm, rad)."""
+    """``[pass r, pass θ, final r, final θ]``, each checked (cm, rad)."""
     tol_r = checks.check_number("tol_r", tol_r, unit="cm")
     tol_theta = checks.check_number("tol_theta", tol_theta, high=math.pi / 2, unit="rad")
     pass_r = checks.check_number(
@@ -254,21 +244,19 @@ def _run(jitted, spec, params, init, robot, dt, options: Options, n: int | None,
     """Check params, init, robot and dt as ``rollout`` does (``n`` runs, or one), then run."""
     if n is not None and np.ndim(init) == 2 and np.shape(init)[0] != n:
         raise ValueError(f"init has {np.shape(init)[0]} rows; allowed: {n}, one per run")
-    # A stand-in reference: the real ones are checked by the caller, and its
-    # batch size is the one every batched argument must share.
+    # A stand-in reference: the caller checked the real ones.
     dummy, names = np.zeros((3,) if n is None else (n, 3)), (entry, _BATCHED.get(entry, ""))
     batch = False if n is None else None
     _, params, init, robot, dt = simulation.prepare(
         dummy, params, init, robot, dt, options, batch=batch, entry=names
     )
-    # The robot's speed limiter, as in the rollouts (docs/model.md §4.2.2): the
-    # held command rides in the state's velocity, from rest.
+    # The robot's speed limiter, as in the rollouts (docs/model.md §4.2.2).
     options = loops.for_robot(options, robot, dt)
     return jitted(spec, params, init, robot, dt, options=options)
 
 
 def _keywords_of(single: Any) -> Any:
-    """Give a batched entry point the signature of its single-run one (``help`` shows it)."""
+    """Give a batched entry point the signature of its single-run one, for ``help``."""
 
     def adopt(batched: Any) -> Any:
         batched.__signature__ = inspect.signature(single)
@@ -413,17 +401,14 @@ def batch_track_rollout(refs: Any, params: Any = None, **keywords: Any) -> Track
 
 
 def soccer_waypoints() -> np.ndarray:
-    """Return ``SOCCER_WAYPOINTS_DEG`` as ``(K, 3)`` in cm, cm, rad."""
+    """``SOCCER_WAYPOINTS_DEG`` as ``(K, 3)`` in cm, cm, rad."""
     wp = np.array(SOCCER_WAYPOINTS_DEG)
     wp[:, 2] = np.radians(wp[:, 2])
     return wp
 
 
 class SoccerRun(NamedTuple):
-    """One run of the soccer-like sequence: the controller's name, its mode
-    (``"stop"`` at every waypoint or ``"pass"`` through the intermediate ones)
-    and its ``ChainRun``.
-    """
+    """A soccer run: controller, mode (``"stop"`` or ``"pass"``) and its ``ChainRun``."""
 
     controller: str
     mode: str
@@ -463,8 +448,8 @@ def soccer_study(
     """Run the soccer-like sequence (``SOCCER_WAYPOINTS_DEG``) for each controller.
 
     Each controller runs the chain twice: stopping at every waypoint and
-    passing through the intermediate ones. Computed in float64 (the polar
-    baselines' bearing is rounding noise near a goal in float32).
+    passing through the intermediate ones. Computed in float64, where the
+    polar baselines' bearing near a goal is not rounding noise.
 
     Args:
         controller_names: registered controllers; default every one.
@@ -510,13 +495,8 @@ def soccer_study(
 
 
 def soccer_steps(robot: Robot | None = None, steps: int = SOCCER_STEPS) -> int:
-    """Control periods for the soccer-like route on ``robot``: ``steps`` scaled.
-
-    The route's 450 periods are the paper robot's; a slower robot gets them
+    """Control periods of the soccer route on ``robot``: the paper robot's ``steps``
     stretched as the studies' horizon (``robustness.study_horizon``).
-
-    Raises:
-        ValueError: for anything but one valid robot, or ``steps`` not an integer >= 1.
     """
     from wmr_jax._src.sim.poses import HORIZON_S
     from wmr_jax._src.studies.robustness import study_horizon
@@ -526,11 +506,10 @@ def soccer_steps(robot: Robot | None = None, steps: int = SOCCER_STEPS) -> int:
 
 
 def _leg_summary(run: ChainRun) -> dict[str, Any]:
-    """Return the arrival at each waypoint, the slowest leg, path and zig-zag of a run."""
+    """The arrival at each waypoint, the slowest leg, path and zig-zag of a run."""
     arrival = np.asarray(run.arrival, dtype=float)
     row: dict[str, Any] = {f"leg {i + 1} s": float(t) for i, t in enumerate(arrival)}
-    # A waypoint never reached makes its leg, and every later one, infinite
-    # (inf − inf would be NaN).
+    # A waypoint never reached makes its leg, and every later one, infinite.
     with np.errstate(invalid="ignore"):
         legs = np.diff(np.concatenate([[0.0], arrival]))
     legs[~np.isfinite(arrival)] = np.inf
