@@ -21,7 +21,7 @@ __all__ = ["Timing", "environment", "time_group"]
 
 
 def _cpu_busy_seconds() -> float | None:
-    """Return the CPU seconds all processes have used (Linux), or ``None``."""
+    """The CPU seconds all processes have used (Linux), or ``None``."""
     try:
         with open("/proc/stat", encoding="ascii") as f:
             fields = [int(v) for v in f.readline().split()[1:]]

@@ -1,10 +1,7 @@
 """Pose-space maps: docs/model.md §6 metrics over grids of reference poses, per controller.
 
-Every pose of a grid (reference positions at several headings, the robot
-starting at the origin) is run to the horizon by ``wmr_jax.sweep``, which
-reduces each run to its metrics inside the time loop and feeds the poses in
-fixed-size chunks: memory grows with the number of poses only.
-``map_study`` runs the grid for every controller, ``compare_controllers``
+Every pose is run to the horizon by ``wmr_jax.sweep``, in bounded memory.
+``map_study`` runs a grid for every controller, ``compare_controllers``
 random poses, and ``summarize`` tabulates either side by side.
 """
 
@@ -89,20 +86,16 @@ def pose_grid(
     r_min: float = EVAL_R_MIN,
     r_max: float = EVAL_R_MAX,
 ) -> PoseGrid:
-    """Return a square grid over ``[−r_max, r_max]²`` with about ``n_poses`` references.
+    """A square grid over ``[−r_max, r_max]²`` with about ``n_poses`` references.
 
     Only positions at distance ``r_min``–``r_max`` from the origin are run (the
-    docs/model.md §6 set); the side is chosen so that their number times the
-    number of headings is close to ``n_poses``.
+    docs/model.md §6 set).
 
     Args:
         n_poses: about how many references in all, ``>= 1``.
         headings_deg: the reference headings θ_r, degrees (at least one, finite).
         r_min: least distance from the origin, cm.
         r_max: largest distance, cm, ``> r_min``.
-
-    Raises:
-        ValueError: for a bad count, heading or distance range.
     """
     n_poses = checks.check_int("n_poses", n_poses, 1, MAX_SAMPLES)
     r_min = checks.check_number("r_min", r_min, closed=True, unit="cm")
@@ -153,7 +146,7 @@ def evaluate_poses(
     resume: bool = True,
     on_chunk: Callable[[int, int], None] | None = None,
 ) -> PoseMetrics:
-    """Return the docs/model.md §6 metrics of every reference, in bounded memory.
+    """The docs/model.md §6 metrics of every reference, in bounded memory.
 
     Args:
         refs: ``(N, 3)`` reference poses ``[x cm, y cm, θ rad]``.
@@ -168,18 +161,14 @@ def evaluate_poses(
         chunk: poses per compiled call (the last chunk is padded to it).
         progress: show a progress bar (stderr).
         x64: compute in float64 (default), whatever JAX's default dtype: in
-            float32 the polar baselines' bearing is rounding noise near their
-            goal, and their heading drifts off again.
+            float32 the polar baselines' bearing is rounding noise near their goal.
         cache: a folder where each finished chunk is kept (``wmr_jax.sweep``'s
-            ``out``), so that an interrupted run resumes; ``None`` keeps nothing.
+            ``out``); ``None`` keeps nothing.
         resume: with ``cache``, reuse the chunks it holds of the same settings.
         on_chunk: called as ``on_chunk(done, total)`` after every chunk.
 
     Returns:
         ``PoseMetrics`` of ``(N,)`` NumPy arrays, in the order of ``refs``.
-
-    Raises:
-        ValueError: for misshapen or non-finite poses and bad options.
     """
     chunk = checks.check_int("chunk", chunk)
     x64, progress = checks.check_bool("x64", x64), checks.check_bool("progress", progress)
@@ -218,7 +207,7 @@ def evaluate_poses(
 
 
 def _arrival_stats(t: np.ndarray) -> dict[str, float]:
-    """Mean, median and 90th percentile of the arrival times of the successful runs, s."""
+    """Mean, median and 90th percentile of arrival times, s (``inf`` for none)."""
     if not t.size:
         return {"mean arrival s": math.inf, "median arrival s": math.inf, "p90 arrival s": math.inf}
     return {
@@ -231,7 +220,7 @@ def _arrival_stats(t: np.ndarray) -> dict[str, float]:
 def summarize(
     results: dict[str, PoseMetrics], *, v_max: float = 125.0, reference: str | None = None
 ) -> list[dict[str, Any]]:
-    """Return one row of summary statistics per controller, side by side.
+    """One row of summary statistics per controller, side by side.
 
     Args:
         results: controller name → its ``PoseMetrics`` over the same poses.
@@ -325,10 +314,7 @@ def map_study(
     horizon: float | None = None,
     on_chunk: Callable[[str, int, int], None] | None = None,
 ) -> MapStudy:
-    """Run the pose-space maps of every controller; return the metrics and the summary.
-
-    Every controller runs the same grid (``pose_grid``) from ``(0, 0, 0)`` on
-    ``robot``, with its default parameters (``robot_defaults``).
+    """Run the pose-space maps of every controller: the same grid from ``(0, 0, 0)``.
 
     Args:
         n_poses: about how many reference poses in all (grid × headings).
@@ -343,9 +329,6 @@ def map_study(
 
     Returns:
         A ``MapStudy``.
-
-    Raises:
-        ValueError: for a bad count, heading, controller or option.
     """
     names = controllers.controller_names(controller_names)
     cache = None if cache is None else checks.check_folder("cache", cache)
@@ -441,9 +424,8 @@ def compare_controllers(
 ) -> dict[str, Any]:
     """Compare every controller over the same random docs/model.md §6 poses.
 
-    The poses are ``wmr_jax.sample_poses(seed, n_poses)`` from ``(0, 0, 0)``,
-    not ``map_study``'s grid. Each run of ``COMPARISON_RUNS`` has its published
-    defaults (``robot_defaults`` on another robot than the paper's).
+    The poses are ``wmr_jax.sample_poses(seed, n_poses)`` from ``(0, 0, 0)``;
+    each run of ``COMPARISON_RUNS`` has its published defaults.
 
     Args:
         n_poses: number of random reference poses.
@@ -453,9 +435,6 @@ def compare_controllers(
     Returns:
         A JSON-ready dict of the settings, the robot and ``rows``
         (``summarize``, one per run).
-
-    Raises:
-        ValueError: for a bad count, seed or option.
     """
     from wmr_jax._src.sim.poses import sample_poses
 

@@ -1,15 +1,10 @@
 """Final poses and docs/model.md §6 metrics for millions of poses, in bounded memory.
 
-``sweep`` runs the closed loop for every reference pose with the metrics
-streamed through the time loop (``metrics.stream_*``), so no trajectory is
-stored, and the poses in chunks of a fixed size spread over all local
-devices, so one compiled program serves every chunk.
-
-With ``out=DIR`` every finished chunk is written atomically as a checksummed
-file carrying a fingerprint of the settings and its poses
-(``sweep_files.ChunkStore``); a later call with the same arguments and
-``resume=True`` loads them instead of recomputing, so an interrupted sweep
-loses nothing it had finished. ``refs`` may be a NumPy memmap.
+The metrics are streamed through the time loop, so no trajectory is stored,
+and the poses run in chunks of one size spread over all local devices, so
+one compiled program serves every chunk. With ``out=DIR`` every finished
+chunk is kept (``sweep_files.ChunkStore``), so an interrupted sweep resumed
+with the same arguments loses nothing it had finished.
 """
 
 from __future__ import annotations
@@ -55,7 +50,7 @@ arrived; ``success``; ``path_length`` cm; ``peak_wheel_speed`` cm/s; ``zigzags``
 
 
 def _sweep_one(ref, params, init, robot, dt, options: loops.Options):
-    """Return the final pose and the streamed metrics of one run (single pose)."""
+    """The final pose and the streamed metrics of one run (single pose)."""
     gains, thresholds = params
 
     def fold(acc, pose, out):
@@ -106,7 +101,7 @@ class _Job:
 
 
 def _pose_count(refs: Any) -> int:
-    """Return ``N`` of ``(N, 3)`` references from their shape alone (a memmap stays on disk)."""
+    """``N`` of ``(N, 3)`` references from their shape alone (a memmap stays on disk)."""
     shape = np.shape(refs) if getattr(refs, "shape", None) is None else refs.shape
     if len(shape) != 2 or shape[1] != 3 or shape[0] < 1:
         raise ValueError(
@@ -277,14 +272,12 @@ def _check_chunk(job: _Job, chunk: _Chunk) -> None:
 
 def _check_result(job: _Job, chunk: _Chunk, host: dict[str, np.ndarray]) -> None:
     """Raise, as ``final_poses`` does, if a run of the chunk left the floating-point range."""
-    finite = np.isfinite(host["final_x"])
-    finite &= np.isfinite(host["final_y"])
-    finite &= np.isfinite(host["final_theta"])
+    finite = np.all([np.isfinite(host[name]) for name in SWEEP_FIELDS[:3]], axis=0)
     checks.require_finite_runs(finite, job.dtype, first=chunk.lo)
 
 
 def _launcher(job: _Job) -> Callable[[_Chunk], Any]:
-    """Return ``launch(chunk)``: place a chunk on the devices and dispatch it (asynchronously)."""
+    """``launch(chunk)``: place a chunk on the devices and dispatch it (asynchronously)."""
     mesh = jax.sharding.Mesh(np.asarray(job.devices), ("batch",))
     spread = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
     shared = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
@@ -440,9 +433,6 @@ def sweep(
 
     Returns:
         A dict of ``(N,)`` NumPy arrays keyed by ``SWEEP_FIELDS``.
-
-    Raises:
-        ValueError: naming the argument, its value and what is allowed (before tracing).
     """
     options = simulation.make_options(
         steps=steps,

@@ -1,8 +1,7 @@
 """The folder of a resumable sweep: its settings' fingerprint and one checked file per chunk.
 
 A chunk is reused only when the fingerprint of the sweep's settings and the
-digest of its own inputs match and its values are plausible; a damaged or
-altered file is recomputed with a one-line warning.
+digest of its own inputs match and its values are plausible.
 """
 
 from __future__ import annotations
@@ -152,10 +151,9 @@ class ChunkStore:
     def load(
         self, i: int, digest: str, size: int, job: _Job | None = None
     ) -> dict[str, np.ndarray] | None:
-        """Return chunk ``i``'s results if its file is intact and was made from these inputs.
+        """Chunk ``i``'s results if its file is intact and was made from these inputs.
 
-        A file from other settings or poses is not used; a damaged or altered one
-        is not used either, with a one-line warning.
+        A damaged or altered file is not used, with a one-line warning.
         """
         try:
             values, meta = io.load_arrays(self.path(i))
