@@ -185,34 +185,31 @@ def write_robustness(
     from wmr_jax._src.model.params import Robot
     from wmr_jax._src.model.robots import robot_json
 
-    out, rows = Path(out_dir), require_rows("rows", rows)
+    rows = require_rows("rows", rows)
     horizon = _horizon_of(rows)
     meta = {"seed": seed, "velocity": velocity, "runs": n_runs, "horizon_s": horizon}
     if x64 is not None:
         meta["dtype"] = "float64" if x64 else "float32"
     meta["robot"] = robot_json(Robot() if robot is None else robot)
-    head = (
-        f"Robustness Monte Carlo ({velocity} loop, seed {seed}, {n_runs} runs per row, "
-        f"horizon {horizon:g} s{_robot_text(meta)})\n\n"
-    )
-    # Everything is checked and drawn before the first file is written.
-    text = head + robustness_table(rows, ROBUSTNESS_COLUMNS)
-    record = (
-        json_text(
-            {**meta, "rows": rows}, "seed, velocity, n_runs and rows", indent=2, sort_keys=False
+
+    def head(rows: list[dict[str, Any]], meta: dict[str, Any]) -> str:
+        return (
+            f"Robustness Monte Carlo ({velocity} loop, seed {seed}, {n_runs} runs per row, "
+            f"horizon {horizon:g} s{_robot_text(meta)})\n\n"
         )
-        + "\n"
-    )
+
     title = (
         f"Robustness, {velocity} loop{_robot_text(meta)}: {n_runs} random poses "
         f"(docs/model.md §6) per point, seed {seed}, horizon {horizon:g} s; mismatch ±3 % "
         "wheel radius" + (", ±20 % mass" if velocity == "nonideal" else "") + "; latency one sample"
     )
-    fig = robustness_figure(rows, title=title)
+
+    def figure(rows: list[dict[str, Any]]) -> Any:
+        return robustness_figure(rows, title=title)
+
     # "tight": the legend lies outside the axes.
-    png = save_closed(fig, out / "robustness.png", dpi=110, bbox_inches="tight")
-    md = atomic_write_text(out / "robustness.md", text)
-    return [png, md, atomic_write_text(out / "robustness.json", record)]
+    columns, save = ROBUSTNESS_COLUMNS, {"bbox_inches": "tight"}
+    return _write_study(out_dir, "robustness", rows, meta, columns, head, figure, **save)
 
 
 def robustness_figure(rows: Sequence[dict[str, Any]], *, title: str) -> Any:
@@ -230,9 +227,46 @@ def robustness_figure(rows: Sequence[dict[str, Any]], *, title: str) -> Any:
     first = [r for r in rows if (r["controller"], r["condition"]) == (names[0], conditions[0])]
 
     def draw(fig, axes):
-        _draw_robustness(fig, axes, rows, names, conditions, first, title)
+        lines = []
+        for c, name in enumerate(names):
+            for i, label in enumerate(conditions):
+                sel = [r for r in rows if r["controller"] == name and r["condition"] == label]
+                style = {"linestyle": _STYLES[i % len(_STYLES)], "color": plt.get_cmap("tab10")(c)}
+                lines.append((f"{name}, {label}", style, sel))
+        degrees = ", ".join(f"{r['noise theta deg']:g}" for r in first)
+        _draw_lines(axes, lines, "median arrival s", f"(σ_θ = {degrees}°)", "measurement noise")
+        axes[0].set_ylim(-0.02, 1.02)
+        axes[1].set_ylim(0.0, _horizon_of(rows))
+        fig.suptitle(title, fontsize=9)
+        _legend_outside(fig, axes, rows, 0.75, fontsize=7)
 
     return built(draw, 1, 2, figsize=(11, 4.2))
+
+
+def _draw_lines(axes, lines, arrival: str, sigma_theta: str, noise: str) -> None:
+    """Success and ``arrival`` (over the runs that arrive) against σ_xy, one line per group.
+
+    ``lines``: ``(label, style, rows)``; a point where at least half of the
+    successes only settle at the horizon is an x.
+    """
+    for label, style, sel in lines:
+        x = [r["noise xy cm"] for r in sel]
+        late = _late_points(sel)
+        _plot_marked(axes[0], x, [r["success"] for r in sel], late, label=label, **style)
+        # Over the runs that arrive only; absent (not drawn) where none does.
+        _plot_marked(axes[1], x, [_arrived_time(r, arrival) for r in sel], late, **style)
+    shown = f"{arrival.removesuffix(' s')} of the runs that arrive [s]"
+    for ax, label in zip(axes, ("success rate", shown), strict=True):
+        ax.set_xlabel(f"{noise} σ_xy [cm] {sigma_theta}")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+
+
+def _legend_outside(fig, axes, rows, right: float, fontsize: int) -> None:
+    """Fit the axes left of ``right`` (a share of the width), the legend to their right."""
+    fig.tight_layout(rect=(0, 0, right, 1))
+    handles, labels = _with_late_mark(axes[0], rows)
+    fig.legend(handles, labels, fontsize=fontsize, loc="center left", bbox_to_anchor=(right, 0.5))
 
 
 def _late_points(rows: Sequence[dict[str, Any]]) -> list[int]:
@@ -252,35 +286,6 @@ def _plot_marked(ax, x, y, late, **style) -> None:
         plain = {k: v for k, v in style.items() if k not in ("linestyle", "label")}
         ax.plot([x[i] for i in late], [y[i] for i in late], linestyle="none", marker="x",
                 markersize=8, **plain)  # fmt: skip
-
-
-def _draw_robustness(fig, axes, rows, names, conditions, first, title) -> None:
-    """Draw the lines, labels and legend of ``robustness_figure``."""
-    for c, name in enumerate(names):
-        colour = plt.get_cmap("tab10")(c)
-        for i, label in enumerate(conditions):
-            sel = [r for r in rows if r["controller"] == name and r["condition"] == label]
-            x = [r["noise xy cm"] for r in sel]
-            late = _late_points(sel)
-            style = dict(linestyle=_STYLES[i % len(_STYLES)], color=colour)
-            success = [r["success"] for r in sel]
-            _plot_marked(axes[0], x, success, late, label=f"{name}, {label}", **style)
-            # Over the runs that arrive only; absent (not drawn) where none does.
-            medians = [_arrived_time(r, "median arrival s") for r in sel]
-            _plot_marked(axes[1], x, medians, late, **style)
-    axes[0].set_ylabel("success rate")
-    axes[1].set_ylabel("median arrival of the runs that arrive [s]")
-    degrees = ", ".join(f"{r['noise theta deg']:g}" for r in first)
-    for ax in axes:
-        ax.set_xlabel(f"measurement noise σ_xy [cm] (σ_θ = {degrees}°)")
-        ax.grid(alpha=0.3)
-    axes[0].set_ylim(-0.02, 1.02)
-    axes[1].set_ylim(0.0, _horizon_of(rows))
-    fig.suptitle(title, fontsize=9)
-    fig.tight_layout(rect=(0, 0, 0.75, 1))
-    # Outside the axes, so that it never hides a line.
-    handles, labels = _with_late_mark(axes[0], rows)
-    fig.legend(handles, labels, fontsize=7, loc="center left", bbox_to_anchor=(0.75, 0.5))
 
 
 def _with_late_mark(ax: Any, rows: Sequence[dict[str, Any]]) -> tuple[list, list]:
@@ -402,7 +407,7 @@ def write_noise_curve(
     return _write_study(out_dir, "noise_curve", rows, meta, columns, head, figure)
 
 
-def _write_study(out_dir, name, rows, meta, columns, head, figure) -> list[Path]:
+def _write_study(out_dir, name, rows, meta, columns, head, figure, **save) -> list[Path]:
     """Write ``name``.png, ``.md`` (``head`` and the table) and ``.json``, all checked first."""
     out, rows = Path(out_dir), require_rows("rows", rows)
     if not isinstance(meta, dict):
@@ -410,7 +415,7 @@ def _write_study(out_dir, name, rows, meta, columns, head, figure) -> list[Path]
     table = robustness_table(rows, columns)
     text = head(rows, meta) + table
     record = json_text({**meta, "rows": rows}, "meta and rows", indent=2, sort_keys=False) + "\n"
-    png = save_closed(figure(rows), out / f"{name}.png", dpi=110)
+    png = save_closed(figure(rows), out / f"{name}.png", dpi=110, **save)
     md = atomic_write_text(out / f"{name}.md", text)
     return [png, md, atomic_write_text(out / f"{name}.json", record)]
 
@@ -426,22 +431,15 @@ def noise_curve_figure(rows: Sequence[dict[str, Any]]) -> Any:
     names = list(dict.fromkeys(r["gains"] for r in rows))
 
     def draw(fig, axes):
+        lines = []
         for j, name in enumerate(names):
             mine = sorted((r for r in rows if r["gains"] == name), key=lambda r: r["noise xy cm"])
-            x = [r["noise xy cm"] for r in mine]
-            colour = plt.get_cmap("tab10")(j)
             style = "--" if mine[0]["feedback"] == "raw" else "-"
-            label = f"{name} ({mine[0]['feedback']})"
-            late = _late_points(mine)
-            success = [r["success"] for r in mine]
-            _plot_marked(axes[0], x, success, late, linestyle=style, color=colour, label=label)
-            arrival = [_arrived_time(r, "mean arrival s") for r in mine]
-            _plot_marked(axes[1], x, arrival, late, linestyle=style, color=colour)
-        labels = ("success rate", "mean arrival of the runs that arrive [s]")
-        for ax, label in zip(axes, labels, strict=True):
-            ax.set_xlabel("pose noise σ_xy [cm] (σ_θ = 2°/cm)")
-            ax.set_ylabel(label)
-            ax.grid(alpha=0.3)
+            colour = plt.get_cmap("tab10")(j)
+            lines.append(
+                (f"{name} ({mine[0]['feedback']})", {"linestyle": style, "color": colour}, mine)
+            )
+        _draw_lines(axes, lines, "mean arrival s", "(σ_θ = 2°/cm)", "pose noise")
         axes[0].set_ylim(0, 1.05)
         axes[1].set_ylim(bottom=0)
         fig.suptitle(
@@ -449,8 +447,6 @@ def noise_curve_figure(rows: Sequence[dict[str, Any]]) -> Any:
             "hard law, ideal loop; dashed: raw feedback, solid: estimator",
             fontsize=9,
         )
-        fig.tight_layout(rect=(0, 0, 0.78, 1))
-        handles, labels = _with_late_mark(axes[0], rows)
-        fig.legend(handles, labels, fontsize=8, loc="center left", bbox_to_anchor=(0.78, 0.5))
+        _legend_outside(fig, axes, rows, 0.78, fontsize=8)
 
     return built(draw, 1, 2, figsize=(11, 4.0))
