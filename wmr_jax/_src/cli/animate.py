@@ -13,11 +13,11 @@ from wmr_jax._src.cli import flags
 __all__ = ["SUBCOMMANDS"]
 
 
-def _flags() -> dict[str, dict[str, Any]]:
-    """Flag -> ``add_argument`` keywords, in ``--help`` order (values are checked in ``run``)."""
+def add_arguments(parser: Any) -> None:
+    """Add the flags of ``wmr-jax animate`` (their values are checked in ``run``)."""
     from wmr_jax._src.model.controllers import SHIM_SUNG, registered_names
 
-    return {
+    options = {
         "--out": {"required": True, "metavar": "FILE.gif", "help": "GIF to write"},
         "--controller": {
             "default": SHIM_SUNG.name,
@@ -37,8 +37,10 @@ def _flags() -> dict[str, dict[str, Any]]:
             "metavar": "X",
             "help": "playback speed, 1 = real time (each frame lasts its simulated time)",
         },
-        "--robot": flags.robot_flag_options(),
     }
+    for flag, keywords in options.items():
+        parser.add_argument(flag, **keywords)
+    flags.add_robot_flag(parser)
 
 
 def run(args: Any) -> int:
@@ -82,7 +84,7 @@ def run(args: Any) -> int:
 SUBCOMMANDS = {
     "animate": {
         "help": "animated GIF of a batch of robots driving to their poses",
-        "flags": _flags,
+        "add_arguments": add_arguments,
         "run": run,
     },
 }

@@ -1,9 +1,6 @@
 """``wmr-jax evaluate``: judge a tuned loop on the user's references under one condition.
 
-The loop comes from ``--gains`` (``load_tuned``), the references from an
-``(N, 3)`` ``.npy`` or ``.csv`` ``[x cm, y cm, θ rad]``; ``evaluate_loop``
-runs them under one standard condition (docs/model.md §7, §9) on the robot
-the file records. Every flag and both files are checked before any run.
+Every flag and both files are checked before any run.
 """
 
 from __future__ import annotations
@@ -69,9 +66,7 @@ def add_arguments(parser: Any) -> None:
         help="feedback, instead of the file's: none (raw measurements), observer or ekf (the "
         "file's parameters if it holds that estimator, else the defaults); default: the file's",
     )
-    parser.add_argument(
-        "--float32", action="store_true", help="compute in float32 instead of float64"
-    )
+    parser.add_argument("--float32", **flags.FLOAT32)
     parser.add_argument(
         "--json",
         default=None,
@@ -217,9 +212,6 @@ def load_refs(path: str, *, x64: bool = True) -> tuple[Any, list[str]]:
 
     Where: ``line 3`` of a CSV, ``row 0 (from 0)`` of an array. A single row of
     3 is one reference.
-
-    Raises:
-        ValueError: one line naming ``--refs``, the file and what is wrong.
     """
     import jax
     import numpy as np
@@ -265,11 +257,7 @@ def load_refs(path: str, *, x64: bool = True) -> tuple[Any, list[str]]:
 
 
 def unit_warnings(path: str, refs: Any) -> list[str]:
-    """One-line warnings for references whose numbers look like another unit.
-
-    References all within the arrival distance of the start look like metres,
-    headings beyond 2π rad like degrees; both are legal, so warned about.
-    """
+    """Warnings for references that look like metres or degrees (legal, so not refused)."""
     import numpy as np
 
     from wmr_jax._src.sim.metrics import DEFAULT_TOL_R
@@ -385,11 +373,7 @@ def _failed(result: dict[str, Any], labels: list[str] | None) -> str:
 
 
 def summary_rows(result: dict[str, Any], labels: list[str] | None = None) -> list[dict[str, str]]:
-    """The printed table of a result: one quantity a row, with its unit.
-
-    ``labels`` says where each reference is in ``--refs``, for the row of
-    those that did not arrive.
-    """
+    """The printed table of a result: one quantity a row; ``labels`` name the references."""
     from wmr_jax._src.model.robots import describe_robot, robot_from_values
 
     robot = base = describe_robot(robot_from_values(result["robot"], "robot"))

@@ -1,8 +1,7 @@
 """Flag values of the command line, checked: one line naming the flag when one is bad.
 
 Flags arrive as text and are checked here rather than by ``argparse`` types,
-so that a bad value gives the same one-line error as every other mistake, in
-the flag's own unit.
+so that a bad value gives the same one-line error as every other mistake.
 """
 
 from __future__ import annotations
@@ -38,7 +37,7 @@ __all__ = [
 
 
 def positive_int(flag: str, text: Any, minimum: int = 1, maximum: int | None = None) -> int:
-    """Return the integer value of a flag, in ``[minimum, maximum]``."""
+    """The integer value of a flag, in ``[minimum, maximum]``."""
     try:
         value = int(str(text), 10)
     except ValueError:
@@ -58,7 +57,7 @@ def number(
     closed: bool = True,
     unit: str = "",
 ) -> float:
-    """Return a flag's finite value in ``[low, high]`` (``(low, high]`` unless ``closed``)."""
+    """A flag's finite value in ``[low, high]`` (``(low, high]`` unless ``closed``)."""
     try:
         value = float(text)
     except (TypeError, ValueError):
@@ -78,21 +77,21 @@ def number(
 
 
 def output_dir(flag: str, text: str) -> Path:
-    """Return a folder the command may write to (created later), or say why not."""
+    """A folder the command may write to (created later), or say why not."""
     from wmr_jax._src.io import writable_path
 
     return writable_path(f"{flag} {text!r}", text, folder=True)
 
 
 def output_file(flag: str, text: str) -> Path:
-    """Return a file path the command may write to, or say why not."""
+    """A file path the command may write to, or say why not."""
     from wmr_jax._src.io import writable_path
 
     return writable_path(f"{flag} {text!r}", text, folder=False)
 
 
 def image_file(flag: str, text: str) -> Path:
-    """Return a writable path whose ending names an image format matplotlib can save."""
+    """A writable path whose ending names an image format matplotlib can save."""
     from wmr_jax._src.report.figures import image_formats
 
     path = output_file(flag, text)
@@ -113,14 +112,14 @@ def choice(flag: str, text: str, allowed: Sequence[str]) -> str:
 
 
 def velocity_loop(text: str) -> str:
-    """Return the name of a velocity loop given to ``--velocity``."""
+    """The velocity loop given to ``--velocity``."""
     from wmr_jax._src.sim.loops import VELOCITY_LOOPS
 
     return choice("--velocity", text, VELOCITY_LOOPS)
 
 
 def controller_names(names: Sequence[str] | None) -> list[str]:
-    """Return the controllers given to ``--controller`` (default: every registered one)."""
+    """The controllers given to ``--controller`` (default: every registered one)."""
     from wmr_jax._src.model.controllers import registered_names
 
     known = registered_names()
@@ -133,7 +132,7 @@ def controller_names(names: Sequence[str] | None) -> list[str]:
 
 
 def pose_from_degrees(flag: str, values: Sequence[Any]) -> list[float]:
-    """Return ``[x cm, y cm, θ rad]`` from a flag's ``X Y THETA_DEG``."""
+    """``[x cm, y cm, θ rad]`` from a flag's ``X Y THETA_DEG``."""
     x = number(f"{flag} X", values[0], unit="cm")
     y = number(f"{flag} Y", values[1], unit="cm")
     theta = number(f"{flag} THETA_DEG", values[2], unit="degrees")
@@ -204,10 +203,7 @@ def gain_flag_values(params: Any) -> list[str]:
 
 
 def gains_from(args: Any) -> Any:
-    """Return the ``Gains`` of the gain flags, or of ``--gains FILE`` (not both).
-
-    Out-of-range values are named in the flags' units.
-    """
+    """The ``Gains`` of the gain flags, or of ``--gains FILE`` (not both), in the flags' units."""
     from wmr_jax._src.model.params import Gains, validate_gains
 
     if getattr(args, "gains", None) is not None:
@@ -249,11 +245,7 @@ def os_reason(text: str) -> str:
 
 
 def tuned_file(flag: str, path: Any) -> Any:
-    """``load_tuned_and_tuning(path)`` for a command's flag: ``(ClosedLoop, tuning)``.
-
-    Raises:
-        ValueError: one line naming ``flag``, the file and what is wrong.
-    """
+    """``load_tuned_and_tuning(path)`` for a command's flag, its errors naming ``flag``."""
     from wmr_jax._src.tuning.saved import load_tuned_and_tuning
 
     try:
@@ -273,12 +265,7 @@ def tuned_file(flag: str, path: Any) -> Any:
 
 
 def gains_file(flag: str, text: str) -> Any:
-    """Return the fixed ``Gains`` stored in a file such as ``tuned_gains.json``.
-
-    Raises:
-        ValueError: one line naming ``flag`` and the file, for a file
-            ``load_tuned`` refuses or one of a gain schedule.
-    """
+    """The fixed ``Gains`` stored in a file such as ``tuned_gains.json`` (not a schedule)."""
     from wmr_jax._src.model.params import Gains
 
     loop = tuned_file(flag, text)[0]
@@ -290,6 +277,8 @@ def gains_file(flag: str, text: str) -> Any:
     return loop.params
 
 
+# The add_argument keywords of --float32 for a command that computes in float64 by default.
+FLOAT32 = {"action": "store_true", "help": "compute in float32 instead of float64"}
 # What --gains FILE takes, in the help of every command that reads one.
 GAINS_FILE_HELP = (
     "tuned_gains.json of wmr-jax tune (fixed gains or a schedule, with its estimator) "
@@ -299,20 +288,16 @@ GAINS_FILE_HELP = (
 
 def add_robot_flag(parser: Any, default: str = "paper") -> None:
     """Add ``--robot NAME|FILE``; ``default`` names what runs without it, in the help only."""
-    parser.add_argument("--robot", **robot_flag_options(default))
-
-
-def robot_flag_options(default: str = "paper") -> dict[str, Any]:
-    """The ``add_argument`` keywords of ``--robot`` (``add_robot_flag``)."""
     from wmr_jax._src.model.robots import ROBOTS
 
-    return {
-        "default": None,
-        "metavar": "NAME|FILE",
-        "help": f"the robot: a preset ({', '.join(ROBOTS)}), a .json of Robot fields in cm, kg, "
+    parser.add_argument(
+        "--robot",
+        default=None,
+        metavar="NAME|FILE",
+        help=f"the robot: a preset ({', '.join(ROBOTS)}), a .json of Robot fields in cm, kg, "
         "s (any subset; the rest the paper robot's) or a ROS diff_drive_controller .yaml "
         f"(docs/robots.md) (default: {default})",
-    }
+    )
 
 
 def scaled_gains_note(robot: Any) -> str:
@@ -329,9 +314,9 @@ def scaled_gains_note(robot: Any) -> str:
 
 
 def say_robot(given: Any, detail: str = "", gains: bool = True) -> None:
-    """Print ``--robot``'s robot (and a ROS YAML's note), if given, for a command that runs it.
+    """Print ``--robot``'s robot (and a ROS YAML's note), if given, then ``detail``.
 
-    ``detail`` follows its description; ``gains`` adds ``scaled_gains_note``.
+    ``gains`` adds ``scaled_gains_note``.
     """
     from wmr_jax._src.model.robots import describe_robot
 
@@ -344,12 +329,7 @@ def say_robot(given: Any, detail: str = "", gains: bool = True) -> None:
 
 
 def robot_from(text: Any) -> Any:
-    """Return the robot of ``--robot`` (a ``robots.LoadedRobot``), or ``None`` if not given.
-
-    Raises:
-        ValueError: one line naming ``--robot``, the file, the key, its value
-            and what is allowed.
-    """
+    """The robot of ``--robot`` (a ``robots.LoadedRobot``), or ``None`` if not given."""
     from wmr_jax._src.model.robots import read_robot
 
     if text is None:
@@ -381,19 +361,7 @@ def robot_for_gains(given: Any, saved: Any, gains_flag: str, path: Any) -> Any:
     """The robot to run a tuned file's parameters on: ``--robot``'s, else the file's.
 
     Gains fit one robot's wheel budget, so a ``--robot`` other than the one the
-    file records is refused; a file that records none runs on ``--robot``'s.
-
-    Args:
-        given: the ``LoadedRobot`` of ``--robot``, or ``None``.
-        saved: the file's robot (``ClosedLoop.robot``), or ``None``.
-        gains_flag: the flag that named the file (``--gains``).
-        path: the file.
-
-    Returns:
-        A ``Robot``, or ``None`` (neither given: the paper robot).
-
-    Raises:
-        ValueError: one line naming both robots.
+    file records is refused. ``None`` where neither is given (the paper robot).
     """
     from wmr_jax._src.model.robots import same_robot
 

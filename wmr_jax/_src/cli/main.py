@@ -78,11 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
             formatter_class=_HelpFormatter,
             allow_abbrev=False,
         )
-        if "flags" in spec:  # a table {flag: add_argument options}
-            for flag, options in spec["flags"]().items():
-                command.add_argument(flag, **options)
-        else:
-            spec["add_arguments"](command)
+        spec["add_arguments"](command)
         command.set_defaults(func=spec["run"])
     return parser
 

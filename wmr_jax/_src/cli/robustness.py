@@ -1,13 +1,8 @@
 """``wmr-jax robustness``: Monte Carlo of noise, model mismatch and latency (docs/model.md §7).
 
-On the robot of ``--robot``, else the one the gain files record, else the
-paper robot; the runs last that robot's horizon (``study_horizon``). A gain
-file tuned for another robot, or by another problem than its flag names, is
-refused. With ``--robot DIR/identified.json`` the gain sets run on the
-identified robot while the controller believes its base: the conditions are
-that robot as identified, without its tracker noise, and the base
-(``identified_conditions.{md,json}``); the Monte Carlo, whose drawn mismatch,
-latency and noise the identification replaces, is not run.
+With ``--robot DIR/identified.json`` the gain sets run on the identified
+robot while the controller believes its base, instead of the Monte Carlo,
+whose drawn mismatch, latency and noise the identification replaces.
 """
 
 from __future__ import annotations
@@ -53,9 +48,7 @@ def add_arguments(parser: Any) -> None:
     add_study_flags(parser)
     parser.add_argument("--seed", default=0, metavar="N", help="PRNG seed, an integer >= 0")
     parser.add_argument("--runs", default=256, metavar="N", help="runs per noise level")
-    parser.add_argument(
-        "--float32", action="store_true", help="compute in float32 instead of float64"
-    )
+    parser.add_argument("--float32", **flags.FLOAT32)
     parser.add_argument(
         "--nominal-gains",
         default=None,
@@ -105,8 +98,7 @@ def run(args: Any) -> int:
         )
     sets, robot = _gain_sets(args, identified)
     meta = _meta(seed, robot, sets, args)
-    # The folder holds this run's results only: an earlier run's (a noise
-    # curve not asked for now, or what an interruption would leave) go first.
+    # The folder holds this run's results only: an earlier run's go first.
     for name in _OUTPUTS:
         (out / name).unlink(missing_ok=True)
     if identified is not None:
@@ -156,11 +148,7 @@ def _is_paper(robot: Any) -> bool:
 
 
 def _meta(seed: int, robot: Any, sets: dict[str, Any], args: Any) -> dict[str, Any]:
-    """What the standard conditions and the noise curve record beside their rows.
-
-    The seed, poses, robot, dtype, gain files and every set's parameters, so
-    that two runs on other files or dtypes never read alike.
-    """
+    """What the standard conditions and the noise curve record beside their rows."""
     from wmr_jax._src.model.robots import robot_json
     from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED
 
@@ -230,8 +218,7 @@ def _gain_sets(args: Any, identified: Any = None) -> tuple[dict[str, Any], Any]:
     """The gain sets and the robot they run on (checked before any computation).
 
     The first set is the paper's feasible gains scaled into that robot's wheel
-    budget. With ``identified`` (``loaded_identified`` of ``--robot``) the robot
-    is its base, and files tuned for the identified robot run there too.
+    budget. With ``identified`` the robot is its base.
     """
     from wmr_jax._src.identify.closed_loop import tuned_for_identified
     from wmr_jax._src.model.params import Robot
