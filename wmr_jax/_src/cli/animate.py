@@ -1,8 +1,4 @@
-"""``wmr-jax animate``: animated GIF of a batch of robots driving to their poses.
-
-The references are ``sample_poses(--seed, --robots)`` or, with ``--paper``,
-the seven of Fig. 7; ``wmr_jax.report.animate`` runs and draws them.
-"""
+"""``wmr-jax animate``: animated GIF of a batch of robots driving to their poses."""
 
 from __future__ import annotations
 

@@ -1,8 +1,7 @@
 """``wmr-jax export``: a tuned loop as a C controller for the robot (docs/deploy.md).
 
-Writes ``wmr_controller.h``, ``.c`` and ``.json`` (the loop and the period,
-for ``wmr-jax evaluate --c``) into ``--out``; with a C compiler, compiles
-them once and prints the state's and the object's sizes.
+With a C compiler, the sources are compiled once and the state's and the
+object's sizes printed.
 """
 
 from __future__ import annotations

@@ -84,9 +84,8 @@ DEFAULT_STEPS = 150
 def default_steps(robot: Any) -> int:
     """``DEFAULT_STEPS`` stretched as the studies' horizon is on a slower robot.
 
-    ``study_horizon``: the paper's gains scaled into a smaller wheel budget
-    drive the same paths that many times slower, so a run of the default
-    length on such a robot would end before it arrives.
+    The paper's gains scaled into a smaller wheel budget drive the same paths
+    that many times slower.
     """
     from wmr_jax._src.sim.poses import HORIZON_S
     from wmr_jax._src.studies.robustness import study_horizon

@@ -1,8 +1,6 @@
 """``wmr-jax sweep``: map success, arrival, path, wheel speed and zig-zag over a pose space.
 
-Runs ``wmr_jax.studies.map_study`` for every controller asked for, writes
-its maps and summary into ``--out`` (``wmr_jax.report.save_map_study``) and
-prints the summary table. Ctrl-C says which finished chunks were kept.
+Ctrl-C says which finished chunks were kept.
 """
 
 from __future__ import annotations
@@ -95,10 +93,7 @@ def study_settings(args: Any) -> tuple[Any, dict[str, Any]]:
 
 
 def robot_and_horizon(args: Any) -> tuple[Any, Any, float]:
-    """``--robot`` (``LoadedRobot`` or ``None``), the robot to run, and the horizon, s.
-
-    Given a ``--robot``, prints it and the horizon it runs (and a ROS YAML's note).
-    """
+    """``--robot`` (``LoadedRobot`` or ``None``), the robot to run, and the horizon, s; said."""
     from wmr_jax._src.model.params import Robot
     from wmr_jax._src.studies.robustness import study_horizon
 

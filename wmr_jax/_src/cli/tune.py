@@ -1,8 +1,6 @@
 """``wmr-jax tune``: tune gains by gradient descent under k_r + L k_θ ≤ V_max.
 
-The flags and what is printed. The run, its checkpoints and its files are
-``wmr_jax.tuning.tune`` (``tuning/run.py``); the comparison
-``tuning.compare.run_comparison``; ``--robust`` is ``cli/tune_robust.py``.
+The flags and what is printed; ``--robust`` is ``cli/tune_robust.py``.
 """
 
 from __future__ import annotations
@@ -13,8 +11,6 @@ from typing import Any
 from wmr_jax._src.cli import flags
 
 __all__ = ["SUBCOMMANDS"]
-
-# ---------------------------------------------------------------- the command
 
 # flag, TuneConfig field (or None), metavar, help
 _FLAGS = (
@@ -213,8 +209,7 @@ def _shown(params: Any) -> list[str]:
     """The tuned parameters as printed: each with its unit, angles in degrees.
 
     Fixed gains come with a second line, the ``wmr-jax simulate`` flags that
-    give them (to six digits); a schedule's tables are lists of 3 significant
-    digits.
+    give them.
     """
     import math
 
@@ -256,11 +251,10 @@ def _compare(out: Path, args: Any, robot: Any) -> int:
 
 
 def _robot_horizon(args: Any, config: Any, robot: Any) -> Any:
-    """The config with the horizon of ``robot`` where ``--horizon`` is not given; said.
+    """The config with the studies' horizon of ``robot`` where ``--horizon`` is not given.
 
-    The paper's 6 s is the paper robot's; a slower robot, whose wheels cannot
-    follow the paper's feasible gains, gets the studies' stretched horizon
-    (``studies.study_horizon``), so that its yardstick row can arrive at all.
+    A slower robot, whose wheels cannot follow the paper's feasible gains,
+    needs the stretched horizon for its yardstick row to arrive at all.
     """
     from wmr_jax._src.studies.robustness import study_horizon
 

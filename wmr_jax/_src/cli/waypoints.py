@@ -1,8 +1,4 @@
-"""``wmr-jax waypoints``: consecutive motions through a chain of waypoints.
-
-Runs ``wmr_jax.studies.soccer_study``, writes ``soccer.png``, ``.md`` and
-``.json`` into ``--out`` and prints when each waypoint was reached.
-"""
+"""``wmr-jax waypoints``: consecutive motions through a chain of waypoints."""
 
 from __future__ import annotations
 

@@ -1,9 +1,4 @@
-"""Figures and files of a pose-space study: heat maps, the first-to-arrive map, the summary.
-
-``save_map_study`` writes what ``wmr-jax sweep`` leaves in its folder:
-``maps_<controller>.png`` (metrics × headings, one colour range per metric
-shared by every controller), ``winner.png``, ``summary.md`` and ``summary.json``.
-"""
+"""Figures and files of a pose-space study: heat maps, the first-to-arrive map, the summary."""
 
 from __future__ import annotations
 
@@ -50,7 +45,7 @@ def _metric_values(m: PoseMetrics, field: str) -> np.ndarray:
 
 
 def _to_image(grid: PoseGrid, values: np.ndarray, h: int) -> np.ndarray:
-    """Return the ``[iy, ix]`` image of heading ``h`` (NaN outside the annulus)."""
+    """The ``[iy, ix]`` image of heading ``h`` (NaN outside the annulus)."""
     per_heading = int(grid.inside.sum())
     image = np.full(grid.inside.shape, np.nan)
     image[grid.inside] = values[h * per_heading : (h + 1) * per_heading]
@@ -72,13 +67,7 @@ def _ranges(results: dict[str, PoseMetrics]) -> dict[str, tuple[float, float]]:
 
 
 def comparison_table(rows: list[dict[str, Any]]) -> str:
-    """The Markdown table of ``summarize`` rows (or their JSON) that docs/maps.md shows.
-
-    One line per controller: success, mean / median / p90 arrival, mean path,
-    mean / largest peak wheel speed, runs over V_max, mean zig-zag count and,
-    where present, the share of poses where it arrives before the reference
-    controller.
-    """
+    """The Markdown table of ``summarize`` rows (or their JSON) that docs/maps.md shows."""
     rows = require_rows("rows", rows)
     ahead = [k for k in rows[0] if k.startswith("faster than ")]
     table = []
@@ -121,10 +110,7 @@ _SUMMARY_NUMBERS = (
 
 
 def save_comparison(out_dir: str | Path, comparison: dict[str, Any]) -> list[Path]:
-    """Write ``comparison.md`` and ``comparison.json`` of ``wmr_jax.studies.compare_controllers``.
-
-    Returns the paths written.
-    """
+    """Write ``comparison.md`` and ``comparison.json`` of ``compare_controllers``; their paths."""
     out = Path(out_dir)
     keys = ("poses", "seed", "velocity", "horizon_s", "dtype", "rows")
     if not isinstance(comparison, dict) or any(k not in comparison for k in keys):
@@ -187,7 +173,7 @@ _CONTOUR_CELL_CM = 8.0
 
 
 def _over_vmax_share(grid: PoseGrid, img: np.ndarray, v_max: float) -> tuple:
-    """Return cell centres ``(cx, cy)`` and the share of poses over ``v_max`` in each cell."""
+    """Cell centres ``(cx, cy)`` and the share of poses over ``v_max`` in each cell."""
     step = float(grid.xs[1] - grid.xs[0]) if len(grid.xs) > 1 else 1.0
     k = max(1, int(round(_CONTOUR_CELL_CM / step)))
     n = len(grid.xs) // k * k
@@ -205,24 +191,21 @@ def _heading_title(grid: PoseGrid, h: int) -> str:
     return f"θ_r = {math.degrees(grid.headings[h]):g}°"
 
 
+def _show(ax: Any, grid: PoseGrid, img: np.ndarray, **style: Any) -> Any:
+    """Draw ``img`` (``[iy, ix]``) over the grid's square, one cell per pose."""
+    extent = (grid.xs[0], grid.xs[-1], grid.xs[0], grid.xs[-1])
+    return ax.imshow(img, origin="lower", extent=extent, interpolation="nearest", **style)
+
+
 def _draw_metric(ax, grid: PoseGrid, m: PoseMetrics, field: str, cmap, vrange, h, v_max):
     """Draw one metric at heading ``h``; failures in red on the arrival map."""
-    extent = (grid.xs[0], grid.xs[-1], grid.xs[0], grid.xs[-1])
     img = _to_image(grid, _metric_values(m, field), h)
-    image = ax.imshow(
-        img,
-        origin="lower",
-        extent=extent,
-        cmap=cmap,
-        vmin=vrange[0],
-        vmax=vrange[1],
-        interpolation="nearest",
-    )
+    image = _show(ax, grid, img, cmap=cmap, vmin=vrange[0], vmax=vrange[1])
     if field == "arrival":
         failed = _to_image(grid, (~m.success).astype(float), h)
         overlay = np.zeros((*failed.shape, 4))  # transparent but where it failed
         overlay[failed == 1] = (0.85, 0.1, 0.1, 1.0)
-        ax.imshow(overlay, origin="lower", extent=extent, interpolation="nearest")
+        _show(ax, grid, overlay)
     if field == "peak_wheel" and np.nanmax(img) > v_max:
         cx, cy, share = _over_vmax_share(grid, img, v_max)
         if np.nanmax(share) > 0.5:
@@ -328,11 +311,7 @@ def _draw_maps(fig, axes, grid, m, ranges, v_max, title) -> None:
 def winner_figure(
     path: str | Path, grid: PoseGrid, results: dict[str, PoseMetrics], *, title: str = ""
 ) -> Path:
-    """Save the map of the controller that arrives first at each pose (grey: none arrives).
-
-    ``results`` maps a controller's name to its metrics over ``grid.refs``;
-    returns the path written.
-    """
+    """Save the map of the controller that arrives first at each pose (grey: none arrives)."""
     from wmr_jax._src.report.figures import ListedColormap
 
     if not isinstance(results, dict) or not results:
@@ -357,19 +336,9 @@ def winner_figure(
 
 def _draw_winner(fig, axes, grid, names, best, colours, cmap, title) -> None:
     """Draw the first-to-arrive map of ``winner_figure`` into ``axes``, with its legend."""
-    n_h = len(grid.headings)
-    extent = (grid.xs[0], grid.xs[-1], grid.xs[0], grid.xs[-1])
-    for h in range(n_h):
+    for h in range(len(grid.headings)):
         ax = axes[0, h]
-        ax.imshow(
-            _to_image(grid, best, h),
-            origin="lower",
-            extent=extent,
-            cmap=cmap,
-            vmin=-0.5,
-            vmax=len(names) + 0.5,
-            interpolation="nearest",
-        )
+        _show(ax, grid, _to_image(grid, best, h), cmap=cmap, vmin=-0.5, vmax=len(names) + 0.5)
         _decorate(ax, grid, bottom=True, left=h == 0)
         ax.set_title(_heading_title(grid, h), fontsize=9)
     handles = [
@@ -381,12 +350,10 @@ def _draw_winner(fig, axes, grid, names, best, colours, cmap, title) -> None:
 
 
 def save_map_study(out_dir: str | Path, study: MapStudy) -> list[Path]:
-    """Write the figures and the summary of a ``map_study`` into ``out_dir``.
+    """Write ``maps_<controller>.png``, ``winner.png``, ``summary.md`` and ``.json``.
 
-    ``maps_<controller>.png``, ``winner.png`` (with two controllers or more),
-    ``summary.md`` and ``summary.json``; the maps and ``winner.png`` of an
-    earlier study that this one does not draw are removed. Returns the paths
-    written.
+    ``winner.png`` only with two controllers or more; the figures of an earlier
+    study that this one does not draw are removed. Returns the paths written.
     """
     out = Path(out_dir)
     # Everything is checked, and the texts made, before the first file is written.
@@ -406,9 +373,7 @@ def save_map_study(out_dir: str | Path, study: MapStudy) -> list[Path]:
     # The robot the study ran (older summaries record none: the paper robot).
     robot = study.summary.get("robot") if isinstance(study.summary, dict) else None
     v_max = float(robot["v_max"]) if isinstance(robot, dict) else float(Robot().v_max)
-    # A figure of an earlier study in this folder (another controller, a
-    # winner of several) would pass for this one's: only this study's stay.
-    # (Maps of registered controllers only: another maps_*.png is not a study's.)
+    # A figure of an earlier study in this folder would pass for this one's.
     earlier = {f"maps_{name}.png" for name in registered_names()} | {"winner.png"}
     drawn = {f"maps_{name}.png" for name in study.results}
     drawn |= {"winner.png"} if len(study.results) > 1 else set()

@@ -1,8 +1,4 @@
-"""The paper's figures and tables (``docs/model.md §5``) from ``wmr_jax.studies.paper_runs``.
-
-``save_paper`` writes ``fig6.png`` … ``fig10.png``, the wheel speeds and
-``paper_table.md``/``.json``; ``save_fig7`` writes ``fig7.png``/``.md``/``.json``.
-"""
+"""The paper's figures and tables (``docs/model.md §5``) from ``wmr_jax.studies.paper_runs``."""
 
 from __future__ import annotations
 
@@ -156,11 +152,6 @@ def paper_summary_table(summary: dict[str, Any], v_max: float) -> str:
     Args:
         summary: ``PaperRuns.summary`` (or ``paper_table.json``'s ``"summary"``).
         v_max: the wheel-speed limit, cm/s.
-
-    Returns:
-        Markdown: ``k_r``, ``k_r + L k_θ``, the condition, the ideal vs
-        non-ideal path gap (max / mean), arrival, zig-zag count and the share
-        of samples with a wheel command over ``v_max``, ideal / non-ideal.
     """
     v_max = check_number("v_max", v_max, unit="cm/s")
     if not isinstance(summary, dict):
@@ -219,11 +210,8 @@ _SUMMARY_NUMBERS = (
 
 
 def save_paper(out_dir: str | Path, runs: Any) -> dict[str, Any]:
-    """Write the paper's figures and table into ``out_dir`` (created if missing).
+    """Write ``fig6.png`` … ``fig10.png``, the wheel speeds and ``paper_table.md``/``.json``.
 
-    ``fig6.png`` … ``fig10.png``, ``wheels_k120.png``, ``wheels_k60.png`` and
-    ``paper_table.md`` / ``.json``: one row per reference and case with the
-    run's metrics and the largest gap between its ideal and non-ideal paths.
     Returns the table as written to ``paper_table.json``.
     """
     out_dir = Path(out_dir)

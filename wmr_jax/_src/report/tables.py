@@ -47,7 +47,7 @@ def markdown_table(rows: list[dict[str, Any]], columns: list[str] | None = None)
 
 
 def require_rows(name: str, rows: Any) -> list[Any]:
-    """Return ``rows`` as a list, or raise unless it is a non-empty sequence of dicts."""
+    """``rows`` as a list, or refused unless it is a non-empty sequence of dicts."""
     if isinstance(rows, Iterable) and not isinstance(rows, (str, bytes, Mapping)):
         rows = list(rows)
     if not isinstance(rows, list) or not rows:
@@ -65,11 +65,7 @@ _JSON_FLOATS = {"inf": math.inf, "-inf": -math.inf, "nan": math.nan, None: math.
 
 
 def json_number(name: str, value: Any) -> float:
-    """Return ``value`` as a float, reading back what ``atomic_write_json`` wrote for inf or NaN.
-
-    Raises:
-        ValueError: naming ``name``, for a bool, any other string or a non-number.
-    """
+    """``value`` as a float, reading back what ``atomic_write_json`` wrote for inf or NaN."""
     if value is None or isinstance(value, str):
         if value in _JSON_FLOATS:
             return _JSON_FLOATS[value]
@@ -86,7 +82,7 @@ def json_number(name: str, value: Any) -> float:
 
 
 def row_numbers(name: str, row: Mapping[str, Any], keys: Any) -> dict[str, float]:
-    """Return ``{key: json_number(row[key])}`` for ``keys``, naming a missing key."""
+    """``{key: json_number(row[key])}`` for ``keys``, naming a missing key."""
     missing = [k for k in keys if k not in row]
     if missing:
         raise ValueError(

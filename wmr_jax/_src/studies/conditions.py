@@ -183,11 +183,11 @@ def _loops(given: Any, name: str, controller: Any, estimator: Any, robot: Any):
     return sets, _study_robot(robot, sets, name)
 
 
-def _judged(spec: Disturbance, loop: ClosedLoop, dt, robot, x64, horizon):
+def _judged(spec: Disturbance, loop: ClosedLoop, dt, robot, x64, horizon, velocity="ideal"):
     """``summary_row`` of one loop's runs, with its ``feedback``, and the runs' metrics."""
     m = disturbed_metrics(
         spec, loop.params, controller=loop.controller, estimator=loop.estimator,
-        dt=dt, robot=robot, x64=x64,
+        dt=dt, robot=robot, velocity=velocity, x64=x64,
     )  # fmt: skip
     used, _ = resolve_estimator(loop.estimator)
     return {"feedback": "raw" if used is None else used.name, **summary_row(m, horizon)}, m
@@ -281,16 +281,7 @@ def evaluate_loop(
     refs, noise, factors, horizon = draws
     if identified is None:
         spec = _scaled(refs, noise, factors, *labels[condition])
-        m = disturbed_metrics(
-            spec,
-            loop.params,
-            controller=controller,
-            estimator=loop.estimator,
-            dt=dt,
-            robot=robot,
-            velocity=velocity,
-            x64=x64,
-        )
+        _, m = _judged(spec, loop, dt, robot, x64, horizon, velocity)
     else:
         m, condition, mismatch = _on_identified(
             identified, condition, refs, noise, loop, controller, dt, robot, velocity, x64

@@ -68,7 +68,7 @@ def time_bounds(
     dt: float = DEFAULT_DT,
     tol_r: float = DEFAULT_TOL_R,
 ) -> TimeBounds:
-    """Return the turn–drive–turn time and the lower bound of each reference (docs/model.md §8).
+    """The turn–drive–turn time and the lower bound of each reference (docs/model.md §8).
 
     Args:
         refs: ``(N, 3)`` or ``(3,)`` reference poses ``[x cm, y cm, θ rad]``,
@@ -79,9 +79,6 @@ def time_bounds(
 
     Returns:
         ``TimeBounds`` of arrays with the leading shape of ``refs``, s.
-
-    Raises:
-        ValueError: for bad poses, robot, ``dt`` or ``tol_r``, naming the value.
     """
     require_concrete("time_bounds", refs, robot, dt, tol_r)
     robot = validate_robot(Robot() if robot is None else robot)
@@ -103,7 +100,7 @@ def time_bounds(
 
 
 def bound_ratios(mean_arrival: float, bounds: TimeBounds) -> dict[str, float]:
-    """Return a mean arrival time as ratios to the mean of each yardstick.
+    """A mean arrival time as ratios to the mean of each yardstick.
 
     Args:
         mean_arrival: a controller's mean arrival time on the references, s.

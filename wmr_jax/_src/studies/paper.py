@@ -39,7 +39,7 @@ FIG6_MARK_DEG = 70.0  # the paper's Φ_m
 def run_table(
     traj: Any, refs: np.ndarray, *, dt: float, robot: Robot | None = None
 ) -> list[dict[str, Any]]:
-    """Return one row of ``docs/model.md §6`` metrics per run of a batched trajectory.
+    """One row of ``docs/model.md §6`` metrics per run of a batched trajectory.
 
     Args:
         traj: a batched ``Trajectory`` of ``N`` runs from ``batch_rollout``.
@@ -92,15 +92,12 @@ def run_table(
 
 
 def residual_bound(phi_m: Any) -> Any:
-    """Return the paper's residual distance bound ``sqrt(sin Φ_m tan Φ_m)``, cm (Fig. 6).
+    """The paper's residual distance bound ``sqrt(sin Φ_m tan Φ_m)``, cm (Fig. 6).
 
     ``V̇ ≤ 0`` (docs/model.md §3.6) is proven only for ``r_e`` above it.
 
     Args:
         phi_m: ``Φ_m`` in rad, ``0 ≤ Φ_m < π/2``; any array shape.
-
-    Raises:
-        ValueError: for a ``Φ_m`` outside ``[0, π/2)``.
     """
     arr = real_array("phi_m", phi_m, "numbers 0 <= phi_m < pi/2 rad")
     require("phi_m", arr, (arr >= 0) & (arr < math.pi / 2), "0 <= phi_m < pi/2 rad")
@@ -108,7 +105,7 @@ def residual_bound(phi_m: Any) -> Any:
 
 
 def fig6_curve(points: int = 400) -> dict[str, Any]:
-    """Return Fig. 6's curve: ``phi_m_deg`` (1°–89°) and ``bound_cm``, ``(points,)`` each.
+    """Fig. 6's curve: ``phi_m_deg`` (1°–89°) and ``bound_cm``, ``(points,)`` each.
 
     Also ``mark_deg`` (70°, the paper's ``Φ_m``) and ``mark_cm``, the bound there.
     """
@@ -164,7 +161,7 @@ class PaperRuns:
     summary: dict[str, Any]
 
     def table(self) -> dict[str, Any]:
-        """Return the JSON-ready table: ``{"robot": ..., "summary": ..., "runs": ...}``."""
+        """The JSON-ready table: ``{"robot": ..., "summary": ..., "runs": ...}``."""
         robot = {k: float(v) for k, v in vars(self.robot).items()}
         return {"robot": robot, "summary": self.summary, "runs": self.runs}
 
@@ -180,7 +177,7 @@ def _paper_case(refs: np.ndarray, kr: float, robot: Robot) -> PaperCase:
 
 
 def _case_rows(case: PaperCase, refs: np.ndarray, robot: Robot) -> dict[str, list[dict]]:
-    """Return the table rows of one case, per loop (``"ideal"``, ``"nonideal"``)."""
+    """The table rows of one case, per loop (``"ideal"``, ``"nonideal"``)."""
     out = {}
     for loop, traj in (("ideal", case.ideal), ("nonideal", case.nonideal)):
         out[loop] = run_table(traj, refs, dt=DEFAULT_DT, robot=robot)
@@ -231,9 +228,7 @@ def paper_runs(*, robot: Robot | None = None) -> PaperRuns:
 
 @dataclasses.dataclass(frozen=True)
 class Fig7Runs:
-    """Fig. 7: the seven runs with the ideal velocity loop and the paper's gains, and
-    their ``run_table`` rows.
-    """
+    """Fig. 7: the seven runs of the ideal loop with the paper's gains, and their rows."""
 
     gains: Gains
     refs: np.ndarray
@@ -241,7 +236,7 @@ class Fig7Runs:
     rows: list[dict[str, Any]]
 
     def table(self) -> dict[str, Any]:
-        """Return the JSON-ready table: ``{"gains": {field: value}, "runs": rows}``."""
+        """The JSON-ready table: ``{"gains": {field: value}, "runs": rows}``."""
         gains = {k: float(v) for k, v in vars(self.gains).items()}
         return {"gains": gains, "runs": self.rows}
 
