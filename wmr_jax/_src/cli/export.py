@@ -39,32 +39,17 @@ def add_arguments(parser: Any) -> None:
 
 def _object_size(folder: Path) -> tuple[int, int] | None:
     """``(sizeof(wmr_controller), bytes of the compiled code)``, or ``None`` without a compiler."""
-    import subprocess
+    from wmr_jax._src.export.compiled import compile_controller, compiler
+    from wmr_jax._src.studies.bench import code_bytes
 
-    from wmr_jax._src.export.compiled import CFLAGS, compiler
-    from wmr_jax._src.studies.bench import text_bytes
-
-    cc = compiler()
-    if cc is None:
+    if compiler() is None:
         return None
     with tempfile.TemporaryDirectory() as tmp:
-        obj, probe = Path(tmp, "wmr_controller.o"), Path(tmp, "probe")
-        src = folder / "wmr_controller.c"
-        compiled = subprocess.run(
-            [cc, *CFLAGS, "-O2", "-c", str(src), "-o", str(obj)], capture_output=True, text=True
-        )
-        if compiled.returncode != 0:
-            raise ValueError(f"the exported C does not compile: {compiled.stderr.strip()}")
-        main = Path(tmp, "size.c")
-        main.write_text(
-            '#include <stdio.h>\n#include "wmr_controller.h"\n'
-            'int main(void) { printf("%lu\\n", (unsigned long)wmr_size()); return 0; }\n'
-        )
-        subprocess.run(
-            [cc, f"-I{folder}", str(main), str(obj), "-o", str(probe), "-lm"], check=True
-        )
-        size = int(subprocess.run([str(probe)], capture_output=True, text=True).stdout)
-        return size, text_bytes(obj)
+        try:
+            size = compile_controller(folder, build=tmp).size
+        except RuntimeError as err:
+            raise ValueError(f"the exported C does not compile: {err}") from None
+        return size, code_bytes(folder / "wmr_controller.c", Path(tmp))
 
 
 def run(args: Any) -> int:

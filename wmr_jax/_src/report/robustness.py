@@ -2,8 +2,7 @@
 
 Tables print fractions of runs as percentages, the JSON files keep the
 fractions. Figures draw the arrival of the runs that arrive and mark apart
-those that count as arrived only because the horizon ends
-(``wmr_jax.studies.settled_at_horizon``).
+those that count as arrived only because the horizon ends.
 """
 
 from __future__ import annotations
@@ -89,9 +88,6 @@ def robustness_table(rows: Sequence[dict[str, Any]], columns: Sequence[str]) -> 
     """A Markdown table of study rows, fractions of runs as percentages (``'99.8 %'``).
 
     ``"settled at horizon"`` is shown after the last arrival column where every row has it.
-
-    Raises:
-        ValueError: for no rows or a row without one of ``columns``.
     """
     rows = require_rows("rows", rows)
     columns = list(columns)
@@ -215,10 +211,8 @@ def write_robustness(
 def robustness_figure(rows: Sequence[dict[str, Any]], *, title: str) -> Any:
     """Draw success rate and median arrival against noise level, one line per row group.
 
-    One colour per controller, one line style per condition; the arrival is
-    the median over the runs that arrive, and a point where at least half of
-    the successes only settle at the horizon is an x. The caller saves and
-    closes the returned ``Figure``.
+    One colour per controller, one line style per condition. The caller saves
+    and closes the returned ``Figure``.
     """
     rows = require_rows("rows", rows)
     markdown_table(rows, _FIGURE_KEYS)  # names a row without one of them
@@ -304,9 +298,8 @@ def write_standard_conditions(
 ) -> list[Path]:
     """Write ``standard_conditions.png``, ``.md`` and ``.json`` (``docs/model.md §7``).
 
-    ``rows`` are ``standard_conditions``'s; ``meta`` says what produced them
-    (seed, runs, the gain files; the robot's ``{field: value}`` under
-    ``"robot"``, named in the text). Returns the paths written.
+    ``meta`` says what produced the rows (the robot's ``{field: value}`` under
+    ``"robot"`` is named in the text). Returns the paths written.
     """
 
     def head(rows: list[dict[str, Any]], meta: dict[str, Any]) -> str:
@@ -421,11 +414,7 @@ def _write_study(out_dir, name, rows, meta, columns, head, figure, **save) -> li
 
 
 def noise_curve_figure(rows: Sequence[dict[str, Any]]) -> Any:
-    """Draw success and mean arrival against σ_xy, one line per loop (legend outside).
-
-    Arrivals are over the runs that arrive (no point where none does); a level
-    where at least half of the successes only settle at the horizon is an x.
-    """
+    """Draw success and mean arrival against σ_xy, one line per loop (legend outside)."""
     rows = require_rows("rows", rows)
     markdown_table(rows, ["gains", "feedback", "noise xy cm", "success", "mean arrival s"])
     names = list(dict.fromkeys(r["gains"] for r in rows))

@@ -12,12 +12,7 @@ __all__ = ["json_number", "markdown_table", "number", "percent", "require_rows",
 
 
 def markdown_table(rows: list[dict[str, Any]], columns: list[str] | None = None) -> str:
-    """Format rows of scalars (lists shown compactly) as a Markdown table, ``|`` escaped.
-
-    Raises:
-        ValueError: for no rows, a row that is not a dict, or a row without
-            one of ``columns`` (naming it).
-    """
+    """Format rows of scalars (lists shown compactly) as a Markdown table, ``|`` escaped."""
     rows = require_rows("rows", rows)
     columns = list(rows[0]) if columns is None else list(columns)
     for i, row in enumerate(rows):

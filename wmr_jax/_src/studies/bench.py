@@ -335,7 +335,7 @@ class _SizeBench:
         with tempfile.TemporaryDirectory() as tmp:
             codegen.write_sources(Path(tmp), codegen.c_sources(loop), loop)
             c = compiled.compile_controller(tmp, build=Path(tmp, "build"))
-            code_bytes = _code_bytes(Path(tmp, "wmr_controller.c"), Path(tmp, "build"))
+            code_size = code_bytes(Path(tmp, "wmr_controller.c"), Path(tmp, "build"))
         refs = np.asarray(self.refs_np, dtype=np.float64)
         rng = np.random.default_rng(self.config.seed)
         along = np.linspace(0.0, 1.0, self.steps)[:, None, None] * refs[None]
@@ -354,7 +354,7 @@ class _SizeBench:
                 t,
                 ns_per_step=per_step,
                 state_bytes=c.size,
-                code_bytes=code_bytes,
+                code_bytes=code_size,
                 law="schedule",
                 feedback="ekf",
                 latency=1,
@@ -458,8 +458,13 @@ class _SizeBench:
         return self.loss_rows(loss, row, "grad_tuning_loss", beside)
 
 
-def _code_bytes(source: Any, build: Any) -> int | None:
-    """Bytes of code and constants of ``source`` compiled with the export's flags (``-O2``)."""
+def code_bytes(source: Any, build: Any) -> int | None:
+    """Bytes of code and constants of ``source`` compiled with the export's flags (``-O2``).
+
+    ``size``'s text of the object file where ``size`` is found, else the file's size;
+    ``None`` if it does not compile.
+    """
+    import shutil
     import subprocess
 
     from wmr_jax._src.export.compiled import CFLAGS, compiler
@@ -468,14 +473,8 @@ def _code_bytes(source: Any, build: Any) -> int | None:
     done = subprocess.run(
         [compiler(), *CFLAGS, "-O2", "-c", str(source), "-o", str(obj)], capture_output=True
     )
-    return text_bytes(obj) if done.returncode == 0 else None
-
-
-def text_bytes(obj: Any) -> int:
-    """Bytes of code and constants in an object file (``size``'s text), else the file's size."""
-    import shutil
-    import subprocess
-
+    if done.returncode != 0:
+        return None
     tool = shutil.which("size")
     if tool:
         done = subprocess.run([tool, str(obj)], capture_output=True, text=True)

@@ -262,9 +262,6 @@ def evaluate_loop(
         ``dtype`` and ``per_reference``: one ``{"ref", "success",
         "arrival_s" (None if not arrived), "final_distance_cm",
         "settled_at_horizon"}`` per reference, in order.
-
-    Raises:
-        ValueError: for a bad argument, before any run.
     """
     from wmr_jax._src.model.robots import robot_json
 

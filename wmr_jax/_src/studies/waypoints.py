@@ -314,10 +314,6 @@ def chain_rollout(
 
     Returns:
         A ``ChainRun``; ``arrival`` has one entry per waypoint.
-
-    Raises:
-        ValueError: for misshapen or non-finite poses, bad tolerances, or any
-            bad option or parameter (as ``rollout``).
     """
     wp = _pose_stack("waypoints", waypoints, 2, "(K, 3)")
     tol = _tolerances(tol_r, tol_theta, pass_tol_r, pass_tol_theta)
