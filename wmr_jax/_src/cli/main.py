@@ -16,8 +16,7 @@ from collections.abc import Sequence
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
-# The commands in --help order. Each lives in the module of this package of
-# the same name, except demo, which shares the paper's.
+# The commands in --help order, each in the module of its name (demo in paper's).
 COMMANDS = (
     "simulate demo paper tune sweep compare waypoints robustness evaluate export animate identify "
     "bench"
@@ -61,8 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="wmr-jax",
         description="Differentiable, batched simulator of the Shim–Sung (2003) pose controller.",
         formatter_class=_HelpFormatter,
-        # A flag is spelled whole: a prefix of one flag must not quietly be
-        # another (``animate --robot`` was read as ``--robots``).
+        # A flag is spelled whole: a prefix of one flag must not quietly be another.
         allow_abbrev=False,
     )
     parser.add_argument("--version", action="version", version=f"wmr-jax {_version()}")
@@ -100,9 +98,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     argv = sys.argv[1:] if argv is None else list(argv)
     if not argv:
-        # No command is a usage error like any other (status 2, so a script
-        # whose command word came out empty fails), but the whole help says
-        # more than a one-line error would; stderr, as for every error.
+        # No command is a usage error (status 2), shown with the whole help.
         parser.print_help(sys.stderr)
         return 2
     args = parser.parse_args(argv)

@@ -238,7 +238,7 @@ def map_figure(
     Returns:
         The path written.
     """
-    _check_sizes(grid, {"m": m})
+    _check_sizes(grid, {None: m}, "m")
     ranges = _ranges({"": m}) if ranges is None else ranges
     missing = [field for field, _, _ in _MAP_FIELDS if field not in ranges]
     if missing:
@@ -255,15 +255,21 @@ def map_figure(
     return Path(path)
 
 
-def _check_sizes(grid: PoseGrid, results: dict[str, PoseMetrics]) -> None:
-    """Raise unless every metric of ``results`` has one value per pose of ``grid``."""
+def _check_sizes(grid: PoseGrid, results: Any, name: str) -> None:
+    """Raise unless ``results`` is a non-empty dict of metrics, each with one value per pose."""
+    if not isinstance(results, dict) or not results:
+        raise ValueError(
+            f"{name} = {results!r:.80} is not allowed; allowed: a non-empty dict of "
+            "controller name → PoseMetrics"
+        )
     n_h, per_heading = len(grid.headings), int(np.asarray(grid.inside).sum())
-    for name, m in results.items():
+    for key, m in results.items():
+        label = name if key is None else f"{name}[{key!r}]"
         for field in ("arrival", "path", "peak_wheel", "zigzag"):
             size = np.size(getattr(m, field))
             if size != n_h * per_heading:
                 raise ValueError(
-                    f"{name}.{field} has {size} values; allowed: one per pose of grid, "
+                    f"{label}.{field} has {size} values; allowed: one per pose of grid, "
                     f"{n_h * per_heading} ({n_h} headings × {per_heading} positions)"
                 )
 
@@ -314,12 +320,7 @@ def winner_figure(
     """Save the map of the controller that arrives first at each pose (grey: none arrives)."""
     from wmr_jax._src.report.figures import ListedColormap
 
-    if not isinstance(results, dict) or not results:
-        raise ValueError(
-            f"results = {results!r:.80} is not allowed; allowed: a non-empty dict of "
-            "controller name → PoseMetrics"
-        )
-    _check_sizes(grid, {f"results[{name!r}]": m for name, m in results.items()})
+    _check_sizes(grid, results, "results")
     names = list(results)
     times = np.stack([results[n].arrival for n in names])  # (C, N)
     best = np.argmin(times, axis=0).astype(float)
@@ -357,12 +358,7 @@ def save_map_study(out_dir: str | Path, study: MapStudy) -> list[Path]:
     """
     out = Path(out_dir)
     # Everything is checked, and the texts made, before the first file is written.
-    if not isinstance(study.results, dict) or not study.results:
-        raise ValueError(
-            f"study.results = {study.results!r:.80} is not allowed; allowed: a non-empty dict "
-            "of controller name → PoseMetrics"
-        )
-    _check_sizes(study.grid, {f"study.results[{k!r}]": m for k, m in study.results.items()})
+    _check_sizes(study.grid, study.results, "study.results")
     what = _describe(study.summary)
     summary_json = json_text(study.summary, "study.summary", indent=2, sort_keys=False) + "\n"
     summary_md = (

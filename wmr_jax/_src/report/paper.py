@@ -90,26 +90,19 @@ def _wheels_figure(path: Path, title: str, refs: np.ndarray, case: Any, v_max: f
     """Rim speeds against time per reference, non-ideal (solid) and ideal (dotted)."""
     n = len(refs)
     cols = (n + 1) // 2
+    loops = ((case.nonideal, "non-ideal", "-", v_max), (case.ideal, "ideal", ":", None))
     with closed_after(2, cols, figsize=(3.2 * cols, 5.6), sharey=True) as (fig, axes):
         for i, ax in enumerate(axes.flat):
             if i >= n:
                 ax.axis("off")
                 continue
-            plot_wheel_speeds(
-                ax,
-                np.asarray(case.nonideal.wheel_speeds[i]),
-                dt=DEFAULT_DT,
-                v_max=v_max,
-                labels=("left (non-ideal)", "right (non-ideal)"),
-            )
-            ax.set_prop_cycle(None)
-            plot_wheel_speeds(
-                ax,
-                np.asarray(case.ideal.wheel_speeds[i]),
-                dt=DEFAULT_DT,
-                labels=("left (ideal)", "right (ideal)"),
-                linestyle=":",
-            )
+            for traj, loop, style, limit in loops:
+                ax.set_prop_cycle(None)  # the same colour per wheel in both loops
+                speeds = np.asarray(traj.wheel_speeds[i])
+                names = (f"left ({loop})", f"right ({loop})")
+                plot_wheel_speeds(
+                    ax, speeds, dt=DEFAULT_DT, v_max=limit, labels=names, linestyle=style
+                )
             x, y, th = refs[i]
             ax.set_title(f"ref ({x:g}, {y:g}, {math.degrees(th):g}°)", fontsize=9)
             if i:

@@ -75,8 +75,7 @@ _STYLES = ("-", "--", ":", "-.")
 # Fractions of runs, printed as percentages in the tables.
 _PERCENT_KEYS = ("success", "reached", "settled at horizon")
 # The share of runs that only settle at the horizon (studies.settled_at_horizon),
-# and the arrival of the others: shown where every row has them (rows of
-# studies run before they were recorded have not).
+# and the arrival of the others: shown where every row has them.
 _LATE = "settled at horizon"
 _ARRIVAL_COLUMNS = ("mean arrival s", "median arrival s")
 # A point where at least this share of the successes only settles at the horizon

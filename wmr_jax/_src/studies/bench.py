@@ -282,7 +282,6 @@ class _SizeBench:
         Standard noise, ±3 % wheel radius and one sample of latency; the jitted
         core is timed, not the checks before it.
         """
-
         import jax
 
         from wmr_jax._src.sim.sensing.disturbances import sample_disturbance
@@ -292,11 +291,10 @@ class _SizeBench:
             jax.random.PRNGKey(self.config.seed), self.refs, self.steps, noise_xy=0.5,
             noise_theta=math.radians(1.0), radius_mismatch=0.03, latency=1.0,
         )  # fmt: skip
-        group = {}
+        group, start = {}, (0.0, 0.0, 0.0)
         for name, estimator in (("raw", None), ("observer", "observer"), ("ekf", "ekf")):
-            start, robot = (0.0, 0.0, 0.0), self.robot
             args, options = prepare_disturbed(
-                spec, self.gains, "shim-sung", estimator, start, 0.033, robot, "ideal"
+                spec, self.gains, "shim-sung", estimator, start, 0.033, self.robot, "ideal"
             )
             group[name] = (
                 lambda args=args, options=options: _disturbed_jit(*args, options=options),

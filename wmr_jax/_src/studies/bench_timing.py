@@ -101,8 +101,7 @@ def time_group(
         for name, (call, compiled) in calls.items():
             if compiled:
                 # Steady state, as in a loop of calls: right after another
-                # case (NumPy's half second, say) XLA's worker threads are
-                # asleep, and waking them costs a JAX call up to 30 %.
+                # case XLA's worker threads are asleep, and waking them costs.
                 jax.block_until_ready(call())
             busy0, own0, start = _cpu_busy_seconds(), _own_cpu_seconds(), time.perf_counter()
             jax.block_until_ready(call())
@@ -121,9 +120,6 @@ def time_group(
         share = min(cores, cpu / wall) if wall > 0 and _cpu_busy_seconds() is not None else None
         timings[name] = Timing(run, compile_s, runs[name], share)
     return timings
-
-
-# ---------------------------------------------------------------- the benchmark
 
 
 def environment() -> dict[str, Any]:

@@ -83,8 +83,7 @@ def time_bounds(
     require_concrete("time_bounds", refs, robot, dt, tol_r)
     robot = validate_robot(Robot() if robot is None else robot)
     as_poses("refs", refs, batch=None)  # shape, finiteness and the heading's range
-    # The references as given, in float64: through the session's float32 a
-    # heading of π became 3.1415927 > π, one sample of turning too many.
+    # The references as given, in float64: in float32 a heading of π is above π.
     refs = np.asarray(refs, dtype=np.float64)
     dt = float(check_dt(dt))
     tol_r = check_number("tol_r", tol_r, unit="cm")

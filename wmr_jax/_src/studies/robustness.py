@@ -323,25 +323,14 @@ def robustness_study(
     resolve_estimator(estimator)  # refused before any run
     study_steps(robot, horizon, DEFAULT_DT)  # and the robot and the horizon
     keys = jax.random.split(jax.random.PRNGKey(seed), len(ROBUSTNESS_CONDITIONS))
+    shared = {"n_runs": n_runs, "noise_xy": noise_xy, "noise_deg": noise_deg, "x64": x64}
+    shared.update(velocity=velocity, estimator=estimator, robot=robot, horizon=horizon)
     rows = []
     for (label, radius, mass, latency), key in zip(ROBUSTNESS_CONDITIONS, keys, strict=True):
         if velocity == "ideal":
             mass = 0.0  # the ideal loop has no mass: the rows say so rather than ±20 %
+        condition = {"radius_mismatch": radius, "mass_mismatch": mass, "latency": latency}
         for name in names:
-            for row in monte_carlo(
-                key,
-                controller=name,
-                n_runs=n_runs,
-                noise_xy=noise_xy,
-                noise_deg=noise_deg,
-                radius_mismatch=radius,
-                mass_mismatch=mass,
-                latency=latency,
-                velocity=velocity,
-                x64=x64,
-                estimator=estimator,
-                robot=robot,
-                horizon=horizon,
-            ):
+            for row in monte_carlo(key, controller=name, **condition, **shared):
                 rows.append({"condition": label, **row})
     return rows
