@@ -105,12 +105,12 @@ def run(args: Any) -> int:
         _on_identified(out, sets, seed, identified, meta, x64=not args.float32)
         return 0
 
-    from wmr_jax._src.model.robots import describe_robot
+    from wmr_jax._src.model.robots import describe_robot, robot_name
     from wmr_jax._src.report.robustness import robustness_table, write_robustness
     from wmr_jax._src.studies.robustness import robustness_study, study_horizon
 
     note = ""
-    if not _is_paper(robot):
+    if robot_name(robot) != "paper":
         note = (
             "; the Monte Carlo runs shim-sung and shim-sung-schedule on the paper's gains "
             "scaled into this robot's wheel budget, the baselines on their defaults (the "
@@ -138,13 +138,6 @@ def run(args: Any) -> int:
     if args.noise_curve:
         _noise_curve(out, sets, seed, robot, meta, x64=not args.float32)
     return 0
-
-
-def _is_paper(robot: Any) -> bool:
-    from wmr_jax._src.model.params import Robot
-    from wmr_jax._src.model.robots import same_robot
-
-    return same_robot(robot, Robot())
 
 
 def _meta(seed: int, robot: Any, sets: dict[str, Any], args: Any) -> dict[str, Any]:
