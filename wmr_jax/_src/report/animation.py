@@ -240,29 +240,14 @@ def animate(
     frame_timing(dt, stride, speed)  # bad values fail before anything runs
     steps = horizon_steps(dt) if steps is None else steps
     name = controllers.get_controller(controller).name
+    run = {"init": init, "dt": dt, "robot": robot, "velocity": velocity, "controller": name}
     with jax.enable_x64(True):
-        traj = simulation.batch_rollout(
-            refs,
-            params,
-            init=init,
-            dt=dt,
-            steps=steps,
-            robot=robot,
-            velocity=velocity,
-            controller=name,
-        )
+        poses = np.asarray(simulation.batch_rollout(refs, params, steps=steps, **run).poses)
     refs = np.asarray(refs, dtype=float)
     if refs.ndim == 1:
-        refs = np.broadcast_to(refs, (traj.poses.shape[0], 3))
-    return write_gif(
-        path,
-        np.asarray(traj.poses),
-        refs,
-        dt=dt,
-        title=f"{name}, {velocity} loop: {len(refs)} robots from {_start(init)}",
-        speed=speed,
-        stride=stride,
-    )
+        refs = np.broadcast_to(refs, (poses.shape[0], 3))
+    title = f"{name}, {velocity} loop: {len(refs)} robots from {_start(init)}"
+    return write_gif(path, poses, refs, dt=dt, title=title, speed=speed, stride=stride)
 
 
 def _start(init: Any) -> str:

@@ -177,22 +177,11 @@ def evaluate_poses(
     cache = None if cache is None else checks.check_folder("cache", cache)
     if np.ndim(init) != 1:
         raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,), shared by every run")
+    run = {"init": init, "dt": dt, "robot": robot, "velocity": velocity, "controller": controller}
+    kept = {"out": cache, "resume": resume, "on_chunk": on_chunk, "progress": progress}
     with jax.enable_x64(x64):
-        out = sweep(
-            refs_host,
-            params,
-            init=init,
-            dt=dt,
-            steps=horizon_steps(dt) if steps is None else steps,
-            robot=robot,
-            velocity=velocity,
-            controller=controller,
-            chunk_size=chunk,
-            progress=progress,
-            out=cache,
-            resume=resume,
-            on_chunk=on_chunk,
-        )
+        steps = horizon_steps(dt) if steps is None else steps
+        out = sweep(refs_host, params, steps=steps, chunk_size=chunk, **run, **kept)
     final = np.stack([out["final_x"], out["final_y"]], axis=-1)
     return PoseMetrics(
         arrival=out["arrival_time"],
@@ -374,17 +363,14 @@ def _horizon(horizon: float | None, robot: Robot) -> float:
 
 def _metrics(refs, runs, robot, horizon, velocity, chunk, progress, x64, per_run=None):
     """Each run's metrics over ``refs``: ``runs`` maps a label to (controller, params or None)."""
+    same = {"robot": robot, "velocity": velocity, "chunk": chunk, "progress": progress, "x64": x64}
+    same["steps"] = horizon_steps(DEFAULT_DT, horizon)
     return {
         label: evaluate_poses(
             refs,
             robot_defaults(name, robot) if params is None else params,
             controller=name,
-            steps=horizon_steps(DEFAULT_DT, horizon),
-            robot=robot,
-            velocity=velocity,
-            chunk=chunk,
-            progress=progress,
-            x64=x64,
+            **same,
             **({} if per_run is None else per_run(label)),
         )
         for label, (name, params) in runs.items()

@@ -473,18 +473,10 @@ def soccer_study(
     rows, runs = [], []
     with jax.enable_x64(True):
         for name in names:
-            params = robot_defaults(name, robot)
+            same = {"controller": name, "velocity": velocity, "steps": steps, "robot": robot}
+            same["params"] = robot_defaults(name, robot)
             for mode, p_r, p_theta in modes:
-                run = chain_rollout(
-                    wp,
-                    params=params,
-                    controller=name,
-                    velocity=velocity,
-                    steps=steps,
-                    pass_tol_r=p_r,
-                    pass_tol_theta=p_theta,
-                    robot=robot,
-                )
+                run = chain_rollout(wp, pass_tol_r=p_r, pass_tol_theta=p_theta, **same)
                 rows.append({"controller": name, "mode": mode, **_leg_summary(run)})
                 runs.append(SoccerRun(name, mode, run))
     return SoccerStudy(rows, runs, velocity, steps, pass_tol_r, pass_tol_theta, robot)
