@@ -26,9 +26,7 @@ def markdown_table(rows: list[dict[str, Any]], columns: list[str] | None = None)
     def fmt(value: Any) -> str:
         if _is_float_scalar(value):
             value = float(value)
-            if math.isinf(value):
-                return "inf" if value > 0 else "-inf"
-            return f"{value:.3g}" if abs(value) < 1e4 else f"{value:.4g}"
+            return f"{value:.4g}" if math.isfinite(value) and abs(value) >= 1e4 else number(value)
         if isinstance(value, list):
             return "(" + ", ".join(f"{v:g}" for v in value) + ")"
         return str(value)
