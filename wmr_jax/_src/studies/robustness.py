@@ -231,19 +231,12 @@ def monte_carlo(
         key, n_runs, steps, radius_mismatch=radius_mismatch, mass_mismatch=mass_mismatch
     )
     delay = np.float64(1.0 if latency else 0.0)
+    run = {"estimator": estimator, "dt": dt, "robot": robot, "velocity": velocity, "x64": x64}
     rows = []
     for sxy, sdeg in zip(noise_xy, noise_deg, strict=True):
         scale = np.array([sxy, sxy, math.radians(sdeg)])
-        m = disturbed_metrics(
-            Disturbance(refs, unit * scale, mismatch, delay),
-            params,
-            controller=name,
-            estimator=estimator,
-            dt=dt,
-            robot=robot,
-            velocity=velocity,
-            x64=x64,
-        )
+        spec = Disturbance(refs, unit * scale, mismatch, delay)
+        m = disturbed_metrics(spec, params, controller=name, **run)
         condition = {
             "controller": name,
             "feedback": "raw" if estimator_used is None else estimator_used.name,
