@@ -149,24 +149,17 @@ def _check_modes(args: Any) -> None:
         if getattr(args, name) not in (None, False) and not args.robust:
             flag = f"--{name.replace('_', '-')}"
             raise ValueError(f"{flag} is not allowed without --robust, whose problem it sets")
-    if args.robust:
-        # --robust --compare is the robust comparison; --knots sizes its schedule.
-        unused = ("schedule", "horizon", "eval_poses", "checkpoint_every", "no_random_search")
-        if args.gradient_cost:
-            raise ValueError("--robust is not allowed with --gradient-cost; allowed: one of them")
-        for name in unused:
-            if getattr(args, name) not in (None, False):
-                flag = f"--{name.replace('_', '-')}"
-                raise ValueError(f"{flag} is not allowed with --robust, which does not use it")
-        return
     modes = [m for m in ("robust", "compare", "gradient_cost") if getattr(args, m)]
+    if args.robust and args.compare:  # the robust comparison (--knots sizes its schedule)
+        modes.remove("compare")
     if len(modes) > 1:
         a, b = (f"--{m.replace('_', '-')}" for m in modes[:2])
         raise ValueError(f"{a} is not allowed with {b}; allowed: one of them")
     mode = modes[0] if modes else None
-    if args.knots is not None and not args.schedule:
+    if args.knots is not None and not args.schedule and not args.robust:
         raise ValueError("--knots is not allowed without --schedule, whose tables it sizes")
     unused = {
+        "robust": ("schedule", "horizon", "eval_poses", "checkpoint_every", "no_random_search"),
         "compare": ("seed", "checkpoint_every", "no_random_search"),
         "gradient_cost": (*(field for _, field, _, _ in _FLAGS), "schedule", "resume", "robot"),
     }.get(mode, ())
