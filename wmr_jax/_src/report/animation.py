@@ -151,12 +151,8 @@ def write_gif(
             raise ValueError(f"{name} holds {held}; allowed: real numbers [x cm, y cm, theta rad]")
     poses = np.asarray(poses, dtype=float)
     refs = np.asarray(refs, dtype=float)
-    if (
-        poses.ndim != 3
-        or poses.shape[2] != 3
-        or refs.shape != (poses.shape[0], 3)
-        or 0 in poses.shape
-    ):
+    shaped = poses.ndim == 3 and poses.shape[2] == 3 and refs.shape == (poses.shape[0], 3)
+    if not shaped or 0 in poses.shape:
         raise ValueError(
             f"poses has shape {poses.shape} and refs {refs.shape}; "
             "allowed: poses (N, steps + 1, 3) with refs (N, 3), N >= 1 and steps + 1 >= 1"
