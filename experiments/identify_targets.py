@@ -10,7 +10,7 @@ samples), σ_xy = 0.3 cm and σ_θ = 0.5°, driving the plan of
 * UMBmark (Borenstein & Feng 1996) and finite-difference Gauss–Newton on the
   same logs: error and wall time side by side.
 
-    python experiments/identify_targets.py [--robots 100] [--coverage-minutes 1]
+    python experiments/identify_targets.py [--robots 100] [--coverage-minutes 1] [--seed 0]
 """
 
 from __future__ import annotations
@@ -87,13 +87,13 @@ def accuracy(base, rng, minutes):
         print(f"  ROS multipliers' errors (%): {', '.join(f'{100 * abs(e):.4f}' for e in ros)}")
 
 
-def coverage(base, rng, robots, minutes):
+def coverage(base, rng, robots, minutes, seed=0):
     dt = 0.04
     commands = plan.plan_commands(base, dt, minutes, seed=1)
     truths, segs = [], []
     for i in range(robots):
         truth = draw(rng, base)
-        c, z, _ = log_of(commands, base, truth, dt, 1000 + i)
+        c, z, _ = log_of(commands, base, truth, dt, 1000 * (seed + 1) + i)
         truths.append(truth)
         segs.append(fit.segments_of(c, z))
     start, cpu = time.perf_counter(), time.process_time()
@@ -177,9 +177,11 @@ def main():
     parser.add_argument("--robots", type=int, default=100)
     parser.add_argument("--coverage-minutes", type=float, default=1.0)
     parser.add_argument("--parts", default="accuracy,baselines,coverage")
+    # Another seed draws other robots and other noise: an independent sample.
+    parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     base = load_robot(args.robot)
-    rng = np.random.default_rng(0)
+    rng = np.random.default_rng(args.seed)
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; base {args.robot}")
     parts = args.parts.split(",")
     if "accuracy" in parts:
@@ -187,7 +189,7 @@ def main():
     if "baselines" in parts:
         baselines(base, rng, args.minutes)
     if "coverage" in parts:
-        coverage(base, rng, args.robots, args.coverage_minutes)
+        coverage(base, rng, args.robots, args.coverage_minutes, args.seed)
     print(f"load average {os.getloadavg()[0]:.1f} at the end")
 
 
