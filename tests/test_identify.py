@@ -123,6 +123,40 @@ def test_identification_recovers_several_robots_within_the_targets():
         assert lo < got.half_track < hi
 
 
+@pytest.mark.parametrize("turn", [math.pi - 2e-3, -math.pi + 2e-3, math.pi, 2.0])
+def test_a_segment_is_placed_alike_whichever_way_it_heads(turn):
+    """Rotating a window's measurements moves none of its residuals, even across ±π.
+
+    Near a half turn the positions' Procrustes angle and the headings' offset
+    can fall on either side of the cut; placed apart, the window's residuals
+    would be a full turn's worth of heading.
+    """
+    rng = np.random.default_rng(5)
+    t = np.linspace(0.0, 2.4, 60)
+    path = np.column_stack([100 * np.sin(0.8 * t), 100 * (1 - np.cos(0.8 * t)), 0.8 * t])
+    noisy = path + rng.normal(0.0, 1.0, path.shape) * [SIGMA_XY, SIGMA_XY, SIGMA_THETA]
+    # The first heading's noise alone puts it across the cut from the rest.
+    noisy[0, 2] = path[0, 2] + 4e-3
+
+    def placed(angle):
+        c, s = math.cos(angle), math.sin(angle)
+        moved = np.column_stack(
+            [
+                c * noisy[:, 0] - s * noisy[:, 1] + 7.0,
+                s * noisy[:, 0] + c * noisy[:, 1] - 3.0,
+                noisy[:, 2] + angle,
+            ]
+        )
+        with jax.enable_x64(True):
+            rx, ry, rt = fit._placed(
+                jnp.asarray(path), jnp.asarray(moved), SIGMA_XY**-2, SIGMA_THETA**-2
+            )
+        # The positions' residuals turn with the measurements: turned back here.
+        return np.column_stack([c * rx + s * ry, c * ry - s * rx, rt])
+
+    np.testing.assert_allclose(placed(turn), placed(0.0), atol=1e-6)
+
+
 def _csv(tmp_path, commands, poses, dt=DT, name="log.csv"):
     path = tmp_path / name
     logs.write_csv(path, dt, commands, poses)

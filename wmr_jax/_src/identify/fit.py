@@ -85,10 +85,13 @@ def _placed(predicted: jax.Array, measured: jax.Array, w_xy: jax.Array, w_theta:
     z = jax.lax.complex(measured[:, 0], measured[:, 1])
     pc, zc = p - jnp.mean(p), z - jnp.mean(z)
     cross = jnp.sum(jnp.conj(pc) * zc)
-    alpha = jnp.angle(cross)
     rho = jnp.abs(cross)
     d0 = law.wrap_angle(measured[0, 2] - predicted[0, 2])
     d = d0 + law.wrap_angle(measured[:, 2] - predicted[:, 2] - d0)
+    # The positions' angle on the headings' branch: near ±π the two would
+    # otherwise fall on either side of the cut, 2π apart.
+    alpha = jnp.angle(cross)
+    alpha = alpha + 2 * jnp.pi * jnp.round((jnp.mean(d) - alpha) / (2 * jnp.pi))
     count = d.shape[0]
     phi = (w_xy * rho * alpha + w_theta * count * jnp.mean(d)) / (w_xy * rho + w_theta * count)
     for _ in range(4):
