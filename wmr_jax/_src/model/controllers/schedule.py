@@ -169,11 +169,7 @@ def _command(pose, ref, params, *, temperature=None, frame=None):
 
 
 def validate_schedule(params: ScheduleParams) -> ScheduleParams:
-    """Check a schedule's tables and shape gains (docs/model.md §3); return it unchanged.
-
-    Raises:
-        ValueError: naming the field, its value and what is allowed.
-    """
+    """Check a schedule's tables and shape gains (docs/model.md §3); return it unchanged."""
     if not isinstance(params, ScheduleParams):
         raise ValueError(
             f"params is a {type(params).__name__}; allowed: a wmr_jax.controllers.ScheduleParams"
