@@ -63,12 +63,7 @@ def _blocks(tree: Any, path: tuple[str, ...], seen: set[int], out: list) -> None
 
 
 def _flat(tree: dict, prefix: str = "", depth: int = 0, where: str = "") -> dict[str, Any]:
-    """``{"linear": {"x": {"max_velocity": v}}}`` as ``{"linear.x.max_velocity": v}``.
-
-    Raises:
-        ValueError: for a parameter given twice, dotted and nested
-            (``linear.x.max_velocity`` beside ``linear: x: max_velocity``).
-    """
+    """``{"linear": {"x": {"max_velocity": v}}}`` as ``{"linear.x.max_velocity": v}``, each once."""
     out: dict[str, Any] = {}
     for key, value in tree.items():
         name = f"{prefix}{key}"

@@ -66,11 +66,9 @@ def _interval(content: Mapping[str, Any], name: str, value: float) -> tuple[floa
 def around(content: Mapping[str, Any]) -> Centred:
     """The ranges of a training centred on the content of an ``identified.json``.
 
-    Wheel scales and noise levels: uniform over their 95 % intervals
-    (``ci95``). Latency: the identified integer ``m``; ``m − 1`` and
-    ``m + 1`` join it where identify's profile over the latency
-    (``latency_profile``, cost per latency) cannot tell them from ``m``
-    (a cost within ``LATENCY_TIE`` of its own).
+    Wheel scales and noise levels: their 95 % intervals (``ci95``). Latency:
+    the identified ``m``, and ``m ± 1`` where their cost in ``latency_profile``
+    is within ``LATENCY_TIE`` of its own.
 
     Raises:
         ValueError: one line naming a missing or malformed field.

@@ -69,12 +69,7 @@ def run_options(values: dict[str, Any]) -> dict[str, Any]:
 
 
 def check_run(run: dict[str, Any]) -> None:
-    """Check the run options of a search before it starts (names and values).
-
-    Raises:
-        ValueError: for an unknown option, or a bad ``dt``, ``horizon``,
-            ``velocity``, ``substeps`` or ``wheel_limit``, naming it.
-    """
+    """Check the run options of a search (``RUN_OPTIONS``, names and values) before it starts."""
     unknown = sorted(set(run) - set(RUN_OPTIONS))
     if unknown:
         raise ValueError(f"unknown option {unknown[0]!r}; allowed: {', '.join(RUN_OPTIONS)}")

@@ -34,11 +34,7 @@ def save_checkpoint(path: Path, state: Any, identity: dict[str, Any]) -> None:
 
 
 def load_checkpoint(path: Path, fresh: Any, identity: dict[str, Any]) -> Any:
-    """Restore a checkpoint into the structure of ``fresh``.
-
-    Raises:
-        ValueError: one line, if it is damaged or belongs to another run.
-    """
+    """Restore a checkpoint into ``fresh``'s structure; refuse a damaged one or another run's."""
     advice = "remove it to start over"
     try:
         arrays, meta = io.load_arrays(path)

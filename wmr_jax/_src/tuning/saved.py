@@ -191,12 +191,7 @@ def _kind_of(values: dict[str, Any], where: str) -> str:
 
 
 def _in_library_units(values: dict[str, Any], fields: tuple, where: str) -> dict[str, Any]:
-    """``values`` with its angles in radians, after checking its ``"units"`` (if any).
-
-    Raises:
-        ValueError: one line naming the file, the key and its unit, for a
-            unit other than the library's (or ``"deg"`` for an angle).
-    """
+    """``values`` with its angles in radians, after checking its ``"units"`` are the library's."""
     if "units" not in values:
         return values  # a file from before units were recorded: the library's
     units = values["units"]
