@@ -1,14 +1,11 @@
 """The tuned loop as a C controller for the robot: generate, compile, and judge it.
 
-``c_sources`` turns a ``ClosedLoop`` (``load_tuned``) into ``wmr_controller.h``
-and ``wmr_controller.c``: C99, no heap, no global state, the tuned constants
-baked in (``write_sources`` writes them, with the loop as JSON beside them;
-``wmr-jax export`` does both). ``compile_controller`` builds them with the
-system C compiler and wraps them with ``ctypes``; ``compiled_metrics`` runs the
-project's disturbed loop (docs/model.md §7, §9) with the compiled controller
-giving the commands, and ``evaluate_compiled`` judges it as
-``wmr_jax.studies.evaluate_loop`` judges the tuned file. docs/deploy.md
-takes the files from here to the robot.
+``c_sources`` turns a ``ClosedLoop`` (``load_tuned``) into C99 sources with
+the tuned constants baked in (``write_sources`` writes them);
+``compile_controller`` builds and wraps them with ``ctypes``;
+``compiled_metrics`` and ``evaluate_compiled`` run and judge the compiled
+controller in the disturbed loop (docs/model.md §7, §9). docs/deploy.md takes
+the files from here to the robot.
 """
 
 from wmr_jax._src.export.codegen import MAX_LATENCY as MAX_LATENCY

@@ -2,18 +2,12 @@
 
 ``train`` runs Adam on a relaxed arrival-time loss through the law's smooth
 relaxation and judges the result with the hard law against the paper's
-feasible gains and a random search of the same wall time; it reports through
-``progress_fn`` and writes no files. ``tune`` (the ``wmr-jax tune`` command
-as a function) also writes the results and resumable checkpoints to a folder.
-See ``docs/model.md §3`` (the gains, their ranges and the gain schedules),
-``§6`` (the poses and the arrival time) and ``§8`` (the time-optimal
-yardsticks every tuning report compares with).
-``TuneConfig.for_problem("schedule")`` tunes the gain-scheduled law
-(``ScheduleParams``) instead of the fixed gains, with its own recommended
-iterations, step and annealing (``knots=`` sizes its tables:
-``schedule_problem(knots)``);
-``load_tuned`` reads either kind of ``tuned_gains.json``; ``compare`` runs
-the gradient against CMA-ES and random search at equal wall time.
+feasible gains and a random search of the same wall time; ``tune`` (the
+``wmr-jax tune`` command as a function) also writes the results and
+resumable checkpoints to a folder. ``TuneConfig.for_problem("schedule")``
+tunes the gain-scheduled law (``ScheduleParams``); ``load_tuned`` reads
+either kind of ``tuned_gains.json``; ``compare`` runs the gradient against
+CMA-ES and random search at equal wall time (docs/model.md §3, §6, §8).
 """
 
 from wmr_jax._src.model.controllers.schedule import SCHEDULE as SCHEDULE

@@ -54,12 +54,7 @@ def array_kind(value: Any) -> str:
 
 
 def real_array(name: str, value: Any, allowed: str) -> np.ndarray:
-    """Return ``value`` as a float64 NumPy array if it holds real numbers only.
-
-    Raises:
-        ValueError: naming ``name`` and ``allowed``, for ``None``, bools,
-            strings, complex numbers or anything else.
-    """
+    """Return ``value`` as a float64 NumPy array if it holds real numbers only (no bools)."""
     try:
         if value is None or array_kind(value) not in "iuf":
             raise TypeError(value)
@@ -95,11 +90,7 @@ def _holds_bool(value: Any) -> bool:
 
 
 def check_int(name: str, value: Any, minimum: int = 1, maximum: int | None = None) -> int:
-    """Return ``value`` as an ``int`` in ``[minimum, maximum]``.
-
-    Raises:
-        ValueError: for a bool, a non-integer or a value out of range.
-    """
+    """Return ``value`` as an ``int`` in ``[minimum, maximum]`` (not a bool)."""
     ok = not isinstance(value, bool) and isinstance(value, (int, np.integer))
     if not ok or value < minimum or (maximum is not None and value > maximum):
         upper = "" if maximum is None else f" and <= {maximum}"
@@ -183,11 +174,7 @@ def check_number(
     closed: bool = False,
     unit: str = "",
 ) -> float:
-    """Return ``value`` as a float in ``(low, high)``, or ``[low, high)`` if ``closed``.
-
-    Raises:
-        ValueError: for a non-number, NaN or a value out of range.
-    """
+    """Return ``value`` as a float in ``(low, high)``, or ``[low, high)`` if ``closed``."""
     try:
         # Python would read True as 1 and "0.5" as 0.5.
         if isinstance(value, (bool, np.bool_, str, bytes)) or np.iscomplexobj(value):

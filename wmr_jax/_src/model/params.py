@@ -1,10 +1,9 @@
 """Controller gains and robot parameters as immutable pytrees, with boundary checks.
 
-Every field is a leaf: gains and robots can be differentiated, vmapped (a
-leading batch axis on a field) and passed through ``jax.jit`` without
-retracing. Building one checks nothing (JAX rebuilds them on every tree
-operation); the entry points call ``validate_gains`` / ``validate_robot``
-before tracing, skipping traced leaves (docs/model.md §3).
+Every field is a leaf: gains and robots can be differentiated and vmapped (a
+leading batch axis on a field). Building one checks nothing (JAX rebuilds them
+on every tree operation); the entry points call ``validate_gains`` /
+``validate_robot`` before tracing.
 """
 
 from __future__ import annotations
@@ -134,11 +133,7 @@ class SamplingWarning(UserWarning):
 
 
 def validate_gains(gains: Gains, prefix: str = "gains") -> Gains:
-    """Check ``gains`` against the ranges of docs/model.md §3; return it unchanged.
-
-    Raises:
-        ValueError: naming the field, its value and the allowed range.
-    """
+    """Check ``gains`` against the ranges of docs/model.md §3; return it unchanged."""
     g = field_values(gains, Gains, prefix)
     positive = (("kr", "cm/s"), ("k_theta", "rad/s"), ("r_m", "cm"), ("r_a", "cm"), ("r_e", "cm"))
     for name, unit in positive:
@@ -177,11 +172,7 @@ _NON_NEGATIVE_ROBOT_FIELDS = ("integral_gain", "accel_max", "angular_accel_max")
 
 
 def validate_robot(robot: Robot) -> Robot:
-    """Check the robot's parameters are physical; return it unchanged.
-
-    Raises:
-        ValueError: naming the field, its value and the allowed range.
-    """
+    """Check the robot's parameters are physical; return it unchanged."""
     r = field_values(robot, Robot, "robot")
     for name in _POSITIVE_ROBOT_FIELDS:
         if r[name] is not None:
@@ -201,11 +192,7 @@ def validate_robot(robot: Robot) -> Robot:
 
 
 def validate_one_robot(robot: Robot | None, purpose: str) -> Robot:
-    """``validate_robot`` for code that needs one robot, not a batch (default ``Robot()``).
-
-    Raises:
-        ValueError: naming a batched field and ``purpose``.
-    """
+    """``validate_robot`` for code that needs one robot (default ``Robot()``), not a batch."""
     robot = validate_robot(Robot() if robot is None else robot)
     require_unbatched(robot, "robot", f"one robot (a number per field) for {purpose}")
     return robot

@@ -256,7 +256,8 @@ def robot_json(robot: Robot) -> dict[str, float]:
 # ---------------------------------------------------------------- values from a file
 
 
-def _is_number(value: Any) -> bool:
+def is_number(value: Any) -> bool:
+    """Whether a value read from JSON or YAML is a number a float holds (not a bool or str)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         return False  # JSON's true and YAML's yes are no numbers; nor is "22"
     try:
@@ -283,7 +284,7 @@ def robot_from_values(values: Any, where: str) -> Robot:
                 f"{where}: key {key!r} (= {value!r:.40}) is not allowed; allowed: keys among "
                 + ", ".join(ROBOT_FIELDS)
             )
-        if not _is_number(value) or not math.isfinite(float(value)):
+        if not is_number(value) or not math.isfinite(float(value)):
             raise ValueError(
                 f"{where}: {key} = {value!r:.40} is not allowed; allowed: a finite number "
                 f"({_UNIT[key]})"

@@ -13,7 +13,7 @@ import math
 from typing import Any
 
 from wmr_jax._src.model.params import Robot
-from wmr_jax._src.model.robots import _UNIT, ROBOT_FIELDS, _is_number, robot_from_values
+from wmr_jax._src.model.robots import _UNIT, ROBOT_FIELDS, is_number, robot_from_values
 
 # The parameter blocks are found by these keys (every diff_drive_controller has them).
 _BLOCK_KEYS = ("wheel_separation", "wheel_radius")
@@ -63,12 +63,7 @@ def _blocks(tree: Any, path: tuple[str, ...], seen: set[int], out: list) -> None
 
 
 def _flat(tree: dict, prefix: str = "", depth: int = 0, where: str = "") -> dict[str, Any]:
-    """``{"linear": {"x": {"max_velocity": v}}}`` as ``{"linear.x.max_velocity": v}``.
-
-    Raises:
-        ValueError: for a parameter given twice, dotted and nested
-            (``linear.x.max_velocity`` beside ``linear: x: max_velocity``).
-    """
+    """``{"linear": {"x": {"max_velocity": v}}}`` as ``{"linear.x.max_velocity": v}``, each once."""
     out: dict[str, Any] = {}
     for key, value in tree.items():
         name = f"{prefix}{key}"
@@ -101,9 +96,9 @@ def _positive(
     if key not in params:
         return None
     value = params[key]
-    if limit and _is_number(value) and math.isnan(float(value)):
+    if limit and is_number(value) and math.isnan(float(value)):
         return None
-    if not _is_number(value) or not (math.isfinite(float(value)) and float(value) > 0):
+    if not is_number(value) or not (math.isfinite(float(value)) and float(value) > 0):
         raise ValueError(
             f"{where}: {key} = {value!r:.40} is not allowed; allowed: a finite number > 0 ({unit})"
         )

@@ -1,12 +1,9 @@
 """The non-ideal velocity loop: wheel-speed control of the Eq. 5 dynamics (docs/model.md §4).
 
-Over each control period ``dt``: the command becomes rim-speed set points
-limited to ``±V_max`` (clipped per wheel, or scaled to keep the curvature);
-a computed-torque loop ``B τ = H (k_p (q* − q) + k_i z) + G(q)``, torques
-clipped at ``±τ_max``, drives the Euler–Lagrange dynamics ``H q̇ + G(q) = B τ``
-of Eq. 5; ``substeps`` RK4 steps advance the velocity, and the exact arc at
-the mean velocity the pose, the rims held within ``±V_max``. The choices and
-the inertias are in docs/model.md §4.
+Over each control period the command becomes rim-speed set points within
+``±V_max``; a computed-torque loop with torques clipped at ``±τ_max`` drives
+the dynamics ``H q̇ + G(q) = B τ``; ``substeps`` RK4 steps advance the
+velocity, and the exact arc at the mean velocity the pose.
 """
 
 from __future__ import annotations
@@ -157,9 +154,8 @@ def _limit_split(v, w, robot: Robot, mode: str):
 def _loop_rates(target, robot: Robot, model: Robot, with_integral: bool, with_coriolis: bool):
     """Return ``f(wheel) -> d wheel/dt`` of the closed wheel loop (Eq. 5 and its controller).
 
-    ``wheel`` is ``v + i ω``, with ``z_v + i z_ω`` beside it if
-    ``with_integral``. ``wheel_torques`` then ``body_acceleration`` on
-    separate scalars, so that a batched rollout carries no ``(N, 2)`` arrays.
+    ``wheel`` is ``v + i ω`` (with ``z_v + i z_ω`` if ``with_integral``):
+    ``wheel_torques`` then ``body_acceleration`` with no ``(N, 2)`` arrays.
     """
     target_v, target_w = target
     m11, m22 = inertia(model)

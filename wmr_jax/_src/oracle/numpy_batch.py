@@ -128,6 +128,3 @@ class _NumpyLaw:
         v = self.kr * d * np.sin(r_bar) * cos_phi_bar
         omega = self.k_theta * (eps * sin_phi_bar + (one - eps) * sin_theta_bar)
         return v, omega
-
-
-# ---------------------------------------------------------------- timing

@@ -89,14 +89,8 @@ def _diagnostics(pose: tuple, ref: tuple, gains: Gains) -> dict[str, float]:
     """``reference_diagnostics`` on checked arguments (the rollout's inner call)."""
     x_c, y_c, th_c = pose
     x_r, y_r, th_r = ref
-    kr, k_th = float(gains.kr), float(gains.k_theta)
-    phi_m, r_m, r_a, r_e_lim, alpha = (
-        float(gains.phi_m),
-        float(gains.r_m),
-        float(gains.r_a),
-        float(gains.r_e),
-        float(gains.alpha),
-    )
+    fields = ("kr", "k_theta", "phi_m", "r_m", "r_a", "r_e", "alpha")
+    kr, k_th, phi_m, r_m, r_a, r_e_lim, alpha = (float(getattr(gains, f)) for f in fields)
     e_x = math.cos(th_c) * (x_r - x_c) + math.sin(th_c) * (y_r - y_c)
     e_y = -math.sin(th_c) * (x_r - x_c) + math.cos(th_c) * (y_r - y_c)
     r_e = math.hypot(e_x, e_y)

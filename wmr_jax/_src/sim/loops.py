@@ -103,11 +103,11 @@ class Options:
 def for_robot(options: Options, robot: Robot, dt: Any) -> Options:
     """Return ``options`` fitted to ``robot``: its speed limiter on, vanishing terms left out.
 
-    Ideal loop: the speed limiter is on where the robot gives an acceleration
-    limit, or is traced (docs/model.md §4.2.2). Non-ideal loop: the integral
-    state is left out where ``integral_gain = 0``, the Coriolis terms where
-    ``com_offset = 0`` (same results, faster), and ``small_turn`` is set when
-    ``V_max dt / (L substeps) ≤ π/2``. Traced values keep the general loop.
+    Ideal loop: the speed limiter is on where the robot has an acceleration
+    limit (docs/model.md §4.2.2). Non-ideal loop: no integral state where
+    ``integral_gain = 0``, no Coriolis terms where ``com_offset = 0``, and
+    ``small_turn`` where ``V_max dt / (L substeps) ≤ π/2``. Traced values
+    keep the general loop.
     """
 
     def concrete(value: Any) -> np.ndarray | None:
@@ -176,15 +176,12 @@ class ClosedLoopStep:
     """One control period of the closed loop: law → commands in flight → velocity loop → robot.
 
     The one step of every run (docs/model.md §4, §7, §9). Optional parts,
-    ``None`` where a run has none: ``disturbance`` (noise, latency, wheel and
-    mass mismatch of one run), ``options.estimator`` with its parameters
-    ``estimate``, and ``aim(acc) -> ref``, the reference of the next command
-    from the fold's accumulator (waypoint chains, moving references).
-
-    Arranged for speed: the pose rides as complex ``x + i y`` and
-    ``cos θ + i sin θ`` (``SplitPose``), so no step recomputes the heading's
-    cosine and sine; the next command is computed at the end of each period
-    and carried as ``v + i ω``, so XLA:CPU evaluates the law in one loop only.
+    ``None`` where a run has none: ``disturbance`` of one run,
+    ``options.estimator`` with its parameters ``estimate``, and
+    ``aim(acc) -> ref``, the reference of the next command from the fold's
+    accumulator (waypoint chains). The pose rides as a ``SplitPose`` and the
+    next command, computed at the end of each period, as ``v + i ω``: no step
+    recomputes the heading's sine, and XLA:CPU evaluates the law in one loop.
     """
 
     ref: jax.Array
@@ -276,9 +273,8 @@ class ClosedLoopStep:
     ) -> tuple[SplitPose, Any, jax.Array, StepOutput, Any]:
         """The plant's half of a period: the robot moves under ``applied`` (``v + i ω``).
 
-        Speed limiter, the disturbance's wheels, the velocity loop and the
-        robot, then the fold. The command side is the caller's: ``__call__``,
-        or a host loop whose commands come from elsewhere (``wmr_jax.export``).
+        The command side is the caller's: ``__call__``, or a host loop
+        (``wmr_jax.export``).
 
         Returns:
             ``(pose, wheel, followed, out, acc)`` at the end of the period;
@@ -396,11 +392,7 @@ def scan_closed_loop(
 
 
 def remat(body: Callable) -> Callable:
-    """Differentiate ``body`` by recomputing it, not by storing its intermediates.
-
-    Reverse mode through a scan otherwise keeps every intermediate of every
-    step; recomputing is cheaper than writing them all to memory.
-    """
+    """Differentiate ``body`` by recomputing it: cheaper than storing every step's intermediates."""
     return jax.checkpoint(body, prevent_cse=False)
 
 
@@ -448,10 +440,7 @@ def jit_top_level(fn: Callable, **kwargs: Any) -> Callable:
 
 
 def _untraced(kwargs: dict[str, Any]) -> dict[str, Any]:
-    """The static ``options`` of a call with concrete arguments, without ``remat``.
-
-    Nothing differentiates such a call, and a checkpointed body costs more to trace.
-    """
+    """``options`` without ``remat`` for a call with concrete arguments (nothing differentiates)."""
     options = kwargs.get("options")
     if isinstance(options, Options) and options.remat:
         return {**kwargs, "options": dataclasses.replace(options, remat=False)}

@@ -258,10 +258,7 @@ def _field_of(traj: Any, name: str) -> Any:
 
 
 def path_length(traj: Any) -> jax.Array:
-    """Return the distance the centre travelled over the run, cm (docs/model.md §6).
-
-    The sum of ``Trajectory.distance``.
-    """
+    """Return the distance the centre travelled over the run, cm: the sum of ``traj.distance``."""
     return jnp.sum(_field_of(traj, "distance"), axis=-1)
 
 
@@ -317,8 +314,7 @@ def region_time(traj: Any, *, dt: float) -> jax.Array:
     return jnp.sum(one_hot, axis=-2) * dt
 
 
-# ---------------------------------------------------------------- streamed metrics
-# The same metrics folded period by period, so that no trajectory is stored.
+# ---------------------------------------------------------------- streamed metrics (no trajectory)
 
 
 class Thresholds(NamedTuple):

@@ -92,12 +92,10 @@ class Trajectory(NamedTuple):
 
 
 # choice: where the compute dtype spaces positions near the reference more than
-# this apart, cm (beyond 524 cm of the origin in float32), a run that starts
-# nearer its reference than the farther of the two is from the origin is
+# this apart, cm, a run that starts nearer its reference than the origin is
 # computed in the reference's frame and translated back: the law does not
-# depend on the origin but the rounding does, and far out the last millimetres
-# are a few float32 spacings (docs/model.md §3.8). Nearer the origin the
-# translation is by 0 and the run is the same bit for bit.
+# depend on the origin but the rounding does (docs/model.md §3.8). Nearer the
+# origin the translation is by 0 and the run is the same bit for bit.
 GOAL_FRAME_SPACING = AT_GOAL / GOAL_EPS
 
 
@@ -148,11 +146,7 @@ def make_options(
     substeps: Any = DEFAULT_SUBSTEPS,
     wheel_limit: Any = "clip",
 ) -> Options:
-    """Check the static options of a rollout and return them as ``Options``.
-
-    Raises:
-        ValueError: naming the option, its value and what is allowed.
-    """
+    """Check the static options of a rollout and return them as ``Options``."""
     steps = check_int("steps", steps, 1, MAX_STEPS)
     if velocity not in VELOCITY_LOOPS:
         raise ValueError(f"velocity = {velocity!r} is not allowed; allowed: {VELOCITY_LOOPS}")
@@ -256,8 +250,7 @@ def finite_result(poses: Any, result: Any, *, pose_axes: int = 1) -> Any:
     """Return ``result``, or raise if a pose of the run left the floating-point range.
 
     Some valid gains or periods drive the robot beyond what the compute dtype
-    holds; such a run is reported, not returned. Skipped under a caller's
-    own transformations.
+    holds; such a run is reported, not returned (traced poses pass).
     """
     if is_traced(poses):
         return result
@@ -360,10 +353,9 @@ def require_trajectory_fits(args: tuple, steps: int) -> None:
 def require_memory(runs: int, steps: int, record: tuple[int, int], inputs: Any = None) -> None:
     """Refuse, before it runs, a record of ``runs`` runs larger than the memory.
 
-    XLA would allocate it whole, and an overcommitting host may stall rather than fail.
-
-    ``record``: ``(floats, int32s)`` per run and period; ``inputs``: the
-    run's inputs, whose devices it runs on (default: the default device).
+    XLA would allocate it whole, and an overcommitting host may stall rather
+    than fail. ``record``: ``(floats, int32s)`` per run and period;
+    ``inputs``: the run's inputs, whose devices it runs on.
     """
     needed = record_bytes(runs, steps, record)
     memory = _memory_bytes(inputs)

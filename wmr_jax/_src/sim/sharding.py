@@ -57,11 +57,9 @@ MAX_CPU_DEVICES = 1024
 
 
 def use_cpu_devices(count: int | None = None) -> int:
-    """Split the CPU into ``count`` JAX devices; return the number of local devices.
+    """Split the CPU into ``count`` JAX devices (one leaves cores idle); return the local count.
 
-    XLA runs one program's kernels one after another, so one CPU device
-    leaves cores idle. Takes effect only before JAX has started; no effect
-    on accelerators.
+    Takes effect only before JAX has started; no effect on accelerators.
 
     Args:
         count: devices to make; default twice the number of cores this

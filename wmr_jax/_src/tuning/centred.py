@@ -1,13 +1,8 @@
 """Robust training conditions centred on an identified robot (docs/model.md §10).
 
-``tune --robust --robot DIR/identified.json`` trains through the robot that
-identification measured rather than through the standard conditions of
-docs/model.md §7: each training run's wheel scales, tracker noise and
-latency are drawn around the identified values, as wide as their 95 %
-intervals. ``around`` turns an ``identified.json`` into those ranges,
-``draw`` draws one run per reference from them, and ``batches`` is what the
-robust loss runs instead of its standard batches when
-``RobustConfig.around`` holds a ``Centred``.
+``tune --robust --robot DIR/identified.json`` trains through the identified
+robot instead of the standard conditions of §7: each run's wheel scales,
+tracker noise and latency are drawn over the identified 95 % intervals.
 """
 
 from __future__ import annotations
@@ -71,11 +66,9 @@ def _interval(content: Mapping[str, Any], name: str, value: float) -> tuple[floa
 def around(content: Mapping[str, Any]) -> Centred:
     """The ranges of a training centred on the content of an ``identified.json``.
 
-    Wheel scales and noise levels: uniform over their 95 % intervals
-    (``ci95``). Latency: the identified integer ``m``; ``m − 1`` and
-    ``m + 1`` join it where identify's profile over the latency
-    (``latency_profile``, cost per latency) cannot tell them from ``m``
-    (a cost within ``LATENCY_TIE`` of its own).
+    Wheel scales and noise levels: their 95 % intervals (``ci95``). Latency:
+    the identified ``m``, and ``m ± 1`` where their cost in ``latency_profile``
+    is within ``LATENCY_TIE`` of its own.
 
     Raises:
         ValueError: one line naming a missing or malformed field.
@@ -134,15 +127,12 @@ def draw(key: jax.Array, refs: jax.Array, steps: int, ranges: Centred, mass: flo
 def batches(key, refs, nonideal_refs, steps, ideal, ranges: Centred) -> list:
     """The robust loss's ``[(spec, options)]`` drawn from ``ranges`` instead of the standard ones.
 
-    ``refs`` run in the ideal loop (``ideal``, the options of the standard
-    batch), each as many times as there are standard conditions, each time
-    with its own draw; ``nonideal_refs`` (may be empty) in the non-ideal loop with the
-    body mass off by up to ±20 % besides. Both carry up to the longest
-    latency drawn.
+    ``refs`` run in the ideal loop (options ``ideal``) once per standard
+    condition, each with its own draw; ``nonideal_refs`` (may be empty) in
+    the non-ideal loop, the body mass off by up to ±20 % besides.
     """
     ideal = dataclasses.replace(ideal, max_delay=max(1, *ranges.latency))
     k_ideal, k_nonideal = jax.random.split(key)
-    # Each pose as often as the standard training runs it (once per condition).
     refs = jnp.tile(refs, (len(STANDARD_CONDITIONS), 1))
     out = [(draw(k_ideal, refs, steps, ranges), ideal)]
     if nonideal_refs.shape[0]:

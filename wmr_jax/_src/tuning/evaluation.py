@@ -1,9 +1,7 @@
 """Hard-law evaluation of gains on a set of references (``docs/model.md §6``).
 
 Tuned gains are always judged with the paper's hard law, never with the
-smooth relaxation they were tuned through, on held-out poses drawn from
-their own seed (the same for every tuning seed, so that tables from
-different runs compare like with like).
+smooth relaxation they were tuned through, on held-out poses.
 """
 
 from __future__ import annotations
@@ -71,12 +69,7 @@ def run_options(values: dict[str, Any]) -> dict[str, Any]:
 
 
 def check_run(run: dict[str, Any]) -> None:
-    """Check the run options of a search before it starts (names and values).
-
-    Raises:
-        ValueError: for an unknown option, or a bad ``dt``, ``horizon``,
-            ``velocity``, ``substeps`` or ``wheel_limit``, naming it.
-    """
+    """Check the run options of a search (``RUN_OPTIONS``, names and values) before it starts."""
     unknown = sorted(set(run) - set(RUN_OPTIONS))
     if unknown:
         raise ValueError(f"unknown option {unknown[0]!r}; allowed: {', '.join(RUN_OPTIONS)}")
@@ -176,11 +169,7 @@ def evaluate(
 
 
 def wheel_speed_ok(evaluation: Evaluation, robot: Robot | None = None) -> bool:
-    """Whether one evaluation's peak rim speed stays within ``robot``'s ``V_max`` (cm/s).
-
-    Judged row by row: one baseline that asks too much of a wheel says
-    nothing of the others. The tolerance, ``1e-6`` relative, is rounding.
-    """
+    """Whether one evaluation's peak rim speed stays within ``robot``'s ``V_max`` (to 1e-6)."""
     v_max = float((Robot() if robot is None else robot).v_max)
     return bool(evaluation.peak_wheel_speed <= v_max * (1 + 1e-6))
 
@@ -196,9 +185,8 @@ PAPER_NONE_ARRIVED = (
 def report_ratios(mean_arrival: float, bounds: Any, paper: float | None = None) -> dict[str, Any]:
     """The ratios of a report row: to the §8 yardsticks and, with ``paper``, the speed-up.
 
-    Each ratio is a finite number, or ``None`` with the reason beside it
-    (``"<ratio>_reason"``) when a mean arrival it needs is ``inf`` (no run
-    arrived): a report never holds NaN.
+    Each ratio is a finite number, or ``None`` with a ``"<ratio>_reason"``
+    where a mean arrival it needs is ``inf``: a report never holds NaN.
 
     Args:
         mean_arrival: the row's mean arrival time, s (``inf``: none arrived).
@@ -208,8 +196,7 @@ def report_ratios(mean_arrival: float, bounds: Any, paper: float | None = None) 
 
     Returns:
         ``{"turn_drive_turn_s", "lower_bound_s", "vs_turn_drive_turn",
-        "vs_lower_bound"}`` (and ``"speedup_vs_paper"``), and a ``"…_reason"``
-        for each ``None``.
+        "vs_lower_bound"}`` (and ``"speedup_vs_paper"``).
     """
     from wmr_jax._src.studies.optimal import bound_ratios
 

@@ -42,11 +42,9 @@ PAPER_FEASIBLE_GAINS = Gains(kr=60.0)
 def paper_feasible_gains(robot: Robot | None = None) -> Gains:
     """The paper's feasible gains for ``robot``: its shape ``k_r : k_θ = 60 : 10``, within budget.
 
-    ``PAPER_FEASIBLE_GAINS`` (``k_r = 60`` cm/s, ``k_θ = 10`` rad/s) where
-    ``60 + 10 L ≤ V_max`` (the paper robot: 78.5 ≤ 125 cm/s); on a slower or
-    wider robot both are scaled by one factor so that ``k_r + L k_θ ≤ V_max``:
-    the baseline every tuning report compares against is then one the robot
-    can follow. The other fields keep their defaults.
+    ``PAPER_FEASIBLE_GAINS`` where ``60 + 10 L ≤ V_max``; on a slower or wider
+    robot both scaled by one factor to ``k_r + L k_θ ≤ V_max``, so that every
+    tuning report's baseline is one the robot can follow.
 
     Raises:
         ValueError: for a robot that is not one valid robot (a number per field).

@@ -1,9 +1,7 @@
 """The tuning problems as values: fixed gains (7 parameters) and gain schedules (35 by default).
 
 A ``Problem`` is the controller, its feasible set as an image of the unit
-cube (every point meets the wheel condition by construction), the starting
-point, and how its parameters become a flat row (history, checkpoints) and
-JSON (``tuned_gains.json``). The tuner, random search and CMA-ES take any.
+cube, the starting point, and how its parameters become a flat row and JSON.
 """
 
 from __future__ import annotations
@@ -94,18 +92,15 @@ FIXED = Problem(
 _KR = (1e-3, 1.0)  # fraction of V_max
 _K_THETA = (1e-3, 1.0)  # fraction of turn_gain_max
 _SHAPE_COLUMNS = (*SHAPE_FIELDS, "v_max", "half_track")
-# The largest schedule tuned: the loss gradient of larger tables takes long to
-# compile, and memory (60 knots: 40 s and 2.4 GB on 2 cores; 200 knots ran
-# out of 24 GB), though rollouts take up to MAX_KNOTS.
+# The largest schedule tuned: the loss gradient of larger tables takes long
+# to compile and much memory, though rollouts take up to MAX_KNOTS.
 MAX_TUNED_KNOTS = 60
 
 
 def schedule_problem(knots: int = KNOTS) -> Problem:
     """The gain-schedule problem with ``knots`` knots per table: ``3 knots + 5`` parameters.
 
-    One ``Problem`` value per knot count (cached), so that it is the same
-    static argument of every compiled step. ``SCHEDULED`` is the default,
-    ``KNOTS`` knots (35 parameters).
+    One cached ``Problem`` per knot count: the same static argument of every compiled step.
 
     Raises:
         ValueError: for a knot count outside 2 … ``MAX_TUNED_KNOTS``.
@@ -116,11 +111,10 @@ def schedule_problem(knots: int = KNOTS) -> Problem:
 def turn_gain_max(robot: Robot) -> Any:
     """The largest turn-gain knot of the schedule's box, rad/s (docs/model.md §3.9).
 
-    ``max(V_max / L, 1 / dt₀)`` with ``dt₀ = DEFAULT_DT``: a turn gain up to
-    the rate at which the wheels saturate, and on a robot that turns slowly
-    (``V_max / L < 1 / dt₀``) up to the sampled heading loop's deadbeat gain
-    ``k dt₀ = 1`` (§4.2.1), since the command's cap ``|ω| ≤ V_max / L`` keeps
-    its wheels within ``V_max`` whatever the gain.
+    ``max(V_max / L, 1 / dt₀)`` with ``dt₀ = DEFAULT_DT``: up to the rate at
+    which the wheels saturate, or the sampled heading loop's deadbeat gain
+    ``k dt₀ = 1`` (§4.2.1) on a robot that turns slowly; the cap
+    ``|ω| ≤ V_max / L`` keeps the wheels within ``V_max`` whatever the gain.
     """
     return jnp.maximum(robot.v_max / robot.half_track, 1.0 / DEFAULT_DT)
 
@@ -153,9 +147,7 @@ def _schedule_problem(knots: int) -> Problem:
     def start(robot: Robot) -> np.ndarray:
         """The paper's feasible gains as constant tables (the fixed law's start)."""
         gains = fixed.PAPER_FEASIBLE_GAINS
-        # turn_gain_max's bound, in float64 from the fields' own values as the
-        # start always was (turn_gain_max may round to float32, and divides
-        # float32 fields in float32).
+        # turn_gain_max's bound in float64 (turn_gain_max may round to float32).
         omega_max = max(float(robot.v_max) / float(robot.half_track), 1.0 / DEFAULT_DT)
         unit = fixed.unit_from_gains(gains, robot)
 

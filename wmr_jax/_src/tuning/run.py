@@ -34,11 +34,7 @@ def save_checkpoint(path: Path, state: Any, identity: dict[str, Any]) -> None:
 
 
 def load_checkpoint(path: Path, fresh: Any, identity: dict[str, Any]) -> Any:
-    """Restore a checkpoint into the structure of ``fresh``.
-
-    Raises:
-        ValueError: one line, if it is damaged or belongs to another run.
-    """
+    """Restore a checkpoint into ``fresh``'s structure; refuse a damaged one or another run's."""
     advice = "remove it to start over"
     try:
         arrays, meta = io.load_arrays(path)
@@ -115,9 +111,7 @@ def write_results(
 ) -> None:
     """Write the parameters, the evaluation and the tuning curve of ``result`` to ``out``.
 
-    ``resumed_at``: the iteration this session resumed from (``None``: it ran
-    them all); recorded beside the wall times, which count every session's
-    compilation.
+    ``resumed_at``: the iteration this run resumed from (``None``: it ran them all).
 
     Raises:
         ValueError: one line, if the tuned parameters are not all finite
@@ -161,8 +155,7 @@ def write_results(
             "tuning": result.tune_wall_s,
             "random_search": None if search is None else search.wall_s,
         },
-        # Each session compiles the step again: a resumed run's tuning time
-        # (the random search's budget) holds one more compilation per resume.
+        # A resumed run's tuning time holds one more compilation per resume.
         "resumed_at_iteration": resumed_at,
         "random_search_candidates": None if search is None else search.candidates,
         # The iterate kept: the best hard-law score on the validation poses.
@@ -211,13 +204,9 @@ def tune(
 ) -> Any:
     """Run ``wmr_jax.tuning.train`` and write its results and checkpoints to ``out_dir``.
 
-    Files in ``out_dir``: ``tuned_gains.json`` (the controller, the kind,
-    the parameters and the robot; ``wmr_jax.load_tuned`` reads it; the
-    files that judged the gains it replaces, ``saved.JUDGING_TUNED``, are
-    removed when it is written),
-    ``evaluation.json``, ``tuning_curve.png``,
-    ``random_search_gains.json`` and ``checkpoint.npz`` (checksummed, written
-    atomically every ``config.checkpoint_every`` iterations and at the end).
+    Files in ``out_dir``: ``tuned_gains.json`` (``wmr_jax.load_tuned`` reads
+    it), ``evaluation.json``, ``tuning_curve.png``, ``random_search_gains.json``
+    and ``checkpoint.npz`` (every ``config.checkpoint_every`` iterations).
 
     Args:
         out_dir: output folder (created if needed).

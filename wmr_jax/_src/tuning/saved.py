@@ -1,16 +1,10 @@
 """Tuned parameters as files: ``tuned_gains.json`` and ``load_tuned``.
 
-A ``tuned_gains.json`` names its controller and kind (``"controller":
-"shim-sung"`` or ``"shim-sung-schedule"``, ``"kind": "fixed"`` or
-``"schedule"``) beside the parameters, the estimator tuned with them
-(``"estimator": {"kind": "observer", ...}``; absent or null: raw feedback,
-docs/model.md §9), the unit of each number under ``"units"`` (the Python
-API's, angles in radians; a file may name an angle ``"deg"``), the robot they
-were tuned for (``"robot"``, ``"robot_units"``: gains are tuned within its
-wheel budget ``k_r + L k_θ ≤ V_max``) and the problem that tuned them
-(``"tuning": "nominal"`` or ``"robust"``, ``tuning_of``). A file with only
-``Gains`` field names loads as fixed gains; one without ``"units"`` holds
-radians; one without a robot or a tuning says nothing of them.
+A ``tuned_gains.json`` holds the parameters with their ``"controller"`` and
+``"kind"``, the ``"estimator"`` tuned with them (null: raw feedback), the
+``"units"`` of its numbers (a file may give an angle in ``"deg"``), the
+``"robot"`` whose wheel budget they were tuned within, and the ``"tuning"``
+problem. A file of ``Gains`` field names only loads as fixed gains in radians.
 """
 
 from __future__ import annotations
@@ -26,7 +20,13 @@ from wmr_jax._src.io import atomic_write_json, json_object_once
 from wmr_jax._src.model.controllers.schedule import SCHEDULE, SHAPE_FIELDS, TABLES, ScheduleParams
 from wmr_jax._src.model.controllers.shim_sung import SHIM_SUNG
 from wmr_jax._src.model.params import Gains, Robot, validate_one_robot
-from wmr_jax._src.model.robots import ROBOT_UNITS, check_units, robot_from_values, robot_json
+from wmr_jax._src.model.robots import (
+    ROBOT_UNITS,
+    check_units,
+    is_number,
+    robot_from_values,
+    robot_json,
+)
 from wmr_jax._src.sim.sensing.loop import ClosedLoop
 from wmr_jax._src.tuning.estimation import estimator_from_json, estimator_json
 from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS
@@ -65,11 +65,9 @@ PARAM_UNITS = {
     "estimator.sigma_xy": "cm",
     "estimator.sigma_theta": "rad",
 }
-# What the tuning commands write beside a tuned_gains.json about the gains in
-# it (their evaluation, their tuning's history, the search they were compared
-# with). ``write_tuned`` removes them before it replaces the file, so that a
-# folder never holds new gains beside the judgement of older ones: of an
-# interrupted run, of another seed, or of the other tuning command.
+# What the tuning commands write beside a tuned_gains.json about its gains;
+# ``write_tuned`` removes them, so no folder holds new gains beside the
+# judgement of older ones.
 JUDGING_TUNED = (
     "evaluation.json",
     "tuning_curve.png",
@@ -98,18 +96,15 @@ def tuned_json(
 ) -> dict[str, Any]:
     """Return the ``tuned_gains.json`` content of ``Gains`` or ``ScheduleParams``.
 
-    ``params`` may also be a ``ClosedLoop`` (its params, estimator and
-    robot); ``estimator`` is the estimator tuned with the gains (``None``:
-    raw feedback), written under ``"estimator"``; ``robot`` the ``Robot``
-    they were tuned for, written under ``"robot"`` (cm, kg, s; its units
-    under ``"robot_units"``). ``None`` (and no robot in the loop) writes no
-    robot, as files did before. ``tuning``: the problem that tuned them, a
-    key of ``TUNINGS`` (``None``: not recorded).
+    Args:
+        params: the parameters, or a ``ClosedLoop`` (its params, estimator and robot).
+        estimator: the estimator tuned with them (``None``: raw feedback).
+        robot: the ``Robot`` they were tuned for (cm, kg, s); ``None``: not recorded.
+        tuning: the problem that tuned them, a key of ``TUNINGS`` (``None``: not recorded).
 
     Raises:
         ValueError: for anything but one valid parameter set (a scalar per
-            field) and robot, naming the field: ``load_tuned`` must read
-            back what is written, and a file of nulls is never written.
+            field) and robot, naming the field: ``load_tuned`` must read it back.
     """
     if isinstance(params, ClosedLoop):
         robot = params.robot if robot is None else robot
@@ -138,11 +133,7 @@ def tuned_json(
 
 
 def write_tuned(folder: Path, values: dict[str, Any]) -> Path:
-    """Write ``values`` (``tuned_json``) to ``folder/tuned_gains.json``, atomically.
-
-    The files of ``JUDGING_TUNED`` in ``folder`` judged the gains it replaces;
-    they are removed first (the caller writes the new ones after).
-    """
+    """Write ``tuned_json`` ``values`` to ``folder/tuned_gains.json``; drop ``JUDGING_TUNED``."""
     for name in JUDGING_TUNED:
         (folder / name).unlink(missing_ok=True)
     return atomic_write_json(folder / "tuned_gains.json", values)
@@ -156,9 +147,7 @@ def _check_tuning(tuning: Any, where: str) -> str:
 
 
 def tuning_of(path: str | os.PathLike) -> str | None:
-    """The problem that tuned a ``tuned_gains.json``: a key of ``TUNINGS``, or ``None``.
-
-    ``None`` for a file that does not say (from before it was recorded).
+    """The problem that tuned a ``tuned_gains.json``: a key of ``TUNINGS``, or ``None`` if unsaid.
 
     Raises:
         ValueError: one line, if the file cannot be loaded (``load_tuned``).
@@ -202,12 +191,7 @@ def _kind_of(values: dict[str, Any], where: str) -> str:
 
 
 def _in_library_units(values: dict[str, Any], fields: tuple, where: str) -> dict[str, Any]:
-    """``values`` with its angles in radians, after checking its ``"units"`` (if any).
-
-    Raises:
-        ValueError: one line naming the file, the key and its unit, for a
-            unit other than the library's (or ``"deg"`` for an angle).
-    """
+    """``values`` with its angles in radians, after checking its ``"units"`` are the library's."""
     if "units" not in values:
         return values  # a file from before units were recorded: the library's
     units = values["units"]
@@ -235,22 +219,12 @@ def _in_library_units(values: dict[str, Any], fields: tuple, where: str) -> dict
             continue
         if key.startswith("estimator."):
             name = key.split(".", 1)[1]
-            if isinstance(estimator, dict) and _is_number(estimator.get(name)):
+            if isinstance(estimator, dict) and is_number(estimator.get(name)):
                 estimator = {**estimator, name: math.radians(estimator[name])}
                 out["estimator"] = estimator
-        elif _is_number(values.get(key)):
+        elif is_number(values.get(key)):
             out[key] = math.radians(values[key])
     return out
-
-
-def _is_number(value: Any) -> bool:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return False
-    try:
-        float(value)  # an integer of 400 digits is beyond any float
-    except OverflowError:
-        return False
-    return True
 
 
 def _no_gains(values: dict[str, Any], where: str) -> ValueError:
@@ -265,14 +239,10 @@ def _no_gains(values: dict[str, Any], where: str) -> ValueError:
 def load_tuned(path: str | os.PathLike) -> ClosedLoop:
     """Load a ``tuned_gains.json`` of ``wmr-jax tune`` (fixed gains or a schedule, and estimator).
 
-    ``rollout(ref, loop.params, controller=loop.controller)``,
-    ``batch_rollout`` and ``final_poses`` run the result; the disturbed runs
-    and the studies of sensed loops (``disturbed_metrics(...,
-    estimator=loop.estimator)``, ``standard_conditions``) run it whole. A
-    hand-written fixed-gain file of ``Gains`` field names only (the old
-    form, ``phi_m`` in radians) may leave fields out (they keep the paper's
-    values); a file that records its units, as ``wmr-jax tune`` writes it,
-    is whole.
+    ``rollout(ref, loop.params, controller=loop.controller)`` runs the
+    result; ``disturbed_metrics(..., estimator=loop.estimator)`` runs it
+    whole. A hand-written file of ``Gains`` field names only may leave
+    fields out (they keep the paper's values).
 
     Args:
         path: the JSON file.
@@ -309,9 +279,7 @@ def load_tuned_and_tuning(path: str | os.PathLike) -> tuple[ClosedLoop, str | No
     fields = GAIN_FIELDS if kind == "fixed" else _SCHEDULE_FIELDS
     named = ("kind", "controller", "estimator", "units", "robot", "robot_units", "tuning")
     bad = sorted({k for k in values if k not in named} - set(fields))
-    # Another of the tuner's files (evaluation.json, a comparison), or one
-    # without gains, which would load as the law's defaults: said as such
-    # (after the refusals of its estimator and robot, which name more).
+    # A file without gains would load as the law's defaults: refused as such.
     holds_gains = bool(values.keys() & set(fields))
     if bad and not holds_gains:
         raise _no_gains(values, where)
@@ -345,16 +313,13 @@ def load_tuned_and_tuning(path: str | os.PathLike) -> tuple[ClosedLoop, str | No
     for name, value in numbers.items():
         table = kind == "schedule" and name in TABLES
         if table:
-            ok = isinstance(value, list) and len(value) >= 2 and all(map(_is_number, value))
+            ok = isinstance(value, list) and len(value) >= 2 and all(map(is_number, value))
         else:
-            ok = _is_number(value)
+            ok = is_number(value)
         if not ok:
             shape = "a list of >= 2 numbers" if table else "a number"
             raise ValueError(f"{where}: {name} = {value!r} is not allowed; allowed: {shape}")
-    # A schedule is saved whole, and so are fixed gains in a file that records
-    # its units or tuning (as wmr-jax tune writes it): a missing field is a
-    # damaged or edited file, not a default. A hand-written file of Gains
-    # fields only may leave fields out (the paper's values).
+    # In a file as wmr-jax tune writes it, a missing field is damage, not a default.
     if whole:
         missing = [name for name in fields if name not in numbers]
         if missing:

@@ -58,11 +58,7 @@ def _aicardi_control(pose, ref, gains, *, temperature=None, frame=None):
 
 
 def validate_aicardi_gains(gains: AicardiGains) -> AicardiGains:
-    """Check Aicardi gains (``γ, k, h > 0``, finite; ``backward`` a bool); return them.
-
-    Raises:
-        ValueError: naming the field, its value and the allowed range.
-    """
+    """Check Aicardi gains (``γ, k, h > 0``, ``backward`` a bool); return them."""
     g = polar.gain_values(gains, AicardiGains)
     for name, unit in (("gamma", " 1/s"), ("k", " 1/s"), ("h", "")):
         if g[name] is not None:

@@ -57,13 +57,7 @@ def _astolfi_control(pose, ref, gains, *, temperature=None, frame=None):
 
 
 def validate_astolfi_gains(gains: AstolfiGains) -> AstolfiGains:
-    """Check the Astolfi/Corke stability conditions; return the gains.
-
-    ``k_ρ > 0``, ``k_β < 0`` and ``k_α − k_ρ > 0`` (Corke, after Astolfi 1999).
-
-    Raises:
-        ValueError: naming the field, its value and the allowed range.
-    """
+    """Check ``k_ρ > 0``, ``k_β < 0``, ``k_α > k_ρ`` (Corke, after Astolfi 1999); return them."""
     g = polar.gain_values(gains, AstolfiGains)
     if g["k_rho"] is not None:
         require("gains.k_rho", g["k_rho"], g["k_rho"] > 0, "k_rho > 0 1/s")

@@ -34,7 +34,7 @@ from wmr_jax._src.model.controllers.shim_sung import (
     commands,
     direction_flag,
     polar_error,
-    region_label,
+    pose_region,
 )
 from wmr_jax._src.model.params import Gains, Robot, WheelSpeedWarning, sampled, validate_gains
 
@@ -168,16 +168,8 @@ def _command(pose, ref, params, *, temperature=None, frame=None):
     return schedule_commands(polar_error(pose, ref, frame=frame), params, temperature=temperature)
 
 
-def _region(pose, ref, params, *, frame=None):
-    return region_label(polar_error(pose, ref, frame=frame), params)
-
-
 def validate_schedule(params: ScheduleParams) -> ScheduleParams:
-    """Check a schedule's tables and shape gains (docs/model.md §3); return it unchanged.
-
-    Raises:
-        ValueError: naming the field, its value and what is allowed.
-    """
+    """Check a schedule's tables and shape gains (docs/model.md §3); return it unchanged."""
     if not isinstance(params, ScheduleParams):
         raise ValueError(
             f"params is a {type(params).__name__}; allowed: a wmr_jax.controllers.ScheduleParams"
@@ -256,7 +248,7 @@ SCHEDULE = register_controller(
         command=_command,
         params_type=ScheduleParams,
         validate=validate_schedule,
-        region=_region,
+        region=pose_region,
         smooth=True,
         check_robot=_check_robot,
         check_sampling=_check_sampling,

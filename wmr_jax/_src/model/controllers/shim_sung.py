@@ -1,25 +1,16 @@
 """The Shim–Sung asymptotic pose controller, one equation per function (docs/model.md §2–3).
 
 Every function but ``control`` and ``control_diagnostics`` is a pure,
-unjitted, elementwise building block that checks nothing; the entry points
-check their inputs on the host before tracing.
-
-The angles ``φ_e`` and ``θ_e`` travel as their cosine and sine: the paper's
-law stated without ``atan2`` (``|φ_e| ≤ Φ_m ⇔ cos φ_e ≥ cos Φ_m``; ``fold``
-flips both signs exactly when ``cos a < 0``). It saves the transcendental
-calls that dominate a rollout and keeps values and gradients finite at
-``r_e = 0``; ``wmr_jax.reference`` states the law literally, and the tests
-hold the two equal. A caller carrying the heading as ``(cos θ, sin θ)``
-passes ``frame=(x, y, cos θ, sin θ)``.
-
-Smooth relaxation: a positive ``temperature`` replaces each switch by a
-smooth one (sigmoid, ``tanh``, soft minimum) on dimensionless arguments,
-tending to the hard law (``None``) as it goes to zero.
+elementwise building block that checks nothing. The angles ``φ_e`` and
+``θ_e`` travel as their cosine and sine (``|φ_e| ≤ Φ_m ⇔ cos φ_e ≥ cos Φ_m``):
+no ``atan2`` in a rollout, and values and gradients stay finite at ``r_e = 0``.
+A positive ``temperature`` replaces each switch by a smooth one (sigmoid,
+``tanh``, soft minimum) that tends to the hard law (``None``) as it goes to 0.
 """
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -156,11 +147,7 @@ def _step(
 
 
 def _tie_break(temperature: float) -> float:
-    """Return the offset ``log(1 + 1/T)`` that makes a relaxed switch decide a tie as the hard one.
-
-    Centred on its threshold, a relaxed switch would sit half-way at a tie and
-    could stall where the hard law drives (docs/model.md §3).
-    """
+    """The offset ``log(1 + 1/T)`` that makes a relaxed switch decide a tie as the hard one."""
     return jnp.log1p(1.0 / temperature)
 
 
@@ -294,10 +281,7 @@ def wheel_speeds(v: jax.Array, omega: jax.Array, robot: Robot) -> jax.Array:
 def control(
     pose: jax.Array, ref: jax.Array, gains: Gains, *, temperature: float | None = None
 ) -> tuple[jax.Array, jax.Array]:
-    """Return the command ``(v cm/s, ω rad/s)`` of the asymptotic controller.
-
-    An entry point: its arguments are checked on the host (traced values
-    cannot be), then the law runs as one compiled program.
+    """Return the command ``(v cm/s, ω rad/s)`` of the asymptotic controller (checked, jitted).
 
     Args:
         pose: ``(..., 3)`` current pose ``[x cm, y cm, θ rad]``.
@@ -320,10 +304,7 @@ _control_jit = jax.jit(_law)  # the temperature an argument: a new value does no
 
 
 def control_diagnostics(pose: jax.Array, ref: jax.Array, gains: Gains) -> Diagnostics:
-    """Return the command with the region, ``d``, ``ε``, ``V`` and error coordinates.
-
-    An entry point, checked and compiled as ``control`` is.
-    """
+    """Return the command with the region, ``d``, ``ε``, ``V`` and error coordinates."""
     return _diagnostics_jit(*check_law_inputs(pose, ref, gains, Gains, validate_gains))
 
 
@@ -346,7 +327,8 @@ def _diagnostics_jit(pose: jax.Array, ref: jax.Array, gains: Gains) -> Diagnosti
     )
 
 
-def _region(pose: jax.Array, ref: jax.Array, gains: Gains, *, frame=None) -> jax.Array:
+def pose_region(pose: jax.Array, ref: jax.Array, gains: Any, *, frame=None) -> jax.Array:
+    """``region_label`` of a pose (``Controller.region``); any gains with the shape fields."""
     return region_label(polar_error(pose, ref, frame=frame), gains)
 
 
@@ -365,7 +347,7 @@ SHIM_SUNG = register_controller(
         command=_law,
         params_type=Gains,
         validate=validate_gains,
-        region=_region,
+        region=pose_region,
         smooth=True,
         check_robot=_warn_infeasible,
         check_sampling=_warn_unsampled,

@@ -1,10 +1,6 @@
 """The disturbances of docs/model.md §7, drawn from a PRNG key, and how they act on a run.
 
-A ``Disturbance`` holds what makes one run differ from the nominal one:
-pose-measurement noise at every sample, each wheel's radius error (its rim
-moves ``1 + δ`` times as fast as commanded), the body-mass error (non-ideal
-loop; the wheel controller keeps the nominal model) and a latency of a whole
-number of samples. ``sample_disturbance`` is the one place they are drawn.
+``sample_disturbance`` is the one place they are drawn.
 """
 
 from __future__ import annotations
@@ -215,12 +211,11 @@ def sample_disturbance(
 ) -> Disturbance:
     """Draw one ``Disturbance`` per reference from ``key`` (``docs/model.md §7``); traceable.
 
-    Each level may be a scalar or one value per run ``(N,)``.
-
     Args:
         key: a ``jax.random`` key.
         refs: ``(N, 3)`` reference poses.
         steps: control periods per run (static).
+        noise_xy, ...: each level a scalar or one value per run ``(N,)``.
         noise_xy: σ of the x and y measurement noise, cm.
         noise_theta: σ of the heading measurement noise, rad.
         latency: probability that a run has a one-sample latency.
@@ -271,13 +266,10 @@ def draw_disturbances(
     radius_mismatch: float = 0.0,
     mass_mismatch: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Draw references, unit noise and mismatch factors from ``key`` (via ``sample_disturbance``).
-
-    ``n`` runs of ``steps`` periods; the mismatch levels as for ``sample_disturbance``.
+    """Draw ``n`` references (``sample_poses``), unit noise and mismatch factors from ``key``.
 
     Returns:
-        ``(refs (n, 3), unit noise (n, steps, 3) ~ N(0, 1), mismatch (n, 3))``;
-        the references as ``sample_poses`` draws them (``docs/model.md §6``).
+        ``(refs (n, 3), unit noise (n, steps, 3) ~ N(0, 1), mismatch (n, 3))``.
     """
     n = checks.check_int("n", n)
     _check_draw(key, steps, n, radius_mismatch=radius_mismatch, mass_mismatch=mass_mismatch)

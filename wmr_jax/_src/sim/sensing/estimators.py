@@ -1,11 +1,9 @@
 """Pose estimators of the sensed loop (docs/model.md §9): an observer and an extended Kalman filter.
 
-Every period an estimator predicts its pose on the ideal robot's arc under
-the command applied, then corrects it toward the measurement; it starts from
-the first measurement. ``OBSERVER`` pulls toward the measurement by gains in
-``[0, 1]``, constants or tables over the estimated distance to the goal;
-``EKF`` is the extended Kalman filter of the ideal robot, its process noise
-growing with each wheel's travel. Latency compensation is the loop's.
+Each period an estimator predicts its pose on the ideal robot's arc under the
+command applied, then corrects it toward the measurement: ``OBSERVER`` by
+gains in ``[0, 1]`` (constants or tables over the distance to the goal),
+``EKF`` by the Kalman gain of the ideal robot. Latency compensation is the loop's.
 """
 
 from __future__ import annotations

@@ -1,11 +1,9 @@
 """The disturbed closed loop (docs/model.md §7), with or without an estimator (§9).
 
 The one closed-loop step (``loops.ClosedLoopStep``) given a ``Disturbance``:
-pose-measurement noise (arrival is judged on the true pose), wheel-radius and
-mass mismatch, and a latency of ``delay`` samples. The estimator, if any,
-sits between the measurement and the law. Without a disturbance the run is
-the nominal rollout. The metrics stream through the scan, so batches are
-bounded in memory.
+pose-measurement noise (arrival is judged on the true pose), wheel and mass
+mismatch, and a latency of ``delay`` samples. The metrics stream through the
+scan, so batches are bounded in memory.
 """
 
 from __future__ import annotations
@@ -41,18 +39,15 @@ __all__ = [
 
 
 class ClosedLoop(NamedTuple):
-    """A controller, its parameters and the estimator between it and the sensor.
-
-    What ``load_tuned`` returns and what the studies of sensed loops take.
+    """A controller, its parameters and the estimator between it and the sensor (``load_tuned``).
 
     Attributes:
         controller: a ``Controller`` or its registered name.
         params: its parameters.
         estimator: ``None`` (raw feedback), an estimator's name, or its
             parameters (``ObserverParams`` / ``EKFParams``), docs/model.md §9.
-        robot: the ``Robot`` the parameters were tuned for (their wheel
-            budget ``k_r + L k_θ ≤ V_max`` is that robot's), or ``None``
-            where unknown.
+        robot: the ``Robot`` whose wheel budget the parameters were tuned
+            within, or ``None`` where unknown.
     """
 
     controller: Any
@@ -68,33 +63,19 @@ def disturbed_run(
     robot: Robot,
     dt: jax.Array,
     options: Options,
-    *,
-    estimate: Any = None,
-    fold: loops.Fold | None = None,
-    acc: Any = None,
-    record: bool = False,
+    **kwargs: Any,
 ) -> tuple[jax.Array, Any, Any]:
-    """Run one pose under its ``Disturbance`` (docs/model.md §7, §9): the one step, disturbed.
+    """Run one pose toward ``spec.ref`` under its ``Disturbance`` (docs/model.md §7, §9).
 
-    ``loops.scan_closed_loop`` with ``disturbance=spec`` (no batch axes)
-    toward ``spec.ref``; ``robot`` is the nominal one, the controller's and
-    estimator's model.
+    ``loops.scan_closed_loop`` with ``disturbance=spec`` (no batch axes) and
+    its keywords ``estimate``, ``fold``, ``acc``, ``record``; ``robot`` is the
+    nominal one, the controller's and estimator's model.
 
     Returns:
         ``(final true pose (3,), acc, (poses, outputs, estimates) or None)``.
     """
     return loops.scan_closed_loop(
-        spec.ref,
-        params,
-        init,
-        robot,
-        dt,
-        options,
-        disturbance=spec,
-        estimate=estimate,
-        fold=fold,
-        acc=acc,
-        record=record,
+        spec.ref, params, init, robot, dt, options, disturbance=spec, **kwargs
     )
 
 
@@ -233,8 +214,7 @@ def prepare_disturbed(
     refs, noise, mismatch, delay = checked_disturbance(disturbance)
     estimator, estimate = resolve_estimator(estimator)
     if estimator is not None:
-        # One value per run, or one for all: as the gains, before any tracing
-        # (a list is an array of values, as everywhere, not a tree of them).
+        # A list is an array of values, one per run, not a tree of them.
         estimate = jax.tree.map(
             lambda v: np.asarray(v) if isinstance(v, list) else v,
             estimate,
@@ -244,8 +224,7 @@ def prepare_disturbed(
     if record is not None:
         simulation.require_memory(max(len(refs), runs), noise.shape[1], record, disturbance)
     if len(refs) == 1 and runs > 1:
-        # One disturbance shared by every run of batched parameters, as a
-        # batch axis of size 1 is everywhere (README: the Python API).
+        # One disturbance shared by every run of batched parameters.
         refs, noise, mismatch = (np.repeat(a, runs, axis=0) for a in (refs, noise, mismatch))
         delay = np.repeat(delay, runs, axis=0) if delay.ndim else delay
     options = simulation.make_options(
