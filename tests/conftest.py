@@ -157,7 +157,6 @@ FILE_SECONDS = {
     "test_tuning.py": 40,
     "test_edges.py": 39,
     "test_identify.py": 35,
-    "test_fuzz.py": 30,
     "test_tuning_edges.py": 26,
     "test_user_view.py": 26,
     "test_robustness.py": 25,
@@ -173,6 +172,7 @@ FILE_SECONDS = {
     "test_tuning_best.py": 15,
     "test_usability.py": 15,
     "test_controllers.py": 14,
+    "test_fuzz.py": 14,
     "test_readme.py": 14,
     "test_sharding.py": 14,
     "test_bench.py": 13,
@@ -261,6 +261,19 @@ def pytest_collection_finish(session):
     """Freeze what is alive now (modules, JAX, the collected tests): no collection rescans it."""
     gc.collect()
     gc.freeze()
+
+
+def pytest_sessionfinish(session):
+    """In an xdist worker, freeze what is alive once its tests have run.
+
+    pytest ends a session with a full garbage collection (to report errors
+    raised in finalizers) over every object the worker made, its traced and
+    compiled programs included. The worker then ends without freeing
+    anything (``_exit_now``), where those finalizers would not run either,
+    so the collection is wasted work.
+    """
+    if hasattr(session.config, "workerinput"):
+        gc.freeze()
 
 
 def pytest_runtest_setup(item):

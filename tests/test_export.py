@@ -445,7 +445,8 @@ def test_any_latency_is_the_nominal_run_shifted(tmp_path, robust_file, estimator
     periods and then drives the nominal run (``disturbed_metrics``, no latency)."""
     loop = w.load_tuned(robust_file)._replace(estimator=estimator)
     compiled = _build(tmp_path, loop)
-    robot, (refs, noise, _, _) = _conditions_runs(loop, 40)
+    # The runs of the closed-loop test above: with the EKF, its compiled JAX loop.
+    robot, (refs, noise, _, _) = _conditions_runs(loop, 150)
     nominal = Disturbance(refs, 0 * noise, np.ones((len(refs), 3)), np.float64(0.0))
     expected = disturbed_metrics(
         nominal, loop.params, controller=loop.controller, estimator=estimator, robot=robot
@@ -729,7 +730,7 @@ def test_baseline_closed_loop_in_the_wheel_loop(tmp_path):
     controller, gains = _BASELINES[2]
     loop = w.ClosedLoop(controller, gains)
     compiled = _build(tmp_path, loop)
-    robot, (refs, noise, _, _) = _conditions_runs(loop, 30)
+    robot, (refs, noise, _, _) = _conditions_runs(loop, 40)  # the draw of the tests above
     spec = Disturbance(refs, 0 * noise, np.ones((len(refs), 3)), np.float64(1.0))
     jax_m = disturbed_metrics(spec, gains, controller=controller, velocity="nonideal")
     c_m = export.compiled_metrics(compiled, spec, loop, robot=robot, velocity="nonideal")

@@ -3,9 +3,10 @@
 Every call either returns finite values (arrival times may be ``inf``: not
 arrived) or raises ``ValueError``/``TypeError`` whose message names the
 argument at fault. Shapes and static options are held fixed so that the
-compiled programs are reused and ten thousand calls fit in CI (1,500
-examples per test, one to three calls each: 10,500 judged calls, counted by
-the last test); the ``slow`` marker runs more.
+compiled programs are reused (500 examples per test, one to three calls
+each: 3,500 judged calls, counted by the last test): breadth, where the
+exact tests of ``test_edges.py`` and ``test_meaning_*.py`` pin the refusals'
+wording; the ``slow`` marker runs more.
 """
 
 import collections
@@ -20,7 +21,7 @@ from hypothesis import strategies as st
 
 import wmr_jax as w
 
-EXAMPLES = 1500  # per test; 1 + 1 + 2 + 3 calls per example: 10,500 calls in CI
+EXAMPLES = 500  # per test; 1 + 1 + 2 + 3 calls per example: 3,500 calls in CI
 
 # Calls judged in this process: answered with finite values, or refused by name.
 CALLS = collections.Counter()
@@ -191,10 +192,10 @@ def test_rollout_long(ref, field, value):
     check_call(lambda: w.rollout(ref, w.Gains(**{field: value}), steps=4), names)
 
 
-def test_ten_thousand_calls_were_judged():
-    """The four tests above ran (in this process) and judged 10⁴ calls or more."""
+def test_every_generated_call_was_judged():
+    """The four tests above ran (in this process) and judged 3,000 calls or more."""
     if not CALLS:
         pytest.skip("run with the rest of this file")
-    assert sum(CALLS.values()) >= 10_000, CALLS
+    assert sum(CALLS.values()) >= 3_000, CALLS
     # Most generated inputs are odd on purpose; hundreds must still be answered.
-    assert CALLS["refused"] > 5000 and CALLS["answered"] > 500, CALLS
+    assert CALLS["refused"] > 2000 and CALLS["answered"] > 200, CALLS

@@ -331,7 +331,7 @@ def test_every_controller_and_loop_runs_with_an_estimator():
 
 
 def test_noise_curve_gives_one_row_per_loop_and_level_on_common_draws():
-    refs = random_refs(6, 8)
+    refs = random_refs(7, 64)  # the draw of the studies' tests below: one compiled raw loop
     loops = {
         "raw": w.Gains(kr=60.0),
         "ekf": studies.ClosedLoop("shim-sung", w.Gains(kr=60.0), "ekf"),
