@@ -130,9 +130,12 @@ def test_batched_robust_scores_are_each_candidates_robust_score():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         batched = search_module.robust_population_scores(
-            loops, REFS, key, dt=0.01, robot=robot, noise=(0.5, 1.0)
+            loops, REFS, key, dt=0.05, robot=robot, noise=(0.5, 1.0)
         )
-        alone = [tuning.robust_score(lp, REFS, key, robot=robot, noise=(0.5, 1.0)) for lp in loops]
+        alone = [
+            tuning.robust_score(lp, REFS, key, dt=0.05, robot=robot, noise=(0.5, 1.0))
+            for lp in loops
+        ]
     assert batched.shape == (3,) and len(set(np.round(alone, 4))) == 3
     np.testing.assert_allclose(batched, alone, rtol=1e-5)
 
