@@ -195,3 +195,20 @@ def test_a_robust_comparison_of_the_wall_time_format_is_not_resumed(tmp_path, mo
     path.write_text(json.dumps(saved))
     with pytest.raises(ValueError, match=r"holds another comparison \(other format\)"):
         robust_run.run_comparison(tmp_path, config, resume=True, progress=None)
+
+
+def test_robust_searches_spend_at_least_the_gradients_cpu_time():
+    """A real run with raw feedback: each search scores whole generations until its budget."""
+    pytest.importorskip("evosax")
+    config = tuning.RobustConfig(
+        iters=1, poses=2, nonideal_poses=0, eval_poses=2, search_poses=2, validation_poses=2,
+        law="fixed", estimator=None, compare=True,
+    )  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = tuning.tune_robust(config)
+    assert set(result.searches) == {"random search", "cma-es"}
+    for loop, candidates, cpu, wall in result.searches.values():
+        assert isinstance(loop, w.ClosedLoop) and loop.estimator is None
+        assert (candidates - 1) % 8 == 0  # the start, then whole generations of 8
+        assert cpu >= result.tune_wall_s and wall > 0  # stopped by the CPU budget only
