@@ -216,11 +216,22 @@ def test_compare_runs_all_three_methods_on_a_schedule_of_its_size():
             patch.setattr(compare_module, name, watched(getattr(compare_module, name)))
         rows = tuning.compare(seeds=(0,), problems=("schedule",), configs={"schedule": config})
     assert [r["method"] for r in rows] == ["gradient", "cma-es", "random search"]
-    # Each given the gradient's wall time (positive), searching the 11 logits.
+    # Each given the gradient's CPU time (positive), searching the 11 logits.
     assert searched == [("cma_es_search", 11, True), ("random_search", 11, True)]
     assert all(r["parameters"] == 11 for r in rows)
     for row in rows:
         assert row["wall_s"] > 0 and row["mean_arrival"] > 0, row  # inf: none arrives in 0.3 s
+    # The budget is the gradient's CPU time; every method judged on the same held-out poses.
+    gradient = rows[0]
+    assert gradient["cpu_s"] == gradient["budget_s"] > 0
+    assert gradient["per_cpu_s"] == pytest.approx(config.iters / gradient["cpu_s"])
+    held = tuning.held_out_poses(config.eval_poses, config.eval_seed)
+    from wmr_jax._src.tuning.robust_run import poses_digest
+
+    assert {r["held_out"] for r in rows} == {poses_digest(held)}
+    assert {r["budget_s"] for r in rows} == {gradient["budget_s"]}
+    assert "relaxed surrogate" in gradient["minimises"]
+    assert all("hard law" in r["minimises"] for r in rows[1:])
 
 
 # ---------------------------------------------------------------- smaller entry points

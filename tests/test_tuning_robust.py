@@ -252,7 +252,7 @@ def _fake_result(config):
     history = {"validated_at": np.array([0, config.iters]), "validation": np.array([2.0, 1.0])}
     return TuneResult(
         None, {}, history, 1.0, None, "robust", config.iters, None, None, rows,
-        {"random search": (None, 8)},
+        {"random search": (None, 8, 1.0, 2.0)},  # loop, candidates, CPU s, wall s
     )  # fmt: skip
 
 
@@ -261,9 +261,10 @@ def test_robust_compare_without_evosax_says_so_and_keeps_each_seed(tmp_path, cap
 
     seeds = []
 
-    def fake(config, **_):
+    def fake(config, on_tuned=None, **_):
         seeds.append(config.seed)
         assert config.compare  # the searches run beside the gradient
+        on_tuned(None, [])  # the gradient's wall time ends here
         return _fake_result(config)
 
     monkeypatch.setattr(robust, "evosax_available", lambda: False)

@@ -47,7 +47,7 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument(
         "--no-random-search",
         action="store_true",
-        help="skip the random-search baseline (same wall time as the tuning)",
+        help="skip the random-search baseline (same CPU time as the tuning)",
     )
     flags.add_robot_flag(parser)
     parser.add_argument(
@@ -75,7 +75,7 @@ def add_arguments(parser: Any) -> None:
         action="store_true",
         help="tune the gain schedule and a pose estimator together for robustness to noise, "
         "latency and a robot unlike its model (docs/model.md §7, §9); with --compare, "
-        "gradient against CMA-ES and random search at equal wall time, seeds 0-2",
+        "gradient against CMA-ES and random search at equal CPU time, seeds 0-2",
     )
     parser.add_argument(
         "--fixed",
@@ -103,7 +103,7 @@ def add_arguments(parser: Any) -> None:
         "--compare",
         action="store_true",
         help="instead of tuning once, compare gradient, CMA-ES and random search at equal "
-        "wall time, fixed gains and schedules (with --schedule: the schedule only), seeds "
+        "CPU time, fixed gains and schedules (with --schedule: the schedule only), seeds "
         "0-2, into DIR/compare.{json,md}",
     )
     parser.add_argument(
@@ -303,7 +303,7 @@ def run(args: Any) -> int:
     search = result.search
     extra = "" if search is None else f"; random search {search.candidates} candidates"
     kept = f"kept iteration {result.best_iteration} (best validation score)"
-    print(f"tuning wall time {result.tune_wall_s:.1f} s{extra}; {kept}")
+    print(f"tuning CPU time {result.tune_wall_s:.1f} s{extra}; {kept}")
     if result.note is not None:
         print(result.note)
     print(f"curve -> {out / 'tuning_curve.png'}")

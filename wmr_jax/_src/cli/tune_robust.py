@@ -9,7 +9,7 @@ estimator and robot, which ``load_tuned`` reads whole), ``robust_evaluation.json
 and ``.md`` (the hard-law table under the standard conditions, each with ±3 %
 wheel mismatch, and the model robot) and ``robust_loss.json`` (the loss per
 iteration). With ``--compare`` it runs seeds 0–2 instead, each with random
-search and CMA-ES given the tuning's wall time, into
+search and CMA-ES given the tuning's process CPU time, into
 ``robust_compare.json`` and ``.md`` (each seed written as it finishes;
 ``--resume`` keeps them). ``--robot`` tunes and judges on that robot, over
 its horizon (``robustness.study_horizon``). ``--noise`` and ``--noise-theta``
@@ -175,14 +175,14 @@ def run(args: Any) -> int:
     print(f"robust_evaluation.md/json -> {out}")
     print(table, end="")
     kept = f"kept iteration {result.best_iteration} (best validation score)"
-    print(f"tuning wall time {result.tune_wall_s:.1f} s; {kept}")
+    print(f"tuning CPU time {result.tune_wall_s:.1f} s; {kept}")
     if result.note is not None:
         print(result.note)
     return 0
 
 
 def _compare(out: Any, config: Any, robot: Any, *, resume: bool) -> int:
-    """Gradient, CMA-ES and random search at equal wall time, seeds 0–2; each seed kept."""
+    """Gradient, CMA-ES and random search at equal CPU time, seeds 0–2; each seed kept."""
     from wmr_jax._src.report.tuning import robust_comparison_table
     from wmr_jax._src.tuning.robust import evosax_available
     from wmr_jax._src.tuning.robust_run import run_comparison

@@ -130,7 +130,9 @@ _COMPARE_COLUMNS = [
     "success",
     "mean − lower bound (s)",
     "vs turn–drive–turn",
+    "CPU time (s)",
     "wall time (s)",
+    "candidates per CPU-s",
 ]
 
 
@@ -181,12 +183,31 @@ def _arrived_mean(values: list[float], fmt: str) -> str:
     return fmt.format(float(np.mean(values)))
 
 
+def _maybe(value: Any, fmt: str) -> str:
+    """``value`` as ``fmt``, or "—" where a row has none (rows of older formats, a rate of 0 s)."""
+    return "—" if value is None else fmt.format(float(value))
+
+
+def _minimised_notes(rows: list[dict[str, Any]]) -> str:
+    """One line per method: what it minimises (the rows' ``minimises``), under a table."""
+    said = {}
+    for row in rows:
+        if isinstance(row.get("minimises"), str):
+            said.setdefault(str(row["method"]), row["minimises"])
+    if not said:
+        return ""
+    return "\n" + "".join(f"- {method} minimises: {text}\n" for method, text in said.items())
+
+
 def comparison_table(rows: list[dict[str, Any]]) -> str:
     """Return gradient vs CMA-ES vs random search as Markdown, one line per problem and method.
 
     A seed whose parameters never arrive (a mean arrival of ``inf``, or
     ``"inf"`` as read back from JSON) reads "none arrived", as do the means
-    and ratios that would need it.
+    and ratios that would need it. The CPU time (the budget's clock) stands
+    beside the wall time; candidates per CPU-second are the gradient's
+    iterations for the gradient; under the table, what each method minimises
+    (the judged score is the hard law's on the held-out poses for all).
 
     Args:
         rows: the rows of ``wmr_jax.tuning.compare`` (one per problem, seed and method).
@@ -198,6 +219,7 @@ def comparison_table(rows: list[dict[str, Any]]) -> str:
     rows = require_rows("rows", rows)
     numbers = [_compare_numbers(i, row) for i, row in enumerate(rows)]
     groups: dict[tuple[str, str], list[dict[str, float]]] = {}
+    raws: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for row, values in zip(rows, numbers, strict=True):
         # Rows of before the schedules had a size do not say their parameter
         # count: theirs is the default problem's.
@@ -205,8 +227,10 @@ def comparison_table(rows: list[dict[str, Any]]) -> str:
         size = row.get("parameters", None if default is None else default.dim)
         problem = row["problem"] if size is None else f"{row['problem']} ({size})"
         groups.setdefault((problem, row["method"]), []).append(values)
+        raws.setdefault((problem, row["method"]), []).append(row)
     lines = []
     for (problem, method), group in groups.items():
+        raw = raws[(problem, method)]
         arrival = [r["mean_arrival"] for r in group]
         gap = [r["mean_arrival"] - r["lower_bound_s"] for r in group]
         ratio = [r["mean_arrival"] / r["turn_drive_turn_s"] for r in group]
@@ -220,7 +244,11 @@ def comparison_table(rows: list[dict[str, Any]]) -> str:
                 "success": f"{100 * min(r['success_rate'] for r in group):.1f} %",
                 "mean − lower bound (s)": _arrived_mean(gap, "{:.3f}"),
                 "vs turn–drive–turn": _arrived_mean(ratio, "{:.3f}×"),
+                "CPU time (s)": " / ".join(_maybe(r.get("cpu_s"), "{:.0f}") for r in raw),
                 "wall time (s)": " / ".join(f"{r['wall_s']:.0f}" for r in group),
+                "candidates per CPU-s": " / ".join(
+                    _maybe(r.get("per_cpu_s"), "{:.3g}") for r in raw
+                ),
             }
         )
     first = numbers[0]
@@ -233,7 +261,7 @@ def comparison_table(rows: list[dict[str, Any]]) -> str:
             ),
         }
     )
-    return _right_aligned(lines, _COMPARE_COLUMNS)
+    return _right_aligned(lines, _COMPARE_COLUMNS) + _minimised_notes(rows)
 
 
 def tuning_curve(
@@ -420,14 +448,24 @@ def robust_comparison_table(rows: list[dict[str, Any]]) -> str:
     ``score`` is the mean over the conditions of the mean arrival with
     failures counted at twice the horizon (12 s on the paper robot, longer
     on a slower one: each row's ``horizon s``), what the searches minimise.
-    The last rows are each method's mean over the seeds.
+    ``budget`` is the gradient's process CPU time, spent by each search;
+    ``CPU`` and ``wall`` what each method spent, ``per CPU-s`` its candidates
+    (the gradient: iterations) per CPU-second. The last rows are each
+    method's mean over the seeds; under the table, what each method minimises.
     """
     rows = require_rows("rows", rows)
     cells: dict[tuple[str, int], dict[str, Any]] = {}
     for row in rows:
         key = (str(row["method"]), int(row["seed"]))
         entry = cells.setdefault(
-            key, {"budget": float(row["budget_s"]), "candidates": int(row["candidates"])}
+            key,
+            {
+                "budget": float(row["budget_s"]),
+                "candidates": int(row["candidates"]),
+                "cpu": row.get("cpu_s"),
+                "wall": row.get("wall_s"),
+                "rate": row.get("per_cpu_s"),
+            },
         )
         ok, mean = float(row["success"]), float(row["mean arrival s"])
         # Rows written before they recorded their horizon ran the paper robot's.
@@ -445,9 +483,15 @@ def robust_comparison_table(rows: list[dict[str, Any]]) -> str:
             line[c] = f"{100 * ok:.1f} %, " + (f"{mean:.3f} s" if ok > 0 else "none arrived")
         line["budget (s)"] = f"{entry['budget']:.0f}"
         line["candidates"] = str(entry["candidates"])
+        if entry["cpu"] is not None:  # rows of format 3 on
+            line["CPU (s)"] = _maybe(entry["cpu"], "{:.0f}")
+            line["wall (s)"] = _maybe(entry["wall"], "{:.0f}")
+            line["per CPU-s"] = _maybe(entry["rate"], "{:.3g}")
         table.append(line)
     for method, values in scores.items():
         table.append({"method": method, "seed": "mean", "score (s)": f"{np.mean(values):.3f}"})
     columns = ["method", "seed", "score (s)", *_ROBUST_CONDITIONS, "budget (s)", "candidates"]
+    columns += ["CPU (s)", "wall (s)", "per CPU-s"]
     columns = [c for c in columns if any(c in r for r in table)]
-    return markdown_table([{c: r.get(c, "") for c in columns} for r in table], columns)
+    table = markdown_table([{c: r.get(c, "") for c in columns} for r in table], columns)
+    return table + _minimised_notes(rows)

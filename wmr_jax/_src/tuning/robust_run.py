@@ -3,18 +3,24 @@
 ``save_tuned`` writes the tuned loop as soon as the iterations end,
 ``write_evaluation`` the hard-law table under the standard conditions
 (``robust_evaluation.json`` and ``.md``), and ``run_comparison`` runs seeds
-0–2 of ``tune_robust`` with random search and CMA-ES into
-``robust_compare.json`` and ``.md``, each seed written as it finishes and
-kept by a resumed comparison of the same settings, robot and code.
+0–2 of ``tune_robust`` with random search and CMA-ES given the gradient's
+process CPU time (``search.clock``) into ``robust_compare.json`` and
+``.md``, each seed written as it finishes and kept by a resumed comparison
+of the same settings, robot and code.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
+import os
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from wmr_jax._src import io
 from wmr_jax._src.model.params import Robot, validate_one_robot
@@ -24,7 +30,10 @@ from wmr_jax._src.tuning.robust import RobustConfig
 __all__ = [
     "COLUMNS",
     "COMPARE_SEEDS",
+    "compare_seed",
     "described",
+    "minimised",
+    "poses_digest",
     "run_comparison",
     "save_tuned",
     "write_evaluation",
@@ -32,7 +41,8 @@ __all__ = [
 
 COLUMNS = ["condition", "gains", "feedback", "success", "mean arrival s", "median arrival s"]
 COMPARE_SEEDS = (0, 1, 2)
-COMPARE_FORMAT = 2
+# 3: budgets in process CPU time, rows with CPU and wall time beside each other.
+COMPARE_FORMAT = 3
 
 
 def described(config: RobustConfig) -> str:
@@ -106,6 +116,65 @@ def _kept_rows(path: Any, settings: dict[str, Any], resume: bool) -> list[dict[s
     return rows
 
 
+def poses_digest(poses: Any) -> str:
+    """The first 16 hex digits of the sha256 of ``poses`` (float64): which poses judged a row."""
+    return hashlib.sha256(np.asarray(poses, dtype=np.float64).tobytes()).hexdigest()[:16]
+
+
+def minimised(config: RobustConfig, method: str) -> str:
+    """What ``method`` minimises in a robust comparison of ``config``, in words."""
+    if method == "gradient":
+        return (
+            f"relaxed surrogate: soft arrival of the smooth law (temperature "
+            f"{config.temperature_start:g} to {config.temperature_end:g}), mean over "
+            f"{config.poses} + {config.nonideal_poses} fresh poses per iteration under "
+            "conditions sampled anew (noise up to twice the sensor's, latency, mismatch)"
+        )
+    return (
+        "robust_score: hard law, mean arrival (failures at twice the horizon) over the "
+        f"5 standard conditions on {config.search_poses} fixed search poses, one draw"
+    )
+
+
+def compare_seed(config: RobustConfig, seed: int, robot: Robot) -> list[dict[str, Any]]:
+    """One seed of the robust comparison: ``tune_robust`` with its searches, as rows.
+
+    One row per method and condition (the paper's gains left out): the
+    ``standard_conditions`` row with ``method``, ``seed``, ``budget_s`` (the
+    gradient's CPU time), ``candidates`` (gradient: iterations), ``cpu_s``,
+    ``wall_s``, ``per_cpu_s``, ``minimises``, ``held_out`` (``poses_digest``)
+    and ``loadavg`` (the 1-minute load average as the row was written).
+    """
+    from wmr_jax._src.tuning.evaluation import EVAL_SEED, held_out_poses
+
+    held_out = poses_digest(held_out_poses(config.eval_poses, EVAL_SEED))
+    config_seed = dataclasses.replace(config, seed=seed, compare=True)
+    tuned_at: list[float] = []
+    began = time.perf_counter()
+    result = robust.tune_robust(
+        config_seed,
+        robot=robot,
+        on_tuned=lambda *_, at=tuned_at: at.append(time.perf_counter()),
+    )
+    budget = result.tune_wall_s  # process CPU time (trainer.iterate counts it so)
+    spent = {"gradient": (config.iters, budget, tuned_at[0] - began)}
+    spent.update({m: tuple(s[1:]) for m, s in result.searches.items()})
+    rows = []
+    for row in result.rows:
+        if row["gains"] == "paper":
+            continue
+        method = "gradient" if row["gains"] == "robust-tuned" else row["gains"]
+        candidates, cpu, wall = spent[method]
+        rows.append(
+            {**row, "method": method, "seed": seed, "budget_s": budget,
+             "candidates": candidates, "cpu_s": cpu, "wall_s": wall,
+             "per_cpu_s": candidates / cpu if cpu > 0 else None,
+             "minimises": minimised(config, method), "held_out": held_out,
+             "loadavg": os.getloadavg()[0]}
+        )  # fmt: skip
+    return rows
+
+
 def run_comparison(
     out: Path,
     config: RobustConfig,
@@ -114,10 +183,16 @@ def run_comparison(
     resume: bool = False,
     progress: Callable[[str], Any] | None = print,
 ) -> list[dict[str, Any]]:
-    """Gradient, CMA-ES and random search at equal wall time, seeds 0–2; each seed kept.
+    """Gradient, CMA-ES and random search at equal CPU time, seeds 0–2; each seed kept.
 
-    The settings, the robot and the code version are recorded with the rows:
-    a resumed comparison keeps only rows of the same three.
+    The gradient tuner's process CPU time, compilation included, is each
+    search's budget (``search.clock``), so the ranking does not move with
+    the machine's load; each row records its CPU and wall time, candidates
+    (gradient: iterations) per CPU-second, what it minimises and the digest
+    of the held-out poses it was judged on (every method's rows come from one
+    ``standard_conditions`` call: the same poses and draws). The settings,
+    the robot and the code version are recorded with the rows: a resumed
+    comparison keeps only rows of the same three.
 
     Returns:
         The rows (kept and new), also written to ``robust_compare.json`` and ``.md``.
@@ -146,18 +221,7 @@ def run_comparison(
             say(f"seed {seed}: kept from {path}")
             continue
         say(f"seed {seed}: tuning the {described(config)}, then the searches")
-        config_seed = dataclasses.replace(config, seed=seed, compare=True)
-        result = robust.tune_robust(config_seed, robot=robot)
-        budget = result.tune_wall_s
-        counts = {"gradient": config.iters, **{m: n for m, (_, n) in result.searches.items()}}
-        for row in result.rows:
-            if row["gains"] == "paper":
-                continue
-            method = "gradient" if row["gains"] == "robust-tuned" else row["gains"]
-            rows.append(
-                {**row, "method": method, "seed": seed, "budget_s": budget,
-                 "candidates": counts[method]}
-            )  # fmt: skip
+        rows += compare_seed(config, seed, robot)
         # Sealed with a checksum: --resume keeps only what this wrote.
         io.atomic_write_json(path, io.sealed({"settings": settings, "rows": rows}))
     io.atomic_write_text(out / "robust_compare.md", robust_comparison_table(rows))

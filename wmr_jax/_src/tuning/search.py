@@ -1,10 +1,13 @@
 """The black-box searches, the baselines the gradient must beat: random search and CMA-ES.
 
 ``search_loop`` is the one driver of every search (propose, score, keep the
-best, until the wall-time budget); ``random_search`` and ``cma_es_search``
-search a problem's feasible set with the hard law, and the robust tuner's
-searches (``robust.black_box``) go through the same driver and
-``cma_es_proposals``.
+best, until the budget); ``random_search`` and ``cma_es_search`` search a
+problem's feasible set with the hard law, and the robust tuner's searches
+(``robust.black_box``) go through the same driver and ``cma_es_proposals``,
+scoring a generation in one batch per condition (``robust_population_scores``).
+Every budget is process CPU time (``clock``), the gradient tuner's included,
+so that a comparison buys each method the same work however busy the
+machine is.
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ __all__ = [
     "evosax_available",
     "population_scores",
     "random_search",
+    "robust_population_scores",
     "search_loop",
 ]
 
@@ -60,12 +64,14 @@ class SearchResult(NamedTuple):
             twice the horizon, s.
         candidates: how many candidates were scored.
         wall_s: wall time spent, s.
+        cpu_s: process CPU time spent (``clock``), s: what the budget counts.
     """
 
     gains: Gains
     score: float
     candidates: int
     wall_s: float
+    cpu_s: float
 
 
 def random_search(
@@ -84,7 +90,7 @@ def random_search(
     problem: Any = "fixed",
     progress: Any = None,
 ) -> SearchResult:
-    """Search the feasible set of ``problem`` at random for ``budget_s`` seconds.
+    """Search the feasible set of ``problem`` at random for ``budget_s`` CPU seconds.
 
     Candidates are ``u ~ U[0, 1]^dim`` of the problem's feasible set, scored
     ``chunk`` at a time with the hard law on ``refs`` (mean arrival time,
@@ -95,7 +101,7 @@ def random_search(
     Args:
         key: PRNG key of the candidates.
         refs: ``(N, 3)`` reference poses the candidates are scored on.
-        budget_s: wall-time budget, s.
+        budget_s: budget in process CPU time (``clock``), s.
         robot: robot parameters; default ``Robot()``.
         start: gains scored first (fixed problem); the schedule starts from
             its own starting point.
@@ -134,12 +140,12 @@ def random_search(
     def score(u: jax.Array) -> Any:
         return population_scores(problem, u, tiled, n, robot, run)
 
-    began = time.perf_counter()
+    wall, began = time.perf_counter(), clock()
     best_u, best_score, count = search_loop(
         propose, score, budget_s, began=began, best=(first, math.inf), progress=progress
     )
     best = jax.tree.map(float, problem.from_unit(best_u, robot))
-    return SearchResult(best, best_score, count, time.perf_counter() - began)
+    return SearchResult(best, best_score, count, time.perf_counter() - wall, clock() - began)
 
 
 def clock() -> float:
@@ -169,7 +175,8 @@ def search_loop(
         propose: ``propose(generation)`` → candidates ``(P, dim)``, or ``None``
             to stop (a strategy that broke down).
         score: ``score(candidates)`` → ``(P,)`` scores, lower is better.
-        budget_s: wall-time budget, s, from ``began`` (``time.perf_counter``).
+        budget_s: budget in process CPU time, s, from ``began`` (a ``clock()``
+            reading): the loop stops once ``clock()`` has advanced by it.
         best: ``(candidate, score)`` to beat; ``count``: candidates scored already.
         tell: ``tell(generation, candidates, scores)`` after each scoring.
         progress: called with the generation's size after each.
@@ -180,7 +187,7 @@ def search_loop(
     """
     best_x, best_score = best
     generation = 0
-    while (at_least_once and generation == 0) or time.perf_counter() - began < budget_s:
+    while (at_least_once and generation == 0) or clock() - began < budget_s:
         xs = propose(generation)
         if xs is None:
             break
@@ -215,6 +222,62 @@ def population_scores(problem: Problem, u: jax.Array, tiled: jax.Array, n: int, 
         _, times, steps = hard_runs(tiled, population, **run, controller=problem.controller)
     times = times.reshape(u.shape[0], n)
     return jnp.mean(jnp.minimum(times, FAILURE_FACTOR * steps * run["dt"]), axis=1)
+
+
+def robust_population_scores(
+    loops: Any, refs: Any, key: jax.Array, *, dt: float, robot: Robot, noise: Any = None
+) -> np.ndarray:
+    """``robust.robust_score`` of each of ``loops``, the whole population in one batch.
+
+    The runs of ``studies.conditions.standard_conditions`` (the same draws of
+    ``key``, float32), each condition one ``disturbed_metrics`` call over
+    every candidate's runs instead of one call per candidate: the score of a
+    candidate is the mean over the conditions of its mean arrival, failures
+    counted as twice the horizon.
+
+    Args:
+        loops: ``ClosedLoop``s of one controller and one kind of estimator.
+        refs: ``(N, 3)`` reference poses; ``key``: the draws' key.
+        dt, robot, noise: as for ``robust_score`` (``robot`` checked).
+
+    Returns:
+        ``(len(loops),)`` scores, s.
+    """
+    from wmr_jax._src.sim.sensing.disturbances import STANDARD_CONDITIONS, STANDARD_MISMATCH
+    from wmr_jax._src.sim.sensing.loop import disturbed_metrics
+    from wmr_jax._src.studies import conditions
+
+    refs, unit, factors, horizon = conditions._runs(
+        refs, key, robot, None, dt, STANDARD_MISMATCH, False
+    )
+    size, n = len(loops), len(refs)
+
+    def per_run(*leaves: Any) -> np.ndarray:  # candidate i's value on runs i·N … (i+1)·N − 1
+        return np.repeat(np.asarray(leaves, dtype=float), n)
+
+    params = jax.tree.map(per_run, *[loop.params for loop in loops])
+    estimate = loops[0].estimator
+    if estimate is not None and not isinstance(estimate, str):
+        estimate = jax.tree.map(per_run, *[loop.estimator for loop in loops])
+
+    def tiled(a: np.ndarray) -> np.ndarray:
+        return np.tile(a, (size,) + (1,) * (a.ndim - 1))
+
+    refs, unit, factors = tiled(refs), tiled(unit), tiled(factors)
+    table = [(0.0, 0.0, False, np.ones_like(factors))]  # the model robot
+    for _, sxy, sdeg, latency in STANDARD_CONDITIONS:
+        if noise is not None and sxy:
+            sxy, sdeg = noise
+        table.append((sxy, sdeg, latency, factors))
+    total = np.zeros(size)
+    for sxy, sdeg, latency, wheels in table:
+        m = disturbed_metrics(
+            conditions._scaled(refs, unit, wheels, sxy, sdeg, latency), params,
+            controller=loops[0].controller, estimator=estimate, dt=dt, robot=robot, x64=False,
+        )  # fmt: skip
+        arrival = np.where(m.success, m.arrival, FAILURE_FACTOR * horizon)
+        total += arrival.reshape(size, n).mean(axis=1)
+    return total / len(table)
 
 
 # ---------------------------------------------------------------- CMA-ES
@@ -253,7 +316,7 @@ def _generation_keys(key: jax.Array, generation: Any) -> jax.Array:
     """The ask and tell keys of a generation: ``split(fold_in(key, generation + 1))``.
 
     One compiled call per generation, not two operations dispatched one by
-    one: the loop's own time counts against the search's wall-time budget.
+    one: the loop's own time counts against the search's budget.
     """
     return jax.random.split(jax.random.fold_in(key, generation + 1))
 
@@ -302,7 +365,7 @@ def cma_es_search(
     progress: Any = None,
     **run: Any,
 ) -> SearchResult:
-    """CMA-ES on the logits of ``problem``'s feasible set for ``budget_s`` seconds.
+    """CMA-ES on the logits of ``problem``'s feasible set for ``budget_s`` CPU seconds.
 
     Scored as by ``random_search``, from the problem's start with step
     ``std_init`` in logit space; at least one generation whatever the budget.
@@ -327,7 +390,7 @@ def cma_es_search(
     n = refs.shape[0]
     tiled = jnp.tile(refs, (population, 1))
     start = jnp.asarray(problem.start_logits(robot), float_dtype())
-    began = time.perf_counter()
+    wall, began = time.perf_counter(), clock()
     propose, tell = cma_es_proposals(key, start, population, std_init)
 
     def score(z: Any) -> Any:
@@ -338,4 +401,4 @@ def cma_es_search(
         progress=progress,
     )  # fmt: skip
     best = jax.tree.map(float, problem.from_logits(best_z, robot))
-    return SearchResult(best, best_score, count, time.perf_counter() - began)
+    return SearchResult(best, best_score, count, time.perf_counter() - wall, clock() - began)

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import time
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
@@ -26,6 +25,7 @@ from wmr_jax._src.provenance import code_version
 from wmr_jax._src.sim import loops
 from wmr_jax._src.sim.poses import MAX_SAMPLES
 from wmr_jax._src.sim.rollout import check_temperature
+from wmr_jax._src.tuning.search import clock
 
 __all__ = [
     "BEST_MARGIN",
@@ -102,7 +102,8 @@ class TrainState(NamedTuple):
         opt_state: the optax state.
         losses, temperatures: of each iteration done (s; the smooth law's).
         gains: the parameters after each iteration as rows (``TrainingProblem.row``).
-        elapsed_s: wall time of the iterations done (all sessions), s.
+        elapsed_s: process CPU time of the iterations done (all sessions;
+            ``search.clock``, the clock of every budget), s.
         run: the run's identity (``run_text``); a state of another run is
             refused. Empty (a state built by hand): not checked.
         validated: ``(iteration, score s)`` of each validation score so far, in order.
@@ -132,7 +133,7 @@ class TuneResult(NamedTuple):
         history: per-iteration ``loss`` (s), ``temperature`` and ``gains``
             rows, and the validation scores ``validated_at`` (iterations) and
             ``validation`` (s), as NumPy arrays.
-        tune_wall_s: wall time of the gradient iterations (all sessions), s.
+        tune_wall_s: process CPU time of the gradient iterations (all sessions), s.
         search: the random search's ``SearchResult``, or ``None``.
         problem: ``"fixed"``, ``"schedule"`` or ``"robust"``.
         best_iteration: the iterate returned (0: the start), by ``best_iteration``.
@@ -140,8 +141,8 @@ class TuneResult(NamedTuple):
         loop: the robust problem's tuned ``ClosedLoop``, else ``None``.
         rows: the robust problem's ``standard_conditions`` rows of the paper's
             gains, the tuned loop and the searches' loops, else ``None``.
-        searches: the robust problem's ``{method: (ClosedLoop, candidates)}``,
-            else ``None``.
+        searches: the robust problem's ``{method: (ClosedLoop, candidates, CPU s,
+            wall s)}``, else ``None``.
     """
 
     gains: Any
@@ -257,11 +258,11 @@ def iterate(
     """Run the iterations from ``state.iteration`` to ``hyper.iters``, scoring every few."""
     dtype, iters = float_dtype(), problem.hyper.iters
     if state.iteration == 0 and not state.validated:
-        began = time.perf_counter()
+        began = clock()
         state = _scored(problem, state)
-        state = state._replace(elapsed_s=state.elapsed_s + time.perf_counter() - began)
+        state = state._replace(elapsed_s=state.elapsed_s + clock() - began)
     for iteration in range(state.iteration, iters):
-        began = time.perf_counter()
+        began = clock()
         temperature = anneal(problem.temperature_start, problem.temperature_end, iteration, iters)
         z, opt_state, loss = train_step(
             state.z,
@@ -282,7 +283,7 @@ def iterate(
         )
         if state.iteration % problem.validate_every == 0 or state.iteration == iters:
             state = _scored(problem, state)
-        state = state._replace(elapsed_s=state.elapsed_s + time.perf_counter() - began)
+        state = state._replace(elapsed_s=state.elapsed_s + clock() - began)
         if progress_fn is not None:
             progress_fn(state)
     return state

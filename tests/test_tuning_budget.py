@@ -1,0 +1,214 @@
+"""Budgets of the gradient-against-search comparisons: CPU time, and what the rows report."""
+
+import json
+import warnings
+
+import jax
+import numpy as np
+import pytest
+
+import wmr_jax as w
+from wmr_jax import tuning
+from wmr_jax._src.tuning import robust, robust_run, trainer
+from wmr_jax._src.tuning import search as search_module
+from wmr_jax._src.tuning.estimation import concrete_loop
+
+KEY = jax.random.key(0)
+REFS = np.array([[30.0, 10.0, 1.0], [-20.0, 15.0, -2.0]])
+
+
+class FakeClock:
+    """A CPU clock that moves only when ``tick`` is called: one second per scored generation."""
+
+    def __init__(self):
+        self.now = 100.0
+
+    def __call__(self):
+        return self.now
+
+    def tick(self, seconds=1.0):
+        self.now += seconds
+
+
+@pytest.fixture
+def wall_races(monkeypatch):
+    """Wall time that runs 1000 s per reading: a budget counted in it would end at once."""
+    import time
+
+    real = time.perf_counter
+    start, calls = real(), [0]
+
+    def racing():
+        calls[0] += 1
+        return start + 1000.0 * calls[0]
+
+    monkeypatch.setattr(time, "perf_counter", racing)
+
+
+def test_search_loop_stops_once_the_cpu_clock_has_advanced_by_the_budget(monkeypatch, wall_races):
+    clock = FakeClock()
+    monkeypatch.setattr(search_module, "clock", clock)
+
+    def score(xs):
+        clock.tick()
+        return np.zeros(len(xs))
+
+    def propose(generation):
+        return np.full((4, 2), float(generation))
+
+    _, _, count = search_module.search_loop(
+        propose, score, 3.0, began=clock(), best=(None, np.inf), at_least_once=False
+    )
+    # 0, 1, 2 s of CPU time used before generations 1, 2, 3; at 3 s it stops.
+    assert count == 3 * 4
+    clock.now = 100.0
+    _, _, none = search_module.search_loop(
+        propose, score, 0.0, began=clock(), best=(None, np.inf), at_least_once=False
+    )
+    assert none == 0
+
+
+def test_random_search_spends_its_budget_in_cpu_time_and_reports_both(monkeypatch, wall_races):
+    clock = FakeClock()
+    monkeypatch.setattr(search_module, "clock", clock)
+
+    def scored(problem, u, tiled, n, robot, run):
+        clock.tick(0.5)
+        return jax.numpy.arange(u.shape[0], dtype=float)
+
+    monkeypatch.setattr(search_module, "population_scores", scored)
+    result = tuning.random_search(KEY, REFS, budget_s=2.0, chunk=3, horizon=0.3)
+    assert result.candidates == 4 * 3  # 0, 0.5, 1, 1.5 s before each chunk; 2 s ends it
+    assert result.cpu_s == pytest.approx(2.0)
+    assert result.wall_s >= 1000.0  # the wall clock ran on, and did not stop the search
+
+
+def test_robust_black_box_counts_its_start_and_stops_on_the_cpu_clock(monkeypatch, wall_races):
+    clock = FakeClock()
+    monkeypatch.setattr(robust, "clock", clock)
+    monkeypatch.setattr(search_module, "clock", clock)
+    sizes = []
+
+    def scores(loops, refs, key, **_):
+        sizes.append(len(loops))
+        clock.tick()
+        return np.arange(len(loops), dtype=float)
+
+    monkeypatch.setattr(robust, "robust_population_scores", scores)
+    joint = robust.joint_problem(tuning.RobustConfig())
+    loop, count, cpu, wall = robust.black_box(
+        "random search", KEY, REFS, 3.0, w.Robot(), 0.01, joint, (0.5, 1.0)
+    )
+    # The start (1 s of the budget), then whole generations of 8 in one batch each.
+    assert sizes == [1, 8, 8]
+    assert count == 1 + 2 * 8 and cpu == pytest.approx(3.0) and wall >= 1000.0
+    assert isinstance(loop, w.ClosedLoop)
+
+
+def test_the_trainer_counts_its_time_on_the_cpu_clock(monkeypatch, wall_races):
+    calls = []
+
+    def clock():
+        calls.append(None)
+        return 10.0 * len(calls)  # every reading 10 s after the one before
+
+    monkeypatch.setattr(trainer, "clock", clock)
+    config = tuning.TuneConfig(iters=2, poses=2, eval_poses=2, horizon=0.3, random_search=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = tuning.train(config)
+    # The start's score and each of the 2 iterations: one span of 10 s each.
+    assert result.tune_wall_s == pytest.approx(30.0)
+
+
+def test_batched_robust_scores_are_each_candidates_robust_score():
+    robot = w.Robot()
+    joint = robust.joint_problem(tuning.RobustConfig(law="fixed", estimator="ekf"))
+    z0 = np.asarray(joint.start_logits(robot))
+    loops = [concrete_loop(joint.from_logits(z0 + shift, robot)) for shift in (0.0, -1.0, 1.5)]
+    key = jax.random.key(3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        batched = search_module.robust_population_scores(
+            loops, REFS, key, dt=0.05, robot=robot, noise=(0.5, 1.0)
+        )
+        alone = [
+            tuning.robust_score(lp, REFS, key, dt=0.05, robot=robot, noise=(0.5, 1.0))
+            for lp in loops
+        ]
+    assert batched.shape == (3,) and len(set(np.round(alone, 4))) == 3
+    np.testing.assert_allclose(batched, alone, rtol=1e-5)
+
+
+def _fake_tune(config, on_tuned=None, **_):
+    """What tune_robust returns, made up: 4 CPU s of gradient, the searches' own CPU and wall."""
+    on_tuned(None, [])
+    rows = []
+    for condition in ("model robot", "nominal", "latency", "noise", "both"):
+        for gains in ("paper", "robust-tuned", "random search", "cma-es"):
+            rows.append(
+                {"condition": condition, "gains": gains, "feedback": "ekf", "success": 1.0,
+                 "mean arrival s": 0.5, "median arrival s": 0.5, "horizon s": 6.0}
+            )  # fmt: skip
+    history = {"validated_at": np.array([0, config.iters]), "validation": np.array([2.0, 1.0])}
+    searches = {"random search": (None, 17, 4.5, 3.0), "cma-es": (None, 9, 4.2, 5.0)}
+    return tuning.TuneResult(
+        None, {}, history, 4.0, None, "robust", config.iters, None, None, rows, searches
+    )
+
+
+def test_robust_comparison_rows_report_cpu_wall_rates_and_what_each_minimises(
+    tmp_path, monkeypatch
+):
+    monkeypatch.setattr(robust, "tune_robust", _fake_tune)
+    config = tuning.RobustConfig(iters=8, search_poses=5, eval_poses=6)
+    rows = robust_run.run_comparison(tmp_path, config, progress=None)
+    assert len(rows) == 3 * 3 * 5  # seeds, methods, conditions
+    by = {(r["seed"], r["method"]): r for r in rows if r["condition"] == "nominal"}
+    gradient, search = by[(0, "gradient")], by[(0, "random search")]
+    assert gradient["budget_s"] == search["budget_s"] == 4.0  # the gradient's CPU time
+    assert (gradient["cpu_s"], gradient["candidates"]) == (4.0, 8)
+    assert gradient["per_cpu_s"] == pytest.approx(8 / 4.0)  # iterations per CPU-second
+    assert (search["cpu_s"], search["wall_s"], search["candidates"]) == (4.5, 3.0, 17)
+    assert search["per_cpu_s"] == pytest.approx(17 / 4.5)
+    assert by[(2, "cma-es")]["per_cpu_s"] == pytest.approx(9 / 4.2)
+    assert "relaxed surrogate" in gradient["minimises"]
+    assert "hard law" in search["minimises"] and "5 fixed search poses" in search["minimises"]
+    # Every row judged on the same held-out poses: the 6 of the evaluation seed.
+    held = robust_run.poses_digest(tuning.held_out_poses(6, tuning.EVAL_SEED))
+    assert {r["held_out"] for r in rows} == {held}
+    table = (tmp_path / "robust_compare.md").read_text()
+    header = table.splitlines()[0]
+    for column in ("budget (s)", "CPU (s)", "wall (s)", "per CPU-s"):
+        assert f"| {column} |" in header, header
+    assert "| 4 | 17 | 4 | 3 | 3.78 |" in table, table  # random search: 4.5 CPU s
+    assert "- gradient minimises: relaxed surrogate" in table
+
+
+def test_a_robust_comparison_of_the_wall_time_format_is_not_resumed(tmp_path, monkeypatch):
+    monkeypatch.setattr(robust, "tune_robust", _fake_tune)
+    config = tuning.RobustConfig(iters=8)
+    robust_run.run_comparison(tmp_path, config, progress=None)
+    path = tmp_path / "robust_compare.json"
+    saved = json.loads(path.read_text())
+    saved["settings"]["format"] = 2  # rows whose budgets were wall time
+    path.write_text(json.dumps(saved))
+    with pytest.raises(ValueError, match=r"holds another comparison \(other format\)"):
+        robust_run.run_comparison(tmp_path, config, resume=True, progress=None)
+
+
+def test_robust_searches_spend_at_least_the_gradients_cpu_time():
+    """A real run with raw feedback: each search scores whole generations until its budget."""
+    pytest.importorskip("evosax")
+    config = tuning.RobustConfig(
+        iters=1, poses=2, nonideal_poses=0, eval_poses=2, search_poses=2, validation_poses=2,
+        law="fixed", estimator=None, compare=True,
+    )  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = tuning.tune_robust(config)
+    assert set(result.searches) == {"random search", "cma-es"}
+    for loop, candidates, cpu, wall in result.searches.values():
+        assert isinstance(loop, w.ClosedLoop) and loop.estimator is None
+        assert (candidates - 1) % 8 == 0  # the start, then whole generations of 8
+        assert cpu >= result.tune_wall_s and wall > 0  # stopped by the CPU budget only
