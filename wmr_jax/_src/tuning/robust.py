@@ -4,14 +4,15 @@ The loss is the relaxed arrival time of ``tuning_loss`` (with its log-error
 shaping) averaged over domain-randomised runs that ``sample_conditions``
 draws inside the loss and ``sensing.loop.disturbed_run`` runs, the code of
 the Monte Carlo. ``robust_problem`` is it as the trainer's problem;
-``tune_robust`` runs the trainer on it, then random search and CMA-ES
-(``black_box``) for the same wall time on the same cube, and judges all with
-the hard law under the standard conditions. By default the gain schedule and
-the EKF are tuned together (``law = "schedule"``, ``estimator = "ekf"``).
-On another robot than the paper's the loop is tuned within its wheel budget,
-with its speed limiter where it gives acceleration limits (docs/model.md
-§4.2.2), over the horizon of the studies that judge it
-(``robustness.study_horizon``).
+``tune_robust`` runs the trainer on it and, by default (``tuner =
+"hybrid"``), polishes the result with CMA-ES on the hard law (``polish``),
+then runs random search and CMA-ES (``black_box``) for the same time on the
+same cube, and judges all with the hard law under the standard conditions.
+By default the gain schedule and the EKF are tuned together (``law =
+"schedule"``, ``estimator = "ekf"``). On another robot than the paper's
+the loop is tuned within its wheel budget, with its speed limiter where it
+gives acceleration limits (docs/model.md §4.2.2), over the horizon of the
+studies that judge it (``robustness.study_horizon``).
 """
 
 from __future__ import annotations
@@ -54,6 +55,7 @@ from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
 from wmr_jax._src.tuning.problems import FIXED, schedule_problem
 from wmr_jax._src.tuning.search import (
     FAILURE_FACTOR,
+    clock,
     cma_es_proposals,
     evosax_available,
     search_loop,
@@ -66,6 +68,7 @@ __all__ = [
     "RobustLoss",
     "black_box",
     "joint_problem",
+    "polish",
     "robust_loss",
     "robust_problem",
     "robust_score",
@@ -78,6 +81,7 @@ __all__ = [
 # ``wmr-jax robustness`` at its default ``--seed``, so both write the same table.
 EVAL_NOISE_SEED = 0
 
+TUNERS = ("hybrid", "gradient")
 _NOISE_LEVEL_MAX = 2.0  # training noise up to twice the sensor's level
 # The standard pose noise (σ_xy cm, σ_θ degrees): that of the noisy standard conditions.
 _STANDARD_NOISE = next((c[1], c[2]) for c in disturbances.STANDARD_CONDITIONS if c[1])
@@ -107,6 +111,13 @@ class RobustConfig:
         around: ``centred.Centred`` ranges of an identified robot: the
             training draws its runs from them instead of the standard
             conditions (``centred.for_config``); ``None``: the standard ones.
+        tuner: ``"hybrid"`` (default): the gradient iterations, then CMA-ES
+            from their result (``polish``) with the hard law;
+            ``"gradient"``: the gradient iterations alone.
+        polish_share: the polish's share of the hybrid's CPU time
+            (``search.clock``), in (0, 1): it runs for
+            ``share / (1 − share)`` times the iterations' CPU time.
+        polish_std: the polish's CMA-ES step in logits.
     """
 
     problem: ClassVar[str] = "robust"
@@ -132,6 +143,9 @@ class RobustConfig:
     noise_xy: float = 0.5
     noise_theta: float = 1.0
     around: centred.Centred | None = None
+    tuner: str = "hybrid"
+    polish_share: float = 0.5
+    polish_std: float = 0.1
 
     def validate(self) -> RobustConfig:
         """Check every field; return ``self`` (``ValueError`` naming the field)."""
@@ -141,6 +155,12 @@ class RobustConfig:
         check_bool("compare", self.compare)
         check_number("noise_xy", self.noise_xy, closed=True, unit="cm")
         check_number("noise_theta", self.noise_theta, closed=True, unit="degrees")
+        if self.tuner not in TUNERS:
+            raise ValueError(
+                f"tuner = {self.tuner!r} is not allowed; allowed: 'hybrid' or 'gradient'"
+            )
+        check_number("polish_share", self.polish_share, high=1.0)
+        check_number("polish_std", self.polish_std)
         if self.law not in ("fixed", "schedule"):
             raise ValueError(f"law = {self.law!r} is not allowed; allowed: 'fixed' or 'schedule'")
         if self.estimator is not None and self.estimator not in ESTIMATORS:
@@ -175,8 +195,11 @@ def joint_problem(config: RobustConfig) -> JointProblem:
     return JointProblem(problem, box)
 
 
-def _group_grads(z, spec, joint, robot, dt, options):
-    """Per-run ``(loss (N,), gradient (N, dim))`` w.r.t. the logits ``z`` of one batch of runs."""
+_SPEC_AXES = disturbances.Disturbance(0, 0, 0, 0)
+
+
+def _run_loss(joint, robot, dt, options):
+    """``run_loss(z, spec)``: the loss of one run of a batch's ``options``, s."""
     init = jnp.zeros((3,), dt.dtype)
 
     def run_loss(z, spec):
@@ -186,8 +209,27 @@ def _group_grads(z, spec, joint, robot, dt, options):
         )
         return recorded_arrival(poses, spec.ref, dt)
 
-    spec_axes = disturbances.Disturbance(0, 0, 0, 0)
-    return jax.vmap(jax.value_and_grad(run_loss), in_axes=(None, spec_axes))(z, spec)
+    return run_loss
+
+
+def _group_grads(z, spec, joint, robot, dt, options):
+    """Per-run ``(loss (N,), gradient (N, dim))`` w.r.t. the logits ``z`` of one batch of runs."""
+    run_loss = _run_loss(joint, robot, dt, options)
+    return jax.vmap(jax.value_and_grad(run_loss), in_axes=(None, _SPEC_AXES))(z, spec)
+
+
+def robust_loss_value(
+    z, key, refs, nonideal_refs, temperature, robot, dt, steps, joint, accel_limit, noise=None
+):
+    """The mean of ``robust_loss``'s runs without its gradient (traceable), s: its forward pass."""
+    batches = sample_conditions(
+        key, refs, nonideal_refs, steps, temperature, joint, accel_limit, noise
+    )
+    values = [
+        jax.vmap(_run_loss(joint, robot, dt, options), in_axes=(None, _SPEC_AXES))(z, spec)
+        for spec, options in batches
+    ]
+    return jnp.mean(jnp.concatenate(values))
 
 
 def sample_conditions(
@@ -470,6 +512,48 @@ def black_box(method, key, refs, budget_s, robot, dt, joint, noise=None):
     return closed(best_z), count
 
 
+def polish(key, z, refs, budget_s, robot, dt, joint, noise=None, std=0.1):
+    """CMA-ES from the logits ``z`` for ``budget_s`` s of CPU time: ``(ClosedLoop, candidates)``.
+
+    The hybrid tuner's second half: the gradient descends a relaxed
+    surrogate, this searches with the hard law under the standard conditions
+    what the loop is judged by. 8 candidates per generation with step
+    ``std`` in logits, each scored with ``robust_score`` on ``refs``; ``z``
+    is scored first, so the result is never worse than it on ``refs``. The
+    budget is counted with ``search.clock``, ``z``'s own score included.
+    """
+    began = clock()
+    score_key = jax.random.fold_in(key, 7)
+    z = jnp.asarray(z, float_dtype())
+
+    def closed(z):
+        return concrete_loop(joint.from_logits(z, robot))
+
+    def scores(zs: Any) -> jax.Array:
+        with warnings.catch_warnings():
+            # Candidates far outside the useful set warn; their score says it.
+            warnings.simplefilter("ignore")
+            return jnp.asarray(
+                [
+                    robust_score(closed(z), refs, score_key, dt=dt, robot=robot, noise=noise)
+                    for z in zs
+                ],
+                float_dtype(),
+            )
+
+    cma_propose, tell = cma_es_proposals(key, z, 8, std, split=False)
+
+    def propose(generation: int) -> Any:
+        return cma_propose(generation) if clock() - began < budget_s else None
+
+    # The budget is spent when ``propose`` says so: no wall-time limit besides.
+    best_z, _, count = search_loop(
+        propose, scores, math.inf, began=0.0, best=(z, float(scores(z[None])[0])), count=1,
+        tell=tell, at_least_once=False,
+    )  # fmt: skip
+    return closed(best_z), count
+
+
 def tune_robust(
     config: RobustConfig | None = None,
     *,
@@ -488,12 +572,14 @@ def tune_robust(
         state: continue from this ``TrainState`` (from ``progress_fn`` of a run
             of the same ``config`` and ``robot``).
         progress_fn: called with the ``TrainState`` after each iteration.
-        on_tuned: called with ``(ClosedLoop, losses)`` as soon as the
-            iterations end, before the searches and the evaluation.
+        on_tuned: called with ``(ClosedLoop, losses)`` as soon as the loop
+            is tuned (the iterations, and the polish of the hybrid), before
+            the searches and the evaluation.
 
     Returns:
         A ``TuneResult`` of problem ``"robust"``: ``loop`` the tuned
-        ``ClosedLoop``, ``gains`` its params, ``searches``, ``rows`` (the paper's
+        ``ClosedLoop``, ``gains`` its params, ``tune_wall_s`` the time of the
+        iterations and the polish, ``searches``, ``rows`` (the paper's
         feasible gains with raw feedback, the tuned loop and the searches' loops
         under the standard conditions), ``note`` if it scores no better than the
         paper's gains.
@@ -508,16 +594,41 @@ def tune_robust(
     check_callable("on_tuned", on_tuned)
     robot = validate_one_robot(robot, "tuning")
     problem, run = robust_problem(config, robot), trainer.run_text(config, robot)
-    tuned, best, history, state = trainer.fit(problem, run, state, progress_fn)
+    iterates = {0: problem.z0}
+
+    def progress(state: TrainState) -> None:
+        iterates[state.iteration] = state.z  # the polish starts from the kept one
+        if progress_fn is not None:
+            progress_fn(state)
+
+    tuned, best, history, state = trainer.fit(problem, run, state, progress)
     tuned, wall = tuned._replace(robot=robot), state.elapsed_s
+    joint, dt = joint_problem(config), DEFAULT_DT
+    stream = jax.random.fold_in(jax.random.key(config.seed), 11)
+    search_refs = sample_poses(jax.random.fold_in(stream, -1 % 2**31), config.search_poses)
+    hybrid = config.tuner == "hybrid"
+    if hybrid and not evosax_available():
+        warnings.warn(
+            "tuner = 'hybrid' polishes with CMA-ES, which needs evosax: the gradient's result "
+            "is kept unpolished (pip install 'wmr-jax[search]')",
+            stacklevel=2,
+        )
+        hybrid = False
+    if hybrid:
+        # A run resumed after its kept iterate starts the polish from its last.
+        start = iterates.get(best, state.z)
+        share = config.polish_share
+        began = clock()
+        tuned, _ = polish(
+            jax.random.fold_in(jax.random.key(config.seed), 20), start, search_refs,
+            wall * share / (1.0 - share), robot, dt, joint, config.noise, config.polish_std,
+        )  # fmt: skip
+        tuned, wall = tuned._replace(robot=robot), wall + clock() - began
     if on_tuned is not None:
         on_tuned(tuned, list(state.losses))
     sets = {"paper": paper_feasible_gains(robot), "robust-tuned": tuned}
     searches = {}
     if config.compare:
-        joint, dt = joint_problem(config), DEFAULT_DT
-        stream = jax.random.fold_in(jax.random.key(config.seed), 11)
-        search_refs = sample_poses(jax.random.fold_in(stream, -1 % 2**31), config.search_poses)
         for method in ("random search", "cma-es"):
             if method == "cma-es" and not evosax_available():
                 continue
