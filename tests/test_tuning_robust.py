@@ -14,7 +14,7 @@ from wmr_jax.tuning import TuneResult
 
 def small_config(**changes):
     # eval_poses = poses: the held-out draw reuses the training draw's compiled sampler.
-    # The gradient alone: the hybrid's polish has tests of its own below.
+    # The gradient alone (the default): the hybrid's polish has tests of its own below.
     base = dict(
         iters=3, poses=3, nonideal_poses=0, eval_poses=3, compare=False, law="fixed",
         estimator=None, tuner="gradient",
@@ -157,9 +157,8 @@ def test_joint_tuning_moves_the_schedule_and_the_filter_and_saves_them_whole(tmp
     # compiled step serves both.
     config = tuning.RobustConfig(iters=2, poses=2, eval_poses=3, compare=False)
     assert (config.law, config.estimator, config.nonideal_poses) == ("schedule", "ekf", 8)
-    assert config.tuner == "hybrid"
-    # The gradient's own result: the command's test below runs the default's polish.
-    config = dataclasses.replace(config, knots=2, tuner="gradient")
+    assert config.tuner == "gradient"
+    config = dataclasses.replace(config, knots=2)
     result = tuning.tune_robust(config)
     loop = result.loop
     assert loop.controller.name == "shim-sung-schedule"
@@ -200,7 +199,7 @@ def test_the_observer_is_tuned_with_gains_in_range():
         (dict(law="fixd"), "law = 'fixd' is not allowed"),
         (dict(estimator="kalman"), "estimator = 'kalman' is not allowed"),
         (dict(observer_knots=1), "knots = 1"),
-        (dict(tuner="cma-es"), "tuner = 'cma-es' is not allowed; allowed: 'hybrid' or 'gradient'"),
+        (dict(tuner="cma-es"), "tuner = 'cma-es' is not allowed; allowed: 'gradient' or 'hybrid'"),
         (dict(polish_share=1.0), "polish_share = 1.0 is not allowed"),
         (dict(polish_share=0.0), "polish_share = 0.0 is not allowed"),
         (dict(polish_std=-0.1), "polish_std = -0.1 is not allowed"),
@@ -469,7 +468,7 @@ def test_config_refuses_bad_noise(field, value):
 
 
 def test_the_hybrid_polishes_the_kept_iterate_for_its_share_of_the_time(monkeypatch):
-    """The default tuner hands the kept iterate's logits to ``polish`` and returns its loop."""
+    """The hybrid tuner hands the kept iterate's logits to ``polish`` and returns its loop."""
     from wmr_jax._src.tuning import robust
 
     _scores(monkeypatch, [1.0, 2.0, 0.5, 3.0])  # iteration 2 is kept

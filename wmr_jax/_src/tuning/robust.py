@@ -4,10 +4,10 @@ The loss is the relaxed arrival time of ``tuning_loss`` (with its log-error
 shaping) averaged over domain-randomised runs that ``sample_conditions``
 draws inside the loss and ``sensing.loop.disturbed_run`` runs, the code of
 the Monte Carlo. ``robust_problem`` is it as the trainer's problem;
-``tune_robust`` runs the trainer on it and, by default (``tuner =
-"hybrid"``), polishes the result with CMA-ES on the hard law (``polish``),
-then runs random search and CMA-ES (``black_box``) for the same time on the
-same cube, and judges all with the hard law under the standard conditions.
+``tune_robust`` runs the trainer on it (with ``tuner = "hybrid"`` it then
+polishes the result with CMA-ES on the hard law, ``polish``), then random
+search and CMA-ES (``black_box``) for the same time on the same cube, and
+judges all with the hard law under the standard conditions.
 By default the gain schedule and the EKF are tuned together (``law =
 "schedule"``, ``estimator = "ekf"``). On another robot than the paper's
 the loop is tuned within its wheel budget, with its speed limiter where it
@@ -81,7 +81,7 @@ __all__ = [
 # ``wmr-jax robustness`` at its default ``--seed``, so both write the same table.
 EVAL_NOISE_SEED = 0
 
-TUNERS = ("hybrid", "gradient")
+TUNERS = ("gradient", "hybrid")
 _NOISE_LEVEL_MAX = 2.0  # training noise up to twice the sensor's level
 # The standard pose noise (σ_xy cm, σ_θ degrees): that of the noisy standard conditions.
 _STANDARD_NOISE = next((c[1], c[2]) for c in disturbances.STANDARD_CONDITIONS if c[1])
@@ -111,9 +111,9 @@ class RobustConfig:
         around: ``centred.Centred`` ranges of an identified robot: the
             training draws its runs from them instead of the standard
             conditions (``centred.for_config``); ``None``: the standard ones.
-        tuner: ``"hybrid"`` (default): the gradient iterations, then CMA-ES
-            from their result (``polish``) with the hard law;
-            ``"gradient"``: the gradient iterations alone.
+        tuner: ``"gradient"`` (default): the gradient iterations alone;
+            ``"hybrid"``: the iterations, then CMA-ES from their result
+            (``polish``) on the hard-law score (docs/robustness.md).
         polish_share: the polish's share of the hybrid's CPU time
             (``search.clock``), in (0, 1): it runs for
             ``share / (1 − share)`` times the iterations' CPU time.
@@ -143,7 +143,7 @@ class RobustConfig:
     noise_xy: float = 0.5
     noise_theta: float = 1.0
     around: centred.Centred | None = None
-    tuner: str = "hybrid"
+    tuner: str = "gradient"
     polish_share: float = 0.5
     polish_std: float = 0.1
 
@@ -157,7 +157,7 @@ class RobustConfig:
         check_number("noise_theta", self.noise_theta, closed=True, unit="degrees")
         if self.tuner not in TUNERS:
             raise ValueError(
-                f"tuner = {self.tuner!r} is not allowed; allowed: 'hybrid' or 'gradient'"
+                f"tuner = {self.tuner!r} is not allowed; allowed: 'gradient' or 'hybrid'"
             )
         check_number("polish_share", self.polish_share, high=1.0)
         check_number("polish_std", self.polish_std)
