@@ -78,6 +78,7 @@ CASES = (
     "batch_rollout",
     "grad_final_pose_loss",
     "grad_tuning_loss",
+    "grad_robust_loss",
     "disturbed_estimator",
     "c_controller",
     "numpy_batch",
@@ -218,6 +219,7 @@ class _SizeBench:
             ("batch_rollout", lambda: self.alone("batch_rollout", "ideal")),
             ("grad_final_pose_loss", self.final_pose_loss),
             ("grad_tuning_loss", self.tuning_loss),
+            ("grad_robust_loss", self.robust_loss),
             ("disturbed_estimator", self.disturbed),
             ("c_controller", self.c_controller),
         ):
@@ -467,6 +469,64 @@ class _SizeBench:
         beside = ("final_poses_relaxed", relaxed)
         return self.loss_rows(loss, row, "grad_tuning_loss", beside)
 
+    def robust_loss(self) -> list[dict]:
+        """The robust tuner's loss (the schedule and the EKF), its gradient and one jvp.
+
+        ``n`` poses under the standard conditions and ``n // 4`` (at least 1)
+        in the non-ideal group, over ``steps`` periods, at the bench's
+        tuning temperature. The gradient is the trainer's: per run, capped
+        (``robust.RobustLoss``); the jvp is along the logits.
+        """
+        import jax
+        import jax.numpy as jnp
+
+        from wmr_jax._src.model.params import Robot
+        from wmr_jax._src.sim import loops
+        from wmr_jax._src.sim.rollout import DEFAULT_DT
+        from wmr_jax._src.tuning import robust
+
+        robot = Robot() if self.robot is None else self.robot
+        joint = robust.joint_problem(robust.RobustConfig())
+        dtype = self.refs.dtype
+        accel = loops.for_robot(loops.Options(), robot, DEFAULT_DT).accel_limit
+        loss = robust.RobustLoss(self.steps, joint, accel, None)
+        z = jnp.asarray(joint.start_logits(robot), dtype)
+        batch = (jax.random.key(self.config.seed), self.refs, self.refs[: max(self.n // 4, 1)])
+        consts = (robot, jnp.asarray(DEFAULT_DT, dtype))
+        temperature = jnp.asarray(TUNING_TEMPERATURE, dtype)
+
+        def value(z, batch, temperature, consts):
+            return robust.robust_loss_value(
+                z, *batch, temperature, *consts, self.steps, joint, accel
+            )
+
+        def along(z, batch, temperature, consts):
+            return jax.jvp(
+                lambda z: value(z, batch, temperature, consts), (z,), (jnp.ones_like(z),)
+            )
+
+        calls = {
+            name: loops.jit_top_level(f) for name, f in
+            (("forward", value), ("directional", along), ("gradient", loss))
+        }  # fmt: skip
+        group = {
+            name: (lambda f=f: f(z, batch, temperature, consts), True) for name, f in calls.items()
+        }
+        t = self.time(group)
+        forward = t["forward"].run_s
+        runs = {"runs": self.n * len(robust.disturbances.STANDARD_CONDITIONS) + len(batch[2])}
+        return [
+            self.row("robust_loss", t["forward"], **runs),
+            self.row(
+                "jvp_robust_loss",
+                t["directional"],
+                jvp_over_forward=t["directional"].run_s / forward,
+            ),
+            self.row(
+                "grad_robust_loss", t["gradient"], grad_over_forward=t["gradient"].run_s / forward
+            ),
+        ]
+
 
 def _code_bytes(source: Any, build: Any) -> int | None:
     """Bytes of code and constants of ``source`` compiled with the export's flags (``-O2``)."""
@@ -522,6 +582,8 @@ def _ratios(rows: list[dict]) -> dict[str, Any]:
             ("grad_tuning_loss", "grad_over_forward", "grad_tuning_loss_over_forward"),
             ("jvp_final_pose_loss", "jvp_over_forward", "jvp_final_pose_loss_over_forward"),
             ("jvp_tuning_loss", "jvp_over_forward", "jvp_tuning_loss_over_forward"),
+            ("grad_robust_loss", "grad_over_forward", "grad_robust_loss_over_forward"),
+            ("jvp_robust_loss", "jvp_over_forward", "jvp_robust_loss_over_forward"),
             ("disturbed_observer", "over_raw", "disturbed_observer_over_raw"),
             ("disturbed_ekf", "over_raw", "disturbed_ekf_over_raw"),
         ):
