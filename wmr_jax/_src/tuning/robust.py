@@ -5,7 +5,7 @@ shaping) averaged over domain-randomised runs that ``sample_conditions``
 draws inside the loss and ``sensing.loop.disturbed_run`` runs, the code of
 the Monte Carlo. ``robust_problem`` is it as the trainer's problem;
 ``tune_robust`` runs the trainer on it (with ``tuner = "hybrid"`` it then
-polishes the result with CMA-ES on the hard law, ``polish``), then random
+polishes the result with CMA-ES on the hard law, ``hybrid.polish``), then random
 search and CMA-ES (``black_box``) for the same time on the same cube, and
 judges all with the hard law under the standard conditions.
 By default the gain schedule and the EKF are tuned together (``law =
@@ -68,7 +68,6 @@ __all__ = [
     "RobustLoss",
     "black_box",
     "joint_problem",
-    "polish",
     "robust_loss",
     "robust_problem",
     "robust_score",
@@ -113,7 +112,7 @@ class RobustConfig:
             conditions (``centred.for_config``); ``None``: the standard ones.
         tuner: ``"gradient"`` (default): the gradient iterations alone;
             ``"hybrid"``: the iterations, then CMA-ES from their result
-            (``polish``) on the hard-law score (docs/robustness.md).
+            (``hybrid.polish``) on the hard-law score (docs/robustness.md).
         polish_share: the polish's share of the hybrid's CPU time
             (``search.clock``), in (0, 1): it runs for
             ``share / (1 − share)`` times the iterations' CPU time.
@@ -161,6 +160,11 @@ class RobustConfig:
             )
         check_number("polish_share", self.polish_share, high=1.0)
         check_number("polish_std", self.polish_std)
+        if self.tuner == "hybrid" and not evosax_available():
+            raise ValueError(
+                "tuner = 'hybrid' polishes with CMA-ES, which needs evosax; allowed: "
+                "pip install 'wmr-jax[search]', or tuner = 'gradient'"
+            )
         if self.law not in ("fixed", "schedule"):
             raise ValueError(f"law = {self.law!r} is not allowed; allowed: 'fixed' or 'schedule'")
         if self.estimator is not None and self.estimator not in ESTIMATORS:
@@ -195,41 +199,33 @@ def joint_problem(config: RobustConfig) -> JointProblem:
     return JointProblem(problem, box)
 
 
-_SPEC_AXES = disturbances.Disturbance(0, 0, 0, 0)
+def _runs(gradient, z, key, refs, nonideal_refs, temperature, robot, dt, steps, joint, *rest):
+    """Per-run losses ``(N,)`` of ``sample_conditions``' draw; with ``gradient``, and ``(N, dim)``.
 
-
-def _run_loss(joint, robot, dt, options):
-    """``run_loss(z, spec)``: the loss of one run of a batch's ``options``, s."""
+    ``*rest``: ``accel_limit`` and ``noise`` of ``sample_conditions``.
+    """
     init = jnp.zeros((3,), dt.dtype)
+    parts = []
+    for spec, options in sample_conditions(
+        key, refs, nonideal_refs, steps, temperature, joint, *rest
+    ):  # fmt: skip
 
-    def run_loss(z, spec):
-        closed = joint.from_logits(z, robot)
-        _, _, (poses, _, _) = loop.disturbed_run(
-            spec, closed.params, init, robot, dt, options, estimate=closed.estimator, record=True
-        )
-        return recorded_arrival(poses, spec.ref, dt)
+        def run_loss(z, spec, options=options):
+            closed = joint.from_logits(z, robot)
+            _, _, (poses, _, _) = loop.disturbed_run(
+                spec, closed.params, init, robot, dt, options, estimate=closed.estimator,
+                record=True,
+            )  # fmt: skip
+            return recorded_arrival(poses, spec.ref, dt)
 
-    return run_loss
-
-
-def _group_grads(z, spec, joint, robot, dt, options):
-    """Per-run ``(loss (N,), gradient (N, dim))`` w.r.t. the logits ``z`` of one batch of runs."""
-    run_loss = _run_loss(joint, robot, dt, options)
-    return jax.vmap(jax.value_and_grad(run_loss), in_axes=(None, _SPEC_AXES))(z, spec)
+        run = jax.value_and_grad(run_loss) if gradient else run_loss
+        parts.append(jax.vmap(run, in_axes=(None, disturbances.Disturbance(0, 0, 0, 0)))(z, spec))
+    return jax.tree.map(lambda *leaves: jnp.concatenate(leaves), *parts)
 
 
-def robust_loss_value(
-    z, key, refs, nonideal_refs, temperature, robot, dt, steps, joint, accel_limit, noise=None
-):
-    """The mean of ``robust_loss``'s runs without its gradient (traceable), s: its forward pass."""
-    batches = sample_conditions(
-        key, refs, nonideal_refs, steps, temperature, joint, accel_limit, noise
-    )
-    values = [
-        jax.vmap(_run_loss(joint, robot, dt, options), in_axes=(None, _SPEC_AXES))(z, spec)
-        for spec, options in batches
-    ]
-    return jnp.mean(jnp.concatenate(values))
+def robust_loss_value(*args):
+    """``robust_loss(*args)``'s mean without its gradient, s (``joint``, ``accel_limit`` given)."""
+    return jnp.mean(_runs(False, *args))
 
 
 def sample_conditions(
@@ -327,15 +323,10 @@ def robust_loss(
     joint = JointProblem(FIXED, None) if joint is None else joint
     if accel_limit is None:
         accel_limit = _accel_limit(robot, dt)
-    values, grads = [], []
-    batches = sample_conditions(
-        key, refs, nonideal_refs, steps, temperature, joint, accel_limit, noise
-    )
-    for spec, options in batches:
-        value, grad = _group_grads(z, spec, joint, robot, dt, options)
-        values.append(value)
-        grads.append(grad)
-    values, grads = jnp.concatenate(values), jnp.concatenate(grads)
+    values, grads = _runs(
+        True, z, key, refs, nonideal_refs, temperature, robot, dt, steps, joint, accel_limit,
+        noise,
+    )  # fmt: skip
     loss, grad, _, _ = capped_mean(values, grads)
     return loss, grad / values.shape[0]
 
@@ -512,48 +503,6 @@ def black_box(method, key, refs, budget_s, robot, dt, joint, noise=None):
     return closed(best_z), count
 
 
-def polish(key, z, refs, budget_s, robot, dt, joint, noise=None, std=0.1):
-    """CMA-ES from the logits ``z`` for ``budget_s`` s of CPU time: ``(ClosedLoop, candidates)``.
-
-    The hybrid tuner's second half: the gradient descends a relaxed
-    surrogate, this searches with the hard law under the standard conditions
-    what the loop is judged by. 8 candidates per generation with step
-    ``std`` in logits, each scored with ``robust_score`` on ``refs``; ``z``
-    is scored first, so the result is never worse than it on ``refs``. The
-    budget is counted with ``search.clock``, ``z``'s own score included.
-    """
-    began = clock()
-    score_key = jax.random.fold_in(key, 7)
-    z = jnp.asarray(z, float_dtype())
-
-    def closed(z):
-        return concrete_loop(joint.from_logits(z, robot))
-
-    def scores(zs: Any) -> jax.Array:
-        with warnings.catch_warnings():
-            # Candidates far outside the useful set warn; their score says it.
-            warnings.simplefilter("ignore")
-            return jnp.asarray(
-                [
-                    robust_score(closed(z), refs, score_key, dt=dt, robot=robot, noise=noise)
-                    for z in zs
-                ],
-                float_dtype(),
-            )
-
-    cma_propose, tell = cma_es_proposals(key, z, 8, std, split=False)
-
-    def propose(generation: int) -> Any:
-        return cma_propose(generation) if clock() - began < budget_s else None
-
-    # The budget is spent when ``propose`` says so: no wall-time limit besides.
-    best_z, _, count = search_loop(
-        propose, scores, math.inf, began=0.0, best=(z, float(scores(z[None])[0])), count=1,
-        tell=tell, at_least_once=False,
-    )  # fmt: skip
-    return closed(best_z), count
-
-
 def tune_robust(
     config: RobustConfig | None = None,
     *,
@@ -606,20 +555,12 @@ def tune_robust(
     joint, dt = joint_problem(config), DEFAULT_DT
     stream = jax.random.fold_in(jax.random.key(config.seed), 11)
     search_refs = sample_poses(jax.random.fold_in(stream, -1 % 2**31), config.search_poses)
-    hybrid = config.tuner == "hybrid"
-    if hybrid and not evosax_available():
-        warnings.warn(
-            "tuner = 'hybrid' polishes with CMA-ES, which needs evosax: the gradient's result "
-            "is kept unpolished (pip install 'wmr-jax[search]')",
-            stacklevel=2,
-        )
-        hybrid = False
-    if hybrid:
+    if config.tuner == "hybrid":
+        from wmr_jax._src.tuning import hybrid
+
         # A run resumed after its kept iterate starts the polish from its last.
-        start = iterates.get(best, state.z)
-        share = config.polish_share
-        began = clock()
-        tuned, _ = polish(
+        start, share, began = iterates.get(best, state.z), config.polish_share, clock()
+        tuned, _ = hybrid.polish(
             jax.random.fold_in(jax.random.key(config.seed), 20), start, search_refs,
             wall * share / (1.0 - share), robot, dt, joint, config.noise, config.polish_std,
         )  # fmt: skip
