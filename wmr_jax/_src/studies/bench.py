@@ -473,9 +473,8 @@ class _SizeBench:
         """The robust tuner's loss (the schedule and the EKF), its gradient and one jvp.
 
         ``n`` poses under the standard conditions and ``n // 4`` (at least 1)
-        in the non-ideal group, over ``steps`` periods, at the bench's
-        tuning temperature. The gradient is the trainer's: per run, capped
-        (``robust.RobustLoss``); the jvp is along the logits.
+        non-ideal, over ``steps`` periods at the tuning temperature; the
+        gradient is the trainer's (``robust.RobustLoss``), the jvp along the logits.
         """
         import jax
         import jax.numpy as jnp
@@ -486,45 +485,36 @@ class _SizeBench:
         from wmr_jax._src.tuning import robust
 
         robot = Robot() if self.robot is None else self.robot
-        joint = robust.joint_problem(robust.RobustConfig())
-        dtype = self.refs.dtype
+        joint, dtype = robust.joint_problem(robust.RobustConfig()), self.refs.dtype
         accel = loops.for_robot(loops.Options(), robot, DEFAULT_DT).accel_limit
         loss = robust.RobustLoss(self.steps, joint, accel, None)
         z = jnp.asarray(joint.start_logits(robot), dtype)
         batch = (jax.random.key(self.config.seed), self.refs, self.refs[: max(self.n // 4, 1)])
-        consts = (robot, jnp.asarray(DEFAULT_DT, dtype))
-        temperature = jnp.asarray(TUNING_TEMPERATURE, dtype)
+        temperature, consts = TUNING_TEMPERATURE, (robot, jnp.asarray(DEFAULT_DT, dtype))
+        args = (batch, jnp.asarray(temperature, dtype), consts)
 
-        def value(z, batch, temperature, consts):
+        def forward(z, args):
+            (key, refs, nonideal), temperature, (robot, dt) = args
+            steps = self.steps
             return robust.robust_loss_value(
-                z, *batch, temperature, *consts, self.steps, joint, accel
+                z, key, refs, nonideal, temperature, robot, dt, steps, joint, accel
             )
 
-        def along(z, batch, temperature, consts):
-            return jax.jvp(
-                lambda z: value(z, batch, temperature, consts), (z,), (jnp.ones_like(z),)
-            )
+        def directional(z, args):
+            return jax.jvp(lambda z: forward(z, args), (z,), (jnp.ones_like(z),))
 
-        calls = {
-            name: loops.jit_top_level(f) for name, f in
-            (("forward", value), ("directional", along), ("gradient", loss))
-        }  # fmt: skip
-        group = {
-            name: (lambda f=f: f(z, batch, temperature, consts), True) for name, f in calls.items()
-        }
+        calls = {"forward": forward, "directional": directional}
+        jitted = {name: loops.jit_top_level(f) for name, f in calls.items()}
+        jitted["gradient"] = loops.jit_top_level(loss)
+        group = {name: (lambda f=f: f(z, args), True) for name, f in jitted.items()}
+        group["gradient"] = (lambda: jitted["gradient"](z, *args), True)
         t = self.time(group)
-        forward = t["forward"].run_s
-        runs = {"runs": self.n * len(robust.disturbances.STANDARD_CONDITIONS) + len(batch[2])}
+        over = {name: t[name].run_s / t["forward"].run_s for name in group}
+        runs = self.n * len(robust.disturbances.STANDARD_CONDITIONS) + len(batch[2])
         return [
-            self.row("robust_loss", t["forward"], **runs),
-            self.row(
-                "jvp_robust_loss",
-                t["directional"],
-                jvp_over_forward=t["directional"].run_s / forward,
-            ),
-            self.row(
-                "grad_robust_loss", t["gradient"], grad_over_forward=t["gradient"].run_s / forward
-            ),
+            self.row("robust_loss", t["forward"], runs=runs),
+            self.row("jvp_robust_loss", t["directional"], jvp_over_forward=over["directional"]),
+            self.row("grad_robust_loss", t["gradient"], grad_over_forward=over["gradient"]),
         ]
 
 
