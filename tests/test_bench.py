@@ -92,6 +92,22 @@ def test_both_losses_and_their_gradients_are_timed():
     assert "one forward-mode derivative / forward (tuning loss)" in table
 
 
+def test_the_robust_loss_is_timed_with_its_gradient_and_one_jvp():
+    """The robust tuner's loss, the trainer's gradient of it and a jvp, with their ratios."""
+    config = w.studies.BenchConfig(
+        sizes=(2,), steps=4, repeats=1, dtype="float64", cases=("grad_robust_loss",)
+    )
+    result = w.studies.run_benchmark(config)
+    rows = result["rows"]
+    assert [row["case"] for row in rows] == ["robust_loss", "jvp_robust_loss", "grad_robust_loss"]
+    assert rows[0]["runs"] == 2 * 4 + 1  # four standard conditions, one non-ideal run
+    assert all(row["run_s"] > 0 for row in rows)
+    ratios = result["ratios"]["N=2"]
+    assert ratios["grad_robust_loss_over_forward"] > 0
+    assert ratios["jvp_robust_loss_over_forward"] > 0
+    assert "grad / forward (robust loss)" in w.report.bench_table(result)
+
+
 @pytest.mark.parametrize(
     ("config", "message"),
     [

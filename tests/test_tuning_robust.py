@@ -14,9 +14,10 @@ from wmr_jax.tuning import TuneResult
 
 def small_config(**changes):
     # eval_poses = poses: the held-out draw reuses the training draw's compiled sampler.
+    # The gradient alone (the default): the hybrid's polish has tests of its own below.
     base = dict(
         iters=3, poses=3, nonideal_poses=0, eval_poses=3, compare=False, law="fixed",
-        estimator=None,
+        estimator=None, tuner="gradient",
     )  # fmt: skip
     return tuning.RobustConfig(**{**base, **changes})
 
@@ -156,6 +157,7 @@ def test_joint_tuning_moves_the_schedule_and_the_filter_and_saves_them_whole(tmp
     # compiled step serves both.
     config = tuning.RobustConfig(iters=2, poses=2, eval_poses=3, compare=False)
     assert (config.law, config.estimator, config.nonideal_poses) == ("schedule", "ekf", 8)
+    assert config.tuner == "gradient"
     config = dataclasses.replace(config, knots=2)
     result = tuning.tune_robust(config)
     loop = result.loop
@@ -197,6 +199,10 @@ def test_the_observer_is_tuned_with_gains_in_range():
         (dict(law="fixd"), "law = 'fixd' is not allowed"),
         (dict(estimator="kalman"), "estimator = 'kalman' is not allowed"),
         (dict(observer_knots=1), "knots = 1"),
+        (dict(tuner="cma-es"), "tuner = 'cma-es' is not allowed; allowed: 'gradient' or 'hybrid'"),
+        (dict(polish_share=1.0), "polish_share = 1.0 is not allowed"),
+        (dict(polish_share=0.0), "polish_share = 0.0 is not allowed"),
+        (dict(polish_std=-0.1), "polish_std = -0.1 is not allowed"),
     ],
 )
 def test_config_refuses_unknown_problems_and_estimators(changes, message):
@@ -460,3 +466,62 @@ def test_noise_flags_refuse_bad_values_in_one_line(tmp_path, capsys, flag, value
 def test_config_refuses_bad_noise(field, value):
     with pytest.raises(ValueError, match=f"{field} = .* is not allowed; allowed: a number >= 0"):
         tuning.RobustConfig(**{field: value}).validate()
+
+
+def test_the_hybrid_polishes_the_kept_iterate_for_its_share_of_the_time(monkeypatch):
+    """The hybrid tuner hands the kept iterate's logits to ``polish`` and returns its loop."""
+    from wmr_jax._src.tuning import hybrid, robust
+
+    _scores(monkeypatch, [1.0, 2.0, 0.5, 3.0])  # iteration 2 is kept
+    calls, logits = [], {}
+    polished = robust.concrete_loop(
+        robust.joint_problem(small_config()).from_logits(np.zeros(7, np.float32), w.Robot())
+    )
+
+    def fake_polish(key, z, refs, budget_s, robot, dt, joint, noise, std):
+        calls.append((np.asarray(z), budget_s, refs.shape, noise, std))
+        return polished, 9
+
+    monkeypatch.setattr(hybrid, "polish", fake_polish)
+    config = small_config(validate_every=1, tuner="hybrid", polish_share=0.25, polish_std=0.3)
+    result = tuning.tune_robust(
+        config, progress_fn=lambda state: logits.setdefault(state.iteration, state.z)
+    )
+    assert result.best_iteration == 2 and len(calls) == 1
+    z, budget, shape, noise, std = calls[0]
+    np.testing.assert_array_equal(z, np.asarray(logits[2]))
+    # A quarter of the hybrid's time: a third of the iterations' (this polish takes none).
+    assert 0 < budget == pytest.approx(result.tune_wall_s / 3, rel=0.05)
+    assert shape == (config.search_poses, 3) and noise == config.noise and std == 0.3
+    assert result.loop.params == polished.params and result.gains == polished.params
+
+
+def test_polish_keeps_its_start_without_budget_and_improves_on_it_with_one(monkeypatch):
+    """CMA-ES from the start's logits: scored first, then better candidates kept."""
+    import jax
+
+    from wmr_jax._src.tuning import hybrid, robust
+
+    robot = w.Robot()
+    joint = robust.joint_problem(small_config())
+    target = np.asarray(
+        jax.tree.leaves(joint.from_logits(np.full(7, 0.3, np.float32), robot).params)
+    )
+
+    def distance(loop, *args, **kwargs):  # a bowl in the gains, least at the target
+        gains = np.asarray(jax.tree.leaves(loop.params), dtype=float)
+        return float(np.sum(((gains - target) / target) ** 2))
+
+    def population(loops, *args, **kwargs):
+        return np.asarray([distance(loop) for loop in loops])
+
+    monkeypatch.setattr(hybrid, "robust_population_scores", population)
+    start = np.zeros(7, np.float32)
+    refs, key = w.sample_poses(0, 2), jax.random.key(0)
+    kept, count = hybrid.polish(key, start, refs, 0.0, robot, 0.033, joint)
+    first = robust.concrete_loop(joint.from_logits(start, robot)).params
+    assert count == 1
+    np.testing.assert_allclose(jax.tree.leaves(kept.params), jax.tree.leaves(first), rtol=1e-6)
+    better, count = hybrid.polish(key, start, refs, 2.0, robot, 0.033, joint, std=0.2)
+    assert count > 1 and (count - 1) % 8 == 0
+    assert distance(better) < 0.5 * distance(kept)

@@ -15,6 +15,8 @@ _RATIO_COLUMNS = {
     "grad_final_pose_loss_over_forward": "grad / forward (final-pose loss)",
     "grad_tuning_loss_over_forward": "grad / forward (tuning loss)",
     "jvp_tuning_loss_over_forward": "one forward-mode derivative / forward (tuning loss)",
+    "grad_robust_loss_over_forward": "grad / forward (robust loss)",
+    "jvp_robust_loss_over_forward": "one forward-mode derivative / forward (robust loss)",
     "tuning_loss_over_final_poses": "tuning loss / final_poses (time per robot-step)",
     "nonideal_over_ideal": "non-ideal / ideal final_poses (time per robot-step)",
     "relaxed_over_final_poses": "relaxed / hard-law final_poses (time per robot-step)",

@@ -70,6 +70,7 @@ CASES = (
     "batch_rollout",
     "grad_final_pose_loss",
     "grad_tuning_loss",
+    "grad_robust_loss",
     "disturbed_estimator",
     "c_controller",
     "numpy_batch",
@@ -208,6 +209,7 @@ class _SizeBench:
             ("batch_rollout", lambda: self.alone("batch_rollout", "ideal")),
             ("grad_final_pose_loss", self.final_pose_loss),
             ("grad_tuning_loss", self.tuning_loss),
+            ("grad_robust_loss", self.robust_loss),
             ("disturbed_estimator", self.disturbed),
             ("c_controller", self.c_controller),
         ):
@@ -454,6 +456,54 @@ class _SizeBench:
         # what the loss adds to the law it differentiates.
         beside = ("final_poses_relaxed", relaxed)
         return self.loss_rows(loss, row, "grad_tuning_loss", beside)
+
+    def robust_loss(self) -> list[dict]:
+        """The robust tuner's loss (the schedule and the EKF), its gradient and one jvp.
+
+        ``n`` poses under the standard conditions and ``n // 4`` (at least 1)
+        non-ideal, over ``steps`` periods at the tuning temperature; the
+        gradient is the trainer's (``robust.RobustLoss``), the jvp along the logits.
+        """
+        import jax
+        import jax.numpy as jnp
+
+        from wmr_jax._src.model.params import Robot
+        from wmr_jax._src.sim import loops
+        from wmr_jax._src.sim.rollout import DEFAULT_DT
+        from wmr_jax._src.tuning import robust
+
+        robot = Robot() if self.robot is None else self.robot
+        joint, dtype = robust.joint_problem(robust.RobustConfig()), self.refs.dtype
+        accel = loops.for_robot(loops.Options(), robot, DEFAULT_DT).accel_limit
+        loss = robust.RobustLoss(self.steps, joint, accel, None)
+        z = jnp.asarray(joint.start_logits(robot), dtype)
+        batch = (jax.random.key(self.config.seed), self.refs, self.refs[: max(self.n // 4, 1)])
+        temperature, consts = TUNING_TEMPERATURE, (robot, jnp.asarray(DEFAULT_DT, dtype))
+        args = (batch, jnp.asarray(temperature, dtype), consts)
+
+        def forward(z, args):
+            (key, refs, nonideal), temperature, (robot, dt) = args
+            steps = self.steps
+            return robust.robust_loss_value(
+                z, key, refs, nonideal, temperature, robot, dt, steps, joint, accel
+            )
+
+        def directional(z, args):
+            return jax.jvp(lambda z: forward(z, args), (z,), (jnp.ones_like(z),))
+
+        calls = {"forward": forward, "directional": directional}
+        jitted = {name: loops.jit_top_level(f) for name, f in calls.items()}
+        jitted["gradient"] = loops.jit_top_level(loss)
+        group = {name: (lambda f=f: f(z, args), True) for name, f in jitted.items()}
+        group["gradient"] = (lambda: jitted["gradient"](z, *args), True)
+        t = self.time(group)
+        over = {name: t[name].run_s / t["forward"].run_s for name in group}
+        runs = self.n * len(robust.disturbances.STANDARD_CONDITIONS) + len(batch[2])
+        return [
+            self.row("robust_loss", t["forward"], runs=runs),
+            self.row("jvp_robust_loss", t["directional"], jvp_over_forward=over["directional"]),
+            self.row("grad_robust_loss", t["gradient"], grad_over_forward=over["gradient"]),
+        ]
 
 
 def code_bytes(source: Any, build: Any) -> int | None:

@@ -4,14 +4,15 @@ The loss is the relaxed arrival time of ``tuning_loss`` (with its log-error
 shaping) averaged over domain-randomised runs that ``sample_conditions``
 draws inside the loss and ``sensing.loop.disturbed_run`` runs, the code of
 the Monte Carlo. ``robust_problem`` is it as the trainer's problem;
-``tune_robust`` runs the trainer on it, then random search and CMA-ES
-(``black_box``) for the same wall time on the same cube, and judges all with
-the hard law under the standard conditions. By default the gain schedule and
-the EKF are tuned together (``law = "schedule"``, ``estimator = "ekf"``).
-On another robot than the paper's the loop is tuned within its wheel budget,
-with its speed limiter where it gives acceleration limits (docs/model.md
-§4.2.2), over the horizon of the studies that judge it
-(``robustness.study_horizon``).
+``tune_robust`` runs the trainer on it (with ``tuner = "hybrid"`` it then
+polishes the result with CMA-ES on the hard law, ``hybrid.polish``), then random
+search and CMA-ES (``black_box``) for the same time on the same cube, and
+judges all with the hard law under the standard conditions.
+By default the gain schedule and the EKF are tuned together (``law =
+"schedule"``, ``estimator = "ekf"``). On another robot than the paper's
+the loop is tuned within its wheel budget, with its speed limiter where it
+gives acceleration limits (docs/model.md §4.2.2), over the horizon of the
+studies that judge it (``robustness.study_horizon``).
 """
 
 from __future__ import annotations
@@ -80,6 +81,7 @@ __all__ = [
 # ``wmr-jax robustness`` at its default ``--seed``, so both write the same table.
 EVAL_NOISE_SEED = 0
 
+TUNERS = ("gradient", "hybrid")
 _NOISE_LEVEL_MAX = 2.0  # training noise up to twice the sensor's level
 # The standard pose noise (σ_xy cm, σ_θ degrees): that of the noisy standard conditions.
 _STANDARD_NOISE = next((c[1], c[2]) for c in disturbances.STANDARD_CONDITIONS if c[1])
@@ -109,6 +111,13 @@ class RobustConfig:
         around: ``centred.Centred`` ranges of an identified robot: the
             training draws its runs from them instead of the standard
             conditions (``centred.for_config``); ``None``: the standard ones.
+        tuner: ``"gradient"`` (default): the gradient iterations alone;
+            ``"hybrid"``: the iterations, then CMA-ES from their result
+            (``hybrid.polish``) on the hard-law score (docs/robustness.md).
+        polish_share: the polish's share of the hybrid's CPU time
+            (``search.clock``), in (0, 1): it runs for
+            ``share / (1 − share)`` times the iterations' CPU time.
+        polish_std: the polish's CMA-ES step in logits.
     """
 
     problem: ClassVar[str] = "robust"
@@ -134,6 +143,9 @@ class RobustConfig:
     noise_xy: float = 0.5
     noise_theta: float = 1.0
     around: centred.Centred | None = None
+    tuner: str = "gradient"
+    polish_share: float = 0.5
+    polish_std: float = 0.1
 
     def validate(self) -> RobustConfig:
         """Check every field; return ``self`` (``ValueError`` naming the field)."""
@@ -143,6 +155,17 @@ class RobustConfig:
         check_bool("compare", self.compare)
         check_number("noise_xy", self.noise_xy, closed=True, unit="cm")
         check_number("noise_theta", self.noise_theta, closed=True, unit="degrees")
+        if self.tuner not in TUNERS:
+            raise ValueError(
+                f"tuner = {self.tuner!r} is not allowed; allowed: 'gradient' or 'hybrid'"
+            )
+        check_number("polish_share", self.polish_share, high=1.0)
+        check_number("polish_std", self.polish_std)
+        if self.tuner == "hybrid" and not evosax_available():
+            raise ValueError(
+                "tuner = 'hybrid' polishes with CMA-ES, which needs evosax; allowed: "
+                "pip install 'wmr-jax[search]', or tuner = 'gradient'"
+            )
         if self.law not in ("fixed", "schedule"):
             raise ValueError(f"law = {self.law!r} is not allowed; allowed: 'fixed' or 'schedule'")
         if self.estimator is not None and self.estimator not in ESTIMATORS:
@@ -177,19 +200,33 @@ def joint_problem(config: RobustConfig) -> JointProblem:
     return JointProblem(problem, box)
 
 
-def _group_grads(z, spec, joint, robot, dt, options):
-    """Per-run ``(loss (N,), gradient (N, dim))`` w.r.t. the logits ``z`` of one batch of runs."""
+def _runs(gradient, z, key, refs, nonideal_refs, temperature, robot, dt, steps, joint, *rest):
+    """Per-run losses ``(N,)`` of ``sample_conditions``' draw; with ``gradient``, and ``(N, dim)``.
+
+    ``*rest``: ``accel_limit`` and ``noise`` of ``sample_conditions``.
+    """
     init = jnp.zeros((3,), dt.dtype)
+    parts = []
+    for spec, options in sample_conditions(
+        key, refs, nonideal_refs, steps, temperature, joint, *rest
+    ):  # fmt: skip
 
-    def run_loss(z, spec):
-        closed = joint.from_logits(z, robot)
-        _, _, (poses, _, _) = loop.disturbed_run(
-            spec, closed.params, init, robot, dt, options, estimate=closed.estimator, record=True
-        )
-        return recorded_arrival(poses, spec.ref, dt)
+        def run_loss(z, spec, options=options):
+            closed = joint.from_logits(z, robot)
+            _, _, (poses, _, _) = loop.disturbed_run(
+                spec, closed.params, init, robot, dt, options, estimate=closed.estimator,
+                record=True,
+            )  # fmt: skip
+            return recorded_arrival(poses, spec.ref, dt)
 
-    spec_axes = disturbances.Disturbance(0, 0, 0, 0)
-    return jax.vmap(jax.value_and_grad(run_loss), in_axes=(None, spec_axes))(z, spec)
+        run = jax.value_and_grad(run_loss) if gradient else run_loss
+        parts.append(jax.vmap(run, in_axes=(None, disturbances.Disturbance(0, 0, 0, 0)))(z, spec))
+    return jax.tree.map(lambda *leaves: jnp.concatenate(leaves), *parts)
+
+
+def robust_loss_value(*args):
+    """``robust_loss(*args)``'s mean without its gradient, s (``joint``, ``accel_limit`` given)."""
+    return jnp.mean(_runs(False, *args))
 
 
 def sample_conditions(
@@ -287,15 +324,10 @@ def robust_loss(
     joint = JointProblem(FIXED, None) if joint is None else joint
     if accel_limit is None:
         accel_limit = _accel_limit(robot, dt)
-    values, grads = [], []
-    batches = sample_conditions(
-        key, refs, nonideal_refs, steps, temperature, joint, accel_limit, noise
-    )
-    for spec, options in batches:
-        value, grad = _group_grads(z, spec, joint, robot, dt, options)
-        values.append(value)
-        grads.append(grad)
-    values, grads = jnp.concatenate(values), jnp.concatenate(grads)
+    values, grads = _runs(
+        True, z, key, refs, nonideal_refs, temperature, robot, dt, steps, joint, accel_limit,
+        noise,
+    )  # fmt: skip
     loss, grad, _, _ = capped_mean(values, grads)
     return loss, grad / values.shape[0]
 
@@ -493,12 +525,14 @@ def tune_robust(
         state: continue from this ``TrainState`` (from ``progress_fn`` of a run
             of the same ``config`` and ``robot``).
         progress_fn: called with the ``TrainState`` after each iteration.
-        on_tuned: called with ``(ClosedLoop, losses)`` as soon as the
-            iterations end, before the searches and the evaluation.
+        on_tuned: called with ``(ClosedLoop, losses)`` as soon as the loop
+            is tuned (the iterations, and the polish of the hybrid), before
+            the searches and the evaluation.
 
     Returns:
         A ``TuneResult`` of problem ``"robust"``: ``loop`` the tuned
-        ``ClosedLoop``, ``gains`` its params, ``searches``, ``rows`` (the paper's
+        ``ClosedLoop``, ``gains`` its params, ``tune_wall_s`` the time of the
+        iterations and the polish, ``searches``, ``rows`` (the paper's
         feasible gains with raw feedback, the tuned loop and the searches' loops
         under the standard conditions), ``note`` if it scores no better than the
         paper's gains.
@@ -513,16 +547,33 @@ def tune_robust(
     check_callable("on_tuned", on_tuned)
     robot = validate_one_robot(robot, "tuning")
     problem, run = robust_problem(config, robot), trainer.run_text(config, robot)
-    tuned, best, history, state = trainer.fit(problem, run, state, progress_fn)
+    iterates = {0: problem.z0}
+
+    def progress(state: TrainState) -> None:
+        iterates[state.iteration] = state.z  # the polish starts from the kept one
+        if progress_fn is not None:
+            progress_fn(state)
+
+    tuned, best, history, state = trainer.fit(problem, run, state, progress)
     tuned, wall = tuned._replace(robot=robot), state.elapsed_s
+    joint, dt = joint_problem(config), DEFAULT_DT
+    stream = jax.random.fold_in(jax.random.key(config.seed), 11)
+    search_refs = sample_poses(jax.random.fold_in(stream, -1 % 2**31), config.search_poses)
+    if config.tuner == "hybrid":
+        from wmr_jax._src.tuning import hybrid
+
+        # A run resumed after its kept iterate starts the polish from its last.
+        start, share, began = iterates.get(best, state.z), config.polish_share, clock()
+        tuned, _ = hybrid.polish(
+            jax.random.fold_in(jax.random.key(config.seed), 20), start, search_refs,
+            wall * share / (1.0 - share), robot, dt, joint, config.noise, config.polish_std,
+        )  # fmt: skip
+        tuned, wall = tuned._replace(robot=robot), wall + clock() - began
     if on_tuned is not None:
         on_tuned(tuned, list(state.losses))
     sets = {"paper": paper_feasible_gains(robot), "robust-tuned": tuned}
     searches = {}
     if config.compare:
-        joint, dt = joint_problem(config), DEFAULT_DT
-        stream = jax.random.fold_in(jax.random.key(config.seed), 11)
-        search_refs = sample_poses(jax.random.fold_in(stream, -1 % 2**31), config.search_poses)
         for method in ("random search", "cma-es"):
             if method == "cma-es" and not evosax_available():
                 continue
