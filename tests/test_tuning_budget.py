@@ -118,7 +118,7 @@ def test_the_trainer_counts_its_time_on_the_cpu_clock(monkeypatch, wall_races):
         warnings.simplefilter("ignore")
         result = tuning.train(config)
     # The start's score and each of the 2 iterations: one span of 10 s each.
-    assert result.tune_wall_s == pytest.approx(30.0)
+    assert result.tune_cpu_s == pytest.approx(30.0)
 
 
 def test_batched_robust_scores_are_each_candidates_robust_score():
@@ -195,20 +195,3 @@ def test_a_robust_comparison_of_the_wall_time_format_is_not_resumed(tmp_path, mo
     path.write_text(json.dumps(saved))
     with pytest.raises(ValueError, match=r"holds another comparison \(other format\)"):
         robust_run.run_comparison(tmp_path, config, resume=True, progress=None)
-
-
-def test_robust_searches_spend_at_least_the_gradients_cpu_time():
-    """A real run with raw feedback: each search scores whole generations until its budget."""
-    pytest.importorskip("evosax")
-    config = tuning.RobustConfig(
-        iters=1, poses=2, nonideal_poses=0, eval_poses=2, search_poses=2, validation_poses=2,
-        law="fixed", estimator=None, compare=True,
-    )  # fmt: skip
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        result = tuning.tune_robust(config)
-    assert set(result.searches) == {"random search", "cma-es"}
-    for loop, candidates, cpu, wall in result.searches.values():
-        assert isinstance(loop, w.ClosedLoop) and loop.estimator is None
-        assert (candidates - 1) % 8 == 0  # the start, then whole generations of 8
-        assert cpu >= result.tune_wall_s and wall > 0  # stopped by the CPU budget only

@@ -491,7 +491,7 @@ def test_the_hybrid_polishes_the_kept_iterate_for_its_share_of_the_time(monkeypa
     z, budget, shape, noise, std = calls[0]
     np.testing.assert_array_equal(z, np.asarray(logits[2]))
     # A quarter of the hybrid's time: a third of the iterations' (this polish takes none).
-    assert 0 < budget == pytest.approx(result.tune_wall_s / 3, rel=0.05)
+    assert 0 < budget == pytest.approx(result.tune_cpu_s / 3, rel=0.05)
     assert shape == (config.search_poses, 3) and noise == config.noise and std == 0.3
     assert result.loop.params == polished.params and result.gains == polished.params
 
@@ -525,3 +525,22 @@ def test_polish_keeps_its_start_without_budget_and_improves_on_it_with_one(monke
     better, count = hybrid.polish(key, start, refs, 2.0, robot, 0.033, joint, std=0.2)
     assert count > 1 and (count - 1) % 8 == 0
     assert distance(better) < 0.5 * distance(kept)
+
+
+def test_each_robust_search_gets_the_gradients_cpu_time_as_its_budget(monkeypatch):
+    """The gradient's CPU time is each search's budget (``black_box`` spends it on the clock)."""
+    pytest.importorskip("evosax")
+    from wmr_jax._src.tuning import robust
+
+    budgets = {}
+
+    def fake_black_box(method, key, refs, budget_s, robot, dt, joint, noise=None):
+        budgets[method] = budget_s
+        loop = robust.concrete_loop(joint.from_logits(joint.start_logits(robot), robot))
+        return loop, 1, budget_s, 0.0
+
+    monkeypatch.setattr(robust, "black_box", fake_black_box)
+    result = tuning.tune_robust(small_config(compare=True))
+    assert set(budgets) == {"random search", "cma-es"} == set(result.searches)
+    assert result.tune_cpu_s > 0
+    assert budgets == {m: result.tune_cpu_s for m in budgets}

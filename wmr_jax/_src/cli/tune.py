@@ -303,7 +303,7 @@ def run(args: Any) -> int:
     search = result.search
     extra = "" if search is None else f"; random search {search.candidates} candidates"
     kept = f"kept iteration {result.best_iteration} (best validation score)"
-    print(f"tuning CPU time {result.tune_wall_s:.1f} s{extra}; {kept}")
+    print(f"tuning CPU time {result.tune_cpu_s:.1f} s{extra}; {kept}")
     if result.note is not None:
         print(result.note)
     print(f"curve -> {out / 'tuning_curve.png'}")

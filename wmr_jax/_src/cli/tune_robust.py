@@ -175,7 +175,7 @@ def run(args: Any) -> int:
     print(f"robust_evaluation.md/json -> {out}")
     print(table, end="")
     kept = f"kept iteration {result.best_iteration} (best validation score)"
-    print(f"tuning CPU time {result.tune_wall_s:.1f} s; {kept}")
+    print(f"tuning CPU time {result.tune_cpu_s:.1f} s; {kept}")
     if result.note is not None:
         print(result.note)
     return 0

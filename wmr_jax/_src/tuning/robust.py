@@ -531,7 +531,7 @@ def tune_robust(
 
     Returns:
         A ``TuneResult`` of problem ``"robust"``: ``loop`` the tuned
-        ``ClosedLoop``, ``gains`` its params, ``tune_wall_s`` the time of the
+        ``ClosedLoop``, ``gains`` its params, ``tune_cpu_s`` the time of the
         iterations and the polish, ``searches``, ``rows`` (the paper's
         feasible gains with raw feedback, the tuned loop and the searches' loops
         under the standard conditions), ``note`` if it scores no better than the

@@ -151,9 +151,9 @@ def write_results(
         "peak_wheel_speed_ok": all(row["peak_wheel_speed_ok"] for row in rows.values()),
         "robot": robot_json(robot),
         "robot_units": dict(ROBOT_UNITS),
-        "wall_time_s": {
-            "tuning": result.tune_wall_s,
-            "random_search": None if search is None else search.wall_s,
+        "cpu_time_s": {
+            "tuning": result.tune_cpu_s,
+            "random_search": None if search is None else search.cpu_s,
         },
         # A resumed run's tuning time holds one more compilation per resume.
         "resumed_at_iteration": resumed_at,

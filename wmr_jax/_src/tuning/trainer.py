@@ -133,7 +133,7 @@ class TuneResult(NamedTuple):
         history: per-iteration ``loss`` (s), ``temperature`` and ``gains``
             rows, and the validation scores ``validated_at`` (iterations) and
             ``validation`` (s), as NumPy arrays.
-        tune_wall_s: process CPU time of the gradient iterations (all sessions), s.
+        tune_cpu_s: process CPU time of the gradient iterations (all sessions), s.
         search: the random search's ``SearchResult``, or ``None``.
         problem: ``"fixed"``, ``"schedule"`` or ``"robust"``.
         best_iteration: the iterate returned (0: the start), by ``best_iteration``.
@@ -148,7 +148,7 @@ class TuneResult(NamedTuple):
     gains: Any
     evaluation: dict[str, Any]
     history: dict[str, np.ndarray]
-    tune_wall_s: float
+    tune_cpu_s: float
     search: Any
     problem: str = "fixed"
     best_iteration: int = 0

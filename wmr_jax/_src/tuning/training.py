@@ -331,7 +331,7 @@ def _compare(
     config: TuneConfig,
     robot: Robot,
     tuned: Any,
-    tune_wall_s: float,
+    tune_cpu_s: float,
     search_progress: Any,
     eval_progress: Any,
 ) -> tuple:
@@ -345,7 +345,7 @@ def _compare(
         search = random_search(
             stream,
             refs,
-            budget_s=tune_wall_s,
+            budget_s=tune_cpu_s,
             problem=config.space,
             progress=search_progress,
             **run,
