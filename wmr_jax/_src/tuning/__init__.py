@@ -5,7 +5,7 @@ distribution of reference poses (``docs/model.md §6`` by default)? Adam
 descends a differentiable surrogate of the arrival time through the law's
 smooth relaxation, the relaxation is annealed towards the hard law, and the
 result is compared, with the hard law, against the paper's feasible gains and
-against a plain random search given the same wall time.
+against a plain random search given the same CPU time.
 
 The modules, one concept each, are listed in ``docs/custom_controller.md``:
 the feasible sets (``parametrisation``, ``problems``, ``estimation``), the

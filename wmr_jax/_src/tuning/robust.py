@@ -1,18 +1,12 @@
 """Robust tuning: controller and estimator tuned together (docs/model.md §7, §9).
 
-The loss is the relaxed arrival time of ``tuning_loss`` (with its log-error
-shaping) averaged over domain-randomised runs that ``sample_conditions``
-draws inside the loss and ``sensing.loop.disturbed_run`` runs, the code of
-the Monte Carlo. ``robust_problem`` is it as the trainer's problem;
-``tune_robust`` runs the trainer on it (with ``tuner = "hybrid"`` it then
-polishes the result with CMA-ES on the hard law, ``hybrid.polish``), then random
-search and CMA-ES (``black_box``) for the same time on the same cube, and
-judges all with the hard law under the standard conditions.
-By default the gain schedule and the EKF are tuned together (``law =
-"schedule"``, ``estimator = "ekf"``). On another robot than the paper's
-the loop is tuned within its wheel budget, with its speed limiter where it
-gives acceleration limits (docs/model.md §4.2.2), over the horizon of the
-studies that judge it (``robustness.study_horizon``).
+The loss is ``tuning_loss``'s relaxed arrival time averaged over
+domain-randomised runs that ``sample_conditions`` draws inside the loss and
+``sensing.loop.disturbed_run`` runs. ``tune_robust`` runs the trainer on
+``robust_problem`` (the hybrid tuner then polishes with ``hybrid.polish``),
+then random search and CMA-ES (``black_box``) for the same CPU time, and
+judges all with the hard law under the standard conditions, within the
+robot's wheel budget and over the studies' horizon (``study_horizon``).
 """
 
 from __future__ import annotations
@@ -98,7 +92,7 @@ class RobustConfig:
         poses: reference poses per standard condition per iteration (ideal loop).
         nonideal_poses: poses of the randomised non-ideal group per iteration (0: none).
         search_poses: poses per condition that random search and CMA-ES score on.
-        compare: also run random search and CMA-ES for the tuning's wall time.
+        compare: also run random search and CMA-ES for the tuning's CPU time.
         law: ``"schedule"`` (the gain schedule, default) or ``"fixed"`` (the 7
             gains): the controller's searched set.
         estimator: ``"ekf"`` (default), ``"observer"``, or ``None`` (raw

@@ -3,7 +3,7 @@
 ``train`` runs the trainer from the paper's feasible gains (moved just
 inside the search box, whose budget is the robot's) on the robust batch
 gradient of ``tuning_loss`` over a fresh batch of poses per iteration, then
-judges the paper's, the tuned and a random search's gains (same wall time)
+judges the paper's, the tuned and a random search's gains (same CPU time)
 with the hard law on held-out poses. It writes no files.
 """
 
@@ -85,7 +85,7 @@ class TuneConfig:
         checkpoint_every: iterations between checkpoints (of ``wmr-jax tune``).
         eval_poses: held-out poses of the before/after table.
         eval_seed: seed of the held-out poses (the same for every ``seed``).
-        random_search: also run random search for the tuning's wall time.
+        random_search: also run random search for the tuning's CPU time.
         weights: terms of the loss (see ``tuning_loss``).
         substeps: inner steps per period (non-ideal loop).
         wheel_limit: ``"clip"`` or ``"scale"`` (non-ideal loop).
@@ -335,7 +335,7 @@ def _compare(
     search_progress: Any,
     eval_progress: Any,
 ) -> tuple:
-    """Random search for the tuning's wall time, then the hard-law table on held-out poses."""
+    """Random search for the tuning's CPU time, then the hard-law table on held-out poses."""
     run = {name: getattr(config, name) for name in RUN_OPTIONS if name != "robot"}
     run["robot"] = robot
     search = None
