@@ -9,15 +9,16 @@
 # was computed with (docs/data/fingerprints.json), so a change to the code
 # that would move a committed figure fails the tests until the stage is rerun.
 # STAGE is any of: paper compare maps waypoints animate tune robustness
-# compare-tuning compare-sizes compare-robust bench (default: all; on 2 CPU
-# cores, tune took 5 minutes, robustness 2 and compare-robust 18).
+# compare-tuning compare-sizes compare-robust tuner-load tuner-scaling bench
+# (default: all; on 2 CPU cores, tune took 5 minutes, robustness 2 and
+# compare-robust 18).
 # Every command is seeded (the seed is its default unless named here), so a
 # rerun prints the same tables; bench timings are the exception.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-results/readme}
 shift || true
-STAGES=${*:-paper compare maps waypoints animate tune robustness compare-tuning compare-sizes compare-robust bench}
+STAGES=${*:-paper compare maps waypoints animate tune robustness compare-tuning compare-sizes compare-robust tuner-load tuner-scaling bench}
 mkdir -p "$OUT" docs/data
 
 for stage in $STAGES; do
@@ -63,6 +64,19 @@ for stage in $STAGES; do
       done ;;
     compare-robust)  # the joint robust problem: gradient vs CMA-ES vs random search, 3 seeds
       wmr-jax tune --out "$OUT/tune-robust-compare" --robust --compare ;;
+    tuner-load)  # the reduced robust comparison as the machine is, then beside two CPU hogs
+      rm -f docs/data/tuner_load_quiet.json docs/data/tuner_load_hog.json
+      python experiments/tuner_scaling.py --sizes 38 --iters 30 --poses 8 --eval-poses 64 \
+        --out docs/data/tuner_load_quiet.json
+      python -c "while True: pass" & hog1=$!
+      python -c "while True: pass" & hog2=$!
+      trap 'kill $hog1 $hog2 2>/dev/null' EXIT
+      python experiments/tuner_scaling.py --sizes 38 --iters 30 --poses 8 --eval-poses 64 \
+        --out docs/data/tuner_load_hog.json
+      kill $hog1 $hog2 ;;
+    tuner-scaling)  # 38, 101 and 285 parameters at equal CPU time; resumes where the file stops
+      python experiments/tuner_scaling.py --sizes 38 101 285 --iters 30 --poses 8 \
+        --eval-poses 64 --out docs/data/tuner_scaling.json ;;
     bench)
       wmr-jax bench --json "$OUT/bench.json" --wait-idle 60 ;;
     *) echo "unknown stage $stage" >&2; exit 2 ;;
