@@ -549,7 +549,7 @@ def tune_robust(
             progress_fn(state)
 
     tuned, best, history, state = trainer.fit(problem, run, state, progress)
-    tuned, wall = tuned._replace(robot=robot), state.elapsed_s
+    tuned, cpu = tuned._replace(robot=robot), state.elapsed_s
     joint, dt = joint_problem(config), DEFAULT_DT
     stream = jax.random.fold_in(jax.random.key(config.seed), 11)
     search_refs = sample_poses(jax.random.fold_in(stream, -1 % 2**31), config.search_poses)
@@ -560,9 +560,9 @@ def tune_robust(
         start, share, began = iterates.get(best, state.z), config.polish_share, clock()
         tuned, _ = hybrid.polish(
             jax.random.fold_in(jax.random.key(config.seed), 20), start, search_refs,
-            wall * share / (1.0 - share), robot, dt, joint, config.noise, config.polish_std,
+            cpu * share / (1.0 - share), robot, dt, joint, config.noise, config.polish_std,
         )  # fmt: skip
-        tuned, wall = tuned._replace(robot=robot), wall + clock() - began
+        tuned, cpu = tuned._replace(robot=robot), cpu + clock() - began
     if on_tuned is not None:
         on_tuned(tuned, list(state.losses))
     sets = {"paper": paper_feasible_gains(robot), "robust-tuned": tuned}
@@ -573,7 +573,7 @@ def tune_robust(
                 continue
             key = jax.random.fold_in(jax.random.key(config.seed), 12 + len(searches))
             searches[method] = black_box(
-                method, key, search_refs, wall, robot, dt, joint, config.noise
+                method, key, search_refs, cpu, robot, dt, joint, config.noise
             )
             sets[method] = searches[method][0]
     held_out = held_out_poses(config.eval_poses, EVAL_SEED)
@@ -593,5 +593,5 @@ def tune_robust(
             "conditions on the held-out poses"
         )
     return TuneResult(
-        tuned.params, {}, history, wall, None, "robust", best, note, tuned, rows, searches
+        tuned.params, {}, history, cpu, None, "robust", best, note, tuned, rows, searches
     )
