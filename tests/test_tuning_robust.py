@@ -515,7 +515,7 @@ def test_polish_keeps_its_start_without_budget_and_improves_on_it_with_one(monke
     def population(loops, *args, **kwargs):
         return np.asarray([distance(loop) for loop in loops])
 
-    monkeypatch.setattr(hybrid, "robust_population_scores", population)
+    monkeypatch.setattr(robust, "robust_population_scores", population)
     start = np.zeros(7, np.float32)
     refs, key = w.sample_poses(0, 2), jax.random.key(0)
     kept, count = hybrid.polish(key, start, refs, 0.0, robot, 0.033, joint)

@@ -459,19 +459,21 @@ def robust_problem(config: RobustConfig, robot: Robot) -> trainer.TrainingProble
     )
 
 
-def black_box(method, key, refs, budget_s, robot, dt, joint, noise=None):
+def black_box(method, key, refs, budget_s, robot, dt, joint, noise=None, *, start=None, std=1.0):
     """Random search or CMA-ES on the logits for ``budget_s`` CPU seconds (``search.clock``).
 
     8 candidates per generation (random search: logistic draws, uniform in the
     cube), each scored with ``robust_score`` on ``refs`` under the same draws,
     a generation in one batch (``robust_population_scores``), through
-    ``search_loop``; the start's score counts against the budget too.
+    ``search_loop``; the start's score counts against the budget too. CMA-ES
+    starts from ``start`` (logits; default the problem's start), step ``std``.
 
     Returns:
         ``(ClosedLoop, candidates scored, CPU s, wall s)``.
     """
     wall, began = time.perf_counter(), clock()
-    start = jnp.asarray(joint.start_logits(robot), float_dtype())
+    start = joint.start_logits(robot) if start is None else start
+    start = jnp.asarray(start, float_dtype())
     score_key = jax.random.fold_in(key, 7)
 
     def closed(z):
@@ -487,7 +489,7 @@ def black_box(method, key, refs, budget_s, robot, dt, joint, noise=None):
     best = (start, float(scores(start[None])[0]))
     tell = None
     if method == "cma-es":
-        propose, tell = cma_es_proposals(key, start, 8, split=False)
+        propose, tell = cma_es_proposals(key, start, 8, std, split=False)
     else:
 
         def propose(generation: int) -> Any:
