@@ -137,8 +137,7 @@ def standard_conditions(
         )
     sets, robot = _loops(params_by_name, "params_by_name", controller, estimator, robot)
     refs, noise, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
-    ones = np.ones((len(refs), 3))
-    conditions = [(MODEL_ROBOT, 0.0, 0.0, False, ones)]
+    conditions = [(MODEL_ROBOT, 0.0, 0.0, False, np.ones((len(refs), 3)))]
     for label, sxy, sdeg, latency in STANDARD_CONDITIONS:
         if sensor is not None and sxy:
             sxy, sdeg = sensor
@@ -152,15 +151,12 @@ def standard_conditions(
                 {
                     "condition": label,
                     "gains": name,
-                    "feedback": row.pop("feedback"),
-                    "success": row["success"],
-                    "mean arrival s": row["mean arrival s"],
-                    "median arrival s": row["median arrival s"],
+                    **_columns(row, "feedback", "success", "mean arrival s", "median arrival s"),
                     "mean final distance cm": row["mean final distance cm"],
                     "peak wheel cm/s": float(np.max(m.peak_wheel)),
                     "mismatch": 0.0 if label == MODEL_ROBOT else mismatch,
                     "runs": len(refs),
-                    **_horizon_columns(row, horizon),
+                    **_columns(row, *_LATE_COLUMNS),
                 }
             )
     return rows
@@ -190,15 +186,16 @@ def _judged(spec: Disturbance, loop: ClosedLoop, dt, robot, x64, horizon, veloci
         dt=dt, robot=robot, velocity=velocity, x64=x64,
     )  # fmt: skip
     used, _ = resolve_estimator(loop.estimator)
-    return {"feedback": "raw" if used is None else used.name, **summary_row(m, horizon)}, m
+    row = {"feedback": "raw" if used is None else used.name, **summary_row(m, horizon)}
+    return {**row, "horizon s": horizon}, m
 
 
-def _horizon_columns(row: dict[str, Any], horizon: float) -> dict[str, Any]:
-    return {
-        "settled at horizon": row["settled at horizon"],
-        "mean arrival, not at horizon s": row["mean arrival, not at horizon s"],
-        "horizon s": horizon,
-    }
+# What every row of these studies ends with: the runs settled only at the horizon.
+_LATE_COLUMNS = ("settled at horizon", "mean arrival, not at horizon s", "horizon s")
+
+
+def _columns(row: dict[str, Any], *keys: str) -> dict[str, Any]:
+    return {key: row[key] for key in keys}
 
 
 def _study_robot(robot: Any, loops: Mapping[str, ClosedLoop], name: str) -> Robot:
@@ -274,8 +271,8 @@ def evaluate_loop(
     mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
     seed = checks.check_int("seed", seed, 0, 2**32 - 1)
     robot = _study_robot(robot, {"loop": loop}, "evaluate_loop")
-    draws = _runs(refs, jax.random.key(seed), robot, horizon, dt, mismatch, x64)
-    refs, noise, factors, horizon = draws
+    key = jax.random.key(seed)
+    refs, noise, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
     if identified is None:
         spec = _scaled(refs, noise, factors, *labels[condition])
         _, m = _judged(spec, loop, dt, robot, x64, horizon, velocity)
@@ -414,12 +411,11 @@ def noise_curve(
                     "feedback": row["feedback"],
                     "noise xy cm": sxy,
                     "noise theta deg": sdeg,
-                    "success": row["success"],
-                    "mean arrival s": row["mean arrival s"],
+                    **_columns(row, "success", "mean arrival s"),
                     "mismatch": mismatch,
                     "latency": latency,
                     "runs": len(refs),
-                    **_horizon_columns(row, horizon),
+                    **_columns(row, *_LATE_COLUMNS),
                 }
             )
     return rows

@@ -22,7 +22,7 @@ from wmr_jax._src.sim import metrics
 from wmr_jax._src.sim.metrics import PoseMetrics
 from wmr_jax._src.sim.poses import EVAL_R_MAX, EVAL_R_MIN, MAX_SAMPLES, horizon_steps
 from wmr_jax._src.sim.rollout import DEFAULT_DT
-from wmr_jax._src.studies.robustness import robot_defaults, study_horizon
+from wmr_jax._src.studies.robustness import mean_median, robot_defaults, study_horizon
 from wmr_jax._src.studies.sweep import sweep
 
 __all__ = [
@@ -47,9 +47,6 @@ def robot_record(robot: Robot) -> dict[str, Any]:
     from wmr_jax._src.model.robots import robot_json, robot_name
 
     return {"robot": robot_json(robot), "robot_label": robot_name(robot) or "custom"}
-
-
-# ---------------------------------------------------------------- the grid
 
 
 class PoseGrid(NamedTuple):
@@ -126,9 +123,6 @@ def pose_grid(
     return PoseGrid(xs, headings, inside, refs)
 
 
-# ---------------------------------------------------------------- evaluation
-
-
 def evaluate_poses(
     refs: Any,
     params: Any = None,
@@ -192,20 +186,6 @@ def evaluate_poses(
     )
 
 
-# ---------------------------------------------------------------- summaries
-
-
-def _arrival_stats(t: np.ndarray) -> dict[str, float]:
-    """Mean, median and 90th percentile of arrival times, s (``inf`` for none)."""
-    if not t.size:
-        return {"mean arrival s": math.inf, "median arrival s": math.inf, "p90 arrival s": math.inf}
-    return {
-        "mean arrival s": float(t.mean()),
-        "median arrival s": float(np.median(t)),
-        "p90 arrival s": float(np.percentile(t, 90)),
-    }
-
-
 def summarize(
     results: dict[str, PoseMetrics], *, v_max: float = 125.0, reference: str | None = None
 ) -> list[dict[str, Any]]:
@@ -245,12 +225,15 @@ def summarize(
         reference = controllers.SHIM_SUNG.name
     rows = []
     for name, m in results.items():
-        ok = m.success
+        t = m.arrival[m.success]
+        mean, median = mean_median(t)
         row: dict[str, Any] = {
             "controller": name,
             "poses": int(len(m.arrival)),
-            "success": float(ok.mean()),
-            **_arrival_stats(m.arrival[ok]),
+            "success": float(m.success.mean()),
+            "mean arrival s": mean,
+            "median arrival s": median,
+            "p90 arrival s": float(np.percentile(t, 90)) if t.size else math.inf,
             "mean path cm": float(m.path.mean()),
             "mean peak wheel cm/s": float(m.peak_wheel.mean()),
             "max peak wheel cm/s": float(m.peak_wheel.max()),
@@ -258,14 +241,10 @@ def summarize(
             "mean zigzag": float(m.zigzag.mean()),
             "any zigzag": float((m.zigzag > 0).mean()),
         }
-        if reference is not None and reference in results:
-            ref_t = results[reference].arrival
-            row[f"faster than {reference}"] = float((m.arrival < ref_t).mean())
+        if reference is not None:
+            row[f"faster than {reference}"] = float((m.arrival < results[reference].arrival).mean())
         rows.append(row)
     return rows
-
-
-# ---------------------------------------------------------------- the study
 
 
 class MapStudy(NamedTuple):
@@ -336,20 +315,29 @@ def map_study(
 
     runs = {name: (name, None) for name in names}
     results = _metrics(grid.refs, runs, robot, horizon, velocity, chunk, progress, x64, per_run)
-    summary = {
+    head = {
         "poses": int(len(grid.refs)),
         "grid_side": int(len(grid.xs)),
         # As given (pose_grid checked them: a number or a nested list works too).
         "headings_deg": np.asarray(headings_deg, dtype=float).reshape(-1).tolist(),
+    }
+    tolerances = {"r_cm": metrics.DEFAULT_TOL_R, "theta_deg": 5.0}
+    summary = _summary(head, results, robot, horizon, velocity, x64, tolerances=tolerances)
+    return MapStudy(grid, results, summary)
+
+
+def _summary(head, results, robot, horizon, velocity, x64, **more) -> dict[str, Any]:
+    """A study's JSON-ready record: ``head``, the run's settings, ``more``, the robot and rows."""
+    return {
+        **head,
         "velocity": velocity,
         "dtype": "float64" if x64 else "float32",
         "horizon_s": horizon,
         "dt_s": DEFAULT_DT,
-        "tolerances": {"r_cm": metrics.DEFAULT_TOL_R, "theta_deg": 5.0},
+        **more,
         **robot_record(robot),
         "rows": summarize(results, v_max=float(robot.v_max)),
     }
-    return MapStudy(grid, results, summary)
 
 
 def _horizon(horizon: float | None, robot: Robot) -> float:
@@ -375,9 +363,6 @@ def _metrics(refs, runs, robot, horizon, velocity, chunk, progress, x64, per_run
         )
         for label, (name, params) in runs.items()
     }
-
-
-# ---------------------------------------------------------------- random-pose comparison
 
 
 def _comparison_runs() -> dict[str, tuple[str, Any]]:
@@ -430,13 +415,4 @@ def compare_controllers(
     horizon = _horizon(horizon, robot)
     refs = np.asarray(sample_poses(seed, n_poses), dtype=float)
     results = _metrics(refs, _comparison_runs(), robot, horizon, velocity, chunk, progress, x64)
-    return {
-        "poses": n_poses,
-        "seed": seed,
-        "velocity": velocity,
-        "dtype": "float64" if x64 else "float32",
-        "horizon_s": horizon,
-        "dt_s": DEFAULT_DT,
-        **robot_record(robot),
-        "rows": summarize(results, v_max=float(robot.v_max)),
-    }
+    return _summary({"poses": n_poses, "seed": seed}, results, robot, horizon, velocity, x64)

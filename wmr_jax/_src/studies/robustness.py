@@ -1,13 +1,9 @@
-"""Robustness Monte Carlo (docs/model.md §7, §9).
+"""Robustness Monte Carlo (docs/model.md §7, §9), and what the studies share.
 
 Success and arrival of the disturbed loop against the level of pose noise,
-with wheel-radius and mass mismatch and latency, and what the studies share:
-their horizon on a robot and their summary of a run set.
-
-The references keep the evaluation set of docs/model.md §6 on any robot,
-since the tolerances and the noise are lengths and angles; the horizon
-scales instead, as the paper's gains scaled into a slower robot's wheel
-budget drive the same paths more slowly.
+with wheel-radius and mass mismatch and latency. On any robot the references
+stay the docs/model.md §6 set (tolerances and noise are lengths and angles);
+the horizon scales instead (``study_horizon``).
 """
 
 from __future__ import annotations
@@ -25,10 +21,7 @@ from wmr_jax._src.model.params import Robot, validate_one_robot
 from wmr_jax._src.sim.metrics import PoseMetrics
 from wmr_jax._src.sim.poses import HORIZON_S, horizon_steps
 from wmr_jax._src.sim.rollout import DEFAULT_DT
-from wmr_jax._src.sim.sensing.disturbances import (
-    Disturbance,
-    draw_disturbances,
-)
+from wmr_jax._src.sim.sensing.disturbances import Disturbance, draw_disturbances
 from wmr_jax._src.sim.sensing.estimators import resolve_estimator
 from wmr_jax._src.sim.sensing.loop import disturbed_metrics
 
@@ -82,12 +75,10 @@ def check_levels(noise_xy: Any, noise_deg: Any) -> tuple[list[float], list[float
 def study_horizon(robot: Robot | None = None) -> float:
     """The studies' default horizon on ``robot``, s: 6 s for the paper robot (docs/model.md §6).
 
-    Where the paper's feasible gains do not fit (``60 + 10 L > V_max``) they
-    are scaled by ``c = V_max / (60 + 10 L)`` (docs/robots.md) and drive the
-    same paths ``1 / c`` times slower: the horizon is ``6 s / c``, rounded up
-    to 0.1 s.
+    Where the paper's feasible gains exceed the wheels (``60 + 10 L > V_max``), they
+    scale by ``c = V_max / (60 + 10 L)`` (docs/robots.md) and drive the same paths
+    ``1 / c`` times slower: the horizon is ``6 s / c``, rounded up to 0.1 s.
     """
-    # Imported here: the tuning package imports this module.
     from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS as PAPER
 
     robot = validate_one_robot(robot, "the studies' horizon")
@@ -104,9 +95,8 @@ LATE_SHARE = 0.25
 def settled_at_horizon(m: PoseMetrics, horizon: float) -> np.ndarray:
     """Which runs count as arrived (docs/model.md §6) only because the horizon ends, ``(N,)``.
 
-    Under noise a run may reach the goal, leave its tolerance and hover back
-    into it, its arrival then set by where the horizon cuts it: a settled
-    arrival after ``(1 − LATE_SHARE)`` of the horizon and after its first arrival.
+    Under noise a run may reach the goal, leave it and hover back: its settled arrival
+    comes after ``(1 − LATE_SHARE)`` of the horizon and after its first arrival.
 
     Args:
         m: the runs' metrics (``first_arrival`` included).
@@ -132,6 +122,11 @@ def _check_with_first_arrivals(m: Any, name: str) -> None:
         )
 
 
+def mean_median(times: np.ndarray) -> tuple[float, float]:
+    """The mean and the median of some times, s; ``inf`` for none."""
+    return (float(times.mean()), float(np.median(times))) if times.size else (math.inf, math.inf)
+
+
 def summary_row(m: PoseMetrics, horizon: float | None = None) -> dict[str, Any]:
     """Success, arrival, first arrival, final distance and zig-zag of a batch.
 
@@ -140,29 +135,24 @@ def summary_row(m: PoseMetrics, horizon: float | None = None) -> dict[str, Any]:
     """
     _check_with_first_arrivals(m, "m")
     ok = m.success
-    t = m.arrival[ok]
+    mean, median = mean_median(m.arrival[ok])
     row = {
         "success": float(ok.mean()),
-        "mean arrival s": float(t.mean()) if t.size else math.inf,
-        "median arrival s": float(np.median(t)) if t.size else math.inf,
+        "mean arrival s": mean,
+        "median arrival s": median,
         "reached": float(np.isfinite(m.first_arrival).mean()),
-        "median first arrival s": _median_finite(m.first_arrival),
+        "median first arrival s": mean_median(m.first_arrival[np.isfinite(m.first_arrival)])[1],
         "mean final distance cm": float(m.final_distance.mean()),
         "mean zigzag": float(m.zigzag.mean()),
     }
     if horizon is None:
         return row
     late = settled_at_horizon(m, horizon)
-    early = m.arrival[ok & ~late]
     row["settled at horizon"] = float(late.mean())
-    row["mean arrival, not at horizon s"] = float(early.mean()) if early.size else math.inf
-    row["median arrival, not at horizon s"] = float(np.median(early)) if early.size else math.inf
+    mean, median = mean_median(m.arrival[ok & ~late])
+    row["mean arrival, not at horizon s"] = mean
+    row["median arrival, not at horizon s"] = median
     return row
-
-
-def _median_finite(times: np.ndarray) -> float:
-    finite = times[np.isfinite(times)]
-    return float(np.median(finite)) if finite.size else math.inf
 
 
 def monte_carlo(
@@ -183,9 +173,9 @@ def monte_carlo(
     robot: Robot | None = None,
     horizon: float | None = None,
 ) -> list[dict[str, Any]]:
-    """Return success and arrival against noise level for one controller and condition.
+    """Success and arrival against noise level for one controller and condition.
 
-    Every noise level reuses the same references, unit noise and mismatch.
+    Every level reuses the same references, unit noise and mismatch.
 
     Args:
         key: ``jax.random`` key; the same key gives the same numbers.
@@ -256,10 +246,8 @@ def monte_carlo(
 def robot_defaults(controller: Any, robot: Robot | None = None) -> Any:
     """The parameters a study runs for ``controller`` on ``robot`` when given none.
 
-    ``None`` (the controller's defaults) on the paper robot and for other
-    controllers than Shim–Sung's two, whose defaults fit the paper robot's
-    wheels: there ``shim-sung`` runs ``tuning.paper_feasible_gains(robot)`` and
-    ``shim-sung-schedule`` the same gains as constant tables for that robot.
+    On another robot than the paper's, ``shim-sung`` runs ``paper_feasible_gains(robot)``
+    and ``shim-sung-schedule`` them as constant tables; else ``None`` (the defaults).
     """
     from wmr_jax._src.model.controllers.schedule import SCHEDULE, ScheduleParams
     from wmr_jax._src.model.robots import same_robot
