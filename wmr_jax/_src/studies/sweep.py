@@ -1,10 +1,9 @@
 """Final poses and docs/model.md §6 metrics for millions of poses, in bounded memory.
 
-The metrics are streamed through the time loop, so no trajectory is stored,
-and the poses run in chunks of one size spread over all local devices, so
-one compiled program serves every chunk. With ``out=DIR`` every finished
-chunk is kept (``sweep_files.ChunkStore``), so an interrupted sweep resumed
-with the same arguments loses nothing it had finished.
+The metrics are streamed through the time loop (no trajectory is stored); the
+poses run in chunks of one size spread over the local devices, so one compiled
+program serves every chunk. With ``out=DIR`` finished chunks are kept
+(``sweep_files.ChunkStore``) and a resumed sweep reuses them.
 """
 
 from __future__ import annotations
@@ -70,9 +69,6 @@ def _sweep_one(ref, params, init, robot, dt, options: loops.Options):
 _sweep_jit = loops.EntryJit(loops.batched(_sweep_one), static_argnames=("options",))
 
 
-# ---------------------------------------------------------------- checking and planning
-
-
 @dataclasses.dataclass(frozen=True)
 class _Job:
     """A checked sweep: its inputs, options and chunks (``*_mask``: which leaves are batched)."""
@@ -108,17 +104,6 @@ def _pose_count(refs: Any) -> int:
             f"refs has shape {tuple(shape)}; allowed: (N, 3) with N >= 1 [x cm, y cm, theta rad]"
         )
     return int(shape[0])
-
-
-def _thresholds(tol_r, tol_theta, v_dead_band, omega_dead_band) -> metrics.Thresholds:
-    return metrics.Thresholds(
-        tol_r=checks.check_number("tol_r", tol_r, low=0.0, unit="cm"),
-        tol_theta=checks.check_number("tol_theta", tol_theta, high=math.pi / 2, unit="rad"),
-        v_dead_band=checks.check_number("v_dead_band", v_dead_band, closed=True, unit="cm/s"),
-        omega_dead_band=checks.check_number(
-            "omega_dead_band", omega_dead_band, closed=True, unit="rad/s"
-        ),
-    )
 
 
 def _per_run_or_shared(tree: Any, n: int, name: str) -> Any:
@@ -210,9 +195,6 @@ def _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, device
     )
 
 
-# ---------------------------------------------------------------- running the chunks
-
-
 @dataclasses.dataclass(frozen=True)
 class _Chunk:
     """The host inputs of chunk ``i``: rows ``lo:hi`` padded by ``pad`` copies of the last."""
@@ -226,7 +208,6 @@ class _Chunk:
 
 
 def _chunk_inputs(job: _Job, i: int) -> _Chunk:
-    """Read chunk ``i``'s inputs."""
     lo, hi = job.bounds(i)
     pad = job.chunk - (hi - lo)
     refs = _take(job.refs, True, lo, hi, pad)
@@ -246,20 +227,14 @@ def _chunk_digest(job: _Job, chunk: _Chunk) -> str:
 def _check_chunk(job: _Job, chunk: _Chunk) -> None:
     """Check every row of a chunk as ``final_poses`` checks a batch (rows of the whole batch)."""
     size = chunk.hi - chunk.lo
-
-    def offset(err: ValueError) -> ValueError:
-        # "refs[3] = ..." within the chunk is row lo + 3 of the batch.
-        text = re.sub(
-            r"^(refs|init)\[(\d+)\]", lambda m: f"{m[1]}[{chunk.lo + int(m[2])}]", str(err)
-        )
-        return ValueError(text)
-
     try:
         checks.as_poses("refs", np.asarray(chunk.refs[:size]), batch=True, check_only=True)
         if job.batched_init:
             checks.as_poses("init", np.asarray(chunk.init[:size]), batch=True, check_only=True)
-    except ValueError as err:
-        raise offset(err) from None
+    except ValueError as err:  # "refs[3] = ..." of the chunk is row lo + 3 of the batch
+        row = r"^(refs|init)\[(\d+)\]"
+        text = re.sub(row, lambda m: f"{m[1]}[{chunk.lo + int(m[2])}]", str(err))
+        raise ValueError(text) from None
     lo, hi = chunk.lo, chunk.hi
     try:
         if any(jax.tree.leaves(job.gains_mask)):
@@ -270,26 +245,17 @@ def _check_chunk(job: _Job, chunk: _Chunk) -> None:
         raise ValueError(f"{err} (among runs {lo} to {hi - 1})") from None
 
 
-def _check_result(job: _Job, chunk: _Chunk, host: dict[str, np.ndarray]) -> None:
-    """Raise, as ``final_poses`` does, if a run of the chunk left the floating-point range."""
-    finite = np.all([np.isfinite(host[name]) for name in SWEEP_FIELDS[:3]], axis=0)
-    checks.require_finite_runs(finite, job.dtype, first=chunk.lo)
-
-
 def _launcher(job: _Job) -> Callable[[_Chunk], Any]:
     """``launch(chunk)``: place a chunk on the devices and dispatch it (asynchronously)."""
     mesh = jax.sharding.Mesh(np.asarray(job.devices), ("batch",))
     spread = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
     shared = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
 
+    def put(leaf: Any, batched: bool) -> jax.Array:
+        return jax.device_put(np.asarray(leaf, job.dtype), spread if batched else shared)
+
     def place(tree: Any, mask: Any) -> Any:
-        return jax.tree.map(
-            lambda leaf, batched: jax.device_put(
-                np.asarray(leaf, job.dtype), spread if batched else shared
-            ),
-            tree,
-            mask,
-        )
+        return jax.tree.map(put, tree, mask)
 
     def launch(chunk: _Chunk) -> Any:
         lo, hi, pad = chunk.lo, chunk.hi, chunk.pad
@@ -307,11 +273,6 @@ def _launcher(job: _Job) -> Callable[[_Chunk], Any]:
     return launch
 
 
-def _empty_results(job: _Job) -> dict[str, np.ndarray]:
-    kinds = {"success": bool, "zigzags": np.int32}
-    return {name: np.empty(job.n, dtype=kinds.get(name, job.dtype)) for name in SWEEP_FIELDS}
-
-
 def _run_chunks(
     job: _Job,
     results: dict[str, np.ndarray],
@@ -324,8 +285,9 @@ def _run_chunks(
 
     def keep(chunk: _Chunk, digest: str | None, values: dict[str, Any], *, computed: bool) -> None:
         host = {name: np.asarray(values[name])[: chunk.hi - chunk.lo] for name in SWEEP_FIELDS}
-        if computed:
-            _check_result(job, chunk, host)
+        if computed:  # as final_poses does, raise if a run left the floating-point range
+            finite = np.all([np.isfinite(host[name]) for name in SWEEP_FIELDS[:3]], axis=0)
+            checks.require_finite_runs(finite, job.dtype, first=chunk.lo)
         for name in SWEEP_FIELDS:
             results[name][chunk.lo : chunk.hi] = host[name]
         if computed and store is not None:
@@ -372,9 +334,6 @@ def _progress(job: _Job, bar: bool, on_chunk: Callable[[int, int], None] | None)
     finally:
         if shown is not None:
             shown.close()
-
-
-# ---------------------------------------------------------------- the sweep
 
 
 def sweep(
@@ -442,7 +401,14 @@ def sweep(
         substeps=substeps,
         wheel_limit=wheel_limit,
     )
-    thresholds = _thresholds(tol_r, tol_theta, v_dead_band, omega_dead_band)
+    thresholds = metrics.Thresholds(
+        tol_r=checks.check_number("tol_r", tol_r, low=0.0, unit="cm"),
+        tol_theta=checks.check_number("tol_theta", tol_theta, high=math.pi / 2, unit="rad"),
+        v_dead_band=checks.check_number("v_dead_band", v_dead_band, closed=True, unit="cm/s"),
+        omega_dead_band=checks.check_number(
+            "omega_dead_band", omega_dead_band, closed=True, unit="rad/s"
+        ),
+    )
     checks.check_callable("on_chunk", on_chunk)
     checks.check_bool("resume", resume)
     checks.check_bool("progress", progress)
@@ -450,7 +416,8 @@ def sweep(
     checks.require_concrete("sweep", refs, gains, init, robot, dt)  # it runs chunk by chunk
     job = _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, devices)
     store = None if out is None else files.ChunkStore(out, files.settings(job), SWEEP_FIELDS)
-    results = _empty_results(job)
+    kinds = {"success": bool, "zigzags": np.int32}
+    results = {name: np.empty(job.n, dtype=kinds.get(name, job.dtype)) for name in SWEEP_FIELDS}
     with _progress(job, progress, on_chunk) as done:
         _run_chunks(job, results, store, resume, done)
     if store is not None:

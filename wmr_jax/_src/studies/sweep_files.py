@@ -32,9 +32,6 @@ class OtherSettingsWarning(UserWarning):
     """A sweep's folder holds chunks of other settings: they are not used, and are replaced."""
 
 
-# ---------------------------------------------------------------- fingerprints
-
-
 def digest(*arrays: Any) -> str:
     h = hashlib.sha256()
     for a in arrays:
@@ -62,19 +59,13 @@ def tree_description(tree: Any) -> dict[str, Any]:
 
 def settings(job: _Job) -> dict[str, Any]:
     """Everything but the reference poses that decides a chunk's results."""
-    options = job.options
+    chosen = ("steps", "velocity", "controller", "temperature", "substeps", "wheel_limit")
+    options = {name: getattr(job.options, name) for name in chosen}
     return {
         "n": job.n,
         "chunk": job.chunk,
         "dtype": job.dtype.name,
-        "options": {
-            "steps": options.steps,
-            "velocity": options.velocity,
-            "controller": options.controller.name,
-            "temperature": options.temperature,
-            "substeps": options.substeps,
-            "wheel_limit": options.wheel_limit,
-        },
+        "options": {**options, "controller": job.options.controller.name},
         "dt": job.dt,
         "gains": tree_description(job.gains),
         "robot": tree_description(job.robot),
@@ -90,8 +81,6 @@ def fingerprint(settings: dict[str, Any]) -> str:
     text = json.dumps(settings, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
-
-# ---------------------------------------------------------------- chunk files
 
 # The metadata of every chunk file: the sweep's fingerprint and its poses' digest.
 _CHUNK_META = ("fingerprint", "refs_digest")
