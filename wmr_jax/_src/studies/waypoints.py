@@ -1,13 +1,10 @@
 """Consecutive motions: a chain of waypoints, and references that move.
 
-* **Waypoint chain.** The robot is given waypoint 0 and, once arrived there
-  (docs/model.md §6), waypoint 1, and so on; intermediate waypoints may use
-  a looser *pass-through* tolerance. An intermediate waypoint's arrival time
-  is the end of the period it was reached at; the last one's is the
-  docs/model.md §6 arrival time.
-* **Moving reference.** One reference per control period, ``(steps, 3)``;
-  the error and the arrival test after period ``k`` are taken against
-  ``refs[k]``. A constant reference gives exactly a ``rollout``.
+A chain gives the robot waypoint 0 and, once arrived there (docs/model.md §6),
+waypoint 1, and so on; intermediate waypoints may use a looser pass-through
+tolerance. A moving reference is one reference per control period: the error
+after period ``k`` is taken against ``refs[k]``, and a constant reference
+gives exactly a ``rollout``.
 """
 
 from __future__ import annotations
@@ -28,6 +25,7 @@ from wmr_jax._src.model.params import Robot, validate_one_robot
 from wmr_jax._src.sim import loops, metrics
 from wmr_jax._src.sim import rollout as simulation
 from wmr_jax._src.sim.loops import Options
+from wmr_jax._src.sim.poses import HORIZON_S
 from wmr_jax._src.sim.rollout import DEFAULT_DT, Trajectory
 
 __all__ = [
@@ -65,7 +63,8 @@ class ChainRun(NamedTuple):
     Attributes:
         trajectory: the ``Trajectory`` of the run (``steps + 1`` poses).
         leg: ``(steps,)`` int32 index of the waypoint each period aimed at.
-        arrival: ``(K,)`` arrival time at each waypoint, s; ``inf`` if never.
+        arrival: ``(K,)`` arrival time at each waypoint, s; ``inf`` if never: the
+            end of the period it was reached at, the last one's that of docs/model.md §6.
     """
 
     trajectory: Trajectory
@@ -85,9 +84,6 @@ class TrackRun(NamedTuple):
     trajectory: Trajectory
     error: jax.Array
     arrival: jax.Array
-
-
-# ---------------------------------------------------------------- single robot
 
 
 def _chain_single(spec, params, init, robot, dt, options: Options) -> ChainRun:
@@ -181,9 +177,6 @@ _track_jit = loops.EntryJit(_track_single, static_argnames=("options",))
 _batch_track_jit = loops.EntryJit(loops.batched(_track_single), static_argnames=("options",))
 
 
-# ---------------------------------------------------------------- boundary checks
-
-
 def _pose_stack(name: str, value: Any, ndim: int, allowed: str) -> jax.Array:
     """``value`` as checked poses of ``ndim`` dims, the last of length 3."""
     shape = np.shape(value)
@@ -255,24 +248,11 @@ def _run(jitted, spec, params, init, robot, dt, options: Options, n: int | None,
     return jitted(spec, params, init, robot, dt, options=options)
 
 
-def _keywords_of(single: Any) -> Any:
-    """Give a batched entry point the signature of its single-run one, for ``help``."""
-
-    def adopt(batched: Any) -> Any:
-        batched.__signature__ = inspect.signature(single)
-        return batched
-
-    return adopt
-
-
 def _bound(single: Any, first: Any, params: Any, keywords: dict[str, Any]) -> Any:
     """Every argument of ``single`` as given to its batched twin, defaults filled in."""
     bound = inspect.signature(single).bind(first, params, **keywords)
     bound.apply_defaults()
     return types.SimpleNamespace(**bound.arguments)
-
-
-# ---------------------------------------------------------------- entry points
 
 
 def chain_rollout(
@@ -322,7 +302,6 @@ def chain_rollout(
     return _run(_chain_jit, (wp, tol), params, init, robot, dt, options, None, "chain_rollout")
 
 
-@_keywords_of(chain_rollout)
 def batch_chain_rollout(waypoints: Any, params: Any = None, **keywords: Any) -> ChainRun:
     """Run ``chain_rollout`` for a batch of ``N`` robots in one call.
 
@@ -352,6 +331,9 @@ def batch_chain_rollout(waypoints: Any, params: Any = None, **keywords: Any) -> 
     return _run(_batch_chain_jit, (wp, tol), params, a.init, a.robot, a.dt, options, wp.shape[0])
 
 
+batch_chain_rollout.__signature__ = inspect.signature(chain_rollout)  # for help()
+
+
 def track_rollout(
     refs: Any,
     params: Any = None,
@@ -379,7 +361,6 @@ def track_rollout(
     return _run(_track_jit, arr, params, init, robot, dt, options, None, "track_rollout")
 
 
-@_keywords_of(track_rollout)
 def batch_track_rollout(refs: Any, params: Any = None, **keywords: Any) -> TrackRun:
     """Run ``track_rollout`` for ``N`` robots: ``refs (N, steps, 3)``, ``init (3,)`` or ``(N, 3)``.
 
@@ -393,7 +374,7 @@ def batch_track_rollout(refs: Any, params: Any = None, **keywords: Any) -> Track
     return _run(_batch_track_jit, arr, params, a.init, a.robot, a.dt, options, arr.shape[0])
 
 
-# ---------------------------------------------------------------- demo
+batch_track_rollout.__signature__ = inspect.signature(track_rollout)  # for help()
 
 
 def soccer_waypoints() -> np.ndarray:
@@ -483,10 +464,7 @@ def soccer_study(
 
 
 def soccer_steps(robot: Robot | None = None, steps: int = SOCCER_STEPS) -> int:
-    """Control periods of the soccer route on ``robot``: the paper robot's ``steps``
-    stretched as the studies' horizon (``robustness.study_horizon``).
-    """
-    from wmr_jax._src.sim.poses import HORIZON_S
+    """The paper robot's ``steps`` of the soccer route, stretched as ``study_horizon(robot)``."""
     from wmr_jax._src.studies.robustness import study_horizon
 
     steps = checks.check_int("steps", steps)
