@@ -139,7 +139,6 @@ def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = No
         (cores), or ``skipped`` with a reason; ``ratios`` maps ``"N=<n>"`` to
         the speed-ups of ``final_poses`` over the baselines and the cost of
         each derivative over its forward pass.
-
     """
     config = _check_config(config)
     if log is not None and not callable(log):
@@ -202,8 +201,7 @@ class _SizeBench:
     def rows(self, *, scalar: bool) -> list[dict]:
         """Return the rows of every chosen case, in the order of the table."""
         cases = self.config.cases
-        baselines = self.baselines(scalar=scalar and "scalar_reference" in cases)
-        rows = baselines[0]
+        rows, last = self.baselines(scalar=scalar and "scalar_reference" in cases)
         for case, step in (
             ("final_poses_nonideal", lambda: self.alone("final_poses", "nonideal")),
             ("batch_rollout", lambda: self.alone("batch_rollout", "ideal")),
@@ -215,7 +213,7 @@ class _SizeBench:
         ):
             if case in cases:
                 rows += step()
-        return rows + baselines[1]
+        return rows + last
 
     def baselines(self, *, scalar: bool) -> tuple[list[dict], list[dict]]:
         """Time ``final_poses`` against both baselines, interleaved: their ratio counts.
@@ -348,18 +346,9 @@ class _SizeBench:
 
         t = self.time({"c": (run, False)})["c"]
         per_step = t.run_s / (self.n * self.steps) * 1e9
-        return [
-            self.row(
-                "c_controller",
-                t,
-                ns_per_step=per_step,
-                state_bytes=c.size,
-                code_bytes=code_size,
-                law="schedule",
-                feedback="ekf",
-                latency=1,
-            )
-        ]
+        sizes = {"state_bytes": c.size, "code_bytes": code_size}
+        run_as = {"law": "schedule", "feedback": "ekf", "latency": 1}
+        return [self.row("c_controller", t, ns_per_step=per_step, **sizes, **run_as)]
 
     def alone(self, entry: str, velocity: str) -> list[dict]:
         """Time ``final_poses`` or ``batch_rollout`` (``entry``) alone, with ``velocity``'s loop."""
@@ -380,12 +369,9 @@ class _SizeBench:
         case: str,
         beside: tuple[str, Callable[[], Any]] | None = None,
     ) -> list[dict]:
-        """Time ``loss(gains, refs)``, its gradient and one directional derivative, interleaved.
-
-        The forward-mode derivative along the gains prices what reverse mode
-        cannot avoid, so ``1 + jvp_over_forward`` is the gradient's floor.
-        ``beside``: ``(case, call)`` timed in the same group, its row first.
-        Returns the rows ``[beside,] forward, jvp_<case>, <case>``.
+        """Rows ``[beside,] forward, jvp_<case>, <case>``: ``loss(gains, refs)``, its
+        derivative along the gains (the gradient's floor is ``1 + jvp_over_forward``) and
+        its gradient, timed together with ``beside``'s ``(case, call)``.
         """
         import jax
 
@@ -452,10 +438,8 @@ class _SizeBench:
             )
 
         row = ("tuning_loss", {"temperature": TUNING_TEMPERATURE})
-        # final_poses through the same relaxed law, timed beside the loss:
-        # what the loss adds to the law it differentiates.
-        beside = ("final_poses_relaxed", relaxed)
-        return self.loss_rows(loss, row, "grad_tuning_loss", beside)
+        # Beside the loss, the relaxed law alone: what the loss adds to it.
+        return self.loss_rows(loss, row, "grad_tuning_loss", ("final_poses_relaxed", relaxed))
 
     def robust_loss(self) -> list[dict]:
         """The robust tuner's loss (the schedule and the EKF), its gradient and one jvp.
@@ -507,10 +491,10 @@ class _SizeBench:
 
 
 def code_bytes(source: Any, build: Any) -> int | None:
-    """Bytes of code and constants of ``source`` compiled with the export's flags (``-O2``).
+    """Bytes of code and constants of ``source`` compiled with the export's flags and ``-O2``.
 
-    ``size``'s text of the object file where ``size`` is found, else the file's size;
-    ``None`` if it does not compile.
+    The object's text as ``size`` counts it, else the object file's size (no ``size``
+    tool); ``None`` if it does not compile.
     """
     import shutil
     import subprocess

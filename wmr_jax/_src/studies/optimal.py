@@ -19,9 +19,7 @@ from wmr_jax._src.sim.rollout import DEFAULT_DT
 
 __all__ = ["TimeBounds", "bound_ratios", "time_bounds"]
 
-# A time that is a whole number of periods up to rounding is not rounded up
-# one more period.
-_ROUNDING = 1e-9
+_ROUNDING = 1e-9  # a whole number of periods up to rounding is not one more
 
 
 class TimeBounds(NamedTuple):
@@ -44,8 +42,8 @@ def _folded_magnitude(angle: np.ndarray) -> np.ndarray:
 
 
 def _ceil_samples(seconds: np.ndarray, dt: float) -> np.ndarray:
-    # A positive time takes one sample at least, however long the period (the
-    # slack would round a time below 1e-9 periods down to 0); zero takes none.
+    # A positive time takes one sample at least (the slack would round a time
+    # below 1e-9 periods down to 0); zero takes none.
     samples = np.ceil(seconds / dt - _ROUNDING)
     return np.where(seconds > 0, np.maximum(samples, 1.0), 0.0) * dt
 
@@ -112,15 +110,14 @@ def bound_ratios(mean_arrival: float, bounds: TimeBounds) -> dict[str, float]:
         raise ValueError(
             f"bounds is a {type(bounds).__name__}; allowed: a TimeBounds (from time_bounds)"
         )
-    # inf (none arrived) is allowed and gives inf ratios; NaN, 0 and below are not times.
-    allowed = "a time > 0 s, or inf"
+    allowed = "a time > 0 s, or inf"  # inf (none arrived) gives inf ratios
     value = real_array("mean_arrival", mean_arrival, allowed)
     if value.shape != () or not value > 0:
         raise ValueError(f"mean_arrival = {mean_arrival!r} is not allowed; allowed: {allowed}")
     mean_arrival = float(value)
     tdt = float(np.mean(bounds.turn_drive_turn))
     lower = float(np.mean(bounds.lower_bound))
-    if not (tdt > 0 and lower > 0):  # a mean arrival of inf (none arrived) is inf times
+    if not (tdt > 0 and lower > 0):
         raise ValueError(
             f"bounds of {tdt:.4g} / {lower:.4g} s are not allowed as yardsticks; allowed: "
             "references beyond tol_r (bounds > 0)"
