@@ -216,11 +216,7 @@ class _SizeBench:
         return rows + last
 
     def baselines(self, *, scalar: bool) -> tuple[list[dict], list[dict]]:
-        """Time ``final_poses`` against both baselines, interleaved: their ratio counts.
-
-        Returns:
-            The rows of ``final_poses`` (and sharded), then those of the baselines.
-        """
+        """Rows of ``final_poses`` (and sharded), then of the baselines, timed interleaved."""
         import jax
 
         from wmr_jax._src.oracle import reference
@@ -369,9 +365,10 @@ class _SizeBench:
         case: str,
         beside: tuple[str, Callable[[], Any]] | None = None,
     ) -> list[dict]:
-        """Rows ``[beside,] forward, jvp_<case>, <case>``: ``loss(gains, refs)``, its
-        derivative along the gains (the gradient's floor is ``1 + jvp_over_forward``) and
-        its gradient, timed together with ``beside``'s ``(case, call)``.
+        """Time ``loss(gains, refs)``, its derivative along the gains and its gradient together.
+
+        ``1 + jvp_over_forward`` is the gradient's floor. ``beside``: ``(case, call)`` timed
+        with them. Returns the rows ``[beside,] forward, jvp_<case>, <case>``.
         """
         import jax
 
@@ -542,19 +539,16 @@ def _ratios(rows: list[dict]) -> dict[str, Any]:
             for r in rows:
                 if r["n"] == n and key in r:
                     entry[f"{r['case']}_{key.removeprefix('grad_').removeprefix('jvp_')}"] = r[key]
-        relaxed, loss = rate("final_poses_relaxed", n), rate("tuning_loss", n)
-        if relaxed and loss:
-            entry["tuning_loss_over_relaxed"] = relaxed / loss
-        # Costs per robot-step against final_poses (ideal loop), measured in this run.
-        ideal = rate("final_poses", n)
-        for case, key in (
-            ("tuning_loss", "tuning_loss_over_final_poses"),
-            ("final_poses_nonideal", "nonideal_over_ideal"),
-            ("final_poses_relaxed", "relaxed_over_final_poses"),
+        # Costs per robot-step, measured in this run: the rate of the first over the second.
+        for key, fast, slow in (
+            ("tuning_loss_over_relaxed", "final_poses_relaxed", "tuning_loss"),
+            ("tuning_loss_over_final_poses", "final_poses", "tuning_loss"),
+            ("nonideal_over_ideal", "final_poses", "final_poses_nonideal"),
+            ("relaxed_over_final_poses", "final_poses", "final_poses_relaxed"),
         ):
-            value = rate(case, n)
-            if ideal and value:
-                entry[key] = ideal / value
+            top, bottom = rate(fast, n), rate(slow, n)
+            if top and bottom:
+                entry[key] = top / bottom
         if entry:
             out[f"N={n}"] = entry
     return out

@@ -27,6 +27,7 @@ from wmr_jax._src.sim.sensing.estimators import resolve_estimator
 from wmr_jax._src.sim.sensing.loop import ClosedLoop, disturbed_metrics
 from wmr_jax._src.studies.robustness import (
     check_levels,
+    mean_median,
     settled_at_horizon,
     study_steps,
     summary_row,
@@ -312,16 +313,15 @@ def figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity) ->
     """
     from wmr_jax._src.studies.optimal import time_bounds
 
-    arrived = m.arrival[m.success]
-    mean = float(arrived.mean()) if arrived.size else None
-    optimal = None
-    if arrived.size:
+    mean = median = optimal = None
+    if m.success.any():
+        mean, median = mean_median(m.arrival[m.success])
         optimal = float(np.mean(time_bounds(refs[m.success], robot=robot, dt=dt).turn_drive_turn))
     peak = float(np.max(m.peak_wheel))
     return {
         "success": float(m.success.mean()),
         "mean_arrival_s": mean,
-        "median_arrival_s": float(np.median(arrived)) if arrived.size else None,
+        "median_arrival_s": median,
         "settled_at_horizon": float(settled_at_horizon(m, horizon).mean()),
         "peak_wheel_speed": peak,
         "v_max": float(robot.v_max),

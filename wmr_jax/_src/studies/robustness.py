@@ -79,6 +79,7 @@ def study_horizon(robot: Robot | None = None) -> float:
     scale by ``c = V_max / (60 + 10 L)`` (docs/robots.md) and drive the same paths
     ``1 / c`` times slower: the horizon is ``6 s / c``, rounded up to 0.1 s.
     """
+    # Imported here: the tuning package imports this module.
     from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS as PAPER
 
     robot = validate_one_robot(robot, "the studies' horizon")
