@@ -88,9 +88,7 @@ def study_horizon(robot: Robot | None = None) -> float:
     return math.ceil(HORIZON_S * stretch * 10 - 1e-9) / 10
 
 
-# A success that settles only in the last quarter of the horizon, after the run
-# had been within the tolerance and left it, is no arrival (settled_at_horizon).
-LATE_SHARE = 0.25
+LATE_SHARE = 0.25  # the horizon's last share, where settling again is no arrival
 
 
 def settled_at_horizon(m: PoseMetrics, horizon: float) -> np.ndarray:

@@ -190,9 +190,8 @@ def _tolerances(tol_r, tol_theta, pass_tol_r, pass_tol_theta) -> jax.Array:
     """``[pass r, pass θ, final r, final θ]``, each checked (cm, rad)."""
     tol_r = checks.check_number("tol_r", tol_r, unit="cm")
     tol_theta = checks.check_number("tol_theta", tol_theta, high=math.pi / 2, unit="rad")
-    pass_r = checks.check_number(
-        "pass_tol_r", tol_r if pass_tol_r is None else pass_tol_r, unit="cm"
-    )
+    pass_r = tol_r if pass_tol_r is None else pass_tol_r
+    pass_r = checks.check_number("pass_tol_r", pass_r, unit="cm")
     pass_theta = tol_theta if pass_tol_theta is None else pass_tol_theta
     pass_theta = checks.check_number("pass_tol_theta", pass_theta, unit="rad")
     # π/2 is allowed for passing through: |θ̄_e| ≤ π/2 always holds, heading ignored.
