@@ -329,25 +329,20 @@ def winner_figure(
     cmap = ListedColormap(colours).with_extremes(bad=(1, 1, 1, 0))
     n_h = len(grid.headings)
     size = (2.9 * n_h, 3.8)
-    with closed_after(1, n_h, figsize=size, squeeze=False, layout="constrained") as drawn:
-        _draw_winner(*drawn, grid, names, best, colours, cmap, title)
-        save_figure(drawn[0], path, dpi=100)
+    with closed_after(1, n_h, figsize=size, squeeze=False, layout="constrained") as (fig, axes):
+        for h in range(n_h):
+            ax = axes[0, h]
+            _show(ax, grid, _to_image(grid, best, h), cmap=cmap, vmin=-0.5, vmax=len(names) + 0.5)
+            _decorate(ax, grid, bottom=True, left=h == 0)
+            ax.set_title(_heading_title(grid, h), fontsize=9)
+        handles = [
+            plt.Line2D([], [], marker="s", ls="", color=c, label=lab)
+            for c, lab in zip(colours, [*names, "none arrives"], strict=True)
+        ]
+        fig.legend(handles=handles, loc="outside lower center", ncol=len(handles), fontsize=8)
+        fig.suptitle(title, fontsize=10)
+        save_figure(fig, path, dpi=100)
     return Path(path)
-
-
-def _draw_winner(fig, axes, grid, names, best, colours, cmap, title) -> None:
-    """Draw the first-to-arrive map of ``winner_figure`` into ``axes``, with its legend."""
-    for h in range(len(grid.headings)):
-        ax = axes[0, h]
-        _show(ax, grid, _to_image(grid, best, h), cmap=cmap, vmin=-0.5, vmax=len(names) + 0.5)
-        _decorate(ax, grid, bottom=True, left=h == 0)
-        ax.set_title(_heading_title(grid, h), fontsize=9)
-    handles = [
-        plt.Line2D([], [], marker="s", ls="", color=c, label=lab)
-        for c, lab in zip(colours, [*names, "none arrives"], strict=True)
-    ]
-    fig.legend(handles=handles, loc="outside lower center", ncol=len(handles), fontsize=8)
-    fig.suptitle(title, fontsize=10)
 
 
 def save_map_study(out_dir: str | Path, study: MapStudy) -> list[Path]:
