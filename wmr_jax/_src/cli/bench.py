@@ -38,7 +38,6 @@ def add_arguments(parser: Any) -> None:
         "--sizes",
         nargs="+",
         action="extend",
-        default=None,
         metavar="N",
         help="batch sizes, repeatable (default: "
         + " ".join(str(n) for n in bench.DEFAULT_SIZES)
@@ -51,7 +50,6 @@ def add_arguments(parser: Any) -> None:
         "--cases",
         nargs="+",
         action="extend",
-        default=None,
         metavar="CASE",
         help="only these cases, among "
         + ", ".join(bench.CASES)
@@ -61,7 +59,6 @@ def add_arguments(parser: Any) -> None:
     )
     parser.add_argument(
         "--cpu-devices",
-        default=None,
         metavar="K",
         help="split the CPU into K JAX devices for the sharded case (None: two per "
         "core; 1 keeps one). Only before JAX starts; see wmr_jax.studies.use_cpu_devices",
@@ -75,7 +72,6 @@ def add_arguments(parser: Any) -> None:
     )
     parser.add_argument(
         "--json",
-        default=None,
         metavar="FILE",
         help="also write the results here (atomically), the robot included",
     )

@@ -1,8 +1,4 @@
-"""``wmr-jax compare``: every controller over the same random docs/model.md §6 poses.
-
-Runs ``wmr_jax.studies.compare_controllers``, writes ``comparison.md`` and
-``comparison.json`` into ``--out`` and prints the table docs/maps.md shows.
-"""
+"""``wmr-jax compare``: every controller over the same random docs/model.md §6 poses."""
 
 from __future__ import annotations
 

@@ -1,8 +1,4 @@
-"""``wmr-jax export``: a tuned loop as a C controller for the robot (docs/deploy.md).
-
-With a C compiler, the sources are compiled once and the state's and the
-object's sizes printed.
-"""
+"""``wmr-jax export``: a tuned loop as a C controller for the robot (docs/deploy.md)."""
 
 from __future__ import annotations
 
@@ -29,7 +25,6 @@ def add_arguments(parser: Any) -> None:
     )
     parser.add_argument(
         "--period",
-        default=None,
         metavar="S",
         help="control period the C is called at, s: the one the gains were tuned for "
         "(a tuned_gains.json does not record it; default the project's DEFAULT_DT, 0.033)",

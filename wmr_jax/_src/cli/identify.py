@@ -1,8 +1,4 @@
-"""``wmr-jax identify``: fit the true robot to its logs, or plan the driving that does.
-
-``--log ... --out DIR`` writes ``DIR/identified.json`` and ``DIR/fit.png``;
-``--plan OUT.csv`` writes the commands to drive (docs/robots.md).
-"""
+"""``wmr-jax identify``: fit the true robot to its logs, or plan the driving that does."""
 
 from __future__ import annotations
 

@@ -1,8 +1,6 @@
-"""The ``wmr-jax`` command line: the one place that parses arguments.
+"""The ``wmr-jax`` command line: every user error is one line on stderr and exit status 2.
 
-Each command's module has ``SUBCOMMANDS``: its help, its flags and
-``run(args) -> int``. Every user error ends in one line on stderr and exit
-status 2, never a traceback.
+Each command's module has ``SUBCOMMANDS``: its help, its flags and ``run(args) -> int``.
 """
 
 from __future__ import annotations
@@ -142,11 +140,10 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
 
 
 def entry() -> None:
-    """The ``wmr-jax`` program: ``main`` with the process's arguments, then exit with its status.
+    """The ``wmr-jax`` program: ``main``, then exit with its status.
 
-    After an interruption (status 130) the process ends at once: tearing the
-    interpreter down under JAX's running threads could crash it and hide the
-    status. Everything written was written atomically.
+    After an interruption (130) the process ends at once: tearing the interpreter
+    down under JAX's threads could crash it and hide the status.
     """
     status = main()
     if status == 130:

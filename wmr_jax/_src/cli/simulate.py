@@ -30,18 +30,14 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument("--dt", default=0.033, metavar="S", help="control period, s")
     parser.add_argument(
         "--steps",
-        default=None,
         metavar="N",
         help="control periods (default: 150 on the paper robot; on a slower robot as many "
         "times more as the studies' horizon is longer there, docs/robustness.md)",
     )
     parser.add_argument("--velocity", default="ideal", help="velocity loop: ideal or nonideal")
-    parser.add_argument(
-        "--plot", default=None, metavar="FILE.png", help="save the path to this image"
-    )
+    parser.add_argument("--plot", metavar="FILE.png", help="save the path to this image")
     parser.add_argument(
         "--gains",
-        default=None,
         metavar="FILE.json",
         help="take the controller and its parameters from this file (tuned_gains.json of "
         "wmr-jax tune: fixed gains or a gain schedule) instead of the gain flags; the robot "
@@ -82,11 +78,7 @@ DEFAULT_STEPS = 150
 
 
 def default_steps(robot: Any) -> int:
-    """``DEFAULT_STEPS`` stretched as the studies' horizon is on a slower robot.
-
-    The paper's gains scaled into a smaller wheel budget drive the same paths
-    that many times slower.
-    """
+    """``DEFAULT_STEPS`` stretched as the studies' horizon is on a slower robot."""
     from wmr_jax._src.sim.poses import HORIZON_S
     from wmr_jax._src.studies.robustness import study_horizon
 

@@ -17,7 +17,6 @@ def add_arguments(parser: Any) -> None:
     add_study_flags(parser)
     parser.add_argument(
         "--steps",
-        default=None,
         metavar="N",
         help="control periods of each run (default: 450, 14.85 s, for the paper robot; for a "
         "--robot whose wheels cannot follow the paper's feasible gains, 60 + 10 L > v_max, "
