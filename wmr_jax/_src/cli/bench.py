@@ -9,7 +9,7 @@ from wmr_jax._src.cli import flags
 from wmr_jax._src.sim.poses import MAX_SAMPLES
 from wmr_jax._src.studies import bench
 
-__all__ = ["SUBCOMMANDS"]
+__all__ = ["add_arguments", "run"]
 
 # The integer flags: (flag, attribute, default, metavar, help).
 _INT_FLAGS = (
@@ -119,12 +119,3 @@ def run(args: Any) -> int:
         atomic_write_json(out, result)
         print(f"results: {args.json}")
     return 0
-
-
-SUBCOMMANDS = {
-    "bench": {
-        "help": "robot-steps per second against NumPy baselines",
-        "add_arguments": add_arguments,
-        "run": run,
-    },
-}

@@ -6,7 +6,7 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["SUBCOMMANDS"]
+__all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: Any) -> None:
@@ -50,12 +50,3 @@ def run(args: Any) -> int:
     )
     print(comparison_table(comparison["rows"]), end="")
     return 0
-
-
-SUBCOMMANDS = {
-    "compare": {
-        "help": "compare the controllers over random poses (the table of docs/maps.md)",
-        "add_arguments": add_arguments,
-        "run": run,
-    },
-}

@@ -9,7 +9,7 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["SUBCOMMANDS", "load_refs"]
+__all__ = ["add_arguments", "load_refs", "run"]
 
 _CONDITIONS = ("nominal", "latency", "noise", "both")
 _ESTIMATOR_CHOICES = ("none", "observer", "ekf")
@@ -538,12 +538,3 @@ def run_compiled(args: Any) -> int:
     result = {**result, "c_folder": str(args.c), "gains": meta["gains"], "refs_file": args.refs}
     _finish(out, result)
     return 0
-
-
-SUBCOMMANDS = {
-    "evaluate": {
-        "help": "judge tuned gains (and their estimator) on your references under one condition",
-        "add_arguments": add_arguments,
-        "run": run,
-    },
-}

@@ -8,7 +8,7 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["SUBCOMMANDS"]
+__all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: Any) -> None:
@@ -74,12 +74,3 @@ def run(args: Any) -> int:
         print(f"sizeof(wmr_controller) = {sizes[0]} bytes; code and constants: {sizes[1]} bytes")
     print(f"period {sources.period:g} s, latency 0 to {sources.max_latency} periods, {real}")
     return 0
-
-
-SUBCOMMANDS = {
-    "export": {
-        "help": "write a tuned loop (law, estimator, latency compensation) as a C controller",
-        "add_arguments": add_arguments,
-        "run": run,
-    },
-}

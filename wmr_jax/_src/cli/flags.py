@@ -304,29 +304,26 @@ def add_robot_flag(parser: Any, default: str = "paper") -> None:
     )
 
 
-def scaled_gains_note(robot: Any) -> str:
-    """What Shim–Sung runs on ``robot`` in a study given no gains (``robot_defaults``)."""
-    from wmr_jax._src.studies.robustness import robot_defaults
-
-    gains = robot_defaults("shim-sung", robot)
-    if gains is None:
-        return ""
-    return (
-        f"; shim-sung at k_r = {float(gains.kr):.4g} cm/s, k_theta = {float(gains.k_theta):.4g} "
-        "rad/s (the paper's feasible gains within its wheel budget)"
-    )
-
-
 def say_robot(given: Any, detail: str = "", gains: bool = True) -> None:
-    """Print ``--robot``'s robot (and its note), if given, then ``detail`` and the gains note."""
+    """Print ``--robot``'s robot (and its note), if given, then ``detail``.
+
+    ``gains``: also what Shim–Sung runs there in a study given no gains (``robot_defaults``).
+    """
     from wmr_jax._src.model.robots import describe_robot
+    from wmr_jax._src.studies.robustness import robot_defaults
 
     if given is None:
         return
     if given.note:
         print(given.note)
-    note = scaled_gains_note(given.robot) if gains else ""
-    print(f"robot {given.label!r}: {describe_robot(given.robot)}{detail}{note}")
+    scaled = robot_defaults("shim-sung", given.robot) if gains else None
+    if scaled is not None:
+        kr, k_theta = float(scaled.kr), float(scaled.k_theta)
+        detail += (
+            f"; shim-sung at k_r = {kr:.4g} cm/s, k_theta = {k_theta:.4g} rad/s (the paper's "
+            "feasible gains within its wheel budget)"
+        )
+    print(f"robot {given.label!r}: {describe_robot(given.robot)}{detail}")
 
 
 def robot_from(text: Any) -> Any:
@@ -346,16 +343,6 @@ def is_robot_file(text: Any) -> bool:
     from wmr_jax._src.model.robots import ROBOTS
 
     return text is not None and text not in ROBOTS
-
-
-def robot_shown(given: Any, robot: Any) -> str:
-    """One line for the robot a command runs: ``describe_robot``, and the file it came from."""
-    from wmr_jax._src.model.robots import describe_robot
-
-    text = describe_robot(robot)
-    if given is not None and is_robot_file(given.label):
-        text += f", from {given.label}"
-    return text
 
 
 def robot_for_gains(given: Any, saved: Any, gains_flag: str, path: Any) -> Any:

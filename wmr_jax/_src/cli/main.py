@@ -1,6 +1,6 @@
 """The ``wmr-jax`` command line: every user error is one line on stderr and exit status 2.
 
-Each command's module has ``SUBCOMMANDS``: its help, its flags and ``run(args) -> int``.
+Each command's module has ``add_arguments(parser)`` and ``run(args) -> int``.
 """
 
 from __future__ import annotations
@@ -14,12 +14,44 @@ from collections.abc import Sequence
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
-# The commands in --help order, each in the module of its name (demo in paper's).
-COMMANDS = (
-    "simulate demo paper tune sweep compare waypoints robustness evaluate export animate identify "
-    "bench"
-).split()
-_MODULE_OF = {"demo": "paper"}
+# The commands in --help order: the module under cli/ with their add_arguments, the
+# function that runs them (args -> exit status), and their help.
+_COMMANDS = {
+    "simulate": ("simulate", "run", "drive the robot to one reference pose and report"),
+    "demo": ("paper", "run_demo", "the main job: reproduce the paper into a folder, tabulate"),
+    "paper": ("paper", "run_paper", "Figs. 6-10, wheel speeds and the paper table"),
+    "tune": ("tune", "run", "tune gains by gradient descent under k_r + L k_theta <= V_max"),
+    "sweep": (
+        "sweep",
+        "run",
+        "map success, arrival, path, wheel speed and zig-zag over a pose space",
+    ),
+    "compare": (
+        "compare",
+        "run",
+        "compare the controllers over random poses (the table of docs/maps.md)",
+    ),
+    "waypoints": ("waypoints", "run", "consecutive motions through a chain of waypoints"),
+    "robustness": ("robustness", "run", "Monte Carlo of noise, model mismatch and latency"),
+    "evaluate": (
+        "evaluate",
+        "run",
+        "judge tuned gains (and their estimator) on your references under one condition",
+    ),
+    "export": (
+        "export",
+        "run",
+        "write a tuned loop (law, estimator, latency compensation) as a C controller",
+    ),
+    "animate": ("animate", "run", "animated GIF of a batch of robots driving to their poses"),
+    "identify": (
+        "identify",
+        "run",
+        "fit the true robot (wheel scales, track, wheel lag, latency, noise) to its logs",
+    ),
+    "bench": ("bench", "run", "robot-steps per second against NumPy baselines"),
+}
+COMMANDS = tuple(_COMMANDS)
 
 # Sweep-like commands spread their batches over every local device; on a CPU
 # that means splitting it into several JAX devices first (wmr_jax.studies.use_cpu_devices).
@@ -63,19 +95,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"wmr-jax {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name in COMMANDS:
-        module_name = _MODULE_OF.get(name, name)
+    for name, (module_name, function, text) in _COMMANDS.items():
         module = importlib.import_module(f"wmr_jax._src.cli.{module_name}")
-        spec = module.SUBCOMMANDS[name]
         command = sub.add_parser(
-            name,
-            help=spec["help"],
-            description=spec["help"],
-            formatter_class=_HelpFormatter,
-            allow_abbrev=False,
+            name, help=text, description=text, formatter_class=_HelpFormatter, allow_abbrev=False
         )
-        spec["add_arguments"](command)
-        command.set_defaults(func=spec["run"])
+        module.add_arguments(command)
+        command.set_defaults(func=getattr(module, function))
     return parser
 
 

@@ -12,7 +12,7 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["SUBCOMMANDS"]
+__all__ = ["add_arguments", "run"]
 
 # What the command writes into --out (the noise curve only with --noise-curve).
 _OUTPUTS = tuple(
@@ -326,12 +326,3 @@ def _held_out() -> Any:
 def _finite(value: Any) -> float:
     """An arrival of ``evaluate_loop`` as the tables hold it: ``inf`` where none arrived."""
     return math.inf if value is None else float(value)
-
-
-SUBCOMMANDS = {
-    "robustness": {
-        "help": "Monte Carlo of noise, model mismatch and latency",
-        "add_arguments": add_arguments,
-        "run": run,
-    },
-}

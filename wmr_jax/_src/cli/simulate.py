@@ -8,7 +8,7 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["SUBCOMMANDS"]
+__all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: Any) -> None:
@@ -109,7 +109,7 @@ def run(args: Any) -> int:
 
     from wmr_jax._src.identify.closed_loop import identified_rollout, loaded_identified
     from wmr_jax._src.model.params import Robot
-    from wmr_jax._src.model.robots import same_robot
+    from wmr_jax._src.model.robots import describe_robot, same_robot
     from wmr_jax._src.sim import metrics
     from wmr_jax._src.sim.rollout import rollout
 
@@ -139,7 +139,10 @@ def run(args: Any) -> int:
     final = np.asarray(traj.poses[-1])
     if robot is not None and not same_robot(robot, Robot()):
         # Shown only off the paper robot, the one every other run of the command uses.
-        print(f"robot          : {flags.robot_shown(given, robot)}")
+        shown = describe_robot(robot)
+        if given is not None and flags.is_robot_file(given.label):
+            shown += f", from {given.label}"
+        print(f"robot          : {shown}")
     if args.gains is not None:
         print(f"gains          : {args.gains} ({controller.name})")
     print(f"reference      : x={ref[0]:.3f} cm  y={ref[1]:.3f} cm  θ={_degrees(ref[2]):.2f}°")
@@ -173,12 +176,3 @@ def run(args: Any) -> int:
         path_figure(plot, traj, ref, title=plot_title(ref, controller, gains, args.gains))
         print(f"plot           : {plot}")
     return 0
-
-
-SUBCOMMANDS = {
-    "simulate": {
-        "help": "drive the robot to one reference pose and report",
-        "add_arguments": add_arguments,
-        "run": run,
-    },
-}

@@ -9,7 +9,7 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["SUBCOMMANDS"]
+__all__ = ["add_arguments", "run"]
 
 
 def _flags() -> dict[str, dict[str, Any]]:
@@ -191,12 +191,3 @@ def _run(args: Any, out: Path, chunks: Path | None, finished: dict) -> int:
     print(f"{study.summary['poses']} poses -> {out}/maps_*.png, summary.md, summary.json")
     print(comparison_table(study.rows), end="")
     return 0
-
-
-SUBCOMMANDS = {
-    "sweep": {
-        "help": "map success, arrival, path, wheel speed and zig-zag over a pose space",
-        "add_arguments": add_arguments,
-        "run": run,
-    },
-}

@@ -7,7 +7,7 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["SUBCOMMANDS"]
+__all__ = ["add_arguments", "run"]
 
 # flag, TuneConfig field (or None), metavar, help
 _FLAGS = (
@@ -291,12 +291,3 @@ def run(args: Any) -> int:
         print(result.note)
     print(f"curve -> {out / 'tuning_curve.png'}")
     return 0
-
-
-SUBCOMMANDS = {
-    "tune": {
-        "help": "tune gains by gradient descent under k_r + L k_theta <= V_max",
-        "add_arguments": add_arguments,
-        "run": run,
-    },
-}
