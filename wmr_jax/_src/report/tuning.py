@@ -214,18 +214,16 @@ def comparison_table(rows: list[dict[str, Any]]) -> str:
     """
     rows = require_rows("rows", rows)
     numbers = [_compare_numbers(i, row) for i, row in enumerate(rows)]
-    groups: dict[tuple[str, str], list[dict[str, float]]] = {}
-    raws: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    # Each row with its numbers read back as floats, grouped by problem and method.
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for row, values in zip(rows, numbers, strict=True):
         # A row without a parameter count has the default problem's.
         default = PROBLEMS.get(row["problem"])
         size = row.get("parameters", None if default is None else default.dim)
         problem = row["problem"] if size is None else f"{row['problem']} ({size})"
-        groups.setdefault((problem, row["method"]), []).append(values)
-        raws.setdefault((problem, row["method"]), []).append(row)
+        groups.setdefault((problem, row["method"]), []).append({**row, **values})
     lines = []
     for (problem, method), group in groups.items():
-        raw = raws[(problem, method)]
         arrival = [r["mean_arrival"] for r in group]
         gap = [r["mean_arrival"] - r["lower_bound_s"] for r in group]
         ratio = [r["mean_arrival"] / r["turn_drive_turn_s"] for r in group]
@@ -239,10 +237,10 @@ def comparison_table(rows: list[dict[str, Any]]) -> str:
                 "success": f"{100 * min(r['success_rate'] for r in group):.1f} %",
                 "mean − lower bound (s)": _arrived_mean(gap, "{:.3f}"),
                 "vs turn–drive–turn": _arrived_mean(ratio, "{:.3f}×"),
-                "CPU time (s)": " / ".join(_maybe(r.get("cpu_s"), "{:.0f}") for r in raw),
+                "CPU time (s)": " / ".join(_maybe(r.get("cpu_s"), "{:.0f}") for r in group),
                 "wall time (s)": " / ".join(f"{r['wall_s']:.0f}" for r in group),
                 "candidates per CPU-s": " / ".join(
-                    _maybe(r.get("per_cpu_s"), "{:.3g}") for r in raw
+                    _maybe(r.get("per_cpu_s"), "{:.3g}") for r in group
                 ),
             }
         )
@@ -321,10 +319,8 @@ def tuning_curve(
         twin.plot(steps, temperature, lw=1.0, color="C3")
         twin.set_yscale("log")
         twin.set_ylabel("temperature", color="C3")
-        title = f"loss ({velocity} loop)"
-        if not finite.all():
-            title += f"; {(~finite).sum()} non-finite or non-positive, marked ×"
-        ax.set_title(title, fontsize=9 if not finite.all() else None)
+        what = "non-finite or non-positive, marked ×"
+        _marked_title(ax, f"loss ({velocity} loop)", finite, what)
         if problem == "schedule":
             _schedule_panels(axes, steps, gains, knots)
         else:
@@ -342,11 +338,11 @@ def _plot_marked(ax: Any, steps: np.ndarray, values: np.ndarray, drawn: Any, **s
     return drawn
 
 
-def _marked_title(ax: Any, title: str, drawn: Any) -> None:
-    """``title``, with the count of the values not drawn where there are any."""
+def _marked_title(ax: Any, title: str, drawn: Any, what: str = "non-finite, marked ×") -> None:
+    """``title``, with the count of the values not drawn (``what`` they are) where there are any."""
     missing = int((~np.asarray(drawn, dtype=bool)).sum())
     if missing:
-        title += f"; {missing} non-finite, marked ×"
+        title += f"; {missing} {what}"
     ax.set_title(title, fontsize=9 if missing else None)
 
 
@@ -414,10 +410,7 @@ def _schedule_panels(axes: Any, steps: np.ndarray, rows: np.ndarray, knots: int)
         ax.plot(radii, table[-1], "o-", ms=3, lw=1.2, label="tuned")
         ax.set_xscale("symlog", linthresh=1.0)
         ax.set_xlabel("r_e (cm)")
-        missing = int((~np.isfinite(table[[0, -1]])).sum())
-        if missing:
-            title += f"; {missing} knot values non-finite, not drawn"
-        ax.set_title(title, fontsize=9 if missing else None)
+        _marked_title(ax, title, np.isfinite(table[[0, -1]]), "knot values non-finite, not drawn")
     axes.flat[1].legend(fontsize=8)
     for k, name in enumerate(SHAPE_FIELDS):  # Φ_m, the radii and α
         ax = axes.flat[k + 4]
