@@ -87,6 +87,7 @@ def run(args: Any) -> int:
     names = flags.controller_names(args.controller)
     velocity = flags.velocity_loop(args.velocity)
     estimator = flags.estimator(args.estimator)
+    x64 = not args.float32
     from wmr_jax._src.identify.closed_loop import loaded_identified
 
     identified = loaded_identified(getattr(args, "robot", None))
@@ -101,7 +102,7 @@ def run(args: Any) -> int:
     for name in _OUTPUTS:
         (out / name).unlink(missing_ok=True)
     if identified is not None:
-        _on_identified(out, sets, seed, identified, meta, x64=not args.float32)
+        _on_identified(out, sets, seed, identified, meta, x64=x64)
         return 0
 
     from wmr_jax._src.model.robots import describe_robot, robot_name
@@ -119,23 +120,14 @@ def run(args: Any) -> int:
     robot_file = getattr(args, "robot", None)
     origin = f", from {robot_file}" if flags.is_robot_file(robot_file) else ""
     print(f"robot {describe_robot(robot)}{origin}, horizon {study_horizon(robot):g} s{note}")
-    rows = robustness_study(
-        seed=seed,
-        controller_names=names,
-        n_runs=n_runs,
-        velocity=velocity,
-        x64=not args.float32,
-        estimator=estimator,
-        robot=robot,
-    )
-    write_robustness(
-        out, rows, seed=seed, velocity=velocity, n_runs=n_runs, robot=robot, x64=not args.float32
-    )
+    study = {"seed": seed, "velocity": velocity, "n_runs": n_runs, "robot": robot, "x64": x64}
+    rows = robustness_study(controller_names=names, estimator=estimator, **study)
+    write_robustness(out, rows, **study)
     print(f"robustness -> {out}/robustness.png, robustness.md, robustness.json")
     print(robustness_table(rows, _PRINTED), end="")
-    _standard(out, sets, seed, robot, meta, x64=not args.float32)
+    _standard(out, sets, seed, robot, meta, x64=x64)
     if args.noise_curve:
-        _noise_curve(out, sets, seed, robot, meta, x64=not args.float32)
+        _noise_curve(out, sets, seed, robot, meta, x64=x64)
     return 0
 
 
