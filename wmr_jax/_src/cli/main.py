@@ -14,44 +14,24 @@ from collections.abc import Sequence
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
-# The commands in --help order: the module under cli/ with their add_arguments, the
-# function that runs them (args -> exit status), and their help.
-_COMMANDS = {
-    "simulate": ("simulate", "run", "drive the robot to one reference pose and report"),
-    "demo": ("paper", "run_demo", "the main job: reproduce the paper into a folder, tabulate"),
-    "paper": ("paper", "run_paper", "Figs. 6-10, wheel speeds and the paper table"),
-    "tune": ("tune", "run", "tune gains by gradient descent under k_r + L k_theta <= V_max"),
-    "sweep": (
-        "sweep",
-        "run",
-        "map success, arrival, path, wheel speed and zig-zag over a pose space",
-    ),
-    "compare": (
-        "compare",
-        "run",
-        "compare the controllers over random poses (the table of docs/maps.md)",
-    ),
-    "waypoints": ("waypoints", "run", "consecutive motions through a chain of waypoints"),
-    "robustness": ("robustness", "run", "Monte Carlo of noise, model mismatch and latency"),
-    "evaluate": (
-        "evaluate",
-        "run",
-        "judge tuned gains (and their estimator) on your references under one condition",
-    ),
-    "export": (
-        "export",
-        "run",
-        "write a tuned loop (law, estimator, latency compensation) as a C controller",
-    ),
-    "animate": ("animate", "run", "animated GIF of a batch of robots driving to their poses"),
-    "identify": (
-        "identify",
-        "run",
-        "fit the true robot (wheel scales, track, wheel lag, latency, noise) to its logs",
-    ),
-    "bench": ("bench", "run", "robot-steps per second against NumPy baselines"),
+# The commands in --help order, and their help. Each is the add_arguments and the
+# run_<name> (else run) of the cli module of its name; demo's is paper's.
+_HELP = {
+    "simulate": "drive the robot to one reference pose and report",
+    "demo": "the main job: reproduce the paper into a folder, tabulate",
+    "paper": "Figs. 6-10, wheel speeds and the paper table",
+    "tune": "tune gains by gradient descent under k_r + L k_theta <= V_max",
+    "sweep": "map success, arrival, path, wheel speed and zig-zag over a pose space",
+    "compare": "compare the controllers over random poses (the table of docs/maps.md)",
+    "waypoints": "consecutive motions through a chain of waypoints",
+    "robustness": "Monte Carlo of noise, model mismatch and latency",
+    "evaluate": "judge tuned gains (and their estimator) on your references under one condition",
+    "export": "write a tuned loop (law, estimator, latency compensation) as a C controller",
+    "animate": "animated GIF of a batch of robots driving to their poses",
+    "identify": "fit the true robot (wheel scales, track, wheel lag, latency, noise) to its logs",
+    "bench": "robot-steps per second against NumPy baselines",
 }
-COMMANDS = tuple(_COMMANDS)
+COMMANDS = tuple(_HELP)
 
 # Sweep-like commands spread their batches over every local device; on a CPU
 # that means splitting it into several JAX devices first (wmr_jax.studies.use_cpu_devices).
@@ -95,13 +75,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"wmr-jax {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name, (module_name, function, text) in _COMMANDS.items():
-        module = importlib.import_module(f"wmr_jax._src.cli.{module_name}")
+    for name, text in _HELP.items():
+        module = importlib.import_module(f"wmr_jax._src.cli.{'paper' if name == 'demo' else name}")
         command = sub.add_parser(
             name, help=text, description=text, formatter_class=_HelpFormatter, allow_abbrev=False
         )
         module.add_arguments(command)
-        command.set_defaults(func=getattr(module, function))
+        command.set_defaults(func=getattr(module, f"run_{name}", None) or module.run)
     return parser
 
 
