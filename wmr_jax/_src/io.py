@@ -1,8 +1,4 @@
-"""Output files: atomic writes, and checksummed array files for chunks and checkpoints.
-
-A kill never leaves a half-written result (a temporary file and a rename),
-and a results file damaged or edited afterwards fails its checksum.
-"""
+"""Output files: atomic writes (no half-written file), checksummed arrays and records."""
 
 from __future__ import annotations
 
@@ -85,11 +81,7 @@ def atomic_write_npz(path: str | os.PathLike, **arrays: Any) -> Path:
 
 
 def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
-    """Write UTF-8 ``text`` to ``path`` atomically.
-
-    Raises:
-        ValueError: ``text`` is not a ``str`` (bytes go to ``atomic_write_bytes``).
-    """
+    """Write UTF-8 ``text`` to ``path`` atomically (bytes go to ``atomic_write_bytes``)."""
     if not isinstance(text, str):
         raise ValueError(f"text = {text!r:.80} is not allowed; allowed: a str")
     return atomic_write_bytes(path, text.encode("utf-8"))
@@ -112,11 +104,7 @@ def _jsonable(obj: Any) -> Any:
 
 
 def atomic_write_json(path: str | os.PathLike, obj: Any) -> Path:
-    """Write ``obj`` as indented JSON atomically; ``inf`` and NaN become "inf" and "nan".
-
-    Raises:
-        ValueError: ``obj`` holds a value JSON cannot store (nothing is written).
-    """
+    """Write ``obj`` as indented JSON atomically; ``inf`` and NaN become "inf" and "nan"."""
     return atomic_write_text(path, json_text(obj, "obj", indent=2, sort_keys=False) + "\n")
 
 
@@ -137,11 +125,7 @@ def json_text(obj: Any, name: str, **kwargs: Any) -> str:
 
 
 def save_figure(fig: Any, path: str | os.PathLike, **kwargs: Any) -> Path:
-    """Render a matplotlib figure to ``path`` atomically (format from the suffix).
-
-    Raises:
-        ValueError: ``path`` does not end in an image format matplotlib can write.
-    """
+    """Render a matplotlib figure to ``path`` atomically, in the format its suffix names."""
     canvas = getattr(fig, "canvas", None)
     if not hasattr(canvas, "get_supported_filetypes"):
         raise ValueError(f"fig is a {type(fig).__name__}; allowed: a matplotlib Figure")
@@ -209,9 +193,8 @@ def save_arrays(path: str | os.PathLike, arrays: dict[str, Any], meta: dict[str,
     """Write arrays and a JSON-able ``meta`` dict as a checksummed ``.npz``, atomically.
 
     Raises:
-        ValueError: before anything is written, for ``arrays`` not a mapping
-            of str names to numeric, bool or string arrays, a reserved name,
-            or a ``meta`` JSON cannot store.
+        ValueError: before writing, for arrays that are not numbers, bools or
+            strings under str names, or a ``meta`` JSON cannot store.
     """
     arrays = _checked_arrays(arrays)
     meta_text = json_text(meta, "meta", sort_keys=True)
@@ -225,8 +208,7 @@ def load_arrays(path: str | os.PathLike) -> tuple[dict[str, np.ndarray], dict[st
     """Read a file of ``save_arrays``: ``(arrays, meta)``.
 
     Raises:
-        DamagedFileError: the file is unreadable, truncated, not of
-            ``save_arrays``, or its checksum does not match (one line, naming it).
+        DamagedFileError: unreadable, truncated, not of ``save_arrays``, or a wrong checksum.
         FileNotFoundError: there is no such file.
     """
     path = Path(path)
@@ -268,13 +250,10 @@ def _record_digest(record: dict[str, Any]) -> str:
 
 
 def sealed(record: Mapping[str, Any]) -> dict[str, Any]:
-    """``record`` as it reads back from JSON, with a ``"sha256"`` of its content added.
-
-    ``unsealed`` refuses a record changed after it was written.
+    """``record`` as it reads back from JSON, with a ``"sha256"`` that ``unsealed`` checks.
 
     Raises:
-        ValueError: ``record`` is not a mapping of str keys without
-            ``"sha256"``, or holds a value JSON cannot store.
+        ValueError: not a mapping without ``"sha256"``, or a value JSON cannot store.
     """
     if not isinstance(record, Mapping) or _SEAL in record:
         raise ValueError(
@@ -285,11 +264,7 @@ def sealed(record: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def unsealed(record: Any, where: str) -> dict[str, Any]:
-    """The content of a record ``sealed`` wrote, checked against its ``"sha256"``.
-
-    Raises:
-        DamagedFileError: no checksum, or one the content does not match (naming ``where``).
-    """
+    """The content of a record ``sealed`` wrote; ``DamagedFileError`` naming ``where`` if edited."""
     if not isinstance(record, dict) or not isinstance(record.get(_SEAL), str):
         raise DamagedFileError(
             f"{where} has no checksum (it was not written by this version of wmr_jax, "
@@ -311,10 +286,9 @@ def unsealed(record: Any, where: str) -> dict[str, Any]:
 
 
 def writable_path(shown: str, value: Any, *, folder: bool) -> Path:
-    """Return ``value`` as a path to write (a folder or a file), or say why not.
+    """``value`` as a path to write (a folder or a file), tried with a temporary file.
 
-    Tried before any work by a temporary file in the deepest existing folder.
-    ``shown`` introduces the value in messages (``"out = '/x'"``).
+    A refusal introduces the value as ``shown`` (``"out = '/x'"``).
     """
     text = os.fspath(value) if isinstance(value, (str, os.PathLike)) else ""
     if not text:  # Path("") is the current folder

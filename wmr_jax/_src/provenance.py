@@ -1,9 +1,7 @@
 """Which code computed a result: the package version and a digest of its source.
 
-Caches record ``code_version()`` beside their settings and are reused only
-by the same code, even between two installs of one version number. The
-digest covers every module under ``wmr_jax/_src`` but ``cli/`` and
-``report/``, which compute nothing that is cached.
+Caches record ``code_version()`` and are reused only by the same code. The digest
+leaves out ``cli/`` and ``report/``, which compute nothing that is cached.
 """
 
 from __future__ import annotations

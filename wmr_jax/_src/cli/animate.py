@@ -6,7 +6,7 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["SUBCOMMANDS"]
+__all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: Any) -> None:
@@ -75,12 +75,3 @@ def run(args: Any) -> int:
     )
     print(f"animation -> {path}")
     return 0
-
-
-SUBCOMMANDS = {
-    "animate": {
-        "help": "animated GIF of a batch of robots driving to their poses",
-        "add_arguments": add_arguments,
-        "run": run,
-    },
-}

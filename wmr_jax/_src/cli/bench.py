@@ -9,7 +9,7 @@ from wmr_jax._src.cli import flags
 from wmr_jax._src.sim.poses import MAX_SAMPLES
 from wmr_jax._src.studies import bench
 
-__all__ = ["SUBCOMMANDS"]
+__all__ = ["add_arguments", "run"]
 
 # The integer flags: (flag, attribute, default, metavar, help).
 _INT_FLAGS = (
@@ -38,7 +38,6 @@ def add_arguments(parser: Any) -> None:
         "--sizes",
         nargs="+",
         action="extend",
-        default=None,
         metavar="N",
         help="batch sizes, repeatable (default: "
         + " ".join(str(n) for n in bench.DEFAULT_SIZES)
@@ -51,7 +50,6 @@ def add_arguments(parser: Any) -> None:
         "--cases",
         nargs="+",
         action="extend",
-        default=None,
         metavar="CASE",
         help="only these cases, among "
         + ", ".join(bench.CASES)
@@ -61,7 +59,6 @@ def add_arguments(parser: Any) -> None:
     )
     parser.add_argument(
         "--cpu-devices",
-        default=None,
         metavar="K",
         help="split the CPU into K JAX devices for the sharded case (None: two per "
         "core; 1 keeps one). Only before JAX starts; see wmr_jax.studies.use_cpu_devices",
@@ -75,7 +72,6 @@ def add_arguments(parser: Any) -> None:
     )
     parser.add_argument(
         "--json",
-        default=None,
         metavar="FILE",
         help="also write the results here (atomically), the robot included",
     )
@@ -123,12 +119,3 @@ def run(args: Any) -> int:
         atomic_write_json(out, result)
         print(f"results: {args.json}")
     return 0
-
-
-SUBCOMMANDS = {
-    "bench": {
-        "help": "robot-steps per second against NumPy baselines",
-        "add_arguments": add_arguments,
-        "run": run,
-    },
-}

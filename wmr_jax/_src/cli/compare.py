@@ -1,8 +1,4 @@
-"""``wmr-jax compare``: every controller over the same random docs/model.md §6 poses.
-
-Runs ``wmr_jax.studies.compare_controllers``, writes ``comparison.md`` and
-``comparison.json`` into ``--out`` and prints the table docs/maps.md shows.
-"""
+"""``wmr-jax compare``: every controller over the same random docs/model.md §6 poses."""
 
 from __future__ import annotations
 
@@ -10,7 +6,7 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["SUBCOMMANDS"]
+__all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: Any) -> None:
@@ -54,12 +50,3 @@ def run(args: Any) -> int:
     )
     print(comparison_table(comparison["rows"]), end="")
     return 0
-
-
-SUBCOMMANDS = {
-    "compare": {
-        "help": "compare the controllers over random poses (the table of docs/maps.md)",
-        "add_arguments": add_arguments,
-        "run": run,
-    },
-}

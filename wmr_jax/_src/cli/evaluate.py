@@ -1,7 +1,4 @@
-"""``wmr-jax evaluate``: judge a tuned loop on the user's references under one condition.
-
-Every flag and both files are checked before any run.
-"""
+"""``wmr-jax evaluate``: judge a tuned loop on the user's references under one condition."""
 
 from __future__ import annotations
 
@@ -12,7 +9,7 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["SUBCOMMANDS", "load_refs"]
+__all__ = ["add_arguments", "load_refs", "run"]
 
 _CONDITIONS = ("nominal", "latency", "noise", "both")
 _ESTIMATOR_CHOICES = ("none", "observer", "ekf")
@@ -51,7 +48,6 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument("--seed", default=0, metavar="N", help="seed of the noise and mismatch")
     parser.add_argument(
         "--horizon",
-        default=None,
         metavar="S",
         help=f"simulated time per reference, s (at most {_MAX_HORIZON_S:g}; default: 6 on the "
         "paper robot, longer on a slower one: 6 s times (60 + 10 L) / V_max where that "
@@ -61,7 +57,6 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument("--velocity", default="ideal", help="velocity loop: ideal or nonideal")
     parser.add_argument(
         "--estimator",
-        default=None,
         metavar="NAME",
         help="feedback, instead of the file's: none (raw measurements), observer or ekf (the "
         "file's parameters if it holds that estimator, else the defaults); default: the file's",
@@ -69,13 +64,11 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument("--float32", **flags.FLOAT32)
     parser.add_argument(
         "--json",
-        default=None,
         metavar="OUT.json",
         help="write the result to this JSON file (if omitted, only print it)",
     )
     parser.add_argument(
         "--per-ref",
-        default=None,
         metavar="OUT.csv",
         help="write one line per reference to this CSV: where it is in --refs, the reference, "
         "whether it arrived, its arrival time, its final distance and whether it settled only "
@@ -83,7 +76,6 @@ def add_arguments(parser: Any) -> None:
     )
     parser.add_argument(
         "--c",
-        default=None,
         metavar="DIR",
         help="judge the C controller wmr-jax export wrote into DIR, compiled with the system "
         "C compiler, in place of --gains (the same runs; float64 loop, docs/deploy.md)",
@@ -210,8 +202,7 @@ def _read_npy(path: str) -> tuple[Any, list[str] | None]:
 def load_refs(path: str, *, x64: bool = True) -> tuple[Any, list[str]]:
     """The ``(N, 3)`` references of ``--refs`` (``.npy`` or ``.csv``), checked, and where each is.
 
-    Where: ``line 3`` of a CSV, ``row 0 (from 0)`` of an array. A single row of
-    3 is one reference.
+    Where: ``line 3`` of a CSV, ``row 0 (from 0)`` of an array.
     """
     import jax
     import numpy as np
@@ -331,34 +322,6 @@ def _seconds(value: float | None) -> str:
     return "none arrived" if value is None else f"{value:.3f} s"
 
 
-def _versus_optimal(result: dict[str, Any]) -> str:
-    if result["vs_turn_drive_turn"] is None:
-        return "none arrived"
-    return (
-        f"{result['vs_turn_drive_turn']:.3f}× (its mean {result['turn_drive_turn_s']:.3f} s "
-        "over the references that arrived, docs/model.md §8)"
-    )
-
-
-def _within(result: dict[str, Any]) -> str:
-    bound = result["v_max"] * (1.0 + result["mismatch"])
-    if result["peak_wheel_speed_ok"]:
-        if result["mismatch"] == 0:
-            return "every wheel command within it"
-        return (
-            f"every wheel command within it (a wheel up to {100 * result['mismatch']:g} % larger "
-            f"than modelled turns that into up to {bound:.4g} cm/s at its rim)"
-        )
-    return "exceeded: the gains ask more of the wheels than this robot has"
-
-
-def _peak(result: dict[str, Any]) -> str:
-    text = f"{result['peak_wheel_speed']:.1f} cm/s"
-    if result["mismatch"] == 0:
-        return text
-    return text + " at the rims, wheel-radius mismatch included"
-
-
 _SHOWN_FAILURES = 5
 
 
@@ -385,6 +348,25 @@ def summary_rows(result: dict[str, Any], labels: list[str] | None = None) -> lis
             f"(wheel scales, half-track, wheel lag, latency, tracker noise); the loop believes "
             f"its base: {base}"
         )
+    mismatch = result["mismatch"]
+    versus = "none arrived"
+    if result["vs_turn_drive_turn"] is not None:
+        versus = (
+            f"{result['vs_turn_drive_turn']:.3f}× (its mean {result['turn_drive_turn_s']:.3f} s "
+            "over the references that arrived, docs/model.md §8)"
+        )
+    peak = f"{result['peak_wheel_speed']:.1f} cm/s"
+    within = "exceeded: the gains ask more of the wheels than this robot has"
+    if result["peak_wheel_speed_ok"]:
+        within = "every wheel command within it"
+    if mismatch != 0:
+        peak += " at the rims, wheel-radius mismatch included"
+        if result["peak_wheel_speed_ok"]:
+            bound = result["v_max"] * (1.0 + mismatch)
+            within += (
+                f" (a wheel up to {100 * mismatch:g} % larger than modelled turns that into up "
+                f"to {bound:.4g} cm/s at its rim)"
+            )
     rows = [("success", _percent(result["success"]))]
     if "per_reference" in result:
         rows.append(("not arrived", _failed(result, labels)))
@@ -392,14 +374,14 @@ def summary_rows(result: dict[str, Any], labels: list[str] | None = None) -> lis
     rows += [
         ("mean arrival", _seconds(result["mean_arrival_s"])),
         ("median arrival", _seconds(result["median_arrival_s"])),
-        ("vs turn–drive–turn time", _versus_optimal(result)),
+        ("vs turn–drive–turn time", versus),
         ("settled only at the horizon", settled),
-        ("peak wheel speed", _peak(result)),
-        ("V_max", f"{result['v_max']:g} cm/s, {_within(result)}"),
+        ("peak wheel speed", peak),
+        ("V_max", f"{result['v_max']:g} cm/s, {within}"),
         ("robot", robot),
         ("references (n)", str(result["n"])),
         ("condition", result["condition"]),
-        ("wheel-radius mismatch", f"±{100 * result['mismatch']:g} %"),
+        ("wheel-radius mismatch", f"±{100 * mismatch:g} %"),
         ("seed", str(result["seed"])),
         ("horizon", f"{result['horizon_s']:g} s"),
         ("velocity loop", result["velocity"]),
@@ -556,12 +538,3 @@ def run_compiled(args: Any) -> int:
     result = {**result, "c_folder": str(args.c), "gains": meta["gains"], "refs_file": args.refs}
     _finish(out, result)
     return 0
-
-
-SUBCOMMANDS = {
-    "evaluate": {
-        "help": "judge tuned gains (and their estimator) on your references under one condition",
-        "add_arguments": add_arguments,
-        "run": run,
-    },
-}

@@ -1,8 +1,4 @@
-"""``wmr-jax export``: a tuned loop as a C controller for the robot (docs/deploy.md).
-
-With a C compiler, the sources are compiled once and the state's and the
-object's sizes printed.
-"""
+"""``wmr-jax export``: a tuned loop as a C controller for the robot (docs/deploy.md)."""
 
 from __future__ import annotations
 
@@ -12,7 +8,7 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["SUBCOMMANDS"]
+__all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: Any) -> None:
@@ -29,7 +25,6 @@ def add_arguments(parser: Any) -> None:
     )
     parser.add_argument(
         "--period",
-        default=None,
         metavar="S",
         help="control period the C is called at, s: the one the gains were tuned for "
         "(a tuned_gains.json does not record it; default the project's DEFAULT_DT, 0.033)",
@@ -79,12 +74,3 @@ def run(args: Any) -> int:
         print(f"sizeof(wmr_controller) = {sizes[0]} bytes; code and constants: {sizes[1]} bytes")
     print(f"period {sources.period:g} s, latency 0 to {sources.max_latency} periods, {real}")
     return 0
-
-
-SUBCOMMANDS = {
-    "export": {
-        "help": "write a tuned loop (law, estimator, latency compensation) as a C controller",
-        "add_arguments": add_arguments,
-        "run": run,
-    },
-}

@@ -1,7 +1,6 @@
 """Flag values of the command line, checked: one line naming the flag when one is bad.
 
-Flags arrive as text and are checked here rather than by ``argparse`` types,
-so that a bad value gives the same one-line error as every other mistake.
+Checked here rather than by ``argparse`` types: the same one-line error as every other mistake.
 """
 
 from __future__ import annotations
@@ -118,6 +117,15 @@ def velocity_loop(text: str) -> str:
     return choice("--velocity", text, VELOCITY_LOOPS)
 
 
+def estimator(text: str) -> str | None:
+    """The estimator given to ``--estimator``: a registered name, or ``None`` for raw feedback."""
+    from wmr_jax._src.sim.sensing.estimators import ESTIMATORS
+
+    if text in ("none", "raw"):
+        return None
+    return choice("--estimator", text, ["none", *ESTIMATORS])
+
+
 def controller_names(names: Sequence[str] | None) -> list[str]:
     """The controllers given to ``--controller`` (default: every registered one)."""
     from wmr_jax._src.model.controllers import registered_names
@@ -190,10 +198,7 @@ def add_gain_flags(parser: Any) -> None:
 
 
 def gain_flag_values(params: Any) -> list[str]:
-    """``Gains`` as the gain flags that give them: ``["--k-r", "65.592", ...]`` (Φ_m in degrees).
-
-    Six significant digits: typed back into ``wmr-jax simulate`` they give the same gains.
-    """
+    """``Gains`` as the gain flags that give them, six digits: ``["--k-r", "65.592", ...]``."""
     argv = []
     for flag, field, *_ in _GAIN_FLAGS:
         value = float(getattr(params, field))
@@ -292,7 +297,6 @@ def add_robot_flag(parser: Any, default: str = "paper") -> None:
 
     parser.add_argument(
         "--robot",
-        default=None,
         metavar="NAME|FILE",
         help=f"the robot: a preset ({', '.join(ROBOTS)}), a .json of Robot fields in cm, kg, "
         "s (any subset; the rest the paper robot's) or a ROS diff_drive_controller .yaml "
@@ -300,32 +304,26 @@ def add_robot_flag(parser: Any, default: str = "paper") -> None:
     )
 
 
-def scaled_gains_note(robot: Any) -> str:
-    """What Shim–Sung runs on ``robot`` in a study given no gains (``robot_defaults``)."""
-    from wmr_jax._src.studies.robustness import robot_defaults
-
-    gains = robot_defaults("shim-sung", robot)
-    if gains is None:
-        return ""
-    return (
-        f"; shim-sung at k_r = {float(gains.kr):.4g} cm/s, k_theta = {float(gains.k_theta):.4g} "
-        "rad/s (the paper's feasible gains within its wheel budget)"
-    )
-
-
 def say_robot(given: Any, detail: str = "", gains: bool = True) -> None:
-    """Print ``--robot``'s robot (and a ROS YAML's note), if given, then ``detail``.
+    """Print ``--robot``'s robot (and its note), if given, then ``detail``.
 
-    ``gains`` adds ``scaled_gains_note``.
+    ``gains``: also what Shim–Sung runs there in a study given no gains (``robot_defaults``).
     """
     from wmr_jax._src.model.robots import describe_robot
+    from wmr_jax._src.studies.robustness import robot_defaults
 
     if given is None:
         return
     if given.note:
         print(given.note)
-    note = scaled_gains_note(given.robot) if gains else ""
-    print(f"robot {given.label!r}: {describe_robot(given.robot)}{detail}{note}")
+    scaled = robot_defaults("shim-sung", given.robot) if gains else None
+    if scaled is not None:
+        kr, k_theta = float(scaled.kr), float(scaled.k_theta)
+        detail += (
+            f"; shim-sung at k_r = {kr:.4g} cm/s, k_theta = {k_theta:.4g} rad/s (the paper's "
+            "feasible gains within its wheel budget)"
+        )
+    print(f"robot {given.label!r}: {describe_robot(given.robot)}{detail}")
 
 
 def robot_from(text: Any) -> Any:
@@ -347,22 +345,8 @@ def is_robot_file(text: Any) -> bool:
     return text is not None and text not in ROBOTS
 
 
-def robot_shown(given: Any, robot: Any) -> str:
-    """One line for the robot a command runs: ``describe_robot``, and the file it came from."""
-    from wmr_jax._src.model.robots import describe_robot
-
-    text = describe_robot(robot)
-    if given is not None and is_robot_file(given.label):
-        text += f", from {given.label}"
-    return text
-
-
 def robot_for_gains(given: Any, saved: Any, gains_flag: str, path: Any) -> Any:
-    """The robot to run a tuned file's parameters on: ``--robot``'s, else the file's.
-
-    Gains fit one robot's wheel budget, so a ``--robot`` other than the one the
-    file records is refused. ``None`` where neither is given (the paper robot).
-    """
+    """``--robot``'s robot, else the file's (``None``: neither); gains fit one robot, no other."""
     from wmr_jax._src.model.robots import same_robot
 
     if given is None:
@@ -390,10 +374,9 @@ def short_robot(robot: Any) -> str:
 
 @contextlib.contextmanager
 def as_flags(names: dict[str, str]) -> Iterator[None]:
-    """Name the command's flags in the library's errors raised inside the block.
+    """Name the flag in the library's errors: ``"--poses: n_poses = 10 is not allowed ..."``.
 
-    ``"n_poses = 10 is not allowed; ..."`` becomes ``"--poses: n_poses = 10 ..."``;
-    the advice to switch JAX to float64, which no flag does, is left out.
+    The advice to switch JAX to float64, which no flag does, is left out.
     """
     from wmr_jax._src.checks import _FLOAT64_HINT
 

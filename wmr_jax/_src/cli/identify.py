@@ -1,8 +1,4 @@
-"""``wmr-jax identify``: fit the true robot to its logs, or plan the driving that does.
-
-``--log ... --out DIR`` writes ``DIR/identified.json`` and ``DIR/fit.png``;
-``--plan OUT.csv`` writes the commands to drive (docs/robots.md).
-"""
+"""``wmr-jax identify``: fit the true robot to its logs, or plan the driving that does."""
 
 from __future__ import annotations
 
@@ -12,7 +8,7 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["SUBCOMMANDS"]
+__all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: Any) -> None:
@@ -102,12 +98,3 @@ def _plan(args: Any, robot: Any) -> int:
     np.savetxt(path, rows, fmt="%.6f", delimiter=",", header="t,v_cmd,omega_cmd", comments="")
     print(f"wrote {len(commands)} commands ({minutes:g} min at {dt:g} s) to {path}")
     return 0
-
-
-SUBCOMMANDS = {
-    "identify": {
-        "help": "fit the true robot (wheel scales, track, wheel lag, latency, noise) to its logs",
-        "add_arguments": add_arguments,
-        "run": run,
-    },
-}

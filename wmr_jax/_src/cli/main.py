@@ -1,8 +1,6 @@
-"""The ``wmr-jax`` command line: the one place that parses arguments.
+"""The ``wmr-jax`` command line: every user error is one line on stderr and exit status 2.
 
-Each command's module has ``SUBCOMMANDS``: its help, its flags and
-``run(args) -> int``. Every user error ends in one line on stderr and exit
-status 2, never a traceback.
+Each command's module has ``add_arguments(parser)`` and ``run(args) -> int``.
 """
 
 from __future__ import annotations
@@ -16,12 +14,24 @@ from collections.abc import Sequence
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
-# The commands in --help order, each in the module of its name (demo in paper's).
-COMMANDS = (
-    "simulate demo paper tune sweep compare waypoints robustness evaluate export animate identify "
-    "bench"
-).split()
-_MODULE_OF = {"demo": "paper"}
+# The commands in --help order, and their help. Each is the add_arguments and the
+# run_<name> (else run) of the cli module of its name; demo's is paper's.
+_HELP = {
+    "simulate": "drive the robot to one reference pose and report",
+    "demo": "the main job: reproduce the paper into a folder, tabulate",
+    "paper": "Figs. 6-10, wheel speeds and the paper table",
+    "tune": "tune gains by gradient descent under k_r + L k_theta <= V_max",
+    "sweep": "map success, arrival, path, wheel speed and zig-zag over a pose space",
+    "compare": "compare the controllers over random poses (the table of docs/maps.md)",
+    "waypoints": "consecutive motions through a chain of waypoints",
+    "robustness": "Monte Carlo of noise, model mismatch and latency",
+    "evaluate": "judge tuned gains (and their estimator) on your references under one condition",
+    "export": "write a tuned loop (law, estimator, latency compensation) as a C controller",
+    "animate": "animated GIF of a batch of robots driving to their poses",
+    "identify": "fit the true robot (wheel scales, track, wheel lag, latency, noise) to its logs",
+    "bench": "robot-steps per second against NumPy baselines",
+}
+COMMANDS = tuple(_HELP)
 
 # Sweep-like commands spread their batches over every local device; on a CPU
 # that means splitting it into several JAX devices first (wmr_jax.studies.use_cpu_devices).
@@ -65,19 +75,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"wmr-jax {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name in COMMANDS:
-        module_name = _MODULE_OF.get(name, name)
-        module = importlib.import_module(f"wmr_jax._src.cli.{module_name}")
-        spec = module.SUBCOMMANDS[name]
+    for name, text in _HELP.items():
+        module = importlib.import_module(f"wmr_jax._src.cli.{'paper' if name == 'demo' else name}")
         command = sub.add_parser(
-            name,
-            help=spec["help"],
-            description=spec["help"],
-            formatter_class=_HelpFormatter,
-            allow_abbrev=False,
+            name, help=text, description=text, formatter_class=_HelpFormatter, allow_abbrev=False
         )
-        spec["add_arguments"](command)
-        command.set_defaults(func=spec["run"])
+        module.add_arguments(command)
+        command.set_defaults(func=getattr(module, f"run_{name}", None) or module.run)
     return parser
 
 
@@ -142,11 +146,10 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
 
 
 def entry() -> None:
-    """The ``wmr-jax`` program: ``main`` with the process's arguments, then exit with its status.
+    """The ``wmr-jax`` program: ``main``, then exit with its status.
 
-    After an interruption (status 130) the process ends at once: tearing the
-    interpreter down under JAX's running threads could crash it and hide the
-    status. Everything written was written atomically.
+    After an interruption (130) the process ends at once: tearing the interpreter
+    down under JAX's threads could crash it and hide the status.
     """
     status = main()
     if status == 130:

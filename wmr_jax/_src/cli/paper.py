@@ -6,22 +6,12 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["SUBCOMMANDS"]
+__all__ = ["add_arguments", "run_demo", "run_paper"]
 
 
 def add_arguments(parser: Any) -> None:
     """Add the flags of ``wmr-jax paper`` and ``demo``."""
     parser.add_argument("--out", default="results", metavar="DIR", help="output folder")
-
-
-def _summary_line(case: str, s: dict[str, Any]) -> str:
-    """One line per gain: the wheel-speed condition, the path gap and the zig-zags."""
-    return (
-        f"  {case}: k_r + L k_theta = {s['k_r + L k_theta']:g} cm/s ({s['condition']}); "
-        f"ideal vs non-ideal path gap: max {s['max_deviation_cm']:.2f} cm, "
-        f"mean {s['mean_deviation_cm']:.2f} cm; zig-zag ideal {s['ideal_zigzag']:.1f}, "
-        f"non-ideal {s['nonideal_zigzag']:.1f}"
-    )
 
 
 def run_paper(args: Any) -> int:
@@ -33,8 +23,14 @@ def run_paper(args: Any) -> int:
     runs = paper.paper_runs()
     save_paper(out, runs)
     print(f"Figs. 6-10, wheel speeds and the table -> {out}/")
-    for kr in paper.PAPER_KR:
-        print(_summary_line(f"kr={kr:g}", runs.summary[f"kr={kr:g}"]))
+    for kr in paper.PAPER_KR:  # the wheel-speed condition, the path gap and the zig-zags
+        s = runs.summary[f"kr={kr:g}"]
+        print(
+            f"  kr={kr:g}: k_r + L k_theta = {s['k_r + L k_theta']:g} cm/s ({s['condition']}); "
+            f"ideal vs non-ideal path gap: max {s['max_deviation_cm']:.2f} cm, "
+            f"mean {s['mean_deviation_cm']:.2f} cm; zig-zag ideal {s['ideal_zigzag']:.1f}, "
+            f"non-ideal {s['nonideal_zigzag']:.1f}"
+        )
     print("\nMeans over the seven references (the table of docs/paper.md):\n")
     print(paper_summary_table(runs.summary, float(runs.robot.v_max)), end="")
     return 0
@@ -52,17 +48,3 @@ def run_demo(args: Any) -> int:
     print(f"Fig. 7 (ideal velocity loop, paper gains) -> {out / 'fig7.png'}")
     print(markdown_table(fig7.rows), end="")
     return run_paper(args)
-
-
-SUBCOMMANDS = {
-    "demo": {
-        "help": "the main job: reproduce the paper into a folder, tabulate",
-        "add_arguments": add_arguments,
-        "run": run_demo,
-    },
-    "paper": {
-        "help": "Figs. 6-10, wheel speeds and the paper table",
-        "add_arguments": add_arguments,
-        "run": run_paper,
-    },
-}

@@ -12,7 +12,7 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["SUBCOMMANDS"]
+__all__ = ["add_arguments", "run"]
 
 # What the command writes into --out (the noise curve only with --noise-curve).
 _OUTPUTS = tuple(
@@ -20,7 +20,15 @@ _OUTPUTS = tuple(
     for stem in ("robustness", "standard_conditions", "noise_curve", "identified_conditions")
     for ext in ("png", "md", "json")
 )
-_GAIN_FLAGS = ("--nominal-gains", "--robust-gains")
+# Each gain-file flag: the label of its rows and the tuning its file must come from.
+_GAIN_FILES = {
+    "--nominal-gains": ("nominal-tuned", "nominal"),
+    "--robust-gains": ("robust-tuned", "robust"),
+}
+_GAIN_FILE_HELP = {
+    "nominal": "shown beside the paper's gains",
+    "robust": "shown beside them, run whole (with the estimator it was tuned with)",
+}
 
 # The columns printed after the run (robustness.md has them all).
 _PRINTED = ["condition", "controller", "noise xy cm", "success", "median arrival s"]
@@ -36,7 +44,6 @@ def add_study_flags(parser: Any) -> None:
         "--controller",
         nargs="+",
         action="extend",
-        default=None,
         metavar="NAME",
         help=f"controllers to run (repeatable; if omitted, every registered one: {known})",
     )
@@ -49,19 +56,11 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument("--seed", default=0, metavar="N", help="PRNG seed, an integer >= 0")
     parser.add_argument("--runs", default=256, metavar="N", help="runs per noise level")
     parser.add_argument("--float32", **flags.FLOAT32)
-    parser.add_argument(
-        "--nominal-gains",
-        default=None,
-        metavar="PATH",
-        help="tuned_gains.json of `wmr-jax tune`, shown beside the paper's gains",
-    )
-    parser.add_argument(
-        "--robust-gains",
-        default=None,
-        metavar="PATH",
-        help="tuned_gains.json of `wmr-jax tune --robust`, shown beside them, run whole "
-        "(with the estimator it was tuned with)",
-    )
+    from wmr_jax._src.tuning.saved import TUNINGS
+
+    for flag, (_, tuning) in _GAIN_FILES.items():
+        text = f"tuned_gains.json of `{TUNINGS[tuning]}`, {_GAIN_FILE_HELP[tuning]}"
+        parser.add_argument(flag, metavar="PATH", help=text)
     parser.add_argument(
         "--estimator",
         default="none",
@@ -87,7 +86,8 @@ def run(args: Any) -> int:
     n_runs = flags.positive_int("--runs", args.runs, 1, 10**6)
     names = flags.controller_names(args.controller)
     velocity = flags.velocity_loop(args.velocity)
-    estimator = _estimator(args.estimator)
+    estimator = flags.estimator(args.estimator)
+    x64 = not args.float32
     from wmr_jax._src.identify.closed_loop import loaded_identified
 
     identified = loaded_identified(getattr(args, "robot", None))
@@ -102,7 +102,7 @@ def run(args: Any) -> int:
     for name in _OUTPUTS:
         (out / name).unlink(missing_ok=True)
     if identified is not None:
-        _on_identified(out, sets, seed, identified, meta, x64=not args.float32)
+        _on_identified(out, sets, seed, identified, meta, x64=x64)
         return 0
 
     from wmr_jax._src.model.robots import describe_robot, robot_name
@@ -120,23 +120,14 @@ def run(args: Any) -> int:
     robot_file = getattr(args, "robot", None)
     origin = f", from {robot_file}" if flags.is_robot_file(robot_file) else ""
     print(f"robot {describe_robot(robot)}{origin}, horizon {study_horizon(robot):g} s{note}")
-    rows = robustness_study(
-        seed=seed,
-        controller_names=names,
-        n_runs=n_runs,
-        velocity=velocity,
-        x64=not args.float32,
-        estimator=estimator,
-        robot=robot,
-    )
-    write_robustness(
-        out, rows, seed=seed, velocity=velocity, n_runs=n_runs, robot=robot, x64=not args.float32
-    )
+    study = {"seed": seed, "velocity": velocity, "n_runs": n_runs, "robot": robot, "x64": x64}
+    rows = robustness_study(controller_names=names, estimator=estimator, **study)
+    write_robustness(out, rows, **study)
     print(f"robustness -> {out}/robustness.png, robustness.md, robustness.json")
     print(robustness_table(rows, _PRINTED), end="")
-    _standard(out, sets, seed, robot, meta, x64=not args.float32)
+    _standard(out, sets, seed, robot, meta, x64=x64)
     if args.noise_curve:
-        _noise_curve(out, sets, seed, robot, meta, x64=not args.float32)
+        _noise_curve(out, sets, seed, robot, meta, x64=x64)
     return 0
 
 
@@ -145,7 +136,7 @@ def _meta(seed: int, robot: Any, sets: dict[str, Any], args: Any) -> dict[str, A
     from wmr_jax._src.model.robots import robot_json
     from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED
 
-    files = {flag: getattr(args, flag[2:].replace("-", "_"), None) for flag in _GAIN_FLAGS}
+    files = {flag: _gain_file(args, flag) for flag in _GAIN_FILES}
     return {
         "seed": seed,
         "held_out_poses": EVAL_POSES,
@@ -159,27 +150,21 @@ def _meta(seed: int, robot: Any, sets: dict[str, Any], args: Any) -> dict[str, A
 
 def _gains_of(sets: dict[str, Any]) -> dict[str, Any]:
     """Each set's parameters and estimator, as ``tuned_gains.json`` holds them."""
-    from wmr_jax._src.sim.sensing.loop import ClosedLoop
     from wmr_jax._src.tuning.saved import tuned_json
 
-    gains = {}
-    for label, value in sets.items():
-        loop = value if isinstance(value, ClosedLoop) else ClosedLoop("shim-sung", value, None)
-        gains[label] = tuned_json(loop.params, loop.estimator)
-    return gains
+    loops = {label: _as_loop(value) for label, value in sets.items()}
+    return {label: tuned_json(loop.params, loop.estimator) for label, loop in loops.items()}
 
 
-def _estimator(name: str) -> Any:
-    """The ``--estimator`` value: ``None`` for raw feedback, else a registered estimator's name."""
-    from wmr_jax._src.sim.sensing.estimators import ESTIMATORS
+def _as_loop(value: Any) -> Any:
+    """A gain set as a ``ClosedLoop``: fixed gains are Shim–Sung on raw feedback."""
+    from wmr_jax._src.sim.sensing.loop import ClosedLoop
 
-    if name in ("none", "raw"):
-        return None
-    if name not in ESTIMATORS:
-        raise ValueError(
-            f"--estimator {name!r} is not allowed; allowed: none, {', '.join(ESTIMATORS)}"
-        )
-    return name
+    return value if isinstance(value, ClosedLoop) else ClosedLoop("shim-sung", value, None)
+
+
+def _gain_file(args: Any, flag: str) -> Any:
+    return getattr(args, flag[2:].replace("-", "_"), None)
 
 
 def _noise_curve(
@@ -189,30 +174,23 @@ def _noise_curve(
     import jax
 
     from wmr_jax._src.report.robustness import write_noise_curve
-    from wmr_jax._src.sim.sensing.loop import ClosedLoop
     from wmr_jax._src.studies.conditions import noise_curve
-    from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
 
     loops = {}
     for name, value in sets.items():
         if name.endswith(", raw feedback"):
             continue  # drawn as the raw line of its own set
-        loop = value if isinstance(value, ClosedLoop) else ClosedLoop("shim-sung", value, None)
+        loop = _as_loop(value)
         loops[name] = loop._replace(estimator=None)
         # The tuned estimator where the file has one, else the EKF's defaults.
         loops[name + " + estimator"] = loop._replace(estimator=loop.estimator or "ekf")
-    refs = held_out_poses(EVAL_POSES, EVAL_SEED)
-    rows = noise_curve(loops, refs, jax.random.key(seed), x64=x64, robot=robot)
+    rows = noise_curve(loops, _held_out(), jax.random.key(seed), x64=x64, robot=robot)
     write_noise_curve(out, rows, meta={**meta, "gains": _gains_of(loops)})  # the loops it ran
     print(f"noise curve -> {out}/noise_curve.png, .md, .json")
 
 
 def _gain_sets(args: Any, identified: Any = None) -> tuple[dict[str, Any], Any]:
-    """The gain sets and the robot they run on (checked before any computation).
-
-    The first set is the paper's feasible gains scaled into that robot's wheel
-    budget. With ``identified`` the robot is its base.
-    """
+    """The gain sets, the paper's feasible gains first, and the robot they run on (checked)."""
     from wmr_jax._src.identify.closed_loop import tuned_for_identified
     from wmr_jax._src.model.params import Robot
     from wmr_jax._src.model.robots import same_robot
@@ -224,11 +202,8 @@ def _gain_sets(args: Any, identified: Any = None) -> tuple[dict[str, Any], Any]:
         print(given.note)
     loops = {}
     robot, source = (None, None) if given is None else (given.robot, f"--robot {given.label!r}")
-    for flag, label, wanted in (
-        ("--nominal-gains", "nominal-tuned", "nominal"),
-        ("--robust-gains", "robust-tuned", "robust"),
-    ):
-        path = getattr(args, flag[2:].replace("-", "_"), None)
+    for flag, (label, wanted) in _GAIN_FILES.items():
+        path = _gain_file(args, flag)
         if path is None:
             continue
         loop, tuning = flags.tuned_file(flag, path)  # run whole: its law and estimator
@@ -274,10 +249,8 @@ def _standard(
         write_standard_conditions,
     )
     from wmr_jax._src.studies.conditions import standard_conditions
-    from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
 
-    refs = held_out_poses(EVAL_POSES, EVAL_SEED)
-    rows = standard_conditions(sets, refs, jax.random.key(seed), x64=x64, robot=robot)
+    rows = standard_conditions(sets, _held_out(), jax.random.key(seed), x64=x64, robot=robot)
     write_standard_conditions(out, rows, meta=meta)
     print(f"standard conditions -> {out}/standard_conditions.png, .md, .json")
     print(robustness_table(rows, STANDARD_COLUMNS[:6]), end="")
@@ -292,7 +265,6 @@ def _on_identified(
     from wmr_jax._src.io import atomic_write_json, atomic_write_text
     from wmr_jax._src.report.robustness import STANDARD_COLUMNS, robustness_table
     from wmr_jax._src.studies.conditions import evaluate_loop
-    from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
 
     base, content = identified[0].robot, identified[1]
     quiet = {**content, "noise": {"sigma_xy": 0.0, "sigma_theta": 0.0}}
@@ -301,7 +273,7 @@ def _on_identified(
         "identified robot, no tracker noise": {"identified": quiet},
         "base robot": {"mismatch": 0.0},
     }
-    refs = held_out_poses(EVAL_POSES, EVAL_SEED)
+    refs = _held_out()
     rows = []
     for label, how in conditions.items():
         for name, value in sets.items():
@@ -336,15 +308,13 @@ def _on_identified(
     print(robustness_table(rows, STANDARD_COLUMNS[:6]), end="")
 
 
+def _held_out() -> Any:
+    """The held-out poses of docs/model.md §6 every gain set is judged on."""
+    from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
+
+    return held_out_poses(EVAL_POSES, EVAL_SEED)
+
+
 def _finite(value: Any) -> float:
     """An arrival of ``evaluate_loop`` as the tables hold it: ``inf`` where none arrived."""
     return math.inf if value is None else float(value)
-
-
-SUBCOMMANDS = {
-    "robustness": {
-        "help": "Monte Carlo of noise, model mismatch and latency",
-        "add_arguments": add_arguments,
-        "run": run,
-    },
-}

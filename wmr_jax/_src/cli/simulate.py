@@ -8,7 +8,7 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["SUBCOMMANDS"]
+__all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: Any) -> None:
@@ -30,18 +30,14 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument("--dt", default=0.033, metavar="S", help="control period, s")
     parser.add_argument(
         "--steps",
-        default=None,
         metavar="N",
         help="control periods (default: 150 on the paper robot; on a slower robot as many "
         "times more as the studies' horizon is longer there, docs/robustness.md)",
     )
     parser.add_argument("--velocity", default="ideal", help="velocity loop: ideal or nonideal")
-    parser.add_argument(
-        "--plot", default=None, metavar="FILE.png", help="save the path to this image"
-    )
+    parser.add_argument("--plot", metavar="FILE.png", help="save the path to this image")
     parser.add_argument(
         "--gains",
-        default=None,
         metavar="FILE.json",
         help="take the controller and its parameters from this file (tuned_gains.json of "
         "wmr-jax tune: fixed gains or a gain schedule) instead of the gain flags; the robot "
@@ -82,11 +78,7 @@ DEFAULT_STEPS = 150
 
 
 def default_steps(robot: Any) -> int:
-    """``DEFAULT_STEPS`` stretched as the studies' horizon is on a slower robot.
-
-    The paper's gains scaled into a smaller wheel budget drive the same paths
-    that many times slower.
-    """
+    """``DEFAULT_STEPS`` stretched as the studies' horizon is on a slower robot."""
     from wmr_jax._src.sim.poses import HORIZON_S
     from wmr_jax._src.studies.robustness import study_horizon
 
@@ -117,7 +109,7 @@ def run(args: Any) -> int:
 
     from wmr_jax._src.identify.closed_loop import identified_rollout, loaded_identified
     from wmr_jax._src.model.params import Robot
-    from wmr_jax._src.model.robots import same_robot
+    from wmr_jax._src.model.robots import describe_robot, same_robot
     from wmr_jax._src.sim import metrics
     from wmr_jax._src.sim.rollout import rollout
 
@@ -147,7 +139,10 @@ def run(args: Any) -> int:
     final = np.asarray(traj.poses[-1])
     if robot is not None and not same_robot(robot, Robot()):
         # Shown only off the paper robot, the one every other run of the command uses.
-        print(f"robot          : {flags.robot_shown(given, robot)}")
+        shown = describe_robot(robot)
+        if given is not None and flags.is_robot_file(given.label):
+            shown += f", from {given.label}"
+        print(f"robot          : {shown}")
     if args.gains is not None:
         print(f"gains          : {args.gains} ({controller.name})")
     print(f"reference      : x={ref[0]:.3f} cm  y={ref[1]:.3f} cm  θ={_degrees(ref[2]):.2f}°")
@@ -181,12 +176,3 @@ def run(args: Any) -> int:
         path_figure(plot, traj, ref, title=plot_title(ref, controller, gains, args.gains))
         print(f"plot           : {plot}")
     return 0
-
-
-SUBCOMMANDS = {
-    "simulate": {
-        "help": "drive the robot to one reference pose and report",
-        "add_arguments": add_arguments,
-        "run": run,
-    },
-}

@@ -1,7 +1,4 @@
-"""``wmr-jax sweep``: map success, arrival, path, wheel speed and zig-zag over a pose space.
-
-Ctrl-C says which finished chunks were kept.
-"""
+"""``wmr-jax sweep``: map success, arrival, path, wheel speed and zig-zag over a pose space."""
 
 from __future__ import annotations
 
@@ -12,7 +9,7 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["SUBCOMMANDS"]
+__all__ = ["add_arguments", "run"]
 
 
 def _flags() -> dict[str, dict[str, Any]]:
@@ -30,7 +27,6 @@ def _flags() -> dict[str, dict[str, Any]]:
         "--controller": {
             "nargs": "+",
             "action": "extend",
-            "default": None,
             "metavar": "NAME",
             "help": "controllers to compare, repeatable (none given: every registered one: "
             + ", ".join(registered_names())
@@ -38,7 +34,6 @@ def _flags() -> dict[str, dict[str, Any]]:
         },
         "--velocity": {"default": "ideal", "help": "velocity loop: ideal or nonideal"},
         "--horizon": {
-            "default": None,
             "metavar": "S",
             "help": "simulated time per run, s (default: the paper robot's 6 s, docs/model.md "
             "§6; for a --robot whose wheels cannot follow the paper's feasible gains, "
@@ -49,7 +44,6 @@ def _flags() -> dict[str, dict[str, Any]]:
         "--headings": {
             "nargs": "+",
             "action": "extend",
-            "default": None,
             "metavar": "DEG",
             "help": "reference headings of the maps, degrees, repeatable (default: "
             + " ".join(f"{h:g}" for h in DEFAULT_HEADINGS_DEG)
@@ -197,12 +191,3 @@ def _run(args: Any, out: Path, chunks: Path | None, finished: dict) -> int:
     print(f"{study.summary['poses']} poses -> {out}/maps_*.png, summary.md, summary.json")
     print(comparison_table(study.rows), end="")
     return 0
-
-
-SUBCOMMANDS = {
-    "sweep": {
-        "help": "map success, arrival, path, wheel speed and zig-zag over a pose space",
-        "add_arguments": add_arguments,
-        "run": run,
-    },
-}

@@ -1,7 +1,4 @@
-"""``wmr-jax tune``: tune gains by gradient descent under k_r + L k_θ ≤ V_max.
-
-The flags and what is printed; ``--robust`` is ``cli/tune_robust.py``.
-"""
+"""``wmr-jax tune``: tune gains by gradient descent under k_r + L k_θ ≤ V_max."""
 
 from __future__ import annotations
 
@@ -10,7 +7,7 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["SUBCOMMANDS"]
+__all__ = ["add_arguments", "run"]
 
 # flag, TuneConfig field (or None), metavar, help
 _FLAGS = (
@@ -50,68 +47,62 @@ def add_arguments(parser: Any) -> None:
         help="skip the random-search baseline (same CPU time as the tuning)",
     )
     flags.add_robot_flag(parser)
-    parser.add_argument(
-        "--resume",
-        action="store_true",
-        help="continue from DIR/checkpoint.npz (same settings) instead of starting over; "
-        "with --compare, keep the seeds DIR/compare.json already holds",
-    )
-    parser.add_argument(
-        "--schedule",
-        action="store_true",
-        help="tune the gain-scheduled law (35 parameters by default, docs/model.md §3.9) "
-        "instead of the "
-        "7 fixed gains, with the schedule's own defaults for --iters, the step and the "
+    for flag, (metavar, text) in _MODE_FLAGS.items():
+        kind = {"action": "store_true"} if metavar is None else {"metavar": metavar}
+        parser.add_argument(flag, help=text, **kind)
+
+
+# The flags that choose and shape a mode: flag -> (metavar, or None for a switch; help).
+_MODE_FLAGS = {
+    "--resume": (
+        None,
+        "continue from DIR/checkpoint.npz (same settings) instead of starting over; with "
+        "--compare, keep the seeds DIR/compare.json already holds",
+    ),
+    "--schedule": (
+        None,
+        "tune the gain-scheduled law (35 parameters by default, docs/model.md §3.9) instead of "
+        "the 7 fixed gains, with the schedule's own defaults for --iters, the step and the "
         "annealing (wmr_jax.tuning.TuneConfig.for_problem)",
-    )
-    parser.add_argument(
-        "--knots",
-        metavar="K",
-        help="with --schedule: knots per table, 3K + 5 parameters (default: 10, 35 "
-        "parameters; at most 60, whose gradient takes 40 s and 2.4 GB to compile)",
-    )
-    parser.add_argument(
-        "--robust",
-        action="store_true",
-        help="tune the gain schedule and a pose estimator together for robustness to noise, "
-        "latency and a robot unlike its model (docs/model.md §7, §9); with --compare, "
-        "gradient against CMA-ES and random search at equal CPU time, seeds 0-2",
-    )
-    parser.add_argument(
-        "--fixed",
-        action="store_true",
-        help="with --robust: tune the 7 fixed gains with raw feedback instead",
-    )
-    parser.add_argument(
-        "--estimator",
-        metavar="NAME",
-        help="with --robust: the estimator tuned with the law: ekf, observer or none "
-        "(raw feedback) (default: ekf; none with --fixed)",
-    )
-    parser.add_argument(
-        "--noise",
-        metavar="CM",
-        help="with --robust: your sensor's position noise σ_xy in cm; the tuning trains on "
-        "up to twice it and judges the noise conditions at it (default: 0.5)",
-    )
-    parser.add_argument(
-        "--noise-theta",
-        metavar="DEG",
-        help="with --robust: your sensor's heading noise σ_θ in degrees, as --noise (default: 1)",
-    )
-    parser.add_argument(
-        "--compare",
-        action="store_true",
-        help="instead of tuning once, compare gradient, CMA-ES and random search at equal "
-        "CPU time, fixed gains and schedules (with --schedule: the schedule only), seeds "
-        "0-2, into DIR/compare.{json,md}",
-    )
-    parser.add_argument(
-        "--gradient-cost",
-        action="store_true",
-        help="instead of tuning, measure the gradient's time and peak memory "
-        "(4096 poses x 150 steps, with and without remat) into DIR/gradient_cost.json",
-    )
+    ),
+    "--knots": (
+        "K",
+        "with --schedule: knots per table, 3K + 5 parameters (default: 10, 35 parameters; at "
+        "most 60, whose gradient takes 40 s and 2.4 GB to compile)",
+    ),
+    "--robust": (
+        None,
+        "tune the gain schedule and a pose estimator together for robustness to noise, latency "
+        "and a robot unlike its model (docs/model.md §7, §9); with --compare, gradient against "
+        "CMA-ES and random search at equal CPU time, seeds 0-2",
+    ),
+    "--fixed": (None, "with --robust: tune the 7 fixed gains with raw feedback instead"),
+    "--estimator": (
+        "NAME",
+        "with --robust: the estimator tuned with the law: ekf, observer or none (raw feedback) "
+        "(default: ekf; none with --fixed)",
+    ),
+    "--noise": (
+        "CM",
+        "with --robust: your sensor's position noise σ_xy in cm; the tuning trains on up to "
+        "twice it and judges the noise conditions at it (default: 0.5)",
+    ),
+    "--noise-theta": (
+        "DEG",
+        "with --robust: your sensor's heading noise σ_θ in degrees, as --noise (default: 1)",
+    ),
+    "--compare": (
+        None,
+        "instead of tuning once, compare gradient, CMA-ES and random search at equal CPU time, "
+        "fixed gains and schedules (with --schedule: the schedule only), seeds 0-2, into "
+        "DIR/compare.{json,md}",
+    ),
+    "--gradient-cost": (
+        None,
+        "instead of tuning, measure the gradient's time and peak memory (4096 poses x 150 "
+        "steps, with and without remat) into DIR/gradient_cost.json",
+    ),
+}
 
 
 def _config_from(args: Any, *, problem: str) -> Any:
@@ -199,11 +190,7 @@ _PRINTED = {
 
 
 def _shown(params: Any) -> list[str]:
-    """The tuned parameters as printed: each with its unit, angles in degrees.
-
-    Fixed gains come with a second line, the ``wmr-jax simulate`` flags that
-    give them.
-    """
+    """The tuned parameters as printed, angles in degrees; fixed gains also as simulate flags."""
     import math
 
     from wmr_jax._src.model.params import Gains
@@ -244,11 +231,7 @@ def _compare(out: Path, args: Any, robot: Any) -> int:
 
 
 def _robot_horizon(args: Any, config: Any, robot: Any) -> Any:
-    """The config with the studies' horizon of ``robot`` where ``--horizon`` is not given.
-
-    A slower robot, whose wheels cannot follow the paper's feasible gains,
-    needs the stretched horizon for its yardstick row to arrive at all.
-    """
+    """The config with ``robot``'s studies' horizon unless ``--horizon`` is given."""
     from wmr_jax._src.studies.robustness import study_horizon
 
     if robot is None or args.horizon is not None or args.gradient_cost:
@@ -308,12 +291,3 @@ def run(args: Any) -> int:
         print(result.note)
     print(f"curve -> {out / 'tuning_curve.png'}")
     return 0
-
-
-SUBCOMMANDS = {
-    "tune": {
-        "help": "tune gains by gradient descent under k_r + L k_theta <= V_max",
-        "add_arguments": add_arguments,
-        "run": run,
-    },
-}

@@ -1,20 +1,8 @@
 """``wmr-jax tune --robust``: controller and estimator tuned together (docs/model.md §7, §9).
 
-Called by ``wmr-jax tune`` with its parsed flags (``out``, ``seed``,
-``iters``, ``poses``, ``velocity``, ``resume``, ``fixed``, ``estimator``,
-``knots``, ``compare``, ``noise``, ``noise_theta``). By default the gain
-schedule and the estimator are tuned together (``--fixed``: the 7 fixed
-gains with raw feedback). Writes ``tuned_gains.json`` (controller, parameters,
-estimator and robot, which ``load_tuned`` reads whole), ``robust_evaluation.json``
-and ``.md`` (the hard-law table under the standard conditions, each with ±3 %
-wheel mismatch, and the model robot) and ``robust_loss.json`` (the loss per
-iteration). With ``--compare`` it runs seeds 0–2 instead, each with random
-search and CMA-ES given the tuning's process CPU time, into
-``robust_compare.json`` and ``.md`` (each seed written as it finishes;
-``--resume`` keeps them). ``--robot`` tunes and judges on that robot, over
-its horizon (``robustness.study_horizon``). ``--noise`` and ``--noise-theta``
-set the sensor's pose noise the loop is tuned and judged for
-(``RobustConfig.noise_xy``, ``noise_theta``).
+Called by ``wmr-jax tune`` with its parsed flags. Writes ``tuned_gains.json``,
+``robust_evaluation.{json,md}`` and ``robust_loss.json``; with ``--compare``,
+seeds 0–2 against CMA-ES and random search into ``robust_compare.{json,md}``.
 """
 
 from __future__ import annotations
@@ -25,36 +13,6 @@ from wmr_jax._src.cli import flags
 
 __all__ = ["run"]
 
-_NONE = ("none", "raw")
-
-
-def _counts(args: Any) -> tuple[int, int]:
-    """``--iters`` and ``--poses``, or the robust tuner's own defaults where not given."""
-    from wmr_jax._src.tuning.robust import RobustConfig
-
-    robust = RobustConfig()
-    counts = []
-    for flag, name in (("--iters", "iters"), ("--poses", "poses")):
-        value = getattr(args, name, None)
-        counts.append(getattr(robust, name) if value is None else flags.positive_int(flag, value))
-    return counts[0], counts[1]
-
-
-def _estimator(args: Any) -> Any:
-    """The ``--estimator`` name (``None`` for raw feedback); ``--fixed`` defaults to raw."""
-    from wmr_jax._src.sim.sensing.estimators import ESTIMATORS
-    from wmr_jax._src.tuning.robust import RobustConfig
-
-    value = getattr(args, "estimator", None)
-    if value is None:
-        return None if getattr(args, "fixed", False) else RobustConfig().estimator
-    if value in _NONE:
-        return None
-    if value not in ESTIMATORS:
-        allowed = ", ".join([*ESTIMATORS, "none"])
-        raise ValueError(f"--estimator {value!r} is not allowed; allowed: {allowed}")
-    return value
-
 
 def config_from(args: Any) -> Any:
     """The ``RobustConfig`` of the flags, each checked (one line naming a bad one)."""
@@ -63,7 +21,11 @@ def config_from(args: Any) -> Any:
 
     seed = getattr(args, "seed", None)
     seed = flags.positive_int("--seed", 0 if seed is None else seed, 0, 2**32 - 1)
-    iters, poses = _counts(args)
+    changes: dict[str, Any] = {"seed": seed}
+    for flag, name in (("--iters", "iters"), ("--poses", "poses")):
+        value = getattr(args, name, None)
+        if value is not None:  # else the robust tuner's own default
+            changes[name] = flags.positive_int(flag, value)
     velocity = getattr(args, "velocity", None)
     if velocity is not None and flags.velocity_loop(velocity) != "ideal":
         raise ValueError(
@@ -71,19 +33,18 @@ def config_from(args: Any) -> Any:
             "(the robust loss mixes both loops itself)"
         )
     fixed = bool(getattr(args, "fixed", False))
-    changes: dict[str, Any] = {
-        "iters": iters,
-        "poses": poses,
-        "seed": seed,
-        "law": "fixed" if fixed else "schedule",
-        "estimator": _estimator(args),
-        "compare": False,
-    }
+    law = "fixed" if fixed else "schedule"
+    estimator = getattr(args, "estimator", None)
+    if estimator is not None:
+        changes["estimator"] = flags.estimator(estimator)
+    elif fixed:  # raw feedback; the schedule keeps RobustConfig's estimator
+        changes["estimator"] = None
+    changes.update(law=law, compare=False)
     for flag, name, unit in (
         ("--noise", "noise_xy", "cm"),
         ("--noise-theta", "noise_theta", "degrees"),
     ):
-        value = getattr(args, name if name == "noise_theta" else "noise", None)
+        value = getattr(args, flag[2:].replace("-", "_"), None)
         if value is not None:
             changes[name] = flags.number(flag, value, low=0.0, unit=unit)
     knots = getattr(args, "knots", None)
@@ -95,11 +56,7 @@ def config_from(args: Any) -> Any:
 
 
 def _robot(args: Any) -> tuple[Any, dict[str, Any]]:
-    """The robot of ``--robot`` (the paper robot if not given), and the arguments that pass it on.
-
-    The note of a YAML is printed first. Only another robot than the
-    paper's is handed on (``tune_robust``'s default is the paper robot).
-    """
+    """``--robot``'s robot (else the paper's) and the keywords handing on another robot."""
     from wmr_jax._src.model.params import Robot
     from wmr_jax._src.model.robots import same_robot
 

@@ -9,7 +9,7 @@ from typing import Any
 from wmr_jax._src.cli import flags
 from wmr_jax._src.cli.robustness import add_study_flags
 
-__all__ = ["SUBCOMMANDS"]
+__all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: Any) -> None:
@@ -17,7 +17,6 @@ def add_arguments(parser: Any) -> None:
     add_study_flags(parser)
     parser.add_argument(
         "--steps",
-        default=None,
         metavar="N",
         help="control periods of each run (default: 450, 14.85 s, for the paper robot; for a "
         "--robot whose wheels cannot follow the paper's feasible gains, 60 + 10 L > v_max, "
@@ -91,12 +90,3 @@ def run(args: Any) -> int:
     table = markdown_table([_shown(row) for row in study.rows])
     print(f"soccer-like sequence -> {out}/soccer.png, soccer.md, soccer.json\n{table}", end="")
     return 0
-
-
-SUBCOMMANDS = {
-    "waypoints": {
-        "help": "consecutive motions through a chain of waypoints",
-        "add_arguments": add_arguments,
-        "run": run,
-    },
-}

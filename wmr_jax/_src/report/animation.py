@@ -1,8 +1,6 @@
 """Animated GIF of a batch of robots driving to their reference poses.
 
-Each robot is a disc with a heading tick and a fading trail; its reference
-a cross with a heading arrow, green while the robot is arrived
-(docs/model.md §6).
+Robots are discs with a heading tick and a trail; references crosses, green while arrived.
 """
 
 from __future__ import annotations
@@ -60,10 +58,9 @@ _MAX_FRAME_MS = 655_350
 def frame_timing(dt: float, stride: int | None = None, speed: float = 1.0) -> tuple[int, int]:
     """``(stride, frame_ms)``: samples per frame and the GIF's delay per frame, ms.
 
-    A GIF stores delays in whole hundredths of a second (browsers play those
-    under 20 ms at 100 ms): with ``stride=None`` the smallest stride whose delay
-    is within 2 % of ``stride · dt / speed`` is chosen; a given ``stride`` gets
-    the nearest delay.
+    GIF delays are whole hundredths of a second (browsers play those under 20 ms
+    at 100 ms): ``stride=None`` takes the smallest stride whose delay is within
+    2 % of ``stride · dt / speed``.
     """
     dt = checks.check_dt(dt)
     speed = checks.check_number("speed", speed, unit="× real time")
@@ -128,14 +125,12 @@ def write_gif(
         path: the ``.gif`` to write.
         poses: ``(N, steps + 1, 3)`` recorded poses ``[x cm, y cm, θ rad]``.
         refs: ``(N, 3)`` their references.
-        dt: control period of the samples, s (for the clock).
+        dt: control period of the samples, s.
         title: text above the pitch.
-        speed: playback speed, 1 (default) for real time (``frame_timing``).
-        stride: samples per frame; default the smallest that plays at ``speed``.
+        speed, stride: playback speed (1: real time) and samples per frame (``frame_timing``).
         trail: samples of path drawn behind each robot.
         body_radius: drawn radius of each robot, cm.
-        tol_r: arrival distance for the reference marker, cm.
-        tol_theta: arrival folded-heading error, rad.
+        tol_r, tol_theta: arrival distance, cm, and folded-heading error, rad.
 
     Returns:
         The path written.
@@ -213,9 +208,7 @@ def animate(
     speed: float = 1.0,
     stride: int | None = None,
 ) -> Path:
-    """Simulate a batch of robots and write the GIF of them driving to their poses.
-
-    The runs are recorded whole (``batch_rollout``) in float64, like the maps.
+    """Simulate a batch of robots (in float64) and write the GIF of them driving to their poses.
 
     Args:
         path: the ``.gif`` to write (atomically).

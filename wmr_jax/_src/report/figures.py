@@ -1,8 +1,4 @@
-"""Figures: the one module that imports matplotlib; the other report modules use its ``plt``.
-
-Paths with the robot's heading and the references marked, wheel speeds
-against time, and ``path_figure`` for one run.
-"""
+"""Paths and wheel-speed figures; the one module that imports matplotlib (others use ``plt``)."""
 
 from __future__ import annotations
 

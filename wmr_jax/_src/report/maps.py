@@ -13,7 +13,7 @@ from wmr_jax._src.io import atomic_write_text, json_text, save_figure
 from wmr_jax._src.model.controllers import registered_names
 from wmr_jax._src.model.params import Robot
 from wmr_jax._src.model.robots import robot_from_values, same_robot
-from wmr_jax._src.report.figures import closed_after, plt
+from wmr_jax._src.report.figures import ListedColormap, Patch, closed_after, plt
 from wmr_jax._src.report.tables import (
     json_number,
     markdown_table,
@@ -248,10 +248,42 @@ def map_figure(
         )
     v_max = float(Robot().v_max) if v_max is None else check_number("v_max", v_max, unit="cm/s")
     n_h, n_rows = len(grid.headings), len(_MAP_FIELDS)
-    size = (2.5 * n_h + 1.3, 2.4 * n_rows + 0.9)
-    with closed_after(n_rows, n_h, figsize=size, squeeze=False, layout="constrained") as drawn:
-        _draw_maps(*drawn, grid, m, ranges, v_max, title)
-        save_figure(drawn[0], path, dpi=100)
+    size = {"figsize": (2.5 * n_h + 1.3, 2.4 * n_rows + 0.9), "squeeze": False}
+    with closed_after(n_rows, n_h, layout="constrained", **size) as (fig, axes):
+        for row, (field, label, cmap_name) in enumerate(_MAP_FIELDS):
+            cmap = plt.get_cmap(cmap_name).with_extremes(bad=(1, 1, 1, 0))
+            image = None
+            for h in range(n_h):
+                ax = axes[row, h]
+                image = _draw_metric(ax, grid, m, field, cmap, ranges[field], h, v_max)
+                _decorate(ax, grid, bottom=row == n_rows - 1, left=h == 0)
+                if row == 0:
+                    ax.set_title(_heading_title(grid, h), fontsize=9)
+            fig.colorbar(image, ax=axes[row, :].tolist(), shrink=0.85, pad=0.01).set_label(
+                label, fontsize=8
+            )
+        legend = [
+            Patch(
+                facecolor="0.55",
+                edgecolor="w",
+                hatch="////",
+                label=f"peak wheel speed > V_max = {v_max:g} cm/s on most poses "
+                f"({_CONTOUR_CELL_CM:g} cm cells)",
+            ),
+            plt.Line2D([], [], marker="s", ls="", color=(0.85, 0.1, 0.1), label="not arrived"),
+            plt.Line2D([], [], marker=(3, 0, -90), ls="", color="k", label="robot at (0, 0, 0°)"),
+        ]
+        fig.legend(
+            handles=legend,
+            loc="outside lower center",
+            ncol=3,
+            fontsize=7,
+            facecolor="0.55",
+            labelcolor="k",
+            framealpha=1,
+        )
+        fig.suptitle(title, fontsize=10)
+        save_figure(fig, path, dpi=100)
     return Path(path)
 
 
@@ -274,52 +306,10 @@ def _check_sizes(grid: PoseGrid, results: Any, name: str) -> None:
                 )
 
 
-def _draw_maps(fig, axes, grid, m, ranges, v_max, title) -> None:
-    """Draw the heat maps of ``map_figure`` into ``axes``, with the legend and the title."""
-    n_h, n_rows = len(grid.headings), len(_MAP_FIELDS)
-    for row, (field, label, cmap_name) in enumerate(_MAP_FIELDS):
-        cmap = plt.get_cmap(cmap_name).with_extremes(bad=(1, 1, 1, 0))
-        image = None
-        for h in range(n_h):
-            ax = axes[row, h]
-            image = _draw_metric(ax, grid, m, field, cmap, ranges[field], h, v_max)
-            _decorate(ax, grid, bottom=row == n_rows - 1, left=h == 0)
-            if row == 0:
-                ax.set_title(_heading_title(grid, h), fontsize=9)
-        fig.colorbar(image, ax=axes[row, :].tolist(), shrink=0.85, pad=0.01).set_label(
-            label, fontsize=8
-        )
-    from wmr_jax._src.report.figures import Patch
-
-    legend = [
-        Patch(
-            facecolor="0.55",
-            edgecolor="w",
-            hatch="////",
-            label=f"peak wheel speed > V_max = {v_max:g} cm/s on most poses "
-            f"({_CONTOUR_CELL_CM:g} cm cells)",
-        ),
-        plt.Line2D([], [], marker="s", ls="", color=(0.85, 0.1, 0.1), label="not arrived"),
-        plt.Line2D([], [], marker=(3, 0, -90), ls="", color="k", label="robot at (0, 0, 0°)"),
-    ]
-    fig.legend(
-        handles=legend,
-        loc="outside lower center",
-        ncol=3,
-        fontsize=7,
-        facecolor="0.55",
-        labelcolor="k",
-        framealpha=1,
-    )
-    fig.suptitle(title, fontsize=10)
-
-
 def winner_figure(
     path: str | Path, grid: PoseGrid, results: dict[str, PoseMetrics], *, title: str = ""
 ) -> Path:
     """Save the map of the controller that arrives first at each pose (grey: none arrives)."""
-    from wmr_jax._src.report.figures import ListedColormap
-
     _check_sizes(grid, results, "results")
     names = list(results)
     times = np.stack([results[n].arrival for n in names])  # (C, N)
@@ -329,25 +319,20 @@ def winner_figure(
     cmap = ListedColormap(colours).with_extremes(bad=(1, 1, 1, 0))
     n_h = len(grid.headings)
     size = (2.9 * n_h, 3.8)
-    with closed_after(1, n_h, figsize=size, squeeze=False, layout="constrained") as drawn:
-        _draw_winner(*drawn, grid, names, best, colours, cmap, title)
-        save_figure(drawn[0], path, dpi=100)
+    with closed_after(1, n_h, figsize=size, squeeze=False, layout="constrained") as (fig, axes):
+        for h in range(n_h):
+            ax = axes[0, h]
+            _show(ax, grid, _to_image(grid, best, h), cmap=cmap, vmin=-0.5, vmax=len(names) + 0.5)
+            _decorate(ax, grid, bottom=True, left=h == 0)
+            ax.set_title(_heading_title(grid, h), fontsize=9)
+        handles = [
+            plt.Line2D([], [], marker="s", ls="", color=c, label=lab)
+            for c, lab in zip(colours, [*names, "none arrives"], strict=True)
+        ]
+        fig.legend(handles=handles, loc="outside lower center", ncol=len(handles), fontsize=8)
+        fig.suptitle(title, fontsize=10)
+        save_figure(fig, path, dpi=100)
     return Path(path)
-
-
-def _draw_winner(fig, axes, grid, names, best, colours, cmap, title) -> None:
-    """Draw the first-to-arrive map of ``winner_figure`` into ``axes``, with its legend."""
-    for h in range(len(grid.headings)):
-        ax = axes[0, h]
-        _show(ax, grid, _to_image(grid, best, h), cmap=cmap, vmin=-0.5, vmax=len(names) + 0.5)
-        _decorate(ax, grid, bottom=True, left=h == 0)
-        ax.set_title(_heading_title(grid, h), fontsize=9)
-    handles = [
-        plt.Line2D([], [], marker="s", ls="", color=c, label=lab)
-        for c, lab in zip(colours, [*names, "none arrives"], strict=True)
-    ]
-    fig.legend(handles=handles, loc="outside lower center", ncol=len(handles), fontsize=8)
-    fig.suptitle(title, fontsize=10)
 
 
 def save_map_study(out_dir: str | Path, study: MapStudy) -> list[Path]:

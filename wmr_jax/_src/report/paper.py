@@ -58,14 +58,6 @@ def _fig6(path: Path, curve: dict[str, Any], r_e: float = 1.0) -> None:
         save_figure(fig, path, dpi=120, bbox_inches="tight")
 
 
-def _legend_below(ax: Any, title: str | None = None) -> None:
-    """The legend under the axes, where it covers no path."""
-    ax.legend(
-        loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8, title=title,
-        title_fontsize=8,
-    )  # fmt: skip
-
-
 def _paths_figure(path: Path, title: str, refs: np.ndarray, runs: list[tuple]) -> None:
     """Draw several sets of paths ``(label, trajectory, line style, colour)`` on one plot."""
     with closed_after(figsize=(6.5, 6.5)) as (fig, ax):
@@ -81,8 +73,11 @@ def _paths_figure(path: Path, title: str, refs: np.ndarray, runs: list[tuple]) -
             )
         ax.plot([0], [0], "ko", ms=5)
         ax.set_title(title, fontsize=10)
-        # One colour per path: the entries name the references, the title the loop.
-        _legend_below(ax, runs[0][0] if len(runs) == 1 and runs[0][3] is None else None)
+        # Under the axes, covering no path. One colour per path: the entries name the
+        # references, the title the loop.
+        legend = runs[0][0] if len(runs) == 1 and runs[0][3] is None else None
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8,
+                  title=legend, title_fontsize=8)  # fmt: skip
         save_figure(fig, path, dpi=120, bbox_inches="tight")
 
 

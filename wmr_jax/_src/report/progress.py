@@ -1,8 +1,4 @@
-"""Progress bars on a terminal, plain progress lines everywhere else.
-
-A bar's escapes are noise in a file or a pipe: there ``bar`` draws the same
-``tqdm`` as whole lines, at most one every ``PLAIN_INTERVAL_S`` seconds.
-"""
+"""Progress bars on a terminal; elsewhere plain lines, one every ``PLAIN_INTERVAL_S`` at most."""
 
 from __future__ import annotations
 

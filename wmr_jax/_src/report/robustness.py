@@ -1,8 +1,7 @@
-"""The robustness study's figure, tables and result files (``docs/model.md §7``).
+"""The robustness study's figures, tables and result files (``docs/model.md §7``).
 
-Tables print fractions of runs as percentages, the JSON files keep the
-fractions. Figures draw the arrival of the runs that arrive and mark apart
-those that count as arrived only because the horizon ends.
+Tables print fractions of runs as percentages; figures mark apart the runs
+that count as arrived only because the horizon ends.
 """
 
 from __future__ import annotations
@@ -170,9 +169,8 @@ def write_robustness(
         out_dir: the folder (created if missing).
         rows: ``robustness_study`` rows.
         seed, velocity, n_runs: the study's seed, velocity loop and runs per level.
-        robot: the study's ``Robot`` (recorded and named); ``None``: the paper robot.
-        x64: whether the study computed in float64, recorded as its ``dtype``;
-            ``None`` records none.
+        robot: the study's ``Robot``; ``None``: the paper robot.
+        x64: recorded as the ``dtype`` (float64 or float32); ``None`` records none.
 
     Returns:
         The paths written.
@@ -208,10 +206,9 @@ def write_robustness(
 
 
 def robustness_figure(rows: Sequence[dict[str, Any]], *, title: str) -> Any:
-    """Draw success rate and median arrival against noise level, one line per row group.
+    """Draw success and median arrival against noise, one line per controller and condition.
 
-    One colour per controller, one line style per condition. The caller saves
-    and closes the returned ``Figure``.
+    The caller saves and closes the returned ``Figure``.
     """
     rows = require_rows("rows", rows)
     markdown_table(rows, _FIGURE_KEYS)  # names a row without one of them
@@ -237,11 +234,7 @@ def robustness_figure(rows: Sequence[dict[str, Any]], *, title: str) -> Any:
 
 
 def _draw_lines(axes, lines, arrival: str, sigma_theta: str, noise: str) -> None:
-    """Success and ``arrival`` (over the runs that arrive) against σ_xy, one line per group.
-
-    ``lines``: ``(label, style, rows)``; a point where at least half of the
-    successes only settle at the horizon is an x.
-    """
+    """Success and ``arrival`` against σ_xy, one line per ``(label, style, rows)`` of ``lines``."""
     for label, style, sel in lines:
         x = [r["noise xy cm"] for r in sel]
         late = _late_points(sel)
@@ -295,10 +288,9 @@ def _with_late_mark(ax: Any, rows: Sequence[dict[str, Any]]) -> tuple[list, list
 def write_standard_conditions(
     out_dir: str | os.PathLike, rows: Sequence[dict[str, Any]], *, meta: dict[str, Any]
 ) -> list[Path]:
-    """Write ``standard_conditions.png``, ``.md`` and ``.json`` (``docs/model.md §7``).
+    """Write ``standard_conditions.png``, ``.md`` and ``.json``; return their paths.
 
-    ``meta`` says what produced the rows (the robot's ``{field: value}`` under
-    ``"robot"`` is named in the text). Returns the paths written.
+    ``meta`` says what produced the rows; its ``"robot"`` is named in the text.
     """
 
     def head(rows: list[dict[str, Any]], meta: dict[str, Any]) -> str:
@@ -316,8 +308,7 @@ def write_standard_conditions(
 def standard_figure(rows: Sequence[dict[str, Any]]) -> Any:
     """Draw success and mean arrival per condition, one bar per gain set (legend outside).
 
-    The success bar is hatched for the runs that only settle at the horizon;
-    the arrival bar is the mean over the runs that arrive, absent where none does.
+    Success is hatched for the runs that only settle at the horizon.
     """
     rows = require_rows("rows", rows)
     markdown_table(rows, ["condition", "gains", "success", "mean arrival s"])  # names a gap

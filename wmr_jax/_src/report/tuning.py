@@ -202,35 +202,28 @@ def _minimised_notes(rows: list[dict[str, Any]]) -> str:
 def comparison_table(rows: list[dict[str, Any]]) -> str:
     """Return gradient vs CMA-ES vs random search as Markdown, one line per problem and method.
 
-    A seed whose parameters never arrive (a mean arrival of ``inf``, or
-    ``"inf"`` as read back from JSON) reads "none arrived", as do the means
-    and ratios that would need it. The CPU time (the budget's clock) stands
-    beside the wall time; candidates per CPU-second are the gradient's
-    iterations for the gradient; under the table, what each method minimises
-    (the judged score is the hard law's on the held-out poses for all).
+    A seed that never arrives (``inf``, or ``"inf"`` read back from JSON) reads
+    "none arrived", as do the means and ratios that need it; under the table,
+    what each method minimises.
 
     Args:
         rows: the rows of ``wmr_jax.tuning.compare`` (one per problem, seed and method).
 
     Raises:
-        ValueError: naming the row and key, for a row without a number the
-            table shows or with one that is not a number.
+        ValueError: naming the row and key of a missing or non-numeric number.
     """
     rows = require_rows("rows", rows)
     numbers = [_compare_numbers(i, row) for i, row in enumerate(rows)]
-    groups: dict[tuple[str, str], list[dict[str, float]]] = {}
-    raws: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    # Each row with its numbers read back as floats, grouped by problem and method.
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for row, values in zip(rows, numbers, strict=True):
-        # Rows of before the schedules had a size do not say their parameter
-        # count: theirs is the default problem's.
+        # A row without a parameter count has the default problem's.
         default = PROBLEMS.get(row["problem"])
         size = row.get("parameters", None if default is None else default.dim)
         problem = row["problem"] if size is None else f"{row['problem']} ({size})"
-        groups.setdefault((problem, row["method"]), []).append(values)
-        raws.setdefault((problem, row["method"]), []).append(row)
+        groups.setdefault((problem, row["method"]), []).append({**row, **values})
     lines = []
     for (problem, method), group in groups.items():
-        raw = raws[(problem, method)]
         arrival = [r["mean_arrival"] for r in group]
         gap = [r["mean_arrival"] - r["lower_bound_s"] for r in group]
         ratio = [r["mean_arrival"] / r["turn_drive_turn_s"] for r in group]
@@ -244,10 +237,10 @@ def comparison_table(rows: list[dict[str, Any]]) -> str:
                 "success": f"{100 * min(r['success_rate'] for r in group):.1f} %",
                 "mean − lower bound (s)": _arrived_mean(gap, "{:.3f}"),
                 "vs turn–drive–turn": _arrived_mean(ratio, "{:.3f}×"),
-                "CPU time (s)": " / ".join(_maybe(r.get("cpu_s"), "{:.0f}") for r in raw),
+                "CPU time (s)": " / ".join(_maybe(r.get("cpu_s"), "{:.0f}") for r in group),
                 "wall time (s)": " / ".join(f"{r['wall_s']:.0f}" for r in group),
                 "candidates per CPU-s": " / ".join(
-                    _maybe(r.get("per_cpu_s"), "{:.3g}") for r in raw
+                    _maybe(r.get("per_cpu_s"), "{:.3g}") for r in group
                 ),
             }
         )
@@ -274,13 +267,9 @@ def tuning_curve(
 ) -> Path:
     """Save the loss (with the temperature) and the parameters against the iteration.
 
-    For a schedule, the three tables are drawn against ``r_e`` (first and
-    last iteration) and the shape gains against the iteration. Fixed gains
-    are drawn beside the tuner's baseline on ``robot``, the paper's feasible
-    gains scaled into its wheel budget (``paper_feasible_gains``), as the
-    table of the run compares with. A value that is NaN or infinite has no
-    place on an axis: its iterations are marked × along the panel's top and
-    counted in its title, never left as a silent gap.
+    A schedule's tables are drawn against ``r_e`` (first and last iteration);
+    fixed gains beside ``paper_feasible_gains(robot)``, the run's baseline.
+    Non-finite values are marked × along the panel's top and counted in its title.
 
     Args:
         path: the image file to write (atomically).
@@ -330,10 +319,8 @@ def tuning_curve(
         twin.plot(steps, temperature, lw=1.0, color="C3")
         twin.set_yscale("log")
         twin.set_ylabel("temperature", color="C3")
-        title = f"loss ({velocity} loop)"
-        if not finite.all():
-            title += f"; {(~finite).sum()} non-finite or non-positive, marked ×"
-        ax.set_title(title, fontsize=9 if not finite.all() else None)
+        what = "non-finite or non-positive, marked ×"
+        _marked_title(ax, f"loss ({velocity} loop)", finite, what)
         if problem == "schedule":
             _schedule_panels(axes, steps, gains, knots)
         else:
@@ -351,11 +338,11 @@ def _plot_marked(ax: Any, steps: np.ndarray, values: np.ndarray, drawn: Any, **s
     return drawn
 
 
-def _marked_title(ax: Any, title: str, drawn: Any) -> None:
-    """``title``, with the count of the values not drawn where there are any."""
+def _marked_title(ax: Any, title: str, drawn: Any, what: str = "non-finite, marked ×") -> None:
+    """``title``, with the count of the values not drawn (``what`` they are) where there are any."""
     missing = int((~np.asarray(drawn, dtype=bool)).sum())
     if missing:
-        title += f"; {missing} non-finite, marked ×"
+        title += f"; {missing} {what}"
     ax.set_title(title, fontsize=9 if missing else None)
 
 
@@ -423,10 +410,7 @@ def _schedule_panels(axes: Any, steps: np.ndarray, rows: np.ndarray, knots: int)
         ax.plot(radii, table[-1], "o-", ms=3, lw=1.2, label="tuned")
         ax.set_xscale("symlog", linthresh=1.0)
         ax.set_xlabel("r_e (cm)")
-        missing = int((~np.isfinite(table[[0, -1]])).sum())
-        if missing:
-            title += f"; {missing} knot values non-finite, not drawn"
-        ax.set_title(title, fontsize=9 if missing else None)
+        _marked_title(ax, title, np.isfinite(table[[0, -1]]), "knot values non-finite, not drawn")
     axes.flat[1].legend(fontsize=8)
     for k, name in enumerate(SHAPE_FIELDS):  # Φ_m, the radii and α
         ax = axes.flat[k + 4]
@@ -445,13 +429,9 @@ def robust_comparison_table(rows: list[dict[str, Any]]) -> str:
     """Markdown table of ``tune --robust --compare``: each method and seed under each condition.
 
     A cell is the success rate and the mean arrival of the successful runs;
-    ``score`` is the mean over the conditions of the mean arrival with
-    failures counted at twice the horizon (12 s on the paper robot, longer
-    on a slower one: each row's ``horizon s``), what the searches minimise.
-    ``budget`` is the gradient's process CPU time, spent by each search;
-    ``CPU`` and ``wall`` what each method spent, ``per CPU-s`` its candidates
-    (the gradient: iterations) per CPU-second. The last rows are each
-    method's mean over the seeds; under the table, what each method minimises.
+    ``score`` is what the searches minimise (``condition_score``, failures at
+    twice each row's horizon), ``budget`` the gradient's CPU time each search
+    spent. The last rows are each method's mean over the seeds.
     """
     rows = require_rows("rows", rows)
     cells: dict[tuple[str, int], dict[str, Any]] = {}
