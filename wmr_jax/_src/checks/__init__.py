@@ -1,33 +1,28 @@
-"""Boundary checks: every user input is checked here, in plain Python, before tracing.
+"""Boundary checks of user input, in plain Python before tracing.
 
-Each check names the argument, the value it got and what is allowed, and
-raises ``ValueError``; the rest of the package calls these and has no checks
-of its own. Values that are JAX tracers (a caller running the library inside
-their own ``jit`` or ``grad``) cannot be inspected and pass through unchecked.
+Each names the argument, the value it got and what is allowed, and raises
+``ValueError``; JAX tracers cannot be inspected and pass unchecked.
 """
 
 from wmr_jax._src.checks.arrays import Parameters as Parameters
 from wmr_jax._src.checks.arrays import as_float_tree as as_float_tree
 from wmr_jax._src.checks.arrays import batch_sizes as batch_sizes
 from wmr_jax._src.checks.arrays import common_batch_size as common_batch_size
+from wmr_jax._src.checks.arrays import field_array as field_array
 from wmr_jax._src.checks.arrays import field_values as field_values
 from wmr_jax._src.checks.arrays import list_as_array as list_as_array
-from wmr_jax._src.checks.arrays import lists_to_arrays as lists_to_arrays
 from wmr_jax._src.checks.arrays import require as require
 from wmr_jax._src.checks.arrays import require_finite_runs as require_finite_runs
 from wmr_jax._src.checks.arrays import require_one_batch_size as require_one_batch_size
 from wmr_jax._src.checks.arrays import require_representable as require_representable
 from wmr_jax._src.checks.arrays import require_unbatched as require_unbatched
-from wmr_jax._src.checks.poses import HEADING_REDUCE_ABOVE as HEADING_REDUCE_ABOVE
 from wmr_jax._src.checks.poses import MAX_HEADING as MAX_HEADING
 from wmr_jax._src.checks.poses import as_pose_array as as_pose_array
 from wmr_jax._src.checks.poses import as_poses as as_poses
 from wmr_jax._src.checks.poses import position_limit as position_limit
-from wmr_jax._src.checks.poses import reduce_heading as reduce_heading
 from wmr_jax._src.checks.values import _FLOAT64_HINT as _FLOAT64_HINT
 from wmr_jax._src.checks.values import MAX_STEPS as MAX_STEPS
 from wmr_jax._src.checks.values import MAX_TEMPERATURE as MAX_TEMPERATURE
-from wmr_jax._src.checks.values import MIN_TEMPERATURE as MIN_TEMPERATURE
 from wmr_jax._src.checks.values import array_kind as array_kind
 from wmr_jax._src.checks.values import check_bool as check_bool
 from wmr_jax._src.checks.values import check_budget as check_budget

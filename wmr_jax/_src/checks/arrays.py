@@ -13,12 +13,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from wmr_jax._src.checks.values import (
-    _FLOAT64_HINT,
-    array_kind,
-    described,
-    float_dtype,
-)
+from wmr_jax._src.checks.values import _FLOAT64_HINT, array_kind, float_dtype, real_array
 
 
 def _shown(arr: np.ndarray, bad: np.ndarray) -> str:
@@ -56,31 +51,25 @@ def field_values(
         if field.name in skip:
             continue
         name, value = f"{prefix}.{field.name}", getattr(obj, field.name)
-        if isinstance(value, jax.core.Tracer):
-            out[field.name] = None
-            continue
-        try:
-            if value is None or isinstance(value, (str, bytes)):
-                raise TypeError(value)  # NumPy would read None as NaN and "1.5" as 1.5
-            if array_kind(value) in "bcUS":
-                raise TypeError(value)  # True as 1, and 1 + 2j as 1, are not gains
-            arr = np.asarray(value, dtype=float)
-        except (TypeError, ValueError, OverflowError):  # OverflowError: an int beyond float
-            raise ValueError(
-                f"{name} = {described(value)} is not allowed; allowed: a finite number"
-            ) from None
-        if arr.ndim > 1 or arr.size == 0:
-            raise ValueError(
-                f"{name} has shape {arr.shape}; allowed: a scalar or one leading batch axis "
-                "of size >= 1"
-            )
-        require(name, arr, np.isfinite(arr), "a finite number")
-        require_representable(name, arr)
-        out[field.name] = arr
+        tracer = isinstance(value, jax.core.Tracer)
+        out[field.name] = None if tracer else field_array(name, value)
     require_one_batch_size(
         {f"{prefix}.{k}": v.shape[0] for k, v in out.items() if v is not None and v.ndim}
     )
     return out
+
+
+def field_array(name: str, value: Any, allowed: str = "a finite number") -> np.ndarray:
+    """Return one parameter value as a checked float array: finite, representable, ndim <= 1."""
+    arr = real_array(name, value, allowed, objects=True)
+    if arr.ndim > 1 or arr.size == 0:
+        raise ValueError(
+            f"{name} has shape {arr.shape}; allowed: a scalar or one leading batch axis "
+            "of size >= 1"
+        )
+    require(name, arr, np.isfinite(arr), allowed)
+    require_representable(name, arr)
+    return arr
 
 
 def require_one_batch_size(sizes: dict[str, int]) -> int | None:
@@ -189,20 +178,12 @@ class Parameters:
     """
 
     def __post_init__(self) -> None:
-        lists_to_arrays(self)
+        for field in dataclasses.fields(self):
+            object.__setattr__(self, field.name, list_as_array(getattr(self, field.name)))
 
     def replace(self, **changes: Any) -> Any:
         """Return a copy with the given fields changed."""
         return dataclasses.replace(self, **changes)
-
-
-def lists_to_arrays(params: Any) -> None:
-    """Store the list or tuple fields of a frozen parameter dataclass as NumPy arrays.
-
-    A Python list would otherwise be a pytree node, not one batched field.
-    """
-    for field in dataclasses.fields(params):
-        object.__setattr__(params, field.name, list_as_array(getattr(params, field.name)))
 
 
 def list_as_array(value: Any) -> Any:

@@ -9,13 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks.values import (
-    _FLOAT64_HINT,
-    array_kind,
-    described,
-    float_dtype,
-    is_traced,
-)
+from wmr_jax._src.checks.values import _FLOAT64_HINT, float_dtype, is_traced, real_array
 
 
 def as_poses(
@@ -38,14 +32,7 @@ def as_poses(
         arr = value.astype(float_dtype()) if value.dtype != float_dtype() else value
         host = None
     else:
-        try:
-            if array_kind(value) in "bcUS":
-                raise TypeError(value)  # True as 1, or 1 + 2j as 1, is no coordinate
-            host = np.asarray(value, dtype=float)
-        except (TypeError, ValueError) as err:
-            shown = described(value)
-            raise ValueError(f"{name} = {shown} is not allowed; allowed: {real}") from err
-        arr = None
+        host, arr = real_array(name, value, real, objects=True), None
     shape = tuple((arr if arr is not None else host).shape)
     allowed = {False: "(3,)", True: "(N, 3) with N >= 1", None: "(3,) or (N, 3)"}[batch]
     ok_ndim = {False: (1,), True: (2,), None: (1, 2)}[batch]
@@ -137,15 +124,7 @@ def as_pose_array(name: str, value: Any) -> Any:
     """
     if is_traced(value):
         return value
-    try:
-        if array_kind(value) in "bcUS":
-            raise TypeError(value)
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(
-            f"{name} = {described(value)} is not allowed; allowed: real numbers (..., 3) "
-            "[x cm, y cm, theta rad]"
-        ) from None
+    arr = real_array(name, value, "real numbers (..., 3) [x cm, y cm, theta rad]", objects=True)
     if arr.ndim == 0 or arr.shape[-1] != 3:
         raise ValueError(f"{name} has shape {arr.shape}; allowed: (..., 3) [x cm, y cm, theta rad]")
     if arr.ndim == 1:
