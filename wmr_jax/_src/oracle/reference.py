@@ -164,8 +164,8 @@ def reference_control(pose: Any, ref: Any, gains: Gains) -> tuple[float, float]:
 def _limited(command: float, last: float, accel: float, dt: float) -> float:
     """One axis of the speed limiter (docs/model.md §4.2.2); ``accel`` 0: none.
 
-    The change since ``last`` is clamped to ``±accel dt`` and added to it, in
-    the order ros2_controllers' ``SpeedLimiter`` computes it.
+    The change since ``last``, clamped to ``±accel dt``, is added to it as
+    ros2_controllers' ``SpeedLimiter`` computes it.
     """
     if accel <= 0:
         return command
@@ -361,7 +361,7 @@ class _Observer:
     """The observer in plain floats: predict on the exact arc, blend toward the measurement."""
 
     def __init__(self, params: Any, measured: tuple, half_track: float):
-        del half_track
+        del half_track  # the filter's signature
         self.position, self.heading = params.position, params.heading
         self.pose = measured
 
