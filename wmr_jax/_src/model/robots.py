@@ -343,10 +343,9 @@ def read_robot(source: Any) -> LoadedRobot:
     except (OSError, UnicodeDecodeError) as err:
         raise ValueError(f"{where} cannot be read: {' '.join(str(err).split())}") from None
     if path.suffix.lower() == ".json":
-        identified = _identified_block(content)
-        robot = _robot_from_json(content if identified is None else identified, where)
+        robot, identified = _robot_from_json(content, where)
         _warn_unit_slips(robot, where, ros=False)
-        if identified is not None:
+        if identified:
             note = (
                 f"{text}: the identified robot (its half-track and wheel-loop gain); its "
                 "wheel scales, latency and tracker noise act in simulate, evaluate and robustness "
@@ -375,27 +374,20 @@ def load_robot(source: Any) -> Robot:
     return read_robot(source).robot
 
 
-def _identified_block(content: str) -> str | None:
-    """The ``robot`` block of an ``identify`` output (``identified.json``), else ``None``."""
-    try:
-        values = json.loads(content)
-    except (ValueError, RecursionError):
-        return None
-    if isinstance(values, dict) and "wheel_scale" in values and "robot" in values:
-        return json.dumps(values["robot"])
-    return None
-
-
-def _robot_from_json(content: str, where: str) -> Robot:
+def _robot_from_json(content: str, where: str) -> tuple[Robot, bool]:
+    """The robot of a JSON file, and whether it is the ``robot`` block of an ``identify`` output."""
     from wmr_jax._src.io import json_object_once
 
     try:
         values = json.loads(content, object_pairs_hook=json_object_once)
     except (ValueError, RecursionError) as err:
         raise ValueError(f"{where} cannot be read: {' '.join(str(err).split())}") from None
+    identified = isinstance(values, dict) and "wheel_scale" in values and "robot" in values
+    if identified:
+        values = values["robot"]
     if not isinstance(values, dict):
         raise ValueError(
             f"{where} is not allowed; allowed: a JSON object of Robot fields in cm, kg, s "
             f"(keys among {', '.join(ROBOT_FIELDS)})"
         )
-    return robot_from_values(values, where)
+    return robot_from_values(values, where), identified
