@@ -17,19 +17,6 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-__all__ = [
-    "RobotState",
-    "arc_advance",
-    "arc_apply",
-    "arc_factors",
-    "arc_step",
-    "initial_state",
-    "rate_limit",
-    "sin_cos",
-    "sin_small",
-    "sinc",
-]
-
 _NEAREST_EVEN = lax.RoundingMethod.TO_NEAREST_EVEN  # what jnp.round does
 
 # Below this |u| the series 1 − u²/6 + u⁴/120 equals sin(u)/u to float64

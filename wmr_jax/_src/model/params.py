@@ -28,20 +28,6 @@ from wmr_jax._src.checks import (
     require_unbatched,
 )
 
-__all__ = [
-    "Gains",
-    "Robot",
-    "SamplingWarning",
-    "WheelSpeedWarning",
-    "check_feasible",
-    "check_sampling",
-    "sampling_margins",
-    "validate_gains",
-    "validate_one_robot",
-    "validate_robot",
-    "wheel_speed_bound",
-]
-
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)

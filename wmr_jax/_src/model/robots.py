@@ -23,22 +23,6 @@ import numpy as np
 from wmr_jax._src.checks import require_unbatched
 from wmr_jax._src.model.params import NON_NEGATIVE_ROBOT_FIELDS, Robot, validate_robot
 
-__all__ = [
-    "LoadedRobot",
-    "RobotUnitsWarning",
-    "ROBOTS",
-    "ROBOT_FIELDS",
-    "ROBOT_UNITS",
-    "describe_robot",
-    "load_robot",
-    "read_robot",
-    "robot_from_values",
-    "robot_json",
-    "robot_name",
-    "robot_preset",
-    "same_robot",
-]
-
 ROBOT_FIELDS = tuple(f.name for f in dataclasses.fields(Robot))
 
 # The unit of each Robot field, as tuned_gains.json records it beside the robot.

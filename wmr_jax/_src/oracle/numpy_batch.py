@@ -13,8 +13,6 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["numpy_final_poses"]
-
 
 def numpy_final_poses(
     refs: Any,

@@ -28,14 +28,6 @@ from wmr_jax._src.model.params import Gains, Robot, check_sampling, validate_gai
 from wmr_jax._src.model.velocity_loop import check_stability
 from wmr_jax._src.sim.sensing.estimators import OBSERVER_R, EKFParams, resolve_estimator
 
-__all__ = [
-    "reference_control",
-    "reference_diagnostics",
-    "reference_disturbed_rollout",
-    "reference_rollout",
-]
-
-
 # π as a sum of two floats: shifting an angle by PI_HI and then PI_LO gives the
 # correctly rounded a ∓ π, so that e.g. fold(−float(π)) is the tiny positive
 # number it is in exact arithmetic rather than 0. Sgn(sin θ̄_e) depends on it.

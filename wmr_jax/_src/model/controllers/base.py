@@ -25,15 +25,6 @@ from wmr_jax._src.checks import (
     is_traced,
 )
 
-__all__ = [
-    "Controller",
-    "check_law_inputs",
-    "controller_names",
-    "get_controller",
-    "register_controller",
-    "registered_names",
-]
-
 
 @dataclasses.dataclass(frozen=True)
 class Controller:

@@ -23,17 +23,6 @@ from wmr_jax._src.checks import check_bool, field_values
 from wmr_jax._src.model.controllers import shim_sung as law
 from wmr_jax._src.model.controllers.base import Controller, check_law_inputs, register_controller
 
-__all__ = [
-    "AT_GOAL",
-    "GOAL_EPS",
-    "driving_error",
-    "gain_values",
-    "goal_floor",
-    "hold_at_goal",
-    "polar_command",
-    "polar_controller",
-]
-
 # choice (docs/model.md §3): within this distance of the reference, cm, the
 # polar laws only turn to the reference heading: their bearing α is undefined
 # at ρ = 0, and rounding noise near it.

@@ -38,16 +38,6 @@ from wmr_jax._src.model.controllers.shim_sung import (
 )
 from wmr_jax._src.model.params import Gains, Robot, WheelSpeedWarning, sampled, validate_gains
 
-__all__ = [
-    "KNOTS",
-    "R_KNOT",
-    "SCHEDULE",
-    "ScheduleParams",
-    "knot_radii",
-    "schedule_commands",
-    "validate_schedule",
-]
-
 KNOTS = 10  # knots per table by default
 # Each knot is a term of the compiled law: many more no longer compile.
 MAX_KNOTS = 200

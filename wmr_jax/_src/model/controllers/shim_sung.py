@@ -20,26 +20,6 @@ from wmr_jax._src.model.controllers.base import Controller, check_law_inputs, re
 from wmr_jax._src.model.dynamics import sin_cos, sin_small
 from wmr_jax._src.model.params import Gains, Robot, feasible, sampled, validate_gains
 
-__all__ = [
-    "SHIM_SUNG",
-    "Diagnostics",
-    "PolarError",
-    "blend",
-    "commands",
-    "control",
-    "control_diagnostics",
-    "direction_flag",
-    "error_angles",
-    "fold",
-    "lyapunov",
-    "polar_error",
-    "region_label",
-    "saturated_distance",
-    "sgn",
-    "wheel_speeds",
-    "wrap_angle",
-]
-
 
 class PolarError(NamedTuple):
     """Error coordinates of docs/model.md §2 (Eq. 3), angles as cosine and sine.
