@@ -345,12 +345,10 @@ def read_robot(source: Any) -> LoadedRobot:
 
 
 def load_robot(source: Any) -> Robot:
-    """Return the robot of a preset name or a ``.json`` / ``.yaml`` file, checked.
+    """Return the robot of a preset name (``ROBOTS``) or a ``.json`` / ``.yaml`` file, checked.
 
-    ``"paper"``, ``"turtlebot3-burger"``, ``"pioneer-3dx"`` (``ROBOTS``); a
-    JSON object of ``Robot`` fields in cm, kg, s (any subset: the rest keep
-    the paper robot's values); or a ROS ``diff_drive_controller`` YAML
-    (``read_robot`` also returns which of its fields were used).
+    A JSON file gives ``Robot`` fields in cm, kg, s (any subset); a YAML file
+    is a ROS ``diff_drive_controller``'s (``read_robot`` also says what was used).
 
     Raises:
         ValueError: one line naming the file, the key, its value and what is allowed.

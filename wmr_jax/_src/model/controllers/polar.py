@@ -1,13 +1,10 @@
 """What the two polar-coordinate baselines of Shim–Sung share (docs/model.md §3).
 
-Both steer from ``ρ = r_e``; ``α``, the bearing of the reference from the
-direction of travel (``φ_e``, or ``φ_e + π`` wrapped when driving backwards);
-and ``θ_A = α − θ_e`` (wrapped; Astolfi's and Corke's ``β`` is ``−θ_A``). A
-robot driving backwards is a robot turned by ``π`` whose reference is turned
-too: ``v`` changes sign, ``ω`` does not. choice: the direction is decided
-afresh at every sample, backwards when ``cos φ_e < 0``. The static
-``backward`` flag picks code, not values; commands and gradients are finite
-at ``ρ = 0``.
+Both steer from ``ρ = r_e``, ``α`` (the bearing of the reference from the
+direction of travel: ``φ_e``, or ``φ_e + π`` wrapped when driving backwards)
+and ``θ_A = α − θ_e`` (wrapped; Astolfi's and Corke's ``β`` is ``−θ_A``).
+Driving backwards, ``v`` changes sign and ``ω`` does not. choice: the
+direction is decided afresh at every sample, backwards when ``cos φ_e < 0``.
 """
 
 from __future__ import annotations

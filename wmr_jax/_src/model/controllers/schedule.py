@@ -1,11 +1,9 @@
 """The Shim–Sung law with gain schedules: gains as functions of the error state (docs/model.md §3).
 
-The gains are tables over the distance ``r_e`` (knots dense near the goal),
-``k_turn`` the turn gain where ``d = 0``; then ``|ω| ≤ V_max / L`` and
-``|v| ≤ V_max − L |ω|``, so every wheel command is within ``±V_max`` by
-construction, and the speed uses whatever the turn leaves. The law is
-``shim_sung.commands`` itself with the gains of the state: constant tables
-that meet ``k_r + L k_θ ≤ V_max`` give the fixed-gain law exactly.
+The gains are tables over ``r_e`` (knots dense near the goal), ``k_turn`` the
+turn gain where ``d = 0``. ``shim_sung.commands`` runs with the gains of the
+state, then ``|ω| ≤ V_max / L`` and ``|v| ≤ V_max − L |ω|``: every wheel
+command is within ``±V_max`` by construction.
 """
 
 from __future__ import annotations
