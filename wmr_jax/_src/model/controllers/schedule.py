@@ -3,7 +3,8 @@
 The gains are tables over ``r_e`` (knots dense near the goal), ``k_turn`` the
 turn gain where ``d = 0``. ``shim_sung.commands`` runs with the gains of the
 state, then ``|ω| ≤ V_max / L`` and ``|v| ≤ V_max − L |ω|``: every wheel
-command is within ``±V_max`` by construction.
+command is within ``±V_max`` by construction, and constant tables within that
+budget give the fixed-gain law exactly.
 """
 
 from __future__ import annotations
