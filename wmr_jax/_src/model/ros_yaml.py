@@ -128,7 +128,6 @@ def _axis_limit(params: dict, axis: str, kind: str, unit: str, where: str, used:
 def _multiplier(params: dict[str, Any], keys: tuple[str, ...], where: str) -> tuple[float, list]:
     """The mean of the calibration multipliers given among ``keys`` (1 if none), and their keys."""
     given = [(k, _positive(params, k, "a factor", where)) for k in keys if k in params]
-    given = [(k, v) for k, v in given if v is not None]
     if not given:
         return 1.0, []
     return sum(v for _, v in given) / len(given), [k for k, _ in given]
