@@ -121,6 +121,9 @@ def test_a_period_float32_cannot_hold_is_refused_before_the_run(dt):
         ({"ref": np.array([30, 30, True], dtype=object)}, r"ref = .* allowed: real numbers"),
         ({"ref": np.array([30 + 1j, 30, 0])}, r"ref = .* allowed: real numbers"),
         ({"ref": jax.numpy.array([30 + 1j, 30, 0])}, r"ref has dtype complex"),
+        # An integer beyond any float, and no pose at all, are named as any other.
+        ({"ref": [10**400, 0, 0]}, r"ref = \[1000.* allowed: real numbers"),
+        ({"init": None}, r"init = None is not allowed; allowed: real numbers"),
     ],
 )
 def test_bools_strings_and_complex_numbers_are_not_numbers(kwargs, message):

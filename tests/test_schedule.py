@@ -118,6 +118,8 @@ def test_bad_schedules_are_refused_in_one_line():
         ({"v_max": True}, r"params.v_max = True is not allowed; allowed: a finite v_max > 0"),
         ({"phi_m": 2.0}, r"params.phi_m = 2.0 is not allowed"),
         ({"k_turn": (1.0,) * 2000}, r"params.k_turn has 2000 knots; allowed: 2 to 200"),
+        # An empty knot is refused as an empty Gains field is, not run as a batch of 0.
+        ({"kr": (np.ones(0),) + (60.0,) * 9}, r"params.kr\[0\] has shape \(0,\); allowed: a"),
     ):
         with pytest.raises(ValueError, match=message):
             w.final_poses([[10.0, 0.0, 0.0]], params.replace(**change), controller=SCHEDULE)

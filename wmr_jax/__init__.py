@@ -52,9 +52,8 @@ from wmr_jax._src.tuning.saved import load_tuned as load_tuned
 
 __version__ = "0.1.0"
 
-# The public families, imported on first use (wmr_jax.cli, say, after a plain
-# ``import wmr_jax``): report, studies and tuning import optax or matplotlib,
-# and cli every command, which ``import wmr_jax`` should not pay for.
+# The public families, imported on first use: report, studies and tuning import
+# optax or matplotlib, and cli every command, which ``import wmr_jax`` should not pay for.
 _SUBMODULES = ("cli", "controllers", "dynamics", "export", "report", "studies", "tuning")
 
 # Every name imported above as itself, and the families (tests/test_usability.py

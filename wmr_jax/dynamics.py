@@ -2,9 +2,8 @@
 
 ``docs/model.md §4``: the ideal loop integrates each held ``(v, ω)`` exactly
 (``arc_step``); the non-ideal loop runs a computed-torque wheel-speed loop on
-the dynamics of Eq. 5 (``advance``). These pure primitives check nothing
-(``check_stability`` tells whether the sub-steps are short enough); the
-entry points (``wmr_jax.rollout``, ...) check their inputs before tracing.
+the dynamics of Eq. 5 (``advance``). These pure primitives check nothing;
+``check_stability`` tells whether the sub-steps are short enough.
 """
 
 from wmr_jax._src.model.dynamics import RobotState as RobotState

@@ -1,11 +1,9 @@
 """Robot motion over one control period: the ideal velocity loop (docs/model.md §4).
 
-The command is held over each ``dt`` and the ideal robot follows it at once,
-so the unicycle kinematics (Eq. 2) integrate exactly to an arc. The arc has
-one home, ``arc_advance``, on the position ``x + i y`` and the heading
-``cos θ + i sin θ`` as complex numbers (a turn is one product); ``arc_step``
-is the same arc on a pose. ``sin_cos`` is a polynomial cosine and sine, which
-XLA:CPU vectorises where ``jnp.sin``/``jnp.cos`` do not.
+The ideal robot follows the held command at once, so the unicycle kinematics
+(Eq. 2) integrate exactly to an arc: ``arc_advance``, on the position ``x + i y``
+and heading ``cos θ + i sin θ`` as complex numbers. ``sin_cos`` is a polynomial
+cosine and sine, which XLA:CPU vectorises where ``jnp.sin``/``jnp.cos`` do not.
 """
 
 from __future__ import annotations
@@ -18,19 +16,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import lax
-
-__all__ = [
-    "RobotState",
-    "arc_advance",
-    "arc_apply",
-    "arc_factors",
-    "arc_step",
-    "initial_state",
-    "rate_limit",
-    "sin_cos",
-    "sin_small",
-    "sinc",
-]
 
 _NEAREST_EVEN = lax.RoundingMethod.TO_NEAREST_EVEN  # what jnp.round does
 
@@ -102,8 +87,7 @@ def initial_state(init: jax.Array) -> RobotState:
 def rate_limit(value: jax.Array, previous: jax.Array, rate: jax.Array, dt: jax.Array) -> jax.Array:
     """``value`` moved from ``previous`` by at most ``rate · dt`` (docs/model.md §4.2.2).
 
-    One axis of a speed limiter; a ``rate`` of 0 is no limit (``value``
-    passes bit for bit). Differentiable in all four arguments.
+    One axis of a speed limiter; a ``rate`` of 0 is no limit (``value`` passes bit for bit).
     """
     step = jnp.where(rate > 0, rate * dt, jnp.inf)
     return jnp.clip(value, previous - step, previous + step)

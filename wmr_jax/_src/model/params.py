@@ -1,9 +1,8 @@
 """Controller gains and robot parameters as immutable pytrees, with boundary checks.
 
-Every field is a leaf: gains and robots can be differentiated and vmapped (a
-leading batch axis on a field). Building one checks nothing (JAX rebuilds them
-on every tree operation); the entry points call ``validate_gains`` /
-``validate_robot`` before tracing.
+Every field is a leaf, so gains and robots can be differentiated and vmapped.
+Building one checks nothing (JAX rebuilds them on every tree operation); the
+entry points call ``validate_gains`` / ``validate_robot`` before tracing.
 """
 
 from __future__ import annotations
@@ -28,20 +27,6 @@ from wmr_jax._src.checks import (
     require_concrete,
     require_unbatched,
 )
-
-__all__ = [
-    "Gains",
-    "Robot",
-    "SamplingWarning",
-    "WheelSpeedWarning",
-    "check_feasible",
-    "check_sampling",
-    "sampling_margins",
-    "validate_gains",
-    "validate_one_robot",
-    "validate_robot",
-    "wheel_speed_bound",
-]
 
 
 @jax.tree_util.register_dataclass
@@ -72,22 +57,14 @@ class Gains(Parameters):
     alpha: Any = 0.25
 
 
-# Table 1 of the paper; lengths in cm, masses in kg, time in s. Torques are then
-# in kg·cm²/s² (1 N·m = 1e4 kg·cm²/s²).
-_BODY_MASS = 0.5
-_BODY_DIAMETER = 3.7
-_WHEEL_RADIUS = 1.5
-_WHEEL_MASS = 0.010
-
-
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class Robot(Parameters):
     """Differential-drive robot of the paper's Table 1 (docs/model.md §1, §4).
 
     Units: cm, kg, s; torques in kg·cm²/s² (1 N·m = 1e4 kg·cm²/s²): a robot
-    8 cm across the wheels is ``Robot(half_track=4.0)``. Ranges are checked
-    where a robot is used, not here.
+    8 cm across the wheels is ``Robot(half_track=4.0)``. The defaults are
+    Table 1 of the paper.
 
     Attributes:
         half_track: ``L``, distance from the centre C to each wheel, cm.
@@ -106,13 +83,12 @@ class Robot(Parameters):
         angular_accel_max: the same for the angular-velocity command, rad/s².
     """
 
-    # choice (docs/model.md §1): L = D/2.
-    half_track: Any = _BODY_DIAMETER / 2
+    half_track: Any = 3.7 / 2  # choice (docs/model.md §1): L = D/2
     v_max: Any = 125.0
-    body_mass: Any = _BODY_MASS
-    body_diameter: Any = _BODY_DIAMETER
-    wheel_radius: Any = _WHEEL_RADIUS
-    wheel_mass: Any = _WHEEL_MASS
+    body_mass: Any = 0.5
+    body_diameter: Any = 3.7
+    wheel_radius: Any = 1.5
+    wheel_mass: Any = 0.010
     com_offset: Any = 0.0
     # choice: ~0.08 N·m per motor, about 2 g of linear acceleration for Table 1.
     torque_max: Any = 800.0
@@ -139,22 +115,14 @@ def validate_gains(gains: Gains, prefix: str = "gains") -> Gains:
     for name, unit in positive:
         if g[name] is not None:
             require(f"{prefix}.{name}", g[name], g[name] > 0, f"{name} > 0 {unit}")
-    if g["phi_m"] is not None:
-        ok = (g["phi_m"] > 0) & (g["phi_m"] < math.pi / 2)
-        require(f"{prefix}.phi_m", g["phi_m"], ok, "0 < phi_m < pi/2 rad")
-    if g["alpha"] is not None:
-        ok = (g["alpha"] > 0) & (g["alpha"] < 0.5)
-        require(f"{prefix}.alpha", g["alpha"], ok, "0 < alpha < 0.5")
-    if g["r_e"] is not None and g["r_a"] is not None:
-        require(
-            f"{prefix}.r_e",
-            g["r_e"],
-            g["r_e"] <= g["r_a"],
-            f"0 < r_e <= r_a ({prefix}.r_a = {g['r_a']})",
-        )
-    if g["r_a"] is not None and g["r_m"] is not None:
-        allowed = f"r_a <= r_m ({prefix}.r_m = {g['r_m']})"
-        require(f"{prefix}.r_a", g["r_a"], g["r_a"] <= g["r_m"], allowed)
+    for name, high, allowed in (("phi_m", math.pi / 2, "pi/2 rad"), ("alpha", 0.5, "0.5")):
+        if g[name] is not None:
+            ok = (g[name] > 0) & (g[name] < high)
+            require(f"{prefix}.{name}", g[name], ok, f"0 < {name} < {allowed}")
+    for low, high, floor in (("r_e", "r_a", "0 < "), ("r_a", "r_m", "")):
+        if g[low] is not None and g[high] is not None:
+            allowed = f"{floor}{low} <= {high} ({prefix}.{high} = {g[high]})"
+            require(f"{prefix}.{low}", g[low], g[low] <= g[high], allowed)
     return gains
 
 
@@ -168,7 +136,7 @@ _POSITIVE_ROBOT_FIELDS = (
     "torque_max",
     "speed_gain",
 )
-_NON_NEGATIVE_ROBOT_FIELDS = ("integral_gain", "accel_max", "angular_accel_max")
+NON_NEGATIVE_ROBOT_FIELDS = ("integral_gain", "accel_max", "angular_accel_max")
 
 
 def validate_robot(robot: Robot) -> Robot:
@@ -177,17 +145,13 @@ def validate_robot(robot: Robot) -> Robot:
     for name in _POSITIVE_ROBOT_FIELDS:
         if r[name] is not None:
             require(f"robot.{name}", r[name], r[name] > 0, "> 0")
-    for name in _NON_NEGATIVE_ROBOT_FIELDS:  # 0: none (no integral action, no limit)
+    for name in NON_NEGATIVE_ROBOT_FIELDS:  # 0: none (no integral action, no limit)
         if r[name] is not None:
             require(f"robot.{name}", r[name], r[name] >= 0, ">= 0")
     if r["com_offset"] is not None and r["body_diameter"] is not None:
         ok = np.abs(r["com_offset"]) < r["body_diameter"] / 2
-        require(
-            "robot.com_offset",
-            r["com_offset"],
-            ok,
-            "|com_offset| < body_diameter / 2 (inside the body)",
-        )
+        allowed = "|com_offset| < body_diameter / 2 (inside the body)"
+        require("robot.com_offset", r["com_offset"], ok, allowed)
     return robot
 
 
@@ -199,12 +163,12 @@ def validate_one_robot(robot: Robot | None, purpose: str) -> Robot:
 
 
 def wheel_speed_bound(gains: Gains, robot: Robot | None = None) -> Any:
-    """Return ``k_r + L k_θ``, the largest rim speed the law can command (docs/model.md §3).
+    """Return ``k_r + L k_θ`` cm/s, the largest rim speed the law commands (docs/model.md §3).
 
-    Since ``|v_m| ≤ k_r`` and ``|ω_m| ≤ k_θ``. Works on scalars, batches and tracers.
+    Works on scalars, batches and tracers (checked when given values).
     """
     robot = Robot() if robot is None else robot
-    if not is_traced((gains, robot)):  # called with values: check them
+    if not is_traced((gains, robot)):
         validate_gains(gains)
         validate_robot(robot)
         common_batch_size({"gains": gains, "robot": robot})
@@ -232,7 +196,6 @@ def check_feasible(
 
 def feasible(gains: Gains, robot: Robot, *, warn: bool, stacklevel: int) -> np.ndarray:
     """``check_feasible`` of gains and a robot already checked (the rollouts' warning)."""
-    # wheel_speed_bound's sum in NumPy.
     half_track, v_max = (np.asarray(v, dtype=float) for v in (robot.half_track, robot.v_max))
     bound = np.asarray(gains.kr, dtype=float) + half_track * np.asarray(gains.k_theta, dtype=float)
     ok = bound <= v_max * (1 + 1e-12)
@@ -252,7 +215,7 @@ def sampling_margins(gains: Gains, dt: Any) -> tuple[Any, Any]:
 
     Near the goal each settles only while its factor stays below 2 (docs/model.md §4).
     """
-    if not is_traced((gains, dt)):  # called with values: check them (dt may be an array)
+    if not is_traced((gains, dt)):  # dt may be an array of periods
         validate_gains(gains)
         periods = real_array("dt", dt, "periods > 0 s")
         require("dt", periods, np.isfinite(periods) & (periods > 0), "finite periods > 0 s")

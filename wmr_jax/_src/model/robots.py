@@ -1,11 +1,9 @@
 """Robots as data: presets, JSON files of ``Robot`` fields, ROS ``diff_drive_controller`` YAML.
 
-A robot is a preset (``ROBOTS``) or a file: ``.json``, an object of ``Robot``
-fields in the library's units (``ROBOT_UNITS``; a field left out keeps the
-paper robot's value), or ``.yaml`` / ``.yml``, a ROS ``diff_drive_controller``
-(``ros_yaml.py``). Every file is checked before anything runs; a mistake is
-one line naming the file, the key, its value and what is allowed. The
-presets' sources are in their comments and in ``docs/robots.md``.
+A JSON file gives ``Robot`` fields in the library's units (``ROBOT_UNITS``; a
+field left out keeps the paper robot's value); a YAML file is read by
+``ros_yaml.py``. A mistake in a file is one line naming the file, the key,
+its value and what is allowed.
 """
 
 from __future__ import annotations
@@ -23,23 +21,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from wmr_jax._src.checks import require_unbatched
-from wmr_jax._src.model.params import Robot, validate_robot
-
-__all__ = [
-    "LoadedRobot",
-    "RobotUnitsWarning",
-    "ROBOTS",
-    "ROBOT_FIELDS",
-    "ROBOT_UNITS",
-    "describe_robot",
-    "load_robot",
-    "read_robot",
-    "robot_from_values",
-    "robot_json",
-    "robot_name",
-    "robot_preset",
-    "same_robot",
-]
+from wmr_jax._src.model.params import NON_NEGATIVE_ROBOT_FIELDS, Robot, validate_robot
 
 ROBOT_FIELDS = tuple(f.name for f in dataclasses.fields(Robot))
 
@@ -68,10 +50,8 @@ class RobotUnitsWarning(UserWarning):
     """A robot's size or speed looks like a unit slip (metres where cm belong, or cm in ROS)."""
 
 
-# Sizes and speeds no wheeled robot this model describes has (the paper's
-# soccer robot: L = 1.85 cm; a warehouse robot: L of some 30 cm, 2 m/s): a
-# value outside is most likely written in another unit. The range is wide
-# on purpose; the run goes on as given.
+# Sizes and speeds outside these wide ranges are most likely written in
+# another unit; the run goes on as given.
 PLAUSIBLE = {
     "half_track": (0.5, 500.0, "cm"),
     "wheel_radius": (0.2, 100.0, "cm"),
@@ -86,8 +66,7 @@ _TYPED_NUMBERS = (int, float, np.integer, np.floating)
 def implausible(values: dict[str, Any]) -> list[tuple[str, Any, tuple[float, float, str]]]:
     """The sizes and speeds among ``values`` outside ``PLAUSIBLE``: ``(field, value, range)``.
 
-    Numbers only (arrays and tracers are batches and programs), and within
-    ``(0, inf)``: other values are refused where the robot is used.
+    Plain numbers in ``(0, inf)`` only; other values are refused where the robot is used.
     """
     found = []
     for field, bounds in PLAUSIBLE.items():
@@ -117,67 +96,41 @@ def _warn_unit_slips(robot: Robot, where: str, ros: bool) -> None:
 
 # ---------------------------------------------------------------- presets
 
-# ROBOTIS TurtleBot3 Burger. Sourced: wheel separation 0.160 m and wheel radius
-# 0.033 m (ROBOTIS turtlebot3, turtlebot3_bringup/param/burger.yaml, "wheels:
-# separation / radius"); maximum translational velocity 0.22 m/s, maximum
-# rotational velocity 2.84 rad/s, size 138 x 178 x 192 mm, weight 1 kg with SBC,
-# battery and sensors (ROBOTIS e-Manual, TurtleBot3 > Specifications > Hardware
-# Specifications); each wheel 0.0285 kg (ROBOTIS turtlebot3_simulations, Gazebo
-# model of the Burger, wheel link mass 2.8498940e-02 kg); acceleration limits
-# 2.5 m/s^2 and 3.2 rad/s^2 (ROBOTIS turtlebot3,
-# turtlebot3_navigation2/param/burger.yaml: the local planner's "acc_lim_x: 2.5",
-# "acc_lim_theta: 3.2", and the recoveries' "rotational_acc_lim: 3.2").
+# The presets' sources and choices, value by value, are in docs/robots.md.
 _BURGER_SEPARATION_CM = 16.0
 _BURGER_MASS_KG = 1.0
 _BURGER_WHEEL_KG = 0.0285
 TURTLEBOT3_BURGER = Robot(
     half_track=_BURGER_SEPARATION_CM / 2,
-    # The rim limit is at least either published speed: 22 cm/s straight and
-    # 2.84 rad/s × 8 cm = 22.72 cm/s turning in place (the rule of the ROS YAML).
+    # The larger rim speed of 22 cm/s straight and 2.84 rad/s turning in place.
     v_max=max(22.0, 2.84 * _BURGER_SEPARATION_CM / 2),
     body_mass=_BURGER_MASS_KG - 2 * _BURGER_WHEEL_KG,
-    # choice: the body as a disc as wide as the robot (178 mm).
-    body_diameter=17.8,
+    body_diameter=17.8,  # choice: the robot's width
     wheel_radius=3.3,
     wheel_mass=_BURGER_WHEEL_KG,
-    # choice: not published; the centre of mass on the axle.
-    com_offset=0.0,
-    # choice: not published as a wheel torque; ~1 g of linear acceleration
-    # (the traction limit of a tyre on a floor, μ ≈ 1): g M r / 2 per wheel.
+    com_offset=0.0,  # choice
+    # choice: ~1 g of linear acceleration (a tyre's traction, μ ≈ 1): g M r / 2 per wheel.
     torque_max=round(_G * _BURGER_MASS_KG * 3.3 / 2, -1),
-    # choice: the paper robot's wheel loop, a 10 ms velocity time constant.
-    speed_gain=100.0,
+    speed_gain=100.0,  # choice: the paper robot's wheel loop
     integral_gain=0.0,
-    accel_max=250.0,  # 2.5 m/s², the limits ROBOTIS configures for the Burger
+    accel_max=250.0,
     angular_accel_max=3.2,
 )
 
-# Adept MobileRobots Pioneer 3-DX. Sourced (the P3-DX datasheet and the
-# Pioneer 3 Operations Manual, as widely published): wheel diameter 195 mm,
-# maximum forward speed 1.2 m/s, weight 9 kg, width 381 mm (the body, not the
-# wheel track). The wheel separation is not in the datasheet: 33 cm wheel to
-# wheel, as Player/Stage models the Pioneer DX (B. Gerkey, playerstage-users,
-# 2003); ARIA's p3dx.p gives DiffConvFactor 0.0056, i.e. 2 / 0.0056 = 357 mm
-# (an odometry factor, "unused in newer firmware"). A JSON file can give yours.
 _P3DX_MASS_KG = 9.0
-_P3DX_WHEEL_KG = 0.5
+_P3DX_WHEEL_KG = 0.5  # choice
 PIONEER_3DX = Robot(
-    half_track=33.0 / 2,
+    half_track=33.0 / 2,  # as Player/Stage models it; the datasheet gives none
     v_max=120.0,
     body_mass=_P3DX_MASS_KG - 2 * _P3DX_WHEEL_KG,
-    # choice: the body as a disc as wide as the robot (381 mm).
-    body_diameter=38.1,
+    body_diameter=38.1,  # choice: the robot's width
     wheel_radius=19.5 / 2,
-    # choice: not published; a 19.5 cm pneumatic wheel with its hub, ~0.5 kg.
     wheel_mass=_P3DX_WHEEL_KG,
-    com_offset=0.0,  # choice: not published
-    # choice: ~1 g of linear acceleration, as the Burger's.
-    torque_max=round(_G * _P3DX_MASS_KG * 9.75 / 2, -2),
-    speed_gain=100.0,  # choice: the paper robot's wheel loop
+    com_offset=0.0,  # choice
+    torque_max=round(_G * _P3DX_MASS_KG * 9.75 / 2, -2),  # choice: as the Burger's
+    speed_gain=100.0,  # choice
     integral_gain=0.0,
-    # Not found in a published source (ARIA's p3dx.p leaves TransAccel and
-    # RotAccel to the robot's firmware): no speed limiter. A file can give them.
-    accel_max=0.0,
+    accel_max=0.0,  # none published
     angular_accel_max=0.0,
 )
 
@@ -211,10 +164,7 @@ def _floats(robot: Robot) -> dict[str, float]:
 
 
 def same_robot(a: Robot, b: Robot) -> bool:
-    """Whether two single robots have the same fields, to float32 rounding (1e-6 relative).
-
-    A robot that went through a float32 session is still the robot it was.
-    """
+    """Whether two single robots have the same fields, to float32 rounding (1e-6 relative)."""
     fa, fb = _floats(a), _floats(b)
     return all(math.isclose(fa[n], fb[n], rel_tol=1e-6, abs_tol=1e-9) for n in ROBOT_FIELDS)
 
@@ -225,10 +175,7 @@ def robot_name(robot: Robot) -> str | None:
 
 
 def describe_robot(robot: Robot) -> str:
-    """One line: the preset's name (if any), the fields that set the wheel budget, its limits.
-
-    The acceleration limits are named where the robot gives them (above 0).
-    """
+    """One line: the preset's name (if any), the fields that set the wheel budget, its limits."""
     f = _floats(robot)
     name = robot_name(robot) or "custom"
     limits = "".join(
@@ -291,8 +238,7 @@ def robot_from_values(values: Any, where: str) -> Robot:
             )
         if key == "com_offset":
             continue  # either sign; validate_robot keeps it inside the body below
-        # 0: no integral action, no acceleration limit.
-        zero = key in ("integral_gain", "accel_max", "angular_accel_max")
+        zero = key in NON_NEGATIVE_ROBOT_FIELDS  # 0: none (no integral action, no limit)
         low = ">= 0" if zero else "> 0"
         if not (float(value) >= 0 if zero else float(value) > 0):
             raise ValueError(
@@ -381,10 +327,9 @@ def read_robot(source: Any) -> LoadedRobot:
     except (OSError, UnicodeDecodeError) as err:
         raise ValueError(f"{where} cannot be read: {' '.join(str(err).split())}") from None
     if path.suffix.lower() == ".json":
-        identified = _identified_block(content)
-        robot = _robot_from_json(content if identified is None else identified, where)
+        robot, identified = _robot_from_json(content, where)
         _warn_unit_slips(robot, where, ros=False)
-        if identified is not None:
+        if identified:
             note = (
                 f"{text}: the identified robot (its half-track and wheel-loop gain); its "
                 "wheel scales, latency and tracker noise act in simulate, evaluate and robustness "
@@ -400,12 +345,10 @@ def read_robot(source: Any) -> LoadedRobot:
 
 
 def load_robot(source: Any) -> Robot:
-    """Return the robot of a preset name or a ``.json`` / ``.yaml`` file, checked.
+    """Return the robot of a preset name (``ROBOTS``) or a ``.json`` / ``.yaml`` file, checked.
 
-    ``"paper"``, ``"turtlebot3-burger"``, ``"pioneer-3dx"`` (``ROBOTS``); a
-    JSON object of ``Robot`` fields in cm, kg, s (any subset: the rest keep
-    the paper robot's values); or a ROS ``diff_drive_controller`` YAML
-    (``read_robot`` also returns which of its fields were used).
+    A JSON file gives ``Robot`` fields in cm, kg, s (any subset); a YAML file
+    is a ROS ``diff_drive_controller``'s (``read_robot`` also says what was used).
 
     Raises:
         ValueError: one line naming the file, the key, its value and what is allowed.
@@ -413,27 +356,20 @@ def load_robot(source: Any) -> Robot:
     return read_robot(source).robot
 
 
-def _identified_block(content: str) -> str | None:
-    """The ``robot`` block of an ``identify`` output (``identified.json``), else ``None``."""
-    try:
-        values = json.loads(content)
-    except (ValueError, RecursionError):
-        return None
-    if isinstance(values, dict) and "wheel_scale" in values and "robot" in values:
-        return json.dumps(values["robot"])
-    return None
-
-
-def _robot_from_json(content: str, where: str) -> Robot:
+def _robot_from_json(content: str, where: str) -> tuple[Robot, bool]:
+    """The robot of a JSON file, and whether it is the ``robot`` block of an ``identify`` output."""
     from wmr_jax._src.io import json_object_once
 
     try:
         values = json.loads(content, object_pairs_hook=json_object_once)
     except (ValueError, RecursionError) as err:
         raise ValueError(f"{where} cannot be read: {' '.join(str(err).split())}") from None
+    identified = isinstance(values, dict) and "wheel_scale" in values and "robot" in values
+    if identified:
+        values = values["robot"]
     if not isinstance(values, dict):
         raise ValueError(
             f"{where} is not allowed; allowed: a JSON object of Robot fields in cm, kg, s "
             f"(keys among {', '.join(ROBOT_FIELDS)})"
         )
-    return robot_from_values(values, where)
+    return robot_from_values(values, where), identified

@@ -90,8 +90,7 @@ def _positive(
 ) -> float | None:
     """The finite positive number of ``key`` (in the file's unit), ``None`` if absent.
 
-    A ``limit`` (a velocity or acceleration bound) may also be ``.nan``, which
-    ros2_controllers reads as "no limit": ``None`` too. A NaN size is refused.
+    A ``limit`` may also be ``.nan``, which ros2_controllers reads as "no limit": ``None``.
     """
     if key not in params:
         return None
@@ -129,7 +128,6 @@ def _axis_limit(params: dict, axis: str, kind: str, unit: str, where: str, used:
 def _multiplier(params: dict[str, Any], keys: tuple[str, ...], where: str) -> tuple[float, list]:
     """The mean of the calibration multipliers given among ``keys`` (1 if none), and their keys."""
     given = [(k, _positive(params, k, "a factor", where)) for k in keys if k in params]
-    given = [(k, v) for k, v in given if v is not None]
     if not given:
         return 1.0, []
     return sum(v for _, v in given) / len(given), [k for k, _ in given]
@@ -193,11 +191,7 @@ def robot_from_ros_yaml(content: str, where: str) -> tuple[Robot, str, dict[str,
     radius = _positive(params, "wheel_radius", "m", where)
     if radius is not None:
         # ROS 2 scales each wheel; this model has one radius: their mean.
-        keys_r = (
-            "wheel_radius_multiplier",
-            "left_wheel_radius_multiplier",
-            "right_wheel_radius_multiplier",
-        )
+        keys_r = tuple(f"{side}wheel_radius_multiplier" for side in ("", "left_", "right_"))
         factor, keys = _multiplier(params, keys_r, where)
         used += ["wheel_radius", *keys]
         values["wheel_radius"] = _centi(radius * factor)  # m -> cm
@@ -245,11 +239,8 @@ def robot_from_ros_yaml(content: str, where: str) -> tuple[Robot, str, dict[str,
     ignored = [k for k in params if k not in used]
     robot = robot_from_values(values, where)
     # No acceleration limit given is none (the paper robot's 0), not a value kept.
-    kept = [
-        name
-        for name in ROBOT_FIELDS
-        if name not in values and name not in ("accel_max", "angular_accel_max")
-    ]
+    limits = ("accel_max", "angular_accel_max")
+    kept = [name for name in ROBOT_FIELDS if name not in values and name not in limits]
     note = (
         f"robot from {where}, diff_drive_controller parameters at "
         f"'{'.'.join(path) or '(top level)'}': used {', '.join(used) or 'nothing'} -> "

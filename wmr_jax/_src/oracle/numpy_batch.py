@@ -13,8 +13,6 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["numpy_final_poses"]
-
 
 def numpy_final_poses(
     refs: Any,
@@ -43,8 +41,7 @@ def numpy_final_poses(
     from wmr_jax._src.checks import MAX_STEPS, as_poses, check_dt, check_int, require_unbatched
     from wmr_jax._src.model.params import Gains, validate_gains
 
-    # The same checks as final_poses, in the refs' own precision; the values
-    # used are the caller's, not the checked copies in JAX's dtype.
+    # final_poses' checks in the refs' own precision; the caller's values are used.
     wide = np.dtype(getattr(refs, "dtype", np.float64)) != np.float32  # lists are float64
     with jax.enable_x64(bool(wide)):
         as_poses("refs", refs, batch=True)

@@ -28,14 +28,6 @@ from wmr_jax._src.model.params import Gains, Robot, check_sampling, validate_gai
 from wmr_jax._src.model.velocity_loop import check_stability
 from wmr_jax._src.sim.sensing.estimators import OBSERVER_R, EKFParams, resolve_estimator
 
-__all__ = [
-    "reference_control",
-    "reference_diagnostics",
-    "reference_disturbed_rollout",
-    "reference_rollout",
-]
-
-
 # π as a sum of two floats: shifting an angle by PI_HI and then PI_LO gives the
 # correctly rounded a ∓ π, so that e.g. fold(−float(π)) is the tiny positive
 # number it is in exact arithmetic rather than 0. Sgn(sin θ̄_e) depends on it.
@@ -164,8 +156,8 @@ def reference_control(pose: Any, ref: Any, gains: Gains) -> tuple[float, float]:
 def _limited(command: float, last: float, accel: float, dt: float) -> float:
     """One axis of the speed limiter (docs/model.md §4.2.2); ``accel`` 0: none.
 
-    The change since ``last`` is clamped to ``±accel dt`` and added to it, in
-    the order ros2_controllers' ``SpeedLimiter`` computes it.
+    The change since ``last``, clamped to ``±accel dt``, is added to it as
+    ros2_controllers' ``SpeedLimiter`` computes it.
     """
     if accel <= 0:
         return command
@@ -361,7 +353,7 @@ class _Observer:
     """The observer in plain floats: predict on the exact arc, blend toward the measurement."""
 
     def __init__(self, params: Any, measured: tuple, half_track: float):
-        del half_track
+        del half_track  # the filter's signature
         self.position, self.heading = params.position, params.heading
         self.pose = measured
 

@@ -12,8 +12,6 @@ from wmr_jax._src.checks import Parameters, require
 from wmr_jax._src.model.controllers import polar
 from wmr_jax._src.model.dynamics import sinc
 
-__all__ = ["AICARDI", "AicardiGains", "aicardi_control", "validate_aicardi_gains"]
-
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)

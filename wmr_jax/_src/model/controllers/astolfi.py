@@ -12,8 +12,6 @@ import numpy as np
 from wmr_jax._src.checks import Parameters, require
 from wmr_jax._src.model.controllers import polar
 
-__all__ = ["ASTOLFI", "AstolfiGains", "astolfi_control", "validate_astolfi_gains"]
-
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)

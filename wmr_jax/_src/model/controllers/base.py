@@ -1,8 +1,6 @@
-"""Controllers as values: a pure command law plus the type of its parameter pytree.
+"""Controllers as values: a pure command law, its parameter type and a registry by name.
 
-A ``Controller`` bundles ``command(pose, ref, params, *, temperature, frame)``
-→ ``(v cm/s, ω rad/s)`` with what a rollout needs around it; the rest of the
-package asks it, never which one it is.
+The rest of the package asks a ``Controller``, never which one it is.
 """
 
 from __future__ import annotations
@@ -26,15 +24,6 @@ from wmr_jax._src.checks import (
     float_dtype,
     is_traced,
 )
-
-__all__ = [
-    "Controller",
-    "check_law_inputs",
-    "controller_names",
-    "get_controller",
-    "register_controller",
-    "registered_names",
-]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,7 +54,7 @@ class Controller:
     check_sampling: Callable[[Any, Any], None] | None = None
 
     def __post_init__(self) -> None:
-        # Checked where it is built: a controller is usable without registering.
+        # Checked here: a controller is usable without registering.
         if not isinstance(self.name, str) or not self.name.strip():
             raise ValueError(
                 f"controller.name = {self.name!r} is not allowed; allowed: a non-empty str"
@@ -79,7 +68,6 @@ class Controller:
                     f"controller {self.name!r}: controller.{field} = {described(value):.60} is not "
                     f"allowed; allowed: {allowed} {_CALLS[field][2]}"
                 )
-            # Else it would fail inside the traced scan, far from its cause.
             _check_signature(self.name, field, value)
         if not isinstance(self.params_type, type):
             raise ValueError(
@@ -126,7 +114,7 @@ _REQUIRED = ("command", "validate")  # the rest may be None
 
 
 def _check_signature(name: Any, field: str, function: Any) -> None:
-    """Refuse a function of a ``Controller`` that cannot be called as the package calls it.
+    """Refuse a ``Controller`` function the package cannot call (it would fail inside a scan).
 
     A signature Python cannot read (some builtins) passes.
     """
@@ -149,11 +137,10 @@ def _check_signature(name: Any, field: str, function: Any) -> None:
 
 
 def check_command_output(controller: Controller, params: Any) -> None:
-    """Refuse a command law that does not return ``(v, ω)`` as the loops use them.
+    """Refuse a command law that does not return two real scalars ``(v, ω)`` for one pose.
 
-    The law is traced abstractly (``jax.eval_shape``) at one pose ``(3,)``
-    and must return two real scalars; otherwise it would fail deep inside the
-    scan. Kept per parameter structure and dtype; the package's laws pass.
+    Traced abstractly (``jax.eval_shape``), once per parameter structure and
+    dtype; the package's own laws are trusted.
     """
     if getattr(controller.command, "__module__", "").startswith("wmr_jax."):
         return
@@ -187,8 +174,6 @@ def _check_output_once(controller: Controller, structure: Any, dtype: str) -> No
 
 
 _REGISTRY: dict[str, Controller] = {}
-
-
 _NAME = re.compile(r"[a-z0-9][a-z0-9_-]*")  # a CLI word, and safe in a file name
 
 
@@ -270,13 +255,11 @@ def check_law_inputs(
     ``params_type`` that ``validate`` accepts.
     """
     pose, ref = as_pose_array("pose", pose), as_pose_array("ref", ref)
-    try:
-        np.broadcast_shapes(np.shape(pose)[:-1], np.shape(ref)[:-1])
-    except ValueError:
+    if not _broadcasts(np.shape(pose)[:-1], np.shape(ref)[:-1]):
         raise ValueError(
             f"pose has batch shape {np.shape(pose)[:-1]} and ref {np.shape(ref)[:-1]}; "
             "allowed: shapes that broadcast"
-        ) from None
+        )
     if not isinstance(params, params_type):
         raise ValueError(
             f"gains = {params!r} is not allowed; allowed: a wmr_jax.{params_type.__name__}"
@@ -285,18 +268,13 @@ def check_law_inputs(
         return pose, ref, params
     params = as_float_tree(validate(params))
     batch = np.broadcast_shapes(np.shape(pose)[:-1], np.shape(ref)[:-1])
-    gain_shapes = {np.shape(leaf) for leaf in jax.tree.leaves(params)}
-    try:
-        np.broadcast_shapes(batch, *gain_shapes)
-    except ValueError:
-        shown = next(
-            (shape for shape in gain_shapes if not _broadcasts(batch, shape)),
-            max(gain_shapes, key=len),
-        )
+    shapes = {np.shape(leaf) for leaf in jax.tree.leaves(params)}
+    if not _broadcasts(batch, *shapes):
+        shown = next((s for s in shapes if not _broadcasts(batch, s)), max(shapes, key=len))
         raise ValueError(
             f"gains have batch shape {shown} and the poses {batch}; "
             "allowed: shapes that broadcast (one gain per pose, or one for all)"
-        ) from None
+        )
     return pose, ref, params
 
 

@@ -1,13 +1,10 @@
 """What the two polar-coordinate baselines of Shim–Sung share (docs/model.md §3).
 
-Both steer from ``ρ = r_e``; ``α``, the bearing of the reference from the
-direction of travel (``φ_e``, or ``φ_e + π`` wrapped when driving backwards);
-and ``θ_A = α − θ_e`` (wrapped; Astolfi's and Corke's ``β`` is ``−θ_A``). A
-robot driving backwards is a robot turned by ``π`` whose reference is turned
-too: ``v`` changes sign, ``ω`` does not. choice: the direction is decided
-afresh at every sample, backwards when ``cos φ_e < 0``. The static
-``backward`` flag picks code, not values; commands and gradients are finite
-at ``ρ = 0``.
+Both steer from ``ρ = r_e``, ``α`` (the bearing of the reference from the
+direction of travel: ``φ_e``, or ``φ_e + π`` wrapped when driving backwards)
+and ``θ_A = α − θ_e`` (wrapped; Astolfi's and Corke's ``β`` is ``−θ_A``).
+Driving backwards, ``v`` changes sign and ``ω`` does not. choice: the
+direction is decided afresh at every sample, backwards when ``cos φ_e < 0``.
 """
 
 from __future__ import annotations
@@ -23,28 +20,15 @@ from wmr_jax._src.checks import check_bool, field_values
 from wmr_jax._src.model.controllers import shim_sung as law
 from wmr_jax._src.model.controllers.base import Controller, check_law_inputs, register_controller
 
-__all__ = [
-    "AT_GOAL",
-    "GOAL_EPS",
-    "entry_point",
-    "driving_error",
-    "gain_values",
-    "goal_floor",
-    "hold_at_goal",
-    "polar_command",
-    "polar_controller",
-]
-
 # choice (docs/model.md §3): within this distance of the reference, cm, the
 # polar laws only turn to the reference heading: their bearing α is undefined
 # at ρ = 0, and rounding noise near it.
 AT_GOAL = 1e-3
 
 # choice: far from the origin positions are coarser than AT_GOAL, so the floor
-# grows to this many machine epsilons of the largest coordinate (16 to 32
-# spacings, where a step of k ρ dt no longer rounds away). Nothing changes
-# below 524 cm in float32; the rollouts compute such runs in the reference's
-# frame (rollout.GOAL_FRAME_SPACING), the world-frame loops use this floor.
+# grows to this many machine epsilons of the largest coordinate, where a step
+# of k ρ dt no longer rounds away (the world-frame loops; the rollouts compute
+# such runs in the reference's frame).
 GOAL_EPS = 16
 
 
@@ -80,9 +64,8 @@ def driving_error(
 
 def gain_values(params: Any, cls: type) -> dict[str, np.ndarray | None]:
     """Check the fields of polar-law gains (finite numbers; ``backward`` a bool)."""
-    backward = getattr(params, "backward", None) if isinstance(params, cls) else None
-    if isinstance(params, cls) and not isinstance(backward, (bool, np.bool_)):
-        raise ValueError(f"gains.backward = {backward!r} is not allowed; allowed: True or False")
+    if isinstance(params, cls):
+        check_bool("gains.backward", params.backward)
     return field_values(params, cls, "gains", skip=("backward",))
 
 
@@ -133,13 +116,11 @@ def polar_command(
 def polar_controller(
     name: str, command: Callable, params_type: type, validate: Callable
 ) -> tuple[Controller, Callable]:
-    """Register the polar law ``command`` as ``name``; return it and its ``entry_point``."""
+    """Register the polar law ``command`` as ``name``; return it and its public form.
+
+    The public form checks poses and gains on the host and takes no ``temperature``.
+    """
     controller = Controller(name=name, command=command, params_type=params_type, validate=validate)
-    return register_controller(controller), entry_point(command, params_type, validate)
-
-
-def entry_point(law: Callable, params_type: type, validate: Callable) -> Callable:
-    """The public form of a polar law: poses and gains checked on the host, no ``temperature``."""
 
     def checked(pose: Any, ref: Any, gains: Any, *, temperature: Any = None) -> Any:
         if temperature is not None:
@@ -147,8 +128,8 @@ def entry_point(law: Callable, params_type: type, validate: Callable) -> Callabl
                 f"temperature = {temperature!r} is not allowed; allowed: None (this law has "
                 "no smooth relaxation)"
             )
-        return law(*check_law_inputs(pose, ref, gains, params_type, validate))
+        return command(*check_law_inputs(pose, ref, gains, params_type, validate))
 
-    checked.__name__ = checked.__qualname__ = law.__name__.lstrip("_")
-    checked.__module__, checked.__doc__ = law.__module__, law.__doc__
-    return checked
+    checked.__name__ = checked.__qualname__ = command.__name__.lstrip("_")
+    checked.__module__, checked.__doc__ = command.__module__, command.__doc__
+    return register_controller(controller), checked

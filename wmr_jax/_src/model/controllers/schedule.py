@@ -1,11 +1,10 @@
 """The Shim–Sung law with gain schedules: gains as functions of the error state (docs/model.md §3).
 
-The gains are tables over the distance ``r_e`` (knots dense near the goal),
-``k_turn`` the turn gain where ``d = 0``; then ``|ω| ≤ V_max / L`` and
-``|v| ≤ V_max − L |ω|``, so every wheel command is within ``±V_max`` by
-construction, and the speed uses whatever the turn leaves. The law is
-``shim_sung.commands`` itself with the gains of the state: constant tables
-that meet ``k_r + L k_θ ≤ V_max`` give the fixed-gain law exactly.
+The gains are tables over ``r_e`` (knots dense near the goal), ``k_turn`` the
+turn gain where ``d = 0``. ``shim_sung.commands`` runs with the gains of the
+state, then ``|ω| ≤ V_max / L`` and ``|v| ≤ V_max − L |ω|``: every wheel
+command is within ``±V_max`` by construction, and constant tables within that
+budget give the fixed-gain law exactly.
 """
 
 from __future__ import annotations
@@ -21,12 +20,12 @@ import numpy as np
 
 from wmr_jax._src.checks import (
     Parameters,
+    batch_sizes,
     check_int,
+    field_array,
     list_as_array,
-    real_array,
     require,
     require_one_batch_size,
-    require_representable,
 )
 from wmr_jax._src.model.controllers.base import Controller, register_controller
 from wmr_jax._src.model.controllers.shim_sung import (
@@ -37,16 +36,6 @@ from wmr_jax._src.model.controllers.shim_sung import (
     pose_region,
 )
 from wmr_jax._src.model.params import Gains, Robot, WheelSpeedWarning, sampled, validate_gains
-
-__all__ = [
-    "KNOTS",
-    "R_KNOT",
-    "SCHEDULE",
-    "ScheduleParams",
-    "knot_radii",
-    "schedule_commands",
-    "validate_schedule",
-]
 
 KNOTS = 10  # knots per table by default
 # Each knot is a term of the compiled law: many more no longer compile.
@@ -197,25 +186,14 @@ def validate_schedule(params: ScheduleParams) -> ScheduleParams:
     validate_gains(shape, prefix="params")
     for name, unit in (("v_max", "cm/s"), ("half_track", "cm")):
         _check_positive(f"params.{name}", getattr(params, name), f"a finite {name} > 0, {unit}")
-    # Every batched value, knot or field, must run the same N (or 1, shared).
-    values = {f"params.{t}[{k}]": v for t in TABLES for k, v in enumerate(getattr(params, t))}
-    for name in (*SHAPE_FIELDS, "v_max", "half_track"):
-        values[f"params.{name}"] = getattr(params, name)
-    require_one_batch_size({name: np.shape(v)[0] for name, v in values.items() if np.ndim(v) == 1})
+    require_one_batch_size(batch_sizes({"params": params}))  # knots and fields alike
     return params
 
 
 def _check_positive(name: str, value: Any, allowed: str) -> None:
-    """Check a concrete knot or limit: real, finite, > 0 and within the compute dtype."""
-    if isinstance(value, jax.core.Tracer):
-        return
-    if isinstance(value, (str, bytes)):  # NumPy would read "60" as 60.0
-        raise ValueError(f"{name} = {value!r} is not allowed; allowed: {allowed}")
-    arr = real_array(name, value, allowed)
-    if arr.ndim > 1:
-        raise ValueError(f"{name} has shape {arr.shape}; allowed: a scalar or one batch axis")
-    require(name, arr, np.isfinite(arr) & (arr > 0), allowed)
-    require_representable(name, arr)
+    if not isinstance(value, jax.core.Tracer):
+        arr = field_array(name, value, allowed)
+        require(name, arr, arr > 0, allowed)
 
 
 def _check_robot(params: ScheduleParams, robot: Robot) -> None:

@@ -1,15 +1,15 @@
 """The Shim–Sung asymptotic pose controller, one equation per function (docs/model.md §2–3).
 
-Every function but ``control`` and ``control_diagnostics`` is a pure,
-elementwise building block that checks nothing. The angles ``φ_e`` and
-``θ_e`` travel as their cosine and sine (``|φ_e| ≤ Φ_m ⇔ cos φ_e ≥ cos Φ_m``):
-no ``atan2`` in a rollout, and values and gradients stay finite at ``r_e = 0``.
-A positive ``temperature`` replaces each switch by a smooth one (sigmoid,
-``tanh``, soft minimum) that tends to the hard law (``None``) as it goes to 0.
+All but ``control`` and ``control_diagnostics`` are pure elementwise building
+blocks that check nothing. ``φ_e`` and ``θ_e`` travel as cosine and sine: no
+``atan2`` in a rollout, and values and gradients stay finite at ``r_e = 0``.
+A positive ``temperature`` replaces each switch by a smooth one that tends to
+the hard law (``None``) as it goes to 0.
 """
 
 from __future__ import annotations
 
+import functools
 from typing import Any, NamedTuple
 
 import jax
@@ -19,26 +19,6 @@ from wmr_jax._src.checks import check_temperature, is_traced
 from wmr_jax._src.model.controllers.base import Controller, check_law_inputs, register_controller
 from wmr_jax._src.model.dynamics import sin_cos, sin_small
 from wmr_jax._src.model.params import Gains, Robot, feasible, sampled, validate_gains
-
-__all__ = [
-    "SHIM_SUNG",
-    "Diagnostics",
-    "PolarError",
-    "blend",
-    "commands",
-    "control",
-    "control_diagnostics",
-    "direction_flag",
-    "error_angles",
-    "fold",
-    "lyapunov",
-    "polar_error",
-    "region_label",
-    "saturated_distance",
-    "sgn",
-    "wheel_speeds",
-    "wrap_angle",
-]
 
 
 class PolarError(NamedTuple):
@@ -105,16 +85,14 @@ def polar_error(
         x, y, cos_c, sin_c = frame
     cos_r, sin_r = sin_cos(ref[..., 2])
     dx, dy = ref[..., 0] - x, ref[..., 1] - y
-    # e_x + i e_y = (cos θ_c − i sin θ_c)(Δx + i Δy): as one complex product
-    # XLA keeps the rotation inside the law's loop.
+    # e_x + i e_y = (cos θ_c − i sin θ_c)(Δx + i Δy), one complex product.
     dtype = jnp.result_type(cos_c, sin_c, dx, dy, float)
     e = jax.lax.complex(jnp.asarray(cos_c, dtype), -jnp.asarray(sin_c, dtype)) * jax.lax.complex(
         jnp.asarray(dx, dtype), jnp.asarray(dy, dtype)
     )
     e_x, e_y = e.real, e.imag
-    # Double-where keeps value and gradient finite at r_e = 0. Where r_e²
-    # underflows (r_e ≈ 1e-19 cm in float32) the robot is on the reference
-    # (φ_e = 0), in Region 0 either way.
+    # Double-where keeps value and gradient finite at r_e = 0; where r_e²
+    # underflows the robot is on the reference (φ_e = 0), in Region 0 either way.
     r_sq = e_x * e_x + e_y * e_y
     positive = r_sq > 0
     safe_r = jnp.sqrt(jnp.where(positive, r_sq, 1.0))
@@ -296,7 +274,7 @@ def control(
 
 
 def _law(pose, ref, gains, *, temperature=None, frame=None):
-    """The law as the loops call it (``Controller.command``): pure, inputs checked before."""
+    """The law as the loops call it (``Controller.command``)."""
     return commands(polar_error(pose, ref, frame=frame), gains, temperature=temperature)
 
 
@@ -332,15 +310,6 @@ def pose_region(pose: jax.Array, ref: jax.Array, gains: Any, *, frame=None) -> j
     return region_label(polar_error(pose, ref, frame=frame), gains)
 
 
-def _warn_infeasible(gains: Gains, robot: Robot) -> None:
-    # Legal, but a wheel may be asked for more than V_max (docs/model.md §3).
-    feasible(gains, robot, warn=True, stacklevel=5)  # both checked by the rollout
-
-
-def _warn_unsampled(gains: Gains, dt) -> None:
-    sampled(gains, dt, stacklevel=5)
-
-
 SHIM_SUNG = register_controller(
     Controller(
         name="shim-sung",
@@ -349,8 +318,9 @@ SHIM_SUNG = register_controller(
         validate=validate_gains,
         region=pose_region,
         smooth=True,
-        check_robot=_warn_infeasible,
-        check_sampling=_warn_unsampled,
+        # The rollout checked their arguments; the warnings name its caller.
+        check_robot=functools.partial(feasible, warn=True, stacklevel=4),
+        check_sampling=functools.partial(sampled, stacklevel=4),
     )
 )
 """The Shim–Sung asymptotic controller of the paper, the default everywhere."""
