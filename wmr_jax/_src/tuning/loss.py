@@ -4,13 +4,10 @@
 wheel-saturation penalty for the non-ideal loop (``docs/model.md §4, §6``).
 
 Per-pose gradients are heavy-tailed: a run that grazes a switching surface,
-or that sits parked on its reference (where the bearing ``φ_e`` is
-undefined), can have a sensitivity many orders of magnitude above the
-median, growing geometrically with the remaining horizon, and in float32
-overflowing. ``robust_gradient`` therefore caps each pose's gradient at a
-multiple of the batch median (``pose_clip``) and drops non-finite ones
-before averaging; the trainer feeds it to ``optax.chain(clip_by_global_norm,
-adam)``.
+or sits parked on its reference (where the bearing ``φ_e`` is undefined),
+can be orders of magnitude above the median, even overflow in float32.
+``robust_gradient`` therefore caps each pose's gradient at a multiple of the
+batch median (``pose_clip``) and drops non-finite ones before averaging.
 """
 
 from __future__ import annotations
@@ -98,13 +95,11 @@ class LossSpec:
         )
 
     def for_robot(self, robot: Robot, dt: Any) -> LossSpec:
-        """This spec with the speed limiter of ``robot``'s acceleration limits on where it has them.
+        """This spec with the speed limiter on where ``robot`` has acceleration limits.
 
         As ``loops.for_robot`` decides for the rollouts (docs/model.md
-        §4.2.2): on for a robot that gives ``accel_max`` or
-        ``angular_accel_max`` above 0 (ideal loop), so that the loss tunes the
-        loop the evaluation judges; a robot without limits keeps the loss it
-        had, bit for bit. Call it on the concrete robot, before tracing.
+        §4.2.2), so that the loss tunes the loop the evaluation judges. Call
+        it on the concrete robot, before tracing.
         """
         fitted = loops.for_robot(self.options(), robot, dt)
         return dataclasses.replace(self, accel_limit=fitted.accel_limit)
@@ -128,13 +123,13 @@ def make_spec(
     *,
     horizon: Any,
     dt: Any,
-    velocity: Any,
-    substeps: Any,
-    wheel_limit: Any,
-    tol_r: Any,
-    tol_theta: Any,
-    weights: Any,
-    remat: bool,
+    velocity: Any = "ideal",
+    substeps: Any = loops.DEFAULT_SUBSTEPS,
+    wheel_limit: Any = "clip",
+    tol_r: Any = DEFAULT_TOL_R,
+    tol_theta: Any = DEFAULT_TOL_THETA,
+    weights: Any = LossWeights(),  # noqa: B008 (frozen, so safe to share)
+    remat: bool = True,
     controller: Any = SHIM_SUNG,
 ) -> LossSpec:
     """Check the loss options (before tracing) and return them as a static spec.
@@ -204,13 +199,10 @@ def arrival_terms(dist: jax.Array, head: jax.Array, softness: Any) -> tuple[jax.
 def recorded_arrival(poses: jax.Array, ref: jax.Array, dt: jax.Array) -> jax.Array:
     """Relaxed arrival time plus log-error shaping of one recorded run ``poses (steps, 3)``, s.
 
-    The per-run term of ``tuning_loss`` in the ideal loop (the same
-    ``arrival_terms``, tolerances and default weights), for the robust loss,
-    whose ``disturbed_run`` records the trajectory. It is not merged with
-    ``_pose_loss_terms``: that one streams the sum through the rollout's scan
-    (``S ← a (S + 1)`` forwards), this one takes the reversed cumulative
-    product of the recorded samples; the two agree to rounding, not bit for
-    bit, and each tuner's results are kept as they are.
+    ``tuning_loss``'s per-run term (ideal loop, default weights) for the
+    robust loss, whose ``disturbed_run`` records the trajectory. It agrees
+    with ``_pose_loss_terms``' streamed sum to rounding, not bit for bit, so
+    the two stay apart and each tuner's results stay as they are.
     """
     weights = LossWeights()
     err = law.polar_error(poses, ref)
@@ -226,14 +218,8 @@ def recorded_arrival(poses: jax.Array, ref: jax.Array, dt: jax.Array) -> jax.Arr
 def _pose_loss_terms(ref, gains, init, robot, dt, spec: LossSpec, temperature):
     """Return ``(relaxed arrival s, integrated log-error s, saturation s)`` of one run.
 
-    ``ref``, ``init``: ``(3,)``; ``gains``, ``robot``: scalar leaves;
-    ``temperature``: traced scalar, or ``None`` for the hard law.
-
-    The terms stream through the rollout's own scan (``loops.scan_closed_loop``
-    with ``fold=``), so the loss runs in the fast layout of ``final_poses``
-    and stores no trajectory; unless ``spec.remat`` is off, the loop
-    recomputes each step in the backward pass instead of storing its
-    intermediates.
+    The terms stream through the rollout's own scan (``fold=``), so no
+    trajectory is stored; ``temperature`` ``None`` is the hard law.
     """
     # The temperature is a traced value rather than a static option so that
     # annealing it does not recompile; Options is therefore built in the trace.
@@ -482,9 +468,7 @@ def tuning_loss(
         weights: the terms' weights and the relaxed test's width.
         remat: recompute each step of the rollout in the backward pass
             (``jax.checkpoint`` on the scan body) instead of storing its
-            intermediates: some fifty arrays of ``N × steps`` otherwise. On
-            XLA:CPU it is both smaller and faster; ``False`` trades memory
-            for the recomputation where that pays (no effect on the value).
+            intermediates (no effect on the value).
 
     Returns:
         Scalar loss, s.

@@ -400,10 +400,9 @@ class RobustLoss:
 def robust_problem(config: RobustConfig, robot: Robot) -> trainer.TrainingProblem:
     """The ``TrainingProblem`` of a checked ``config`` on a checked ``robot``.
 
-    The iteration's draw is ``(key of the disturbances, refs, nonideal_refs)``
-    from ``config.seed``; the validation score is ``robust_score`` on poses
-    and noise of their own streams; a row is the loop's parameters and its
-    estimator's, flattened.
+    A draw is ``(key of the disturbances, refs, nonideal_refs)``; the
+    validation score is ``robust_score``; a row is the loop's parameters and
+    its estimator's, flattened.
     """
     joint = joint_problem(config)
     # The horizon of the studies that judge the loop: on a slower robot the
@@ -462,11 +461,9 @@ def robust_problem(config: RobustConfig, robot: Robot) -> trainer.TrainingProble
 def black_box(method, key, refs, budget_s, robot, dt, joint, noise=None, *, start=None, std=1.0):
     """Random search or CMA-ES on the logits for ``budget_s`` CPU seconds (``search.clock``).
 
-    8 candidates per generation (random search: logistic draws, uniform in the
-    cube), each scored with ``robust_score`` on ``refs`` under the same draws,
-    a generation in one batch (``robust_population_scores``), through
-    ``search_loop``; the start's score counts against the budget too. CMA-ES
-    starts from ``start`` (logits; default the problem's start), step ``std``.
+    8 candidates per generation (random search: uniform in the cube), scored
+    by ``robust_score`` on ``refs`` under the same draws; the start (default
+    the problem's; CMA-ES's mean, step ``std``) is scored first, in the budget.
 
     Returns:
         ``(ClosedLoop, candidates scored, CPU s, wall s)``.
@@ -521,24 +518,17 @@ def tune_robust(
         state: continue from this ``TrainState`` (from ``progress_fn`` of a run
             of the same ``config`` and ``robot``).
         progress_fn: called with the ``TrainState`` after each iteration.
-        on_tuned: called with ``(ClosedLoop, losses)`` as soon as the loop
-            is tuned (the iterations, and the polish of the hybrid), before
-            the searches and the evaluation.
+        on_tuned: called with ``(ClosedLoop, losses)`` once the loop is
+            tuned, before the searches and the evaluation.
 
     Returns:
         A ``TuneResult`` of problem ``"robust"``: ``loop`` the tuned
-        ``ClosedLoop``, ``gains`` its params, ``tune_cpu_s`` the time of the
-        iterations and the polish, ``searches``, ``rows`` (the paper's
-        feasible gains with raw feedback, the tuned loop and the searches' loops
-        under the standard conditions), ``note`` if it scores no better than the
-        paper's gains.
+        ``ClosedLoop``, ``gains`` its params, ``tune_cpu_s`` the CPU time of
+        the iterations and the polish, ``searches``, ``rows`` (the paper's
+        gains with raw feedback, the tuned and the searches' loops under the
+        standard conditions), ``note`` if it is no better than the paper's.
     """
-    if config is not None and not isinstance(config, RobustConfig):
-        raise ValueError(
-            f"config = {config!r:.80} is not allowed; allowed: a wmr_jax.tuning.RobustConfig "
-            "or None"
-        )
-    config = (RobustConfig() if config is None else config).validate()
+    config = trainer.checked_config(config, RobustConfig)
     check_callable("progress_fn", progress_fn)
     check_callable("on_tuned", on_tuned)
     robot = validate_one_robot(robot, "tuning")

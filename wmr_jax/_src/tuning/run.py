@@ -234,7 +234,7 @@ def tune(
     check_bool("resume", resume)
     check_bool("progress", progress)
     check_callable("progress_fn", progress_fn)
-    config = training.checked_config(config)
+    config = trainer.checked_config(config, training.TuneConfig)
     io.remove_stale_temporaries(out)
     robot = Robot() if robot is None else robot
     identity = training.run_identity(config, robot)
