@@ -14,7 +14,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-import warnings
 from typing import Any, ClassVar
 
 import jax
@@ -43,7 +42,7 @@ from wmr_jax._src.sim.sensing.loop import ClosedLoop
 from wmr_jax._src.studies import conditions, robustness
 from wmr_jax._src.tuning import centred, trainer
 from wmr_jax._src.tuning.estimation import JointProblem, concrete_loop, estimator_box
-from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
+from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses, quiet_scoring
 from wmr_jax._src.tuning.loss import capped_mean, recorded_arrival
 from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
 from wmr_jax._src.tuning.problems import FIXED, schedule_problem
@@ -430,9 +429,7 @@ def robust_problem(config: RobustConfig, robot: Robot) -> trainer.TrainingProble
         return ClosedLoop(joint.problem.controller, params, estimate)
 
     def score(closed: ClosedLoop) -> float:
-        with warnings.catch_warnings():
-            # An iterate is scored, not reported: its score says what its warnings would.
-            warnings.simplefilter("ignore")
+        with quiet_scoring():
             return robust_score(
                 closed, validation_refs, validation_key, robot=robot, noise=config.noise
             )
@@ -477,9 +474,7 @@ def black_box(method, key, refs, budget_s, robot, dt, joint, noise=None, *, star
         return concrete_loop(joint.from_logits(z, robot))
 
     def scores(zs: Any) -> np.ndarray:
-        with warnings.catch_warnings():
-            # Candidates far outside the useful set warn; their score says it.
-            warnings.simplefilter("ignore")
+        with quiet_scoring():
             loops = [closed(z) for z in zs]
             return robust_population_scores(loops, refs, score_key, dt=dt, robot=robot, noise=noise)
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-import warnings
 from typing import Any, NamedTuple
 
 import jax
@@ -30,7 +29,7 @@ from wmr_jax._src.model.params import Gains, Robot, validate_one_robot
 from wmr_jax._src.sim import loops
 from wmr_jax._src.sim import rollout as simulation
 from wmr_jax._src.sim.poses import HORIZON_S
-from wmr_jax._src.tuning.evaluation import check_run, hard_runs, run_options
+from wmr_jax._src.tuning.evaluation import check_run, hard_runs, quiet_scoring, run_options
 from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS, unit_from_gains
 from wmr_jax._src.tuning.problems import FIXED, Problem, get_problem
 
@@ -222,10 +221,7 @@ def population_scores(problem: Problem, u: jax.Array, tiled: jax.Array, n: int, 
     # Leaves the same for every candidate (the robot's V_max, L) are repeated too.
     size = u.shape[0]
     population = jax.tree.map(lambda leaf: jnp.repeat(jnp.broadcast_to(leaf, (size,)), n), params)
-    with warnings.catch_warnings():
-        # Candidates are scored, not reported: a candidate's warnings (wheel
-        # saturation, sampling margins) are the search's business, not the user's.
-        warnings.simplefilter("ignore")
+    with quiet_scoring():
         _, times, steps = hard_runs(tiled, population, **run, controller=problem.controller)
     times = times.reshape(u.shape[0], n)
     return jnp.mean(jnp.minimum(times, FAILURE_FACTOR * steps * run["dt"]), axis=1)

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -40,6 +39,7 @@ from wmr_jax._src.tuning.evaluation import (
     evaluate,
     hard_runs,
     held_out_poses,
+    quiet_scoring,
 )
 from wmr_jax._src.tuning.loss import LossSpec, LossWeights, make_spec, robust_value_and_grad
 from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
@@ -302,10 +302,7 @@ def validation_poses(config: TuneConfig) -> jax.Array:
 
 def validation_score(config: TuneConfig, robot: Robot, params: Any, refs: Any) -> float:
     """Hard-law score of ``params`` on ``refs``: mean arrival, failures at twice the horizon, s."""
-    with warnings.catch_warnings():
-        # An iterate is scored, not reported: its warnings (wheel saturation,
-        # sampling margins) are the tuner's business; its score says it.
-        warnings.simplefilter("ignore")
+    with quiet_scoring():
         _, times, steps = hard_runs(
             refs, params, robot=robot, **config.hard_run, controller=config.space.controller
         )
