@@ -13,6 +13,7 @@ batch median (``pose_clip``) and drops non-finite ones before averaging.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
 from collections.abc import Callable
 from typing import Any, NamedTuple
@@ -82,17 +83,10 @@ class LossSpec:
     accel_limit: bool = False
 
     def options(self, temperature: Any = None) -> loops.Options:
-        """The rollout options of this loss with its law at ``temperature``."""
-        return loops.Options(
-            steps=self.steps,
-            velocity=self.velocity,
-            controller=self.controller,
-            temperature=temperature,
-            substeps=self.substeps,
-            wheel_limit=self.wheel_limit,
-            remat=self.remat,
-            accel_limit=self.accel_limit,
-        )
+        """The rollout options of this loss (its fields but the loss's own) at ``temperature``."""
+        loss_only = ("tol_r", "tol_theta", "weights")
+        fields = [f.name for f in dataclasses.fields(self) if f.name not in loss_only]
+        return loops.Options(**{f: getattr(self, f) for f in fields}, temperature=temperature)
 
     def for_robot(self, robot: Robot, dt: Any) -> LossSpec:
         """This spec with the speed limiter on where ``robot`` has acceleration limits.
@@ -119,38 +113,32 @@ class LossTerms(NamedTuple):
     saturation: jax.Array
 
 
-def make_spec(
-    *,
-    horizon: Any,
-    dt: Any,
-    velocity: Any = "ideal",
-    substeps: Any = loops.DEFAULT_SUBSTEPS,
-    wheel_limit: Any = "clip",
-    tol_r: Any = DEFAULT_TOL_R,
-    tol_theta: Any = DEFAULT_TOL_THETA,
-    weights: Any = LossWeights(),  # noqa: B008 (frozen, so safe to share)
-    remat: bool = True,
-    controller: Any = SHIM_SUNG,
-) -> LossSpec:
-    """Check the loss options (before tracing) and return them as a static spec.
+def make_spec(*, controller: Any = SHIM_SUNG, **given: Any) -> LossSpec:
+    """Check the static options of ``tuning_loss`` (before tracing); return them as a spec.
+
+    ``given``: ``horizon``, ``dt``, ``velocity``, ``substeps``, ``wheel_limit``,
+    ``tol_r``, ``tol_theta``, ``weights``, ``remat``; the others keep
+    ``tuning_loss``'s defaults.
 
     Raises:
         ValueError: naming the option, its value and what is allowed.
     """
+    o = {**_OPTION_DEFAULTS, **given}
     options = simulation.make_options(
-        steps=horizon_steps(dt, horizon),
-        velocity=velocity,
-        substeps=substeps,
-        wheel_limit=wheel_limit,
+        steps=horizon_steps(o["dt"], o["horizon"]),
+        velocity=o["velocity"],
+        substeps=o["substeps"],
+        wheel_limit=o["wheel_limit"],
         controller=controller,
     )
+    weights = o["weights"]
     if not isinstance(weights, LossWeights):
         raise ValueError(f"weights = {weights!r} is not allowed; allowed: a LossWeights")
     for name, closed in (("arrival_softness", False), ("shaping", True), ("saturation", True)):
         value = check_number(f"weights.{name}", getattr(weights, name), closed=closed)
         require_representable(f"weights.{name}", np.asarray(value))
-    tol_r = check_number("tol_r", tol_r, unit="cm")
-    tol_theta = check_number("tol_theta", tol_theta, high=math.pi / 2, unit="rad")
+    tol_r = check_number("tol_r", o["tol_r"], unit="cm")
+    tol_theta = check_number("tol_theta", o["tol_theta"], high=math.pi / 2, unit="rad")
     # The loss divides by tol_r² and sin²(tol_θ): both must stay finite.
     largest = float(np.finfo(np.dtype(float_dtype())).max)
     smallest = largest**-0.5
@@ -171,7 +159,7 @@ def make_spec(
         tol_r=tol_r,
         tol_theta=tol_theta,
         weights=weights,
-        remat=check_bool("remat", remat),
+        remat=check_bool("remat", o["remat"]),
         controller=options.controller,
     )
 
@@ -358,21 +346,6 @@ _robust_jit = loops.jit_top_level(robust_value_and_grad, static_argnames=("spec"
 
 # ---------------------------------------------------------------- public entry points
 
-_OPTION_DEFAULTS = {
-    "init": (0.0, 0.0, 0.0),
-    "robot": None,
-    "dt": simulation.DEFAULT_DT,
-    "horizon": HORIZON_S,
-    "velocity": "ideal",
-    "substeps": loops.DEFAULT_SUBSTEPS,
-    "wheel_limit": "clip",
-    "tol_r": DEFAULT_TOL_R,
-    "tol_theta": DEFAULT_TOL_THETA,
-    "weights": LossWeights(),
-    "remat": True,
-}
-_STATIC_OPTIONS = tuple(name for name in _OPTION_DEFAULTS if name not in ("init", "robot"))
-
 
 def _prepared(gains: Any, refs: Any, temperature: Any, options: dict[str, Any]) -> tuple:
     """Check every argument (before tracing); return ``(spec, temperature, prepared args)``.
@@ -479,6 +452,15 @@ def tuning_loss(
     options = {name: value for name, value in locals().items() if name in _OPTION_DEFAULTS}
     spec, temperature, args = _prepared(gains, refs, temperature, options)
     return _batch_loss_jit(*args, spec=spec, temperature=temperature)
+
+
+# The options of ``tuning_loss`` (and of ``loss_terms``, ``robust_gradient``) with their defaults.
+_OPTION_DEFAULTS = {
+    name: parameter.default
+    for name, parameter in inspect.signature(tuning_loss).parameters.items()
+    if parameter.kind is parameter.KEYWORD_ONLY and name != "temperature"
+}
+_STATIC_OPTIONS = tuple(name for name in _OPTION_DEFAULTS if name not in ("init", "robot"))
 
 
 def loss_terms(gains: Gains, refs: Any, *, temperature: float | None, **options: Any) -> LossTerms:
