@@ -85,9 +85,8 @@ def gradient_cost(
 ) -> GradientCost:
     """Time the loss and its gradient on ``poses`` × ``steps`` and read their peak memory.
 
-    Peak memory is read from XLA's compile-time ``memory_analysis``:
-    arguments + outputs + temporaries, what the compiled program allocates
-    (the process's resident set adds the runtime and compiled code on top).
+    Peak memory: what the compiled program allocates, from XLA's compile-time
+    ``memory_analysis`` (``_peak_bytes``).
 
     Args:
         poses: batch size.

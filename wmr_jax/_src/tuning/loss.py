@@ -317,10 +317,8 @@ def robust_value_and_grad(
 def capped_mean(values, grads, pose_clip=1.0):
     """Mean loss and capped gradient sum of per-run ``values (N,)`` and ``grads (N, dim)``.
 
-    A run grazing a switching surface of the law has a gradient orders of
-    magnitude above the rest: each run's gradient is capped at ``pose_clip``
-    times the batch median norm (``None``: no cap), and runs whose value or
-    gradient is not finite are dropped from both.
+    Each run's gradient is capped at ``pose_clip`` times the batch median
+    norm (``None``: no cap); runs whose value or gradient is not finite are dropped.
 
     Returns:
         ``(mean loss over the kept runs, Σ capped gradients (dim,), kept (N,),
