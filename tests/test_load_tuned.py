@@ -144,6 +144,13 @@ def test_a_fixed_gain_file_written_by_tune_must_be_whole(tmp_path):
     )
 
 
+def test_an_estimator_number_no_float_holds_is_refused_in_one_line(tmp_path):
+    path = tmp_path / "tuned_gains.json"
+    path.write_text('{"kr": 60, "estimator": {"kind": "ekf", "sigma_xy": 1' + "0" * 400 + "}}")
+    with pytest.raises(ValueError, match=r"estimator sigma_xy = 10+ is not allowed; allowed: a "):
+        tuning.load_tuned(path)
+
+
 def test_a_schedule_file_must_be_whole_and_integers_load_as_floats(tmp_path):
     schedule = tuning.tuned_json(tuning.ScheduleParams())
     del schedule["phi_m"]

@@ -12,6 +12,7 @@ from wmr_jax import tuning
 from wmr_jax._src.tuning import robust, robust_run, trainer
 from wmr_jax._src.tuning import search as search_module
 from wmr_jax._src.tuning.estimation import concrete_loop
+from wmr_jax._src.tuning.evaluation import poses_digest
 
 KEY = jax.random.key(0)
 REFS = np.array([[30.0, 10.0, 1.0], [-20.0, 15.0, -2.0]])
@@ -175,7 +176,7 @@ def test_robust_comparison_rows_report_cpu_wall_rates_and_what_each_minimises(
     assert "relaxed surrogate" in gradient["minimises"]
     assert "hard law" in search["minimises"] and "5 fixed search poses" in search["minimises"]
     # Every row judged on the same held-out poses: the 6 of the evaluation seed.
-    held = robust_run.poses_digest(tuning.held_out_poses(6, tuning.EVAL_SEED))
+    held = poses_digest(tuning.held_out_poses(6, tuning.EVAL_SEED))
     assert {r["held_out"] for r in rows} == {held}
     table = (tmp_path / "robust_compare.md").read_text()
     header = table.splitlines()[0]

@@ -226,7 +226,7 @@ def test_compare_runs_all_three_methods_on_a_schedule_of_its_size():
     assert gradient["cpu_s"] == gradient["budget_s"] > 0
     assert gradient["per_cpu_s"] == pytest.approx(config.iters / gradient["cpu_s"])
     held = tuning.held_out_poses(config.eval_poses, config.eval_seed)
-    from wmr_jax._src.tuning.robust_run import poses_digest
+    from wmr_jax._src.tuning.evaluation import poses_digest
 
     assert {r["held_out"] for r in rows} == {poses_digest(held)}
     assert {r["budget_s"] for r in rows} == {gradient["budget_s"]}

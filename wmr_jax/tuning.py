@@ -2,12 +2,12 @@
 
 ``train`` runs Adam on a relaxed arrival-time loss through the law's smooth
 relaxation and judges the result with the hard law against the paper's
-feasible gains and a random search of the same wall time; ``tune`` (the
-``wmr-jax tune`` command as a function) also writes the results and
-resumable checkpoints to a folder. ``TuneConfig.for_problem("schedule")``
-tunes the gain-scheduled law (``ScheduleParams``); ``load_tuned`` reads
-either kind of ``tuned_gains.json``; ``compare`` runs the gradient against
-CMA-ES and random search at equal wall time (docs/model.md §3, §6, §8).
+feasible gains and a random search of the same CPU time; ``tune`` (``wmr-jax
+tune`` as a function) also writes the results and resumable checkpoints.
+``TuneConfig.for_problem("schedule")`` tunes the gain-scheduled law;
+``tune_robust`` tunes a law with its estimator through disturbances;
+``compare`` runs the gradient against CMA-ES and random search at equal CPU
+time (docs/model.md §3, §6, §8).
 """
 
 from wmr_jax._src.model.controllers.schedule import SCHEDULE as SCHEDULE

@@ -418,7 +418,7 @@ class _SizeBench:
 
     def tuning_loss(self) -> list[dict]:
         """``wmr_jax.tuning.tuning_loss`` and its gradient, beside the relaxed law it wraps."""
-        from wmr_jax._src import tuning
+        from wmr_jax import tuning
         from wmr_jax._src.sim.rollout import DEFAULT_DT, final_poses
 
         horizon, robot = self.steps * DEFAULT_DT, self.robot

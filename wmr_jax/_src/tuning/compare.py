@@ -1,12 +1,9 @@
 """Gradient descent against black-box search at equal CPU time, on both tuning problems.
 
-``compare`` gives CMA-ES (``search.cma_es_search``, ``evosax``, the optional
-extra ``[search]``) and random search the gradient tuner's process CPU time
-(``search.clock``), compile included, per problem and seed, and judges all
-three with the hard law on the same held-out poses, with the time-optimal
-yardsticks of ``docs/model.md §8``. CPU time, not wall time: a budget taken
-while the machine is quiet and spent while it is busy would buy the searches
-less work, and the ranking would follow the load.
+``compare`` gives CMA-ES (``evosax``, the optional extra ``[search]``) and
+random search the gradient tuner's process CPU time (``search.clock``),
+compile included, and judges all three with the hard law on the same
+held-out poses, with the time-optimal yardsticks of ``docs/model.md §8``.
 """
 
 from __future__ import annotations
@@ -28,13 +25,12 @@ from wmr_jax._src.model.params import Robot, validate_one_robot
 from wmr_jax._src.sim.poses import sample_poses
 from wmr_jax._src.studies.optimal import time_bounds
 from wmr_jax._src.tuning.evaluation import (
-    RUN_OPTIONS,
     evaluate,
     held_out_poses,
+    poses_digest,
     report_ratios,
 )
 from wmr_jax._src.tuning.problems import get_problem
-from wmr_jax._src.tuning.robust_run import poses_digest
 from wmr_jax._src.tuning.search import _evosax_cma_es, cma_es_search, random_search
 from wmr_jax._src.tuning.trainer import differences
 from wmr_jax._src.tuning.training import TuneConfig, train
@@ -43,6 +39,10 @@ __all__ = ["COMPARE_SEEDS", "METHODS", "compare", "minimised", "run_comparison",
 
 # The methods compared, in the order of each (problem, seed)'s rows.
 METHODS = ("gradient", "cma-es", "random search")
+# The seeds of a resumable comparison (this one's and the robust one's).
+COMPARE_SEEDS = (0, 1, 2)
+# 3: budgets in process CPU time, rows with CPU and wall time beside each other.
+COMPARE_FORMAT = 3
 
 
 def _checked_plan(seeds: Any, problems: Any, configs: Any) -> dict[str, TuneConfig]:
@@ -106,7 +106,7 @@ def compare(
         gradient's CPU time), ``cpu_s`` and ``wall_s`` spent, ``candidates``
         (``None`` for the gradient), ``per_cpu_s`` (candidates, or gradient
         iterations, per CPU-second), ``minimises`` (in words), ``held_out``
-        (``robust_run.poses_digest`` of the held-out poses), the hard-law
+        (``evaluation.poses_digest`` of the held-out poses), the hard-law
         ``mean_arrival``, ``success_rate``, ``peak_wheel_speed`` and the
         ratios of ``report_ratios`` (``None``, with a ``"…_reason"``, where
         none arrived).
@@ -123,7 +123,7 @@ def compare(
         problem = base.space  # for a schedule, of base.knots knots
         held_out = held_out_poses(base.eval_poses, base.eval_seed)
         bounds = time_bounds(held_out, robot=robot, dt=base.dt)
-        run = {k: getattr(base, k) for k in RUN_OPTIONS if k != "robot"}
+        run = base.hard_run
         held_digest = poses_digest(held_out)
         for seed in seeds:
             config = base.replace(seed=seed, random_search=False)
@@ -191,11 +191,9 @@ def saved_rows(
 ) -> list[dict[str, Any]]:
     """Check the rows of a saved ``compare.json`` before a resumed comparison keeps them.
 
-    Every row must be one ``compare`` writes for this comparison: a problem of
-    ``problems`` (name → parameter count), a seed of ``seeds``, a method of
-    ``METHODS``, each number the table shows; each (problem, seed) with all
-    three methods once. Returns ``rows``; ``ValueError``: one line naming
-    ``where``, the row and what is wrong.
+    Each row must be one ``compare`` writes for ``problems`` (name → parameter
+    count) and ``seeds``, each (problem, seed) with all of ``METHODS`` once.
+    Returns ``rows``; ``ValueError``: one line naming ``where`` and the row.
     """
     from wmr_jax._src.report.tuning import _compare_numbers
 
@@ -259,9 +257,17 @@ def _json_type(value: Any) -> str:
 
 # ---------------------------------------------------------------- a resumable comparison
 
-COMPARE_SEEDS = (0, 1, 2)
-# 3: budgets in process CPU time, rows with CPU and wall time beside each other.
-COMPARE_FORMAT = 3
+
+def comparison_settings(robot: Robot, **fields: Any) -> dict[str, Any]:
+    """What a resumed comparison must match: ``fields``, the robot and the code (JSON as read).
+
+    Rows computed by other code (the law, the loss, an optimiser) are not mixed in.
+    """
+    from wmr_jax._src.model.robots import robot_json
+    from wmr_jax._src.provenance import code_version
+
+    settings = {"format": COMPARE_FORMAT, **fields, "robot": robot_json(robot)}
+    return json.loads(json.dumps({**settings, "code": code_version()}))
 
 
 def run_comparison(
@@ -284,20 +290,14 @@ def run_comparison(
         All rows, kept and new.
     """
     from wmr_jax._src import io
-    from wmr_jax._src.model.robots import robot_json
-    from wmr_jax._src.provenance import code_version
     from wmr_jax._src.report.tuning import comparison_table
 
     robot = validate_one_robot(robot, "tuning")
-    settings = {
-        "format": COMPARE_FORMAT,
-        "seeds": list(COMPARE_SEEDS),
-        "configs": {name: config.as_dict() for name, config in configs.items()},
-        "robot": robot_json(robot),
-        # Rows computed by other code (the law, the loss, an optimiser) are not mixed in.
-        "code": code_version(),
-    }
-    settings = json.loads(json.dumps(settings))  # as it reads back from the file
+    settings = comparison_settings(
+        robot,
+        seeds=list(COMPARE_SEEDS),
+        configs={name: config.as_dict() for name, config in configs.items()},
+    )
     problems = {name: config.space.dim for name, config in configs.items()}
     rows = _compare_rows(out, settings, resume, problems)
     done = {(row["problem"], row["seed"]) for row in rows}
@@ -320,11 +320,7 @@ def run_comparison(
 def _compare_rows(
     out: Path, settings: dict[str, Any], resume: bool, problems: dict[str, int]
 ) -> list[dict[str, Any]]:
-    """The rows of ``out/compare.json`` to keep (``--resume``), after checking they are ours.
-
-    Checked whole before anything runs: a file of another comparison, or one
-    whose shape is not what ``--compare`` writes, is refused in one line.
-    """
+    """The rows of ``out/compare.json`` to keep (``--resume``), checked whole before any run."""
     from wmr_jax._src import io
 
     record, manifest = out / "compare.json", out / "compare_settings.json"

@@ -12,9 +12,8 @@ from wmr_jax._src.checks import as_float_tree, check_int, float_dtype
 from wmr_jax._src.model.params import Robot
 from wmr_jax._src.sim import loops
 from wmr_jax._src.sim import rollout as simulation
-from wmr_jax._src.sim.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
 from wmr_jax._src.sim.poses import sample_poses
-from wmr_jax._src.tuning.loss import LossWeights, batch_loss, make_spec, robust_value_and_grad
+from wmr_jax._src.tuning.loss import batch_loss, make_spec, robust_value_and_grad
 from wmr_jax._src.tuning.parametrisation import (
     PAPER_FEASIBLE_GAINS,
     gains_from_logits,
@@ -86,9 +85,8 @@ def gradient_cost(
 ) -> GradientCost:
     """Time the loss and its gradient on ``poses`` × ``steps`` and read their peak memory.
 
-    Peak memory is read from XLA's compile-time ``memory_analysis``:
-    arguments + outputs + temporaries, what the compiled program allocates
-    (the process's resident set adds the runtime and compiled code on top).
+    Peak memory: what the compiled program allocates, from XLA's compile-time
+    ``memory_analysis`` (``_peak_bytes``).
 
     Args:
         poses: batch size.
@@ -106,17 +104,7 @@ def gradient_cost(
     steps = check_int("steps", steps, 1)
     repeats = check_int("repeats", repeats, 1)
     dt = simulation.DEFAULT_DT
-    spec = make_spec(
-        horizon=steps * dt,
-        dt=dt,
-        velocity=velocity,
-        substeps=loops.DEFAULT_SUBSTEPS,
-        wheel_limit="clip",
-        tol_r=DEFAULT_TOL_R,
-        tol_theta=DEFAULT_TOL_THETA,
-        weights=LossWeights(),
-        remat=remat,
-    )
+    spec = make_spec(horizon=steps * dt, dt=dt, velocity=velocity, remat=remat)
     dtype = float_dtype()
     robot = as_float_tree(Robot())
     refs = sample_poses(jax.random.key(seed), poses)

@@ -21,6 +21,7 @@ import numpy as np
 
 from wmr_jax._src.checks import check_int
 from wmr_jax._src.model.params import Gains, Robot
+from wmr_jax._src.model.robots import is_number
 from wmr_jax._src.sim.metrics import DEFAULT_TOL_R
 from wmr_jax._src.sim.sensing.estimators import (
     ESTIMATORS,
@@ -109,13 +110,6 @@ class EstimatorBox:
         default = ObserverParams() if self.name == "observer" else EKFParams()
         return self.unit_of(default)
 
-    def columns(self) -> tuple[str, ...]:
-        """Names of the entries of a flat row."""
-        if self.name == "observer":
-            k = range(self.knots)
-            return tuple(f"position[{i}]" for i in k) + tuple(f"heading[{i}]" for i in k)
-        return tuple(_EKF_LOG)
-
 
 def estimator_box(name: str, knots: int = OBSERVER_KNOTS) -> EstimatorBox:
     """The cube of estimator ``name`` (``"observer"``: two tables of ``knots``; ``"ekf"``: 3)."""
@@ -200,9 +194,7 @@ def estimator_from_json(values: Any, where: str, *, whole: bool = False) -> Any:
     for name, value in given.items():
         is_list = isinstance(value, list)
         entries = value if is_list else [value]
-        if not entries or any(
-            isinstance(x, bool) or not isinstance(x, (int, float)) for x in entries
-        ):
+        if not entries or not all(map(is_number, entries)):
             raise ValueError(
                 f"{where}: estimator {name} = {value!r:.80} is not allowed; allowed: a number "
                 "or a list of numbers"

@@ -6,7 +6,11 @@ smooth relaxation they were tuned through, on held-out poses.
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import math
+import warnings
+from collections.abc import Iterator
 from typing import Any, NamedTuple
 
 import jax
@@ -28,6 +32,8 @@ __all__ = [
     "Evaluation",
     "evaluate",
     "held_out_poses",
+    "poses_digest",
+    "quiet_scoring",
     "report_ratios",
     "wheel_speed_ok",
 ]
@@ -61,6 +67,23 @@ def held_out_poses(n: int = EVAL_POSES, eval_seed: int = EVAL_SEED) -> jax.Array
     """Return the ``n`` held-out reference poses of the before/after table, ``(n, 3)``."""
     eval_seed = check_int("eval_seed", eval_seed, 0, 2**32 - 1)
     return sample_poses(jax.random.fold_in(jax.random.key(eval_seed), 1), n)
+
+
+def poses_digest(poses: Any) -> str:
+    """The first 16 hex digits of the sha256 of ``poses`` (float64): which poses judged a row."""
+    return hashlib.sha256(np.asarray(poses, dtype=np.float64).tobytes()).hexdigest()[:16]
+
+
+@contextlib.contextmanager
+def quiet_scoring() -> Iterator[None]:
+    """Ignore warnings while candidates or iterates are scored, not reported.
+
+    Their warnings (wheel saturation, sampling margins) are the tuner's
+    business, not the user's: the score says what they would.
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        yield
 
 
 def run_options(values: dict[str, Any]) -> dict[str, Any]:

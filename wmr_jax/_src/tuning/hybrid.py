@@ -1,9 +1,7 @@
 """The hybrid robust tuner's second half: CMA-ES from the gradient's result on the hard law.
 
-The gradient descends a relaxed surrogate (the smooth law, a soft arrival
-time); ``polish`` searches from its result with the hard law under the
-standard conditions, the score the loop is judged by
-(``robust.tune_robust`` with ``RobustConfig.tuner = "hybrid"``).
+The gradient descends a relaxed surrogate; ``polish`` searches from its result
+with the score the loop is judged by (``RobustConfig.tuner = "hybrid"``).
 """
 
 from __future__ import annotations
@@ -16,9 +14,8 @@ __all__ = ["polish"]
 def polish(key, z, refs, budget_s, robot, dt, joint, noise=None, std=0.1):
     """CMA-ES from the logits ``z`` for ``budget_s`` s of CPU time: ``(ClosedLoop, candidates)``.
 
-    ``robust.black_box``'s CMA-ES started at ``z`` with step ``std``: ``z`` is
-    scored first (its score counts against the budget), so the result is
-    never worse than it on ``refs``.
+    ``z`` is scored first, within the budget, so the result is never worse
+    than it on ``refs``.
     """
     loop, count, _, _ = robust.black_box(
         "cma-es", key, refs, budget_s, robot, dt, joint, noise, start=z, std=std

@@ -4,18 +4,16 @@
 wheel-saturation penalty for the non-ideal loop (``docs/model.md §4, §6``).
 
 Per-pose gradients are heavy-tailed: a run that grazes a switching surface,
-or that sits parked on its reference (where the bearing ``φ_e`` is
-undefined), can have a sensitivity many orders of magnitude above the
-median, growing geometrically with the remaining horizon, and in float32
-overflowing. ``robust_gradient`` therefore caps each pose's gradient at a
-multiple of the batch median (``pose_clip``) and drops non-finite ones
-before averaging; the trainer feeds it to ``optax.chain(clip_by_global_norm,
-adam)``.
+or sits parked on its reference (where the bearing ``φ_e`` is undefined),
+can be orders of magnitude above the median, even overflow in float32.
+``robust_gradient`` therefore caps each pose's gradient at a multiple of the
+batch median (``pose_clip``) and drops non-finite ones before averaging.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
 from collections.abc import Callable
 from typing import Any, NamedTuple
@@ -85,26 +83,17 @@ class LossSpec:
     accel_limit: bool = False
 
     def options(self, temperature: Any = None) -> loops.Options:
-        """The rollout options of this loss with its law at ``temperature``."""
-        return loops.Options(
-            steps=self.steps,
-            velocity=self.velocity,
-            controller=self.controller,
-            temperature=temperature,
-            substeps=self.substeps,
-            wheel_limit=self.wheel_limit,
-            remat=self.remat,
-            accel_limit=self.accel_limit,
-        )
+        """The rollout options of this loss (its fields but the loss's own) at ``temperature``."""
+        loss_only = ("tol_r", "tol_theta", "weights")
+        fields = [f.name for f in dataclasses.fields(self) if f.name not in loss_only]
+        return loops.Options(**{f: getattr(self, f) for f in fields}, temperature=temperature)
 
     def for_robot(self, robot: Robot, dt: Any) -> LossSpec:
-        """This spec with the speed limiter of ``robot``'s acceleration limits on where it has them.
+        """This spec with the speed limiter on where ``robot`` has acceleration limits.
 
         As ``loops.for_robot`` decides for the rollouts (docs/model.md
-        §4.2.2): on for a robot that gives ``accel_max`` or
-        ``angular_accel_max`` above 0 (ideal loop), so that the loss tunes the
-        loop the evaluation judges; a robot without limits keeps the loss it
-        had, bit for bit. Call it on the concrete robot, before tracing.
+        §4.2.2), so that the loss tunes the loop the evaluation judges. Call
+        it on the concrete robot, before tracing.
         """
         fitted = loops.for_robot(self.options(), robot, dt)
         return dataclasses.replace(self, accel_limit=fitted.accel_limit)
@@ -124,38 +113,32 @@ class LossTerms(NamedTuple):
     saturation: jax.Array
 
 
-def make_spec(
-    *,
-    horizon: Any,
-    dt: Any,
-    velocity: Any,
-    substeps: Any,
-    wheel_limit: Any,
-    tol_r: Any,
-    tol_theta: Any,
-    weights: Any,
-    remat: bool,
-    controller: Any = SHIM_SUNG,
-) -> LossSpec:
-    """Check the loss options (before tracing) and return them as a static spec.
+def make_spec(*, controller: Any = SHIM_SUNG, **given: Any) -> LossSpec:
+    """Check the static options of ``tuning_loss`` (before tracing); return them as a spec.
+
+    ``given``: ``horizon``, ``dt``, ``velocity``, ``substeps``, ``wheel_limit``,
+    ``tol_r``, ``tol_theta``, ``weights``, ``remat``; the others keep
+    ``tuning_loss``'s defaults.
 
     Raises:
         ValueError: naming the option, its value and what is allowed.
     """
+    o = {**_OPTION_DEFAULTS, **given}
     options = simulation.make_options(
-        steps=horizon_steps(dt, horizon),
-        velocity=velocity,
-        substeps=substeps,
-        wheel_limit=wheel_limit,
+        steps=horizon_steps(o["dt"], o["horizon"]),
+        velocity=o["velocity"],
+        substeps=o["substeps"],
+        wheel_limit=o["wheel_limit"],
         controller=controller,
     )
+    weights = o["weights"]
     if not isinstance(weights, LossWeights):
         raise ValueError(f"weights = {weights!r} is not allowed; allowed: a LossWeights")
     for name, closed in (("arrival_softness", False), ("shaping", True), ("saturation", True)):
         value = check_number(f"weights.{name}", getattr(weights, name), closed=closed)
         require_representable(f"weights.{name}", np.asarray(value))
-    tol_r = check_number("tol_r", tol_r, unit="cm")
-    tol_theta = check_number("tol_theta", tol_theta, high=math.pi / 2, unit="rad")
+    tol_r = check_number("tol_r", o["tol_r"], unit="cm")
+    tol_theta = check_number("tol_theta", o["tol_theta"], high=math.pi / 2, unit="rad")
     # The loss divides by tol_r² and sin²(tol_θ): both must stay finite.
     largest = float(np.finfo(np.dtype(float_dtype())).max)
     smallest = largest**-0.5
@@ -176,7 +159,7 @@ def make_spec(
         tol_r=tol_r,
         tol_theta=tol_theta,
         weights=weights,
-        remat=check_bool("remat", remat),
+        remat=check_bool("remat", o["remat"]),
         controller=options.controller,
     )
 
@@ -204,13 +187,10 @@ def arrival_terms(dist: jax.Array, head: jax.Array, softness: Any) -> tuple[jax.
 def recorded_arrival(poses: jax.Array, ref: jax.Array, dt: jax.Array) -> jax.Array:
     """Relaxed arrival time plus log-error shaping of one recorded run ``poses (steps, 3)``, s.
 
-    The per-run term of ``tuning_loss`` in the ideal loop (the same
-    ``arrival_terms``, tolerances and default weights), for the robust loss,
-    whose ``disturbed_run`` records the trajectory. It is not merged with
-    ``_pose_loss_terms``: that one streams the sum through the rollout's scan
-    (``S ← a (S + 1)`` forwards), this one takes the reversed cumulative
-    product of the recorded samples; the two agree to rounding, not bit for
-    bit, and each tuner's results are kept as they are.
+    ``tuning_loss``'s per-run term (ideal loop, default weights) for the
+    robust loss, whose ``disturbed_run`` records the trajectory. It agrees
+    with ``_pose_loss_terms``' streamed sum to rounding, not bit for bit, so
+    the two stay apart and each tuner's results stay as they are.
     """
     weights = LossWeights()
     err = law.polar_error(poses, ref)
@@ -226,14 +206,8 @@ def recorded_arrival(poses: jax.Array, ref: jax.Array, dt: jax.Array) -> jax.Arr
 def _pose_loss_terms(ref, gains, init, robot, dt, spec: LossSpec, temperature):
     """Return ``(relaxed arrival s, integrated log-error s, saturation s)`` of one run.
 
-    ``ref``, ``init``: ``(3,)``; ``gains``, ``robot``: scalar leaves;
-    ``temperature``: traced scalar, or ``None`` for the hard law.
-
-    The terms stream through the rollout's own scan (``loops.scan_closed_loop``
-    with ``fold=``), so the loss runs in the fast layout of ``final_poses``
-    and stores no trajectory; unless ``spec.remat`` is off, the loop
-    recomputes each step in the backward pass instead of storing its
-    intermediates.
+    The terms stream through the rollout's own scan (``fold=``), so no
+    trajectory is stored; ``temperature`` ``None`` is the hard law.
     """
     # The temperature is a traced value rather than a static option so that
     # annealing it does not recompile; Options is therefore built in the trace.
@@ -343,10 +317,8 @@ def robust_value_and_grad(
 def capped_mean(values, grads, pose_clip=1.0):
     """Mean loss and capped gradient sum of per-run ``values (N,)`` and ``grads (N, dim)``.
 
-    A run grazing a switching surface of the law has a gradient orders of
-    magnitude above the rest: each run's gradient is capped at ``pose_clip``
-    times the batch median norm (``None``: no cap), and runs whose value or
-    gradient is not finite are dropped from both.
+    Each run's gradient is capped at ``pose_clip`` times the batch median
+    norm (``None``: no cap); runs whose value or gradient is not finite are dropped.
 
     Returns:
         ``(mean loss over the kept runs, Σ capped gradients (dim,), kept (N,),
@@ -371,21 +343,6 @@ _robust_jit = loops.jit_top_level(robust_value_and_grad, static_argnames=("spec"
 
 
 # ---------------------------------------------------------------- public entry points
-
-_OPTION_DEFAULTS = {
-    "init": (0.0, 0.0, 0.0),
-    "robot": None,
-    "dt": simulation.DEFAULT_DT,
-    "horizon": HORIZON_S,
-    "velocity": "ideal",
-    "substeps": loops.DEFAULT_SUBSTEPS,
-    "wheel_limit": "clip",
-    "tol_r": DEFAULT_TOL_R,
-    "tol_theta": DEFAULT_TOL_THETA,
-    "weights": LossWeights(),
-    "remat": True,
-}
-_STATIC_OPTIONS = tuple(name for name in _OPTION_DEFAULTS if name not in ("init", "robot"))
 
 
 def _prepared(gains: Any, refs: Any, temperature: Any, options: dict[str, Any]) -> tuple:
@@ -482,9 +439,7 @@ def tuning_loss(
         weights: the terms' weights and the relaxed test's width.
         remat: recompute each step of the rollout in the backward pass
             (``jax.checkpoint`` on the scan body) instead of storing its
-            intermediates: some fifty arrays of ``N × steps`` otherwise. On
-            XLA:CPU it is both smaller and faster; ``False`` trades memory
-            for the recomputation where that pays (no effect on the value).
+            intermediates (no effect on the value).
 
     Returns:
         Scalar loss, s.
@@ -495,6 +450,15 @@ def tuning_loss(
     options = {name: value for name, value in locals().items() if name in _OPTION_DEFAULTS}
     spec, temperature, args = _prepared(gains, refs, temperature, options)
     return _batch_loss_jit(*args, spec=spec, temperature=temperature)
+
+
+# The options of ``tuning_loss`` (and of ``loss_terms``, ``robust_gradient``) with their defaults.
+_OPTION_DEFAULTS = {
+    name: parameter.default
+    for name, parameter in inspect.signature(tuning_loss).parameters.items()
+    if parameter.kind is parameter.KEYWORD_ONLY and name != "temperature"
+}
+_STATIC_OPTIONS = tuple(name for name in _OPTION_DEFAULTS if name not in ("init", "robot"))
 
 
 def loss_terms(gains: Gains, refs: Any, *, temperature: float | None, **options: Any) -> LossTerms:

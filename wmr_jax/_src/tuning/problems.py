@@ -202,6 +202,6 @@ def params_json(problem: Problem, params: Any) -> dict[str, Any]:
         return values
     for table in TABLES:
         values[table] = [float(x) for x in getattr(params, table)]
-    for name in (*SHAPE_FIELDS, "v_max", "half_track"):
+    for name in _SHAPE_COLUMNS:
         values[name] = float(getattr(params, name))
     return values

@@ -14,7 +14,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-import warnings
 from typing import Any, ClassVar
 
 import jax
@@ -43,7 +42,7 @@ from wmr_jax._src.sim.sensing.loop import ClosedLoop
 from wmr_jax._src.studies import conditions, robustness
 from wmr_jax._src.tuning import centred, trainer
 from wmr_jax._src.tuning.estimation import JointProblem, concrete_loop, estimator_box
-from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses
+from wmr_jax._src.tuning.evaluation import EVAL_POSES, EVAL_SEED, held_out_poses, quiet_scoring
 from wmr_jax._src.tuning.loss import capped_mean, recorded_arrival
 from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
 from wmr_jax._src.tuning.problems import FIXED, schedule_problem
@@ -400,10 +399,9 @@ class RobustLoss:
 def robust_problem(config: RobustConfig, robot: Robot) -> trainer.TrainingProblem:
     """The ``TrainingProblem`` of a checked ``config`` on a checked ``robot``.
 
-    The iteration's draw is ``(key of the disturbances, refs, nonideal_refs)``
-    from ``config.seed``; the validation score is ``robust_score`` on poses
-    and noise of their own streams; a row is the loop's parameters and its
-    estimator's, flattened.
+    A draw is ``(key of the disturbances, refs, nonideal_refs)``; the
+    validation score is ``robust_score``; a row is the loop's parameters and
+    its estimator's, flattened.
     """
     joint = joint_problem(config)
     # The horizon of the studies that judge the loop: on a slower robot the
@@ -431,9 +429,7 @@ def robust_problem(config: RobustConfig, robot: Robot) -> trainer.TrainingProble
         return ClosedLoop(joint.problem.controller, params, estimate)
 
     def score(closed: ClosedLoop) -> float:
-        with warnings.catch_warnings():
-            # An iterate is scored, not reported: its score says what its warnings would.
-            warnings.simplefilter("ignore")
+        with quiet_scoring():
             return robust_score(
                 closed, validation_refs, validation_key, robot=robot, noise=config.noise
             )
@@ -462,11 +458,9 @@ def robust_problem(config: RobustConfig, robot: Robot) -> trainer.TrainingProble
 def black_box(method, key, refs, budget_s, robot, dt, joint, noise=None, *, start=None, std=1.0):
     """Random search or CMA-ES on the logits for ``budget_s`` CPU seconds (``search.clock``).
 
-    8 candidates per generation (random search: logistic draws, uniform in the
-    cube), each scored with ``robust_score`` on ``refs`` under the same draws,
-    a generation in one batch (``robust_population_scores``), through
-    ``search_loop``; the start's score counts against the budget too. CMA-ES
-    starts from ``start`` (logits; default the problem's start), step ``std``.
+    8 candidates per generation (random search: uniform in the cube), scored
+    by ``robust_score`` on ``refs`` under the same draws; the start (default
+    the problem's; CMA-ES's mean, step ``std``) is scored first, in the budget.
 
     Returns:
         ``(ClosedLoop, candidates scored, CPU s, wall s)``.
@@ -480,9 +474,7 @@ def black_box(method, key, refs, budget_s, robot, dt, joint, noise=None, *, star
         return concrete_loop(joint.from_logits(z, robot))
 
     def scores(zs: Any) -> np.ndarray:
-        with warnings.catch_warnings():
-            # Candidates far outside the useful set warn; their score says it.
-            warnings.simplefilter("ignore")
+        with quiet_scoring():
             loops = [closed(z) for z in zs]
             return robust_population_scores(loops, refs, score_key, dt=dt, robot=robot, noise=noise)
 
@@ -521,24 +513,17 @@ def tune_robust(
         state: continue from this ``TrainState`` (from ``progress_fn`` of a run
             of the same ``config`` and ``robot``).
         progress_fn: called with the ``TrainState`` after each iteration.
-        on_tuned: called with ``(ClosedLoop, losses)`` as soon as the loop
-            is tuned (the iterations, and the polish of the hybrid), before
-            the searches and the evaluation.
+        on_tuned: called with ``(ClosedLoop, losses)`` once the loop is
+            tuned, before the searches and the evaluation.
 
     Returns:
         A ``TuneResult`` of problem ``"robust"``: ``loop`` the tuned
-        ``ClosedLoop``, ``gains`` its params, ``tune_cpu_s`` the time of the
-        iterations and the polish, ``searches``, ``rows`` (the paper's
-        feasible gains with raw feedback, the tuned loop and the searches' loops
-        under the standard conditions), ``note`` if it scores no better than the
-        paper's gains.
+        ``ClosedLoop``, ``gains`` its params, ``tune_cpu_s`` the CPU time of
+        the iterations and the polish, ``searches``, ``rows`` (the paper's
+        gains with raw feedback, the tuned and the searches' loops under the
+        standard conditions), ``note`` if it is no better than the paper's.
     """
-    if config is not None and not isinstance(config, RobustConfig):
-        raise ValueError(
-            f"config = {config!r:.80} is not allowed; allowed: a wmr_jax.tuning.RobustConfig "
-            "or None"
-        )
-    config = (RobustConfig() if config is None else config).validate()
+    config = trainer.checked_config(config, RobustConfig)
     check_callable("progress_fn", progress_fn)
     check_callable("on_tuned", on_tuned)
     robot = validate_one_robot(robot, "tuning")

@@ -12,7 +12,6 @@ of the same settings, robot and code.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import os
 import time
@@ -20,11 +19,11 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from wmr_jax._src import io
 from wmr_jax._src.model.params import Robot, validate_one_robot
 from wmr_jax._src.tuning import robust, trainer
+from wmr_jax._src.tuning.compare import COMPARE_SEEDS, comparison_settings
+from wmr_jax._src.tuning.evaluation import EVAL_SEED, held_out_poses, poses_digest
 from wmr_jax._src.tuning.robust import RobustConfig
 
 __all__ = [
@@ -40,9 +39,6 @@ __all__ = [
 ]
 
 COLUMNS = ["condition", "gains", "feedback", "success", "mean arrival s", "median arrival s"]
-COMPARE_SEEDS = (0, 1, 2)
-# 3: budgets in process CPU time, rows with CPU and wall time beside each other.
-COMPARE_FORMAT = 3
 
 
 def described(config: RobustConfig) -> str:
@@ -97,7 +93,7 @@ def _kept_rows(path: Any, settings: dict[str, Any], resume: bool) -> list[dict[s
     if not isinstance(saved, dict) or saved.get("settings") != settings:
         theirs = saved.get("settings") if isinstance(saved, dict) else None
         theirs = theirs if isinstance(theirs, dict) else {}
-        keys = [*settings, *(k for k in theirs if k not in settings)]
+        keys = dict.fromkeys([*settings, *theirs])
         differ = [k for k in keys if theirs.get(k) != settings.get(k)]
         raise ValueError(
             f"--resume: {str(path)!r} holds another comparison (other {', '.join(differ)}); "
@@ -114,11 +110,6 @@ def _kept_rows(path: Any, settings: dict[str, Any], resume: bool) -> list[dict[s
     if not good:
         raise ValueError(f"--resume: {str(path)!r} has malformed rows; allowed: another --out")
     return rows
-
-
-def poses_digest(poses: Any) -> str:
-    """The first 16 hex digits of the sha256 of ``poses`` (float64): which poses judged a row."""
-    return hashlib.sha256(np.asarray(poses, dtype=np.float64).tobytes()).hexdigest()[:16]
 
 
 def minimised(config: RobustConfig, method: str) -> str:
@@ -141,12 +132,10 @@ def compare_seed(config: RobustConfig, seed: int, robot: Robot) -> list[dict[str
 
     One row per method and condition (the paper's gains left out): the
     ``standard_conditions`` row with ``method``, ``seed``, ``budget_s`` (the
-    gradient's CPU time), ``candidates`` (gradient: iterations), ``cpu_s``,
-    ``wall_s``, ``per_cpu_s``, ``minimises``, ``held_out`` (``poses_digest``)
-    and ``loadavg`` (the 1-minute load average as the row was written).
+    gradient's CPU time, every search's budget), ``candidates`` (gradient:
+    iterations), ``cpu_s``, ``wall_s``, ``per_cpu_s``, ``minimises``,
+    ``held_out`` (``poses_digest``) and ``loadavg`` (1-minute load average).
     """
-    from wmr_jax._src.tuning.evaluation import EVAL_SEED, held_out_poses
-
     held_out = poses_digest(held_out_poses(config.eval_poses, EVAL_SEED))
     config_seed = dataclasses.replace(config, seed=seed, compare=True)
     tuned_at: list[float] = []
@@ -183,33 +172,19 @@ def run_comparison(
     resume: bool = False,
     progress: Callable[[str], Any] | None = print,
 ) -> list[dict[str, Any]]:
-    """Gradient, CMA-ES and random search at equal CPU time, seeds 0–2; each seed kept.
+    """Gradient, CMA-ES and random search at equal CPU time, seeds 0–2 (``compare_seed``).
 
-    The gradient tuner's process CPU time, compilation included, is each
-    search's budget (``search.clock``), so the ranking does not move with
-    the machine's load; each row records its CPU and wall time, candidates
-    (gradient: iterations) per CPU-second, what it minimises and the digest
-    of the held-out poses it was judged on (every method's rows come from one
-    ``standard_conditions`` call: the same poses and draws). The settings,
-    the robot and the code version are recorded with the rows: a resumed
-    comparison keeps only rows of the same three.
+    Each seed's rows are written as it finishes, with the settings, the robot
+    and the code version: a resumed comparison keeps only rows of the same three.
 
     Returns:
         The rows (kept and new), also written to ``robust_compare.json`` and ``.md``.
     """
-    from wmr_jax._src.model.robots import robot_json
-    from wmr_jax._src.provenance import code_version
     from wmr_jax._src.report.tuning import robust_comparison_table
 
     robot = validate_one_robot(robot, "tuning")
     path = out / "robust_compare.json"
-    settings = {
-        "format": COMPARE_FORMAT,
-        "config": dataclasses.asdict(config),
-        "robot": robot_json(robot),
-        "code": code_version(),  # rows of another law are not this comparison's
-    }
-    settings = json.loads(json.dumps(settings))  # as it reads back from the file
+    settings = comparison_settings(robot, config=dataclasses.asdict(config))
     rows = _kept_rows(path, settings, resume)
     if not resume:  # a new comparison: nothing of an earlier one stays beside its rows
         for stale in (path, out / "robust_compare.md"):

@@ -51,9 +51,8 @@ def load_checkpoint(path: Path, fresh: Any, identity: dict[str, Any]) -> Any:
             f"{meta.get('format')!r:.40}; allowed: {CHECKPOINT_FORMAT}); {advice}"
         )
     saved = meta.get("identity")
-    shape = {"config": dict, "robot": dict}
     if not isinstance(saved, dict) or not all(
-        isinstance(saved.get(key), kind) for key, kind in shape.items()
+        isinstance(saved.get(key), dict) for key in ("config", "robot")
     ):
         raise ValueError(
             f"--resume: checkpoint {path} has metadata of the wrong shape (identity = "
@@ -184,7 +183,7 @@ def _bars(config: Any, state: Any, progress: bool) -> tuple[Any, Any, Any]:
         dynamic_ncols=True,
     )
     search_bar = tqdm(
-        desc="random search (same wall time)",
+        desc="random search (same CPU time)",
         unit=" candidates",
         disable=not (progress and config.random_search),
         dynamic_ncols=True,
@@ -234,7 +233,7 @@ def tune(
     check_bool("resume", resume)
     check_bool("progress", progress)
     check_callable("progress_fn", progress_fn)
-    config = training.checked_config(config)
+    config = trainer.checked_config(config, training.TuneConfig)
     io.remove_stale_temporaries(out)
     robot = Robot() if robot is None else robot
     identity = training.run_identity(config, robot)

@@ -281,19 +281,14 @@ def load_tuned_and_tuning(path: str | os.PathLike) -> tuple[ClosedLoop, str | No
     bad = sorted({k for k in values if k not in named} - set(fields))
     # A file without gains would load as the law's defaults: refused as such.
     holds_gains = bool(values.keys() & set(fields))
-    if bad and not holds_gains:
-        raise _no_gains(values, where)
-    if (
-        bad
-        and "kind" not in values
-        and "controller" not in values
-        and set(bad) <= set(_SCHEDULE_FIELDS)
-    ):
-        raise ValueError(
-            f"{where}: key {bad[0]!r} is a schedule's, but the file names no kind; allowed: "
-            "'kind': 'schedule' (as wmr-jax tune --schedule writes), or Gains fields only"
-        )
     if bad:
+        if not holds_gains:
+            raise _no_gains(values, where)
+        if not values.keys() & {"kind", "controller"} and set(bad) <= set(_SCHEDULE_FIELDS):
+            raise ValueError(
+                f"{where}: key {bad[0]!r} is a schedule's, but the file names no kind; allowed: "
+                "'kind': 'schedule' (as wmr-jax tune --schedule writes), or Gains fields only"
+            )
         raise ValueError(
             f"{where}: key {bad[0]!r} is not allowed; allowed: keys among {', '.join(fields)}"
         )

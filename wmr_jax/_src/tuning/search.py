@@ -1,13 +1,8 @@
 """The black-box searches, the baselines the gradient must beat: random search and CMA-ES.
 
-``search_loop`` is the one driver of every search (propose, score, keep the
-best, until the budget); ``random_search`` and ``cma_es_search`` search a
-problem's feasible set with the hard law, and the robust tuner's searches
-(``robust.black_box``) go through the same driver and ``cma_es_proposals``,
-scoring a generation in one batch per condition (``robust_population_scores``).
-Every budget is process CPU time (``clock``), the gradient tuner's included,
-so that a comparison buys each method the same work however busy the
-machine is.
+``search_loop`` is the one driver of every search, ``random_search``'s,
+``cma_es_search``'s and the robust tuner's (``robust.black_box``). Every
+budget is process CPU time (``clock``), the gradient tuner's included.
 """
 
 from __future__ import annotations
@@ -15,7 +10,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-import warnings
 from typing import Any, NamedTuple
 
 import jax
@@ -35,7 +29,7 @@ from wmr_jax._src.model.params import Gains, Robot, validate_one_robot
 from wmr_jax._src.sim import loops
 from wmr_jax._src.sim import rollout as simulation
 from wmr_jax._src.sim.poses import HORIZON_S
-from wmr_jax._src.tuning.evaluation import check_run, hard_runs, run_options
+from wmr_jax._src.tuning.evaluation import check_run, hard_runs, quiet_scoring, run_options
 from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS, unit_from_gains
 from wmr_jax._src.tuning.problems import FIXED, Problem, get_problem
 
@@ -121,8 +115,6 @@ def random_search(
     refs = as_poses("refs", refs, batch=True)
     run = run_options(locals())
     check_run(run)
-    n = refs.shape[0]
-    tiled = jnp.tile(refs, (chunk, 1))
     problem = get_problem(problem)
     if problem is not FIXED and start is not PAPER_FEASIBLE_GAINS:
         raise ValueError(
@@ -137,23 +129,37 @@ def random_search(
         u = jax.random.uniform(k, (chunk, problem.dim), float_dtype())
         return u.at[0].set(first) if generation == 0 else u
 
-    def score(u: jax.Array) -> Any:
-        return population_scores(problem, u, tiled, n, robot, run)
-
-    wall, began = time.perf_counter(), clock()
-    best_u, best_score, count = search_loop(
-        propose, score, budget_s, began=began, best=(first, math.inf), progress=progress
+    return _hard_law_search(
+        problem, refs, chunk, robot, run, budget_s, first, lambda: (propose, None), progress
     )
-    best = jax.tree.map(float, problem.from_unit(best_u, robot))
+
+
+def _hard_law_search(
+    problem, refs, size, robot, run, budget_s, first, proposals, progress, *, logits=False
+):
+    """``search_loop`` over generations of ``size`` points of ``problem``'s cube (or logits).
+
+    ``proposals()`` makes ``(propose, tell)`` once the budget's clocks run;
+    each candidate is scored by ``population_scores`` on ``refs``.
+    """
+    n, tiled = refs.shape[0], jnp.tile(refs, (size, 1))
+    wall, began = time.perf_counter(), clock()
+    propose, tell = proposals()
+
+    def score(x: jax.Array) -> Any:
+        return population_scores(problem, jax.nn.sigmoid(x) if logits else x, tiled, n, robot, run)
+
+    best_x, best_score, count = search_loop(
+        propose, score, budget_s, began=began, best=(first, math.inf), tell=tell,
+        progress=progress,
+    )  # fmt: skip
+    params = problem.from_logits(best_x, robot) if logits else problem.from_unit(best_x, robot)
+    best = jax.tree.map(float, params)
     return SearchResult(best, best_score, count, time.perf_counter() - wall, clock() - began)
 
 
 def clock() -> float:
-    """Process CPU time, s: the clock that budgets of tuning and search are counted in.
-
-    CPU time rather than wall time, so that a budget buys the same work
-    however busy the machine is with other processes.
-    """
+    """Process CPU time, s: every budget's clock, the same work however busy the machine is."""
     return time.process_time()
 
 
@@ -215,10 +221,7 @@ def population_scores(problem: Problem, u: jax.Array, tiled: jax.Array, n: int, 
     # Leaves the same for every candidate (the robot's V_max, L) are repeated too.
     size = u.shape[0]
     population = jax.tree.map(lambda leaf: jnp.repeat(jnp.broadcast_to(leaf, (size,)), n), params)
-    with warnings.catch_warnings():
-        # Candidates are scored, not reported: a candidate's warnings (wheel
-        # saturation, sampling margins) are the search's business, not the user's.
-        warnings.simplefilter("ignore")
+    with quiet_scoring():
         _, times, steps = hard_runs(tiled, population, **run, controller=problem.controller)
     times = times.reshape(u.shape[0], n)
     return jnp.mean(jnp.minimum(times, FAILURE_FACTOR * steps * run["dt"]), axis=1)
@@ -227,21 +230,11 @@ def population_scores(problem: Problem, u: jax.Array, tiled: jax.Array, n: int, 
 def robust_population_scores(
     loops: Any, refs: Any, key: jax.Array, *, dt: float, robot: Robot, noise: Any = None
 ) -> np.ndarray:
-    """``robust.robust_score`` of each of ``loops``, the whole population in one batch.
+    """``robust.robust_score`` of each of ``loops`` (one controller and estimator kind), s.
 
-    The runs of ``studies.conditions.standard_conditions`` (the same draws of
-    ``key``, float32), each condition one ``disturbed_metrics`` call over
-    every candidate's runs instead of one call per candidate: the score of a
-    candidate is the mean over the conditions of its mean arrival, failures
-    counted as twice the horizon.
-
-    Args:
-        loops: ``ClosedLoop``s of one controller and one kind of estimator.
-        refs: ``(N, 3)`` reference poses; ``key``: the draws' key.
-        dt, robot, noise: as for ``robust_score`` (``robot`` checked).
-
-    Returns:
-        ``(len(loops),)`` scores, s.
+    The runs of ``standard_conditions`` (the same draws of ``key``), one
+    ``disturbed_metrics`` call per condition over every candidate's runs;
+    ``dt``, ``robot`` (checked) and ``noise`` as for ``robust_score``.
     """
     from wmr_jax._src.sim.sensing.disturbances import STANDARD_CONDITIONS, STANDARD_MISMATCH
     from wmr_jax._src.sim.sensing.loop import disturbed_metrics
@@ -313,11 +306,7 @@ def _evosax_cma_es() -> Any:
 
 @jax.jit
 def _generation_keys(key: jax.Array, generation: Any) -> jax.Array:
-    """The ask and tell keys of a generation: ``split(fold_in(key, generation + 1))``.
-
-    One compiled call per generation, not two operations dispatched one by
-    one: the loop's own time counts against the search's budget.
-    """
+    """The ask and tell keys of a generation, in one compiled call (the loop's time is budgeted)."""
     return jax.random.split(jax.random.fold_in(key, generation + 1))
 
 
@@ -387,18 +376,8 @@ def cma_es_search(
     run = {**_RUN_DEFAULTS, **run, "robot": robot}
     check_run(run)
     _evosax_cma_es()
-    n = refs.shape[0]
-    tiled = jnp.tile(refs, (population, 1))
     start = jnp.asarray(problem.start_logits(robot), float_dtype())
-    wall, began = time.perf_counter(), clock()
-    propose, tell = cma_es_proposals(key, start, population, std_init)
-
-    def score(z: Any) -> Any:
-        return population_scores(problem, jax.nn.sigmoid(z), tiled, n, robot, run)
-
-    best_z, best_score, count = search_loop(
-        propose, score, budget_s, began=began, best=(start, math.inf), tell=tell,
-        progress=progress,
+    return _hard_law_search(
+        problem, refs, population, robot, run, budget_s, start,
+        lambda: cma_es_proposals(key, start, population, std_init), progress, logits=True,
     )  # fmt: skip
-    best = jax.tree.map(float, problem.from_logits(best_z, robot))
-    return SearchResult(best, best_score, count, time.perf_counter() - wall, clock() - began)

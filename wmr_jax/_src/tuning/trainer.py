@@ -36,6 +36,7 @@ __all__ = [
     "anneal",
     "best_iteration",
     "check_loop",
+    "checked_config",
     "differences",
     "fit",
     "iterate",
@@ -178,6 +179,16 @@ def check_loop(config: Any) -> None:
         check_temperature(name, getattr(config, name))
 
 
+def checked_config(config: Any, kind: type) -> Any:
+    """``config`` validated (``None``: ``kind()``), or say why it is not a ``kind``."""
+    if config is not None and not isinstance(config, kind):
+        raise ValueError(
+            f"config = {config!r:.80} is not allowed; allowed: a "
+            f"wmr_jax.tuning.{kind.__name__} or None"
+        )
+    return (kind() if config is None else config).validate()
+
+
 # ---------------------------------------------------------------- optimiser
 
 
@@ -214,9 +225,7 @@ train_step = loops.jit_top_level(_train_step, static_argnames=("loss", "hyper"))
 
 # How much lower an earlier iterate must score than the last to replace it:
 # the validation poses are a sample, and the last iterate, annealed to the
-# coldest temperature, is what the method aims at. On the paper robot the
-# iterates of the last hundred iterations score within 0.2 % of each other;
-# where the smooth loss climbs (a slow, wide robot) the last scores 2-3x the best.
+# coldest temperature, is what the method aims at.
 BEST_MARGIN = 0.01
 
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -31,7 +30,6 @@ from wmr_jax._src.model.controllers.schedule import KNOTS
 from wmr_jax._src.model.params import Robot, validate_one_robot
 from wmr_jax._src.sim import loops
 from wmr_jax._src.sim import rollout as simulation
-from wmr_jax._src.sim.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
 from wmr_jax._src.sim.poses import HORIZON_S, sample_poses
 from wmr_jax._src.tuning import trainer
 from wmr_jax._src.tuning.evaluation import (
@@ -41,6 +39,7 @@ from wmr_jax._src.tuning.evaluation import (
     evaluate,
     hard_runs,
     held_out_poses,
+    quiet_scoring,
 )
 from wmr_jax._src.tuning.loss import LossSpec, LossWeights, make_spec, robust_value_and_grad
 from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
@@ -148,6 +147,11 @@ class TuneConfig:
         """The searched set: gain schedules of ``knots`` knots, or the fixed gains."""
         return schedule_problem(self.knots) if self.problem == "schedule" else FIXED
 
+    @property
+    def hard_run(self) -> dict[str, Any]:
+        """The options of a hard-law run of these settings (``RUN_OPTIONS`` but the robot)."""
+        return {name: getattr(self, name) for name in RUN_OPTIONS if name != "robot"}
+
     def replace(self, **changes: Any) -> TuneConfig:
         """Return a copy with the given fields changed."""
         return dataclasses.replace(self, **changes)
@@ -186,10 +190,7 @@ class TuneConfig:
             velocity=self.velocity,
             substeps=self.substeps,
             wheel_limit=self.wheel_limit,
-            tol_r=DEFAULT_TOL_R,
-            tol_theta=DEFAULT_TOL_THETA,
             weights=self.weights,
-            remat=True,
             controller=self.space.controller,
         )
 
@@ -265,21 +266,9 @@ def training_poses(seed: int, iteration: int, n: int) -> jax.Array:
 # ---------------------------------------------------------------- state
 
 
-def checked_config(config: Any) -> TuneConfig:
-    """``config`` validated (``None``: ``TuneConfig()``), or say why it is not one."""
-    if config is not None and not isinstance(config, TuneConfig):
-        raise ValueError(
-            f"config = {config!r:.80} is not allowed; allowed: a wmr_jax.tuning.TuneConfig or None"
-        )
-    return (TuneConfig() if config is None else config).validate()
-
-
 def _checked(config: TuneConfig | None, robot: Robot | None) -> tuple[TuneConfig, Robot]:
-    return checked_config(config), as_float_tree(validate_one_robot(robot, "tuning"))
-
-
-def _checked(config: TuneConfig | None, robot: Robot | None) -> tuple[TuneConfig, Robot]:
-    return checked_config(config), as_float_tree(validate_one_robot(robot, "tuning"))
+    config = trainer.checked_config(config, TuneConfig)
+    return config, as_float_tree(validate_one_robot(robot, "tuning"))
 
 
 def init_state(config: TuneConfig | None = None, robot: Robot | None = None) -> TrainState:
@@ -303,11 +292,9 @@ def run_identity(config: TuneConfig | None = None, robot: Robot | None = None) -
 
 
 def validation_poses(config: TuneConfig) -> jax.Array:
-    """The poses the iterates are scored on: from ``config.seed``, apart from every other set.
+    """The poses the iterates are scored on: stream 4 of ``config.seed``, apart from every other.
 
-    Stream 4 of the seed: the training batches are stream 0, the random
-    search's candidates and poses 2 and 3; the held-out poses come from
-    ``eval_seed``.
+    (Training batches: stream 0; the random search's candidates and poses: 2 and 3.)
     """
     key = jax.random.fold_in(jax.random.key(config.seed), 4)
     return sample_poses(key, config.validation_poses)
@@ -315,13 +302,9 @@ def validation_poses(config: TuneConfig) -> jax.Array:
 
 def validation_score(config: TuneConfig, robot: Robot, params: Any, refs: Any) -> float:
     """Hard-law score of ``params`` on ``refs``: mean arrival, failures at twice the horizon, s."""
-    run = {name: getattr(config, name) for name in RUN_OPTIONS if name != "robot"}
-    with warnings.catch_warnings():
-        # An iterate is scored, not reported: its warnings (wheel saturation,
-        # sampling margins) are the tuner's business; its score says it.
-        warnings.simplefilter("ignore")
+    with quiet_scoring():
         _, times, steps = hard_runs(
-            refs, params, robot=robot, **run, controller=config.space.controller
+            refs, params, robot=robot, **config.hard_run, controller=config.space.controller
         )
     times = np.asarray(times, dtype=float)
     return float(np.mean(np.minimum(times, FAILURE_FACTOR * steps * config.dt)))
@@ -336,8 +319,7 @@ def _compare(
     eval_progress: Any,
 ) -> tuple:
     """Random search for the tuning's CPU time, then the hard-law table on held-out poses."""
-    run = {name: getattr(config, name) for name in RUN_OPTIONS if name != "robot"}
-    run["robot"] = robot
+    run = {**config.hard_run, "robot": robot}
     search = None
     if config.random_search:
         stream = jax.random.fold_in(jax.random.key(config.seed), 2)
