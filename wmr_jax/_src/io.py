@@ -13,23 +13,6 @@ from typing import Any
 
 import numpy as np
 
-__all__ = [
-    "DamagedFileError",
-    "atomic_write_bytes",
-    "atomic_write_json",
-    "atomic_write_npz",
-    "atomic_write_text",
-    "json_object_once",
-    "json_text",
-    "load_arrays",
-    "remove_stale_temporaries",
-    "save_arrays",
-    "save_figure",
-    "sealed",
-    "unsealed",
-    "writable_path",
-]
-
 
 def _write_atomically(path: str | os.PathLike, write: Callable[[Any], None]) -> Path:
     """Call ``write(file)`` on a temporary file beside ``path``, then rename it over ``path``."""

@@ -11,8 +11,6 @@ import hashlib
 import importlib.metadata
 from pathlib import Path
 
-__all__ = ["code_version"]
-
 _SOURCE = Path(__file__).resolve().parent
 _NOT_COMPUTING = ("cli", "report")
 

@@ -6,8 +6,6 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["add_arguments", "run"]
-
 
 def add_arguments(parser: Any) -> None:
     """Add the flags of ``wmr-jax animate`` (their values are checked in ``run``)."""

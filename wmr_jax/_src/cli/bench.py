@@ -9,8 +9,6 @@ from wmr_jax._src.cli import flags
 from wmr_jax._src.sim.poses import MAX_SAMPLES
 from wmr_jax._src.studies import bench
 
-__all__ = ["add_arguments", "run"]
-
 # The integer flags: (flag, attribute, default, metavar, help).
 _INT_FLAGS = (
     (

@@ -9,8 +9,6 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["add_arguments", "load_refs", "run"]
-
 _CONDITIONS = ("nominal", "latency", "noise", "both")
 _ESTIMATOR_CHOICES = ("none", "observer", "ekf")
 _REF_SUFFIXES = (".npy", ".csv")

@@ -13,27 +13,6 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = [
-    "GAIN_FLAG",
-    "add_gain_flags",
-    "add_robot_flag",
-    "choice",
-    "controller_names",
-    "gain_flag",
-    "gain_flag_values",
-    "gains_file",
-    "gains_from",
-    "given_gain_flags",
-    "number",
-    "output_dir",
-    "output_file",
-    "pose_from_degrees",
-    "positive_int",
-    "robot_for_gains",
-    "robot_from",
-    "velocity_loop",
-]
-
 
 def positive_int(flag: str, text: Any, minimum: int = 1, maximum: int | None = None) -> int:
     """The integer value of a flag, in ``[minimum, maximum]``."""

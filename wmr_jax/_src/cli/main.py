@@ -12,8 +12,6 @@ import sys
 import warnings
 from collections.abc import Sequence
 
-__all__ = ["COMMANDS", "build_parser", "main"]
-
 # The commands in --help order, and their help. Each is the add_arguments and the
 # run_<name> (else run) of the cli module of its name; demo's is paper's.
 _HELP = {

@@ -6,8 +6,6 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["add_arguments", "run_demo", "run_paper"]
-
 
 def add_arguments(parser: Any) -> None:
     """Add the flags of ``wmr-jax paper`` and ``demo``."""

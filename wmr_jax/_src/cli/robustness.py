@@ -12,8 +12,6 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["add_arguments", "run"]
-
 # What the command writes into --out (the noise curve only with --noise-curve).
 _OUTPUTS = tuple(
     f"{stem}.{ext}"

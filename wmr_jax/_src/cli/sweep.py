@@ -9,8 +9,6 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["add_arguments", "run"]
-
 
 def _flags() -> dict[str, dict[str, Any]]:
     """Flag -> ``add_argument`` keywords, in ``--help`` order (values are checked in ``run``)."""

@@ -7,8 +7,6 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["add_arguments", "run"]
-
 # flag, TuneConfig field (or None), metavar, help
 _FLAGS = (
     ("--velocity", "velocity", "ideal|nonideal", "velocity loop the gains are tuned for"),

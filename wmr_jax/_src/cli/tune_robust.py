@@ -11,8 +11,6 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-__all__ = ["run"]
-
 
 def config_from(args: Any) -> Any:
     """The ``RobustConfig`` of the flags, each checked (one line naming a bad one)."""

@@ -9,8 +9,6 @@ from typing import Any
 from wmr_jax._src.cli import flags
 from wmr_jax._src.cli.robustness import add_study_flags
 
-__all__ = ["add_arguments", "run"]
-
 
 def add_arguments(parser: Any) -> None:
     """Add the flags of ``wmr-jax waypoints``."""

@@ -14,8 +14,6 @@ from wmr_jax._src.sim.sensing.estimators import (
     observer_radii,
 )
 
-__all__ = ["ekf", "observer"]
-
 
 def observer(c: c_law.Emitter, params: ObserverParams) -> str:
     """The observer's correction (``estimators._observer_update``)."""

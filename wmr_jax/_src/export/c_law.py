@@ -16,8 +16,6 @@ from wmr_jax._src.model import dynamics
 from wmr_jax._src.model.controllers.schedule import ScheduleParams, knot_radii
 from wmr_jax._src.model.params import Robot
 
-__all__ = ["Emitter", "arc", "kernels", "law", "limits", "polar_law", "scalar", "wrap"]
-
 
 class Emitter:
     """Literals of one precision: a constant as the C of the chosen real type."""

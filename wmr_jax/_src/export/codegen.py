@@ -39,8 +39,6 @@ from wmr_jax._src.sim.sensing.estimators import (
 )
 from wmr_jax._src.sim.sensing.loop import ClosedLoop
 
-__all__ = ["MAX_LATENCY", "REALS", "CSources", "c_sources"]
-
 REALS = ("double", "float")
 # Commands in flight the controller can hold (its ring of sent commands is
 # one longer): a compile-time bound, so that the state has a fixed size.

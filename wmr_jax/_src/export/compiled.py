@@ -22,15 +22,6 @@ import numpy as np
 
 from wmr_jax._src.export.codegen import HEADER, SOURCE
 
-__all__ = [
-    "CFLAGS",
-    "CONTRACT",
-    "CompiledController",
-    "compile_controller",
-    "compiler",
-    "sanitizers_work",
-]
-
 # The flags the exported files must compile cleanly with.
 CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror")
 # Multiply-adds fused where the CPU has them, as XLA:CPU compiles the JAX step.

@@ -37,14 +37,6 @@ from wmr_jax._src.sim.sensing.loop import (
     prepare_disturbed,
 )
 
-__all__ = [
-    "METADATA",
-    "compiled_metrics",
-    "evaluate_compiled",
-    "exported_loop",
-    "read_metadata",
-]
-
 # What `wmr-jax export` writes beside the C: the loop it was generated from.
 METADATA = "wmr_controller.json"
 

@@ -30,15 +30,6 @@ from wmr_jax._src.sim.rollout import Trajectory
 from wmr_jax._src.sim.sensing import loop as sensing_loop
 from wmr_jax._src.sim.sensing.disturbances import Disturbance
 
-__all__ = [
-    "identified_metrics",
-    "identified_rollout",
-    "is_identified",
-    "loaded_identified",
-    "read_identified",
-    "tuned_for_identified",
-]
-
 _KEYS = ("robot", "base_robot", "wheel_scale", "latency_samples", "noise")
 
 

@@ -35,8 +35,6 @@ from wmr_jax._src.identify import model
 from wmr_jax._src.model.controllers import shim_sung as law
 from wmr_jax._src.model.params import Robot
 
-__all__ = ["Fit", "Segments", "fit_batch", "fit_log", "levenberg_marquardt", "segments_of", "Z95"]
-
 Z95 = 1.959963984540054
 SEGMENT = 60  # samples in a segment's window
 WARMUP = model.MAX_LATENCY + 10  # periods replayed before it

@@ -13,8 +13,6 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["HEADER", "Log", "check_log", "read_csv", "read_bag", "read_log", "write_csv"]
-
 HEADER = ("t", "v_cmd", "omega_cmd", "x", "y", "theta")
 # A period is uniform when every step is within this fraction of the median.
 _UNIFORM = 1e-3

@@ -27,16 +27,6 @@ from wmr_jax._src.model.params import Robot
 from wmr_jax._src.sim import loops
 from wmr_jax._src.sim.sensing import disturbances
 
-__all__ = [
-    "LOGGED",
-    "MAX_LATENCY",
-    "SUBSTEPS",
-    "TrueRobot",
-    "fitted_robot",
-    "replay",
-    "replay_options",
-]
-
 # The largest latency the fit profiles over, in samples.
 MAX_LATENCY = 10
 SUBSTEPS = loops.DEFAULT_SUBSTEPS

@@ -18,9 +18,6 @@ import numpy as np
 from wmr_jax._src.identify import model
 from wmr_jax._src.model.params import Robot
 
-__all__ = ["plan_commands", "square_commands", "synthetic_log"]
-
-
 # The fastest turn a plan asks for, rad/s: a small robot spinning at the
 # rate its wheels allow traces loops a few cm wide, where its speed scale
 # hardly shows.

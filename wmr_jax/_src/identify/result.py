@@ -14,8 +14,6 @@ from wmr_jax._src.identify import fit as fitting
 from wmr_jax._src.identify import model
 from wmr_jax._src.model.params import Robot
 
-__all__ = ["identified", "table", "plot_fit", "true_robot"]
-
 
 def true_robot(base: Robot, result: fitting.Fit) -> Robot:
     """The identified robot: ``base`` with the fitted half-track and wheel-loop gain."""

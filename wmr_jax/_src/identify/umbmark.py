@@ -21,8 +21,6 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["umbmark", "square_ends"]
-
 
 def square_ends(poses: np.ndarray, starts: list[int], ends: list[int]) -> np.ndarray:
     """End errors ``(runs, 2)`` of square runs, in the frame of each run's start pose."""

@@ -18,19 +18,6 @@ import numpy as np
 from wmr_jax._src.model import dynamics
 from wmr_jax._src.model.params import Robot
 
-__all__ = [
-    "DEFAULT_SUBSTEPS",
-    "WheelState",
-    "advance",
-    "advance_split",
-    "body_acceleration",
-    "check_stability",
-    "inertia",
-    "kinetic_energy",
-    "limit_wheels",
-    "wheel_torques",
-]
-
 DEFAULT_SUBSTEPS = 10
 
 # RK4 is stable on ẏ = −k y for k h < 2.785; keep a margin, the loop is

@@ -24,8 +24,6 @@ from wmr_jax._src.sim import rollout as simulation
 from wmr_jax._src.sim.poses import horizon_steps, sample_poses
 from wmr_jax._src.sim.rollout import DEFAULT_DT
 
-__all__ = ["animate", "frame_timing", "gif_path", "write_gif"]
-
 
 def _pitch(poses: np.ndarray, refs: np.ndarray, title: str, arrow: float) -> tuple[Any, Any]:
     """``(fig, ax)`` framing the runs, with the references' heading arrows (``arrow`` cm)."""

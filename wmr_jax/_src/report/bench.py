@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["bench_table"]
-
 # Columns of the ratio table: key of the ratio entry -> heading.
 _RATIO_COLUMNS = {
     "vs_numpy_batch": "final_poses / NumPy batch",

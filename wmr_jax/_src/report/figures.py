@@ -10,6 +10,7 @@ from typing import Any
 import matplotlib
 
 matplotlib.use("Agg")  # files only; no display is assumed
+# What the report modules take from here: matplotlib after its backend is set.
 import matplotlib.animation as mpl_animation  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
@@ -19,19 +20,7 @@ from matplotlib.patches import Patch  # noqa: E402
 from wmr_jax._src import checks  # noqa: E402
 from wmr_jax._src.io import save_figure  # noqa: E402
 
-__all__ = [
-    "built",
-    "closed_after",
-    "image_formats",
-    "ListedColormap",
-    "Patch",
-    "mpl_animation",
-    "path_figure",
-    "plot_paths",
-    "plot_wheel_speeds",
-    "plt",
-    "save_closed",
-]
+__all__ = ["ListedColormap", "Patch", "mpl_animation", "plt"]  # matplotlib, as above
 
 
 def image_formats() -> list[str]:

@@ -24,8 +24,6 @@ from wmr_jax._src.report.tables import (
 )
 from wmr_jax._src.studies.maps import MapStudy, PoseGrid, PoseMetrics
 
-__all__ = ["comparison_table", "map_figure", "save_comparison", "save_map_study", "winner_figure"]
-
 # metric (a PoseMetrics field, or "success"), colour-bar label, colour map
 _MAP_FIELDS = (
     ("success", "success", "RdYlGn"),

@@ -15,8 +15,6 @@ from wmr_jax._src.report.figures import closed_after, plot_paths, plot_wheel_spe
 from wmr_jax._src.report.tables import markdown_table, number, percent, row_numbers
 from wmr_jax._src.sim.rollout import DEFAULT_DT
 
-__all__ = ["paper_summary_table", "save_fig7", "save_paper"]
-
 # k_r (cm/s) -> numbers of its figures: ideal paths, non-ideal paths, the two compared.
 _FIGURES = {120.0: (7, 8, 9), 60.0: (None, None, 10)}
 _TABLE_COLUMNS = [

@@ -6,8 +6,6 @@ import re
 import sys
 from typing import Any
 
-__all__ = ["PLAIN_INTERVAL_S", "bar", "on_terminal"]
-
 PLAIN_INTERVAL_S = 10.0
 # A status without the bar: "tune (ideal): 40/400 [00:12<01:48, T=0.05, loss=0.61s]".
 _PLAIN_FORMAT = "{desc}: {n_fmt}/{total_fmt} [{elapsed}<{remaining}{postfix}]"

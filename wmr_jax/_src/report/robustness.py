@@ -17,18 +17,6 @@ from wmr_jax._src.report.figures import built, plt, save_closed
 from wmr_jax._src.report.tables import markdown_table, percent, require_rows
 from wmr_jax._src.sim.poses import HORIZON_S
 
-__all__ = [
-    "NOISE_CURVE_COLUMNS",
-    "ROBUSTNESS_COLUMNS",
-    "STANDARD_COLUMNS",
-    "robustness_figure",
-    "robustness_table",
-    "standard_figure",
-    "write_robustness",
-    "write_noise_curve",
-    "write_standard_conditions",
-]
-
 # The columns of robustness.md, in order.
 ROBUSTNESS_COLUMNS = [
     "condition",

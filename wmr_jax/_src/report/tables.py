@@ -8,8 +8,6 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["json_number", "markdown_table", "number", "percent", "require_rows", "row_numbers"]
-
 
 def markdown_table(rows: list[dict[str, Any]], columns: list[str] | None = None) -> str:
     """Format rows of scalars (lists shown compactly) as a Markdown table, ``|`` escaped."""

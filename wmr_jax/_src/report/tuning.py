@@ -29,8 +29,6 @@ from wmr_jax._src.tuning.problems import (
 )
 from wmr_jax._src.tuning.robust import condition_score
 
-__all__ = ["comparison_table", "evaluation_table", "robust_comparison_table", "tuning_curve"]
-
 _GAIN_LABELS = {
     "kr": "k_r (cm/s)",
     "k_theta": "k_θ (rad/s)",

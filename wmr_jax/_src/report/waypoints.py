@@ -21,8 +21,6 @@ from wmr_jax._src.studies.waypoints import (
     soccer_waypoints,
 )
 
-__all__ = ["soccer_figure", "write_soccer"]
-
 
 def soccer_figure(runs: Sequence[SoccerRun], *, title: str) -> Any:
     """Draw the path of every run through the soccer waypoints, one column per controller.

@@ -31,25 +31,6 @@ from wmr_jax._src.sim.motion import (
     split_region,
 )
 
-__all__ = [
-    "COMPILER_OPTIONS",
-    "DEFAULT_STEPS",
-    "DEFAULT_SUBSTEPS",
-    "EntryJit",
-    "Options",
-    "StepOutput",
-    "VELOCITY_LOOPS",
-    "WHEEL_LIMITS",
-    "batch_axes",
-    "batched",
-    "ClosedLoopStep",
-    "LoopCarry",
-    "for_robot",
-    "jit_top_level",
-    "remat",
-    "scan_closed_loop",
-]
-
 VELOCITY_LOOPS = ("ideal", "nonideal")
 WHEEL_LIMITS = ("clip", "scale")
 DEFAULT_SUBSTEPS = velocity_loop.DEFAULT_SUBSTEPS

@@ -25,25 +25,6 @@ from wmr_jax._src.checks import (
 )
 from wmr_jax._src.model.controllers import shim_sung as law
 
-__all__ = [
-    "PoseMetrics",
-    "DEFAULT_OMEGA_DEAD_BAND",
-    "DEFAULT_TOL_R",
-    "DEFAULT_V_DEAD_BAND",
-    "RunMetrics",
-    "Thresholds",
-    "stream_result",
-    "stream_start",
-    "stream_update",
-    "DEFAULT_TOL_THETA",
-    "arrival_time",
-    "arrived",
-    "path_length",
-    "region_time",
-    "success_rate",
-    "zigzag_count",
-]
-
 DEFAULT_TOL_R = 1.0  # cm
 DEFAULT_TOL_THETA = math.radians(5.0)
 DEFAULT_V_DEAD_BAND = 1.0  # cm/s

@@ -19,18 +19,6 @@ from wmr_jax._src.model.params import Robot
 if TYPE_CHECKING:
     from wmr_jax._src.sim.loops import Options
 
-__all__ = [
-    "ArcMove",
-    "HeldCommand",
-    "SplitPose",
-    "advance_period",
-    "ideal_move",
-    "initial_wheel",
-    "speed_limit",
-    "split_command",
-    "split_region",
-]
-
 
 class SplitPose(NamedTuple):
     """A pose as the loops carry it: complex ``x + i y`` cm, ``cos θ + i sin θ``, θ rad."""

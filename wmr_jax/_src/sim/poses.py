@@ -23,16 +23,6 @@ from wmr_jax._src.checks import (
     position_limit,
 )
 
-__all__ = [
-    "EVAL_R_MAX",
-    "EVAL_R_MIN",
-    "HORIZON_S",
-    "PAPER_REFS_DEG",
-    "horizon_steps",
-    "paper_refs",
-    "sample_poses",
-]
-
 # docs/model.md §6: the default evaluation set and horizon.
 EVAL_R_MIN = 5.0  # cm
 EVAL_R_MAX = 80.0  # cm

@@ -18,7 +18,6 @@ import numpy as np
 
 from wmr_jax._src.checks import (
     MAX_STEPS,
-    MAX_TEMPERATURE,
     as_float_tree,
     as_poses,
     batch_sizes,
@@ -49,20 +48,6 @@ from wmr_jax._src.sim.loops import (
     for_robot,
     scan_closed_loop,
 )
-
-__all__ = [
-    "DEFAULT_DT",
-    "MAX_STEPS",
-    "MAX_TEMPERATURE",
-    "Trajectory",
-    "batch_rollout",
-    "check_temperature",
-    "final_poses",
-    "finite_result",
-    "make_options",
-    "prepare",
-    "rollout",
-]
 
 DEFAULT_DT = 0.033
 

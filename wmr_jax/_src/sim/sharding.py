@@ -23,15 +23,6 @@ import numpy as np
 from wmr_jax._src import checks
 from wmr_jax._src.checks import check_int
 
-__all__ = [
-    "ShardedBatch",
-    "batch_sharding",
-    "checked_devices",
-    "shard",
-    "unpad",
-    "use_cpu_devices",
-]
-
 BATCH_AXIS = "batch"
 
 

@@ -24,8 +24,6 @@ from wmr_jax._src.oracle.numpy_batch import numpy_final_poses
 from wmr_jax._src.sim.poses import MAX_SAMPLES
 from wmr_jax._src.studies.bench_timing import Timing, environment, time_group
 
-__all__ = ["CASES", "BenchConfig", "numpy_final_poses", "run_benchmark"]
-
 DEFAULT_SIZES = (1_000, 10_000, 100_000)
 DEFAULT_STEPS = 100
 DEFAULT_REPEATS = 5

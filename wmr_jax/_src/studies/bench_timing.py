@@ -17,8 +17,6 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Timing", "environment", "time_group"]
-
 
 def _cpu_busy_seconds() -> float | None:
     """The CPU seconds all processes have used (Linux), or ``None``."""

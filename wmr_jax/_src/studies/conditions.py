@@ -33,14 +33,6 @@ from wmr_jax._src.studies.robustness import (
     summary_row,
 )
 
-__all__ = [
-    "MODEL_ROBOT",
-    "NOISE_CURVE_XY",
-    "evaluate_loop",
-    "noise_curve",
-    "standard_conditions",
-]
-
 
 def _closed_loop(value: Any, controller: Any, estimator: Any, where: str) -> ClosedLoop:
     """A ``ClosedLoop`` as it is, or params of ``controller``; refused if batched."""

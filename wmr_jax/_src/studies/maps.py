@@ -25,19 +25,6 @@ from wmr_jax._src.sim.rollout import DEFAULT_DT
 from wmr_jax._src.studies.robustness import mean_median, robot_defaults, study_horizon
 from wmr_jax._src.studies.sweep import sweep
 
-__all__ = [
-    "COMPARISON_RUNS",
-    "DEFAULT_HEADINGS_DEG",
-    "MapStudy",
-    "PoseGrid",
-    "PoseMetrics",
-    "compare_controllers",
-    "evaluate_poses",
-    "map_study",
-    "pose_grid",
-    "summarize",
-]
-
 DEFAULT_HEADINGS_DEG = (-90.0, 0.0, 90.0, 180.0)
 DEFAULT_CHUNK = 16384
 

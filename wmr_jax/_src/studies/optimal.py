@@ -17,8 +17,6 @@ from wmr_jax._src.model.params import Robot, validate_robot
 from wmr_jax._src.sim.metrics import DEFAULT_TOL_R
 from wmr_jax._src.sim.rollout import DEFAULT_DT
 
-__all__ = ["TimeBounds", "bound_ratios", "time_bounds"]
-
 _ROUNDING = 1e-9  # a whole number of periods up to rounding is not one more
 
 

@@ -20,17 +20,6 @@ from wmr_jax._src.sim import metrics
 from wmr_jax._src.sim.poses import paper_refs
 from wmr_jax._src.sim.rollout import DEFAULT_DT, Trajectory, batch_rollout
 
-__all__ = [
-    "Fig7Runs",
-    "PaperCase",
-    "PaperRuns",
-    "fig6_curve",
-    "fig7_runs",
-    "paper_runs",
-    "residual_bound",
-    "run_table",
-]
-
 PAPER_STEPS = 91  # 3 s at 33 ms: every paper run has settled by then
 PAPER_KR = (120.0, 60.0)  # cm/s: Figs. 7–9 violate the wheel-speed condition, Fig. 10 holds it
 FIG6_MARK_DEG = 70.0  # the paper's Φ_m

@@ -25,19 +25,6 @@ from wmr_jax._src.sim.sensing.disturbances import Disturbance, draw_disturbances
 from wmr_jax._src.sim.sensing.estimators import resolve_estimator
 from wmr_jax._src.sim.sensing.loop import disturbed_metrics
 
-__all__ = [
-    "DEFAULT_NOISE_DEG",
-    "DEFAULT_NOISE_XY",
-    "LATE_SHARE",
-    "ROBUSTNESS_CONDITIONS",
-    "monte_carlo",
-    "robot_defaults",
-    "robustness_study",
-    "settled_at_horizon",
-    "study_horizon",
-    "summary_row",
-]
-
 DEFAULT_NOISE_XY = (0.0, 0.25, 0.5, 1.0, 2.0)  # σ of x and y, cm
 DEFAULT_NOISE_DEG = (0.0, 0.5, 1.0, 2.0, 4.0)  # σ of θ, degrees, paired with the above
 

@@ -27,8 +27,6 @@ from wmr_jax._src.sim import rollout as simulation
 from wmr_jax._src.sim.sharding import checked_devices
 from wmr_jax._src.studies import sweep_files as files
 
-__all__ = ["DEFAULT_CHUNK_SIZE", "SWEEP_FIELDS", "sweep"]
-
 DEFAULT_CHUNK_SIZE = 131_072
 
 

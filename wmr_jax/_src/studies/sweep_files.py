@@ -22,8 +22,6 @@ from wmr_jax._src.provenance import code_version
 if TYPE_CHECKING:
     from wmr_jax._src.studies.sweep import _Job
 
-__all__ = ["ChunkStore", "OtherSettingsWarning", "digest", "fingerprint", "implausible", "settings"]
-
 _MANIFEST = "sweep.json"
 _RESULTS = "results.npz"
 

@@ -28,21 +28,6 @@ from wmr_jax._src.sim.loops import Options
 from wmr_jax._src.sim.poses import HORIZON_S
 from wmr_jax._src.sim.rollout import DEFAULT_DT, Trajectory
 
-__all__ = [
-    "SOCCER_WAYPOINTS_DEG",
-    "ChainRun",
-    "SoccerRun",
-    "SoccerStudy",
-    "TrackRun",
-    "batch_chain_rollout",
-    "batch_track_rollout",
-    "chain_rollout",
-    "soccer_steps",
-    "soccer_study",
-    "soccer_waypoints",
-    "track_rollout",
-]
-
 # A soccer-like sequence on a 160 cm × 120 cm pitch, (x cm, y cm, θ deg): run to
 # the ball, turn it upfield, dribble, cut back, return to defend, face the goal.
 SOCCER_WAYPOINTS_DEG = (

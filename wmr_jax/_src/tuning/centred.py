@@ -17,8 +17,6 @@ import jax.numpy as jnp
 
 from wmr_jax._src.sim.sensing.disturbances import STANDARD_CONDITIONS, Disturbance
 
-__all__ = ["Centred", "around", "batches", "draw", "for_config"]
-
 # choice: a neighbouring latency is drawn too when its cost in identify's
 # profile over the latency is within this fraction of the winner's; on a log
 # that shows the latency at all, one sample off costs far more.

@@ -35,8 +35,6 @@ from wmr_jax._src.tuning.search import _evosax_cma_es, cma_es_search, random_sea
 from wmr_jax._src.tuning.trainer import differences
 from wmr_jax._src.tuning.training import TuneConfig, train
 
-__all__ = ["COMPARE_SEEDS", "METHODS", "compare", "minimised", "run_comparison", "saved_rows"]
-
 # The methods compared, in the order of each (problem, seed)'s rows.
 METHODS = ("gradient", "cma-es", "random search")
 # The seeds of a resumable comparison (this one's and the robust one's).

@@ -20,8 +20,6 @@ from wmr_jax._src.tuning.parametrisation import (
     logits_from_gains,
 )
 
-__all__ = ["GradientCost", "gradient_cost", "write_gradient_costs"]
-
 
 class GradientCost(NamedTuple):
     """Measured cost of one loss gradient against the forward pass.

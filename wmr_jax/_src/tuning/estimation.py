@@ -34,16 +34,6 @@ from wmr_jax._src.sim.sensing.loop import ClosedLoop
 from wmr_jax._src.tuning.parametrisation import checked_point
 from wmr_jax._src.tuning.problems import FIXED, Problem
 
-__all__ = [
-    "EstimatorBox",
-    "JointProblem",
-    "concrete_loop",
-    "estimator_box",
-    "estimator_from_json",
-    "estimator_json",
-    "robust_gains",
-]
-
 _GAIN = (1e-3, 1.0)
 # log boxes of the filter's covariances: wheel_error relative, σ_xy cm, σ_θ rad
 _EKF_LOG = {

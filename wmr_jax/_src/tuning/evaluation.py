@@ -26,18 +26,6 @@ from wmr_jax._src.sim import rollout as simulation
 from wmr_jax._src.sim.metrics import arrival_time
 from wmr_jax._src.sim.poses import horizon_steps, sample_poses
 
-__all__ = [
-    "EVAL_POSES",
-    "EVAL_SEED",
-    "Evaluation",
-    "evaluate",
-    "held_out_poses",
-    "poses_digest",
-    "quiet_scoring",
-    "report_ratios",
-    "wheel_speed_ok",
-]
-
 # The options of a hard-law run that ``evaluate`` and ``random_search`` take.
 RUN_OPTIONS = ("robot", "dt", "horizon", "velocity", "substeps", "wheel_limit")
 

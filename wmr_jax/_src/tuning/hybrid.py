@@ -8,8 +8,6 @@ from __future__ import annotations
 
 from wmr_jax._src.tuning import robust
 
-__all__ = ["polish"]
-
 
 def polish(key, z, refs, budget_s, robot, dt, joint, noise=None, std=0.1):
     """CMA-ES from the logits ``z`` for ``budget_s`` s of CPU time: ``(ClosedLoop, candidates)``.

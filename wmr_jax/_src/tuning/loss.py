@@ -44,8 +44,6 @@ from wmr_jax._src.sim.poses import HORIZON_S, horizon_steps
 from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS
 from wmr_jax._src.tuning.problems import FIXED, Problem, get_problem
 
-__all__ = ["LossTerms", "LossWeights", "loss_terms", "robust_gradient", "tuning_loss"]
-
 
 @dataclasses.dataclass(frozen=True)
 class LossWeights:

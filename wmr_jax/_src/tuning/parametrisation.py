@@ -21,17 +21,6 @@ from wmr_jax._src.checks import is_traced, real_array, require, require_unbatche
 from wmr_jax._src.model.params import Gains, Robot, validate_gains, validate_one_robot
 from wmr_jax._src.sim.poses import EVAL_R_MAX
 
-__all__ = [
-    "GAIN_FIELDS",
-    "PAPER_FEASIBLE_GAINS",
-    "gains_as_dict",
-    "paper_feasible_gains",
-    "gains_from_logits",
-    "gains_from_unit",
-    "logits_from_gains",
-    "unit_from_gains",
-]
-
 GAIN_FIELDS = tuple(f.name for f in dataclasses.fields(Gains))
 
 # The paper's Fig. 10 gains, the ones that meet k_r + L k_θ ≤ V_max

@@ -28,17 +28,6 @@ from wmr_jax._src.model.params import Gains, Robot
 from wmr_jax._src.sim.rollout import DEFAULT_DT
 from wmr_jax._src.tuning import parametrisation as fixed
 
-__all__ = [
-    "FIXED",
-    "MAX_TUNED_KNOTS",
-    "PROBLEMS",
-    "SCHEDULED",
-    "Problem",
-    "get_problem",
-    "params_json",
-    "schedule_problem",
-]
-
 
 @dataclasses.dataclass(frozen=True)
 class Problem:

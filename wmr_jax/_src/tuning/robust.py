@@ -56,20 +56,6 @@ from wmr_jax._src.tuning.search import (
 )
 from wmr_jax._src.tuning.trainer import TrainState, TuneResult
 
-__all__ = [
-    "JointProblem",
-    "RobustConfig",
-    "RobustLoss",
-    "black_box",
-    "joint_problem",
-    "robust_loss",
-    "robust_problem",
-    "robust_score",
-    "sample_conditions",
-    "tune_robust",
-]
-
-
 # Seed of the noise the standard conditions are judged under: that of
 # ``wmr-jax robustness`` at its default ``--seed``, so both write the same table.
 EVAL_NOISE_SEED = 0

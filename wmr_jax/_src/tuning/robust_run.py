@@ -26,18 +26,6 @@ from wmr_jax._src.tuning.compare import COMPARE_SEEDS, comparison_settings
 from wmr_jax._src.tuning.evaluation import EVAL_SEED, held_out_poses, poses_digest
 from wmr_jax._src.tuning.robust import RobustConfig
 
-__all__ = [
-    "COLUMNS",
-    "COMPARE_SEEDS",
-    "compare_seed",
-    "described",
-    "minimised",
-    "poses_digest",
-    "run_comparison",
-    "save_tuned",
-    "write_evaluation",
-]
-
 COLUMNS = ["condition", "gains", "feedback", "success", "mean arrival s", "median arrival s"]
 
 

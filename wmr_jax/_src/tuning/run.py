@@ -18,8 +18,6 @@ from typing import Any
 from wmr_jax._src import io
 from wmr_jax._src.tuning import trainer, training
 
-__all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_NAME", "held_out_bounds", "tune", "write_results"]
-
 CHECKPOINT_NAME = "checkpoint.npz"
 CHECKPOINT_FORMAT = 3
 

@@ -32,17 +32,6 @@ from wmr_jax._src.tuning.estimation import estimator_from_json, estimator_json
 from wmr_jax._src.tuning.parametrisation import GAIN_FIELDS
 from wmr_jax._src.tuning.problems import FIXED, SCHEDULED, params_json
 
-__all__ = [
-    "JUDGING_TUNED",
-    "PARAM_UNITS",
-    "TUNINGS",
-    "load_tuned",
-    "load_tuned_and_tuning",
-    "tuned_json",
-    "tuning_of",
-    "write_tuned",
-]
-
 _KINDS = {"fixed": (SHIM_SUNG, Gains), "schedule": (SCHEDULE, ScheduleParams)}
 _SCHEDULE_FIELDS = (*TABLES, *SHAPE_FIELDS, "v_max", "half_track")
 

@@ -33,17 +33,6 @@ from wmr_jax._src.tuning.evaluation import check_run, hard_runs, quiet_scoring, 
 from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS, unit_from_gains
 from wmr_jax._src.tuning.problems import FIXED, Problem, get_problem
 
-__all__ = [
-    "SearchResult",
-    "cma_es_proposals",
-    "cma_es_search",
-    "evosax_available",
-    "population_scores",
-    "random_search",
-    "robust_population_scores",
-    "search_loop",
-]
-
 # Random search scores a run that never arrives as twice the horizon: worse
 # than any arrival, but finite, so that candidates' means stay comparable.
 FAILURE_FACTOR = 2.0

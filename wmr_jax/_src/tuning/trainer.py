@@ -27,29 +27,6 @@ from wmr_jax._src.sim.poses import MAX_SAMPLES
 from wmr_jax._src.sim.rollout import check_temperature
 from wmr_jax._src.tuning.search import clock
 
-__all__ = [
-    "BEST_MARGIN",
-    "Hyper",
-    "TrainState",
-    "TrainingProblem",
-    "TuneResult",
-    "anneal",
-    "best_iteration",
-    "check_loop",
-    "checked_config",
-    "differences",
-    "fit",
-    "iterate",
-    "optimizer",
-    "own_state",
-    "restore_state",
-    "run_text",
-    "start_state",
-    "state_arrays",
-    "train_step",
-    "verdict",
-]
-
 
 @dataclasses.dataclass(frozen=True)
 class Hyper:

@@ -47,16 +47,6 @@ from wmr_jax._src.tuning.problems import FIXED, MAX_TUNED_KNOTS, Problem, schedu
 from wmr_jax._src.tuning.search import FAILURE_FACTOR, random_search
 from wmr_jax._src.tuning.trainer import TrainState, TuneResult
 
-__all__ = [
-    "TuneConfig",
-    "gain_problem",
-    "init_state",
-    "run_identity",
-    "train",
-    "training_poses",
-]
-
-
 # The gain schedule's settings where they differ from the fixed gains': its
 # parameters need more and longer steps than seven, and a colder end of the
 # annealing helps it (not the fixed gains); docs/tuning.md.

@@ -19,19 +19,6 @@ from wmr_jax._src.model.params import Robot
 from wmr_jax._src.sim import motion
 from wmr_jax._src.sim.poses import sample_poses
 
-__all__ = [
-    "STANDARD_CONDITIONS",
-    "STANDARD_MISMATCH",
-    "Disturbance",
-    "checked_disturbance",
-    "draw_disturbances",
-    "Measurement",
-    "measurement",
-    "realised",
-    "sample_disturbance",
-]
-
-
 # The standard conditions of docs/model.md §7, with the nominal model first:
 # (label, σ_xy cm, σ_θ degrees, one-sample latency). Ideal loop.
 STANDARD_CONDITIONS = (

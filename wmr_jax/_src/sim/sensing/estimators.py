@@ -31,19 +31,6 @@ from wmr_jax._src.model.dynamics import sin_cos
 from wmr_jax._src.model.params import Robot
 from wmr_jax._src.sim import motion
 
-__all__ = [
-    "EKF",
-    "ESTIMATORS",
-    "EKFParams",
-    "Estimator",
-    "OBSERVER",
-    "OBSERVER_KNOTS",
-    "OBSERVER_R",
-    "ObserverParams",
-    "observer_radii",
-    "resolve_estimator",
-]
-
 OBSERVER_KNOTS = 6  # knots per gain table by default
 # The last knot, cm: the gains matter near the goal, where the law is most
 # sensitive to noise; beyond it they are constant.

@@ -26,17 +26,6 @@ from wmr_jax._src.sim.rollout import DEFAULT_DT
 from wmr_jax._src.sim.sensing.disturbances import Disturbance, checked_disturbance
 from wmr_jax._src.sim.sensing.estimators import resolve_estimator
 
-__all__ = [
-    "ClosedLoop",
-    "batched_disturbed",
-    "disturbed_rollout",
-    "disturbed_run",
-    "disturbed_metrics",
-    "metrics_fold",
-    "metrics_result",
-    "prepare_disturbed",
-]
-
 
 class ClosedLoop(NamedTuple):
     """A controller, its parameters and the estimator between it and the sensor (``load_tuned``).
