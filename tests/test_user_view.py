@@ -131,7 +131,8 @@ def test_the_peak_rim_speed_beside_v_max_says_it_includes_the_mismatch(capsys, t
 
 
 def test_a_failing_run_under_noise_points_to_robust_tuning(capsys, tmp_path):
-    refs = _file(tmp_path, "refs.csv", "400,0,0\n")
+    # Two references, as the files above: the program they compiled.
+    refs = _file(tmp_path, "refs.csv", "400,0,0\n-400,0,0\n")
     argv = ["evaluate", "--gains", _gains(tmp_path), "--refs", refs, "--horizon", "1"]
     assert main([*argv, "--condition", "noise"]) == 0
     assert "hint: these gains were not tuned for this noise; wmr-jax tune --robust" in (
