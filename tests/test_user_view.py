@@ -190,7 +190,8 @@ def test_simulate_prints_headings_wrapped(radians, degrees):
 
 
 def test_simulate_prints_the_reference_heading_wrapped(capsys):
-    assert main(["simulate", "--ref", "10", "0", "405", "--steps", "2"]) == 0
+    # Three steps, as the test below: one compiled run for both.
+    assert main(["simulate", "--ref", "10", "0", "405", "--steps", "3"]) == 0
     assert "θ=45.00°" in capsys.readouterr().out
 
 
