@@ -66,6 +66,16 @@ def quiet(seed: int, delay: float) -> studies.Disturbance:
     return studies.Disturbance(refs, np.zeros((N, STEPS, 3)), np.ones((N, 3)), np.full(N, delay))
 
 
+def nominal_poses(seed: int, m: int) -> np.ndarray:
+    """The undisturbed runs to ``_draw(seed)``'s references over ``STEPS - m`` periods, poses.
+
+    The first periods of one compiled run over ``STEPS``: a run's poses up
+    to a period do not depend on how many periods follow.
+    """
+    poses = np.asarray(w.batch_rollout(_draw(seed).ref, GAINS, steps=STEPS).poses)
+    return poses[:, : STEPS - m + 1]
+
+
 def reference_runs(spec: studies.Disturbance, estimator) -> list[dict]:
     return [
         reference_disturbed_rollout(
@@ -133,7 +143,7 @@ def test_compensated_latency_is_the_nominal_run_one_period_late(name):
     # run's pose after period k + 1 is the nominal run's after period k.
     spec = quiet(2, 1.0)
     got = studies.disturbed_rollout(spec, GAINS, estimator=ESTIMATORS[name])
-    nominal = np.asarray(w.batch_rollout(spec.ref, GAINS, steps=STEPS - 1).poses)
+    nominal = nominal_poses(2, 1)
     np.testing.assert_array_equal(got["poses"][:, 1], got["poses"][:, 0])
     # Same arcs, same law: equal to rounding (1e-12 cm, rad).
     np.testing.assert_allclose(got["poses"][:, 1:], nominal, rtol=0, atol=1e-12)
@@ -166,16 +176,18 @@ def test_a_latency_of_several_samples_matches_the_numpy_reference(name):
         assert abs(got["v"][i, m]) + abs(got["omega"][i, m]) > 0.0
 
 
-@pytest.mark.parametrize("m", [2, 3])
-def test_compensated_latency_of_m_samples_is_the_nominal_run_m_periods_late(m):
+def test_compensated_latency_of_m_samples_is_the_nominal_run_m_periods_late():
     # As for one sample: the robot rests over m periods, then each command
     # starts at the pose the law was handed, rolled over the m in flight.
-    spec = quiet(2, float(m))
+    # One latency per run, m = 0 to 3 (the batch of the test above).
+    spec = quiet(2, 0.0)._replace(delay=LONG_DELAYS)
     got = studies.disturbed_rollout(spec, GAINS, estimator=ESTIMATORS["ekf"])
-    nominal = np.asarray(w.batch_rollout(spec.ref, GAINS, steps=STEPS - m).poses)
-    for k in range(1, m + 1):
-        np.testing.assert_array_equal(got["poses"][:, k], got["poses"][:, 0])
-    np.testing.assert_allclose(got["poses"][:, m:], nominal, rtol=0, atol=1e-12)
+    nominal = nominal_poses(2, 0)
+    for i, m in enumerate(LONG_DELAYS.astype(int)):
+        for k in range(1, m + 1):
+            np.testing.assert_array_equal(got["poses"][i, k], got["poses"][i, 0])
+        np.testing.assert_allclose(got["poses"][i, m:], nominal[i, : STEPS - m + 1], atol=1e-12)
+    assert set(LONG_DELAYS) >= {2.0, 3.0}
 
 
 def test_compensation_rolls_the_commands_in_flight_through_the_speed_limiter():
@@ -186,7 +198,7 @@ def test_compensation_rolls_the_commands_in_flight_through_the_speed_limiter():
     got = studies.disturbed_rollout(spec, GAINS, estimator="observer", robot=heavy)
     nominal = np.asarray(w.batch_rollout(spec.ref, GAINS, steps=STEPS - m, robot=heavy).poses)
     np.testing.assert_allclose(got["poses"][:, m:], nominal, rtol=0, atol=1e-9)
-    free = np.asarray(w.batch_rollout(spec.ref, GAINS, steps=STEPS - m).poses)
+    free = nominal_poses(2, m)
     assert np.abs(free - nominal).max() > 1.0  # the limiter binds
 
 

@@ -105,7 +105,10 @@ def test_headings_in_degrees_are_warned_about(capsys, tmp_path):
 
 
 def test_references_in_cm_and_radians_pass_without_a_word(capsys, tmp_path):
-    refs = _file(tmp_path, "refs.csv", "30,20,0.8\n-40,10,3.1\n0.5,0,6.2\n")
+    # Not every reference within 1 cm of the start, a heading just below 2π:
+    # neither warning. Two references, as in the two warned files above, so
+    # the three tests run one compiled program.
+    refs = _file(tmp_path, "refs.csv", "30,20,0.8\n0.5,0,6.2\n")
     assert main(["evaluate", "--gains", _gains(tmp_path), "--refs", refs, "--horizon", "1"]) == 0
     assert capsys.readouterr().err == ""
 
@@ -128,7 +131,8 @@ def test_the_peak_rim_speed_beside_v_max_says_it_includes_the_mismatch(capsys, t
 
 
 def test_a_failing_run_under_noise_points_to_robust_tuning(capsys, tmp_path):
-    refs = _file(tmp_path, "refs.csv", "400,0,0\n")
+    # Two references, as the files above: the program they compiled.
+    refs = _file(tmp_path, "refs.csv", "400,0,0\n-400,0,0\n")
     argv = ["evaluate", "--gains", _gains(tmp_path), "--refs", refs, "--horizon", "1"]
     assert main([*argv, "--condition", "noise"]) == 0
     assert "hint: these gains were not tuned for this noise; wmr-jax tune --robust" in (
@@ -186,7 +190,8 @@ def test_simulate_prints_headings_wrapped(radians, degrees):
 
 
 def test_simulate_prints_the_reference_heading_wrapped(capsys):
-    assert main(["simulate", "--ref", "10", "0", "405", "--steps", "2"]) == 0
+    # Three steps, as the test below: one compiled run for both.
+    assert main(["simulate", "--ref", "10", "0", "405", "--steps", "3"]) == 0
     assert "θ=45.00°" in capsys.readouterr().out
 
 
