@@ -12,7 +12,14 @@ import pytest
 
 import wmr_jax as w
 from wmr_jax import tuning
-from wmr_jax._src.model.robots import describe_robot, robot_json, same_robot
+from wmr_jax._src.model.robots import (
+    ROBOT_FIELDS,
+    describe_robot,
+    implausible,
+    read_robot,
+    robot_json,
+    same_robot,
+)
 
 
 def _read(tmp_path, name, text):
@@ -293,3 +300,38 @@ def test_a_robot_built_in_python_takes_cm_as_given_and_never_warns():
         assert (copy.half_track, copy.body_mass, copy.v_max) == (0.09, 2.0, 0.22)
         assert jax.tree.map(lambda x: x, robot) == robot
         assert dataclasses.replace(w.Robot(), v_max=0.3).v_max == 0.3
+
+
+def test_an_identify_output_gives_its_robot_block_and_says_so(tmp_path):
+    identified = {"wheel_scale": [1.01, 0.99], "robot": {"half_track": 9.5, "v_max": 30.0}}
+    path = tmp_path / "identified.json"
+    path.write_text(json.dumps(identified))
+    loaded = read_robot(path)
+    assert (loaded.robot.half_track, loaded.robot.v_max) == (9.5, 30.0)
+    assert loaded.note.startswith(f"{path}: the identified robot")
+    # Without the identification's wheel scales, "robot" is an unknown Robot field.
+    plain = tmp_path / "plain.json"
+    plain.write_text(json.dumps({"robot": {"half_track": 9.5}}))
+    with pytest.raises(ValueError, match="robot"):
+        read_robot(plain)
+    # Robot fields beside the scales but no robot block: read at the top level.
+    flat = tmp_path / "flat.json"
+    flat.write_text(json.dumps({"wheel_scale": 1.0, "half_track": 9.5}))
+    with pytest.raises(ValueError, match="wheel_scale"):
+        read_robot(flat)
+
+
+def test_a_json_file_that_is_not_an_object_lists_the_robot_fields(tmp_path):
+    path = tmp_path / "list.json"
+    path.write_text("[8.0, 22.0]")
+    with pytest.raises(ValueError) as err:
+        read_robot(path)
+    assert str(err.value).endswith(f"(keys among {', '.join(ROBOT_FIELDS)})")
+
+
+def test_plausibility_looks_at_every_number_and_at_positive_finite_ones_only():
+    # A value that is not a number does not hide the fields after it.
+    assert [f for f, *_ in implausible({"half_track": "8", "v_max": 1e5})] == ["v_max"]
+    # Booleans, zero and infinity are refused where the robot is used, not called implausible.
+    assert implausible({"half_track": True, "wheel_radius": 0.0, "v_max": float("inf")}) == []
+    assert implausible({"half_track": 1000.0}) == [("half_track", 1000.0, (0.5, 500.0, "cm"))]
