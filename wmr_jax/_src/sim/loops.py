@@ -1,8 +1,6 @@
-"""The closed loop of one pose as a ``lax.scan``, and the one ``vmap`` that batches it.
+"""The closed loop of one pose as a ``lax.scan`` (docs/model.md §4, §7, §9), and its ``vmap``.
 
-``ClosedLoopStep`` is one control period (``docs/model.md §4, §7, §9``);
-``scan_closed_loop`` runs it, recording the run or folding it into streamed
-metrics. Nothing here checks its inputs: the entry points do that first.
+Nothing here checks its inputs: the entry points do that first.
 """
 
 from __future__ import annotations
@@ -28,16 +26,12 @@ from wmr_jax._src.sim.motion import (
     initial_wheel,
     speed_limit,
     split_command,
-    split_region,
 )
 
 VELOCITY_LOOPS = ("ideal", "nonideal")
 WHEEL_LIMITS = ("clip", "scale")
 DEFAULT_SUBSTEPS = velocity_loop.DEFAULT_SUBSTEPS
 DEFAULT_STEPS = 150
-
-
-# ---------------------------------------------------------------- single pose
 
 
 @dataclasses.dataclass(frozen=True)
@@ -84,11 +78,9 @@ class Options:
 def for_robot(options: Options, robot: Robot, dt: Any) -> Options:
     """Return ``options`` fitted to ``robot``: its speed limiter on, vanishing terms left out.
 
-    Ideal loop: the speed limiter is on where the robot has an acceleration
-    limit (docs/model.md §4.2.2). Non-ideal loop: no integral state where
-    ``integral_gain = 0``, no Coriolis terms where ``com_offset = 0``, and
-    ``small_turn`` where ``V_max dt / (L substeps) ≤ π/2``. Traced values
-    keep the general loop.
+    Ideal loop: the limiter where the robot has an acceleration limit
+    (docs/model.md §4.2.2). Non-ideal loop: no integral state, Coriolis terms
+    or range reduction where they vanish. Traced values keep the general loop.
     """
 
     def concrete(value: Any) -> np.ndarray | None:
@@ -118,11 +110,7 @@ def for_robot(options: Options, robot: Robot, dt: Any) -> Options:
 
 
 class StepOutput(NamedTuple):
-    """What one control period reports (one sample of a ``Trajectory``).
-
-    ``v``, ``ω``: the command applied (before a speed limiter and the wheels'
-    mismatch); ``region`` is ``-1`` in a disturbed run.
-    """
+    """One period's sample of a ``Trajectory``; ``v``, ``ω`` before limiter and mismatch."""
 
     v: jax.Array
     omega: jax.Array
@@ -135,12 +123,7 @@ Fold = Callable[[Any, "SplitPose", StepOutput], Any]
 
 
 class LoopCarry(NamedTuple):
-    """What the one closed-loop step carries from period to period.
-
-    ``command`` is computed at the sample (``v + i ω``); ``in_flight`` the
-    commands of the ``max_delay`` samples before it, newest first, and
-    ``moves`` their arcs (disturbed runs); ``ref`` is carried with ``aim`` only.
-    """
+    """The scan's carry: ``command`` is ``v + i ω``; ``in_flight``/``moves`` newest first."""
 
     pose: Any
     wheel: Any
@@ -156,13 +139,9 @@ class LoopCarry(NamedTuple):
 class ClosedLoopStep:
     """One control period of the closed loop: law → commands in flight → velocity loop → robot.
 
-    The one step of every run (docs/model.md §4, §7, §9). Optional parts,
-    ``None`` where a run has none: ``disturbance`` of one run,
-    ``options.estimator`` with its parameters ``estimate``, and
-    ``aim(acc) -> ref``, the reference of the next command from the fold's
-    accumulator (waypoint chains). The pose rides as a ``SplitPose`` and the
-    next command, computed at the end of each period, as ``v + i ω``: no step
-    recomputes the heading's sine, and XLA:CPU evaluates the law in one loop.
+    Optional parts are ``None`` where a run has none: ``disturbance``,
+    ``estimate`` (the estimator's parameters), and ``aim(acc) -> ref``, the
+    next command's reference from the fold's accumulator (waypoint chains).
     """
 
     ref: jax.Array
@@ -199,18 +178,14 @@ class ClosedLoopStep:
         return applied
 
     def followed(self, wheel: Any, command: jax.Array) -> tuple[jax.Array, Any]:
-        """``command`` after the speed limiter in state ``wheel`` (where the loop has one)."""
+        """``command`` after the speed limiter, if any, in state ``wheel``."""
         if not self.limiter:
             return command, wheel
         v, omega = speed_limit(wheel, command.real, command.imag, self.robot, self.dt)
         return jax.lax.complex(v, omega), HeldCommand(v, omega)
 
     def law_input(self, estimate: SplitPose, queue: tuple, moves: tuple, wheel: Any) -> SplitPose:
-        """The estimate rolled over the commands in flight, oldest first (compensation).
-
-        ``queue``/``moves``: the commands in flight and their arcs, newest
-        first; with a speed limiter, each passes through it as it will.
-        """
+        """The estimate rolled over the commands in flight, oldest first (compensation)."""
         if not self.estimate.compensate:
             return estimate
         for j in reversed(range(self.slots)):
@@ -238,8 +213,6 @@ class ClosedLoopStep:
             if estimator is None:
                 first = self.law(sensed, ref)
             else:
-                # The estimate starts from the first measurement (docs/model.md
-                # §9); no command is in flight before the first sample.
                 state = estimator.start(sensed, self.estimate, self.robot)
                 zero = jnp.zeros((), init.dtype)
                 still = (ArcMove.of(zero, zero, self.dt),) * self.slots
@@ -252,20 +225,16 @@ class ClosedLoopStep:
     def move(
         self, pose: SplitPose, wheel: Any, applied: jax.Array, ref: jax.Array, acc: Any
     ) -> tuple[SplitPose, Any, jax.Array, StepOutput, Any]:
-        """The plant's half of a period: the robot moves under ``applied`` (``v + i ω``).
+        """The plant's half of a period under ``applied``; the command side is the caller's.
 
-        The command side is the caller's: ``__call__``, or a host loop
-        (``wmr_jax.export``).
-
-        Returns:
-            ``(pose, wheel, followed, out, acc)`` at the end of the period;
-            ``followed`` is the command the limiter let through.
+        Returns ``(pose, wheel, followed, out, acc)``; ``followed``: what the limiter let through.
         """
         spec = self.disturbance
         if spec is not None:
             region = jnp.int32(-1)
         elif self.fold or self.record:
-            region = split_region(pose, ref, self.params, self.options)
+            control = self.options.controller
+            region = control.region_of(pose.stacked(), ref, self.params, frame=pose.frame())
         else:
             region = None
         followed, wheel = self.followed(wheel, applied)
@@ -283,11 +252,7 @@ class ClosedLoopStep:
         return pose, wheel, followed, out, acc
 
     def __call__(self, carry: LoopCarry, noise_next: Any) -> tuple[LoopCarry, Any]:
-        """Move over one period under the carried command; compute the next one.
-
-        ``noise_next``: the measurement noise at the end of the period (3,)
-        (``None`` without a disturbance).
-        """
+        """Move over one period; compute the next command from the measurement ``noise_next``."""
         pose, wheel, fresh, queue, moves, state, ref, acc = carry
         ref = self.ref if self.aim is None else ref
         spec, estimator, dt = self.disturbance, self.estimator, self.dt
@@ -300,7 +265,6 @@ class ClosedLoopStep:
             moves = (fresh_move, *moves[:-1])
         pose, wheel, followed, out, acc = self.move(pose, wheel, applied, ref, acc)
         if estimator is not None and not moves:
-            # With a speed limiter: the arc of what it let through.
             move = ArcMove.of(followed.real, followed.imag, dt)
         queue = (fresh, *queue[:-1]) if queue else ()
         if spec is None:
@@ -347,12 +311,10 @@ def scan_closed_loop(
 ) -> tuple[jax.Array, Any, Any]:
     """Run the closed loop of one pose: the one ``lax.scan`` of ``ClosedLoopStep``.
 
-    ``ref``, ``init``: ``(3,)`` poses; ``robot``: the nominal one (the law's,
-    wheel controller's and estimator's model). A ``disturbance`` of one run
+    ``ref``, ``init``: ``(3,)``; ``robot``: the nominal one. A ``disturbance``
     sets the number of periods by its noise; ``fold(acc, pose, out) -> acc``
-    streams metrics after every period (``pose`` a ``SplitPose``); ``record``
-    also returns every pose and ``StepOutput`` (and, disturbed, the pose the
-    law's side holds). Returns ``(final pose (3,), acc, records or None)``.
+    streams metrics; ``record`` also returns every pose and ``StepOutput``
+    (disturbed: and the pose the law saw). Returns ``(final pose (3,), acc, records)``.
     """
     step = ClosedLoopStep(ref, params, robot, dt, options, disturbance, estimate, aim, fold, record)
     carry = step.start(ref, init, acc)
@@ -373,11 +335,8 @@ def scan_closed_loop(
 
 
 def remat(body: Callable) -> Callable:
-    """Differentiate ``body`` by recomputing it: cheaper than storing every step's intermediates."""
+    """Recompute ``body`` in the backward pass instead of storing its intermediates."""
     return jax.checkpoint(body, prevent_cse=False)
-
-
-# ---------------------------------------------------------------- batching
 
 
 def batch_axes(tree: Any, single_ndim: int) -> Any:
@@ -420,20 +379,8 @@ def jit_top_level(fn: Callable, **kwargs: Any) -> Callable:
         return jax.jit(fn, **kwargs)
 
 
-def _untraced(kwargs: dict[str, Any]) -> dict[str, Any]:
-    """``options`` without ``remat`` for a call with concrete arguments (nothing differentiates)."""
-    options = kwargs.get("options")
-    if isinstance(options, Options) and options.remat:
-        return {**kwargs, "options": dataclasses.replace(options, remat=False)}
-    return kwargs
-
-
 class EntryJit:
-    """A jitted entry point, compiled with ``COMPILER_OPTIONS`` when called at top level.
-
-    JAX accepts compiler options only on a top-level ``jit``; with traced
-    arguments the function runs as a plain nested ``jit``.
-    """
+    """A jitted entry point: ``COMPILER_OPTIONS`` at top level, a nested ``jit`` when traced."""
 
     def __init__(self, fn: Callable, **kwargs: Any):
         self.nested = jax.jit(fn, **kwargs)
@@ -443,4 +390,8 @@ class EntryJit:
         traced = any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(args))
         if traced:
             return self.nested(*args, **kwargs)
-        return self.top(*args, **_untraced(kwargs))
+        # Concrete arguments: nothing differentiates, so no remat.
+        options = kwargs.get("options")
+        if isinstance(options, Options) and options.remat:
+            kwargs = {**kwargs, "options": dataclasses.replace(options, remat=False)}
+        return self.top(*args, **kwargs)
