@@ -125,7 +125,7 @@ class WheelState(NamedTuple):
 
 
 def _limit_split(v, w, robot: Robot, mode: str):
-    """``limit_wheels`` on separate ``v``, ``ω``: the same arithmetic, no stacking."""
+    """``limit_wheels`` on separate ``v``, ``ω``."""
     L, v_max = robot.half_track, robot.v_max
     left, right = v - L * w, v + L * w
     if mode == "clip":
@@ -139,10 +139,9 @@ def _limit_split(v, w, robot: Robot, mode: str):
 
 
 def _loop_rates(target, robot: Robot, model: Robot, with_integral: bool, with_coriolis: bool):
-    """Return ``f(wheel) -> d wheel/dt`` of the closed wheel loop (Eq. 5 and its controller).
+    """Return ``f(wheel) -> d wheel/dt``: ``wheel_torques`` then ``body_acceleration``, unstacked.
 
-    ``wheel`` is ``v + i ω`` (with ``z_v + i z_ω`` if ``with_integral``):
-    ``wheel_torques`` then ``body_acceleration`` with no ``(N, 2)`` arrays.
+    ``wheel`` is ``v + i ω``, with ``z_v + i z_ω`` if ``with_integral``.
     """
     target_v, target_w = target
     m11, m22 = inertia(model)
@@ -182,16 +181,15 @@ def _loop_rates(target, robot: Robot, model: Robot, with_integral: bool, with_co
     return rates
 
 
-def _along(y, c, k):
-    """Return ``y + c k`` for complex ``y``, ``k`` and a real ``c``, without a complex product."""
-    return jax.lax.complex(y.real + c * k.real, y.imag + c * k.imag)
-
-
 def _rk4(f, y, h):
     """One classical RK4 step of ``ẏ = f(y)``, ``y`` a pytree of complex arrays."""
 
     def along(c, k):
-        return jax.tree.map(lambda a, b: _along(a, c, b), y, k)
+        # y + c k for a real c, without a complex product.
+        def step(a, b):
+            return jax.lax.complex(a.real + c * b.real, a.imag + c * b.imag)
+
+        return jax.tree.map(step, y, k)
 
     k1 = f(y)
     k2 = f(along(0.5 * h, k1))
@@ -217,12 +215,11 @@ def advance_split(
     coriolis: bool = True,
     small_turn: bool = False,
 ) -> tuple[jax.Array, jax.Array, jax.Array, WheelState, jax.Array]:
-    """Move the robot over one control period under the non-ideal loop (docs/model.md §4).
+    """``advance`` on a pose split as the loops carry it (``motion.SplitPose``).
 
-    ``advance`` on a pose split as the rollouts carry it: complex position
-    ``x + i y`` and heading ``cos θ + i sin θ``, θ beside them. The static
-    ``integral=False`` is exact only for ``integral_gain = 0``, ``coriolis=False``
-    only for ``com_offset = 0``, ``small_turn`` only if ``V_max dt / (L substeps) ≤ π/2``.
+    The static ``integral=False`` is exact only for ``integral_gain = 0``,
+    ``coriolis=False`` only for ``com_offset = 0``, ``small_turn`` only if
+    ``V_max dt / (L substeps) ≤ π/2``.
 
     Returns:
         ``(position, heading, theta, wheel, distance cm)`` at the next sample.

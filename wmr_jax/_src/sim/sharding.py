@@ -48,7 +48,7 @@ MAX_CPU_DEVICES = 1024
 
 
 def use_cpu_devices(count: int | None = None) -> int:
-    """Split the CPU into ``count`` JAX devices (one leaves cores idle); return the local count.
+    """Split the CPU into ``count`` JAX devices; return the local count.
 
     Takes effect only before JAX has started; no effect on accelerators.
 
@@ -72,18 +72,6 @@ def use_cpu_devices(count: int | None = None) -> int:
     except (RuntimeError, AttributeError):  # JAX is up already, or has no such option
         pass
     return len(jax.local_devices())
-
-
-def batch_sharding(devices: Sequence[Any] | None = None) -> jax.sharding.NamedSharding:
-    """Return the sharding that splits an array's leading axis over ``devices``.
-
-    Args:
-        devices: devices in order; default ``jax.devices()`` (every device of
-            every process).
-    """
-    devices = checked_devices(jax.devices() if devices is None else devices)
-    mesh = jax.sharding.Mesh(np.asarray(devices), (BATCH_AXIS,))
-    return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec(BATCH_AXIS))
 
 
 def checked_devices(devices: Sequence[Any]) -> list[Any]:
@@ -117,8 +105,8 @@ def shard(batch: Any, devices: Sequence[Any] | None = None) -> ShardedBatch:
     Args:
         batch: an ``(N, ...)`` array (or nested list of numbers), or a
             pytree of arrays of one leading length ``N``.
-        devices: default ``jax.devices()``. With several processes, every
-            process passes the same ``batch``.
+        devices: in order; default ``jax.devices()`` (every device of every
+            process). With several processes, every process passes the same ``batch``.
 
     Returns:
         ``ShardedBatch(array, n)``, ``array`` padded to ``ceil(N / D) · D`` rows.
@@ -126,8 +114,10 @@ def shard(batch: Any, devices: Sequence[Any] | None = None) -> ShardedBatch:
     Raises:
         ValueError: if the leaves do not share one leading length ``N ≥ 1``.
     """
-    sharding = batch_sharding(devices)
-    count = len(sharding.mesh.devices.flat)
+    devices = checked_devices(jax.devices() if devices is None else devices)
+    mesh = jax.sharding.Mesh(np.asarray(devices), (BATCH_AXIS,))
+    sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec(BATCH_AXIS))
+    count = len(devices)
     if isinstance(batch, list):
         batch = _rows("batch", batch)
     leaves = jax.tree.leaves(batch)

@@ -1,9 +1,8 @@
 """Pose estimators of the sensed loop (docs/model.md §9): an observer and an extended Kalman filter.
 
-Each period an estimator predicts its pose on the ideal robot's arc under the
-command applied, then corrects it toward the measurement: ``OBSERVER`` by
-gains in ``[0, 1]`` (constants or tables over the distance to the goal),
-``EKF`` by the Kalman gain of the ideal robot. Latency compensation is the loop's.
+Each period the loop predicts the estimate on the ideal robot's arc; the
+estimator corrects it toward the measurement (``OBSERVER`` by gains in
+``[0, 1]``, ``EKF`` by the Kalman gain). Latency compensation is the loop's.
 """
 
 from __future__ import annotations
@@ -93,14 +92,11 @@ class EKFParams(Parameters):
     compensate: bool = dataclasses.field(default=True, metadata={"static": True})
 
 
-# ---------------------------------------------------------------- checks
-
-
 def _check_values(name: str, value: Any, ok: Callable, allowed: str) -> int | None:
     """Check one concrete field (a scalar or one batch axis); return its batch size."""
     if isinstance(value, jax.core.Tracer):
         return None
-    arr = real_array(name, value, allowed)  # refuses strings, bools and None by name
+    arr = real_array(name, value, allowed)
     if arr.ndim > 1:
         raise ValueError(f"{name} has shape {arr.shape}; allowed: a scalar or one batch axis")
     require(name, arr, np.isfinite(arr) & ok(arr), allowed)
@@ -153,9 +149,6 @@ def validate_ekf(params: EKFParams, prefix: str = "estimator") -> EKFParams:
     return params
 
 
-# ---------------------------------------------------------------- the observer
-
-
 class ObserverState(NamedTuple):
     """The observer's estimate (a ``motion.SplitPose``)."""
 
@@ -169,19 +162,13 @@ def _table(values: Any, r: jax.Array) -> jax.Array:
     return table_at((values[0] + jnp.zeros_like(r), *values[1:]), r, observer_radii(len(values)))
 
 
-def _rotation(angle: jax.Array) -> jax.Array:
-    """``cos angle + i sin angle`` (exactly ``1`` at ``0``)."""
-    cos_a, sin_a = sin_cos(angle)
-    return jax.lax.complex(cos_a, sin_a)
-
-
 def _observer_start(measured: motion.SplitPose, params: Any, robot: Robot) -> ObserverState:
     del params, robot
     return ObserverState(measured)
 
 
 def _observer_update(state, predicted, command, measured, ref, params, robot, dt):
-    """Blend the prediction over the period toward ``measured``."""
+    """Blend the prediction toward ``measured`` by the gains at its distance to ``ref``."""
     del state, command, robot, dt
     # A plain square root: the complex absolute value's overflow guard is slow.
     d = jax.lax.complex(ref[0], ref[1]) - predicted.position
@@ -192,9 +179,6 @@ def _observer_update(state, predicted, command, measured, ref, params, robot, dt
     position = measured.position + (1.0 - g_position) * (predicted.position - measured.position)
     back = (1.0 - g_heading) * measured.residual(predicted)
     return ObserverState(motion.SplitPose(position, measured.turned(-back), measured.theta - back))
-
-
-# ---------------------------------------------------------------- the EKF
 
 
 class EKFState(NamedTuple):
@@ -266,15 +250,13 @@ def _ekf_update(state, predicted, command, measured, ref, params, robot, dt) -> 
     dx = p00 * y0 + p01 * y1 + p02 * y2
     dy = p01 * y0 + p11 * y1 + p12 * y2
     dth = p02 * y0 + p12 * y1 + p22 * y2
+    cos_d, sin_d = sin_cos(dth)
     pose = motion.SplitPose(
         predicted.position + jax.lax.complex(dx, dy),
-        predicted.heading * _rotation(dth),
+        predicted.heading * jax.lax.complex(cos_d, sin_d),
         predicted.theta + dth,
     )
     return EKFState(pose, covariance)
-
-
-# ---------------------------------------------------------------- estimators as values
 
 
 @dataclasses.dataclass(frozen=True)

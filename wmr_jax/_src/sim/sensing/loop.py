@@ -1,9 +1,7 @@
 """The disturbed closed loop (docs/model.md §7), with or without an estimator (§9).
 
-The one closed-loop step (``loops.ClosedLoopStep``) given a ``Disturbance``:
-pose-measurement noise (arrival is judged on the true pose), wheel and mass
-mismatch, and a latency of ``delay`` samples. The metrics stream through the
-scan, so batches are bounded in memory.
+Arrival is judged on the true pose; the metrics stream through the scan, so
+batches are bounded in memory.
 """
 
 from __future__ import annotations
@@ -54,11 +52,7 @@ def disturbed_run(
     options: Options,
     **kwargs: Any,
 ) -> tuple[jax.Array, Any, Any]:
-    """Run one pose toward ``spec.ref`` under its ``Disturbance`` (docs/model.md §7, §9).
-
-    ``loops.scan_closed_loop`` with ``disturbance=spec`` (no batch axes) and
-    its keywords ``estimate``, ``fold``, ``acc``, ``record``; ``robot`` is the
-    nominal one, the controller's and estimator's model.
+    """``loops.scan_closed_loop`` of one pose toward ``spec.ref`` under ``spec`` (no batch axes).
 
     Returns:
         ``(final true pose (3,), acc, (poses, outputs, estimates) or None)``.
@@ -79,18 +73,10 @@ def metrics_fold(ref: jax.Array) -> loops.Fold:
 
 
 def _disturbed_single(spec: Disturbance, params, estimate, init, robot, dt, options: Options):
-    """Run one pose under its ``Disturbance``, streaming the ``docs/model.md §6`` metrics."""
     ref = spec.ref
+    fold, acc = metrics_fold(ref), metrics.stream_start(ref.dtype)
     final, acc, _ = disturbed_run(
-        spec,
-        params,
-        init,
-        robot,
-        dt,
-        options,
-        estimate=estimate,
-        fold=metrics_fold(ref),
-        acc=metrics.stream_start(ref.dtype),
+        spec, params, init, robot, dt, options, estimate=estimate, fold=fold, acc=acc
     )
     return metrics_result(acc, final, ref, dt)
 
@@ -112,8 +98,8 @@ def metrics_result(acc: Any, final: jax.Array, ref: jax.Array, dt: jax.Array) ->
 def batched_disturbed(single):
     """Lift ``single(spec, params, estimate, init, robot, dt, options)`` over disturbances.
 
-    Every field of ``spec`` carries the batch axis, except a scalar ``delay``
-    (shared); ``params``, ``estimate`` and ``robot`` leaves may carry it too.
+    Every field of ``spec`` carries the batch axis but a scalar ``delay``;
+    ``params``, ``estimate`` and ``robot`` leaves may carry it too.
     """
 
     def run(spec, params, estimate, init, robot, dt, options):
@@ -197,8 +183,8 @@ def prepare_disturbed(
 ) -> tuple[tuple, Options]:
     """Check a batch of disturbances and the run's settings; return the jitted core's arguments.
 
-    ``record``: ``(floats, int32s)`` kept per run and period, refused beyond the
-    memory. Returns ``((spec, params, estimate, init, robot, dt), options)``.
+    ``record``: ``(floats, int32s)`` kept per run and period, refused beyond
+    the memory. Returns ``((spec, params, estimate, init, robot, dt), options)``.
     """
     refs, noise, mismatch, delay = checked_disturbance(disturbance)
     estimator, estimate = resolve_estimator(estimator)
@@ -223,9 +209,7 @@ def prepare_disturbed(
         refs, params, init, robot, dt, options, batch=None
     )
     if options.velocity == "ideal":
-        # The robot's speed limiter, as in the rollouts (docs/model.md §4.2.2).
         options = loops.for_robot(options, robot, dt)
-    # The commands in flight the loop carries: as many as the longest latency.
     options = dataclasses.replace(options, max_delay=max(1, int(np.max(delay))))
     if np.ndim(init) != 1:
         raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,)")
