@@ -28,13 +28,8 @@ _MAX_STIFFNESS = 2.5
 
 def inertia(robot: Robot) -> tuple[jax.Array, jax.Array]:
     """Return the diagonal of ``H``: ``(m₁₁ kg, m₂₂ kg·cm²)`` (Eq. 5)."""
-    M, m, r, L, a = (
-        robot.body_mass,
-        robot.wheel_mass,
-        robot.wheel_radius,
-        robot.half_track,
-        robot.com_offset,
-    )
+    M, m, r = robot.body_mass, robot.wheel_mass, robot.wheel_radius
+    L, a = robot.half_track, robot.com_offset
     spin = 0.5 * m * r**2  # each wheel about its axle
     across = 0.25 * m * r**2  # each wheel about a vertical diameter
     body = M * robot.body_diameter**2 / 8.0
@@ -109,14 +104,7 @@ def limit_wheels(velocity: jax.Array, robot: Robot, *, mode: str = "clip") -> ja
 
 
 class WheelState(NamedTuple):
-    """The wheel loop's state as separate scalars (leading batch axes allowed).
-
-    Attributes:
-        v: body linear velocity, cm/s.
-        omega: body angular velocity, rad/s.
-        z_v: integral of the linear-velocity error, cm.
-        z_omega: integral of the angular-velocity error, rad.
-    """
+    """The wheel loop's state: ``v`` cm/s, ``omega`` rad/s, error integrals ``z_v``, ``z_omega``."""
 
     v: jax.Array
     omega: jax.Array

@@ -48,16 +48,11 @@ class Options:
             both by one factor, keeping the curvature (non-ideal loop).
         wheel_integral: integrate the wheel loop's velocity error (non-ideal loop).
         wheel_coriolis: include the Coriolis terms ``G(q)`` (non-ideal loop).
-        small_turn: every sub-step turns by at most ``π/2``, so the arcs need
-            no range reduction (non-ideal loop).
-        estimator: the pose estimator between the measurements and the law
-            (``sensing.estimators.Estimator``), or ``None``; disturbed loop only.
-        remat: recompute each step in the backward pass instead of storing
-            its intermediates (``remat``); no effect on evaluation.
-        accel_limit: pass each command through the robot's speed limiter
-            (ideal loop; docs/model.md §4.2.2).
-        max_delay: the longest latency in samples of a disturbed run: that
-            many commands ride in flight (docs/model.md §7).
+        small_turn: no sub-step turns beyond ``π/2``: no range reduction (non-ideal loop).
+        estimator: the ``Estimator`` between measurement and law (disturbed loop), or ``None``.
+        remat: recompute each step in the backward pass instead of storing it.
+        accel_limit: the robot's speed limiter (ideal loop; docs/model.md §4.2.2).
+        max_delay: the longest latency of a disturbed run, samples (docs/model.md §7).
     """
 
     steps: int = DEFAULT_STEPS
@@ -314,7 +309,7 @@ def scan_closed_loop(
     ``ref``, ``init``: ``(3,)``; ``robot``: the nominal one. A ``disturbance``
     sets the number of periods by its noise; ``fold(acc, pose, out) -> acc``
     streams metrics; ``record`` also returns every pose and ``StepOutput``
-    (disturbed: and the pose the law saw). Returns ``(final pose (3,), acc, records)``.
+    (disturbed: and the estimate). Returns ``(final pose (3,), acc, records)``.
     """
     step = ClosedLoopStep(ref, params, robot, dt, options, disturbance, estimate, aim, fold, record)
     carry = step.start(ref, init, acc)

@@ -289,9 +289,6 @@ def region_time(traj: Any, *, dt: float) -> jax.Array:
     return jnp.sum(one_hot, axis=-2) * dt
 
 
-# ---------------------------------------------------------------- streamed metrics (no trajectory)
-
-
 class Thresholds(NamedTuple):
     """The metrics' tolerances, traced (changing them does not recompile)."""
 
@@ -302,7 +299,7 @@ class Thresholds(NamedTuple):
 
 
 class RunMetrics(NamedTuple):
-    """Running metrics of one run (all scalars), see ``stream_update``."""
+    """Running metrics of one run (all scalars), streamed without a trajectory."""
 
     step: jax.Array  # periods folded so far
     settled_from: jax.Array  # first sample of the current run of arrived samples, or −1
@@ -339,13 +336,8 @@ def stream_update(
 ) -> RunMetrics:
     """Fold one control period into the metrics (``docs/model.md §6``).
 
-    Args:
-        acc: the metrics so far.
-        pose: ``(3,)`` true pose at the end of the period.
-        ref: ``(3,)`` reference.
-        out: what the period reported (a ``StepOutput``).
-        thresholds: tolerances and dead bands.
-        frame: the pose as ``(x, y, cos θ, sin θ)`` if the caller has it.
+    ``pose``: ``(3,)`` true pose at the end of the period, also as ``frame``
+    ``(x, y, cos θ, sin θ)`` if the caller has it; ``out``: its ``StepOutput``.
     """
     ok = _is_arrived(pose, ref, thresholds.tol_r, thresholds.tol_theta, frame)
     k = acc.step

@@ -115,9 +115,6 @@ _batch_rollout_jit = EntryJit(batched(_trajectory), static_argnames=("options",)
 _final_poses_jit = EntryJit(batched(_final_pose), static_argnames=("options",))
 
 
-# ---------------------------------------------------------------- boundary checks
-
-
 def make_options(
     *,
     steps: Any = DEFAULT_STEPS,
@@ -166,9 +163,7 @@ def _common_batch(refs, params, init, robot):
     def shared(leaf):
         return leaf[0] if jnp.ndim(leaf) >= 1 and jnp.shape(leaf)[0] == 1 else leaf
 
-    refs = refs[0] if refs.ndim == 2 and refs.shape[0] == 1 else refs
-    init = init[0] if init.ndim == 2 and init.shape[0] == 1 else init
-    return refs, jax.tree.map(shared, params), init, jax.tree.map(shared, robot)
+    return jax.tree.map(shared, (refs, params, init, robot))
 
 
 def prepare(
@@ -237,8 +232,6 @@ def _finite_runs(poses: jax.Array, axes: tuple[int, ...]) -> jax.Array:
     """Whether each run's poses are all finite."""
     return jnp.isfinite(poses).all(axis=axes)
 
-
-# ---------------------------------------------------------------- entry points
 
 _STATIC = ("steps", "velocity", "controller", "temperature", "substeps", "wheel_limit")
 

@@ -55,9 +55,6 @@ def use_cpu_devices(count: int | None = None) -> int:
     Args:
         count: devices to make; default twice the number of cores this
             process may use.
-
-    Returns:
-        ``len(jax.local_devices())`` after the call.
     """
     if count is None:
         try:

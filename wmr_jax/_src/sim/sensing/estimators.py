@@ -43,8 +43,7 @@ def observer_radii(knots: int) -> np.ndarray:
 
 # choice: hand-set tables, low at the goal (where noise would move the robot
 # back and forth) up to 0.7 beyond about 7 cm; tuned tables replace them.
-_DEFAULT_POSITION = (0.05, 0.1, 0.4, 0.7, 0.7, 0.7)
-_DEFAULT_HEADING = (0.05, 0.1, 0.4, 0.7, 0.7, 0.7)
+_DEFAULT_GAINS = (0.05, 0.1, 0.4, 0.7, 0.7, 0.7)
 
 
 @jax.tree_util.register_dataclass
@@ -62,8 +61,8 @@ class ObserverParams(Parameters):
             commands in flight (docs/model.md §9).
     """
 
-    position: Any = _DEFAULT_POSITION
-    heading: Any = _DEFAULT_HEADING
+    position: Any = _DEFAULT_GAINS
+    heading: Any = _DEFAULT_GAINS
     compensate: bool = dataclasses.field(default=True, metadata={"static": True})
 
     def __post_init__(self) -> None:

@@ -267,13 +267,12 @@ def disturbed_rollout(
     Args: as for ``disturbed_metrics``.
 
     Returns:
-        ``{"poses": (N, steps + 1, 3) true poses, the initial one first,
-        "v": (N, steps) cm/s, "omega": (N, steps) rad/s``: the command
-        applied over each period (zero over the first one under latency;
-        before a speed limiter, as a ``Trajectory``'s), ``"estimates": (N,
-        steps, 3)``: the estimate of the pose at the end of each period (the
-        measurement itself without an estimator); the last one follows a
-        noise-free measurement, since no command uses it``}``.
+        ``{"poses": (N, steps + 1, 3)`` true poses, the initial one first;
+        ``"v": (N, steps)`` cm/s, ``"omega": (N, steps)`` rad/s, the command
+        applied over each period (zero over the first under latency; before a
+        speed limiter); ``"estimates": (N, steps, 3)``, the estimate at the end
+        of each period (the measurement without an estimator; the last one
+        from a noise-free measurement)``}``.
     """
     with jax.enable_x64(checks.check_bool("x64", x64)):
         args, options = prepare_disturbed(
