@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from wmr_jax._src.checks import is_traced
 from wmr_jax._src.model import dynamics
 from wmr_jax._src.model.params import Robot
 
@@ -302,7 +303,7 @@ def check_stability(robot: Robot, dt: float, substeps: int) -> None:
     ``k_i = 0``), and RK4 needs ``|λ| dt / substeps ≤ 2.5``.
     """
     gain, integral = robot.speed_gain, robot.integral_gain
-    if any(isinstance(x, jax.core.Tracer) for x in (gain, integral, dt)):
+    if is_traced((gain, integral, dt)):
         return
     k_p = np.asarray(gain, dtype=float)
     k_i = np.asarray(integral, dtype=float)

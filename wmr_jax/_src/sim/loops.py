@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from wmr_jax._src.checks import is_traced
 from wmr_jax._src.model import velocity_loop
 from wmr_jax._src.model.controllers.base import Controller
 from wmr_jax._src.model.controllers.shim_sung import SHIM_SUNG
@@ -79,8 +80,7 @@ def for_robot(options: Options, robot: Robot, dt: Any) -> Options:
     """
 
     def concrete(value: Any) -> np.ndarray | None:
-        traced = isinstance(value, jax.core.Tracer)
-        return None if traced else np.asarray(value, dtype=float)
+        return None if is_traced(value) else np.asarray(value, dtype=float)
 
     def vanishes(value: Any) -> bool:
         value = concrete(value)
@@ -184,13 +184,12 @@ class ClosedLoopStep:
         if not self.estimate.compensate:
             return estimate
         for j in reversed(range(self.slots)):
+            late = self.disturbance.delay > j
             if moves:
                 move = moves[j]
             else:
                 followed, next_wheel = self.followed(wheel, queue[j])
                 move = ArcMove.of(followed.real, followed.imag, self.dt)
-            late = self.disturbance.delay > j
-            if not moves:
                 wheel = _select(late, next_wheel, wheel)
             estimate = _select(late, ideal_move(estimate, move), estimate)
         return estimate
@@ -382,8 +381,7 @@ class EntryJit:
         self.top = jit_top_level(fn, **kwargs)
 
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
-        traced = any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(args))
-        if traced:
+        if is_traced(args):
             return self.nested(*args, **kwargs)
         # Concrete arguments: nothing differentiates, so no remat.
         options = kwargs.get("options")

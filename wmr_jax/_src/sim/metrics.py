@@ -72,14 +72,14 @@ def _poses_of(traj: Any) -> Any:
             f"traj is a {type(traj).__name__}; allowed: a Trajectory (from rollout or "
             "batch_rollout), whose poses have shape (..., steps + 1, 3)"
         )
-    if not is_traced(poses) and (
-        jnp.ndim(poses) < 2 or jnp.shape(poses)[-1] != 3 or jnp.shape(poses)[-2] < 2
-    ):
+    if is_traced(poses):
+        return poses
+    if jnp.ndim(poses) < 2 or jnp.shape(poses)[-1] != 3 or jnp.shape(poses)[-2] < 2:
         raise ValueError(
             f"traj.poses has shape {jnp.shape(poses)}; allowed: (..., steps + 1, 3) with "
             "steps >= 1 (the initial pose, then one per control period)"
         )
-    if not is_traced(poses) and array_kind(poses) in "iuf":
+    if array_kind(poses) in "iuf":
         host = np.asarray(poses)
         bad = ~np.isfinite(host).all(axis=-1)
         if bad.any():

@@ -19,6 +19,7 @@ import numpy as np
 from wmr_jax._src.checks import (
     Parameters,
     check_bool,
+    is_traced,
     list_as_array,
     real_array,
     require,
@@ -91,16 +92,17 @@ class EKFParams(Parameters):
     compensate: bool = dataclasses.field(default=True, metadata={"static": True})
 
 
-def _check_values(name: str, value: Any, ok: Callable, allowed: str) -> int | None:
-    """Check one concrete field (a scalar or one batch axis); return its batch size."""
-    if isinstance(value, jax.core.Tracer):
-        return None
+def _check_values(name: str, value: Any, ok: Callable, allowed: str, sizes: dict) -> None:
+    """Check one concrete field (a scalar or one batch axis); note its batch size in ``sizes``."""
+    if is_traced(value):
+        return
     arr = real_array(name, value, allowed)
     if arr.ndim > 1:
         raise ValueError(f"{name} has shape {arr.shape}; allowed: a scalar or one batch axis")
     require(name, arr, np.isfinite(arr) & ok(arr), allowed)
     require_representable(name, arr, tiny_ok=True)
-    return arr.shape[0] if arr.ndim else None
+    if arr.ndim:
+        sizes[name] = arr.shape[0]
 
 
 def _check_kind(params: Any, kind: type, prefix: str) -> None:
@@ -125,9 +127,7 @@ def validate_observer(params: ObserverParams, prefix: str = "estimator") -> Obse
             )
         for k, value in enumerate(entries):
             label = f"{prefix}.{name}[{k}]" if isinstance(table, tuple) else f"{prefix}.{name}"
-            size = _check_values(label, value, lambda a: (a >= 0) & (a <= 1), "a gain 0 <= g <= 1")
-            if size is not None:
-                sizes[label] = size
+            _check_values(label, value, lambda a: (a >= 0) & (a <= 1), "a gain 0 <= g <= 1", sizes)
     require_one_batch_size(sizes)
     return params
 
@@ -138,12 +138,9 @@ def validate_ekf(params: EKFParams, prefix: str = "estimator") -> EKFParams:
     sizes = {}
     units = {"wheel_error": "", "sigma_xy": " cm", "sigma_theta": " rad"}
     for name, unit in units.items():
-        label = f"{prefix}.{name}"
-        size = _check_values(
-            label, getattr(params, name), lambda a: (a > 0) & (a <= 1e6), f"0 < {name} <= 1e6{unit}"
-        )
-        if size is not None:
-            sizes[label] = size
+        allowed = f"0 < {name} <= 1e6{unit}"
+        value = getattr(params, name)
+        _check_values(f"{prefix}.{name}", value, lambda a: (a > 0) & (a <= 1e6), allowed, sizes)
     require_one_batch_size(sizes)
     return params
 

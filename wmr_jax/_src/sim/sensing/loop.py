@@ -214,12 +214,7 @@ def prepare_disturbed(
     if np.ndim(init) != 1:
         raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,)")
     dtype = dt.dtype
-    spec = Disturbance(
-        refs_j,
-        jnp.asarray(noise, dtype),
-        jnp.asarray(mismatch, dtype),
-        jnp.asarray(delay, dtype),
-    )
+    spec = Disturbance(refs_j, *(jnp.asarray(a, dtype) for a in (noise, mismatch, delay)))
     if estimator is not None:
         sizes = {"disturbance.ref": len(refs), **checks.batch_sizes({"estimator": estimate})}
         checks.require_one_batch_size(sizes)
