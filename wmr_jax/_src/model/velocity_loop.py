@@ -21,9 +21,9 @@ from wmr_jax._src.model.params import Robot
 
 DEFAULT_SUBSTEPS = 10
 
+MAX_SUBSTEPS = 2**31 - 1  # a scan's length is an int32
 # RK4 is stable on ẏ = −k y for k h < 2.785; keep a margin, the loop is
 # nonlinear once torques saturate.
-MAX_SUBSTEPS = 2**31 - 1  # a scan's length is an int32
 _MAX_STIFFNESS = 2.5
 
 
@@ -204,14 +204,10 @@ def advance_split(
     coriolis: bool = True,
     small_turn: bool = False,
 ) -> tuple[jax.Array, jax.Array, jax.Array, WheelState, jax.Array]:
-    """``advance`` on a pose split as the loops carry it (``motion.SplitPose``).
+    """Return ``advance`` of a split pose: ``(position, heading, theta, wheel, distance cm)``.
 
-    The static ``integral=False`` is exact only for ``integral_gain = 0``,
-    ``coriolis=False`` only for ``com_offset = 0``, ``small_turn`` only if
-    ``V_max dt / (L substeps) ≤ π/2``.
-
-    Returns:
-        ``(position, heading, theta, wheel, distance cm)`` at the next sample.
+    ``integral=False`` is exact only for ``integral_gain = 0``, ``coriolis=False``
+    for ``com_offset = 0``, ``small_turn`` if ``V_max dt / (L substeps) ≤ π/2``.
     """
     model = robot if model is None else model
     target = _limit_split(command[0], command[1], model, wheel_limit)

@@ -341,8 +341,8 @@ def batch_axes(tree: Any, single_ndim: int) -> Any:
 def batched(single: Callable) -> Callable:
     """Lift ``single(ref, params, init, robot, dt, options)`` to batched inputs.
 
-    A leading axis on ``ref``/``init`` or on any leaf of ``params``/``robot``
-    is mapped over; the others are shared. The one place ``vmap`` is applied.
+    A leading axis on ``ref``/``init`` or any leaf of ``params``/``robot`` is
+    mapped over; the others are shared.
     """
 
     def run(ref, params, init, robot, dt, options):

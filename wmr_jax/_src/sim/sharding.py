@@ -72,11 +72,7 @@ def use_cpu_devices(count: int | None = None) -> int:
 
 
 def checked_devices(devices: Sequence[Any]) -> list[Any]:
-    """Return ``devices`` as a list after checking each is a JAX device, once.
-
-    Raises:
-        ValueError: for none, something else than a device, or a repeat.
-    """
+    """Return ``devices`` as a list; ``ValueError`` for none, a non-device or a repeat."""
     if isinstance(devices, (str, bytes, jax.Device)) or not hasattr(devices, "__iter__"):
         raise ValueError(
             f"devices = {devices!r} is not allowed; allowed: a sequence of JAX devices "

@@ -178,10 +178,9 @@ def _observer_update(state, predicted, command, measured, ref, params, robot, dt
 
 
 class EKFState(NamedTuple):
-    """The filter's estimate and its covariance over ``[x cm, y cm, θ rad]``.
+    """The filter's estimate and covariance over ``[x cm, y cm, θ rad]``.
 
-    ``covariance`` is one array of its six distinct entries
-    ``(P₀₀, P₀₁, P₀₂, P₁₁, P₁₂, P₂₂)``.
+    ``covariance``: its six distinct entries ``(P₀₀, P₀₁, P₀₂, P₁₁, P₁₂, P₂₂)``.
     """
 
     pose: motion.SplitPose

@@ -17,10 +17,9 @@ from wmr_jax._src import checks
 from wmr_jax._src.model import controllers
 from wmr_jax._src.model.params import Robot
 from wmr_jax._src.sim import loops, metrics
-from wmr_jax._src.sim import rollout as simulation
 from wmr_jax._src.sim.loops import Options
 from wmr_jax._src.sim.metrics import PoseMetrics
-from wmr_jax._src.sim.rollout import DEFAULT_DT
+from wmr_jax._src.sim.rollout import DEFAULT_DT, make_options, prepare, require_memory
 from wmr_jax._src.sim.sensing.disturbances import Disturbance, checked_disturbance
 from wmr_jax._src.sim.sensing.estimators import resolve_estimator
 
@@ -197,17 +196,13 @@ def prepare_disturbed(
         )
     runs = checks.common_batch_size({"gains": params, "robot": robot, "estimator": estimate})
     if record is not None:
-        simulation.require_memory(max(len(refs), runs), noise.shape[1], record, disturbance)
+        require_memory(max(len(refs), runs), noise.shape[1], record, disturbance)
     if len(refs) == 1 and runs > 1:
         # One disturbance shared by every run of batched parameters.
         refs, noise, mismatch = (np.repeat(a, runs, axis=0) for a in (refs, noise, mismatch))
         delay = np.repeat(delay, runs, axis=0) if delay.ndim else delay
-    options = simulation.make_options(
-        steps=noise.shape[1], velocity=velocity, controller=controller
-    )
-    refs_j, params, init, robot, dt = simulation.prepare(
-        refs, params, init, robot, dt, options, batch=None
-    )
+    options = make_options(steps=noise.shape[1], velocity=velocity, controller=controller)
+    refs_j, params, init, robot, dt = prepare(refs, params, init, robot, dt, options, batch=None)
     if options.velocity == "ideal":
         options = loops.for_robot(options, robot, dt)
     options = dataclasses.replace(options, max_delay=max(1, int(np.max(delay))))
