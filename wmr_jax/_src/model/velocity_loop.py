@@ -15,26 +15,22 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from wmr_jax._src.checks import is_traced
 from wmr_jax._src.model import dynamics
 from wmr_jax._src.model.params import Robot
 
 DEFAULT_SUBSTEPS = 10
 
+MAX_SUBSTEPS = 2**31 - 1  # a scan's length is an int32
 # RK4 is stable on ẏ = −k y for k h < 2.785; keep a margin, the loop is
 # nonlinear once torques saturate.
-MAX_SUBSTEPS = 2**31 - 1  # a scan's length is an int32
 _MAX_STIFFNESS = 2.5
 
 
 def inertia(robot: Robot) -> tuple[jax.Array, jax.Array]:
     """Return the diagonal of ``H``: ``(m₁₁ kg, m₂₂ kg·cm²)`` (Eq. 5)."""
-    M, m, r, L, a = (
-        robot.body_mass,
-        robot.wheel_mass,
-        robot.wheel_radius,
-        robot.half_track,
-        robot.com_offset,
-    )
+    M, m, r = robot.body_mass, robot.wheel_mass, robot.wheel_radius
+    L, a = robot.half_track, robot.com_offset
     spin = 0.5 * m * r**2  # each wheel about its axle
     across = 0.25 * m * r**2  # each wheel about a vertical diameter
     body = M * robot.body_diameter**2 / 8.0
@@ -109,14 +105,7 @@ def limit_wheels(velocity: jax.Array, robot: Robot, *, mode: str = "clip") -> ja
 
 
 class WheelState(NamedTuple):
-    """The wheel loop's state as separate scalars (leading batch axes allowed).
-
-    Attributes:
-        v: body linear velocity, cm/s.
-        omega: body angular velocity, rad/s.
-        z_v: integral of the linear-velocity error, cm.
-        z_omega: integral of the angular-velocity error, rad.
-    """
+    """The wheel loop's state: ``v`` cm/s, ``omega`` rad/s, error integrals ``z_v``, ``z_omega``."""
 
     v: jax.Array
     omega: jax.Array
@@ -125,7 +114,7 @@ class WheelState(NamedTuple):
 
 
 def _limit_split(v, w, robot: Robot, mode: str):
-    """``limit_wheels`` on separate ``v``, ``ω``: the same arithmetic, no stacking."""
+    """``limit_wheels`` on separate ``v``, ``ω``."""
     L, v_max = robot.half_track, robot.v_max
     left, right = v - L * w, v + L * w
     if mode == "clip":
@@ -139,10 +128,9 @@ def _limit_split(v, w, robot: Robot, mode: str):
 
 
 def _loop_rates(target, robot: Robot, model: Robot, with_integral: bool, with_coriolis: bool):
-    """Return ``f(wheel) -> d wheel/dt`` of the closed wheel loop (Eq. 5 and its controller).
+    """Return ``f(wheel) -> d wheel/dt``: ``wheel_torques`` then ``body_acceleration``, unstacked.
 
-    ``wheel`` is ``v + i ω`` (with ``z_v + i z_ω`` if ``with_integral``):
-    ``wheel_torques`` then ``body_acceleration`` with no ``(N, 2)`` arrays.
+    ``wheel`` is ``v + i ω``, with ``z_v + i z_ω`` if ``with_integral``.
     """
     target_v, target_w = target
     m11, m22 = inertia(model)
@@ -182,16 +170,15 @@ def _loop_rates(target, robot: Robot, model: Robot, with_integral: bool, with_co
     return rates
 
 
-def _along(y, c, k):
-    """Return ``y + c k`` for complex ``y``, ``k`` and a real ``c``, without a complex product."""
-    return jax.lax.complex(y.real + c * k.real, y.imag + c * k.imag)
-
-
 def _rk4(f, y, h):
     """One classical RK4 step of ``ẏ = f(y)``, ``y`` a pytree of complex arrays."""
 
     def along(c, k):
-        return jax.tree.map(lambda a, b: _along(a, c, b), y, k)
+        # y + c k for a real c, without a complex product.
+        def step(a, b):
+            return jax.lax.complex(a.real + c * b.real, a.imag + c * b.imag)
+
+        return jax.tree.map(step, y, k)
 
     k1 = f(y)
     k2 = f(along(0.5 * h, k1))
@@ -217,15 +204,10 @@ def advance_split(
     coriolis: bool = True,
     small_turn: bool = False,
 ) -> tuple[jax.Array, jax.Array, jax.Array, WheelState, jax.Array]:
-    """Move the robot over one control period under the non-ideal loop (docs/model.md §4).
+    """Return ``advance`` of a split pose: ``(position, heading, theta, wheel, distance cm)``.
 
-    ``advance`` on a pose split as the rollouts carry it: complex position
-    ``x + i y`` and heading ``cos θ + i sin θ``, θ beside them. The static
     ``integral=False`` is exact only for ``integral_gain = 0``, ``coriolis=False``
-    only for ``com_offset = 0``, ``small_turn`` only if ``V_max dt / (L substeps) ≤ π/2``.
-
-    Returns:
-        ``(position, heading, theta, wheel, distance cm)`` at the next sample.
+    for ``com_offset = 0``, ``small_turn`` if ``V_max dt / (L substeps) ≤ π/2``.
     """
     model = robot if model is None else model
     target = _limit_split(command[0], command[1], model, wheel_limit)
@@ -317,7 +299,7 @@ def check_stability(robot: Robot, dt: float, substeps: int) -> None:
     ``k_i = 0``), and RK4 needs ``|λ| dt / substeps ≤ 2.5``.
     """
     gain, integral = robot.speed_gain, robot.integral_gain
-    if any(isinstance(x, jax.core.Tracer) for x in (gain, integral, dt)):
+    if is_traced((gain, integral, dt)):
         return
     k_p = np.asarray(gain, dtype=float)
     k_i = np.asarray(integral, dtype=float)

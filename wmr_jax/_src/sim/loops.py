@@ -1,8 +1,6 @@
-"""The closed loop of one pose as a ``lax.scan``, and the one ``vmap`` that batches it.
+"""The closed loop of one pose as a ``lax.scan`` (docs/model.md §4, §7, §9), and its ``vmap``.
 
-``ClosedLoopStep`` is one control period (``docs/model.md §4, §7, §9``);
-``scan_closed_loop`` runs it, recording the run or folding it into streamed
-metrics. Nothing here checks its inputs: the entry points do that first.
+Nothing here checks its inputs: the entry points do that first.
 """
 
 from __future__ import annotations
@@ -15,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from wmr_jax._src.checks import is_traced
 from wmr_jax._src.model import velocity_loop
 from wmr_jax._src.model.controllers.base import Controller
 from wmr_jax._src.model.controllers.shim_sung import SHIM_SUNG
@@ -28,16 +27,12 @@ from wmr_jax._src.sim.motion import (
     initial_wheel,
     speed_limit,
     split_command,
-    split_region,
 )
 
 VELOCITY_LOOPS = ("ideal", "nonideal")
 WHEEL_LIMITS = ("clip", "scale")
 DEFAULT_SUBSTEPS = velocity_loop.DEFAULT_SUBSTEPS
 DEFAULT_STEPS = 150
-
-
-# ---------------------------------------------------------------- single pose
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,16 +49,11 @@ class Options:
             both by one factor, keeping the curvature (non-ideal loop).
         wheel_integral: integrate the wheel loop's velocity error (non-ideal loop).
         wheel_coriolis: include the Coriolis terms ``G(q)`` (non-ideal loop).
-        small_turn: every sub-step turns by at most ``π/2``, so the arcs need
-            no range reduction (non-ideal loop).
-        estimator: the pose estimator between the measurements and the law
-            (``sensing.estimators.Estimator``), or ``None``; disturbed loop only.
-        remat: recompute each step in the backward pass instead of storing
-            its intermediates (``remat``); no effect on evaluation.
-        accel_limit: pass each command through the robot's speed limiter
-            (ideal loop; docs/model.md §4.2.2).
-        max_delay: the longest latency in samples of a disturbed run: that
-            many commands ride in flight (docs/model.md §7).
+        small_turn: no sub-step turns beyond ``π/2``: no range reduction (non-ideal loop).
+        estimator: the ``Estimator`` between measurement and law (disturbed loop), or ``None``.
+        remat: recompute each step in the backward pass instead of storing it.
+        accel_limit: the robot's speed limiter (ideal loop; docs/model.md §4.2.2).
+        max_delay: the longest latency of a disturbed run, samples (docs/model.md §7).
     """
 
     steps: int = DEFAULT_STEPS
@@ -84,16 +74,13 @@ class Options:
 def for_robot(options: Options, robot: Robot, dt: Any) -> Options:
     """Return ``options`` fitted to ``robot``: its speed limiter on, vanishing terms left out.
 
-    Ideal loop: the speed limiter is on where the robot has an acceleration
-    limit (docs/model.md §4.2.2). Non-ideal loop: no integral state where
-    ``integral_gain = 0``, no Coriolis terms where ``com_offset = 0``, and
-    ``small_turn`` where ``V_max dt / (L substeps) ≤ π/2``. Traced values
-    keep the general loop.
+    Ideal loop: the limiter where the robot has an acceleration limit
+    (docs/model.md §4.2.2). Non-ideal loop: no integral state, Coriolis terms
+    or range reduction where they vanish. Traced values keep the general loop.
     """
 
     def concrete(value: Any) -> np.ndarray | None:
-        traced = isinstance(value, jax.core.Tracer)
-        return None if traced else np.asarray(value, dtype=float)
+        return None if is_traced(value) else np.asarray(value, dtype=float)
 
     def vanishes(value: Any) -> bool:
         value = concrete(value)
@@ -118,11 +105,7 @@ def for_robot(options: Options, robot: Robot, dt: Any) -> Options:
 
 
 class StepOutput(NamedTuple):
-    """What one control period reports (one sample of a ``Trajectory``).
-
-    ``v``, ``ω``: the command applied (before a speed limiter and the wheels'
-    mismatch); ``region`` is ``-1`` in a disturbed run.
-    """
+    """One period's sample of a ``Trajectory``; ``v``, ``ω`` before limiter and mismatch."""
 
     v: jax.Array
     omega: jax.Array
@@ -135,12 +118,7 @@ Fold = Callable[[Any, "SplitPose", StepOutput], Any]
 
 
 class LoopCarry(NamedTuple):
-    """What the one closed-loop step carries from period to period.
-
-    ``command`` is computed at the sample (``v + i ω``); ``in_flight`` the
-    commands of the ``max_delay`` samples before it, newest first, and
-    ``moves`` their arcs (disturbed runs); ``ref`` is carried with ``aim`` only.
-    """
+    """The scan's carry: ``command`` is ``v + i ω``; ``in_flight``/``moves`` newest first."""
 
     pose: Any
     wheel: Any
@@ -156,13 +134,9 @@ class LoopCarry(NamedTuple):
 class ClosedLoopStep:
     """One control period of the closed loop: law → commands in flight → velocity loop → robot.
 
-    The one step of every run (docs/model.md §4, §7, §9). Optional parts,
-    ``None`` where a run has none: ``disturbance`` of one run,
-    ``options.estimator`` with its parameters ``estimate``, and
-    ``aim(acc) -> ref``, the reference of the next command from the fold's
-    accumulator (waypoint chains). The pose rides as a ``SplitPose`` and the
-    next command, computed at the end of each period, as ``v + i ω``: no step
-    recomputes the heading's sine, and XLA:CPU evaluates the law in one loop.
+    Optional parts are ``None`` where a run has none: ``disturbance``,
+    ``estimate`` (the estimator's parameters), and ``aim(acc) -> ref``, the
+    next command's reference from the fold's accumulator (waypoint chains).
     """
 
     ref: jax.Array
@@ -199,28 +173,23 @@ class ClosedLoopStep:
         return applied
 
     def followed(self, wheel: Any, command: jax.Array) -> tuple[jax.Array, Any]:
-        """``command`` after the speed limiter in state ``wheel`` (where the loop has one)."""
+        """``command`` after the speed limiter, if any, in state ``wheel``."""
         if not self.limiter:
             return command, wheel
         v, omega = speed_limit(wheel, command.real, command.imag, self.robot, self.dt)
         return jax.lax.complex(v, omega), HeldCommand(v, omega)
 
     def law_input(self, estimate: SplitPose, queue: tuple, moves: tuple, wheel: Any) -> SplitPose:
-        """The estimate rolled over the commands in flight, oldest first (compensation).
-
-        ``queue``/``moves``: the commands in flight and their arcs, newest
-        first; with a speed limiter, each passes through it as it will.
-        """
+        """The estimate rolled over the commands in flight, oldest first (compensation)."""
         if not self.estimate.compensate:
             return estimate
         for j in reversed(range(self.slots)):
+            late = self.disturbance.delay > j
             if moves:
                 move = moves[j]
             else:
                 followed, next_wheel = self.followed(wheel, queue[j])
                 move = ArcMove.of(followed.real, followed.imag, self.dt)
-            late = self.disturbance.delay > j
-            if not moves:
                 wheel = _select(late, next_wheel, wheel)
             estimate = _select(late, ideal_move(estimate, move), estimate)
         return estimate
@@ -238,8 +207,6 @@ class ClosedLoopStep:
             if estimator is None:
                 first = self.law(sensed, ref)
             else:
-                # The estimate starts from the first measurement (docs/model.md
-                # §9); no command is in flight before the first sample.
                 state = estimator.start(sensed, self.estimate, self.robot)
                 zero = jnp.zeros((), init.dtype)
                 still = (ArcMove.of(zero, zero, self.dt),) * self.slots
@@ -252,20 +219,16 @@ class ClosedLoopStep:
     def move(
         self, pose: SplitPose, wheel: Any, applied: jax.Array, ref: jax.Array, acc: Any
     ) -> tuple[SplitPose, Any, jax.Array, StepOutput, Any]:
-        """The plant's half of a period: the robot moves under ``applied`` (``v + i ω``).
+        """The plant's half of a period under ``applied``; the command side is the caller's.
 
-        The command side is the caller's: ``__call__``, or a host loop
-        (``wmr_jax.export``).
-
-        Returns:
-            ``(pose, wheel, followed, out, acc)`` at the end of the period;
-            ``followed`` is the command the limiter let through.
+        Returns ``(pose, wheel, followed, out, acc)``; ``followed``: what the limiter let through.
         """
         spec = self.disturbance
         if spec is not None:
             region = jnp.int32(-1)
         elif self.fold or self.record:
-            region = split_region(pose, ref, self.params, self.options)
+            control = self.options.controller
+            region = control.region_of(pose.stacked(), ref, self.params, frame=pose.frame())
         else:
             region = None
         followed, wheel = self.followed(wheel, applied)
@@ -283,11 +246,7 @@ class ClosedLoopStep:
         return pose, wheel, followed, out, acc
 
     def __call__(self, carry: LoopCarry, noise_next: Any) -> tuple[LoopCarry, Any]:
-        """Move over one period under the carried command; compute the next one.
-
-        ``noise_next``: the measurement noise at the end of the period (3,)
-        (``None`` without a disturbance).
-        """
+        """Move over one period; compute the next command from the measurement ``noise_next``."""
         pose, wheel, fresh, queue, moves, state, ref, acc = carry
         ref = self.ref if self.aim is None else ref
         spec, estimator, dt = self.disturbance, self.estimator, self.dt
@@ -300,7 +259,6 @@ class ClosedLoopStep:
             moves = (fresh_move, *moves[:-1])
         pose, wheel, followed, out, acc = self.move(pose, wheel, applied, ref, acc)
         if estimator is not None and not moves:
-            # With a speed limiter: the arc of what it let through.
             move = ArcMove.of(followed.real, followed.imag, dt)
         queue = (fresh, *queue[:-1]) if queue else ()
         if spec is None:
@@ -347,12 +305,10 @@ def scan_closed_loop(
 ) -> tuple[jax.Array, Any, Any]:
     """Run the closed loop of one pose: the one ``lax.scan`` of ``ClosedLoopStep``.
 
-    ``ref``, ``init``: ``(3,)`` poses; ``robot``: the nominal one (the law's,
-    wheel controller's and estimator's model). A ``disturbance`` of one run
+    ``ref``, ``init``: ``(3,)``; ``robot``: the nominal one. A ``disturbance``
     sets the number of periods by its noise; ``fold(acc, pose, out) -> acc``
-    streams metrics after every period (``pose`` a ``SplitPose``); ``record``
-    also returns every pose and ``StepOutput`` (and, disturbed, the pose the
-    law's side holds). Returns ``(final pose (3,), acc, records or None)``.
+    streams metrics; ``record`` also returns every pose and ``StepOutput``
+    (disturbed: and the estimate). Returns ``(final pose (3,), acc, records)``.
     """
     step = ClosedLoopStep(ref, params, robot, dt, options, disturbance, estimate, aim, fold, record)
     carry = step.start(ref, init, acc)
@@ -373,11 +329,8 @@ def scan_closed_loop(
 
 
 def remat(body: Callable) -> Callable:
-    """Differentiate ``body`` by recomputing it: cheaper than storing every step's intermediates."""
+    """Recompute ``body`` in the backward pass instead of storing its intermediates."""
     return jax.checkpoint(body, prevent_cse=False)
-
-
-# ---------------------------------------------------------------- batching
 
 
 def batch_axes(tree: Any, single_ndim: int) -> Any:
@@ -388,8 +341,8 @@ def batch_axes(tree: Any, single_ndim: int) -> Any:
 def batched(single: Callable) -> Callable:
     """Lift ``single(ref, params, init, robot, dt, options)`` to batched inputs.
 
-    A leading axis on ``ref``/``init`` or on any leaf of ``params``/``robot``
-    is mapped over; the others are shared. The one place ``vmap`` is applied.
+    A leading axis on ``ref``/``init`` or any leaf of ``params``/``robot`` is
+    mapped over; the others are shared.
     """
 
     def run(ref, params, init, robot, dt, options):
@@ -420,27 +373,18 @@ def jit_top_level(fn: Callable, **kwargs: Any) -> Callable:
         return jax.jit(fn, **kwargs)
 
 
-def _untraced(kwargs: dict[str, Any]) -> dict[str, Any]:
-    """``options`` without ``remat`` for a call with concrete arguments (nothing differentiates)."""
-    options = kwargs.get("options")
-    if isinstance(options, Options) and options.remat:
-        return {**kwargs, "options": dataclasses.replace(options, remat=False)}
-    return kwargs
-
-
 class EntryJit:
-    """A jitted entry point, compiled with ``COMPILER_OPTIONS`` when called at top level.
-
-    JAX accepts compiler options only on a top-level ``jit``; with traced
-    arguments the function runs as a plain nested ``jit``.
-    """
+    """A jitted entry point: ``COMPILER_OPTIONS`` at top level, a nested ``jit`` when traced."""
 
     def __init__(self, fn: Callable, **kwargs: Any):
         self.nested = jax.jit(fn, **kwargs)
         self.top = jit_top_level(fn, **kwargs)
 
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
-        traced = any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(args))
-        if traced:
+        if is_traced(args):
             return self.nested(*args, **kwargs)
-        return self.top(*args, **_untraced(kwargs))
+        # Concrete arguments: nothing differentiates, so no remat.
+        options = kwargs.get("options")
+        if isinstance(options, Options) and options.remat:
+            kwargs = {**kwargs, "options": dataclasses.replace(options, remat=False)}
+        return self.top(*args, **kwargs)

@@ -1,7 +1,6 @@
 """Metrics of docs/model.md §6, so that every experiment measures the same thing.
 
-All functions broadcast over leading batch axes of the trajectory: a
-``Trajectory`` from ``rollout`` or one from ``batch_rollout`` alike.
+All functions broadcast over leading batch axes of the trajectory.
 """
 
 from __future__ import annotations
@@ -58,7 +57,7 @@ class PoseMetrics(NamedTuple):
 
 
 def _check_tolerances(tol_r: Any, tol_theta: Any) -> tuple[Any, Any]:
-    """Return the tolerances as floats after checking their ranges (tracers pass)."""
+    """Return the tolerances as checked floats (tracers pass)."""
     if is_traced((tol_r, tol_theta)):
         return tol_r, tol_theta
     tol_r = check_number("tol_r", tol_r, unit="cm")
@@ -73,19 +72,17 @@ def _poses_of(traj: Any) -> Any:
             f"traj is a {type(traj).__name__}; allowed: a Trajectory (from rollout or "
             "batch_rollout), whose poses have shape (..., steps + 1, 3)"
         )
-    if not is_traced(poses) and (
-        jnp.ndim(poses) < 2 or jnp.shape(poses)[-1] != 3 or jnp.shape(poses)[-2] < 2
-    ):
+    if is_traced(poses):
+        return poses
+    if jnp.ndim(poses) < 2 or jnp.shape(poses)[-1] != 3 or jnp.shape(poses)[-2] < 2:
         raise ValueError(
             f"traj.poses has shape {jnp.shape(poses)}; allowed: (..., steps + 1, 3) with "
             "steps >= 1 (the initial pose, then one per control period)"
         )
-    if not is_traced(poses) and array_kind(poses) in "iuf":
+    if array_kind(poses) in "iuf":
         host = np.asarray(poses)
         bad = ~np.isfinite(host).all(axis=-1)
         if bad.any():
-            # Named by its own index in traj.poses (batch axes, then the sample),
-            # not by its place in the flattened samples a later check would see.
             at = tuple(int(i) for i in np.argwhere(bad)[0])
             raise ValueError(
                 f"traj.poses[{', '.join(map(str, at))}] = {host[at].tolist()} is not finite; "
@@ -98,8 +95,7 @@ def _is_arrived(
     poses: jax.Array, refs: jax.Array, tol_r: Any, tol_theta: Any, frame: Any = None
 ) -> jax.Array:
     err = law.polar_error(poses, refs, frame=frame)
-    # |θ̄_e| from the headings, not cosines: a heading exactly tol_theta off is
-    # arrived, as ≤ says. Whole turns by round, faster than jnp.mod on XLA:CPU.
+    # |θ̄_e| from the headings, not cosines: a heading exactly tol_theta off is arrived.
     turn = poses[..., 2] - refs[..., 2]
     whole = 2 * jnp.pi * jnp.round(turn / (2 * jnp.pi))
     turn = jnp.abs(jnp.where(jnp.abs(turn) <= jnp.pi, turn, turn - whole))
@@ -127,7 +123,6 @@ def arrived(
     return _arrived_jit(poses, refs, tol_r, tol_theta)
 
 
-# One compiled program each, not dozens of ops compiled for every batch shape.
 _arrived_jit = jax.jit(_is_arrived)
 
 
@@ -177,7 +172,7 @@ def arrival_time(
 @jax.jit
 def _arrival_time_jit(samples, refs, tol_r, tol_theta, dt):
     ok = _is_arrived(samples, refs, tol_r, tol_theta)
-    # Length of the run of arrived samples that ends the horizon.
+    # The run of arrived samples that ends the horizon.
     settled = jnp.sum(jnp.cumprod(ok[..., ::-1], axis=-1), axis=-1)
     steps = ok.shape[-1]
     first = steps - settled
@@ -191,7 +186,7 @@ def success_rate(times: Any) -> float:
         ValueError: for no times, or bools, NaN or negative numbers (``inf``
             is a run that never settled: a failure).
     """
-    require_concrete("success_rate", times)  # a float of NumPy's count, on the host
+    require_concrete("success_rate", times)
     allowed = "one or more arrival times, s (from arrival_time; inf where a run never settles)"
     if isinstance(times, (str, bytes)) or getattr(times, "poses", None) is not None:
         raise ValueError(f"times = {type(times).__name__} is not allowed; allowed: {allowed}")
@@ -199,7 +194,7 @@ def success_rate(times: Any) -> float:
     if arr.size == 0:
         raise ValueError(f"times has shape {arr.shape} (no runs); allowed: {allowed}")
     require("times", arr, ~np.isnan(arr) & (arr >= 0), allowed)
-    # In NumPy: JAX's mean of bools is float32 even in a float64 session (3/5 -> 0.6000000238).
+    # In NumPy: JAX's mean of bools is float32 even in a float64 session.
     finite = np.isfinite(np.asarray(times, dtype=float))
     return float(np.count_nonzero(finite) / finite.size)
 
@@ -281,7 +276,6 @@ def zigzag_count(
 
 @jax.jit
 def _zigzags(v, omega, v_dead_band, omega_dead_band):
-    """Sign changes of ``v`` plus those of ``ω``: one compiled program (see ``_arrived_jit``)."""
     return _sign_changes(v, v_dead_band) + _sign_changes(omega, omega_dead_band)
 
 
@@ -295,9 +289,6 @@ def region_time(traj: Any, *, dt: float) -> jax.Array:
     return jnp.sum(one_hot, axis=-2) * dt
 
 
-# ---------------------------------------------------------------- streamed metrics (no trajectory)
-
-
 class Thresholds(NamedTuple):
     """The metrics' tolerances, traced (changing them does not recompile)."""
 
@@ -308,7 +299,7 @@ class Thresholds(NamedTuple):
 
 
 class RunMetrics(NamedTuple):
-    """Running metrics of one run (all scalars), see ``stream_update``."""
+    """Running metrics of one run (all scalars), streamed without a trajectory."""
 
     step: jax.Array  # periods folded so far
     settled_from: jax.Array  # first sample of the current run of arrived samples, or −1
@@ -321,14 +312,14 @@ class RunMetrics(NamedTuple):
 
 
 def stream_start(dtype: Any) -> RunMetrics:
-    """Return the metrics of a run before its first control period."""
+    """The metrics of a run before its first control period."""
     zero, izero = jnp.zeros((), dtype), jnp.zeros((), jnp.int32)
     none = jnp.full((), -1, jnp.int32)
     return RunMetrics(izero, none, none, zero, zero, izero, izero, izero)
 
 
 def _flip(last: jax.Array, x: jax.Array, dead_band: Any) -> tuple[jax.Array, jax.Array]:
-    """Return the updated last sign and 1 if ``x`` flipped it, else 0 (as ``_sign_changes``)."""
+    """Return the updated last sign and 1 if ``x`` flipped it, else 0."""
     sign = jnp.where(x > dead_band, 1, jnp.where(x < -dead_band, -1, 0)).astype(jnp.int32)
     flipped = (sign != 0) & (last != 0) & (sign != last)
     return jnp.where(sign != 0, sign, last), flipped.astype(jnp.int32)
@@ -345,13 +336,8 @@ def stream_update(
 ) -> RunMetrics:
     """Fold one control period into the metrics (``docs/model.md §6``).
 
-    Args:
-        acc: the metrics so far.
-        pose: ``(3,)`` true pose at the end of the period.
-        ref: ``(3,)`` reference.
-        out: what the period reported (a ``StepOutput``).
-        thresholds: tolerances and dead bands.
-        frame: the pose as ``(x, y, cos θ, sin θ)`` if the caller has it.
+    ``pose``: ``(3,)`` true pose at the end of the period, also as ``frame``
+    ``(x, y, cos θ, sin θ)`` if the caller has it; ``out``: its ``StepOutput``.
     """
     ok = _is_arrived(pose, ref, thresholds.tol_r, thresholds.tol_theta, frame)
     k = acc.step

@@ -1,8 +1,7 @@
 """The pose as the loops carry it, and its motion over one control period.
 
-``SplitPose`` holds the position and heading as complex numbers, so that the
-ideal robot's exact arc (``ideal_move``) is two complex products. Nothing
-here checks its inputs.
+``SplitPose`` holds position and heading as complex numbers, so that the ideal
+robot's exact arc is two complex products. Nothing here checks its inputs.
 """
 
 from __future__ import annotations
@@ -52,16 +51,8 @@ def split_command(pose: SplitPose, ref, params, options: Options) -> jax.Array:
     return jax.lax.complex(v, omega)
 
 
-def split_region(pose: SplitPose, ref, params, options: Options) -> jax.Array:
-    """Return the controller's region label at ``pose`` (−1 if it has none)."""
-    return options.controller.region_of(pose.stacked(), ref, params, frame=pose.frame())
-
-
 class HeldCommand(NamedTuple):
-    """The command ``(v cm/s, ω rad/s)`` the speed limiter last let through (docs/model.md §4.2.2).
-
-    The ideal loop's state when ``Options.accel_limit`` is on; at rest ``(0, 0)``.
-    """
+    """The command ``(v cm/s, ω rad/s)`` the speed limiter let through (docs/model.md §4.2.2)."""
 
     v: jax.Array
     omega: jax.Array
@@ -121,9 +112,8 @@ def advance_period(
 ) -> tuple[SplitPose, Any, jax.Array, jax.Array]:
     """Move the robot over one period under the held ``command = (v, ω)`` (docs/model.md §4).
 
-    ``wheel`` is the velocity loop's state (``initial_wheel``), ``model`` the
-    robot the wheel controller believes in. Returns ``(pose, wheel, rim
-    speeds (2,) cm/s, distance cm)`` at the end of the period.
+    ``model``: the robot the wheel controller believes in. Returns ``(pose,
+    wheel, rim speeds (2,) cm/s, distance cm)`` at the end of the period.
     """
     v, omega = command
     if options.velocity == "ideal":

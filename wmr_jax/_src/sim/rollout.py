@@ -1,9 +1,6 @@
 """Closed-loop rollouts: the entry points ``rollout``, ``batch_rollout``, ``final_poses``.
 
-The entry points check their inputs in plain Python, then call a jitted core
-whose static arguments are the shape-deciding options, among them the robot's
-vanishing terms and speed limiter (``loops.for_robot``, ``docs/model.md
-§4.2.2, §4.3``). The loop itself is in ``loops.py``.
+Each checks its inputs in plain Python, then calls a jitted core of ``loops.py``.
 """
 
 from __future__ import annotations
@@ -78,9 +75,8 @@ class Trajectory(NamedTuple):
 
 # choice: where the compute dtype spaces positions near the reference more than
 # this apart, cm, a run that starts nearer its reference than the origin is
-# computed in the reference's frame and translated back: the law does not
-# depend on the origin but the rounding does (docs/model.md §3.8). Nearer the
-# origin the translation is by 0 and the run is the same bit for bit.
+# computed in the reference's frame: the law does not depend on the origin but
+# the rounding does (docs/model.md §3.8). Elsewhere the shift is 0, bit for bit.
 GOAL_FRAME_SPACING = AT_GOAL / GOAL_EPS
 
 
@@ -119,9 +115,6 @@ _batch_rollout_jit = EntryJit(batched(_trajectory), static_argnames=("options",)
 _final_poses_jit = EntryJit(batched(_final_pose), static_argnames=("options",))
 
 
-# ---------------------------------------------------------------- boundary checks
-
-
 def make_options(
     *,
     steps: Any = DEFAULT_STEPS,
@@ -155,7 +148,7 @@ def make_options(
 
 
 def _common_batch(refs, params, init, robot):
-    """Check the batch sizes agree; return the arguments with size-1 axes (shared) removed."""
+    """Check the batch sizes agree; return the arguments with size-1 (shared) axes removed."""
     n = require_one_batch_size(
         batch_sizes({"gains": params, "robot": robot}, {"refs": refs, "init": init})
     )
@@ -170,21 +163,7 @@ def _common_batch(refs, params, init, robot):
     def shared(leaf):
         return leaf[0] if jnp.ndim(leaf) >= 1 and jnp.shape(leaf)[0] == 1 else leaf
 
-    refs = refs[0] if refs.ndim == 2 and refs.shape[0] == 1 else refs
-    init = init[0] if init.ndim == 2 and init.shape[0] == 1 else init
-    return refs, jax.tree.map(shared, params), init, jax.tree.map(shared, robot)
-
-
-SINGLE_RUN = ("rollout", "batch_rollout or final_poses")
-
-
-def _single_run(params: Any, robot: Robot, entry: tuple[str, str]) -> None:
-    """Refuse batched parameters in an entry point that runs one robot."""
-    single, batched = entry
-    for prefix, tree in (("gains", params), ("robot", robot)):
-        require_unbatched(
-            tree, prefix, f"a scalar in {single} (one run); use {batched} for a batch"
-        )
+    return jax.tree.map(shared, (refs, params, init, robot))
 
 
 def prepare(
@@ -196,13 +175,13 @@ def prepare(
     options: Options,
     *,
     batch: bool | None,
-    entry: tuple[str, str] = SINGLE_RUN,
+    entry: tuple[str, str] = ("rollout", "batch_rollout or final_poses"),
 ):
     """Check and convert every argument of a rollout entry point (before tracing).
 
-    ``batch``: ``False`` for one run, ``None`` for a batch over any of
-    refs/init/params/robot; ``entry``: for one run, the names for the message
-    that refuses batched parameters. Returns ``(refs, params, init, robot, dt)``.
+    ``batch``: ``False`` for one run, ``None`` for a batch; ``entry``: the
+    single and batched entry points the refusal of a batch in one run names.
+    Returns ``(refs, params, init, robot, dt)``.
     """
     control = options.controller
     params = control.default_params() if params is None else params
@@ -220,7 +199,9 @@ def prepare(
     refs = as_poses("refs" if batch is not False else "ref", refs, batch=batch)
     init = as_poses("init", init, batch=None if batch is not False else False)
     if batch is False:
-        _single_run(params, robot, entry)
+        for prefix, tree in (("gains", params), ("robot", robot)):
+            allowed = f"a scalar in {entry[0]} (one run); use {entry[1]} for a batch"
+            require_unbatched(tree, prefix, allowed)
     else:
         refs, params, init, robot = _common_batch(refs, params, init, robot)
     if not is_traced((params, robot, dt)):
@@ -232,14 +213,9 @@ def prepare(
 
 
 def finite_result(poses: Any, result: Any, *, pose_axes: int = 1) -> Any:
-    """Return ``result``, or raise if a pose of the run left the floating-point range.
-
-    Some valid gains or periods drive the robot beyond what the compute dtype
-    holds; such a run is reported, not returned (traced poses pass).
-    """
+    """Return ``result``, or raise if a run left the floating-point range (traced poses pass)."""
     if is_traced(poses):
         return result
-    # One flag per run: the pose (and time) axes reduced, the batch axes kept.
     axes = tuple(range(-pose_axes, 0))
     if isinstance(poses, jax.Array) and not poses.is_fully_addressable:
         # Spread over several processes: each checks the runs it holds.
@@ -253,24 +229,23 @@ def finite_result(poses: Any, result: Any, *, pose_axes: int = 1) -> Any:
 
 @functools.partial(jax.jit, static_argnums=1)
 def _finite_runs(poses: jax.Array, axes: tuple[int, ...]) -> jax.Array:
-    """Whether each run's poses are all finite (one program, not an op-by-op pair)."""
+    """Whether each run's poses are all finite."""
     return jnp.isfinite(poses).all(axis=axes)
 
-
-# ---------------------------------------------------------------- entry points
 
 _STATIC = ("steps", "velocity", "controller", "temperature", "substeps", "wheel_limit")
 
 
 def _static_options(arguments: dict[str, Any]) -> dict[str, Any]:
-    """Pick the static options out of an entry point's arguments."""
     return {name: arguments[name] for name in _STATIC}
 
 
 def _run(jitted: EntryJit, args: tuple, options: Options, *, record: bool) -> Any:
     """Run ``jitted`` on an entry point's prepared ``args``; refuse a run that left the range."""
     if record:
-        require_trajectory_fits(args, options.steps)
+        refs, params, init, robot, _ = args
+        runs = common_batch_size({"gains": params, "robot": robot}, {"refs": refs, "init": init})
+        require_memory(runs, options.steps, TRAJECTORY_RECORD, args)
     options = for_robot(options, args[3], args[4])
     out = jitted(*args, options=options)
     return finite_result(out.poses, out, pose_axes=2) if record else finite_result(out, out)
@@ -328,19 +303,12 @@ def record_bytes(runs: int, steps: int, record: tuple[int, int]) -> int:
     return runs * (steps + 1) * (floats * np.dtype(float_dtype()).itemsize + ints * 4)
 
 
-def require_trajectory_fits(args: tuple, steps: int) -> None:
-    """Refuse a ``Trajectory`` of the prepared ``args`` larger than the machine's memory."""
-    refs, params, init, robot, _ = args
-    runs = common_batch_size({"gains": params, "robot": robot}, {"refs": refs, "init": init})
-    require_memory(runs, steps, TRAJECTORY_RECORD, args)
-
-
 def require_memory(runs: int, steps: int, record: tuple[int, int], inputs: Any = None) -> None:
     """Refuse, before it runs, a record of ``runs`` runs larger than the memory.
 
     XLA would allocate it whole, and an overcommitting host may stall rather
-    than fail. ``record``: ``(floats, int32s)`` per run and period;
-    ``inputs``: the run's inputs, whose devices it runs on.
+    than fail. ``record``: ``(floats, int32s)`` per run and period; ``inputs``
+    place the run on their devices.
     """
     needed = record_bytes(runs, steps, record)
     memory = _memory_bytes(inputs)

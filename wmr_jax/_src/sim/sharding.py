@@ -48,16 +48,13 @@ MAX_CPU_DEVICES = 1024
 
 
 def use_cpu_devices(count: int | None = None) -> int:
-    """Split the CPU into ``count`` JAX devices (one leaves cores idle); return the local count.
+    """Split the CPU into ``count`` JAX devices; return the local count.
 
     Takes effect only before JAX has started; no effect on accelerators.
 
     Args:
         count: devices to make; default twice the number of cores this
             process may use.
-
-    Returns:
-        ``len(jax.local_devices())`` after the call.
     """
     if count is None:
         try:
@@ -74,24 +71,8 @@ def use_cpu_devices(count: int | None = None) -> int:
     return len(jax.local_devices())
 
 
-def batch_sharding(devices: Sequence[Any] | None = None) -> jax.sharding.NamedSharding:
-    """Return the sharding that splits an array's leading axis over ``devices``.
-
-    Args:
-        devices: devices in order; default ``jax.devices()`` (every device of
-            every process).
-    """
-    devices = checked_devices(jax.devices() if devices is None else devices)
-    mesh = jax.sharding.Mesh(np.asarray(devices), (BATCH_AXIS,))
-    return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec(BATCH_AXIS))
-
-
 def checked_devices(devices: Sequence[Any]) -> list[Any]:
-    """Return ``devices`` as a list after checking each is a JAX device, once.
-
-    Raises:
-        ValueError: for none, something else than a device, or a repeat.
-    """
+    """Return ``devices`` as a list; ``ValueError`` for none, a non-device or a repeat."""
     if isinstance(devices, (str, bytes, jax.Device)) or not hasattr(devices, "__iter__"):
         raise ValueError(
             f"devices = {devices!r} is not allowed; allowed: a sequence of JAX devices "
@@ -117,8 +98,8 @@ def shard(batch: Any, devices: Sequence[Any] | None = None) -> ShardedBatch:
     Args:
         batch: an ``(N, ...)`` array (or nested list of numbers), or a
             pytree of arrays of one leading length ``N``.
-        devices: default ``jax.devices()``. With several processes, every
-            process passes the same ``batch``.
+        devices: in order; default ``jax.devices()`` (every device of every
+            process). With several processes, every process passes the same ``batch``.
 
     Returns:
         ``ShardedBatch(array, n)``, ``array`` padded to ``ceil(N / D) · D`` rows.
@@ -126,8 +107,10 @@ def shard(batch: Any, devices: Sequence[Any] | None = None) -> ShardedBatch:
     Raises:
         ValueError: if the leaves do not share one leading length ``N ≥ 1``.
     """
-    sharding = batch_sharding(devices)
-    count = len(sharding.mesh.devices.flat)
+    devices = checked_devices(jax.devices() if devices is None else devices)
+    mesh = jax.sharding.Mesh(np.asarray(devices), (BATCH_AXIS,))
+    sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec(BATCH_AXIS))
+    count = len(devices)
     if isinstance(batch, list):
         batch = _rows("batch", batch)
     leaves = jax.tree.leaves(batch)

@@ -1,9 +1,8 @@
 """Pose estimators of the sensed loop (docs/model.md §9): an observer and an extended Kalman filter.
 
-Each period an estimator predicts its pose on the ideal robot's arc under the
-command applied, then corrects it toward the measurement: ``OBSERVER`` by
-gains in ``[0, 1]`` (constants or tables over the distance to the goal),
-``EKF`` by the Kalman gain of the ideal robot. Latency compensation is the loop's.
+Each period the loop predicts the estimate on the ideal robot's arc; the
+estimator corrects it toward the measurement (``OBSERVER`` by gains in
+``[0, 1]``, ``EKF`` by the Kalman gain). Latency compensation is the loop's.
 """
 
 from __future__ import annotations
@@ -20,6 +19,7 @@ import numpy as np
 from wmr_jax._src.checks import (
     Parameters,
     check_bool,
+    is_traced,
     list_as_array,
     real_array,
     require,
@@ -44,8 +44,7 @@ def observer_radii(knots: int) -> np.ndarray:
 
 # choice: hand-set tables, low at the goal (where noise would move the robot
 # back and forth) up to 0.7 beyond about 7 cm; tuned tables replace them.
-_DEFAULT_POSITION = (0.05, 0.1, 0.4, 0.7, 0.7, 0.7)
-_DEFAULT_HEADING = (0.05, 0.1, 0.4, 0.7, 0.7, 0.7)
+_DEFAULT_GAINS = (0.05, 0.1, 0.4, 0.7, 0.7, 0.7)
 
 
 @jax.tree_util.register_dataclass
@@ -63,8 +62,8 @@ class ObserverParams(Parameters):
             commands in flight (docs/model.md §9).
     """
 
-    position: Any = _DEFAULT_POSITION
-    heading: Any = _DEFAULT_HEADING
+    position: Any = _DEFAULT_GAINS
+    heading: Any = _DEFAULT_GAINS
     compensate: bool = dataclasses.field(default=True, metadata={"static": True})
 
     def __post_init__(self) -> None:
@@ -93,19 +92,17 @@ class EKFParams(Parameters):
     compensate: bool = dataclasses.field(default=True, metadata={"static": True})
 
 
-# ---------------------------------------------------------------- checks
-
-
-def _check_values(name: str, value: Any, ok: Callable, allowed: str) -> int | None:
-    """Check one concrete field (a scalar or one batch axis); return its batch size."""
-    if isinstance(value, jax.core.Tracer):
-        return None
-    arr = real_array(name, value, allowed)  # refuses strings, bools and None by name
+def _check_values(name: str, value: Any, ok: Callable, allowed: str, sizes: dict) -> None:
+    """Check one concrete field (a scalar or one batch axis); note its batch size in ``sizes``."""
+    if is_traced(value):
+        return
+    arr = real_array(name, value, allowed)
     if arr.ndim > 1:
         raise ValueError(f"{name} has shape {arr.shape}; allowed: a scalar or one batch axis")
     require(name, arr, np.isfinite(arr) & ok(arr), allowed)
     require_representable(name, arr, tiny_ok=True)
-    return arr.shape[0] if arr.ndim else None
+    if arr.ndim:
+        sizes[name] = arr.shape[0]
 
 
 def _check_kind(params: Any, kind: type, prefix: str) -> None:
@@ -130,9 +127,7 @@ def validate_observer(params: ObserverParams, prefix: str = "estimator") -> Obse
             )
         for k, value in enumerate(entries):
             label = f"{prefix}.{name}[{k}]" if isinstance(table, tuple) else f"{prefix}.{name}"
-            size = _check_values(label, value, lambda a: (a >= 0) & (a <= 1), "a gain 0 <= g <= 1")
-            if size is not None:
-                sizes[label] = size
+            _check_values(label, value, lambda a: (a >= 0) & (a <= 1), "a gain 0 <= g <= 1", sizes)
     require_one_batch_size(sizes)
     return params
 
@@ -143,17 +138,11 @@ def validate_ekf(params: EKFParams, prefix: str = "estimator") -> EKFParams:
     sizes = {}
     units = {"wheel_error": "", "sigma_xy": " cm", "sigma_theta": " rad"}
     for name, unit in units.items():
-        label = f"{prefix}.{name}"
-        size = _check_values(
-            label, getattr(params, name), lambda a: (a > 0) & (a <= 1e6), f"0 < {name} <= 1e6{unit}"
-        )
-        if size is not None:
-            sizes[label] = size
+        allowed = f"0 < {name} <= 1e6{unit}"
+        value = getattr(params, name)
+        _check_values(f"{prefix}.{name}", value, lambda a: (a > 0) & (a <= 1e6), allowed, sizes)
     require_one_batch_size(sizes)
     return params
-
-
-# ---------------------------------------------------------------- the observer
 
 
 class ObserverState(NamedTuple):
@@ -169,19 +158,13 @@ def _table(values: Any, r: jax.Array) -> jax.Array:
     return table_at((values[0] + jnp.zeros_like(r), *values[1:]), r, observer_radii(len(values)))
 
 
-def _rotation(angle: jax.Array) -> jax.Array:
-    """``cos angle + i sin angle`` (exactly ``1`` at ``0``)."""
-    cos_a, sin_a = sin_cos(angle)
-    return jax.lax.complex(cos_a, sin_a)
-
-
 def _observer_start(measured: motion.SplitPose, params: Any, robot: Robot) -> ObserverState:
     del params, robot
     return ObserverState(measured)
 
 
 def _observer_update(state, predicted, command, measured, ref, params, robot, dt):
-    """Blend the prediction over the period toward ``measured``."""
+    """Blend the prediction toward ``measured`` by the gains at its distance to ``ref``."""
     del state, command, robot, dt
     # A plain square root: the complex absolute value's overflow guard is slow.
     d = jax.lax.complex(ref[0], ref[1]) - predicted.position
@@ -194,14 +177,10 @@ def _observer_update(state, predicted, command, measured, ref, params, robot, dt
     return ObserverState(motion.SplitPose(position, measured.turned(-back), measured.theta - back))
 
 
-# ---------------------------------------------------------------- the EKF
-
-
 class EKFState(NamedTuple):
-    """The filter's estimate and its covariance over ``[x cm, y cm, θ rad]``.
+    """The filter's estimate and covariance over ``[x cm, y cm, θ rad]``.
 
-    ``covariance`` is one array of its six distinct entries
-    ``(P₀₀, P₀₁, P₀₂, P₁₁, P₁₂, P₂₂)``.
+    ``covariance``: its six distinct entries ``(P₀₀, P₀₁, P₀₂, P₁₁, P₁₂, P₂₂)``.
     """
 
     pose: motion.SplitPose
@@ -266,15 +245,13 @@ def _ekf_update(state, predicted, command, measured, ref, params, robot, dt) -> 
     dx = p00 * y0 + p01 * y1 + p02 * y2
     dy = p01 * y0 + p11 * y1 + p12 * y2
     dth = p02 * y0 + p12 * y1 + p22 * y2
+    cos_d, sin_d = sin_cos(dth)
     pose = motion.SplitPose(
         predicted.position + jax.lax.complex(dx, dy),
-        predicted.heading * _rotation(dth),
+        predicted.heading * jax.lax.complex(cos_d, sin_d),
         predicted.theta + dth,
     )
     return EKFState(pose, covariance)
-
-
-# ---------------------------------------------------------------- estimators as values
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,9 +1,7 @@
 """The disturbed closed loop (docs/model.md §7), with or without an estimator (§9).
 
-The one closed-loop step (``loops.ClosedLoopStep``) given a ``Disturbance``:
-pose-measurement noise (arrival is judged on the true pose), wheel and mass
-mismatch, and a latency of ``delay`` samples. The metrics stream through the
-scan, so batches are bounded in memory.
+Arrival is judged on the true pose; the metrics stream through the scan, so
+batches are bounded in memory.
 """
 
 from __future__ import annotations
@@ -19,10 +17,9 @@ from wmr_jax._src import checks
 from wmr_jax._src.model import controllers
 from wmr_jax._src.model.params import Robot
 from wmr_jax._src.sim import loops, metrics
-from wmr_jax._src.sim import rollout as simulation
 from wmr_jax._src.sim.loops import Options
 from wmr_jax._src.sim.metrics import PoseMetrics
-from wmr_jax._src.sim.rollout import DEFAULT_DT
+from wmr_jax._src.sim.rollout import DEFAULT_DT, make_options, prepare, require_memory
 from wmr_jax._src.sim.sensing.disturbances import Disturbance, checked_disturbance
 from wmr_jax._src.sim.sensing.estimators import resolve_estimator
 
@@ -54,11 +51,7 @@ def disturbed_run(
     options: Options,
     **kwargs: Any,
 ) -> tuple[jax.Array, Any, Any]:
-    """Run one pose toward ``spec.ref`` under its ``Disturbance`` (docs/model.md §7, §9).
-
-    ``loops.scan_closed_loop`` with ``disturbance=spec`` (no batch axes) and
-    its keywords ``estimate``, ``fold``, ``acc``, ``record``; ``robot`` is the
-    nominal one, the controller's and estimator's model.
+    """``loops.scan_closed_loop`` of one pose toward ``spec.ref`` under ``spec`` (no batch axes).
 
     Returns:
         ``(final true pose (3,), acc, (poses, outputs, estimates) or None)``.
@@ -79,18 +72,10 @@ def metrics_fold(ref: jax.Array) -> loops.Fold:
 
 
 def _disturbed_single(spec: Disturbance, params, estimate, init, robot, dt, options: Options):
-    """Run one pose under its ``Disturbance``, streaming the ``docs/model.md §6`` metrics."""
     ref = spec.ref
+    fold, acc = metrics_fold(ref), metrics.stream_start(ref.dtype)
     final, acc, _ = disturbed_run(
-        spec,
-        params,
-        init,
-        robot,
-        dt,
-        options,
-        estimate=estimate,
-        fold=metrics_fold(ref),
-        acc=metrics.stream_start(ref.dtype),
+        spec, params, init, robot, dt, options, estimate=estimate, fold=fold, acc=acc
     )
     return metrics_result(acc, final, ref, dt)
 
@@ -112,8 +97,8 @@ def metrics_result(acc: Any, final: jax.Array, ref: jax.Array, dt: jax.Array) ->
 def batched_disturbed(single):
     """Lift ``single(spec, params, estimate, init, robot, dt, options)`` over disturbances.
 
-    Every field of ``spec`` carries the batch axis, except a scalar ``delay``
-    (shared); ``params``, ``estimate`` and ``robot`` leaves may carry it too.
+    Every field of ``spec`` carries the batch axis but a scalar ``delay``;
+    ``params``, ``estimate`` and ``robot`` leaves may carry it too.
     """
 
     def run(spec, params, estimate, init, robot, dt, options):
@@ -197,8 +182,8 @@ def prepare_disturbed(
 ) -> tuple[tuple, Options]:
     """Check a batch of disturbances and the run's settings; return the jitted core's arguments.
 
-    ``record``: ``(floats, int32s)`` kept per run and period, refused beyond the
-    memory. Returns ``((spec, params, estimate, init, robot, dt), options)``.
+    ``record``: ``(floats, int32s)`` kept per run and period, refused beyond
+    the memory. Returns ``((spec, params, estimate, init, robot, dt), options)``.
     """
     refs, noise, mismatch, delay = checked_disturbance(disturbance)
     estimator, estimate = resolve_estimator(estimator)
@@ -211,31 +196,20 @@ def prepare_disturbed(
         )
     runs = checks.common_batch_size({"gains": params, "robot": robot, "estimator": estimate})
     if record is not None:
-        simulation.require_memory(max(len(refs), runs), noise.shape[1], record, disturbance)
+        require_memory(max(len(refs), runs), noise.shape[1], record, disturbance)
     if len(refs) == 1 and runs > 1:
         # One disturbance shared by every run of batched parameters.
         refs, noise, mismatch = (np.repeat(a, runs, axis=0) for a in (refs, noise, mismatch))
         delay = np.repeat(delay, runs, axis=0) if delay.ndim else delay
-    options = simulation.make_options(
-        steps=noise.shape[1], velocity=velocity, controller=controller
-    )
-    refs_j, params, init, robot, dt = simulation.prepare(
-        refs, params, init, robot, dt, options, batch=None
-    )
+    options = make_options(steps=noise.shape[1], velocity=velocity, controller=controller)
+    refs_j, params, init, robot, dt = prepare(refs, params, init, robot, dt, options, batch=None)
     if options.velocity == "ideal":
-        # The robot's speed limiter, as in the rollouts (docs/model.md §4.2.2).
         options = loops.for_robot(options, robot, dt)
-    # The commands in flight the loop carries: as many as the longest latency.
     options = dataclasses.replace(options, max_delay=max(1, int(np.max(delay))))
     if np.ndim(init) != 1:
         raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,)")
     dtype = dt.dtype
-    spec = Disturbance(
-        refs_j,
-        jnp.asarray(noise, dtype),
-        jnp.asarray(mismatch, dtype),
-        jnp.asarray(delay, dtype),
-    )
+    spec = Disturbance(refs_j, *(jnp.asarray(a, dtype) for a in (noise, mismatch, delay)))
     if estimator is not None:
         sizes = {"disturbance.ref": len(refs), **checks.batch_sizes({"estimator": estimate})}
         checks.require_one_batch_size(sizes)
@@ -283,13 +257,12 @@ def disturbed_rollout(
     Args: as for ``disturbed_metrics``.
 
     Returns:
-        ``{"poses": (N, steps + 1, 3) true poses, the initial one first,
-        "v": (N, steps) cm/s, "omega": (N, steps) rad/s``: the command
-        applied over each period (zero over the first one under latency;
-        before a speed limiter, as a ``Trajectory``'s), ``"estimates": (N,
-        steps, 3)``: the estimate of the pose at the end of each period (the
-        measurement itself without an estimator); the last one follows a
-        noise-free measurement, since no command uses it``}``.
+        ``{"poses": (N, steps + 1, 3)`` true poses, the initial one first;
+        ``"v": (N, steps)`` cm/s, ``"omega": (N, steps)`` rad/s, the command
+        applied over each period (zero over the first under latency; before a
+        speed limiter); ``"estimates": (N, steps, 3)``, the estimate at the end
+        of each period (the measurement without an estimator; the last one
+        from a noise-free measurement)``}``.
     """
     with jax.enable_x64(checks.check_bool("x64", x64)):
         args, options = prepare_disturbed(
