@@ -335,3 +335,11 @@ def test_plausibility_looks_at_every_number_and_at_positive_finite_ones_only():
     # Booleans, zero and infinity are refused where the robot is used, not called implausible.
     assert implausible({"half_track": True, "wheel_radius": 0.0, "v_max": float("inf")}) == []
     assert implausible({"half_track": 1000.0}) == [("half_track", 1000.0, (0.5, 500.0, "cm"))]
+
+
+def test_a_unit_warning_points_at_the_line_that_loads_the_robot(tmp_path):
+    path = tmp_path / "m.json"
+    path.write_text(json.dumps({"half_track": 0.08}))
+    with pytest.warns(w.RobotUnitsWarning) as caught:
+        w.load_robot(path)
+    assert [c.filename for c in caught] == [__file__]
