@@ -43,7 +43,7 @@ def main(argv: list[str]) -> int:
     from wmr_jax._src.sim.poses import sample_poses
     from wmr_jax._src.sim.rollout import DEFAULT_DT
     from wmr_jax._src.studies import conditions
-    from wmr_jax._src.tuning import hybrid, robust, search, trainer
+    from wmr_jax._src.tuning import robust, search, trainer
     from wmr_jax._src.tuning.evaluation import EVAL_SEED, held_out_poses
 
     # Every budget in CPU time: the trainer's own account too.
@@ -56,13 +56,13 @@ def main(argv: list[str]) -> int:
     path = Path(args.out)
     rows = json.loads(path.read_text()) if path.exists() else []
     starts = []
-    polish = hybrid.polish
+    black_box = robust.black_box
 
-    def recording(key, z, *rest, **kwargs):
-        starts.append(z)
-        return polish(key, z, *rest, **kwargs)
+    def recording(method, *rest, start=None, **kwargs):
+        starts.append(start)  # the hybrid's polish: the gradient part's end
+        return black_box(method, *rest, start=start, **kwargs)
 
-    hybrid.polish = recording
+    robust.black_box = recording
     for seed in args.seeds:
         if any(r["seed"] == seed for r in rows):
             print(f"seed {seed}: kept", flush=True)
@@ -75,9 +75,9 @@ def main(argv: list[str]) -> int:
         stream = jax.random.fold_in(jax.random.key(seed), 11)
         refs = sample_poses(jax.random.fold_in(stream, -1 % 2**31), config.search_poses)
         began = search.clock()
-        cma, count = polish(
-            jax.random.fold_in(jax.random.key(seed), 13), joint.start_logits(robot), refs,
-            budget, robot, DEFAULT_DT, joint, config.noise, 1.0,
+        cma, count, *_ = black_box(
+            "cma-es", jax.random.fold_in(jax.random.key(seed), 13), refs, budget, robot,
+            DEFAULT_DT, joint, config.noise, start=joint.start_logits(robot), std=1.0,
         )  # fmt: skip
         cma_cpu = search.clock() - began
         sets = {config.tuner: result.loop, "cma-es": cma}

@@ -469,8 +469,8 @@ def test_config_refuses_bad_noise(field, value):
 
 
 def test_the_hybrid_polishes_the_kept_iterate_for_its_share_of_the_time(monkeypatch):
-    """The hybrid tuner hands the kept iterate's logits to ``polish`` and returns its loop."""
-    from wmr_jax._src.tuning import hybrid, robust
+    """The hybrid tuner hands the kept iterate's logits to CMA-ES and returns its loop."""
+    from wmr_jax._src.tuning import robust
 
     _scores(monkeypatch, [1.0, 2.0, 0.5, 3.0])  # iteration 2 is kept
     calls, logits = [], {}
@@ -478,11 +478,12 @@ def test_the_hybrid_polishes_the_kept_iterate_for_its_share_of_the_time(monkeypa
         robust.joint_problem(small_config()).from_logits(np.zeros(7, np.float32), w.Robot())
     )
 
-    def fake_polish(key, z, refs, budget_s, robot, dt, joint, noise, std):
-        calls.append((np.asarray(z), budget_s, refs.shape, noise, std))
-        return polished, 9
+    def fake_black_box(method, key, refs, budget_s, robot, dt, joint, noise, *, start, std):
+        assert method == "cma-es"
+        calls.append((np.asarray(start), budget_s, refs.shape, noise, std))
+        return polished, 9, 0.0, 0.0
 
-    monkeypatch.setattr(hybrid, "polish", fake_polish)
+    monkeypatch.setattr(robust, "black_box", fake_black_box)
     config = small_config(validate_every=1, tuner="hybrid", polish_share=0.25, polish_std=0.3)
     result = tuning.tune_robust(
         config, progress_fn=lambda state: logits.setdefault(state.iteration, state.z)
@@ -500,7 +501,7 @@ def test_polish_keeps_its_start_without_budget_and_improves_on_it_with_one(monke
     """CMA-ES from the start's logits: scored first, then better candidates kept."""
     import jax
 
-    from wmr_jax._src.tuning import hybrid, robust
+    from wmr_jax._src.tuning import robust
 
     robot = w.Robot()
     joint = robust.joint_problem(small_config())
@@ -518,11 +519,13 @@ def test_polish_keeps_its_start_without_budget_and_improves_on_it_with_one(monke
     monkeypatch.setattr(robust, "robust_population_scores", population)
     start = np.zeros(7, np.float32)
     refs, key = w.sample_poses(0, 2), jax.random.key(0)
-    kept, count = hybrid.polish(key, start, refs, 0.0, robot, 0.033, joint)
+    kept, count, *_ = robust.black_box("cma-es", key, refs, 0.0, robot, 0.033, joint, start=start)
     first = robust.concrete_loop(joint.from_logits(start, robot)).params
     assert count == 1
     np.testing.assert_allclose(jax.tree.leaves(kept.params), jax.tree.leaves(first), rtol=1e-6)
-    better, count = hybrid.polish(key, start, refs, 2.0, robot, 0.033, joint, std=0.2)
+    better, count, *_ = robust.black_box(
+        "cma-es", key, refs, 2.0, robot, 0.033, joint, start=start, std=0.2
+    )
     assert count > 1 and (count - 1) % 8 == 0
     assert distance(better) < 0.5 * distance(kept)
 

@@ -3,7 +3,7 @@
 The loss is ``tuning_loss``'s relaxed arrival time averaged over
 domain-randomised runs that ``sample_conditions`` draws inside the loss and
 ``sensing.loop.disturbed_run`` runs. ``tune_robust`` runs the trainer on
-``robust_problem`` (the hybrid tuner then polishes with ``hybrid.polish``),
+``robust_problem`` (the hybrid tuner then polishes with CMA-ES, ``black_box``),
 then random search and CMA-ES (``black_box``) for the same CPU time, and
 judges all with the hard law under the standard conditions, within the
 robot's wheel budget and over the studies' horizon (``study_horizon``).
@@ -92,7 +92,7 @@ class RobustConfig:
             conditions (``centred.for_config``); ``None``: the standard ones.
         tuner: ``"gradient"`` (default): the gradient iterations alone;
             ``"hybrid"``: the iterations, then CMA-ES from their result
-            (``hybrid.polish``) on the hard-law score (docs/robustness.md).
+            (``black_box``) on the hard-law score (docs/robustness.md).
         polish_share: the polish's share of the hybrid's CPU time
             (``search.clock``), in (0, 1): it runs for
             ``share / (1 − share)`` times the iterations' CPU time.
@@ -527,13 +527,14 @@ def tune_robust(
     stream = jax.random.fold_in(jax.random.key(config.seed), 11)
     search_refs = sample_poses(jax.random.fold_in(stream, -1 % 2**31), config.search_poses)
     if config.tuner == "hybrid":
-        from wmr_jax._src.tuning import hybrid
-
-        # A run resumed after its kept iterate starts the polish from its last.
+        # CMA-ES on the hard-law score from the kept iterate, scored first so
+        # never worse on the search poses; a run resumed after its kept
+        # iterate starts from its last.
         start, share, began = iterates.get(best, state.z), config.polish_share, clock()
-        tuned, _ = hybrid.polish(
-            jax.random.fold_in(jax.random.key(config.seed), 20), start, search_refs,
-            cpu * share / (1.0 - share), robot, dt, joint, config.noise, config.polish_std,
+        tuned, *_ = black_box(
+            "cma-es", jax.random.fold_in(jax.random.key(config.seed), 20), search_refs,
+            cpu * share / (1.0 - share), robot, dt, joint, config.noise, start=start,
+            std=config.polish_std,
         )  # fmt: skip
         tuned, cpu = tuned._replace(robot=robot), cpu + clock() - began
     if on_tuned is not None:
