@@ -56,44 +56,8 @@ __version__ = "0.1.0"
 # optax or matplotlib, and cli every command, which ``import wmr_jax`` should not pay for.
 _SUBMODULES = ("cli", "controllers", "dynamics", "export", "report", "studies", "tuning")
 
-# Every name imported above as itself, and the families (tests/test_usability.py
-# holds the list to the imports: a new export goes in both).
-__all__ = [
-    "Controller",
-    "get_controller",
-    "register_controller",
-    "control",
-    "Options",
-    "arrival_time",
-    "success_rate",
-    "Gains",
-    "Robot",
-    "SamplingWarning",
-    "WheelSpeedWarning",
-    "RobotUnitsWarning",
-    "paper_refs",
-    "sample_poses",
-    "reference_rollout",
-    "ROBOTS",
-    "load_robot",
-    "DEFAULT_DT",
-    "Trajectory",
-    "batch_rollout",
-    "final_poses",
-    "rollout",
-    "ClosedLoop",
-    "shard",
-    "unpad",
-    "sweep",
-    "load_tuned",
-    "cli",
-    "controllers",
-    "dynamics",
-    "export",
-    "report",
-    "studies",
-    "tuning",
-]
+# Every name imported above as itself, and the families.
+__all__ = sorted({name for name in dir() if not name.startswith("_")} | set(_SUBMODULES))
 
 
 def __getattr__(name: str):
