@@ -27,13 +27,13 @@ from wmr_jax._src.checks import (
     require,
     require_one_batch_size,
 )
-from wmr_jax._src.model.controllers.base import Controller, register_controller
+from wmr_jax._src.model.controllers.base import register_controller
 from wmr_jax._src.model.controllers.shim_sung import (
+    SHIM_SUNG,
     PolarError,
     commands,
     direction_flag,
     polar_error,
-    pose_region,
 )
 from wmr_jax._src.model.params import Gains, Robot, WheelSpeedWarning, sampled, validate_gains
 
@@ -220,14 +220,14 @@ def _check_sampling(params: ScheduleParams, dt: Any) -> None:
     sampled(at_goal, dt, stacklevel=5)  # the schedule and dt checked by the rollout
 
 
+# The fixed-gain law's regions and smooth relaxation, with scheduled gains.
 SCHEDULE = register_controller(
-    Controller(
+    dataclasses.replace(
+        SHIM_SUNG,
         name="shim-sung-schedule",
         command=_command,
         params_type=ScheduleParams,
         validate=validate_schedule,
-        region=pose_region,
-        smooth=True,
         check_robot=_check_robot,
         check_sampling=_check_sampling,
     )
