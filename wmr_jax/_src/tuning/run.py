@@ -163,27 +163,6 @@ def write_results(
     )
 
 
-def _bars(config: Any, state: Any, progress: bool) -> tuple[Any, Any, Any]:
-    """The progress bars of a run: the iterations, the random search, the evaluation."""
-    from wmr_jax._src.report.progress import bar as tqdm
-
-    bar = tqdm(
-        total=config.iters,
-        initial=state.iteration,
-        desc=f"tune ({config.velocity})",
-        disable=not progress,
-        dynamic_ncols=True,
-    )
-    search_bar = tqdm(
-        desc="random search (same CPU time)",
-        unit=" candidates",
-        disable=not (progress and config.random_search),
-        dynamic_ncols=True,
-    )
-    eval_bar = tqdm(total=3, desc="hard-law evaluation", disable=not progress, dynamic_ncols=True)
-    return bar, search_bar, eval_bar
-
-
 def tune(
     out_dir: str | os.PathLike,
     config: Any = None,
@@ -220,6 +199,7 @@ def tune(
     """
     from wmr_jax._src.checks import check_bool, check_callable, check_folder
     from wmr_jax._src.model.params import Robot, validate_robot
+    from wmr_jax._src.report.progress import bar as tqdm
 
     out = check_folder("out_dir", out_dir)
     check_bool("resume", resume)
@@ -235,7 +215,21 @@ def tune(
         state = load_checkpoint(checkpoint, state, identity)
     elif resume:  # a mistyped --out would otherwise start over without a word
         print(f"--resume: no {CHECKPOINT_NAME} in {out}; starting from the first iteration")
-    bar, search_bar, eval_bar = _bars(config, state, progress)
+    # The progress bars: the iterations, the random search, the evaluation.
+    bar = tqdm(
+        total=config.iters,
+        initial=state.iteration,
+        desc=f"tune ({config.velocity})",
+        disable=not progress,
+        dynamic_ncols=True,
+    )
+    search_bar = tqdm(
+        desc="random search (same CPU time)",
+        unit=" candidates",
+        disable=not (progress and config.random_search),
+        dynamic_ncols=True,
+    )
+    eval_bar = tqdm(total=3, desc="hard-law evaluation", disable=not progress, dynamic_ncols=True)
     report = _progress(config, checkpoint, identity, bar, progress_fn)
     try:
         result = training.train(
