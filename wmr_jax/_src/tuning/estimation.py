@@ -1,11 +1,8 @@
 """The estimator's share of a joint tuning problem, and the joint problem (``JointProblem``).
 
-The joint robust tuner (``tuning.robust``) searches the controller's cube
-(``problems.Problem``) and the estimator's side by side. Every point of the
-estimator's cube is a valid ``ObserverParams`` or ``EKFParams``: the
-observer's gains are linear in ``u`` over ``[0.001, 1]`` (one knot table for
-position, one for heading); the filter's covariances are log-uniform, since
-their effect is on a log scale.
+Every point of the estimator's cube is a valid ``ObserverParams`` or
+``EKFParams``: the observer's gains are linear in ``u`` over ``[0.001, 1]``;
+the filter's covariances are log-uniform, since their effect is on a log scale.
 """
 
 from __future__ import annotations
