@@ -340,9 +340,9 @@ def _compare_rows(
         raise ValueError(f"--resume: {err}; remove it, or use a fresh --out") from None
 
 
-def _settings_difference(saved: Any, now: dict[str, Any]) -> str:
+def _settings_difference(saved: dict[str, Any], now: dict[str, Any]) -> str:
     """Name the problems whose settings differ between two ``compare_settings.json``."""
-    saved_configs = saved.get("configs", {}) if isinstance(saved, dict) else {}
+    saved_configs = saved.get("configs", {})
     saved_configs = saved_configs if isinstance(saved_configs, dict) else {}
     parts = [
         f"{name}: {differences({'config': saved_configs.get(name)}, {'config': config})}"
@@ -352,14 +352,13 @@ def _settings_difference(saved: Any, now: dict[str, Any]) -> str:
         if saved_configs.get(name) != config
     ]
     parts += [f"{name}: not compared now" for name in saved_configs if name not in now["configs"]]
-    saved_robot = saved.get("robot") if isinstance(saved, dict) else None
+    saved_robot = saved.get("robot")
     if saved_robot != now.get("robot"):
         parts.append(
             f"robot: {_robot_text(saved_robot)} there, {_robot_text(now.get('robot'))} now"
         )
-    saved_code = saved.get("code") if isinstance(saved, dict) else None
-    if saved_code != now.get("code"):
-        parts.append(f"computed by wmr_jax {saved_code}, this is {now.get('code')}")
+    if saved.get("code") != now.get("code"):
+        parts.append(f"computed by wmr_jax {saved.get('code')}, this is {now.get('code')}")
     return "; ".join(parts) or "its format or seeds differ"
 
 
