@@ -1,13 +1,10 @@
 """Gain tuning under ``k_r + L k_θ ≤ V_max``: the feasible set, the loss, the trainer.
 
-``train`` runs Adam on a relaxed arrival-time loss through the law's smooth
-relaxation and judges the result with the hard law against the paper's
-feasible gains and a random search of the same CPU time; ``tune`` (``wmr-jax
-tune`` as a function) also writes the results and resumable checkpoints.
-``TuneConfig.for_problem("schedule")`` tunes the gain-scheduled law;
-``tune_robust`` tunes a law with its estimator through disturbances;
-``compare`` runs the gradient against CMA-ES and random search at equal CPU
-time (docs/model.md §3, §6, §8).
+``train`` runs Adam on a relaxed arrival-time loss and judges the result with
+the hard law; ``tune`` (``wmr-jax tune`` as a function) also writes the results
+and resumable checkpoints; ``tune_robust`` tunes a law with its estimator
+through disturbances; ``compare`` runs the gradient against CMA-ES and random
+search at equal CPU time (docs/model.md §3, §6, §8).
 """
 
 from wmr_jax._src.model.controllers.schedule import SCHEDULE as SCHEDULE

@@ -17,19 +17,11 @@ from typing import Any
 
 import jax
 
-from wmr_jax._src.checks import (
-    check_callable,
-    check_int,
-)
+from wmr_jax._src.checks import check_callable, check_int
 from wmr_jax._src.model.params import Robot, validate_one_robot
 from wmr_jax._src.sim.poses import sample_poses
 from wmr_jax._src.studies.optimal import time_bounds
-from wmr_jax._src.tuning.evaluation import (
-    evaluate,
-    held_out_poses,
-    poses_digest,
-    report_ratios,
-)
+from wmr_jax._src.tuning.evaluation import evaluate, held_out_poses, poses_digest, report_ratios
 from wmr_jax._src.tuning.problems import get_problem
 from wmr_jax._src.tuning.search import _evosax_cma_es, cma_es_search, random_search
 from wmr_jax._src.tuning.trainer import differences
@@ -84,10 +76,9 @@ def compare(
     """Gradient vs CMA-ES vs random search at equal CPU time, per problem and seed.
 
     The gradient tuner runs first (``configs[problem]``, its seed replaced);
-    its process CPU time (``search.clock``), compile included, is the budget
-    of the other two, which score candidates on a batch of ``config.poses``
-    training poses. All are judged with the hard law on the same held-out
-    poses (one array per problem; each row records its digest).
+    its CPU time is the budget of the other two, which score candidates on
+    ``config.poses`` training poses. All are judged with the hard law on the
+    same held-out poses.
 
     Args:
         seeds: seeds of the training poses and the searches.
@@ -187,11 +178,10 @@ def minimised(config: TuneConfig, method: str) -> str:
 def saved_rows(
     rows: Any, where: str, problems: dict[str, int], seeds: tuple[int, ...]
 ) -> list[dict[str, Any]]:
-    """Check the rows of a saved ``compare.json`` before a resumed comparison keeps them.
+    """``rows`` of a saved ``compare.json`` if a resumed comparison may keep them, else say why.
 
     Each row must be one ``compare`` writes for ``problems`` (name → parameter
     count) and ``seeds``, each (problem, seed) with all of ``METHODS`` once.
-    Returns ``rows``; ``ValueError``: one line naming ``where`` and the row.
     """
     from wmr_jax._src.report.tuning import _compare_numbers
 
@@ -257,10 +247,7 @@ def _json_type(value: Any) -> str:
 
 
 def comparison_settings(robot: Robot, **fields: Any) -> dict[str, Any]:
-    """What a resumed comparison must match: ``fields``, the robot and the code (JSON as read).
-
-    Rows computed by other code (the law, the loss, an optimiser) are not mixed in.
-    """
+    """What a resumed comparison must match: ``fields``, the robot and the code (JSON as read)."""
     from wmr_jax._src.model.robots import robot_json
     from wmr_jax._src.provenance import code_version
 
@@ -278,11 +265,9 @@ def run_comparison(
 ) -> list[dict[str, Any]]:
     """``compare`` for seeds 0–2 of each problem in ``configs``, into ``out/compare.{json,md}``.
 
-    Each (problem, seed) is written, sealed with a checksum, as soon as its
-    three methods are done, beside ``compare_settings.json`` (the settings,
-    the robot and the code): with ``resume`` an interrupted comparison of the
-    same settings keeps them and runs only the rest; one of other settings
-    is refused in one line.
+    Each (problem, seed) is written, sealed with a checksum, once its three
+    methods are done, beside ``compare_settings.json``: with ``resume`` an
+    interrupted comparison of the same settings, robot and code keeps them.
 
     Returns:
         All rows, kept and new.
@@ -309,7 +294,6 @@ def run_comparison(
                 seeds=(seed,), problems=(name,), configs={name: config}, robot=robot,
                 progress=progress,
             )  # fmt: skip
-            # Each row sealed with a checksum: a resumed comparison keeps only what this wrote.
             io.atomic_write_json(out / "compare.json", [io.sealed(row) for row in rows])
     io.atomic_write_text(out / "compare.md", comparison_table(rows))
     return rows
@@ -356,9 +340,9 @@ def _compare_rows(
         raise ValueError(f"--resume: {err}; remove it, or use a fresh --out") from None
 
 
-def _settings_difference(saved: Any, now: dict[str, Any]) -> str:
+def _settings_difference(saved: dict[str, Any], now: dict[str, Any]) -> str:
     """Name the problems whose settings differ between two ``compare_settings.json``."""
-    saved_configs = saved.get("configs", {}) if isinstance(saved, dict) else {}
+    saved_configs = saved.get("configs", {})
     saved_configs = saved_configs if isinstance(saved_configs, dict) else {}
     parts = [
         f"{name}: {differences({'config': saved_configs.get(name)}, {'config': config})}"
@@ -368,14 +352,13 @@ def _settings_difference(saved: Any, now: dict[str, Any]) -> str:
         if saved_configs.get(name) != config
     ]
     parts += [f"{name}: not compared now" for name in saved_configs if name not in now["configs"]]
-    saved_robot = saved.get("robot") if isinstance(saved, dict) else None
+    saved_robot = saved.get("robot")
     if saved_robot != now.get("robot"):
         parts.append(
             f"robot: {_robot_text(saved_robot)} there, {_robot_text(now.get('robot'))} now"
         )
-    saved_code = saved.get("code") if isinstance(saved, dict) else None
-    if saved_code != now.get("code"):
-        parts.append(f"computed by wmr_jax {saved_code}, this is {now.get('code')}")
+    if saved.get("code") != now.get("code"):
+        parts.append(f"computed by wmr_jax {saved.get('code')}, this is {now.get('code')}")
     return "; ".join(parts) or "its format or seeds differ"
 
 

@@ -43,31 +43,25 @@ class GradientCost(NamedTuple):
     gradient_peak_bytes: int
 
 
-def _peak_bytes(stats: Any) -> int:
-    """Bytes the compiled program allocates: arguments, outputs and temporaries.
-
-    XLA's own ``peak_memory_in_bytes`` leaves the temporaries out on the CPU.
-    """
-    return int(
+def _fastest(function: Any, args: tuple, repeats: int) -> tuple[float, int]:
+    """Compile ``function``; return (fastest of ``repeats`` timed calls s, peak bytes)."""
+    compiled = jax.jit(function).lower(*args).compile()
+    # Arguments, outputs and temporaries: XLA's own ``peak_memory_in_bytes``
+    # leaves the temporaries out on the CPU.
+    stats = compiled.memory_analysis()
+    peak = int(
         stats.argument_size_in_bytes
         + stats.output_size_in_bytes
         + stats.temp_size_in_bytes
         - stats.alias_size_in_bytes
     )
-
-
-def _fastest(function: Any, args: tuple, repeats: int) -> tuple[float, int]:
-    """Compile ``function``; return (fastest of ``repeats`` timed calls s, peak bytes)."""
-    compiled = jax.jit(function).lower(*args).compile()
-    peak = _peak_bytes(compiled.memory_analysis())
     jax.block_until_ready(compiled(*args))
     times = []
     for _ in range(repeats):
         began = time.perf_counter()
         jax.block_until_ready(compiled(*args))
         times.append(time.perf_counter() - began)
-    # The fastest of the repeats: on a shared machine the others measure the
-    # neighbours too.
+    # On a shared machine the slower repeats measure the neighbours too.
     return min(times), peak
 
 
@@ -83,8 +77,7 @@ def gradient_cost(
 ) -> GradientCost:
     """Time the loss and its gradient on ``poses`` × ``steps`` and read their peak memory.
 
-    Peak memory: what the compiled program allocates, from XLA's compile-time
-    ``memory_analysis`` (``_peak_bytes``).
+    Peak memory: what the compiled program allocates (XLA's ``memory_analysis``).
 
     Args:
         poses: batch size.

@@ -1,17 +1,13 @@
 """The estimator's share of a joint tuning problem, and the joint problem (``JointProblem``).
 
-The joint robust tuner (``tuning.robust``) searches the controller's cube
-(``problems.Problem``) and the estimator's side by side. Every point of the
-estimator's cube is a valid ``ObserverParams`` or ``EKFParams``: the
-observer's gains are linear in ``u`` over ``[0.001, 1]`` (one knot table for
-position, one for heading); the filter's covariances are log-uniform, since
-their effect is on a log scale.
+Every point of the estimator's cube is a valid ``ObserverParams`` or
+``EKFParams``: the observer's gains are linear in ``u`` over ``[0.001, 1]``;
+the filter's covariances are log-uniform, since their effect is on a log scale.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from typing import Any
 
@@ -42,6 +38,11 @@ _EKF_LOG = {
     "sigma_theta": (math.log(math.radians(0.05)), math.log(math.radians(10.0))),
 }
 _CLIP = 1e-3  # how close to a face a starting point may sit (its logit is finite)
+# choice: the robust tuner keeps R_e ≤ tol_r. Inside R_e (Region 0) the law
+# steers the heading only, so a robot that enters it more than tol_r from the
+# goal can stay there; the relaxed law blurs this trap, and unconstrained Adam
+# walks into it.
+_R_E_MAX = 1.0 * DEFAULT_TOL_R
 
 
 @dataclasses.dataclass(frozen=True)
@@ -105,11 +106,7 @@ def estimator_box(name: str, knots: int = OBSERVER_KNOTS) -> EstimatorBox:
     """The cube of estimator ``name`` (``"observer"``: two tables of ``knots``; ``"ekf"``: 3)."""
     if name not in ("observer", "ekf"):
         raise ValueError(f"estimator = {name!r} is not allowed; allowed: 'observer' or 'ekf'")
-    return _box(name, check_int("knots", knots, 2, 50))
-
-
-@functools.cache
-def _box(name: str, knots: int) -> EstimatorBox:
+    knots = check_int("knots", knots, 2, 50)
     if name == "observer":
         return EstimatorBox("observer", 2 * knots, knots)
     return EstimatorBox("ekf", len(_EKF_LOG))
@@ -217,7 +214,8 @@ class JointProblem:
     def from_unit(self, u: Any, robot: Robot) -> ClosedLoop:
         """The closed loop of ``u (dim,)``: feasible gains, ``R_e ≤ tol_r``, a valid estimator."""
         n = self.problem.dim
-        params = _capped(self.problem.from_unit(u[:n], robot))
+        params = self.problem.from_unit(u[:n], robot)
+        params = params.replace(r_e=jnp.minimum(params.r_e, _R_E_MAX))
         estimate = self.estimator.from_unit(u[n:]) if self.estimator else None
         return ClosedLoop(self.problem.controller, params, estimate)
 
@@ -237,17 +235,6 @@ class JointProblem:
     @property
     def options_estimator(self) -> Any:
         return ESTIMATORS[self.estimator.name] if self.estimator else None
-
-
-# choice: the robust tuner keeps R_e ≤ tol_r. Inside R_e (Region 0) the law
-# steers the heading only, so a robot that enters it more than tol_r from the
-# goal can stay there; the relaxed law blurs this trap, and unconstrained Adam
-# walks into it.
-_R_E_MAX = 1.0 * DEFAULT_TOL_R
-
-
-def _capped(params: Any) -> Any:
-    return params.replace(r_e=jnp.minimum(params.r_e, _R_E_MAX))
 
 
 def concrete_loop(closed: ClosedLoop) -> ClosedLoop:

@@ -64,11 +64,7 @@ def poses_digest(poses: Any) -> str:
 
 @contextlib.contextmanager
 def quiet_scoring() -> Iterator[None]:
-    """Ignore warnings while candidates or iterates are scored, not reported.
-
-    Their warnings (wheel saturation, sampling margins) are the tuner's
-    business, not the user's: the score says what they would.
-    """
+    """Ignore warnings while candidates or iterates are scored: the score says what they would."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         yield
@@ -144,9 +140,7 @@ def evaluate(
         robot: robot parameters; default ``Robot()``.
         dt: control period, s.
         horizon: simulated time per run, s; default the studies' horizon on
-            ``robot`` (``studies.study_horizon``: the paper robot's 6 s,
-            longer on a robot too slow for the paper's feasible gains, as
-            ``wmr-jax evaluate`` runs it).
+            ``robot`` (``studies.study_horizon``), as ``wmr-jax evaluate`` runs it.
         velocity: ``"ideal"`` or ``"nonideal"``.
         substeps: inner steps per period (non-ideal loop).
         wheel_limit: ``"clip"`` or ``"scale"`` (non-ideal loop).
@@ -177,12 +171,6 @@ def evaluate(
         peak_wheel_speed=float(np.max(np.abs(np.asarray(traj.wheel_speeds)))),
         poses=int(times.size),
     )
-
-
-def wheel_speed_ok(evaluation: Evaluation, robot: Robot | None = None) -> bool:
-    """Whether one evaluation's peak rim speed stays within ``robot``'s ``V_max`` (to 1e-6)."""
-    v_max = float((Robot() if robot is None else robot).v_max)
-    return bool(evaluation.peak_wheel_speed <= v_max * (1 + 1e-6))
 
 
 # Why a report's ratio is null (JSON) or "none arrived" (print): a mean arrival

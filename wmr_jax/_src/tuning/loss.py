@@ -2,12 +2,10 @@
 
 ``tuning_loss`` is a relaxed arrival time plus a shaping term, and a
 wheel-saturation penalty for the non-ideal loop (``docs/model.md §4, §6``).
-
-Per-pose gradients are heavy-tailed: a run that grazes a switching surface,
-or sits parked on its reference (where the bearing ``φ_e`` is undefined),
-can be orders of magnitude above the median, even overflow in float32.
-``robust_gradient`` therefore caps each pose's gradient at a multiple of the
-batch median (``pose_clip``) and drops non-finite ones before averaging.
+Per-pose gradients are heavy-tailed (a run that grazes a switching surface,
+or sits parked on its reference where ``φ_e`` is undefined, can overflow in
+float32), so ``robust_gradient`` caps each at a multiple of the batch median
+and drops non-finite ones before averaging.
 """
 
 from __future__ import annotations
@@ -63,11 +61,7 @@ class LossWeights:
 
 @dataclasses.dataclass(frozen=True)
 class LossSpec:
-    """Static part of the loss: horizon, velocity loop, tolerances, weights.
-
-    ``accel_limit`` is the ideal loop's speed limiter (``loops.Options``),
-    set for the robot by ``for_robot`` before tracing.
-    """
+    """Static part of the loss: horizon, velocity loop, tolerances, weights, speed limiter."""
 
     steps: int
     velocity: str
@@ -87,11 +81,9 @@ class LossSpec:
         return loops.Options(**{f: getattr(self, f) for f in fields}, temperature=temperature)
 
     def for_robot(self, robot: Robot, dt: Any) -> LossSpec:
-        """This spec with the speed limiter on where ``robot`` has acceleration limits.
+        """This spec with the speed limiter as ``loops.for_robot`` sets it (before tracing).
 
-        As ``loops.for_robot`` decides for the rollouts (docs/model.md
-        §4.2.2), so that the loss tunes the loop the evaluation judges. Call
-        it on the concrete robot, before tracing.
+        So that the loss tunes the loop the evaluation judges (docs/model.md §4.2.2).
         """
         fitted = loops.for_robot(self.options(), robot, dt)
         return dataclasses.replace(self, accel_limit=fitted.accel_limit)
@@ -114,12 +106,8 @@ class LossTerms(NamedTuple):
 def make_spec(*, controller: Any = SHIM_SUNG, **given: Any) -> LossSpec:
     """Check the static options of ``tuning_loss`` (before tracing); return them as a spec.
 
-    ``given``: ``horizon``, ``dt``, ``velocity``, ``substeps``, ``wheel_limit``,
-    ``tol_r``, ``tol_theta``, ``weights``, ``remat``; the others keep
-    ``tuning_loss``'s defaults.
-
-    Raises:
-        ValueError: naming the option, its value and what is allowed.
+    ``given``: its keyword options but ``init`` and ``robot``; the others keep
+    their defaults. ``ValueError`` names a bad option, its value and what is allowed.
     """
     o = {**_OPTION_DEFAULTS, **given}
     options = simulation.make_options(
@@ -166,15 +154,10 @@ def make_spec(*, controller: Any = SHIM_SUNG, **given: Any) -> LossSpec:
 
 
 def arrival_terms(dist: jax.Array, head: jax.Array, softness: Any) -> tuple[jax.Array, jax.Array]:
-    """Return the relaxed "arrived" test and the shaping term of one sample.
+    """``(a, log(1 + q + p))`` of one sample, ``a = σ((1 − q)/s) σ((1 − p)/s)`` the relaxed test.
 
-    Args:
-        dist: ``q = (r_e / tol_r)²``.
-        head: ``p = (sin θ_e / sin tol_θ)²``; arrived exactly when ``q, p ≤ 1``.
-        softness: width ``s`` of the relaxed test.
-
-    Returns:
-        ``(a, log(1 + q + p))`` with ``a = σ((1 − q)/s) σ((1 − p)/s)``.
+    ``dist``: ``q = (r_e / tol_r)²``; ``head``: ``p = (sin θ_e / sin tol_θ)²``;
+    ``softness``: ``s``.
     """
     arrived = jax.nn.sigmoid((1.0 - dist) / softness) * jax.nn.sigmoid((1.0 - head) / softness)
     # log, not log1p (several times slower on XLA:CPU): 1 + q + p ≥ 1, so the
@@ -186,9 +169,8 @@ def recorded_arrival(poses: jax.Array, ref: jax.Array, dt: jax.Array) -> jax.Arr
     """Relaxed arrival time plus log-error shaping of one recorded run ``poses (steps, 3)``, s.
 
     ``tuning_loss``'s per-run term (ideal loop, default weights) for the
-    robust loss, whose ``disturbed_run`` records the trajectory. It agrees
-    with ``_pose_loss_terms``' streamed sum to rounding, not bit for bit, so
-    the two stay apart and each tuner's results stay as they are.
+    robust loss. It agrees with ``_pose_loss_terms``' streamed sum to
+    rounding only, so the two stay apart and each tuner's results stay put.
     """
     weights = LossWeights()
     err = law.polar_error(poses, ref)
@@ -204,11 +186,9 @@ def recorded_arrival(poses: jax.Array, ref: jax.Array, dt: jax.Array) -> jax.Arr
 def _pose_loss_terms(ref, gains, init, robot, dt, spec: LossSpec, temperature):
     """Return ``(relaxed arrival s, integrated log-error s, saturation s)`` of one run.
 
-    The terms stream through the rollout's own scan (``fold=``), so no
-    trajectory is stored; ``temperature`` ``None`` is the hard law.
+    The terms stream through the rollout's scan (``fold=``): no trajectory is stored.
     """
-    # The temperature is a traced value rather than a static option so that
-    # annealing it does not recompile; Options is therefore built in the trace.
+    # Built in the trace: the temperature is traced, so annealing does not recompile.
     options = spec.options(temperature)
     sin_tol_sq = math.sin(spec.tol_theta) ** 2
     inv_tol_r_sq = 1.0 / spec.tol_r**2
@@ -227,10 +207,8 @@ def _pose_loss_terms(ref, gains, init, robot, dt, spec: LossSpec, temperature):
         dist = (dx * dx + dy * dy) * inv_tol_r_sq
         head = sin_theta * sin_theta / sin_tol_sq
         arrived, log_error = arrival_terms(dist, head, softness)
-        # Σ_k Π_{j≥k} a_j over the samples so far, by S ← a (S + 1): the reversed
-        # cumulative product of the "settled from k on" test, streamed forwards.
-        # It rides with the log-error as one complex number: XLA:CPU computes
-        # each output of a step in a loop of its own, so one output is cheaper.
+        # Σ_k Π_{j≥k} a_j so far, by S ← a (S + 1), riding with the log-error as
+        # one complex number: one output per step is cheaper on XLA:CPU.
         sums = acc[0]
         sums = jax.lax.complex(arrived * (sums.real + 1.0), sums.imag + log_error)
         if not nonideal:
@@ -292,16 +270,14 @@ def robust_value_and_grad(
 ):
     """Return ``(mean loss, gradient (dim,) w.r.t. the logits, stats)`` over a prepared batch.
 
-    Each pose's gradient is capped at ``pose_clip`` times the batch median
-    norm (``None``: no cap) and non-finite ones are dropped, then averaged.
+    Each pose's gradient capped and non-finite ones dropped (``capped_mean``).
     """
 
     def single(ref, z):
         params = problem.from_logits(z, robot)
         return _pose_objective(ref, params, init, robot, dt, spec, temperature)
 
-    # One vmap over the references; the logits are shared, so the map from
-    # them to the parameters runs once and each pose's gradient is (dim,).
+    # The logits are shared: each pose's gradient is (dim,).
     values, grads = jax.vmap(jax.value_and_grad(single, argnums=1), in_axes=(0, None))(refs, z)
     loss, grad, finite, scale = capped_mean(values, grads, pose_clip)
     grad = jnp.where(jnp.all(jnp.isfinite(grad)), grad, 0.0) / refs.shape[0]
@@ -346,9 +322,8 @@ _robust_jit = loops.jit_top_level(robust_value_and_grad, static_argnames=("spec"
 def _prepared(gains: Any, refs: Any, temperature: Any, options: dict[str, Any]) -> tuple:
     """Check every argument (before tracing); return ``(spec, temperature, prepared args)``.
 
-    ``gains`` ``None`` (``robust_gradient``, which has logits instead) checks
-    the rest against the paper's feasible gains. A ``ScheduleParams`` selects
-    the gain-scheduled law, ``Gains`` the fixed one.
+    ``gains`` ``None`` checks the rest against the paper's feasible gains; a
+    ``ScheduleParams`` selects the gain-scheduled law.
     """
     unknown = sorted(set(options) - set(_OPTION_DEFAULTS))
     if unknown:
@@ -392,32 +367,24 @@ def tuning_loss(
         T̃  +  w_shape · ∫ log(1 + q + p) dt  [ + w_sat · ∫ |v_wheel* − v_wheel|² / V_max² dt ]
 
     * ``T̃`` is the ``docs/model.md §6`` arrival time with its indicator
-      relaxed. With ``q = (r_e / tol_r)²`` and ``p = (sin θ_e / sin tol_θ)²``
-      at a sample, the robot is arrived exactly when ``q ≤ 1`` and ``p ≤ 1``.
-      The relaxed test ``a = σ((1 − q)/s) σ((1 − p)/s)``
-      (``s = weights.arrival_softness``) gives
-      ``T̃ = dt (1 + Σ_k (1 − Π_{j≥k} a_j))``, which *is* the arrival time,
-      capped at the horizon, wherever ``a`` is 0 or 1. That is why the loss
-      tracks arrival time; the width ``s`` makes it ask for a small margin
-      inside the tolerances.
-    * ``∫ log(1 + q + p) dt`` integrates the log of the tolerance-normalised
-      error in the Lyapunov quantities ``r_e`` and ``θ̄_e``. ``T̃`` has no
-      gradient while a run is far from its reference or never arrives; this
-      term has one everywhere. For an exponential approach at rate λ from
-      ``q₀ ≫ 1`` it is about ``log²(q₀) / (4λ)``, so it too shrinks as the
-      arrival gets earlier.
-    * Non-ideal loop only (``docs/model.md §4``): the wheel-saturation
-      penalty integrates the squared shortfall of the rim speeds behind their
-      commands at each sample, normalised by ``V_max``: small while the wheel
-      loop tracks, large when its torque or ``±V_max`` limits saturate. With
-      the ideal loop the rims follow the commands exactly and it is zero.
+      relaxed: with ``q = (r_e / tol_r)²`` and ``p = (sin θ_e / sin tol_θ)²``
+      the robot is arrived exactly when ``q, p ≤ 1``; the relaxed test
+      ``a = σ((1 − q)/s) σ((1 − p)/s)`` (``s = weights.arrival_softness``)
+      gives ``T̃ = dt (1 + Σ_k (1 − Π_{j≥k} a_j))``, the arrival time wherever
+      ``a`` is 0 or 1. The width ``s`` asks for a small margin inside the
+      tolerances.
+    * ``∫ log(1 + q + p) dt`` has a gradient everywhere, where ``T̃`` has none
+      (a run far from its reference, or that never arrives); it too shrinks
+      as the arrival gets earlier (about ``log²(q₀) / (4λ)`` for an
+      exponential approach at rate λ).
+    * Non-ideal loop only (``docs/model.md §4``): the squared shortfall of the
+      rim speeds behind their commands, normalised by ``V_max``: large when the
+      wheel loop's torque or ``±V_max`` limits saturate.
 
     The controller is the law's smooth relaxation at ``temperature``
-    (``docs/model.md §3``), so the gradient reaches all seven gains, the
-    switching thresholds included. ``None`` is the hard law, whose gradient
-    with respect to the switching thresholds ``Φ_m``, ``R_a`` and ``R_e`` is
-    zero almost everywhere (``k_r``, ``k_θ``, ``R_m`` and ``α`` scale
-    commands and keep theirs).
+    (``docs/model.md §3``), so the gradient reaches all seven gains. ``None``
+    is the hard law, whose gradient with respect to the switching thresholds
+    ``Φ_m``, ``R_a`` and ``R_e`` is zero almost everywhere.
 
     Args:
         gains: the gains (differentiate with respect to this argument).
@@ -460,10 +427,9 @@ _STATIC_OPTIONS = tuple(name for name in _OPTION_DEFAULTS if name not in ("init"
 
 
 def loss_terms(gains: Gains, refs: Any, *, temperature: float | None, **options: Any) -> LossTerms:
-    """Return the per-run terms of ``tuning_loss``, ``LossTerms`` of ``(N,)`` arrays, s.
+    """Return the per-run terms of ``tuning_loss`` before weighting, ``LossTerms`` of ``(N,)``, s.
 
-    Before weighting and averaging; ``**options`` as ``tuning_loss``'s keyword
-    arguments (``init``, ``robot``, ``dt``, ``horizon``, ``velocity``, …).
+    ``**options``: as ``tuning_loss``'s keyword arguments.
     """
     spec, temperature, args = _prepared(gains, refs, temperature, options)
     return _batch_terms_jit(*args, spec=spec, temperature=temperature)
@@ -480,10 +446,9 @@ def robust_gradient(
 ) -> tuple[jax.Array, jax.Array, dict[str, jax.Array]]:
     """Return the tuner's robust batch gradient with respect to the logits ``z``.
 
-    The gains are ``gains_from_logits(z, robot)``. Each pose's gradient of the
-    ``tuning_loss`` term is capped at ``pose_clip`` times the batch median
-    norm and non-finite ones are dropped before averaging; the loss is the
-    mean over the finite runs.
+    Each pose's gradient of the ``tuning_loss`` term is capped at ``pose_clip``
+    times the batch median norm and non-finite ones are dropped before
+    averaging; the loss is the mean over the finite runs.
 
     Args:
         z: ``(7,)`` logits.
@@ -500,8 +465,7 @@ def robust_gradient(
         of the poses ``"dropped"`` (non-finite) and ``"clipped"``.
     """
     problem = get_problem(problem)
-    # The options are checked with parameters the logits can reach (None: the
-    # paper's feasible gains), so that no warning is about gains not in use.
+    # Options checked with parameters the logits can reach: no warning about gains not in use.
     start = None if problem is FIXED else problem.controller.default_params()
     # The logits map to gains through the robot: one robot for the batch.
     validate_one_robot(options.get("robot"), "robust_gradient")

@@ -1,10 +1,8 @@
 """The feasible set that tuning and random search share: gains as an image of the unit cube.
 
-Every point ``u ∈ [0, 1]^7`` maps (``gains_from_unit``) to gains that meet
-``k_r + L k_θ ≤ V_max`` and every range of ``docs/model.md §3`` by
-construction, so every iterate of the tuner is feasible, not only the last.
-Adam works on the logits ``z`` (``u = σ(z)``, ``gains_from_logits``); random
-search samples ``u`` uniformly: both search the same set.
+Every point ``u ∈ [0, 1]^7`` maps to gains that meet ``k_r + L k_θ ≤ V_max``
+and every range of ``docs/model.md §3``, so every iterate is feasible. Adam
+works on the logits ``z`` (``u = σ(z)``); random search samples ``u``.
 """
 
 from __future__ import annotations

@@ -89,10 +89,8 @@ MAX_TUNED_KNOTS = 60
 def schedule_problem(knots: int = KNOTS) -> Problem:
     """The gain-schedule problem with ``knots`` knots per table: ``3 knots + 5`` parameters.
 
-    One cached ``Problem`` per knot count: the same static argument of every compiled step.
-
-    Raises:
-        ValueError: for a knot count outside 2 … ``MAX_TUNED_KNOTS``.
+    One cached ``Problem`` per knot count: the same static argument of every
+    compiled step. ``ValueError`` for a count outside 2 … ``MAX_TUNED_KNOTS``.
     """
     return _schedule_problem(check_int("knots", knots, 2, MAX_TUNED_KNOTS))
 

@@ -1,12 +1,9 @@
 """Robust tuning: controller and estimator tuned together (docs/model.md §7, §9).
 
-The loss is ``tuning_loss``'s relaxed arrival time averaged over
-domain-randomised runs that ``sample_conditions`` draws inside the loss and
-``sensing.loop.disturbed_run`` runs. ``tune_robust`` runs the trainer on
-``robust_problem`` (the hybrid tuner then polishes with CMA-ES, ``black_box``),
-then random search and CMA-ES (``black_box``) for the same CPU time, and
-judges all with the hard law under the standard conditions, within the
-robot's wheel budget and over the studies' horizon (``study_horizon``).
+The loss is the relaxed arrival time averaged over domain-randomised runs
+(``sample_conditions``). ``tune_robust`` runs the trainer on it, then the
+black-box searches for the same CPU time (``black_box``), and judges all with
+the hard law under the standard conditions on the robot's horizon.
 """
 
 from __future__ import annotations
@@ -204,7 +201,7 @@ def _runs(gradient, z, key, refs, nonideal_refs, temperature, robot, dt, steps, 
 
 
 def robust_loss_value(*args):
-    """``robust_loss(*args)``'s mean without its gradient, s (``joint``, ``accel_limit`` given)."""
+    """``RobustLoss``'s mean without its gradient, s; ``*args`` as ``_runs``' after ``gradient``."""
     return jnp.mean(_runs(False, *args))
 
 
@@ -213,15 +210,12 @@ def sample_conditions(
 ):
     """The conditions the robust loss trains under: ``[(disturbances, options)]`` from ``key``.
 
-    ``refs`` under each standard condition, with wheel mismatch and the noise
-    scaled per run by a level ``U(0, 2)``, in the ideal loop (one batch), and
-    ``nonideal_refs`` (may be empty) under mass mismatch and latency with
-    probability ½ besides, in the non-ideal loop.
-
-    ``accel_limit``: the ideal loop's speed limiter (docs/model.md §4.2.2);
-    ``noise``: ``(σ_xy cm, σ_θ degrees)`` of the noisy runs, each scaled by
-    a level ``U(0, 2)`` (default the standard 0.5 cm, 1°); a
-    ``centred.Centred`` draws every run from its ranges instead.
+    ``refs`` under each standard condition with wheel mismatch, in the ideal
+    loop (one batch), and ``nonideal_refs`` (may be empty) under mass
+    mismatch and latency besides, in the non-ideal loop. The noise
+    ``(σ_xy cm, σ_θ degrees)`` (default the standard 0.5 cm, 1°) is scaled
+    per run by a level ``U(0, 2)``; a ``centred.Centred`` draws every run
+    from its ranges instead. ``accel_limit``: as ``RobustLoss``'s.
     """
     keys = jax.random.split(key, 2 * len(disturbances.STANDARD_CONDITIONS) + 1)
     ideal = loops.Options(
@@ -273,44 +267,6 @@ def sample_conditions(
     return batches
 
 
-def _accel_limit(robot: Robot, dt: Any) -> bool:
-    return loops.for_robot(loops.Options(), robot, dt).accel_limit
-
-
-def robust_loss(
-    z, key, refs, nonideal_refs, temperature, robot, dt, steps, joint=None, accel_limit=None,
-    noise=None,
-):  # fmt: skip
-    """The robust tuning loss of logits ``z`` and its capped gradient (traceable).
-
-    The runs of ``sample_conditions(key, refs, nonideal_refs, …)``; each
-    run's gradient capped and non-finite ones dropped (``capped_mean``).
-
-    Args:
-        joint: the ``JointProblem`` of ``z``; default the 7 fixed gains with
-            raw feedback.
-        accel_limit: the ideal loop's speed limiter of the robot's
-            acceleration limits (docs/model.md §4.2.2); ``None`` decides by
-            ``loops.for_robot`` (on for a traced robot, whose limits cannot
-            be seen).
-        noise: ``(σ_xy cm, σ_θ degrees)`` of the sensor (``RobustConfig.noise``);
-            default the standard 0.5 cm, 1°; a ``centred.Centred`` draws
-            every run from its ranges instead (``RobustConfig.around``).
-
-    Returns:
-        ``(mean loss s, gradient (dim,))``.
-    """
-    joint = JointProblem(FIXED, None) if joint is None else joint
-    if accel_limit is None:
-        accel_limit = _accel_limit(robot, dt)
-    values, grads = _runs(
-        True, z, key, refs, nonideal_refs, temperature, robot, dt, steps, joint, accel_limit,
-        noise,
-    )  # fmt: skip
-    loss, grad, _, _ = capped_mean(values, grads)
-    return loss, grad / values.shape[0]
-
-
 def robust_score(
     gains: Any,
     refs: Any,
@@ -322,9 +278,7 @@ def robust_score(
 ) -> float:
     """Hard-law score: mean arrival over the standard conditions, failures 2× horizon, s.
 
-    The conditions of ``standard_conditions``: the model robot, then
-    nominal, latency, noise and both with ±3 % wheel mismatch, on ``robot``
-    over its horizon (``robustness.study_horizon``).
+    The conditions of ``standard_conditions`` on ``robot`` over its horizon.
 
     Args:
         gains: ``Gains`` (raw feedback) or a ``ClosedLoop``.
@@ -350,10 +304,7 @@ def robust_score(
 
 
 def condition_score(row: dict[str, Any]) -> float:
-    """Mean arrival with failures at twice the horizon, from a ``standard_conditions`` row.
-
-    What the searches minimise per condition, and what the comparison table shows.
-    """
+    """Mean arrival with failures at twice the horizon, from a ``standard_conditions`` row."""
     ok = row["success"]
     arrival = row["mean arrival s"] if ok > 0 else 0.0
     return ok * arrival + (1.0 - ok) * FAILURE_FACTOR * row["horizon s"]
@@ -361,10 +312,20 @@ def condition_score(row: dict[str, Any]) -> float:
 
 @dataclasses.dataclass(frozen=True)
 class RobustLoss:
-    """The robust loss of one iteration (``TrainingProblem.loss``), hashable.
+    """The robust tuning loss of one iteration (``TrainingProblem.loss``), hashable.
 
-    ``self(z, (key, refs, nonideal_refs), temperature, (robot, dt))`` is
-    ``robust_loss`` with the non-finite entries of its gradient zeroed.
+    ``self(z, (key, refs, nonideal_refs), temperature, (robot, dt))`` is the
+    mean loss over the runs of ``sample_conditions`` and its gradient
+    ``(dim,)``: each run's gradient capped and non-finite ones dropped
+    (``capped_mean``), non-finite entries of the mean zeroed.
+
+    Attributes:
+        steps: control periods per run.
+        joint: the ``JointProblem`` of ``z``.
+        accel_limit: the ideal loop's speed limiter (docs/model.md §4.2.2).
+        noise: ``(σ_xy cm, σ_θ degrees)`` of the sensor (``RobustConfig.noise``;
+            ``None``: the standard 0.5 cm, 1°), or a ``centred.Centred`` whose
+            ranges every run is drawn from (``RobustConfig.around``).
     """
 
     steps: int
@@ -375,23 +336,22 @@ class RobustLoss:
     def __call__(self, z, batch, temperature, consts):
         key, refs, nonideal_refs = batch
         robot, dt = consts
-        loss, grad = robust_loss(
-            z, key, refs, nonideal_refs, temperature, robot, dt, self.steps, self.joint,
+        values, grads = _runs(
+            True, z, key, refs, nonideal_refs, temperature, robot, dt, self.steps, self.joint,
             self.accel_limit, self.noise,
         )  # fmt: skip
+        loss, grad, _, _ = capped_mean(values, grads)
+        grad = grad / values.shape[0]
         return loss, jnp.where(jnp.isfinite(grad), grad, 0.0)
 
 
 def robust_problem(config: RobustConfig, robot: Robot) -> trainer.TrainingProblem:
     """The ``TrainingProblem`` of a checked ``config`` on a checked ``robot``.
 
-    A draw is ``(key of the disturbances, refs, nonideal_refs)``; the
-    validation score is ``robust_score``; a row is the loop's parameters and
-    its estimator's, flattened.
+    A draw is ``(key of the disturbances, refs, nonideal_refs)``; a row is
+    the loop's parameters and its estimator's, flattened.
     """
     joint = joint_problem(config)
-    # The horizon of the studies that judge the loop: on a slower robot the
-    # paper's gains, scaled into its budget, need longer (study_horizon).
     horizon = robustness.study_horizon(robot)
     dtype, dt = float_dtype(), DEFAULT_DT
     seed = jax.random.key(config.seed)
@@ -426,7 +386,7 @@ def robust_problem(config: RobustConfig, robot: Robot) -> trainer.TrainingProble
         loss=RobustLoss(
             horizon_steps(dt, horizon),
             joint,
-            _accel_limit(robot, dt),
+            loops.for_robot(loops.Options(), robot, dt).accel_limit,
             config.noise if config.around is None else config.around,
         ),
         consts=(robot, jnp.asarray(dt, dtype)),
@@ -551,7 +511,6 @@ def tune_robust(
             )
             sets[method] = searches[method][0]
     held_out = held_out_poses(config.eval_poses, EVAL_SEED)
-    # The noise of wmr-jax robustness at its default seed: the same table.
     rows = conditions.standard_conditions(
         sets, held_out, jax.random.key(EVAL_NOISE_SEED), robot=robot, noise=config.noise
     )

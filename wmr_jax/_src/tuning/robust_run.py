@@ -1,13 +1,4 @@
-"""A robust tuning run with its files, and the resumable robust comparison.
-
-``save_tuned`` writes the tuned loop as soon as the iterations end,
-``write_evaluation`` the hard-law table under the standard conditions
-(``robust_evaluation.json`` and ``.md``), and ``run_comparison`` runs seeds
-0–2 of ``tune_robust`` with random search and CMA-ES given the gradient's
-process CPU time (``search.clock``) into ``robust_compare.json`` and
-``.md``, each seed written as it finishes and kept by a resumed comparison
-of the same settings, robot and code.
-"""
+"""A robust tuning run with its files, and the resumable robust comparison."""
 
 from __future__ import annotations
 
@@ -38,10 +29,7 @@ def described(config: RobustConfig) -> str:
 
 
 def save_tuned(out: Path, loop: Any, losses: list[float], robot: Robot) -> None:
-    """Write ``tuned_gains.json`` (the loop and its robot) and ``robust_loss.json``.
-
-    Removes the files that judged the gains it replaces.
-    """
+    """Write ``tuned_gains.json`` (the loop and its robot) and ``robust_loss.json``."""
     from wmr_jax._src.tuning.saved import tuned_json, write_tuned
 
     write_tuned(out, tuned_json(loop, robot=robot, tuning="robust"))
@@ -162,8 +150,8 @@ def run_comparison(
 ) -> list[dict[str, Any]]:
     """Gradient, CMA-ES and random search at equal CPU time, seeds 0–2 (``compare_seed``).
 
-    Each seed's rows are written as it finishes, with the settings, the robot
-    and the code version: a resumed comparison keeps only rows of the same three.
+    Each seed's rows are written as it finishes: a resumed comparison keeps
+    only rows of the same settings, robot and code.
 
     Returns:
         The rows (kept and new), also written to ``robust_compare.json`` and ``.md``.
@@ -185,7 +173,6 @@ def run_comparison(
             continue
         say(f"seed {seed}: tuning the {described(config)}, then the searches")
         rows += compare_seed(config, seed, robot)
-        # Sealed with a checksum: --resume keeps only what this wrote.
         io.atomic_write_json(path, io.sealed({"settings": settings, "rows": rows}))
     io.atomic_write_text(out / "robust_compare.md", robust_comparison_table(rows))
     return rows

@@ -1,10 +1,8 @@
 """A tuning run with its files: checkpoints, ``tuned_gains.json``, ``evaluation.json``, the curve.
 
-``tune`` runs ``train`` and writes its results and resumable checkpoints to a
-folder (``wmr-jax tune`` is it with flags); the checkpoint format is
-``CHECKPOINT_FORMAT``, an ``io.save_arrays`` file of ``state_arrays`` with the
-run's identity (``run_identity``) beside it: a checkpoint of other settings,
-another robot, other code or another format is refused, never read.
+A checkpoint is an ``io.save_arrays`` file of ``state_arrays`` with the run's
+identity (``run_identity``) beside it: one of other settings, another robot,
+other code or another format (``CHECKPOINT_FORMAT``) is refused, never read.
 """
 
 from __future__ import annotations
@@ -23,12 +21,6 @@ CHECKPOINT_FORMAT = 3
 
 
 # ---------------------------------------------------------------- checkpoints
-
-
-def save_checkpoint(path: Path, state: Any, identity: dict[str, Any]) -> None:
-    """Write ``state`` and the run's ``identity`` to ``path`` (checksummed, atomically)."""
-    meta = {"format": CHECKPOINT_FORMAT, "identity": identity}
-    io.save_arrays(path, trainer.state_arrays(state), meta)
 
 
 def load_checkpoint(path: Path, fresh: Any, identity: dict[str, Any]) -> Any:
@@ -84,8 +76,9 @@ def _progress(
             loss=f"{state.losses[-1]:.3f}s", T=f"{state.temperatures[-1]:.3g}", refresh=False
         )
         last = state.iteration == config.iters
-        if last or state.iteration % config.checkpoint_every == 0:
-            save_checkpoint(checkpoint, state, identity)
+        if last or state.iteration % config.checkpoint_every == 0:  # checksummed, atomically
+            meta = {"format": CHECKPOINT_FORMAT, "identity": identity}
+            io.save_arrays(checkpoint, trainer.state_arrays(state), meta)
         if last:
             bar.close()  # before the random search and the evaluation
         if user_fn is not None:
@@ -117,7 +110,7 @@ def write_results(
     from wmr_jax._src.model.params import check_feasible
     from wmr_jax._src.model.robots import ROBOT_UNITS, robot_json
     from wmr_jax._src.report.tuning import tuning_curve
-    from wmr_jax._src.tuning.evaluation import report_ratios, wheel_speed_ok
+    from wmr_jax._src.tuning.evaluation import report_ratios
     from wmr_jax._src.tuning.saved import tuned_json, write_tuned
 
     # Each file records the robot: its gains are tuned within that robot's wheel budget.
@@ -130,10 +123,11 @@ def write_results(
     paper = result.evaluation["paper_feasible"].mean_arrival
     bounds = held_out_bounds(config, robot)
     rows = {name: dict(ev._asdict()) for name, ev in result.evaluation.items()}
-    for name, row in rows.items():
+    for row in rows.values():
         # A ratio that needs a run that never arrived is null, with the reason beside it.
         row.update(report_ratios(row["mean_arrival"], bounds, paper))
-        row["peak_wheel_speed_ok"] = wheel_speed_ok(result.evaluation[name], robot)
+        # Within the robot's V_max, to 1e-6.
+        row["peak_wheel_speed_ok"] = row["peak_wheel_speed"] <= float(robot.v_max) * (1 + 1e-6)
     report = {
         "problem": result.problem,
         "velocity": config.velocity,
@@ -167,27 +161,6 @@ def write_results(
         problem=result.problem,
         robot=robot,
     )
-
-
-def _bars(config: Any, state: Any, progress: bool) -> tuple[Any, Any, Any]:
-    """The progress bars of a run: the iterations, the random search, the evaluation."""
-    from wmr_jax._src.report.progress import bar as tqdm
-
-    bar = tqdm(
-        total=config.iters,
-        initial=state.iteration,
-        desc=f"tune ({config.velocity})",
-        disable=not progress,
-        dynamic_ncols=True,
-    )
-    search_bar = tqdm(
-        desc="random search (same CPU time)",
-        unit=" candidates",
-        disable=not (progress and config.random_search),
-        dynamic_ncols=True,
-    )
-    eval_bar = tqdm(total=3, desc="hard-law evaluation", disable=not progress, dynamic_ncols=True)
-    return bar, search_bar, eval_bar
 
 
 def tune(
@@ -226,6 +199,7 @@ def tune(
     """
     from wmr_jax._src.checks import check_bool, check_callable, check_folder
     from wmr_jax._src.model.params import Robot, validate_robot
+    from wmr_jax._src.report.progress import bar as tqdm
 
     out = check_folder("out_dir", out_dir)
     check_bool("resume", resume)
@@ -241,7 +215,21 @@ def tune(
         state = load_checkpoint(checkpoint, state, identity)
     elif resume:  # a mistyped --out would otherwise start over without a word
         print(f"--resume: no {CHECKPOINT_NAME} in {out}; starting from the first iteration")
-    bar, search_bar, eval_bar = _bars(config, state, progress)
+    # The progress bars: the iterations, the random search, the evaluation.
+    bar = tqdm(
+        total=config.iters,
+        initial=state.iteration,
+        desc=f"tune ({config.velocity})",
+        disable=not progress,
+        dynamic_ncols=True,
+    )
+    search_bar = tqdm(
+        desc="random search (same CPU time)",
+        unit=" candidates",
+        disable=not (progress and config.random_search),
+        dynamic_ncols=True,
+    )
+    eval_bar = tqdm(total=3, desc="hard-law evaluation", disable=not progress, dynamic_ncols=True)
     report = _progress(config, checkpoint, identity, bar, progress_fn)
     try:
         result = training.train(

@@ -73,13 +73,6 @@ TUNINGS = {"nominal": "wmr-jax tune", "robust": "wmr-jax tune --robust"}
 _DEGREES = "deg"
 
 
-def _units(values: dict[str, Any]) -> dict[str, str]:
-    """The ``"units"`` entry of a file's numbers (``values``: its fields and estimator)."""
-    names = [k for k in values if k in PARAM_UNITS]
-    names += [f"estimator.{k}" for k in values.get("estimator") or {}]
-    return {name: PARAM_UNITS[name] for name in names if name in PARAM_UNITS}
-
-
 def tuned_json(
     params: Any, estimator: Any = None, robot: Any = None, *, tuning: str | None = None
 ) -> dict[str, Any]:
@@ -110,7 +103,9 @@ def tuned_json(
     sensed = estimator_json(estimator)
     if sensed is not None:
         values["estimator"] = sensed
-    values["units"] = _units(values)
+    names = [k for k in values if k in PARAM_UNITS]
+    names += [f"estimator.{k}" for k in values.get("estimator") or {}]
+    values["units"] = {name: PARAM_UNITS[name] for name in names if name in PARAM_UNITS}
     if tuning is not None:
         values["tuning"] = _check_tuning(tuning, "tuning")
     if robot is not None:

@@ -75,11 +75,10 @@ def random_search(
 ) -> SearchResult:
     """Search the feasible set of ``problem`` at random for ``budget_s`` CPU seconds.
 
-    Candidates are ``u ~ U[0, 1]^dim`` of the problem's feasible set, scored
-    ``chunk`` at a time with the hard law on ``refs`` (mean arrival time,
-    failures counted as twice the horizon); ``start`` is the first
-    candidate, so the result is never worse than it on ``refs``. At least
-    one chunk is scored whatever the budget.
+    Candidates ``u ~ U[0, 1]^dim`` are scored ``chunk`` at a time with the
+    hard law on ``refs`` (mean arrival time, failures at twice the horizon);
+    ``start`` is the first, so the result is never worse than it on ``refs``.
+    At least one chunk is scored whatever the budget.
 
     Args:
         key: PRNG key of the candidates.
@@ -126,10 +125,9 @@ def random_search(
 def _hard_law_search(
     problem, refs, size, robot, run, budget_s, first, proposals, progress, *, logits=False
 ):
-    """``search_loop`` over generations of ``size`` points of ``problem``'s cube (or logits).
+    """``search_loop`` over ``population_scores`` of ``problem``'s cube (or logits) on ``refs``.
 
-    ``proposals()`` makes ``(propose, tell)`` once the budget's clocks run;
-    each candidate is scored by ``population_scores`` on ``refs``.
+    ``proposals()`` makes ``(propose, tell)`` once the budget's clocks run.
     """
     n, tiled = refs.shape[0], jnp.tile(refs, (size, 1))
     wall, began = time.perf_counter(), clock()
@@ -201,11 +199,10 @@ def search_loop(
 
 
 def population_scores(problem: Problem, u: jax.Array, tiled: jax.Array, n: int, robot, run):
-    """Hard-law score of each candidate ``u (P, dim)`` on ``n`` poses tiled ``P`` times, s.
+    """Mean hard-law arrival of each candidate ``u (P, dim)``, failures at twice the horizon, s.
 
-    The mean arrival time, failures counted as twice the horizon.
+    Candidate i runs on poses i·N … (i+1)·N − 1 of ``tiled``, one flat batch.
     """
-    # Candidate i runs on poses i·N … (i+1)·N − 1: one flat batch.
     params = problem.from_unit(u, robot)
     # Leaves the same for every candidate (the robot's V_max, L) are repeated too.
     size = u.shape[0]
@@ -221,9 +218,8 @@ def robust_population_scores(
 ) -> np.ndarray:
     """``robust.robust_score`` of each of ``loops`` (one controller and estimator kind), s.
 
-    The runs of ``standard_conditions`` (the same draws of ``key``), one
-    ``disturbed_metrics`` call per condition over every candidate's runs;
-    ``dt``, ``robot`` (checked) and ``noise`` as for ``robust_score``.
+    One ``disturbed_metrics`` call per standard condition over every
+    candidate's runs; the arguments as for ``robust_score`` (``robot`` checked).
     """
     from wmr_jax._src.sim.sensing.disturbances import STANDARD_CONDITIONS, STANDARD_MISMATCH
     from wmr_jax._src.sim.sensing.loop import disturbed_metrics
@@ -305,8 +301,7 @@ def cma_es_proposals(
     """``(propose, tell)`` of CMA-ES from ``start`` (logits), for ``search_loop``.
 
     Generation ``g`` asks and tells with ``split(fold_in(key, g + 1))``, or
-    with ``fold_in(key, g + 1)`` for both where ``split`` is off (the robust
-    tuner's searches, whose documented comparison was drawn so).
+    with ``fold_in(key, g + 1)`` for both without ``split`` (the robust tuner's).
     """
     strategy = _evosax_cma_es()(population_size=population, solution=start)
     params = dataclasses.replace(strategy.default_params, std_init=std_init)
@@ -347,9 +342,8 @@ def cma_es_search(
 
     Scored as by ``random_search``, from the problem's start with step
     ``std_init`` in logit space; at least one generation whatever the budget.
-    ``population``: candidates per generation; ``**run``: ``dt``, ``horizon``,
-    ``velocity``, ``substeps``, ``wheel_limit``; the other arguments as for
-    ``random_search``.
+    ``population``: candidates per generation; ``**run``: ``random_search``'s
+    ``dt``, ``horizon``, ``velocity``, ``substeps``, ``wheel_limit``.
 
     Raises:
         ValueError: if evosax is missing (one line) or for bad options.

@@ -1,10 +1,8 @@
 """The one gradient trainer: optax on a problem's logits, annealed, best iterate by validation.
 
-A ``TrainingProblem`` holds what differs between the tuning problems (fixed
-gains and schedules in ``training``, the robust joint loop in ``robust``);
-``fit`` runs the one loop (``iterate``) for any of them and keeps the
-iterate of ``best_iteration``. A run continues bit for bit from any
-``TrainState`` that ``progress_fn`` saw.
+A ``TrainingProblem`` holds what differs between the tuning problems;
+``fit`` runs the one loop for any of them. A run continues bit for bit from
+any ``TrainState`` that ``progress_fn`` saw.
 """
 
 from __future__ import annotations
@@ -169,28 +167,19 @@ def checked_config(config: Any, kind: type) -> Any:
 # ---------------------------------------------------------------- optimiser
 
 
-def optimizer(
-    learning_rate: float, iters: int, grad_clip: float = 1.0
-) -> optax.GradientTransformation:
+def optimizer(hyper: Hyper) -> optax.GradientTransformation:
     """``clip_by_global_norm`` then Adam, its step cosine-decayed to a tenth.
 
     Large steps while the temperature is high and the landscape smooth, small
     ones once it is close to the hard law.
     """
-    schedule = optax.cosine_decay_schedule(learning_rate, iters, alpha=0.1)
-    return optax.chain(optax.clip_by_global_norm(grad_clip), optax.adam(schedule))
-
-
-def anneal(start: float, end: float, iteration: int, iters: int) -> float:
-    """The smooth law's temperature, geometric: ``start`` at 0, ``end`` at ``iters − 1``."""
-    frac = iteration / max(iters - 1, 1)
-    return start * (end / start) ** frac
+    schedule = optax.cosine_decay_schedule(hyper.learning_rate, hyper.iters, alpha=0.1)
+    return optax.chain(optax.clip_by_global_norm(hyper.grad_clip), optax.adam(schedule))
 
 
 def _train_step(z, opt_state, batch, temperature, consts, *, loss, hyper):
     value, grad = loss(z, batch, temperature, consts)
-    update = optimizer(hyper.learning_rate, hyper.iters, hyper.grad_clip).update
-    updates, opt_state = update(grad, opt_state, z)
+    updates, opt_state = optimizer(hyper).update(grad, opt_state, z)
     # Feasibility needs no projection: every z maps into the feasible set.
     return optax.apply_updates(z, updates), opt_state, value
 
@@ -225,8 +214,7 @@ def best_iteration(validated: Any, margin: float = BEST_MARGIN) -> int:
 
 def start_state(problem: TrainingProblem, run: str = "") -> TrainState:
     """The state before the first iteration: the problem's start, Adam at rest."""
-    hyper = problem.hyper
-    opt_state = optimizer(hyper.learning_rate, hyper.iters, hyper.grad_clip).init(problem.z0)
+    opt_state = optimizer(problem.hyper).init(problem.z0)
     start = problem.row(problem.z0)
     return TrainState(0, problem.z0, opt_state, (), (), (), 0.0, run, (), start)
 
@@ -243,13 +231,15 @@ def iterate(
 ) -> TrainState:
     """Run the iterations from ``state.iteration`` to ``hyper.iters``, scoring every few."""
     dtype, iters = float_dtype(), problem.hyper.iters
+    start, end = problem.temperature_start, problem.temperature_end
     if state.iteration == 0 and not state.validated:
         began = clock()
         state = _scored(problem, state)
         state = state._replace(elapsed_s=state.elapsed_s + clock() - began)
     for iteration in range(state.iteration, iters):
         began = clock()
-        temperature = anneal(problem.temperature_start, problem.temperature_end, iteration, iters)
+        # Geometric: the start's at iteration 0, the end's at the last.
+        temperature = start * (end / start) ** (iteration / max(iters - 1, 1))
         z, opt_state, loss = train_step(
             state.z,
             state.opt_state,

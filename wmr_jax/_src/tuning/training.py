@@ -1,10 +1,8 @@
 """The fixed-gain and gain-schedule problems of the trainer, and ``train``.
 
-``train`` runs the trainer from the paper's feasible gains (moved just
-inside the search box, whose budget is the robot's) on the robust batch
-gradient of ``tuning_loss`` over a fresh batch of poses per iteration, then
-judges the paper's, the tuned and a random search's gains (same CPU time)
-with the hard law on held-out poses. It writes no files.
+``train`` descends the robust batch gradient of ``tuning_loss`` from the
+paper's feasible gains, then judges the paper's, the tuned and a random
+search's gains (same CPU time) with the hard law on held-out poses.
 """
 
 from __future__ import annotations
@@ -116,11 +114,7 @@ class TuneConfig:
         """The recommended settings of ``problem``, with ``changes`` on top.
 
         ``"fixed"`` is ``TuneConfig()``; ``"schedule"`` also sets
-        ``SCHEDULE_SETTINGS``, which ``wmr-jax tune --schedule`` and
-        ``compare`` use.
-
-        Raises:
-            ValueError: for another ``problem``, naming it.
+        ``SCHEDULE_SETTINGS``. ``ValueError`` for another ``problem``.
         """
         problem = getattr(problem, "name", problem)  # a Problem, or its name
         unknown = sorted(set(changes) - {f.name for f in dataclasses.fields(cls)})
@@ -147,11 +141,7 @@ class TuneConfig:
         return dataclasses.replace(self, **changes)
 
     def validate(self) -> TuneConfig:
-        """Check every field; return ``self``.
-
-        Raises:
-            ValueError: naming the field, its value and what is allowed.
-        """
+        """Check every field; return ``self`` (``ValueError`` naming the field)."""
         trainer.check_loop(self)
         for name, minimum, maximum in _INT_FIELDS:
             check_int(name, getattr(self, name), minimum, maximum)
@@ -201,11 +191,7 @@ _INT_FIELDS = (
 
 @dataclasses.dataclass(frozen=True)
 class GainLoss:
-    """The fixed-gain or schedule loss of one iteration (``TrainingProblem.loss``).
-
-    ``self(z, refs, temperature, (init, robot, dt))`` is ``robust_value_and_grad``:
-    the mean ``tuning_loss`` over ``refs`` and its per-pose capped gradient.
-    """
+    """The fixed-gain or schedule loss of one iteration (``robust_value_and_grad``), hashable."""
 
     spec: LossSpec
     problem: Problem
@@ -226,7 +212,8 @@ def gain_problem(config: TuneConfig, robot: Robot) -> trainer.TrainingProblem:
     # The loss runs the loop the evaluation judges: the robot's speed limiter included.
     spec = config.spec().for_robot(robot, dt)
     pose_clip = None if config.pose_clip is None else float(config.pose_clip)
-    refs = validation_poses(config)
+    # Stream 4 of the seed, apart from the training's 0 and the random search's 2 and 3.
+    refs = sample_poses(jax.random.fold_in(jax.random.key(config.seed), 4), config.validation_poses)
     return trainer.TrainingProblem(
         name=space.name,
         z0=jnp.asarray(space.start_logits(robot), dtype),
@@ -264,10 +251,8 @@ def _checked(config: TuneConfig | None, robot: Robot | None) -> tuple[TuneConfig
 def init_state(config: TuneConfig | None = None, robot: Robot | None = None) -> TrainState:
     """Return the state before the first iteration: the paper's feasible gains, Adam at rest.
 
-    For a schedule, the paper's feasible gains as constant tables.
-
-    Raises:
-        ValueError: for bad settings, naming the field.
+    For a schedule, the paper's feasible gains as constant tables. ``ValueError``
+    for bad settings, naming the field.
     """
     config, robot = _checked(config, robot)
     return trainer.start_state(gain_problem(config, robot), trainer.run_text(config, robot))
@@ -281,15 +266,6 @@ def run_identity(config: TuneConfig | None = None, robot: Robot | None = None) -
 # ---------------------------------------------------------------- validation and judging
 
 
-def validation_poses(config: TuneConfig) -> jax.Array:
-    """The poses the iterates are scored on: stream 4 of ``config.seed``, apart from every other.
-
-    (Training batches: stream 0; the random search's candidates and poses: 2 and 3.)
-    """
-    key = jax.random.fold_in(jax.random.key(config.seed), 4)
-    return sample_poses(key, config.validation_poses)
-
-
 def validation_score(config: TuneConfig, robot: Robot, params: Any, refs: Any) -> float:
     """Hard-law score of ``params`` on ``refs``: mean arrival, failures at twice the horizon, s."""
     with quiet_scoring():
@@ -298,42 +274,6 @@ def validation_score(config: TuneConfig, robot: Robot, params: Any, refs: Any) -
         )
     times = np.asarray(times, dtype=float)
     return float(np.mean(np.minimum(times, FAILURE_FACTOR * steps * config.dt)))
-
-
-def _compare(
-    config: TuneConfig,
-    robot: Robot,
-    tuned: Any,
-    tune_cpu_s: float,
-    search_progress: Any,
-    eval_progress: Any,
-) -> tuple:
-    """Random search for the tuning's CPU time, then the hard-law table on held-out poses."""
-    run = {**config.hard_run, "robot": robot}
-    search = None
-    if config.random_search:
-        stream = jax.random.fold_in(jax.random.key(config.seed), 2)
-        refs = sample_poses(jax.random.fold_in(jax.random.key(config.seed), 3), config.poses)
-        search = random_search(
-            stream,
-            refs,
-            budget_s=tune_cpu_s,
-            problem=config.space,
-            progress=search_progress,
-            **run,
-        )
-    held_out = held_out_poses(config.eval_poses, config.eval_seed)
-    # The paper's gains scaled into this robot's wheel budget: the baseline
-    # must be gains the robot can follow, as the tuned ones are.
-    candidates = {"paper_feasible": paper_feasible_gains(robot), "tuned": tuned}
-    if search is not None:
-        candidates["random_search"] = search.gains
-    evaluation = {}
-    for name, params in candidates.items():
-        evaluation[name] = evaluate(params, held_out, **run)
-        if eval_progress is not None:
-            eval_progress(name)
-    return evaluation, search
 
 
 def train(
@@ -375,21 +315,38 @@ def train(
         ("eval_progress", eval_progress),
     ):
         check_callable(name, fn)
-    problem, run = gain_problem(config, robot), trainer.run_text(config, robot)
-    tuned, best, history, state = trainer.fit(problem, run, state, progress_fn)
-    evaluation, search = _compare(
-        config, robot, tuned, state.elapsed_s, search_progress, eval_progress
-    )
+    problem, identity = gain_problem(config, robot), trainer.run_text(config, robot)
+    tuned, best, history, state = trainer.fit(problem, identity, state, progress_fn)
+    run = {**config.hard_run, "robot": robot}
+    search = None
+    if config.random_search:
+        stream = jax.random.fold_in(jax.random.key(config.seed), 2)
+        refs = sample_poses(jax.random.fold_in(jax.random.key(config.seed), 3), config.poses)
+        search = random_search(
+            stream,
+            refs,
+            budget_s=state.elapsed_s,
+            problem=config.space,
+            progress=search_progress,
+            **run,
+        )
+    held_out = held_out_poses(config.eval_poses, config.eval_seed)
+    # The paper's gains scaled into this robot's wheel budget: the baseline
+    # must be gains the robot can follow, as the tuned ones are.
+    candidates = {"paper_feasible": paper_feasible_gains(robot), "tuned": tuned}
+    if search is not None:
+        candidates["random_search"] = search.gains
+    evaluation = {}
+    for name, params in candidates.items():
+        evaluation[name] = evaluate(params, held_out, **run)
+        if eval_progress is not None:
+            eval_progress(name)
     note = baseline_note(evaluation, "paper_feasible", "tuned")
     return TuneResult(tuned, evaluation, history, state.elapsed_s, search, problem.name, best, note)
 
 
 def baseline_note(evaluation: dict[str, Any], baseline: str, tuned: str) -> str | None:
-    """One line when the ``tuned`` row is no better than the ``baseline`` row, else ``None``.
-
-    No better: it arrives less often, or as often and no sooner on average
-    (hard law, held-out poses).
-    """
+    """A line when ``tuned`` arrives less often than ``baseline``, or as often and no sooner."""
     ours, theirs = evaluation[tuned], evaluation[baseline]
     if ours.success_rate > theirs.success_rate or (
         ours.success_rate == theirs.success_rate and ours.mean_arrival < theirs.mean_arrival
