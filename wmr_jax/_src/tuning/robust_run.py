@@ -3,8 +3,9 @@
 ``save_tuned`` writes the tuned loop as soon as the iterations end,
 ``write_evaluation`` the hard-law table under the standard conditions
 (``robust_evaluation.json`` and ``.md``), and ``run_comparison`` runs seeds
-0–2 of ``tune_robust`` with random search and CMA-ES given the gradient's
-process CPU time (``search.clock``) into ``robust_compare.json`` and
+0–2 of ``tune_robust`` with random search and CMA-ES given as many
+candidates as the gradient's compute buys (``robust.iteration_price``) into
+``robust_compare.json`` and
 ``.md``, each seed written as it finishes and kept by a resumed comparison
 of the same settings, robot and code.
 """
@@ -120,9 +121,11 @@ def compare_seed(config: RobustConfig, seed: int, robot: Robot) -> list[dict[str
 
     One row per method and condition (the paper's gains left out): the
     ``standard_conditions`` row with ``method``, ``seed``, ``budget_s`` (the
-    gradient's CPU time, every search's budget), ``candidates`` (gradient:
-    iterations), ``cpu_s``, ``wall_s``, ``per_cpu_s``, ``minimises``,
-    ``held_out`` (``poses_digest``) and ``loadavg`` (1-minute load average).
+    gradient's CPU time), ``price`` (candidates one iteration costs,
+    ``robust.iteration_price``), ``budget_candidates`` (every search's
+    budget), ``candidates`` (gradient: iterations), ``cpu_s``, ``wall_s``,
+    ``per_cpu_s``, ``minimises``, ``held_out`` (``poses_digest``) and
+    ``loadavg`` (1-minute load average).
     """
     held_out = poses_digest(held_out_poses(config.eval_poses, EVAL_SEED))
     config_seed = dataclasses.replace(config, seed=seed, compare=True)
@@ -144,7 +147,9 @@ def compare_seed(config: RobustConfig, seed: int, robot: Robot) -> list[dict[str
         candidates, cpu, wall = spent[method]
         rows.append(
             {**row, "method": method, "seed": seed, "budget_s": budget,
-             "candidates": candidates, "cpu_s": cpu, "wall_s": wall,
+             "price": result.budget["price"],
+             "budget_candidates": result.budget["candidates"], "candidates": candidates,
+             "cpu_s": cpu, "wall_s": wall,
              "per_cpu_s": candidates / cpu if cpu > 0 else None,
              "minimises": minimised(config, method), "held_out": held_out,
              "loadavg": os.getloadavg()[0]}
@@ -160,7 +165,7 @@ def run_comparison(
     resume: bool = False,
     progress: Callable[[str], Any] | None = print,
 ) -> list[dict[str, Any]]:
-    """Gradient, CMA-ES and random search at equal CPU time, seeds 0–2 (``compare_seed``).
+    """Gradient, CMA-ES and random search at equal compute, seeds 0–2 (``compare_seed``).
 
     Each seed's rows are written as it finishes, with the settings, the robot
     and the code version: a resumed comparison keeps only rows of the same three.
