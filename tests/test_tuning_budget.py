@@ -69,6 +69,24 @@ def test_search_loop_stops_once_the_cpu_clock_has_advanced_by_the_budget(monkeyp
     assert none == 0
 
 
+def test_search_loop_with_a_candidate_budget_stops_on_the_count_not_the_clock(monkeypatch):
+    clock = FakeClock()
+    monkeypatch.setattr(search_module, "clock", clock)
+
+    def score(xs):
+        clock.tick(1000.0)  # far past any time budget: the count alone must stop it
+        return np.zeros(len(xs))
+
+    def propose(generation):
+        return np.full((4, 2), float(generation))
+
+    _, _, count = search_module.search_loop(
+        propose, score, 0.0, began=clock(), best=(None, np.inf), count=1,
+        at_least_once=False, max_count=10,
+    )  # fmt: skip
+    assert count == 1 + 3 * 4  # 1, 5, 9 are short of 10; 13 is not
+
+
 def test_random_search_spends_its_budget_in_cpu_time_and_reports_both(monkeypatch, wall_races):
     clock = FakeClock()
     monkeypatch.setattr(search_module, "clock", clock)
@@ -104,6 +122,36 @@ def test_robust_black_box_counts_its_start_and_stops_on_the_cpu_clock(monkeypatc
     assert sizes == [1, 8, 8]
     assert count == 1 + 2 * 8 and cpu == pytest.approx(3.0) and wall >= 1000.0
     assert isinstance(loop, w.ClosedLoop)
+    sizes.clear()
+    _, count, *_ = robust.black_box(
+        "random search", KEY, REFS, 0.0, w.Robot(), 0.01, joint, (0.5, 1.0), candidates=17
+    )
+    assert sizes == [1, 8, 8] and count == 17  # a candidate budget: no clock reading stops it
+
+
+def test_an_iterations_price_is_its_cpu_time_over_a_candidates_timed_in_turn(monkeypatch):
+    clock = FakeClock()
+    monkeypatch.setattr(robust, "clock", clock)
+    calls = []
+
+    def step(z, opt_state, batch, temperature, consts, *, loss, hyper):
+        calls.append("iteration")
+        clock.tick(2.0)
+        return z, opt_state, 0.0
+
+    def scores(zs):
+        calls.append(("generation", len(zs)))
+        clock.tick(0.5)
+        return np.zeros(len(zs))
+
+    monkeypatch.setattr(robust.trainer, "train_step", step)
+    config = tuning.RobustConfig(iters=3, poses=2, nonideal_poses=0)
+    problem = robust.robust_problem(config, w.Robot())
+    state = robust.trainer.start_state(problem)
+    price = robust.iteration_price(problem, state, scores, rounds=3)
+    assert price == pytest.approx(2.0 / (0.5 / 8))  # 32 candidates per iteration
+    # One call of each to compile, then the two in turn, so that load falls on both.
+    assert calls == ["iteration", ("generation", 8)] * 4
 
 
 def test_the_trainer_counts_its_time_on_the_cpu_clock(monkeypatch, wall_races):
@@ -153,8 +201,9 @@ def _fake_tune(config, on_tuned=None, **_):
             )  # fmt: skip
     history = {"validated_at": np.array([0, config.iters]), "validation": np.array([2.0, 1.0])}
     searches = {"random search": (None, 17, 4.5, 3.0), "cma-es": (None, 9, 4.2, 5.0)}
+    budget = {"price": 3.0, "candidates": 25}
     return tuning.TuneResult(
-        None, {}, history, 4.0, None, "robust", config.iters, None, None, rows, searches
+        None, {}, history, 4.0, None, "robust", config.iters, None, None, rows, searches, budget
     )
 
 
@@ -168,6 +217,8 @@ def test_robust_comparison_rows_report_cpu_wall_rates_and_what_each_minimises(
     by = {(r["seed"], r["method"]): r for r in rows if r["condition"] == "nominal"}
     gradient, search = by[(0, "gradient")], by[(0, "random search")]
     assert gradient["budget_s"] == search["budget_s"] == 4.0  # the gradient's CPU time
+    assert gradient["price"] == search["price"] == 3.0  # candidates per iteration
+    assert gradient["budget_candidates"] == search["budget_candidates"] == 25
     assert (gradient["cpu_s"], gradient["candidates"]) == (4.0, 8)
     assert gradient["per_cpu_s"] == pytest.approx(8 / 4.0)  # iterations per CPU-second
     assert (search["cpu_s"], search["wall_s"], search["candidates"]) == (4.5, 3.0, 17)
@@ -180,9 +231,9 @@ def test_robust_comparison_rows_report_cpu_wall_rates_and_what_each_minimises(
     assert {r["held_out"] for r in rows} == {held}
     table = (tmp_path / "robust_compare.md").read_text()
     header = table.splitlines()[0]
-    for column in ("budget (s)", "CPU (s)", "wall (s)", "per CPU-s"):
+    for column in ("gradient CPU (s)", "price", "budget", "CPU (s)", "wall (s)", "per CPU-s"):
         assert f"| {column} |" in header, header
-    assert "| 4 | 17 | 4 | 3 | 3.78 |" in table, table  # random search: 4.5 CPU s
+    assert "| 4 | 3 | 25 | 17 | 4 | 3 | 3.78 |" in table, table  # random search: 4.5 CPU s
     assert "- gradient minimises: relaxed surrogate" in table
 
 

@@ -530,20 +530,27 @@ def test_polish_keeps_its_start_without_budget_and_improves_on_it_with_one(monke
     assert distance(better) < 0.5 * distance(kept)
 
 
-def test_each_robust_search_gets_the_gradients_cpu_time_as_its_budget(monkeypatch):
-    """The gradient's CPU time is each search's budget (``black_box`` spends it on the clock)."""
+@pytest.mark.parametrize("tuner", ["gradient", "hybrid"])
+def test_each_robust_search_scores_the_candidates_the_tuners_compute_buys(monkeypatch, tuner):
+    """Iterations at their price, validations at theirs, the polish's candidates as counted."""
     pytest.importorskip("evosax")
     from wmr_jax._src.tuning import robust
 
     budgets = {}
 
-    def fake_black_box(method, key, refs, budget_s, robot, dt, joint, noise=None):
-        budgets[method] = budget_s
+    def fake_black_box(method, key, refs, budget_s, robot, dt, joint, noise=None, **kwargs):
         loop = robust.concrete_loop(joint.from_logits(joint.start_logits(robot), robot))
-        return loop, 1, budget_s, 0.0
+        if kwargs.get("start") is not None:  # the hybrid's polish: 9 candidates
+            return loop, 9, 0.0, 0.0
+        budgets[method] = kwargs["candidates"]
+        return loop, kwargs["candidates"], 0.0, 0.0
 
     monkeypatch.setattr(robust, "black_box", fake_black_box)
-    result = tuning.tune_robust(small_config(compare=True))
+    monkeypatch.setattr(robust, "iteration_price", lambda *args, **kwargs: 2.5)
+    config = small_config(compare=True, tuner=tuner, validation_poses=3, search_poses=2)
+    result = tuning.tune_robust(config)
+    validations = len(result.history["validated_at"])  # each 3 poses: 1.5 candidates
+    expected = round(config.iters * 2.5 + validations * 1.5 + (9 if tuner == "hybrid" else 0))
     assert set(budgets) == {"random search", "cma-es"} == set(result.searches)
-    assert result.tune_cpu_s > 0
-    assert budgets == {m: result.tune_cpu_s for m in budgets}
+    assert budgets == {m: expected for m in budgets}
+    assert result.budget == {"price": 2.5, "candidates": expected}

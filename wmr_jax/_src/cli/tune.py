@@ -72,7 +72,8 @@ _MODE_FLAGS = {
         None,
         "tune the gain schedule and a pose estimator together for robustness to noise, latency "
         "and a robot unlike its model (docs/model.md §7, §9); with --compare, gradient against "
-        "CMA-ES and random search at equal CPU time, seeds 0-2",
+        "CMA-ES and random search at equal compute (the candidates an iteration's CPU time "
+        "buys), seeds 0-2",
     ),
     "--fixed": (None, "with --robust: tune the 7 fixed gains with raw feedback instead"),
     "--estimator": (

@@ -137,7 +137,7 @@ def run(args: Any) -> int:
 
 
 def _compare(out: Any, config: Any, robot: Any, *, resume: bool) -> int:
-    """Gradient, CMA-ES and random search at equal CPU time, seeds 0–2; each seed kept."""
+    """Gradient, CMA-ES and random search at equal compute, seeds 0–2; each seed kept."""
     from wmr_jax._src.report.tuning import robust_comparison_table
     from wmr_jax._src.tuning.robust import evosax_available
     from wmr_jax._src.tuning.robust_run import run_comparison

@@ -428,8 +428,10 @@ def robust_comparison_table(rows: list[dict[str, Any]]) -> str:
 
     A cell is the success rate and the mean arrival of the successful runs;
     ``score`` is what the searches minimise (``condition_score``, failures at
-    twice each row's horizon), ``budget`` the gradient's CPU time each search
-    spent. The last rows are each method's mean over the seeds.
+    twice each row's horizon), ``gradient CPU`` the gradient's CPU time,
+    ``price`` the candidates one of its iterations costs and ``budget`` the
+    candidates each search scored for it. The last rows are each method's
+    mean over the seeds.
     """
     rows = require_rows("rows", rows)
     cells: dict[tuple[str, int], dict[str, Any]] = {}
@@ -439,6 +441,8 @@ def robust_comparison_table(rows: list[dict[str, Any]]) -> str:
             key,
             {
                 "budget": float(row["budget_s"]),
+                "price": row.get("price"),
+                "budget_candidates": row.get("budget_candidates"),
                 "candidates": int(row["candidates"]),
                 "cpu": row.get("cpu_s"),
                 "wall": row.get("wall_s"),
@@ -459,7 +463,10 @@ def robust_comparison_table(rows: list[dict[str, Any]]) -> str:
         for c in conditions:
             ok, mean, _ = entry[c]
             line[c] = f"{100 * ok:.1f} %, " + (f"{mean:.3f} s" if ok > 0 else "none arrived")
-        line["budget (s)"] = f"{entry['budget']:.0f}"
+        line["gradient CPU (s)"] = f"{entry['budget']:.0f}"
+        if entry["price"] is not None:
+            line["price"] = f"{entry['price']:.3g}"
+            line["budget"] = str(entry["budget_candidates"])
         line["candidates"] = str(entry["candidates"])
         if entry["cpu"] is not None:  # rows of format 3 on
             line["CPU (s)"] = _maybe(entry["cpu"], "{:.0f}")
@@ -468,7 +475,8 @@ def robust_comparison_table(rows: list[dict[str, Any]]) -> str:
         table.append(line)
     for method, values in scores.items():
         table.append({"method": method, "seed": "mean", "score (s)": f"{np.mean(values):.3f}"})
-    columns = ["method", "seed", "score (s)", *_ROBUST_CONDITIONS, "budget (s)", "candidates"]
+    columns = ["method", "seed", "score (s)", *_ROBUST_CONDITIONS, "gradient CPU (s)", "price"]
+    columns += ["budget", "candidates"]
     columns += ["CPU (s)", "wall (s)", "per CPU-s"]
     columns = [c for c in columns if any(c in r for r in table)]
     table = markdown_table([{c: r.get(c, "") for c in columns} for r in table], columns)

@@ -2,8 +2,9 @@
 
 The loss is the relaxed arrival time averaged over domain-randomised runs
 (``sample_conditions``). ``tune_robust`` runs the trainer on it, then the
-black-box searches for the same CPU time (``black_box``), and judges all with
-the hard law under the standard conditions on the robot's horizon.
+black-box searches for the same compute (``black_box``, ``iteration_price``),
+and judges all with the hard law under the standard conditions on the robot's
+horizon.
 """
 
 from __future__ import annotations
@@ -74,7 +75,8 @@ class RobustConfig:
         poses: reference poses per standard condition per iteration (ideal loop).
         nonideal_poses: poses of the randomised non-ideal group per iteration (0: none).
         search_poses: poses per condition that random search and CMA-ES score on.
-        compare: also run random search and CMA-ES for the tuning's CPU time.
+        compare: also run random search and CMA-ES, each scoring as many
+            candidates as the tuning's compute buys (``iteration_price``).
         law: ``"schedule"`` (the gain schedule, default) or ``"fixed"`` (the 7
             gains): the controller's searched set.
         estimator: ``"ekf"`` (default), ``"observer"``, or ``None`` (raw
@@ -401,12 +403,59 @@ def robust_problem(config: RobustConfig, robot: Robot) -> trainer.TrainingProble
     )
 
 
-def black_box(method, key, refs, budget_s, robot, dt, joint, noise=None, *, start=None, std=1.0):
+def _scorer(refs, key, robot, dt, joint, noise):
+    """``scores(zs)``: ``robust_score`` of each row of logits ``zs (P, dim)``, s."""
+
+    def scores(zs: Any) -> np.ndarray:
+        with quiet_scoring():
+            loops = [concrete_loop(joint.from_logits(z, robot)) for z in zs]
+            return robust_population_scores(loops, refs, key, dt=dt, robot=robot, noise=noise)
+
+    return scores
+
+
+def iteration_price(problem, state, scores, rounds=5):
+    """Candidates one gradient iteration costs: its CPU time over one candidate's scoring.
+
+    A compiled iteration (``trainer.train_step`` at ``state``) and the scoring
+    of a generation of 8 candidates (``scores``) are timed in turn,
+    ``rounds`` times each after one call of each that compiles them, so that
+    the machine's load falls on both alike; the ratio of the medians.
+    """
+    dtype = float_dtype()
+    temperature = jnp.asarray(problem.temperature_end, dtype)
+    generation = jnp.broadcast_to(state.z, (8, state.z.shape[0]))
+
+    def iteration():
+        out = trainer.train_step(
+            state.z, state.opt_state, problem.batch(0), temperature, problem.consts,
+            loss=problem.loss, hyper=problem.hyper,
+        )  # fmt: skip
+        jax.block_until_ready(out)
+
+    iteration()  # both compiled before the timing
+    scores(generation)
+    per_iteration, per_generation = [], []
+    for _ in range(rounds):
+        began = clock()
+        iteration()
+        per_iteration.append(clock() - began)
+        began = clock()
+        scores(generation)
+        per_generation.append(clock() - began)
+    return float(np.median(per_iteration) / (np.median(per_generation) / len(generation)))
+
+
+def black_box(
+    method, key, refs, budget_s, robot, dt, joint, noise=None, *, start=None, std=1.0,
+    candidates=None,
+):  # fmt: skip
     """Random search or CMA-ES on the logits for ``budget_s`` CPU seconds (``search.clock``).
 
     8 candidates per generation (random search: uniform in the cube), scored
     by ``robust_score`` on ``refs`` under the same draws; the start (default
     the problem's; CMA-ES's mean, step ``std``) is scored first, in the budget.
+    ``candidates``: a budget in candidates scored instead of ``budget_s``.
 
     Returns:
         ``(ClosedLoop, candidates scored, CPU s, wall s)``.
@@ -419,11 +468,7 @@ def black_box(method, key, refs, budget_s, robot, dt, joint, noise=None, *, star
     def closed(z):
         return concrete_loop(joint.from_logits(z, robot))
 
-    def scores(zs: Any) -> np.ndarray:
-        with quiet_scoring():
-            loops = [closed(z) for z in zs]
-            return robust_population_scores(loops, refs, score_key, dt=dt, robot=robot, noise=noise)
-
+    scores = _scorer(refs, score_key, robot, dt, joint, noise)
     best = (start, float(scores(start[None])[0]))
     tell = None
     if method == "cma-es":
@@ -436,7 +481,7 @@ def black_box(method, key, refs, budget_s, robot, dt, joint, noise=None, *, star
 
     best_z, _, count = search_loop(
         propose, scores, budget_s, began=began, best=best, count=1, tell=tell,
-        at_least_once=False,
+        at_least_once=False, max_count=candidates,
     )  # fmt: skip
     return closed(best_z), count, clock() - began, time.perf_counter() - wall
 
@@ -467,7 +512,8 @@ def tune_robust(
         ``ClosedLoop``, ``gains`` its params, ``tune_cpu_s`` the CPU time of
         the iterations and the polish, ``searches``, ``rows`` (the paper's
         gains with raw feedback, the tuned and the searches' loops under the
-        standard conditions), ``note`` if it is no better than the paper's.
+        standard conditions), ``note`` if it is no better than the paper's,
+        ``budget`` the searches' equal compute (with ``compare``).
     """
     config = trainer.checked_config(config, RobustConfig)
     check_callable("progress_fn", progress_fn)
@@ -486,29 +532,42 @@ def tune_robust(
     joint, dt = joint_problem(config), DEFAULT_DT
     stream = jax.random.fold_in(jax.random.key(config.seed), 11)
     search_refs = sample_poses(jax.random.fold_in(stream, -1 % 2**31), config.search_poses)
+    budget = None
+    if config.compare:
+        # Equal compute, whatever the load: the searches score as many
+        # candidates as the gradient's iterations and validations cost.
+        price = iteration_price(
+            problem, state, _scorer(search_refs, jax.random.key(0), robot, dt, joint, config.noise)
+        )  # fmt: skip
+        validated = len(state.validated) * config.validation_poses / config.search_poses
+        budget = {"price": price, "candidates": state.iteration * price + validated}
     if config.tuner == "hybrid":
         # CMA-ES on the hard-law score from the kept iterate, scored first so
         # never worse on the search poses; a run resumed after its kept
         # iterate starts from its last.
         start, share, began = iterates.get(best, state.z), config.polish_share, clock()
-        tuned, *_ = black_box(
+        tuned, polished, *_ = black_box(
             "cma-es", jax.random.fold_in(jax.random.key(config.seed), 20), search_refs,
             cpu * share / (1.0 - share), robot, dt, joint, config.noise, start=start,
             std=config.polish_std,
         )  # fmt: skip
         tuned, cpu = tuned._replace(robot=robot), cpu + clock() - began
+        if budget is not None:
+            budget["candidates"] += polished
     if on_tuned is not None:
         on_tuned(tuned, list(state.losses))
     sets = {"paper": paper_feasible_gains(robot), "robust-tuned": tuned}
     searches = {}
     if config.compare:
+        budget["candidates"] = max(1, round(budget["candidates"]))
         for method in ("random search", "cma-es"):
             if method == "cma-es" and not evosax_available():
                 continue
             key = jax.random.fold_in(jax.random.key(config.seed), 12 + len(searches))
             searches[method] = black_box(
-                method, key, search_refs, cpu, robot, dt, joint, config.noise
-            )
+                method, key, search_refs, math.inf, robot, dt, joint, config.noise,
+                candidates=budget["candidates"],
+            )  # fmt: skip
             sets[method] = searches[method][0]
     held_out = held_out_poses(config.eval_poses, EVAL_SEED)
     rows = conditions.standard_conditions(
@@ -526,5 +585,5 @@ def tune_robust(
             "conditions on the held-out poses"
         )
     return TuneResult(
-        tuned.params, {}, history, cpu, None, "robust", best, note, tuned, rows, searches
+        tuned.params, {}, history, cpu, None, "robust", best, note, tuned, rows, searches, budget
     )

@@ -108,9 +108,11 @@ def compare_seed(config: RobustConfig, seed: int, robot: Robot) -> list[dict[str
 
     One row per method and condition (the paper's gains left out): the
     ``standard_conditions`` row with ``method``, ``seed``, ``budget_s`` (the
-    gradient's CPU time, every search's budget), ``candidates`` (gradient:
-    iterations), ``cpu_s``, ``wall_s``, ``per_cpu_s``, ``minimises``,
-    ``held_out`` (``poses_digest``) and ``loadavg`` (1-minute load average).
+    gradient's CPU time), ``price`` (candidates one iteration costs,
+    ``robust.iteration_price``), ``budget_candidates`` (every search's
+    budget), ``candidates`` (gradient: iterations), ``cpu_s``, ``wall_s``,
+    ``per_cpu_s``, ``minimises``, ``held_out`` (``poses_digest``) and
+    ``loadavg`` (1-minute load average).
     """
     held_out = poses_digest(held_out_poses(config.eval_poses, EVAL_SEED))
     config_seed = dataclasses.replace(config, seed=seed, compare=True)
@@ -132,7 +134,9 @@ def compare_seed(config: RobustConfig, seed: int, robot: Robot) -> list[dict[str
         candidates, cpu, wall = spent[method]
         rows.append(
             {**row, "method": method, "seed": seed, "budget_s": budget,
-             "candidates": candidates, "cpu_s": cpu, "wall_s": wall,
+             "price": result.budget["price"],
+             "budget_candidates": result.budget["candidates"], "candidates": candidates,
+             "cpu_s": cpu, "wall_s": wall,
              "per_cpu_s": candidates / cpu if cpu > 0 else None,
              "minimises": minimised(config, method), "held_out": held_out,
              "loadavg": os.getloadavg()[0]}
@@ -148,7 +152,7 @@ def run_comparison(
     resume: bool = False,
     progress: Callable[[str], Any] | None = print,
 ) -> list[dict[str, Any]]:
-    """Gradient, CMA-ES and random search at equal CPU time, seeds 0–2 (``compare_seed``).
+    """Gradient, CMA-ES and random search at equal compute, seeds 0–2 (``compare_seed``).
 
     Each seed's rows are written as it finishes: a resumed comparison keeps
     only rows of the same settings, robot and code.

@@ -161,6 +161,7 @@ def search_loop(
     tell: Any = None,
     progress: Any = None,
     at_least_once: bool = True,
+    max_count: int | None = None,
 ) -> tuple[Any, float, int]:
     """The loop of every black-box search: propose, score, keep the best, until the budget.
 
@@ -174,13 +175,19 @@ def search_loop(
         tell: ``tell(generation, candidates, scores)`` after each scoring.
         progress: called with the generation's size after each.
         at_least_once: run one generation whatever the budget.
+        max_count: a budget in candidates instead: stop once ``count`` reaches it
+            (``budget_s`` is then not read).
 
     Returns:
         ``(best candidate, its score, candidates scored)``.
     """
     best_x, best_score = best
     generation = 0
-    while (at_least_once and generation == 0) or clock() - began < budget_s:
+
+    def within() -> bool:  # reads ``count`` as the loop advances it
+        return clock() - began < budget_s if max_count is None else count < max_count
+
+    while (at_least_once and generation == 0) or within():
         xs = propose(generation)
         if xs is None:
             break

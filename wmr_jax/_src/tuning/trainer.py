@@ -119,6 +119,9 @@ class TuneResult(NamedTuple):
             gains, the tuned loop and the searches' loops, else ``None``.
         searches: the robust problem's ``{method: (ClosedLoop, candidates, CPU s,
             wall s)}``, else ``None``.
+        budget: the robust comparison's equal compute, ``{"price": candidates
+            one gradient iteration costs, "candidates": each search's budget}``,
+            else ``None``.
     """
 
     gains: Any
@@ -132,6 +135,7 @@ class TuneResult(NamedTuple):
     loop: Any = None
     rows: list[dict[str, Any]] | None = None
     searches: dict[str, Any] | None = None
+    budget: dict[str, float] | None = None
 
 
 # name, minimum, maximum of the integer fields every tuning config has.
