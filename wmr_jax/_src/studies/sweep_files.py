@@ -59,15 +59,16 @@ def settings(job: _Job) -> dict[str, Any]:
     """Everything but the reference poses that decides a chunk's results."""
     chosen = ("steps", "velocity", "controller", "temperature", "substeps", "wheel_limit")
     options = {name: getattr(job.options, name) for name in chosen}
+    _, gains, init, robot = job.inputs
     return {
         "n": job.n,
         "chunk": job.chunk,
         "dtype": job.dtype.name,
         "options": {**options, "controller": job.options.controller.name},
         "dt": job.dt,
-        "gains": tree_description(job.gains),
-        "robot": tree_description(job.robot),
-        "init": "per pose" if job.batched_init else tree_description(job.init),
+        "gains": tree_description(gains),
+        "robot": tree_description(robot),
+        "init": "per pose" if np.ndim(init) == 2 else tree_description(init),
         "thresholds": [float(t) for t in job.thresholds],
         # A change of the code that computes (the law, a loop, a metric) must
         # not reuse old chunks, even under one version number.
