@@ -6,6 +6,7 @@ that count as arrived only because the horizon ends.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from collections.abc import Sequence
@@ -13,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from wmr_jax._src.io import atomic_write_text, json_text
-from wmr_jax._src.report.figures import built, plt, save_closed
+from wmr_jax._src.report.figures import Patch, built, plt, save_closed
 from wmr_jax._src.report.tables import markdown_table, percent, require_rows
 from wmr_jax._src.sim.poses import HORIZON_S
 
@@ -130,17 +131,6 @@ def _robot_text(meta: dict[str, Any]) -> str:
     return f", on {describe_robot(robot_from_values(meta['robot'], 'meta robot'))}"
 
 
-# The keys of a row that robustness_figure draws.
-_FIGURE_KEYS = [
-    "controller",
-    "condition",
-    "noise xy cm",
-    "noise theta deg",
-    "success",
-    "median arrival s",
-]
-
-
 def write_robustness(
     out_dir: str | os.PathLike,
     rows: Sequence[dict[str, Any]],
@@ -185,12 +175,9 @@ def write_robustness(
         "wheel radius" + (", ±20 % mass" if velocity == "nonideal" else "") + "; latency one sample"
     )
 
-    def figure(rows: list[dict[str, Any]]) -> Any:
-        return robustness_figure(rows, title=title)
-
     # "tight": the legend lies outside the axes.
-    columns, save = ROBUSTNESS_COLUMNS, {"bbox_inches": "tight"}
-    return _write_study(out_dir, "robustness", rows, meta, columns, head, figure, **save)
+    figure, save = functools.partial(robustness_figure, title=title), {"bbox_inches": "tight"}
+    return _write_study(out_dir, "robustness", rows, meta, ROBUSTNESS_COLUMNS, head, figure, **save)
 
 
 def robustness_figure(rows: Sequence[dict[str, Any]], *, title: str) -> Any:
@@ -199,7 +186,8 @@ def robustness_figure(rows: Sequence[dict[str, Any]], *, title: str) -> Any:
     The caller saves and closes the returned ``Figure``.
     """
     rows = require_rows("rows", rows)
-    markdown_table(rows, _FIGURE_KEYS)  # names a row without one of them
+    drawn = ["controller", "condition", "noise xy cm", "noise theta deg", "success"]
+    markdown_table(rows, [*drawn, "median arrival s"])  # names a row without one of them
     names = list(dict.fromkeys(r["controller"] for r in rows))
     conditions = list(dict.fromkeys(r["condition"] for r in rows))
     first = [r for r in rows if (r["controller"], r["condition"]) == (names[0], conditions[0])]
@@ -264,11 +252,9 @@ def _plot_marked(ax, x, y, late, **style) -> None:
 
 def _with_late_mark(ax: Any, rows: Sequence[dict[str, Any]]) -> tuple[list, list]:
     """The legend of ``ax``, with what an x means where one is drawn."""
-    from matplotlib.lines import Line2D
-
     handles, labels = ax.get_legend_handles_labels()
     if _late_points(rows):
-        handles.append(Line2D([], [], color="grey", marker="x", linestyle="none"))
+        handles.append(plt.Line2D([], [], color="grey", marker="x", linestyle="none"))
         labels.append("x: half or more of the\nsuccesses only settle\nat the horizon")
     return handles, labels
 
@@ -310,19 +296,12 @@ def standard_figure(rows: Sequence[dict[str, Any]]) -> Any:
                 f"rows has no row of gains {name!r} under condition {lacking!r}; allowed: "
                 "one row per gain set and condition"
             )
-    width = 0.8 / len(sets)
-
-    def draw(fig, axes):
-        _draw_standard(fig, axes, rows, conditions, sets, width)
-
-    return built(draw, 1, 2, figsize=(11, 4.0))
+    return built(functools.partial(_draw_standard, rows, conditions, sets), 1, 2, figsize=(11, 4.0))
 
 
-def _draw_standard(fig, axes, rows, conditions, sets, width) -> None:
+def _draw_standard(rows, conditions, sets, fig, axes) -> None:
     """Draw the bars, labels and legend of ``standard_figure``."""
-    from matplotlib.patches import Patch
-
-    any_late = False
+    any_late, width = False, 0.8 / len(sets)
     for j, name in enumerate(sets):
         got = {r["condition"]: r for r in rows if r["gains"] == name}
         x = [i + (j - (len(sets) - 1) / 2) * width for i in range(len(conditions))]

@@ -108,21 +108,6 @@ def _check_config(config: BenchConfig) -> BenchConfig:
     return dataclasses.replace(config, cases=tuple(config.cases) or CASES)
 
 
-def _row(case: str, n: int | None, steps: int, timing: Timing | None, **extra: Any) -> dict:
-    row: dict[str, Any] = {"case": case, "n": n, "steps": steps}
-    if timing is not None:
-        count = (n or 0) * steps
-        row.update(
-            run_s=timing.run_s,
-            compile_s=timing.compile_s,
-            robot_steps_per_s=count / timing.run_s if timing.run_s > 0 else None,
-            runs_s=timing.runs_s,
-            others_cpu=timing.others_cpu,
-        )
-    row.update(extra)
-    return row
-
-
 def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = None) -> dict:
     """Run the benchmark and return its results as a JSON-ready dict.
 
@@ -193,8 +178,19 @@ class _SizeBench:
     def time(self, calls: dict[str, tuple[Callable[[], Any], bool]]) -> dict[str, Timing]:
         return time_group(calls, self.config.repeats, wait_idle=self.config.wait_idle)
 
-    def row(self, case: str, timing: Timing | None, **extra: Any) -> dict:
-        return _row(case, self.n, self.steps, timing, **extra)
+    def row(self, case: str, timing: Timing | None, n: int | None = None, **extra: Any) -> dict:
+        """The row of ``case`` over ``n`` poses (default the batch size)."""
+        n = self.n if n is None else n
+        row: dict[str, Any] = {"case": case, "n": n, "steps": self.steps}
+        if timing is not None:
+            row.update(
+                run_s=timing.run_s,
+                compile_s=timing.compile_s,
+                robot_steps_per_s=n * self.steps / timing.run_s if timing.run_s > 0 else None,
+                runs_s=timing.runs_s,
+                others_cpu=timing.others_cpu,
+            )
+        return {**row, **extra}
 
     def rows(self, *, scalar: bool) -> list[dict]:
         """Return the rows of every chosen case, in the order of the table."""
@@ -267,7 +263,7 @@ class _SizeBench:
             last.append(self.row("numpy_batch", t["numpy_batch"], dtype=self.config.dtype))
         if "scalar_reference" in t:
             note = "float64, one pose at a time"
-            last.append(_row("scalar_reference", k, steps, t["scalar_reference"], note=note))
+            last.append(self.row("scalar_reference", t["scalar_reference"], k, note=note))
         return first, last
 
     def disturbed(self) -> list[dict]:
@@ -462,9 +458,8 @@ class _SizeBench:
 
         def forward(z, args):
             (key, refs, nonideal), temperature, (robot, dt) = args
-            steps = self.steps
             return robust.robust_loss_value(
-                z, key, refs, nonideal, temperature, robot, dt, steps, joint, accel
+                z, key, refs, nonideal, temperature, robot, dt, self.steps, joint, accel
             )
 
         def directional(z, args):
