@@ -41,14 +41,6 @@ def _pitch(poses: np.ndarray, refs: np.ndarray, title: str, arrow: float) -> tup
     return fig, ax
 
 
-def _frames(samples: int, stride: int) -> list[int]:
-    """Every ``stride``-th sample, and the last one."""
-    frames = list(range(0, samples, stride))
-    if frames[-1] != samples - 1:
-        frames.append(samples - 1)
-    return frames
-
-
 # A GIF stores a frame's delay in hundredths of a second, as a 16-bit integer.
 _MAX_FRAME_MS = 655_350
 
@@ -183,7 +175,7 @@ def write_gif(
             )
             return [*bodies, *ticks, *trails, markers, clock]
 
-        frames = _frames(samples, stride)
+        frames = [*range(0, samples - 1, stride), samples - 1]  # and always the last sample
         anim = mpl_animation.FuncAnimation(fig, draw, frames=frames, blit=False)
         return _save(anim, fig, path, frame_ms)
     finally:

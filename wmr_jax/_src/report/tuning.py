@@ -47,10 +47,6 @@ _BOUND_KEYS = ["vs_turn_drive_turn", "vs_lower_bound"]
 _NONE_ARRIVED = "none arrived"
 
 
-def _ratio(value: float) -> str:
-    return f"{value:.3f}×"
-
-
 def _right_aligned(rows: list[dict[str, str]], columns: list[str]) -> str:
     rows = [{**dict.fromkeys(columns, ""), **row} for row in rows]
     lines = markdown_table(rows, columns).splitlines()
@@ -110,7 +106,7 @@ def evaluation_table(evaluation: dict[str, Any], bounds: Any = None) -> str:
         if bounds is not None:
             ratios = bound_ratios(mean, bounds)
             for column, key in zip(_BOUND_COLUMNS, _BOUND_KEYS, strict=True):
-                row[column] = _ratio(ratios[key]) if math.isfinite(mean) else _NONE_ARRIVED
+                row[column] = f"{ratios[key]:.3f}×" if math.isfinite(mean) else _NONE_ARRIVED
         rows.append(row)
     if bounds is not None:
         for label, values in (
@@ -368,19 +364,15 @@ def _history_curves(history: dict) -> tuple[np.ndarray, np.ndarray]:
     return curves[0], curves[1]
 
 
-def baseline_label(baseline: Any) -> str:
-    """The legend of the tuning curve's dashed baseline: the gains the table compares with."""
-    if baseline is PAPER_FEASIBLE_GAINS:
-        return "paper (feasible)"
-    return (
-        f"paper's, scaled into the wheel budget (k_r = {float(baseline.kr):.3g}, "
-        f"k_θ = {float(baseline.k_theta):.3g})"
-    )
-
-
 def _gain_panels(axes: Any, steps: np.ndarray, gains: np.ndarray, baseline: Any) -> None:
     start_values = gains_as_dict(baseline)
-    label = baseline_label(baseline)
+    # The dashed baseline: the gains the table compares with.
+    label = "paper (feasible)"
+    if baseline is not PAPER_FEASIBLE_GAINS:
+        label = (
+            f"paper's, scaled into the wheel budget (k_r = {float(baseline.kr):.3g}, "
+            f"k_θ = {float(baseline.k_theta):.3g})"
+        )
     for k, name in enumerate(GAIN_FIELDS):
         ax = axes.flat[k + 1]
         values = gains[:, k]

@@ -70,10 +70,7 @@ def pose_grid(
     r_min: float = EVAL_R_MIN,
     r_max: float = EVAL_R_MAX,
 ) -> PoseGrid:
-    """A square grid over ``[−r_max, r_max]²`` with about ``n_poses`` references.
-
-    Only positions at distance ``r_min``–``r_max`` from the origin are run (the
-    docs/model.md §6 set).
+    """About ``n_poses`` references on a grid over ``[−r_max, r_max]²``, ``r_min``–``r_max`` from 0.
 
     Args:
         n_poses: about how many references in all, ``>= 1``.

@@ -64,20 +64,18 @@ def run_table(
     commanded = np.abs(np.asarray(wheel_speeds(traj.v, traj.omega, robot)))
     saturated = (commanded > float(robot.v_max)).any(axis=-1).mean(axis=-1)
     final = np.asarray(traj.poses[:, -1])
-    rows = []
-    for i, ref in enumerate(np.asarray(refs)):
-        rows.append(
-            {
-                "ref": [float(ref[0]), float(ref[1]), round(math.degrees(float(ref[2])), 6)],
-                "arrival_s": float(times[i]),
-                "path_cm": float(lengths[i]),
-                "peak_wheel_cm_s": float(peak[i]),
-                "saturated_fraction": float(saturated[i]),
-                "zigzag": int(zigzag[i]),
-                "final_distance_cm": float(np.hypot(*(final[i, :2] - ref[:2]))),
-            }
-        )
-    return rows
+    return [
+        {
+            "ref": [float(ref[0]), float(ref[1]), round(math.degrees(float(ref[2])), 6)],
+            "arrival_s": float(times[i]),
+            "path_cm": float(lengths[i]),
+            "peak_wheel_cm_s": float(peak[i]),
+            "saturated_fraction": float(saturated[i]),
+            "zigzag": int(zigzag[i]),
+            "final_distance_cm": float(np.hypot(*(final[i, :2] - ref[:2]))),
+        }
+        for i, ref in enumerate(refs)
+    ]
 
 
 def residual_bound(phi_m: Any) -> Any:

@@ -189,8 +189,7 @@ def monte_carlo(
     n_runs = checks.check_int("n_runs", n_runs)
     checks.check_key("key", key)
     noise_xy, noise_deg = check_levels(noise_xy, noise_deg)
-    if not isinstance(latency, (bool, np.bool_)):
-        raise ValueError(f"latency = {latency!r} is not allowed; allowed: True or False")
+    latency = checks.check_bool("latency", latency)
     for name, value in (("radius_mismatch", radius_mismatch), ("mass_mismatch", mass_mismatch)):
         checks.check_number(name, value, high=1.0, closed=True)
     if mass_mismatch > 0 and velocity == "ideal":
@@ -201,8 +200,7 @@ def monte_carlo(
     name = controllers.get_controller(controller).name
     estimator_used, _ = resolve_estimator(estimator)
     steps, horizon = study_steps(robot, horizon, dt)
-    if params is None:
-        params = robot_defaults(name, robot)
+    params = robot_defaults(name, robot) if params is None else params
     refs, unit, mismatch = draw_disturbances(
         key, n_runs, steps, radius_mismatch=radius_mismatch, mass_mismatch=mass_mismatch
     )
