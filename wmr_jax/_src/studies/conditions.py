@@ -234,12 +234,9 @@ def evaluate_loop(
         loop: a ``ClosedLoop`` or ``Gains`` (Shim–Sung, raw feedback).
         refs: ``(N, 3)`` references ``[x cm, y cm, θ rad]``.
         condition: ``"nominal"``, ``"latency"``, ``"noise"`` or ``"both"``.
-        mismatch: bound of each wheel's relative radius error, ``[0, 1)``.
+        mismatch, horizon, dt, x64: as ``standard_conditions``.
         seed: seed of the draws, an integer in ``[0, 2³² − 1]``.
-        horizon: simulated time per run, s; default ``study_horizon(robot)``.
         velocity: ``"ideal"`` or ``"nonideal"``.
-        dt: control period, s.
-        x64: compute in float64.
         robot: the robot; default the loop's own, else ``Robot()``.
         identified: the content of an ``identified.json`` whose base is
             ``robot``: the runs are on the identified robot while the loop

@@ -127,15 +127,10 @@ def evaluate_poses(
     """The docs/model.md §6 metrics of every reference, in bounded memory.
 
     Args:
-        refs: ``(N, 3)`` reference poses ``[x cm, y cm, θ rad]``.
-        params: the controller's parameters (its defaults if ``None``); leaves
-            scalar, or ``(N,)`` for one value per pose.
-        controller: a ``Controller`` or its registered name.
+        refs, controller, dt, robot, velocity, on_chunk: as ``wmr_jax.sweep``.
+        params: as ``sweep``'s ``gains``.
         init: ``(3,)`` initial pose shared by every run.
-        dt: control period, s.
         steps: control periods; default the docs/model.md §6 horizon of 6 s.
-        robot: robot parameters; default ``Robot()``.
-        velocity: ``"ideal"`` or ``"nonideal"``.
         chunk: poses per compiled call (the last chunk is padded to it).
         progress: show a progress bar (stderr).
         x64: compute in float64 (default), whatever JAX's default dtype: in
@@ -143,7 +138,6 @@ def evaluate_poses(
         cache: a folder where each finished chunk is kept (``wmr_jax.sweep``'s
             ``out``); ``None`` keeps nothing.
         resume: with ``cache``, reuse the chunks it holds of the same settings.
-        on_chunk: called as ``on_chunk(done, total)`` after every chunk.
 
     Returns:
         ``PoseMetrics`` of ``(N,)`` NumPy arrays, in the order of ``refs``.
