@@ -59,14 +59,6 @@ def save_closed(fig: Any, path: Any, **kwargs: Any) -> Any:
         plt.close(fig)
 
 
-def _heading_arrows(ax, poses: np.ndarray, spacing: float, color, length: float, **kw) -> None:
-    """Draw the heading every ``spacing`` cm of travel, and at the last pose."""
-    step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
-    travelled = np.concatenate([[0.0], np.cumsum(step)])
-    marks = np.flatnonzero(np.diff(np.floor(travelled / spacing), prepend=-1.0) > 0)
-    reference_arrows(ax, poses[np.union1d(marks, [len(poses) - 1])], length, color=color, **kw)
-
-
 def reference_arrows(ax: Any, poses: np.ndarray, length: float, color: Any = "k", **kw) -> Any:
     """Draw each pose's heading as an arrow ``length`` cm long from its position."""
     tips = length * np.stack([np.cos(poses[:, 2]), np.sin(poses[:, 2])], axis=-1)
@@ -127,7 +119,12 @@ def plot_paths(
         else:
             name = label if i == 0 else None
         ax.plot(poses[:, 0], poses[:, 1], linestyle, color=c, lw=1.3, label=name)
-        _heading_arrows(ax, poses, heading_spacing, c, arrow_length, alpha=0.8)
+        # The heading every heading_spacing cm of travel, and at the last pose.
+        step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+        travelled = np.concatenate([[0.0], np.cumsum(step)])
+        marks = np.flatnonzero(np.diff(np.floor(travelled / heading_spacing), prepend=-1.0) > 0)
+        marked = poses[np.union1d(marks, [len(poses) - 1])]
+        reference_arrows(ax, marked, arrow_length, color=c, alpha=0.8)
     if mark_refs:
         refs = np.asarray(refs)
         ax.plot(refs[:, 0], refs[:, 1], "kx", ms=8, mew=2, label="reference" if label else None)

@@ -225,9 +225,15 @@ def _draw_lines(axes, lines, arrival: str, sigma_theta: str, noise: str) -> None
 
 
 def _legend_outside(fig, axes, rows, right: float, fontsize: int) -> None:
-    """Fit the axes left of ``right`` (a share of the width), the legend to their right."""
+    """Fit the axes left of ``right`` (a share of the width), the legend to their right.
+
+    The legend says what an x means where one is drawn.
+    """
     fig.tight_layout(rect=(0, 0, right, 1))
-    handles, labels = _with_late_mark(axes[0], rows)
+    handles, labels = axes[0].get_legend_handles_labels()
+    if _late_points(rows):
+        handles.append(plt.Line2D([], [], color="grey", marker="x", linestyle="none"))
+        labels.append("x: half or more of the\nsuccesses only settle\nat the horizon")
     fig.legend(handles, labels, fontsize=fontsize, loc="center left", bbox_to_anchor=(right, 0.5))
 
 
@@ -248,15 +254,6 @@ def _plot_marked(ax, x, y, late, **style) -> None:
         plain = {k: v for k, v in style.items() if k not in ("linestyle", "label")}
         ax.plot([x[i] for i in late], [y[i] for i in late], linestyle="none", marker="x",
                 markersize=8, **plain)  # fmt: skip
-
-
-def _with_late_mark(ax: Any, rows: Sequence[dict[str, Any]]) -> tuple[list, list]:
-    """The legend of ``ax``, with what an x means where one is drawn."""
-    handles, labels = ax.get_legend_handles_labels()
-    if _late_points(rows):
-        handles.append(plt.Line2D([], [], color="grey", marker="x", linestyle="none"))
-        labels.append("x: half or more of the\nsuccesses only settle\nat the horizon")
-    return handles, labels
 
 
 def write_standard_conditions(

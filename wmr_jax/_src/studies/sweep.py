@@ -88,9 +88,6 @@ class _Job:
     def chunks(self) -> int:
         return math.ceil(self.n / self.chunk)
 
-    def bounds(self, i: int) -> tuple[int, int]:
-        return i * self.chunk, min(self.n, (i + 1) * self.chunk)
-
 
 def _per_run_or_shared(tree: Any, n: int, name: str) -> Any:
     """Leaves with one value per run stay, a batch axis of size 1 is dropped, others refused."""
@@ -189,7 +186,7 @@ class _Chunk:
 
 
 def _chunk_inputs(job: _Job, i: int) -> _Chunk:
-    lo, hi = job.bounds(i)
+    lo, hi = i * job.chunk, min(job.n, (i + 1) * job.chunk)
     pad = job.chunk - (hi - lo)
     return _Chunk(i, lo, hi, pad, _take(job.inputs, job.mask, lo, hi, pad))
 
