@@ -39,18 +39,16 @@ _GAIN_LABELS = {
     "alpha": "α",
 }
 
-_TABLE_COLUMNS = ["gains", "mean arrival (s)", "vs paper", "success", "peak wheel speed (cm/s)"]
-
-
-_BOUND_COLUMNS = ["vs turn–drive–turn", "vs lower bound"]
-_BOUND_KEYS = ["vs_turn_drive_turn", "vs_lower_bound"]
+# The columns of the yardstick ratios -> their bound_ratios keys.
+_BOUND_COLUMNS = {"vs turn–drive–turn": "vs_turn_drive_turn", "vs lower bound": "vs_lower_bound"}
 _NONE_ARRIVED = "none arrived"
 
 
-def _right_aligned(rows: list[dict[str, str]], columns: list[str]) -> str:
+def _right_aligned(rows: list[dict[str, str]]) -> str:
+    """The table of ``rows``, whose first has every column; the numeric ones right-aligned."""
+    columns = list(rows[0])
     rows = [{**dict.fromkeys(columns, ""), **row} for row in rows]
     lines = markdown_table(rows, columns).splitlines()
-    # The numeric columns are right-aligned.
     lines[1] = "|---|" + "---:|" * (len(columns) - 1)
     return "\n".join(lines) + "\n"
 
@@ -85,7 +83,6 @@ def evaluation_table(evaluation: dict[str, Any], bounds: Any = None) -> str:
                     f"evaluation[{name!r}].{field} = {value!r} is not allowed; allowed: {allowed}"
                 )
     paper = float(evaluation["paper_feasible"].mean_arrival)
-    columns = _TABLE_COLUMNS + (_BOUND_COLUMNS if bounds is not None else [])
     rows = []
     for name, ev in evaluation.items():
         mean = float(ev.mean_arrival)
@@ -105,7 +102,7 @@ def evaluation_table(evaluation: dict[str, Any], bounds: Any = None) -> str:
         }
         if bounds is not None:
             ratios = bound_ratios(mean, bounds)
-            for column, key in zip(_BOUND_COLUMNS, _BOUND_KEYS, strict=True):
+            for column, key in _BOUND_COLUMNS.items():
                 row[column] = f"{ratios[key]:.3f}×" if math.isfinite(mean) else _NONE_ARRIVED
         rows.append(row)
     if bounds is not None:
@@ -114,20 +111,7 @@ def evaluation_table(evaluation: dict[str, Any], bounds: Any = None) -> str:
             ("lower bound (§8)", bounds.lower_bound),
         ):
             rows.append({"gains": label, "mean arrival (s)": f"{float(np.mean(values)):.3f}"})
-    return _right_aligned(rows, columns)
-
-
-_COMPARE_COLUMNS = [
-    "problem (parameters)",
-    "method",
-    "mean arrival (s), seeds 0/1/2",
-    "success",
-    "mean − lower bound (s)",
-    "vs turn–drive–turn",
-    "CPU time (s)",
-    "wall time (s)",
-    "candidates per CPU-s",
-]
+    return _right_aligned(rows)
 
 
 # The numbers comparison_table reads from each row, and what each may be.
@@ -248,7 +232,7 @@ def comparison_table(rows: list[dict[str, Any]]) -> str:
             ),
         }
     )
-    return _right_aligned(lines, _COMPARE_COLUMNS) + _minimised_notes(rows)
+    return _right_aligned(lines) + _minimised_notes(rows)
 
 
 def tuning_curve(
