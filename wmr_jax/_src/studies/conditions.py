@@ -26,6 +26,7 @@ from wmr_jax._src.sim.sensing.disturbances import (
 from wmr_jax._src.sim.sensing.estimators import resolve_estimator
 from wmr_jax._src.sim.sensing.loop import ClosedLoop, disturbed_metrics
 from wmr_jax._src.studies.robustness import (
+    _scaled,
     check_levels,
     mean_median,
     settled_at_horizon,
@@ -61,12 +62,6 @@ def _runs(refs: Any, key: jax.Array, robot: Robot, horizon: Any, dt: float, mism
         refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
     noise, factors = _unit_draws(key, refs, steps, mismatch)
     return refs, noise, factors, horizon
-
-
-def _scaled(refs, noise, wheels, sxy: float, sdeg: float, latency: bool) -> Disturbance:
-    """The runs' ``Disturbance`` at pose noise ``σ_xy`` cm, ``σ_θ`` degrees."""
-    scale = np.array([sxy, sxy, math.radians(sdeg)])
-    return Disturbance(refs, noise * scale, wheels, np.float64(1.0 if latency else 0.0))
 
 
 # The model robot's row: no mismatch, no noise, no latency (docs/model.md §9).
@@ -118,26 +113,25 @@ def standard_conditions(
         ``horizon s``.
     """
     mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
-    sensor = noise
-    if sensor is not None:
-        if not isinstance(sensor, (tuple, list)) or len(sensor) != 2:
+    if noise is not None:
+        if not isinstance(noise, (tuple, list)) or len(noise) != 2:
             raise ValueError(
                 f"noise = {noise!r:.80} is not allowed; allowed: (σ_xy cm, σ_θ degrees) or None"
             )
-        sensor = tuple(
+        noise = tuple(
             checks.check_number(f"noise[{i}]", v, closed=True, unit=u)
-            for i, (v, u) in enumerate(zip(sensor, ("cm", "degrees"), strict=True))
+            for i, (v, u) in enumerate(zip(noise, ("cm", "degrees"), strict=True))
         )
     sets, robot = _loops(params_by_name, "params_by_name", controller, estimator, robot)
-    refs, noise, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
+    refs, unit, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
     conditions = [(MODEL_ROBOT, 0.0, 0.0, False, np.ones((len(refs), 3)))]
     for label, sxy, sdeg, latency in STANDARD_CONDITIONS:
-        if sensor is not None and sxy:
-            sxy, sdeg = sensor
+        if noise is not None and sxy:
+            sxy, sdeg = noise
         conditions.append((label, sxy, sdeg, latency, factors))
     rows = []
     for label, sxy, sdeg, latency, wheels in conditions:
-        spec = _scaled(refs, noise, wheels, sxy, sdeg, latency)
+        spec = _scaled(refs, unit, wheels, sxy, sdeg, latency)
         for name, loop in sets.items():
             row, m = _judged(spec, loop, dt, robot, x64, horizon)
             rows.append(
@@ -283,15 +277,14 @@ def evaluate_loop(
             np.asarray(refs), m.success, m.arrival, m.final_distance, late, strict=True
         )
     ]
-    row = figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity)
-    row.update(
-        controller=controller.name,
-        feedback="raw" if estimator is None else estimator.name,
-        robot=robot_json(robot),
-        dtype="float64" if x64 else "float32",
-        per_reference=per_reference,
-    )
-    return row
+    return {
+        **figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity),
+        "controller": controller.name,
+        "feedback": "raw" if estimator is None else estimator.name,
+        "robot": robot_json(robot),
+        "dtype": "float64" if x64 else "float32",
+        "per_reference": per_reference,
+    }
 
 
 def figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity) -> dict[str, Any]:

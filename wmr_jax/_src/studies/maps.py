@@ -1,8 +1,6 @@
 """Pose-space maps: docs/model.md §6 metrics over grids of reference poses, per controller.
 
 Every pose is run to the horizon by ``wmr_jax.sweep``, in bounded memory.
-``map_study`` runs a grid for every controller, ``compare_controllers``
-random poses, and ``summarize`` tabulates either side by side.
 """
 
 from __future__ import annotations

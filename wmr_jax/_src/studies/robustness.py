@@ -113,6 +113,12 @@ def mean_median(times: np.ndarray) -> tuple[float, float]:
     return (float(times.mean()), float(np.median(times))) if times.size else (math.inf, math.inf)
 
 
+def _scaled(refs, noise, wheels, sxy: float, sdeg: float, latency: bool) -> Disturbance:
+    """The runs' ``Disturbance`` at pose noise ``σ_xy`` cm, ``σ_θ`` degrees."""
+    scale = np.array([sxy, sxy, math.radians(sdeg)])
+    return Disturbance(refs, noise * scale, wheels, np.float64(1.0 if latency else 0.0))
+
+
 def summary_row(m: PoseMetrics, horizon: float | None = None) -> dict[str, Any]:
     """Success, arrival, first arrival, final distance and zig-zag of a batch.
 
@@ -204,12 +210,10 @@ def monte_carlo(
     refs, unit, mismatch = draw_disturbances(
         key, n_runs, steps, radius_mismatch=radius_mismatch, mass_mismatch=mass_mismatch
     )
-    delay = np.float64(1.0 if latency else 0.0)
     run = {"estimator": estimator, "dt": dt, "robot": robot, "velocity": velocity, "x64": x64}
     rows = []
     for sxy, sdeg in zip(noise_xy, noise_deg, strict=True):
-        scale = np.array([sxy, sxy, math.radians(sdeg)])
-        spec = Disturbance(refs, unit * scale, mismatch, delay)
+        spec = _scaled(refs, unit, mismatch, sxy, sdeg, latency)
         m = disturbed_metrics(spec, params, controller=name, **run)
         condition = {
             "controller": name,
