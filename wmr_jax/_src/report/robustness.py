@@ -225,10 +225,7 @@ def _draw_lines(axes, lines, arrival: str, sigma_theta: str, noise: str) -> None
 
 
 def _legend_outside(fig, axes, rows, right: float, fontsize: int) -> None:
-    """Fit the axes left of ``right`` (a share of the width), the legend to their right.
-
-    The legend says what an x means where one is drawn.
-    """
+    """Fit the axes left of ``right`` (a share of the width), the legend, x mark included, right."""
     fig.tight_layout(rect=(0, 0, right, 1))
     handles, labels = axes[0].get_legend_handles_labels()
     if _late_points(rows):

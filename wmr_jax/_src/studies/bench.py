@@ -269,8 +269,7 @@ class _SizeBench:
     def disturbed(self) -> list[dict]:
         """The disturbed loop (docs/model.md §7) raw and with each estimator, interleaved.
 
-        Standard noise, ±3 % wheel radius and one sample of latency; the jitted
-        core is timed, not the checks before it.
+        The jitted core is timed, not the checks before it.
         """
         import jax
 
@@ -304,8 +303,7 @@ class _SizeBench:
         """The exported C controller (``wmr_jax.export``): a gain schedule with its EKF.
 
         ``N`` controllers with one sample of latency, stepped through noisy poses;
-        one foreign call steps all ``N``. The row carries ``ns_per_step``,
-        ``sizeof(wmr_controller)`` and the bytes of the compiled step.
+        one foreign call steps all ``N``.
         """
         import tempfile
         from pathlib import Path
@@ -435,9 +433,7 @@ class _SizeBench:
     def robust_loss(self) -> list[dict]:
         """The robust tuner's loss (the schedule and the EKF), its gradient and one jvp.
 
-        ``n`` poses under the standard conditions and ``n // 4`` (at least 1)
-        non-ideal, over ``steps`` periods at the tuning temperature; the
-        gradient is the trainer's (``robust.RobustLoss``), the jvp along the logits.
+        The gradient is the trainer's (``robust.RobustLoss``), the jvp along the logits.
         """
         import jax
         import jax.numpy as jnp

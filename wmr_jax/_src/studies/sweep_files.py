@@ -181,12 +181,7 @@ class ChunkStore:
 
 
 def implausible(job: _Job, values: dict[str, np.ndarray]) -> str | None:
-    """Why a chunk read back cannot be this sweep's result, or ``None`` if it can be.
-
-    Its final poses must be finite, its arrivals ``inf`` or whole periods
-    within the horizon, its successes where the arrival is finite, and its
-    paths, wheel speeds and zig-zag counts non-negative.
-    """
+    """Why a chunk read back cannot be this sweep's result, or ``None`` if it can be."""
     pose = np.stack([values[name] for name in ("final_x", "final_y", "final_theta")], axis=1)
     if not np.isfinite(pose).all():
         return "a final pose that is not finite"
