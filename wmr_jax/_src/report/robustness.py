@@ -14,6 +14,8 @@ from pathlib import Path
 from typing import Any
 
 from wmr_jax._src.io import atomic_write_text, json_text
+from wmr_jax._src.model.params import Robot
+from wmr_jax._src.model.robots import describe_robot, robot_from_values, robot_json
 from wmr_jax._src.report.figures import Patch, built, plt, save_closed
 from wmr_jax._src.report.tables import markdown_table, percent, require_rows
 from wmr_jax._src.sim.poses import HORIZON_S
@@ -124,8 +126,6 @@ def _horizon_of(rows: Sequence[dict[str, Any]], default: float = HORIZON_S) -> f
 
 def _robot_text(meta: dict[str, Any]) -> str:
     """``", on <robot>"`` for a meta that records a robot, else ``""``."""
-    from wmr_jax._src.model.robots import describe_robot, robot_from_values
-
     if not isinstance(meta.get("robot"), dict):
         return ""
     return f", on {describe_robot(robot_from_values(meta['robot'], 'meta robot'))}"
@@ -153,9 +153,6 @@ def write_robustness(
     Returns:
         The paths written.
     """
-    from wmr_jax._src.model.params import Robot
-    from wmr_jax._src.model.robots import robot_json
-
     rows = require_rows("rows", rows)
     horizon = _horizon_of(rows)
     meta = {"seed": seed, "velocity": velocity, "runs": n_runs, "horizon_s": horizon}

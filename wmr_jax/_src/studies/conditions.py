@@ -16,6 +16,7 @@ import numpy as np
 from wmr_jax._src import checks
 from wmr_jax._src.model import controllers
 from wmr_jax._src.model.params import Robot, validate_one_robot
+from wmr_jax._src.model.robots import describe_robot, robot_json, same_robot
 from wmr_jax._src.sim.rollout import DEFAULT_DT
 from wmr_jax._src.sim.sensing.disturbances import (
     STANDARD_CONDITIONS,
@@ -25,6 +26,7 @@ from wmr_jax._src.sim.sensing.disturbances import (
 )
 from wmr_jax._src.sim.sensing.estimators import resolve_estimator
 from wmr_jax._src.sim.sensing.loop import ClosedLoop, disturbed_metrics
+from wmr_jax._src.studies.optimal import time_bounds
 from wmr_jax._src.studies.robustness import (
     _scaled,
     check_levels,
@@ -187,8 +189,6 @@ def _columns(row: dict[str, Any], *keys: str) -> dict[str, Any]:
 
 def _study_robot(robot: Any, loops: Mapping[str, ClosedLoop], name: str) -> Robot:
     """``robot``, else the one the ``loops`` record, else the paper's; other robots refused."""
-    from wmr_jax._src.model.robots import describe_robot, same_robot
-
     recorded = {label: loop.robot for label, loop in loops.items() if loop.robot is not None}
     if robot is None and recorded:
         robot = next(iter(recorded.values()))
@@ -244,8 +244,6 @@ def evaluate_loop(
         "arrival_s" (None if not arrived), "final_distance_cm",
         "settled_at_horizon"}`` per reference, in order.
     """
-    from wmr_jax._src.model.robots import robot_json
-
     labels = {label: (sxy, sdeg, lat) for label, sxy, sdeg, lat in STANDARD_CONDITIONS}
     if condition not in labels:
         raise ValueError(f"condition = {condition!r} is not allowed; allowed: {', '.join(labels)}")
@@ -293,8 +291,6 @@ def figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity) ->
     The peak wheel speed is within ``v_max`` when every rim stays within
     ``v_max (1 + mismatch)``.
     """
-    from wmr_jax._src.studies.optimal import time_bounds
-
     mean = median = optimal = None
     if m.success.any():
         mean, median = mean_median(m.arrival[m.success])

@@ -16,9 +16,10 @@ import numpy as np
 from wmr_jax._src import checks
 from wmr_jax._src.model import controllers
 from wmr_jax._src.model.params import Robot, validate_one_robot
+from wmr_jax._src.model.robots import robot_json, robot_name
 from wmr_jax._src.sim import metrics
 from wmr_jax._src.sim.metrics import PoseMetrics
-from wmr_jax._src.sim.poses import EVAL_R_MAX, EVAL_R_MIN, MAX_SAMPLES, horizon_steps
+from wmr_jax._src.sim.poses import EVAL_R_MAX, EVAL_R_MIN, MAX_SAMPLES, horizon_steps, sample_poses
 from wmr_jax._src.sim.rollout import DEFAULT_DT
 from wmr_jax._src.studies.robustness import mean_median, robot_defaults, study_horizon
 from wmr_jax._src.studies.sweep import sweep
@@ -29,8 +30,6 @@ DEFAULT_CHUNK = 16384
 
 def robot_record(robot: Robot) -> dict[str, Any]:
     """The robot as a summary records it: its fields and a label (preset name or "custom")."""
-    from wmr_jax._src.model.robots import robot_json, robot_name
-
     return {"robot": robot_json(robot), "robot_label": robot_name(robot) or "custom"}
 
 
@@ -383,8 +382,6 @@ def compare_controllers(
         A JSON-ready dict of the settings, the robot and ``rows``
         (``summarize``, one per run).
     """
-    from wmr_jax._src.sim.poses import sample_poses
-
     n_poses = checks.check_int("n_poses", n_poses, 1, MAX_SAMPLES)
     seed = checks.check_int("seed", seed, minimum=0)
     robot = validate_one_robot(robot, "compare_controllers")

@@ -27,6 +27,7 @@ from wmr_jax._src.sim import rollout as simulation
 from wmr_jax._src.sim.loops import Options
 from wmr_jax._src.sim.poses import HORIZON_S
 from wmr_jax._src.sim.rollout import DEFAULT_DT, Trajectory
+from wmr_jax._src.studies.robustness import robot_defaults, study_horizon
 
 # A soccer-like sequence on a 160 cm × 120 cm pitch, (x cm, y cm, θ deg): run to
 # the ball, turn it upfield, dribble, cut back, return to defend, face the goal.
@@ -420,8 +421,6 @@ def soccer_study(
     Returns:
         A ``SoccerStudy``.
     """
-    from wmr_jax._src.studies.robustness import robot_defaults
-
     names = controllers.controller_names(controller_names)
     robot = validate_one_robot(robot, "soccer_study")
     # Every setting is checked before the first controller runs (and compiles).
@@ -444,8 +443,6 @@ def soccer_study(
 
 def soccer_steps(robot: Robot | None = None, steps: int = SOCCER_STEPS) -> int:
     """The paper robot's ``steps`` of the soccer route, stretched as ``study_horizon(robot)``."""
-    from wmr_jax._src.studies.robustness import study_horizon
-
     steps = checks.check_int("steps", steps)
     return math.ceil(steps * study_horizon(robot) / HORIZON_S - 1e-9)
 
