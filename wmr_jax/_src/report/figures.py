@@ -19,6 +19,7 @@ from matplotlib.patches import Patch  # noqa: E402
 
 from wmr_jax._src import checks  # noqa: E402
 from wmr_jax._src.io import save_figure  # noqa: E402
+from wmr_jax._src.sim.metrics import DEFAULT_TOL_R  # noqa: E402
 
 __all__ = ["ListedColormap", "Patch", "mpl_animation", "plt"]  # matplotlib, as above
 
@@ -126,7 +127,6 @@ def plot_paths(
         marked = poses[np.union1d(marks, [len(poses) - 1])]
         reference_arrows(ax, marked, arrow_length, color=c, alpha=0.8)
     if mark_refs:
-        refs = np.asarray(refs)
         ax.plot(refs[:, 0], refs[:, 1], "kx", ms=8, mew=2, label="reference" if label else None)
         tips = reference_arrows(ax, refs, 2.5 * arrow_length)
         # quiver does not widen the data limits: take the arrow tips in, or they are clipped.
@@ -142,8 +142,6 @@ def plot_paths(
 
 def _mark_backwards(ax: Any, paths: Sequence[np.ndarray], refs: np.ndarray) -> None:
     """Circle the references reached facing backwards (``θ = θ_r ± 180°``, arrived all the same)."""
-    from wmr_jax._src.sim.metrics import DEFAULT_TOL_R
-
     ends = np.asarray([np.asarray(p)[-1] for p in paths])
     close = np.hypot(*(ends[:, :2] - refs[: len(ends), :2]).T) <= DEFAULT_TOL_R
     turn = np.angle(np.exp(1j * (ends[:, 2] - refs[: len(ends), 2])))

@@ -125,11 +125,7 @@ _COMPARE_NUMBERS = {
 
 
 def _compare_numbers(i: int, row: dict[str, Any]) -> dict[str, float]:
-    """The numbers of ``rows[i]`` that the table shows, read back as ``atomic_write_json`` wrote.
-
-    Raises:
-        ValueError: one line naming the row, the key and what is allowed.
-    """
+    """The numbers of ``rows[i]`` that the table shows, read back as ``atomic_write_json`` wrote."""
     out = {}
     for key, (ok, allowed) in _COMPARE_NUMBERS.items():
         if key not in row:

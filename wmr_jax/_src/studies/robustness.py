@@ -18,6 +18,7 @@ import numpy as np
 from wmr_jax._src import checks
 from wmr_jax._src.model import controllers
 from wmr_jax._src.model.params import Robot, validate_one_robot
+from wmr_jax._src.model.robots import same_robot
 from wmr_jax._src.sim.metrics import PoseMetrics
 from wmr_jax._src.sim.poses import HORIZON_S, horizon_steps
 from wmr_jax._src.sim.rollout import DEFAULT_DT
@@ -237,8 +238,6 @@ def robot_defaults(controller: Any, robot: Robot | None = None) -> Any:
     On another robot than the paper's, ``shim-sung`` runs ``paper_feasible_gains(robot)``
     and ``shim-sung-schedule`` them as constant tables; else ``None`` (the defaults).
     """
-    from wmr_jax._src.model.controllers.schedule import SCHEDULE, ScheduleParams
-    from wmr_jax._src.model.robots import same_robot
     from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
 
     name = controllers.get_controller(controller).name
@@ -246,8 +245,8 @@ def robot_defaults(controller: Any, robot: Robot | None = None) -> Any:
         return None
     if name == controllers.SHIM_SUNG.name:
         return paper_feasible_gains(robot)
-    if name == SCHEDULE.name:
-        return ScheduleParams.from_gains(paper_feasible_gains(robot), robot=robot)
+    if name == controllers.SCHEDULE.name:
+        return controllers.ScheduleParams.from_gains(paper_feasible_gains(robot), robot=robot)
     return None
 
 

@@ -136,9 +136,7 @@ class ChunkStore:
     def path(self, i: int) -> Path:
         return self.folder / f"chunk_{i:06d}.npz"
 
-    def load(
-        self, i: int, digest: str, size: int, job: _Job | None = None
-    ) -> dict[str, np.ndarray] | None:
+    def load(self, i: int, digest: str, size: int, job: _Job) -> dict[str, np.ndarray] | None:
         """Chunk ``i``'s results if its file is intact and was made from these inputs.
 
         A damaged or altered file is not used, with a one-line warning.
@@ -165,7 +163,7 @@ class ChunkStore:
         if set(values) != set(self.fields) or any(v.shape != (size,) for v in values.values()):
             warnings.warn(f"{self.path(i)} has unexpected contents; recomputing it", stacklevel=4)
             return None
-        why = None if job is None else implausible(job, values)
+        why = implausible(job, values)
         if why is not None:
             # Written with a valid checksum but not by this sweep's arithmetic.
             warnings.warn(f"{self.path(i)} holds {why}; recomputing it", stacklevel=4)
