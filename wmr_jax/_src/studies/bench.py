@@ -17,11 +17,20 @@ import warnings
 from collections.abc import Callable
 from typing import Any
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from wmr_jax._src.checks import check_int, check_number
+from wmr_jax._src.model.params import Gains, Robot, validate_one_robot
+from wmr_jax._src.oracle import reference
 from wmr_jax._src.oracle.numpy_batch import numpy_final_poses
-from wmr_jax._src.sim.poses import MAX_SAMPLES
+from wmr_jax._src.sim import loops, rollout
+from wmr_jax._src.sim.poses import MAX_SAMPLES, sample_poses
+from wmr_jax._src.sim.rollout import DEFAULT_DT, final_poses
+from wmr_jax._src.sim.sensing.disturbances import sample_disturbance
+from wmr_jax._src.sim.sensing.loop import ClosedLoop, _disturbed_jit, prepare_disturbed
+from wmr_jax._src.sim.sharding import shard
 from wmr_jax._src.studies.bench_timing import Timing, environment, time_group
 
 DEFAULT_SIZES = (1_000, 10_000, 100_000)
@@ -102,8 +111,6 @@ def _check_config(config: BenchConfig) -> BenchConfig:
     if unknown:
         raise ValueError(f"cases = {unknown!r} are not known; allowed: {CASES}")
     if config.robot is not None:
-        from wmr_jax._src.model.params import validate_one_robot
-
         validate_one_robot(config.robot, "the benchmark")
     return dataclasses.replace(config, cases=tuple(config.cases) or CASES)
 
@@ -126,8 +133,6 @@ def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = No
     config = _check_config(config)
     if log is not None and not callable(log):
         raise ValueError(f"log = {log!r} is not allowed; allowed: a function of one line, or None")
-    import jax
-
     if config.dtype == "float64" and not jax.config.jax_enable_x64:
         jax.config.update("jax_enable_x64", True)
     if config.dtype == "float32" and jax.config.jax_enable_x64:
@@ -135,7 +140,6 @@ def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = No
             "dtype = 'float32' is not allowed while jax_enable_x64 is on; "
             "allowed: 'float64', or turn jax_enable_x64 off"
         )
-    from wmr_jax._src.model.params import Gains, Robot
     from wmr_jax._src.studies.maps import robot_record
 
     say = log or (lambda line: None)
@@ -165,10 +169,6 @@ class _SizeBench:
     """The cases of one batch size ``n``, each a step that returns its rows."""
 
     def __init__(self, config: BenchConfig, n: int, gains: Any) -> None:
-        import jax.numpy as jnp
-
-        from wmr_jax._src.sim.poses import sample_poses
-
         self.config, self.n, self.gains, self.steps = config, n, gains, config.steps
         self.robot = config.robot
         dtype = np.float32 if config.dtype == "float32" else np.float64
@@ -211,11 +211,6 @@ class _SizeBench:
 
     def baselines(self, *, scalar: bool) -> tuple[list[dict], list[dict]]:
         """Rows of ``final_poses`` (and sharded), then of the baselines, timed interleaved."""
-        import jax
-
-        from wmr_jax._src.oracle import reference
-        from wmr_jax._src.sim.rollout import final_poses
-
         cases, gains, steps, refs = self.config.cases, self.gains, self.steps, self.refs
         robot = self.robot
         group: dict[str, tuple[Callable[[], Any], bool]] = {}
@@ -231,8 +226,6 @@ class _SizeBench:
             )
         k = self.config.reference_poses
         if scalar:
-            from wmr_jax._src.sim.poses import sample_poses
-
             scalar_refs = np.asarray(sample_poses(self.config.seed, k), dtype=np.float64)
 
             def scalar_runs():
@@ -242,8 +235,6 @@ class _SizeBench:
             group["scalar_reference"] = (scalar_runs, False)
         devices = jax.local_devices()
         if "final_poses_sharded" in cases and len(devices) > 1:
-            from wmr_jax._src.sim.sharding import shard
-
             spread = shard(self.refs_np, devices)
             group["final_poses_sharded"] = (
                 lambda: final_poses(spread.array, gains, steps=steps, robot=robot),
@@ -271,11 +262,6 @@ class _SizeBench:
 
         The jitted core is timed, not the checks before it.
         """
-        import jax
-
-        from wmr_jax._src.sim.sensing.disturbances import sample_disturbance
-        from wmr_jax._src.sim.sensing.loop import _disturbed_jit, prepare_disturbed
-
         spec = sample_disturbance(
             jax.random.PRNGKey(self.config.seed), self.refs, self.steps, noise_xy=0.5,
             noise_theta=math.radians(1.0), radius_mismatch=0.03, latency=1.0,
@@ -310,8 +296,6 @@ class _SizeBench:
 
         from wmr_jax._src.export import codegen, compiled
         from wmr_jax._src.model.controllers.schedule import SCHEDULE, ScheduleParams
-        from wmr_jax._src.model.params import Robot
-        from wmr_jax._src.sim.sensing.loop import ClosedLoop
 
         if compiled.compiler() is None:
             return [self.row("c_controller", None, skipped="skipped: no C compiler")]
@@ -340,8 +324,6 @@ class _SizeBench:
 
     def alone(self, entry: str, velocity: str) -> list[dict]:
         """Time ``final_poses`` or ``batch_rollout`` (``entry``) alone, with ``velocity``'s loop."""
-        from wmr_jax._src.sim import rollout
-
         run = getattr(rollout, entry)
         case = entry + ("_nonideal" if velocity == "nonideal" else "")
 
@@ -362,10 +344,6 @@ class _SizeBench:
         ``1 + jvp_over_forward`` is the gradient's floor. ``beside``: ``(case, call)`` timed
         with them. Returns the rows ``[beside,] forward, jvp_<case>, <case>``.
         """
-        import jax
-
-        from wmr_jax._src.sim import loops
-
         forward = loops.jit_top_level(loss)
         gradient = loops.jit_top_level(jax.value_and_grad(loss))
 
@@ -394,10 +372,6 @@ class _SizeBench:
 
     def final_pose_loss(self) -> list[dict]:
         """The mean squared final-pose error through ``final_poses``, and its gradient."""
-        import jax.numpy as jnp
-
-        from wmr_jax._src.sim.rollout import final_poses
-
         steps, robot = self.steps, self.robot
 
         def loss(gains, refs):
@@ -411,7 +385,6 @@ class _SizeBench:
     def tuning_loss(self) -> list[dict]:
         """``wmr_jax.tuning.tuning_loss`` and its gradient, beside the relaxed law it wraps."""
         from wmr_jax import tuning
-        from wmr_jax._src.sim.rollout import DEFAULT_DT, final_poses
 
         horizon, robot = self.steps * DEFAULT_DT, self.robot
         gains, refs, steps = self.gains, self.refs, self.steps
@@ -435,12 +408,6 @@ class _SizeBench:
 
         The gradient is the trainer's (``robust.RobustLoss``), the jvp along the logits.
         """
-        import jax
-        import jax.numpy as jnp
-
-        from wmr_jax._src.model.params import Robot
-        from wmr_jax._src.sim import loops
-        from wmr_jax._src.sim.rollout import DEFAULT_DT
         from wmr_jax._src.tuning import robust
 
         robot = Robot() if self.robot is None else self.robot
