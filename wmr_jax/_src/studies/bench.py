@@ -27,7 +27,7 @@ from wmr_jax._src.oracle import reference
 from wmr_jax._src.oracle.numpy_batch import numpy_final_poses
 from wmr_jax._src.sim import loops, rollout
 from wmr_jax._src.sim.poses import MAX_SAMPLES, sample_poses
-from wmr_jax._src.sim.rollout import DEFAULT_DT, final_poses
+from wmr_jax._src.sim.rollout import DEFAULT_DT
 from wmr_jax._src.sim.sensing.disturbances import sample_disturbance
 from wmr_jax._src.sim.sensing.loop import ClosedLoop, _disturbed_jit, prepare_disturbed
 from wmr_jax._src.sim.sharding import shard
@@ -216,7 +216,7 @@ class _SizeBench:
         group: dict[str, tuple[Callable[[], Any], bool]] = {}
         if "final_poses" in cases:
             group["final_poses"] = (
-                lambda: final_poses(refs, gains, steps=steps, robot=robot),
+                lambda: rollout.final_poses(refs, gains, steps=steps, robot=robot),
                 True,
             )
         if "numpy_batch" in cases:
@@ -237,7 +237,7 @@ class _SizeBench:
         if "final_poses_sharded" in cases and len(devices) > 1:
             spread = shard(self.refs_np, devices)
             group["final_poses_sharded"] = (
-                lambda: final_poses(spread.array, gains, steps=steps, robot=robot),
+                lambda: rollout.final_poses(spread.array, gains, steps=steps, robot=robot),
                 True,
             )
         t = self.time(group) if group else {}
@@ -375,7 +375,7 @@ class _SizeBench:
         steps, robot = self.steps, self.robot
 
         def loss(gains, refs):
-            final = final_poses(refs, gains, steps=steps, robot=robot)
+            final = rollout.final_poses(refs, gains, steps=steps, robot=robot)
             err = final - refs
             return jnp.mean(err[:, 0] ** 2 + err[:, 1] ** 2 + (1.0 - jnp.cos(err[:, 2])))
 
@@ -395,7 +395,7 @@ class _SizeBench:
             )
 
         def relaxed():
-            return final_poses(
+            return rollout.final_poses(
                 refs, gains, steps=steps, temperature=TUNING_TEMPERATURE, robot=robot
             )
 
