@@ -18,7 +18,7 @@ from wmr_jax._src import checks
 from wmr_jax._src.io import atomic_write_bytes
 from wmr_jax._src.model import controllers
 from wmr_jax._src.model.params import Robot
-from wmr_jax._src.report.figures import plt, reference_arrows
+from wmr_jax._src.report.figures import mpl_animation, plt, reference_arrows
 from wmr_jax._src.sim import metrics
 from wmr_jax._src.sim import rollout as simulation
 from wmr_jax._src.sim.poses import horizon_steps, sample_poses
@@ -39,14 +39,6 @@ def _pitch(poses: np.ndarray, refs: np.ndarray, title: str, arrow: float) -> tup
     ax.set_title(title, fontsize=9, pad=16)
     reference_arrows(ax, refs, arrow)
     return fig, ax
-
-
-def _frames(samples: int, stride: int) -> list[int]:
-    """Every ``stride``-th sample, and the last one."""
-    frames = list(range(0, samples, stride))
-    if frames[-1] != samples - 1:
-        frames.append(samples - 1)
-    return frames
 
 
 # A GIF stores a frame's delay in hundredths of a second, as a 16-bit integer.
@@ -81,8 +73,6 @@ def frame_timing(dt: float, stride: int | None = None, speed: float = 1.0) -> tu
 
 def _save(anim: Any, fig: Any, path: str | os.PathLike, frame_ms: int) -> Path:
     """Encode the animation into a temporary file, then atomically replace ``path``."""
-    from wmr_jax._src.report.figures import mpl_animation
-
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=target.parent, prefix=f".{target.name}.") as tmp:
@@ -133,8 +123,6 @@ def write_gif(
     Returns:
         The path written.
     """
-    from wmr_jax._src.report.figures import mpl_animation
-
     path = gif_path("path =", path)
 
     for name, value in (("poses", poses), ("refs", refs)):
@@ -183,7 +171,7 @@ def write_gif(
             )
             return [*bodies, *ticks, *trails, markers, clock]
 
-        frames = _frames(samples, stride)
+        frames = [*range(0, samples - 1, stride), samples - 1]  # and always the last sample
         anim = mpl_animation.FuncAnimation(fig, draw, frames=frames, blit=False)
         return _save(anim, fig, path, frame_ms)
     finally:

@@ -33,17 +33,6 @@ def _ratio(entry: dict[str, float], key: str) -> str:
     return _fmt(entry.get(key), ".0f" if key.endswith("scalar_reference") else ".1f", "×")
 
 
-def _header(result: dict[str, Any]) -> list[str]:
-    env, config = result["environment"], result["config"]
-    return [
-        f"device: {env['device']} ({env['backend']}, {env['devices']} device(s), "
-        f"{env['cpu_cores']} cores: {env['cpu']})",
-        f"jax {env['jax']}, jaxlib {env['jaxlib']}, numpy {env['numpy']}, "
-        f"dtype {config['dtype']}, {config['steps']} steps, "
-        f"median of {config['repeats']}",
-    ]
-
-
 def _rate_lines(rows: list[dict[str, Any]]) -> list[str]:
     lines = [
         "| case | N | robot-steps/s | run s | compile s | others' CPU |",
@@ -100,7 +89,15 @@ def bench_table(result: dict[str, Any]) -> str:
     for i, row in enumerate(result["rows"]):
         if not all(k in row for k in ("case", "n")):
             raise ValueError(f"result['rows'][{i}] has no 'case' and 'n'; allowed: benchmark rows")
-    lines = [*_header(result), "", *_rate_lines(result["rows"])]
+    env, config = result["environment"], result["config"]
+    lines = [
+        f"device: {env['device']} ({env['backend']}, {env['devices']} device(s), "
+        f"{env['cpu_cores']} cores: {env['cpu']})",
+        f"jax {env['jax']}, jaxlib {env['jaxlib']}, numpy {env['numpy']}, "
+        f"dtype {config['dtype']}, {config['steps']} steps, median of {config['repeats']}",
+        "",
+        *_rate_lines(result["rows"]),
+    ]
     lines += _ratio_lines(result.get("ratios") or {})
     busy = [r["others_cpu"] for r in result["rows"] if r.get("others_cpu") is not None]
     if busy and max(busy) > 0.2:

@@ -19,6 +19,7 @@ from matplotlib.patches import Patch  # noqa: E402
 
 from wmr_jax._src import checks  # noqa: E402
 from wmr_jax._src.io import save_figure  # noqa: E402
+from wmr_jax._src.sim.metrics import DEFAULT_TOL_R  # noqa: E402
 
 __all__ = ["ListedColormap", "Patch", "mpl_animation", "plt"]  # matplotlib, as above
 
@@ -57,14 +58,6 @@ def save_closed(fig: Any, path: Any, **kwargs: Any) -> Any:
         return save_figure(fig, path, **kwargs)
     finally:
         plt.close(fig)
-
-
-def _heading_arrows(ax, poses: np.ndarray, spacing: float, color, length: float, **kw) -> None:
-    """Draw the heading every ``spacing`` cm of travel, and at the last pose."""
-    step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
-    travelled = np.concatenate([[0.0], np.cumsum(step)])
-    marks = np.flatnonzero(np.diff(np.floor(travelled / spacing), prepend=-1.0) > 0)
-    reference_arrows(ax, poses[np.union1d(marks, [len(poses) - 1])], length, color=color, **kw)
 
 
 def reference_arrows(ax: Any, poses: np.ndarray, length: float, color: Any = "k", **kw) -> Any:
@@ -127,9 +120,13 @@ def plot_paths(
         else:
             name = label if i == 0 else None
         ax.plot(poses[:, 0], poses[:, 1], linestyle, color=c, lw=1.3, label=name)
-        _heading_arrows(ax, poses, heading_spacing, c, arrow_length, alpha=0.8)
+        # The heading every heading_spacing cm of travel, and at the last pose.
+        step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+        travelled = np.concatenate([[0.0], np.cumsum(step)])
+        marks = np.flatnonzero(np.diff(np.floor(travelled / heading_spacing), prepend=-1.0) > 0)
+        marked = poses[np.union1d(marks, [len(poses) - 1])]
+        reference_arrows(ax, marked, arrow_length, color=c, alpha=0.8)
     if mark_refs:
-        refs = np.asarray(refs)
         ax.plot(refs[:, 0], refs[:, 1], "kx", ms=8, mew=2, label="reference" if label else None)
         tips = reference_arrows(ax, refs, 2.5 * arrow_length)
         # quiver does not widen the data limits: take the arrow tips in, or they are clipped.
@@ -145,8 +142,6 @@ def plot_paths(
 
 def _mark_backwards(ax: Any, paths: Sequence[np.ndarray], refs: np.ndarray) -> None:
     """Circle the references reached facing backwards (``θ = θ_r ± 180°``, arrived all the same)."""
-    from wmr_jax._src.sim.metrics import DEFAULT_TOL_R
-
     ends = np.asarray([np.asarray(p)[-1] for p in paths])
     close = np.hypot(*(ends[:, :2] - refs[: len(ends), :2]).T) <= DEFAULT_TOL_R
     turn = np.angle(np.exp(1j * (ends[:, 2] - refs[: len(ends), 2])))

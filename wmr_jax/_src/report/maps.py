@@ -149,8 +149,8 @@ def _describe(summary: dict[str, Any]) -> str:
     return what + ("" if summary["dtype"] == "float64" else ", float32")
 
 
-def _decorate(ax: Any, grid: PoseGrid, *, bottom: bool, left: bool) -> None:
-    """Mark the robot at the origin (facing +x); axis labels on the outer panels only."""
+def _decorate(ax: Any, grid: PoseGrid, h: int, *, top: bool, bottom: bool, left: bool) -> None:
+    """Mark the robot at the origin (facing +x); heading ``h``, axis labels on outer panels only."""
     ax.plot(0, 0, marker=(3, 0, -90), color="k", ms=6)
     reach = float(grid.xs[-1])
     ticks = [-80, 0, 80] if reach >= 80 else [round(-reach), 0, round(reach)]
@@ -161,6 +161,8 @@ def _decorate(ax: Any, grid: PoseGrid, *, bottom: bool, left: bool) -> None:
         ax.set_xlabel("x_r [cm]", fontsize=8)
     if left:
         ax.set_ylabel("y_r [cm]", fontsize=8)
+    if top:
+        ax.set_title(f"θ_r = {math.degrees(grid.headings[h]):g}°", fontsize=9)
 
 
 # Side of the square cells over which the V_max contour is drawn, cm: the peak
@@ -183,10 +185,6 @@ def _over_vmax_share(grid: PoseGrid, img: np.ndarray, v_max: float) -> tuple:
     share[counted < k * k / 2] = np.nan  # cells mostly outside the annulus
     centres = grid.xs[:n].reshape(-1, k).mean(axis=1)
     return centres, centres, share
-
-
-def _heading_title(grid: PoseGrid, h: int) -> str:
-    return f"θ_r = {math.degrees(grid.headings[h]):g}°"
 
 
 def _show(ax: Any, grid: PoseGrid, img: np.ndarray, **style: Any) -> Any:
@@ -254,9 +252,7 @@ def map_figure(
             for h in range(n_h):
                 ax = axes[row, h]
                 image = _draw_metric(ax, grid, m, field, cmap, ranges[field], h, v_max)
-                _decorate(ax, grid, bottom=row == n_rows - 1, left=h == 0)
-                if row == 0:
-                    ax.set_title(_heading_title(grid, h), fontsize=9)
+                _decorate(ax, grid, h, top=row == 0, bottom=row == n_rows - 1, left=h == 0)
             fig.colorbar(image, ax=axes[row, :].tolist(), shrink=0.85, pad=0.01).set_label(
                 label, fontsize=8
             )
@@ -321,8 +317,7 @@ def winner_figure(
         for h in range(n_h):
             ax = axes[0, h]
             _show(ax, grid, _to_image(grid, best, h), cmap=cmap, vmin=-0.5, vmax=len(names) + 0.5)
-            _decorate(ax, grid, bottom=True, left=h == 0)
-            ax.set_title(_heading_title(grid, h), fontsize=9)
+            _decorate(ax, grid, h, top=True, bottom=True, left=h == 0)
         handles = [
             plt.Line2D([], [], marker="s", ls="", color=c, label=lab)
             for c, lab in zip(colours, [*names, "none arrives"], strict=True)

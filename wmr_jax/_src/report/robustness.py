@@ -6,6 +6,7 @@ that count as arrived only because the horizon ends.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from collections.abc import Sequence
@@ -13,7 +14,9 @@ from pathlib import Path
 from typing import Any
 
 from wmr_jax._src.io import atomic_write_text, json_text
-from wmr_jax._src.report.figures import built, plt, save_closed
+from wmr_jax._src.model.params import Robot
+from wmr_jax._src.model.robots import describe_robot, robot_from_values, robot_json
+from wmr_jax._src.report.figures import Patch, built, plt, save_closed
 from wmr_jax._src.report.tables import markdown_table, percent, require_rows
 from wmr_jax._src.sim.poses import HORIZON_S
 
@@ -123,22 +126,9 @@ def _horizon_of(rows: Sequence[dict[str, Any]], default: float = HORIZON_S) -> f
 
 def _robot_text(meta: dict[str, Any]) -> str:
     """``", on <robot>"`` for a meta that records a robot, else ``""``."""
-    from wmr_jax._src.model.robots import describe_robot, robot_from_values
-
     if not isinstance(meta.get("robot"), dict):
         return ""
     return f", on {describe_robot(robot_from_values(meta['robot'], 'meta robot'))}"
-
-
-# The keys of a row that robustness_figure draws.
-_FIGURE_KEYS = [
-    "controller",
-    "condition",
-    "noise xy cm",
-    "noise theta deg",
-    "success",
-    "median arrival s",
-]
 
 
 def write_robustness(
@@ -163,9 +153,6 @@ def write_robustness(
     Returns:
         The paths written.
     """
-    from wmr_jax._src.model.params import Robot
-    from wmr_jax._src.model.robots import robot_json
-
     rows = require_rows("rows", rows)
     horizon = _horizon_of(rows)
     meta = {"seed": seed, "velocity": velocity, "runs": n_runs, "horizon_s": horizon}
@@ -185,12 +172,9 @@ def write_robustness(
         "wheel radius" + (", ±20 % mass" if velocity == "nonideal" else "") + "; latency one sample"
     )
 
-    def figure(rows: list[dict[str, Any]]) -> Any:
-        return robustness_figure(rows, title=title)
-
     # "tight": the legend lies outside the axes.
-    columns, save = ROBUSTNESS_COLUMNS, {"bbox_inches": "tight"}
-    return _write_study(out_dir, "robustness", rows, meta, columns, head, figure, **save)
+    figure, save = functools.partial(robustness_figure, title=title), {"bbox_inches": "tight"}
+    return _write_study(out_dir, "robustness", rows, meta, ROBUSTNESS_COLUMNS, head, figure, **save)
 
 
 def robustness_figure(rows: Sequence[dict[str, Any]], *, title: str) -> Any:
@@ -199,7 +183,8 @@ def robustness_figure(rows: Sequence[dict[str, Any]], *, title: str) -> Any:
     The caller saves and closes the returned ``Figure``.
     """
     rows = require_rows("rows", rows)
-    markdown_table(rows, _FIGURE_KEYS)  # names a row without one of them
+    drawn = ["controller", "condition", "noise xy cm", "noise theta deg", "success"]
+    markdown_table(rows, [*drawn, "median arrival s"])  # names a row without one of them
     names = list(dict.fromkeys(r["controller"] for r in rows))
     conditions = list(dict.fromkeys(r["condition"] for r in rows))
     first = [r for r in rows if (r["controller"], r["condition"]) == (names[0], conditions[0])]
@@ -237,9 +222,12 @@ def _draw_lines(axes, lines, arrival: str, sigma_theta: str, noise: str) -> None
 
 
 def _legend_outside(fig, axes, rows, right: float, fontsize: int) -> None:
-    """Fit the axes left of ``right`` (a share of the width), the legend to their right."""
+    """Fit the axes left of ``right`` (a share of the width), the legend, x mark included, right."""
     fig.tight_layout(rect=(0, 0, right, 1))
-    handles, labels = _with_late_mark(axes[0], rows)
+    handles, labels = axes[0].get_legend_handles_labels()
+    if _late_points(rows):
+        handles.append(plt.Line2D([], [], color="grey", marker="x", linestyle="none"))
+        labels.append("x: half or more of the\nsuccesses only settle\nat the horizon")
     fig.legend(handles, labels, fontsize=fontsize, loc="center left", bbox_to_anchor=(right, 0.5))
 
 
@@ -260,17 +248,6 @@ def _plot_marked(ax, x, y, late, **style) -> None:
         plain = {k: v for k, v in style.items() if k not in ("linestyle", "label")}
         ax.plot([x[i] for i in late], [y[i] for i in late], linestyle="none", marker="x",
                 markersize=8, **plain)  # fmt: skip
-
-
-def _with_late_mark(ax: Any, rows: Sequence[dict[str, Any]]) -> tuple[list, list]:
-    """The legend of ``ax``, with what an x means where one is drawn."""
-    from matplotlib.lines import Line2D
-
-    handles, labels = ax.get_legend_handles_labels()
-    if _late_points(rows):
-        handles.append(Line2D([], [], color="grey", marker="x", linestyle="none"))
-        labels.append("x: half or more of the\nsuccesses only settle\nat the horizon")
-    return handles, labels
 
 
 def write_standard_conditions(
@@ -310,19 +287,12 @@ def standard_figure(rows: Sequence[dict[str, Any]]) -> Any:
                 f"rows has no row of gains {name!r} under condition {lacking!r}; allowed: "
                 "one row per gain set and condition"
             )
-    width = 0.8 / len(sets)
-
-    def draw(fig, axes):
-        _draw_standard(fig, axes, rows, conditions, sets, width)
-
-    return built(draw, 1, 2, figsize=(11, 4.0))
+    return built(functools.partial(_draw_standard, rows, conditions, sets), 1, 2, figsize=(11, 4.0))
 
 
-def _draw_standard(fig, axes, rows, conditions, sets, width) -> None:
+def _draw_standard(rows, conditions, sets, fig, axes) -> None:
     """Draw the bars, labels and legend of ``standard_figure``."""
-    from matplotlib.patches import Patch
-
-    any_late = False
+    any_late, width = False, 0.8 / len(sets)
     for j, name in enumerate(sets):
         got = {r["condition"]: r for r in rows if r["gains"] == name}
         x = [i + (j - (len(sets) - 1) / 2) * width for i in range(len(conditions))]

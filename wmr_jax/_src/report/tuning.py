@@ -39,22 +39,16 @@ _GAIN_LABELS = {
     "alpha": "α",
 }
 
-_TABLE_COLUMNS = ["gains", "mean arrival (s)", "vs paper", "success", "peak wheel speed (cm/s)"]
-
-
-_BOUND_COLUMNS = ["vs turn–drive–turn", "vs lower bound"]
-_BOUND_KEYS = ["vs_turn_drive_turn", "vs_lower_bound"]
+# The columns of the yardstick ratios -> their bound_ratios keys.
+_BOUND_COLUMNS = {"vs turn–drive–turn": "vs_turn_drive_turn", "vs lower bound": "vs_lower_bound"}
 _NONE_ARRIVED = "none arrived"
 
 
-def _ratio(value: float) -> str:
-    return f"{value:.3f}×"
-
-
-def _right_aligned(rows: list[dict[str, str]], columns: list[str]) -> str:
+def _right_aligned(rows: list[dict[str, str]]) -> str:
+    """The table of ``rows``, whose first has every column; the numeric ones right-aligned."""
+    columns = list(rows[0])
     rows = [{**dict.fromkeys(columns, ""), **row} for row in rows]
     lines = markdown_table(rows, columns).splitlines()
-    # The numeric columns are right-aligned.
     lines[1] = "|---|" + "---:|" * (len(columns) - 1)
     return "\n".join(lines) + "\n"
 
@@ -89,7 +83,6 @@ def evaluation_table(evaluation: dict[str, Any], bounds: Any = None) -> str:
                     f"evaluation[{name!r}].{field} = {value!r} is not allowed; allowed: {allowed}"
                 )
     paper = float(evaluation["paper_feasible"].mean_arrival)
-    columns = _TABLE_COLUMNS + (_BOUND_COLUMNS if bounds is not None else [])
     rows = []
     for name, ev in evaluation.items():
         mean = float(ev.mean_arrival)
@@ -109,8 +102,8 @@ def evaluation_table(evaluation: dict[str, Any], bounds: Any = None) -> str:
         }
         if bounds is not None:
             ratios = bound_ratios(mean, bounds)
-            for column, key in zip(_BOUND_COLUMNS, _BOUND_KEYS, strict=True):
-                row[column] = _ratio(ratios[key]) if math.isfinite(mean) else _NONE_ARRIVED
+            for column, key in _BOUND_COLUMNS.items():
+                row[column] = f"{ratios[key]:.3f}×" if math.isfinite(mean) else _NONE_ARRIVED
         rows.append(row)
     if bounds is not None:
         for label, values in (
@@ -118,20 +111,7 @@ def evaluation_table(evaluation: dict[str, Any], bounds: Any = None) -> str:
             ("lower bound (§8)", bounds.lower_bound),
         ):
             rows.append({"gains": label, "mean arrival (s)": f"{float(np.mean(values)):.3f}"})
-    return _right_aligned(rows, columns)
-
-
-_COMPARE_COLUMNS = [
-    "problem (parameters)",
-    "method",
-    "mean arrival (s), seeds 0/1/2",
-    "success",
-    "mean − lower bound (s)",
-    "vs turn–drive–turn",
-    "CPU time (s)",
-    "wall time (s)",
-    "candidates per CPU-s",
-]
+    return _right_aligned(rows)
 
 
 # The numbers comparison_table reads from each row, and what each may be.
@@ -145,11 +125,7 @@ _COMPARE_NUMBERS = {
 
 
 def _compare_numbers(i: int, row: dict[str, Any]) -> dict[str, float]:
-    """The numbers of ``rows[i]`` that the table shows, read back as ``atomic_write_json`` wrote.
-
-    Raises:
-        ValueError: one line naming the row, the key and what is allowed.
-    """
+    """The numbers of ``rows[i]`` that the table shows, read back as ``atomic_write_json`` wrote."""
     out = {}
     for key, (ok, allowed) in _COMPARE_NUMBERS.items():
         if key not in row:
@@ -252,7 +228,7 @@ def comparison_table(rows: list[dict[str, Any]]) -> str:
             ),
         }
     )
-    return _right_aligned(lines, _COMPARE_COLUMNS) + _minimised_notes(rows)
+    return _right_aligned(lines) + _minimised_notes(rows)
 
 
 def tuning_curve(
@@ -368,19 +344,15 @@ def _history_curves(history: dict) -> tuple[np.ndarray, np.ndarray]:
     return curves[0], curves[1]
 
 
-def baseline_label(baseline: Any) -> str:
-    """The legend of the tuning curve's dashed baseline: the gains the table compares with."""
-    if baseline is PAPER_FEASIBLE_GAINS:
-        return "paper (feasible)"
-    return (
-        f"paper's, scaled into the wheel budget (k_r = {float(baseline.kr):.3g}, "
-        f"k_θ = {float(baseline.k_theta):.3g})"
-    )
-
-
 def _gain_panels(axes: Any, steps: np.ndarray, gains: np.ndarray, baseline: Any) -> None:
     start_values = gains_as_dict(baseline)
-    label = baseline_label(baseline)
+    # The dashed baseline: the gains the table compares with.
+    label = "paper (feasible)"
+    if baseline is not PAPER_FEASIBLE_GAINS:
+        label = (
+            f"paper's, scaled into the wheel budget (k_r = {float(baseline.kr):.3g}, "
+            f"k_θ = {float(baseline.k_theta):.3g})"
+        )
     for k, name in enumerate(GAIN_FIELDS):
         ax = axes.flat[k + 1]
         values = gains[:, k]

@@ -17,11 +17,20 @@ import warnings
 from collections.abc import Callable
 from typing import Any
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from wmr_jax._src.checks import check_int, check_number
+from wmr_jax._src.model.params import Gains, Robot, validate_one_robot
+from wmr_jax._src.oracle import reference
 from wmr_jax._src.oracle.numpy_batch import numpy_final_poses
-from wmr_jax._src.sim.poses import MAX_SAMPLES
+from wmr_jax._src.sim import loops, rollout
+from wmr_jax._src.sim.poses import MAX_SAMPLES, sample_poses
+from wmr_jax._src.sim.rollout import DEFAULT_DT
+from wmr_jax._src.sim.sensing.disturbances import sample_disturbance
+from wmr_jax._src.sim.sensing.loop import ClosedLoop, _disturbed_jit, prepare_disturbed
+from wmr_jax._src.sim.sharding import shard
 from wmr_jax._src.studies.bench_timing import Timing, environment, time_group
 
 DEFAULT_SIZES = (1_000, 10_000, 100_000)
@@ -102,25 +111,8 @@ def _check_config(config: BenchConfig) -> BenchConfig:
     if unknown:
         raise ValueError(f"cases = {unknown!r} are not known; allowed: {CASES}")
     if config.robot is not None:
-        from wmr_jax._src.model.params import validate_one_robot
-
         validate_one_robot(config.robot, "the benchmark")
     return dataclasses.replace(config, cases=tuple(config.cases) or CASES)
-
-
-def _row(case: str, n: int | None, steps: int, timing: Timing | None, **extra: Any) -> dict:
-    row: dict[str, Any] = {"case": case, "n": n, "steps": steps}
-    if timing is not None:
-        count = (n or 0) * steps
-        row.update(
-            run_s=timing.run_s,
-            compile_s=timing.compile_s,
-            robot_steps_per_s=count / timing.run_s if timing.run_s > 0 else None,
-            runs_s=timing.runs_s,
-            others_cpu=timing.others_cpu,
-        )
-    row.update(extra)
-    return row
 
 
 def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = None) -> dict:
@@ -141,8 +133,6 @@ def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = No
     config = _check_config(config)
     if log is not None and not callable(log):
         raise ValueError(f"log = {log!r} is not allowed; allowed: a function of one line, or None")
-    import jax
-
     if config.dtype == "float64" and not jax.config.jax_enable_x64:
         jax.config.update("jax_enable_x64", True)
     if config.dtype == "float32" and jax.config.jax_enable_x64:
@@ -150,7 +140,6 @@ def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = No
             "dtype = 'float32' is not allowed while jax_enable_x64 is on; "
             "allowed: 'float64', or turn jax_enable_x64 off"
         )
-    from wmr_jax._src.model.params import Gains, Robot
     from wmr_jax._src.studies.maps import robot_record
 
     say = log or (lambda line: None)
@@ -180,10 +169,6 @@ class _SizeBench:
     """The cases of one batch size ``n``, each a step that returns its rows."""
 
     def __init__(self, config: BenchConfig, n: int, gains: Any) -> None:
-        import jax.numpy as jnp
-
-        from wmr_jax._src.sim.poses import sample_poses
-
         self.config, self.n, self.gains, self.steps = config, n, gains, config.steps
         self.robot = config.robot
         dtype = np.float32 if config.dtype == "float32" else np.float64
@@ -193,8 +178,19 @@ class _SizeBench:
     def time(self, calls: dict[str, tuple[Callable[[], Any], bool]]) -> dict[str, Timing]:
         return time_group(calls, self.config.repeats, wait_idle=self.config.wait_idle)
 
-    def row(self, case: str, timing: Timing | None, **extra: Any) -> dict:
-        return _row(case, self.n, self.steps, timing, **extra)
+    def row(self, case: str, timing: Timing | None, n: int | None = None, **extra: Any) -> dict:
+        """The row of ``case`` over ``n`` poses (default the batch size)."""
+        n = self.n if n is None else n
+        row: dict[str, Any] = {"case": case, "n": n, "steps": self.steps}
+        if timing is not None:
+            row.update(
+                run_s=timing.run_s,
+                compile_s=timing.compile_s,
+                robot_steps_per_s=n * self.steps / timing.run_s if timing.run_s > 0 else None,
+                runs_s=timing.runs_s,
+                others_cpu=timing.others_cpu,
+            )
+        return {**row, **extra}
 
     def rows(self, *, scalar: bool) -> list[dict]:
         """Return the rows of every chosen case, in the order of the table."""
@@ -215,17 +211,12 @@ class _SizeBench:
 
     def baselines(self, *, scalar: bool) -> tuple[list[dict], list[dict]]:
         """Rows of ``final_poses`` (and sharded), then of the baselines, timed interleaved."""
-        import jax
-
-        from wmr_jax._src.oracle import reference
-        from wmr_jax._src.sim.rollout import final_poses
-
         cases, gains, steps, refs = self.config.cases, self.gains, self.steps, self.refs
         robot = self.robot
         group: dict[str, tuple[Callable[[], Any], bool]] = {}
         if "final_poses" in cases:
             group["final_poses"] = (
-                lambda: final_poses(refs, gains, steps=steps, robot=robot),
+                lambda: rollout.final_poses(refs, gains, steps=steps, robot=robot),
                 True,
             )
         if "numpy_batch" in cases:
@@ -235,8 +226,6 @@ class _SizeBench:
             )
         k = self.config.reference_poses
         if scalar:
-            from wmr_jax._src.sim.poses import sample_poses
-
             scalar_refs = np.asarray(sample_poses(self.config.seed, k), dtype=np.float64)
 
             def scalar_runs():
@@ -246,11 +235,9 @@ class _SizeBench:
             group["scalar_reference"] = (scalar_runs, False)
         devices = jax.local_devices()
         if "final_poses_sharded" in cases and len(devices) > 1:
-            from wmr_jax._src.sim.sharding import shard
-
             spread = shard(self.refs_np, devices)
             group["final_poses_sharded"] = (
-                lambda: final_poses(spread.array, gains, steps=steps, robot=robot),
+                lambda: rollout.final_poses(spread.array, gains, steps=steps, robot=robot),
                 True,
             )
         t = self.time(group) if group else {}
@@ -267,20 +254,14 @@ class _SizeBench:
             last.append(self.row("numpy_batch", t["numpy_batch"], dtype=self.config.dtype))
         if "scalar_reference" in t:
             note = "float64, one pose at a time"
-            last.append(_row("scalar_reference", k, steps, t["scalar_reference"], note=note))
+            last.append(self.row("scalar_reference", t["scalar_reference"], k, note=note))
         return first, last
 
     def disturbed(self) -> list[dict]:
         """The disturbed loop (docs/model.md §7) raw and with each estimator, interleaved.
 
-        Standard noise, ±3 % wheel radius and one sample of latency; the jitted
-        core is timed, not the checks before it.
+        The jitted core is timed, not the checks before it.
         """
-        import jax
-
-        from wmr_jax._src.sim.sensing.disturbances import sample_disturbance
-        from wmr_jax._src.sim.sensing.loop import _disturbed_jit, prepare_disturbed
-
         spec = sample_disturbance(
             jax.random.PRNGKey(self.config.seed), self.refs, self.steps, noise_xy=0.5,
             noise_theta=math.radians(1.0), radius_mismatch=0.03, latency=1.0,
@@ -308,16 +289,13 @@ class _SizeBench:
         """The exported C controller (``wmr_jax.export``): a gain schedule with its EKF.
 
         ``N`` controllers with one sample of latency, stepped through noisy poses;
-        one foreign call steps all ``N``. The row carries ``ns_per_step``,
-        ``sizeof(wmr_controller)`` and the bytes of the compiled step.
+        one foreign call steps all ``N``.
         """
         import tempfile
         from pathlib import Path
 
         from wmr_jax._src.export import codegen, compiled
         from wmr_jax._src.model.controllers.schedule import SCHEDULE, ScheduleParams
-        from wmr_jax._src.model.params import Robot
-        from wmr_jax._src.sim.sensing.loop import ClosedLoop
 
         if compiled.compiler() is None:
             return [self.row("c_controller", None, skipped="skipped: no C compiler")]
@@ -346,8 +324,6 @@ class _SizeBench:
 
     def alone(self, entry: str, velocity: str) -> list[dict]:
         """Time ``final_poses`` or ``batch_rollout`` (``entry``) alone, with ``velocity``'s loop."""
-        from wmr_jax._src.sim import rollout
-
         run = getattr(rollout, entry)
         case = entry + ("_nonideal" if velocity == "nonideal" else "")
 
@@ -368,10 +344,6 @@ class _SizeBench:
         ``1 + jvp_over_forward`` is the gradient's floor. ``beside``: ``(case, call)`` timed
         with them. Returns the rows ``[beside,] forward, jvp_<case>, <case>``.
         """
-        import jax
-
-        from wmr_jax._src.sim import loops
-
         forward = loops.jit_top_level(loss)
         gradient = loops.jit_top_level(jax.value_and_grad(loss))
 
@@ -400,14 +372,10 @@ class _SizeBench:
 
     def final_pose_loss(self) -> list[dict]:
         """The mean squared final-pose error through ``final_poses``, and its gradient."""
-        import jax.numpy as jnp
-
-        from wmr_jax._src.sim.rollout import final_poses
-
         steps, robot = self.steps, self.robot
 
         def loss(gains, refs):
-            final = final_poses(refs, gains, steps=steps, robot=robot)
+            final = rollout.final_poses(refs, gains, steps=steps, robot=robot)
             err = final - refs
             return jnp.mean(err[:, 0] ** 2 + err[:, 1] ** 2 + (1.0 - jnp.cos(err[:, 2])))
 
@@ -417,7 +385,6 @@ class _SizeBench:
     def tuning_loss(self) -> list[dict]:
         """``wmr_jax.tuning.tuning_loss`` and its gradient, beside the relaxed law it wraps."""
         from wmr_jax import tuning
-        from wmr_jax._src.sim.rollout import DEFAULT_DT, final_poses
 
         horizon, robot = self.steps * DEFAULT_DT, self.robot
         gains, refs, steps = self.gains, self.refs, self.steps
@@ -428,7 +395,7 @@ class _SizeBench:
             )
 
         def relaxed():
-            return final_poses(
+            return rollout.final_poses(
                 refs, gains, steps=steps, temperature=TUNING_TEMPERATURE, robot=robot
             )
 
@@ -439,16 +406,8 @@ class _SizeBench:
     def robust_loss(self) -> list[dict]:
         """The robust tuner's loss (the schedule and the EKF), its gradient and one jvp.
 
-        ``n`` poses under the standard conditions and ``n // 4`` (at least 1)
-        non-ideal, over ``steps`` periods at the tuning temperature; the
-        gradient is the trainer's (``robust.RobustLoss``), the jvp along the logits.
+        The gradient is the trainer's (``robust.RobustLoss``), the jvp along the logits.
         """
-        import jax
-        import jax.numpy as jnp
-
-        from wmr_jax._src.model.params import Robot
-        from wmr_jax._src.sim import loops
-        from wmr_jax._src.sim.rollout import DEFAULT_DT
         from wmr_jax._src.tuning import robust
 
         robot = Robot() if self.robot is None else self.robot
@@ -462,9 +421,8 @@ class _SizeBench:
 
         def forward(z, args):
             (key, refs, nonideal), temperature, (robot, dt) = args
-            steps = self.steps
             return robust.robust_loss_value(
-                z, key, refs, nonideal, temperature, robot, dt, steps, joint, accel
+                z, key, refs, nonideal, temperature, robot, dt, self.steps, joint, accel
             )
 
         def directional(z, args):

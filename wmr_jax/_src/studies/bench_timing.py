@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 
 
-def _cpu_busy_seconds() -> float | None:
-    """The CPU seconds all processes have used (Linux), or ``None``."""
+def _others_cpu_seconds() -> float | None:
+    """The CPU seconds every process but this one has used (Linux), or ``None``."""
     try:
         with open("/proc/stat", encoding="ascii") as f:
             fields = [int(v) for v in f.readline().split()[1:]]
@@ -27,12 +27,8 @@ def _cpu_busy_seconds() -> float | None:
         return None
     # user, nice, system, irq, softirq, steal
     busy = fields[0] + fields[1] + fields[2] + sum(fields[5:8])
-    return busy / os.sysconf("SC_CLK_TCK")
-
-
-def _own_cpu_seconds() -> float:
-    usage = resource.getrusage(resource.RUSAGE_SELF)
-    return usage.ru_utime + usage.ru_stime
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    return busy / os.sysconf("SC_CLK_TCK") - (own.ru_utime + own.ru_stime)
 
 
 @dataclasses.dataclass
@@ -56,12 +52,11 @@ def _wait_for_idle(limit_s: float, *, threshold: float = 0.1, window_s: float = 
     """Wait up to ``limit_s`` until other processes use under ``threshold`` cores."""
     deadline = time.monotonic() + limit_s
     while time.monotonic() < deadline:
-        busy0, own0 = _cpu_busy_seconds(), _own_cpu_seconds()
-        if busy0 is None:
+        before = _others_cpu_seconds()
+        if before is None:
             return
         time.sleep(window_s)
-        busy1, own1 = _cpu_busy_seconds(), _own_cpu_seconds()
-        if max(0.0, (busy1 - busy0) - (own1 - own0)) / window_s < threshold:
+        if max(0.0, _others_cpu_seconds() - before) / window_s < threshold:
             return
 
 
@@ -101,13 +96,13 @@ def time_group(
                 # Steady state, as in a loop of calls: right after another
                 # case XLA's worker threads are asleep, and waking them costs.
                 jax.block_until_ready(call())
-            busy0, own0, start = _cpu_busy_seconds(), _own_cpu_seconds(), time.perf_counter()
+            before, start = _others_cpu_seconds(), time.perf_counter()
             jax.block_until_ready(call())
             wall = time.perf_counter() - start
-            busy1, own1 = _cpu_busy_seconds(), _own_cpu_seconds()
+            after = _others_cpu_seconds()
             runs[name].append(wall)
-            if busy0 is not None and busy1 is not None:
-                others[name][0] += max(0.0, (busy1 - busy0) - (own1 - own0))
+            if before is not None and after is not None:
+                others[name][0] += max(0.0, after - before)
                 others[name][1] += wall
     cores = os.cpu_count() or 1
     timings = {}
@@ -115,7 +110,7 @@ def time_group(
         run = statistics.median(runs[name])
         compile_s = None if first[name] is None else max(0.0, first[name] - run)
         cpu, wall = others[name]
-        share = min(cores, cpu / wall) if wall > 0 and _cpu_busy_seconds() is not None else None
+        share = min(cores, cpu / wall) if wall > 0 and _others_cpu_seconds() is not None else None
         timings[name] = Timing(run, compile_s, runs[name], share)
     return timings
 

@@ -16,6 +16,7 @@ import numpy as np
 from wmr_jax._src import checks
 from wmr_jax._src.model import controllers
 from wmr_jax._src.model.params import Robot, validate_one_robot
+from wmr_jax._src.model.robots import describe_robot, robot_json, same_robot
 from wmr_jax._src.sim.rollout import DEFAULT_DT
 from wmr_jax._src.sim.sensing.disturbances import (
     STANDARD_CONDITIONS,
@@ -25,7 +26,9 @@ from wmr_jax._src.sim.sensing.disturbances import (
 )
 from wmr_jax._src.sim.sensing.estimators import resolve_estimator
 from wmr_jax._src.sim.sensing.loop import ClosedLoop, disturbed_metrics
+from wmr_jax._src.studies.optimal import time_bounds
 from wmr_jax._src.studies.robustness import (
+    _scaled,
     check_levels,
     mean_median,
     settled_at_horizon,
@@ -61,12 +64,6 @@ def _runs(refs: Any, key: jax.Array, robot: Robot, horizon: Any, dt: float, mism
         refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
     noise, factors = _unit_draws(key, refs, steps, mismatch)
     return refs, noise, factors, horizon
-
-
-def _scaled(refs, noise, wheels, sxy: float, sdeg: float, latency: bool) -> Disturbance:
-    """The runs' ``Disturbance`` at pose noise ``σ_xy`` cm, ``σ_θ`` degrees."""
-    scale = np.array([sxy, sxy, math.radians(sdeg)])
-    return Disturbance(refs, noise * scale, wheels, np.float64(1.0 if latency else 0.0))
 
 
 # The model robot's row: no mismatch, no noise, no latency (docs/model.md §9).
@@ -118,26 +115,25 @@ def standard_conditions(
         ``horizon s``.
     """
     mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
-    sensor = noise
-    if sensor is not None:
-        if not isinstance(sensor, (tuple, list)) or len(sensor) != 2:
+    if noise is not None:
+        if not isinstance(noise, (tuple, list)) or len(noise) != 2:
             raise ValueError(
                 f"noise = {noise!r:.80} is not allowed; allowed: (σ_xy cm, σ_θ degrees) or None"
             )
-        sensor = tuple(
+        noise = tuple(
             checks.check_number(f"noise[{i}]", v, closed=True, unit=u)
-            for i, (v, u) in enumerate(zip(sensor, ("cm", "degrees"), strict=True))
+            for i, (v, u) in enumerate(zip(noise, ("cm", "degrees"), strict=True))
         )
     sets, robot = _loops(params_by_name, "params_by_name", controller, estimator, robot)
-    refs, noise, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
+    refs, unit, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
     conditions = [(MODEL_ROBOT, 0.0, 0.0, False, np.ones((len(refs), 3)))]
     for label, sxy, sdeg, latency in STANDARD_CONDITIONS:
-        if sensor is not None and sxy:
-            sxy, sdeg = sensor
+        if noise is not None and sxy:
+            sxy, sdeg = noise
         conditions.append((label, sxy, sdeg, latency, factors))
     rows = []
     for label, sxy, sdeg, latency, wheels in conditions:
-        spec = _scaled(refs, noise, wheels, sxy, sdeg, latency)
+        spec = _scaled(refs, unit, wheels, sxy, sdeg, latency)
         for name, loop in sets.items():
             row, m = _judged(spec, loop, dt, robot, x64, horizon)
             rows.append(
@@ -193,8 +189,6 @@ def _columns(row: dict[str, Any], *keys: str) -> dict[str, Any]:
 
 def _study_robot(robot: Any, loops: Mapping[str, ClosedLoop], name: str) -> Robot:
     """``robot``, else the one the ``loops`` record, else the paper's; other robots refused."""
-    from wmr_jax._src.model.robots import describe_robot, same_robot
-
     recorded = {label: loop.robot for label, loop in loops.items() if loop.robot is not None}
     if robot is None and recorded:
         robot = next(iter(recorded.values()))
@@ -234,12 +228,9 @@ def evaluate_loop(
         loop: a ``ClosedLoop`` or ``Gains`` (Shim–Sung, raw feedback).
         refs: ``(N, 3)`` references ``[x cm, y cm, θ rad]``.
         condition: ``"nominal"``, ``"latency"``, ``"noise"`` or ``"both"``.
-        mismatch: bound of each wheel's relative radius error, ``[0, 1)``.
+        mismatch, horizon, dt, x64: as ``standard_conditions``.
         seed: seed of the draws, an integer in ``[0, 2³² − 1]``.
-        horizon: simulated time per run, s; default ``study_horizon(robot)``.
         velocity: ``"ideal"`` or ``"nonideal"``.
-        dt: control period, s.
-        x64: compute in float64.
         robot: the robot; default the loop's own, else ``Robot()``.
         identified: the content of an ``identified.json`` whose base is
             ``robot``: the runs are on the identified robot while the loop
@@ -253,8 +244,6 @@ def evaluate_loop(
         "arrival_s" (None if not arrived), "final_distance_cm",
         "settled_at_horizon"}`` per reference, in order.
     """
-    from wmr_jax._src.model.robots import robot_json
-
     labels = {label: (sxy, sdeg, lat) for label, sxy, sdeg, lat in STANDARD_CONDITIONS}
     if condition not in labels:
         raise ValueError(f"condition = {condition!r} is not allowed; allowed: {', '.join(labels)}")
@@ -286,15 +275,14 @@ def evaluate_loop(
             np.asarray(refs), m.success, m.arrival, m.final_distance, late, strict=True
         )
     ]
-    row = figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity)
-    row.update(
-        controller=controller.name,
-        feedback="raw" if estimator is None else estimator.name,
-        robot=robot_json(robot),
-        dtype="float64" if x64 else "float32",
-        per_reference=per_reference,
-    )
-    return row
+    return {
+        **figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity),
+        "controller": controller.name,
+        "feedback": "raw" if estimator is None else estimator.name,
+        "robot": robot_json(robot),
+        "dtype": "float64" if x64 else "float32",
+        "per_reference": per_reference,
+    }
 
 
 def figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity) -> dict[str, Any]:
@@ -303,8 +291,6 @@ def figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity) ->
     The peak wheel speed is within ``v_max`` when every rim stays within
     ``v_max (1 + mismatch)``.
     """
-    from wmr_jax._src.studies.optimal import time_bounds
-
     mean = median = optimal = None
     if m.success.any():
         mean, median = mean_median(m.arrival[m.success])

@@ -1,8 +1,6 @@
 """Pose-space maps: docs/model.md §6 metrics over grids of reference poses, per controller.
 
 Every pose is run to the horizon by ``wmr_jax.sweep``, in bounded memory.
-``map_study`` runs a grid for every controller, ``compare_controllers``
-random poses, and ``summarize`` tabulates either side by side.
 """
 
 from __future__ import annotations
@@ -18,9 +16,10 @@ import numpy as np
 from wmr_jax._src import checks
 from wmr_jax._src.model import controllers
 from wmr_jax._src.model.params import Robot, validate_one_robot
+from wmr_jax._src.model.robots import robot_json, robot_name
 from wmr_jax._src.sim import metrics
 from wmr_jax._src.sim.metrics import PoseMetrics
-from wmr_jax._src.sim.poses import EVAL_R_MAX, EVAL_R_MIN, MAX_SAMPLES, horizon_steps
+from wmr_jax._src.sim.poses import EVAL_R_MAX, EVAL_R_MIN, MAX_SAMPLES, horizon_steps, sample_poses
 from wmr_jax._src.sim.rollout import DEFAULT_DT
 from wmr_jax._src.studies.robustness import mean_median, robot_defaults, study_horizon
 from wmr_jax._src.studies.sweep import sweep
@@ -31,8 +30,6 @@ DEFAULT_CHUNK = 16384
 
 def robot_record(robot: Robot) -> dict[str, Any]:
     """The robot as a summary records it: its fields and a label (preset name or "custom")."""
-    from wmr_jax._src.model.robots import robot_json, robot_name
-
     return {"robot": robot_json(robot), "robot_label": robot_name(robot) or "custom"}
 
 
@@ -70,10 +67,7 @@ def pose_grid(
     r_min: float = EVAL_R_MIN,
     r_max: float = EVAL_R_MAX,
 ) -> PoseGrid:
-    """A square grid over ``[−r_max, r_max]²`` with about ``n_poses`` references.
-
-    Only positions at distance ``r_min``–``r_max`` from the origin are run (the
-    docs/model.md §6 set).
+    """About ``n_poses`` references on a grid over ``[−r_max, r_max]²``, ``r_min``–``r_max`` from 0.
 
     Args:
         n_poses: about how many references in all, ``>= 1``.
@@ -130,15 +124,10 @@ def evaluate_poses(
     """The docs/model.md §6 metrics of every reference, in bounded memory.
 
     Args:
-        refs: ``(N, 3)`` reference poses ``[x cm, y cm, θ rad]``.
-        params: the controller's parameters (its defaults if ``None``); leaves
-            scalar, or ``(N,)`` for one value per pose.
-        controller: a ``Controller`` or its registered name.
+        refs, controller, dt, robot, velocity, on_chunk: as ``wmr_jax.sweep``.
+        params: as ``sweep``'s ``gains``.
         init: ``(3,)`` initial pose shared by every run.
-        dt: control period, s.
         steps: control periods; default the docs/model.md §6 horizon of 6 s.
-        robot: robot parameters; default ``Robot()``.
-        velocity: ``"ideal"`` or ``"nonideal"``.
         chunk: poses per compiled call (the last chunk is padded to it).
         progress: show a progress bar (stderr).
         x64: compute in float64 (default), whatever JAX's default dtype: in
@@ -146,7 +135,6 @@ def evaluate_poses(
         cache: a folder where each finished chunk is kept (``wmr_jax.sweep``'s
             ``out``); ``None`` keeps nothing.
         resume: with ``cache``, reuse the chunks it holds of the same settings.
-        on_chunk: called as ``on_chunk(done, total)`` after every chunk.
 
     Returns:
         ``PoseMetrics`` of ``(N,)`` NumPy arrays, in the order of ``refs``.
@@ -394,8 +382,6 @@ def compare_controllers(
         A JSON-ready dict of the settings, the robot and ``rows``
         (``summarize``, one per run).
     """
-    from wmr_jax._src.sim.poses import sample_poses
-
     n_poses = checks.check_int("n_poses", n_poses, 1, MAX_SAMPLES)
     seed = checks.check_int("seed", seed, minimum=0)
     robot = validate_one_robot(robot, "compare_controllers")

@@ -1,9 +1,4 @@
-"""The time-optimal yardstick for arrival times (docs/model.md §8), vectorised over references.
-
-``time_bounds`` returns, per reference seen from the origin facing +x, the
-turn–drive–turn time (spinning at ``V_max / L``, driving at ``V_max``) and
-the lower bound ``(r − tol_r) / V_max``, both rounded up to whole periods.
-"""
+"""The time-optimal yardstick for arrival times (docs/model.md §8), vectorised over references."""
 
 from __future__ import annotations
 

@@ -64,20 +64,18 @@ def run_table(
     commanded = np.abs(np.asarray(wheel_speeds(traj.v, traj.omega, robot)))
     saturated = (commanded > float(robot.v_max)).any(axis=-1).mean(axis=-1)
     final = np.asarray(traj.poses[:, -1])
-    rows = []
-    for i, ref in enumerate(np.asarray(refs)):
-        rows.append(
-            {
-                "ref": [float(ref[0]), float(ref[1]), round(math.degrees(float(ref[2])), 6)],
-                "arrival_s": float(times[i]),
-                "path_cm": float(lengths[i]),
-                "peak_wheel_cm_s": float(peak[i]),
-                "saturated_fraction": float(saturated[i]),
-                "zigzag": int(zigzag[i]),
-                "final_distance_cm": float(np.hypot(*(final[i, :2] - ref[:2]))),
-            }
-        )
-    return rows
+    return [
+        {
+            "ref": [float(ref[0]), float(ref[1]), round(math.degrees(float(ref[2])), 6)],
+            "arrival_s": float(times[i]),
+            "path_cm": float(lengths[i]),
+            "peak_wheel_cm_s": float(peak[i]),
+            "saturated_fraction": float(saturated[i]),
+            "zigzag": int(zigzag[i]),
+            "final_distance_cm": float(np.hypot(*(final[i, :2] - ref[:2]))),
+        }
+        for i, ref in enumerate(refs)
+    ]
 
 
 def residual_bound(phi_m: Any) -> Any:
@@ -155,24 +153,20 @@ class PaperRuns:
         return {"robot": robot, "summary": self.summary, "runs": self.runs}
 
 
-def _paper_case(refs: np.ndarray, kr: float, robot: Robot) -> PaperCase:
+def _paper_case(refs: np.ndarray, kr: float, robot: Robot) -> tuple[PaperCase, dict]:
+    """The ``PaperCase`` of ``kr`` and its table rows per loop (``"ideal"``, ``"nonideal"``)."""
     gains = Gains(kr=kr)
     ideal = batch_rollout(refs, gains, steps=PAPER_STEPS, robot=robot)
     nonideal = batch_rollout(refs, gains, steps=PAPER_STEPS, robot=robot, velocity="nonideal")
     gap = np.hypot(*np.moveaxis(np.asarray(ideal.poses - nonideal.poses)[..., :2], -1, 0))
     bound = float(kr + float(robot.half_track) * float(gains.k_theta))
     held = "holds" if bound <= float(robot.v_max) else "violated"
-    return PaperCase(kr, ideal, nonideal, bound, held, gap.max(axis=-1))
-
-
-def _case_rows(case: PaperCase, refs: np.ndarray, robot: Robot) -> dict[str, list[dict]]:
-    """The table rows of one case, per loop (``"ideal"``, ``"nonideal"``)."""
-    out = {}
-    for loop, traj in (("ideal", case.ideal), ("nonideal", case.nonideal)):
-        out[loop] = run_table(traj, refs, dt=DEFAULT_DT, robot=robot)
-        for row, dev in zip(out[loop], case.deviation, strict=True):
-            row.update(kr=case.kr, loop=loop, condition=case.condition, max_deviation_cm=float(dev))
-    return out
+    case, rows = PaperCase(kr, ideal, nonideal, bound, held, gap.max(axis=-1)), {}
+    for loop, traj in (("ideal", ideal), ("nonideal", nonideal)):
+        rows[loop] = run_table(traj, refs, dt=DEFAULT_DT, robot=robot)
+        for row, dev in zip(rows[loop], case.deviation, strict=True):
+            row.update(kr=kr, loop=loop, condition=held, max_deviation_cm=float(dev))
+    return case, rows
 
 
 def _case_summary(case: PaperCase, rows: dict[str, list[dict]]) -> dict[str, Any]:
@@ -207,8 +201,7 @@ def paper_runs(*, robot: Robot | None = None) -> PaperRuns:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", WheelSpeedWarning)
         for kr in PAPER_KR:
-            case = _paper_case(refs, kr, robot)
-            case_rows = _case_rows(case, refs, robot)
+            case, case_rows = _paper_case(refs, kr, robot)
             rows += case_rows["ideal"] + case_rows["nonideal"]
             summary[f"kr={kr:g}"] = _case_summary(case, case_rows)
             cases.append(case)

@@ -18,6 +18,7 @@ import numpy as np
 from wmr_jax._src import checks
 from wmr_jax._src.model import controllers
 from wmr_jax._src.model.params import Robot, validate_one_robot
+from wmr_jax._src.model.robots import same_robot
 from wmr_jax._src.sim.metrics import PoseMetrics
 from wmr_jax._src.sim.poses import HORIZON_S, horizon_steps
 from wmr_jax._src.sim.rollout import DEFAULT_DT
@@ -113,6 +114,12 @@ def mean_median(times: np.ndarray) -> tuple[float, float]:
     return (float(times.mean()), float(np.median(times))) if times.size else (math.inf, math.inf)
 
 
+def _scaled(refs, noise, wheels, sxy: float, sdeg: float, latency: bool) -> Disturbance:
+    """The runs' ``Disturbance`` at pose noise ``σ_xy`` cm, ``σ_θ`` degrees."""
+    scale = np.array([sxy, sxy, math.radians(sdeg)])
+    return Disturbance(refs, noise * scale, wheels, np.float64(1.0 if latency else 0.0))
+
+
 def summary_row(m: PoseMetrics, horizon: float | None = None) -> dict[str, Any]:
     """Success, arrival, first arrival, final distance and zig-zag of a batch.
 
@@ -189,8 +196,7 @@ def monte_carlo(
     n_runs = checks.check_int("n_runs", n_runs)
     checks.check_key("key", key)
     noise_xy, noise_deg = check_levels(noise_xy, noise_deg)
-    if not isinstance(latency, (bool, np.bool_)):
-        raise ValueError(f"latency = {latency!r} is not allowed; allowed: True or False")
+    latency = checks.check_bool("latency", latency)
     for name, value in (("radius_mismatch", radius_mismatch), ("mass_mismatch", mass_mismatch)):
         checks.check_number(name, value, high=1.0, closed=True)
     if mass_mismatch > 0 and velocity == "ideal":
@@ -201,17 +207,14 @@ def monte_carlo(
     name = controllers.get_controller(controller).name
     estimator_used, _ = resolve_estimator(estimator)
     steps, horizon = study_steps(robot, horizon, dt)
-    if params is None:
-        params = robot_defaults(name, robot)
+    params = robot_defaults(name, robot) if params is None else params
     refs, unit, mismatch = draw_disturbances(
         key, n_runs, steps, radius_mismatch=radius_mismatch, mass_mismatch=mass_mismatch
     )
-    delay = np.float64(1.0 if latency else 0.0)
     run = {"estimator": estimator, "dt": dt, "robot": robot, "velocity": velocity, "x64": x64}
     rows = []
     for sxy, sdeg in zip(noise_xy, noise_deg, strict=True):
-        scale = np.array([sxy, sxy, math.radians(sdeg)])
-        spec = Disturbance(refs, unit * scale, mismatch, delay)
+        spec = _scaled(refs, unit, mismatch, sxy, sdeg, latency)
         m = disturbed_metrics(spec, params, controller=name, **run)
         condition = {
             "controller": name,
@@ -235,8 +238,6 @@ def robot_defaults(controller: Any, robot: Robot | None = None) -> Any:
     On another robot than the paper's, ``shim-sung`` runs ``paper_feasible_gains(robot)``
     and ``shim-sung-schedule`` them as constant tables; else ``None`` (the defaults).
     """
-    from wmr_jax._src.model.controllers.schedule import SCHEDULE, ScheduleParams
-    from wmr_jax._src.model.robots import same_robot
     from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
 
     name = controllers.get_controller(controller).name
@@ -244,8 +245,8 @@ def robot_defaults(controller: Any, robot: Robot | None = None) -> Any:
         return None
     if name == controllers.SHIM_SUNG.name:
         return paper_feasible_gains(robot)
-    if name == SCHEDULE.name:
-        return ScheduleParams.from_gains(paper_feasible_gains(robot), robot=robot)
+    if name == controllers.SCHEDULE.name:
+        return controllers.ScheduleParams.from_gains(paper_feasible_gains(robot), robot=robot)
     return None
 
 

@@ -69,16 +69,14 @@ _sweep_jit = loops.EntryJit(loops.batched(_sweep_one), static_argnames=("options
 
 @dataclasses.dataclass(frozen=True)
 class _Job:
-    """A checked sweep: its inputs, options and chunks (``*_mask``: which leaves are batched)."""
+    """A checked sweep: its inputs ``(refs, gains, init, robot)``, options and chunks.
 
-    refs: Any
+    ``mask`` is ``inputs``' tree of bools: which leaves have one row per run.
+    """
+
+    inputs: tuple[Any, Any, Any, Any]
+    mask: tuple[Any, Any, Any, Any]
     n: int
-    gains: Any
-    gains_mask: Any
-    robot: Any
-    robot_mask: Any
-    init: Any
-    batched_init: bool
     dt: float
     options: loops.Options
     thresholds: metrics.Thresholds
@@ -89,19 +87,6 @@ class _Job:
     @property
     def chunks(self) -> int:
         return math.ceil(self.n / self.chunk)
-
-    def bounds(self, i: int) -> tuple[int, int]:
-        return i * self.chunk, min(self.n, (i + 1) * self.chunk)
-
-
-def _pose_count(refs: Any) -> int:
-    """``N`` of ``(N, 3)`` references from their shape alone (a memmap stays on disk)."""
-    shape = np.shape(refs) if getattr(refs, "shape", None) is None else refs.shape
-    if len(shape) != 2 or shape[1] != 3 or shape[0] < 1:
-        raise ValueError(
-            f"refs has shape {tuple(shape)}; allowed: (N, 3) with N >= 1 [x cm, y cm, theta rad]"
-        )
-    return int(shape[0])
 
 
 def _per_run_or_shared(tree: Any, n: int, name: str) -> Any:
@@ -147,7 +132,13 @@ def _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, device
     """Check every input (on a one-pose sample of the batch) and plan the chunks."""
     if isinstance(refs, (list, tuple)):  # lists work as arrays (a memmap stays as it is)
         refs = checks.real_array("refs", refs, "rows of real numbers [x cm, y cm, θ rad]")
-    n = _pose_count(refs)
+    # N from the shape alone: a memmap stays on disk.
+    shape = np.shape(refs) if getattr(refs, "shape", None) is None else refs.shape
+    if len(shape) != 2 or shape[1] != 3 or shape[0] < 1:
+        raise ValueError(
+            f"refs has shape {tuple(shape)}; allowed: (N, 3) with N >= 1 [x cm, y cm, theta rad]"
+        )
+    n = int(shape[0])
     chunk_size = checks.check_int("chunk_size", chunk_size)
     devices = tuple(checked_devices(jax.local_devices() if devices is None else devices))
     gains = options.controller.default_params() if gains is None else gains
@@ -165,25 +156,15 @@ def _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, device
     batched_init = np.ndim(init) == 2
     if batched_init and np.shape(init)[0] != n:
         raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,), (1, 3) or ({n}, 3)")
-    gains_mask, robot_mask = _batched_leaves(gains, n), _batched_leaves(robot, n)
-    simulation.prepare(
-        np.asarray(refs[:1], dtype=float),
-        _take(gains, gains_mask, 0, 1, 0),
-        init[:1] if batched_init else init,
-        _take(robot, robot_mask, 0, 1, 0),
-        dt,
-        options,
-        batch=None,
-    )
+    inputs = (refs, gains, init, robot)
+    mask = (True, _batched_leaves(gains, n), batched_init, _batched_leaves(robot, n))
+    _, gains_1, init_1, robot_1 = _take(inputs, mask, 0, 1, 0)
+    refs_1 = np.asarray(refs[:1], dtype=float)
+    simulation.prepare(refs_1, gains_1, init_1, robot_1, dt, options, batch=None)
     return _Job(
-        refs=refs,
+        inputs=inputs,
+        mask=mask,
         n=n,
-        gains=gains,
-        gains_mask=gains_mask,
-        robot=robot,
-        robot_mask=robot_mask,
-        init=init,
-        batched_init=batched_init,
         dt=float(dt),
         options=loops.for_robot(options, robot, dt),
         thresholds=thresholds,
@@ -195,52 +176,48 @@ def _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, device
 
 @dataclasses.dataclass(frozen=True)
 class _Chunk:
-    """The host inputs of chunk ``i``: rows ``lo:hi`` padded by ``pad`` copies of the last."""
+    """Chunk ``i``: rows ``lo:hi`` of the job's inputs, padded by ``pad`` copies of the last."""
 
     i: int
     lo: int
     hi: int
     pad: int
-    refs: np.ndarray
-    init: Any
+    inputs: tuple[Any, Any, Any, Any]
 
 
 def _chunk_inputs(job: _Job, i: int) -> _Chunk:
-    lo, hi = job.bounds(i)
+    lo, hi = i * job.chunk, min(job.n, (i + 1) * job.chunk)
     pad = job.chunk - (hi - lo)
-    refs = _take(job.refs, True, lo, hi, pad)
-    init = _take(job.init, True, lo, hi, pad) if job.batched_init else job.init
-    return _Chunk(i, lo, hi, pad, refs, init)
+    return _Chunk(i, lo, hi, pad, _take(job.inputs, job.mask, lo, hi, pad))
 
 
 def _chunk_digest(job: _Job, chunk: _Chunk) -> str:
     """The digest of everything per pose in a chunk (what a stored chunk is matched by)."""
-    lo, hi, pad = chunk.lo, chunk.hi, chunk.pad
-    per_pose = [chunk.refs, chunk.init if job.batched_init else np.zeros(0)]
-    for tree, mask in ((job.gains, job.gains_mask), (job.robot, job.robot_mask)):
-        per_pose += jax.tree.leaves(_take(tree, mask, lo, hi, pad))
-    return files.digest(*per_pose)
+    refs, gains, init, robot = chunk.inputs
+    per_pose = [refs, init if job.mask[2] else np.zeros(0)]
+    return files.digest(*per_pose, *jax.tree.leaves(gains), *jax.tree.leaves(robot))
 
 
 def _check_chunk(job: _Job, chunk: _Chunk) -> None:
     """Check every row of a chunk as ``final_poses`` checks a batch (rows of the whole batch)."""
     size = chunk.hi - chunk.lo
+    refs, gains, init, robot = chunk.inputs
+    _, gains_mask, batched_init, robot_mask = job.mask
     try:
-        checks.as_poses("refs", np.asarray(chunk.refs[:size]), batch=True, check_only=True)
-        if job.batched_init:
-            checks.as_poses("init", np.asarray(chunk.init[:size]), batch=True, check_only=True)
+        checks.as_poses("refs", np.asarray(refs[:size]), batch=True, check_only=True)
+        if batched_init:
+            checks.as_poses("init", np.asarray(init[:size]), batch=True, check_only=True)
     except ValueError as err:  # "refs[3] = ..." of the chunk is row lo + 3 of the batch
         row = r"^(refs|init)\[(\d+)\]"
         text = re.sub(row, lambda m: f"{m[1]}[{chunk.lo + int(m[2])}]", str(err))
         raise ValueError(text) from None
-    lo, hi = chunk.lo, chunk.hi
     try:
-        if any(jax.tree.leaves(job.gains_mask)):
-            job.options.controller.validate(_take(job.gains, job.gains_mask, lo, hi, 0))
-        if any(jax.tree.leaves(job.robot_mask)):
-            validate_robot(_take(job.robot, job.robot_mask, lo, hi, 0))
+        if any(jax.tree.leaves(gains_mask)):
+            job.options.controller.validate(_take(gains, gains_mask, 0, size, 0))
+        if any(jax.tree.leaves(robot_mask)):
+            validate_robot(_take(robot, robot_mask, 0, size, 0))
     except ValueError as err:
-        raise ValueError(f"{err} (among runs {lo} to {hi - 1})") from None
+        raise ValueError(f"{err} (among runs {chunk.lo} to {chunk.hi - 1})") from None
 
 
 def _launcher(job: _Job) -> Callable[[_Chunk], Any]:
@@ -249,24 +226,15 @@ def _launcher(job: _Job) -> Callable[[_Chunk], Any]:
     spread = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
     shared = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
 
-    def put(leaf: Any, batched: bool) -> jax.Array:
+    def put(leaf: Any, batched: bool = False) -> jax.Array:
         return jax.device_put(np.asarray(leaf, job.dtype), spread if batched else shared)
 
-    def place(tree: Any, mask: Any) -> Any:
-        return jax.tree.map(put, tree, mask)
+    thresholds = jax.tree.map(put, job.thresholds)
 
     def launch(chunk: _Chunk) -> Any:
-        lo, hi, pad = chunk.lo, chunk.hi, chunk.pad
-        params = (_take(job.gains, job.gains_mask, lo, hi, pad), job.thresholds)
-        params_mask = (job.gains_mask, metrics.Thresholds(False, False, False, False))
-        return _sweep_jit(
-            place(chunk.refs, True),
-            place(params, params_mask),
-            place(chunk.init, job.batched_init),
-            place(_take(job.robot, job.robot_mask, lo, hi, pad), job.robot_mask),
-            jax.device_put(np.asarray(job.dt, job.dtype), shared),
-            options=job.options,
-        )
+        refs, gains, init, robot = jax.tree.map(put, chunk.inputs, job.mask)
+        dt = put(job.dt)
+        return _sweep_jit(refs, (gains, thresholds), init, robot, dt, options=job.options)
 
     return launch
 
@@ -391,14 +359,7 @@ def sweep(
     Returns:
         A dict of ``(N,)`` NumPy arrays keyed by ``SWEEP_FIELDS``.
     """
-    options = simulation.make_options(
-        steps=steps,
-        velocity=velocity,
-        controller=controller,
-        temperature=temperature,
-        substeps=substeps,
-        wheel_limit=wheel_limit,
-    )
+    options = simulation.make_options(**simulation._static_options(locals()))
     thresholds = metrics.Thresholds(
         tol_r=checks.check_number("tol_r", tol_r, low=0.0, unit="cm"),
         tol_theta=checks.check_number("tol_theta", tol_theta, high=math.pi / 2, unit="rad"),

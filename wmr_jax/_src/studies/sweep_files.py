@@ -59,15 +59,16 @@ def settings(job: _Job) -> dict[str, Any]:
     """Everything but the reference poses that decides a chunk's results."""
     chosen = ("steps", "velocity", "controller", "temperature", "substeps", "wheel_limit")
     options = {name: getattr(job.options, name) for name in chosen}
+    _, gains, init, robot = job.inputs
     return {
         "n": job.n,
         "chunk": job.chunk,
         "dtype": job.dtype.name,
         "options": {**options, "controller": job.options.controller.name},
         "dt": job.dt,
-        "gains": tree_description(job.gains),
-        "robot": tree_description(job.robot),
-        "init": "per pose" if job.batched_init else tree_description(job.init),
+        "gains": tree_description(gains),
+        "robot": tree_description(robot),
+        "init": "per pose" if np.ndim(init) == 2 else tree_description(init),
         "thresholds": [float(t) for t in job.thresholds],
         # A change of the code that computes (the law, a loop, a metric) must
         # not reuse old chunks, even under one version number.
@@ -135,9 +136,7 @@ class ChunkStore:
     def path(self, i: int) -> Path:
         return self.folder / f"chunk_{i:06d}.npz"
 
-    def load(
-        self, i: int, digest: str, size: int, job: _Job | None = None
-    ) -> dict[str, np.ndarray] | None:
+    def load(self, i: int, digest: str, size: int, job: _Job) -> dict[str, np.ndarray] | None:
         """Chunk ``i``'s results if its file is intact and was made from these inputs.
 
         A damaged or altered file is not used, with a one-line warning.
@@ -164,7 +163,7 @@ class ChunkStore:
         if set(values) != set(self.fields) or any(v.shape != (size,) for v in values.values()):
             warnings.warn(f"{self.path(i)} has unexpected contents; recomputing it", stacklevel=4)
             return None
-        why = None if job is None else implausible(job, values)
+        why = implausible(job, values)
         if why is not None:
             # Written with a valid checksum but not by this sweep's arithmetic.
             warnings.warn(f"{self.path(i)} holds {why}; recomputing it", stacklevel=4)
@@ -180,12 +179,7 @@ class ChunkStore:
 
 
 def implausible(job: _Job, values: dict[str, np.ndarray]) -> str | None:
-    """Why a chunk read back cannot be this sweep's result, or ``None`` if it can be.
-
-    Its final poses must be finite, its arrivals ``inf`` or whole periods
-    within the horizon, its successes where the arrival is finite, and its
-    paths, wheel speeds and zig-zag counts non-negative.
-    """
+    """Why a chunk read back cannot be this sweep's result, or ``None`` if it can be."""
     pose = np.stack([values[name] for name in ("final_x", "final_y", "final_theta")], axis=1)
     if not np.isfinite(pose).all():
         return "a final pose that is not finite"

@@ -27,6 +27,7 @@ from wmr_jax._src.sim import rollout as simulation
 from wmr_jax._src.sim.loops import Options
 from wmr_jax._src.sim.poses import HORIZON_S
 from wmr_jax._src.sim.rollout import DEFAULT_DT, Trajectory
+from wmr_jax._src.studies.robustness import robot_defaults, study_horizon
 
 # A soccer-like sequence on a 160 cm × 120 cm pitch, (x cm, y cm, θ deg): run to
 # the ball, turn it upfield, dribble, cut back, return to defend, face the goal.
@@ -76,7 +77,6 @@ def _chain_single(spec, params, init, robot, dt, options: Options) -> ChainRun:
     waypoints, tolerances = spec
     n_legs = waypoints.shape[0]
     pass_r, pass_theta, final_r, final_theta = (tolerances[i] for i in range(4))
-    dtype = waypoints.dtype
 
     def fold(acc, pose, out):
         k, leg, reached_at, run_start = acc
@@ -108,7 +108,7 @@ def _chain_single(spec, params, init, robot, dt, options: Options) -> ChainRun:
         acc=start,
         record=True,
     )
-    arrival = _period_end(reached_at.at[-1].set(run_start), dt, dtype)
+    arrival = _period_end(reached_at.at[-1].set(run_start), dt, waypoints.dtype)
     # The leg of period k: the waypoints reached before it.
     periods = jnp.arange(options.steps, dtype=jnp.int32)[:, None]
     passed = (reached_at[None, :-1] >= 0) & (reached_at[None, :-1] < periods)
@@ -136,19 +136,15 @@ def _track_single(refs, params, init, robot, dt, options: Options) -> TrackRun:
     settled = jnp.cumprod(ok[::-1].astype(jnp.int32))[::-1]
     run_start = jnp.where(ok[-1], settled.shape[0] - jnp.sum(settled), -1)
     arrival = _period_end(run_start, dt, refs.dtype)
-    return TrackRun(_as_trajectory(init, poses, out), _distance(poses, refs), arrival)
+    # The distance r_e to each period's reference, cm, NaN-safe at 0.
+    d_sq = (refs[..., 0] - poses[..., 0]) ** 2 + (refs[..., 1] - poses[..., 1]) ** 2
+    error = jnp.where(d_sq > 0, jnp.sqrt(jnp.where(d_sq > 0, d_sq, 1.0)), 0.0)
+    return TrackRun(_as_trajectory(init, poses, out), error, arrival)
 
 
 def _period_end(period: jax.Array, dt: jax.Array, dtype: Any) -> jax.Array:
     """The time at the end of ``period`` (int32, ``-1`` for never: ``inf``), s."""
     return jnp.where(period >= 0, (period + 1).astype(dtype) * dt, jnp.inf)
-
-
-def _distance(pose: jax.Array, ref: jax.Array) -> jax.Array:
-    """The distance between the positions of two poses, cm (NaN-safe at 0)."""
-    d_sq = (ref[..., 0] - pose[..., 0]) ** 2 + (ref[..., 1] - pose[..., 1]) ** 2
-    positive = d_sq > 0
-    return jnp.where(positive, jnp.sqrt(jnp.where(positive, d_sq, 1.0)), 0.0)
 
 
 def _as_trajectory(init, poses, out) -> Trajectory:
@@ -425,8 +421,6 @@ def soccer_study(
     Returns:
         A ``SoccerStudy``.
     """
-    from wmr_jax._src.studies.robustness import robot_defaults
-
     names = controllers.controller_names(controller_names)
     robot = validate_one_robot(robot, "soccer_study")
     # Every setting is checked before the first controller runs (and compiles).
@@ -449,8 +443,6 @@ def soccer_study(
 
 def soccer_steps(robot: Robot | None = None, steps: int = SOCCER_STEPS) -> int:
     """The paper robot's ``steps`` of the soccer route, stretched as ``study_horizon(robot)``."""
-    from wmr_jax._src.studies.robustness import study_horizon
-
     steps = checks.check_int("steps", steps)
     return math.ceil(steps * study_horizon(robot) / HORIZON_S - 1e-9)
 
