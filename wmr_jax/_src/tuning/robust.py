@@ -532,15 +532,7 @@ def tune_robust(
     joint, dt = joint_problem(config), DEFAULT_DT
     stream = jax.random.fold_in(jax.random.key(config.seed), 11)
     search_refs = sample_poses(jax.random.fold_in(stream, -1 % 2**31), config.search_poses)
-    budget = None
-    if config.compare:
-        # Equal compute, whatever the load: the searches score as many
-        # candidates as the gradient's iterations and validations cost.
-        price = iteration_price(
-            problem, state, _scorer(search_refs, jax.random.key(0), robot, dt, joint, config.noise)
-        )  # fmt: skip
-        validated = len(state.validated) * config.validation_poses / config.search_poses
-        budget = {"price": price, "candidates": state.iteration * price + validated}
+    polished = 0
     if config.tuner == "hybrid":
         # CMA-ES on the hard-law score from the kept iterate, scored first so
         # never worse on the search poses; a run resumed after its kept
@@ -552,21 +544,27 @@ def tune_robust(
             std=config.polish_std,
         )  # fmt: skip
         tuned, cpu = tuned._replace(robot=robot), cpu + clock() - began
-        if budget is not None:
-            budget["candidates"] += polished
     if on_tuned is not None:
         on_tuned(tuned, list(state.losses))
     sets = {"paper": paper_feasible_gains(robot), "robust-tuned": tuned}
-    searches = {}
+    searches, budget = {}, None
     if config.compare:
-        budget["candidates"] = max(1, round(budget["candidates"]))
+        # Equal compute: the searches score as many candidates as the
+        # gradient's iterations (priced by timing both in turn, so that the
+        # load falls on both alike), its validations and the polish cost.
+        price = iteration_price(
+            problem, state, _scorer(search_refs, jax.random.key(0), robot, dt, joint, config.noise)
+        )  # fmt: skip
+        validated = len(state.validated) * config.validation_poses / config.search_poses
+        candidates = max(1, round(state.iteration * price + validated + polished))
+        budget = {"price": price, "candidates": candidates}
         for method in ("random search", "cma-es"):
             if method == "cma-es" and not evosax_available():
                 continue
             key = jax.random.fold_in(jax.random.key(config.seed), 12 + len(searches))
             searches[method] = black_box(
                 method, key, search_refs, math.inf, robot, dt, joint, config.noise,
-                candidates=budget["candidates"],
+                candidates=candidates,
             )  # fmt: skip
             sets[method] = searches[method][0]
     held_out = held_out_poses(config.eval_poses, EVAL_SEED)
