@@ -59,6 +59,7 @@ from wmr_jax._src.tuning.trainer import TrainState, TuneResult
 EVAL_NOISE_SEED = 0
 
 TUNERS = ("gradient", "hybrid")
+GENERATION = 8  # candidates per black-box generation, one batch each
 _NOISE_LEVEL_MAX = 2.0  # training noise up to twice the sensor's level
 # The standard pose noise (σ_xy cm, σ_θ degrees): that of the noisy standard conditions.
 _STANDARD_NOISE = next((c[1], c[2]) for c in disturbances.STANDARD_CONDITIONS if c[1])
@@ -424,7 +425,7 @@ def iteration_price(problem, state, scores, rounds=5):
     """
     dtype = float_dtype()
     temperature = jnp.asarray(problem.temperature_end, dtype)
-    generation = jnp.broadcast_to(state.z, (8, state.z.shape[0]))
+    generation = jnp.broadcast_to(state.z, (GENERATION, state.z.shape[0]))
 
     def iteration():
         out = trainer.train_step(
@@ -472,12 +473,12 @@ def black_box(
     best = (start, float(scores(start[None])[0]))
     tell = None
     if method == "cma-es":
-        propose, tell = cma_es_proposals(key, start, 8, std, split=False)
+        propose, tell = cma_es_proposals(key, start, GENERATION, std, split=False)
     else:
 
         def propose(generation: int) -> Any:
             k = jax.random.fold_in(key, generation + 1)
-            return jax.random.logistic(k, (8, start.shape[0]), float_dtype())
+            return jax.random.logistic(k, (GENERATION, start.shape[0]), float_dtype())
 
     best_z, _, count = search_loop(
         propose, scores, budget_s, began=began, best=best, count=1, tell=tell,
