@@ -250,3 +250,35 @@ def test_a_robust_comparison_of_the_wall_time_format_is_not_resumed(tmp_path, mo
     path.write_text(json.dumps(saved))
     with pytest.raises(ValueError, match=r"holds another comparison \(other format\)"):
         robust_run.run_comparison(tmp_path, config, resume=True, progress=None)
+
+
+def test_one_core_confines_the_process_only_before_jax_starts(monkeypatch):
+    confined = []
+    monkeypatch.setattr(search_module.os, "sched_getaffinity", lambda pid: {5, 3, 7})
+    pin = lambda pid, cpus: confined.append(cpus)  # noqa: E731
+    monkeypatch.setattr(search_module.os, "sched_setaffinity", pin)
+    # This process's JAX has run already: its thread pool is sized, so nothing changes.
+    assert search_module.one_core() is False and confined == []
+    monkeypatch.setattr(search_module.xla_bridge, "backends_are_initialized", lambda: False)
+    assert search_module.one_core() is True
+    assert confined == [{3}]  # one core of those allowed, the process's own threads to come
+    monkeypatch.delattr(search_module.os, "sched_setaffinity")
+    assert search_module.one_core() is False  # a platform without affinity: run as it is
+
+
+@pytest.mark.parametrize("robust_flag", [[], ["--robust"]])
+def test_the_comparisons_and_only_they_run_on_one_core(monkeypatch, tmp_path, robust_flag):
+    from wmr_jax._src.cli import tune as cli_tune
+    from wmr_jax._src.cli import tune_robust as cli_robust
+    from wmr_jax.cli import main
+
+    calls = []
+    monkeypatch.setattr(search_module, "one_core", lambda: calls.append("one core") or True)
+    compare = cli_robust if robust_flag else cli_tune
+    monkeypatch.setattr(compare, "_compare", lambda *a, **k: calls.append("compare") or 0)
+    assert main(["tune", *robust_flag, "--compare", "--out", str(tmp_path / "c")]) == 0
+    assert calls == ["one core", "compare"]  # before the comparison's first computation
+    calls.clear()
+    monkeypatch.setattr(cli_robust, "run", lambda args: calls.append("tune") or 0)
+    assert main(["tune", "--robust", "--out", str(tmp_path / "t")]) == 0
+    assert calls == ["tune"]  # a tuning run keeps every core

@@ -251,6 +251,10 @@ def run(args: Any) -> int:
     from wmr_jax._src.model.robots import describe_robot
 
     _check_modes(args)
+    if args.compare:  # before JAX starts: CPU time then counts the work (search.one_core)
+        from wmr_jax._src.tuning.search import one_core
+
+        one_core()
     if args.robust:
         from wmr_jax._src.cli import tune_robust
 

@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import time
 from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax._src import xla_bridge  # backends_are_initialized: no public spelling
 
 from wmr_jax._src.checks import (
     as_poses,
@@ -148,6 +150,24 @@ def _hard_law_search(
 def clock() -> float:
     """Process CPU time, s: every budget's clock, the same work however busy the machine is."""
     return time.process_time()
+
+
+def one_core() -> bool:
+    """Confine this process to one of its cores; call it before JAX's first computation.
+
+    XLA sizes its CPU thread pool to the cores the process may use. With
+    several, process CPU time also counts the pool's threads waiting on each
+    other, and how much depends on the machine's load; on one core every
+    computation runs on one thread and ``clock`` counts the work alone. The
+    equal-compute comparisons run so (docs/robustness.md, "At equal compute").
+    Does nothing once JAX's runtime has started (its pool is sized then) or
+    where the platform has no ``os.sched_setaffinity``. Returns whether it confined.
+    """
+    started = getattr(xla_bridge, "backends_are_initialized", lambda: True)
+    if started() or not hasattr(os, "sched_setaffinity"):
+        return False
+    os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    return True
 
 
 def search_loop(
