@@ -1,9 +1,10 @@
 """Where the gradient, CMA-ES and random search win as the robust problem grows, at equal CPU time.
 
 The comparison of ``wmr-jax tune --robust --compare`` (``robust_run.compare_seed``:
-the gradient tuner's process CPU time, compile included, is each search's
-budget; all judged with the hard law under the standard conditions on the
-same held-out poses and draws) on joint problems of growing size:
+each search scores as many candidates as the gradient's iterations cost,
+``robust.iteration_price``, on one core like the CLI's, ``search.one_core``;
+all judged with the hard law under the standard conditions on the same
+held-out poses and draws) on joint problems of growing size:
 
 - 38 parameters: the gain schedule of 10 knots per table (35) and the EKF (3);
 - 101: the schedule of 31 knots (98) and the EKF;
@@ -31,7 +32,7 @@ import numpy as np
 
 from wmr_jax._src import io
 from wmr_jax._src.model.params import Robot
-from wmr_jax._src.tuning import robust_run
+from wmr_jax._src.tuning import robust_run, search
 from wmr_jax._src.tuning.robust import RobustConfig, condition_score
 
 # Parameters -> (schedule knots, estimator, observer knots per table).
@@ -125,6 +126,7 @@ def main() -> None:
     if args.table:
         print(table(json.loads(args.out.read_text(encoding="utf-8"))), end="")
         return
+    search.one_core()
     settings = {
         "iters": args.iters,
         "poses": args.poses,
