@@ -284,7 +284,6 @@ class ClosedLoopStep:
 
 
 def _select(flag: jax.Array, on_true: Any, on_false: Any) -> Any:
-    """``on_true`` where ``flag`` else ``on_false``, leaf by leaf (pytrees of one structure)."""
     return jax.tree.map(lambda a, b: jnp.where(flag, a, b), on_true, on_false)
 
 

@@ -229,7 +229,6 @@ def finite_result(poses: Any, result: Any, *, pose_axes: int = 1) -> Any:
 
 @functools.partial(jax.jit, static_argnums=1)
 def _finite_runs(poses: jax.Array, axes: tuple[int, ...]) -> jax.Array:
-    """Whether each run's poses are all finite."""
     return jnp.isfinite(poses).all(axis=axes)
 
 

@@ -110,7 +110,6 @@ def _per_run_or_shared(tree: Any, n: int, name: str) -> Any:
 
 
 def _batched_leaves(tree: Any, n: int) -> Any:
-    """Map each leaf to True if it carries the batch axis ``(n, ...)``."""
     return jax.tree.map(lambda leaf: np.ndim(leaf) >= 1 and np.shape(leaf)[0] == n, tree)
 
 

@@ -238,7 +238,6 @@ def saved_rows(
 
 
 def _json_type(value: Any) -> str:
-    """The JSON name of a parsed value's type."""
     names = {dict: "object", list: "array", str: "string", bool: "boolean", type(None): "null"}
     return names.get(type(value), "number")
 
