@@ -63,17 +63,11 @@ def _wait_for_idle(limit_s: float, *, threshold: float = 0.1, window_s: float = 
 def time_group(
     calls: dict[str, tuple[Callable[[], Any], bool]], repeats: int, *, wait_idle: float = 0.0
 ) -> dict:
-    """Time several calls, interleaved, so that they see the same machine load.
+    """Time ``calls`` (``name -> (call, compiled)``) interleaved, under the same machine load.
 
-    Args:
-        calls: ``name -> (call, compiled)``; a ``compiled`` call gets a first,
-            untimed call whose extra time is reported as its compile time.
-        repeats: timed calls of each.
-        wait_idle: before each round of calls, wait up to this many seconds
-            for the machine to be idle (0: do not wait).
-
-    Returns:
-        ``name -> Timing``.
+    Each is called ``repeats`` times; a ``compiled`` one first gets an untimed call, whose
+    extra time is its compile time. Before each round, wait up to ``wait_idle`` s for an idle
+    machine. Returns ``name -> Timing``.
     """
     import jax
 

@@ -93,19 +93,11 @@ def around(content: Mapping[str, Any]) -> Centred:
 
 
 def draw(key: jax.Array, refs: jax.Array, steps: int, ranges: Centred, mass: float = 0.0):
-    """One ``Disturbance`` per reference drawn from ``ranges`` (traceable).
+    """One ``Disturbance`` per reference of ``refs (N, 3)`` drawn from ``ranges`` (traceable).
 
-    Args:
-        key: a ``jax.random`` key.
-        refs: ``(N, 3)`` reference poses.
-        steps: control periods per run (static).
-        ranges: the ``Centred`` ranges.
-        mass: the body-mass factor's bound, ``1 + U(−mass, mass)`` (non-ideal loop).
-
-    Returns:
-        A ``Disturbance``: ``mismatch (N, 3)`` the two wheel scales and the
-        mass factor, ``noise (N, steps, 3)`` Gaussian with each run's own
-        σ_xy and σ_θ, ``delay (N,)`` one of ``ranges.latency``.
+    ``mismatch (N, 3)``: the two wheel scales and the mass factor ``1 + U(−mass, mass)``
+    (non-ideal loop); ``noise (N, steps, 3)``: Gaussian with each run's own σ_xy and
+    σ_θ; ``delay (N,)``: one of ``ranges.latency``. ``steps`` is static.
     """
     n, dtype = refs.shape[0], refs.dtype
     k_scale, k_level, k_noise, k_delay = jax.random.split(key, 4)
