@@ -14,7 +14,10 @@ from wmr_jax._src.tuning import search as search_module
 
 KEY = jax.random.key(0)
 REFS = np.array([[30.0, 10.0, 1.0], [-20.0, 15.0, -2.0]])
-TINY = tuning.TuneConfig(iters=2, poses=2, eval_poses=2, horizon=0.3, random_search=False)
+# The problem of tests/test_tuning_best.py: one compiled training step and evaluation for both.
+TINY = tuning.TuneConfig(
+    iters=6, poses=2, eval_poses=2, horizon=0.3, random_search=False, validate_every=2
+)
 
 
 def _trained_states(config):
@@ -52,15 +55,15 @@ def test_train_refuses_a_state_of_another_problem_or_run():
         ("iteration", np.asarray(1.7), r"iteration = array\(1.7\) is not a whole number"),
         ("iteration", np.asarray(True), r"iteration = array\(True\) is not a whole number"),
         ("elapsed_s", np.asarray(-5.0), r"elapsed time finite and >= 0 \(elapsed_s = -5.0\)"),
-        ("temperatures", np.asarray([-1.0, 0.1]), r"temperatures must be > 0"),
-        ("gains", np.ones((2, 2)), r"rows of 2 parameters; allowed: 7"),
-        ("opt_0", np.asarray(-3, np.int32), r"optimiser step counts \[-3, 2\]"),
+        ("temperatures", np.asarray([-1.0] + [0.1] * 5), r"temperatures must be > 0"),
+        ("gains", np.ones((6, 2)), r"rows of 2 parameters; allowed: 7"),
+        ("opt_0", np.asarray(-3, np.int32), r"optimiser step counts \[-3, 6\]"),
     ],
 )
 def test_restore_state_refuses_a_corrupt_state(name, value, message):
     arrays = tuning.state_arrays(_trained_states(TINY)[-1])
     fresh = tuning.init_state(TINY)
-    assert tuning.restore_state(arrays, fresh).iteration == 2
+    assert tuning.restore_state(arrays, fresh).iteration == 6
     with pytest.raises(ValueError, match=message):
         tuning.restore_state({**arrays, name: value}, fresh)
 
