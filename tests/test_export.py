@@ -480,7 +480,8 @@ def test_evaluate_c_judges_the_compiled_controller_as_the_file(tmp_path, robust_
     out = tmp_path / "ctl"
     assert main(["export", "--gains", robust_file, "--out", str(out)]) == 0
     refs = tmp_path / "refs.npy"
-    np.save(refs, w.sample_poses(11, 30))
+    # As many runs as the closed-loop test above: the JAX side reuses its compiled loop.
+    np.save(refs, w.sample_poses(11, 150))
     common = ["--refs", str(refs), "--condition", "both"]
     assert main(["evaluate", "--c", str(out), *common, "--json", str(tmp_path / "c.json")]) == 0
     assert (

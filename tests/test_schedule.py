@@ -169,16 +169,18 @@ def test_a_schedule_float32_cannot_hold_is_refused_there():
 
 
 def test_a_schedule_the_sampled_law_cannot_settle_with_warns():
+    # The runs of test_lists_are_values_and_batches_must_agree: its compiled program.
+    refs = random_refs(0, 3)
     # At the goal the tables take their first knots: k_θ dt = 200 * 0.033 = 6.6.
     fast = tuning.ScheduleParams(kr=(100.0,) * 10, k_theta=(200.0,) * 10, k_turn=(200.0,) * 10)
     with pytest.warns(w.SamplingWarning, match=r"k_theta\*dt = 6\.6"):
-        w.final_poses(random_refs(0, 4), fast, controller=SCHEDULE, steps=3)
+        w.final_poses(refs, fast, controller=SCHEDULE, steps=5)
     # Large knots away from the goal are the schedule's point and do not warn.
     far = (10.0,) * 5 + (60.0,) * 5
     wide = tuning.ScheduleParams(kr=(60.0,) * 10, k_theta=far, k_turn=far)
     with warnings.catch_warnings():
         warnings.simplefilter("error", w.SamplingWarning)
-        w.final_poses(random_refs(0, 4), wide, controller=SCHEDULE, steps=3)
+        w.final_poses(refs, wide, controller=SCHEDULE, steps=5)
 
 
 def test_the_sampling_margin_of_gains_near_float32s_limit_is_finite():

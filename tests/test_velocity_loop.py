@@ -147,10 +147,16 @@ def test_velocity_state_carries_over_between_samples():
 
 
 def test_batch_row_equals_single_nonideal():
-    refs = random_refs(9, 6)
-    batch = w.batch_rollout(refs, velocity="nonideal", steps=SINGLE_STEPS)
-    single = w.rollout(refs[4], velocity="nonideal", steps=SINGLE_STEPS)
-    np.testing.assert_allclose(np.asarray(batch.poses[4]), np.asarray(single.poses), atol=1e-12)
+    # The batch of test_nonideal_rollout_matches_reference[clip-default], its
+    # compiled program: a run's first periods do not depend on how many follow.
+    refs = random_refs(17, 3)
+    batch = w.batch_rollout(
+        refs, w.Gains(kr=60.0), robot=ROBOTS["default"], velocity="nonideal", steps=120
+    )
+    single = w.rollout(refs[1], w.Gains(kr=60.0), velocity="nonideal", steps=SINGLE_STEPS)
+    np.testing.assert_allclose(
+        np.asarray(batch.poses[1, : SINGLE_STEPS + 1]), np.asarray(single.poses), atol=1e-12
+    )
 
 
 def test_gradients_wrt_robot_parameters_match_differences():
