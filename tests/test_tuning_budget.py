@@ -259,7 +259,9 @@ def test_one_core_confines_the_process_only_before_jax_starts(monkeypatch):
     monkeypatch.setattr(search_module.os, "sched_setaffinity", pin)
     # This process's JAX has run already: its thread pool is sized, so nothing changes.
     assert search_module.one_core() is False and confined == []
-    monkeypatch.setattr(search_module.xla_bridge, "backends_are_initialized", lambda: False)
+    from jax._src import xla_bridge
+
+    monkeypatch.setattr(xla_bridge, "backends_are_initialized", lambda: False)
     assert search_module.one_core() is True
     assert confined == [{3}]  # one core of those allowed, the process's own threads to come
     monkeypatch.delattr(search_module.os, "sched_setaffinity")

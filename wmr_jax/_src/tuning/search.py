@@ -16,7 +16,6 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax._src import xla_bridge  # backends_are_initialized: no public spelling
 
 from wmr_jax._src.checks import (
     as_poses,
@@ -157,13 +156,17 @@ def one_core() -> bool:
 
     XLA sizes its CPU thread pool to the cores the process may use. With
     several, process CPU time also counts the pool's threads waiting on each
-    other, and how much depends on the machine's load; on one core every
-    computation runs on one thread and ``clock`` counts the work alone. The
+    other, and how much depends on the machine's load; on one core the pool
+    cannot spread a computation, and ``clock`` counts the work. The
     equal-compute comparisons run so (docs/robustness.md, "At equal compute").
-    Does nothing once JAX's runtime has started (its pool is sized then) or
-    where the platform has no ``os.sched_setaffinity``. Returns whether it confined.
+    Does nothing once JAX's runtime has started (its pool is sized then),
+    where that cannot be told, or where the platform has no
+    ``os.sched_setaffinity``. Returns whether it confined.
     """
-    started = getattr(xla_bridge, "backends_are_initialized", lambda: True)
+    try:  # JAX has no public spelling of this
+        from jax._src.xla_bridge import backends_are_initialized as started
+    except ImportError:
+        return False
     if started() or not hasattr(os, "sched_setaffinity"):
         return False
     os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
