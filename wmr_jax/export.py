@@ -22,20 +22,3 @@ from wmr_jax._src.export.host import compiled_metrics as compiled_metrics
 from wmr_jax._src.export.host import evaluate_compiled as evaluate_compiled
 from wmr_jax._src.export.host import exported_loop as exported_loop
 from wmr_jax._src.export.host import read_metadata as read_metadata
-
-__all__ = [
-    "MAX_LATENCY",
-    "REALS",
-    "CSources",
-    "c_sources",
-    "write_sources",
-    "CFLAGS",
-    "CompiledController",
-    "compile_controller",
-    "compiler",
-    "sanitizers_work",
-    "compiled_metrics",
-    "evaluate_compiled",
-    "exported_loop",
-    "read_metadata",
-]
