@@ -15,13 +15,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks import is_traced
+from wmr_jax._src.checks import MAX_STEPS, is_traced
 from wmr_jax._src.model import dynamics
 from wmr_jax._src.model.params import Robot
 
 DEFAULT_SUBSTEPS = 10
-
-MAX_SUBSTEPS = 2**31 - 1  # a scan's length is an int32
 # RK4 is stable on ẏ = −k y for k h < 2.785; keep a margin, the loop is
 # nonlinear once torques saturate.
 _MAX_STIFFNESS = 2.5
@@ -311,7 +309,7 @@ def check_stability(robot: Robot, dt: float, substeps: int) -> None:
         need = math.ceil(need) if math.isfinite(need) else math.inf
         allowed = (
             f"substeps >= {need}"
-            if need <= MAX_SUBSTEPS
+            if need <= MAX_STEPS
             else f"a smaller speed_gain or integral_gain ({need:.3g} substeps, beyond 2^31 - 1)"
         )
         raise ValueError(
