@@ -141,16 +141,17 @@ def schedule_commands(
     # Where d = 0 the robot does not drive (v = 0), so its turn gain may be other.
     k_theta = k_theta + (1 - d * d) * (_table(params.k_turn, err.r) - k_theta)
     # The fixed-gain law itself, with the gains of this state.
-    gains = Gains(
-        kr=_table(params.kr, err.r),
-        k_theta=k_theta,
-        **{name: getattr(params, name) for name in SHAPE_FIELDS},
-    )
+    gains = _fixed_gains(params, _table(params.kr, err.r), k_theta)
     v, omega = commands(err, gains, temperature=temperature)
     omega_max = params.v_max / params.half_track
     omega = jnp.clip(omega, -omega_max, omega_max)
     budget = params.v_max - params.half_track * jnp.abs(omega)  # ≥ 0 by the clip above
     return jnp.clip(v, -budget, budget), omega
+
+
+def _fixed_gains(params: ScheduleParams, kr: Any, k_theta: Any) -> Gains:
+    """The fixed-gain law's ``Gains``: ``kr``, ``k_theta`` and the schedule's shape fields."""
+    return Gains(kr=kr, k_theta=k_theta, **{name: getattr(params, name) for name in SHAPE_FIELDS})
 
 
 def _command(pose, ref, params, *, temperature=None, frame=None):
@@ -182,8 +183,7 @@ def validate_schedule(params: ScheduleParams) -> ScheduleParams:
         raise ValueError(
             f"the tables have {sorted(sizes)} knots; allowed: kr, k_theta, k_turn of one length"
         )
-    shape = Gains(kr=1.0, k_theta=1.0, **{name: getattr(params, name) for name in SHAPE_FIELDS})
-    validate_gains(shape, prefix="params")
+    validate_gains(_fixed_gains(params, 1.0, 1.0), prefix="params")
     for name, unit in (("v_max", "cm/s"), ("half_track", "cm")):
         _check_positive(f"params.{name}", getattr(params, name), f"a finite {name} > 0, {unit}")
     require_one_batch_size(batch_sizes({"params": params}))  # knots and fields alike
@@ -212,11 +212,7 @@ def _check_robot(params: ScheduleParams, robot: Robot) -> None:
 def _check_sampling(params: ScheduleParams, dt: Any) -> None:
     # Settling is decided at the goal, where the law is the fixed-gain one with
     # the first knots and no cap is active (docs/model.md §4).
-    at_goal = Gains(
-        kr=params.kr[0],
-        k_theta=params.k_theta[0],
-        **{name: getattr(params, name) for name in SHAPE_FIELDS},
-    )
+    at_goal = _fixed_gains(params, params.kr[0], params.k_theta[0])
     sampled(at_goal, dt, stacklevel=5)  # the schedule and dt checked by the rollout
 
 
