@@ -211,10 +211,7 @@ def check_temperature(name: str, value: Any) -> float:
 
 
 def check_dt(dt: Any) -> Any:
-    """Return the control period ``dt`` as a float: finite, > 0, and so in the compute dtype.
-
-    A period the compute dtype rounds to zero or infinity is refused here.
-    """
+    """Return the control period ``dt`` as a float: > 0 and finite in the compute dtype."""
     if isinstance(dt, jax.core.Tracer):
         return dt
     value = check_number("dt", dt, unit="s")
@@ -312,6 +309,11 @@ def batch_sizes(trees: dict[str, Any], poses: dict[str, Any] | None = None) -> d
 def common_batch_size(trees: dict[str, Any], poses: dict[str, Any] | None = None) -> int:
     """The batch size ``N`` shared by every batched input (``batch_sizes``); 1 if none is."""
     return require_one_batch_size(batch_sizes(trees, poses)) or 1
+
+
+def drop_shared_axes(tree: Any) -> Any:
+    """``tree`` with each leading axis of size 1 (one value every run shares) taken off."""
+    return jax.tree.map(lambda a: a[0] if jnp.ndim(a) >= 1 and jnp.shape(a)[0] == 1 else a, tree)
 
 
 def require_unbatched(tree: Any, prefix: str, allowed: str) -> None:
@@ -530,10 +532,7 @@ def position_limit(dtype: Any = None) -> float:
 
 
 def as_pose_array(name: str, value: Any) -> Any:
-    """Return ``value`` as checked float poses of any batch shape ``(..., 3)`` (tracers pass).
-
-    The checks of ``as_poses``, for functions that broadcast poses.
-    """
+    """Return ``value`` as poses of any batch shape ``(..., 3)``, checked as ``as_poses`` does."""
     if is_traced(value):
         return value
     arr = real_array(name, value, "real numbers (..., 3) [x cm, y cm, theta rad]", objects=True)

@@ -23,6 +23,7 @@ from wmr_jax._src.checks import (
     check_substeps,
     check_temperature,
     common_batch_size,
+    drop_shared_axes,
     float_dtype,
     is_traced,
     require_finite_runs,
@@ -157,13 +158,7 @@ def _common_batch(refs, params, init, robot):
             "refs has shape (3,) and nothing else is batched; allowed: refs (N, 3), "
             "init (N, 3) or gains/robot fields of shape (N,)"
         )
-    if n == 1:
-        return refs, params, init, robot
-
-    def shared(leaf):
-        return leaf[0] if jnp.ndim(leaf) >= 1 and jnp.shape(leaf)[0] == 1 else leaf
-
-    return jax.tree.map(shared, (refs, params, init, robot))
+    return (refs, params, init, robot) if n == 1 else drop_shared_axes((refs, params, init, robot))
 
 
 def prepare(

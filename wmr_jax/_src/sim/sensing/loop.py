@@ -213,12 +213,7 @@ def prepare_disturbed(
     if estimator is not None:
         sizes = {"disturbance.ref": len(refs), **checks.batch_sizes({"estimator": estimate})}
         checks.require_one_batch_size(sizes)
-
-        def shared(leaf):  # an axis of size 1 is every run's value
-            leaf = jnp.asarray(leaf, dtype)
-            return leaf[0] if leaf.ndim >= 1 and leaf.shape[0] == 1 else leaf
-
-        estimate = jax.tree.map(shared, estimate)
+        estimate = checks.drop_shared_axes(jax.tree.map(lambda v: jnp.asarray(v, dtype), estimate))
         options = dataclasses.replace(options, estimator=estimator)
     return (spec, params, estimate, init, robot, dt), options
 
