@@ -126,17 +126,13 @@ def validate_gains(gains: Gains, prefix: str = "gains") -> Gains:
     return gains
 
 
-_POSITIVE_ROBOT_FIELDS = (
-    "half_track",
-    "v_max",
-    "body_mass",
-    "body_diameter",
-    "wheel_radius",
-    "wheel_mass",
-    "torque_max",
-    "speed_gain",
-)
 NON_NEGATIVE_ROBOT_FIELDS = ("integral_gain", "accel_max", "angular_accel_max")
+# Every other field but com_offset (either sign, inside the body) is a size, mass or gain > 0.
+_POSITIVE_ROBOT_FIELDS = tuple(
+    f.name
+    for f in dataclasses.fields(Robot)
+    if f.name not in (*NON_NEGATIVE_ROBOT_FIELDS, "com_offset")
+)
 
 
 def validate_robot(robot: Robot) -> Robot:
