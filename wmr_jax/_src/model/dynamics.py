@@ -1,9 +1,9 @@
 """Robot motion over one control period: the ideal velocity loop (docs/model.md §4).
 
 The ideal robot follows the held command at once, so the unicycle kinematics
-(Eq. 2) integrate exactly to an arc: ``arc_advance``, on the position ``x + i y``
-and heading ``cos θ + i sin θ`` as complex numbers. ``sin_cos`` is a polynomial
-cosine and sine, which XLA:CPU vectorises where ``jnp.sin``/``jnp.cos`` do not.
+(Eq. 2) integrate exactly to an arc (``arc_factors``, ``arc_apply``) of the
+position ``x + i y`` and heading ``cos θ + i sin θ``, complex numbers. ``sin_cos``
+is a polynomial cosine and sine, which XLA:CPU vectorises, unlike ``jnp.sin``.
 """
 
 from __future__ import annotations
@@ -201,33 +201,16 @@ def _half_turn_small(u: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
     return cos_u, u * sinc_u, sinc_u
 
 
-def arc_advance(
-    position: jax.Array,
-    heading: jax.Array,
-    v: jax.Array,
-    omega: jax.Array,
-    h: jax.Array,
-    *,
-    small_turn: bool = False,
-) -> tuple[jax.Array, jax.Array]:
-    """Advance the robot by ``h`` seconds at constant ``(v, ω)``, exactly (docs/model.md §4).
-
-    The robot turns by ``ω h`` and moves along the chord ``v h sinc(ω h / 2)``
-    in the direction ``θ + ω h / 2``. ``position`` ``x + i y`` cm and
-    ``heading`` ``cos θ + i sin θ`` are complex; ``small_turn``: the caller
-    guarantees ``|ω h| ≤ π/2`` (static).
-    """
-    turn, chord = arc_factors(v, omega, h, small_turn=small_turn)
-    return arc_apply(position, heading, turn, chord)
-
-
 def arc_factors(
     v: jax.Array, omega: jax.Array, h: jax.Array, *, small_turn: bool = False
 ) -> tuple[jax.Array, jax.Array]:
-    """The parts of ``arc_advance`` that depend on the motion only: ``(e, chord)``.
+    """The exact arc of ``(v, ω)`` held for ``h`` s, apart from the pose it moves (§4).
 
-    ``e = cos(ω h / 2) + i sin(ω h / 2)`` and ``chord = v h sinc(ω h / 2)`` cm;
-    computed once, they move any pose by the same arc (``arc_apply``).
+    The robot turns by ``ω h`` and moves along the chord ``v h sinc(ω h / 2)``
+    in the direction ``θ + ω h / 2``. Returns ``(e, chord)``, ``e = cos(ω h / 2)
+    + i sin(ω h / 2)`` and the chord in cm: computed once, they move any pose by
+    the same arc (``arc_apply``). ``small_turn``: the caller guarantees
+    ``|ω h| ≤ π/2`` (static).
     """
     half_turn = 0.5 * omega * h
     if small_turn:
@@ -241,20 +224,21 @@ def arc_factors(
 def arc_apply(
     position: jax.Array, heading: jax.Array, turn: jax.Array, chord: jax.Array
 ) -> tuple[jax.Array, jax.Array]:
-    """Move ``(position, heading)`` along the arc of ``arc_factors``; returns both, complex."""
+    """Move ``position`` (``x + i y`` cm) and ``heading`` (``cos θ + i sin θ``) by the arc."""
     mid_heading = heading * turn
     # One complex expression: on the real and imaginary parts XLA:CPU is slower.
     return position + chord * mid_heading, mid_heading * turn
 
 
 def arc_step(pose: jax.Array, v: jax.Array, omega: jax.Array, h: jax.Array) -> jax.Array:
-    """Advance ``pose`` by ``h`` seconds at constant ``(v, ω)``: ``arc_advance`` on a pose.
+    """Advance ``pose`` by ``h`` seconds at constant ``(v, ω)``, exactly (docs/model.md §4).
 
     ``pose``: ``(..., 3)`` ``[x cm, y cm, θ rad]``; ``v`` cm/s, ``omega`` rad/s, ``h`` s.
     """
     x, y, theta = pose[..., 0], pose[..., 1], pose[..., 2]
     cos_theta, sin_theta = sin_cos(theta)
-    position, _ = arc_advance(
-        jax.lax.complex(x, y), jax.lax.complex(cos_theta, sin_theta), v, omega, h
+    turn, chord = arc_factors(v, omega, h)
+    position, _ = arc_apply(
+        jax.lax.complex(x, y), jax.lax.complex(cos_theta, sin_theta), turn, chord
     )
     return jnp.stack([position.real, position.imag, theta + omega * h], axis=-1)

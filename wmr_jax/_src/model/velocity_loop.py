@@ -224,9 +224,8 @@ def advance_split(
         wheel = jax.lax.optimization_barrier(wheel)
         new = wheel[0] if integral else wheel  # the stored one (not new_v, new_w)
         mean_v, mean_w = 0.5 * (velocity.real + new.real), 0.5 * (velocity.imag + new.imag)
-        position, heading = dynamics.arc_advance(
-            position, heading, mean_v, mean_w, h, small_turn=small_turn
-        )
+        turn, chord = dynamics.arc_factors(mean_v, mean_w, h, small_turn=small_turn)
+        position, heading = dynamics.arc_apply(position, heading, turn, chord)
         # Distance and turn in one accumulator |v| h + i ω h: one loop, not two.
         covered = jax.lax.complex(covered.real + jnp.abs(mean_v) * h, covered.imag + mean_w * h)
         return (position, heading, wheel, covered), None
