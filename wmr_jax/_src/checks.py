@@ -431,11 +431,8 @@ def as_poses(
 ) -> jax.Array | None:
     """Return ``value`` as a float pose array after checking shape and finiteness.
 
-    Args:
-        name: the argument's name, for error messages.
-        value: a pose ``(3,)`` or, where ``batch`` allows, a batch ``(N, 3)``.
-        batch: ``False`` for a single pose, ``True`` for ``(N, 3)``, ``None`` for either.
-        check_only: only check, return ``None`` (no converted copy is made).
+    ``batch``: ``False`` for one pose ``(3,)``, ``True`` for ``(N, 3)``, ``None``
+    for either; ``check_only``: return ``None``, no converted copy.
     """
     if isinstance(value, jax.core.Tracer):
         return value

@@ -144,10 +144,7 @@ def shard(batch: Any, devices: Sequence[Any] | None = None) -> ShardedBatch:
 
 
 def _rows(name: str, batch: list) -> Any:
-    """Read a list as rows of one batch (numbers), or as a pytree of batches (arrays).
-
-    A list of one-dimensional arrays could be either, and is refused.
-    """
+    """Read a list as rows of one batch (numbers), or as a pytree of batches (arrays)."""
     arrays = [isinstance(row, (np.ndarray, jax.Array)) for row in batch]
     if any(arrays):
         if all(arrays) and all(np.ndim(row) == 1 for row in batch):

@@ -114,10 +114,7 @@ _REQUIRED = ("command", "validate")  # the rest may be None
 
 
 def _check_signature(name: Any, field: str, function: Any) -> None:
-    """Refuse a ``Controller`` function the package cannot call (it would fail inside a scan).
-
-    A signature Python cannot read (some builtins) passes.
-    """
+    """Refuse a ``Controller`` function the package cannot call; an unreadable signature passes."""
     if not callable(function):
         return
     try:
