@@ -387,12 +387,20 @@ class Parameters:
     """What every parameter dataclass shares (``Gains``, ``Robot``, the baselines' gains).
 
     A list or tuple given for a field becomes one NumPy array (one batched
-    field, not a pytree of leaves), and ``replace`` returns a changed copy.
+    field, not a pytree of leaves), or for a field of ``_TABLES`` a tuple of
+    knots (one leaf each); ``replace`` returns a changed copy.
     """
+
+    _TABLES: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         for field in dataclasses.fields(self):
-            object.__setattr__(self, field.name, list_as_array(getattr(self, field.name)))
+            value = getattr(self, field.name)
+            if field.name in self._TABLES and isinstance(value, (list, tuple)):
+                value = tuple(list_as_array(knot) for knot in value)
+            else:
+                value = list_as_array(value)
+            object.__setattr__(self, field.name, value)
 
     def replace(self, **changes: Any) -> Any:
         """Return a copy with the given fields changed."""

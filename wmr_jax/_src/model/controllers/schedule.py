@@ -23,7 +23,6 @@ from wmr_jax._src.checks import (
     batch_sizes,
     check_int,
     field_array,
-    list_as_array,
     require,
     require_one_batch_size,
 )
@@ -74,15 +73,7 @@ class ScheduleParams(Parameters):
     alpha: Any = 0.25
     v_max: Any = float(_ROBOT.v_max)
     half_track: Any = float(_ROBOT.half_track)
-
-    def __post_init__(self) -> None:
-        """Keep each table a tuple of knots (one leaf each); other lists become arrays."""
-        for name in TABLES:
-            table = getattr(self, name)
-            if isinstance(table, (list, tuple)):
-                object.__setattr__(self, name, tuple(list_as_array(knot) for knot in table))
-        for name in (*SHAPE_FIELDS, "v_max", "half_track"):
-            object.__setattr__(self, name, list_as_array(getattr(self, name)))
+    _TABLES = TABLES
 
     @classmethod
     def from_gains(

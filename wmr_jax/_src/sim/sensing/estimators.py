@@ -20,7 +20,6 @@ from wmr_jax._src.checks import (
     Parameters,
     check_bool,
     is_traced,
-    list_as_array,
     real_array,
     require,
     require_one_batch_size,
@@ -65,12 +64,7 @@ class ObserverParams(Parameters):
     position: Any = _DEFAULT_GAINS
     heading: Any = _DEFAULT_GAINS
     compensate: bool = dataclasses.field(default=True, metadata={"static": True})
-
-    def __post_init__(self) -> None:
-        for name in ("position", "heading"):
-            table = getattr(self, name)
-            if isinstance(table, (list, tuple)):
-                object.__setattr__(self, name, tuple(list_as_array(k) for k in table))
+    _TABLES = ("position", "heading")
 
 
 @jax.tree_util.register_dataclass
