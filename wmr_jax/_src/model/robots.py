@@ -190,11 +190,7 @@ def describe_robot(robot: Robot) -> str:
 
 
 def robot_json(robot: Robot) -> dict[str, float]:
-    """Return one robot as ``{field: float}`` in ``ROBOT_FIELDS`` order (JSON-ready).
-
-    Raises:
-        ValueError: for anything but one valid robot (a number per field).
-    """
+    """Return one valid robot (a number per field) as ``{field: float}``, ``ROBOT_FIELDS`` order."""
     robot = validate_robot(robot)
     require_unbatched(robot, "robot", "one robot, a number per field")
     return _floats(robot)
@@ -253,11 +249,7 @@ def robot_from_values(values: Any, where: str) -> Robot:
 
 
 def check_units(units: Any, where: str) -> None:
-    """Check a file's ``"robot_units"``: each unit named must be the library's for that field.
-
-    Raises:
-        ValueError: one line naming ``where``, the field and both units.
-    """
+    """Check a file's ``"robot_units"``: each unit named must be the library's for that field."""
     if not isinstance(units, Mapping):
         raise ValueError(
             f"{where}: robot_units = {units!r:.60} is not allowed; allowed: an object "
