@@ -396,7 +396,8 @@ class _Filter:
         self.cov = 0.5 * (cov + cov.T)
 
 
-def _checked_noise(noise: Any) -> np.ndarray:
+def _checked_disturbance(noise: Any, mismatch: Any, delay: Any) -> tuple[np.ndarray, tuple, int]:
+    """One run's checked noise ``(steps, 3)``, ``(left, right)`` rim factors and latency."""
     arr = real_array("noise", noise, "(steps, 3) real numbers [cm, cm, rad]")
     if arr.ndim != 2 or arr.shape[1] != 3 or not 1 <= arr.shape[0] <= MAX_STEPS:
         raise ValueError(f"noise has shape {arr.shape}; allowed: (steps, 3), steps >= 1")
@@ -407,23 +408,15 @@ def _checked_noise(noise: Any) -> np.ndarray:
             f"noise holds {float(arr[~ok][0])!r}; allowed: finite numbers, |x|, |y| noise <= "
             f"{limit:.0e} cm and heading noise <= {MAX_HEADING:.0e} rad"
         )
-    return arr
-
-
-def _checked_mismatch(mismatch: Any) -> tuple[float, float]:
     allowed = "(left, right) rim factors > 0, or (left, right, mass) (mass unused: ideal loop)"
-    arr = real_array("mismatch", mismatch, allowed)
-    if arr.shape not in ((2,), (3,)) or not np.all(np.isfinite(arr) & (arr > 0)):
-        raise ValueError(f"mismatch = {arr.tolist()} is not allowed; allowed: {allowed}")
-    return float(arr[0]), float(arr[1])
-
-
-def _checked_delay(delay: Any) -> int:
+    factors = real_array("mismatch", mismatch, allowed)
+    if factors.shape not in ((2,), (3,)) or not np.all(np.isfinite(factors) & (factors > 0)):
+        raise ValueError(f"mismatch = {factors.tolist()} is not allowed; allowed: {allowed}")
     allowed = "an integer number of samples m >= 0"
-    arr = real_array("delay", delay, allowed)
-    if arr.shape != () or not (np.isfinite(arr) and arr >= 0 and np.floor(arr) == arr):
+    late = real_array("delay", delay, allowed)
+    if late.shape != () or not (np.isfinite(late) and late >= 0 and np.floor(late) == late):
         raise ValueError(f"delay = {delay!r} is not allowed; allowed: {allowed}")
-    return int(arr)
+    return arr, (float(factors[0]), float(factors[1])), int(late)
 
 
 @_in_float64
@@ -459,8 +452,8 @@ def reference_disturbed_rollout(
     kind, params = resolve_estimator(estimator)
     require_unbatched(params, "estimator", "a number (the reference runs one pose)")
     ref, (x, y, th) = _one_pose("ref", ref), _one_pose("init", init)
-    noise, (f_left, f_right) = _checked_noise(noise), _checked_mismatch(mismatch)
-    late, dt = _checked_delay(delay), float(check_dt(dt))
+    noise, (f_left, f_right), late = _checked_disturbance(noise, mismatch, delay)
+    dt = float(check_dt(dt))
     half_track, steps = float(robot.half_track), noise.shape[0]
 
     def law(pose: tuple) -> tuple[float, float]:
