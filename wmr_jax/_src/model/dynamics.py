@@ -17,8 +17,6 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-_NEAREST_EVEN = lax.RoundingMethod.TO_NEAREST_EVEN  # what jnp.round does
-
 # Below this |u| the series 1 − u²/6 + u⁴/120 equals sin(u)/u to float64
 # precision (the next term is u⁶/5040 < 1e-27), and sin(u)/u would lose digits.
 _SINC_SERIES_BELOW = 1e-3
@@ -130,7 +128,7 @@ def sin_cos(angle: jax.Array) -> tuple[jax.Array, jax.Array]:
     # In lax: the jnp spelling's operations bit for bit, at half its cost to trace.
     const = _constants(angle)
     p1, p2, p3 = (const(p) for p in _PIO2[dtype])
-    k = lax.round(lax.mul(angle, const(2 / np.pi)), _NEAREST_EVEN)
+    k = lax.round(lax.mul(angle, const(2 / np.pi)), lax.RoundingMethod.TO_NEAREST_EVEN)
     r = lax.sub(lax.sub(lax.sub(angle, lax.mul(k, p1)), lax.mul(k, p2)), lax.mul(k, p3))
     z = lax.mul(r, r)
     sin_r = lax.add(r, lax.mul(lax.mul(r, z), _polynomial(z, _SIN[dtype])))

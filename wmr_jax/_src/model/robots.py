@@ -286,9 +286,6 @@ class LoadedRobot(NamedTuple):
     accelerations: Mapping[str, float] | None = None
 
 
-_SUFFIXES = (".json", ".yaml", ".yml")
-
-
 def read_robot(source: Any) -> LoadedRobot:
     """Read a robot from a preset name or a ``.json`` / ``.yaml`` file; say what was used.
 
@@ -305,7 +302,7 @@ def read_robot(source: Any) -> LoadedRobot:
         )
     where = repr(text)
     path = Path(text)
-    if path.suffix.lower() not in _SUFFIXES:
+    if path.suffix.lower() not in (".json", ".yaml", ".yml"):
         raise ValueError(
             f"{where} is not allowed; allowed: a preset ({', '.join(ROBOTS)}), or a file "
             "ending in .json (Robot fields) or .yaml/.yml (a ROS diff_drive_controller)"
