@@ -158,7 +158,9 @@ def _common_batch(refs, params, init, robot):
             "refs has shape (3,) and nothing else is batched; allowed: refs (N, 3), "
             "init (N, 3) or gains/robot fields of shape (N,)"
         )
-    return (refs, params, init, robot) if n == 1 else drop_shared_axes((refs, params, init, robot))
+    if n == 1:
+        return refs, params, init, robot
+    return drop_shared_axes((refs, params, init, robot))
 
 
 def prepare(
