@@ -131,7 +131,6 @@ def schedule_commands(
     k_theta = _table(params.k_theta, err.r)
     # Where d = 0 the robot does not drive (v = 0), so its turn gain may be other.
     k_theta = k_theta + (1 - d * d) * (_table(params.k_turn, err.r) - k_theta)
-    # The fixed-gain law itself, with the gains of this state.
     gains = _fixed_gains(params, _table(params.kr, err.r), k_theta)
     v, omega = commands(err, gains, temperature=temperature)
     omega_max = params.v_max / params.half_track
