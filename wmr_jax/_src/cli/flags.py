@@ -187,14 +187,9 @@ def gain_flag_values(params: Any) -> list[str]:
 
 
 def gains_from(args: Any) -> Any:
-    """The ``Gains`` of the gain flags, or of ``--gains FILE`` (not both), in the flags' units."""
+    """The ``Gains`` of the gain flags, given in the flags' units."""
     from wmr_jax._src.model.params import Gains, validate_gains
 
-    if getattr(args, "gains", None) is not None:
-        given = given_gain_flags(args)
-        if given:
-            raise ValueError(f"{given[0]} is not allowed with --gains; allowed: one or the other")
-        return gains_file("--gains", args.gains)
     values = {}
     for _, field, _, unit, *_ in _GAIN_FLAGS:
         value = number(gain_flag(args, field), getattr(args, field), unit=unit)
@@ -246,19 +241,6 @@ def tuned_file(flag: str, path: Any) -> Any:
                 "the tuned_gains.json of wmr-jax tune, or a JSON object of Gains fields"
             ) from None
         raise ValueError(f"{flag} {head} cannot be read: {os_reason(reason)}") from None
-
-
-def gains_file(flag: str, text: str) -> Any:
-    """The fixed ``Gains`` stored in a file such as ``tuned_gains.json`` (not a schedule)."""
-    from wmr_jax._src.model.params import Gains
-
-    loop = tuned_file(flag, text)[0]
-    if not isinstance(loop.params, Gains):
-        raise ValueError(
-            f"{flag} {text!r} is not allowed here: it holds a gain schedule; allowed: a file "
-            "of fixed gains (wmr-jax simulate --gains runs a schedule)"
-        )
-    return loop.params
 
 
 # The add_argument keywords of --float32 for a command that computes in float64 by default.
