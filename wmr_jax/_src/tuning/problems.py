@@ -136,14 +136,10 @@ def _schedule_problem(knots: int) -> Problem:
         gains = fixed.PAPER_FEASIBLE_GAINS
         # turn_gain_max's bound in float64 (turn_gain_max may round to float32).
         omega_max = max(float(robot.v_max) / float(robot.half_track), 1.0 / DEFAULT_DT)
-        unit = fixed.unit_from_gains(gains, robot)
-
-        def inside(value: float, bounds: tuple[float, float]) -> float:
-            return float(np.clip((value - bounds[0]) / (bounds[1] - bounds[0]), 1e-3, 1 - 1e-3))
-
-        kr = inside(gains.kr / float(robot.v_max), _KR)
-        kt = inside(gains.k_theta / omega_max, _K_THETA)
-        return np.concatenate([[kr] * knots, [kt] * knots, [kt] * knots, unit[2:]])
+        kr = fixed._unlerp(gains.kr / float(robot.v_max), _KR)
+        kt = fixed._unlerp(gains.k_theta / omega_max, _K_THETA)
+        tables = np.clip([kr] * knots + [kt] * (2 * knots), 1e-3, 1 - 1e-3)
+        return np.concatenate([tables, fixed.unit_from_gains(gains, robot)[2:]])
 
     def row(params: ScheduleParams) -> tuple[float, ...]:
         values = [float(x) for table in TABLES for x in getattr(params, table)]
