@@ -70,6 +70,19 @@ def _runs(refs: Any, key: jax.Array, robot: Robot, horizon: Any, dt: float, mism
 MODEL_ROBOT = "model robot"
 
 
+def _standard_table(factors: np.ndarray, noise: Any) -> list[tuple]:
+    """The model robot, then each standard condition: ``(label, σ_xy cm, σ_θ °, latency, wheels)``.
+
+    ``factors``: the runs' wheel factors ``(N, 3)``; ``noise``: ``(σ_xy, σ_θ)`` of the noisy ones.
+    """
+    table = [(MODEL_ROBOT, 0.0, 0.0, False, np.ones_like(factors))]
+    for label, sxy, sdeg, latency in STANDARD_CONDITIONS:
+        if noise is not None and sxy:
+            sxy, sdeg = noise
+        table.append((label, sxy, sdeg, latency, factors))
+    return table
+
+
 def standard_conditions(
     params_by_name: dict[str, Any],
     refs: Any,
@@ -126,13 +139,8 @@ def standard_conditions(
         )
     sets, robot = _loops(params_by_name, "params_by_name", controller, estimator, robot)
     refs, unit, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
-    conditions = [(MODEL_ROBOT, 0.0, 0.0, False, np.ones((len(refs), 3)))]
-    for label, sxy, sdeg, latency in STANDARD_CONDITIONS:
-        if noise is not None and sxy:
-            sxy, sdeg = noise
-        conditions.append((label, sxy, sdeg, latency, factors))
     rows = []
-    for label, sxy, sdeg, latency, wheels in conditions:
+    for label, sxy, sdeg, latency, wheels in _standard_table(factors, noise):
         spec = _scaled(refs, unit, wheels, sxy, sdeg, latency)
         for name, loop in sets.items():
             row, m = _judged(spec, loop, dt, robot, x64, horizon)

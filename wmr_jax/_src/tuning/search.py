@@ -251,7 +251,7 @@ def robust_population_scores(
     One ``disturbed_metrics`` call per standard condition over every
     candidate's runs; the arguments as for ``robust_score`` (``robot`` checked).
     """
-    from wmr_jax._src.sim.sensing.disturbances import STANDARD_CONDITIONS, STANDARD_MISMATCH
+    from wmr_jax._src.sim.sensing.disturbances import STANDARD_MISMATCH
     from wmr_jax._src.sim.sensing.loop import disturbed_metrics
     from wmr_jax._src.studies import conditions
 
@@ -272,13 +272,9 @@ def robust_population_scores(
         return np.tile(a, (size,) + (1,) * (a.ndim - 1))
 
     refs, unit, factors = tiled(refs), tiled(unit), tiled(factors)
-    table = [(0.0, 0.0, False, np.ones_like(factors))]  # the model robot
-    for _, sxy, sdeg, latency in STANDARD_CONDITIONS:
-        if noise is not None and sxy:
-            sxy, sdeg = noise
-        table.append((sxy, sdeg, latency, factors))
+    table = conditions._standard_table(factors, noise)
     total = np.zeros(size)
-    for sxy, sdeg, latency, wheels in table:
+    for _, sxy, sdeg, latency, wheels in table:
         m = disturbed_metrics(
             conditions._scaled(refs, unit, wheels, sxy, sdeg, latency), params,
             controller=loops[0].controller, estimator=estimate, dt=dt, robot=robot, x64=False,
