@@ -242,9 +242,6 @@ def _json_type(value: Any) -> str:
     return names.get(type(value), "number")
 
 
-# ---------------------------------------------------------------- a resumable comparison
-
-
 def comparison_settings(robot: Robot, **fields: Any) -> dict[str, Any]:
     """What a resumed comparison must match: ``fields``, the robot and the code (JSON as read)."""
     from wmr_jax._src.model.robots import robot_json

@@ -150,9 +150,6 @@ def make_spec(*, controller: Any = SHIM_SUNG, **given: Any) -> LossSpec:
     )
 
 
-# ---------------------------------------------------------------- one run
-
-
 def arrival_terms(dist: jax.Array, head: jax.Array, softness: Any) -> tuple[jax.Array, jax.Array]:
     """``(a, log(1 + q + p))`` of one sample, ``a = σ((1 − q)/s) σ((1 − p)/s)`` the relaxed test.
 
@@ -262,9 +259,6 @@ _batch_loss_jit = jax.jit(batch_loss, static_argnames=("spec",))
 _batch_terms_jit = jax.jit(_batch_terms, static_argnames=("spec",))
 
 
-# ---------------------------------------------------------------- robust gradient
-
-
 def robust_value_and_grad(
     z, refs, init, robot, dt, spec: LossSpec, temperature, pose_clip, problem: Problem = FIXED
 ):
@@ -316,14 +310,10 @@ def capped_mean(values, grads, pose_clip=1.0):
 _robust_jit = loops.jit_top_level(robust_value_and_grad, static_argnames=("spec", "problem"))
 
 
-# ---------------------------------------------------------------- public entry points
-
-
 def _prepared(gains: Any, refs: Any, temperature: Any, options: dict[str, Any]) -> tuple:
     """Check every argument (before tracing); return ``(spec, temperature, prepared args)``.
 
-    ``gains`` ``None`` checks the rest against the paper's feasible gains; a
-    ``ScheduleParams`` selects the gain-scheduled law.
+    ``gains``: ``None`` is the paper's feasible gains; a ``ScheduleParams``, the schedule.
     """
     unknown = sorted(set(options) - set(_OPTION_DEFAULTS))
     if unknown:

@@ -20,9 +20,6 @@ CHECKPOINT_NAME = "checkpoint.npz"
 CHECKPOINT_FORMAT = 3
 
 
-# ---------------------------------------------------------------- checkpoints
-
-
 def load_checkpoint(path: Path, fresh: Any, identity: dict[str, Any]) -> Any:
     """Restore a checkpoint into ``fresh``'s structure; refuse a damaged one or another run's."""
     advice = "remove it to start over"
@@ -60,9 +57,6 @@ def load_checkpoint(path: Path, fresh: Any, identity: dict[str, Any]) -> Any:
         return trainer.restore_state(arrays, fresh)
     except ValueError as err:
         raise ValueError(f"--resume: checkpoint {path}: {err}; {advice}") from None
-
-
-# ---------------------------------------------------------------- the run
 
 
 def _progress(

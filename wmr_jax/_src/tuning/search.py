@@ -284,8 +284,6 @@ def robust_population_scores(
     return total / len(table)
 
 
-# ---------------------------------------------------------------- CMA-ES
-
 # The run options of ``cma_es_search`` not given: ``random_search``'s defaults.
 _RUN_DEFAULTS = {
     "dt": simulation.DEFAULT_DT,

@@ -168,9 +168,6 @@ def checked_config(config: Any, kind: type) -> Any:
     return (kind() if config is None else config).validate()
 
 
-# ---------------------------------------------------------------- optimiser
-
-
 def optimizer(hyper: Hyper) -> optax.GradientTransformation:
     """``clip_by_global_norm`` then Adam, its step cosine-decayed to a tenth.
 
@@ -211,9 +208,6 @@ def best_iteration(validated: Any, margin: float = BEST_MARGIN) -> int:
     if last_score <= lowest * (1.0 + margin):
         return last
     return max(i for i, score in validated if score == lowest)
-
-
-# ---------------------------------------------------------------- the loop
 
 
 def start_state(problem: TrainingProblem, run: str = "") -> TrainState:
@@ -310,9 +304,6 @@ def verdict(result: TuneResult, validation_poses: int) -> dict[str, Any]:
         "no_better_than_baseline": result.note is not None,
         "note": result.note,
     }
-
-
-# ---------------------------------------------------------------- identity and state files
 
 
 def run_text(config: Any, robot: Robot) -> str:

@@ -240,9 +240,6 @@ def training_poses(seed: int, iteration: int, n: int) -> jax.Array:
     return sample_poses(jax.random.fold_in(stream, iteration), n)
 
 
-# ---------------------------------------------------------------- state
-
-
 def _checked(config: TuneConfig | None, robot: Robot | None) -> tuple[TuneConfig, Robot]:
     config = trainer.checked_config(config, TuneConfig)
     return config, as_float_tree(validate_one_robot(robot, "tuning"))
@@ -261,9 +258,6 @@ def init_state(config: TuneConfig | None = None, robot: Robot | None = None) -> 
 def run_identity(config: TuneConfig | None = None, robot: Robot | None = None) -> dict[str, Any]:
     """What a saved state must match to be resumed: the settings and the robot (JSON-ready)."""
     return json.loads(trainer.run_text(*_checked(config, robot)))
-
-
-# ---------------------------------------------------------------- validation and judging
 
 
 def validation_score(config: TuneConfig, robot: Robot, params: Any, refs: Any) -> float:
