@@ -1,9 +1,7 @@
 """Gradient descent against black-box search at equal CPU time, on both tuning problems.
 
-``compare`` gives CMA-ES (``evosax``, the optional extra ``[search]``) and
-random search the gradient tuner's process CPU time (``search.clock``),
-compile included, and judges all three with the hard law on the same
-held-out poses, with the time-optimal yardsticks of ``docs/model.md §8``.
+CMA-ES needs ``evosax`` (the optional extra ``[search]``); all three are judged
+with the hard law on the same held-out poses beside the ``docs/model.md §8`` yardsticks.
 """
 
 from __future__ import annotations
@@ -75,10 +73,9 @@ def compare(
 ) -> list[dict[str, Any]]:
     """Gradient vs CMA-ES vs random search at equal CPU time, per problem and seed.
 
-    The gradient tuner runs first (``configs[problem]``, its seed replaced);
-    its CPU time is the budget of the other two, which score candidates on
-    ``config.poses`` training poses. All are judged with the hard law on the
-    same held-out poses.
+    The gradient tuner runs first (``configs[problem]``, its seed replaced); its
+    CPU time (``search.clock``, compile included) is the budget of the other two,
+    which score candidates on ``config.poses`` training poses.
 
     Args:
         seeds: seeds of the training poses and the searches.

@@ -75,9 +75,7 @@ def gradient_cost(
     repeats: int = 5,
     seed: int = 0,
 ) -> GradientCost:
-    """Time the loss and its gradient on ``poses`` × ``steps`` and read their peak memory.
-
-    Peak memory: what the compiled program allocates (XLA's ``memory_analysis``).
+    """Time the loss and its gradient on ``poses`` × ``steps``; read XLA's peak memory of each.
 
     Args:
         poses: batch size.

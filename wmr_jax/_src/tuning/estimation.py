@@ -1,9 +1,4 @@
-"""The estimator's share of a joint tuning problem, and the joint problem (``JointProblem``).
-
-Every point of the estimator's cube is a valid ``ObserverParams`` or
-``EKFParams``: the observer's gains are linear in ``u`` over ``[0.001, 1]``;
-the filter's covariances are log-uniform, since their effect is on a log scale.
-"""
+"""The estimator's share of a joint tuning problem, and the joint problem (``JointProblem``)."""
 
 from __future__ import annotations
 
@@ -30,8 +25,9 @@ from wmr_jax._src.sim.sensing.loop import ClosedLoop
 from wmr_jax._src.tuning.parametrisation import checked_point
 from wmr_jax._src.tuning.problems import FIXED, Problem
 
-_GAIN = (1e-3, 1.0)
-# log boxes of the filter's covariances: wheel_error relative, σ_xy cm, σ_θ rad
+_GAIN = (1e-3, 1.0)  # the observer's gains, linear in u
+# Log-uniform boxes of the filter's covariances (their effect is on a log scale):
+# wheel_error relative, σ_xy cm, σ_θ rad.
 _EKF_LOG = {
     "wheel_error": (math.log(1e-3), math.log(0.3)),
     "sigma_xy": (math.log(0.02), math.log(5.0)),

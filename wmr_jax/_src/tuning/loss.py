@@ -1,11 +1,8 @@
-"""The differentiable tuning loss and the robust per-pose batch gradient.
+"""The differentiable tuning loss (``docs/model.md §4, §6``) and the robust batch gradient.
 
-``tuning_loss`` is a relaxed arrival time plus a shaping term, and a
-wheel-saturation penalty for the non-ideal loop (``docs/model.md §4, §6``).
-Per-pose gradients are heavy-tailed (a run that grazes a switching surface,
-or sits parked on its reference where ``φ_e`` is undefined, can overflow in
-float32), so ``robust_gradient`` caps each at a multiple of the batch median
-and drops non-finite ones before averaging.
+Per-pose gradients are heavy-tailed (a run that grazes a switching surface, or
+sits parked on its reference where ``φ_e`` is undefined, can overflow in
+float32), so ``robust_gradient`` caps each and drops non-finite ones.
 """
 
 from __future__ import annotations
@@ -165,9 +162,8 @@ def arrival_terms(dist: jax.Array, head: jax.Array, softness: Any) -> tuple[jax.
 def recorded_arrival(poses: jax.Array, ref: jax.Array, dt: jax.Array) -> jax.Array:
     """Relaxed arrival time plus log-error shaping of one recorded run ``poses (steps, 3)``, s.
 
-    ``tuning_loss``'s per-run term (ideal loop, default weights) for the
-    robust loss. It agrees with ``_pose_loss_terms``' streamed sum to
-    rounding only, so the two stay apart and each tuner's results stay put.
+    ``tuning_loss``'s per-run term (ideal loop, default weights) for the robust
+    loss; it matches ``_pose_loss_terms``' streamed sum to rounding only, so both stay.
     """
     weights = LossWeights()
     err = law.polar_error(poses, ref)
@@ -181,10 +177,7 @@ def recorded_arrival(poses: jax.Array, ref: jax.Array, dt: jax.Array) -> jax.Arr
 
 
 def _pose_loss_terms(ref, gains, init, robot, dt, spec: LossSpec, temperature):
-    """Return ``(relaxed arrival s, integrated log-error s, saturation s)`` of one run.
-
-    The terms stream through the rollout's scan (``fold=``): no trajectory is stored.
-    """
+    """Return ``(relaxed arrival s, integrated log-error s, saturation s)`` of one run, streamed."""
     # Built in the trace: the temperature is traced, so annealing does not recompile.
     options = spec.options(temperature)
     sin_tol_sq = math.sin(spec.tol_theta) ** 2
@@ -364,9 +357,8 @@ def tuning_loss(
       ``a`` is 0 or 1. The width ``s`` asks for a small margin inside the
       tolerances.
     * ``∫ log(1 + q + p) dt`` has a gradient everywhere, where ``T̃`` has none
-      (a run far from its reference, or that never arrives); it too shrinks
-      as the arrival gets earlier (about ``log²(q₀) / (4λ)`` for an
-      exponential approach at rate λ).
+      (a run far from its reference, or that never arrives), and shrinks as
+      the arrival gets earlier.
     * Non-ideal loop only (``docs/model.md §4``): the squared shortfall of the
       rim speeds behind their commands, normalised by ``V_max``: large when the
       wheel loop's torque or ``±V_max`` limits saturate.
@@ -417,10 +409,7 @@ _STATIC_OPTIONS = tuple(name for name in _OPTION_DEFAULTS if name not in ("init"
 
 
 def loss_terms(gains: Gains, refs: Any, *, temperature: float | None, **options: Any) -> LossTerms:
-    """Return the per-run terms of ``tuning_loss`` before weighting, ``LossTerms`` of ``(N,)``, s.
-
-    ``**options``: as ``tuning_loss``'s keyword arguments.
-    """
+    """Return the unweighted per-run terms of ``tuning_loss`` (same options), ``(N,)`` each, s."""
     spec, temperature, args = _prepared(gains, refs, temperature, options)
     return _batch_terms_jit(*args, spec=spec, temperature=temperature)
 

@@ -1,10 +1,8 @@
 """Robust tuning: controller and estimator tuned together (docs/model.md §7, §9).
 
 The loss is the relaxed arrival time averaged over domain-randomised runs
-(``sample_conditions``). ``tune_robust`` runs the trainer on it, then the
-black-box searches for the same compute (``black_box``, ``iteration_price``),
-and judges all with the hard law under the standard conditions on the robot's
-horizon.
+(``sample_conditions``); ``tune_robust`` also runs the black-box searches for the
+same compute (``black_box``, ``iteration_price``) and judges all with the hard law.
 """
 
 from __future__ import annotations
@@ -101,8 +99,7 @@ class RobustConfig:
 
     problem: ClassVar[str] = "robust"
 
-    # choice: 600 iterations; at 300 the loop under noise and latency
-    # together came out slower on the held-out poses (docs/robustness.md).
+    # choice: 600 iterations, not 300 (docs/robustness.md).
     iters: int = 600
     poses: int = 32
     nonideal_poses: int = 8
@@ -279,16 +276,15 @@ def robust_score(
     robot: Robot | None = None,
     noise: tuple[float, float] | None = None,
 ) -> float:
-    """Hard-law score: mean arrival over the standard conditions, failures 2× horizon, s.
-
-    The conditions of ``standard_conditions`` on ``robot`` over its horizon.
+    """Hard-law score: mean arrival over the ``standard_conditions``, failures 2× horizon, s.
 
     Args:
         gains: ``Gains`` (raw feedback) or a ``ClosedLoop``.
         refs: ``(N, 3)`` reference poses.
         key: the draws' key.
         dt: control period, s.
-        robot: the robot; default the one ``gains`` records, else ``Robot()``.
+        robot: the robot, run over its horizon; default the one ``gains``
+            records, else ``Robot()``.
         noise: ``(σ_xy cm, σ_θ degrees)`` of the noise and both conditions;
             default the standard 0.5 cm, 1°.
     """
@@ -317,10 +313,8 @@ def condition_score(row: dict[str, Any]) -> float:
 class RobustLoss:
     """The robust tuning loss of one iteration (``TrainingProblem.loss``), hashable.
 
-    ``self(z, (key, refs, nonideal_refs), temperature, (robot, dt))`` is the
-    mean loss over the runs of ``sample_conditions`` and its gradient
-    ``(dim,)``: each run's gradient capped and non-finite ones dropped
-    (``capped_mean``), non-finite entries of the mean zeroed.
+    ``self(z, (key, refs, nonideal_refs), temperature, (robot, dt))``: the mean
+    loss over the runs of ``sample_conditions`` and its ``capped_mean`` gradient ``(dim,)``.
 
     Attributes:
         steps: control periods per run.

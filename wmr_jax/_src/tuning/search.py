@@ -1,8 +1,7 @@
 """The black-box searches, the baselines the gradient must beat: random search and CMA-ES.
 
-``search_loop`` is the one driver of every search, ``random_search``'s,
-``cma_es_search``'s and the robust tuner's (``robust.black_box``). Every
-budget is process CPU time (``clock``), the gradient tuner's included.
+``search_loop`` drives every search (``robust.black_box``'s too); every budget
+is process CPU time (``clock``), the gradient tuner's included.
 """
 
 from __future__ import annotations
@@ -154,14 +153,11 @@ def clock() -> float:
 def one_core() -> bool:
     """Confine this process to one of its cores; call it before JAX's first computation.
 
-    XLA sizes its CPU thread pool to the cores the process may use. With
-    several, process CPU time also counts the pool's threads waiting on each
-    other, and how much depends on the machine's load; on one core the pool
-    cannot spread a computation, and ``clock`` counts the work. The
-    equal-compute comparisons run so (docs/robustness.md, "At equal compute").
-    Does nothing once JAX's runtime has started (its pool is sized then),
-    where that cannot be told, or where the platform has no
-    ``os.sched_setaffinity``. Returns whether it confined.
+    On several cores ``clock`` also counts XLA's pool threads waiting on each
+    other, as much as the machine's load makes them; on one it counts the work.
+    The equal-compute comparisons run so (docs/robustness.md). Returns whether it
+    confined: not once JAX's runtime has started, where that cannot be told, or
+    without ``os.sched_setaffinity``.
     """
     try:  # JAX has no public spelling of this
         from jax._src.xla_bridge import backends_are_initialized as started

@@ -78,8 +78,7 @@ class TrainState(NamedTuple):
         opt_state: the optax state.
         losses, temperatures: of each iteration done (s; the smooth law's).
         gains: the parameters after each iteration as rows (``TrainingProblem.row``).
-        elapsed_s: process CPU time of the iterations done (all sessions;
-            ``search.clock``, the clock of every budget), s.
+        elapsed_s: process CPU time (``search.clock``) of the iterations done, all sessions, s.
         run: the run's identity (``run_text``); a state of another run is
             refused. Empty (a state built by hand): not checked.
         validated: ``(iteration, score s)`` of each validation score so far, in order.
@@ -377,9 +376,8 @@ def state_arrays(state: TrainState) -> dict[str, np.ndarray]:
 def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainState:
     """Rebuild the state of ``state_arrays`` in the structure of ``fresh`` (``init_state``).
 
-    A saved state is never trusted: non-finite values, disagreeing counts or
-    lengths, and rows not as long as ``fresh``'s start are refused in one
-    line (``ValueError``).
+    Never trusted: non-finite values, disagreeing counts or lengths, and rows not
+    as long as ``fresh``'s start are refused in one line (``ValueError``).
     """
     leaves, treedef = jax.tree.flatten(fresh.opt_state)
     try:

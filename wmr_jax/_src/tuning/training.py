@@ -1,9 +1,4 @@
-"""The fixed-gain and gain-schedule problems of the trainer, and ``train``.
-
-``train`` descends the robust batch gradient of ``tuning_loss`` from the
-paper's feasible gains, then judges the paper's, the tuned and a random
-search's gains (same CPU time) with the hard law on held-out poses.
-"""
+"""The fixed-gain and gain-schedule problems of the trainer, and ``train``."""
 
 from __future__ import annotations
 
@@ -248,8 +243,7 @@ def _checked(config: TuneConfig | None, robot: Robot | None) -> tuple[TuneConfig
 def init_state(config: TuneConfig | None = None, robot: Robot | None = None) -> TrainState:
     """Return the state before the first iteration: the paper's feasible gains, Adam at rest.
 
-    For a schedule, the paper's feasible gains as constant tables. ``ValueError``
-    for bad settings, naming the field.
+    A schedule starts from them as constant tables; ``ValueError`` names a bad field.
     """
     config, robot = _checked(config, robot)
     return trainer.start_state(gain_problem(config, robot), trainer.run_text(config, robot))
@@ -281,9 +275,10 @@ def train(
 ) -> TuneResult:
     """Tune the gains by gradient descent, then judge them with the hard law.
 
-    Writes no files and draws nothing: ``progress_fn(state)`` is called after
-    each iteration (an exception it raises stops the run), and the returned
-    result holds the gains, the history and the before/after evaluation.
+    The robust batch gradient of ``tuning_loss``, from the paper's feasible gains;
+    then the paper's, the tuned and a random search's gains (same CPU time) are
+    judged on held-out poses. Writes no files and draws nothing (an exception
+    ``progress_fn`` raises stops the run).
 
     Args:
         config: the settings; default ``TuneConfig()``.
