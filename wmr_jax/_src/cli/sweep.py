@@ -36,8 +36,7 @@ def _flags() -> dict[str, dict[str, Any]]:
             "help": "simulated time per run, s (default: the paper robot's 6 s, docs/model.md "
             "§6; for a --robot whose wheels cannot follow the paper's feasible gains, "
             "60 + 10 L > v_max, 6 s × (60 + 10 L) / v_max rounded up to 0.1 s, as those gains are "
-            "scaled to fit; "
-            "printed with the robot)",
+            "scaled to fit; printed with the robot)",
         },
         "--headings": {
             "nargs": "+",

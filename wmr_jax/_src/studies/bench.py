@@ -1,11 +1,9 @@
 """Throughput of the simulator in robot-steps per second (the engine of ``wmr-jax bench``).
 
-One robot-step is one robot simulated over one control period. The cases
-(``CASES``) are timed beside two baselines of the ideal loop: the scalar
-NumPy reference (one pose at a time) and ``numpy_final_poses`` (vectorised
-NumPy, one Python iteration per period). Cases compared with each other are
-timed in alternation, so that they share the machine's load: compare ratios
-taken in one run, not rates across runs.
+One robot-step is one robot over one control period. The cases (``CASES``) are
+timed beside the ideal loop's NumPy baselines (the scalar reference, and
+``numpy_final_poses``); cases compared with each other are timed in alternation,
+under the same load: compare ratios of one run, not rates across runs.
 """
 
 from __future__ import annotations
@@ -258,10 +256,7 @@ class _SizeBench:
         return first, last
 
     def disturbed(self) -> list[dict]:
-        """The disturbed loop (docs/model.md §7) raw and with each estimator, interleaved.
-
-        The jitted core is timed, not the checks before it.
-        """
+        """The disturbed loop's jitted core (docs/model.md §7), raw and with each estimator."""
         spec = sample_disturbance(
             jax.random.PRNGKey(self.config.seed), self.refs, self.steps, noise_xy=0.5,
             noise_theta=math.radians(1.0), radius_mismatch=0.03, latency=1.0,
@@ -404,10 +399,7 @@ class _SizeBench:
         return self.loss_rows(loss, row, "grad_tuning_loss", ("final_poses_relaxed", relaxed))
 
     def robust_loss(self) -> list[dict]:
-        """The robust tuner's loss (the schedule and the EKF), its gradient and one jvp.
-
-        The gradient is the trainer's (``robust.RobustLoss``), the jvp along the logits.
-        """
+        """The robust tuner's loss (schedule, EKF), its ``RobustLoss`` gradient, a logit jvp."""
         from wmr_jax._src.tuning import robust
 
         robot = Robot() if self.robot is None else self.robot

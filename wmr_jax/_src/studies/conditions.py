@@ -1,8 +1,4 @@
-"""Judging closed loops under the standard conditions (docs/model.md §7, §9).
-
-Every loop and condition of a study sees the same draws of noise and
-wheel-radius mismatch.
-"""
+"""Judging closed loops under the standard conditions (docs/model.md §7, §9), on shared draws."""
 
 from __future__ import annotations
 
@@ -324,7 +320,7 @@ def figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity) ->
 
 
 def _on_identified(identified, condition, refs, noise, loop, controller, dt, robot, velocity, x64):
-    """``evaluate_loop``'s metrics on an identified robot, its condition and its mismatch."""
+    """``evaluate_loop``'s metrics, condition and mismatch on an identified robot."""
     from wmr_jax._src.identify.closed_loop import identified_metrics
 
     if condition != "nominal":

@@ -1,7 +1,4 @@
-"""Pose-space maps: docs/model.md §6 metrics over grids of reference poses, per controller.
-
-Every pose is run to the horizon by ``wmr_jax.sweep``, in bounded memory.
-"""
+"""Pose-space maps: docs/model.md §6 metrics over grids of reference poses, per controller."""
 
 from __future__ import annotations
 

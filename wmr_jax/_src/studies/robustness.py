@@ -1,9 +1,7 @@
 """Robustness Monte Carlo (docs/model.md §7, §9), and what the studies share.
 
-Success and arrival of the disturbed loop against the level of pose noise,
-with wheel-radius and mass mismatch and latency. On any robot the references
-stay the docs/model.md §6 set (tolerances and noise are lengths and angles);
-the horizon scales instead (``study_horizon``).
+On any robot the references stay the docs/model.md §6 set (tolerances and noise
+are lengths and angles); the horizon scales instead (``study_horizon``).
 """
 
 from __future__ import annotations
