@@ -55,6 +55,12 @@ import pytest
 import wmr_jax as w
 
 jax.config.update("jax_enable_x64", True)
+# JAX writes the Python call stack of every operation into the programs it
+# lowers, as source locations for XLA's error messages and profiles; building
+# them costs some 8 % of the CPU time of a test that traces a robust tuning
+# step. The suite reads neither, and the compilation cache's key leaves them out.
+jax.config.update("jax_include_full_tracebacks_in_locations", False)
+jax.config.update("jax_traceback_in_locations_limit", 0)
 
 # pyproject.toml's filterwarnings names wmr_jax.WheelSpeedWarning, so pytest
 # imports wmr_jax, and JAX with it, before this file runs: JAX has read its
