@@ -71,6 +71,31 @@ def test_the_robust_loss_and_its_step_run_on_their_own():
     np.testing.assert_array_equal(problem.batch(0)[1], batch[1])
 
 
+@pytest.mark.parametrize("q, p", [(0.25, 0.0), (1.2, 0.0), (0.0, 1.2), (0.9, 0.9)])
+def test_robust_run_term_counts_a_run_just_inside_the_tolerance_as_arrived(q, p):
+    """The relaxed test is centred 0.3 beyond the tolerance; only the error beyond it is shaped.
+
+    ``q``, ``p``: the squared, tolerance-normalised distance and heading errors
+    the run holds at every sample.
+    """
+    import jax.numpy as jnp
+
+    from wmr_jax._src.sim.metrics import DEFAULT_TOL_R, DEFAULT_TOL_THETA
+    from wmr_jax._src.tuning.loss import recorded_arrival
+
+    steps, dt, ref = 50, 0.04, np.array([20.0, -10.0, 0.7])
+    ahead = np.sqrt(q) * DEFAULT_TOL_R * np.array([np.cos(0.7), np.sin(0.7)])
+    turned = np.arcsin(np.sqrt(p) * np.sin(DEFAULT_TOL_THETA))
+    poses = np.tile(np.append(ref[:2] + ahead, ref[2] + turned), (steps, 1))
+    got = float(recorded_arrival(jnp.asarray(poses), jnp.asarray(ref), jnp.asarray(dt)))
+
+    sigmoid = lambda u: 1.0 / (1.0 + np.exp(-u))  # noqa: E731
+    a = sigmoid((1.3 - q) / 0.1) * sigmoid((1.3 - p) / 0.1)
+    settled = sum(a**k for k in range(1, steps + 1))
+    shaping = 0.05 * dt * steps * np.log(1.0 + max(q - 1.0, 0.0) + max(p - 1.0, 0.0))
+    assert got == pytest.approx(dt * (1 + steps - settled) + shaping, rel=1e-5)
+
+
 def test_robust_tuning_moves_feasible_gains_and_judges_them_under_every_condition(
     tmp_path, monkeypatch
 ):
