@@ -12,7 +12,7 @@ import functools
 import math
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import jax
 import jax.numpy as jnp
@@ -391,7 +391,7 @@ class Parameters:
     knots (one leaf each); ``replace`` returns a changed copy.
     """
 
-    _TABLES: tuple[str, ...] = ()
+    _TABLES: ClassVar[tuple[str, ...]] = ()
 
     def __post_init__(self) -> None:
         for field in dataclasses.fields(self):
