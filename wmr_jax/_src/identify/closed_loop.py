@@ -190,21 +190,11 @@ def identified_rollout(
     measurement, not the true pose).
     """
     with jax.enable_x64(True):
-        true = identified["robot"]
         sigma = identified["noise"]
-        scale = np.array([identified["wheel_scale"]["left"], identified["wheel_scale"]["right"]])
         delay = int(identified["latency_samples"])
-        key = jax.random.PRNGKey(seed)
-        draws = jax.random.normal(key, (steps, 3), jnp.float64)
+        draws = jax.random.normal(jax.random.PRNGKey(seed), (steps, 3), jnp.float64)
         spread = jnp.asarray([sigma["sigma_xy"], sigma["sigma_xy"], sigma["sigma_theta"]])
-        spec = model.TrueRobot(
-            draws * spread * (1.0 if noise else 0.0),
-            jnp.asarray(scale),
-            jnp.float64(base.half_track),
-            jnp.float64(delay),
-            jnp.float64(true["half_track"]),
-            jnp.float64(true["speed_gain"]),
-        )
+        spec = true_robot(identified, base, draws * spread * (1.0 if noise else 0.0), jnp.float64)
         options = loops.for_robot(
             loops.Options(
                 steps=steps,
