@@ -66,17 +66,16 @@ for stage in $STAGES; do
       wmr-jax tune --out "$OUT/tune-robust-compare" --robust --compare ;;
     tuner-load)  # the reduced robust comparison as the machine is, then beside two CPU hogs
       rm -f docs/data/tuner_load_quiet.json docs/data/tuner_load_hog.json
-      python experiments/tuner_scaling.py --sizes 38 --iters 30 --poses 8 --eval-poses 64 \
-        --out docs/data/tuner_load_quiet.json
+      python experiments/tuner_scaling.py --sizes 38 --iters 30 --poses 8 --nonideal-poses 2 \
+        --eval-poses 64 --out docs/data/tuner_load_quiet.json
       python -c "while True: pass" & hog1=$!
       python -c "while True: pass" & hog2=$!
       trap 'kill $hog1 $hog2 2>/dev/null' EXIT
-      python experiments/tuner_scaling.py --sizes 38 --iters 30 --poses 8 --eval-poses 64 \
-        --out docs/data/tuner_load_hog.json
+      python experiments/tuner_scaling.py --sizes 38 --iters 30 --poses 8 --nonideal-poses 2 \
+        --eval-poses 64 --out docs/data/tuner_load_hog.json
       kill $hog1 $hog2 ;;
-    tuner-scaling)  # 38, 101 and 285 parameters at equal CPU time; resumes where the file stops
-      python experiments/tuner_scaling.py --sizes 38 101 285 --iters 30 --poses 8 \
-        --eval-poses 64 --out docs/data/tuner_scaling.json ;;
+    tuner-scaling)  # tune --robust --compare at 38, 101 and 285 parameters; resumes where the file stops
+      python experiments/tuner_scaling.py --sizes 38 101 285 --out docs/data/tuner_scaling.json ;;
     bench)
       wmr-jax bench --json "$OUT/bench.json" --wait-idle 60 ;;
     *) echo "unknown stage $stage" >&2; exit 2 ;;
