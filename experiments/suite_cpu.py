@@ -3,8 +3,9 @@
 As a pytest plugin it appends one line per test to the file named by
 ``SUITE_CPU``: the file, the test and the process CPU seconds of its setup,
 call and teardown. It needs nothing from the suite's own ``conftest.py``, so
-it records any commit's suite alike. Run each commit's suite in one process
-on one core from an empty compilation cache::
+it records any commit's suite alike. It appends, so start from no file. Run
+each commit's suite in one process on one core from an empty compilation
+cache::
 
     rm -rf .xla-cache && SUITE_CPU=/tmp/new.tsv PYTHONPATH=experiments \\
         taskset -c 0 python -m pytest -q -n 0 -p suite_cpu
@@ -33,8 +34,13 @@ def pytest_runtest_protocol(item, nextitem):
 
 
 def _load(path: str) -> dict[tuple[str, str], float]:
+    record: dict[tuple[str, str], float] = {}
     with open(path, encoding="utf-8") as f:
-        return {(file, test): float(cpu) for file, test, cpu in csv.reader(f, delimiter="\t")}
+        for file, test, cpu in csv.reader(f, delimiter="\t"):
+            if (file, test) in record:
+                raise SystemExit(f"{path} holds {file}::{test} twice: record each suite afresh")
+            record[file, test] = float(cpu)
+    return record
 
 
 def compare(old: dict, new: dict) -> str:

@@ -1,4 +1,4 @@
-"""Where the gradient, CMA-ES and random search win as the robust problem grows, at equal CPU time.
+"""Where the gradient, CMA-ES and random search win as the robust problem grows, at equal compute.
 
 The comparison of ``wmr-jax tune --robust --compare`` (``robust_run.compare_seed``:
 each search scores as many candidates as the gradient's iterations cost,
