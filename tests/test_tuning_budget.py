@@ -204,7 +204,7 @@ def _fake_tune(config, on_tuned=None, **_):
             )  # fmt: skip
     history = {"validated_at": np.array([0, config.iters]), "validation": np.array([2.0, 1.0])}
     searches = {"random search": (None, 17, 4.5, 3.0), "cma-es": (None, 9, 4.2, 5.0)}
-    budget = {"price": 3.0, "candidates": 25}
+    budget = {"price": 3.0, "measured_price": 3.0, "candidates": 25}
     return tuning.TuneResult(
         None, {}, history, 4.0, None, "robust", config.iters, None, None, rows, searches, budget
     )
@@ -238,6 +238,63 @@ def test_robust_comparison_rows_report_cpu_wall_rates_and_what_each_minimises(
         assert f"| {column} |" in header, header
     assert "| 4 | 3 | 25 | 17 | 4 | 3 | 3.78 |" in table, table  # random search: 4.5 CPU s
     assert "- gradient minimises: relaxed surrogate" in table
+
+
+def test_a_given_price_sets_every_searchs_budget_and_the_measured_one_is_reported(
+    tmp_path, monkeypatch
+):
+    pytest.importorskip("evosax")
+    budgets = {}
+
+    def fake_black_box(method, key, refs, budget_s, robot, dt, joint, noise=None, **kwargs):
+        budgets[method] = kwargs["candidates"]
+        loop = concrete_loop(joint.from_logits(joint.start_logits(robot), robot))
+        return loop, kwargs["candidates"], 1.0, 1.0
+
+    monkeypatch.setattr(robust, "black_box", fake_black_box)
+    monkeypatch.setattr(robust, "iteration_price", lambda *args, **kwargs: 2.5)
+    base = dict(
+        iters=3, poses=3, nonideal_poses=0, eval_poses=3, law="fixed", estimator=None,
+        validation_poses=3, search_poses=2,
+    )  # fmt: skip
+    for price, used in ((None, 2.5), (4.0, 4.0)):
+        config = tuning.RobustConfig(**base, price=price)
+        result = tuning.tune_robust(config)
+        validations = len(result.history["validated_at"])  # each 1.5 candidates
+        expected = round(3 * used + validations * 1.5)
+        assert budgets == {"random search": expected, "cma-es": expected}
+        assert result.budget == {"price": used, "measured_price": 2.5, "candidates": expected}
+    # The table says which price set the budget when it was given.
+    rows = [
+        {**row, "method": row["gains"], "seed": 0, "budget_s": 1.0, "candidates": 3,
+         "price": 4.0, "measured_price": 2.5, "budget_candidates": 13}
+        for row in result.rows if row["gains"] != "paper"
+    ]  # fmt: skip
+    from wmr_jax._src.report.tuning import robust_comparison_table
+
+    assert "| 4 (measured 2.5) | 13 |" in robust_comparison_table(rows)
+
+
+def test_the_price_flag_reaches_the_robust_comparison_and_only_it(monkeypatch, tmp_path, capsys):
+    from wmr_jax._src.cli import tune_robust as cli_robust
+    from wmr_jax.cli import main
+
+    seen = []
+    monkeypatch.setattr(search_module, "one_core", lambda: True)
+    monkeypatch.setattr(
+        cli_robust, "_compare", lambda out, config, *a, **k: seen.append(config) or 0
+    )
+    assert main(["tune", "--robust", "--compare", "--price", "4.5", "--out", str(tmp_path)]) == 0
+    assert seen[0].price == 4.5
+    for argv, message in (
+        (["--robust", "--compare", "--price", "0"], "--price '0' is not allowed; allowed: a"),
+        (["--robust", "--price", "4"], "--price is not allowed without --robust --compare"),
+        (["--compare", "--price", "4"], "--price is not allowed without --robust --compare"),
+    ):
+        assert main(["tune", *argv, "--out", str(tmp_path)]) == 2
+        assert message in capsys.readouterr().err
+    with pytest.raises(ValueError, match=r"price = -1.0 is not allowed; allowed: a number > 0"):
+        tuning.RobustConfig(price=-1.0).validate()
 
 
 def test_a_robust_comparison_of_the_wall_time_format_is_not_resumed(tmp_path, monkeypatch):

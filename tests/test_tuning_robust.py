@@ -579,4 +579,4 @@ def test_each_robust_search_scores_the_candidates_the_tuners_compute_buys(monkey
     expected = round(config.iters * 2.5 + validations * 1.5 + (9 if tuner == "hybrid" else 0))
     assert set(budgets) == {"random search", "cma-es"} == set(result.searches)
     assert budgets == {m: expected for m in budgets}
-    assert result.budget == {"price": 2.5, "candidates": expected}
+    assert result.budget == {"price": 2.5, "measured_price": 2.5, "candidates": expected}

@@ -96,6 +96,12 @@ _MODE_FLAGS = {
         "fixed gains and schedules (with --schedule: the schedule only), seeds 0-2, into "
         "DIR/compare.{json,md}",
     ),
+    "--price": (
+        "C",
+        "with --robust --compare: the candidates one gradient iteration is worth in the "
+        "searches' budget, instead of measuring it; the price a robust_compare.json records "
+        "makes the searches score the same candidates on another machine (default: measured)",
+    ),
     "--gradient-cost": (
         None,
         "instead of tuning, measure the gradient's time and peak memory (4096 poses x 150 "
@@ -139,6 +145,10 @@ def _check_modes(args: Any) -> None:
         if getattr(args, name) not in (None, False) and not args.robust:
             flag = f"--{name.replace('_', '-')}"
             raise ValueError(f"{flag} is not allowed without --robust, whose problem it sets")
+    if args.price is not None and not (args.robust and args.compare):
+        raise ValueError(
+            "--price is not allowed without --robust --compare, whose searches' budget it sets"
+        )
     modes = [m for m in ("robust", "compare", "gradient_cost") if getattr(args, m)]
     if args.robust and args.compare:  # the robust comparison (--knots sizes its schedule)
         modes.remove("compare")

@@ -45,6 +45,11 @@ def config_from(args: Any) -> Any:
         value = getattr(args, flag[2:].replace("-", "_"), None)
         if value is not None:
             changes[name] = flags.number(flag, value, low=0.0, unit=unit)
+    price = getattr(args, "price", None)
+    if price is not None:
+        changes["price"] = flags.number(
+            "--price", price, low=0.0, closed=False, unit="candidates per iteration"
+        )
     knots = getattr(args, "knots", None)
     if knots is not None:
         if fixed:

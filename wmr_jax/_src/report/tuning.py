@@ -401,7 +401,8 @@ def robust_comparison_table(rows: list[dict[str, Any]]) -> str:
     A cell is the success rate and the mean arrival of the successful runs;
     ``score`` is what the searches minimise (``condition_score``, failures at
     twice each row's horizon), ``gradient CPU`` the gradient's CPU time,
-    ``price`` the candidates one of its iterations costs and ``budget`` the
+    ``price`` the candidates one of its iterations costs (a given price
+    with the price measured beside it) and ``budget`` the
     candidates each search scored for it. The last rows are each method's
     mean over the seeds.
     """
@@ -414,6 +415,7 @@ def robust_comparison_table(rows: list[dict[str, Any]]) -> str:
             {
                 "budget": float(row["budget_s"]),
                 "price": row.get("price"),
+                "measured_price": row.get("measured_price"),
                 "budget_candidates": row.get("budget_candidates"),
                 "candidates": int(row["candidates"]),
                 "cpu": row.get("cpu_s"),
@@ -438,6 +440,9 @@ def robust_comparison_table(rows: list[dict[str, Any]]) -> str:
         line["gradient CPU (s)"] = f"{entry['budget']:.0f}"
         if entry["price"] is not None:
             line["price"] = f"{entry['price']:.3g}"
+            measured = entry["measured_price"]
+            if measured is not None and measured != entry["price"]:  # a price given
+                line["price"] += f" (measured {measured:.3g})"
             line["budget"] = str(entry["budget_candidates"])
         line["candidates"] = str(entry["candidates"])
         if entry["cpu"] is not None:  # rows of format 3 on

@@ -76,6 +76,11 @@ class RobustConfig:
         search_poses: poses per condition that random search and CMA-ES score on.
         compare: also run random search and CMA-ES, each scoring as many
             candidates as the tuning's compute buys (``iteration_price``).
+        price: with ``compare``, the candidates one gradient iteration is
+            worth in the searches' budget; ``None`` (default): measured on
+            this machine (``iteration_price``). A price taken from a recorded
+            comparison makes its searches score the same candidates on any
+            machine, so that its rows can be reproduced there.
         law: ``"schedule"`` (the gain schedule, default) or ``"fixed"`` (the 7
             gains): the controller's searched set.
         estimator: ``"ekf"`` (default), ``"observer"``, or ``None`` (raw
@@ -110,6 +115,7 @@ class RobustConfig:
     eval_poses: int = EVAL_POSES
     search_poses: int = 32
     compare: bool = True
+    price: float | None = None
     law: str = "schedule"
     estimator: str | None = "ekf"
     knots: int = KNOTS
@@ -129,6 +135,8 @@ class RobustConfig:
         check_int("nonideal_poses", self.nonideal_poses, 0)
         check_int("search_poses", self.search_poses, 1)
         check_bool("compare", self.compare)
+        if self.price is not None:
+            check_number("price", self.price, unit="candidates per iteration")
         check_number("noise_xy", self.noise_xy, closed=True, unit="cm")
         check_number("noise_theta", self.noise_theta, closed=True, unit="degrees")
         if self.tuner not in TUNERS:
@@ -546,13 +554,15 @@ def tune_robust(
     if config.compare:
         # Equal compute: the searches score as many candidates as the
         # gradient's iterations (priced by timing both in turn, so that the
-        # load falls on both alike), its validations and the polish cost.
-        price = iteration_price(
+        # load falls on both alike, unless the price is given), its
+        # validations and the polish cost.
+        measured = iteration_price(
             problem, state, _scorer(search_refs, jax.random.key(0), robot, dt, joint, config.noise)
         )  # fmt: skip
+        price = measured if config.price is None else config.price
         validated = len(state.validated) * config.validation_poses / config.search_poses
         candidates = max(1, round(state.iteration * price + validated + polished))
-        budget = {"price": price, "candidates": candidates}
+        budget = {"price": price, "measured_price": measured, "candidates": candidates}
         for method in ("random search", "cma-es"):
             if method == "cma-es" and not evosax_available():
                 continue

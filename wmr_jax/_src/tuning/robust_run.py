@@ -108,8 +108,9 @@ def compare_seed(config: RobustConfig, seed: int, robot: Robot) -> list[dict[str
 
     One row per method and condition (the paper's gains left out): the
     ``standard_conditions`` row with ``method``, ``seed``, ``budget_s`` (the
-    gradient's CPU time), ``price`` (candidates one iteration costs,
-    ``robust.iteration_price``), ``budget_candidates`` (every search's
+    gradient's CPU time), ``price`` (candidates one iteration costs:
+    ``config.price``, else ``robust.iteration_price``), ``measured_price``
+    (as measured), ``budget_candidates`` (every search's
     budget), ``candidates`` (gradient: iterations), ``cpu_s``, ``wall_s``,
     ``per_cpu_s``, ``minimises``, ``held_out`` (``poses_digest``) and
     ``loadavg`` (1-minute load average).
@@ -135,6 +136,7 @@ def compare_seed(config: RobustConfig, seed: int, robot: Robot) -> list[dict[str
         rows.append(
             {**row, "method": method, "seed": seed, "budget_s": budget,
              "price": result.budget["price"],
+             "measured_price": result.budget["measured_price"],
              "budget_candidates": result.budget["candidates"], "candidates": candidates,
              "cpu_s": cpu, "wall_s": wall,
              "per_cpu_s": candidates / cpu if cpu > 0 else None,

@@ -119,8 +119,9 @@ class TuneResult(NamedTuple):
         searches: the robust problem's ``{method: (ClosedLoop, candidates, CPU s,
             wall s)}``, else ``None``.
         budget: the robust comparison's equal compute, ``{"price": candidates
-            one gradient iteration costs, "candidates": each search's budget}``,
-            else ``None``.
+            one gradient iteration costs (measured, or ``RobustConfig.price``),
+            "measured_price": as measured, "candidates": each search's
+            budget}``, else ``None``.
     """
 
     gains: Any
