@@ -95,12 +95,12 @@ def test_both_losses_and_their_gradients_are_timed():
 def test_the_robust_loss_is_timed_with_its_gradient_and_one_jvp(monkeypatch):
     """The robust tuner's loss, the trainer's gradient of it and a jvp, with their ratios.
 
-    On a 2-knot schedule with raw feedback: the case's plumbing is the same as
+    On the 7 fixed gains with raw feedback: the case's plumbing is the same as
     with the default schedule and filter, at a fraction of the compile time.
     """
     from wmr_jax._src.tuning import robust
 
-    small = robust.RobustConfig(knots=2, estimator=None)
+    small = robust.RobustConfig(law="fixed", estimator=None)
     monkeypatch.setattr(robust, "RobustConfig", lambda: small)
     config = w.studies.BenchConfig(
         sizes=(2,), steps=4, repeats=1, dtype="float64", cases=("grad_robust_loss",)
