@@ -9,16 +9,18 @@
 # was computed with (docs/data/fingerprints.json), so a change to the code
 # that would move a committed figure fails the tests until the stage is rerun.
 # STAGE is any of: paper compare maps waypoints animate tune robustness
-# compare-tuning compare-sizes compare-robust tuner-load tuner-scaling bench
+# compare-tuning compare-sizes compare-robust compare-robust-price tuner-load tuner-scaling bench
 # (default: all; on 2 CPU cores, tune took 5 minutes, robustness 2 and
 # compare-robust 18).
 # Every command is seeded (the seed is its default unless named here), so a
-# rerun prints the same tables; bench timings are the exception.
+# rerun prints the same tables. The exceptions: bench timings, and
+# compare-robust's search rows, whose budget is priced on the machine as it
+# runs (compare-robust-price gives the price instead).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-results/readme}
 shift || true
-STAGES=${*:-paper compare maps waypoints animate tune robustness compare-tuning compare-sizes compare-robust tuner-load tuner-scaling bench}
+STAGES=${*:-paper compare maps waypoints animate tune robustness compare-tuning compare-sizes compare-robust compare-robust-price tuner-load tuner-scaling bench}
 mkdir -p "$OUT" docs/data
 
 for stage in $STAGES; do
@@ -64,6 +66,8 @@ for stage in $STAGES; do
       done ;;
     compare-robust)  # the joint robust problem: gradient vs CMA-ES vs random search, 3 seeds
       wmr-jax tune --out "$OUT/tune-robust-compare" --robust --compare ;;
+    compare-robust-price)  # the same at a given price: the same candidates on any machine
+      wmr-jax tune --out "$OUT/tune-robust-compare-price" --robust --compare --price 5 ;;
     tuner-load)  # the reduced robust comparison as the machine is, then beside two CPU hogs
       rm -f docs/data/tuner_load_quiet.json docs/data/tuner_load_hog.json
       python experiments/tuner_scaling.py --sizes 38 --iters 30 --poses 8 --nonideal-poses 2 \
