@@ -67,7 +67,8 @@ for stage in $STAGES; do
     compare-robust)  # the joint robust problem: gradient vs CMA-ES vs random search, 3 seeds
       wmr-jax tune --out "$OUT/tune-robust-compare" --robust --compare ;;
     compare-robust-price)  # the same at a given price: the same candidates on any machine
-      wmr-jax tune --out "$OUT/tune-robust-compare-price" --robust --compare --price 5 ;;
+      wmr-jax tune --out "$OUT/tune-robust-compare-price" --robust --compare --price 5
+      cp "$OUT/tune-robust-compare-price/robust_compare.json" docs/data/robust_compare_price.json ;;
     tuner-load)  # the reduced robust comparison as the machine is, then beside two CPU hogs
       rm -f docs/data/tuner_load_quiet.json docs/data/tuner_load_hog.json
       python experiments/tuner_scaling.py --sizes 38 --iters 30 --poses 8 --nonideal-poses 2 \

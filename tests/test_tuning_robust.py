@@ -294,7 +294,7 @@ def _fake_result(config):
     return TuneResult(
         None, {}, history, 1.0, None, "robust", config.iters, None, None, rows,
         {"random search": (None, 8, 1.0, 2.0)},  # loop, candidates, CPU s, wall s
-        {"price": 4.0, "candidates": 8},  # candidates per iteration, the searches' budget
+        {"price": 4.0, "measured_price": 4.0, "candidates": 8},  # per iteration; the budget
     )  # fmt: skip
 
 
