@@ -267,7 +267,8 @@ def test_a_given_price_sets_every_searchs_budget_and_the_measured_one_is_reporte
     # The table says which price set the budget when it was given.
     rows = [
         {**row, "method": row["gains"], "seed": 0, "budget_s": 1.0, "candidates": 3,
-         "price": 4.0, "measured_price": 2.5, "budget_candidates": 13}
+         "price": 4.0, "measured_price": 2.5, "budget_candidates": 13, "cpu_s": 1.0,
+         "wall_s": 1.0, "per_cpu_s": 3.0}
         for row in result.rows if row["gains"] != "paper"
     ]  # fmt: skip
     from wmr_jax._src.report.tuning import robust_comparison_table

@@ -288,7 +288,8 @@ def _fake_result(config):
         for gains in ("paper", "robust-tuned", "random search"):
             rows.append(
                 {"condition": condition, "gains": gains, "feedback": "ekf", "success": 1.0,
-                 "mean arrival s": 0.5 + config.seed, "median arrival s": 0.5}
+                 "mean arrival s": 0.5 + config.seed, "median arrival s": 0.5,
+                 "horizon s": 6.0}
             )  # fmt: skip
     history = {"validated_at": np.array([0, config.iters]), "validation": np.array([2.0, 1.0])}
     return TuneResult(

@@ -98,9 +98,9 @@ _MODE_FLAGS = {
     ),
     "--price": (
         "C",
-        "with --robust --compare: the candidates one gradient iteration is worth in the "
-        "searches' budget, instead of measuring it; the price a robust_compare.json records "
-        "makes the searches score the same candidates on another machine (default: measured)",
+        "with --robust --compare: candidates one gradient iteration is worth in the searches' "
+        "budget; a price robust_compare.json recorded gives the same searches on any machine "
+        "(default: measured)",
     ),
     "--gradient-cost": (
         None,
@@ -146,9 +146,7 @@ def _check_modes(args: Any) -> None:
             flag = f"--{name.replace('_', '-')}"
             raise ValueError(f"{flag} is not allowed without --robust, whose problem it sets")
     if args.price is not None and not (args.robust and args.compare):
-        raise ValueError(
-            "--price is not allowed without --robust --compare, whose searches' budget it sets"
-        )
+        raise ValueError("--price is not allowed without --robust --compare, which it budgets")
     modes = [m for m in ("robust", "compare", "gradient_cost") if getattr(args, m)]
     if args.robust and args.compare:  # the robust comparison (--knots sizes its schedule)
         modes.remove("compare")

@@ -13,7 +13,6 @@ from wmr_jax._src.checks import real_array, require
 from wmr_jax._src.io import save_figure
 from wmr_jax._src.model.controllers.schedule import SHAPE_FIELDS, knot_radii
 from wmr_jax._src.report.tables import json_number, markdown_table, require_rows
-from wmr_jax._src.sim.poses import HORIZON_S
 from wmr_jax._src.studies.optimal import bound_ratios
 from wmr_jax._src.tuning.parametrisation import (
     GAIN_FIELDS,
@@ -158,7 +157,7 @@ def _arrived_mean(values: list[float], fmt: str) -> str:
 
 
 def _maybe(value: Any, fmt: str) -> str:
-    """``value`` as ``fmt``, or "—" where a row has none (rows of older formats, a rate of 0 s)."""
+    """``value`` as ``fmt``, or "—" where a row has none (a rate over 0 s)."""
     return "—" if value is None else fmt.format(float(value))
 
 
@@ -409,25 +408,9 @@ def robust_comparison_table(rows: list[dict[str, Any]]) -> str:
     rows = require_rows("rows", rows)
     cells: dict[tuple[str, int], dict[str, Any]] = {}
     for row in rows:
-        key = (str(row["method"]), int(row["seed"]))
-        entry = cells.setdefault(
-            key,
-            {
-                "budget": float(row["budget_s"]),
-                "price": row.get("price"),
-                "measured_price": row.get("measured_price"),
-                "budget_candidates": row.get("budget_candidates"),
-                "candidates": int(row["candidates"]),
-                "cpu": row.get("cpu_s"),
-                "wall": row.get("wall_s"),
-                "rate": row.get("per_cpu_s"),
-            },
-        )
-        ok, mean = float(row["success"]), float(row["mean arrival s"])
-        # Rows written before they recorded their horizon ran the paper robot's.
-        horizon = float(row.get("horizon s", HORIZON_S))
-        score = condition_score({"success": ok, "mean arrival s": mean, "horizon s": horizon})
-        entry[row["condition"]] = (ok, mean, score)
+        entry = cells.setdefault((str(row["method"]), int(row["seed"])), {"row": row})
+        entry[row["condition"]] = (float(row["success"]), float(row["mean arrival s"]))
+        entry[row["condition"]] += (condition_score(row),)
     table, scores = [], {}
     for (method, seed), entry in sorted(cells.items(), key=lambda kv: (kv[0][1], kv[0][0])):
         conditions = [c for c in _ROBUST_CONDITIONS if c in entry]
@@ -437,24 +420,20 @@ def robust_comparison_table(rows: list[dict[str, Any]]) -> str:
         for c in conditions:
             ok, mean, _ = entry[c]
             line[c] = f"{100 * ok:.1f} %, " + (f"{mean:.3f} s" if ok > 0 else "none arrived")
-        line["gradient CPU (s)"] = f"{entry['budget']:.0f}"
-        if entry["price"] is not None:
-            line["price"] = f"{entry['price']:.3g}"
-            measured = entry["measured_price"]
-            if measured is not None and measured != entry["price"]:  # a price given
-                line["price"] += f" (measured {measured:.3g})"
-            line["budget"] = str(entry["budget_candidates"])
-        line["candidates"] = str(entry["candidates"])
-        if entry["cpu"] is not None:  # rows of format 3 on
-            line["CPU (s)"] = _maybe(entry["cpu"], "{:.0f}")
-            line["wall (s)"] = _maybe(entry["wall"], "{:.0f}")
-            line["per CPU-s"] = _maybe(entry["rate"], "{:.3g}")
+        first = entry["row"]
+        price, measured = first["price"], first["measured_price"]
+        given = f" (measured {measured:.3g})" if measured != price else ""  # a price given
+        line["gradient CPU (s)"] = f"{first['budget_s']:.0f}"
+        line["price"], line["budget"] = f"{price:.3g}{given}", str(first["budget_candidates"])
+        line["candidates"] = str(first["candidates"])
+        line["CPU (s)"] = _maybe(first["cpu_s"], "{:.0f}")
+        line["wall (s)"] = _maybe(first["wall_s"], "{:.0f}")
+        line["per CPU-s"] = _maybe(first["per_cpu_s"], "{:.3g}")
         table.append(line)
     for method, values in scores.items():
         table.append({"method": method, "seed": "mean", "score (s)": f"{np.mean(values):.3f}"})
     columns = ["method", "seed", "score (s)", *_ROBUST_CONDITIONS, "gradient CPU (s)", "price"]
-    columns += ["budget", "candidates"]
-    columns += ["CPU (s)", "wall (s)", "per CPU-s"]
+    columns += ["budget", "candidates", "CPU (s)", "wall (s)", "per CPU-s"]
     columns = [c for c in columns if any(c in r for r in table)]
     table = markdown_table([{c: r.get(c, "") for c in columns} for r in table], columns)
     return table + _minimised_notes(rows)

@@ -76,11 +76,9 @@ class RobustConfig:
         search_poses: poses per condition that random search and CMA-ES score on.
         compare: also run random search and CMA-ES, each scoring as many
             candidates as the tuning's compute buys (``iteration_price``).
-        price: with ``compare``, the candidates one gradient iteration is
-            worth in the searches' budget; ``None`` (default): measured on
-            this machine (``iteration_price``). A price taken from a recorded
-            comparison makes its searches score the same candidates on any
-            machine, so that its rows can be reproduced there.
+        price: with ``compare``, the candidates one iteration is worth in the
+            searches' budget (``None``: measured, ``iteration_price``); a
+            recorded price makes the searches the same on any machine.
         law: ``"schedule"`` (the gain schedule, default) or ``"fixed"`` (the 7
             gains): the controller's searched set.
         estimator: ``"ekf"`` (default), ``"observer"``, or ``None`` (raw
@@ -553,9 +551,8 @@ def tune_robust(
     searches, budget = {}, None
     if config.compare:
         # Equal compute: the searches score as many candidates as the
-        # gradient's iterations (priced by timing both in turn, so that the
-        # load falls on both alike, unless the price is given), its
-        # validations and the polish cost.
+        # gradient's iterations (priced by timing both in turn, so that the load
+        # falls on both alike, or at the given price), its validations and polish.
         measured = iteration_price(
             problem, state, _scorer(search_refs, jax.random.key(0), robot, dt, joint, config.noise)
         )  # fmt: skip
