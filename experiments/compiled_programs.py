@@ -22,6 +22,7 @@ derivatives along the gains, and the disturbed loop with each estimator.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import re
 import subprocess
@@ -45,6 +46,7 @@ CASES = (
     "disturbed_ekf",
 )
 TEMPERATURE = 0.05  # the benchmark's smooth-law temperature
+STEPS, DT = 100, 0.033  # the benchmark's default steps, and the control period
 
 
 def run_case(case: str, n: int) -> None:
@@ -61,8 +63,8 @@ def run_case(case: str, n: int) -> None:
     warnings.simplefilter("ignore", w.WheelSpeedWarning)
 
     refs = jnp.asarray(w.sample_poses(0, n), jnp.float32)
-    gains, steps = w.Gains(), 150
-    horizon = steps * 0.033
+    gains, steps = w.Gains(), STEPS
+    horizon = steps * DT
 
     def tuning_loss(g, r):
         return tuning.tuning_loss(g, r, temperature=TEMPERATURE, horizon=horizon)
@@ -95,7 +97,7 @@ def run_case(case: str, n: int) -> None:
     # radius, one sample of latency; its metrics, through the public call.
     metrics = getattr(studies, "disturbed_metrics", None) or studies.perturbed_metrics
     spec = studies.sample_disturbance(
-        jax.random.PRNGKey(0), refs, steps, noise_xy=0.5, noise_theta=0.017453292519943295,
+        jax.random.PRNGKey(0), refs, steps, noise_xy=0.5, noise_theta=math.radians(1.0),
         radius_mismatch=0.03, latency=1.0,
     )  # fmt: skip
     estimator = {"disturbed_raw": None}.get(case, case.removeprefix("disturbed_"))

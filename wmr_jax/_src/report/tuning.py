@@ -409,8 +409,8 @@ def robust_comparison_table(rows: list[dict[str, Any]]) -> str:
     cells: dict[tuple[str, int], dict[str, Any]] = {}
     for row in rows:
         entry = cells.setdefault((str(row["method"]), int(row["seed"])), {"row": row})
-        entry[row["condition"]] = (float(row["success"]), float(row["mean arrival s"]))
-        entry[row["condition"]] += (condition_score(row),)
+        ok, mean = float(row["success"]), float(row["mean arrival s"])
+        entry[row["condition"]] = (ok, mean, condition_score(row))
     table, scores = [], {}
     for (method, seed), entry in sorted(cells.items(), key=lambda kv: (kv[0][1], kv[0][0])):
         conditions = [c for c in _ROBUST_CONDITIONS if c in entry]
