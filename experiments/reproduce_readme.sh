@@ -9,18 +9,21 @@
 # was computed with (docs/data/fingerprints.json), so a change to the code
 # that would move a committed figure fails the tests until the stage is rerun.
 # STAGE is any of: paper compare maps waypoints animate tune robustness
-# compare-tuning compare-sizes compare-robust compare-robust-price tuner-load tuner-scaling bench
+# compare-tuning compare-sizes compare-robust compare-robust-price compare-robust-kernels
+# compare-robust-second tuner-load tuner-scaling bench
 # (default: all; on 2 CPU cores, tune took 5 minutes, robustness 2 and
 # compare-robust 18).
 # Every command is seeded (the seed is its default unless named here), so a
-# rerun prints the same tables. The exceptions: bench timings, and
+# rerun prints the same tables. The exceptions: bench timings,
 # compare-robust's search rows, whose budget is priced on the machine as it
-# runs (compare-robust-price gives the price instead).
+# runs (compare-robust-price gives the price instead), and CMA-ES's rows on a
+# machine whose OpenBLAS returns other eigenvectors (compare-robust-kernels;
+# docs/robustness.md, "On a second machine").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-results/readme}
 shift || true
-STAGES=${*:-paper compare maps waypoints animate tune robustness compare-tuning compare-sizes compare-robust compare-robust-price tuner-load tuner-scaling bench}
+STAGES=${*:-paper compare maps waypoints animate tune robustness compare-tuning compare-sizes compare-robust compare-robust-price compare-robust-kernels compare-robust-second tuner-load tuner-scaling bench}
 mkdir -p "$OUT" docs/data
 
 for stage in $STAGES; do
@@ -69,6 +72,22 @@ for stage in $STAGES; do
     compare-robust-price)  # the same at a given price: the same candidates on any machine
       wmr-jax tune --out "$OUT/tune-robust-compare-price" --robust --compare --price 5
       cp "$OUT/tune-robust-compare-price/robust_compare.json" docs/data/robust_compare_price.json ;;
+    compare-robust-kernels)  # the same with two OpenBLAS kernels, and XLA without AVX (needs AVX-512)
+      OPENBLAS_CORETYPE=Haswell wmr-jax tune --out "$OUT/price-haswell" --robust --compare --price 5
+      cp "$OUT/price-haswell/robust_compare.json" docs/data/robust_compare_price_haswell.json
+      OPENBLAS_CORETYPE=SkylakeX wmr-jax tune --out "$OUT/price-skylakex" --robust --compare --price 5
+      cp "$OUT/price-skylakex/robust_compare.json" docs/data/robust_compare_price_skylakex.json
+      OPENBLAS_CORETYPE=Haswell XLA_FLAGS=--xla_cpu_max_isa=SSE4_2 \
+        wmr-jax tune --out "$OUT/price-sse4_2" --robust --compare --price 5
+      cp "$OUT/price-sse4_2/robust_compare.json" docs/data/robust_compare_price_sse4_2.json ;;
+    compare-robust-second)  # the default command alone, then sharing its core with a CPU hog
+      OPENBLAS_CORETYPE=Haswell taskset -c 1 wmr-jax tune --out "$OUT/second-alone" --robust --compare
+      cp "$OUT/second-alone/robust_compare.json" docs/data/robust_compare_second_alone.json
+      taskset -c 0 python -c "while True: pass" & hog=$!
+      trap 'kill $hog 2>/dev/null' EXIT
+      OPENBLAS_CORETYPE=Haswell taskset -c 0 wmr-jax tune --out "$OUT/second-load" --robust --compare
+      kill $hog
+      cp "$OUT/second-load/robust_compare.json" docs/data/robust_compare_second_load.json ;;
     tuner-load)  # the reduced robust comparison as the machine is, then beside two CPU hogs
       rm -f docs/data/tuner_load_quiet.json docs/data/tuner_load_hog.json
       python experiments/tuner_scaling.py --sizes 38 --iters 30 --poses 8 --nonideal-poses 2 \

@@ -372,6 +372,87 @@ def test_robust_comparison_at_a_given_price_is_the_stored_run():
             assert cell == f"{value:.3f}", (cells[0], method, cell, value)
 
 
+def _judged(name):
+    """Each method's judged score per seed of a stored robust comparison, and its rows."""
+    from wmr_jax._src.tuning.robust import condition_score
+
+    rows = json.loads((STORED / name).read_text(encoding="utf-8"))["rows"]
+    scores = {}
+    for row in rows:
+        scores.setdefault((row["method"], row["seed"]), []).append(condition_score(row))
+    return {key: float(np.mean(v)) for key, v in scores.items()}, rows
+
+
+def _page_table(page, header):
+    """The cells of the table under the line ``header`` of ``page``."""
+    lines = page.splitlines()
+    start = lines.index(header)
+    body = []
+    for line in lines[start + 2 :]:
+        if not line.startswith("|"):
+            break
+        body.append([c.strip() for c in line.strip("|").split("|")])
+    return body
+
+
+def test_robust_comparison_on_a_second_machine_is_the_stored_runs():
+    """docs/robustness.md's second machine: the scores as stored, the rows said to reproduce."""
+    page = _read("docs/robustness.md")
+    files = {
+        "the first machine (above)": "robust_compare_price.json",
+        "second, Haswell kernels": "robust_compare_price_haswell.json",
+        "second, SkylakeX kernels": "robust_compare_price_skylakex.json",
+        "second, Haswell kernels, XLA at SSE4.2": "robust_compare_price_sse4_2.json",
+    }
+    header = (
+        "| run | gradient, seeds 0 / 1 / 2 | CMA-ES | random search | gradient ahead on the mean |"
+    )
+    table = {cells[0]: cells[1:] for cells in _page_table(page, header)}
+    assert set(files) <= set(table)
+    runs = {}
+    for label, name in files.items():
+        scores, rows = runs[label] = _judged(name)
+        assert {row["price"] for row in rows} == {5.0}
+        for cell, method in zip(
+            table[label][:3], ("gradient", "cma-es", "random search"), strict=True
+        ):
+            assert cell == " / ".join(f"{scores[(method, s)]:.3f}" for s in range(3)), label
+        means = {m: np.mean([scores[(m, s)] for s in range(3)]) for m in ("gradient", "cma-es")}
+        assert table[label][3] == f"{100 * (1 - means['gradient'] / means['cma-es']):.1f} %"
+    # "to the last digit of every field ... in the first four runs": the gradient's and
+    # random search's rows of the Haswell and SkylakeX runs are the first machine's.
+    timing = {"cpu_s", "wall_s", "per_cpu_s", "measured_price", "loadavg", "budget_s"}
+
+    def results(rows, method):
+        return [
+            {k: v for k, v in row.items() if k not in timing}
+            for row in rows
+            if row["method"] == method
+        ]
+
+    first = runs["the first machine (above)"][1]
+    for label in ("second, Haswell kernels", "second, SkylakeX kernels"):
+        for method in ("gradient", "random search"):
+            assert results(runs[label][1], method) == results(first, method), (label, method)
+        assert results(runs[label][1], "cma-es") != results(first, "cma-es")
+
+    # The default command on the second machine, alone and beside the load.
+    alone, _ = _judged("robust_compare_second_alone.json")
+    loaded, _ = _judged("robust_compare_second_load.json")
+    header = "| seed | gradient | CMA-ES, alone / beside the load | random search, alone / beside |"
+    body = _page_table(page, header)
+    assert [cells[0] for cells in body] == ["0", "1", "2", "mean"]
+    for cells in body:
+        seeds = range(3) if cells[0] == "mean" else [int(cells[0])]
+
+        def at(scores, method, seeds=seeds):
+            return f"{np.mean([scores[(method, s)] for s in seeds]):.3f}"
+
+        assert cells[1] == at(alone, "gradient") == at(loaded, "gradient")
+        assert cells[2] == f"{at(alone, 'cma-es')} / {at(loaded, 'cma-es')}"
+        assert cells[3] == f"{at(alone, 'random search')} / {at(loaded, 'random search')}"
+
+
 def test_the_pages_name_every_field_of_what_load_tuned_returns():
     import wmr_jax as w
 
