@@ -19,7 +19,12 @@ prints the distinct eigenvalues of ``C`` after the first generation, the
 objective at the final mean, and how far that mean lies from the first
 kernel's with the same sampler (largest coordinate difference).
 
-Usage: ``python experiments/cma_eigenbasis.py [KERNEL ...]``
+With ``--comparison SEED`` it runs one seed of ``wmr-jax tune --robust
+--compare --price 5`` instead (``compare_seed``, one core, about two minutes
+each) and prints each method's judged score: whether the symmetric root
+makes CMA-ES's row the same for every kernel in the comparison itself.
+
+Usage: ``python experiments/cma_eigenbasis.py [--comparison SEED] [KERNEL ...]``
 """
 
 import json
@@ -35,21 +40,14 @@ def run(sampler: str) -> str:
     import jax.numpy as jnp
     import numpy as np
     from evosax.algorithms import CMA_ES
-    from evosax.algorithms.distribution_based.cma_es import eigen_decomposition
 
     jax.config.update("jax_enable_x64", True)
-
-    class SymmetricRoot(CMA_ES):
-        def _ask(self, key, state, params):
-            C, B, D = eigen_decomposition(state.C)
-            z = jax.random.normal(key, (self.population_size, self.num_dims))
-            return state.mean + state.std * (((z @ B) * D) @ B.T), state.replace(C=C, B=B, D=D)
 
     def objective(x):
         ripples = jnp.sum(x**2 - 3.0 * jnp.cos(2.0 * jnp.pi * x), axis=-1)
         return ripples + jnp.sum((x[..., :-1] - x[..., 1:]) ** 2, axis=-1)
 
-    strategy = (SymmetricRoot if sampler == "symmetric" else CMA_ES)(
+    strategy = (symmetric_root() if sampler == "symmetric" else CMA_ES)(
         population_size=POPULATION, solution=jnp.zeros(DIM)
     )
     params = strategy.default_params
@@ -68,27 +66,68 @@ def run(sampler: str) -> str:
     )
 
 
-def main(kernels: list[str]) -> None:
+def comparison(sampler: str, seed: int) -> str:
+    import numpy as np
+
+    import wmr_jax._src.tuning.search as search
+    from wmr_jax import Robot
+    from wmr_jax._src.tuning.robust import RobustConfig, condition_score
+    from wmr_jax._src.tuning.robust_run import compare_seed
+
+    if sampler == "symmetric":
+        search._evosax_cma_es = symmetric_root
+    rows = compare_seed(RobustConfig(price=5.0), seed, Robot())
+    scores = {}
+    for row in rows:
+        scores.setdefault(row["method"], []).append(condition_score(row))
+    return json.dumps({m: float(np.mean(v)) for m, v in scores.items()})
+
+
+def symmetric_root():
+    """evosax's CMA-ES drawing with ``B D Bᵀ z``."""
+    import jax
+    from evosax.algorithms import CMA_ES
+    from evosax.algorithms.distribution_based.cma_es import eigen_decomposition
+
+    class SymmetricRoot(CMA_ES):
+        def _ask(self, key, state, params):
+            C, B, D = eigen_decomposition(state.C)
+            z = jax.random.normal(key, (self.population_size, self.num_dims))
+            return state.mean + state.std * (((z @ B) * D) @ B.T), state.replace(C=C, B=B, D=D)
+
+    return SymmetricRoot
+
+
+def child(kernel: str, *args: str) -> dict:
+    """The output of this script run as ``--child ARGS`` with ``kernel``, in a fresh process."""
+    out = subprocess.run(
+        [sys.executable, __file__, "--child", *args],
+        env={**os.environ, "OPENBLAS_CORETYPE": kernel},
+        capture_output=True, text=True, check=True,
+    ).stdout  # fmt: skip
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def main(kernels: list[str], seed: int | None) -> None:
     if not kernels:
         with open("/proc/cpuinfo", encoding="utf-8") as cpu:
             avx512 = " avx512f" in cpu.read()
         kernels = ["Haswell", *(["SkylakeX"] if avx512 else []), "Sandybridge"]
+    if seed is not None:
+        print(f"seed {seed}: judged score (s)")
+        for sampler in ("evosax", "symmetric"):
+            for kernel in kernels:
+                scores = child(kernel, sampler, str(seed))
+                text = ", ".join(f"{m} {v:.5f}" for m, v in scores.items())
+                print(f"{kernel:12} {sampler:10} {text}")
+        return
     print(
         "kernel       sampler    distinct eigenvalues  objective at the end  from the first kernel"
     )
     first = {}
     for kernel in kernels:
         for sampler in ("evosax", "symmetric"):
-            env = {**os.environ, "OPENBLAS_CORETYPE": kernel}
-            out = json.loads(
-                subprocess.run(
-                    [sys.executable, __file__, "--child", sampler],
-                    env=env,
-                    capture_output=True,
-                    text=True,
-                    check=True,
-                ).stdout  # fmt: skip
-            )
+            out = child(kernel, sampler)
             mean = first.setdefault(sampler, out["mean"])
             apart = max(abs(a - b) for a, b in zip(out["mean"], mean, strict=True))
             print(
@@ -98,7 +137,10 @@ def main(kernels: list[str]) -> None:
 
 
 if __name__ == "__main__":
-    if sys.argv[1:2] == ["--child"]:
-        print(run(sys.argv[2]))
+    argv = sys.argv[1:]
+    if argv[:1] == ["--child"]:
+        print(run(argv[1]) if len(argv) == 2 else comparison(argv[1], int(argv[2])))
+    elif argv[:1] == ["--comparison"]:
+        main(argv[2:], int(argv[1]))
     else:
-        main(sys.argv[1:])
+        main(argv, None)
