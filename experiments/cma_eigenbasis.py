@@ -21,8 +21,10 @@ kernel's with the same sampler (largest coordinate difference).
 
 With ``--comparison SEED`` it runs one seed of ``wmr-jax tune --robust
 --compare --price 5`` instead (``compare_seed``, one core, about two minutes
-each) and prints each method's judged score: whether the symmetric root
-makes CMA-ES's row the same for every kernel in the comparison itself.
+each) and prints each method's judged score, and how far CMA-ES's
+candidates lie from the first kernel's run generation by generation:
+whether the symmetric root makes CMA-ES's row the same for every kernel in
+the comparison itself, and if not, where the runs part.
 
 Usage: ``python experiments/cma_eigenbasis.py [--comparison SEED] [KERNEL ...]``
 """
@@ -31,6 +33,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 
 DIM, POPULATION, GENERATIONS = 38, 8, 400
 
@@ -66,21 +69,39 @@ def run(sampler: str) -> str:
     )
 
 
-def comparison(sampler: str, seed: int) -> str:
+def comparison(sampler: str, seed: int, record: str) -> str:
     import numpy as np
+    from evosax.algorithms import CMA_ES
 
     import wmr_jax._src.tuning.search as search
     from wmr_jax import Robot
     from wmr_jax._src.tuning.robust import RobustConfig, condition_score
     from wmr_jax._src.tuning.robust_run import compare_seed
 
-    if sampler == "symmetric":
-        search._evosax_cma_es = symmetric_root
+    search.one_core()  # as `tune --compare` runs, before JAX starts
+    populations = []
+    strategy = recorded(symmetric_root() if sampler == "symmetric" else CMA_ES, populations)
+    search._evosax_cma_es = lambda: strategy
     rows = compare_seed(RobustConfig(price=5.0), seed, Robot())
+    np.save(record, np.stack(populations))
     scores = {}
     for row in rows:
         scores.setdefault(row["method"], []).append(condition_score(row))
     return json.dumps({m: float(np.mean(v)) for m, v in scores.items()})
+
+
+def recorded(strategy, populations: list):
+    """``strategy`` appending each generation's candidates to ``populations``."""
+    import jax
+    import numpy as np
+
+    class Recorded(strategy):
+        def _ask(self, key, state, params):
+            population, state = super()._ask(key, state, params)
+            jax.debug.callback(lambda p: populations.append(np.asarray(p)), population)
+            return population, state
+
+    return Recorded
 
 
 def symmetric_root():
@@ -108,18 +129,38 @@ def child(kernel: str, *args: str) -> dict:
     return json.loads(out.strip().splitlines()[-1])
 
 
+def parting(populations, first) -> str:
+    """How far two runs' candidates lie apart, generation by generation (numbered from 1)."""
+    import numpy as np
+
+    n = min(len(populations), len(first))
+    gap = np.abs(populations[:n] - first[:n]).max(axis=(1, 2))
+    if gap.max() <= 1e-3:
+        return f"at most {gap.max():.1e} apart in every generation"
+    parted = int(np.argmax(gap > 1e-3))
+    close = f"at most {gap[:parted].max():.1e} apart up to generation {parted}, " if parted else ""
+    return f"{close}{gap[parted]:.2f} apart at generation {parted + 1}"
+
+
 def main(kernels: list[str], seed: int | None) -> None:
     if not kernels:
         with open("/proc/cpuinfo", encoding="utf-8") as cpu:
             avx512 = " avx512f" in cpu.read()
         kernels = ["Haswell", *(["SkylakeX"] if avx512 else []), "Sandybridge"]
     if seed is not None:
-        print(f"seed {seed}: judged score (s)")
-        for sampler in ("evosax", "symmetric"):
-            for kernel in kernels:
-                scores = child(kernel, sampler, str(seed))
-                text = ", ".join(f"{m} {v:.5f}" for m, v in scores.items())
-                print(f"{kernel:12} {sampler:10} {text}")
+        import numpy as np
+
+        print(f"seed {seed}: judged score (s); CMA-ES's candidates against the first kernel's")
+        with tempfile.TemporaryDirectory() as folder:
+            for sampler in ("evosax", "symmetric"):
+                first = None
+                for kernel in kernels:
+                    record = os.path.join(folder, f"{sampler}-{kernel}.npy")
+                    scores = child(kernel, sampler, str(seed), record)
+                    text = ", ".join(f"{m} {v:.5f}" for m, v in scores.items())
+                    populations = np.load(record)
+                    first = populations if first is None else first
+                    print(f"{kernel:12} {sampler:10} {text}; {parting(populations, first)}")
         return
     print(
         "kernel       sampler    distinct eigenvalues  objective at the end  from the first kernel"
@@ -139,7 +180,7 @@ def main(kernels: list[str], seed: int | None) -> None:
 if __name__ == "__main__":
     argv = sys.argv[1:]
     if argv[:1] == ["--child"]:
-        print(run(argv[1]) if len(argv) == 2 else comparison(argv[1], int(argv[2])))
+        print(run(argv[1]) if len(argv) == 2 else comparison(argv[1], int(argv[2]), argv[3]))
     elif argv[:1] == ["--comparison"]:
         main(argv[2:], int(argv[1]))
     else:
