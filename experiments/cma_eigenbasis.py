@@ -10,18 +10,18 @@ the CPU at run time, or by ``OPENBLAS_CORETYPE``) return different ones.
 The candidates ``B · D · z`` then differ entirely, as if the run had another
 seed. Drawing with the symmetric root instead, ``B · D · Bᵀ · z`` (the same
 distribution, since ``Bᵀ z`` is again standard normal), gives the same
-candidates for any basis.
+candidates for any basis, up to rounding.
 
 For each kernel named on the command line (default: Haswell, and SkylakeX
 where the CPU has AVX-512; Sandybridge) and each sampler, this runs 400
 generations of 8 on a 38-dimensional test function in a fresh process and
-prints the distinct eigenvalues of ``C`` after the first generation, the
+prints how many distinct eigenvalues ``C`` has after the first generation, the
 objective at the final mean, and how far that mean lies from the first
 kernel's with the same sampler (largest coordinate difference).
 
 With ``--comparison SEED`` it runs one seed of ``wmr-jax tune --robust
---compare --price 5`` instead (``compare_seed``, one core, about two minutes
-each) and prints each method's judged score, and how far CMA-ES's
+--compare --price 5`` instead (``compare_seed``, one core; two minutes
+each on a fast 2-core machine) and prints each method's judged score, and how far CMA-ES's
 candidates lie from the first kernel's run generation by generation:
 whether the symmetric root makes CMA-ES's row the same for every kernel in
 the comparison itself, and if not, where the runs part.
@@ -121,12 +121,14 @@ def symmetric_root():
 
 def child(kernel: str, *args: str) -> dict:
     """The output of this script run as ``--child ARGS`` with ``kernel``, in a fresh process."""
-    out = subprocess.run(
+    done = subprocess.run(
         [sys.executable, __file__, "--child", *args],
         env={**os.environ, "OPENBLAS_CORETYPE": kernel},
-        capture_output=True, text=True, check=True,
-    ).stdout  # fmt: skip
-    return json.loads(out.strip().splitlines()[-1])
+        capture_output=True, text=True,
+    )  # fmt: skip
+    if done.returncode:
+        sys.exit(f"OPENBLAS_CORETYPE={kernel} {' '.join(args)} failed:\n{done.stderr}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def parting(populations, first) -> str:
@@ -182,6 +184,8 @@ if __name__ == "__main__":
     if argv[:1] == ["--child"]:
         print(run(argv[1]) if len(argv) == 2 else comparison(argv[1], int(argv[2]), argv[3]))
     elif argv[:1] == ["--comparison"]:
+        if len(argv) < 2 or not argv[1].isdigit():
+            sys.exit("usage: python experiments/cma_eigenbasis.py --comparison SEED [KERNEL ...]")
         main(argv[2:], int(argv[1]))
     else:
         main(argv, None)

@@ -99,8 +99,8 @@ _MODE_FLAGS = {
     "--price": (
         "C",
         "with --robust --compare: candidates one gradient iteration is worth in the searches' "
-        "budget; a price robust_compare.json recorded gives the same searches on any machine "
-        "(default: measured)",
+        "budget; a price robust_compare.json recorded gives them as many candidates on any "
+        "machine (default: measured)",
     ),
     "--gradient-cost": (
         None,

@@ -78,7 +78,7 @@ class RobustConfig:
             candidates as the tuning's compute buys (``iteration_price``).
         price: with ``compare``, the candidates one iteration is worth in the
             searches' budget (``None``: measured, ``iteration_price``); a
-            recorded price makes the searches the same on any machine.
+            recorded price gives them as many candidates on any machine.
         law: ``"schedule"`` (the gain schedule, default) or ``"fixed"`` (the 7
             gains): the controller's searched set.
         estimator: ``"ekf"`` (default), ``"observer"``, or ``None`` (raw
