@@ -346,32 +346,6 @@ def test_robust_table_is_the_stored_standard_conditions():
     assert rows[("both", "robust-tuned, raw feedback")]["feedback"] == "raw"
 
 
-def test_robust_comparison_at_a_given_price_is_the_stored_run():
-    """docs/robustness.md's table at a given price: each method's judged score, as stored."""
-    from wmr_jax._src.tuning.robust import condition_score
-
-    stored = json.loads((STORED / "robust_compare_price.json").read_text(encoding="utf-8"))
-    assert stored["settings"]["config"]["price"] == 5.0
-    scores = {}
-    for row in stored["rows"]:
-        assert row["price"] == 5.0 and row["budget_candidates"] == 3025, row
-        scores.setdefault((row["method"], row["seed"]), []).append(condition_score(row))
-    page = _read("docs/robustness.md")
-    command = "tune --out results/tune-robust-compare-price --robust --compare --price 5"
-    assert f"wmr-jax {command}" in page
-    lines = page.splitlines()
-    start = next(i for i, line in enumerate(lines) if "| CMA-ES at C = 5 |" in line)
-    methods = ("gradient", "cma-es", "random search")
-    body = [[c.strip() for c in line.strip("|").split("|")] for line in lines[start + 2 :]]
-    body = body[: next(i for i, cells in enumerate(body) if cells[0] == "mean") + 1]
-    assert [cells[0] for cells in body] == ["0", "1", "2", "mean"]
-    for cells in body:
-        for cell, method in zip(cells[1:4], methods, strict=True):
-            seeds = range(3) if cells[0] == "mean" else [int(cells[0])]
-            value = np.mean([np.mean(scores[(method, seed)]) for seed in seeds])
-            assert cell == f"{value:.3f}", (cells[0], method, cell, value)
-
-
 def _judged(name):
     """Each method's judged score per seed of a stored robust comparison, and its rows."""
     from wmr_jax._src.tuning.robust import condition_score
@@ -393,6 +367,27 @@ def _page_table(page, header):
             break
         body.append([c.strip() for c in line.strip("|").split("|")])
     return body
+
+
+def test_robust_comparison_at_a_given_price_is_the_stored_run():
+    """docs/robustness.md's table at a given price: each method's judged score, as stored."""
+    stored = json.loads((STORED / "robust_compare_price.json").read_text(encoding="utf-8"))
+    assert stored["settings"]["config"]["price"] == 5.0
+    scores, rows = _judged("robust_compare_price.json")
+    for row in rows:
+        assert row["price"] == 5.0 and row["budget_candidates"] == 3025, row
+    page = _read("docs/robustness.md")
+    command = "tune --out results/tune-robust-compare-price --robust --compare --price 5"
+    assert f"wmr-jax {command}" in page
+    header = next(line for line in page.splitlines() if "| CMA-ES at C = 5 |" in line)
+    body = _page_table(page, header)
+    assert [cells[0] for cells in body] == ["0", "1", "2", "mean"]
+    methods = ("gradient", "cma-es", "random search")
+    for cells in body:
+        for cell, method in zip(cells[1:4], methods, strict=True):
+            seeds = range(3) if cells[0] == "mean" else [int(cells[0])]
+            value = np.mean([scores[(method, seed)] for seed in seeds])
+            assert cell == f"{value:.3f}", (cells[0], method, cell, value)
 
 
 def test_robust_comparison_on_a_second_machine_is_the_stored_runs():
