@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
+import wmr_jax as w
 from wmr_jax.cli import main
-from wmr_jax.report import animate, write_gif
+from wmr_jax.report import write_gif
 
 
 def _frames(path):
@@ -28,10 +29,11 @@ def test_animate_command_and_function(tmp_path, capsys):
     assert _frames(gif) == 5  # samples 0, 3, 6, 9, 12
     assert [p.name for p in tmp_path.iterdir()] == ["robots.gif"]  # no temporary left
 
-    # The same runs (2 random poses, seed 0, 12 periods) with 5 samples per frame.
-    path = animate(
-        tmp_path / "again.gif", n_robots=2, steps=PERIODS, stride=5, controller="aicardi"
-    )
+    # The same runs (2 random poses, seed 0, 12 periods), recorded here and
+    # drawn with 5 samples per frame.
+    refs = np.asarray(w.sample_poses(0, 2), dtype=float)
+    runs = w.batch_rollout(refs, steps=PERIODS, controller="aicardi")
+    path = write_gif(tmp_path / "again.gif", np.asarray(runs.poses), refs, stride=5)
     assert _frames(path) == 4  # samples 0, 5, 10 and the last, 12
 
 

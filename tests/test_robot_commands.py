@@ -348,15 +348,19 @@ def test_bench_runs_the_robot_and_records_it(tmp_path, capsys, monkeypatch):
 
 
 def test_animate_runs_the_robot_and_flags_are_spelled_whole(tmp_path, capsys, monkeypatch):
+    from types import SimpleNamespace
+
     from wmr_jax._src.report import animation
+    from wmr_jax._src.sim import rollout
 
     asked = []
 
-    def fake(path, refs, params=None, **kwargs):
+    def fake(refs, params=None, **kwargs):
         asked.append((params, kwargs["robot"]))
-        return path
+        return SimpleNamespace(poses=np.zeros((len(refs), kwargs["steps"] + 1, 3)))
 
-    monkeypatch.setattr(animation, "animate", fake)
+    monkeypatch.setattr(rollout, "batch_rollout", fake)
+    monkeypatch.setattr(animation, "write_gif", lambda path, *args, **kwargs: path)
     argv = ["animate", "--out", str(tmp_path / "a.gif"), "--seconds", "0.5"]
     assert main([*argv, "--robot", "turtlebot3-burger"]) == 0
     ((params, robot),) = asked

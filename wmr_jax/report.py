@@ -1,7 +1,8 @@
 """The reporting layer: figures, GIFs, Markdown tables and result files.
 
-It draws and writes what ``wmr_jax.studies`` and ``wmr_jax.tuning`` return
-(``animate`` also runs the robots it draws); every file is written atomically.
+It draws and writes what the simulator, ``wmr_jax.studies`` and
+``wmr_jax.tuning`` return, and simulates nothing itself: a GIF draws runs recorded
+by ``batch_rollout`` (``write_gif``). Every file is written atomically.
 """
 
 from wmr_jax._src.io import DamagedFileError as DamagedFileError
@@ -13,7 +14,6 @@ from wmr_jax._src.io import load_arrays as load_arrays
 from wmr_jax._src.io import remove_stale_temporaries as remove_stale_temporaries
 from wmr_jax._src.io import save_arrays as save_arrays
 from wmr_jax._src.io import save_figure as save_figure
-from wmr_jax._src.report.animation import animate as animate
 from wmr_jax._src.report.animation import frame_timing as frame_timing
 from wmr_jax._src.report.animation import write_gif as write_gif
 from wmr_jax._src.report.bench import bench_table as bench_table

@@ -39,9 +39,12 @@ def add_arguments(parser: Any) -> None:
 
 def run(args: Any) -> int:
     """Run ``wmr-jax animate``; return the exit status."""
-    from wmr_jax._src.report.animation import animate, gif_path
-    from wmr_jax._src.sim.poses import horizon_steps, paper_refs
-    from wmr_jax._src.sim.rollout import DEFAULT_DT
+    import jax
+    import numpy as np
+
+    from wmr_jax._src.report.animation import gif_path, run_title, write_gif
+    from wmr_jax._src.sim.poses import horizon_steps, paper_refs, sample_poses
+    from wmr_jax._src.sim.rollout import DEFAULT_DT, batch_rollout
     from wmr_jax._src.studies.robustness import robot_defaults
 
     gif_path("--out", args.out)
@@ -59,17 +62,13 @@ def run(args: Any) -> int:
     )
     params = robot_defaults(name, robot)
     flags.say_robot(given)
-    path = animate(
-        out,
-        paper_refs() if args.paper else None,
-        params,
-        robot=robot,
-        n_robots=robots,
-        seed=seed,
-        controller=name,
-        velocity=velocity,
-        steps=max(1, horizon_steps(DEFAULT_DT, seconds)),
-        speed=speed,
-    )
+    refs = np.asarray(paper_refs() if args.paper else sample_poses(seed, robots), dtype=float)
+    steps = max(1, horizon_steps(DEFAULT_DT, seconds))
+    with jax.enable_x64(True):
+        runs = batch_rollout(
+            refs, params, steps=steps, robot=robot, velocity=velocity, controller=name
+        )
+    title = run_title(name, velocity, len(refs))
+    path = write_gif(out, np.asarray(runs.poses), refs, dt=DEFAULT_DT, title=title, speed=speed)
     print(f"animation -> {path}")
     return 0

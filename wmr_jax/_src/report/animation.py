@@ -11,17 +11,12 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-import jax
 import numpy as np
 
 from wmr_jax._src import checks
 from wmr_jax._src.io import atomic_write_bytes
-from wmr_jax._src.model import controllers
-from wmr_jax._src.model.params import Robot
 from wmr_jax._src.report.figures import mpl_animation, plt, reference_arrows
 from wmr_jax._src.sim import metrics
-from wmr_jax._src.sim import rollout as simulation
-from wmr_jax._src.sim.poses import horizon_steps, sample_poses
 from wmr_jax._src.sim.rollout import DEFAULT_DT
 
 
@@ -178,51 +173,9 @@ def write_gif(
         plt.close(fig)  # also when drawing or encoding failed
 
 
-def animate(
-    path: str | os.PathLike,
-    refs: Any = None,
-    params: Any = None,
-    *,
-    n_robots: int = 8,
-    seed: int = 0,
-    controller: Any = controllers.SHIM_SUNG,
-    init: Any = (0.0, 0.0, 0.0),
-    dt: float = DEFAULT_DT,
-    steps: int | None = None,
-    robot: Robot | None = None,
-    velocity: str = "ideal",
-    speed: float = 1.0,
-    stride: int | None = None,
-) -> Path:
-    """Simulate a batch of robots (in float64) and write the GIF of them driving to their poses.
-
-    Args:
-        path: the ``.gif`` to write (atomically).
-        refs: ``(N, 3)`` references; default ``sample_poses(seed, n_robots)``.
-        params: the controller's parameters (its defaults if ``None``).
-        n_robots: number of random references when ``refs`` is ``None``.
-        seed: seed of the random references.
-        controller, init, dt, robot, velocity: as ``batch_rollout``.
-        steps: control periods; default the docs/model.md §6 horizon (6 s).
-        speed, stride: as ``write_gif``.
-
-    Returns:
-        The path written.
-    """
-    path = gif_path("path =", path)
-    if refs is None:
-        refs = np.asarray(sample_poses(seed, checks.check_int("n_robots", n_robots)), dtype=float)
-    frame_timing(dt, stride, speed)  # bad values fail before anything runs
-    steps = horizon_steps(dt) if steps is None else steps
-    name = controllers.get_controller(controller).name
-    run = {"init": init, "dt": dt, "robot": robot, "velocity": velocity, "controller": name}
-    with jax.enable_x64(True):
-        poses = np.asarray(simulation.batch_rollout(refs, params, steps=steps, **run).poses)
-    refs = np.asarray(refs, dtype=float)
-    if refs.ndim == 1:
-        refs = np.broadcast_to(refs, (poses.shape[0], 3))
-    title = f"{name}, {velocity} loop: {len(refs)} robots from {_start(init)}"
-    return write_gif(path, poses, refs, dt=dt, title=title, speed=speed, stride=stride)
+def run_title(controller: str, velocity: str, n: int, init: Any = (0.0, 0.0, 0.0)) -> str:
+    """The title of a GIF of ``n`` runs of ``controller`` in the ``velocity`` loop from ``init``."""
+    return f"{controller}, {velocity} loop: {n} robots from {_start(init)}"
 
 
 def _start(init: Any) -> str:
