@@ -342,3 +342,31 @@ def test_the_comparisons_and_only_they_run_on_one_core(monkeypatch, tmp_path, ro
     monkeypatch.setattr(cli_robust, "run", lambda args: calls.append("tune") or 0)
     assert main(["tune", "--robust", "--out", str(tmp_path / "t")]) == 0
     assert calls == ["tune"]  # a tuning run keeps every core
+
+
+def test_every_cma_es_search_of_a_shape_runs_the_programs_the_first_compiled():
+    """A search's budget buys candidates, not compiling: the gradient's seeds after the
+    first reuse its compiled step, and CMA-ES's reuse its compiled init, ask and tell."""
+    evosax = pytest.importorskip("evosax.algorithms")
+    start = np.zeros(7)
+
+    def generations(seed):
+        propose, tell = search_module.cma_es_proposals(jax.random.key(seed), start, 4)
+        asked = []
+        for g in range(3):
+            z = propose(g)
+            tell(g, z, np.sum(np.asarray(z) ** 2, axis=1))
+            asked.append(np.asarray(z))
+        return np.stack(asked)
+
+    first = generations(0)
+    jitted = (evosax.CMA_ES.init, evosax.CMA_ES.ask, evosax.CMA_ES.tell)
+    compiled = [f._cache_size() for f in jitted]
+    other = generations(1)
+    assert [f._cache_size() for f in jitted] == compiled
+    # The shared strategy keeps no state between searches: a seed asks the same again.
+    np.testing.assert_array_equal(generations(0), first)
+    assert not np.array_equal(other, first)
+    # Another population is another strategy.
+    search_module.cma_es_proposals(KEY, start, 6)[0](0)
+    assert evosax.CMA_ES.ask._cache_size() == compiled[1] + 1

@@ -7,6 +7,7 @@ is process CPU time (``clock``), the gradient tuner's included.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import os
 import time
@@ -309,6 +310,19 @@ def _evosax_cma_es() -> Any:
     return CMA_ES
 
 
+@functools.cache
+def _strategy(cls: Any, population: int, shape: tuple[int, ...], dtype: str) -> Any:
+    """One evosax strategy per class, population and shape, for every search of the process.
+
+    evosax compiles ``init``, ``ask`` and ``tell`` per strategy object (it is
+    their static argument): a new object per search would compile them again
+    inside each search's budget (about 2.5 CPU-seconds), where the gradient
+    tuner's compiled step serves every seed after the first. The start only
+    gives the shape; ``init`` takes the mean.
+    """
+    return cls(population_size=population, solution=jnp.zeros(shape, dtype))
+
+
 @jax.jit
 def _generation_keys(key: jax.Array, generation: Any) -> jax.Array:
     """The ask and tell keys of a generation, in one compiled call (the loop's time is budgeted)."""
@@ -323,7 +337,7 @@ def cma_es_proposals(
     Generation ``g`` asks and tells with ``split(fold_in(key, g + 1))``, or
     with ``fold_in(key, g + 1)`` for both without ``split`` (the robust tuner's).
     """
-    strategy = _evosax_cma_es()(population_size=population, solution=start)
+    strategy = _strategy(_evosax_cma_es(), population, start.shape, str(start.dtype))
     params = dataclasses.replace(strategy.default_params, std_init=std_init)
     state = strategy.init(jax.random.fold_in(key, 0), start, params)
     tell_keys = {}
