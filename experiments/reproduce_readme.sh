@@ -62,8 +62,9 @@ for stage in $STAGES; do
       cp "$OUT/robustness-standard/standard_conditions.png" docs/
       cp "$OUT/robustness-standard/noise_curve.png" docs/
       cp "$OUT/robustness-standard/standard_conditions.json" docs/data/standard_conditions.json ;;
-    compare-tuning)  # gradient vs CMA-ES vs random search, 3 seeds (about 7 minutes)
-      wmr-jax tune --out "$OUT/tune-compare" --compare ;;
+    compare-tuning)  # gradient vs CMA-ES vs random search, 3 seeds (2-7 minutes)
+      wmr-jax tune --out "$OUT/tune-compare" --compare
+      cp "$OUT/tune-compare/compare.json" docs/data/tune_compare.json ;;
     compare-sizes)  # the same on schedules of 30 and 60 knots (about 20 minutes)
       for knots in 30 60; do
         wmr-jax tune --out "$OUT/tune-compare-k$knots" --compare --schedule --knots $knots

@@ -369,6 +369,31 @@ def _page_table(page, header):
     return body
 
 
+def test_tuner_comparison_table_is_the_stored_run():
+    """docs/tuning.md's table of ``tune --compare``: the stored run, as the command writes it."""
+    from wmr_jax._src.report.tuning import comparison_table
+
+    rows = json.loads((STORED / "tune_compare.json").read_text(encoding="utf-8"))
+    page = _read("docs/tuning.md")
+    table = [line for line in comparison_table(rows).splitlines() if line.startswith("|")]
+    assert "\n".join(table) in page
+    # One held-out set per problem, every method judged on it, three seeds each.
+    for problem in ("fixed", "schedule"):
+        mine = [row for row in rows if row["problem"] == problem]
+        assert len({row["held_out"] for row in mine}) == 1
+        assert sorted((row["method"], row["seed"]) for row in mine) == sorted(
+            (m, seed) for m in ("gradient", "cma-es", "random search") for seed in (0, 1, 2)
+        )
+    # The prose's margins: CMA-ES level on the fixed gains, behind on the schedule.
+    arrival = {(r["problem"], r["method"], r["seed"]): r["mean_arrival"] for r in rows}
+    fixed = [arrival["fixed", "cma-es", k] - arrival["fixed", "gradient", k] for k in range(3)]
+    assert [round(d, 3) for d in fixed] == [0.001, 0.001, -0.009]
+    ahead = [
+        arrival["schedule", "cma-es", k] - arrival["schedule", "gradient", k] for k in range(3)
+    ]
+    assert 0.006 <= round(min(ahead), 3) and round(max(ahead), 3) <= 0.009
+
+
 def test_robust_comparison_at_a_given_price_is_the_stored_run():
     """docs/robustness.md's table at a given price: each method's judged score, as stored."""
     stored = json.loads((STORED / "robust_compare_price.json").read_text(encoding="utf-8"))
