@@ -20,7 +20,7 @@ def _frames(path):
 PERIODS = 12
 
 
-def test_animate_command_and_function(tmp_path, capsys):
+def test_animate_command_and_a_gif_of_recorded_runs(tmp_path, capsys):
     gif = tmp_path / "robots.gif"
     argv = ["animate", "--out", str(gif), "--robots", "2", "--seconds", "0.396"]
     assert main([*argv, "--controller", "aicardi"]) == 0
@@ -77,9 +77,16 @@ def test_write_gif_checks_shapes(tmp_path):
         (["--out", "a.gif", "--seconds", "-1"], "--seconds '-1'"),
         (["--out", "a.gif", "--velocity", "warp"], "--velocity 'warp'"),
         (["--out", "a.gif", "--speed", "0"], "--speed '0'"),
+        (["--out", "a.gif", "--speed", "1e-5"], "speed = 1e-05"),  # no GIF can play it
     ],
 )
 def test_animate_command_bad_values(tmp_path, monkeypatch, capsys, argv, message):
+    from wmr_jax._src.sim import rollout
+
+    def no_runs(*args, **kwargs):
+        raise AssertionError("refused only after simulating")
+
+    monkeypatch.setattr(rollout, "batch_rollout", no_runs)  # every refusal comes first
     monkeypatch.chdir(tmp_path)
     assert main(["animate", *argv]) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -9,6 +9,7 @@ import math
 import os
 import warnings
 
+import jax
 import numpy as np
 import pytest
 
@@ -353,14 +354,20 @@ def test_animate_runs_the_robot_and_flags_are_spelled_whole(tmp_path, capsys, mo
     from wmr_jax._src.report import animation
     from wmr_jax._src.sim import rollout
 
-    asked = []
+    asked, drawn = [], []
 
     def fake(refs, params=None, **kwargs):
         asked.append((params, kwargs["robot"]))
-        return SimpleNamespace(poses=np.zeros((len(refs), kwargs["steps"] + 1, 3)))
+        # What the runs are computed in: float64, whatever the session's default.
+        dtype = jax.numpy.zeros(()).dtype
+        return SimpleNamespace(poses=np.zeros((len(refs), kwargs["steps"] + 1, 3), dtype))
+
+    def draw(path, poses, refs, **kwargs):
+        drawn.append((poses.dtype, refs.shape, kwargs))
+        return path
 
     monkeypatch.setattr(rollout, "batch_rollout", fake)
-    monkeypatch.setattr(animation, "write_gif", lambda path, *args, **kwargs: path)
+    monkeypatch.setattr(animation, "write_gif", draw)
     argv = ["animate", "--out", str(tmp_path / "a.gif"), "--seconds", "0.5"]
     assert main([*argv, "--robot", "turtlebot3-burger"]) == 0
     ((params, robot),) = asked
@@ -368,7 +375,12 @@ def test_animate_runs_the_robot_and_flags_are_spelled_whole(tmp_path, capsys, mo
     kr = 22.72 * 60 / (60 + 8 * 10)  # the paper's feasible gains within its wheels
     assert (params.kr, params.k_theta) == pytest.approx((kr, kr / 6))
     assert "robot 'turtlebot3-burger'" in capsys.readouterr().out
-    assert main(argv) == 0 and asked[-1] == (None, None)  # the paper robot, its defaults
+    with jax.enable_x64(False):
+        assert main(argv) == 0 and asked[-1] == (None, None)  # the paper robot, its defaults
+    dtype, shape, kwargs = drawn[-1]
+    assert dtype == np.float64 and shape == (8, 3)
+    title = "shim-sung, ideal loop: 8 robots from (0, 0, 0°)"
+    assert kwargs == {"dt": 0.033, "title": title, "speed": 1.0}
     # A prefix of a flag is not that flag (``--robot`` once read as ``--robots``).
     with pytest.raises(SystemExit) as refused:
         main([*argv, "--rob", "3"])

@@ -367,6 +367,14 @@ def test_every_cma_es_search_of_a_shape_runs_the_programs_the_first_compiled():
     # The shared strategy keeps no state between searches: a seed asks the same again.
     np.testing.assert_array_equal(generations(0), first)
     assert not np.array_equal(other, first)
-    # Another population is another strategy.
-    search_module.cma_es_proposals(KEY, start, 6)[0](0)
-    assert evosax.CMA_ES.ask._cache_size() == compiled[1] + 1
+    # One strategy per population and shape.
+    strategy = search_module._strategy
+    assert strategy(evosax.CMA_ES, 4, (7,), "float64") is strategy(
+        evosax.CMA_ES, 4, (7,), "float64"
+    )
+    assert strategy(evosax.CMA_ES, 6, (7,), "float64") is not strategy(
+        evosax.CMA_ES, 4, (7,), "float64"
+    )
+    assert strategy(evosax.CMA_ES, 4, (8,), "float64") is not strategy(
+        evosax.CMA_ES, 4, (7,), "float64"
+    )

@@ -42,7 +42,7 @@ def run(args: Any) -> int:
     import jax
     import numpy as np
 
-    from wmr_jax._src.report.animation import gif_path, run_title, write_gif
+    from wmr_jax._src.report.animation import frame_timing, gif_path, run_title, write_gif
     from wmr_jax._src.sim.poses import horizon_steps, paper_refs, sample_poses
     from wmr_jax._src.sim.rollout import DEFAULT_DT, batch_rollout
     from wmr_jax._src.studies.robustness import robot_defaults
@@ -60,6 +60,7 @@ def run(args: Any) -> int:
     speed = flags.number(
         "--speed", args.speed, low=0.0, closed=False, high=100.0, unit="× real time"
     )
+    frame_timing(DEFAULT_DT, None, speed)  # a speed no GIF can play is refused before the runs
     params = robot_defaults(name, robot)
     flags.say_robot(given)
     refs = np.asarray(paper_refs() if args.paper else sample_poses(seed, robots), dtype=float)
