@@ -402,6 +402,30 @@ def test_tuner_comparison_table_is_the_stored_run():
     assert "3.5× closer to the bound than random search" in page
 
 
+def test_larger_schedules_tables_are_the_stored_runs():
+    """docs/tuning.md's 30- and 60-knot comparisons, as the command writes them, and their gaps."""
+    from wmr_jax._src.report.tuning import comparison_table
+
+    page = _read("docs/tuning.md")
+    gaps = {}
+    for name in ("tune_compare.json", "tune_compare_k30.json", "tune_compare_k60.json"):
+        rows = [r for r in json.loads((STORED / name).read_text()) if r["problem"] == "schedule"]
+        if name != "tune_compare.json":
+            table = [line for line in comparison_table(rows).splitlines() if line.startswith("|")]
+            assert "\n".join(table) in page, name
+        bound = rows[0]["lower_bound_s"]
+        gap = {}
+        for row in rows:
+            gap.setdefault(row["method"], []).append(row["mean_arrival"] - bound)
+        gaps[rows[0]["parameters"]] = {m: float(np.mean(v)) for m, v in gap.items()}
+        by_seed = {(r["method"], r["seed"]): r["mean_arrival"] for r in rows}
+        assert all(by_seed["gradient", k] < by_seed["cma-es", k] for k in range(3)), name
+    over_cma = [round(g["cma-es"] / g["gradient"], 2) for g in gaps.values()]
+    over_random = [round(g["random search"] / g["gradient"], 1) for g in gaps.values()]
+    assert over_cma == [1.12, 1.33, 1.24] and over_random == [3.5, 6.1, 5.2]
+    assert "from the lower bound is 1.12×, 1.33× and 1.24× the gradient's" in page
+
+
 def test_robust_comparison_at_a_given_price_is_the_stored_run():
     """docs/robustness.md's table at a given price: each method's judged score, as stored."""
     stored = json.loads((STORED / "robust_compare_price.json").read_text(encoding="utf-8"))
