@@ -65,7 +65,7 @@ for stage in $STAGES; do
     compare-tuning)  # gradient vs CMA-ES vs random search, 3 seeds (2-7 minutes)
       wmr-jax tune --out "$OUT/tune-compare" --compare
       cp "$OUT/tune-compare/compare.json" docs/data/tune_compare.json ;;
-    compare-sizes)  # the same on schedules of 30 and 60 knots (13-20 minutes)
+    compare-sizes)  # the same on schedules of 30 and 60 knots (13 minutes on a fast 2-core machine)
       wmr-jax tune --out "$OUT/tune-compare-k30" --compare --schedule --knots 30
       cp "$OUT/tune-compare-k30/compare.json" docs/data/tune_compare_k30.json
       wmr-jax tune --out "$OUT/tune-compare-k60" --compare --schedule --knots 60

@@ -367,8 +367,20 @@ def test_every_cma_es_search_of_a_shape_runs_the_programs_the_first_compiled():
     # The shared strategy keeps no state between searches: a seed asks the same again.
     np.testing.assert_array_equal(generations(0), first)
     assert not np.array_equal(other, first)
+    # Each search asks for the strategy of its class, population and shape.
+    asked = []
+    cached = search_module._strategy
+
+    def recorded(*key):
+        asked.append(key)
+        return cached(*key)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(search_module, "_strategy", recorded)
+        search_module.cma_es_proposals(KEY, start, 6)
+    assert asked == [(evosax.CMA_ES, 6, (7,), "float64")]
     # One strategy per population and shape.
-    strategy = search_module._strategy
+    strategy = cached
     assert strategy(evosax.CMA_ES, 4, (7,), "float64") is strategy(
         evosax.CMA_ES, 4, (7,), "float64"
     )
