@@ -75,6 +75,11 @@ def test_write_gif_checks_shapes(tmp_path):
         (["--out", "a.gif", "--robots", "0"], "--robots '0'"),
         (["--out", "a.gif", "--seed", "-1"], "--seed '-1'"),
         (["--out", "a.gif", "--seconds", "-1"], "--seconds '-1'"),
+        (["--out", "a.gif", "--seconds", "0.03"], "--seconds '0.03'"),  # under one period
+        (["--out", "a.gif", "--seconds", "600.5"], "--seconds '600.5'"),
+        (["--out", "a.gif", "--robots", "10001"], "--robots '10001'"),
+        (["--out", "a.gif", "--seed", "4294967296"], "--seed '4294967296'"),
+        (["--out", "a.gif", "--speed", "100.5"], "--speed '100.5'"),
         (["--out", "a.gif", "--velocity", "warp"], "--velocity 'warp'"),
         (["--out", "a.gif", "--speed", "0"], "--speed '0'"),
         (["--out", "a.gif", "--speed", "1e-5"], "speed = 1e-05"),  # no GIF can play it
@@ -92,3 +97,38 @@ def test_animate_command_bad_values(tmp_path, monkeypatch, capsys, argv, message
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0] and "allowed" in err[0], err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_animate_command_runs_what_its_flags_ask(tmp_path, monkeypatch):
+    """The references, controller, loop, periods and playback the command hands on."""
+    from types import SimpleNamespace
+
+    from wmr_jax._src.report import animation
+    from wmr_jax._src.sim import rollout
+
+    runs, drawn = [], []
+
+    def fake(refs, params=None, **kwargs):
+        runs.append((np.asarray(refs), kwargs))
+        return SimpleNamespace(poses=np.zeros((len(refs), kwargs["steps"] + 1, 3)))
+
+    monkeypatch.setattr(rollout, "batch_rollout", fake)
+    monkeypatch.setattr(animation, "write_gif", lambda path, *a, **kw: drawn.append(kw) or path)
+    out = ["animate", "--out", str(tmp_path / "a.gif")]
+    flags = ["--paper", "--controller", "aicardi", "--velocity", "nonideal", "--speed", "2"]
+    assert main([*out, *flags, "--seconds", "1"]) == 0
+    refs, kwargs = runs[-1]
+    np.testing.assert_array_equal(refs, w.paper_refs())
+    assert kwargs["controller"] == "aicardi" and kwargs["velocity"] == "nonideal"
+    assert kwargs["steps"] == 31  # 1 s of 33 ms periods, the last one partly
+    assert drawn[-1]["speed"] == 2.0
+    assert drawn[-1]["title"] == "aicardi, nonideal loop: 7 robots from (0, 0, 0°)"
+    # Random references: the seed's first poses; one period at the least, 600 s at the most.
+    assert main([*out, "--robots", "3", "--seed", "5", "--seconds", "0.033"]) == 0
+    refs, kwargs = runs[-1]
+    np.testing.assert_array_equal(refs, np.asarray(w.sample_poses(5, 3), dtype=float))
+    assert kwargs["steps"] == 1 and kwargs["velocity"] == "ideal"
+    limits = ["--robots", "10000", "--seed", "4294967295", "--seconds", "600", "--speed", "100"]
+    assert main([*out, *limits]) == 0
+    assert len(runs[-1][0]) == 10_000 and runs[-1][1]["steps"] == 18_182
+    assert main([*out, "--robots", "1", "--seed", "0"]) == 0 and len(runs[-1][0]) == 1

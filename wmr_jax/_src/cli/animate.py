@@ -56,7 +56,8 @@ def run(args: Any) -> int:
     # A GIF holds every frame in memory: a few minutes of a few thousand robots at most.
     robots = flags.positive_int("--robots", args.robots, 1, 10_000)
     seed = flags.positive_int("--seed", args.seed, 0, 2**32 - 1)
-    seconds = flags.number("--seconds", args.seconds, low=0.0, closed=False, high=600.0, unit="s")
+    # At least one control period, named as the flag (not as the horizon it sets).
+    seconds = flags.number("--seconds", args.seconds, low=DEFAULT_DT, high=600.0, unit="s")
     speed = flags.number(
         "--speed", args.speed, low=0.0, closed=False, high=100.0, unit="× real time"
     )
@@ -64,7 +65,7 @@ def run(args: Any) -> int:
     params = robot_defaults(name, robot)
     flags.say_robot(given)
     refs = np.asarray(paper_refs() if args.paper else sample_poses(seed, robots), dtype=float)
-    steps = max(1, horizon_steps(DEFAULT_DT, seconds))
+    steps = horizon_steps(DEFAULT_DT, seconds)
     with jax.enable_x64(True):
         runs = batch_rollout(
             refs, params, steps=steps, robot=robot, velocity=velocity, controller=name
