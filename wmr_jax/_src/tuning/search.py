@@ -316,8 +316,8 @@ def _strategy(cls: Any, population: int, shape: tuple[int, ...], dtype: str) -> 
 
     evosax compiles ``init``, ``ask`` and ``tell`` per strategy object (it is
     their static argument): a new object per search would compile them again
-    inside each search's budget (about 2.5 CPU-seconds), where the gradient
-    tuner's compiled step serves every seed after the first. The start only
+    inside each search's budget, where the gradient tuner's compiled step
+    serves every seed after the first (docs/tuning.md). The start only
     gives the shape; ``init`` takes the mean.
     """
     return cls(population_size=population, solution=jnp.zeros(shape, dtype))
