@@ -369,14 +369,18 @@ def _page_table(page, header):
     return body
 
 
-def test_tuner_comparison_table_is_the_stored_run():
-    """docs/tuning.md's table of ``tune --compare``: the stored run, as the command writes it."""
+def _compare_table(rows):
+    """The table lines ``tune --compare`` writes to ``compare.md`` for ``rows``."""
     from wmr_jax._src.report.tuning import comparison_table
 
+    return "\n".join(line for line in comparison_table(rows).splitlines() if line.startswith("|"))
+
+
+def test_tuner_comparison_table_is_the_stored_run():
+    """docs/tuning.md's table of ``tune --compare``: the stored run, as the command writes it."""
     rows = json.loads((STORED / "tune_compare.json").read_text(encoding="utf-8"))
     page = _read("docs/tuning.md")
-    table = [line for line in comparison_table(rows).splitlines() if line.startswith("|")]
-    assert "\n".join(table) in page
+    assert _compare_table(rows) in page
     # One held-out set per problem, every method judged on it, three seeds each.
     for problem in ("fixed", "schedule"):
         mine = [row for row in rows if row["problem"] == problem]
@@ -404,15 +408,13 @@ def test_tuner_comparison_table_is_the_stored_run():
 
 def test_larger_schedules_tables_are_the_stored_runs():
     """docs/tuning.md's 30- and 60-knot comparisons, as the command writes them, and their gaps."""
-    from wmr_jax._src.report.tuning import comparison_table
-
     page = _read("docs/tuning.md")
     gaps = {}
     for name in ("tune_compare.json", "tune_compare_k30.json", "tune_compare_k60.json"):
-        rows = [r for r in json.loads((STORED / name).read_text()) if r["problem"] == "schedule"]
+        stored = json.loads((STORED / name).read_text(encoding="utf-8"))
+        rows = [row for row in stored if row["problem"] == "schedule"]
         if name != "tune_compare.json":
-            table = [line for line in comparison_table(rows).splitlines() if line.startswith("|")]
-            assert "\n".join(table) in page, name
+            assert _compare_table(rows) in page, name
         bound = rows[0]["lower_bound_s"]
         gap = {}
         for row in rows:
