@@ -378,7 +378,9 @@ def test_every_cma_es_search_of_a_shape_runs_the_programs_the_first_compiled():
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(search_module, "_strategy", recorded)
         search_module.cma_es_proposals(KEY, start, 6)
-    assert asked == [(evosax.CMA_ES, 6, (7,), "float64")]
+    used = search_module._evosax_cma_es()  # evosax's, with the eigenbasis of tuning/cma.py
+    assert issubclass(used, evosax.CMA_ES) and used is search_module._evosax_cma_es()
+    assert asked == [(used, 6, (7,), "float64")]
     # One strategy per population and shape.
     strategy = cached
     assert strategy(evosax.CMA_ES, 4, (7,), "float64") is strategy(

@@ -30,6 +30,7 @@ from wmr_jax._src.model.params import Gains, Robot, validate_one_robot
 from wmr_jax._src.sim import loops
 from wmr_jax._src.sim import rollout as simulation
 from wmr_jax._src.sim.poses import HORIZON_S
+from wmr_jax._src.tuning import cma
 from wmr_jax._src.tuning.evaluation import check_run, hard_runs, quiet_scoring, run_options
 from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS, unit_from_gains
 from wmr_jax._src.tuning.problems import FIXED, Problem, get_problem
@@ -301,13 +302,13 @@ def evosax_available() -> bool:
 
 
 def _evosax_cma_es() -> Any:
+    """evosax's CMA-ES with an eigenbasis from XLA alone (``cma``); one clear error without it."""
     try:
-        from evosax.algorithms import CMA_ES
+        return cma.cma_es_class()
     except ImportError:
         raise ValueError(
             "CMA-ES needs evosax; allowed: pip install 'wmr-jax[search]' (evosax >= 0.3)"
         ) from None
-    return CMA_ES
 
 
 @functools.cache
