@@ -17,23 +17,31 @@ rerun with the same settings skips what is there: an interrupted study
 loses nothing finished. Seeds run in the outer loop, so that every size has
 seed 0 before any has seed 1. ``--table`` prints the Markdown table of a
 finished file instead.
+``--rerun-cma-es`` runs CMA-ES again for the (size, seed) rows of ``--out``,
+at the budget in candidates each was given, and replaces its rows: the
+gradient's and random search's rows do not depend on CMA-ES's code.
 
 Usage: ``python experiments/tuner_scaling.py [--sizes 38 101 285] [--seeds 0 1 2]
-[--iters 600] [--poses 32] [--out docs/data/tuner_scaling.json] [--table]``: the defaults
-are `tune --robust --compare`'s, so that the 38 parameters are its problem.
+[--iters 600] [--poses 32] [--out docs/data/tuner_scaling.json] [--table]
+[--rerun-cma-es]``: the defaults are `tune --robust --compare`'s, so that the 38 parameters
+are its problem.
 """
 
 import argparse
 import dataclasses
 import json
 import math
+import os
 from pathlib import Path
 
+import jax
 import numpy as np
 
 from wmr_jax._src import io
 from wmr_jax._src.model.params import Robot
-from wmr_jax._src.tuning import robust_run, search
+from wmr_jax._src.studies import conditions
+from wmr_jax._src.tuning import robust, robust_run, search
+from wmr_jax._src.tuning.evaluation import EVAL_SEED, held_out_poses, poses_digest
 from wmr_jax._src.tuning.robust import RobustConfig, condition_score
 
 # Parameters -> (schedule knots, estimator, observer knots per table or None: the default).
@@ -116,6 +124,33 @@ def table(record: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def rerun_cma_es(record: dict, args: argparse.Namespace, out: Path) -> None:
+    """Run CMA-ES again for each of ``record``'s (size, seed) in ``args``, at its budget."""
+    robot = Robot()
+    for i, row in enumerate(record["rows"]):
+        size, seed = row["parameters"], row["seed"]
+        if row["method"] != "cma-es" or size not in args.sizes or seed not in args.seeds:
+            continue
+        config = dataclasses.replace(config_of(size, args), seed=seed, compare=True)
+        print(f"{size} parameters, seed {seed}: CMA-ES at {row['candidates']:,} candidates")
+        loop, count, cpu, wall = robust.compared_search("cma-es", config, robot, row["candidates"])
+        held_out = held_out_poses(config.eval_poses, EVAL_SEED)
+        judged = conditions.standard_conditions(
+            {"cma-es": loop}, held_out, jax.random.key(robust.EVAL_NOISE_SEED), robot=robot,
+            noise=config.noise,
+        )  # fmt: skip
+        spent = {
+            "method": "cma-es", "seed": seed, "budget_s": row["budget_s"], "cpu_s": cpu,
+            "wall_s": wall, "candidates": count, "per_cpu_s": count / cpu,
+            "loadavg": os.getloadavg()[0], "minimises": row["minimises"],
+            "held_out": poses_digest(held_out),
+        }  # fmt: skip
+        (new,) = summary([{**r, **spent} for r in judged], size)
+        print(f"  score {row['score_s']:.3f} -> {new['score_s']:.3f} s", flush=True)
+        record["rows"][i] = new
+        io.atomic_write_json(out, record)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=sorted(SIZES), choices=SIZES)
@@ -126,11 +161,15 @@ def main() -> None:
     parser.add_argument("--eval-poses", type=int, default=DEFAULT.eval_poses)
     parser.add_argument("--out", type=Path, default=Path("docs/data/tuner_scaling.json"))
     parser.add_argument("--table", action="store_true", help="print the table of --out")
+    parser.add_argument("--rerun-cma-es", action="store_true", help="CMA-ES again, same budgets")
     args = parser.parse_args()
     if args.table:
         print(table(json.loads(args.out.read_text(encoding="utf-8"))), end="")
         return
     search.one_core()
+    if args.rerun_cma_es:
+        rerun_cma_es(json.loads(args.out.read_text(encoding="utf-8")), args, args.out)
+        return
     settings = {
         "iters": args.iters,
         "poses": args.poses,

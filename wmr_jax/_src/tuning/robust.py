@@ -487,6 +487,22 @@ def black_box(
     return closed(best_z), count, clock() - began, time.perf_counter() - wall
 
 
+def search_poses(config: RobustConfig) -> jax.Array:
+    """The poses the searches of ``config``'s seed score candidates on, ``(search_poses, 3)``."""
+    stream = jax.random.fold_in(jax.random.key(config.seed), 11)
+    return sample_poses(jax.random.fold_in(stream, -1 % 2**31), config.search_poses)
+
+
+def compared_search(method: str, config: RobustConfig, robot: Robot, candidates: int) -> tuple:
+    """A search of ``tune_robust``'s comparison: ``black_box`` at a budget of ``candidates``."""
+    key = jax.random.fold_in(jax.random.key(config.seed), 12 + (method == "cma-es"))
+    joint = joint_problem(config)
+    return black_box(
+        method, key, search_poses(config), math.inf, robot, DEFAULT_DT, joint, config.noise,
+        candidates=candidates,
+    )  # fmt: skip
+
+
 def tune_robust(
     config: RobustConfig | None = None,
     *,
@@ -531,8 +547,7 @@ def tune_robust(
     tuned, best, history, state = trainer.fit(problem, run, state, progress)
     tuned, cpu = tuned._replace(robot=robot), state.elapsed_s
     joint, dt = joint_problem(config), DEFAULT_DT
-    stream = jax.random.fold_in(jax.random.key(config.seed), 11)
-    search_refs = sample_poses(jax.random.fold_in(stream, -1 % 2**31), config.search_poses)
+    search_refs = search_poses(config)
     polished = 0
     if config.tuner == "hybrid":
         # CMA-ES on the hard-law score from the kept iterate, scored first so
@@ -563,11 +578,7 @@ def tune_robust(
         for method in ("random search", "cma-es"):
             if method == "cma-es" and not evosax_available():
                 continue
-            key = jax.random.fold_in(jax.random.key(config.seed), 12 + len(searches))
-            searches[method] = black_box(
-                method, key, search_refs, math.inf, robot, dt, joint, config.noise,
-                candidates=candidates,
-            )  # fmt: skip
+            searches[method] = compared_search(method, config, robot, candidates)
             sets[method] = searches[method][0]
     held_out = held_out_poses(config.eval_poses, EVAL_SEED)
     rows = conditions.standard_conditions(
