@@ -116,7 +116,7 @@ def _with_xla_eigenbasis(base: type) -> type:
             d_squared, b = jacobi_eigh(c, state.B)
             d = jnp.sqrt(jnp.maximum(d_squared, 1e-8))
             z = jax.random.normal(key, (self.population_size, self.num_dims))
-            population = state.mean + state.std * ((z * d) @ b.T)
+            population = state.mean + state.std * ((z @ jnp.diag(d).T) @ b.T)  # evosax's
             return population, state.replace(C=c, B=b, D=d)
 
     return XlaCMAES
