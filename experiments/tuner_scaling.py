@@ -167,9 +167,6 @@ def main() -> None:
         print(table(json.loads(args.out.read_text(encoding="utf-8"))), end="")
         return
     search.one_core()
-    if args.rerun_cma_es:
-        rerun_cma_es(json.loads(args.out.read_text(encoding="utf-8")), args, args.out)
-        return
     settings = {
         "iters": args.iters,
         "poses": args.poses,
@@ -187,6 +184,9 @@ def main() -> None:
                 raise SystemExit(f"{args.out} holds {size} parameters of other settings")
         saved["settings"]["configs"].update(settings["configs"])
         record = saved
+    if args.rerun_cma_es:
+        rerun_cma_es(record, args, args.out)
+        return
     done = {(r["parameters"], r["seed"]) for r in record["rows"]}
     robot = Robot()
     for seed in args.seeds:
