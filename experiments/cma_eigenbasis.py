@@ -10,7 +10,9 @@ the CPU at run time, or by ``OPENBLAS_CORETYPE``) return different ones.
 The candidates ``B · D · z`` then differ entirely, as if the run had another
 seed. Drawing with the symmetric root instead, ``B · D · Bᵀ · z`` (the same
 distribution, since ``Bᵀ z`` is again standard normal), gives the same
-candidates for any basis, up to rounding.
+candidates for any basis, up to rounding. wmr_jax's own CMA-ES (``xla``:
+``wmr_jax._src.tuning.cma``) takes ``B`` and ``D`` from a Jacobi method in
+XLA's operations instead of LAPACK, and so the same bits on every kernel.
 
 For each kernel named on the command line (default: Haswell, and SkylakeX
 where the CPU has AVX-512; Sandybridge) and each sampler, this runs 400
@@ -36,13 +38,13 @@ import sys
 import tempfile
 
 DIM, POPULATION, GENERATIONS = 38, 8, 400
+SAMPLERS = ("evosax", "symmetric", "xla")
 
 
 def run(sampler: str) -> str:
     import jax
     import jax.numpy as jnp
     import numpy as np
-    from evosax.algorithms import CMA_ES
 
     jax.config.update("jax_enable_x64", True)
 
@@ -50,9 +52,7 @@ def run(sampler: str) -> str:
         ripples = jnp.sum(x**2 - 3.0 * jnp.cos(2.0 * jnp.pi * x), axis=-1)
         return ripples + jnp.sum((x[..., :-1] - x[..., 1:]) ** 2, axis=-1)
 
-    strategy = (symmetric_root() if sampler == "symmetric" else CMA_ES)(
-        population_size=POPULATION, solution=jnp.zeros(DIM)
-    )
+    strategy = sampler_class(sampler)(population_size=POPULATION, solution=jnp.zeros(DIM))
     params = strategy.default_params
     state = strategy.init(jax.random.key(0), jnp.zeros(DIM), params)
     ask, tell = jax.jit(strategy.ask), jax.jit(strategy.tell)
@@ -71,7 +71,6 @@ def run(sampler: str) -> str:
 
 def comparison(sampler: str, seed: int, record: str) -> str:
     import numpy as np
-    from evosax.algorithms import CMA_ES
 
     import wmr_jax._src.tuning.search as search
     from wmr_jax import Robot
@@ -80,7 +79,7 @@ def comparison(sampler: str, seed: int, record: str) -> str:
 
     search.one_core()  # as `tune --compare` runs, before JAX starts
     populations = []
-    strategy = recorded(symmetric_root() if sampler == "symmetric" else CMA_ES, populations)
+    strategy = recorded(sampler_class(sampler), populations)
     search._evosax_cma_es = lambda: strategy
     rows = compare_seed(RobustConfig(price=5.0), seed, Robot())
     np.save(record, np.stack(populations))
@@ -88,6 +87,15 @@ def comparison(sampler: str, seed: int, record: str) -> str:
     for row in rows:
         scores.setdefault(row["method"], []).append(condition_score(row))
     return json.dumps({m: float(np.mean(v)) for m, v in scores.items()})
+
+
+def sampler_class(sampler: str):
+    """evosax's CMA-ES (``evosax``), drawing with ``B D Bᵀ z`` (``symmetric``), or wmr_jax's."""
+    from evosax.algorithms import CMA_ES
+
+    from wmr_jax._src.tuning import cma
+
+    return {"evosax": CMA_ES, "symmetric": symmetric_root(), "xla": cma.cma_es_class()}[sampler]
 
 
 def recorded(strategy, populations: list):
@@ -154,7 +162,7 @@ def main(kernels: list[str], seed: int | None) -> None:
 
         print(f"seed {seed}: judged score (s); CMA-ES's candidates against the first kernel's")
         with tempfile.TemporaryDirectory() as folder:
-            for sampler in ("evosax", "symmetric"):
+            for sampler in SAMPLERS:
                 first = None
                 for kernel in kernels:
                     record = os.path.join(folder, f"{sampler}-{kernel}.npy")
@@ -169,7 +177,7 @@ def main(kernels: list[str], seed: int | None) -> None:
     )
     first = {}
     for kernel in kernels:
-        for sampler in ("evosax", "symmetric"):
+        for sampler in SAMPLERS:
             out = child(kernel, sampler)
             mean = first.setdefault(sampler, out["mean"])
             apart = max(abs(a - b) for a, b in zip(out["mean"], mean, strict=True))

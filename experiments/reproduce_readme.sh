@@ -15,11 +15,12 @@
 # record the second machine of docs/robustness.md and are run by name; on 2
 # CPU cores, tune took 5 minutes, robustness 2 and compare-robust 18).
 # Every command is seeded (the seed is its default unless named here), so a
-# rerun prints the same tables. The exceptions: bench timings,
-# compare-robust's search rows, whose budget is priced on the machine as it
-# runs (compare-robust-price gives the price instead), and CMA-ES's rows on a
-# machine whose OpenBLAS returns other eigenvectors (compare-robust-kernels;
-# docs/robustness.md, "On a second machine").
+# rerun prints the same tables. The exceptions: bench timings, and the
+# searches' rows of compare-robust and compare-robust-second, whose budget is
+# priced on the machine as it runs (compare-robust-price gives the price
+# instead). CMA-ES's rows follow XLA's arithmetic alone, as the gradient's do:
+# compare-robust-kernels shows them the same under another OpenBLAS kernel and
+# with XLA limited to AVX2 (docs/robustness.md, "On a second machine").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-results/readme}
@@ -72,17 +73,15 @@ for stage in $STAGES; do
       cp "$OUT/tune-compare-k60/compare.json" docs/data/tune_compare_k60.json ;;
     compare-robust)  # the joint robust problem: gradient vs CMA-ES vs random search, 3 seeds
       wmr-jax tune --out "$OUT/tune-robust-compare" --robust --compare ;;
-    compare-robust-price)  # the same at a given price: as many candidates on any machine
-      wmr-jax tune --out "$OUT/tune-robust-compare-price" --robust --compare --price 5
+    compare-robust-price)  # the same at a given price: as many candidates on any machine (OpenBLAS's Haswell kernels)
+      OPENBLAS_CORETYPE=Haswell wmr-jax tune --out "$OUT/tune-robust-compare-price" --robust --compare --price 5
       cp "$OUT/tune-robust-compare-price/robust_compare.json" docs/data/robust_compare_price.json ;;
-    compare-robust-kernels)  # the same with two OpenBLAS kernels, XLA at AVX2 and SSE4.2 (needs AVX-512)
-      OPENBLAS_CORETYPE=Haswell wmr-jax tune --out "$OUT/price-haswell" --robust --compare --price 5
-      cp "$OUT/price-haswell/robust_compare.json" docs/data/robust_compare_price_haswell.json
+    compare-robust-kernels)  # the same under OpenBLAS's SkylakeX kernels, and XLA at AVX2 and SSE4.2 (needs AVX-512)
+      OPENBLAS_CORETYPE=SkylakeX wmr-jax tune --out "$OUT/price-skylakex" --robust --compare --price 5
+      cp "$OUT/price-skylakex/robust_compare.json" docs/data/robust_compare_price_skylakex.json
       OPENBLAS_CORETYPE=Haswell XLA_FLAGS=--xla_cpu_max_isa=AVX2 \
         wmr-jax tune --out "$OUT/price-avx2" --robust --compare --price 5
       cp "$OUT/price-avx2/robust_compare.json" docs/data/robust_compare_price_avx2.json
-      OPENBLAS_CORETYPE=SkylakeX wmr-jax tune --out "$OUT/price-skylakex" --robust --compare --price 5
-      cp "$OUT/price-skylakex/robust_compare.json" docs/data/robust_compare_price_skylakex.json
       OPENBLAS_CORETYPE=Haswell XLA_FLAGS=--xla_cpu_max_isa=SSE4_2 \
         wmr-jax tune --out "$OUT/price-sse4_2" --robust --compare --price 5
       cp "$OUT/price-sse4_2/robust_compare.json" docs/data/robust_compare_price_sse4_2.json ;;
@@ -105,6 +104,7 @@ for stage in $STAGES; do
         --eval-poses 64 --out docs/data/tuner_load_hog.json
       kill $hog1 $hog2 ;;
     tuner-scaling)  # tune --robust --compare at 38, 101 and 285 parameters; resumes where the file stops
+      # (after a change to CMA-ES alone: python experiments/tuner_scaling.py --rerun-cma-es)
       python experiments/tuner_scaling.py --sizes 38 101 285 --out docs/data/tuner_scaling.json ;;
     bench)
       wmr-jax bench --json "$OUT/bench.json" --wait-idle 60 ;;
