@@ -1,15 +1,10 @@
 """CMA-ES whose samples are the same on every machine: its eigenbasis computed by XLA alone.
 
-evosax's CMA-ES draws a generation as ``mean + σ · B · D · z``, with ``B`` and
-``D²`` the eigenvectors and eigenvalues of the covariance ``C`` from
-``jnp.linalg.eigh``, which on the CPU calls LAPACK. LAPACK's last bits depend
-on the BLAS kernels the machine loads, and CMA-ES's ranking of candidates
-amplifies them until two machines' searches part (docs/robustness.md, "On a
-second machine"). Here ``B`` and ``D`` come from a cyclic Jacobi method
-written in JAX operations, so the search follows XLA's arithmetic, as the
-gradient tuner and random search do. Each generation starts the method from
-the previous generation's basis, in which ``C`` is nearly diagonal already:
-a few sweeps then converge.
+evosax draws ``mean + σ · B · D · z`` with ``B``, ``D²`` from ``jnp.linalg.eigh``
+of the covariance: LAPACK on the CPU, whose last bits follow the machine's BLAS
+kernels, and CMA-ES's ranking amplifies them until two machines' searches part
+(docs/robustness.md, "On a second machine"). Here a cyclic Jacobi method in
+JAX operations gives ``B`` and ``D``, started from the previous generation's basis.
 """
 
 from __future__ import annotations
@@ -21,18 +16,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-# A sweep with no rotation above the threshold ends the method; this many
-# sweeps end it whatever (from a near-diagonal start it takes about three).
-MAX_SWEEPS = 30
+MAX_SWEEPS = 30  # from a near-diagonal start a sweep without rotation comes after about 3
 
 
 @functools.cache
 def _round_robin(m: int) -> tuple[np.ndarray, np.ndarray]:
-    """Index pairs ``(p, q)``, each ``(m - 1, m // 2)``: every pair of ``m`` (even) once.
-
-    A round pairs every index with another (a round-robin tournament: 0 stays,
-    the others turn), so its rotations touch disjoint rows and columns.
-    """
+    """Pairs ``(p, q)``, each ``(m - 1, m // 2)``: all of ``m`` (even), each round disjoint."""
     others = list(range(1, m))
     p, q = [], []
     for r in range(m - 1):
@@ -43,13 +32,11 @@ def _round_robin(m: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def jacobi_eigh(a: jax.Array, start: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """Eigenvalues ``(n,)`` and orthonormal eigenvectors ``(n, n)`` (columns) of symmetric ``a``.
+    """Eigenvalues ``(n,)``, unsorted, and orthonormal eigenvectors (columns) of symmetric ``a``.
 
-    Cyclic Jacobi in round-robin order from the orthogonal basis ``start``
-    (the identity, or an earlier basis of a nearby matrix). A rotation is
-    skipped where ``|a_pq| ≤ ε √|a_pp a_qq|`` (``ε`` the dtype's machine
-    epsilon); the method ends after a sweep that skips them all, or after
-    ``MAX_SWEEPS``. The eigenvalues are not sorted.
+    Cyclic Jacobi in round-robin order from the orthogonal basis ``start``; a
+    rotation is skipped where ``|a_pq| ≤ ε √|a_pp a_qq|``, and the method ends
+    after a sweep that skips them all, or after ``MAX_SWEEPS``.
     """
     n = a.shape[0]
     m = n + n % 2  # an odd size gets a decoupled extra index, never rotated
