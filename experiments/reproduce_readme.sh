@@ -21,6 +21,9 @@
 # instead). CMA-ES's rows follow XLA's arithmetic alone, as the gradient's do:
 # compare-robust-kernels shows them the same under another OpenBLAS kernel and
 # with XLA limited to AVX2 (docs/robustness.md, "On a second machine").
+# docs/data/robust_compare_price_first_machine.json is compare-robust-price as
+# it ran on that page's first machine, when CMA-ES drew in LAPACK's
+# eigenbasis; it stays for its gradient and random search rows.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-results/readme}
