@@ -21,9 +21,12 @@
 # instead). CMA-ES's rows follow XLA's arithmetic alone, as the gradient's do:
 # compare-robust-kernels shows them the same under another OpenBLAS kernel and
 # with XLA limited to AVX2 (docs/robustness.md, "On a second machine").
-# docs/data/robust_compare_price_first_machine.json is compare-robust-price as
-# it ran on that page's first machine, when CMA-ES drew in LAPACK's
-# eigenbasis; it stays for its gradient and random search rows.
+# Runs with CMA-ES in evosax's LAPACK eigenbasis, which no stage makes now,
+# stay for the page's account of it: docs/data/robust_compare_price_first_machine.json
+# (compare-robust-price on that page's first machine) and
+# docs/data/robust_compare_price_lapack_haswell.json,
+# docs/data/robust_compare_price_lapack_skylakex.json and
+# docs/data/robust_compare_price_lapack_sse4_2.json (compare-robust-kernels on the second).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-results/readme}
@@ -78,7 +81,12 @@ for stage in $STAGES; do
       wmr-jax tune --out "$OUT/tune-robust-compare" --robust --compare ;;
     compare-robust-price)  # the same at a given price: as many candidates on any machine (OpenBLAS's Haswell kernels)
       OPENBLAS_CORETYPE=Haswell wmr-jax tune --out "$OUT/tune-robust-compare-price" --robust --compare --price 5
-      cp "$OUT/tune-robust-compare-price/robust_compare.json" docs/data/robust_compare_price.json ;;
+      cp "$OUT/tune-robust-compare-price/robust_compare.json" docs/data/robust_compare_price.json
+      # 20 % either side: docs/data/robust_compare_price_4.json and docs/data/robust_compare_price_6.json
+      for price in 4 6; do
+        wmr-jax tune --out "$OUT/tune-robust-compare-price-$price" --robust --compare --price $price
+        cp "$OUT/tune-robust-compare-price-$price/robust_compare.json" "docs/data/robust_compare_price_$price.json"
+      done ;;
     compare-robust-kernels)  # the same under OpenBLAS's SkylakeX kernels, and XLA at AVX2 and SSE4.2 (needs AVX-512)
       OPENBLAS_CORETYPE=SkylakeX wmr-jax tune --out "$OUT/price-skylakex" --robust --compare --price 5
       cp "$OUT/price-skylakex/robust_compare.json" docs/data/robust_compare_price_skylakex.json

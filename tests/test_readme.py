@@ -448,11 +448,18 @@ def test_robust_comparison_at_a_given_price_is_the_stored_run():
     body = _page_table(page, header)
     assert [cells[0] for cells in body] == ["0", "1", "2", "mean"]
     methods = ("gradient", "cma-es", "random search")
+    at = {price: _judged(f"robust_compare_price_{price}.json") for price in (4, 6)}
+    for price, (_, price_rows) in at.items():
+        assert {(r["price"], r["budget_candidates"]) for r in price_rows} == {
+            (price, 600 * price + 25)
+        }
     for cells in body:
+        seeds = range(3) if cells[0] == "mean" else [int(cells[0])]
         for cell, method in zip(cells[1:4], methods, strict=True):
-            seeds = range(3) if cells[0] == "mean" else [int(cells[0])]
             value = np.mean([scores[(method, seed)] for seed in seeds])
             assert cell == f"{value:.3f}", (cells[0], method, cell, value)
+        others = [np.mean([at[p][0][("cma-es", seed)] for seed in seeds]) for p in (4, 6)]
+        assert cells[4] == " / ".join(f"{v:.3f}" for v in others), cells
 
 
 def test_robust_comparison_on_a_second_machine_is_the_stored_runs():

@@ -1,4 +1,4 @@
-"""CMA-ES whose samples are the same on every machine: its eigenbasis computed by XLA alone.
+"""CMA-ES whose samples do not depend on the machine's LAPACK: its eigenbasis by XLA alone.
 
 evosax draws ``mean + σ · B · D · z`` with ``B``, ``D²`` from ``jnp.linalg.eigh``
 of the covariance: LAPACK on the CPU, whose last bits follow the machine's BLAS

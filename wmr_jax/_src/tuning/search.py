@@ -307,7 +307,7 @@ def _evosax_cma_es() -> Any:
         return cma.cma_es_class()
     except ImportError:
         raise ValueError(
-            "CMA-ES needs evosax; allowed: pip install 'wmr-jax[search]' (evosax >= 0.3)"
+            "CMA-ES needs evosax; allowed: pip install 'wmr-jax[search]' (evosax 0.3)"
         ) from None
 
 
