@@ -21,7 +21,7 @@ def test_jacobi_eigh_is_the_eigendecomposition(n, dtype, tol):
     rng = np.random.default_rng(n)
     a = _spd(rng, n, 4.0).astype(dtype)
     with jax.enable_x64(dtype == np.float64):
-        values, vectors = cma.jacobi_eigh(jnp.asarray(a), jnp.eye(n, dtype=dtype))
+        values, vectors, _ = cma.jacobi_eigh(jnp.asarray(a), jnp.eye(n, dtype=dtype))
     values, vectors = np.asarray(values, np.float64), np.asarray(vectors, np.float64)
     assert values.dtype == vectors.dtype and vectors.shape == (n, n)
     top = np.linalg.eigvalsh(a.astype(np.float64)).max()
@@ -39,19 +39,35 @@ def test_a_start_that_diagonalises_is_kept_bit_for_bit():
     q, _ = np.linalg.qr(rng.standard_normal((5, 5)))
     diagonal = np.array([3.0, 1.0, 4.0, 1.5, 9.0])
     with jax.enable_x64(True):
-        values, vectors = cma.jacobi_eigh(jnp.diag(jnp.asarray(diagonal)), jnp.eye(5))
+        values, vectors, sweeps = cma.jacobi_eigh(jnp.diag(jnp.asarray(diagonal)), jnp.eye(5))
         np.testing.assert_array_equal(values, diagonal)  # already diagonal: nothing rotates
         np.testing.assert_array_equal(vectors, np.eye(5))
+        assert int(sweeps) == 1
         # From a nearby matrix's basis the method ends where it began, up to rounding.
         a = (q * diagonal) @ q.T
-        values, vectors = cma.jacobi_eigh(jnp.asarray(a), jnp.asarray(q))
+        values, vectors, _ = cma.jacobi_eigh(jnp.asarray(a), jnp.asarray(q))
     np.testing.assert_allclose(values, diagonal, rtol=1e-12)
     np.testing.assert_allclose(np.abs(np.sum(vectors * q, axis=0)), np.ones(5), atol=1e-12)
 
 
+def test_a_nearby_matrix_s_basis_converges_in_a_few_sweeps():
+    # The reason CMA-ES starts each generation from the last one's basis.
+    rng = np.random.default_rng(3)
+    q, _ = np.linalg.qr(rng.standard_normal((13, 13)))
+    a = (q * np.logspace(0.0, 4.0, 13)) @ q.T
+    x = rng.standard_normal(13)
+    with jax.enable_x64(True):
+        _, basis, cold = cma.jacobi_eigh(jnp.asarray(a), jnp.eye(13))
+        values, _, warm = cma.jacobi_eigh(jnp.asarray(a + 1e-3 * np.outer(x, x)), basis)
+    assert 4 <= int(cold) <= 12 and int(warm) <= 5, (int(cold), int(warm))
+    np.testing.assert_allclose(
+        np.sort(np.asarray(values)), np.linalg.eigvalsh(a + 1e-3 * np.outer(x, x)), rtol=1e-12
+    )
+
+
 def test_repeated_and_zero_eigenvalues():
     with jax.enable_x64(True):
-        values, vectors = cma.jacobi_eigh(jnp.ones((4, 4)), jnp.eye(4))
+        values, vectors, _ = cma.jacobi_eigh(jnp.ones((4, 4)), jnp.eye(4))
     np.testing.assert_allclose(np.sort(np.asarray(values)), [0.0, 0.0, 0.0, 4.0], atol=1e-14)
     np.testing.assert_allclose(np.asarray(vectors).T @ np.asarray(vectors), np.eye(4), atol=1e-14)
 
@@ -119,7 +135,7 @@ def test_one_sweep_diagonalises_two_by_two(monkeypatch):
     monkeypatch.setattr(cma, "MAX_SWEEPS", 1)
     with jax.enable_x64(True):
         a = jnp.array([[2.0, 0.7], [0.7, -1.0]])
-        values, vectors = cma.jacobi_eigh(a, jnp.eye(2))
+        values, vectors, _ = cma.jacobi_eigh(a, jnp.eye(2))
     np.testing.assert_allclose(
         np.sort(np.asarray(values)), np.linalg.eigvalsh(np.asarray(a)), atol=1e-15
     )

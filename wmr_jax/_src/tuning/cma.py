@@ -31,12 +31,12 @@ def _round_robin(m: int) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(p, np.int32), np.asarray(q, np.int32)
 
 
-def jacobi_eigh(a: jax.Array, start: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """Eigenvalues ``(n,)``, unsorted, and orthonormal eigenvectors (columns) of symmetric ``a``.
+def jacobi_eigh(a: jax.Array, start: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """Eigenvalues ``(n,)``, unsorted, orthonormal eigenvectors (columns) of ``a``, and sweeps.
 
-    Cyclic Jacobi in round-robin order from the orthogonal basis ``start``; a
-    rotation is skipped where ``|a_pq| ≤ ε √|a_pp a_qq|``, and the method ends
-    after a sweep that skips them all, or after ``MAX_SWEEPS``.
+    Cyclic Jacobi on symmetric ``a`` in round-robin order from the orthogonal
+    basis ``start``; a rotation is skipped where ``|a_pq| ≤ ε √|a_pp a_qq|``,
+    and the method ends after a sweep that skips them all, or after ``MAX_SWEEPS``.
     """
     n = a.shape[0]
     m = n + n % 2  # an odd size gets a decoupled extra index, never rotated
@@ -76,8 +76,8 @@ def jacobi_eigh(a: jax.Array, start: jax.Array) -> tuple[jax.Array, jax.Array]:
         _, _, sweeps, still = carry
         return (sweeps < MAX_SWEEPS) & ~still
 
-    a, basis, _, _ = jax.lax.while_loop(going, sweep, (a, start, 0, jnp.bool_(False)))
-    return jnp.diag(a)[:n], basis[:n, :n]
+    a, basis, sweeps, _ = jax.lax.while_loop(going, sweep, (a, start, 0, jnp.bool_(False)))
+    return jnp.diag(a)[:n], basis[:n, :n], sweeps
 
 
 def cma_es_class() -> type:
@@ -100,7 +100,7 @@ def _with_xla_eigenbasis(base: type) -> type:
             diagonal = jnp.diag_indices_from(c)
             c = c.at[diagonal].set(jnp.maximum(c[diagonal], 0.0))
             c = jnp.minimum(c, 1e8) + 1e-8 * jnp.eye(c.shape[0], dtype=c.dtype)
-            d_squared, b = jacobi_eigh(c, state.B)
+            d_squared, b, _ = jacobi_eigh(c, state.B)
             d = jnp.sqrt(jnp.maximum(d_squared, 1e-8))
             z = jax.random.normal(key, (self.population_size, self.num_dims))
             population = state.mean + state.std * ((z @ jnp.diag(d).T) @ b.T)  # evosax's
