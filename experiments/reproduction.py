@@ -1,0 +1,132 @@
+"""Whether a run of ``wmr-jax tune --robust --compare`` reproduces a committed one.
+
+docs/robustness.md states that the comparison at a given price
+(``--price 5``, ``docs/data/robust_compare_price.json``) reproduces within
+2 % of each judged score wherever XLA's code rounds as it did there. To check
+it on another machine::
+
+    wmr-jax tune --out D --robust --compare --price 5
+    python experiments/reproduction.py docs/data/robust_compare_price.json D/robust_compare.json
+
+This prints, per method and seed, both judged scores (the hard-law mean
+arrival over the standard conditions, failures at twice the horizon) and
+their difference; how many of the rows' fields other than the timings are
+equal to the last digit; and whether the held-out poses were the same. It
+exits with status 1 if a score differs by more than ``--tolerance``
+(relative), 2 if the two runs' settings differ (the price, the robot, the
+problem), so that they could not be compared.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+import numpy as np
+
+from wmr_jax._src.tuning.robust import condition_score
+
+# Fields that record the machine rather than the search: they differ on every run.
+TIMING = {"budget_s", "measured_price", "cpu_s", "wall_s", "per_cpu_s", "loadavg"}
+
+
+def load(path: str) -> dict:
+    with open(path, encoding="utf-8") as file:
+        data = json.load(file)
+    if not isinstance(data, dict) or "rows" not in data or "settings" not in data:
+        raise SystemExit(f"{path}: not a robust_compare.json (no 'rows' and 'settings')")
+    return data
+
+
+def settings_differences(committed: dict, fresh: dict) -> list[str]:
+    """The settings that make two runs incomparable: the config and the robot."""
+    out = []
+    for part in ("config", "robot"):
+        a, b = committed["settings"].get(part, {}), fresh["settings"].get(part, {})
+        for key in sorted(set(a) | set(b)):
+            if a.get(key) != b.get(key):
+                out.append(f"{part}.{key}: committed {a.get(key)!r}, this run {b.get(key)!r}")
+    return out
+
+
+def scores(rows: list[dict]) -> dict[tuple[str, int], float]:
+    """Judged score per (method, seed): the mean of ``condition_score`` over the conditions."""
+    per: dict[tuple[str, int], list[float]] = {}
+    for row in rows:
+        per.setdefault((row["method"], row["seed"]), []).append(condition_score(row))
+    return {key: float(np.mean(values)) for key, values in per.items()}
+
+
+def kept_fields(rows: list[dict]) -> dict[tuple, dict]:
+    """Each row without its timings, keyed by (method, seed, condition)."""
+    return {
+        (r["method"], r["seed"], r["condition"]): {k: v for k, v in r.items() if k not in TIMING}
+        for r in rows
+    }
+
+
+def compare(committed: dict, fresh: dict, tolerance: float) -> tuple[list[str], bool]:
+    """The report's lines, and whether every judged score is within ``tolerance``."""
+    mine, theirs = scores(committed["rows"]), scores(fresh["rows"])
+    missing = sorted(set(mine) ^ set(theirs))
+    lines = [f"missing in one run: {key}" for key in missing]
+    lines += ["| method | seed | committed s | this run s | difference |", "|---|---|---|---|---|"]
+    ok = not missing
+    for key in sorted(set(mine) & set(theirs)):
+        change = theirs[key] / mine[key] - 1.0
+        within = abs(change) <= tolerance
+        ok &= within
+        mark = "" if within else f" (beyond {tolerance:.0%})"
+        lines.append(
+            f"| {key[0]} | {key[1]} | {mine[key]:.4f} | {theirs[key]:.4f} | {change:+.2%}{mark} |"
+        )
+    a, b = kept_fields(committed["rows"]), kept_fields(fresh["rows"])
+    same = sum(a[key] == b.get(key) for key in a)
+    lines.append(f"rows equal in every field but the timings: {same} of {len(a)}")
+    digests = {r["held_out"] for r in committed["rows"]}, {r["held_out"] for r in fresh["rows"]}
+    lines.append(
+        "held-out poses: "
+        + ("the same" if digests[0] == digests[1] else "different (XLA rounds otherwise here)")
+    )
+    for name, run in (("committed", mine), ("this run", theirs)):
+        lines.append(f"{name}: {_ranking(run)}")
+    return lines, ok
+
+
+def _ranking(run: dict[tuple[str, int], float]) -> str:
+    """The gradient's lead over CMA-ES on the mean of the seeds, and the seeds it leads at."""
+    seeds = sorted(s for m, s in run if m == "gradient" and ("cma-es", s) in run)
+    if not seeds:
+        return "no seed has both the gradient and CMA-ES"
+    gradient = np.mean([run["gradient", s] for s in seeds])
+    cma = np.mean([run["cma-es", s] for s in seeds])
+    ahead = [s for s in seeds if run["gradient", s] < run["cma-es", s]]
+    return (
+        f"gradient ahead of CMA-ES on the mean by {1.0 - gradient / cma:+.1%}, "
+        f"at seeds {ahead} of {seeds}"
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("committed", help="the committed robust_compare.json")
+    parser.add_argument("fresh", help="this machine's robust_compare.json")
+    parser.add_argument("--tolerance", type=float, default=0.02, help="relative (default 0.02)")
+    args = parser.parse_args(argv)
+    if not 0.0 <= args.tolerance < 1.0:
+        parser.error(f"--tolerance {args.tolerance!r} is not allowed; allowed: in [0, 1)")
+    committed, fresh = load(args.committed), load(args.fresh)
+    differences = settings_differences(committed, fresh)
+    if differences:
+        print("the runs' settings differ, so their scores are not comparable:")
+        print("\n".join(f"  {line}" for line in differences))
+        return 2
+    lines, ok = compare(committed, fresh, args.tolerance)
+    print("\n".join(lines))
+    print(f"every judged score within {args.tolerance:.0%}: {'yes' if ok else 'no'}")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
