@@ -5,8 +5,8 @@ docs/robustness.md states that the comparison at a given price
 2 % of each judged score wherever XLA's code rounds as it did there. To check
 it on another machine::
 
-    wmr-jax tune --out D --robust --compare --price 5
-    python experiments/reproduction.py docs/data/robust_compare_price.json D/robust_compare.json
+    wmr-jax tune --out results/c5 --robust --compare --price 5
+    python experiments/reproduction.py docs/data/robust_compare_price.json results/c5/robust_compare.json
 
 This prints, per method and seed, both judged scores (the hard-law mean
 arrival over the standard conditions, failures at twice the horizon) and
