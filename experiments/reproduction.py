@@ -6,7 +6,8 @@ docs/robustness.md states that the comparison at a given price
 it on another machine::
 
     wmr-jax tune --out results/c5 --robust --compare --price 5
-    python experiments/reproduction.py docs/data/robust_compare_price.json results/c5/robust_compare.json
+    python experiments/reproduction.py \
+        docs/data/robust_compare_price.json results/c5/robust_compare.json
 
 This prints, per method and seed, both judged scores (the hard-law mean
 arrival over the standard conditions, failures at twice the horizon) and
