@@ -1,4 +1,4 @@
-"""Whether a run of ``wmr-jax tune --robust --compare`` reproduces a committed one.
+r"""Whether a run of ``wmr-jax tune --robust --compare`` reproduces a committed one.
 
 docs/robustness.md states that the comparison at a given price
 (``--price 5``, ``docs/data/robust_compare_price.json``) reproduces within
