@@ -2,6 +2,7 @@
 
 import functools
 import json
+import warnings
 
 import jax
 import numpy as np
@@ -327,6 +328,25 @@ def test_standard_conditions_compare_gain_sets_on_the_same_draws():
     assert nominal["mean arrival s"] != model["mean arrival s"]
     with pytest.raises(ValueError, match=r"params_by_name = \{\} is not allowed"):
         studies.standard_conditions({}, refs, jax.random.PRNGKey(3))  # no rows at all
+
+
+def test_a_studys_warning_names_the_loop_it_is_about_once():
+    # The Fig. 7 gains exceed the wheel bound; the second set's R_m is too small
+    # for the sampled law to settle (k_r π dt / (2 R_m) = 100 π 0.033 / 1 > 2).
+    refs = draw_refs(8)
+    fast = w.Gains(kr=100.0, r_m=0.5, r_a=0.4, r_e=0.1)
+    sets = {"paper": w.Gains(), "fast": fast, "feasible": w.Gains(kr=60.0)}
+    for study in (studies.standard_conditions, studies.noise_curve):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            study(sets, refs, jax.random.PRNGKey(3))
+        said = sorted((r.category.__name__, str(r.message)) for r in caught)
+        assert len(said) == 2, said  # once each, over every condition or noise level
+        assert said[0][0] == "SamplingWarning"
+        assert said[0][1].startswith("gains 'fast': k_theta*dt = 0.33 and k_r*pi*dt/(2*R_m) = 10.4")
+        assert said[1][0] == "WheelSpeedWarning"
+        assert said[1][1].startswith("gains 'paper': k_r + L*k_theta = 138.5 cm/s exceeds")
+        assert {r.filename for r in caught} == {__file__}  # at the study's caller
 
 
 def test_standard_conditions_keep_float64_poses_in_a_float32_session():

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -135,11 +136,12 @@ def standard_conditions(
         )
     sets, robot = _loops(params_by_name, "params_by_name", controller, estimator, robot)
     refs, unit, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
-    rows = []
+    rows, named = [], _NamedWarnings()
     for label, sxy, sdeg, latency, wheels in _standard_table(factors, noise):
         spec = _scaled(refs, unit, wheels, sxy, sdeg, latency)
         for name, loop in sets.items():
-            row, m = _judged(spec, loop, dt, robot, x64, horizon)
+            with named(name):
+                row, m = _judged(spec, loop, dt, robot, x64, horizon)
             rows.append(
                 {
                     "condition": label,
@@ -170,6 +172,35 @@ def _loops(given: Any, name: str, controller: Any, estimator: Any, robot: Any):
         resolve_estimator(loop.estimator)
         controllers.get_controller(loop.controller)
     return sets, _study_robot(robot, sets, name)
+
+
+class _NamedWarnings:
+    """Warnings of a study's runs said once per loop, with its name (``with named(name):``).
+
+    A study of several loops runs each under every condition; a warning about
+    one loop's gains (the wheel bound, the sampled law) names that loop.
+    """
+
+    def __init__(self) -> None:
+        self.said: set[tuple[str, str]] = set()
+
+    def __call__(self, name: str) -> _NamedWarnings:
+        self.name = name
+        self.caught = warnings.catch_warnings(record=True)
+        return self
+
+    def __enter__(self) -> None:
+        self.records = self.caught.__enter__()
+        warnings.simplefilter("always")
+
+    def __exit__(self, *exc: Any) -> None:
+        self.caught.__exit__(*exc)
+        for record in self.records:
+            text = f"gains {self.name!r}: {record.message}"
+            if (text, record.category.__name__) not in self.said:
+                self.said.add((text, record.category.__name__))
+                # 1: here, 2: the study, 3: its caller.
+                warnings.warn(text, record.category, stacklevel=3)
 
 
 def _judged(spec: Disturbance, loop: ClosedLoop, dt, robot, x64, horizon, velocity="ideal"):
@@ -381,12 +412,13 @@ def noise_curve(
     latency = checks.check_bool("latency", latency)
     sets, robot = _loops(loops_by_name, "loops_by_name", controllers.SHIM_SUNG, None, robot)
     refs, noise, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
-    rows = []
+    rows, named = [], _NamedWarnings()
     for name, loop in sets.items():
         for sxy in levels:
             sdeg = _DEG_PER_CM * sxy
             spec = _scaled(refs, noise, factors, sxy, sdeg, latency)
-            row, _ = _judged(spec, loop, dt, robot, x64, horizon)
+            with named(name):
+                row, _ = _judged(spec, loop, dt, robot, x64, horizon)
             rows.append(
                 {
                     "gains": name,
