@@ -48,7 +48,7 @@ def test_the_same_run_reproduces_in_every_field(tmp_path, capsys):
     assert "rows equal in every field but the timings: 45 of 45" in out
     assert "held-out poses: the same" in out
     assert out.count("+0.00% |") == 9
-    assert "every judged score within 2%: yes" in out
+    assert "every row in both runs, every judged score within 2%: yes" in out
     # The committed run's ranking, as docs/robustness.md states it at C = 5.
     assert "gradient ahead of CMA-ES on the mean by +3.9%, at seeds [0, 1] of [0, 1, 2]" in out
 
@@ -67,7 +67,7 @@ def test_a_wider_tolerance_is_honoured(tmp_path, capsys):
     status, out = _run(
         tmp_path, capsys, _slower(_committed(), "gradient", 2, 1.04), "--tolerance", "0.05"
     )
-    assert status == 0 and "every judged score within 5%: yes" in out
+    assert status == 0 and "every row in both runs, every judged score within 5%: yes" in out
     # 4 % slower at seed 2 puts CMA-ES ahead there and narrows the lead on the mean.
     assert "this run: gradient ahead of CMA-ES on the mean by +2.6%, at seeds [0, 1]" in out
 
@@ -81,11 +81,37 @@ def test_runs_of_other_settings_are_not_compared(tmp_path, capsys):
     assert "|" not in out
 
 
-def test_a_missing_seed_fails_the_check(tmp_path, capsys):
+def test_a_row_in_one_run_only_fails_the_check(tmp_path, capsys):
     fresh = _committed()
     fresh["rows"] = [r for r in fresh["rows"] if (r["method"], r["seed"]) != ("gradient", 2)]
     status, out = _run(tmp_path, capsys, fresh)
-    assert status == 1 and "missing in one run: ('gradient', 2)" in out
+    assert status == 1
+    assert out.count("only in the committed run: ('gradient', 2, ") == 5  # its five conditions
+    extra = _committed()
+    extra["rows"].append({**extra["rows"][0], "condition": "wind"})
+    status, out = _run(tmp_path, capsys, extra)
+    assert status == 1 and "only in this run: ('gradient', 0, 'wind')" in out
+    assert "rows equal in every field but the timings: 45 of 45" in out
+
+
+def test_a_file_that_is_no_comparison_is_refused(tmp_path, capsys):
+    broken = _committed()
+    del broken["rows"][3]["held_out"]
+    status, out = _run(tmp_path, capsys, broken)
+    assert status == 3 and out.endswith("fresh.json: row 3 has no held_out\n")
+    status, out = _run(tmp_path, capsys, {"rows": []})
+    assert status == 3 and "no 'settings'" in out
+    path = tmp_path / "fresh.json"
+    path.write_text("{", encoding="utf-8")
+    assert _script().main([str(COMMITTED), str(path)]) == 3
+    assert "cannot be read" in capsys.readouterr().out
+
+
+def test_another_file_format_is_not_compared(tmp_path, capsys):
+    fresh = _committed()
+    fresh["settings"]["format"] = 4
+    status, out = _run(tmp_path, capsys, fresh)
+    assert status == 2 and "format: committed 3, this run 4" in out
 
 
 @pytest.mark.parametrize("tolerance", ["-0.1", "1.0"])

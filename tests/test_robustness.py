@@ -347,6 +347,32 @@ def test_a_studys_warning_names_the_loop_it_is_about_once():
         assert said[1][0] == "WheelSpeedWarning"
         assert said[1][1].startswith("gains 'paper': k_r + L*k_theta = 138.5 cm/s exceeds")
         assert {r.filename for r in caught} == {__file__}  # at the study's caller
+    # One loop: nothing to tell apart, the warning as the runs give it.
+    with pytest.warns(w.SamplingWarning, match=r"^k_theta\*dt = 0.33 and"):
+        studies.standard_conditions({"fast": fast}, refs, jax.random.PRNGKey(3))
+
+
+def test_only_gain_warnings_are_named_and_an_error_leaves_the_filters_as_they_were():
+    from wmr_jax._src.studies.conditions import _named
+
+    said = set()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with _named("a", said):
+            warnings.warn("something else", RuntimeWarning, stacklevel=1)
+            warnings.warn("too fast", w.SamplingWarning, stacklevel=1)
+    assert [(r.category, str(r.message)) for r in caught] == [
+        (RuntimeWarning, "something else"),
+        (w.SamplingWarning, "gains 'a': too fast"),
+    ]
+    assert said == {"gains 'a': too fast"}
+    filters = list(warnings.filters)
+    with warnings.catch_warnings(record=True) as caught:
+        with pytest.raises(ValueError, match="a run failed"):
+            with _named("a", set()):
+                warnings.warn("too fast", w.SamplingWarning, stacklevel=1)
+                raise ValueError("a run failed")
+    assert warnings.filters == filters and caught == []  # the error, not the warning
 
 
 def test_standard_conditions_keep_float64_poses_in_a_float32_session():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import warnings
 from collections.abc import Mapping, Sequence
@@ -12,7 +13,12 @@ import numpy as np
 
 from wmr_jax._src import checks
 from wmr_jax._src.model import controllers
-from wmr_jax._src.model.params import Robot, validate_one_robot
+from wmr_jax._src.model.params import (
+    Robot,
+    SamplingWarning,
+    WheelSpeedWarning,
+    validate_one_robot,
+)
 from wmr_jax._src.model.robots import describe_robot, robot_json, same_robot
 from wmr_jax._src.sim.rollout import DEFAULT_DT
 from wmr_jax._src.sim.sensing.disturbances import (
@@ -32,6 +38,9 @@ from wmr_jax._src.studies.robustness import (
     study_steps,
     summary_row,
 )
+
+# The warnings about a loop's gains, which a study of several names.
+_GAIN_WARNINGS = (WheelSpeedWarning, SamplingWarning)
 
 
 def _closed_loop(value: Any, controller: Any, estimator: Any, where: str) -> ClosedLoop:
@@ -136,11 +145,11 @@ def standard_conditions(
         )
     sets, robot = _loops(params_by_name, "params_by_name", controller, estimator, robot)
     refs, unit, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
-    rows, named = [], _NamedWarnings()
+    rows, said = [], set()
     for label, sxy, sdeg, latency, wheels in _standard_table(factors, noise):
         spec = _scaled(refs, unit, wheels, sxy, sdeg, latency)
         for name, loop in sets.items():
-            with named(name):
+            with _named(name if len(sets) > 1 else None, said):
                 row, m = _judged(spec, loop, dt, robot, x64, horizon)
             rows.append(
                 {
@@ -174,33 +183,29 @@ def _loops(given: Any, name: str, controller: Any, estimator: Any, robot: Any):
     return sets, _study_robot(robot, sets, name)
 
 
-class _NamedWarnings:
-    """Warnings of a study's runs said once per loop, with its name (``with named(name):``).
+@contextlib.contextmanager
+def _named(name: str | None, said: set[str]):
+    """Say the gain warnings of one loop's runs once per study, with the loop's name.
 
     A study of several loops runs each under every condition; a warning about
-    one loop's gains (the wheel bound, the sampled law) names that loop.
+    one loop's gains (the wheel bound, the sampled law) names that loop
+    (``name=None``: the study has one loop, the warning is as the runs give it).
+    Other warnings pass unchanged. As ``warnings.catch_warnings``, not for
+    studies run in several threads at once.
     """
-
-    def __init__(self) -> None:
-        self.said: set[tuple[str, str]] = set()
-
-    def __call__(self, name: str) -> _NamedWarnings:
-        self.name = name
-        self.caught = warnings.catch_warnings(record=True)
-        return self
-
-    def __enter__(self) -> None:
-        self.records = self.caught.__enter__()
-        warnings.simplefilter("always")
-
-    def __exit__(self, *exc: Any) -> None:
-        self.caught.__exit__(*exc)
-        for record in self.records:
-            text = f"gains {self.name!r}: {record.message}"
-            if (text, record.category.__name__) not in self.said:
-                self.said.add((text, record.category.__name__))
-                # 1: here, 2: the study, 3: its caller.
-                warnings.warn(text, record.category, stacklevel=3)
+    with warnings.catch_warnings(record=True) as records:
+        for category in _GAIN_WARNINGS:
+            warnings.simplefilter("always", category)
+        yield
+    for record in records:
+        if not issubclass(record.category, _GAIN_WARNINGS):
+            warnings.warn_explicit(record.message, record.category, record.filename, record.lineno)
+            continue
+        text = str(record.message) if name is None else f"gains {name!r}: {record.message}"
+        if text not in said:
+            said.add(text)
+            # 1: here, 2: contextlib, 3: the study, 4: its caller.
+            warnings.warn(text, record.category, stacklevel=4)
 
 
 def _judged(spec: Disturbance, loop: ClosedLoop, dt, robot, x64, horizon, velocity="ideal"):
@@ -412,12 +417,12 @@ def noise_curve(
     latency = checks.check_bool("latency", latency)
     sets, robot = _loops(loops_by_name, "loops_by_name", controllers.SHIM_SUNG, None, robot)
     refs, noise, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
-    rows, named = [], _NamedWarnings()
+    rows, said = [], set()
     for name, loop in sets.items():
         for sxy in levels:
             sdeg = _DEG_PER_CM * sxy
             spec = _scaled(refs, noise, factors, sxy, sdeg, latency)
-            with named(name):
+            with _named(name if len(sets) > 1 else None, said):
                 row, _ = _judged(spec, loop, dt, robot, x64, horizon)
             rows.append(
                 {
