@@ -347,18 +347,24 @@ def test_a_studys_warning_names_the_loop_it_is_about_once():
         assert said[1][0] == "WheelSpeedWarning"
         assert said[1][1].startswith("gains 'paper': k_r + L*k_theta = 138.5 cm/s exceeds")
         assert {r.filename for r in caught} == {__file__}  # at the study's caller
+    # The Monte Carlo of several controllers names the one whose defaults (Fig. 7) warn.
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        studies.robustness_study(controller_names=["aicardi", "shim-sung"], n_runs=N)
+    assert [(r.category, r.filename) for r in caught] == [(w.WheelSpeedWarning, __file__)]
+    assert str(caught[0].message).startswith("gains 'shim-sung': k_r + L*k_theta = 138.5 cm/s")
     # One loop: nothing to tell apart, the warning as the runs give it.
     with pytest.warns(w.SamplingWarning, match=r"^k_theta\*dt = 0.33 and"):
         studies.standard_conditions({"fast": fast}, refs, jax.random.PRNGKey(3))
 
 
 def test_only_gain_warnings_are_named_and_an_error_leaves_the_filters_as_they_were():
-    from wmr_jax._src.studies.conditions import _named
+    from wmr_jax._src.studies.robustness import named_warnings
 
     said = set()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        with _named("a", said):
+        with named_warnings("a", said):
             warnings.warn("something else", RuntimeWarning, stacklevel=1)
             warnings.warn("too fast", w.SamplingWarning, stacklevel=1)
     assert [(r.category, str(r.message)) for r in caught] == [
@@ -369,7 +375,7 @@ def test_only_gain_warnings_are_named_and_an_error_leaves_the_filters_as_they_we
     filters = list(warnings.filters)
     with warnings.catch_warnings(record=True) as caught:
         with pytest.raises(ValueError, match="a run failed"):
-            with _named("a", set()):
+            with named_warnings("a", set()):
                 warnings.warn("too fast", w.SamplingWarning, stacklevel=1)
                 raise ValueError("a run failed")
     assert warnings.filters == filters and caught == []  # the error, not the warning

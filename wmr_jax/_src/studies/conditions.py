@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import contextlib
 import math
-import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -13,12 +11,7 @@ import numpy as np
 
 from wmr_jax._src import checks
 from wmr_jax._src.model import controllers
-from wmr_jax._src.model.params import (
-    Robot,
-    SamplingWarning,
-    WheelSpeedWarning,
-    validate_one_robot,
-)
+from wmr_jax._src.model.params import Robot, validate_one_robot
 from wmr_jax._src.model.robots import describe_robot, robot_json, same_robot
 from wmr_jax._src.sim.rollout import DEFAULT_DT
 from wmr_jax._src.sim.sensing.disturbances import (
@@ -34,13 +27,11 @@ from wmr_jax._src.studies.robustness import (
     _scaled,
     check_levels,
     mean_median,
+    named_warnings,
     settled_at_horizon,
     study_steps,
     summary_row,
 )
-
-# The warnings about a loop's gains, which a study of several names.
-_GAIN_WARNINGS = (WheelSpeedWarning, SamplingWarning)
 
 
 def _closed_loop(value: Any, controller: Any, estimator: Any, where: str) -> ClosedLoop:
@@ -149,7 +140,7 @@ def standard_conditions(
     for label, sxy, sdeg, latency, wheels in _standard_table(factors, noise):
         spec = _scaled(refs, unit, wheels, sxy, sdeg, latency)
         for name, loop in sets.items():
-            with _named(name if len(sets) > 1 else None, said):
+            with named_warnings(name if len(sets) > 1 else None, said):
                 row, m = _judged(spec, loop, dt, robot, x64, horizon)
             rows.append(
                 {
@@ -181,31 +172,6 @@ def _loops(given: Any, name: str, controller: Any, estimator: Any, robot: Any):
         resolve_estimator(loop.estimator)
         controllers.get_controller(loop.controller)
     return sets, _study_robot(robot, sets, name)
-
-
-@contextlib.contextmanager
-def _named(name: str | None, said: set[str]):
-    """Say the gain warnings of one loop's runs once per study, with the loop's name.
-
-    A study of several loops runs each under every condition; a warning about
-    one loop's gains (the wheel bound, the sampled law) names that loop
-    (``name=None``: the study has one loop, the warning is as the runs give it).
-    Other warnings pass unchanged. As ``warnings.catch_warnings``, not for
-    studies run in several threads at once.
-    """
-    with warnings.catch_warnings(record=True) as records:
-        for category in _GAIN_WARNINGS:
-            warnings.simplefilter("always", category)
-        yield
-    for record in records:
-        if not issubclass(record.category, _GAIN_WARNINGS):
-            warnings.warn_explicit(record.message, record.category, record.filename, record.lineno)
-            continue
-        text = str(record.message) if name is None else f"gains {name!r}: {record.message}"
-        if text not in said:
-            said.add(text)
-            # 1: here, 2: contextlib, 3: the study, 4: its caller.
-            warnings.warn(text, record.category, stacklevel=4)
 
 
 def _judged(spec: Disturbance, loop: ClosedLoop, dt, robot, x64, horizon, velocity="ideal"):
@@ -422,7 +388,7 @@ def noise_curve(
         for sxy in levels:
             sdeg = _DEG_PER_CM * sxy
             spec = _scaled(refs, noise, factors, sxy, sdeg, latency)
-            with _named(name if len(sets) > 1 else None, said):
+            with named_warnings(name if len(sets) > 1 else None, said):
                 row, _ = _judged(spec, loop, dt, robot, x64, horizon)
             rows.append(
                 {

@@ -6,7 +6,9 @@ are lengths and angles); the horizon scales instead (``study_horizon``).
 
 from __future__ import annotations
 
+import contextlib
 import math
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -15,7 +17,12 @@ import numpy as np
 
 from wmr_jax._src import checks
 from wmr_jax._src.model import controllers
-from wmr_jax._src.model.params import Robot, validate_one_robot
+from wmr_jax._src.model.params import (
+    Robot,
+    SamplingWarning,
+    WheelSpeedWarning,
+    validate_one_robot,
+)
 from wmr_jax._src.model.robots import same_robot
 from wmr_jax._src.sim.metrics import PoseMetrics
 from wmr_jax._src.sim.poses import HORIZON_S, horizon_steps
@@ -34,6 +41,9 @@ ROBUSTNESS_CONDITIONS = (
     ("noise + mismatch", 0.03, 0.2, False),
     ("noise + mismatch + latency", 0.03, 0.2, True),
 )
+
+# The warnings about a loop's gains, which a study of several names.
+_GAIN_WARNINGS = (WheelSpeedWarning, SamplingWarning)
 
 
 def check_levels(noise_xy: Any, noise_deg: Any) -> tuple[list[float], list[float]]:
@@ -255,6 +265,31 @@ def study_steps(robot: Any, horizon: Any, dt: float) -> tuple[int, float]:
     return steps, steps * float(dt)
 
 
+@contextlib.contextmanager
+def named_warnings(name: str | None, said: set[str]):
+    """Say the gain warnings of one loop's runs once per study, with the loop's name.
+
+    A study of several loops runs each under every condition; a warning about
+    one loop's gains (the wheel bound, the sampled law) names that loop
+    (``name=None``: the study has one loop, the warning is as the runs give it).
+    Other warnings pass unchanged. As ``warnings.catch_warnings``, not for
+    studies run in several threads at once.
+    """
+    with warnings.catch_warnings(record=True) as records:
+        for category in _GAIN_WARNINGS:
+            warnings.simplefilter("always", category)
+        yield
+    for record in records:
+        if not issubclass(record.category, _GAIN_WARNINGS):
+            warnings.warn_explicit(record.message, record.category, record.filename, record.lineno)
+            continue
+        text = str(record.message) if name is None else f"gains {name!r}: {record.message}"
+        if text not in said:
+            said.add(text)
+            # 1: here, 2: contextlib, 3: the study, 4: its caller.
+            warnings.warn(text, record.category, stacklevel=4)
+
+
 def robustness_study(
     *,
     seed: int = 0,
@@ -291,12 +326,13 @@ def robustness_study(
     keys = jax.random.split(jax.random.PRNGKey(seed), len(ROBUSTNESS_CONDITIONS))
     shared = {"n_runs": n_runs, "noise_xy": noise_xy, "noise_deg": noise_deg, "x64": x64}
     shared.update(velocity=velocity, estimator=estimator, robot=robot, horizon=horizon)
-    rows = []
+    rows, said = [], set()
     for (label, radius, mass, latency), key in zip(ROBUSTNESS_CONDITIONS, keys, strict=True):
         if velocity == "ideal":
             mass = 0.0  # the ideal loop has no mass: the rows say so rather than ±20 %
         condition = {"radius_mismatch": radius, "mass_mismatch": mass, "latency": latency}
         for name in names:
-            for row in monte_carlo(key, controller=name, **condition, **shared):
-                rows.append({"condition": label, **row})
+            with named_warnings(name if len(names) > 1 else None, said):
+                found = monte_carlo(key, controller=name, **condition, **shared)
+            rows += [{"condition": label, **row} for row in found]
     return rows
