@@ -463,3 +463,32 @@ def test_robustness_runs_the_gain_sets_on_an_identified_robot(tmp_path, capsys, 
     slow = {r["condition"]: r["mean arrival s"] for r in rows if r["gains"].startswith("paper")}
     assert slow["identified robot"] != pytest.approx(slow["base robot"], abs=1e-3)
     assert main(args + ["--noise-curve"]) == 2
+
+
+def test_simulate_on_an_identified_robot_warns_as_a_rollout_and_times_no_region(
+    tmp_path, capsys, monkeypatch
+):
+    import json
+
+    from wmr_jax._src.cli import main as cli
+    from wmr_jax._src.model.robots import robot_json
+
+    identified = {
+        "robot": {"half_track": float(BASE.half_track), "speed_gain": float(BASE.speed_gain)},
+        "base_robot": robot_json(BASE),
+        "wheel_scale": {"left": 1.0, "right": 1.0},
+        "latency_samples": 0,
+        "noise": {"sigma_xy": 0.1, "sigma_theta": 0.01},
+    }
+    path = tmp_path / "identified.json"
+    path.write_text(json.dumps(identified))
+    monkeypatch.setattr(cli, "_shown_warnings", set())  # each distinct warning printed once
+    # The default gains are Fig. 7's, beyond the paper robot's wheel bound.
+    assert cli.main(["simulate", "--robot", str(path), "--ref", "30", "30", "0"]) == 0
+    out, err = capsys.readouterr()
+    assert "warning: k_r + L*k_theta = 138.5 cm/s exceeds v_max = 125 cm/s" in err
+    # The law sees the tracker's noisy poses: no true region to time, and no zeros shown.
+    assert "time per region: not timed (the law sees the tracker's noisy poses)" in out
+    assert "R0=" not in out
+    assert cli.main(["simulate", "--robot", str(path), "--ref", "30", "30", "0", "--dt", "-1"]) == 2
+    assert "--dt '-1' is not allowed" in capsys.readouterr().err
