@@ -54,6 +54,26 @@ def test_bench_command_writes_table_and_json(tmp_path, capsys):
         assert row["robot_steps_per_s"] > 0 and row["run_s"] > 0
     ratios = result["ratios"]["N=16"]
     assert ratios["vs_numpy_batch"] > 0 and ratios["vs_scalar_reference"] > 0
+    assert result["finished"] is True
+    # Interrupted in the second size: the file keeps the first, marked unfinished.
+    from wmr_jax._src.studies import bench
+
+    rows = bench._SizeBench.rows
+
+    def interrupted(self, *, scalar):
+        if self.n == 16:
+            raise KeyboardInterrupt
+        return rows(self, scalar=scalar)
+
+    out.unlink()
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(bench._SizeBench, "rows", interrupted)
+        assert main(argv) == 130
+    assert "interrupted" in capsys.readouterr().err
+    kept = json.loads(out.read_text())
+    assert kept["finished"] is False
+    assert [(row["case"], row["n"]) for row in kept["rows"]] == cases[:2]
+    assert list(kept["ratios"]) == ["N=8"]
 
 
 def test_both_losses_and_their_gradients_are_timed():

@@ -109,9 +109,19 @@ def run(args: Any) -> int:
     use_cpu_devices(cpu_devices)
     detail = f"; {config.steps} control periods per run and the paper robot's poses (5-80 cm)"
     flags.say_robot(given, detail + ", as for any robot", gains=False)
-    result = bench.run_benchmark(config, log=lambda line: print(line, file=sys.stderr, flush=True))
-    if given is not None:
-        result["robot_label"] = given.label  # the preset's name or the file
+
+    def labelled(result: dict) -> dict:
+        if given is not None:
+            result["robot_label"] = given.label  # the preset's name or the file
+        return result
+
+    # Each finished size is written at once: an interrupted run keeps them ("finished": false).
+    partial = None if out is None else (lambda so_far: atomic_write_json(out, labelled(so_far)))
+
+    def log(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    result = labelled(bench.run_benchmark(config, log=log, on_size=partial))
     print(bench_table(result), end="")
     if out is not None:
         atomic_write_json(out, result)

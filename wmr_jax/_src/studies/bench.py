@@ -113,12 +113,20 @@ def _check_config(config: BenchConfig) -> BenchConfig:
     return dataclasses.replace(config, cases=tuple(config.cases) or CASES)
 
 
-def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = None) -> dict:
+def run_benchmark(
+    config: BenchConfig,
+    *,
+    log: Callable[[str], None] | None = None,
+    on_size: Callable[[dict], None] | None = None,
+) -> dict:
     """Run the benchmark and return its results as a JSON-ready dict.
 
     Args:
         config: what to measure.
         log: called with one line per finished case (progress).
+        on_size: called after each batch size with the results so far (as
+            returned, ``"finished": False``), so that an interrupted run can
+            keep the sizes it finished.
 
     Returns:
         ``{"environment", "config", "robot", "robot_label", "rows", "ratios",
@@ -129,8 +137,9 @@ def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = No
         each derivative over its forward pass.
     """
     config = _check_config(config)
-    if log is not None and not callable(log):
-        raise ValueError(f"log = {log!r} is not allowed; allowed: a function of one line, or None")
+    for name, hook in (("log", log), ("on_size", on_size)):
+        if hook is not None and not callable(hook):
+            raise ValueError(f"{name} = {hook!r} is not allowed; allowed: a function, or None")
     if config.dtype == "float64" and not jax.config.jax_enable_x64:
         jax.config.update("jax_enable_x64", True)
     if config.dtype == "float32" and jax.config.jax_enable_x64:
@@ -138,8 +147,6 @@ def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = No
             "dtype = 'float32' is not allowed while jax_enable_x64 is on; "
             "allowed: 'float64', or turn jax_enable_x64 off"
         )
-    from wmr_jax._src.studies.maps import robot_record
-
     say = log or (lambda line: None)
     rows: list[dict] = []
     with warnings.catch_warnings():
@@ -152,14 +159,24 @@ def run_benchmark(config: BenchConfig, *, log: Callable[[str], None] | None = No
                 rate = row.get("robot_steps_per_s")
                 text = row.get("skipped") or (f"{rate:.3e} robot-steps/s" if rate else "")
                 say(f"{row['case']:<22} N={row['n']!s:<8} {text}")
+            if on_size is not None and n != config.sizes[-1]:
+                on_size(_results(config, rows, finished=False))
+    return _results(config, rows, finished=True)
+
+
+def _results(config: BenchConfig, rows: list[dict], *, finished: bool) -> dict:
+    """``run_benchmark``'s dict of ``rows``."""
+    from wmr_jax._src.studies.maps import robot_record
+
     fields = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
     return {
         "environment": environment(),
         "config": {name: value for name, value in fields.items() if name != "robot"},
         **robot_record(Robot() if config.robot is None else config.robot),
-        "rows": rows,
+        "rows": list(rows),
         "ratios": _ratios(rows),
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "finished": finished,
     }
 
 
