@@ -142,6 +142,24 @@ def test_a_failing_run_under_noise_points_to_robust_tuning(capsys, tmp_path):
     assert "hint" not in capsys.readouterr().out
 
 
+def test_runs_held_by_the_noise_until_the_horizon_call_for_the_hint_too():
+    # Every run arrived, but half settled only at the horizon: counted as
+    # arrived, yet the noise kept them off the goal until the end.
+    import argparse
+
+    from wmr_jax._src.cli.evaluate import hint
+    from wmr_jax._src.model.robots import robot_json
+
+    args = argparse.Namespace(robot=None)
+    result = {"condition": "noise", "success": 1.0, "robot": robot_json(w.Robot())}
+    assert hint({**result, "settled_at_horizon": 0.5}, args).startswith(
+        "hint: these gains were not tuned for this noise"
+    )
+    assert hint({**result, "settled_at_horizon": 0.05}, args) == ""  # 95 % before it
+    assert hint({**result, "settled_at_horizon": 0.06}, args) != ""
+    assert hint({**result, "condition": "latency", "settled_at_horizon": 0.5}, args) == ""
+
+
 def test_the_hint_names_the_robot_the_file_was_tuned_for(capsys, tmp_path):
     burger = w.ROBOTS["turtlebot3-burger"]
     gains = _file(
