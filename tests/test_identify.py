@@ -226,7 +226,9 @@ def test_bad_logs_give_one_clear_error_each(tmp_path, good):
     row[0] = repr(float(row[0]) + DT / 2)
     text[11] = ",".join(row)
     (tmp_path / "time.csv").write_text("\n".join(text) + "\n")
-    assert "line 12" in _error(tmp_path / "time.csv") and "uniform" in _error(tmp_path / "time.csv")
+    message = _error(tmp_path / "time.csv")
+    assert "line 12: t = " in message and "uniform" in message
+    assert "np." not in message  # plain numbers, not NumPy's repr
     # Too short.
     assert "too short" in _error(_csv(tmp_path, commands[:20], measured[:20], name="short.csv"))
     # NaN at line 6.
@@ -324,6 +326,18 @@ def test_cli_plan_and_a_bad_log(tmp_path, capsys, good):
     assert main(["identify", "--log", str(path), "--out", str(tmp_path / "id")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("wmr-jax: error:") and "metres" in err and "\n" not in err
+    # Wholly in metres: poses and commands agree, but both are 100 times small.
+    slow = commands.copy()
+    slow[:, 0] /= 100
+    path = _csv(tmp_path, slow, metres, name="all_metres.csv")
+    assert main(["identify", "--log", str(path), "--out", str(tmp_path / "id")]) == 2
+    err = capsys.readouterr().err.strip()
+    fastest = np.max(np.abs(slow[:, 0]))
+    assert err == (
+        f"wmr-jax: error: --log {path}: its fastest v_cmd is {fastest:.3g} cm/s, under 2 % of "
+        "the robot's V_max (125 cm/s): the log looks like m/s and metres; allowed: v_cmd in "
+        "cm/s and x, y in cm (multiply by 100)"
+    )
 
 
 def test_evaluate_on_an_identified_robot_runs_each_reference_as_simulate_does(tmp_path, capsys):

@@ -63,6 +63,8 @@ def run(args: Any) -> int:
         )
         for p in args.log
     ]
+    for log in logs:
+        _check_speed_unit(log, robot)
     period = logs[0].dt
     for log in logs[1:]:
         if abs(log.dt - period) > 1e-3 * period:
@@ -80,6 +82,24 @@ def run(args: Any) -> int:
     print(output.table(content))
     print(f"fitted in {seconds:.1f} s; wrote {path} and {out / 'fit.png'}")
     return 0
+
+
+# A log that asks for translation, but never for this share of V_max, is in m and m/s.
+_SLOWEST_SHARE = 0.02
+
+
+def _check_speed_unit(log: Any, robot: Any) -> None:
+    """Refuse a log written wholly in metres: poses and commands agree, but 100 times small."""
+    import numpy as np
+
+    fastest = float(np.max(np.abs(log.commands[:, 0])))
+    v_max = float(robot.v_max)
+    if 0.0 < fastest < _SLOWEST_SHARE * v_max:
+        raise ValueError(
+            f"--log {log.source}: its fastest v_cmd is {fastest:.3g} cm/s, under "
+            f"{100 * _SLOWEST_SHARE:g} % of the robot's V_max ({v_max:g} cm/s): the log looks "
+            "like m/s and metres; allowed: v_cmd in cm/s and x, y in cm (multiply by 100)"
+        )
 
 
 def _plan(args: Any, robot: Any) -> int:

@@ -108,7 +108,8 @@ def check_log(
     if off.size:
         i = int(off[0]) + 1
         raise ValueError(
-            f"{where}: {at(i)}: t = {t[i]!r} after {t[i - 1]!r} is a step of {steps[i - 1]:.6g} s; "
+            f"{where}: {at(i)}: t = {float(t[i])!r} after {float(t[i - 1])!r} is a step of "
+            f"{steps[i - 1]:.6g} s; "
             f"allowed: a uniform period ({dt:.6g} s, to {_UNIFORM:.0e} of it)"
         )
     _check_units(dt, commands, poses, where)
