@@ -390,3 +390,12 @@ def test_tables_print_success_as_percentages():
     assert "| nominal | 100 % | 0.5 | 0 % |" in table
     assert "| noise | 67.8 % | 5.72 | 67.8 % |" in table
     assert table.splitlines()[0] == "| condition | success | mean arrival s | settled at horizon |"
+    # No run arrived: said in words, not as inf.
+    failed = {**_standard_rows()[1], "condition": "latency", "success": 0.0}
+    failed.update({"mean arrival s": math.inf, "median arrival s": math.inf})
+    failed["settled at horizon"] = 0.0
+    columns = ["condition", "mean arrival s", "median arrival s", "mean arrival, not at horizon s"]
+    table = robustness_table([*_standard_rows(), failed], columns)
+    assert "| latency | none arrived | none arrived | 0 % | none before the horizon |" in table
+    assert "| noise | 5.72 | 5.8 | 67.8 % | none before the horizon |" in table
+    assert "inf" not in table

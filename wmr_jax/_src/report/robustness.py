@@ -84,8 +84,19 @@ def robustness_table(rows: Sequence[dict[str, Any]], columns: Sequence[str]) -> 
         after = [i for i, c in enumerate(columns) if c in _ARRIVAL_COLUMNS]
         columns.insert(after[-1] + 1 if after else len(columns), _LATE)
     markdown_table(rows, columns)  # names a row without a column, before formatting
-    shown = [{c: _percent(r[c]) if c in _PERCENT_KEYS else r[c] for c in columns} for r in rows]
+    shown = [{c: _cell(r, c) for c in columns} for r in rows]
     return markdown_table(shown, columns)
+
+
+def _cell(row: dict[str, Any], column: str) -> Any:
+    """A cell as the table shows it: a percentage, ``none arrived`` for no arrival, or as is."""
+    if column in _PERCENT_KEYS:
+        return _percent(row[column])
+    if column in _ARRIVAL_COLUMNS and row[column] == math.inf:
+        return "none arrived"
+    if column == "mean arrival, not at horizon s" and row[column] == math.inf:
+        return "none before the horizon"
+    return row[column]
 
 
 def _percent(value: Any) -> Any:
