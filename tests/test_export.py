@@ -483,16 +483,32 @@ def test_evaluate_c_judges_the_compiled_controller_as_the_file(tmp_path, robust_
     # As many runs as the closed-loop test above: the JAX side reuses its compiled loop.
     np.save(refs, w.sample_poses(11, 150))
     common = ["--refs", str(refs), "--condition", "both"]
-    assert main(["evaluate", "--c", str(out), *common, "--json", str(tmp_path / "c.json")]) == 0
+    capsys.readouterr()
+    per_ref = ["--per-ref", str(tmp_path / "c.csv")]
+    assert (
+        main(["evaluate", "--c", str(out), *common, *per_ref, "--json", str(tmp_path / "c.json")])
+        == 0
+    )
+    c_out = capsys.readouterr().out
     assert (
         main(["evaluate", "--gains", robust_file, *common, "--json", str(tmp_path / "j.json")]) == 0
     )
+    j_out = capsys.readouterr().out
     c_result = json.loads((tmp_path / "c.json").read_text())
     j_result = json.loads((tmp_path / "j.json").read_text())
     for key in ("success", "mean_arrival_s", "median_arrival_s", "peak_wheel_speed", "n"):
         assert c_result[key] == pytest.approx(j_result[key], rel=1e-9), key
     assert c_result["feedback"] == "ekf" and "compiled C" in c_result["controller"]
-    capsys.readouterr()
+    # Run by run, as the JAX loop's; and so the same table rows, "not arrived" included.
+    assert len(c_result["per_reference"]) == 150
+    for c_run, j_run in zip(c_result["per_reference"], j_result["per_reference"], strict=True):
+        assert c_run["ref"] == j_run["ref"] and c_run["success"] == j_run["success"]
+        assert c_run["final_distance_cm"] == pytest.approx(j_run["final_distance_cm"], abs=1e-9)
+    c_rows = [line.split("|")[1] for line in c_out.splitlines() if line.startswith("| ")]
+    j_rows = [line.split("|")[1] for line in j_out.splitlines() if line.startswith("| ")]
+    assert c_rows == j_rows and " not arrived " in c_rows
+    lines = (tmp_path / "c.csv").read_text().splitlines()
+    assert len(lines) == 1 + 150 and lines[1].startswith("row 0 (from 0),")
     assert main(["evaluate", "--c", str(out), *common, "--estimator", "observer"]) == 2
     assert "--estimator is not allowed with --c" in capsys.readouterr().err
     assert main(["evaluate", "--c", str(tmp_path), *common]) == 2

@@ -527,8 +527,13 @@ def run_compiled(args: Any) -> int:
     if args.float32:
         raise ValueError("--float32 is not allowed with --c; allowed: wmr-jax export --real float")
     out, settings = _settings(args)
+    per_ref = None if args.per_ref is None else flags.output_file("--per-ref", args.per_ref)
     given = flags.robot_from(args.robot)
-    refs = load_refs(args.refs)[0]
+    refs, labels = load_refs(args.refs)
+    import warnings
+
+    for text in unit_warnings(args.refs, refs):
+        warnings.warn(text, UserWarning, stacklevel=1)
     loop, meta = exported_loop(args.c)
     robot = flags.robot_for_gains(given, loop.robot, "--c", args.c)
     horizon = _horizon(args.horizon, len(refs), robot)
@@ -536,5 +541,8 @@ def run_compiled(args: Any) -> int:
     with flags.as_flags(_AS_FLAGS):
         result = evaluate_compiled(compiled, loop, refs, horizon=horizon, robot=robot, **settings)
     result = {**result, "c_folder": str(args.c), "gains": meta["gains"], "refs_file": args.refs}
-    _finish(out, result)
+    _finish(out, result, labels, per_ref)
+    advice = hint(result, args)
+    if advice:
+        print(advice)
     return 0

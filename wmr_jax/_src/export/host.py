@@ -281,5 +281,6 @@ def _figures(m, loop, refs, robot, condition, mismatch, seed, horizon, velocity,
         feedback="raw" if estimator is None else estimator.name,
         robot=robot_json(robot),
         dtype="float64",
+        per_reference=conditions.per_reference(m, refs, horizon),
     )
     return row

@@ -268,8 +268,20 @@ def evaluate_loop(
         m, condition, mismatch = _on_identified(
             identified, condition, refs, noise, loop, controller, dt, robot, velocity, x64
         )
+    return {
+        **figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity),
+        "controller": controller.name,
+        "feedback": "raw" if estimator is None else estimator.name,
+        "robot": robot_json(robot),
+        "dtype": "float64" if x64 else "float32",
+        "per_reference": per_reference(m, refs, horizon),
+    }
+
+
+def per_reference(m: Any, refs: Any, horizon: float) -> list[dict[str, Any]]:
+    """Each run's reference, arrival, final distance and whether it settled only at the horizon."""
     late = settled_at_horizon(m, horizon)
-    per_reference = [
+    return [
         {
             "ref": [float(v) for v in ref],
             "success": bool(ok),
@@ -281,14 +293,6 @@ def evaluate_loop(
             np.asarray(refs), m.success, m.arrival, m.final_distance, late, strict=True
         )
     ]
-    return {
-        **figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity),
-        "controller": controller.name,
-        "feedback": "raw" if estimator is None else estimator.name,
-        "robot": robot_json(robot),
-        "dtype": "float64" if x64 else "float32",
-        "per_reference": per_reference,
-    }
 
 
 def figures(m, refs, robot, dt, horizon, condition, mismatch, seed, velocity) -> dict[str, Any]:
