@@ -191,6 +191,31 @@ def test_simulate_says_what_to_do_when_not_arrived(capsys):
     out = capsys.readouterr().out
     assert "arrival time   : never (not arrived at the end)" in out
     assert "not arrived in 0.33 s; a longer run, such as --steps 40" in out
+    # A far goal: three times the drive at V_max, 1000 cm / (125 cm/s) / 0.033 s = 242.4 periods.
+    assert main(["simulate", "--ref", "1000", "0", "0", "--steps", "10"]) == 0
+    assert "a longer run, such as --steps 728, shows" in capsys.readouterr().out
+    assert main(["simulate", "--ref", "1e9", "0", "0", "--steps", "10"]) == 0
+    assert "the goal is 1e+09 cm away, at least 8e+06 s at V_max = 125 cm/s: more than one run" in (
+        capsys.readouterr().out
+    )
+
+
+def test_simulate_points_to_dt_when_the_sampled_law_cannot_settle(capsys, monkeypatch):
+    from wmr_jax._src.cli import main as cli
+
+    monkeypatch.setattr(cli, "_shown_warnings", set())  # each distinct warning printed once
+    assert main(["simulate", "--ref", "30", "20", "45", "--steps", "10", "--dt", "0.5"]) == 0
+    out, err = capsys.readouterr()
+    assert "warning: k_theta*dt = 5 and k_r*pi*dt/(2*R_m) = 4.71" in err
+    assert "not arrived in 5 s; the sampled law cannot settle with these gains at this --dt" in out
+    assert "a longer run" not in out
+
+
+def test_simulate_warns_of_a_goal_inside_the_tolerance(capsys):
+    assert main(["simulate", "--ref", "0.3", "0.3", "0", "--steps", "10"]) == 0
+    assert "--ref lies 0.424 cm from the start, inside the arrival tolerance (1 cm)" in (
+        capsys.readouterr().err
+    )
 
 
 @pytest.mark.parametrize(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -84,6 +85,35 @@ def default_steps(robot: Any) -> int:
     return math.ceil(DEFAULT_STEPS * stretch - 1e-9)
 
 
+# The most periods --steps allows.
+MAX_STEPS = 10**7
+
+
+def _not_arrived(steps: int, dt: float, gap: float, robot: Any, unsettled: bool) -> str:
+    """What to try after a run that did not arrive."""
+    from wmr_jax._src.model.params import Robot
+
+    if unsettled:
+        return (
+            f"not arrived in {steps * dt:.3g} s; the sampled law cannot settle with these "
+            "gains at this --dt (the warning above): a smaller --dt or smaller gains "
+            "(docs/model.md §4.2.1)"
+        )
+    v_max = float((Robot() if robot is None else robot).v_max)
+    need = gap / v_max  # the least time to drive there at V_max
+    longer = max(4 * steps, math.ceil(3 * need / dt))
+    if longer > MAX_STEPS:
+        return (
+            f"not arrived in {steps * dt:.3g} s; the goal is {gap:.3g} cm away, at least "
+            f"{need:.3g} s at V_max = {v_max:g} cm/s: more than one run of --steps {MAX_STEPS} "
+            "simulates"
+        )
+    return (
+        f"not arrived in {steps * dt:.3g} s; a longer run, such as --steps {longer}, shows "
+        "whether it arrives later"
+    )
+
+
 def plot_title(ref: Any, controller: Any, gains: Any, gains_file: Any) -> str:
     """The title of ``--plot``: the reference and the gains that drove to it."""
     from wmr_jax._src.model.params import Gains
@@ -106,9 +136,10 @@ def run(args: Any) -> int:
     import numpy as np
 
     from wmr_jax._src.identify.closed_loop import identified_rollout, loaded_identified
-    from wmr_jax._src.model.params import Robot
+    from wmr_jax._src.model.params import Robot, SamplingWarning
     from wmr_jax._src.model.robots import describe_robot, same_robot
     from wmr_jax._src.sim import metrics
+    from wmr_jax._src.sim.metrics import DEFAULT_TOL_R
     from wmr_jax._src.sim.rollout import make_options, prepare, rollout
 
     plot = None if args.plot is None else flags.image_file("--plot", args.plot)
@@ -116,7 +147,7 @@ def run(args: Any) -> int:
     init = flags.pose_from_degrees("--init", args.init)
     dt = flags.number("--dt", args.dt, low=0.0, closed=False, unit="s")
     if args.steps is not None:
-        steps = flags.positive_int("--steps", args.steps, 1, 10**7)
+        steps = flags.positive_int("--steps", args.steps, 1, MAX_STEPS)
     velocity = flags.velocity_loop(args.velocity)
     identified = loaded_identified(args.robot)
     given = flags.robot_from(args.robot) if identified is None else identified[0]
@@ -124,17 +155,30 @@ def run(args: Any) -> int:
     robot = flags.robot_for_gains(given, saved, "--gains", args.gains)
     if given is not None and given.note:
         print(given.note)
+    gap = math.hypot(ref[0] - init[0], ref[1] - init[1])
+    if 0.0 < gap <= DEFAULT_TOL_R:
+        warnings.warn(
+            f"--ref lies {gap:.3g} cm from the start, inside the arrival tolerance "
+            f"({DEFAULT_TOL_R:g} cm); x and y are read as cm (metres need times 100)",
+            UserWarning,
+            stacklevel=1,
+        )
     if args.steps is None:
         steps = default_steps(robot)
     same = {"init": init, "dt": dt, "steps": steps, "velocity": velocity, "controller": controller}
     with flags.as_flags({"ref": "--ref", "init": "--init", "dt": "--dt"}):
-        if identified is not None:
-            # The rollout's checks and warnings (wheel bound, sampling) for the base robot.
-            options = make_options(steps=steps, velocity=velocity, controller=controller)
-            prepare(ref, gains, init, robot, dt, options, batch=False)
-            traj = identified_rollout(ref, gains, base=robot, identified=identified[1], **same)
-        else:
-            traj = rollout(ref, gains, robot=robot, **same)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            if identified is not None:
+                # The rollout's checks and warnings (wheel bound, sampling) for the base robot.
+                options = make_options(steps=steps, velocity=velocity, controller=controller)
+                prepare(ref, gains, init, robot, dt, options, batch=False)
+                traj = identified_rollout(ref, gains, base=robot, identified=identified[1], **same)
+            else:
+                traj = rollout(ref, gains, robot=robot, **same)
+    for record in caught:  # said as they came; the hint below reads them
+        warnings.warn_explicit(record.message, record.category, record.filename, record.lineno)
+    unsettled = any(issubclass(r.category, SamplingWarning) for r in caught)
     t_arrive = float(metrics.arrival_time(traj, np.asarray(ref), dt=dt))
     per_region = np.asarray(metrics.region_time(traj, dt=dt))
     final = np.asarray(traj.poses[-1])
@@ -161,10 +205,7 @@ def run(args: Any) -> int:
     arrival = "never (not arrived at the end)" if math.isinf(t_arrive) else f"{t_arrive:.3f} s"
     print(f"arrival time   : {arrival}")
     if math.isinf(t_arrive):
-        print(
-            f"hint           : not arrived in {steps * dt:.3g} s; a longer run, such as "
-            f"--steps {4 * steps}, shows whether it arrives later"
-        )
+        print(f"hint           : {_not_arrived(steps, dt, gap, robot, unsettled)}")
     # On an identified robot the law sees noisy measurements: no true region to time.
     regions = (
         "not timed (the law sees the tracker's noisy poses)"
