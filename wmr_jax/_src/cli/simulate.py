@@ -155,14 +155,6 @@ def run(args: Any) -> int:
     robot = flags.robot_for_gains(given, saved, "--gains", args.gains)
     if given is not None and given.note:
         print(given.note)
-    gap = math.hypot(ref[0] - init[0], ref[1] - init[1])
-    if 0.0 < gap <= DEFAULT_TOL_R:
-        warnings.warn(
-            f"--ref lies {gap:.3g} cm from the start, inside the arrival tolerance "
-            f"({DEFAULT_TOL_R:g} cm); x and y are read as cm (metres need times 100)",
-            UserWarning,
-            stacklevel=1,
-        )
     if args.steps is None:
         steps = default_steps(robot)
     same = {"init": init, "dt": dt, "steps": steps, "velocity": velocity, "controller": controller}
@@ -179,6 +171,14 @@ def run(args: Any) -> int:
     for record in caught:  # said as they came; the hint below reads them
         warnings.warn_explicit(record.message, record.category, record.filename, record.lineno)
     unsettled = any(issubclass(r.category, SamplingWarning) for r in caught)
+    gap = math.hypot(ref[0] - init[0], ref[1] - init[1])
+    if 0.0 < gap <= DEFAULT_TOL_R:
+        warnings.warn(
+            f"--ref lies {gap:.3g} cm from the start, inside the arrival tolerance "
+            f"({DEFAULT_TOL_R:g} cm); x and y are read as cm (metres need times 100)",
+            UserWarning,
+            stacklevel=1,
+        )
     t_arrive = float(metrics.arrival_time(traj, np.asarray(ref), dt=dt))
     per_region = np.asarray(metrics.region_time(traj, dt=dt))
     final = np.asarray(traj.poses[-1])
