@@ -474,3 +474,16 @@ def test_gain_files_of_two_robots_are_refused_in_a_short_line(capsys, tmp_path):
         f"{nominal!r}: tuned for pioneer-3dx, the other for turtlebot3-burger; allowed: gain "
         "files tuned for one robot\n"
     )
+
+
+def test_the_wheel_bound_warning_says_when_the_gains_are_the_defaults(capsys, monkeypatch):
+    from wmr_jax._src.cli import main as cli
+
+    monkeypatch.setattr(cli, "_shown_warnings", set())  # each distinct warning printed once
+    assert main(["simulate", "--ref", "30", "20", "45", "--steps", "10"]) == 0
+    err = capsys.readouterr().err
+    assert "exceeds v_max = 125 cm/s" in err
+    assert "these are the default gains, the paper's Fig. 7 (docs/paper.md)" in err
+    assert main(["simulate", "--ref", "30", "20", "45", "--steps", "10", "--k-r", "121"]) == 0
+    err = capsys.readouterr().err
+    assert "k_r + L*k_theta = 139.5 cm/s exceeds" in err and "default gains" not in err

@@ -197,9 +197,15 @@ def feasible(gains: Gains, robot: Robot, *, warn: bool, stacklevel: int) -> np.n
     ok = bound <= v_max * (1 + 1e-12)
     if warn and not np.all(ok):
         worst = float(np.max(bound))
+        # The defaults are the paper's Fig. 7 gains, which break the bound on purpose.
+        default = all(
+            np.all(np.asarray(getattr(gains, f.name)) == getattr(Gains(), f.name))
+            for f in dataclasses.fields(Gains)
+        )
+        why = "; these are the default gains, the paper's Fig. 7 (docs/paper.md)" if default else ""
         warnings.warn(
             f"k_r + L*k_theta = {worst:.4g} cm/s exceeds v_max = {float(np.max(v_max)):.4g} cm/s: "
-            "wheel commands may saturate (docs/model.md §3)",
+            f"wheel commands may saturate (docs/model.md §3){why}",
             WheelSpeedWarning,
             stacklevel=stacklevel,
         )
