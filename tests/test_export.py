@@ -230,6 +230,19 @@ def test_export_command_writes_the_files_and_refuses_bad_flags(tmp_path, robust_
         assert f"--period {bad!r} is not allowed; allowed: a finite number > 0 s" in err
 
 
+def test_a_period_the_law_cannot_settle_at_is_warned_of(tmp_path, robust_file, capsys, monkeypatch):
+    # 33 for 0.033: milliseconds read as seconds.
+    from wmr_jax._src.cli import main as cli
+
+    monkeypatch.setattr(cli, "_shown_warnings", set())  # each distinct warning printed once
+    out = tmp_path / "ctl"
+    assert main(["export", "--gains", robust_file, "--out", str(out), "--period", "33"]) == 0
+    err = capsys.readouterr().err
+    assert "warning: k_theta*dt = " in err and "cannot settle unless both are below 2" in err
+    assert main(["export", "--gains", robust_file, "--out", str(out)]) == 0
+    assert "cannot settle" not in capsys.readouterr().err
+
+
 def test_export_period_is_baked_in_and_recorded(tmp_path, robust_file):
     """``--period 0.02``: the C predicts and limits over 0.02 s, so in the disturbed loop run at
     0.02 s it arrives when the JAX loop at 0.02 s does; the JSON records the period."""

@@ -64,6 +64,11 @@ def run(args: Any) -> int:
     robot = flags.robot_for_gains(given, loop.robot, "--gains", args.gains)
     if robot is not None:
         loop = loop._replace(robot=robot)
+    from wmr_jax._src.model.controllers import get_controller
+
+    control = get_controller(loop.controller)
+    if control.check_sampling is not None:  # the warning simulate --dt gives at this period
+        control.check_sampling(loop.params, period)
     sources = c_sources(loop, real=real, period=period)
     for path in write_sources(out, sources, loop):
         print(f"export -> {path}")
