@@ -385,4 +385,5 @@ def test_animate_runs_the_robot_and_flags_are_spelled_whole(tmp_path, capsys, mo
     with pytest.raises(SystemExit) as refused:
         main([*argv, "--rob", "3"])
     assert refused.value.code == 2
-    assert "unrecognized arguments: --rob 3" in capsys.readouterr().err
+    # Named with the command's own help, which lists its flags.
+    assert "unrecognized arguments: --rob 3 (see wmr-jax animate --help)" in capsys.readouterr().err

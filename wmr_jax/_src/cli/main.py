@@ -73,12 +73,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"wmr-jax {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    parser.commands = {}  # name -> its parser, whose errors name its own --help
     for name, text in _HELP.items():
         module = importlib.import_module(f"wmr_jax._src.cli.{'paper' if name == 'demo' else name}")
         command = sub.add_parser(
             name, help=text, description=text, formatter_class=_HelpFormatter, allow_abbrev=False
         )
         module.add_arguments(command)
+        parser.commands[name] = command
         command.set_defaults(func=getattr(module, f"run_{name}", None) or module.run)
     return parser
 
@@ -103,7 +105,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         # No command is a usage error (status 2), shown with the whole help.
         parser.print_help(sys.stderr)
         return 2
-    args = parser.parse_args(argv)
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:  # a flag the command does not have: its own --help lists them
+        parser.commands[args.command].error(f"unrecognized arguments: {' '.join(unknown)}")
     if args.command in _ALL_DEVICE_COMMANDS and getattr(args, "cpu_devices", None) is None:
         from wmr_jax._src.sim.sharding import use_cpu_devices
 
