@@ -69,11 +69,20 @@ def test_bench_command_writes_table_and_json(tmp_path, capsys):
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(bench._SizeBench, "rows", interrupted)
         assert main(argv) == 130
-    assert "interrupted" in capsys.readouterr().err
+    assert f"wmr-jax: interrupted ({out} holds the batch sizes it finished)" in (
+        capsys.readouterr().err
+    )
     kept = json.loads(out.read_text())
     assert kept["finished"] is False
     assert [(row["case"], row["n"]) for row in kept["rows"]] == cases[:2]
     assert list(kept["ratios"]) == ["N=8"]
+    # Interrupted in the first: no row, and no earlier run's file left looking finished.
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(bench._SizeBench, "rows", lambda self, *, scalar: 1 / 0)
+        with pytest.raises(ZeroDivisionError):
+            main(argv)
+    kept = json.loads(out.read_text())
+    assert kept["finished"] is False and kept["rows"] == []
 
 
 def test_both_losses_and_their_gradients_are_timed():

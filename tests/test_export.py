@@ -238,7 +238,8 @@ def test_a_period_the_law_cannot_settle_at_is_warned_of(tmp_path, robust_file, c
     out = tmp_path / "ctl"
     assert main(["export", "--gains", robust_file, "--out", str(out), "--period", "33"]) == 0
     err = capsys.readouterr().err
-    assert "warning: k_theta*dt = " in err and "cannot settle unless both are below 2" in err
+    assert "warning: --period 33 s: k_theta*dt = " in err
+    assert "cannot settle unless both are below 2" in err
     assert main(["export", "--gains", robust_file, "--out", str(out)]) == 0
     assert "cannot settle" not in capsys.readouterr().err
 

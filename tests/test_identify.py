@@ -335,8 +335,8 @@ def test_cli_plan_and_a_bad_log(tmp_path, capsys, good):
     fastest = np.max(np.abs(slow[:, 0]))
     assert err == (
         f"wmr-jax: error: --log {path}: its fastest v_cmd is {fastest:.3g} cm/s, under 2 % of "
-        "the robot's V_max (125 cm/s): the log looks like m/s and metres; allowed: v_cmd in "
-        "cm/s and x, y in cm (multiply by 100)"
+        "V_max of the robot paper (125 cm/s): the log looks like m/s and metres; allowed: v_cmd "
+        "in cm/s and x, y in cm (multiply by 100), or --robot naming the slower robot it drove"
     )
 
 
@@ -506,3 +506,16 @@ def test_simulate_on_an_identified_robot_warns_as_a_rollout_and_times_no_region(
     assert "R0=" not in out
     assert cli.main(["simulate", "--robot", str(path), "--ref", "30", "30", "0", "--dt", "-1"]) == 2
     assert "--dt '-1' is not allowed" in capsys.readouterr().err
+
+
+def test_the_metres_check_leaves_turning_logs_with_stray_speeds_alone():
+    from wmr_jax._src.cli.identify import _check_speed_unit
+
+    commands = np.zeros((200, 2))
+    commands[:, 1] = 1.0  # turning in place
+    commands[:10, 0] = 0.5  # a joystick's dead band: 5 % of the samples, 0.5 cm/s
+    log = logs.Log(DT, commands, np.zeros((200, 3)), "spin.csv")
+    _check_speed_unit(log, BASE, "paper")  # not refused
+    commands[:30, 0] = 0.5  # 15 % of the samples, never above 0.5 cm/s: metres
+    with pytest.raises(ValueError, match="spin.csv: its fastest v_cmd is 0.5 cm/s"):
+        _check_speed_unit(log._replace(commands=commands), BASE, "paper")

@@ -393,9 +393,11 @@ def test_tables_print_success_as_percentages():
     # No run arrived: said in words, not as inf.
     failed = {**_standard_rows()[1], "condition": "latency", "success": 0.0}
     failed.update({"mean arrival s": math.inf, "median arrival s": math.inf})
-    failed["settled at horizon"] = 0.0
+    failed.update({"settled at horizon": 0.0, "median first arrival s": math.inf})
     columns = ["condition", "mean arrival s", "median arrival s", "mean arrival, not at horizon s"]
-    table = robustness_table([*_standard_rows(), failed], columns)
-    assert "| latency | none arrived | none arrived | 0 % | none before the horizon |" in table
-    assert "| noise | 5.72 | 5.8 | 67.8 % | none before the horizon |" in table
+    rows = [{**_standard_rows()[0], "median first arrival s": 0.4}, failed]
+    table = robustness_table(rows, [*columns, "median first arrival s"])
+    failed_row = "| latency | none arrived | none arrived | 0 % | none before the horizon |"
+    assert f"{failed_row} none arrived |" in table
+    assert "| nominal | 0.5 | 0.5 | 0 % | 0.5 | 0.4 |" in table
     assert "inf" not in table

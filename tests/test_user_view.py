@@ -152,12 +152,22 @@ def test_runs_held_by_the_noise_until_the_horizon_call_for_the_hint_too():
 
     args = argparse.Namespace(robot=None)
     result = {"condition": "noise", "success": 1.0, "robot": robot_json(w.Robot())}
+    result["feedback"] = "raw"
     assert hint({**result, "settled_at_horizon": 0.5}, args).startswith(
         "hint: these gains were not tuned for this noise"
     )
     assert hint({**result, "settled_at_horizon": 0.05}, args) == ""  # 95 % before it
     assert hint({**result, "settled_at_horizon": 0.06}, args) != ""
     assert hint({**result, "condition": "latency", "settled_at_horizon": 0.5}, args) == ""
+    # A loop with a filter was tuned for noise, if not this one; a compiled one is exported again.
+    tuned = {**result, "feedback": "ekf", "settled_at_horizon": 0.5}
+    assert hint(tuned, args).startswith(
+        "hint: fewer than 95 % of the runs arrived before the horizon under this noise; "
+        "wmr-jax tune --robust --out DIR"
+    )
+    assert hint(tuned, argparse.Namespace(robot=None, c="ctl")).endswith(
+        "then wmr-jax export --gains DIR/tuned_gains.json and evaluate --c its folder"
+    )
 
 
 def test_the_hint_names_the_robot_the_file_was_tuned_for(capsys, tmp_path):
@@ -487,3 +497,13 @@ def test_the_wheel_bound_warning_says_when_the_gains_are_the_defaults(capsys, mo
     assert main(["simulate", "--ref", "30", "20", "45", "--steps", "10", "--k-r", "121"]) == 0
     err = capsys.readouterr().err
     assert "k_r + L*k_theta = 139.5 cm/s exceeds" in err and "default gains" not in err
+
+
+def test_simulate_says_its_warnings_before_an_error_they_explain(capsys, monkeypatch):
+    from wmr_jax._src.cli import main as cli
+
+    monkeypatch.setattr(cli, "_shown_warnings", set())  # each distinct warning printed once
+    assert main(["simulate", "--ref", "30", "20", "45", "--steps", "10", "--dt", "1e30"]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[-1].startswith("wmr-jax: error: the run left the range")
+    assert any(line.startswith("wmr-jax: warning: k_theta*dt = 1e+31") for line in err[:-1])

@@ -409,10 +409,18 @@ def hint(result: dict[str, Any], args: Any) -> str:
         robot = f" --robot {name or 'YOUR_ROBOT_FILE'}"
     else:
         robot = ""
+    # Raw feedback: gains tuned without noise. With an estimator: tuned for another noise.
+    why = (
+        "these gains were not tuned for this noise"
+        if result["feedback"] == "raw"
+        else "fewer than 95 % of the runs arrived before the horizon under this noise"
+    )
+    after = "then evaluate DIR/tuned_gains.json"
+    if getattr(args, "c", None) is not None:
+        after = "then wmr-jax export --gains DIR/tuned_gains.json and evaluate --c its folder"
     return (
-        f"hint: these gains were not tuned for this noise; wmr-jax tune --robust{robot} "
-        "--out DIR tunes gains and an estimator for it (docs/robustness.md), then evaluate "
-        "DIR/tuned_gains.json"
+        f"hint: {why}; wmr-jax tune --robust{robot} --out DIR tunes gains and an estimator "
+        f"for it (docs/robustness.md), {after}"
     )
 
 

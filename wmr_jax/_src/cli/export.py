@@ -67,8 +67,14 @@ def run(args: Any) -> int:
     from wmr_jax._src.model.controllers import get_controller
 
     control = get_controller(loop.controller)
-    if control.check_sampling is not None:  # the warning simulate --dt gives at this period
-        control.check_sampling(loop.params, period)
+    if control.check_sampling is not None:  # the warning simulate --dt gives, at this period
+        import warnings
+
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            control.check_sampling(loop.params, period)
+        for record in caught:
+            warnings.warn(f"--period {period:g} s: {record.message}", record.category, 2)
     sources = c_sources(loop, real=real, period=period)
     for path in write_sources(out, sources, loop):
         print(f"export -> {path}")

@@ -45,6 +45,7 @@ def add_arguments(parser: Any) -> None:
 def run(args: Any) -> int:
     from wmr_jax._src.model.robots import load_robot
 
+    label = "paper" if args.robot is None else flags.robot_from(args.robot).label
     robot = load_robot("paper") if args.robot is None else flags.robot_from(args.robot).robot
     if args.plan is not None:
         return _plan(args, robot)
@@ -64,7 +65,7 @@ def run(args: Any) -> int:
         for p in args.log
     ]
     for log in logs:
-        _check_speed_unit(log, robot)
+        _check_speed_unit(log, robot, label)
     period = logs[0].dt
     for log in logs[1:]:
         if abs(log.dt - period) > 1e-3 * period:
@@ -84,21 +85,25 @@ def run(args: Any) -> int:
     return 0
 
 
-# A log that asks for translation, but never for this share of V_max, is in m and m/s.
+# A log that asks for translation (in this share of its samples at least), but
+# never for this share of V_max, is in m and m/s.
+_MOVING_SHARE = 0.1
 _SLOWEST_SHARE = 0.02
 
 
-def _check_speed_unit(log: Any, robot: Any) -> None:
+def _check_speed_unit(log: Any, robot: Any, label: str) -> None:
     """Refuse a log written wholly in metres: poses and commands agree, but 100 times small."""
     import numpy as np
 
-    fastest = float(np.max(np.abs(log.commands[:, 0])))
-    v_max = float(robot.v_max)
-    if 0.0 < fastest < _SLOWEST_SHARE * v_max:
+    speeds = np.abs(log.commands[:, 0])
+    fastest, v_max = float(np.max(speeds)), float(robot.v_max)
+    moving = float(np.mean(speeds > 0))
+    if moving >= _MOVING_SHARE and fastest < _SLOWEST_SHARE * v_max:
         raise ValueError(
             f"--log {log.source}: its fastest v_cmd is {fastest:.3g} cm/s, under "
-            f"{100 * _SLOWEST_SHARE:g} % of the robot's V_max ({v_max:g} cm/s): the log looks "
-            "like m/s and metres; allowed: v_cmd in cm/s and x, y in cm (multiply by 100)"
+            f"{100 * _SLOWEST_SHARE:g} % of V_max of the robot {label} ({v_max:g} cm/s): the log "
+            "looks like m/s and metres; allowed: v_cmd in cm/s and x, y in cm (multiply by 100), "
+            "or --robot naming the slower robot it drove"
         )
 
 

@@ -107,7 +107,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     args, unknown = parser.parse_known_args(argv)
     if unknown:  # a flag the command does not have: its own --help lists them
-        parser.commands[args.command].error(f"unrecognized arguments: {' '.join(unknown)}")
+        top = unknown[0] in argv and argv.index(unknown[0]) < argv.index(args.command)
+        which = parser if top else parser.commands[args.command]
+        which.error(f"unrecognized arguments: {' '.join(unknown)}")
     if args.command in _ALL_DEVICE_COMMANDS and getattr(args, "cpu_devices", None) is None:
         from wmr_jax._src.sim.sharding import use_cpu_devices
 
@@ -132,6 +134,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         modes = ("robust", "gradient_cost")
         resumable = hasattr(args, "resume") and not any(getattr(args, m, False) for m in modes)
         hint = " (the same command with --resume keeps what it finished)" if resumable else ""
+        if args.command == "bench" and args.json is not None:
+            hint = f" ({args.json} holds the batch sizes it finished)"
         print(f"wmr-jax: interrupted{hint}", file=sys.stderr)
         return 130
 

@@ -101,13 +101,15 @@ def _not_arrived(steps: int, dt: float, gap: float, robot: Any, unsettled: bool)
         )
     v_max = float((Robot() if robot is None else robot).v_max)
     need = gap / v_max  # the least time to drive there at V_max
-    longer = max(4 * steps, math.ceil(3 * need / dt))
-    if longer > MAX_STEPS:
+    if 3 * need / dt > MAX_STEPS:
         return (
             f"not arrived in {steps * dt:.3g} s; the goal is {gap:.3g} cm away, at least "
             f"{need:.3g} s at V_max = {v_max:g} cm/s: more than one run of --steps {MAX_STEPS} "
-            "simulates"
+            "simulates (--ref is in cm; a larger --dt covers more time)"
         )
+    longer = min(max(4 * steps, math.ceil(3 * need / dt)), MAX_STEPS)
+    if longer <= steps:
+        return f"not arrived in {steps * dt:.3g} s, the longest run --steps allows"
     return (
         f"not arrived in {steps * dt:.3g} s; a longer run, such as --steps {longer}, shows "
         "whether it arrives later"
@@ -158,18 +160,23 @@ def run(args: Any) -> int:
     if args.steps is None:
         steps = default_steps(robot)
     same = {"init": init, "dt": dt, "steps": steps, "velocity": velocity, "controller": controller}
-    with flags.as_flags({"ref": "--ref", "init": "--init", "dt": "--dt"}):
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            if identified is not None:
-                # The rollout's checks and warnings (wheel bound, sampling) for the base robot.
-                options = make_options(steps=steps, velocity=velocity, controller=controller)
-                prepare(ref, gains, init, robot, dt, options, batch=False)
-                traj = identified_rollout(ref, gains, base=robot, identified=identified[1], **same)
-            else:
-                traj = rollout(ref, gains, robot=robot, **same)
-    for record in caught:  # said as they came; the hint below reads them
-        warnings.warn_explicit(record.message, record.category, record.filename, record.lineno)
+    caught: list = []
+    try:
+        with flags.as_flags({"ref": "--ref", "init": "--init", "dt": "--dt"}):
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                if identified is not None:
+                    # The rollout's checks and warnings (wheel bound, sampling) for the base robot.
+                    options = make_options(steps=steps, velocity=velocity, controller=controller)
+                    prepare(ref, gains, init, robot, dt, options, batch=False)
+                    traj = identified_rollout(
+                        ref, gains, base=robot, identified=identified[1], **same
+                    )
+                else:
+                    traj = rollout(ref, gains, robot=robot, **same)
+    finally:  # said as they came, before an error they may explain; the hint reads them
+        for record in caught:
+            warnings.warn_explicit(record.message, record.category, record.filename, record.lineno)
     unsettled = any(issubclass(r.category, SamplingWarning) for r in caught)
     gap = math.hypot(ref[0] - init[0], ref[1] - init[1])
     if 0.0 < gap <= DEFAULT_TOL_R:

@@ -92,10 +92,8 @@ def _cell(row: dict[str, Any], column: str) -> Any:
     """A cell as the table shows it: a percentage, ``none arrived`` for no arrival, or as is."""
     if column in _PERCENT_KEYS:
         return _percent(row[column])
-    if column in _ARRIVAL_COLUMNS and row[column] == math.inf:
-        return "none arrived"
-    if column == "mean arrival, not at horizon s" and row[column] == math.inf:
-        return "none before the horizon"
+    if column.endswith(" s") and row[column] == math.inf:  # an arrival time of no run
+        return "none before the horizon" if "not at horizon" in column else "none arrived"
     return row[column]
 
 

@@ -124,9 +124,9 @@ def run_benchmark(
     Args:
         config: what to measure.
         log: called with one line per finished case (progress).
-        on_size: called after each batch size with the results so far (as
-            returned, ``"finished": False``), so that an interrupted run can
-            keep the sizes it finished.
+        on_size: called before the first batch size and after each one but
+            the last with the results so far (as returned, ``"finished":
+            False``), so that an interrupted run can keep the sizes it finished.
 
     Returns:
         ``{"environment", "config", "robot", "robot_label", "rows", "ratios",
@@ -149,6 +149,8 @@ def run_benchmark(
         )
     say = log or (lambda line: None)
     rows: list[dict] = []
+    if on_size is not None:
+        on_size(_results(config, rows, finished=False))
     with warnings.catch_warnings():
         # The paper's gains trip the wheel-speed warning on every call.
         warnings.simplefilter("ignore")
