@@ -340,6 +340,24 @@ def test_cli_plan_and_a_bad_log(tmp_path, capsys, good):
     )
 
 
+def _identified_file(tmp_path, wheels, latency, noise):
+    """An identified.json of the paper robot with these wheel scales, latency and noise."""
+    import json
+
+    from wmr_jax._src.model.robots import robot_json
+
+    identified = {
+        "robot": {"half_track": float(BASE.half_track), "speed_gain": float(BASE.speed_gain)},
+        "base_robot": robot_json(BASE),
+        "wheel_scale": {"left": wheels[0], "right": wheels[1]},
+        "latency_samples": latency,
+        "noise": {"sigma_xy": noise[0], "sigma_theta": noise[1]},
+    }
+    path = tmp_path / "identified.json"
+    path.write_text(json.dumps(identified))
+    return identified, path
+
+
 def test_evaluate_on_an_identified_robot_runs_each_reference_as_simulate_does(tmp_path, capsys):
     """Latency 2 and 2 % wheel mismatch: per-reference arrival as identified_rollout's and as
     the disturbed loop's with the same wheel factors and latency (the models coincide there)."""
@@ -347,22 +365,13 @@ def test_evaluate_on_an_identified_robot_runs_each_reference_as_simulate_does(tm
 
     from wmr_jax._src.cli.main import main
     from wmr_jax._src.identify.closed_loop import identified_rollout
-    from wmr_jax._src.model.robots import robot_json
     from wmr_jax._src.sim import metrics
     from wmr_jax._src.sim.poses import horizon_steps
     from wmr_jax._src.sim.rollout import DEFAULT_DT
     from wmr_jax._src.sim.sensing.disturbances import Disturbance
     from wmr_jax._src.sim.sensing.loop import disturbed_metrics
 
-    identified = {
-        "robot": {"half_track": float(BASE.half_track), "speed_gain": float(BASE.speed_gain)},
-        "base_robot": robot_json(BASE),
-        "wheel_scale": {"left": 1.02, "right": 0.98},
-        "latency_samples": 2,
-        "noise": {"sigma_xy": 0.0, "sigma_theta": 0.0},
-    }
-    path = tmp_path / "identified.json"
-    path.write_text(json.dumps(identified))
+    identified, path = _identified_file(tmp_path, (1.02, 0.98), 2, (0.0, 0.0))
     refs = np.array([[40.0, 30.0, 1.0], [-30.0, 20.0, -2.0], [10.0, -50.0, 0.5]])
     np.save(tmp_path / "refs.npy", refs)
     fields = {"kr": 120.0, "k_theta": 10.0, "phi_m": math.radians(70)}
@@ -482,20 +491,10 @@ def test_robustness_runs_the_gain_sets_on_an_identified_robot(tmp_path, capsys, 
 def test_simulate_on_an_identified_robot_warns_as_a_rollout_and_times_no_region(
     tmp_path, capsys, monkeypatch
 ):
-    import json
 
     from wmr_jax._src.cli import main as cli
-    from wmr_jax._src.model.robots import robot_json
 
-    identified = {
-        "robot": {"half_track": float(BASE.half_track), "speed_gain": float(BASE.speed_gain)},
-        "base_robot": robot_json(BASE),
-        "wheel_scale": {"left": 1.0, "right": 1.0},
-        "latency_samples": 0,
-        "noise": {"sigma_xy": 0.1, "sigma_theta": 0.01},
-    }
-    path = tmp_path / "identified.json"
-    path.write_text(json.dumps(identified))
+    _, path = _identified_file(tmp_path, (1.0, 1.0), 0, (0.1, 0.01))
     monkeypatch.setattr(cli, "_shown_warnings", set())  # each distinct warning printed once
     # The default gains are Fig. 7's, beyond the paper robot's wheel bound.
     assert cli.main(["simulate", "--robot", str(path), "--ref", "30", "30", "0"]) == 0
