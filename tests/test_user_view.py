@@ -507,3 +507,11 @@ def test_simulate_says_its_warnings_before_an_error_they_explain(capsys, monkeyp
     err = capsys.readouterr().err.splitlines()
     assert err[-1].startswith("wmr-jax: error: the run left the range")
     assert any(line.startswith("wmr-jax: warning: k_theta*dt = 1e+31") for line in err[:-1])
+
+
+def test_a_phi_m_that_looks_like_radians_is_warned_of(capsys):
+    assert main(["simulate", "--ref", "30", "20", "45", "--steps", "10", "--phi-m", "1.2"]) == 0
+    err = capsys.readouterr().err
+    assert "--phi-m 1.2 is read in degrees (1.2°); a value in radians needs times 180/pi" in err
+    assert main(["simulate", "--ref", "30", "20", "45", "--steps", "10", "--phi-m", "2"]) == 0
+    assert "read in degrees" not in capsys.readouterr().err  # above π/2 degrees: meant

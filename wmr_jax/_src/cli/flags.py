@@ -206,6 +206,16 @@ def gains_from(args: Any) -> Any:
             if str(err).startswith(f"gains.{field} "):
                 raise ValueError(f"{gain_flag(args, field)}: {err}") from None
         raise
+    degrees = math.degrees(values["phi_m"])
+    if degrees <= math.pi / 2:  # a Φ_m of a degree or so: radians given where degrees belong
+        import warnings
+
+        warnings.warn(
+            f"{gain_flag(args, 'phi_m')} {args.phi_m} is read in degrees ({degrees:g}°); a "
+            "value in radians needs times 180/pi",
+            UserWarning,
+            stacklevel=2,
+        )
     return gains
 
 
