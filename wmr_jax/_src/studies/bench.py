@@ -130,8 +130,9 @@ def run_benchmark(
 
     Returns:
         ``{"environment", "config", "robot", "robot_label", "rows", "ratios",
-        "peak_rss_mb"}``; each row has ``case``, ``n``, ``steps``, ``run_s``,
-        ``compile_s``, ``robot_steps_per_s``, ``runs_s``, ``others_cpu``
+        "peak_rss_mb", "finished"}`` (``finished`` True here); each row has
+        ``case``, ``n``, ``steps``, ``run_s``, ``compile_s``,
+        ``robot_steps_per_s``, ``runs_s``, ``others_cpu``
         (cores), or ``skipped`` with a reason; ``ratios`` maps ``"N=<n>"`` to
         the speed-ups of ``final_poses`` over the baselines and the cost of
         each derivative over its forward pass.
