@@ -311,6 +311,32 @@ def test_an_identified_json_reads_as_its_true_robot(tmp_path):
     assert "simulate, evaluate and robustness only" in found.note
 
 
+def test_the_printed_table_gives_the_heading_noise_in_degrees_as_the_flags_take_it():
+    from wmr_jax._src.identify.result import table
+
+    base = {"half_track": 17.0, "speed_gain": 60.0}
+    content = {
+        "ci95": {
+            "wheel_scale_left": [0.99, 1.01],
+            "wheel_scale_right": [0.98, 1.0],
+            "half_track": [17.1, 17.3],
+            "speed_gain": [63.0, 65.0],
+            "sigma_xy": [0.29, 0.31],
+            "sigma_theta": [math.radians(0.45), math.radians(0.55)],
+        },
+        "base_robot": base,
+        "robot": {"half_track": 17.2, "speed_gain": 64.0},
+        "wheel_scale": {"left": 1.0, "right": 0.99},
+        "noise": {"sigma_xy": 0.3, "sigma_theta": math.radians(0.5)},
+        "latency_samples": 2,
+        "ros": {"wheel_separation_multiplier": 17.2 / 17.0},
+    }
+    rows = {line[:20].strip(): line[20:].split() for line in table(content).splitlines()}
+    assert rows["sigma_theta (deg)"] == ["0.5", "[0.45,", "0.55]"]
+    assert rows["sigma_xy (cm)"] == ["0.3", "[0.29,", "0.31]"]
+    assert rows["half-track (cm)"] == ["17.2", "[17.1,", "17.3]", "17"]
+
+
 def test_cli_plan_and_a_bad_log(tmp_path, capsys, good):
     from wmr_jax._src.cli.main import main
 

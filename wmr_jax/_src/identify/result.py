@@ -56,7 +56,13 @@ def table(content: dict[str, Any]) -> str:
         ("half-track (cm)", content["robot"]["half_track"], ci["half_track"], base["half_track"]),
         ("speed_gain (1/s)", content["robot"]["speed_gain"], ci["speed_gain"], base["speed_gain"]),
         ("sigma_xy (cm)", content["noise"]["sigma_xy"], ci["sigma_xy"], None),
-        ("sigma_theta (rad)", content["noise"]["sigma_theta"], ci["sigma_theta"], None),
+        # In degrees, as --noise-theta and the docs give it (identified.json keeps radians).
+        (
+            "sigma_theta (deg)",
+            np.degrees(content["noise"]["sigma_theta"]),
+            np.degrees(ci["sigma_theta"]),
+            None,
+        ),
     ]
     lines = [f"{'quantity':<20}{'fitted':>12}{'95% interval':>26}{'base':>10}"]
     for name, value, (lo, hi), b in rows:
