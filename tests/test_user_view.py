@@ -3,6 +3,7 @@
 import io
 import json
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -515,3 +516,23 @@ def test_a_phi_m_that_looks_like_radians_is_warned_of(capsys):
     assert "--phi-m 1.2 is read in degrees (1.2°); a value in radians needs times 180/pi" in err
     assert main(["simulate", "--ref", "30", "20", "45", "--steps", "10", "--phi-m", "2"]) == 0
     assert "read in degrees" not in capsys.readouterr().err  # above π/2 degrees: meant
+
+
+def test_a_robust_noise_that_looks_like_metres_or_radians_is_warned_of():
+    from types import SimpleNamespace
+
+    from wmr_jax._src.cli.tune_robust import config_from
+
+    with pytest.warns(UserWarning) as caught:
+        config = config_from(SimpleNamespace(noise=0.005, noise_theta=0.0087))
+    assert (config.noise_xy, config.noise_theta) == (0.005, 0.0087)  # warned, still taken
+    assert [str(w.message) for w in caught] == [
+        "--noise 0.005 is read in cm, finer than a motion-capture tracker (under 0.01 cm); "
+        "a value in metres needs times 100",
+        "--noise-theta 0.0087 is read in degrees, finer than a motion-capture tracker "
+        "(under 0.05 degrees); a value in radians needs times 180/pi",
+    ]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # noiseless, and a mocap tracker's, are meant
+        config_from(SimpleNamespace(noise=0, noise_theta=0))
+        config_from(SimpleNamespace(noise=0.01, noise_theta=0.05))

@@ -11,6 +11,11 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
+# Below these a sensor's noise is finer than motion capture resolves: the value
+# was most likely given in metres or radians.
+_FINEST_XY = 0.01  # cm
+_FINEST_THETA = 0.05  # degrees
+
 
 def config_from(args: Any) -> Any:
     """The ``RobustConfig`` of the flags, each checked (one line naming a bad one)."""
@@ -38,13 +43,22 @@ def config_from(args: Any) -> Any:
     elif fixed:  # raw feedback; the schedule keeps RobustConfig's estimator
         changes["estimator"] = None
     changes.update(law=law, compare=False)
-    for flag, name, unit in (
-        ("--noise", "noise_xy", "cm"),
-        ("--noise-theta", "noise_theta", "degrees"),
+    for flag, name, unit, finest, other in (
+        ("--noise", "noise_xy", "cm", _FINEST_XY, "metres needs times 100"),
+        ("--noise-theta", "noise_theta", "degrees", _FINEST_THETA, "radians needs times 180/pi"),
     ):
         value = getattr(args, flag[2:].replace("-", "_"), None)
         if value is not None:
             changes[name] = flags.number(flag, value, low=0.0, unit=unit)
+            if 0 < changes[name] < finest:  # a tracker finer than motion capture: another unit
+                import warnings
+
+                warnings.warn(
+                    f"{flag} {value} is read in {unit}, finer than a motion-capture tracker "
+                    f"(under {finest:g} {unit}); a value in {other}",
+                    UserWarning,
+                    stacklevel=2,
+                )
     price = getattr(args, "price", None)
     if price is not None:
         changes["price"] = flags.number(
