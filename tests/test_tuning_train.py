@@ -9,6 +9,7 @@ import pytest
 
 import wmr_jax as w
 from wmr_jax import tuning
+from wmr_jax._src.tuning import run as tuning_run
 from wmr_jax.cli import main
 
 # One small setting shared by every run here, so that they compile once:
@@ -115,6 +116,21 @@ def test_cli_writes_the_results_and_a_resumed_run_gives_the_same_gains(tmp_path,
     assert resumed["rows"] == report["rows"]
     # Its wall time counts a second session's compilation: the report says it was resumed.
     assert resumed["resumed_at_iteration"] == 2 and report["resumed_at_iteration"] is None
+    # Resumed once more, the finished run is left as it is: nothing is tuned, searched or
+    # judged again (a job resubmitted with --resume keeps its results).
+    files = {p.name: (p.stat().st_mtime_ns, p.read_bytes()) for p in cut.iterdir()}
+    capsys.readouterr()
+    assert main(["tune", "--out", str(cut), *SMALL_FLAGS, "--resume"]) == 0
+    assert capsys.readouterr().out == (
+        f"--resume: {cut} holds this run finished (tuned_gains.json, evaluation.json); "
+        "nothing to resume. Without --resume it tunes again from the start\n"
+    )
+    assert {p.name: (p.stat().st_mtime_ns, p.read_bytes()) for p in cut.iterdir()} == files
+    # One of its files judged by another run's settings: that run is resumed as before.
+    (cut / "evaluation.json").write_text(json.dumps({**resumed, "config": {}}))
+    assert not tuning_run.finished(cut, SMALL, None)
+    assert tuning_run.finished(whole, SMALL, None)
+    assert not tuning_run.finished(whole, SMALL.replace(iters=7), None)
 
 
 def test_resume_without_a_checkpoint_says_it_starts_over(tmp_path, capsys):

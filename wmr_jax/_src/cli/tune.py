@@ -281,6 +281,12 @@ def run(args: Any) -> int:
     from wmr_jax._src.report.tuning import evaluation_table
     from wmr_jax._src.tuning import run as tuning_run
 
+    if args.resume and tuning_run.finished(out, config, robot):
+        print(
+            f"--resume: {out} holds this run finished (tuned_gains.json, evaluation.json); "
+            "nothing to resume. Without --resume it tunes again from the start"
+        )
+        return 0
     result = tuning_run.tune(out, config, robot=robot, resume=args.resume)
     robot = Robot() if robot is None else robot
     kind = "gain schedule" if config.problem == "schedule" else "gains"

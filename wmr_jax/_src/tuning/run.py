@@ -13,6 +13,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from wmr_jax._src import io
 from wmr_jax._src.tuning import trainer, training
 
@@ -57,6 +59,37 @@ def load_checkpoint(path: Path, fresh: Any, identity: dict[str, Any]) -> Any:
         return trainer.restore_state(arrays, fresh)
     except ValueError as err:
         raise ValueError(f"--resume: checkpoint {path}: {err}; {advice}") from None
+
+
+def finished(out: Path, config: Any, robot: Any) -> bool:
+    """Whether ``out`` holds this run finished, so that resuming it would redo nothing new.
+
+    That is: its checkpoint is of the same run and at its last iteration, and an
+    ``evaluation.json`` of the same settings and robot was written after it (a run
+    stopped in its random search or evaluation has none newer, and is resumed).
+    """
+    from wmr_jax._src.model.params import Robot, validate_robot
+    from wmr_jax._src.model.robots import robot_json
+
+    robot = validate_robot(Robot() if robot is None else robot)
+    checkpoint, report = out / CHECKPOINT_NAME, out / "evaluation.json"
+    try:
+        if report.stat().st_mtime_ns < checkpoint.stat().st_mtime_ns:
+            return False
+        arrays, meta = io.load_arrays(checkpoint)
+        saved = json.loads(report.read_text())
+    except (OSError, ValueError):  # a damaged file among them
+        return False  # resuming says what is wrong with them
+    identity = training.run_identity(config, robot)
+    return (
+        isinstance(meta, dict)
+        and meta.get("format") == CHECKPOINT_FORMAT
+        and meta.get("identity") == identity
+        and int(np.asarray(arrays.get("iteration", -1))) == config.iters
+        and isinstance(saved, dict)
+        and saved.get("config") == json.loads(json.dumps(config.as_dict()))
+        and saved.get("robot") == json.loads(json.dumps(robot_json(robot)))
+    )
 
 
 def _progress(
