@@ -247,6 +247,24 @@ def test_bad_logs_give_one_clear_error_each(tmp_path, good):
     degrees = measured.copy()
     degrees[:, 2] = (np.rad2deg(degrees[:, 2]) + 180) % 360 - 180
     assert "degrees" in _error(_csv(tmp_path, commands, degrees, name="deg.csv"))
+    # ... or unwrapped, over minutes in which the heading drifts from the integrated command
+    # (here by turns that miss their mark): decided step by step, not on the whole turn.
+    drifting = measured.copy()
+    drifting[:, 2] = np.unwrap(drifting[:, 2]) + np.cumsum(np.abs(commands[:, 1])) * DT / 2
+    path = _csv(tmp_path, commands, drifting, name="drift.csv")
+    assert logs.read_csv(path, minimum=50).commands.shape == commands.shape
+    drifting[:, 2] = np.rad2deg(drifting[:, 2])
+    assert "degrees" in _error(_csv(tmp_path, commands, drifting, name="drift_deg.csv"))
+    # omega_cmd in deg/s.
+    turning = commands.copy()
+    turning[:, 1] = np.rad2deg(turning[:, 1])
+    assert "omega_cmd looks like deg/s" in _error(_csv(tmp_path, turning, measured, name="w.csv"))
+    # t in ms: a period of 40 s, over which the robot hardly moves.
+    ms = _csv(tmp_path, commands, measured, dt=DT * 1000, name="ms.csv")
+    assert "t looks like milliseconds" in _error(ms)
+    # v_cmd and omega_cmd swapped.
+    swapped = _csv(tmp_path, commands[:, ::-1], measured, name="swapped.csv")
+    assert "or its column is omega_cmd's" in _error(swapped)
     # A wrong header.
     (tmp_path / "header.csv").write_text("t,v,w,x,y,theta\n0,0,0,0,0,0\n")
     assert "line 1" in _error(tmp_path / "header.csv")

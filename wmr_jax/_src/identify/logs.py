@@ -127,6 +127,11 @@ def _check_units(dt: float, commands: np.ndarray, poses: np.ndarray, where: str)
     busy = commanded > 1e-6
     if np.sum(busy) >= 3 and np.sum(commanded[busy]) > 0:
         ratio = float(np.sum(moved[busy]) / np.sum(commanded[busy]))
+        if ratio < 0.1 and dt >= 1.0:  # a "period" of a second or more: t in ms
+            raise ValueError(
+                f"{where}: its period is {dt:.6g} s, and x, y moved {ratio:.3g} times the "
+                "distance v_cmd asked for over it: t looks like milliseconds; allowed: t in s"
+            )
         if ratio < 0.1:
             raise ValueError(
                 f"{where}: x, y moved {ratio:.3g} times the distance v_cmd asked for: the poses "
@@ -135,24 +140,35 @@ def _check_units(dt: float, commands: np.ndarray, poses: np.ndarray, where: str)
         if ratio > 10:
             raise ValueError(
                 f"{where}: x, y moved {ratio:.3g} times the distance v_cmd asked for: v_cmd looks "
-                "like m/s; allowed: v_cmd in cm/s (multiply m/s by 100)"
+                "like m/s, or its column is omega_cmd's; allowed: the columns "
+                f"{','.join(HEADER)} with v_cmd in cm/s (multiply m/s by 100)"
             )
-    turned = np.cumsum(commands[:, 1] * dt)
-    if np.max(np.abs(turned)) > 0.5:
-        theta = poses[:, 2]
+    turn = commands[:-1, 1] * dt  # each sample's commanded turn, rad
+    if np.sum(np.abs(turn)) > 0.5:
+        step = np.diff(poses[:, 2])
 
-        def slope(heading: np.ndarray) -> float:
-            a = turned - turned.mean()
-            return float(np.dot(heading - heading.mean(), a) / np.dot(a, a))
+        def follows(measured: np.ndarray, scale: float) -> bool:
+            """Whether the heading's steps follow the commanded turns scaled by ``scale``.
 
-        as_rad = slope(np.unwrap(theta))
-        as_deg = slope(np.deg2rad(np.unwrap(theta, period=360.0)))
-        # Read as radians a log in degrees turns some 57 times too far (wheel
-        # mismatch moves a true log's figure too, but by far less).
-        if abs(as_rad) > 10 and 0.2 < as_deg < 5:
+            Step by step, not in total: over minutes the heading drifts from the
+            integrated command (the wheels' mismatch, the speed limits).
+            """
+            asked = turn * scale
+            return 0.2 < float(np.dot(measured, asked) / np.dot(asked, asked)) < 5
+
+        as_rad = np.angle(np.exp(1j * step))  # each step wrapped, as np.unwrap would
+        as_deg = np.deg2rad((step + 180.0) % 360.0 - 180.0)
+        if follows(as_rad, 1.0):
+            return
+        if follows(as_deg, 1.0) or follows(as_deg, np.pi / 180):
             raise ValueError(
                 f"{where}: theta turns about 57 times what omega_cmd asks for: it looks like "
                 "degrees; allowed: theta in rad"
+            )
+        if follows(as_rad, np.pi / 180):
+            raise ValueError(
+                f"{where}: theta turns about 1/57 of what omega_cmd asks for: omega_cmd looks "
+                "like deg/s; allowed: omega_cmd in rad/s"
             )
 
 
