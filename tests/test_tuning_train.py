@@ -267,3 +267,31 @@ def test_tuning_a_schedule_of_four_knots(tmp_path):
 def _small_settings():
     names = ("iters", "poses", "horizon", "checkpoint_every", "eval_poses", "random_search")
     return {name: getattr(SMALL, name) for name in names}
+
+
+def test_a_robust_resume_leaves_its_finished_run_and_refuses_another(tmp_path, capsys):
+    import dataclasses
+    from types import SimpleNamespace
+
+    from wmr_jax._src.cli.tune_robust import config_from
+    from wmr_jax._src.model.robots import robot_json
+
+    # A finished `tune --robust --iters 3 --poses 4` (its files, as the run writes them).
+    config = config_from(SimpleNamespace(iters=3, poses=4))
+    record = {"config": dataclasses.asdict(config), "robot": robot_json(w.Robot()), "rows": []}
+    (tmp_path / "robust_evaluation.json").write_text(json.dumps(record))
+    (tmp_path / "tuned_gains.json").write_text("{}")
+    files = {p.name: (p.stat().st_mtime_ns, p.read_bytes()) for p in tmp_path.iterdir()}
+    flags = ["tune", "--robust", "--out", str(tmp_path), "--poses", "4", "--resume"]
+    assert main([*flags, "--iters", "3"]) == 0
+    assert capsys.readouterr().out == (
+        f"--resume: {tmp_path} holds this run finished (tuned_gains.json, "
+        "robust_evaluation.json); nothing to resume. Without --resume it tunes again\n"
+    )
+    # Other settings are refused, naming the difference, before anything is tuned.
+    assert main([*flags, "--iters", "5"]) == 2
+    err = capsys.readouterr().err
+    assert "robust_evaluation.json' is of another run (iters = 3 there, 5 now)" in err
+    assert main([*flags, "--iters", "3", "--robot", "turtlebot3-burger"]) == 2
+    assert "(the robot differs)" in capsys.readouterr().err
+    assert {p.name: (p.stat().st_mtime_ns, p.read_bytes()) for p in tmp_path.iterdir()} == files

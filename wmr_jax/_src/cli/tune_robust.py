@@ -124,9 +124,15 @@ def run(args: Any) -> int:
     from wmr_jax._src.model.robots import describe_robot
     from wmr_jax._src.studies.robustness import study_horizon
     from wmr_jax._src.tuning.robust import tune_robust
-    from wmr_jax._src.tuning.robust_run import described, save_tuned, write_evaluation
+    from wmr_jax._src.tuning.robust_run import described, finished, save_tuned, write_evaluation
 
     if getattr(args, "resume", False):
+        if finished(out, config, robot):
+            print(
+                f"--resume: {out} holds this run finished (tuned_gains.json, "
+                "robust_evaluation.json); nothing to resume. Without --resume it tunes again"
+            )
+            return 0
         print("tune --robust keeps no checkpoint: --resume runs it again from the start")
     print(
         f"tuning the {described(config)} through the disturbances on the robot "

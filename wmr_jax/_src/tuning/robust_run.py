@@ -58,6 +58,33 @@ def write_evaluation(out: Path, config: RobustConfig, robot: Robot, result: Any)
     return table
 
 
+def finished(out: Path, config: RobustConfig, robot: Robot) -> bool:
+    """Whether ``out`` holds this robust run finished (``--resume`` then redoes nothing).
+
+    Raises:
+        ValueError: one line, if ``out``'s ``robust_evaluation.json`` is of other
+            settings or another robot, naming what differs.
+    """
+    from wmr_jax._src.model.robots import robot_json
+
+    path = out / "robust_evaluation.json"
+    if not path.exists():
+        return False
+    try:
+        saved = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as err:
+        raise ValueError(f"--resume: {str(path)!r} cannot be read: {err}") from None
+    now = json.loads(json.dumps({"config": dataclasses.asdict(config), "robot": robot_json(robot)}))
+    saved = saved if isinstance(saved, dict) else {}
+    mine = {key: saved.get(key) for key in now}
+    if mine != now:
+        raise ValueError(
+            f"--resume: {str(path)!r} is of another run ({trainer.differences(mine, now)}); "
+            "allowed: the same settings, or another --out"
+        )
+    return (out / "tuned_gains.json").exists()
+
+
 def _kept_rows(path: Any, settings: dict[str, Any], resume: bool) -> list[dict[str, Any]]:
     """The rows of an earlier ``--compare`` of the same settings (``--resume``), else none."""
     if not resume or not path.exists():
