@@ -255,7 +255,7 @@ def test_a_given_price_sets_every_searchs_budget_and_the_measured_one_is_reporte
     monkeypatch.setattr(robust, "iteration_price", lambda *args, **kwargs: 2.5)
     base = dict(
         iters=3, poses=3, nonideal_poses=0, eval_poses=3, law="fixed", estimator=None,
-        validation_poses=3, search_poses=2,
+        validation_poses=3, search_poses=2, compare=True,
     )  # fmt: skip
     for price, used in ((None, 2.5), (4.0, 4.0)):
         config = tuning.RobustConfig(**base, price=price)

@@ -180,8 +180,10 @@ def test_joint_tuning_moves_the_schedule_and_the_filter_and_saves_them_whole(tmp
     # and compiles in about 23 s on one core, the default 10 knots' in 26-31 s.
     # The settings of the command's test below (2 iterations of 2 poses): one
     # compiled step serves both.
-    config = tuning.RobustConfig(iters=2, poses=2, eval_poses=3, compare=False)
+    config = tuning.RobustConfig(iters=2, poses=2, eval_poses=3)
+    # The defaults: the schedule with the filter, tuned by the gradient alone (no searches).
     assert (config.law, config.estimator, config.nonideal_poses) == ("schedule", "ekf", 8)
+    assert config.compare is False
     assert config.tuner == "gradient"
     config = dataclasses.replace(config, knots=2)
     result = tuning.tune_robust(config)

@@ -75,7 +75,8 @@ class RobustConfig:
         nonideal_poses: poses of the randomised non-ideal group per iteration (0: none).
         search_poses: poses per condition that random search and CMA-ES score on.
         compare: also run random search and CMA-ES, each scoring as many
-            candidates as the tuning's compute buys (``iteration_price``).
+            candidates as the tuning's compute buys (``iteration_price``);
+            off by default, as in ``wmr-jax tune --robust``.
         price: with ``compare``, the candidates one iteration is worth in the
             searches' budget (``None``: measured, ``iteration_price``); a
             recorded price gives them as many candidates on any machine.
@@ -112,7 +113,7 @@ class RobustConfig:
     temperature_end: float = 0.003
     eval_poses: int = EVAL_POSES
     search_poses: int = 32
-    compare: bool = True
+    compare: bool = False
     price: float | None = None
     law: str = "schedule"
     estimator: str | None = "ekf"
@@ -514,7 +515,7 @@ def tune_robust(
     """Tune a controller and its estimator through the disturbances; judge with the hard law.
 
     Args:
-        config: the settings; default ``RobustConfig()`` (schedule and EKF).
+        config: the settings; default ``RobustConfig()`` (schedule and EKF, no searches).
         robot: robot parameters; default the paper robot. The loop is tuned on
             it (wheel budget, speed limiter) over its horizon
             (``robustness.study_horizon``), and judged, and searched, there.
