@@ -355,14 +355,39 @@ def test_the_printed_table_gives_the_heading_noise_in_degrees_as_the_flags_take_
     assert rows["half-track (cm)"] == ["17.2", "[17.1,", "17.3]", "17"]
 
 
-def test_cli_plan_and_a_bad_log(tmp_path, capsys, good):
+def test_cli_plan_and_a_bad_log(tmp_path, capsys, good, monkeypatch):
+    from wmr_jax._src.cli import main as cli
     from wmr_jax._src.cli.main import main
+
+    monkeypatch.setattr(cli, "_shown_warnings", set())  # each distinct warning printed once
 
     out = tmp_path / "drive.csv"
     assert main(["identify", "--plan", str(out), "--minutes", "0.5", "--plan-dt", "0.05"]) == 0
     lines = out.read_text().splitlines()
     assert lines[0] == "t,v_cmd,omega_cmd" and len(lines) == 1 + 600
+    # Its folder is made; a period of seconds is warned of as milliseconds meant.
+    deep = tmp_path / "new" / "sub" / "drive.csv"
+    capsys.readouterr()
+    assert main(["identify", "--plan", str(deep), "--minutes", "0.55", "--plan-dt", "33"]) == 0
+    assert len(deep.read_text().splitlines()) == 1 + 1
+    warned = "wmr-jax: warning: --plan-dt 33 is read in s; a value in milliseconds needs /1000"
+    assert warned in capsys.readouterr().err
     commands, measured = good
+    # A flag of the other mode is refused, not ignored.
+    log = str(_csv(tmp_path, commands, measured))
+    refused = {
+        "--log": ["--plan", str(out), "--log", log],
+        "--dt": ["--plan", str(out), "--dt", "0.04"],
+        "--minutes": ["--log", log, "--out", str(tmp_path / "id"), "--minutes", "3"],
+        "--seed": ["--log", log, "--out", str(tmp_path / "id"), "--seed", "4"],
+        "--cmd-topic": ["--log", log, "--out", str(tmp_path / "id"), "--cmd-topic", "/cmd_vel"],
+    }
+    capsys.readouterr()
+    for flag, argv in refused.items():
+        assert main(["identify", *argv]) == 2, flag
+        err = capsys.readouterr().err
+        assert err.startswith(f"wmr-jax: error: {flag} is not allowed "), err
+    assert not (tmp_path / "id").exists()
     metres = measured.copy()
     metres[:, :2] /= 100
     path = _csv(tmp_path, commands, metres, name="metres.csv")

@@ -35,11 +35,20 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument(
         "--plan", metavar="OUT.csv", help="write a command plan to drive instead of fitting"
     )
-    parser.add_argument("--minutes", default="5", metavar="MIN", help="length of the plan")
+    parser.add_argument("--minutes", metavar="MIN", help="length of the plan (default: 5)")
     parser.add_argument(
-        "--plan-dt", default="0.04", metavar="S", help="the plan's control period, s"
+        "--plan-dt", metavar="S", help="the plan's control period, s (default: 0.04)"
     )
-    parser.add_argument("--seed", default="0", metavar="N", help="the plan's random seed")
+    parser.add_argument("--seed", metavar="N", help="the plan's random seed (default: 0)")
+
+
+# Flags of one mode only: those that plan, and those that read bags.
+_PLAN_FLAGS = ("--minutes", "--plan-dt", "--seed")
+_BAG_FLAGS = ("--dt", "--cmd-topic", "--pose-topic")
+
+
+def _given(args: Any, names: tuple[str, ...]) -> list[str]:
+    return [name for name in names if getattr(args, name[2:].replace("-", "_")) is not None]
 
 
 def run(args: Any) -> int:
@@ -48,9 +57,24 @@ def run(args: Any) -> int:
     label = "paper" if args.robot is None else flags.robot_from(args.robot).label
     robot = load_robot("paper") if args.robot is None else flags.robot_from(args.robot).robot
     if args.plan is not None:
+        fitting_flags = _given(args, ("--log", "--out", *_BAG_FLAGS))
+        if fitting_flags:
+            raise ValueError(
+                f"{fitting_flags[0]} is not allowed with --plan, which writes a plan and fits "
+                "nothing; allowed: --robot, --minutes, --plan-dt, --seed"
+            )
         return _plan(args, robot)
     if not args.log or args.out is None:
         raise ValueError("identify needs --log FILE [FILE ...] and --out DIR (or --plan OUT.csv)")
+    planning = _given(args, _PLAN_FLAGS)
+    if planning:
+        raise ValueError(f"{planning[0]} is not allowed without --plan; it sets the plan's driving")
+    bag_only = _given(args, _BAG_FLAGS)
+    if bag_only and all(str(p).lower().endswith(".csv") for p in args.log):
+        raise ValueError(
+            f"{bag_only[0]} is not allowed with CSV logs only (their t column sets the period); "
+            "allowed: with a ROS 2 bag (.mcap, .db3)"
+        )
     from wmr_jax._src.identify import fit as fitting
     from wmr_jax._src.identify import logs as reading
     from wmr_jax._src.identify import result as output
@@ -112,12 +136,23 @@ def _plan(args: Any, robot: Any) -> int:
 
     from wmr_jax._src.identify import plan
 
-    minutes = flags.number("--minutes", args.minutes, low=0, closed=False)
-    dt = flags.number("--plan-dt", args.plan_dt, low=0, closed=False)
-    seed = flags.positive_int("--seed", args.seed, minimum=0)
+    defaults = {"minutes": "5", "plan_dt": "0.04", "seed": "0"}
+    text = {k: d if getattr(args, k) is None else getattr(args, k) for k, d in defaults.items()}
+    minutes = flags.number("--minutes", text["minutes"], low=0, closed=False)
+    dt = flags.number("--plan-dt", text["plan_dt"], low=0, closed=False)
+    seed = flags.positive_int("--seed", text["seed"], minimum=0)
     path = Path(flags.output_file("--plan", args.plan))
+    if dt >= 1.0:  # no robot is controlled at a second a sample: milliseconds meant
+        import warnings
+
+        warnings.warn(
+            f"--plan-dt {args.plan_dt} is read in s; a value in milliseconds needs /1000",
+            UserWarning,
+            stacklevel=2,
+        )
     commands = plan.plan_commands(robot, dt, minutes, seed)
     rows = np.column_stack([np.arange(len(commands)) * dt, commands])
+    path.parent.mkdir(parents=True, exist_ok=True)
     np.savetxt(path, rows, fmt="%.6f", delimiter=",", header="t,v_cmd,omega_cmd", comments="")
     print(f"wrote {len(commands)} commands ({minutes:g} min at {dt:g} s) to {path}")
     return 0
