@@ -291,6 +291,7 @@ def test_the_price_flag_reaches_the_robust_comparison_and_only_it(monkeypatch, t
         (["--robust", "--compare", "--price", "0"], "--price '0' is not allowed; allowed: a"),
         (["--robust", "--price", "4"], "--price is not allowed without --robust --compare"),
         (["--compare", "--price", "4"], "--price is not allowed without --robust --compare"),
+        (["--robust", "--compare", "--seed", "5"], "--seed is not allowed with --robust --compare"),
     ):
         assert main(["tune", *argv, "--out", str(tmp_path)]) == 2
         assert message in capsys.readouterr().err

@@ -150,6 +150,8 @@ def _check_modes(args: Any) -> None:
     modes = [m for m in ("robust", "compare", "gradient_cost") if getattr(args, m)]
     if args.robust and args.compare:  # the robust comparison (--knots sizes its schedule)
         modes.remove("compare")
+        if args.seed is not None:
+            raise ValueError("--seed is not allowed with --robust --compare, which runs seeds 0-2")
     if len(modes) > 1:
         a, b = (f"--{m.replace('_', '-')}" for m in modes[:2])
         raise ValueError(f"{a} is not allowed with {b}; allowed: one of them")
