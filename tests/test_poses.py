@@ -40,6 +40,19 @@ def test_bad_arguments_name_themselves(kwargs, message):
         w.sample_poses(**kwargs)
 
 
+def test_inside_jit_a_key_draws_and_a_traced_seed_is_refused_in_one_line():
+    key = jax.random.key(3)
+    np.testing.assert_array_equal(
+        jax.jit(lambda k: w.sample_poses(k, 4))(key), w.sample_poses(key, 4)
+    )
+    raw = jax.random.PRNGKey(3)  # a raw uint32 key works too
+    np.testing.assert_array_equal(
+        jax.jit(lambda k: w.sample_poses(k, 4))(raw), w.sample_poses(3, 4)
+    )
+    with pytest.raises(ValueError, match=r"^key = an array of shape \(\) and dtype int"):
+        jax.jit(lambda seed: w.sample_poses(seed, 4))(3)
+
+
 def test_paper_references_and_horizon():
     refs = w.paper_refs()
     assert refs.shape == (7, 3)

@@ -78,6 +78,12 @@ def sample_poses(
     """
     if not isinstance(key, jax.Array):
         key = jax.random.key(check_int("seed", key, 0, 2**32 - 1))
+    elif not jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key) and key.shape != (2,):
+        # A seed as a JAX array, e.g. traced inside jit: JAX would fail on it as a key.
+        raise ValueError(
+            f"key = an array of shape {key.shape} and dtype {key.dtype} is not allowed; "
+            "allowed: a JAX PRNG key (jax.random.key(seed), also inside jit), or an int seed"
+        )
     n = check_int("n", n, 0, MAX_SAMPLES)
     r_min = check_number("r_min", r_min, closed=True, unit="cm")
     r_max = check_number("r_max", r_max, low=r_min, closed=True, unit="cm")
