@@ -335,6 +335,10 @@ def test_plausibility_looks_at_every_number_and_at_positive_finite_ones_only():
     # Booleans, zero and infinity are refused where the robot is used, not called implausible.
     assert implausible({"half_track": True, "wheel_radius": 0.0, "v_max": float("inf")}) == []
     assert implausible({"half_track": 1000.0}) == [("half_track", 1000.0, (0.5, 500.0, "cm"))]
+    # An acceleration in m/s² (2.5 for 250 cm/s²), or cm/s² in a ROS file; 0 is "no limit".
+    assert implausible({"accel_max": 2.5}) == [("accel_max", 2.5, (5.0, 1e4, "cm/s^2"))]
+    assert implausible({"accel_max": 25000.0}) == [("accel_max", 25000.0, (5.0, 1e4, "cm/s^2"))]
+    assert implausible({"accel_max": 0.0}) == implausible({"accel_max": 250.0}) == []
 
 
 def test_a_unit_warning_points_at_the_line_that_loads_the_robot(tmp_path):

@@ -56,6 +56,8 @@ PLAUSIBLE = {
     "half_track": (0.5, 500.0, "cm"),
     "wheel_radius": (0.2, 100.0, "cm"),
     "v_max": (1.0, 2000.0, "cm/s"),
+    # Floors and tyres grip at about 1 g; 0 (no limit) is not a slip.
+    "accel_max": (5.0, 10_000.0, "cm/s^2"),
 }
 
 
