@@ -129,3 +129,34 @@ def test_tune_robust_with_an_identified_json_sets_the_ranges_and_its_noise(tmp_p
     noisy = SimpleNamespace(robot=str(path), fixed=True, noise=0.5)
     with pytest.raises(ValueError, match="--noise is not allowed with --robot"):
         tune_robust._around_identified(tune_robust.config_from(noisy), noisy)
+
+
+def test_tune_robust_on_an_identified_robot_says_where_to_judge_it_there(
+    tmp_path, capsys, monkeypatch
+):
+    from types import SimpleNamespace
+
+    from wmr_jax._src.cli.main import main
+    from wmr_jax._src.model.params import Robot
+    from wmr_jax._src.model.robots import robot_json
+    from wmr_jax._src.tuning import robust, robust_run
+
+    path = tmp_path / "identified.json"
+    content = {**CONTENT, "robot": robot_json(Robot()), "base_robot": robot_json(Robot())}
+    path.write_text(json.dumps(content))
+    # The run itself is the robust tuner's (tested there): here only what the command says.
+    seen = []
+    result = SimpleNamespace(best_iteration=1, tune_cpu_s=1.0, note=None)
+    monkeypatch.setattr(robust, "tune_robust", lambda config, **_: seen.append(config) or result)
+    monkeypatch.setattr(robust_run, "write_evaluation", lambda *args: "| table |\n")
+    out = tmp_path / "tuned"
+    assert main(["tune", "--robust", "--fixed", "--robot", str(path), "--out", str(out)]) == 0
+    assert seen[0].around == centred.around(CONTENT)
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[printed.index("| table |") + 1] == (
+        f"(the standard conditions, as for any loop; on the robot identified in {path}: "
+        f"wmr-jax robustness --robot {path} --robust-gains {out / 'tuned_gains.json'} --out DIR)"
+    )
+    # On a robot typed by hand, the standard conditions are the judgement: no such line.
+    assert main(["tune", "--robust", "--fixed", "--out", str(out)]) == 0
+    assert "identified" not in capsys.readouterr().out

@@ -154,6 +154,13 @@ def run(args: Any) -> int:
     table = write_evaluation(out, config, robot, result)
     print(f"robust_evaluation.md/json -> {out}")
     print(table, end="")
+    if config.around is not None:  # trained around an identified robot, judged as any loop
+        source = args.robot
+        print(
+            f"(the standard conditions, as for any loop; on the robot identified in {source}: "
+            f"wmr-jax robustness --robot {source} --robust-gains {out / 'tuned_gains.json'} "
+            "--out DIR)"
+        )
     kept = f"kept iteration {result.best_iteration} (best validation score)"
     print(f"tuning CPU time {result.tune_cpu_s:.1f} s; {kept}")
     if result.note is not None:
