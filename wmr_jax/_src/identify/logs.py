@@ -160,7 +160,12 @@ def _check_units(dt: float, commands: np.ndarray, poses: np.ndarray, where: str)
         as_deg = np.deg2rad((step + 180.0) % 360.0 - 180.0)
         if follows(as_rad, 1.0):
             return
-        if follows(as_deg, 1.0) or follows(as_deg, np.pi / 180):
+        if follows(as_deg, np.pi / 180):
+            raise ValueError(
+                f"{where}: theta and omega_cmd look like degrees and deg/s (their turns agree "
+                "in degrees only); allowed: theta in rad, omega_cmd in rad/s"
+            )
+        if follows(as_deg, 1.0):
             raise ValueError(
                 f"{where}: theta turns about 57 times what omega_cmd asks for: it looks like "
                 "degrees; allowed: theta in rad"
