@@ -259,6 +259,12 @@ def test_bad_logs_give_one_clear_error_each(tmp_path, good):
     turning = commands.copy()
     turning[:, 1] = np.rad2deg(turning[:, 1])
     assert "omega_cmd looks like deg/s" in _error(_csv(tmp_path, turning, measured, name="w.csv"))
+    # Both in degrees, turning in place faster than 180 "rad" a sample: no radian reading fits.
+    n = 200
+    spin = np.column_stack([np.zeros(n), np.full(n, np.rad2deg(1.5))])
+    headings = np.rad2deg(1.5 * DT * np.arange(n))
+    spun = np.column_stack([np.zeros(n), np.zeros(n), headings])
+    assert "look like degrees and deg/s" in _error(_csv(tmp_path, spin, spun, name="spin.csv"))
     # t in ms: a period of 40 s, over which the robot hardly moves.
     ms = _csv(tmp_path, commands, measured, dt=DT * 1000, name="ms.csv")
     assert "t looks like milliseconds" in _error(ms)
