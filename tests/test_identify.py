@@ -239,37 +239,46 @@ def test_bad_logs_give_one_clear_error_each(tmp_path, good):
     # Metres and m/s.
     metres = measured.copy()
     metres[:, :2] /= 100
-    assert "metres" in _error(_csv(tmp_path, commands, metres, name="metres.csv"))
+    # (The files' names say nothing: each message is told apart by its own words.)
+    message = _error(_csv(tmp_path, commands, metres, name="a.csv"))
+    assert "times the distance v_cmd asked for: the poses look like metres" in message
     fast = commands.copy()
     fast[:, 0] /= 100
-    assert "m/s" in _error(_csv(tmp_path, fast, measured, name="ms.csv"))
+    message = _error(_csv(tmp_path, fast, measured, name="b.csv"))
+    assert "times the distance v_cmd asked for: v_cmd looks like m/s" in message
     # Degrees, wrapped to ±180 as trackers write them.
     degrees = measured.copy()
     degrees[:, 2] = (np.rad2deg(degrees[:, 2]) + 180) % 360 - 180
-    assert "degrees" in _error(_csv(tmp_path, commands, degrees, name="deg.csv"))
+    turns_57 = "theta turns about 57 times what omega_cmd asks for: it looks like degrees"
+    assert turns_57 in _error(_csv(tmp_path, commands, degrees, name="c.csv"))
     # ... or unwrapped, over minutes in which the heading drifts from the integrated command
     # (here by turns that miss their mark): decided step by step, not on the whole turn.
     drifting = measured.copy()
     drifting[:, 2] = np.unwrap(drifting[:, 2]) + np.cumsum(np.abs(commands[:, 1])) * DT / 2
-    path = _csv(tmp_path, commands, drifting, name="drift.csv")
+    path = _csv(tmp_path, commands, drifting, name="d.csv")
     assert logs.read_csv(path, minimum=50).commands.shape == commands.shape
     drifting[:, 2] = np.rad2deg(drifting[:, 2])
-    assert "degrees" in _error(_csv(tmp_path, commands, drifting, name="drift_deg.csv"))
+    assert turns_57 in _error(_csv(tmp_path, commands, drifting, name="e.csv"))
     # omega_cmd in deg/s.
     turning = commands.copy()
     turning[:, 1] = np.rad2deg(turning[:, 1])
-    assert "omega_cmd looks like deg/s" in _error(_csv(tmp_path, turning, measured, name="w.csv"))
+    message = _error(_csv(tmp_path, turning, measured, name="f.csv"))
+    assert (
+        "theta turns about 1/57 of what omega_cmd asks for: omega_cmd looks like deg/s" in message
+    )
     # Both in degrees, turning in place faster than 180 "rad" a sample: no radian reading fits.
     n = 200
     spin = np.column_stack([np.zeros(n), np.full(n, np.rad2deg(1.5))])
     headings = np.rad2deg(1.5 * DT * np.arange(n))
     spun = np.column_stack([np.zeros(n), np.zeros(n), headings])
-    assert "look like degrees and deg/s" in _error(_csv(tmp_path, spin, spun, name="spin.csv"))
+    message = _error(_csv(tmp_path, spin, spun, name="g.csv"))
+    assert "theta and omega_cmd look like degrees and deg/s" in message
     # t in ms: a period of 40 s, over which the robot hardly moves.
-    ms = _csv(tmp_path, commands, measured, dt=DT * 1000, name="ms.csv")
-    assert "t looks like milliseconds" in _error(ms)
+    message = _error(_csv(tmp_path, commands, measured, dt=DT * 1000, name="h.csv"))
+    assert "its period is 40 s, and x, y moved" in message
+    assert "t looks like milliseconds" in message
     # v_cmd and omega_cmd swapped.
-    swapped = _csv(tmp_path, commands[:, ::-1], measured, name="swapped.csv")
+    swapped = _csv(tmp_path, commands[:, ::-1], measured, name="i.csv")
     assert "or its column is omega_cmd's" in _error(swapped)
     # A wrong header.
     (tmp_path / "header.csv").write_text("t,v,w,x,y,theta\n0,0,0,0,0,0\n")
