@@ -64,6 +64,8 @@ def test_write_gif_checks_shapes(tmp_path):
         write_gif(tmp_path / "x.gif", np.zeros((2, 5, 3)), np.zeros((3, 3)))
     with pytest.raises(ValueError, match="stride = 0"):
         write_gif(tmp_path / "x.gif", np.zeros((2, 5, 3)), np.zeros((2, 3)), stride=0)
+    with pytest.raises(ValueError, match=r"^poses of 801 samples at stride 1 makes 801 frames"):
+        write_gif(tmp_path / "x.gif", np.zeros((2, 801, 3)), np.zeros((2, 3)), stride=1)
     assert not (tmp_path / "x.gif").exists()
 
 
@@ -83,6 +85,13 @@ def test_write_gif_checks_shapes(tmp_path):
         (["--out", "a.gif", "--velocity", "warp"], "--velocity 'warp'"),
         (["--out", "a.gif", "--speed", "0"], "--speed '0'"),
         (["--out", "a.gif", "--speed", "1e-5"], "speed = 1e-05"),  # no GIF can play it
+        # More frames than memory should hold while the GIF is encoded (1 GiB of pixels).
+        (
+            ["--out", "a.gif", "--seconds", "600"],
+            "--seconds 600 at --speed 1 makes 6062 frames of 600×630 pixels, 8.5 GiB held in "
+            "memory while the GIF is encoded; allowed: at most 710 frames (fewer --seconds, or "
+            "a higher --speed)",
+        ),
     ],
 )
 def test_animate_command_bad_values(tmp_path, monkeypatch, capsys, argv, message):

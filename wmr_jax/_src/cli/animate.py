@@ -42,7 +42,14 @@ def run(args: Any) -> int:
     import jax
     import numpy as np
 
-    from wmr_jax._src.report.animation import frame_timing, gif_path, run_title, write_gif
+    from wmr_jax._src.report.animation import (
+        SQUARE_PIXELS,
+        check_frames,
+        frame_timing,
+        gif_path,
+        run_title,
+        write_gif,
+    )
     from wmr_jax._src.sim.poses import horizon_steps, paper_refs, sample_poses
     from wmr_jax._src.sim.rollout import DEFAULT_DT, batch_rollout
     from wmr_jax._src.studies.robustness import robot_defaults
@@ -53,7 +60,6 @@ def run(args: Any) -> int:
     given = flags.robot_from(args.robot)
     robot = None if given is None else given.robot
     velocity = flags.velocity_loop(args.velocity)
-    # A GIF holds every frame in memory: a few minutes of a few thousand robots at most.
     robots = flags.positive_int("--robots", args.robots, 1, 10_000)
     seed = flags.positive_int("--seed", args.seed, 0, 2**32 - 1)
     # At least one control period, named as the flag (not as the horizon it sets).
@@ -61,7 +67,11 @@ def run(args: Any) -> int:
     speed = flags.number(
         "--speed", args.speed, low=0.0, closed=False, high=100.0, unit="× real time"
     )
-    frame_timing(DEFAULT_DT, None, speed)  # a speed no GIF can play is refused before the runs
+    # A speed no GIF can play, or more frames than memory holds, is refused before the runs.
+    stride, _ = frame_timing(DEFAULT_DT, None, speed)
+    shown = f"--seconds {seconds:g} at --speed {speed:g}"
+    remedy = " (fewer --seconds, or a higher --speed)"
+    check_frames(horizon_steps(DEFAULT_DT, seconds) + 1, stride, SQUARE_PIXELS, shown, remedy)
     params = robot_defaults(name, robot)
     flags.say_robot(given)
     refs = np.asarray(paper_refs() if args.paper else sample_poses(seed, robots), dtype=float)

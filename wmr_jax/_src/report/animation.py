@@ -66,6 +66,32 @@ def frame_timing(dt: float, stride: int | None = None, speed: float = 1.0) -> tu
     raise ValueError(f"no frame stride plays dt = {dt} s at speed {speed} within 2 %")
 
 
+# The frames a GIF is encoded from are all held in memory, 4 bytes a pixel.
+MAX_FRAMES_BYTES = 2**30
+# A square pitch's figure, in pixels (``_pitch``, at matplotlib's 100 dpi).
+SQUARE_PIXELS = (600, 630)
+
+
+def check_frames(
+    samples: int, stride: int, pixels: tuple[int, int], shown: str, remedy: str = ""
+) -> int:
+    """The number of frames of ``samples`` at ``stride``, if their pixels fit in memory.
+
+    Raises:
+        ValueError: naming ``shown`` (and ``remedy``, the way out), if they would hold
+            more than ``MAX_FRAMES_BYTES``.
+    """
+    frames = len(range(0, samples - 1, stride)) + 1
+    frame_bytes = 4 * pixels[0] * pixels[1]
+    if frames * frame_bytes > MAX_FRAMES_BYTES:
+        raise ValueError(
+            f"{shown} makes {frames} frames of {pixels[0]}×{pixels[1]} pixels, "
+            f"{frames * frame_bytes / 2**30:.1f} GiB held in memory while the GIF is encoded; "
+            f"allowed: at most {MAX_FRAMES_BYTES // frame_bytes} frames{remedy}"
+        )
+    return frames
+
+
 def _save(anim: Any, fig: Any, path: str | os.PathLike, frame_ms: int) -> Path:
     """Encode the animation into a temporary file, then atomically replace ``path``."""
     target = Path(path)
@@ -141,6 +167,9 @@ def write_gif(
     colours = [plt.get_cmap("tab10")(i % 10) for i in range(n)]
     fig, ax = _pitch(poses, refs, title, 2.5 * body_radius)
     try:
+        shown = f"poses of {samples} samples at stride {stride}"
+        remedy = " (fewer samples, a larger stride or a higher speed)"
+        check_frames(samples, stride, fig.canvas.get_width_height(), shown, remedy)
         markers = ax.scatter(refs[:, 0], refs[:, 1], marker="x", s=50, c="k", zorder=6)
         trails = [ax.plot([], [], "-", lw=1.0, color=c, alpha=0.6)[0] for c in colours]
         bodies = [plt.Circle((0, 0), body_radius, fc=c, ec="k", lw=0.6, zorder=4) for c in colours]
