@@ -238,10 +238,11 @@ def test_a_period_the_law_cannot_settle_at_is_warned_of(tmp_path, robust_file, c
     out = tmp_path / "ctl"
     assert main(["export", "--gains", robust_file, "--out", str(out), "--period", "33"]) == 0
     err = capsys.readouterr().err
+    assert "warning: --period 33 is read in s; a value in milliseconds needs /1000" in err
     assert "warning: --period 33 s: k_theta*dt = " in err
     assert "cannot settle unless both are below 2" in err
     assert main(["export", "--gains", robust_file, "--out", str(out)]) == 0
-    assert "cannot settle" not in capsys.readouterr().err
+    assert "cannot settle" not in (err := capsys.readouterr().err) and "milliseconds" not in err
 
 
 def test_export_period_is_baked_in_and_recorded(tmp_path, robust_file):

@@ -536,3 +536,30 @@ def test_a_robust_noise_that_looks_like_metres_or_radians_is_warned_of():
         warnings.simplefilter("error")  # noiseless, and a mocap tracker's, are meant
         config_from(SimpleNamespace(noise=0, noise_theta=0))
         config_from(SimpleNamespace(noise=0.01, noise_theta=0.05))
+
+
+def test_a_period_or_horizon_that_looks_like_milliseconds_is_warned_of(
+    tmp_path, capsys, monkeypatch
+):
+    from wmr_jax._src.cli import main as cli
+    from wmr_jax._src.studies import maps
+
+    monkeypatch.setattr(cli, "_shown_warnings", set())  # each distinct warning printed once
+    assert main(["simulate", "--ref", "30", "20", "45", "--steps", "2", "--dt", "33"]) == 0
+    ms = "is read in s; a value in milliseconds needs /1000"
+    assert f"wmr-jax: warning: --dt 33 {ms}" in capsys.readouterr().err
+    assert main(["simulate", "--ref", "30", "20", "45", "--steps", "2", "--dt", "0.5"]) == 0
+    assert "milliseconds" not in capsys.readouterr().err
+
+    def stop(*args, **kwargs):
+        raise ValueError("stopped before the runs")
+
+    monkeypatch.setattr(maps, "compare_controllers", stop)
+    assert main(["compare", "--out", str(tmp_path), "--horizon", "6000"]) == 2
+    err = capsys.readouterr().err
+    assert (
+        "wmr-jax: warning: --horizon 6000 is read in s, 1000 times this robot's study horizon "
+        "(6 s); a value in milliseconds needs /1000"
+    ) in err
+    assert main(["compare", "--out", str(tmp_path), "--horizon", "600"]) == 2  # 100 times: meant
+    assert "milliseconds" not in capsys.readouterr().err

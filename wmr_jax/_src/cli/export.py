@@ -55,7 +55,7 @@ def run(args: Any) -> int:
     real = flags.choice("--real", args.real, REALS)
     period = DEFAULT_DT
     if args.period is not None:
-        period = flags.number("--period", args.period, low=0.0, closed=False, unit="s")
+        period = flags.period("--period", args.period)
     given = flags.robot_from(args.robot)
     try:
         loop = load_tuned(args.gains)

@@ -186,6 +186,20 @@ def gain_flag_values(params: Any) -> list[str]:
     return argv
 
 
+def period(flag: str, text: Any) -> float:
+    """A control period in s (> 0); one of a second or more is warned of as milliseconds meant."""
+    value = number(flag, text, low=0.0, closed=False, unit="s")
+    if value >= 1.0:  # no robot is controlled at a second a sample
+        import warnings
+
+        warnings.warn(
+            f"{flag} {text} is read in s; a value in milliseconds needs /1000",
+            UserWarning,
+            stacklevel=2,
+        )
+    return value
+
+
 def gains_from(args: Any) -> Any:
     """The ``Gains`` of the gain flags, given in the flags' units."""
     from wmr_jax._src.model.params import Gains, validate_gains

@@ -80,7 +80,7 @@ def run(args: Any) -> int:
     from wmr_jax._src.identify import result as output
 
     out = flags.output_dir("--out", args.out)
-    dt = None if args.dt is None else flags.number("--dt", args.dt, low=0, closed=False)
+    dt = None if args.dt is None else flags.period("--dt", args.dt)
     minimum = fitting.WARMUP + fitting.SEGMENT + 1
     logs = [
         reading.read_log(
@@ -139,17 +139,9 @@ def _plan(args: Any, robot: Any) -> int:
     defaults = {"minutes": "5", "plan_dt": "0.04", "seed": "0"}
     text = {k: d if getattr(args, k) is None else getattr(args, k) for k, d in defaults.items()}
     minutes = flags.number("--minutes", text["minutes"], low=0, closed=False)
-    dt = flags.number("--plan-dt", text["plan_dt"], low=0, closed=False)
+    dt = flags.period("--plan-dt", text["plan_dt"])
     seed = flags.positive_int("--seed", text["seed"], minimum=0)
     path = Path(flags.output_file("--plan", args.plan))
-    if dt >= 1.0:  # no robot is controlled at a second a sample: milliseconds meant
-        import warnings
-
-        warnings.warn(
-            f"--plan-dt {args.plan_dt} is read in s; a value in milliseconds needs /1000",
-            UserWarning,
-            stacklevel=2,
-        )
     commands = plan.plan_commands(robot, dt, minutes, seed)
     rows = np.column_stack([np.arange(len(commands)) * dt, commands])
     path.parent.mkdir(parents=True, exist_ok=True)

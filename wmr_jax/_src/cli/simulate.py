@@ -147,7 +147,7 @@ def run(args: Any) -> int:
     plot = None if args.plot is None else flags.image_file("--plot", args.plot)
     ref = flags.pose_from_degrees("--ref", args.ref)
     init = flags.pose_from_degrees("--init", args.init)
-    dt = flags.number("--dt", args.dt, low=0.0, closed=False, unit="s")
+    dt = flags.period("--dt", args.dt)
     if args.steps is not None:
         steps = flags.positive_int("--steps", args.steps, 1, MAX_STEPS)
     velocity = flags.velocity_loop(args.velocity)
