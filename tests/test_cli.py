@@ -40,6 +40,10 @@ def test_simulate_says_when_the_robot_faces_backwards(capsys):
         assert ("facing backwards: θ − θ_r = " in out) == backwards, out
         seen.append(backwards)
     assert seen == [True, False]  # one run of each kind
+    # A run stopped on its way, turned more than 90° from θ_r, is not said to face backwards.
+    assert main(["simulate", "--ref", "0", "30", "180", "--steps", "15"]) == 0
+    out = capsys.readouterr().out
+    assert "arrival time   : never" in out and "facing backwards" not in out
 
 
 def test_simulate_nonideal(capsys):

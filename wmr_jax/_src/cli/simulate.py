@@ -202,7 +202,7 @@ def run(args: Any) -> int:
     turned = math.remainder(float(final[2]) - ref[2], 2 * math.pi)
     facing = (
         f"  (facing backwards: θ − θ_r = {math.degrees(turned):.1f}°; front and back count alike)"
-        if math.cos(turned) < 0
+        if math.cos(turned) < 0 and not math.isinf(t_arrive)  # said of a robot at its goal only
         else ""
     )
     print(
