@@ -563,3 +563,40 @@ def test_a_period_or_horizon_that_looks_like_milliseconds_is_warned_of(
     ) in err
     assert main(["compare", "--out", str(tmp_path), "--horizon", "600"]) == 2  # 100 times: meant
     assert "milliseconds" not in capsys.readouterr().err
+
+
+def test_angles_that_look_like_radians_and_a_pass_tolerance_in_metres_are_warned_of(
+    tmp_path, capsys, monkeypatch
+):
+    from wmr_jax._src.cli import main as cli
+    from wmr_jax._src.studies import maps, waypoints
+
+    monkeypatch.setattr(cli, "_shown_warnings", set())  # each distinct warning printed once
+    radians = "a value in radians needs times 180/pi"
+    assert main(["simulate", "--ref", "30", "30", "1.57", "--steps", "2"]) == 0
+    assert f"--ref THETA_DEG 1.57 is read in degrees (1.57°); {radians}" in capsys.readouterr().err
+    for theta in ("0", "3", "-45", "90.5"):  # whole degrees, or beyond ±π: meant
+        assert main(["simulate", "--ref", "30", "30", theta, "--steps", "2"]) == 0
+        assert "read in degrees" not in capsys.readouterr().err
+
+    def stop(*args, **kwargs):
+        raise ValueError("stopped before the runs")
+
+    monkeypatch.setattr(maps, "map_study", stop)
+    out = str(tmp_path)
+    assert main(["sweep", "--out", out, "--headings", "0", "1.57", "3.14"]) == 2
+    assert (
+        f"--headings 0 1.57 3.14 is read in degrees (3.14°); {radians}" in capsys.readouterr().err
+    )
+    assert main(["sweep", "--out", out, "--headings", "0", "1.5", "90"]) == 2  # one beyond ±π
+    assert "read in degrees" not in capsys.readouterr().err
+    monkeypatch.setattr(waypoints, "soccer_study", stop)
+    assert main(["waypoints", "--out", out, "--pass-tol", "0.05", "--pass-tol-deg", "0.5"]) == 2
+    err = capsys.readouterr().err
+    assert f"--pass-tol-deg 0.5 is read in degrees (0.5°); {radians}" in err
+    assert (
+        "--pass-tol 0.05 is read in cm, under the arrival tolerance (1 cm): a robot may never "
+        "pass a waypoint; a value in metres needs times 100"
+    ) in err
+    assert main(["waypoints", "--out", out]) == 2  # the defaults: 5 cm and 30°
+    assert "read in" not in capsys.readouterr().err

@@ -118,11 +118,25 @@ def controller_names(names: Sequence[str] | None) -> list[str]:
     return list(dict.fromkeys(names))
 
 
+def warn_if_radians(flag: str, text: Any, degrees: float) -> None:
+    """Warn that ``degrees``, a fraction within ±π, was most likely given in radians."""
+    if 0 < abs(degrees) <= math.pi + 1e-3 and degrees != round(degrees):
+        import warnings
+
+        warnings.warn(
+            f"{flag} {text} is read in degrees ({degrees:g}°); a value in radians needs "
+            "times 180/pi",
+            UserWarning,
+            stacklevel=3,
+        )
+
+
 def pose_from_degrees(flag: str, values: Sequence[Any]) -> list[float]:
     """``[x cm, y cm, θ rad]`` from a flag's ``X Y THETA_DEG``."""
     x = number(f"{flag} X", values[0], unit="cm")
     y = number(f"{flag} Y", values[1], unit="cm")
     theta = number(f"{flag} THETA_DEG", values[2], unit="degrees")
+    warn_if_radians(f"{flag} THETA_DEG", values[2], theta)
     return [x, y, math.radians(theta)]
 
 

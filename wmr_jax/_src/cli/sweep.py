@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 import warnings
 from pathlib import Path
@@ -153,6 +154,8 @@ def _run(args: Any, out: Path, chunks: Path | None, finished: dict) -> int:
     headings = [
         flags.number("--headings", h, unit="degrees") for h in args.headings or DEFAULT_HEADINGS_DEG
     ]
+    if args.headings and all(abs(h) <= math.pi + 1e-3 for h in headings):  # ±π: radians?
+        flags.warn_if_radians("--headings", " ".join(args.headings), max(headings, key=abs))
     names = flags.controller_names(args.controller)
     given, settings = study_settings(args)
 

@@ -52,6 +52,7 @@ def run(args: Any) -> int:
     """Run ``wmr-jax waypoints``; return the exit status."""
     from wmr_jax._src.model.params import Robot
     from wmr_jax._src.model.robots import robot_json
+    from wmr_jax._src.sim.metrics import DEFAULT_TOL_R
     from wmr_jax._src.studies.robustness import study_horizon
     from wmr_jax._src.studies.waypoints import soccer_steps
 
@@ -59,6 +60,18 @@ def run(args: Any) -> int:
     pass_deg = flags.number(
         "--pass-tol-deg", args.pass_tol_deg, low=0.0, high=90.0, closed=False, unit="degrees"
     )
+    flags.warn_if_radians("--pass-tol-deg", args.pass_tol_deg, pass_deg)
+    pass_cm = flags.number("--pass-tol", args.pass_tol, low=0.0, closed=False, unit="cm")
+    if pass_cm < DEFAULT_TOL_R:  # tighter than arriving: the chain may never pass a waypoint
+        import warnings
+
+        warnings.warn(
+            f"--pass-tol {args.pass_tol} is read in cm, under the arrival tolerance "
+            f"({DEFAULT_TOL_R:g} cm): a robot may never pass a waypoint; a value in metres "
+            "needs times 100",
+            UserWarning,
+            stacklevel=2,
+        )
     given = flags.robot_from(args.robot)
     robot = Robot() if given is None else given.robot
     if args.steps is None:
@@ -69,7 +82,7 @@ def run(args: Any) -> int:
         "controller_names": flags.controller_names(args.controller),
         "velocity": flags.velocity_loop(args.velocity),
         "steps": steps,
-        "pass_tol_r": flags.number("--pass-tol", args.pass_tol, low=0.0, closed=False, unit="cm"),
+        "pass_tol_r": pass_cm,
         "pass_tol_theta": math.radians(pass_deg),
         "robot": robot,
     }
