@@ -85,6 +85,8 @@ def test_write_gif_checks_shapes(tmp_path):
         (["--out", "a.gif", "--velocity", "warp"], "--velocity 'warp'"),
         (["--out", "a.gif", "--speed", "0"], "--speed '0'"),
         (["--out", "a.gif", "--speed", "1e-5"], "speed = 1e-05"),  # no GIF can play it
+        (["--out", "a.gif", "--paper", "--robots", "5"], "--robots is not allowed with --paper"),
+        (["--out", "a.gif", "--paper", "--seed", "3"], "--seed is not allowed with --paper"),
         # More frames than memory should hold while the GIF is encoded (1 GiB of pixels).
         (
             ["--out", "a.gif", "--seconds", "600"],

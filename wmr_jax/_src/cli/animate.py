@@ -18,8 +18,8 @@ def add_arguments(parser: Any) -> None:
             "metavar": "NAME",
             "help": "controller: " + ", ".join(registered_names()),
         },
-        "--robots": {"default": 8, "metavar": "N", "help": "number of random references"},
-        "--seed": {"default": 0, "metavar": "S", "help": "seed of the random references"},
+        "--robots": {"metavar": "N", "help": "number of random references (default: 8)"},
+        "--seed": {"metavar": "S", "help": "seed of the random references (default: 0)"},
         "--paper": {
             "action": "store_true",
             "help": "use the paper's seven Fig. 7 references instead of random ones",
@@ -60,8 +60,13 @@ def run(args: Any) -> int:
     given = flags.robot_from(args.robot)
     robot = None if given is None else given.robot
     velocity = flags.velocity_loop(args.velocity)
-    robots = flags.positive_int("--robots", args.robots, 1, 10_000)
-    seed = flags.positive_int("--seed", args.seed, 0, 2**32 - 1)
+    for flag, value in (("--robots", args.robots), ("--seed", args.seed)):
+        if args.paper and value is not None:
+            raise ValueError(
+                f"{flag} is not allowed with --paper, whose seven references it would not change"
+            )
+    robots = flags.positive_int("--robots", 8 if args.robots is None else args.robots, 1, 10_000)
+    seed = flags.positive_int("--seed", 0 if args.seed is None else args.seed, 0, 2**32 - 1)
     # At least one control period, named as the flag (not as the horizon it sets).
     seconds = flags.number("--seconds", args.seconds, low=DEFAULT_DT, high=600.0, unit="s")
     speed = flags.number(
