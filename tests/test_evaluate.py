@@ -182,6 +182,14 @@ def _write(tmp_path, name, content):
         ({"--gains": "{garbled_json}"}, "--gains '{garbled_json}' is not a JSON gains file"),
         ({"--gains": "{bad_gains}"}, "--gains '{bad_gains}': key 'warp' is not allowed"),
         ({"--json": "/dev/null/out.json"}, "--json '/dev/null/out.json' is not allowed"),
+        (
+            {"--json": "{tmp}/out.csv"},
+            "--json '{tmp}/out.csv' is not allowed; allowed: a path ending in .json",
+        ),
+        (
+            {"--per-ref": "{tmp}/runs.json"},
+            "--per-ref '{tmp}/runs.json' is not allowed; allowed: a path ending in .csv",
+        ),
     ],
 )
 def test_bad_values_give_one_line_exit_2_and_no_run(capsys, tmp_path, monkeypatch, change, message):
@@ -202,6 +210,7 @@ def test_bad_values_give_one_line_exit_2_and_no_run(capsys, tmp_path, monkeypatc
         "pickled": _write(tmp_path, "objects.npy", np.array([{"x": 1}, None], dtype=object)),
         "not_npy": _write(tmp_path, "text.npy", "1,2,3\n"),
         "txt": _write(tmp_path, "refs.txt", "1,2,3\n"),
+        "tmp": str(tmp_path),
         "far": _write(tmp_path, "far.npy", np.array([[1e200, 0.0, 0.0]])),
         "missing_json": str(tmp_path / "none.json"),
         "garbled_json": _write(tmp_path, "garbled.json", "{kr: 60"),

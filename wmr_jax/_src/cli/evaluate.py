@@ -439,7 +439,7 @@ def per_ref_csv(result: dict[str, Any], labels: list[str]) -> str:
 
 def _settings(args: Any) -> tuple[Any, dict[str, Any]]:
     """``--json``'s path and the checked settings of the runs, ``--c`` or not."""
-    out = None if args.json is None else flags.output_file("--json", args.json)
+    out = None if args.json is None else flags.output_file("--json", args.json, ".json")
     return out, {
         "condition": flags.choice("--condition", args.condition, _CONDITIONS),
         "mismatch": _mismatch(args.mismatch),
@@ -473,7 +473,7 @@ def run(args: Any) -> int:
     if args.gains is None:
         raise ValueError("--gains is required; allowed: a tuned_gains.json (or --c DIR)")
     out, settings = _settings(args)
-    per_ref = None if args.per_ref is None else flags.output_file("--per-ref", args.per_ref)
+    per_ref = None if args.per_ref is None else flags.output_file("--per-ref", args.per_ref, ".csv")
     estimator = None
     if args.estimator is not None:
         estimator = flags.choice("--estimator", args.estimator, _ESTIMATOR_CHOICES)
@@ -535,7 +535,7 @@ def run_compiled(args: Any) -> int:
     if args.float32:
         raise ValueError("--float32 is not allowed with --c; allowed: wmr-jax export --real float")
     out, settings = _settings(args)
-    per_ref = None if args.per_ref is None else flags.output_file("--per-ref", args.per_ref)
+    per_ref = None if args.per_ref is None else flags.output_file("--per-ref", args.per_ref, ".csv")
     given = flags.robot_from(args.robot)
     refs, labels = load_refs(args.refs)
     import warnings

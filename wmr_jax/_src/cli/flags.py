@@ -61,11 +61,14 @@ def output_dir(flag: str, text: str) -> Path:
     return writable_path(f"{flag} {text!r}", text, folder=True)
 
 
-def output_file(flag: str, text: str) -> Path:
-    """A file path the command may write to, or say why not."""
+def output_file(flag: str, text: str, ending: str | None = None) -> Path:
+    """A file path the command may write to, ending in ``ending`` if given, or say why not."""
     from wmr_jax._src.io import writable_path
 
-    return writable_path(f"{flag} {text!r}", text, folder=False)
+    path = writable_path(f"{flag} {text!r}", text, folder=False)
+    if ending is not None and path.suffix.lower() != ending:
+        raise ValueError(f"{flag} {text!r} is not allowed; allowed: a path ending in {ending}")
+    return path
 
 
 def image_file(flag: str, text: str) -> Path:
