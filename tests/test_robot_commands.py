@@ -173,7 +173,7 @@ def test_an_interrupted_sweep_with_resume_says_what_it_kept_and_reuses_it(
     assert list(kept) == ["chunk_000000.npz"]
     monkeypatch.setattr(maps, "sweep", real)
     assert main(argv) == 0
-    said = f"--resume: finished chunks in {out / 'chunks'} (shim-sung 1): those of these settings"
+    said = f"--resume: finished chunks in {out / 'chunks'} (shim-sung 1): reused if they are of"
     assert said in capsys.readouterr().out
     after = _inodes(chunks)
     assert list(after) == [f"chunk_{i:06d}.npz" for i in range(_chunks_run())]

@@ -167,8 +167,8 @@ def _run(args: Any, out: Path, chunks: Path | None, finished: dict) -> int:
         if any(found.values()):
             counts = ", ".join(f"{n} {k}" for n, k in found.items() if k)
             print(
-                f"--resume: finished chunks in {chunks} ({counts}): those of these settings "
-                "are reused, the rest computed",
+                f"--resume: finished chunks in {chunks} ({counts}): reused if they are of "
+                "these settings (chunks of others are refused), the rest computed",
                 flush=True,
             )
 
