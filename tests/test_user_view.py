@@ -600,3 +600,22 @@ def test_angles_that_look_like_radians_and_a_pass_tolerance_in_metres_are_warned
     ) in err
     assert main(["waypoints", "--out", out]) == 2  # the defaults: 5 cm and 30°
     assert "read in" not in capsys.readouterr().err
+
+
+def test_a_gain_error_says_when_the_flag_blamed_was_not_given_and_aliases_conflict(capsys):
+    assert main(["simulate", "--ref", "30", "30", "0", "--r-m", "0.2", "--r-a", "0.2"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "wmr-jax: error: --r-e (not given: its default, 1): gains.r_e = 1.0 is not allowed; "
+        "allowed: 0 < r_e <= r_a (gains.r_a = 0.2)"
+    )
+    assert main(["simulate", "--ref", "30", "30", "0", "--r-e", "0.5", "--r-a", "0.2"]) == 2
+    assert capsys.readouterr().err.startswith("wmr-jax: error: --r-e: gains.r_e = 0.5 is not")
+    # Two spellings of one gain: refused, not the last one silently taken.
+    with pytest.raises(SystemExit) as refused:  # as the parser refuses any flag
+        main(["simulate", "--ref", "30", "30", "0", "--k-r", "60", "--kr", "90"])
+    assert refused.value.code == 2
+    assert capsys.readouterr().err == (
+        "wmr-jax: error: --kr is not allowed with --k-r: both set kr; allowed: one of them "
+        "(see wmr-jax simulate --help)\n"
+    )
+    assert main(["simulate", "--ref", "30", "30", "0", "--kr", "60", "--steps", "2"]) == 0

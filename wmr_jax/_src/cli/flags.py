@@ -166,8 +166,13 @@ class _GainFlag(argparse.Action):
     """Store a gain flag's text and the spelling it was typed in (for messages)."""
 
     def __call__(self, parser: Any, namespace: Any, values: Any, option_string: Any = None):
-        setattr(namespace, self.dest, values)
         typed = dict(getattr(namespace, _TYPED, None) or {})
+        if typed.get(self.dest, option_string) != option_string:  # --kr 90 after --k-r 60
+            parser.error(
+                f"{option_string} is not allowed with {typed[self.dest]}: both set "
+                f"{self.dest}; allowed: one of them"
+            )
+        setattr(namespace, self.dest, values)
         typed[self.dest] = option_string
         setattr(namespace, _TYPED, typed)
 
@@ -235,7 +240,10 @@ def gains_from(args: Any) -> Any:
             ) from None
         for _, field, *_ in _GAIN_FLAGS:
             if str(err).startswith(f"gains.{field} "):
-                raise ValueError(f"{gain_flag(args, field)}: {err}") from None
+                shown = gain_flag(args, field)
+                if not isinstance(getattr(args, field), str):  # not given: its default
+                    shown += f" (not given: its default, {getattr(args, field):g})"
+                raise ValueError(f"{shown}: {err}") from None
         raise
     degrees = math.degrees(values["phi_m"])
     if degrees <= math.pi / 2:  # a Φ_m of a degree or so: radians given where degrees belong
