@@ -121,6 +121,11 @@ def _write(tmp_path, name, text):
         # An empty path was the current folder.
         (["sweep", "--out", "", "--poses", "10"], "--out '' is not allowed; allowed: a folder"),
         (["bench", "--json", ""], "--json '' is not allowed; allowed: a file name"),
+        # Only the scalar reference is timed on --reference-poses: for other cases it was ignored.
+        (
+            ["bench", "--cases", "final_poses", "--reference-poses", "5"],
+            "--reference-poses is not allowed without the scalar_reference case",
+        ),
         # --knots sizes a schedule's tables: alone it would size nothing.
         (["tune", "--out", "{dir}", "--knots", "30"], "--knots is not allowed without --schedule"),
         (["tune", "--out", "{dir}", "--schedule", "--knots", "61"], "--knots '61' is not"),
@@ -297,7 +302,7 @@ def test_tune_robust_writes_its_gains_before_judging_them(tmp_path, monkeypatch)
 
 def test_bench_adds_repeated_cases_and_names_a_case_it_cannot_run(tmp_path, capsys):
     path = tmp_path / "b.json"
-    common = ["bench", "--sizes", "2", "--steps", "1", "--repeats", "1", "--reference-poses", "1"]
+    common = ["bench", "--sizes", "2", "--steps", "1", "--repeats", "1"]
     argv = [*common, "--cases", "final_poses", "--cases", "final_poses_sharded"]
     assert main([*argv, "--dtype", "float64", "--cpu-devices", "1", "--json", str(path)]) == 0
     rows = json.loads(path.read_text())["rows"]

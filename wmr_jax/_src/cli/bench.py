@@ -79,6 +79,11 @@ def add_arguments(parser: Any) -> None:
 def _config_from(args: Any, robot: Any = None) -> bench.BenchConfig:
     """Return the ``BenchConfig`` of the flags, each checked (one line naming a bad one)."""
     ints = {name: flags.positive_int(flag, getattr(args, name)) for flag, name, *_ in _INT_FLAGS}
+    cases = tuple(flags.choice("--cases", c, bench.CASES) for c in args.cases or ())
+    if cases and "scalar_reference" not in cases and isinstance(args.reference_poses, str):
+        raise ValueError(
+            "--reference-poses is not allowed without the scalar_reference case, which it sizes"
+        )
     return bench.BenchConfig(
         robot=robot,
         sizes=tuple(
@@ -86,7 +91,7 @@ def _config_from(args: Any, robot: Any = None) -> bench.BenchConfig:
             for n in args.sizes or bench.DEFAULT_SIZES
         ),
         dtype=flags.choice("--dtype", args.dtype, bench.DTYPES),
-        cases=tuple(flags.choice("--cases", c, bench.CASES) for c in args.cases or ()),
+        cases=cases,
         wait_idle=flags.number("--wait-idle", args.wait_idle, low=0.0, unit="s"),
         **ints,
     )
