@@ -165,6 +165,10 @@ def test_bad_inputs():
         map_study(0)
     with pytest.raises(ValueError, match=r"headings_deg = .*nan.*allowed: finite degrees"):
         pose_grid(100, (0.0, math.nan))
+    # One heading twice (here 0° and 360°) would map the same runs as two columns.
+    with pytest.raises(ValueError, match=r"360 repeats a heading \(modulo 360\); allowed: dis"):
+        pose_grid(100, (0.0, 90.0, 360.0))
+    assert len(np.unique(pose_grid(100, (0.0, 90.0, 270.0, -45.0)).refs[:, 2])) == 4
     with pytest.raises(ValueError, match=r"n_poses = 100000000000000 is not allowed"):
         pose_grid(10**14)
     with pytest.raises(ValueError, match="not known|allowed"):

@@ -87,6 +87,13 @@ def pose_grid(
         np.abs(np.radians(degrees)) <= checks.MAX_HEADING,
         f"|heading| <= {math.degrees(checks.MAX_HEADING):.3g} degrees",
     )
+    turns = np.mod(degrees, 360.0)  # one heading, however many turns it is written with
+    repeated = [float(d) for i, d in enumerate(degrees) if np.any(turns[:i] == turns[i])]
+    if repeated:
+        raise ValueError(
+            f"headings_deg = {degrees.tolist()} is not allowed: {repeated[0]:g} repeats a "
+            "heading (modulo 360); allowed: distinct headings"
+        )
     headings = np.radians(degrees)
     annulus = math.pi * (1.0 - (r_min / r_max) ** 2) / 4  # its share of the square
     side = min(max(2, round(math.sqrt(n_poses / (len(headings) * annulus)))), _MAX_SIDE)
