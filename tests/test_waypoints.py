@@ -161,7 +161,8 @@ def test_bad_batch_and_track_inputs_raise(call, message):
 def test_command_writes_the_soccer_tables(tmp_path, capsys):
     argv = ["waypoints", "--out", str(tmp_path), "--controller", "shim-sung", "astolfi-corke"]
     assert main(argv) == 0
-    assert "| astolfi-corke | pass |" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "| astolfi-corke | pass |" in printed and "hint" not in printed  # each chain finished
     for name in ("soccer.png", "soccer.md", "soccer.json"):
         assert (tmp_path / name).stat().st_size > 100
     assert not list(tmp_path.glob(".*tmp"))  # no temporary files left behind
@@ -170,6 +171,13 @@ def test_command_writes_the_soccer_tables(tmp_path, capsys):
     assert saved["rows"] == rows and [r.mode for r in runs] == ["stop", "pass"] * 2
     assert all(f"leg {i + 1} s" in rows[0] for i in range(len(WP)))
     assert rows[0]["leg 6 s"] == float(runs[0].run.arrival[-1])
+    # Too few periods for the chain: its times are inf, and the command says what to change.
+    argv = ["waypoints", "--out", str(tmp_path), "--controller", "shim-sung", "--steps", "5"]
+    assert main(argv) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == (
+        "hint: shim-sung (stop), shim-sung (pass) did not finish the chain within 5 control "
+        "periods (0.165 s); more --steps give it time"
+    )
 
 
 # Values the command refuses, each with a one-line error and exit status 2.

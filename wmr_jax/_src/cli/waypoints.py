@@ -93,6 +93,7 @@ def run(args: Any) -> int:
 
     from wmr_jax._src.report.tables import markdown_table
     from wmr_jax._src.report.waypoints import write_soccer
+    from wmr_jax._src.sim.rollout import DEFAULT_DT
     from wmr_jax._src.studies.waypoints import soccer_study
 
     study = soccer_study(**settings)
@@ -100,4 +101,15 @@ def run(args: Any) -> int:
     write_soccer(out, study, extra={"robot": robot_json(robot), "robot_label": label})
     table = markdown_table([_shown(row) for row in study.rows])
     print(f"soccer-like sequence -> {out}/soccer.png, soccer.md, soccer.json\n{table}", end="")
+    short = [f"{r['controller']} ({r['mode']})" for r in study.rows if _unfinished(r)]
+    if short:  # inf times: the run ended before the chain did
+        print(
+            f"hint: {', '.join(short)} did not finish the chain within {steps} control periods "
+            f"({steps * DEFAULT_DT:g} s); more --steps give it time"
+        )
     return 0
+
+
+def _unfinished(row: dict[str, Any]) -> bool:
+    """Whether a row's run ended before its last waypoint (its slowest leg never ended)."""
+    return not math.isfinite(float(row["slowest leg s"]))
