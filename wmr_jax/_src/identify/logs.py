@@ -151,10 +151,15 @@ def _check_units(dt: float, commands: np.ndarray, poses: np.ndarray, where: str)
             """Whether the heading's steps follow the commanded turns scaled by ``scale``.
 
             Step by step, not in total: over minutes the heading drifts from the
-            integrated command (the wheels' mismatch, the speed limits).
+            integrated command (the wheels' mismatch, the speed limits). The gain
+            must stand five standard errors clear of the tracker's noise: a log that
+            hardly turns tells nothing of its units.
             """
             asked = turn * scale
-            return 0.2 < float(np.dot(measured, asked) / np.dot(asked, asked)) < 5
+            size = float(np.dot(asked, asked))
+            gain = float(np.dot(measured, asked)) / size
+            spread = float(np.std(measured - gain * asked)) / np.sqrt(size)
+            return 0.2 < gain < 5 and gain > 5 * spread
 
         as_rad = np.angle(np.exp(1j * step))  # each step wrapped, as np.unwrap would
         as_deg = np.deg2rad((step + 180.0) % 360.0 - 180.0)
