@@ -37,6 +37,18 @@ def test_animate_command_and_a_gif_of_recorded_runs(tmp_path, capsys):
     assert _frames(path) == 4  # samples 0, 5, 10 and the last, 12
 
 
+def test_a_frame_is_at_most_600_by_630_pixels_whatever_the_pitch(tmp_path):
+    """The bound ``animate`` checks its frames' memory against, before it simulates."""
+    for span, tall in (((10.0, 100.0), True), ((100.0, 10.0), False), ((50.0, 50.0), None)):
+        poses = np.zeros((1, 2, 3))
+        poses[0, 1, :2] = span
+        path = write_gif(tmp_path / "a.gif", poses, poses[:, 1], stride=1)
+        with Image.open(path) as image:
+            width, height = image.size
+        assert width <= 600 and height <= 630, image.size
+        assert (width, height) == (600, 630) if tall is None else (height == 630) == tall
+
+
 def _delays_ms(path):
     with Image.open(path) as image:
         delays = []
@@ -91,8 +103,8 @@ def test_write_gif_checks_shapes(tmp_path):
         (
             ["--out", "a.gif", "--seconds", "600"],
             "--seconds 600 at --speed 1 makes 6062 frames of 600×630 pixels, 8.5 GiB held in "
-            "memory while the GIF is encoded; allowed: at most 710 frames (fewer --seconds, or "
-            "a higher --speed)",
+            "memory while the GIF is encoded; allowed: at most 710 frames (--seconds 70.19 at "
+            "the most at --speed 1)",
         ),
     ],
 )

@@ -47,6 +47,7 @@ def run(args: Any) -> int:
         check_frames,
         frame_timing,
         gif_path,
+        max_frames,
         run_title,
         write_gif,
     )
@@ -75,7 +76,8 @@ def run(args: Any) -> int:
     # A speed no GIF can play, or more frames than memory holds, is refused before the runs.
     stride, _ = frame_timing(DEFAULT_DT, None, speed)
     shown = f"--seconds {seconds:g} at --speed {speed:g}"
-    remedy = " (fewer --seconds, or a higher --speed)"
+    longest = (max_frames(SQUARE_PIXELS) - 1) * stride * DEFAULT_DT  # the frames' span, s
+    remedy = f" (--seconds {longest:.4g} at the most at --speed {speed:g})"
     check_frames(horizon_steps(DEFAULT_DT, seconds) + 1, stride, SQUARE_PIXELS, shown, remedy)
     params = robot_defaults(name, robot)
     flags.say_robot(given)

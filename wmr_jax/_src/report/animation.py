@@ -24,7 +24,9 @@ def _pitch(poses: np.ndarray, refs: np.ndarray, title: str, arrow: float) -> tup
     """``(fig, ax)`` framing the runs, with the references' heading arrows (``arrow`` cm)."""
     span = np.concatenate([poses[..., :2].reshape(-1, 2), refs[:, :2]])
     lo, hi = span.min(axis=0) - 8, span.max(axis=0) + 8
-    fig, ax = plt.subplots(figsize=(6, 6 * (hi[1] - lo[1]) / max(hi[0] - lo[0], 1e-9) + 0.3))
+    # 6 in on its longer side (and 0.3 in for the title): at most SQUARE_PIXELS a frame.
+    tall = (hi[1] - lo[1]) / max(hi[0] - lo[0], 1e-9)
+    fig, ax = plt.subplots(figsize=(6 / max(tall, 1.0), 6 * min(tall, 1.0) + 0.3))
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
     ax.set_aspect("equal")
@@ -68,8 +70,13 @@ def frame_timing(dt: float, stride: int | None = None, speed: float = 1.0) -> tu
 
 # The frames a GIF is encoded from are all held in memory, 4 bytes a pixel.
 MAX_FRAMES_BYTES = 2**30
-# A square pitch's figure, in pixels (``_pitch``, at matplotlib's 100 dpi).
+# A square pitch's figure, in pixels (``_pitch``, at matplotlib's 100 dpi): the largest.
 SQUARE_PIXELS = (600, 630)
+
+
+def max_frames(pixels: tuple[int, int]) -> int:
+    """The most frames of ``pixels`` a GIF is encoded from (``MAX_FRAMES_BYTES``)."""
+    return MAX_FRAMES_BYTES // (4 * pixels[0] * pixels[1])
 
 
 def check_frames(
@@ -82,12 +89,12 @@ def check_frames(
             more than ``MAX_FRAMES_BYTES``.
     """
     frames = len(range(0, samples - 1, stride)) + 1
-    frame_bytes = 4 * pixels[0] * pixels[1]
-    if frames * frame_bytes > MAX_FRAMES_BYTES:
+    if frames > max_frames(pixels):
+        held = frames * 4 * pixels[0] * pixels[1] / 2**30
         raise ValueError(
-            f"{shown} makes {frames} frames of {pixels[0]}×{pixels[1]} pixels, "
-            f"{frames * frame_bytes / 2**30:.1f} GiB held in memory while the GIF is encoded; "
-            f"allowed: at most {MAX_FRAMES_BYTES // frame_bytes} frames{remedy}"
+            f"{shown} makes {frames} frames of {pixels[0]}×{pixels[1]} pixels, {held:.1f} GiB "
+            f"held in memory while the GIF is encoded; allowed: at most {max_frames(pixels)} "
+            f"frames{remedy}"
         )
     return frames
 
