@@ -130,6 +130,9 @@ def test_cli_writes_the_results_and_a_resumed_run_gives_the_same_gains(tmp_path,
     (cut / "evaluation.json").write_text(json.dumps({**resumed, "config": {}}))
     assert not tuning_run.finished(cut, SMALL, None)
     assert tuning_run.finished(whole, SMALL, None)
+    (whole / "tuned_gains.json").rename(whole / "kept.json")  # the gains gone: tuned again
+    assert not tuning_run.finished(whole, SMALL, None)
+    (whole / "kept.json").rename(whole / "tuned_gains.json")
     assert not tuning_run.finished(whole, SMALL.replace(iters=7), None)
 
 

@@ -527,9 +527,9 @@ def test_a_robust_noise_that_looks_like_metres_or_radians_is_warned_of():
         config = config_from(SimpleNamespace(noise=0.005, noise_theta=0.0087))
     assert (config.noise_xy, config.noise_theta) == (0.005, 0.0087)  # warned, still taken
     assert [str(w.message) for w in caught] == [
-        "--noise 0.005 is read in cm, finer than a motion-capture tracker (under 0.01 cm); "
+        "--noise 0.005 is read in cm, finer than most motion-capture trackers (under 0.01 cm); "
         "a value in metres needs times 100",
-        "--noise-theta 0.0087 is read in degrees, finer than a motion-capture tracker "
+        "--noise-theta 0.0087 is read in degrees, finer than most motion-capture trackers "
         "(under 0.05 degrees); a value in radians needs times 180/pi",
     ]
     with warnings.catch_warnings():
@@ -584,10 +584,8 @@ def test_angles_that_look_like_radians_and_a_pass_tolerance_in_metres_are_warned
 
     monkeypatch.setattr(maps, "map_study", stop)
     out = str(tmp_path)
-    assert main(["sweep", "--out", out, "--headings", "0", "1.57", "3.14"]) == 2
-    assert (
-        f"--headings 0 1.57 3.14 is read in degrees (3.14°); {radians}" in capsys.readouterr().err
-    )
+    assert main(["sweep", "--out", out, "--headings", "0", "1.57", "3"]) == 2
+    assert f"--headings 0 1.57 3 is read in degrees (1.57°); {radians}" in capsys.readouterr().err
     assert main(["sweep", "--out", out, "--headings", "0", "1.5", "90"]) == 2  # one beyond ±π
     assert "read in degrees" not in capsys.readouterr().err
     monkeypatch.setattr(waypoints, "soccer_study", stop)

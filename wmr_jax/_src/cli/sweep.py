@@ -154,8 +154,9 @@ def _run(args: Any, out: Path, chunks: Path | None, finished: dict) -> int:
     headings = [
         flags.number("--headings", h, unit="degrees") for h in args.headings or DEFAULT_HEADINGS_DEG
     ]
-    if args.headings and all(abs(h) <= math.pi + 1e-3 for h in headings):  # ±π: radians?
-        flags.warn_if_radians("--headings", " ".join(args.headings), max(headings, key=abs))
+    fractions = [h for h in headings if h != round(h)]
+    if args.headings and fractions and all(abs(h) <= math.pi + 1e-3 for h in headings):
+        flags.warn_if_radians("--headings", " ".join(args.headings), fractions[0])  # ±π: rad?
     names = flags.controller_names(args.controller)
     given, settings = study_settings(args)
 

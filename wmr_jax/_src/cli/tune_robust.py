@@ -11,7 +11,7 @@ from typing import Any
 
 from wmr_jax._src.cli import flags
 
-# Below these a sensor's noise is finer than motion capture resolves: the value
+# Below these a sensor's noise is finer than most motion capture resolves: the value
 # was most likely given in metres or radians.
 _FINEST_XY = 0.01  # cm
 _FINEST_THETA = 0.05  # degrees
@@ -50,11 +50,11 @@ def config_from(args: Any) -> Any:
         value = getattr(args, flag[2:].replace("-", "_"), None)
         if value is not None:
             changes[name] = flags.number(flag, value, low=0.0, unit=unit)
-            if 0 < changes[name] < finest:  # a tracker finer than motion capture: another unit
+            if 0 < changes[name] < finest:  # finer than motion capture: another unit
                 import warnings
 
                 warnings.warn(
-                    f"{flag} {value} is read in {unit}, finer than a motion-capture tracker "
+                    f"{flag} {value} is read in {unit}, finer than most motion-capture trackers "
                     f"(under {finest:g} {unit}); a value in {other}",
                     UserWarning,
                     stacklevel=2,

@@ -64,9 +64,10 @@ def load_checkpoint(path: Path, fresh: Any, identity: dict[str, Any]) -> Any:
 def finished(out: Path, config: Any, robot: Any) -> bool:
     """Whether ``out`` holds this run finished, so that resuming it would redo nothing new.
 
-    That is: its checkpoint is of the same run and at its last iteration, and an
+    That is: its checkpoint is of the same run and at its last iteration, an
     ``evaluation.json`` of the same settings and robot was written after it (a run
-    stopped in its random search or evaluation has none newer, and is resumed).
+    stopped in its random search or evaluation has none newer, and is resumed), and
+    its ``tuned_gains.json`` is there.
     """
     from wmr_jax._src.model.params import Robot, validate_robot
     from wmr_jax._src.model.robots import robot_json
@@ -89,6 +90,7 @@ def finished(out: Path, config: Any, robot: Any) -> bool:
         and isinstance(saved, dict)
         and saved.get("config") == json.loads(json.dumps(config.as_dict()))
         and saved.get("robot") == json.loads(json.dumps(robot_json(robot)))
+        and (out / "tuned_gains.json").exists()
     )
 
 
