@@ -134,6 +134,7 @@ def _check_speed_unit(log: Any, robot: Any, label: str) -> None:
 def _plan(args: Any, robot: Any) -> int:
     import numpy as np
 
+    from wmr_jax._src import io
     from wmr_jax._src.identify import plan
 
     defaults = {"minutes": "5", "plan_dt": "0.04", "seed": "0"}
@@ -144,7 +145,7 @@ def _plan(args: Any, robot: Any) -> int:
     path = Path(flags.output_file("--plan", args.plan))
     commands = plan.plan_commands(robot, dt, minutes, seed)
     rows = np.column_stack([np.arange(len(commands)) * dt, commands])
-    path.parent.mkdir(parents=True, exist_ok=True)
-    np.savetxt(path, rows, fmt="%.6f", delimiter=",", header="t,v_cmd,omega_cmd", comments="")
+    lines = ["t,v_cmd,omega_cmd", *(",".join(f"{v:.6f}" for v in row) for row in rows)]
+    io.atomic_write_text(path, "\n".join(lines) + "\n")  # and makes its folder
     print(f"wrote {len(commands)} commands ({minutes:g} min at {dt:g} s) to {path}")
     return 0
