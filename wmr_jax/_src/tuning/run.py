@@ -79,14 +79,15 @@ def finished(out: Path, config: Any, robot: Any) -> bool:
             return False
         arrays, meta = io.load_arrays(checkpoint)
         saved = json.loads(report.read_text())
-    except (OSError, ValueError):  # a damaged file among them
+        iteration = int(np.asarray(arrays.get("iteration", -1)))
+    except (OSError, TypeError, ValueError):  # a damaged file among them
         return False  # resuming says what is wrong with them
     identity = training.run_identity(config, robot)
     return (
         isinstance(meta, dict)
         and meta.get("format") == CHECKPOINT_FORMAT
         and meta.get("identity") == identity
-        and int(np.asarray(arrays.get("iteration", -1))) == config.iters
+        and iteration == config.iters
         and isinstance(saved, dict)
         and saved.get("config") == json.loads(json.dumps(config.as_dict()))
         and saved.get("robot") == json.loads(json.dumps(robot_json(robot)))
