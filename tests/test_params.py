@@ -2,6 +2,7 @@
 
 import logging
 import math
+import warnings
 
 import jax
 import numpy as np
@@ -93,6 +94,12 @@ def test_infeasible_gains_warn_but_run():
     assert float(bound) == pytest.approx(60.0 + 1.85 * 10.0)
     batch = w.controllers.check_feasible(w.Gains(kr=np.array([60.0, 120.0])))
     np.testing.assert_array_equal(batch, [True, False])
+    # At the bound, k_r + L k_θ = 106.5 + 1.85 * 10 = 125 (in float32, 125.0000002): allowed.
+    with jax.enable_x64(False), warnings.catch_warnings():
+        warnings.simplefilter("error", w.WheelSpeedWarning)
+        w.rollout([10.0, 0.0, 0.0], w.Gains(kr=106.5, k_theta=10.0), steps=2)
+        assert w.controllers.check_feasible(w.Gains(kr=106.5, k_theta=10.0))
+    assert not w.controllers.check_feasible(w.Gains(kr=106.51, k_theta=10.0))
 
 
 def test_tracers_skip_validation_inside_user_transforms():
