@@ -245,6 +245,24 @@ def test_a_period_the_law_cannot_settle_at_is_warned_of(tmp_path, robust_file, c
     assert "cannot settle" not in (err := capsys.readouterr().err) and "milliseconds" not in err
 
 
+def test_gains_beyond_the_wheel_budget_are_warned_of_as_a_rollout_warns(
+    tmp_path, fixed_file, capsys, monkeypatch
+):
+    from wmr_jax._src.cli import main as cli
+
+    monkeypatch.setattr(cli, "_shown_warnings", set())  # each distinct warning printed once
+    over = tmp_path / "over.json"
+    over.write_text(json.dumps({"kr": 120.0, "k_theta": 10.0}))
+    assert main(["export", "--gains", str(over), "--out", str(tmp_path / "a")]) == 0
+    err = capsys.readouterr().err
+    assert "warning: --gains: k_r + L*k_theta = 138.5 cm/s exceeds v_max = 125 cm/s" in err
+    argv = ["--out", str(tmp_path / "b"), "--robot", "turtlebot3-burger"]
+    assert main(["export", "--gains", str(over), *argv]) == 0
+    assert "k_r + L*k_theta = 200 cm/s exceeds v_max = 22.72 cm/s" in capsys.readouterr().err
+    assert main(["export", "--gains", fixed_file, "--out", str(tmp_path / "c")]) == 0
+    assert "exceeds" not in capsys.readouterr().err  # tuned within the budget
+
+
 def test_export_period_is_baked_in_and_recorded(tmp_path, robust_file):
     """``--period 0.02``: the C predicts and limits over 0.02 s, so in the disturbed loop run at
     0.02 s it arrives when the JAX loop at 0.02 s does; the JSON records the period."""

@@ -67,14 +67,21 @@ def run(args: Any) -> int:
     from wmr_jax._src.model.controllers import get_controller
 
     control = get_controller(loop.controller)
-    if control.check_sampling is not None:  # the warning simulate --dt gives, at this period
-        import warnings
+    import warnings
 
+    from wmr_jax._src.model.params import Robot
+
+    # The warnings a rollout of these gains gives: the wheel budget, then the period.
+    checks = [("--gains", control.check_robot, loop.robot or Robot())]
+    checks.append((f"--period {period:g} s", control.check_sampling, period))
+    for shown, check, against in checks:
+        if check is None:
+            continue
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            control.check_sampling(loop.params, period)
+            check(loop.params, against)
         for record in caught:
-            warnings.warn(f"--period {period:g} s: {record.message}", record.category, 2)
+            warnings.warn(f"{shown}: {record.message}", record.category, 2)
     sources = c_sources(loop, real=real, period=period)
     for path in write_sources(out, sources, loop):
         print(f"export -> {path}")
