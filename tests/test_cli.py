@@ -104,7 +104,10 @@ def _write(tmp_path, name, text):
         # Tried before the work, not found unwritable after it.
         (["sweep", "--out", "/proc/wmr-x", "--poses", "10"], "a place this process can write"),
         # tune: a flag its mode would ignore, and sizes, before any work.
-        (["tune", "--out", "{dir}", "--robust", "--schedule"], "--schedule is not allowed with"),
+        (
+            ["tune", "--out", "{dir}", "--robust", "--schedule"],
+            "--schedule is not allowed with --robust, which tunes a gain schedule already",
+        ),
         (["tune", "--out", "{dir}", "--compare", "--gradient-cost"], "allowed: one of them"),
         (["tune", "--out", "{dir}", "--gradient-cost", "--iters", "5"], "--iters is not allowed"),
         (["tune", "--out", "{dir}", "--eval-poses", "1000000000000"], "--eval-poses '1000"),

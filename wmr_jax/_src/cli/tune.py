@@ -166,7 +166,10 @@ def _check_modes(args: Any) -> None:
     for name in unused:
         if getattr(args, name) not in (None, False):
             flag, other = f"--{name.replace('_', '-')}", f"--{mode.replace('_', '-')}"
-            raise ValueError(f"{flag} is not allowed with {other}, which does not use it")
+            why = "which does not use it"
+            if (mode, name) == ("robust", "schedule"):
+                why = "which tunes a gain schedule already (and fixed gains with --fixed)"
+            raise ValueError(f"{flag} is not allowed with {other}, {why}")
 
 
 def _gradient_cost(out: Path) -> int:
