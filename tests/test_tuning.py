@@ -286,6 +286,15 @@ def test_bad_settings_name_the_field(field, value):
         tuning.TuneConfig(**{field: value}).validate()
 
 
+def test_the_annealing_never_softens_the_law():
+    # An end temperature above the start would relax the law as the tuning goes on.
+    message = r"temperature_end = 0.2 is not allowed; allowed: at most temperature_start \(0.1\)"
+    for kind in (tuning.TuneConfig, tuning.RobustConfig):
+        with pytest.raises(ValueError, match=message):
+            kind(temperature_start=0.1, temperature_end=0.2).validate()
+        kind(temperature_start=0.1, temperature_end=0.1).validate()  # a constant one is fine
+
+
 @pytest.mark.parametrize(
     ("call", "name"),
     [

@@ -156,6 +156,12 @@ def check_loop(config: Any) -> None:
     check_number("learning_rate", config.learning_rate)
     for name in ("temperature_start", "temperature_end"):
         check_temperature(name, getattr(config, name))
+    if config.temperature_end > config.temperature_start:  # annealing sharpens the law
+        raise ValueError(
+            f"temperature_end = {config.temperature_end!r} is not allowed; allowed: at most "
+            f"temperature_start ({config.temperature_start!r}): the law is annealed towards the "
+            "hard one"
+        )
 
 
 def checked_config(config: Any, kind: type) -> Any:
