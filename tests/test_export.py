@@ -228,6 +228,12 @@ def test_export_command_writes_the_files_and_refuses_bad_flags(tmp_path, robust_
         assert main(["export", "--gains", robust_file, "--out", str(out), "--period", bad]) == 2
         err = capsys.readouterr().err
         assert f"--period {bad!r} is not allowed; allowed: a finite number > 0 s" in err
+    # A file that is no gains file is named as the other commands name it.
+    (tmp_path / "refs.csv").write_text("x,y,theta\n1,2,3\n")
+    assert main(["export", "--gains", str(tmp_path / "refs.csv"), "--out", str(out)]) == 2
+    assert capsys.readouterr().err.startswith(
+        f"wmr-jax: error: --gains '{tmp_path / 'refs.csv'}' is not a JSON gains file (not JSON"
+    )
 
 
 def test_a_period_the_law_cannot_settle_at_is_warned_of(tmp_path, robust_file, capsys, monkeypatch):

@@ -49,7 +49,6 @@ def run(args: Any) -> int:
     """Run ``wmr-jax export``; return the exit status."""
     from wmr_jax._src.export.codegen import REALS, c_sources, write_sources
     from wmr_jax._src.sim.rollout import DEFAULT_DT
-    from wmr_jax._src.tuning.saved import load_tuned
 
     out = flags.output_dir("--out", args.out)
     real = flags.choice("--real", args.real, REALS)
@@ -57,10 +56,7 @@ def run(args: Any) -> int:
     if args.period is not None:
         period = flags.period("--period", args.period)
     given = flags.robot_from(args.robot)
-    try:
-        loop = load_tuned(args.gains)
-    except ValueError as err:
-        raise ValueError(f"--gains {err}") from None
+    loop = flags.tuned_file("--gains", args.gains)[0]
     robot = flags.robot_for_gains(given, loop.robot, "--gains", args.gains)
     if robot is not None:
         loop = loop._replace(robot=robot)
