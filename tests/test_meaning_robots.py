@@ -321,6 +321,17 @@ def test_an_identify_output_gives_its_robot_block_and_says_so(tmp_path):
         read_robot(flat)
 
 
+def test_a_tuned_gains_file_given_as_a_robot_is_named_as_one(tmp_path):
+    path = tmp_path / "tuned_gains.json"
+    path.write_text(json.dumps({"controller": "shim-sung", "kr": 60.0, "robot": {}}))
+    with pytest.raises(ValueError) as err:
+        read_robot(path)
+    assert str(err.value) == (
+        f"'{path}' is a tuned gains file (it names a controller), not a robot; allowed: a JSON "
+        "object of Robot fields (a tuned file's own robot comes with it as --gains)"
+    )
+
+
 def test_a_json_file_that_is_not_an_object_lists_the_robot_fields(tmp_path):
     path = tmp_path / "list.json"
     path.write_text("[8.0, 22.0]")

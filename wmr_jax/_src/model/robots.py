@@ -358,6 +358,11 @@ def _robot_from_json(content: str, where: str) -> tuple[Robot, bool]:
     identified = isinstance(values, dict) and "wheel_scale" in values and "robot" in values
     if identified:
         values = values["robot"]
+    elif isinstance(values, dict) and "controller" in values:  # wmr-jax tune's tuned_gains.json
+        raise ValueError(
+            f"{where} is a tuned gains file (it names a controller), not a robot; allowed: a "
+            "JSON object of Robot fields (a tuned file's own robot comes with it as --gains)"
+        )
     if not isinstance(values, dict):
         raise ValueError(
             f"{where} is not allowed; allowed: a JSON object of Robot fields in cm, kg, s "
