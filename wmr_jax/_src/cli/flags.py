@@ -222,6 +222,24 @@ def period(flag: str, text: Any) -> float:
     return value
 
 
+def horizon(flag: str, text: Any, robot: Any) -> float:
+    """A run's horizon in s (> 0); one of 100 times the robot's study horizon is warned of."""
+    from wmr_jax._src.studies.robustness import study_horizon
+
+    value = number(flag, text, low=0.0, closed=False, unit="s")
+    usual = study_horizon(robot)
+    if value > 100 * usual:  # hours of runs for one slip of the unit
+        import warnings
+
+        warnings.warn(
+            f"{flag} {text} is read in s, {value / usual:.0f} times this robot's study horizon "
+            f"({usual:g} s); a value in milliseconds needs /1000",
+            UserWarning,
+            stacklevel=2,
+        )
+    return value
+
+
 def gains_from(args: Any) -> Any:
     """The ``Gains`` of the gain flags, given in the flags' units."""
     from wmr_jax._src.model.params import Gains, validate_gains

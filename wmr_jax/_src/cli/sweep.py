@@ -94,17 +94,7 @@ def robot_and_horizon(args: Any) -> tuple[Any, Any, float]:
     if args.horizon is None:
         horizon = study_horizon(robot)
     else:
-        horizon = flags.number("--horizon", args.horizon, low=0.0, closed=False, unit="s")
-        if horizon > 100 * study_horizon(robot):  # hours of runs for one slip of the unit
-            import warnings
-
-            warnings.warn(
-                f"--horizon {args.horizon} is read in s, {horizon / study_horizon(robot):.0f} "
-                f"times this robot's study horizon ({study_horizon(robot):g} s); a value in "
-                "milliseconds needs /1000",
-                UserWarning,
-                stacklevel=2,
-            )
+        horizon = flags.horizon("--horizon", args.horizon, robot)
     scaled = args.horizon is None and horizon > 6
     scaled = " (6 s × (60 + 10 L) / v_max, rounded up to 0.1 s)" if scaled else ""
     flags.say_robot(given, f"; horizon {horizon:.4g} s{scaled}")
