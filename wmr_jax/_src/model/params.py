@@ -192,10 +192,13 @@ def check_feasible(
 
 def feasible(gains: Gains, robot: Robot, *, warn: bool, stacklevel: int) -> np.ndarray:
     """``check_feasible`` of gains and a robot already checked (the rollouts' warning)."""
-    half_track, v_max = (np.asarray(v, dtype=float) for v in (robot.half_track, robot.v_max))
-    bound = np.asarray(gains.kr, dtype=float) + half_track * np.asarray(gains.k_theta, dtype=float)
-    # Within float32's rounding of the sum: gains at the bound are within it.
-    ok = bound <= v_max * (1 + 1e-6)
+    # In the precision the loop computes in: float32 gains at the bound are at it in float32
+    # (cast to float64 first, 106.5 + 1.85 * 10 would exceed 125 by 2e-7).
+    values = [np.asarray(v) for v in (gains.kr, gains.k_theta, robot.half_track, robot.v_max)]
+    dtype = np.result_type(*values, np.float32)
+    kr, k_theta, half_track, v_max = (v.astype(dtype) for v in values)
+    bound = kr + half_track * k_theta
+    ok = bound <= v_max * (1 + 1e-12)
     if warn and not np.all(ok):
         worst = float(np.max(bound))
         # The defaults are the paper's Fig. 7 gains, which break the bound on purpose.
