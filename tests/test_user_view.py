@@ -617,3 +617,25 @@ def test_a_gain_error_says_when_the_flag_blamed_was_not_given_and_aliases_confli
         "(see wmr-jax simulate --help)\n"
     )
     assert main(["simulate", "--ref", "30", "30", "0", "--kr", "60", "--steps", "2"]) == 0
+
+
+def test_evaluate_warns_when_no_reference_can_be_reached_within_the_horizon(
+    tmp_path, capsys, monkeypatch
+):
+    from wmr_jax._src.cli import main as cli
+    from wmr_jax._src.studies import conditions
+
+    def stop(*args, **kwargs):
+        raise ValueError("stopped before the runs")
+
+    monkeypatch.setattr(cli, "_shown_warnings", set())  # each distinct warning printed once
+    monkeypatch.setattr(conditions, "evaluate_loop", stop)
+    far = _file(tmp_path, "far.csv", "x_cm,y_cm,theta_rad\n3000,3000,0\n-2500,0,1\n")
+    assert main(["evaluate", "--gains", _gains(tmp_path), "--refs", far]) == 2
+    assert (
+        f"--refs '{far}': every reference lies beyond 750 cm, as far as V_max drives within the "
+        "horizon (the nearest 2500 cm): none can arrive; x and y are read as cm"
+    ) in capsys.readouterr().err
+    near = _file(tmp_path, "near.csv", "x_cm,y_cm,theta_rad\n3000,3000,0\n30,20,1\n")
+    assert main(["evaluate", "--gains", _gains(tmp_path), "--refs", near]) == 2
+    assert "none can arrive" not in capsys.readouterr().err  # one of them can

@@ -245,8 +245,12 @@ def load_refs(path: str, *, x64: bool = True) -> tuple[Any, list[str]]:
     return refs, labels
 
 
-def unit_warnings(path: str, refs: Any) -> list[str]:
-    """Warnings for references that look like metres or degrees (legal, so not refused)."""
+def unit_warnings(path: str, refs: Any, reach: float | None = None) -> list[str]:
+    """Warnings for references that look like metres or degrees (legal, so not refused).
+
+    ``reach``: the farthest a robot can drive within the horizon, cm (``V_max`` times
+    it); a file whose every reference lies beyond it is warned of as well.
+    """
     import numpy as np
 
     from wmr_jax._src.sim.metrics import DEFAULT_TOL_R
@@ -258,6 +262,12 @@ def unit_warnings(path: str, refs: Any) -> list[str]:
             f"--refs {path!r}: every reference lies within {DEFAULT_TOL_R:g} cm of the start "
             f"(the farthest {float(distance.max()):.3g} cm), inside the arrival tolerance; the "
             "columns are read as x cm, y cm, theta rad (a file in metres needs x and y times 100)"
+        )
+    if reach is not None and float(distance.min()) > reach:
+        out.append(
+            f"--refs {path!r}: every reference lies beyond {reach:.4g} cm, as far as V_max "
+            f"drives within the horizon (the nearest {float(distance.min()):.4g} cm): none can "
+            "arrive; x and y are read as cm"
         )
     heading = np.abs(refs[:, 2])
     if float(heading.max()) > 2 * np.pi:
@@ -424,6 +434,13 @@ def hint(result: dict[str, Any], args: Any) -> str:
     )
 
 
+def _reach(robot: Any, horizon: float) -> float:
+    """How far a robot drives within ``horizon`` at its ``V_max``, cm."""
+    from wmr_jax._src.model.params import Robot
+
+    return float((Robot() if robot is None else robot).v_max) * horizon
+
+
 def per_ref_csv(result: dict[str, Any], labels: list[str]) -> str:
     """The ``--per-ref`` table: one line per reference, in the order of ``--refs``."""
     lines = ["where,x_cm,y_cm,theta_rad,arrived,arrival_s,final_distance_cm,settled_at_horizon"]
@@ -501,7 +518,7 @@ def run(args: Any) -> int:
         print(given.note)
     import warnings
 
-    for text in unit_warnings(args.refs, refs):
+    for text in unit_warnings(args.refs, refs, _reach(robot, horizon)):
         warnings.warn(text, UserWarning, stacklevel=1)
 
     from wmr_jax._src.studies.conditions import evaluate_loop
@@ -540,11 +557,11 @@ def run_compiled(args: Any) -> int:
     refs, labels = load_refs(args.refs)
     import warnings
 
-    for text in unit_warnings(args.refs, refs):
-        warnings.warn(text, UserWarning, stacklevel=1)
     loop, meta = exported_loop(args.c)
     robot = flags.robot_for_gains(given, loop.robot, "--c", args.c)
     horizon = _horizon(args.horizon, len(refs), robot)
+    for text in unit_warnings(args.refs, refs, _reach(robot, horizon)):
+        warnings.warn(text, UserWarning, stacklevel=1)
     compiled = compile_controller(args.c)
     with flags.as_flags(_AS_FLAGS):
         result = evaluate_compiled(compiled, loop, refs, horizon=horizon, robot=robot, **settings)
