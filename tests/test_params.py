@@ -72,6 +72,23 @@ def test_bad_batch_arguments():
         w.final_poses(np.ones((2, 3)), w.Robot())
 
 
+def test_a_tuned_loop_or_another_laws_parameters_say_how_they_run():
+    from wmr_jax._src.model.controllers.schedule import ScheduleParams
+
+    loop = w.ClosedLoop(params=w.Gains(kr=60.0), controller="shim-sung")
+    with pytest.raises(ValueError) as err:
+        w.rollout([30.0, 30.0, 0.0], loop)
+    assert str(err.value) == (
+        "gains is a ClosedLoop; allowed: a Gains for controller 'shim-sung' (a ClosedLoop runs "
+        "as gains=loop.params, controller='shim-sung'; with its estimator through "
+        "wmr_jax.studies.evaluate_loop)"
+    )
+    schedule = w.get_controller("shim-sung-schedule").default_params()
+    assert isinstance(schedule, ScheduleParams)
+    with pytest.raises(ValueError, match=r"\(the parameters of 'shim-sung-schedule': pass contr"):
+        w.final_poses(np.ones((2, 3)), schedule)
+
+
 def test_errors_come_before_tracing(caplog):
     """A bad gain is refused before anything is compiled (JAX logs each compile)."""
     steps = 7777  # a length no other test uses: running it would compile

@@ -163,6 +163,22 @@ def _common_batch(refs, params, init, robot):
     return drop_shared_axes((refs, params, init, robot))
 
 
+def _which_controller(params: Any) -> str:
+    """What to pass instead of ``params``, when it is the loop of a tuned file or its params."""
+    from wmr_jax._src.model.controllers import registered_names
+    from wmr_jax._src.model.controllers.base import get_controller
+    from wmr_jax._src.sim.sensing.loop import ClosedLoop
+
+    if isinstance(params, ClosedLoop):  # load_tuned's loop: its law's parameters, its controller
+        name = getattr(params.controller, "name", params.controller)
+        return (
+            f" (a ClosedLoop runs as gains=loop.params, controller={name!r}; with its "
+            "estimator through wmr_jax.studies.evaluate_loop)"
+        )
+    owners = [n for n in registered_names() if isinstance(params, get_controller(n).params_type)]
+    return f" (the parameters of {owners[0]!r}: pass controller={owners[0]!r})" if owners else ""
+
+
 def prepare(
     refs,
     params,
@@ -185,7 +201,7 @@ def prepare(
     if not isinstance(params, control.params_type):
         raise ValueError(
             f"gains is a {type(params).__name__}; allowed: a {control.params_type.__name__} "
-            f"for controller {control.name!r}"
+            f"for controller {control.name!r}{_which_controller(params)}"
         )
     params = as_float_tree(control.validate(params))
     check_command_output(control, params)
