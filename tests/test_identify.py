@@ -478,6 +478,9 @@ def test_evaluate_on_an_identified_robot_runs_each_reference_as_simulate_does(tm
     assert main(args) == 0
     printed = capsys.readouterr().out
     assert "runs on the robot identified in" in printed and "believes its base" in printed
+    # Its wheels are the fitted scales (1.02, 0.98), not a ± bound drawn per run.
+    assert "| wheel scales | the identified ones (up to 2 % off the model) |" in printed
+    assert "wheel-radius mismatch |" not in printed
     got = json.loads((tmp_path / "out.json").read_text())
     assert got["condition"] == "identified"
     arrival = [np.inf if r["arrival_s"] is None else r["arrival_s"] for r in got["per_reference"]]

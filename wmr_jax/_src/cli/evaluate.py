@@ -371,10 +371,10 @@ def summary_rows(result: dict[str, Any], labels: list[str] | None = None) -> lis
         peak += " at the rims, wheel-radius mismatch included"
         if result["peak_wheel_speed_ok"]:
             bound = result["v_max"] * (1.0 + mismatch)
-            within += (
-                f" (a wheel up to {100 * mismatch:g} % larger than modelled turns that into up "
-                f"to {bound:.4g} cm/s at its rim)"
-            )
+            wheel = f"a wheel up to {100 * mismatch:.3g} % larger than modelled"
+            if result["condition"] == "identified":  # the fitted scales, not a ± bound
+                wheel = f"the identified wheels, up to {100 * mismatch:.3g} % off the model,"
+            within += f" ({wheel} turns that into up to {bound:.4g} cm/s at its rim)"
     rows = [("success", _percent(result["success"]))]
     if "per_reference" in result:
         rows.append(("not arrived", _failed(result, labels)))
@@ -389,7 +389,7 @@ def summary_rows(result: dict[str, Any], labels: list[str] | None = None) -> lis
         ("robot", robot),
         ("references (n)", str(result["n"])),
         ("condition", result["condition"]),
-        ("wheel-radius mismatch", f"±{100 * mismatch:g} %"),
+        _mismatch_row(result),
         ("seed", str(result["seed"])),
         ("horizon", f"{result['horizon_s']:g} s"),
         ("velocity loop", result["velocity"]),
@@ -439,6 +439,14 @@ def _reach(robot: Any, horizon: float) -> float:
     from wmr_jax._src.model.params import Robot
 
     return float((Robot() if robot is None else robot).v_max) * horizon
+
+
+def _mismatch_row(result: dict[str, Any]) -> tuple[str, str]:
+    """The wheels' row: a ± bound drawn per run, or an identified robot's fitted scales."""
+    if result["condition"] == "identified":
+        off = f"{100 * result['mismatch']:.3g} %"
+        return ("wheel scales", f"the identified ones (up to {off} off the model)")
+    return ("wheel-radius mismatch", f"±{100 * result['mismatch']:g} %")
 
 
 def per_ref_csv(result: dict[str, Any], labels: list[str]) -> str:
