@@ -211,6 +211,15 @@ def test_write_robustness_checks_everything_before_writing(tmp_path):
     for x64, dtype in ((False, "float32"), (True, "float64")):
         write_robustness(tmp_path, [_robustness_row()], seed=0, velocity="ideal", n_runs=1, x64=x64)
         assert json.loads((tmp_path / "robustness.json").read_text())["dtype"] == dtype
+    # The controllers' feedback heads the table and is recorded (raw unless an estimator).
+    head = (tmp_path / "robustness.md").read_text().splitlines()[0]
+    assert head.startswith("Robustness Monte Carlo (ideal loop, raw feedback, seed 0, 1 runs")
+    write_robustness(
+        tmp_path, [_robustness_row()], seed=0, velocity="ideal", n_runs=1, estimator="ekf"
+    )
+    head = (tmp_path / "robustness.md").read_text().splitlines()[0]
+    assert head.startswith("Robustness Monte Carlo (ideal loop, the ekf, seed 0")
+    assert json.loads((tmp_path / "robustness.json").read_text())["feedback"] == "ekf"
 
 
 def test_write_standard_conditions_checks_everything_before_writing(tmp_path):
