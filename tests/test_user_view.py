@@ -563,6 +563,15 @@ def test_a_period_or_horizon_that_looks_like_milliseconds_is_warned_of(
     ) in err
     assert main(["compare", "--out", str(tmp_path), "--horizon", "600"]) == 2  # 100 times: meant
     assert "milliseconds" not in capsys.readouterr().err
+    from wmr_jax._src.tuning import run as tuning_run
+
+    monkeypatch.setattr(tuning_run, "tune", stop)
+    assert main(["tune", "--out", str(tmp_path), "--horizon", "3000"]) == 2
+    assert "warning: --horizon 3000 is read in s, 500 times" in capsys.readouterr().err
+    # A slower robot's study horizon is longer (37 s): there the same horizon is 81 times it.
+    burger = ["--robot", "turtlebot3-burger"]
+    assert main(["tune", "--out", str(tmp_path), "--horizon", "3000", *burger]) == 2
+    assert "milliseconds" not in capsys.readouterr().err
 
 
 def test_angles_that_look_like_radians_and_a_pass_tolerance_in_metres_are_warned_of(

@@ -110,6 +110,14 @@ _MODE_FLAGS = {
 }
 
 
+def _horizon(args: Any, text: Any) -> float:
+    """``--horizon`` (warned of when it looks like milliseconds), else the problem's."""
+    if args.horizon is None:
+        return flags.number("--horizon", text, low=0.0, closed=False, unit="s")
+    given = flags.robot_from(args.robot)
+    return flags.horizon("--horizon", text, None if given is None else given.robot)
+
+
 def _config_from(args: Any, *, problem: str) -> Any:
     """The ``TuneConfig`` of the flags, each checked (one line naming a bad one)."""
     from wmr_jax._src.sim.poses import MAX_SAMPLES
@@ -128,7 +136,7 @@ def _config_from(args: Any, *, problem: str) -> Any:
         iters=flags.positive_int("--iters", given("iters"), 1),
         poses=flags.positive_int("--poses", given("poses"), 1, MAX_SAMPLES),
         seed=flags.positive_int("--seed", given("seed"), 0, 2**32 - 1),
-        horizon=flags.number("--horizon", given("horizon"), low=0.0, closed=False, unit="s"),
+        horizon=_horizon(args, given("horizon")),
         eval_poses=flags.positive_int("--eval-poses", given("eval_poses"), 1, MAX_SAMPLES),
         checkpoint_every=flags.positive_int("--checkpoint-every", given("checkpoint_every"), 1),
         random_search=not args.no_random_search,
