@@ -74,9 +74,8 @@ class RobustConfig:
         poses: reference poses per standard condition per iteration (ideal loop).
         nonideal_poses: poses of the randomised non-ideal group per iteration (0: none).
         search_poses: poses per condition that random search and CMA-ES score on.
-        compare: also run random search and CMA-ES, each scoring as many
-            candidates as the tuning's compute buys (``iteration_price``);
-            off by default, as in ``wmr-jax tune --robust``.
+        compare: also run random search and CMA-ES (off by default, as in ``tune --robust``),
+            each scoring as many candidates as the tuning's compute buys (``iteration_price``).
         price: with ``compare``, the candidates one iteration is worth in the
             searches' budget (``None``: measured, ``iteration_price``); a
             recorded price gives them as many candidates on any machine.
