@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from wmr_jax._src.cli import flags
@@ -77,7 +78,8 @@ def run(args: Any) -> int:
     stride, _ = frame_timing(DEFAULT_DT, None, speed)
     shown = f"--seconds {seconds:g} at --speed {speed:g}"
     longest = (max_frames(SQUARE_PIXELS) - 1) * stride * DEFAULT_DT  # the frames' span, s
-    remedy = f" (--seconds {longest:.4g} at the most at --speed {speed:g})"
+    longest = math.floor(longest * 100) / 100  # shown rounded down: the value shown is allowed
+    remedy = f" (--seconds {longest:.2f} at the most at --speed {speed:g})"
     check_frames(horizon_steps(DEFAULT_DT, seconds) + 1, stride, SQUARE_PIXELS, shown, remedy)
     params = robot_defaults(name, robot)
     flags.say_robot(given)

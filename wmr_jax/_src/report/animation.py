@@ -24,9 +24,11 @@ def _pitch(poses: np.ndarray, refs: np.ndarray, title: str, arrow: float) -> tup
     """``(fig, ax)`` framing the runs, with the references' heading arrows (``arrow`` cm)."""
     span = np.concatenate([poses[..., :2].reshape(-1, 2), refs[:, :2]])
     lo, hi = span.min(axis=0) - 8, span.max(axis=0) + 8
-    # 6 in on its longer side (and 0.3 in for the title): at most SQUARE_PIXELS a frame.
-    tall = (hi[1] - lo[1]) / max(hi[0] - lo[0], 1e-9)
-    fig, ax = plt.subplots(figsize=(6 / max(tall, 1.0), 6 * min(tall, 1.0) + 0.3))
+    # A pitch taller than wide is widened to a square: 6 in wide, at most 6.3 in high
+    # with the title, so a frame is at most SQUARE_PIXELS and never a sliver.
+    widen = max(0.0, (hi[1] - lo[1]) - (hi[0] - lo[0])) / 2
+    lo, hi = lo - [widen, 0.0], hi + [widen, 0.0]
+    fig, ax = plt.subplots(figsize=(6, 6 * (hi[1] - lo[1]) / max(hi[0] - lo[0], 1e-9) + 0.3))
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
     ax.set_aspect("equal")
