@@ -192,13 +192,15 @@ def check_feasible(
 
 def feasible(gains: Gains, robot: Robot, *, warn: bool, stacklevel: int) -> np.ndarray:
     """``check_feasible`` of gains and a robot already checked (the rollouts' warning)."""
-    # In the precision the loop computes in: float32 gains at the bound are at it in float32
-    # (cast to float64 first, 106.5 + 1.85 * 10 would exceed 125 by 2e-7).
+    # To the rounding of the coarsest precision given: float32 gains at the bound are at
+    # it (cast to float64 first, 106.5 + 1.85 * 10 exceeds 125 by 2e-7); float64 ones a
+    # hair above it are not.
     values = [np.asarray(v) for v in (gains.kr, gains.k_theta, robot.half_track, robot.v_max)]
-    dtype = np.result_type(*values, np.float32)
-    kr, k_theta, half_track, v_max = (v.astype(dtype) for v in values)
+    floats = [v.dtype for v in values if v.dtype.kind == "f"] or [np.dtype(np.float64)]
+    ulp = max(np.finfo(d).eps for d in floats)
+    kr, k_theta, half_track, v_max = (v.astype(np.float64) for v in values)
     bound = kr + half_track * k_theta
-    ok = bound <= v_max * (1 + 1e-12)
+    ok = bound <= v_max * (1 + 4 * ulp)
     if warn and not np.all(ok):
         worst = float(np.max(bound))
         # The defaults are the paper's Fig. 7 gains, which break the bound on purpose.
