@@ -642,9 +642,9 @@ def test_evaluate_warns_when_no_reference_can_be_reached_within_the_horizon(
     far = _file(tmp_path, "far.csv", "x_cm,y_cm,theta_rad\n3000,3000,0\n-2500,0,1\n")
     assert main(["evaluate", "--gains", _gains(tmp_path), "--refs", far]) == 2
     assert (
-        f"--refs '{far}': every reference lies beyond 750 cm, as far as V_max drives within the "
-        "horizon (the nearest 2500 cm): none can arrive; x and y are read as cm"
+        f"--refs '{far}': every reference lies beyond 751 cm, as far as V_max drives within the "
+        "horizon (the nearest 2500 cm): a robot within V_max cannot arrive; x and y are read as cm"
     ) in capsys.readouterr().err
     near = _file(tmp_path, "near.csv", "x_cm,y_cm,theta_rad\n3000,3000,0\n30,20,1\n")
     assert main(["evaluate", "--gains", _gains(tmp_path), "--refs", near]) == 2
-    assert "none can arrive" not in capsys.readouterr().err  # one of them can
+    assert "cannot arrive" not in capsys.readouterr().err  # one of them can

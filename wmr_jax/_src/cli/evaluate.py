@@ -266,8 +266,8 @@ def unit_warnings(path: str, refs: Any, reach: float | None = None) -> list[str]
     if reach is not None and float(distance.min()) > reach:
         out.append(
             f"--refs {path!r}: every reference lies beyond {reach:.4g} cm, as far as V_max "
-            f"drives within the horizon (the nearest {float(distance.min()):.4g} cm): none can "
-            "arrive; x and y are read as cm"
+            f"drives within the horizon (the nearest {float(distance.min()):.4g} cm): a robot "
+            "within V_max cannot arrive; x and y are read as cm"
         )
     heading = np.abs(refs[:, 2])
     if float(heading.max()) > 2 * np.pi:
@@ -371,10 +371,14 @@ def summary_rows(result: dict[str, Any], labels: list[str] | None = None) -> lis
         peak += " at the rims, wheel-radius mismatch included"
         if result["peak_wheel_speed_ok"]:
             bound = result["v_max"] * (1.0 + mismatch)
-            wheel = f"a wheel up to {100 * mismatch:.3g} % larger than modelled"
-            if result["condition"] == "identified":  # the fitted scales, not a ± bound
-                wheel = f"the identified wheels, up to {100 * mismatch:.3g} % off the model,"
-            within += f" ({wheel} turns that into up to {bound:.4g} cm/s at its rim)"
+            off = f"{100 * mismatch:.3g} %"
+            within += (
+                f" (the identified wheels, up to {off} off the model, turn that into up to "
+                f"{bound:.4g} cm/s at their rims)"
+                if result["condition"] == "identified"  # the fitted scales, not a ± bound
+                else f" (a wheel up to {off} larger than modelled turns that into up to "
+                f"{bound:.4g} cm/s at its rim)"
+            )
     rows = [("success", _percent(result["success"]))]
     if "per_reference" in result:
         rows.append(("not arrived", _failed(result, labels)))
@@ -435,10 +439,11 @@ def hint(result: dict[str, Any], args: Any) -> str:
 
 
 def _reach(robot: Any, horizon: float) -> float:
-    """How far a robot drives within ``horizon`` at its ``V_max``, cm."""
+    """How far a robot drives within ``horizon`` at its ``V_max``, and the arrival tolerance, cm."""
     from wmr_jax._src.model.params import Robot
+    from wmr_jax._src.sim.metrics import DEFAULT_TOL_R
 
-    return float((Robot() if robot is None else robot).v_max) * horizon
+    return float((Robot() if robot is None else robot).v_max) * horizon + DEFAULT_TOL_R
 
 
 def _mismatch_row(result: dict[str, Any]) -> tuple[str, str]:
