@@ -211,15 +211,14 @@ def test_write_robustness_checks_everything_before_writing(tmp_path):
     for x64, dtype in ((False, "float32"), (True, "float64")):
         write_robustness(tmp_path, [_robustness_row()], seed=0, velocity="ideal", n_runs=1, x64=x64)
         assert json.loads((tmp_path / "robustness.json").read_text())["dtype"] == dtype
-    # The controllers' feedback heads the table and is recorded (raw unless an estimator).
+    # The controllers' feedback, as the rows give it, heads the table.
     head = (tmp_path / "robustness.md").read_text().splitlines()[0]
-    assert head.startswith("Robustness Monte Carlo (ideal loop, raw feedback, seed 0, 1 runs")
-    write_robustness(
-        tmp_path, [_robustness_row()], seed=0, velocity="ideal", n_runs=1, estimator="ekf"
-    )
-    head = (tmp_path / "robustness.md").read_text().splitlines()[0]
-    assert head.startswith("Robustness Monte Carlo (ideal loop, the ekf, seed 0")
-    assert json.loads((tmp_path / "robustness.json").read_text())["feedback"] == "ekf"
+    assert head.startswith("Robustness Monte Carlo (ideal loop, seed 0, 1 runs")  # rows say none
+    for feedback, said in (("raw", "raw feedback, "), ("ekf", "the ekf, ")):
+        rows = [_robustness_row(feedback=feedback)]
+        write_robustness(tmp_path, rows, seed=0, velocity="ideal", n_runs=1)
+        head = (tmp_path / "robustness.md").read_text().splitlines()[0]
+        assert head.startswith(f"Robustness Monte Carlo (ideal loop, {said}seed 0")
 
 
 def test_write_standard_conditions_checks_everything_before_writing(tmp_path):

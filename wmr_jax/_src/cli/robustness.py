@@ -120,7 +120,7 @@ def run(args: Any) -> int:
     print(f"robot {describe_robot(robot)}{origin}, horizon {study_horizon(robot):g} s{note}")
     study = {"seed": seed, "velocity": velocity, "n_runs": n_runs, "robot": robot, "x64": x64}
     rows = robustness_study(controller_names=names, estimator=estimator, **study)
-    write_robustness(out, rows, **study, estimator=estimator)
+    write_robustness(out, rows, **study)
     print(f"robustness -> {out}/robustness.png, robustness.md, robustness.json")
     print(robustness_table(rows, _PRINTED), end="")
     _standard(out, sets, seed, robot, meta, x64=x64)

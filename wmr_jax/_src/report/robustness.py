@@ -149,7 +149,6 @@ def write_robustness(
     n_runs: int,
     robot: Any = None,
     x64: bool | None = None,
-    estimator: str | None = None,
 ) -> list[Path]:
     """Write ``robustness.png``, ``robustness.md`` and ``robustness.json`` into ``out_dir``.
 
@@ -159,23 +158,23 @@ def write_robustness(
         seed, velocity, n_runs: the study's seed, velocity loop and runs per level.
         robot: the study's ``Robot``; ``None``: the paper robot.
         x64: recorded as the ``dtype`` (float64 or float32); ``None`` records none.
-        estimator: the controllers' feedback (``None``: raw), recorded and in the table's head.
 
     Returns:
         The paths written.
     """
     rows = require_rows("rows", rows)
     horizon = _horizon_of(rows)
-    feedback = "raw feedback" if estimator is None else f"the {estimator}"
+    # The controllers' feedback, as the rows say it (raw, or the estimator's name).
+    fed = sorted({str(row["feedback"]) for row in rows if "feedback" in row})
+    feedback = "".join(f"{f} feedback, " if f == "raw" else f"the {f}, " for f in fed)
     meta = {"seed": seed, "velocity": velocity, "runs": n_runs, "horizon_s": horizon}
-    meta["feedback"] = "raw" if estimator is None else estimator
     if x64 is not None:
         meta["dtype"] = "float64" if x64 else "float32"
     meta["robot"] = robot_json(Robot() if robot is None else robot)
 
     def head(rows: list[dict[str, Any]], meta: dict[str, Any]) -> str:
         return (
-            f"Robustness Monte Carlo ({velocity} loop, {feedback}, seed {seed}, {n_runs} runs "
+            f"Robustness Monte Carlo ({velocity} loop, {feedback}seed {seed}, {n_runs} runs "
             "per row, "
             f"horizon {horizon:g} s{_robot_text(meta)})\n\n"
         )
