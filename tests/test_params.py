@@ -80,8 +80,8 @@ def test_a_tuned_loop_or_another_laws_parameters_say_how_they_run():
         w.rollout([30.0, 30.0, 0.0], loop)
     assert str(err.value) == (
         "gains is a ClosedLoop; allowed: a Gains for controller 'shim-sung' (a ClosedLoop runs "
-        "as gains=loop.params, controller='shim-sung'; with its estimator through "
-        "wmr_jax.studies.evaluate_loop)"
+        "as gains=loop.params, controller='shim-sung' and the robot it was tuned for, "
+        "robot=loop.robot; with its estimator through wmr_jax.studies.evaluate_loop)"
     )
     schedule = w.get_controller("shim-sung-schedule").default_params()
     assert isinstance(schedule, ScheduleParams)

@@ -172,8 +172,9 @@ def _which_controller(params: Any) -> str:
     if isinstance(params, ClosedLoop):  # load_tuned's loop: its law's parameters, its controller
         name = getattr(params.controller, "name", params.controller)
         return (
-            f" (a ClosedLoop runs as gains=loop.params, controller={name!r}; with its "
-            "estimator through wmr_jax.studies.evaluate_loop)"
+            f" (a ClosedLoop runs as gains=loop.params, controller={name!r} and the robot it "
+            "was tuned for, robot=loop.robot; with its estimator through "
+            "wmr_jax.studies.evaluate_loop)"
         )
     owners = [n for n in registered_names() if isinstance(params, get_controller(n).params_type)]
     return f" (the parameters of {owners[0]!r}: pass controller={owners[0]!r})" if owners else ""
