@@ -529,10 +529,8 @@ def run(args: Any) -> int:
     horizon = _horizon(args.horizon, len(refs), robot)
     if given is not None and given.note:
         print(given.note)
-    import warnings
-
     for text in unit_warnings(args.refs, refs, _reach(robot, horizon)):
-        warnings.warn(text, UserWarning, stacklevel=1)
+        flags.unit_slip(text)
 
     from wmr_jax._src.studies.conditions import evaluate_loop
     from wmr_jax._src.tuning.saved import tuned_json
@@ -568,13 +566,11 @@ def run_compiled(args: Any) -> int:
     per_ref = None if args.per_ref is None else flags.output_file("--per-ref", args.per_ref, ".csv")
     given = flags.robot_from(args.robot)
     refs, labels = load_refs(args.refs)
-    import warnings
-
     loop, meta = exported_loop(args.c)
     robot = flags.robot_for_gains(given, loop.robot, "--c", args.c)
     horizon = _horizon(args.horizon, len(refs), robot)
     for text in unit_warnings(args.refs, refs, _reach(robot, horizon)):
-        warnings.warn(text, UserWarning, stacklevel=1)
+        flags.unit_slip(text)
     compiled = compile_controller(args.c)
     with flags.as_flags(_AS_FLAGS):
         result = evaluate_compiled(compiled, loop, refs, horizon=horizon, robot=robot, **settings)

@@ -60,15 +60,14 @@ def run(args: Any) -> int:
     robot = flags.robot_for_gains(given, loop.robot, "--gains", args.gains)
     if robot is not None:
         loop = loop._replace(robot=robot)
-    from wmr_jax._src.model.controllers import get_controller
-
-    control = get_controller(loop.controller)
     import warnings
 
+    from wmr_jax._src.model.controllers import get_controller
     from wmr_jax._src.model.params import Robot
 
+    control = get_controller(loop.controller)
     # The warnings a rollout of these gains gives: the wheel budget, then the period.
-    checks = [("--gains", control.check_robot, loop.robot or Robot())]
+    checks = [("--gains", control.check_robot, Robot() if loop.robot is None else loop.robot)]
     checks.append((f"--period {period:g} s", control.check_sampling, period))
     for shown, check, against in checks:
         if check is None:

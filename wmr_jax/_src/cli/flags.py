@@ -121,17 +121,21 @@ def controller_names(names: Sequence[str] | None) -> list[str]:
     return list(dict.fromkeys(names))
 
 
+def unit_slip(text: str) -> None:
+    """Warn that a flag's value, taken as given, was most likely written in another unit."""
+    import warnings
+
+    warnings.warn(text, UserWarning, stacklevel=3)
+
+
+def _read_in_degrees(flag: str, text: Any, degrees: float) -> str:
+    return f"{flag} {text} is read in degrees ({degrees:g}°); a value in radians needs times 180/pi"
+
+
 def warn_if_radians(flag: str, text: Any, degrees: float) -> None:
     """Warn that ``degrees``, a fraction within ±π, was most likely given in radians."""
     if 0 < abs(degrees) <= math.pi + 1e-3 and degrees != round(degrees):
-        import warnings
-
-        warnings.warn(
-            f"{flag} {text} is read in degrees ({degrees:g}°); a value in radians needs "
-            "times 180/pi",
-            UserWarning,
-            stacklevel=3,
-        )
+        unit_slip(_read_in_degrees(flag, text, degrees))
 
 
 def pose_from_degrees(flag: str, values: Sequence[Any]) -> list[float]:
@@ -212,13 +216,7 @@ def period(flag: str, text: Any) -> float:
     """A control period in s (> 0); one of a second or more is warned of as milliseconds meant."""
     value = number(flag, text, low=0.0, closed=False, unit="s")
     if value >= 1.0:  # no robot is controlled at a second a sample
-        import warnings
-
-        warnings.warn(
-            f"{flag} {text} is read in s; a value in milliseconds needs /1000",
-            UserWarning,
-            stacklevel=2,
-        )
+        unit_slip(f"{flag} {text} is read in s; a value in milliseconds needs /1000")
     return value
 
 
@@ -229,13 +227,9 @@ def horizon(flag: str, text: Any, robot: Any) -> float:
     value = number(flag, text, low=0.0, closed=False, unit="s")
     usual = study_horizon(robot)
     if value > 100 * usual:  # hours of runs for one slip of the unit
-        import warnings
-
-        warnings.warn(
+        unit_slip(
             f"{flag} {text} is read in s, {value / usual:.0f} times this robot's study horizon "
-            f"({usual:g} s); a value in milliseconds needs /1000",
-            UserWarning,
-            stacklevel=2,
+            f"({usual:g} s); a value in milliseconds needs /1000"
         )
     return value
 
@@ -265,14 +259,7 @@ def gains_from(args: Any) -> Any:
         raise
     degrees = math.degrees(values["phi_m"])
     if degrees <= math.pi / 2:  # a Φ_m of a degree or so: radians given where degrees belong
-        import warnings
-
-        warnings.warn(
-            f"{gain_flag(args, 'phi_m')} {args.phi_m} is read in degrees ({degrees:g}°); a "
-            "value in radians needs times 180/pi",
-            UserWarning,
-            stacklevel=2,
-        )
+        unit_slip(_read_in_degrees(gain_flag(args, "phi_m"), args.phi_m, degrees))
     return gains
 
 

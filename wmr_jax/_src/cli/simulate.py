@@ -180,11 +180,9 @@ def run(args: Any) -> int:
     unsettled = any(issubclass(r.category, SamplingWarning) for r in caught)
     gap = math.hypot(ref[0] - init[0], ref[1] - init[1])
     if 0.0 < gap <= DEFAULT_TOL_R:
-        warnings.warn(
+        flags.unit_slip(
             f"--ref lies {gap:.3g} cm from the start, inside the arrival tolerance "
-            f"({DEFAULT_TOL_R:g} cm); x and y are read as cm (metres need times 100)",
-            UserWarning,
-            stacklevel=1,
+            f"({DEFAULT_TOL_R:g} cm); x and y are read as cm (metres need times 100)"
         )
     t_arrive = float(metrics.arrival_time(traj, np.asarray(ref), dt=dt))
     per_region = np.asarray(metrics.region_time(traj, dt=dt))

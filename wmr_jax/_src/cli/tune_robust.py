@@ -51,13 +51,9 @@ def config_from(args: Any) -> Any:
         if value is not None:
             changes[name] = flags.number(flag, value, low=0.0, unit=unit)
             if 0 < changes[name] < finest:  # finer than motion capture: another unit
-                import warnings
-
-                warnings.warn(
+                flags.unit_slip(
                     f"{flag} {value} is read in {unit}, finer than most motion-capture trackers "
-                    f"(under {finest:g} {unit}); a value in {other}",
-                    UserWarning,
-                    stacklevel=2,
+                    f"(under {finest:g} {unit}); a value in {other}"
                 )
     price = getattr(args, "price", None)
     if price is not None:

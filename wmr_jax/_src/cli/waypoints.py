@@ -63,14 +63,10 @@ def run(args: Any) -> int:
     flags.warn_if_radians("--pass-tol-deg", args.pass_tol_deg, pass_deg)
     pass_cm = flags.number("--pass-tol", args.pass_tol, low=0.0, closed=False, unit="cm")
     if pass_cm < DEFAULT_TOL_R:  # tighter than arriving: the chain may never pass a waypoint
-        import warnings
-
-        warnings.warn(
+        flags.unit_slip(
             f"--pass-tol {args.pass_tol} is read in cm, under the arrival tolerance "
             f"({DEFAULT_TOL_R:g} cm): a robot may never pass a waypoint; a value in metres "
-            "needs times 100",
-            UserWarning,
-            stacklevel=2,
+            "needs times 100"
         )
     given = flags.robot_from(args.robot)
     robot = Robot() if given is None else given.robot
