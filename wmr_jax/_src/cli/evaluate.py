@@ -288,22 +288,32 @@ def _mismatch(text: Any) -> float:
     return value
 
 
-def _horizon(text: Any, n_refs: int, robot: Any) -> float:
-    """``--horizon``, else the robot's default (``study_horizon``), checked with the refs."""
+def _horizon(args: Any, refs: Any, robot: Any, note: str | None = None) -> float:
+    """``--horizon``, else the robot's default (``study_horizon``), checked with the refs.
+
+    Then prints the robot file's ``note`` and warns of references no run can reach.
+    """
+    from wmr_jax._src.model.params import Robot
+    from wmr_jax._src.sim.metrics import DEFAULT_TOL_R
     from wmr_jax._src.sim.poses import horizon_steps
     from wmr_jax._src.sim.rollout import DEFAULT_DT
     from wmr_jax._src.studies.robustness import study_horizon
 
-    if text is None:
-        text = study_horizon(robot)
+    text = study_horizon(robot) if args.horizon is None else args.horizon
     horizon = flags.number("--horizon", text, low=0.0, high=_MAX_HORIZON_S, closed=False, unit="s")
     with flags.as_flags({"horizon": "--horizon"}):
         steps = horizon_steps(DEFAULT_DT, horizon)
-    if n_refs * steps > _MAX_SAMPLES:
+    if len(refs) * steps > _MAX_SAMPLES:
         raise ValueError(
-            f"--horizon {text!r} with {n_refs} references is {n_refs * steps} reference-periods; "
-            f"allowed: at most {_MAX_SAMPLES:.0e} (fewer references or a shorter horizon)"
+            f"--horizon {text!r} with {len(refs)} references is {len(refs) * steps} "
+            f"reference-periods; allowed: at most {_MAX_SAMPLES:.0e} (fewer references or a "
+            "shorter horizon)"
         )
+    if note:
+        print(note)
+    reach = float((Robot() if robot is None else robot).v_max) * horizon + DEFAULT_TOL_R
+    for text in unit_warnings(args.refs, refs, reach):
+        flags.unit_slip(text)
     return horizon
 
 
@@ -379,9 +389,7 @@ def summary_rows(result: dict[str, Any], labels: list[str] | None = None) -> lis
                 else f" (a wheel up to {off} larger than modelled turns that into up to "
                 f"{bound:.4g} cm/s at its rim)"
             )
-    rows = [("success", _percent(result["success"]))]
-    if "per_reference" in result:
-        rows.append(("not arrived", _failed(result, labels)))
+    rows = [("success", _percent(result["success"])), ("not arrived", _failed(result, labels))]
     settled = _percent(result["settled_at_horizon"]) + " of the runs (counted as arrived)"
     rows += [
         ("mean arrival", _seconds(result["mean_arrival_s"])),
@@ -438,14 +446,6 @@ def hint(result: dict[str, Any], args: Any) -> str:
     )
 
 
-def _reach(robot: Any, horizon: float) -> float:
-    """How far a robot drives within ``horizon`` at its ``V_max``, and the arrival tolerance, cm."""
-    from wmr_jax._src.model.params import Robot
-    from wmr_jax._src.sim.metrics import DEFAULT_TOL_R
-
-    return float((Robot() if robot is None else robot).v_max) * horizon + DEFAULT_TOL_R
-
-
 def _mismatch_row(result: dict[str, Any]) -> tuple[str, str]:
     """The wheels' row: a ± bound drawn per run, or an identified robot's fitted scales."""
     if result["condition"] == "identified":
@@ -467,23 +467,25 @@ def per_ref_csv(result: dict[str, Any], labels: list[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _settings(args: Any) -> tuple[Any, dict[str, Any]]:
-    """``--json``'s path and the checked settings of the runs, ``--c`` or not."""
+def _settings(args: Any) -> tuple[Any, Any, dict[str, Any]]:
+    """The paths of ``--json`` and ``--per-ref`` and the checked run settings, ``--c`` or not."""
     out = None if args.json is None else flags.output_file("--json", args.json, ".json")
-    return out, {
+    settings = {
         "condition": flags.choice("--condition", args.condition, _CONDITIONS),
         "mismatch": _mismatch(args.mismatch),
         "seed": flags.positive_int("--seed", args.seed, 0, 2**32 - 1),
         "velocity": flags.velocity_loop(args.velocity),
     }
+    per_ref = None if args.per_ref is None else flags.output_file("--per-ref", args.per_ref, ".csv")
+    return out, per_ref, settings
 
 
 # The library's names of the flags, in its errors.
 _AS_FLAGS = {"refs": "--refs", "horizon": "--horizon", "mismatch": "--mismatch"}
 
 
-def _finish(out: Any, result: dict[str, Any], labels: Any = None, per_ref: Any = None) -> None:
-    """Write ``--json`` and ``--per-ref`` where given, and print the table."""
+def _finish(args: Any, out: Any, per_ref: Any, result: dict[str, Any], labels: Any) -> int:
+    """Write ``--json`` and ``--per-ref`` where given, print the table and any hint; 0."""
     from wmr_jax._src.io import atomic_write_json, atomic_write_text
     from wmr_jax._src.report.tables import markdown_table
 
@@ -494,6 +496,10 @@ def _finish(out: Any, result: dict[str, Any], labels: Any = None, per_ref: Any =
         atomic_write_text(per_ref, per_ref_csv(result, labels))
         print(f"per reference -> {per_ref}")
     print(markdown_table(summary_rows(result, labels), ["quantity", "value"]), end="")
+    advice = hint(result, args)
+    if advice:
+        print(advice)
+    return 0
 
 
 def run(args: Any) -> int:
@@ -502,8 +508,7 @@ def run(args: Any) -> int:
         return run_compiled(args)
     if args.gains is None:
         raise ValueError("--gains is required; allowed: a tuned_gains.json (or --c DIR)")
-    out, settings = _settings(args)
-    per_ref = None if args.per_ref is None else flags.output_file("--per-ref", args.per_ref, ".csv")
+    out, per_ref, settings = _settings(args)
     estimator = None
     if args.estimator is not None:
         estimator = flags.choice("--estimator", args.estimator, _ESTIMATOR_CHOICES)
@@ -526,11 +531,7 @@ def run(args: Any) -> int:
         # Gains tuned with --robot identified.json run on the controller that believes the base.
         loop = loop._replace(robot=identified[0].robot)
     robot = flags.robot_for_gains(given, loop.robot, "--gains", args.gains)
-    horizon = _horizon(args.horizon, len(refs), robot)
-    if given is not None and given.note:
-        print(given.note)
-    for text in unit_warnings(args.refs, refs, _reach(robot, horizon)):
-        flags.unit_slip(text)
+    horizon = _horizon(args, refs, robot, None if given is None else given.note)
 
     from wmr_jax._src.studies.conditions import evaluate_loop
     from wmr_jax._src.tuning.saved import tuned_json
@@ -545,11 +546,7 @@ def run(args: Any) -> int:
     result = {**result, "gains_file": str(args.gains), "gains": gains, "refs_file": str(args.refs)}
     if given is not None and flags.is_robot_file(args.robot):
         result["robot_file"] = str(args.robot)
-    _finish(out, result, labels, per_ref)
-    advice = hint(result, args)
-    if advice:
-        print(advice)
-    return 0
+    return _finish(args, out, per_ref, result, labels)
 
 
 def run_compiled(args: Any) -> int:
@@ -562,21 +559,14 @@ def run_compiled(args: Any) -> int:
             raise ValueError(f"{flag} is not allowed with --c; allowed: the loop baked into the C")
     if args.float32:
         raise ValueError("--float32 is not allowed with --c; allowed: wmr-jax export --real float")
-    out, settings = _settings(args)
-    per_ref = None if args.per_ref is None else flags.output_file("--per-ref", args.per_ref, ".csv")
+    out, per_ref, settings = _settings(args)
     given = flags.robot_from(args.robot)
     refs, labels = load_refs(args.refs)
     loop, meta = exported_loop(args.c)
     robot = flags.robot_for_gains(given, loop.robot, "--c", args.c)
-    horizon = _horizon(args.horizon, len(refs), robot)
-    for text in unit_warnings(args.refs, refs, _reach(robot, horizon)):
-        flags.unit_slip(text)
+    horizon = _horizon(args, refs, robot)
     compiled = compile_controller(args.c)
     with flags.as_flags(_AS_FLAGS):
         result = evaluate_compiled(compiled, loop, refs, horizon=horizon, robot=robot, **settings)
     result = {**result, "c_folder": str(args.c), "gains": meta["gains"], "refs_file": args.refs}
-    _finish(out, result, labels, per_ref)
-    advice = hint(result, args)
-    if advice:
-        print(advice)
-    return 0
+    return _finish(args, out, per_ref, result, labels)

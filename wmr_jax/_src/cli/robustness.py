@@ -1,9 +1,4 @@
-"""``wmr-jax robustness``: Monte Carlo of noise, model mismatch and latency (docs/model.md §7).
-
-With ``--robot DIR/identified.json`` the gain sets run on the identified
-robot while the controller believes its base, instead of the Monte Carlo,
-whose drawn mismatch, latency and noise the identification replaces.
-"""
+"""``wmr-jax robustness``: Monte Carlo of noise, model mismatch and latency (docs/model.md §7)."""
 
 from __future__ import annotations
 
@@ -18,14 +13,14 @@ _OUTPUTS = tuple(
     for stem in ("robustness", "standard_conditions", "noise_curve", "identified_conditions")
     for ext in ("png", "md", "json")
 )
-# Each gain-file flag: the label of its rows and the tuning its file must come from.
+# Each gain-file flag: the label of its rows, the tuning its file must come from, its help.
 _GAIN_FILES = {
-    "--nominal-gains": ("nominal-tuned", "nominal"),
-    "--robust-gains": ("robust-tuned", "robust"),
-}
-_GAIN_FILE_HELP = {
-    "nominal": "shown beside the paper's gains",
-    "robust": "shown beside them, run whole (with the estimator it was tuned with)",
+    "--nominal-gains": ("nominal-tuned", "nominal", "shown beside the paper's gains"),
+    "--robust-gains": (
+        "robust-tuned",
+        "robust",
+        "shown beside them, run whole (with the estimator it was tuned with)",
+    ),
 }
 
 # The columns printed after the run (robustness.md has them all).
@@ -56,8 +51,8 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument("--float32", **flags.FLOAT32)
     from wmr_jax._src.tuning.saved import TUNINGS
 
-    for flag, (_, tuning) in _GAIN_FILES.items():
-        text = f"tuned_gains.json of `{TUNINGS[tuning]}`, {_GAIN_FILE_HELP[tuning]}"
+    for flag, (_, tuning, shown) in _GAIN_FILES.items():
+        text = f"tuned_gains.json of `{TUNINGS[tuning]}`, {shown}"
         parser.add_argument(flag, metavar="PATH", help=text)
     parser.add_argument(
         "--estimator",
@@ -148,17 +143,11 @@ def _meta(seed: int, robot: Any, sets: dict[str, Any], args: Any) -> dict[str, A
 
 def _gains_of(sets: dict[str, Any]) -> dict[str, Any]:
     """Each set's parameters and estimator, as ``tuned_gains.json`` holds them."""
+    from wmr_jax._src.studies.conditions import as_closed_loop
     from wmr_jax._src.tuning.saved import tuned_json
 
-    loops = {label: _as_loop(value) for label, value in sets.items()}
+    loops = {label: as_closed_loop(loop, "shim-sung", None, label) for label, loop in sets.items()}
     return {label: tuned_json(loop.params, loop.estimator) for label, loop in loops.items()}
-
-
-def _as_loop(value: Any) -> Any:
-    """A gain set as a ``ClosedLoop``: fixed gains are Shim–Sung on raw feedback."""
-    from wmr_jax._src.sim.sensing.loop import ClosedLoop
-
-    return value if isinstance(value, ClosedLoop) else ClosedLoop("shim-sung", value, None)
 
 
 def _gain_file(args: Any, flag: str) -> Any:
@@ -172,13 +161,13 @@ def _noise_curve(
     import jax
 
     from wmr_jax._src.report.robustness import write_noise_curve
-    from wmr_jax._src.studies.conditions import noise_curve
+    from wmr_jax._src.studies.conditions import as_closed_loop, noise_curve
 
     loops = {}
     for name, value in sets.items():
         if name.endswith(", raw feedback"):
             continue  # drawn as the raw line of its own set
-        loop = _as_loop(value)
+        loop = as_closed_loop(value, "shim-sung", None, name)
         loops[name] = loop._replace(estimator=None)
         # The tuned estimator where the file has one, else the EKF's defaults.
         loops[name + " + estimator"] = loop._replace(estimator=loop.estimator or "ekf")
@@ -200,7 +189,7 @@ def _gain_sets(args: Any, identified: Any = None) -> tuple[dict[str, Any], Any]:
         print(given.note)
     loops = {}
     robot, source = (None, None) if given is None else (given.robot, f"--robot {given.label!r}")
-    for flag, (label, wanted) in _GAIN_FILES.items():
+    for flag, (label, wanted, _) in _GAIN_FILES.items():
         path = _gain_file(args, flag)
         if path is None:
             continue

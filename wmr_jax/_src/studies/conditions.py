@@ -34,7 +34,7 @@ from wmr_jax._src.studies.robustness import (
 )
 
 
-def _closed_loop(value: Any, controller: Any, estimator: Any, where: str) -> ClosedLoop:
+def as_closed_loop(value: Any, controller: Any, estimator: Any, where: str) -> ClosedLoop:
     """A ``ClosedLoop`` as it is, or params of ``controller``; refused if batched."""
     loop = value if isinstance(value, ClosedLoop) else ClosedLoop(controller, value, estimator)
     allowed = "scalars: one loop (disturbed_metrics runs a batch of parameters)"
@@ -165,7 +165,7 @@ def _loops(given: Any, name: str, controller: Any, estimator: Any, robot: Any):
             "ClosedLoop or Gains, at least one"
         )
     sets = {
-        label: _closed_loop(value, controller, estimator, f"{name}[{label!r}]")
+        label: as_closed_loop(value, controller, estimator, f"{name}[{label!r}]")
         for label, value in given.items()
     }
     for loop in sets.values():
@@ -253,7 +253,7 @@ def evaluate_loop(
     labels = {label: (sxy, sdeg, lat) for label, sxy, sdeg, lat in STANDARD_CONDITIONS}
     if condition not in labels:
         raise ValueError(f"condition = {condition!r} is not allowed; allowed: {', '.join(labels)}")
-    loop = _closed_loop(loop, controllers.SHIM_SUNG, None, "loop")
+    loop = as_closed_loop(loop, controllers.SHIM_SUNG, None, "loop")
     estimator, _ = resolve_estimator(loop.estimator)
     controller = controllers.get_controller(loop.controller)
     mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)

@@ -195,26 +195,21 @@ def saved_rows(
             if key not in row:
                 raise bad(f"row {i} has no {key!r}; allowed: rows of wmr-jax tune --compare")
         problem, seed, method = row["problem"], row["seed"], row["method"]
+
+        def refuse(key, value, allowed, i=i):
+            return bad(f"row {i}: {key} = {value!r:.40} is not allowed; allowed: {allowed}")
+
         if not isinstance(problem, str) or problem not in problems:
-            raise bad(
-                f"row {i}: problem = {problem!r:.40} is not allowed; allowed: "
-                f"{', '.join(map(repr, problems))} (the problems compared now)"
-            )
+            names = ", ".join(map(repr, problems))
+            raise refuse("problem", problem, f"{names} (the problems compared now)")
         if isinstance(seed, bool) or not isinstance(seed, int) or seed not in seeds:
-            raise bad(
-                f"row {i}: seed = {seed!r:.40} is not allowed; allowed: "
-                f"{', '.join(map(str, seeds))} (the seeds compared)"
-            )
+            raise refuse("seed", seed, f"{', '.join(map(str, seeds))} (the seeds compared)")
         if not isinstance(method, str) or method not in METHODS:
-            raise bad(
-                f"row {i}: method = {method!r:.40} is not allowed; allowed: "
-                f"{', '.join(map(repr, METHODS))}"
-            )
+            raise refuse("method", method, ", ".join(map(repr, METHODS)))
         size = row.get("parameters", problems[problem])
         if isinstance(size, bool) or size != problems[problem]:
-            raise bad(
-                f"row {i}: parameters = {size!r:.40} is not allowed; allowed: "
-                f"{problems[problem]} (the {problem!r} problem compared now)"
+            raise refuse(
+                "parameters", size, f"{problems[problem]} (the {problem!r} problem compared now)"
             )
         try:
             _compare_numbers(i, row)

@@ -70,32 +70,26 @@ class EstimatorBox:
         }
         return EKFParams(**values)
 
-    def unit_of(self, params: Any) -> np.ndarray:
-        """The point of the cube of ``params`` (clipped inside it), for a starting point."""
+    def start(self) -> np.ndarray:
+        """The estimator's default parameters as a point of the cube (clipped inside it)."""
         if self.name == "observer":
-            tables = []
-            radii = np.linspace(0.0, 1.0, self.knots)
-            for table in (params.position, params.heading):
-                if isinstance(table, tuple):
-                    old = np.linspace(0.0, 1.0, len(table)) ** 2
-                    values = np.interp(radii**2, old, np.asarray(table, dtype=float))
-                else:
-                    values = np.full(self.knots, float(table))
-                tables.append(values)
+            default, radii = ObserverParams(), np.linspace(0.0, 1.0, self.knots)
+            tables = [
+                np.interp(
+                    radii**2, np.linspace(0.0, 1.0, len(table)) ** 2, np.asarray(table, float)
+                )
+                for table in (default.position, default.heading)
+            ]
             u = (np.concatenate(tables) - _GAIN[0]) / (_GAIN[1] - _GAIN[0])
         else:
+            default = EKFParams()
             u = np.array(
                 [
-                    (math.log(float(getattr(params, name))) - lo) / (hi - lo)
+                    (math.log(float(getattr(default, name))) - lo) / (hi - lo)
                     for name, (lo, hi) in _EKF_LOG.items()
                 ]
             )
         return np.clip(u, _CLIP, 1.0 - _CLIP)
-
-    def start(self) -> np.ndarray:
-        """The estimator's default parameters as a point of the cube."""
-        default = ObserverParams() if self.name == "observer" else EKFParams()
-        return self.unit_of(default)
 
 
 def estimator_box(name: str, knots: int = OBSERVER_KNOTS) -> EstimatorBox:

@@ -234,40 +234,34 @@ def sample_conditions(
     if isinstance(noise, centred.Centred):  # around an identified robot (RobustConfig.around)
         return centred.batches(key, refs, nonideal_refs, steps, ideal, noise)
     noise_xy, noise_deg = _STANDARD_NOISE if noise is None else noise
-    n = refs.shape[0]
-    specs = []
-    for i, (_, sxy, sdeg, latency) in enumerate(disturbances.STANDARD_CONDITIONS):
-        if sxy:
-            sxy, sdeg = noise_xy, noise_deg
-        level = jax.random.uniform(keys[2 * i], (n,), refs.dtype, 0.0, _NOISE_LEVEL_MAX)
-        specs.append(
-            disturbances.sample_disturbance(
-                keys[2 * i + 1],
-                refs,
-                steps,
-                noise_xy=sxy * level,
-                noise_theta=math.radians(sdeg) * level,
-                latency=float(latency),
-                radius_mismatch=STANDARD_MISMATCH,
-            )
+
+    def drawn(k_level, k_spec, at, sxy, sdeg, latency, mass=0.0):
+        level = jax.random.uniform(k_level, at.shape[:1], refs.dtype, 0.0, _NOISE_LEVEL_MAX)
+        return disturbances.sample_disturbance(
+            k_spec,
+            at,
+            steps,
+            noise_xy=sxy * level,
+            noise_theta=math.radians(sdeg) * level,
+            latency=float(latency),
+            radius_mismatch=STANDARD_MISMATCH,
+            mass_mismatch=mass,
         )
+
+    specs = [
+        drawn(
+            keys[2 * i],
+            keys[2 * i + 1],
+            refs,
+            *((noise_xy, noise_deg) if sxy else (sxy, sdeg)),
+            latency,
+        )
+        for i, (_, sxy, sdeg, latency) in enumerate(disturbances.STANDARD_CONDITIONS)
+    ]
     # One batch for all conditions: one scan to compile, not four.
     batches = [(jax.tree.map(lambda *leaves: jnp.concatenate(leaves), *specs), ideal)]
     if nonideal_refs.shape[0]:
-        k_level, k_spec = jax.random.split(keys[-1])
-        level = jax.random.uniform(
-            k_level, (nonideal_refs.shape[0],), refs.dtype, 0.0, _NOISE_LEVEL_MAX
-        )
-        spec = disturbances.sample_disturbance(
-            k_spec,
-            nonideal_refs,
-            steps,
-            noise_xy=noise_xy * level,
-            noise_theta=math.radians(noise_deg) * level,
-            latency=0.5,
-            radius_mismatch=STANDARD_MISMATCH,
-            mass_mismatch=0.2,
-        )
+        spec = drawn(*jax.random.split(keys[-1]), nonideal_refs, noise_xy, noise_deg, 0.5, 0.2)
         nonideal = dataclasses.replace(ideal, velocity="nonideal", accel_limit=False)
         batches.append((spec, nonideal))
     return batches
