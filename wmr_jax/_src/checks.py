@@ -112,7 +112,7 @@ def check_int(name: str, value: Any, minimum: int = 1, maximum: int | None = Non
 def check_substeps(value: Any) -> int:
     """Return the non-ideal loop's ``substeps`` after checking it in the compute dtype.
 
-    Beyond ``1 / (1000 eps)`` sub-steps (8388 in float32) the rounding of
+    Beyond ``1 / (1000 eps)`` sub-steps the rounding of
     each addition to the pose swamps a visible part of the motion.
     """
     dtype = np.dtype(float_dtype())
@@ -152,11 +152,6 @@ def check_key(name: str, key: Any) -> Any:
             f"{name} = {key!r:.80} is not allowed; allowed: a jax.random key (jax.random.key(seed))"
         )
     return key
-
-
-def check_budget(name: str, value: Any) -> float:
-    """Return a wall-time budget in s: a finite number ``>= 0`` (0: one round only)."""
-    return check_number(name, value, closed=True, high=1e9, unit="s")
 
 
 def check_path(name: str, value: Any) -> Path:
@@ -519,11 +514,9 @@ MAX_HEADING = 1e12
 
 def reduce_heading(theta: Any) -> Any:
     """Return headings with ``|θ| > HEADING_REDUCE_ABOVE`` reduced to ``[−π, π)``."""
-    if isinstance(theta, np.ndarray):
-        wrapped = np.remainder(theta + np.pi, 2 * np.pi) - np.pi
-        return np.where(np.abs(theta) > HEADING_REDUCE_ABOVE, wrapped, theta)
-    wrapped = jnp.remainder(theta + jnp.pi, 2 * jnp.pi) - jnp.pi
-    return jnp.where(jnp.abs(theta) > HEADING_REDUCE_ABOVE, wrapped, theta)
+    xp = np if isinstance(theta, np.ndarray) else jnp
+    wrapped = xp.remainder(theta + np.pi, 2 * np.pi) - np.pi
+    return xp.where(xp.abs(theta) > HEADING_REDUCE_ABOVE, wrapped, theta)
 
 
 def position_limit(dtype: Any = None) -> float:

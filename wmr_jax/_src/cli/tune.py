@@ -193,31 +193,16 @@ def _gradient_cost(out: Path) -> int:
     return 0
 
 
-# How tune prints each parameter: its symbol and the unit a person types it in
-# (Φ_m in degrees, as simulate's --phi-m takes it; the files hold radians).
-_PRINTED = {
-    "kr": ("k_r", "cm/s"),
-    "k_theta": ("k_θ", "rad/s"),
-    "k_turn": ("k_turn", "rad/s"),
-    "phi_m": ("Φ_m", "°"),
-    "r_m": ("R_m", "cm"),
-    "r_a": ("R_a", "cm"),
-    "r_e": ("R_e", "cm"),
-    "alpha": ("α", ""),
-    "v_max": ("V_max", "cm/s"),
-    "half_track": ("L", "cm"),
-}
-
-
 def _shown(params: Any) -> list[str]:
     """The tuned parameters as printed, angles in degrees; fixed gains also as simulate flags."""
     import math
 
     from wmr_jax._src.model.params import Gains
+    from wmr_jax._src.report.tuning import SYMBOLS
     from wmr_jax._src.tuning.saved import tuned_json
 
     def fmt(name: str, value: Any) -> str:
-        symbol, unit = _PRINTED[name]
+        symbol, unit = SYMBOLS[name]
         to_unit = math.degrees if name == "phi_m" else float
         if isinstance(value, list):
             text = "[" + ", ".join(f"{to_unit(x):.3g}" for x in value) + "]"
@@ -226,7 +211,7 @@ def _shown(params: Any) -> list[str]:
         return f"{symbol}={text}{'' if unit in ('', '°') else ' '}{unit}"
 
     values = tuned_json(params)
-    lines = ["  ".join(fmt(k, v) for k, v in values.items() if k in _PRINTED)]
+    lines = ["  ".join(fmt(k, v) for k, v in values.items() if k in SYMBOLS)]
     if isinstance(params, Gains):
         lines.append("as simulate flags: " + " ".join(flags.gain_flag_values(params)))
     return lines

@@ -28,15 +28,21 @@ from wmr_jax._src.tuning.problems import (
 )
 from wmr_jax._src.tuning.robust import condition_score
 
-_GAIN_LABELS = {
-    "kr": "k_r (cm/s)",
-    "k_theta": "k_θ (rad/s)",
-    "phi_m": "Φ_m (deg)",
-    "r_m": "R_m (cm)",
-    "r_a": "R_a (cm)",
-    "r_e": "R_e (cm)",
-    "alpha": "α",
+# Each parameter's symbol and the unit a person types it in (Φ_m in degrees, as
+# simulate's --phi-m takes it; the files hold radians).
+SYMBOLS = {
+    "kr": ("k_r", "cm/s"),
+    "k_theta": ("k_θ", "rad/s"),
+    "k_turn": ("k_turn", "rad/s"),
+    "phi_m": ("Φ_m", "°"),
+    "r_m": ("R_m", "cm"),
+    "r_a": ("R_a", "cm"),
+    "r_e": ("R_e", "cm"),
+    "alpha": ("α", ""),
+    "v_max": ("V_max", "cm/s"),
+    "half_track": ("L", "cm"),
 }
+_GAIN_LABELS = {k: f"{s} ({u.replace('°', 'deg')})" if u else s for k, (s, u) in SYMBOLS.items()}
 
 # The columns of the yardstick ratios -> their bound_ratios keys.
 _BOUND_COLUMNS = {"vs turn–drive–turn": "vs_turn_drive_turn", "vs lower bound": "vs_lower_bound"}

@@ -460,9 +460,6 @@ def black_box(
     start = jnp.asarray(start, float_dtype())
     score_key = jax.random.fold_in(key, 7)
 
-    def closed(z):
-        return concrete_loop(joint.from_logits(z, robot))
-
     scores = _scorer(refs, score_key, robot, dt, joint, noise)
     best = (start, float(scores(start[None])[0]))
     tell = None
@@ -478,7 +475,8 @@ def black_box(
         propose, scores, budget_s, began=began, best=best, count=1, tell=tell,
         at_least_once=False, max_count=candidates,
     )  # fmt: skip
-    return closed(best_z), count, clock() - began, time.perf_counter() - wall
+    loop = concrete_loop(joint.from_logits(best_z, robot))
+    return loop, count, clock() - began, time.perf_counter() - wall
 
 
 def search_poses(config: RobustConfig) -> jax.Array:

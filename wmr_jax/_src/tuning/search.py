@@ -19,7 +19,6 @@ import numpy as np
 
 from wmr_jax._src.checks import (
     as_poses,
-    check_budget,
     check_callable,
     check_int,
     check_key,
@@ -99,7 +98,7 @@ def random_search(
     """
     check_key("key", key)
     robot = validate_one_robot(robot, "tuning")
-    budget_s = check_budget("budget_s", budget_s)
+    budget_s = check_number("budget_s", budget_s, closed=True, high=1e9, unit="s")
     chunk = check_int("chunk", chunk, 1)
     check_callable("progress", progress)
     refs = as_poses("refs", refs, batch=True)
@@ -384,7 +383,7 @@ def cma_es_search(
         ValueError: if evosax is missing (one line) or for bad options.
     """
     check_key("key", key)
-    budget_s = check_budget("budget_s", budget_s)
+    budget_s = check_number("budget_s", budget_s, closed=True, high=1e9, unit="s")
     population = check_int("population", population, 2)
     std_init = check_number("std_init", std_init)
     check_callable("progress", progress)

@@ -171,9 +171,7 @@ class TuneConfig:
 
     def as_dict(self) -> dict[str, Any]:
         """Return the fields as JSON-ready values."""
-        out = dataclasses.asdict(self)
-        out["weights"] = dataclasses.asdict(self.weights)
-        return out
+        return dataclasses.asdict(self)
 
 
 # name, minimum, maximum of the integer fields of TuneConfig beyond the loop's.
@@ -298,12 +296,9 @@ def train(
         ValueError: for bad settings, naming the field.
     """
     config, robot = _checked(config, robot)
-    for name, fn in (
-        ("progress_fn", progress_fn),
-        ("search_progress", search_progress),
-        ("eval_progress", eval_progress),
-    ):
-        check_callable(name, fn)
+    check_callable("progress_fn", progress_fn)
+    check_callable("search_progress", search_progress)
+    check_callable("eval_progress", eval_progress)
     problem, identity = gain_problem(config, robot), trainer.run_text(config, robot)
     tuned, best, history, state = trainer.fit(problem, identity, state, progress_fn)
     run = {**config.hard_run, "robot": robot}
