@@ -10,7 +10,7 @@
 # that would move a committed figure fails the tests until the stage is rerun.
 # STAGE is any of: paper compare maps waypoints animate tune robustness
 # compare-tuning compare-sizes compare-robust compare-robust-price compare-robust-kernels
-# compare-robust-second tuner-load tuner-scaling bench
+# compare-robust-second tuner-load tuner-scaling law-derivative bench
 # (default: all but compare-robust-kernels and compare-robust-second, which
 # record the second machine of docs/robustness.md and are run by name; on 2
 # CPU cores, tune took 5 minutes, robustness 2 and compare-robust 18).
@@ -31,7 +31,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-results/readme}
 shift || true
-STAGES=${*:-paper compare maps waypoints animate tune robustness compare-tuning compare-sizes compare-robust compare-robust-price tuner-load tuner-scaling bench}
+STAGES=${*:-paper compare maps waypoints animate tune robustness compare-tuning compare-sizes compare-robust compare-robust-price tuner-load tuner-scaling law-derivative bench}
 mkdir -p "$OUT" docs/data
 
 for stage in $STAGES; do
@@ -117,6 +117,8 @@ for stage in $STAGES; do
     tuner-scaling)  # tune --robust --compare at 38, 101 and 285 parameters; resumes where the file stops
       # (after a change to CMA-ES alone: python experiments/tuner_scaling.py --rerun-cma-es)
       python experiments/tuner_scaling.py --sizes 38 101 285 --out docs/data/tuner_scaling.json ;;
+    law-derivative)  # the robust loss's gradient, the law's Jacobian against JAX's own derivative
+      python experiments/law_derivative.py --json docs/data/law_derivative.json ;;
     bench)
       wmr-jax bench --json "$OUT/bench.json" --wait-idle 60 ;;
     *) echo "unknown stage $stage" >&2; exit 2 ;;

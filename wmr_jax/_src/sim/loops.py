@@ -30,6 +30,7 @@ from wmr_jax._src.sim.motion import (
 )
 
 VELOCITY_LOOPS = ("ideal", "nonideal")
+LAW_DERIVATIVES = ("traced", "jacobian")
 WHEEL_LIMITS = ("clip", "scale")
 DEFAULT_SUBSTEPS = velocity_loop.DEFAULT_SUBSTEPS
 DEFAULT_STEPS = 150
@@ -54,6 +55,9 @@ class Options:
         remat: recompute each step in the backward pass instead of storing it.
         accel_limit: the robot's speed limiter (ideal loop; docs/model.md §4.2.2).
         max_delay: the longest latency of a disturbed run, samples (docs/model.md §7).
+        law_derivative: ``"traced"``: JAX differentiates the law's operations;
+            ``"jacobian"``: the law's Jacobian in the pose, formed once per step
+            (a faster gradient with the EKF; docs/robustness.md).
     """
 
     steps: int = DEFAULT_STEPS
@@ -69,6 +73,7 @@ class Options:
     remat: bool = True
     accel_limit: bool = False
     max_delay: int = 1
+    law_derivative: str = "traced"
 
 
 def for_robot(options: Options, robot: Robot, dt: Any) -> Options:

@@ -45,10 +45,58 @@ class SplitPose(NamedTuple):
 
 def split_command(pose: SplitPose, ref, params, options: Options) -> jax.Array:
     """Return the controller's command at ``pose`` as the complex ``v + i ω``."""
+    if options.law_derivative == "jacobian":
+        return _jacobian_command(pose, ref, params, options)
     v, omega = options.controller.command(
         pose.stacked(), ref, params, temperature=options.temperature, frame=pose.frame()
     )
     return jax.lax.complex(v, omega)
+
+
+def _jacobian_command(pose: SplitPose, ref, params, options: Options) -> jax.Array:
+    """``split_command`` whose derivative in the pose and reference is their Jacobian.
+
+    JAX's own derivative of the law is a chain of operations that XLA:CPU
+    repeats in every kernel of a backward step that reads it, which dominates
+    the gradient when an estimator makes the law's input depend on the whole
+    carry. Here the Jacobian of ``(v, ω)`` in the pose and the reference is
+    formed once per step (one reverse pass per component); the parameters and
+    the temperature keep JAX's derivative. The values are ``split_command``'s.
+    """
+    dtype = pose.theta.dtype
+    hard = options.temperature is None
+
+    def law(state, rest):
+        x, y, cos_theta, sin_theta, theta, reference = state
+        temperature, gains = rest
+        split = SplitPose(jax.lax.complex(x, y), jax.lax.complex(cos_theta, sin_theta), theta)
+        v, omega = options.controller.command(
+            split.stacked(),
+            reference,
+            gains,
+            temperature=None if hard else temperature,
+            frame=split.frame(),
+        )
+        return jnp.stack([v, omega])
+
+    @jax.custom_jvp
+    def jacobian_command(state, rest):
+        return law(state, rest)
+
+    @jacobian_command.defjvp
+    def _(primals, tangents):
+        state, rest = primals
+        out, pullback = jax.vjp(lambda s: law(s, rest), state)
+        (jacobian,) = jax.vmap(pullback)(jnp.eye(2, dtype=out.dtype))
+        in_state = jax.tree.map(lambda j, t: j @ t if t.ndim else j * t, jacobian, tangents[0])
+        _, in_rest = jax.jvp(lambda r: law(state, r), (rest,), (tangents[1],))
+        return out, sum(jax.tree.leaves(in_state)) + in_rest
+
+    temperature = jnp.zeros((), dtype) if hard else jnp.asarray(options.temperature, dtype)
+    position, heading = pose.position, pose.heading
+    state = (position.real, position.imag, heading.real, heading.imag, pose.theta, ref)
+    vw = jacobian_command(state, (temperature, params))
+    return jax.lax.complex(vw[0], vw[1])
 
 
 class HeldCommand(NamedTuple):

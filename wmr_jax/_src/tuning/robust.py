@@ -32,7 +32,6 @@ from wmr_jax._src.sim import loops
 from wmr_jax._src.sim.poses import horizon_steps, sample_poses
 from wmr_jax._src.sim.rollout import DEFAULT_DT
 from wmr_jax._src.sim.sensing import disturbances, loop
-from wmr_jax._src.sim.sensing.disturbances import STANDARD_MISMATCH
 from wmr_jax._src.sim.sensing.estimators import ESTIMATORS, OBSERVER_KNOTS
 from wmr_jax._src.sim.sensing.loop import ClosedLoop
 from wmr_jax._src.studies import conditions, robustness
@@ -185,7 +184,7 @@ def joint_problem(config: RobustConfig) -> JointProblem:
 def _runs(gradient, z, key, refs, nonideal_refs, temperature, robot, dt, steps, joint, *rest):
     """Per-run losses ``(N,)`` of ``sample_conditions``' draw; with ``gradient``, and ``(N, dim)``.
 
-    ``*rest``: ``accel_limit`` and ``noise`` of ``sample_conditions``.
+    ``*rest``: ``accel_limit``, ``noise`` and ``law_derivative`` of ``sample_conditions``.
     """
     init = jnp.zeros((3,), dt.dtype)
     parts = []
@@ -212,8 +211,9 @@ def robust_loss_value(*args):
 
 
 def sample_conditions(
-    key, refs, nonideal_refs, steps, temperature, joint, accel_limit=False, noise=None
-):
+    key, refs, nonideal_refs, steps, temperature, joint, accel_limit=False, noise=None,
+    law_derivative="traced",
+):  # fmt: skip
     """The conditions the robust loss trains under: ``[(disturbances, options)]`` from ``key``.
 
     ``refs`` under each standard condition with wheel mismatch, in the ideal
@@ -221,7 +221,7 @@ def sample_conditions(
     mismatch and latency besides, in the non-ideal loop. The noise
     ``(σ_xy cm, σ_θ degrees)`` (default the standard 0.5 cm, 1°) is scaled
     per run by a level ``U(0, 2)``; a ``centred.Centred`` draws every run
-    from its ranges instead. ``accel_limit``: as ``RobustLoss``'s.
+    from its ranges instead. ``accel_limit``, ``law_derivative``: as ``RobustLoss``'s.
     """
     keys = jax.random.split(key, 2 * len(disturbances.STANDARD_CONDITIONS) + 1)
     ideal = loops.Options(
@@ -230,6 +230,7 @@ def sample_conditions(
         temperature=temperature,
         estimator=joint.options_estimator,
         accel_limit=accel_limit,
+        law_derivative=law_derivative,
     )
     if isinstance(noise, centred.Centred):  # around an identified robot (RobustConfig.around)
         return centred.batches(key, refs, nonideal_refs, steps, ideal, noise)
@@ -244,7 +245,7 @@ def sample_conditions(
             noise_xy=sxy * level,
             noise_theta=math.radians(sdeg) * level,
             latency=float(latency),
-            radius_mismatch=STANDARD_MISMATCH,
+            radius_mismatch=disturbances.STANDARD_MISMATCH,
             mass_mismatch=mass,
         )
 
@@ -323,19 +324,22 @@ class RobustLoss:
         noise: ``(σ_xy cm, σ_θ degrees)`` of the sensor (``RobustConfig.noise``;
             ``None``: the standard 0.5 cm, 1°), or a ``centred.Centred`` whose
             ranges every run is drawn from (``RobustConfig.around``).
+        law_derivative: ``loops.Options.law_derivative`` of every run: ``"jacobian"``
+            halves the gradient's time with the EKF on large batches (docs/robustness.md).
     """
 
     steps: int
     joint: JointProblem
     accel_limit: bool
     noise: tuple[float, float] | centred.Centred | None
+    law_derivative: str = "traced"
 
     def __call__(self, z, batch, temperature, consts):
         key, refs, nonideal_refs = batch
         robot, dt = consts
         values, grads = _runs(
             True, z, key, refs, nonideal_refs, temperature, robot, dt, self.steps, self.joint,
-            self.accel_limit, self.noise,
+            self.accel_limit, self.noise, self.law_derivative,
         )  # fmt: skip
         loss, grad, _, _ = capped_mean(values, grads)
         grad = grad / values.shape[0]
@@ -517,12 +521,8 @@ def tune_robust(
             tuned, before the searches and the evaluation.
 
     Returns:
-        A ``TuneResult`` of problem ``"robust"``: ``loop`` the tuned
-        ``ClosedLoop``, ``gains`` its params, ``tune_cpu_s`` the CPU time of
-        the iterations and the polish, ``searches``, ``rows`` (the paper's
-        gains with raw feedback, the tuned and the searches' loops under the
-        standard conditions), ``note`` if it is no better than the paper's,
-        ``budget`` the searches' equal compute (with ``compare``).
+        A ``TuneResult`` of problem ``"robust"`` (its fields say what the
+        robust problem fills in); ``tune_cpu_s`` counts the polish too.
     """
     config = trainer.checked_config(config, RobustConfig)
     check_callable("progress_fn", progress_fn)
