@@ -68,7 +68,7 @@ def test_the_jacobian_derivative_moves_no_value_and_equals_the_traced_one(estima
     for a, b in zip(jax.tree.leaves(grad_t), jax.tree.leaves(grad_j), strict=True):
         np.testing.assert_allclose(b, a, rtol=1e-9, atol=1e-9 * abs(float(value_t)))
     assert any(float(jnp.abs(g)) > 0 for g in jax.tree.leaves(grad_t))  # the check bites
-    if estimator is not None:
+    if estimator is not None and temperature is not None:
         # Forward mode runs through it too: along the gains, the gradient's projection.
         direction = w.Gains(kr=1.0, k_theta=-0.5)
         loss = _summed(_runs("jacobian", estimator, temperature))
