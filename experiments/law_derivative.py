@@ -109,6 +109,7 @@ def main() -> None:
         meta = {"poses": args.poses, "steps": args.steps, "rounds": args.rounds}
         with open(args.json, "w") as f:
             json.dump({"settings": {**meta, "one_core": confined}, "rows": rows}, f, indent=2)
+            f.write("\n")
 
 
 if __name__ == "__main__":

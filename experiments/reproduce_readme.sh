@@ -118,7 +118,9 @@ for stage in $STAGES; do
       # (after a change to CMA-ES alone: python experiments/tuner_scaling.py --rerun-cma-es)
       python experiments/tuner_scaling.py --sizes 38 101 285 --out docs/data/tuner_scaling.json ;;
     law-derivative)  # the robust loss's gradient, the law's Jacobian against JAX's own derivative
-      python experiments/law_derivative.py --json docs/data/law_derivative.json ;;
+      python experiments/law_derivative.py --json docs/data/law_derivative.json
+      python experiments/law_derivative.py --poses 32 --estimators ekf \
+        --json docs/data/law_derivative_32.json ;;
     bench)
       wmr-jax bench --json "$OUT/bench.json" --wait-idle 60 ;;
     *) echo "unknown stage $stage" >&2; exit 2 ;;

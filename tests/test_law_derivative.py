@@ -20,7 +20,7 @@ ESTIMATES = {None: None, "ekf": studies.EKFParams()}
 
 
 def _runs(derivative: str, estimator: str | None, temperature: float | None):
-    """``(gains, estimate) -> final poses (N, 3)`` of N noisy runs with latency, float64."""
+    """``(gains, estimate, refs) -> final poses (N, 3)`` of N noisy runs with latency, float64."""
     refs = random_refs(3, N)
     spec = studies.sample_disturbance(
         jax.random.key(3), refs, STEPS, noise_xy=0.5, noise_theta=math.radians(1.0),
@@ -36,22 +36,23 @@ def _runs(derivative: str, estimator: str | None, temperature: float | None):
     )
     robot, dt, init = w.Robot(), jnp.asarray(w.DEFAULT_DT), jnp.zeros(3)
 
-    def final(gains, estimate):
+    def final(gains, estimate, refs=spec.ref):
         def one(s):
             return loop.disturbed_run(s, gains, init, robot, dt, options, estimate=estimate)[0]
 
-        return jax.vmap(one)(spec)
+        return jax.vmap(one)(spec._replace(ref=refs))
 
     return final
 
 
 def _summed(final):
-    return lambda gains, estimate: jnp.sum(final(gains, estimate) ** 2)
+    return lambda gains, estimate, refs: jnp.sum(final(gains, estimate, refs) ** 2)
 
 
 @pytest.mark.parametrize(("estimator", "temperature"), [(None, 0.05), ("ekf", 0.05), ("ekf", None)])
 def test_the_jacobian_derivative_moves_no_value_and_equals_the_traced_one(estimator, temperature):
     gains, estimate = w.Gains(kr=70.0, k_theta=12.0), ESTIMATES[estimator]
+    refs = jnp.asarray(random_refs(3, N))
     got, finals = {}, {}
     for derivative in loops.LAW_DERIVATIVES:
         final = _runs(derivative, estimator, temperature)
@@ -59,12 +60,13 @@ def test_the_jacobian_derivative_moves_no_value_and_equals_the_traced_one(estima
         # The Jacobian's rule is in the program only when asked for.
         program = str(jax.make_jaxpr(final)(gains, estimate))
         assert ("name=jacobian_command" in program) == (derivative == "jacobian")
-        got[derivative] = jax.jit(jax.value_and_grad(_summed(final), (0, 1)))(gains, estimate)
+        loss = jax.value_and_grad(_summed(final), (0, 1, 2))
+        got[derivative] = jax.jit(loss)(gains, estimate, refs)
     # Run alone, the runs are the same computation: equal to the bit.
     np.testing.assert_array_equal(finals["jacobian"], finals["traced"])
     (value_t, grad_t), (value_j, grad_j) = got["traced"], got["jacobian"]
     assert float(value_j) == pytest.approx(float(value_t), rel=1e-14)
-    # The derivative in the gains and the filter's parameters, to rounding.
+    # The derivative in the gains, the filter's parameters and the references, to rounding.
     for a, b in zip(jax.tree.leaves(grad_t), jax.tree.leaves(grad_j), strict=True):
         np.testing.assert_allclose(b, a, rtol=1e-9, atol=1e-9 * abs(float(value_t)))
     assert any(float(jnp.abs(g)) > 0 for g in jax.tree.leaves(grad_t))  # the check bites
@@ -73,13 +75,23 @@ def test_the_jacobian_derivative_moves_no_value_and_equals_the_traced_one(estima
         direction = w.Gains(kr=1.0, k_theta=-0.5)
         loss = _summed(_runs("jacobian", estimator, temperature))
         _, along = jax.jit(jax.jvp, static_argnums=0)(
-            lambda g: loss(g, estimate), (gains,), (direction,)
+            lambda g: loss(g, estimate, refs), (gains,), (direction,)
         )
         want = sum(
             float(jnp.sum(g * d))
             for g, d in zip(jax.tree.leaves(grad_t[0]), jax.tree.leaves(direction), strict=True)
         )
         assert float(along) == pytest.approx(want, rel=1e-9)
+
+
+def test_the_robust_loss_refuses_an_unknown_derivative():
+    from wmr_jax._src.tuning import robust
+
+    joint = robust.joint_problem(tuning.RobustConfig())
+    with pytest.raises(
+        ValueError, match="law_derivative = 'Jacobian' is not allowed; allowed: 'tr"
+    ):
+        robust.RobustLoss(10, joint, False, None, "Jacobian")
 
 
 def test_the_robust_loss_hands_its_derivative_to_every_run(monkeypatch):

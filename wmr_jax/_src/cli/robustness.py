@@ -1,4 +1,9 @@
-"""``wmr-jax robustness``: Monte Carlo of noise, model mismatch and latency (docs/model.md §7)."""
+"""``wmr-jax robustness``: Monte Carlo of noise, model mismatch and latency (docs/model.md §7).
+
+With ``--robot DIR/identified.json`` the gain sets run on the identified
+robot while the controller believes its base, instead of the Monte Carlo,
+whose drawn mismatch, latency and noise the identification replaces.
+"""
 
 from __future__ import annotations
 

@@ -56,8 +56,9 @@ class Options:
         accel_limit: the robot's speed limiter (ideal loop; docs/model.md §4.2.2).
         max_delay: the longest latency of a disturbed run, samples (docs/model.md §7).
         law_derivative: ``"traced"``: JAX differentiates the law's operations;
-            ``"jacobian"``: the law's Jacobian in the pose, formed once per step
-            (a faster gradient with the EKF; docs/robustness.md).
+            ``"jacobian"``: the law's Jacobian in the pose and the reference,
+            formed once per step: a faster gradient with the EKF, a slower one
+            without it (docs/robustness.md).
     """
 
     steps: int = DEFAULT_STEPS

@@ -334,6 +334,13 @@ class RobustLoss:
     noise: tuple[float, float] | centred.Centred | None
     law_derivative: str = "traced"
 
+    def __post_init__(self):
+        if self.law_derivative not in loops.LAW_DERIVATIVES:
+            allowed = " or ".join(map(repr, loops.LAW_DERIVATIVES))
+            raise ValueError(
+                f"law_derivative = {self.law_derivative!r:.40} is not allowed; allowed: {allowed}"
+            )
+
     def __call__(self, z, batch, temperature, consts):
         key, refs, nonideal_refs = batch
         robot, dt = consts
