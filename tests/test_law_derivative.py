@@ -49,28 +49,30 @@ def _summed(final):
     return lambda gains, estimate, refs: jnp.sum(final(gains, estimate, refs) ** 2)
 
 
-@pytest.mark.parametrize(("estimator", "temperature"), [(None, 0.05), ("ekf", 0.05), ("ekf", None)])
+# The relaxed law through the EKF (what the rule is for), and the hard law on raw feedback.
+@pytest.mark.parametrize(("estimator", "temperature"), [("ekf", 0.05), (None, None)])
 def test_the_jacobian_derivative_moves_no_value_and_equals_the_traced_one(estimator, temperature):
     gains, estimate = w.Gains(kr=70.0, k_theta=12.0), ESTIMATES[estimator]
     refs = jnp.asarray(random_refs(3, N))
     got, finals = {}, {}
     for derivative in loops.LAW_DERIVATIVES:
         final = _runs(derivative, estimator, temperature)
-        finals[derivative] = jax.jit(final)(gains, estimate)
         # The Jacobian's rule is in the program only when asked for.
         program = str(jax.make_jaxpr(final)(gains, estimate))
         assert ("name=jacobian_command" in program) == (derivative == "jacobian")
+        if estimator is not None:
+            finals[derivative] = jax.jit(final)(gains, estimate)
         loss = jax.value_and_grad(_summed(final), (0, 1, 2))
         got[derivative] = jax.jit(loss)(gains, estimate, refs)
-    # Run alone, the runs are the same computation: equal to the bit.
-    np.testing.assert_array_equal(finals["jacobian"], finals["traced"])
+    if finals:  # run alone, the runs are the same computation: equal to the bit
+        np.testing.assert_array_equal(finals["jacobian"], finals["traced"])
     (value_t, grad_t), (value_j, grad_j) = got["traced"], got["jacobian"]
     assert float(value_j) == pytest.approx(float(value_t), rel=1e-14)
     # The derivative in the gains, the filter's parameters and the references, to rounding.
     for a, b in zip(jax.tree.leaves(grad_t), jax.tree.leaves(grad_j), strict=True):
         np.testing.assert_allclose(b, a, rtol=1e-9, atol=1e-9 * abs(float(value_t)))
     assert any(float(jnp.abs(g)) > 0 for g in jax.tree.leaves(grad_t))  # the check bites
-    if estimator is not None and temperature is not None:
+    if estimator is not None:
         # Forward mode runs through it too: along the gains, the gradient's projection.
         direction = w.Gains(kr=1.0, k_theta=-0.5)
         loss = _summed(_runs("jacobian", estimator, temperature))
