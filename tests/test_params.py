@@ -87,6 +87,13 @@ def test_a_tuned_loop_or_another_laws_parameters_say_how_they_run():
     assert isinstance(schedule, ScheduleParams)
     with pytest.raises(ValueError, match=r"\(the parameters of 'shim-sung-schedule': pass contr"):
         w.final_poses(np.ones((2, 3)), schedule)
+    # The tuning loss has no controller= to pass: it says whose law it tunes.
+    with pytest.raises(ValueError) as err:
+        w.tuning.tuning_loss(w.controllers.AicardiGains(), np.ones((2, 3)), temperature=None)
+    assert str(err.value) == (
+        "gains is a AicardiGains; allowed: a Gains or a ScheduleParams (the tuning loss is "
+        "Shim–Sung's, fixed or scheduled; docs/custom_controller.md)"
+    )
 
 
 def test_errors_come_before_tracing(caplog):

@@ -126,6 +126,25 @@ def test_without_disturbance_the_reference_is_the_nominal_reference():
 # ---------------------------------------------------------------- exact properties
 
 
+class _Biased(studies.Disturbance):
+    """A sensor that reads every position 5 cm too far along x."""
+
+    def measurement(self, pose, noise):
+        return studies.Disturbance.measurement(self, pose, noise + jnp.array([5.0, 0.0, 0.0]))
+
+
+def test_a_subclass_of_disturbance_acts_through_its_own_methods():
+    # The runs keep the subclass: raw feedback steers the measured pose onto
+    # the reference, so the true pose ends 5 cm short of it along x.
+    spec = quiet(2, 0.0)
+    target = np.asarray(spec.ref)[:, :2]
+    plain = studies.disturbed_rollout(spec, GAINS)["poses"][:, -1, :2]
+    biased = studies.disturbed_rollout(_Biased(*spec), GAINS)["poses"][:, -1, :2]
+    # Both within the arrival tolerance (1 cm) of where each believes the reference is.
+    assert np.hypot(*(plain - target).T).max() < 1.0
+    assert np.hypot(*(biased + [5.0, 0.0] - target).T).max() < 1.0
+
+
 @pytest.mark.parametrize("name", ["observer", "ekf"])
 def test_undisturbed_estimate_is_the_true_pose(name):
     # No noise, latency or mismatch: prediction and measurement are the

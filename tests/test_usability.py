@@ -160,7 +160,7 @@ def test_custom_controller_page_runs_as_written(tmp_path, monkeypatch, capsys):
     """docs/custom_controller.md: its Python block runs and registers "mine"."""
     page = (ROOT / "docs" / "custom_controller.md").read_text(encoding="utf-8")
     blocks = re.findall(r"```python\n(.*?)```", page, flags=re.S)
-    assert len(blocks) == 1
+    assert len(blocks) == 2
     # The page registers a controller: keep it out of the other tests' registry.
     monkeypatch.setattr(base, "_REGISTRY", dict(base._REGISTRY))
     monkeypatch.chdir(tmp_path)
@@ -170,6 +170,10 @@ def test_custom_controller_page_runs_as_written(tmp_path, monkeypatch, capsys):
     assert "final pose" in out and "d(miss after 1 s)/d(k_rho)" in out
     arrival = float(re.search(r"arrived after (\S+) s", out).group(1))
     assert np.isfinite(arrival)
+    # The second: a disturbance of one's own, a sensor whose x reads 5 cm too far.
+    exec(compile(blocks[1], "docs/custom_controller.md", "exec"), {"__name__": "page"})
+    end = re.search(r"biased sensor: \[\s*(\S+)\s+(\S+)\]", capsys.readouterr().out)
+    assert abs(float(end[1]) - 35.0) < 1.0 and abs(float(end[2]) - 20.0) < 1.0
 
 
 # ---------------------------------------------------------------- the package's surface

@@ -324,6 +324,11 @@ def _prepared(gains: Any, refs: Any, temperature: Any, options: dict[str, Any]) 
         raise ValueError(f"unknown option {unknown[0]!r}; allowed: {', '.join(_OPTION_DEFAULTS)}")
     o = {**_OPTION_DEFAULTS, **options}
     gains = PAPER_FEASIBLE_GAINS if gains is None else gains
+    if not isinstance(gains, Gains | ScheduleParams):
+        raise ValueError(
+            f"gains is a {type(gains).__name__}; allowed: a Gains or a ScheduleParams (the "
+            "tuning loss is Shim–Sung's, fixed or scheduled; docs/custom_controller.md)"
+        )
     controller = SCHEDULE if isinstance(gains, ScheduleParams) else SHIM_SUNG
     if temperature is not None:
         temperature = simulation.check_temperature("temperature", temperature)

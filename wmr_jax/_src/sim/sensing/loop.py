@@ -102,7 +102,7 @@ def batched_disturbed(single):
     """
 
     def run(spec, params, estimate, init, robot, dt, options):
-        spec_axes = Disturbance(0, 0, 0, 0 if jnp.ndim(spec.delay) == 1 else None)
+        spec_axes = type(spec)(0, 0, 0, 0 if jnp.ndim(spec.delay) == 1 else None)
         in_axes = (
             spec_axes,
             loops.batch_axes(params, 0),
@@ -209,7 +209,8 @@ def prepare_disturbed(
     if np.ndim(init) != 1:
         raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,)")
     dtype = dt.dtype
-    spec = Disturbance(refs_j, *(jnp.asarray(a, dtype) for a in (noise, mismatch, delay)))
+    # A subclass keeps its own methods (how it measures, realises, perturbs the robot).
+    spec = type(disturbance)(refs_j, *(jnp.asarray(a, dtype) for a in (noise, mismatch, delay)))
     if estimator is not None:
         sizes = {"disturbance.ref": len(refs), **checks.batch_sizes({"estimator": estimate})}
         checks.require_one_batch_size(sizes)
