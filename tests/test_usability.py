@@ -164,8 +164,13 @@ def test_custom_controller_page_runs_as_written(tmp_path, monkeypatch, capsys):
     # The page registers a controller: keep it out of the other tests' registry.
     monkeypatch.setattr(base, "_REGISTRY", dict(base._REGISTRY))
     monkeypatch.chdir(tmp_path)
-    exec(compile(blocks[0], "docs/custom_controller.md", "exec"), {"__name__": "page"})
+    page_names = {"__name__": "page"}
+    exec(compile(blocks[0], "docs/custom_controller.md", "exec"), page_names)
     assert "mine" in w.controllers.registered_names()
+    # Its validate refuses what NumPy would read as a number.
+    for bad in (True, "3"):
+        with pytest.raises(ValueError, match=f"gains.k_rho = {bad!r} is not allowed"):
+            w.rollout([40.0, 20.0, 0.0], page_names["MyGains"](k_rho=bad), controller="mine")
     out = capsys.readouterr().out
     assert "final pose" in out and "d(miss after 1 s)/d(k_rho)" in out
     arrival = float(re.search(r"arrived after (\S+) s", out).group(1))
