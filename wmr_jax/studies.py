@@ -14,6 +14,7 @@ from wmr_jax._src.sim.metrics import arrived as arrived
 from wmr_jax._src.sim.metrics import path_length as path_length
 from wmr_jax._src.sim.metrics import region_time as region_time
 from wmr_jax._src.sim.metrics import zigzag_count as zigzag_count
+from wmr_jax._src.sim.motion import SplitPose as SplitPose
 from wmr_jax._src.sim.poses import EVAL_R_MAX as EVAL_R_MAX
 from wmr_jax._src.sim.poses import EVAL_R_MIN as EVAL_R_MIN
 from wmr_jax._src.sim.poses import HORIZON_S as HORIZON_S
@@ -30,6 +31,7 @@ from wmr_jax._src.sim.sensing.estimators import OBSERVER as OBSERVER
 from wmr_jax._src.sim.sensing.estimators import EKFParams as EKFParams
 from wmr_jax._src.sim.sensing.estimators import Estimator as Estimator
 from wmr_jax._src.sim.sensing.estimators import ObserverParams as ObserverParams
+from wmr_jax._src.sim.sensing.estimators import register_estimator as register_estimator
 from wmr_jax._src.sim.sensing.loop import ClosedLoop as ClosedLoop
 from wmr_jax._src.sim.sensing.loop import disturbed_metrics as disturbed_metrics
 from wmr_jax._src.sim.sensing.loop import disturbed_rollout as disturbed_rollout

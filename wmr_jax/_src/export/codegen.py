@@ -33,10 +33,7 @@ from wmr_jax._src.model.controllers.schedule import SCHEDULE, ScheduleParams
 from wmr_jax._src.model.controllers.shim_sung import SHIM_SUNG
 from wmr_jax._src.model.params import Gains, Robot
 from wmr_jax._src.sim.rollout import DEFAULT_DT
-from wmr_jax._src.sim.sensing.estimators import (
-    EKFParams,
-    resolve_estimator,
-)
+from wmr_jax._src.sim.sensing.estimators import BUILT_IN, EKFParams, resolve_estimator
 from wmr_jax._src.sim.sensing.loop import ClosedLoop
 
 REALS = ("double", "float")
@@ -279,6 +276,12 @@ def c_sources(
     laws[controller][0].validate(params)
     polar = controller in (AICARDI.name, ASTOLFI.name)
     estimator, estimate = resolve_estimator(loop.estimator)
+    if estimator is not None and estimator not in BUILT_IN.values():
+        raise ValueError(
+            f"loop.estimator = {estimator!r} is not allowed; allowed: None, "
+            f"{', '.join(repr(n) for n in BUILT_IN)} or their parameters (the C of an "
+            "estimator of one's own is not generated)"
+        )
     robot = Robot() if loop.robot is None else loop.robot
     c = c_law.Emitter(real, float(period))
     law = c_law.polar_law(c, controller, params) if polar else c_law.law(c, params)

@@ -32,7 +32,7 @@ from wmr_jax._src.sim import loops
 from wmr_jax._src.sim.poses import horizon_steps, sample_poses
 from wmr_jax._src.sim.rollout import DEFAULT_DT
 from wmr_jax._src.sim.sensing import disturbances, loop
-from wmr_jax._src.sim.sensing.estimators import ESTIMATORS, OBSERVER_KNOTS
+from wmr_jax._src.sim.sensing.estimators import BUILT_IN, OBSERVER_KNOTS
 from wmr_jax._src.sim.sensing.loop import ClosedLoop
 from wmr_jax._src.studies import conditions, robustness
 from wmr_jax._src.tuning import centred, trainer
@@ -149,10 +149,10 @@ class RobustConfig:
             )
         if self.law not in ("fixed", "schedule"):
             raise ValueError(f"law = {self.law!r} is not allowed; allowed: 'fixed' or 'schedule'")
-        if self.estimator is not None and self.estimator not in ESTIMATORS:
+        if self.estimator is not None and self.estimator not in BUILT_IN:
             raise ValueError(
                 f"estimator = {self.estimator!r} is not allowed; allowed: None, "
-                f"{', '.join(repr(n) for n in ESTIMATORS)}"
+                f"{', '.join(repr(n) for n in BUILT_IN)}"
             )
         if self.around is not None and not isinstance(self.around, centred.Centred):
             raise ValueError(

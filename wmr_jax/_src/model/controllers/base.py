@@ -174,6 +174,16 @@ _REGISTRY: dict[str, Controller] = {}
 _NAME = re.compile(r"[a-z0-9][a-z0-9_-]*")  # a CLI word, and safe in a file name
 
 
+def check_registry_name(kind: str, name: Any) -> str:
+    """Return ``name`` if a registry may hold it (a CLI word); refuse it naming ``kind``."""
+    if not isinstance(name, str) or not _NAME.fullmatch(name):
+        raise ValueError(
+            f"{kind}.name = {name!r} is not allowed; allowed: lower-case letters, digits, "
+            "'-' and '_', starting with a letter or digit"
+        )
+    return name
+
+
 def register_controller(controller: Controller, *, replace: bool = False) -> Controller:
     """Make ``controller`` known by name to the CLI and ``get_controller``.
 
@@ -187,12 +197,7 @@ def register_controller(controller: Controller, *, replace: bool = False) -> Con
             f"controller is a {type(controller).__name__}; allowed: a wmr_jax.Controller"
         )
     replace = check_bool("replace", replace)
-    name = controller.name
-    if not isinstance(name, str) or not _NAME.fullmatch(name):
-        raise ValueError(
-            f"controller.name = {name!r} is not allowed; allowed: lower-case letters, digits, "
-            "'-' and '_', starting with a letter or digit"
-        )
+    name = check_registry_name("controller", controller.name)
     known = _REGISTRY.get(name)
     if known is not None and known != controller and not replace:
         raise ValueError(

@@ -8,6 +8,7 @@ estimator corrects it toward the measurement (``OBSERVER`` by gains in
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable
 from typing import Any, NamedTuple
@@ -19,16 +20,20 @@ import numpy as np
 from wmr_jax._src.checks import (
     Parameters,
     check_bool,
+    described,
+    float_dtype,
     is_traced,
     real_array,
     require,
     require_one_batch_size,
     require_representable,
 )
+from wmr_jax._src.model.controllers.base import check_registry_name
 from wmr_jax._src.model.controllers.schedule import table_at
 from wmr_jax._src.model.dynamics import sin_cos
 from wmr_jax._src.model.params import Robot
 from wmr_jax._src.sim import motion
+from wmr_jax._src.sim.sensing.disturbances import Measurement
 
 OBSERVER_KNOTS = 6  # knots per gain table by default
 # The last knot, cm: the gains matter near the goal, where the law is most
@@ -254,12 +259,14 @@ class Estimator:
 
     Attributes:
         name: short name for the CLI and tables (``"observer"``, ``"ekf"``).
-        params_type: the class of its parameter pytree.
+        params_type: the class of its parameter pytree, with a static bool
+            field ``compensate`` (its defaults the default parameters).
         validate: checks a parameter pytree before tracing; returns it.
-        start: ``(measured SplitPose, params, robot) -> state``.
+        start: ``(measured SplitPose, params, robot) -> state``: a pytree
+            whose ``pose`` field is the estimate, a ``SplitPose``.
         update: ``(state, predicted SplitPose, applied command v + iω,
-            Measurement, ref (3,), params, robot, dt) -> state``: the
-            correction of the loop's prediction.
+            measured Measurement, ref (3,), params, robot, dt) -> state`` of
+            the same structure: the correction of the loop's prediction.
     """
 
     name: str
@@ -267,6 +274,25 @@ class Estimator:
     validate: Callable[[Any], Any]
     start: Callable[..., Any]
     update: Callable[..., Any]
+
+    def __post_init__(self) -> None:
+        # Checked here: an estimator is usable without registering.
+        check_registry_name("estimator", self.name)
+        for field in ("validate", "start", "update"):
+            value = getattr(self, field)
+            if not callable(value):
+                raise ValueError(
+                    f"estimator {self.name!r}: estimator.{field} = {described(value):.60} is not "
+                    f"allowed; allowed: a function (docs/custom_controller.md)"
+                )
+        if not isinstance(self.params_type, type):
+            raise ValueError(
+                f"estimator {self.name!r}: estimator.params_type = "
+                f"{described(self.params_type):.60} is not allowed; allowed: a class"
+            )
+
+    def __repr__(self) -> str:
+        return f"<Estimator {self.name!r}>"
 
     def default_params(self) -> Any:
         """Return the estimator's default parameters."""
@@ -277,20 +303,123 @@ OBSERVER = Estimator(
     "observer", ObserverParams, validate_observer, _observer_start, _observer_update
 )
 EKF = Estimator("ekf", EKFParams, validate_ekf, _ekf_start, _ekf_update)
-ESTIMATORS = {e.name: e for e in (OBSERVER, EKF)}
+# The package's own, which the tuners, the C export and the NumPy reference know.
+BUILT_IN = {e.name: e for e in (OBSERVER, EKF)}
+# Every estimator known by name: the built-in ones, then register_estimator's.
+ESTIMATORS = dict(BUILT_IN)
+
+
+def register_estimator(estimator: Estimator, *, replace: bool = False) -> Estimator:
+    """Make ``estimator`` known by name and by its parameters' class; return it.
+
+    Args:
+        estimator: the estimator; its name lower-case letters, digits, ``-``
+            and ``_`` (a CLI word).
+        replace: allow a name already registered to another estimator (not a
+            built-in one).
+    """
+    if not isinstance(estimator, Estimator):
+        raise ValueError(
+            f"estimator is a {type(estimator).__name__}; allowed: a wmr_jax.studies.Estimator"
+        )
+    replace = check_bool("replace", replace)
+    known = ESTIMATORS.get(estimator.name)
+    if known is not None and known != estimator and (not replace or known in BUILT_IN.values()):
+        raise ValueError(
+            f"estimator.name = {estimator.name!r} is registered already; allowed: another name"
+            + ("" if estimator.name in BUILT_IN else ", or replace=True")
+        )
+    check_state(estimator, estimator.validate(estimator.default_params()))
+    ESTIMATORS[estimator.name] = estimator
+    return estimator
 
 
 def resolve_estimator(value: Any) -> tuple[Estimator | None, Any]:
-    """Return ``(Estimator, checked params)`` of ``None``, a name or estimator parameters."""
+    """Return ``(Estimator, checked params)`` of ``None``, a name, an ``Estimator`` or params."""
     if value is None:
         return None, None
     if isinstance(value, str) and value in ESTIMATORS:
-        estimator = ESTIMATORS[value]
-        return estimator, estimator.default_params()
-    for estimator in ESTIMATORS.values():
+        value = ESTIMATORS[value]
+    if isinstance(value, Estimator):
+        params = value.validate(value.default_params())
+        check_state(value, params)
+        return value, params
+    for estimator in reversed(ESTIMATORS.values()):
         if isinstance(value, estimator.params_type):
-            return estimator, estimator.validate(value)
+            params = estimator.validate(value)
+            check_state(estimator, params)
+            return estimator, params
+    classes = " or ".join(e.params_type.__name__ for e in ESTIMATORS.values())
     raise ValueError(
         f"estimator = {value!r:.80} is not allowed; allowed: None (raw feedback), "
-        f"{' or '.join(repr(n) for n in ESTIMATORS)}, an ObserverParams or an EKFParams"
+        f"{' or '.join(repr(n) for n in ESTIMATORS)}, an Estimator, or a {classes}"
     )
+
+
+def check_state(estimator: Estimator, params: Any) -> None:
+    """Refuse parameters without a static ``compensate``, or states the loop cannot carry.
+
+    ``start`` and ``update`` are traced abstractly (``jax.eval_shape``), once
+    per parameter structure and dtype; the package's own are trusted.
+    """
+    if estimator in BUILT_IN.values() or is_traced(params):
+        return
+    shown = f"estimator {estimator.name!r}: its parameters {type(params).__name__}"
+    if jax.tree_util.treedef_is_leaf(jax.tree.structure(params)):
+        raise ValueError(
+            f"{shown} are not a pytree; allowed: a dataclass registered with "
+            "jax.tree_util.register_dataclass (docs/custom_controller.md)"
+        )
+    compensate = getattr(params, "compensate", None)
+    if not isinstance(compensate, bool) or any(
+        leaf is compensate for leaf in jax.tree.leaves(params)
+    ):
+        raise ValueError(
+            f"{shown} have compensate = {compensate!r}; allowed: a bool field marked "
+            'static (dataclasses.field(default=True, metadata={"static": True}))'
+        )
+    if any(np.ndim(leaf) != 0 for leaf in jax.tree.leaves(params)):
+        params = estimator.default_params()
+    _check_state_once(estimator, jax.tree.structure(params), np.dtype(float_dtype()).name)
+
+
+@functools.lru_cache(maxsize=64)
+def _check_state_once(estimator: Estimator, structure: Any, dtype: str) -> None:
+    """``check_state`` for one parameter structure and dtype (refusals are not kept)."""
+    real = jax.ShapeDtypeStruct((), dtype)
+    turn = jax.ShapeDtypeStruct((), np.result_type(dtype, np.complex64))
+    pose = motion.SplitPose(turn, turn, real)
+    params = jax.tree.unflatten(structure, [real] * structure.num_leaves)
+    robot = jax.tree.map(lambda _: real, Robot())
+    ref = jax.ShapeDtypeStruct((3,), dtype)
+    measured = Measurement(turn, turn, real, real)
+    allowed = (
+        "allowed: a pytree whose pose is a SplitPose of scalars, the same from start "
+        "and update (docs/custom_controller.md)"
+    )
+    name = f"estimator {estimator.name!r}"
+    calls = (
+        ("start(measured, params, robot)", estimator.start, (pose, params, robot)),
+        (
+            "update(state, predicted, command, measured, ref, params, robot, dt)",
+            estimator.update,
+            (pose, turn, measured, ref, params, robot, real),
+        ),
+    )
+    state = ()
+    for call, function, args in calls:
+        try:
+            out = jax.eval_shape(function, *state, *args)
+        except Exception as err:  # any error of the estimator, reported in one line
+            message = " ".join(str(err).split())[:300]
+            raise ValueError(f"{name}: {call} raised {type(err).__name__}: {message}") from None
+        got = getattr(out, "pose", None)
+        if not isinstance(got, motion.SplitPose) or any(
+            (a.shape, a.dtype) != (b.shape, b.dtype) for a, b in zip(got, pose, strict=True)
+        ):
+            raise ValueError(f"{name}: {call} returned {described(out):.120}; {allowed}")
+        if state and jax.tree.structure(out) != jax.tree.structure(state[0]):
+            raise ValueError(
+                f"{name}: {call} returned a state of another structure than start's; {allowed}"
+            )
+        state = (out,)

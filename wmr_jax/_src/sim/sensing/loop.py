@@ -30,8 +30,9 @@ class ClosedLoop(NamedTuple):
     Attributes:
         controller: a ``Controller`` or its registered name.
         params: its parameters.
-        estimator: ``None`` (raw feedback), an estimator's name, or its
-            parameters (``ObserverParams`` / ``EKFParams``), docs/model.md §9.
+        estimator: ``None`` (raw feedback), a registered estimator's name or
+            parameters (``ObserverParams`` / ``EKFParams``), or an
+            ``Estimator``: docs/model.md §9, docs/custom_controller.md.
         robot: the ``Robot`` whose wheel budget the parameters were tuned
             within, or ``None`` where unknown.
     """
@@ -142,8 +143,9 @@ def disturbed_metrics(
         params: the controller's parameters (its defaults if ``None``).
         controller: a ``Controller`` or its registered name.
         estimator: ``None`` (the law sees the raw measurement), ``"observer"``
-            or ``"ekf"`` (default parameters), or an ``ObserverParams`` /
-            ``EKFParams`` (docs/model.md §9).
+            or ``"ekf"`` (default parameters), an ``ObserverParams`` /
+            ``EKFParams`` (docs/model.md §9), or an estimator of one's own
+            (docs/custom_controller.md).
         init: ``(3,)`` initial pose (true and measured alike), ``[cm, cm, rad]``.
         dt: control period, s.
         robot: the nominal robot (the controller's model); default ``Robot()``.

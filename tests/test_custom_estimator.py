@@ -1,0 +1,205 @@
+"""An estimator of one's own, plugged into the one step (docs/custom_controller.md).
+
+A fixed blend of prediction and measurement is the observer with constant
+gains written another way: the runs must agree with the built-in observer's,
+whichever way the blend is named, so that the step runs a user's estimator
+exactly where it runs its own (update, compensation over the commands in
+flight). The refusals come before any run, in one line naming the part.
+"""
+
+import dataclasses
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import wmr_jax as w
+from wmr_jax import studies
+from wmr_jax._src.oracle.reference import reference_disturbed_rollout
+from wmr_jax._src.sim.sensing import estimators
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Blend:
+    gain: Any = 0.3
+    compensate: bool = dataclasses.field(default=True, metadata={"static": True})
+
+
+class BlendState(NamedTuple):
+    pose: studies.SplitPose
+
+
+def _start(measured, params, robot):
+    return BlendState(measured)
+
+
+def _update(state, predicted, command, measured, ref, params, robot, dt):
+    p, m = predicted.stacked(), measured.pose().stacked()
+    g = params.gain
+    turn = measured.residual(predicted)
+    pose = jnp.stack([p[0] + g * (m[0] - p[0]), p[1] + g * (m[1] - p[1]), p[2] + g * turn])
+    return BlendState(studies.SplitPose.of(pose))
+
+
+def _validate(params):
+    if not isinstance(params.gain, jax.core.Tracer) and not 0 <= float(params.gain) <= 1:
+        raise ValueError(f"estimator.gain = {params.gain!r} is not allowed; allowed: 0 to 1")
+    return params
+
+
+BLEND = studies.Estimator("blend", Blend, _validate, _start, _update)
+REFS = np.array([[40.0, 20.0, 0.0], [-30.0, 25.0, 1.0], [10.0, -35.0, -2.5]])
+GAINS = w.Gains(kr=60.0, k_theta=10.0)
+
+
+@pytest.fixture
+def registry(monkeypatch):
+    """A registry of this test's own, so that registering leaves the others' alone."""
+    monkeypatch.setattr(estimators, "ESTIMATORS", dict(estimators.ESTIMATORS))
+    return estimators.ESTIMATORS
+
+
+def _spec(delay: float, steps: int = 90):
+    key = jax.random.key(3)
+    spec = studies.sample_disturbance(key, REFS, steps, noise_xy=0.5, noise_theta=0.02)
+    return spec._replace(delay=np.full(len(REFS), delay))
+
+
+@pytest.mark.parametrize(("delay", "compensate"), [(0, True), (2, True), (2, False)])
+def test_a_blend_of_ones_own_runs_as_the_observer_with_constant_gains(registry, delay, compensate):
+    spec = _spec(delay)
+    observer = studies.ObserverParams(position=0.3, heading=0.3, compensate=compensate)
+    want = studies.disturbed_rollout(spec, GAINS, estimator=observer)
+    studies.register_estimator(BLEND)
+    for given in (Blend(compensate=compensate), "blend", BLEND):
+        if given in ("blend", BLEND) and not compensate:
+            continue  # by name or value: the default parameters, which compensate
+        got = studies.disturbed_rollout(spec, GAINS, estimator=given)
+        for field in ("poses", "estimates", "v", "omega"):
+            np.testing.assert_allclose(got[field], want[field], rtol=0, atol=1e-9, err_msg=field)
+    # The runs are the estimator's: another gain moves them.
+    other = studies.disturbed_rollout(spec, GAINS, estimator=Blend(gain=0.05))
+    assert np.max(np.abs(other["estimates"] - want["estimates"])) > 0.01
+
+
+def test_an_unregistered_estimator_runs_by_value_and_the_studies_name_it(registry):
+    spec = _spec(1)
+    m = studies.disturbed_metrics(spec, GAINS, estimator=BLEND)
+    assert np.all(np.isfinite(m.final_distance))
+    # Its parameters mean nothing to the package until it is registered.
+    with pytest.raises(ValueError, match=r"estimator = Blend\(gain=0.3.*allowed: None"):
+        studies.disturbed_metrics(spec, GAINS, estimator=Blend())
+    studies.register_estimator(BLEND)
+    loop = studies.ClosedLoop("shim-sung", GAINS, Blend(gain=0.2))
+    row = studies.evaluate_loop(loop, REFS[:2], condition="both")
+    assert row["feedback"] == "blend"
+    rows = studies.monte_carlo(
+        jax.random.key(0), params=GAINS, n_runs=4, noise_xy=(0.5,), noise_deg=(1.0,),
+        estimator="blend", horizon=3.0,
+    )  # fmt: skip
+    assert [r["feedback"] for r in rows] == ["blend"]
+
+
+def _with(**fields):
+    return dataclasses.replace(BLEND, **fields)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class LeafCompensate:
+    gain: Any = 0.3
+    compensate: Any = True  # a leaf: jit would trace it
+
+
+@dataclasses.dataclass(frozen=True)
+class NotATree:
+    gain: Any = 0.3
+    compensate: bool = True
+
+
+class Grown(NamedTuple):
+    pose: Any
+    count: Any
+
+
+@pytest.mark.parametrize(
+    ("estimator", "message"),
+    [
+        (
+            _with(params_type=LeafCompensate),
+            "its parameters LeafCompensate have compensate = True; allowed: a bool field marked "
+            "static",
+        ),
+        (_with(params_type=NotATree), "its parameters NotATree are not a pytree"),
+        (
+            _with(start=lambda measured, params, robot: measured),
+            r"start\(measured, params, robot\) returned SplitPose",
+        ),
+        (
+            _with(update=lambda s, p, c, m, r, g, robot, dt: Grown(p, 0.0)),
+            r"update\(.*\) returned a state of another structure than start's",
+        ),
+        (
+            _with(update=lambda s, p, c, m, r, g, robot, dt: BlendState(p.stacked())),
+            r"update\(.*\) returned BlendState",
+        ),
+        (
+            _with(update=lambda s, p, c, m, r, g, robot, dt: BlendState(m.nope)),
+            r"update\(.*\) raised AttributeError: 'Measurement' object has no attribute 'nope'",
+        ),
+    ],
+)
+def test_an_estimator_the_loop_cannot_carry_is_refused_when_registered_and_run(
+    registry, estimator, message
+):
+    with pytest.raises(ValueError, match=f"estimator 'blend': {message}"):
+        studies.register_estimator(estimator)
+    assert "blend" not in registry
+    with pytest.raises(ValueError, match=f"estimator 'blend': {message}"):
+        studies.disturbed_metrics(_spec(1), GAINS, estimator=estimator)
+
+
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [
+        ({"name": "My Filter"}, "estimator.name = 'My Filter' is not allowed"),
+        ({"update": 3}, "estimator 'blend': estimator.update = 3 is not allowed"),
+        ({"params_type": Blend()}, "estimator 'blend': estimator.params_type = .* is not allowed"),
+    ],
+)
+def test_an_estimator_with_a_bad_field_is_refused_when_built(fields, message):
+    with pytest.raises(ValueError, match=message):
+        _with(**fields)
+
+
+def test_names_are_kept_and_the_built_in_ones_are_not_replaced(registry):
+    assert studies.register_estimator(BLEND) is BLEND
+    studies.register_estimator(BLEND)  # the same again: nothing to refuse
+    other = _with(start=lambda measured, params, robot: BlendState(measured))
+    with pytest.raises(
+        ValueError, match="'blend' is registered already; allowed: another name, or replace=True"
+    ):
+        studies.register_estimator(other)
+    assert studies.register_estimator(other, replace=True) is registry["blend"]
+    with pytest.raises(ValueError, match="'ekf' is registered already; allowed: another name$"):
+        studies.register_estimator(_with(name="ekf"), replace=True)
+    with pytest.raises(
+        ValueError, match="estimator is a str; allowed: a wmr_jax.studies.Estimator"
+    ):
+        studies.register_estimator("blend")
+
+
+def test_the_tuner_the_export_and_the_reference_refuse_it_by_name(registry):
+    studies.register_estimator(BLEND)
+    with pytest.raises(
+        ValueError, match="estimator = 'blend' is not allowed; allowed: None, 'observer', 'ekf'"
+    ):
+        w.tuning.RobustConfig(estimator="blend").validate()
+    loop = studies.ClosedLoop("shim-sung", GAINS, "blend")
+    with pytest.raises(ValueError, match="loop.estimator = <Estimator 'blend'> is not allowed"):
+        w.export.c_sources(loop)
+    with pytest.raises(ValueError, match="estimator = <Estimator 'blend'> is not allowed"):
+        reference_disturbed_rollout(REFS[0], GAINS, noise=np.zeros((5, 3)), estimator="blend")
