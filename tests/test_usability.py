@@ -1,5 +1,6 @@
 """What a user meets first: far-off goals, own controllers, the package's surface, --version."""
 
+import dataclasses
 import importlib.metadata
 import inspect
 import pydoc
@@ -9,6 +10,7 @@ import sys
 from pathlib import Path
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -130,9 +132,9 @@ def test_a_command_without_the_frame_keyword_is_refused_in_one_line():
         (lambda err, pose: (3.0 * err.r[..., None], 0.0 * err.r), "returned v of shape (1,)"),
         (lambda err, pose: (pose, pose), "returned v of shape (3,)"),
         (lambda err, pose: (err.r, err.r, err.r), "returned 3 values"),
-        (lambda err, pose: err.r, "returned ShapeDtypeStruct"),
+        (lambda err, pose: err.r, "returned one array of shape () of float"),
         (lambda err, pose: (err.r, err.sin_phi > 0), "returned omega of shape () of bool"),
-        (lambda err, pose: (err.r, err.missing), "raised AttributeError: 'PolarError' object"),
+        (lambda err, pose: (err.r, err.missing), "'PolarError' object has no attribute 'missing'"),
     ],
     ids=["column", "poses", "three", "one", "bool", "raises"],
 )
@@ -193,6 +195,70 @@ def test_custom_controller_page_runs_as_written(tmp_path, monkeypatch, capsys):
         "BlendParams(gain=0.1, compensate=True)",
     ]
     assert all(0 < float(d) < 2.0 for _, row in finals for d in row.split())
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class _K:
+    k: float = 3.0
+
+
+@dataclasses.dataclass(frozen=True)
+class _Unregistered:
+    k: float = 3.0
+
+
+def _k_command(pose, ref, params, *, temperature=None, frame=None):
+    err = w.controllers.polar_error(pose, ref, frame=frame)
+    if err.r > 1.0:  # a Python if on a traced value: line _IF_LINE
+        return params.k * err.r * err.cos_phi, 4.0 * err.sin_phi
+    return 0.0 * err.r, 0.0 * err.r
+
+
+_IF_LINE = _k_command.__code__.co_firstlineno + 2
+
+
+def _nan_command(pose, ref, params, *, temperature=None, frame=None):
+    err = w.controllers.polar_error(pose, ref, frame=frame)
+    return jnp.log(err.r - 100.0), 4.0 * err.sin_phi  # NaN within 100 cm
+
+
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [
+        (
+            {"params_type": _Unregistered},
+            "controller 'k': its parameters _Unregistered are not a pytree; allowed: a dataclass "
+            "registered with jax.tree_util.register_dataclass (docs/custom_controller.md)",
+        ),
+        (
+            {"validate": lambda params: None},
+            "controller 'k': controller.validate(params) returned None; allowed: the parameters "
+            "it checked (validate(params) -> params)",
+        ),
+        (
+            {"command": _k_command},
+            "controller 'k': controller.command(pose (3,), ref (3,), params) raised "
+            f"TracerBoolConversionError at test_usability.py:{_IF_LINE}: it asks the value of a "
+            "traced array (a Python if, bool(), float() or int() of one); allowed: jnp.where or "
+            "jax.lax.cond, as the law is traced by jit, vmap and grad (docs/custom_controller.md)",
+        ),
+        (
+            {"command": _nan_command},
+            "the run left the range of float64 (a pose became inf or NaN); allowed: gains and dt "
+            "that keep the sampled law stable (docs/model.md §4), and commands of 'k' that stay "
+            "finite",
+        ),
+    ],
+    ids=["unregistered", "validate-returns-none", "python-if", "nan"],
+)
+def test_a_newcomers_slips_in_a_law_are_named_in_one_line(fields, message):
+    """The usual first mistakes with a law of one's own, each said where it happened."""
+    fields = {"command": _mine, "params_type": _K, "validate": lambda params: params, **fields}
+    law = w.Controller(name="k", **fields)
+    with jax.enable_x64(True), pytest.raises(ValueError) as info:
+        w.rollout([20.0, 5.0, 0.0], controller=law, steps=5)
+    assert str(info.value) == message
 
 
 # ---------------------------------------------------------------- the package's surface

@@ -319,12 +319,11 @@ def require_unbatched(tree: Any, prefix: str, allowed: str) -> None:
             raise ValueError(f"{where} has shape {np.shape(leaf)}; allowed: {allowed}")
 
 
+FINITE_ALLOWED = "gains and dt that keep the sampled law stable (docs/model.md §4)"
+
+
 def require_finite_runs(
-    finite: Any,
-    dtype: Any,
-    *,
-    first: int = 0,
-    allowed: str = "gains and dt that keep the sampled law stable (docs/model.md §4)",
+    finite: Any, dtype: Any, *, first: int = 0, allowed: str = FINITE_ALLOWED
 ) -> None:
     """Raise unless every run's flag in ``finite`` is set (a run that left the dtype's range).
 

@@ -14,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from wmr_jax._src.checks import (
+    FINITE_ALLOWED,
     MAX_STEPS,
     as_float_tree,
     as_poses,
@@ -204,7 +205,7 @@ def prepare(
             f"gains is a {type(params).__name__}; allowed: a {control.params_type.__name__} "
             f"for controller {control.name!r}{_which_controller(params)}"
         )
-    params = as_float_tree(control.validate(params))
+    params = as_float_tree(control.checked(params))
     check_command_output(control, params)
     robot = as_float_tree(validate_robot(Robot() if robot is None else robot))
     dt = check_dt(dt)
@@ -226,7 +227,9 @@ def prepare(
     return refs, params, init, robot, jnp.asarray(dt, dtype=float_dtype())
 
 
-def finite_result(poses: Any, result: Any, *, pose_axes: int = 1) -> Any:
+def finite_result(
+    poses: Any, result: Any, *, pose_axes: int = 1, allowed: str = FINITE_ALLOWED
+) -> Any:
     """Return ``result``, or raise if a run left the floating-point range (traced poses pass)."""
     if is_traced(poses):
         return result
@@ -237,7 +240,7 @@ def finite_result(poses: Any, result: Any, *, pose_axes: int = 1) -> Any:
         finite = np.concatenate([f.reshape(-1) for f in local])
     else:
         finite = np.asarray(_finite_runs(poses, axes))
-    require_finite_runs(finite, poses.dtype)
+    require_finite_runs(finite, poses.dtype, allowed=allowed)
     return result
 
 
@@ -261,7 +264,10 @@ def _run(jitted: EntryJit, args: tuple, options: Options, *, record: bool) -> An
         require_memory(runs, options.steps, TRAJECTORY_RECORD, args)
     options = for_robot(options, args[3], args[4])
     out = jitted(*args, options=options)
-    return finite_result(out.poses, out, pose_axes=2) if record else finite_result(out, out)
+    allowed = options.controller.finite_allowed(FINITE_ALLOWED)
+    if record:
+        return finite_result(out.poses, out, pose_axes=2, allowed=allowed)
+    return finite_result(out, out, allowed=allowed)
 
 
 _OPTIONS_DOC = """

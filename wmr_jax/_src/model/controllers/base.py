@@ -9,7 +9,9 @@ import dataclasses
 import functools
 import inspect
 import re
+import traceback
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import jax
@@ -84,6 +86,32 @@ class Controller:
         """Return the controller's default parameters."""
         return self.params_type()
 
+    @property
+    def own(self) -> bool:
+        """Whether the law is the package's own (trusted: not traced to check it)."""
+        return getattr(self.command, "__module__", "").startswith("wmr_jax.")
+
+    def checked(self, params: Any) -> Any:
+        """Return ``validate(params)``; refuse a non-pytree, and a ``validate`` that loses them."""
+        if jax.tree_util.treedef_is_leaf(jax.tree.structure(params)):
+            raise ValueError(
+                f"controller {self.name!r}: its parameters {type(params).__name__} are not a "
+                "pytree; allowed: a dataclass registered with jax.tree_util.register_dataclass "
+                "(docs/custom_controller.md)"
+            )
+        checked = self.validate(params)
+        if not isinstance(checked, self.params_type):
+            raise ValueError(
+                f"controller {self.name!r}: controller.validate(params) returned "
+                f"{described(checked):.60}; allowed: the parameters it checked "
+                "(validate(params) -> params)"
+            )
+        return checked
+
+    def finite_allowed(self, allowed: str) -> str:
+        """``allowed`` of a refused non-finite run, naming a law of one's own as a cause."""
+        return allowed if self.own else f"{allowed}, and commands of {self.name!r} that stay finite"
+
     def region_of(
         self, pose: jax.Array, ref: jax.Array, params: Any, *, frame: Any = None
     ) -> jax.Array:
@@ -139,7 +167,7 @@ def check_command_output(controller: Controller, params: Any) -> None:
     Traced abstractly (``jax.eval_shape``), once per parameter structure and
     dtype; the package's own laws are trusted.
     """
-    if getattr(controller.command, "__module__", "").startswith("wmr_jax."):
+    if controller.own:
         return
     if any(np.ndim(leaf) != 0 for leaf in jax.tree.leaves(params)):
         params = controller.default_params()
@@ -157,17 +185,42 @@ def _check_output_once(controller: Controller, structure: Any, dtype: str) -> No
         out = jax.eval_shape(
             lambda p, r, g: controller.command(p, r, g, temperature=None), pose, pose, probe
         )
+    except jax.errors.ConcretizationTypeError as err:  # TracerBoolConversionError among them
+        raise ValueError(
+            f"{shown} raised {type(err).__name__}{_where(controller.command, err)}: it asks the "
+            "value of a traced array (a Python if, bool(), float() or int() of one); allowed: "
+            "jnp.where or jax.lax.cond, as the law is traced by jit, vmap and grad "
+            "(docs/custom_controller.md)"
+        ) from None
     except Exception as err:  # any error of the law, reported in one line
-        message = " ".join(str(err).split())[:160]
-        raise ValueError(f"{shown} raised {type(err).__name__}: {message}; {allowed}") from None
+        message = " ".join(str(err).split())[:240]
+        where = _where(controller.command, err)
+        raise ValueError(
+            f"{shown} raised {type(err).__name__}{where}: {message}; {allowed}"
+        ) from None
     if not isinstance(out, (tuple, list)) or len(out) != 2:
         what = f"{len(out)} values" if isinstance(out, (tuple, list)) else type(out).__name__
+        if isinstance(out, jax.ShapeDtypeStruct):
+            what = f"one array of shape {out.shape} of {out.dtype}"
         raise ValueError(f"{shown} returned {what}; {allowed}")
     for name, value in zip(("v", "omega"), out, strict=True):
         shape, kind = getattr(value, "shape", None), np.dtype(getattr(value, "dtype", object)).kind
         if shape != () or kind != "f":
             got = f"shape {shape} of {getattr(value, 'dtype', type(value).__name__)}"
             raise ValueError(f"{shown} returned {name} of {got}; {allowed}")
+
+
+def _where(function: Callable, err: BaseException) -> str:
+    """`` at FILE:LINE``, the last line of ``function``'s file that ``err`` passed; or ``""``."""
+    code = getattr(function, "__code__", None)
+    if code is None:
+        return ""
+    lines = [
+        f
+        for f in traceback.walk_tb(err.__traceback__)
+        if f[0].f_code.co_filename == code.co_filename
+    ]
+    return f" at {Path(code.co_filename).name}:{lines[-1][1]}" if lines else ""
 
 
 _REGISTRY: dict[str, Controller] = {}

@@ -168,8 +168,9 @@ def disturbed_metrics(
         checks.require_finite_runs(
             np.isfinite(result.final_distance),
             args[-1].dtype,
-            allowed="disturbances, gains and dt that keep the sampled law stable "
-            "(docs/model.md §4, §7)",
+            allowed=options.controller.finite_allowed(
+                "disturbances, gains and dt that keep the sampled law stable (docs/model.md §4, §7)"
+            ),
         )
         return result
 
