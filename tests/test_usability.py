@@ -7,6 +7,7 @@ import pydoc
 import re
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import jax
@@ -346,3 +347,17 @@ def test_bare_command_prints_the_help_with_status_2(capsys):
     assert "--version" in captured.err
     for command in ("simulate", "compare", "bench"):
         assert command in captured.err
+
+
+def test_a_heading_in_degrees_is_warned_and_one_in_radians_is_not():
+    """A whole number beyond 2π is most likely degrees; an unwrapped angle in radians is not."""
+    with pytest.warns(UserWarning, match=r"ref has heading 90 rad, a whole number beyond 2π"):
+        w.rollout([40.0, 20.0, 90.0], w.Gains(kr=60.0, k_theta=10.0), steps=3)
+    with pytest.warns(UserWarning, match=r"refs has heading -135 rad.*\(2 pose\(s\)\).*= -2\.3562"):
+        w.final_poses([[40.0, 0.0, 0.5], [9.0, 9.0, -135.0], [1.0, 1.0, 180.0]], steps=3)
+    with pytest.warns(UserWarning, match="init has heading 45 rad"):
+        w.rollout([40.0, 20.0, 0.0], init=[0.0, 0.0, 45], steps=3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for theta in (0.0, 3.0, -np.pi, 4 * np.pi, 6.0):
+            w.rollout([40.0, 20.0, theta], w.Gains(kr=60.0, k_theta=10.0), steps=3)

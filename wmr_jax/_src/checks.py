@@ -11,6 +11,7 @@ import dataclasses
 import functools
 import math
 import os
+import warnings
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -434,7 +435,8 @@ def as_poses(
     """Return ``value`` as a float pose array after checking shape and finiteness.
 
     ``batch``: ``False`` for one pose ``(3,)``, ``True`` for ``(N, 3)``, ``None``
-    for either; ``check_only``: return ``None``, no converted copy.
+    for either; ``check_only``: return ``None``, no converted copy. Host
+    values with headings that look like degrees are warned of.
     """
     if isinstance(value, jax.core.Tracer):
         return value
@@ -478,11 +480,26 @@ def as_poses(
             _raise_row(name, shape, arr, host, bad, message)
     if arr is not None:
         return None if check_only else reduced
+    _warn_if_degrees(name, host[..., 2])
     if check_only:
         return None
     host = host.copy()
     host[..., 2] = reduce_heading(host[..., 2])
     return jnp.asarray(host, dtype=float_dtype())
+
+
+def _warn_if_degrees(name: str, theta: np.ndarray) -> None:
+    """Warn where a heading is a whole number beyond 2π: most likely degrees given as radians."""
+    slips = np.flatnonzero((np.abs(theta) > 2 * np.pi) & (theta == np.round(theta)))
+    if slips.size:
+        value = float(theta.reshape(-1)[slips[0]])
+        warnings.warn(
+            f"{name} has heading {value:g} rad, a whole number beyond 2π, most likely degrees "
+            f"({slips.size} pose(s)); headings are radians: np.radians({value:g}) = "
+            f"{np.radians(value):.4f}",
+            UserWarning,
+            stacklevel=4,
+        )
 
 
 @jax.jit
