@@ -7,9 +7,9 @@ The names here are the whole first screen (``docs/model.md`` is the model):
 * the law: ``control``; other controllers: ``Controller``, ``get_controller``,
   ``register_controller``;
 * runs: ``rollout`` (one pose), ``batch_rollout`` and ``final_poses`` (many),
-  ``Trajectory``, ``Options`` (the velocity loop), ``ClosedLoop`` (a law with
-  an estimator), ``DEFAULT_DT``; ``sweep`` streams a large batch to a folder;
-  ``shard`` / ``unpad`` spread a batch over devices;
+  ``Trajectory``, ``ClosedLoop`` (a law with an estimator), ``DEFAULT_DT``;
+  ``sweep`` streams a large batch to a folder; ``shard`` / ``unpad`` spread a
+  batch over devices;
 * poses and measures: ``sample_poses``, ``paper_refs``, ``arrival_time``,
   ``success_rate``;
 * the NumPy oracle: ``reference_rollout``; tuned gains: ``load_tuned``;
@@ -34,7 +34,6 @@ from wmr_jax._src.model.robots import ROBOTS as ROBOTS
 from wmr_jax._src.model.robots import RobotUnitsWarning as RobotUnitsWarning
 from wmr_jax._src.model.robots import load_robot as load_robot
 from wmr_jax._src.oracle.reference import reference_rollout as reference_rollout
-from wmr_jax._src.sim.loops import Options as Options
 from wmr_jax._src.sim.metrics import arrival_time as arrival_time
 from wmr_jax._src.sim.metrics import success_rate as success_rate
 from wmr_jax._src.sim.poses import paper_refs as paper_refs
