@@ -209,3 +209,29 @@ def test_the_maps_draw_the_wheel_limit_of_the_robot_the_study_ran(tmp_path, monk
     del study.summary["robot"]  # a summary from before robots were recorded: the paper robot
     report.save_map_study(tmp_path, study)
     assert drawn == [22.0, 125.0]
+
+
+def test_compare_runs_a_registered_law_beside_the_baselines(tmp_path, monkeypatch, capsys):
+    """The paper's law registered again under another name: its row is shim-sung's."""
+    from wmr_jax._src.model.controllers import base
+
+    monkeypatch.setattr(base, "_REGISTRY", dict(base._REGISTRY))
+    sung = w.controllers.SHIM_SUNG
+    copy = w.Controller(
+        name="shim-copy", command=sung.command, params_type=w.Gains, validate=sung.validate
+    )
+    w.register_controller(copy)
+    argv = ["compare", "--out", str(tmp_path), "--poses", "40", "--horizon", "2", "--no-progress"]
+    assert main([*argv, "--controller", "shim-copy"]) == 0
+    rows = {
+        r["controller"]: r for r in json.loads((tmp_path / "comparison.json").read_text())["rows"]
+    }
+    assert list(rows)[-1] == "shim-copy" and len(rows) == 6
+    assert {**rows["shim-copy"], "controller": "shim-sung"} == rows["shim-sung"]
+    assert "shim-copy" in capsys.readouterr().out
+    for name, said in (
+        ("aicardi", "--controller: also = 'aicardi' is not allowed: it is compared already"),
+        ("nope", "--controller 'nope' is not known"),
+    ):
+        assert main([*argv, "--controller", name]) == 2
+        assert said in capsys.readouterr().err

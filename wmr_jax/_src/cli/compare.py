@@ -20,6 +20,14 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument("--poses", default=200_000, metavar="N", help="random reference poses")
     parser.add_argument("--seed", default=0, metavar="S", help="seed of wmr_jax.sample_poses")
     shared = sweep_flags()
+    parser.add_argument(
+        "--controller",
+        nargs="+",
+        action="extend",
+        metavar="NAME",
+        help="also compare these registered controllers, repeatable, each with its default "
+        "gains (a law of one's own, docs/custom_controller.md)",
+    )
     parser.add_argument("--velocity", **shared["--velocity"])
     parser.add_argument("--horizon", **shared["--horizon"])
     parser.add_argument("--chunk", default=DEFAULT_CHUNK, metavar="N", help="poses per call")
@@ -37,9 +45,10 @@ def run(args: Any) -> int:
     out = flags.output_dir("--out", args.out)
     n_poses = flags.positive_int("--poses", args.poses)
     seed = flags.positive_int("--seed", args.seed, 0, 2**32 - 1)
+    also = flags.controller_names(args.controller) if args.controller else ()
     given, settings = study_settings(args)
-    with flags.as_flags({"horizon": "--horizon"}):
-        comparison = compare_controllers(n_poses, seed=seed, **settings)
+    with flags.as_flags({"horizon": "--horizon", "also": "--controller"}):
+        comparison = compare_controllers(n_poses, seed=seed, also=also, **settings)
     if given is not None:
         comparison["robot_label"] = given.label  # the preset's name or the file
     save_comparison(out, comparison)

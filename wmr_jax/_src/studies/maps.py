@@ -371,6 +371,7 @@ def compare_controllers(
     x64: bool = True,
     robot: Robot | None = None,
     horizon: float | None = None,
+    also: Sequence[Any] = (),
 ) -> dict[str, Any]:
     """Compare every controller over the same random docs/model.md §6 poses.
 
@@ -381,6 +382,9 @@ def compare_controllers(
         n_poses: number of random reference poses.
         seed: seed of ``sample_poses``.
         velocity, chunk, progress, x64, robot, horizon: as ``map_study``.
+        also: registered controllers (names or values) to run after those,
+            each with its default parameters (``robot_defaults``), labelled
+            by name: a law of one's own beside the baselines.
 
     Returns:
         A JSON-ready dict of the settings, the robot and ``rows``
@@ -390,6 +394,14 @@ def compare_controllers(
     seed = checks.check_int("seed", seed, minimum=0)
     robot = validate_one_robot(robot, "compare_controllers")
     horizon = _horizon(horizon, robot)
+    runs = _comparison_runs()
+    for name in [] if not also else controllers.controller_names(also):
+        if name in runs:
+            raise ValueError(
+                f"also = {name!r} is not allowed: it is compared already; allowed: another "
+                "registered controller"
+            )
+        runs[name] = (name, None)
     refs = np.asarray(sample_poses(seed, n_poses), dtype=float)
-    results = _metrics(refs, _comparison_runs(), robot, horizon, velocity, chunk, progress, x64)
+    results = _metrics(refs, runs, robot, horizon, velocity, chunk, progress, x64)
     return _summary({"poses": n_poses, "seed": seed}, results, robot, horizon, velocity, x64)
