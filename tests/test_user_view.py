@@ -536,6 +536,23 @@ def test_a_robust_noise_that_looks_like_metres_or_radians_is_warned_of():
         warnings.simplefilter("error")  # noiseless, and a mocap tracker's, are meant
         config_from(SimpleNamespace(noise=0, noise_theta=0))
         config_from(SimpleNamespace(noise=0.01, noise_theta=0.05))
+        config_from(SimpleNamespace(noise=10, noise_theta=50))  # a coarse tracker's, meant
+
+
+def test_a_robust_noise_no_loop_can_arrive_under_is_warned_of():
+    from types import SimpleNamespace
+
+    from wmr_jax._src.cli.tune_robust import config_from
+
+    with pytest.warns(UserWarning) as caught:
+        config = config_from(SimpleNamespace(noise=50, noise_theta=60))
+    assert (config.noise_xy, config.noise_theta) == (50.0, 60.0)  # warned, still taken
+    assert [str(w.message) for w in caught] == [
+        "--noise 50 is read in cm, over ten times the arrival tolerance the tuner judges by "
+        "(1 cm): no loop settles within it under such noise (a value in mm needs /10)",
+        "--noise-theta 60 is read in degrees, over ten times the arrival tolerance the tuner "
+        "judges by (5 degrees): no loop settles within it",
+    ]
 
 
 def test_a_period_or_horizon_that_looks_like_milliseconds_is_warned_of(

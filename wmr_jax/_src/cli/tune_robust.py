@@ -15,6 +15,9 @@ from wmr_jax._src.cli import flags
 # was most likely given in metres or radians.
 _FINEST_XY = 0.01  # cm
 _FINEST_THETA = 0.05  # degrees
+# Ten times the arrival tolerances the tuner is judged by (1 cm, 5 degrees): above,
+# no loop settles within them, and the tuner has nothing to descend.
+_COARSEST = {"--noise": 10.0, "--noise-theta": 50.0}
 
 
 def config_from(args: Any) -> Any:
@@ -54,6 +57,15 @@ def config_from(args: Any) -> Any:
                 flags.unit_slip(
                     f"{flag} {value} is read in {unit}, finer than most motion-capture trackers "
                     f"(under {finest:g} {unit}); a value in {other}"
+                )
+            if changes[name] > _COARSEST[flag]:
+                flags.unit_slip(
+                    f"{flag} {value} is read in {unit}, over ten times the arrival tolerance "
+                    f"the tuner judges by ({_COARSEST[flag] / 10:g} {unit}): no loop settles "
+                    "within it under such noise (a value in mm needs /10)"
+                    if flag == "--noise"
+                    else f"{flag} {value} is read in {unit}, over ten times the arrival "
+                    f"tolerance the tuner judges by (5 degrees): no loop settles within it"
                 )
     price = getattr(args, "price", None)
     if price is not None:
