@@ -217,11 +217,24 @@ def test_compare_runs_all_three_methods_on_a_schedule_of_its_size():
 
         return run
 
-    with pytest.MonkeyPatch.context() as patch:
+    def warning(evaluate):
+        def run(*args, **kwargs):
+            warnings.warn("k_theta*dt = 2.5 >= 2", w.SamplingWarning, stacklevel=2)
+            return evaluate(*args, **kwargs)
+
+        return run
+
+    with pytest.MonkeyPatch.context() as patch, pytest.warns(w.SamplingWarning) as said:
         for name in ("cma_es_search", "random_search"):
             patch.setattr(compare_module, name, watched(getattr(compare_module, name)))
+        patch.setattr(compare_module, "evaluate", warning(compare_module.evaluate))
         rows = tuning.compare(seeds=(0,), problems=("schedule",), configs={"schedule": config})
     assert [r["method"] for r in rows] == ["gradient", "cma-es", "random search"]
+    # A warning about a method's gains names the method, the problem and the seed.
+    named = [str(r.message) for r in said if issubclass(r.category, w.SamplingWarning)]
+    for method in ("gradient", "cma-es", "random search"):
+        assert f"gains 'schedule, seed 0, {method}': k_theta*dt = 2.5 >= 2" in named
+    assert all(text.startswith("gains 'schedule, seed 0, ") for text in named), named
     # Each given the gradient's CPU time (positive), searching the 17 logits.
     assert searched == [("cma_es_search", 17, True), ("random_search", 17, True)]
     assert all(r["parameters"] == 17 for r in rows)

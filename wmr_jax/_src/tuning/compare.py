@@ -19,6 +19,7 @@ from wmr_jax._src.checks import check_callable, check_int
 from wmr_jax._src.model.params import Robot, validate_one_robot
 from wmr_jax._src.sim.poses import sample_poses
 from wmr_jax._src.studies.optimal import time_bounds
+from wmr_jax._src.studies.robustness import named_warnings
 from wmr_jax._src.tuning.evaluation import evaluate, held_out_poses, poses_digest, report_ratios
 from wmr_jax._src.tuning.problems import get_problem
 from wmr_jax._src.tuning.search import _evosax_cma_es, cma_es_search, random_search
@@ -104,7 +105,7 @@ def compare(
     bases = _checked_plan(seeds, problems, configs)
     check_callable("progress", progress)
     _evosax_cma_es()  # refused now, not after the first gradient run
-    rows = []
+    rows, said = [], set()
     for base in bases.values():
         problem = base.space  # for a schedule, of base.knots knots
         held_out = held_out_poses(base.eval_poses, base.eval_seed)
@@ -126,7 +127,9 @@ def compare(
                 s = search(key, refs, budget_s=budget, problem=problem, robot=robot, **run)
                 found[method] = (s.gains, s.cpu_s, s.wall_s, s.candidates)
             for method, (params, cpu, wall, candidates) in found.items():
-                ev = evaluate(params, held_out, robot=robot, **run)
+                # A warning about one method's gains says whose they are.
+                with named_warnings(f"{problem.name}, seed {seed}, {method}", said):
+                    ev = evaluate(params, held_out, robot=robot, **run)
                 done = config.iters if candidates is None else candidates
                 rows.append(
                     {
