@@ -78,6 +78,17 @@ def paper_refs() -> np.ndarray:
     return w.paper_refs()
 
 
+@pytest.fixture
+def estimator_registry():
+    """The estimators' registry, left as the test found it (every module reads the one dict)."""
+    from wmr_jax._src.sim.sensing import estimators
+
+    kept = dict(estimators.ESTIMATORS)
+    yield estimators.ESTIMATORS
+    estimators.ESTIMATORS.clear()
+    estimators.ESTIMATORS.update(kept)
+
+
 # Every draw of n ≤ _POOL poses is the first n rows of one draw of _POOL (JAX's
 # threefry draws element by element), so the tests share one compiled sampler
 # instead of compiling one per n.

@@ -8,6 +8,7 @@ flight). The refusals come before any run, in one line naming the part.
 """
 
 import dataclasses
+import json
 from typing import Any, NamedTuple
 
 import jax
@@ -18,7 +19,6 @@ import pytest
 import wmr_jax as w
 from wmr_jax import studies
 from wmr_jax._src.oracle.reference import reference_disturbed_rollout
-from wmr_jax._src.sim.sensing import estimators
 
 
 @jax.tree_util.register_dataclass
@@ -56,10 +56,8 @@ GAINS = w.Gains(kr=60.0, k_theta=10.0)
 
 
 @pytest.fixture
-def registry(monkeypatch):
-    """A registry of this test's own, so that registering leaves the others' alone."""
-    monkeypatch.setattr(estimators, "ESTIMATORS", dict(estimators.ESTIMATORS))
-    return estimators.ESTIMATORS
+def registry(estimator_registry):
+    return estimator_registry
 
 
 def _spec(delay: float, steps: int = 90):
@@ -203,3 +201,16 @@ def test_the_tuner_the_export_and_the_reference_refuse_it_by_name(registry):
         w.export.c_sources(loop)
     with pytest.raises(ValueError, match="estimator = <Estimator 'blend'> is not allowed"):
         reference_disturbed_rollout(REFS[0], GAINS, noise=np.zeros((5, 3)), estimator="blend")
+
+
+def test_a_registered_estimators_parameters_are_saved_and_loaded_with_the_gains(registry, tmp_path):
+    path = tmp_path / "tuned_gains.json"
+    studies.register_estimator(BLEND)
+    path.write_text(json.dumps(w.tuning.tuned_json(GAINS, Blend(gain=0.2, compensate=False))))
+    loop = w.load_tuned(path)
+    assert loop.estimator == Blend(gain=0.2, compensate=False) and loop.params == GAINS
+    del registry["blend"]  # a session that has not registered it
+    with pytest.raises(
+        ValueError, match="estimator kind = 'blend' is not allowed; allowed: 'observer' or 'ekf'"
+    ):
+        w.load_tuned(path)

@@ -19,7 +19,6 @@ import wmr_jax as w
 from wmr_jax import controllers
 from wmr_jax._src.cli.main import main
 from wmr_jax._src.model.controllers import base
-from wmr_jax._src.sim.sensing import estimators
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -160,7 +159,7 @@ def test_a_command_that_returns_no_pair_of_scalars_is_refused_before_the_loop(re
         )
 
 
-def test_custom_controller_page_runs_as_written(tmp_path, monkeypatch, capsys):
+def test_custom_controller_page_runs_as_written(tmp_path, monkeypatch, capsys, estimator_registry):
     """docs/custom_controller.md: its Python blocks run; they register "mine" and "blend"."""
     page = (ROOT / "docs" / "custom_controller.md").read_text(encoding="utf-8")
     blocks = re.findall(r"```python\n(.*?)```", page, flags=re.S)
@@ -168,7 +167,6 @@ def test_custom_controller_page_runs_as_written(tmp_path, monkeypatch, capsys):
     # The page registers a controller and an estimator: keep them out of the
     # other tests' registries.
     monkeypatch.setattr(base, "_REGISTRY", dict(base._REGISTRY))
-    monkeypatch.setattr(estimators, "ESTIMATORS", dict(estimators.ESTIMATORS))
     monkeypatch.chdir(tmp_path)
     page_names = {"__name__": "page"}
     exec(compile(blocks[0], "docs/custom_controller.md", "exec"), page_names)
@@ -187,7 +185,7 @@ def test_custom_controller_page_runs_as_written(tmp_path, monkeypatch, capsys):
     assert abs(float(end[1]) - 35.0) < 1.0 and abs(float(end[2]) - 20.0) < 1.0
     # The third: an estimator of one's own, by name and by its parameters.
     exec(compile(blocks[2], "docs/custom_controller.md", "exec"), {"__name__": "page"})
-    assert "blend" in estimators.ESTIMATORS
+    assert "blend" in estimator_registry
     out = capsys.readouterr().out
     finals = re.findall(r"^(.+): final distance \[(.*)\] cm$", out, flags=re.M)
     assert [label for label, _ in finals] == [

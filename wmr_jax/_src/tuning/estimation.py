@@ -107,6 +107,11 @@ def estimator_json(params: Any) -> dict[str, Any] | None:
     estimator, params = resolve_estimator(params)
     if estimator is None:
         return None
+    if not dataclasses.is_dataclass(params):
+        raise ValueError(
+            f"estimator {estimator.name!r}: its parameters {type(params).__name__} are not "
+            "written to a tuned_gains.json; allowed: a dataclass of numbers and tuples of them"
+        )
     values: dict[str, Any] = {"kind": estimator.name, "compensate": bool(params.compensate)}
     for field in dataclasses.fields(params):
         if field.name == "compensate":
@@ -135,18 +140,16 @@ def estimator_from_json(values: Any, where: str, *, whole: bool = False) -> Any:
     """
     if values is None:
         return None
+    kinds = " or ".join(repr(name) for name in ESTIMATORS)  # a registered one's too
     if not isinstance(values, dict):
         raise ValueError(
             f"{where}: estimator = {values!r:.80} is not allowed; allowed: null or an object "
-            "with 'kind' 'observer' or 'ekf'"
+            f"with 'kind' {kinds}"
         )
     kind = values.get("kind")
-    types = {"observer": ObserverParams, "ekf": EKFParams}
-    if kind not in types:
-        raise ValueError(
-            f"{where}: estimator kind = {kind!r} is not allowed; allowed: 'observer' or 'ekf'"
-        )
-    cls = types[kind]
+    if kind not in ESTIMATORS or not dataclasses.is_dataclass(ESTIMATORS[kind].params_type):
+        raise ValueError(f"{where}: estimator kind = {kind!r} is not allowed; allowed: {kinds}")
+    cls = ESTIMATORS[kind].params_type
     fields = {f.name for f in dataclasses.fields(cls)}
     given = {k: v for k, v in values.items() if k != "kind"}
     bad = sorted(set(given) - fields)
