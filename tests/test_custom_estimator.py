@@ -45,8 +45,9 @@ def _update(state, predicted, command, measured, ref, params, robot, dt):
 
 
 def _validate(params):
-    if not isinstance(params.gain, jax.core.Tracer) and not 0 <= float(params.gain) <= 1:
-        raise ValueError(f"estimator.gain = {params.gain!r} is not allowed; allowed: 0 to 1")
+    gain = params.gain
+    if not isinstance(gain, jax.core.Tracer) and not np.all((0 <= gain) & (np.asarray(gain) <= 1)):
+        raise ValueError(f"estimator.gain = {gain!r} is not allowed; allowed: 0 to 1")
     return params
 
 
@@ -112,6 +113,19 @@ class LeafCompensate:
     compensate: Any = True  # a leaf: jit would trace it
 
 
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class NoCompensate:
+    gain: Any = 0.3
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class NoDefault:
+    gain: Any
+    compensate: bool = dataclasses.field(default=True, metadata={"static": True})
+
+
 @dataclasses.dataclass(frozen=True)
 class NotATree:
     gain: Any = 0.3
@@ -123,41 +137,155 @@ class Grown(NamedTuple):
     count: Any
 
 
+def _python_if(state, predicted, command, measured, ref, params, robot, dt):
+    if params.gain > 0.5:  # a Python if on a traced value: line _IF_LINE
+        return state
+    return BlendState(predicted)
+
+
+_IF_LINE = _python_if.__code__.co_firstlineno + 1
+
+
+def _raises(state, predicted, command, measured, ref, params, robot, dt):
+    return BlendState(measured.nope)
+
+
+_RAISES_LINE = _raises.__code__.co_firstlineno + 1
+_ALLOWED = (
+    "allowed: a state whose pose is the estimate, a SplitPose, of the same shapes and dtypes "
+    "from start and update, e.g. a NamedTuple State(pose) (docs/custom_controller.md)"
+)
+_START = "start(measured, params, robot)"
+_UPDATE = "update(state, predicted, command, measured, ref, params, robot, dt)"
+_STATIC = (
+    "allowed: a bool field of a registered dataclass, marked static (dataclasses.field("
+    'default=True, metadata={"static": True}))'
+)
+
+
 @pytest.mark.parametrize(
     ("estimator", "message"),
     [
         (
             _with(params_type=LeafCompensate),
-            "its parameters LeafCompensate have compensate = True; allowed: a bool field marked "
-            "static",
+            f"its parameters LeafCompensate have compensate = True; {_STATIC}",
         ),
-        (_with(params_type=NotATree), "its parameters NotATree are not a pytree"),
+        (
+            _with(params_type=NoCompensate),
+            f"its parameters NoCompensate have no field compensate; {_STATIC}",
+        ),
+        (
+            _with(params_type=NotATree),
+            "its parameters NotATree are not a pytree; allowed: a dataclass registered with "
+            "jax.tree_util.register_dataclass (docs/custom_controller.md)",
+        ),
+        (
+            _with(params_type=NoDefault),
+            "estimator.params_type() raised TypeError: NoDefault.__init__() missing 1 required "
+            "positional argument: 'gain'; allowed: a class whose every field has a default (the "
+            "default parameters)",
+        ),
+        (
+            _with(validate=lambda params: None),
+            "estimator.validate(params) returned None; allowed: the parameters it checked "
+            "(validate(params) -> params)",
+        ),
         (
             _with(start=lambda measured, params, robot: measured),
-            r"start\(measured, params, robot\) returned SplitPose",
+            f"{_START} returned a bare SplitPose, without a .pose; {_ALLOWED}",
+        ),
+        (
+            _with(start=lambda measured, params, robot: {"pose": measured}),
+            f"{_START} returned dict, without a .pose; {_ALLOWED}",
         ),
         (
             _with(update=lambda s, p, c, m, r, g, robot, dt: Grown(p, 0.0)),
-            r"update\(.*\) returned a state of another structure than start's",
+            f"{_UPDATE} returned a state of another structure than start's; {_ALLOWED}",
         ),
         (
             _with(update=lambda s, p, c, m, r, g, robot, dt: BlendState(p.stacked())),
-            r"update\(.*\) returned BlendState",
+            f"{_UPDATE} returned a state whose pose is shape (3,) of float64; {_ALLOWED}",
         ),
         (
-            _with(update=lambda s, p, c, m, r, g, robot, dt: BlendState(m.nope)),
-            r"update\(.*\) raised AttributeError: 'Measurement' object has no attribute 'nope'",
+            _with(
+                start=lambda measured, params, robot: Grown(measured, jnp.zeros(1)),
+                update=lambda s, p, c, m, r, g, robot, dt: Grown(p, jnp.zeros(2)),
+            ),
+            f"{_UPDATE} returned state.count of shape (2,) of float64 where start's is shape "
+            f"(1,) of float64; {_ALLOWED}",
+        ),
+        (
+            _with(update=_raises),
+            f"{_UPDATE} raised AttributeError at test_custom_estimator.py:{_RAISES_LINE}: "
+            f"'Measurement' object has no attribute 'nope'; {_ALLOWED}",
+        ),
+        (
+            _with(update=_python_if),
+            f"{_UPDATE} raised TracerBoolConversionError at test_custom_estimator.py:{_IF_LINE}: "
+            "it asks the value of a traced array (a Python if, bool(), float() or int() of one); "
+            "allowed: jnp.where or jax.lax.cond, as it is traced by jit, vmap and grad "
+            "(docs/custom_controller.md)",
         ),
     ],
-)
+    ids=[
+        "leaf-compensate", "no-compensate", "no-pytree", "no-default", "validate-none",
+        "bare-pose", "dict", "structure", "pose-shape", "state-shape", "raises", "python-if",
+    ],
+)  # fmt: skip
 def test_an_estimator_the_loop_cannot_carry_is_refused_when_registered_and_run(
     registry, estimator, message
 ):
-    with pytest.raises(ValueError, match=f"estimator 'blend': {message}"):
-        studies.register_estimator(estimator)
+    def refused(run):
+        with jax.enable_x64(True), pytest.raises(ValueError) as info:
+            run()
+        assert str(info.value) == f"estimator 'blend': {message}"
+
+    refused(lambda: studies.register_estimator(estimator))
     assert "blend" not in registry
-    with pytest.raises(ValueError, match=f"estimator 'blend': {message}"):
-        studies.disturbed_metrics(_spec(1), GAINS, estimator=estimator)
+    refused(lambda: studies.disturbed_metrics(_spec(1), GAINS, estimator=estimator))
+
+
+@pytest.mark.parametrize(
+    ("params", "message"),
+    [
+        (
+            Blend(gain=True),
+            "estimator.gain = True is not allowed; allowed: a number, or one per run",
+        ),
+        (Blend(gain="a"), "estimator.gain = 'a' is not allowed; allowed: a number, or one per run"),
+        (
+            Blend(gain=np.ones((3, 2))),
+            "estimator.gain has shape (3, 2); allowed: a number, or one per run",
+        ),
+    ],
+)
+def test_parameters_that_are_not_numbers_are_named_by_field(registry, params, message):
+    studies.register_estimator(BLEND)
+    with pytest.raises(ValueError) as info:
+        studies.disturbed_metrics(_spec(1), GAINS, estimator=params)
+    assert str(info.value) == message
+
+
+def test_a_list_of_parameters_is_one_per_run_as_an_array_is(registry):
+    studies.register_estimator(BLEND)
+    spec = _spec(1)
+    as_list = studies.disturbed_rollout(spec, GAINS, estimator=Blend(gain=[0.1, 0.3, 0.9]))
+    as_array = studies.disturbed_rollout(
+        spec, GAINS, estimator=Blend(gain=np.array([0.1, 0.3, 0.9]))
+    )
+    one = studies.disturbed_rollout(spec, GAINS, estimator=Blend(gain=0.9))
+    np.testing.assert_array_equal(as_list["estimates"], as_array["estimates"])
+    np.testing.assert_array_equal(as_list["estimates"][2], one["estimates"][2])
+
+
+def test_another_estimators_parameter_class_is_refused(registry):
+    with pytest.raises(ValueError) as info:
+        studies.register_estimator(_with(name="ukf", params_type=studies.EKFParams))
+    assert str(info.value) == (
+        "estimator 'ukf': estimator.params_type = EKFParams is the parameter class of 'ekf'; "
+        "allowed: a class of its own (parameters name their estimator)"
+    )
+    assert studies.disturbed_metrics(_spec(1), GAINS, estimator=studies.EKFParams()) is not None
 
 
 @pytest.mark.parametrize(
@@ -205,12 +333,68 @@ def test_the_tuner_the_export_and_the_reference_refuse_it_by_name(registry):
 
 def test_a_registered_estimators_parameters_are_saved_and_loaded_with_the_gains(registry, tmp_path):
     path = tmp_path / "tuned_gains.json"
+    with pytest.raises(ValueError) as info:  # load_tuned could not read it back
+        w.tuning.tuned_json(GAINS, BLEND)
+    assert str(info.value) == (
+        "estimator 'blend' is not registered; allowed: a registered estimator "
+        "(wmr_jax.studies.register_estimator), which load_tuned can read back"
+    )
     studies.register_estimator(BLEND)
     path.write_text(json.dumps(w.tuning.tuned_json(GAINS, Blend(gain=0.2, compensate=False))))
     loop = w.load_tuned(path)
     assert loop.estimator == Blend(gain=0.2, compensate=False) and loop.params == GAINS
     del registry["blend"]  # a session that has not registered it
-    with pytest.raises(
-        ValueError, match="estimator kind = 'blend' is not allowed; allowed: 'observer' or 'ekf'"
-    ):
+    with pytest.raises(ValueError) as info:
         w.load_tuned(path)
+    assert str(info.value) == (
+        f"'{path}': estimator kind = 'blend' is not allowed; allowed: 'observer' or 'ekf', or "
+        "one registered with wmr_jax.studies.register_estimator before loading"
+    )
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Moded:
+    gain: Any = 0.3
+    mode: str = dataclasses.field(default="fast", metadata={"static": True})
+    compensate: bool = dataclasses.field(default=True, metadata={"static": True})
+
+
+def test_a_static_field_beside_compensate_runs_but_is_not_saved(registry):
+    moded = studies.register_estimator(_with(name="moded", params_type=Moded))
+    assert np.all(
+        np.isfinite(studies.disturbed_metrics(_spec(1), GAINS, estimator=moded).final_distance)
+    )
+    with pytest.raises(ValueError) as info:
+        w.tuning.tuned_json(GAINS, Moded())
+    assert str(info.value) == (
+        "estimator 'moded': its static field 'mode' cannot be written to a tuned_gains.json; "
+        "allowed: a dataclass of numbers and tuples of them, and compensate"
+    )
+
+
+def test_a_run_an_estimator_of_ones_own_sends_off_range_names_it(registry):
+    def diverge(state, predicted, command, measured, ref, params, robot, dt):
+        return BlendState(predicted._replace(position=predicted.position * jnp.nan))
+
+    studies.register_estimator(_with(update=diverge))
+    with pytest.raises(ValueError) as info:
+        studies.disturbed_metrics(_spec(1), GAINS, estimator="blend")
+    assert str(info.value).endswith(
+        "allowed: disturbances, gains and dt that keep the sampled law stable (docs/model.md "
+        "§4, §7), and estimates of 'blend' that stay finite"
+    ), str(info.value)
+
+
+def test_the_robust_tuner_refuses_a_registered_estimator_by_its_flag(registry):
+    from types import SimpleNamespace
+
+    from wmr_jax._src.cli.tune_robust import config_from
+
+    studies.register_estimator(BLEND)
+    with pytest.raises(ValueError) as info:
+        config_from(SimpleNamespace(estimator="blend"))
+    assert str(info.value) == (
+        "--estimator 'blend' is not allowed with --robust; allowed: none, ekf or observer, the "
+        "estimators the tuner knows"
+    )

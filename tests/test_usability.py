@@ -192,6 +192,7 @@ def test_custom_controller_page_runs_as_written(tmp_path, monkeypatch, capsys, e
         "None",
         "blend",
         "BlendParams(gain=0.1, compensate=True)",
+        "BlendParams(gain=[0.1, 0.5], compensate=True)",
     ]
     assert all(0 < float(d) < 2.0 for _, row in finals for d in row.split())
 
@@ -240,7 +241,7 @@ def _nan_command(pose, ref, params, *, temperature=None, frame=None):
             "controller 'k': controller.command(pose (3,), ref (3,), params) raised "
             f"TracerBoolConversionError at test_usability.py:{_IF_LINE}: it asks the value of a "
             "traced array (a Python if, bool(), float() or int() of one); allowed: jnp.where or "
-            "jax.lax.cond, as the law is traced by jit, vmap and grad (docs/custom_controller.md)",
+            "jax.lax.cond, as it is traced by jit, vmap and grad (docs/custom_controller.md)",
         ),
         (
             {"command": _nan_command},
@@ -355,7 +356,27 @@ def test_a_heading_in_degrees_is_warned_and_one_in_radians_is_not():
         w.final_poses([[40.0, 0.0, 0.5], [9.0, 9.0, -135.0], [1.0, 1.0, 180.0]], steps=3)
     with pytest.warns(UserWarning, match="init has heading 45 rad"):
         w.rollout([40.0, 20.0, 0.0], init=[0.0, 0.0, 45], steps=3)
+    with pytest.warns(UserWarning, match=r"ref has heading 90 rad.*np.radians\(90\) = 1.5708"):
+        w.rollout(jnp.array([40.0, 20.0, 90.0]), w.Gains(kr=60.0, k_theta=10.0), steps=3)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        for theta in (0.0, 3.0, -np.pi, 4 * np.pi, 6.0):
+        for theta in (0.0, 3.0, -np.pi, 4 * np.pi, 6.0, 361.0, -1e10):  # 1e10: not degrees
             w.rollout([40.0, 20.0, theta], w.Gains(kr=60.0, k_theta=10.0), steps=3)
+            w.rollout(jnp.array([40.0, 20.0, theta]), w.Gains(kr=60.0, k_theta=10.0), steps=3)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class _NoGains:
+    pass
+
+
+def test_a_law_without_parameters_runs():
+    """A parameter class with no fields is a pytree with no leaves, not an unregistered class."""
+
+    def fixed(pose, ref, params, *, temperature=None, frame=None):
+        return _mine(pose, ref, _K(), temperature=temperature, frame=frame)
+
+    law = w.Controller(name="fixed", command=fixed, params_type=_NoGains, validate=lambda p: p)
+    final = np.asarray(w.rollout([20.0, 5.0, 0.0], controller=law, steps=150).poses[-1])
+    assert np.hypot(final[0] - 20.0, final[1] - 5.0) < 0.1

@@ -11,6 +11,7 @@ import dataclasses
 import functools
 import math
 import os
+import sys
 import warnings
 from pathlib import Path
 from typing import Any, ClassVar
@@ -471,7 +472,7 @@ def as_poses(
     if arr is not None:
         # Maybe closed over by a caller's jit: checked eagerly, as one program.
         with jax.ensure_compile_time_eval():
-            flags, reduced = _device_pose_checks(arr, limit)
+            flags, reduced, (slips, first) = _device_pose_checks(arr, limit)
             flags = [bool(f) for f in flags]
     else:
         flags = [bool(np.any(bad(host))) for bad, _ in problems]
@@ -479,8 +480,11 @@ def as_poses(
         if flag:
             _raise_row(name, shape, arr, host, bad, message)
     if arr is not None:
+        _warn_if_degrees(name, int(slips), float(first))
         return None if check_only else reduced
-    _warn_if_degrees(name, host[..., 2])
+    theta = host[..., 2].reshape(-1)
+    slipped = np.flatnonzero(_looks_like_degrees(theta))
+    _warn_if_degrees(name, slipped.size, float(theta[slipped[0]]) if slipped.size else 0.0)
     if check_only:
         return None
     host = host.copy()
@@ -488,29 +492,45 @@ def as_poses(
     return jnp.asarray(host, dtype=float_dtype())
 
 
-def _warn_if_degrees(name: str, theta: np.ndarray) -> None:
-    """Warn where a heading is a whole number beyond 2π: most likely degrees given as radians."""
-    slips = np.flatnonzero((np.abs(theta) > 2 * np.pi) & (theta == np.round(theta)))
-    if slips.size:
-        value = float(theta.reshape(-1)[slips[0]])
+def _looks_like_degrees(theta: Any) -> Any:
+    """Headings that are whole numbers beyond 2π, up to 360: most likely degrees as radians."""
+    return (abs(theta) > 2 * np.pi) & (abs(theta) <= 360) & (theta == theta.round())
+
+
+# Where a warning about an argument points: the first frame outside the package
+# (Python 3.12+; before, the entry point's own line).
+_CALLER = (
+    {"skip_file_prefixes": (str(Path(__file__).resolve().parents[1]),)}
+    if sys.version_info >= (3, 12)
+    else {"stacklevel": 4}
+)
+
+
+def _warn_if_degrees(name: str, slips: int, value: float) -> None:
+    """Warn of ``slips`` headings that look like degrees, ``value`` the first."""
+    if slips:
         warnings.warn(
             f"{name} has heading {value:g} rad, a whole number beyond 2π, most likely degrees "
-            f"({slips.size} pose(s)); headings are radians: np.radians({value:g}) = "
+            f"({slips} pose(s)); headings are radians: np.radians({value:g}) = "
             f"{np.radians(value):.4f}",
             UserWarning,
-            stacklevel=4,
+            **_CALLER,
         )
 
 
 @jax.jit
-def _device_pose_checks(arr: jax.Array, limit: Any) -> tuple[tuple[jax.Array, ...], jax.Array]:
-    """Whether each check of ``as_poses`` fails on a device array; the array, headings reduced."""
+def _device_pose_checks(arr: jax.Array, limit: Any) -> tuple:
+    """Whether each check of ``as_poses`` fails on a device array; the array, headings reduced;
+    how many headings look like degrees, and the first."""
     flags = (
         ~jnp.all(jnp.isfinite(arr)),
         jnp.any(jnp.abs(arr[..., 2]) > MAX_HEADING),
         jnp.any(jnp.abs(arr[..., :2]) > limit),
     )
-    return flags, arr.at[..., 2].set(reduce_heading(arr[..., 2]))
+    theta = arr[..., 2].reshape(-1)
+    slipped = _looks_like_degrees(theta)
+    degrees = (jnp.sum(slipped), theta[jnp.argmax(slipped)])
+    return flags, arr.at[..., 2].set(reduce_heading(arr[..., 2])), degrees
 
 
 def _raise_row(name, shape, arr, host, bad, message: str):

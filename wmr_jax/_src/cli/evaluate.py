@@ -10,7 +10,6 @@ from typing import Any
 from wmr_jax._src.cli import flags
 
 _CONDITIONS = ("nominal", "latency", "noise", "both")
-_ESTIMATOR_CHOICES = ("none", "observer", "ekf")
 _REF_SUFFIXES = (".npy", ".csv")
 # The runs keep their noise for the whole horizon (3 floats per reference and
 # period): this many reference-periods are ~5 GB, as `robustness --runs 10^6`.
@@ -56,8 +55,9 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument(
         "--estimator",
         metavar="NAME",
-        help="feedback, instead of the file's: none (raw measurements), observer or ekf (the "
-        "file's parameters if it holds that estimator, else the defaults); default: the file's",
+        help="feedback, instead of the file's: none (raw measurements), observer, ekf or a "
+        "registered estimator's name (the file's parameters if it holds that estimator, else "
+        "the defaults); default: the file's",
     )
     parser.add_argument("--float32", **flags.FLOAT32)
     parser.add_argument(
@@ -518,7 +518,7 @@ def _run_jax(args: Any) -> int:
     out, per_ref, settings = _settings(args)
     estimator = None
     if args.estimator is not None:
-        estimator = flags.choice("--estimator", args.estimator, _ESTIMATOR_CHOICES)
+        estimator = flags.estimator(args.estimator) or "none"
     x64 = not args.float32
     from wmr_jax._src.identify.closed_loop import loaded_identified, tuned_for_identified
 

@@ -63,8 +63,8 @@ def add_arguments(parser: Any) -> None:
         "--estimator",
         default="none",
         metavar="NAME",
-        help="estimator of the Monte Carlo's controllers: none (raw feedback), observer or ekf "
-        "(docs/model.md §9)",
+        help="estimator of the Monte Carlo's controllers: none (raw feedback), observer, ekf "
+        "or a registered estimator's name (docs/model.md §9)",
     )
     parser.add_argument(
         "--noise-curve",

@@ -43,6 +43,11 @@ def config_from(args: Any) -> Any:
     estimator = getattr(args, "estimator", None)
     if estimator is not None:
         changes["estimator"] = flags.estimator(estimator)
+        if changes["estimator"] not in (None, "ekf", "observer"):  # registered: not tunable
+            raise ValueError(
+                f"--estimator {estimator!r} is not allowed with --robust; allowed: none, ekf or "
+                "observer, the estimators the tuner knows"
+            )
     elif fixed:  # raw feedback; the schedule keeps RobustConfig's estimator
         changes["estimator"] = None
     changes.update(law=law, compare=False)

@@ -21,6 +21,7 @@ import numpy as np
 
 from wmr_jax._src import checks
 from wmr_jax._src.model.controllers import SHIM_SUNG, Controller
+from wmr_jax._src.model.controllers.base import require_pytree
 from wmr_jax._src.model.params import Robot, validate_robot
 from wmr_jax._src.sim import loops, metrics
 from wmr_jax._src.sim import rollout as simulation
@@ -141,6 +142,7 @@ def _check(refs, gains, init, robot, dt, options, thresholds, chunk_size, device
     chunk_size = checks.check_int("chunk_size", chunk_size)
     devices = tuple(checked_devices(jax.local_devices() if devices is None else devices))
     gains = options.controller.default_params() if gains is None else gains
+    require_pytree(f"controller {options.controller.name!r}", gains)
     robot = Robot() if robot is None else robot
     if not isinstance(init, jax.Array):
         init = checks.real_array("init", init, "real numbers [x cm, y cm, θ rad], (3,) or (N, 3)")

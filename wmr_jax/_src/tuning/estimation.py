@@ -107,13 +107,22 @@ def estimator_json(params: Any) -> dict[str, Any] | None:
     estimator, params = resolve_estimator(params)
     if estimator is None:
         return None
-    if not dataclasses.is_dataclass(params):
+    shown = f"estimator {estimator.name!r}"
+    if ESTIMATORS.get(estimator.name) != estimator:
         raise ValueError(
-            f"estimator {estimator.name!r}: its parameters {type(params).__name__} are not "
-            "written to a tuned_gains.json; allowed: a dataclass of numbers and tuples of them"
+            f"{shown} is not registered; allowed: a registered estimator "
+            "(wmr_jax.studies.register_estimator), which load_tuned can read back"
+        )
+    fields = dataclasses.fields(params) if dataclasses.is_dataclass(params) else ()
+    static = [f.name for f in fields if f.metadata.get("static") and f.name != "compensate"]
+    if not fields or static:
+        what = f"its static field {static[0]!r}" if static else "its parameters"
+        raise ValueError(
+            f"{shown}: {what} cannot be written to a tuned_gains.json; allowed: a dataclass of "
+            "numbers and tuples of them, and compensate"
         )
     values: dict[str, Any] = {"kind": estimator.name, "compensate": bool(params.compensate)}
-    for field in dataclasses.fields(params):
+    for field in fields:
         if field.name == "compensate":
             continue
         value = getattr(params, field.name)
@@ -140,15 +149,18 @@ def estimator_from_json(values: Any, where: str, *, whole: bool = False) -> Any:
     """
     if values is None:
         return None
-    kinds = " or ".join(repr(name) for name in ESTIMATORS)  # a registered one's too
+    kinds = " or ".join(repr(name) for name in ESTIMATORS)  # registered ones too
     if not isinstance(values, dict):
         raise ValueError(
             f"{where}: estimator = {values!r:.80} is not allowed; allowed: null or an object "
             f"with 'kind' {kinds}"
         )
     kind = values.get("kind")
-    if kind not in ESTIMATORS or not dataclasses.is_dataclass(ESTIMATORS[kind].params_type):
-        raise ValueError(f"{where}: estimator kind = {kind!r} is not allowed; allowed: {kinds}")
+    if kind not in ESTIMATORS:
+        raise ValueError(
+            f"{where}: estimator kind = {kind!r} is not allowed; allowed: {kinds}, or one "
+            "registered with wmr_jax.studies.register_estimator before loading"
+        )
     cls = ESTIMATORS[kind].params_type
     fields = {f.name for f in dataclasses.fields(cls)}
     given = {k: v for k, v in values.items() if k != "kind"}

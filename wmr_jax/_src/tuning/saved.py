@@ -234,7 +234,8 @@ def load_tuned(path: str | os.PathLike) -> ClosedLoop:
     Returns:
         ``ClosedLoop(controller, params, estimator, robot)``: ``SHIM_SUNG``
         with ``Gains`` or ``SCHEDULE`` with ``ScheduleParams``, ``None`` (raw
-        feedback) or the ``ObserverParams``/``EKFParams`` saved with them,
+        feedback) or the estimator parameters saved with them (``ObserverParams``,
+        ``EKFParams``, or a registered estimator's),
         and the ``Robot`` they were tuned for (``None`` if the file records
         none); checked.
 

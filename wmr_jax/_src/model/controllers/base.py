@@ -84,21 +84,16 @@ class Controller:
 
     def default_params(self) -> Any:
         """Return the controller's default parameters."""
-        return self.params_type()
+        return default_instance(f"controller {self.name!r}: controller", self.params_type)
 
     @property
     def own(self) -> bool:
         """Whether the law is the package's own (trusted: not traced to check it)."""
-        return getattr(self.command, "__module__", "").startswith("wmr_jax.")
+        return (getattr(self.command, "__module__", None) or "").startswith("wmr_jax.")
 
     def checked(self, params: Any) -> Any:
         """Return ``validate(params)``; refuse a non-pytree, and a ``validate`` that loses them."""
-        if jax.tree_util.treedef_is_leaf(jax.tree.structure(params)):
-            raise ValueError(
-                f"controller {self.name!r}: its parameters {type(params).__name__} are not a "
-                "pytree; allowed: a dataclass registered with jax.tree_util.register_dataclass "
-                "(docs/custom_controller.md)"
-            )
+        require_pytree(f"controller {self.name!r}", params)
         checked = self.validate(params)
         if not isinstance(checked, self.params_type):
             raise ValueError(
@@ -185,19 +180,8 @@ def _check_output_once(controller: Controller, structure: Any, dtype: str) -> No
         out = jax.eval_shape(
             lambda p, r, g: controller.command(p, r, g, temperature=None), pose, pose, probe
         )
-    except jax.errors.ConcretizationTypeError as err:  # TracerBoolConversionError among them
-        raise ValueError(
-            f"{shown} raised {type(err).__name__}{_where(controller.command, err)}: it asks the "
-            "value of a traced array (a Python if, bool(), float() or int() of one); allowed: "
-            "jnp.where or jax.lax.cond, as the law is traced by jit, vmap and grad "
-            "(docs/custom_controller.md)"
-        ) from None
     except Exception as err:  # any error of the law, reported in one line
-        message = " ".join(str(err).split())[:240]
-        where = _where(controller.command, err)
-        raise ValueError(
-            f"{shown} raised {type(err).__name__}{where}: {message}; {allowed}"
-        ) from None
+        raise call_error(shown, controller.command, err, allowed) from None
     if not isinstance(out, (tuple, list)) or len(out) != 2:
         what = f"{len(out)} values" if isinstance(out, (tuple, list)) else type(out).__name__
         if isinstance(out, jax.ShapeDtypeStruct):
@@ -208,6 +192,40 @@ def _check_output_once(controller: Controller, structure: Any, dtype: str) -> No
         if shape != () or kind != "f":
             got = f"shape {shape} of {getattr(value, 'dtype', type(value).__name__)}"
             raise ValueError(f"{shown} returned {name} of {got}; {allowed}")
+
+
+def call_error(shown: str, function: Callable, err: Exception, allowed: str) -> ValueError:
+    """One line for an error of a user's ``function`` traced abstractly: where, and what to do."""
+    where = f"{shown} raised {type(err).__name__}{_where(function, err)}"
+    if isinstance(err, jax.errors.ConcretizationTypeError):  # TracerBoolConversionError too
+        return ValueError(
+            f"{where}: it asks the value of a traced array (a Python if, bool(), float() or "
+            "int() of one); allowed: jnp.where or jax.lax.cond, as it is traced by jit, vmap "
+            "and grad (docs/custom_controller.md)"
+        )
+    return ValueError(f"{where}: {' '.join(str(err).split())[:240]}; {allowed}")
+
+
+def require_pytree(owner: str, params: Any) -> None:
+    """Refuse parameters JAX cannot see into: a class not registered as a pytree."""
+    leaves = jax.tree.leaves(params)
+    if len(leaves) == 1 and leaves[0] is params:
+        raise ValueError(
+            f"{owner}: its parameters {type(params).__name__} are not a pytree; allowed: a "
+            "dataclass registered with jax.tree_util.register_dataclass "
+            "(docs/custom_controller.md)"
+        )
+
+
+def default_instance(owner: str, params_type: type) -> Any:
+    """``params_type()``, refused in one line where a field has no default."""
+    try:
+        return params_type()
+    except TypeError as err:
+        raise ValueError(
+            f"{owner}.params_type() raised TypeError: {err}; allowed: a class whose every field "
+            "has a default (the default parameters)"
+        ) from None
 
 
 def _where(function: Callable, err: BaseException) -> str:

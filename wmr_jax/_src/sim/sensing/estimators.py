@@ -28,7 +28,12 @@ from wmr_jax._src.checks import (
     require_one_batch_size,
     require_representable,
 )
-from wmr_jax._src.model.controllers.base import check_registry_name
+from wmr_jax._src.model.controllers.base import (
+    call_error,
+    check_registry_name,
+    default_instance,
+    require_pytree,
+)
 from wmr_jax._src.model.controllers.schedule import table_at
 from wmr_jax._src.model.dynamics import sin_cos
 from wmr_jax._src.model.params import Robot
@@ -296,7 +301,12 @@ class Estimator:
 
     def default_params(self) -> Any:
         """Return the estimator's default parameters."""
-        return self.params_type()
+        return default_instance(f"estimator {self.name!r}: estimator", self.params_type)
+
+    @property
+    def own(self) -> bool:
+        """Whether it is the package's own (which the tuners, the C export and the oracle know)."""
+        return BUILT_IN.get(self.name) == self
 
 
 OBSERVER = Estimator(
@@ -314,7 +324,7 @@ def register_estimator(estimator: Estimator, *, replace: bool = False) -> Estima
 
     Args:
         estimator: the estimator; its name lower-case letters, digits, ``-``
-            and ``_`` (a CLI word).
+            and ``_`` (a CLI word), its parameter class its own.
         replace: allow a name already registered to another estimator (not a
             built-in one).
     """
@@ -323,14 +333,24 @@ def register_estimator(estimator: Estimator, *, replace: bool = False) -> Estima
             f"estimator is a {type(estimator).__name__}; allowed: a wmr_jax.studies.Estimator"
         )
     replace = check_bool("replace", replace)
-    known = ESTIMATORS.get(estimator.name)
-    if known is not None and known != estimator and (not replace or known in BUILT_IN.values()):
+    name = estimator.name
+    known = ESTIMATORS.get(name)
+    if known is not None and known != estimator and (not replace or name in BUILT_IN):
         raise ValueError(
-            f"estimator.name = {estimator.name!r} is registered already; allowed: another name"
-            + ("" if estimator.name in BUILT_IN else ", or replace=True")
+            f"estimator.name = {name!r} is registered already; allowed: another name"
+            + ("" if name in BUILT_IN else ", or replace=True")
         )
-    check_state(estimator, estimator.validate(estimator.default_params()))
-    ESTIMATORS[estimator.name] = estimator
+    owner = next(
+        (e.name for e in ESTIMATORS.values() if e.params_type is estimator.params_type), name
+    )
+    if owner != name:
+        raise ValueError(
+            f"estimator {name!r}: estimator.params_type = {estimator.params_type.__name__} is "
+            f"the parameter class of {owner!r}; allowed: a class of its own (parameters name "
+            "their estimator)"
+        )
+    _custom_params(estimator, estimator.default_params())
+    ESTIMATORS[name] = estimator
     return estimator
 
 
@@ -340,52 +360,71 @@ def resolve_estimator(value: Any) -> tuple[Estimator | None, Any]:
         return None, None
     if isinstance(value, str) and value in ESTIMATORS:
         value = ESTIMATORS[value]
-    if isinstance(value, Estimator):
-        params = value.validate(value.default_params())
-        check_state(value, params)
-        return value, params
-    for estimator in reversed(ESTIMATORS.values()):
-        if isinstance(value, estimator.params_type):
-            params = estimator.validate(value)
-            check_state(estimator, params)
-            return estimator, params
-    classes = " or ".join(e.params_type.__name__ for e in ESTIMATORS.values())
-    raise ValueError(
-        f"estimator = {value!r:.80} is not allowed; allowed: None (raw feedback), "
-        f"{' or '.join(repr(n) for n in ESTIMATORS)}, an Estimator, or a {classes}"
-    )
-
-
-def check_state(estimator: Estimator, params: Any) -> None:
-    """Refuse parameters without a static ``compensate``, or states the loop cannot carry.
-
-    ``start`` and ``update`` are traced abstractly (``jax.eval_shape``), once
-    per parameter structure and dtype; the package's own are trusted.
-    """
-    if estimator in BUILT_IN.values() or is_traced(params):
-        return
-    shown = f"estimator {estimator.name!r}: its parameters {type(params).__name__}"
-    if jax.tree_util.treedef_is_leaf(jax.tree.structure(params)):
-        raise ValueError(
-            f"{shown} are not a pytree; allowed: a dataclass registered with "
-            "jax.tree_util.register_dataclass (docs/custom_controller.md)"
-        )
-    compensate = getattr(params, "compensate", None)
-    if not isinstance(compensate, bool) or any(
-        leaf is compensate for leaf in jax.tree.leaves(params)
+    estimator = value if isinstance(value, Estimator) else None
+    for match in (
+        lambda e: type(value) is e.params_type,
+        lambda e: isinstance(value, e.params_type),
     ):
+        estimator = estimator or next((e for e in ESTIMATORS.values() if match(e)), None)
+    if estimator is None:
+        classes = " or ".join(e.params_type.__name__ for e in ESTIMATORS.values())
         raise ValueError(
-            f"{shown} have compensate = {compensate!r}; allowed: a bool field marked "
-            'static (dataclasses.field(default=True, metadata={"static": True}))'
+            f"estimator = {value!r:.80} is not allowed; allowed: None (raw feedback), "
+            f"{' or '.join(repr(n) for n in ESTIMATORS)}, an Estimator, or a {classes}"
         )
-    if any(np.ndim(leaf) != 0 for leaf in jax.tree.leaves(params)):
-        params = estimator.default_params()
-    _check_state_once(estimator, jax.tree.structure(params), np.dtype(float_dtype()).name)
+    params = estimator.default_params() if value is estimator else value
+    if estimator.own:
+        return estimator, estimator.validate(params)
+    return estimator, _custom_params(estimator, params)
+
+
+def _custom_params(estimator: Estimator, params: Any) -> Any:
+    """Check an estimator of one's own and its parameters before any run; return them.
+
+    Its parameters: a pytree of numbers (each a scalar, or one per run; a list
+    is such an array) with a static bool ``compensate``, which its
+    ``validate`` returns. Its ``start`` and ``update`` are traced abstractly
+    (``jax.eval_shape``), once per parameter structure and dtype.
+    """
+    shown = f"estimator {estimator.name!r}"
+    require_pytree(shown, params)
+    compensate = getattr(params, "compensate", None)
+    leaves, structure = jax.tree_util.tree_flatten_with_path(
+        params, is_leaf=lambda v: isinstance(v, list)
+    )
+    if not isinstance(compensate, bool) or any(
+        getattr(path[-1], "name", None) == "compensate" for path, _ in leaves
+    ):
+        what = "no field compensate" if compensate is None else f"compensate = {compensate!r}"
+        raise ValueError(
+            f"{shown}: its parameters {type(params).__name__} have {what}; allowed: a bool "
+            "field of a registered dataclass, marked static "
+            '(dataclasses.field(default=True, metadata={"static": True}))'
+        )
+    numbers = []
+    for path, leaf in leaves:
+        if not is_traced(leaf):
+            name = f"estimator{jax.tree_util.keystr(path)}"
+            value = real_array(name, leaf, "a number, or one per run")
+            if value.ndim > 1:
+                raise ValueError(
+                    f"{name} has shape {value.shape}; allowed: a number, or one per run"
+                )
+            leaf = value if isinstance(leaf, list) else leaf
+        numbers.append(leaf)
+    checked = estimator.validate(jax.tree.unflatten(structure, numbers))
+    if not isinstance(checked, estimator.params_type):
+        raise ValueError(
+            f"{shown}: estimator.validate(params) returned {described(checked):.60}; allowed: "
+            "the parameters it checked (validate(params) -> params)"
+        )
+    _check_state_once(estimator, jax.tree.structure(checked), np.dtype(float_dtype()).name)
+    return checked
 
 
 @functools.lru_cache(maxsize=64)
 def _check_state_once(estimator: Estimator, structure: Any, dtype: str) -> None:
-    """``check_state`` for one parameter structure and dtype (refusals are not kept)."""
+    """Trace ``start`` and ``update`` on abstract values; refuse a state the loop cannot carry."""
     real = jax.ShapeDtypeStruct((), dtype)
     turn = jax.ShapeDtypeStruct((), np.result_type(dtype, np.complex64))
     pose = motion.SplitPose(turn, turn, real)
@@ -394,8 +433,8 @@ def _check_state_once(estimator: Estimator, structure: Any, dtype: str) -> None:
     ref = jax.ShapeDtypeStruct((3,), dtype)
     measured = Measurement(turn, turn, real, real)
     allowed = (
-        "allowed: a pytree whose pose is a SplitPose of scalars, the same from start "
-        "and update (docs/custom_controller.md)"
+        "allowed: a state whose pose is the estimate, a SplitPose, of the same shapes and dtypes "
+        "from start and update, e.g. a NamedTuple State(pose) (docs/custom_controller.md)"
     )
     name = f"estimator {estimator.name!r}"
     calls = (
@@ -411,15 +450,36 @@ def _check_state_once(estimator: Estimator, structure: Any, dtype: str) -> None:
         try:
             out = jax.eval_shape(function, *state, *args)
         except Exception as err:  # any error of the estimator, reported in one line
-            message = " ".join(str(err).split())[:300]
-            raise ValueError(f"{name}: {call} raised {type(err).__name__}: {message}") from None
+            raise call_error(f"{name}: {call}", function, err, allowed) from None
         got = getattr(out, "pose", None)
-        if not isinstance(got, motion.SplitPose) or any(
-            (a.shape, a.dtype) != (b.shape, b.dtype) for a, b in zip(got, pose, strict=True)
+        if isinstance(out, motion.SplitPose) or got is None:
+            what = "a bare SplitPose" if isinstance(out, motion.SplitPose) else type(out).__name__
+            raise ValueError(f"{name}: {call} returned {what}, without a .pose; {allowed}")
+        if not isinstance(got, motion.SplitPose) or jax.tree.map(_kind, got) != jax.tree.map(
+            _kind, pose
         ):
-            raise ValueError(f"{name}: {call} returned {described(out):.120}; {allowed}")
-        if state and jax.tree.structure(out) != jax.tree.structure(state[0]):
             raise ValueError(
-                f"{name}: {call} returned a state of another structure than start's; {allowed}"
+                f"{name}: {call} returned a state whose pose is {_shown_kinds(got)}; {allowed}"
             )
+        if state:
+            before, after = (jax.tree_util.tree_flatten_with_path(x)[0] for x in (state[0], out))
+            if jax.tree.structure(out) != jax.tree.structure(state[0]):
+                raise ValueError(
+                    f"{name}: {call} returned a state of another structure than start's; {allowed}"
+                )
+            for (path, a), (_, b) in zip(before, after, strict=True):
+                if _kind(a) != _kind(b):
+                    raise ValueError(
+                        f"{name}: {call} returned state{jax.tree_util.keystr(path)} of "
+                        f"{_shown_kinds(b)} where start's is {_shown_kinds(a)}; {allowed}"
+                    )
         state = (out,)
+
+
+def _kind(leaf: Any) -> tuple:
+    return (np.shape(leaf), np.dtype(getattr(leaf, "dtype", type(leaf))).name)
+
+
+def _shown_kinds(tree: Any) -> str:
+    kinds = [f"shape {shape} of {dtype}" for shape, dtype in map(_kind, jax.tree.leaves(tree))]
+    return ", ".join(kinds) if kinds else type(tree).__name__

@@ -170,9 +170,19 @@ def disturbed_metrics(
             args[-1].dtype,
             allowed=options.controller.finite_allowed(
                 "disturbances, gains and dt that keep the sampled law stable (docs/model.md §4, §7)"
-            ),
+            )
+            + _estimator_finite(options.estimator),
         )
         return result
+
+
+def _estimator_finite(estimator: Any) -> str:
+    """What a refused non-finite run also asks of an estimator of one's own."""
+    return (
+        ""
+        if estimator is None or estimator.own
+        else f", and estimates of {estimator.name!r} that stay finite"
+    )
 
 
 # What disturbed_rollout keeps per run and period: the pose, v, ω and the
