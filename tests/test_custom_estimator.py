@@ -316,6 +316,9 @@ def test_names_are_kept_and_the_built_in_ones_are_not_replaced(registry):
         ValueError, match="estimator is a str; allowed: a wmr_jax.studies.Estimator"
     ):
         studies.register_estimator("blend")
+    for word in ("none", "raw"):  # what --estimator reads as raw feedback
+        with pytest.raises(ValueError, match=f"'{word}' is not allowed: it means raw feedback"):
+            studies.register_estimator(_with(name=word))
 
 
 def test_the_tuner_the_export_and_the_reference_refuse_it_by_name(registry):

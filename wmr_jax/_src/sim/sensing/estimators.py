@@ -334,6 +334,10 @@ def register_estimator(estimator: Estimator, *, replace: bool = False) -> Estima
         )
     replace = check_bool("replace", replace)
     name = estimator.name
+    if name in ("none", "raw"):
+        raise ValueError(
+            f"estimator.name = {name!r} is not allowed: it means raw feedback; allowed: another"
+        )
     known = ESTIMATORS.get(name)
     if known is not None and known != estimator and (not replace or name in BUILT_IN):
         raise ValueError(
