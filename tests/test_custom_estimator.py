@@ -186,8 +186,8 @@ _STATIC = (
             "default parameters)",
         ),
         (
-            _with(validate=lambda params: None),
-            "estimator.validate(params) returned None; allowed: the parameters it checked "
+            _with(validate=lambda params: params.gain),
+            "estimator.validate(params) returned 0.3; allowed: the parameters it checked "
             "(validate(params) -> params)",
         ),
         (
@@ -215,6 +215,23 @@ _STATIC = (
             f"(1,) of float64; {_ALLOWED}",
         ),
         (
+            _with(
+                start=lambda measured, params, robot: Grown(measured, jnp.zeros(1)),
+                update=lambda s, p, c, m, r, g, robot, dt: Grown(p, jnp.zeros(1, jnp.int32)),
+            ),
+            f"{_UPDATE} returned state.count of shape (1,) of int32 where start's is shape "
+            f"(1,) of float64; {_ALLOWED}",
+        ),
+        (
+            _with(
+                update=lambda s, p, c, m, r, g, robot, dt: BlendState(
+                    studies.SplitPose(p.position[None], p.heading[None], p.theta[None])
+                )
+            ),
+            f"{_UPDATE} returned a state whose pose is shape (1,) of complex128, shape (1,) of "
+            f"complex128, shape (1,) of float64; {_ALLOWED}",
+        ),
+        (
             _with(update=_raises),
             f"{_UPDATE} raised AttributeError at test_custom_estimator.py:{_RAISES_LINE}: "
             f"'Measurement' object has no attribute 'nope'; {_ALLOWED}",
@@ -229,7 +246,8 @@ _STATIC = (
     ],
     ids=[
         "leaf-compensate", "no-compensate", "no-pytree", "no-default", "validate-none",
-        "bare-pose", "dict", "structure", "pose-shape", "state-shape", "raises", "python-if",
+        "bare-pose", "dict", "structure", "pose-shape", "state-shape", "state-dtype",
+        "pose-fields", "raises", "python-if",
     ],
 )  # fmt: skip
 def test_an_estimator_the_loop_cannot_carry_is_refused_when_registered_and_run(
@@ -276,6 +294,78 @@ def test_a_list_of_parameters_is_one_per_run_as_an_array_is(registry):
     one = studies.disturbed_rollout(spec, GAINS, estimator=Blend(gain=0.9))
     np.testing.assert_array_equal(as_list["estimates"], as_array["estimates"])
     np.testing.assert_array_equal(as_list["estimates"][2], one["estimates"][2])
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Table:
+    knots: Any = (0.05, 0.3)  # a tuple: a table of numbers, each a leaf
+    compensate: bool = dataclasses.field(default=True, metadata={"static": True})
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class BlendOfTable(Blend):
+    pass
+
+
+def test_parameters_resolve_to_their_own_estimator_and_a_subclass_to_its_parent(registry):
+    table = studies.register_estimator(
+        _with(
+            name="table",
+            params_type=Table,
+            validate=lambda params: params,
+            update=lambda s, p, c, m, r, g, robot, dt: _update(
+                s, p, c, m, r, Blend(g.knots[1]), robot, dt
+            ),
+        )
+    )
+    studies.register_estimator(BLEND)
+    spec = _spec(1)
+    by_table = studies.disturbed_rollout(spec, GAINS, estimator=Table())
+    np.testing.assert_array_equal(
+        by_table["estimates"], studies.disturbed_rollout(spec, GAINS, estimator=table)["estimates"]
+    )
+    np.testing.assert_array_equal(
+        by_table["estimates"],
+        studies.disturbed_rollout(spec, GAINS, estimator="blend")["estimates"],
+    )  # the table's second knot is the blend's default gain, 0.3
+    # A subclass of a registered class runs as its parent's estimator.
+    sub = studies.disturbed_rollout(spec, GAINS, estimator=BlendOfTable(gain=0.05))
+    own = studies.disturbed_rollout(spec, GAINS, estimator=Blend(gain=0.05))
+    np.testing.assert_array_equal(sub["estimates"], own["estimates"])
+
+    # A registered subclass of EKFParams is its own estimator's, not the EKF's.
+    @jax.tree_util.register_dataclass
+    @dataclasses.dataclass(frozen=True)
+    class UKFParams(studies.EKFParams):
+        pass
+
+    ukf = studies.register_estimator(
+        _with(
+            name="ukf",
+            params_type=UKFParams,
+            validate=lambda params: params,
+            update=lambda s, p, c, m, r, g, robot, dt: BlendState(p),  # odometry alone
+        )
+    )
+    row = studies.evaluate_loop(studies.ClosedLoop("shim-sung", GAINS, UKFParams()), REFS[:1])
+    assert row["feedback"] == ukf.name
+    with pytest.raises(ValueError) as info:
+        studies.disturbed_metrics(spec, GAINS, estimator=3.0)
+    assert str(info.value) == (
+        "estimator = 3.0 is not allowed; allowed: None (raw feedback), 'observer' or 'ekf' or "
+        "'table' or 'blend' or 'ukf', an Estimator, or a ObserverParams or EKFParams or Table or "
+        "Blend or UKFParams"
+    )
+    with pytest.raises(ValueError, match="replace = 'yes' is not allowed"):
+        studies.register_estimator(BLEND, replace="yes")
+    with pytest.raises(ValueError) as info:
+        _with(params_type=Blend())
+    assert str(info.value) == (
+        "estimator 'blend': estimator.params_type = Blend(gain=0.3, compensate=True) is not "
+        "allowed; allowed: a class"
+    )
 
 
 def test_another_estimators_parameter_class_is_refused(registry):

@@ -480,10 +480,9 @@ def _check_state_once(estimator: Estimator, structure: Any, dtype: str) -> None:
         state = (out,)
 
 
-def _kind(leaf: Any) -> tuple:
-    return (np.shape(leaf), np.dtype(getattr(leaf, "dtype", type(leaf))).name)
+def _kind(leaf: jax.ShapeDtypeStruct) -> tuple:
+    return leaf.shape, leaf.dtype.name
 
 
 def _shown_kinds(tree: Any) -> str:
-    kinds = [f"shape {shape} of {dtype}" for shape, dtype in map(_kind, jax.tree.leaves(tree))]
-    return ", ".join(kinds) if kinds else type(tree).__name__
+    return ", ".join(f"shape {s} of {d}" for s, d in map(_kind, jax.tree.leaves(tree))) or "empty"
