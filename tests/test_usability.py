@@ -352,8 +352,14 @@ def test_a_heading_in_degrees_is_warned_and_one_in_radians_is_not():
     """A whole number beyond 2π is most likely degrees; an unwrapped angle in radians is not."""
     with pytest.warns(UserWarning, match=r"ref has heading 90 rad, a whole number beyond 2π"):
         w.rollout([40.0, 20.0, 90.0], w.Gains(kr=60.0, k_theta=10.0), steps=3)
-    with pytest.warns(UserWarning, match=r"refs has heading -135 rad.*\(2 pose\(s\)\).*= -2\.3562"):
-        w.final_poses([[40.0, 0.0, 0.5], [9.0, 9.0, -135.0], [1.0, 1.0, 180.0]], steps=3)
+    refs = [[40.0, 0.0, 0.5], [9.0, 9.0, -135.0], [1.0, 1.0, 120.0]]  # the widest is named
+    for given in (refs, jnp.array(refs)):
+        with pytest.warns(UserWarning) as said:
+            w.final_poses(given, steps=3)
+        assert (
+            "refs has heading -135 rad, a whole number beyond 2π, most likely degrees; headings "
+            "are radians: np.radians(-135) = -2.3562"
+        ) in [str(r.message) for r in said]
     with pytest.warns(UserWarning, match="init has heading 45 rad"):
         w.rollout([40.0, 20.0, 0.0], init=[0.0, 0.0, 45], steps=3)
     with pytest.warns(UserWarning, match=r"ref has heading 90 rad.*np.radians\(90\) = 1.5708"):

@@ -472,19 +472,18 @@ def as_poses(
     if arr is not None:
         # Maybe closed over by a caller's jit: checked eagerly, as one program.
         with jax.ensure_compile_time_eval():
-            flags, reduced, (slips, first) = _device_pose_checks(arr, limit)
-            flags = [bool(f) for f in flags]
+            summary, reduced = _device_pose_checks(arr, limit)
+            *flags, degrees = jax.device_get(summary).tolist()  # one transfer
+            flags = [flag > 0 for flag in flags]
     else:
         flags = [bool(np.any(bad(host))) for bad, _ in problems]
     for flag, (bad, message) in zip(flags, problems, strict=True):
         if flag:
             _raise_row(name, shape, arr, host, bad, message)
     if arr is not None:
-        _warn_if_degrees(name, int(slips), float(first))
+        _warn_if_degrees(name, degrees)
         return None if check_only else reduced
-    theta = host[..., 2].reshape(-1)
-    slipped = np.flatnonzero(_looks_like_degrees(theta))
-    _warn_if_degrees(name, slipped.size, float(theta[slipped[0]]) if slipped.size else 0.0)
+    _warn_if_degrees(name, float(np.max(_degrees(host[..., 2], np), initial=0)))
     if check_only:
         return None
     host = host.copy()
@@ -492,9 +491,11 @@ def as_poses(
     return jnp.asarray(host, dtype=float_dtype())
 
 
-def _looks_like_degrees(theta: Any) -> Any:
-    """Headings that are whole numbers beyond 2π, up to 360: most likely degrees as radians."""
-    return (abs(theta) > 2 * np.pi) & (abs(theta) <= 360) & (theta == theta.round())
+def _degrees(theta: Any, xp: Any) -> Any:
+    """Per heading, ``2|θ| + (θ < 0)`` where it is a whole number beyond 2π and up to 360
+    (most likely degrees given as radians), else 0: its maximum names the widest."""
+    slipped = (abs(theta) > 2 * np.pi) & (abs(theta) <= 360) & (theta == theta.round())
+    return xp.where(slipped, 2 * abs(theta) + (theta < 0), 0)
 
 
 # Where a warning about an argument points: the first frame outside the package
@@ -506,31 +507,32 @@ _CALLER = (
 )
 
 
-def _warn_if_degrees(name: str, slips: int, value: float) -> None:
-    """Warn of ``slips`` headings that look like degrees, ``value`` the first."""
-    if slips:
+def _warn_if_degrees(name: str, code: float) -> None:
+    """Warn of headings that look like degrees; ``code``: the largest of ``_degrees``."""
+    if code:
+        value = code // 2 * (-1 if code % 2 else 1)
         warnings.warn(
-            f"{name} has heading {value:g} rad, a whole number beyond 2π, most likely degrees "
-            f"({slips} pose(s)); headings are radians: np.radians({value:g}) = "
-            f"{np.radians(value):.4f}",
+            f"{name} has heading {value:g} rad, a whole number beyond 2π, most likely degrees; "
+            f"headings are radians: np.radians({value:g}) = {np.radians(value):.4f}",
             UserWarning,
             **_CALLER,
         )
 
 
 @jax.jit
-def _device_pose_checks(arr: jax.Array, limit: Any) -> tuple:
-    """Whether each check of ``as_poses`` fails on a device array; the array, headings reduced;
-    how many headings look like degrees, and the first."""
-    flags = (
-        ~jnp.all(jnp.isfinite(arr)),
-        jnp.any(jnp.abs(arr[..., 2]) > MAX_HEADING),
-        jnp.any(jnp.abs(arr[..., :2]) > limit),
-    )
-    theta = arr[..., 2].reshape(-1)
-    slipped = _looks_like_degrees(theta)
-    degrees = (jnp.sum(slipped), theta[jnp.argmax(slipped)])
-    return flags, arr.at[..., 2].set(reduce_heading(arr[..., 2])), degrees
+def _device_pose_checks(arr: jax.Array, limit: Any) -> tuple[jax.Array, jax.Array]:
+    """Of a device array: whether each check of ``as_poses`` fails and the largest of
+    ``_degrees``, in one reduction (one collective when sharded); the headings reduced."""
+    rows = jnp.stack(
+        [
+            jnp.any(~jnp.isfinite(arr), axis=-1),
+            jnp.abs(arr[..., 2]) > MAX_HEADING,
+            jnp.any(jnp.abs(arr[..., :2]) > limit, axis=-1),
+        ],
+        axis=-1,
+    ).astype(arr.dtype)
+    rows = jnp.concatenate([rows, _degrees(arr[..., 2], jnp)[..., None]], axis=-1)
+    return jnp.max(rows.reshape(-1, 4), axis=0), arr.at[..., 2].set(reduce_heading(arr[..., 2]))
 
 
 def _raise_row(name, shape, arr, host, bad, message: str):
