@@ -518,41 +518,48 @@ def test_a_phi_m_that_looks_like_radians_is_warned_of(capsys):
     assert "read in degrees" not in capsys.readouterr().err  # above π/2 degrees: meant
 
 
-def test_a_robust_noise_that_looks_like_metres_or_radians_is_warned_of():
+@pytest.mark.parametrize(
+    ("noise", "noise_theta", "said"),
+    [
+        (
+            0.005,
+            0.0087,
+            [
+                "--noise 0.005 is read in cm, finer than most motion-capture trackers (under "
+                "0.01 cm); a value in metres needs times 100",
+                "--noise-theta 0.0087 is read in degrees, finer than most motion-capture "
+                "trackers (under 0.05 degrees); a value in radians needs times 180/pi",
+            ],
+        ),
+        (
+            50,
+            60,
+            [
+                "--noise 50 is read in cm, over ten times the arrival tolerance the tuner judges "
+                "by (1 cm): no loop settles within it under such noise (a value in mm needs /10)",
+                "--noise-theta 60 is read in degrees, over ten times the arrival tolerance the "
+                "tuner judges by (5 degrees): no loop settles within it",
+            ],
+        ),
+    ],
+    ids=["metres-or-radians", "no-loop-settles"],
+)
+def test_a_robust_noise_of_another_unit_or_none_can_settle_under_is_warned_of(
+    noise, noise_theta, said
+):
     from types import SimpleNamespace
 
     from wmr_jax._src.cli.tune_robust import config_from
 
     with pytest.warns(UserWarning) as caught:
-        config = config_from(SimpleNamespace(noise=0.005, noise_theta=0.0087))
-    assert (config.noise_xy, config.noise_theta) == (0.005, 0.0087)  # warned, still taken
-    assert [str(w.message) for w in caught] == [
-        "--noise 0.005 is read in cm, finer than most motion-capture trackers (under 0.01 cm); "
-        "a value in metres needs times 100",
-        "--noise-theta 0.0087 is read in degrees, finer than most motion-capture trackers "
-        "(under 0.05 degrees); a value in radians needs times 180/pi",
-    ]
+        config = config_from(SimpleNamespace(noise=noise, noise_theta=noise_theta))
+    assert (config.noise_xy, config.noise_theta) == (noise, noise_theta)  # warned, still taken
+    assert [str(w.message) for w in caught] == said
     with warnings.catch_warnings():
-        warnings.simplefilter("error")  # noiseless, and a mocap tracker's, are meant
+        warnings.simplefilter("error")  # noiseless, a mocap tracker's and a coarse one's: meant
         config_from(SimpleNamespace(noise=0, noise_theta=0))
         config_from(SimpleNamespace(noise=0.01, noise_theta=0.05))
-        config_from(SimpleNamespace(noise=10, noise_theta=50))  # a coarse tracker's, meant
-
-
-def test_a_robust_noise_no_loop_can_arrive_under_is_warned_of():
-    from types import SimpleNamespace
-
-    from wmr_jax._src.cli.tune_robust import config_from
-
-    with pytest.warns(UserWarning) as caught:
-        config = config_from(SimpleNamespace(noise=50, noise_theta=60))
-    assert (config.noise_xy, config.noise_theta) == (50.0, 60.0)  # warned, still taken
-    assert [str(w.message) for w in caught] == [
-        "--noise 50 is read in cm, over ten times the arrival tolerance the tuner judges by "
-        "(1 cm): no loop settles within it under such noise (a value in mm needs /10)",
-        "--noise-theta 60 is read in degrees, over ten times the arrival tolerance the tuner "
-        "judges by (5 degrees): no loop settles within it",
-    ]
+        config_from(SimpleNamespace(noise=10, noise_theta=50))
 
 
 def test_a_period_or_horizon_that_looks_like_milliseconds_is_warned_of(
