@@ -364,7 +364,7 @@ def test_parameters_resolve_to_their_own_estimator_and_a_subclass_to_its_parent(
         _with(params_type=Blend())
     assert str(info.value) == (
         "estimator 'blend': estimator.params_type = Blend(gain=0.3, compensate=True) is not "
-        "allowed; allowed: a class"
+        "allowed; allowed: a class (its defaults are the default parameters)"
     )
 
 

@@ -55,9 +55,8 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument(
         "--estimator",
         metavar="NAME",
-        help="feedback, instead of the file's: none (raw measurements), observer, ekf or a "
-        "registered estimator's name (the file's parameters if it holds that estimator, else "
-        "the defaults); default: the file's",
+        help="feedback, instead of the file's: none (raw), observer, ekf or a registered name "
+        "(the file's parameters if it holds that one, else the defaults); default: the file's",
     )
     parser.add_argument("--float32", **flags.FLOAT32)
     parser.add_argument(

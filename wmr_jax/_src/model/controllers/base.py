@@ -12,7 +12,7 @@ import re
 import traceback
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import jax
 import jax.numpy as jnp
@@ -28,8 +28,38 @@ from wmr_jax._src.checks import (
 )
 
 
-@dataclasses.dataclass(frozen=True)
-class Controller:
+class Pluggable:
+    """What a controller and an estimator share: a name, a parameter class and its defaults."""
+
+    KIND: ClassVar[str]
+    name: str
+    params_type: type
+
+    def check_params_type(self) -> None:
+        if not isinstance(self.params_type, type):
+            raise ValueError(
+                f"{self.KIND} {self.name!r}: {self.KIND}.params_type = "
+                f"{described(self.params_type):.60} is not allowed; allowed: a class (its "
+                "defaults are the default parameters)"
+            )
+
+    def __repr__(self) -> str:
+        # The generated repr would bury a rollout's signature in help().
+        return f"<{self.KIND.title()} {self.name!r}>"
+
+    def default_params(self) -> Any:
+        """Return the default parameters: ``params_type()``."""
+        try:
+            return self.params_type()
+        except TypeError as err:
+            raise ValueError(
+                f"{self.KIND} {self.name!r}: {self.KIND}.params_type() raised TypeError: {err}; "
+                "allowed: a class whose every field has a default (the default parameters)"
+            ) from None
+
+
+@dataclasses.dataclass(frozen=True, repr=False)
+class Controller(Pluggable):
     """A pose controller as a value (hashable, so it can be a static ``jit`` argument).
 
     Attributes:
@@ -46,6 +76,7 @@ class Controller:
         check_sampling: ``(params, dt) -> None``, likewise for the period; or ``None``.
     """
 
+    KIND = "controller"
     name: str
     command: Callable[..., tuple[jax.Array, jax.Array]]
     params_type: type
@@ -71,20 +102,7 @@ class Controller:
                     f"allowed; allowed: {allowed} {_CALLS[field][2]}"
                 )
             _check_signature(self.name, field, value)
-        if not isinstance(self.params_type, type):
-            raise ValueError(
-                f"controller {self.name!r}: controller.params_type = "
-                f"{described(self.params_type):.60} "
-                "is not allowed; allowed: a class (its defaults are the default parameters)"
-            )
-
-    def __repr__(self) -> str:
-        # The generated repr would bury a rollout's signature in help().
-        return f"<Controller {self.name!r}>"
-
-    def default_params(self) -> Any:
-        """Return the controller's default parameters."""
-        return default_instance(f"controller {self.name!r}: controller", self.params_type)
+        self.check_params_type()
 
     @property
     def own(self) -> bool:
@@ -215,17 +233,6 @@ def require_pytree(owner: str, params: Any) -> None:
             "dataclass registered with jax.tree_util.register_dataclass "
             "(docs/custom_controller.md)"
         )
-
-
-def default_instance(owner: str, params_type: type) -> Any:
-    """``params_type()``, refused in one line where a field has no default."""
-    try:
-        return params_type()
-    except TypeError as err:
-        raise ValueError(
-            f"{owner}.params_type() raised TypeError: {err}; allowed: a class whose every field "
-            "has a default (the default parameters)"
-        ) from None
 
 
 def _where(function: Callable, err: BaseException) -> str:

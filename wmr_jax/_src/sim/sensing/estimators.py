@@ -29,9 +29,9 @@ from wmr_jax._src.checks import (
     require_representable,
 )
 from wmr_jax._src.model.controllers.base import (
+    Pluggable,
     call_error,
     check_registry_name,
-    default_instance,
     require_pytree,
 )
 from wmr_jax._src.model.controllers.schedule import table_at
@@ -258,8 +258,8 @@ def _ekf_update(state, predicted, command, measured, ref, params, robot, dt) -> 
     return EKFState(pose, covariance)
 
 
-@dataclasses.dataclass(frozen=True)
-class Estimator:
+@dataclasses.dataclass(frozen=True, repr=False)
+class Estimator(Pluggable):
     """A pose estimator as a value (hashable: a static ``jit`` argument).
 
     Attributes:
@@ -274,6 +274,7 @@ class Estimator:
             the same structure: the correction of the loop's prediction.
     """
 
+    KIND = "estimator"
     name: str
     params_type: type
     validate: Callable[[Any], Any]
@@ -290,18 +291,7 @@ class Estimator:
                     f"estimator {self.name!r}: estimator.{field} = {described(value):.60} is not "
                     f"allowed; allowed: a function (docs/custom_controller.md)"
                 )
-        if not isinstance(self.params_type, type):
-            raise ValueError(
-                f"estimator {self.name!r}: estimator.params_type = "
-                f"{described(self.params_type):.60} is not allowed; allowed: a class"
-            )
-
-    def __repr__(self) -> str:
-        return f"<Estimator {self.name!r}>"
-
-    def default_params(self) -> Any:
-        """Return the estimator's default parameters."""
-        return default_instance(f"estimator {self.name!r}: estimator", self.params_type)
+        self.check_params_type()
 
     @property
     def own(self) -> bool:
