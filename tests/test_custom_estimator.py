@@ -220,7 +220,8 @@ _STATIC = (
                 update=lambda s, p, c, m, r, g, robot, dt: Grown(p, jnp.zeros(1, jnp.int32)),
             ),
             f"{_UPDATE} returned state.count of shape (1,) of int32 where start's is shape "
-            f"(1,) of float64; {_ALLOWED}",
+            "(1,) of float64 (the run computes in float64: make the state from the inputs, e.g. "
+            f"jnp.zeros_like(measured.theta)); {_ALLOWED}",
         ),
         (
             _with(
@@ -234,7 +235,8 @@ _STATIC = (
         (
             _with(update=_raises),
             f"{_UPDATE} raised AttributeError at test_custom_estimator.py:{_RAISES_LINE}: "
-            f"'Measurement' object has no attribute 'nope'; {_ALLOWED}",
+            f"'Measurement' object has no attribute 'nope'; allowed: {_START} -> state, "
+            f"{_UPDATE} -> state (docs/custom_controller.md)",
         ),
         (
             _with(update=_python_if),
@@ -355,8 +357,9 @@ def test_parameters_resolve_to_their_own_estimator_and_a_subclass_to_its_parent(
         studies.disturbed_metrics(spec, GAINS, estimator=3.0)
     assert str(info.value) == (
         "estimator = 3.0 is not allowed; allowed: None (raw feedback), 'observer' or 'ekf' or "
-        "'table' or 'blend' or 'ukf', an Estimator, or a ObserverParams or EKFParams or Table or "
-        "Blend or UKFParams"
+        "'table' or 'blend' or 'ukf', an Estimator, or parameters of one of ObserverParams, "
+        "EKFParams, Table, Blend, UKFParams (an estimator of one's own: "
+        "wmr_jax.studies.register_estimator)"
     )
     with pytest.raises(ValueError, match="replace = 'yes' is not allowed"):
         studies.register_estimator(BLEND, replace="yes")
@@ -491,3 +494,23 @@ def test_the_robust_tuner_refuses_a_registered_estimator_by_its_flag(registry):
         "--estimator 'blend' is not allowed with --robust; allowed: none, ekf or observer, the "
         "estimators the tuner knows"
     )
+
+
+def test_the_command_line_runs_a_registered_estimator_and_says_how_to_register_one(
+    registry, tmp_path, capsys
+):
+    from wmr_jax.cli import main
+
+    argv = ["robustness", "--out", str(tmp_path), "--runs", "4", "--controller", "shim-sung"]
+    assert main([*argv, "--estimator", "blend"]) == 2
+    said = capsys.readouterr().err.strip()
+    assert said.endswith(
+        "--estimator 'blend' is not allowed; allowed: none, observer, ekf (one's own: "
+        "registered by wmr_jax.studies.register_estimator in a script that then calls "
+        "wmr_jax.cli.main)"
+    )
+    studies.register_estimator(BLEND)
+    assert main([*argv, "--estimator", "blend"]) == 0
+    rows = json.loads((tmp_path / "robustness.json").read_text())["rows"]
+    assert {row["feedback"] for row in rows} == {"blend"}
+    assert "estimator blend, seed 0" in (tmp_path / "robustness.md").read_text()

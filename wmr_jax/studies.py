@@ -23,6 +23,7 @@ from wmr_jax._src.sim.poses import horizon_steps as horizon_steps
 from wmr_jax._src.sim.sensing.disturbances import STANDARD_CONDITIONS as STANDARD_CONDITIONS
 from wmr_jax._src.sim.sensing.disturbances import STANDARD_MISMATCH as STANDARD_MISMATCH
 from wmr_jax._src.sim.sensing.disturbances import Disturbance as Disturbance
+from wmr_jax._src.sim.sensing.disturbances import Measurement as Measurement
 from wmr_jax._src.sim.sensing.disturbances import draw_disturbances as draw_disturbances
 from wmr_jax._src.sim.sensing.disturbances import sample_disturbance as sample_disturbance
 from wmr_jax._src.sim.sensing.estimators import EKF as EKF

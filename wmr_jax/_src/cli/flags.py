@@ -105,7 +105,13 @@ def estimator(text: str) -> str | None:
 
     if text in ("none", "raw"):
         return None
-    return choice("--estimator", text, ["none", *ESTIMATORS])
+    if text not in ESTIMATORS:
+        raise ValueError(
+            f"--estimator {text!r} is not allowed; allowed: {', '.join(['none', *ESTIMATORS])} "
+            "(one's own: registered by wmr_jax.studies.register_estimator in a script that then "
+            "calls wmr_jax.cli.main)"
+        )
+    return text
 
 
 def controller_names(names: Sequence[str] | None) -> list[str]:

@@ -166,7 +166,8 @@ def write_robustness(
     horizon = _horizon_of(rows)
     # The controllers' feedback, as the rows say it (raw, or the estimator's name).
     fed = sorted({str(row["feedback"]) for row in rows if "feedback" in row})
-    feedback = "".join(f"{f} feedback, " if f == "raw" else f"the {f}, " for f in fed)
+    named = {"raw": "raw feedback", "ekf": "the ekf", "observer": "the observer"}
+    feedback = "".join(f"{named.get(f, f'estimator {f}')}, " for f in fed)
     meta = {"seed": seed, "velocity": velocity, "runs": n_runs, "horizon_s": horizon}
     if x64 is not None:
         meta["dtype"] = "float64" if x64 else "float32"

@@ -76,11 +76,13 @@ _DEGREES = "deg"
 def tuned_json(
     params: Any, estimator: Any = None, robot: Any = None, *, tuning: str | None = None
 ) -> dict[str, Any]:
-    """Return the ``tuned_gains.json`` content of ``Gains`` or ``ScheduleParams``.
+    """Return the ``tuned_gains.json`` content of ``Gains`` or ``ScheduleParams``, a dict to
+    ``json.dump`` (``load_tuned`` reads it back).
 
     Args:
         params: the parameters, or a ``ClosedLoop`` (its params, estimator and robot).
-        estimator: the estimator tuned with them (``None``: raw feedback).
+        estimator: the estimator tuned with them (``None``: raw feedback): a
+            registered one's name, ``Estimator`` or parameters.
         robot: the ``Robot`` they were tuned for (cm, kg, s); ``None``: not recorded.
         tuning: the problem that tuned them, a key of ``TUNINGS`` (``None``: not recorded).
 

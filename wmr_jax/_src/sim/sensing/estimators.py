@@ -361,10 +361,11 @@ def resolve_estimator(value: Any) -> tuple[Estimator | None, Any]:
     ):
         estimator = estimator or next((e for e in ESTIMATORS.values() if match(e)), None)
     if estimator is None:
-        classes = " or ".join(e.params_type.__name__ for e in ESTIMATORS.values())
+        classes = ", ".join(e.params_type.__name__ for e in ESTIMATORS.values())
         raise ValueError(
             f"estimator = {value!r:.80} is not allowed; allowed: None (raw feedback), "
-            f"{' or '.join(repr(n) for n in ESTIMATORS)}, an Estimator, or a {classes}"
+            f"{' or '.join(repr(n) for n in ESTIMATORS)}, an Estimator, or parameters of one "
+            f"of {classes} (an estimator of one's own: wmr_jax.studies.register_estimator)"
         )
     params = estimator.default_params() if value is estimator else value
     if estimator.own:
@@ -432,9 +433,9 @@ def _check_state_once(estimator: Estimator, structure: Any, dtype: str) -> None:
     )
     name = f"estimator {estimator.name!r}"
     calls = (
-        ("start(measured, params, robot)", estimator.start, (pose, params, robot)),
+        (_START, estimator.start, (pose, params, robot)),
         (
-            "update(state, predicted, command, measured, ref, params, robot, dt)",
+            _UPDATE,
             estimator.update,
             (pose, turn, measured, ref, params, robot, real),
         ),
@@ -444,7 +445,10 @@ def _check_state_once(estimator: Estimator, structure: Any, dtype: str) -> None:
         try:
             out = jax.eval_shape(function, *state, *args)
         except Exception as err:  # any error of the estimator, reported in one line
-            raise call_error(f"{name}: {call}", function, err, allowed) from None
+            signature = (
+                f"allowed: {_START} -> state, {_UPDATE} -> state (docs/custom_controller.md)"
+            )
+            raise call_error(f"{name}: {call}", function, err, signature) from None
         got = getattr(out, "pose", None)
         if isinstance(out, motion.SplitPose) or got is None:
             what = "a bare SplitPose" if isinstance(out, motion.SplitPose) else type(out).__name__
@@ -463,11 +467,21 @@ def _check_state_once(estimator: Estimator, structure: Any, dtype: str) -> None:
                 )
             for (path, a), (_, b) in zip(before, after, strict=True):
                 if _kind(a) != _kind(b):
+                    why = (
+                        f" (the run computes in {dtype}: make the state from the inputs, e.g. "
+                        "jnp.zeros_like(measured.theta))"
+                        if a.shape == b.shape
+                        else ""
+                    )
                     raise ValueError(
                         f"{name}: {call} returned state{jax.tree_util.keystr(path)} of "
-                        f"{_shown_kinds(b)} where start's is {_shown_kinds(a)}; {allowed}"
+                        f"{_shown_kinds(b)} where start's is {_shown_kinds(a)}{why}; {allowed}"
                     )
         state = (out,)
+
+
+_START = "start(measured, params, robot)"
+_UPDATE = "update(state, predicted, command, measured, ref, params, robot, dt)"
 
 
 def _kind(leaf: jax.ShapeDtypeStruct) -> tuple:
