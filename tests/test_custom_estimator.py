@@ -239,6 +239,12 @@ _STATIC = (
             f"{_UPDATE} -> state (docs/custom_controller.md)",
         ),
         (
+            # No line of the estimator's file was reached: the call itself failed.
+            _with(update=lambda state, predicted, command, measured: state),
+            f"{_UPDATE} raised TypeError: <lambda>() takes 4 positional arguments but 8 were "
+            f"given; allowed: {_START} -> state, {_UPDATE} -> state (docs/custom_controller.md)",
+        ),
+        (
             _with(update=_python_if),
             f"{_UPDATE} raised TracerBoolConversionError at test_custom_estimator.py:{_IF_LINE}: "
             "it asks the value of a traced array (a Python if, bool(), float() or int() of one); "
@@ -249,7 +255,7 @@ _STATIC = (
     ids=[
         "leaf-compensate", "no-compensate", "no-pytree", "no-default", "validate-none",
         "bare-pose", "dict", "structure", "pose-shape", "state-shape", "state-dtype",
-        "pose-fields", "raises", "python-if",
+        "pose-fields", "raises", "no-call", "python-if",
     ],
 )  # fmt: skip
 def test_an_estimator_the_loop_cannot_carry_is_refused_when_registered_and_run(
@@ -384,7 +390,11 @@ def test_another_estimators_parameter_class_is_refused(registry):
 @pytest.mark.parametrize(
     ("fields", "message"),
     [
-        ({"name": "My Filter"}, "estimator.name = 'My Filter' is not allowed"),
+        (
+            {"name": "My Filter"},
+            "estimator.name = 'My Filter' is not allowed; allowed: lower-case letters, digits, "
+            "'-' and '_', starting with a letter or digit",
+        ),
         ({"update": 3}, "estimator 'blend': estimator.update = 3 is not allowed"),
         ({"params_type": Blend()}, "estimator 'blend': estimator.params_type = .* is not allowed"),
     ],

@@ -1,6 +1,7 @@
 """What a user meets first: far-off goals, own controllers, the package's surface, --version."""
 
 import dataclasses
+import functools
 import importlib.metadata
 import inspect
 import pydoc
@@ -232,9 +233,17 @@ def _nan_command(pose, ref, params, *, temperature=None, frame=None):
             "registered with jax.tree_util.register_dataclass (docs/custom_controller.md)",
         ),
         (
-            {"validate": lambda params: None},
-            "controller 'k': controller.validate(params) returned None; allowed: the parameters "
+            {"validate": lambda params: params.k},
+            "controller 'k': controller.validate(params) returned 3.0; allowed: the parameters "
             "it checked (validate(params) -> params)",
+        ),
+        (
+            # A callable without code of its own: no file and line to name.
+            {"command": functools.partial(_k_command)},
+            "controller 'k': controller.command(pose (3,), ref (3,), params) raised "
+            "TracerBoolConversionError: it asks the value of a traced array (a Python if, "
+            "bool(), float() or int() of one); allowed: jnp.where or jax.lax.cond, as it is "
+            "traced by jit, vmap and grad (docs/custom_controller.md)",
         ),
         (
             {"command": _k_command},
@@ -250,7 +259,7 @@ def _nan_command(pose, ref, params, *, temperature=None, frame=None):
             "finite",
         ),
     ],
-    ids=["unregistered", "validate-returns-none", "python-if", "nan"],
+    ids=["unregistered", "validate-returns-a-gain", "partial", "python-if", "nan"],
 )
 def test_a_newcomers_slips_in_a_law_are_named_in_one_line(fields, message):
     """The usual first mistakes with a law of one's own, each said where it happened."""
