@@ -521,6 +521,7 @@ def test_the_command_line_runs_a_registered_estimator_and_says_how_to_register_o
     )
     studies.register_estimator(BLEND)
     assert main([*argv, "--estimator", "blend"]) == 0
+    assert "| condition | controller | feedback |" in capsys.readouterr().out
     rows = json.loads((tmp_path / "robustness.json").read_text())["rows"]
     assert {row["feedback"] for row in rows} == {"blend"}
     assert "estimator blend, seed 0" in (tmp_path / "robustness.md").read_text()

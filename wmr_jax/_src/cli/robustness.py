@@ -122,7 +122,8 @@ def run(args: Any) -> int:
     rows = robustness_study(controller_names=names, estimator=estimator, **study)
     write_robustness(out, rows, **study)
     print(f"robustness -> {out}/robustness.png, robustness.md, robustness.json")
-    print(robustness_table(rows, _PRINTED), end="")
+    printed = _PRINTED if estimator is None else [*_PRINTED[:2], "feedback", *_PRINTED[2:]]
+    print(robustness_table(rows, printed), end="")
     _standard(out, sets, seed, robot, meta, x64=x64)
     if args.noise_curve:
         _noise_curve(out, sets, seed, robot, meta, x64=x64)

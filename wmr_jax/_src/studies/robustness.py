@@ -193,7 +193,8 @@ def monte_carlo(
         dt: control period, s.
         x64: compute in float64 (see ``disturbed_metrics``).
         estimator: ``None`` (raw feedback), ``"observer"``, ``"ekf"`` or their
-            parameters (docs/model.md §9), or one's own (as ``disturbed_metrics``).
+            parameters (docs/model.md §9), or one's own (as ``disturbed_metrics``);
+            parameters with one value per run hold ``n_runs``, the same at every level.
         robot: the robot; default ``Robot()``.
         horizon: simulated time per run, s; default ``study_horizon(robot)``.
 
