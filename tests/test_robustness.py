@@ -245,6 +245,21 @@ def test_command_writes_what_the_study_returns(tmp_path, capsys):
     assert main(["robustness", "--out", str(tmp_path / "file"), "--runs", "1"]) == 2
 
 
+def test_command_runs_every_study_over_the_horizon_given(tmp_path, capsys):
+    out = tmp_path / "rob"
+    argv = ["robustness", "--out", str(out), "--runs", str(N), "--controller", "aicardi"]
+    assert main([*argv, "--horizon", "2"]) == 0
+    assert "horizon 2 s" in capsys.readouterr().out
+    for name in ("robustness.json", "standard_conditions.json"):
+        rows = json.loads((out / name).read_text())["rows"]
+        assert {round(row["horizon s"], 9) for row in rows} == {round(61 * 0.033, 9)}  # periods
+    study = studies.robustness_study(controller_names=["aicardi"], n_runs=N, horizon=2.0)
+    saved = json.loads((out / "robustness.json").read_text())["rows"]
+    assert [r["success"] for r in saved] == [r["success"] for r in study]
+    assert main([*argv, "--horizon", "0"]) == 2
+    assert "--horizon '0' is not allowed; allowed: a finite number > 0 s" in capsys.readouterr().err
+
+
 # ---------------------------------------------------------------- the disturbance model (§7)
 
 

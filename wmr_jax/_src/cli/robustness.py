@@ -53,6 +53,9 @@ def add_arguments(parser: Any) -> None:
     add_study_flags(parser)
     parser.add_argument("--seed", default=0, metavar="N", help="PRNG seed, an integer >= 0")
     parser.add_argument("--runs", default=256, metavar="N", help="runs per noise level")
+    from wmr_jax._src.cli.sweep import _flags as sweep_flags
+
+    parser.add_argument("--horizon", **sweep_flags()["--horizon"])
     parser.add_argument("--float32", **flags.FLOAT32)
     from wmr_jax._src.tuning.saved import TUNINGS
 
@@ -95,12 +98,13 @@ def run(args: Any) -> int:
             "robot's own tracker noise"
         )
     sets, robot = _gain_sets(args, identified)
+    horizon = None if args.horizon is None else flags.horizon("--horizon", args.horizon, robot)
     meta = _meta(seed, robot, sets, args)
     # The folder holds this run's results only: an earlier run's go first.
     for name in _OUTPUTS:
         (out / name).unlink(missing_ok=True)
     if identified is not None:
-        _on_identified(out, sets, seed, identified, meta, x64=x64)
+        _on_identified(out, sets, seed, identified, meta, x64=x64, horizon=horizon)
         return 0
 
     from wmr_jax._src.model.robots import describe_robot, robot_name
@@ -117,16 +121,17 @@ def run(args: Any) -> int:
         )
     robot_file = getattr(args, "robot", None)
     origin = f", from {robot_file}" if flags.is_robot_file(robot_file) else ""
-    print(f"robot {describe_robot(robot)}{origin}, horizon {study_horizon(robot):g} s{note}")
+    shown = study_horizon(robot) if horizon is None else horizon
+    print(f"robot {describe_robot(robot)}{origin}, horizon {shown:g} s{note}")
     study = {"seed": seed, "velocity": velocity, "n_runs": n_runs, "robot": robot, "x64": x64}
-    rows = robustness_study(controller_names=names, estimator=estimator, **study)
+    rows = robustness_study(controller_names=names, estimator=estimator, horizon=horizon, **study)
     write_robustness(out, rows, **study)
     print(f"robustness -> {out}/robustness.png, robustness.md, robustness.json")
     printed = _PRINTED if estimator is None else [*_PRINTED[:2], "feedback", *_PRINTED[2:]]
     print(robustness_table(rows, printed), end="")
-    _standard(out, sets, seed, robot, meta, x64=x64)
+    _standard(out, sets, seed, robot, meta, x64=x64, horizon=horizon)
     if args.noise_curve:
-        _noise_curve(out, sets, seed, robot, meta, x64=x64)
+        _noise_curve(out, sets, seed, robot, meta, x64=x64, horizon=horizon)
     return 0
 
 
@@ -161,7 +166,14 @@ def _gain_file(args: Any, flag: str) -> Any:
 
 
 def _noise_curve(
-    out: Any, sets: dict[str, Any], seed: int, robot: Any, meta: dict[str, Any], *, x64: bool
+    out: Any,
+    sets: dict[str, Any],
+    seed: int,
+    robot: Any,
+    meta: dict[str, Any],
+    *,
+    x64: bool,
+    horizon: float | None,
 ) -> None:
     """Success and arrival against noise: each set raw and with its (or the default) estimator."""
     import jax
@@ -177,7 +189,8 @@ def _noise_curve(
         loops[name] = loop._replace(estimator=None)
         # The tuned estimator where the file has one, else the EKF's defaults.
         loops[name + " + estimator"] = loop._replace(estimator=loop.estimator or "ekf")
-    rows = noise_curve(loops, _held_out(), jax.random.key(seed), x64=x64, robot=robot)
+    key = jax.random.key(seed)
+    rows = noise_curve(loops, _held_out(), key, x64=x64, robot=robot, horizon=horizon)
     write_noise_curve(out, rows, meta={**meta, "gains": _gains_of(loops)})  # the loops it ran
     print(f"noise curve -> {out}/noise_curve.png, .md, .json")
 
@@ -231,7 +244,14 @@ def _gain_sets(args: Any, identified: Any = None) -> tuple[dict[str, Any], Any]:
 
 
 def _standard(
-    out: Any, sets: dict[str, Any], seed: int, robot: Any, meta: dict[str, Any], *, x64: bool
+    out: Any,
+    sets: dict[str, Any],
+    seed: int,
+    robot: Any,
+    meta: dict[str, Any],
+    *,
+    x64: bool,
+    horizon: float | None,
 ) -> None:
     """Judge the gain sets under the standard conditions; write and print the table."""
     import jax
@@ -243,14 +263,22 @@ def _standard(
     )
     from wmr_jax._src.studies.conditions import standard_conditions
 
-    rows = standard_conditions(sets, _held_out(), jax.random.key(seed), x64=x64, robot=robot)
+    key = jax.random.key(seed)
+    rows = standard_conditions(sets, _held_out(), key, x64=x64, robot=robot, horizon=horizon)
     write_standard_conditions(out, rows, meta=meta)
     print(f"standard conditions -> {out}/standard_conditions.png, .md, .json")
     print(robustness_table(rows, STANDARD_COLUMNS[:6]), end="")
 
 
 def _on_identified(
-    out: Any, sets: dict[str, Any], seed: int, identified: Any, meta: dict[str, Any], *, x64: bool
+    out: Any,
+    sets: dict[str, Any],
+    seed: int,
+    identified: Any,
+    meta: dict[str, Any],
+    *,
+    x64: bool,
+    horizon: float | None,
 ) -> None:
     """Judge the gain sets on the identified robot, without its tracker noise, and on the base."""
     import numpy as np
@@ -270,7 +298,7 @@ def _on_identified(
     rows = []
     for label, how in conditions.items():
         for name, value in sets.items():
-            got = evaluate_loop(value, refs, seed=seed, x64=x64, robot=base, **how)
+            got = evaluate_loop(value, refs, seed=seed, x64=x64, robot=base, horizon=horizon, **how)
             rows.append(
                 {
                     "condition": label,
