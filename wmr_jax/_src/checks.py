@@ -436,8 +436,8 @@ def as_poses(
     """Return ``value`` as a float pose array after checking shape and finiteness.
 
     ``batch``: ``False`` for one pose ``(3,)``, ``True`` for ``(N, 3)``, ``None``
-    for either; ``check_only``: return ``None``, no converted copy. Host
-    values with headings that look like degrees are warned of.
+    for either; ``check_only``: return ``None``, no converted copy. Headings
+    that look like degrees are warned of.
     """
     if isinstance(value, jax.core.Tracer):
         return value
