@@ -248,9 +248,9 @@ def test_command_writes_what_the_study_returns(tmp_path, capsys):
 def test_command_runs_every_study_over_the_horizon_given(tmp_path, capsys):
     out = tmp_path / "rob"
     argv = ["robustness", "--out", str(out), "--runs", str(N), "--controller", "aicardi"]
-    assert main([*argv, "--horizon", "2"]) == 0
+    assert main([*argv, "--horizon", "2", "--noise-curve"]) == 0
     assert "horizon 2 s" in capsys.readouterr().out
-    for name in ("robustness.json", "standard_conditions.json"):
+    for name in ("robustness.json", "standard_conditions.json", "noise_curve.json"):
         rows = json.loads((out / name).read_text())["rows"]
         assert {round(row["horizon s"], 9) for row in rows} == {round(61 * 0.033, 9)}  # periods
     study = studies.robustness_study(controller_names=["aicardi"], n_runs=N, horizon=2.0)

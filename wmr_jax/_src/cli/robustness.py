@@ -129,9 +129,11 @@ def run(args: Any) -> int:
     print(f"robustness -> {out}/robustness.png, robustness.md, robustness.json")
     printed = _PRINTED if estimator is None else [*_PRINTED[:2], "feedback", *_PRINTED[2:]]
     print(robustness_table(rows, printed), end="")
-    _standard(out, sets, seed, robot, meta, x64=x64, horizon=horizon)
+    # What the judged runs share: the robot, the dtype and the horizon.
+    runs = {"robot": robot, "x64": x64, "horizon": horizon}
+    _standard(out, sets, seed, meta, runs)
     if args.noise_curve:
-        _noise_curve(out, sets, seed, robot, meta, x64=x64, horizon=horizon)
+        _noise_curve(out, sets, seed, meta, runs)
     return 0
 
 
@@ -166,14 +168,7 @@ def _gain_file(args: Any, flag: str) -> Any:
 
 
 def _noise_curve(
-    out: Any,
-    sets: dict[str, Any],
-    seed: int,
-    robot: Any,
-    meta: dict[str, Any],
-    *,
-    x64: bool,
-    horizon: float | None,
+    out: Any, sets: dict[str, Any], seed: int, meta: dict[str, Any], runs: dict[str, Any]
 ) -> None:
     """Success and arrival against noise: each set raw and with its (or the default) estimator."""
     import jax
@@ -189,8 +184,7 @@ def _noise_curve(
         loops[name] = loop._replace(estimator=None)
         # The tuned estimator where the file has one, else the EKF's defaults.
         loops[name + " + estimator"] = loop._replace(estimator=loop.estimator or "ekf")
-    key = jax.random.key(seed)
-    rows = noise_curve(loops, _held_out(), key, x64=x64, robot=robot, horizon=horizon)
+    rows = noise_curve(loops, _held_out(), jax.random.key(seed), **runs)
     write_noise_curve(out, rows, meta={**meta, "gains": _gains_of(loops)})  # the loops it ran
     print(f"noise curve -> {out}/noise_curve.png, .md, .json")
 
@@ -244,14 +238,7 @@ def _gain_sets(args: Any, identified: Any = None) -> tuple[dict[str, Any], Any]:
 
 
 def _standard(
-    out: Any,
-    sets: dict[str, Any],
-    seed: int,
-    robot: Any,
-    meta: dict[str, Any],
-    *,
-    x64: bool,
-    horizon: float | None,
+    out: Any, sets: dict[str, Any], seed: int, meta: dict[str, Any], runs: dict[str, Any]
 ) -> None:
     """Judge the gain sets under the standard conditions; write and print the table."""
     import jax
@@ -263,8 +250,7 @@ def _standard(
     )
     from wmr_jax._src.studies.conditions import standard_conditions
 
-    key = jax.random.key(seed)
-    rows = standard_conditions(sets, _held_out(), key, x64=x64, robot=robot, horizon=horizon)
+    rows = standard_conditions(sets, _held_out(), jax.random.key(seed), **runs)
     write_standard_conditions(out, rows, meta=meta)
     print(f"standard conditions -> {out}/standard_conditions.png, .md, .json")
     print(robustness_table(rows, STANDARD_COLUMNS[:6]), end="")
