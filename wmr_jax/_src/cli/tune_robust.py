@@ -22,6 +22,7 @@ _COARSEST = {"--noise": 10.0, "--noise-theta": 50.0}
 
 def config_from(args: Any) -> Any:
     """The ``RobustConfig`` of the flags, each checked (one line naming a bad one)."""
+    from wmr_jax._src.sim.sensing.estimators import BUILT_IN
     from wmr_jax._src.tuning.problems import MAX_TUNED_KNOTS
     from wmr_jax._src.tuning.robust import RobustConfig
 
@@ -43,7 +44,7 @@ def config_from(args: Any) -> Any:
     estimator = getattr(args, "estimator", None)
     if estimator is not None:
         changes["estimator"] = flags.estimator(estimator)
-        if changes["estimator"] not in (None, "ekf", "observer"):  # registered: not tunable
+        if changes["estimator"] not in (None, *BUILT_IN):  # a registered one: not tunable
             raise ValueError(
                 f"--estimator {estimator!r} is not allowed with --robust; allowed: none, ekf or "
                 "observer, the estimators the tuner knows"

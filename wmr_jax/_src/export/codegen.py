@@ -276,7 +276,7 @@ def c_sources(
     laws[controller][0].validate(params)
     polar = controller in (AICARDI.name, ASTOLFI.name)
     estimator, estimate = resolve_estimator(loop.estimator)
-    if estimator is not None and estimator not in BUILT_IN.values():
+    if estimator is not None and not estimator.own:
         raise ValueError(
             f"loop.estimator = {estimator!r} is not allowed; allowed: None, "
             f"{', '.join(repr(n) for n in BUILT_IN)} or their parameters (the C of an "

@@ -26,12 +26,7 @@ from wmr_jax._src.checks import (
 )
 from wmr_jax._src.model.params import Gains, Robot, check_sampling, validate_gains, validate_robot
 from wmr_jax._src.model.velocity_loop import check_stability
-from wmr_jax._src.sim.sensing.estimators import (
-    BUILT_IN,
-    OBSERVER_R,
-    EKFParams,
-    resolve_estimator,
-)
+from wmr_jax._src.sim.sensing.estimators import OBSERVER_R, EKFParams, resolve_estimator
 
 # π as a sum of two floats: shifting an angle by PI_HI and then PI_LO gives the
 # correctly rounded a ∓ π, so that e.g. fold(−float(π)) is the tiny positive
@@ -455,7 +450,7 @@ def reference_disturbed_rollout(
     gains = _one_set(Gains() if gains is None else gains, validate_gains, "gains")
     robot = _one_set(Robot() if robot is None else robot, validate_robot, "robot")
     kind, params = resolve_estimator(estimator)
-    if kind is not None and kind not in BUILT_IN.values():
+    if kind is not None and not kind.own:
         raise ValueError(f"estimator = {kind!r} is not allowed; allowed: None, 'observer', 'ekf'")
     require_unbatched(params, "estimator", "a number (the reference runs one pose)")
     ref, (x, y, th) = _one_pose("ref", ref), _one_pose("init", init)

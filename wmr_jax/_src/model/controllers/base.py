@@ -47,6 +47,17 @@ class Pluggable:
         # The generated repr would bury a rollout's signature in help().
         return f"<{self.KIND.title()} {self.name!r}>"
 
+    def validated(self, params: Any) -> Any:
+        """Return ``validate(params)``, refused in one line unless it returns parameters."""
+        checked = self.validate(params)
+        if not isinstance(checked, self.params_type):
+            raise ValueError(
+                f"{self.KIND} {self.name!r}: {self.KIND}.validate(params) returned "
+                f"{described(checked):.60}; allowed: the parameters it checked "
+                "(validate(params) -> params)"
+            )
+        return checked
+
     def default_params(self) -> Any:
         """Return the default parameters: ``params_type()``."""
         try:
@@ -112,14 +123,7 @@ class Controller(Pluggable):
     def checked(self, params: Any) -> Any:
         """Return ``validate(params)``; refuse a non-pytree, and a ``validate`` that loses them."""
         require_pytree(f"controller {self.name!r}", params)
-        checked = self.validate(params)
-        if not isinstance(checked, self.params_type):
-            raise ValueError(
-                f"controller {self.name!r}: controller.validate(params) returned "
-                f"{described(checked):.60}; allowed: the parameters it checked "
-                "(validate(params) -> params)"
-            )
-        return checked
+        return self.validated(params)
 
     def finite_allowed(self, allowed: str) -> str:
         """``allowed`` of a refused non-finite run, naming a law of one's own as a cause."""

@@ -407,12 +407,7 @@ def _custom_params(estimator: Estimator, params: Any) -> Any:
                 )
             leaf = value if isinstance(leaf, list) else leaf
         numbers.append(leaf)
-    checked = estimator.validate(jax.tree.unflatten(structure, numbers))
-    if not isinstance(checked, estimator.params_type):
-        raise ValueError(
-            f"{shown}: estimator.validate(params) returned {described(checked):.60}; allowed: "
-            "the parameters it checked (validate(params) -> params)"
-        )
+    checked = estimator.validated(jax.tree.unflatten(structure, numbers))
     _check_state_once(estimator, jax.tree.structure(checked), np.dtype(float_dtype()).name)
     return checked
 
