@@ -70,25 +70,12 @@ def add_arguments(parser: Any) -> None:
 
 
 def study_settings(args: Any) -> tuple[Any, dict[str, Any]]:
-    """``--robot``'s ``LoadedRobot`` (or ``None``) and the checked keywords of a map study."""
-    velocity = flags.velocity_loop(args.velocity)
-    chunk = flags.positive_int("--chunk", args.chunk)
-    given, robot, horizon = robot_and_horizon(args)
-    return given, {
-        "velocity": velocity,
-        "chunk": chunk,
-        "progress": not args.no_progress,
-        "x64": not args.float32,
-        "robot": robot,
-        "horizon": horizon,
-    }
-
-
-def robot_and_horizon(args: Any) -> tuple[Any, Any, float]:
-    """``--robot`` (``LoadedRobot`` or ``None``), the robot to run, and the horizon, s; said."""
+    """``--robot``'s ``LoadedRobot`` (or ``None``) and the checked keywords of a map study; said."""
     from wmr_jax._src.model.params import Robot
     from wmr_jax._src.studies.robustness import study_horizon
 
+    velocity = flags.velocity_loop(args.velocity)
+    chunk = flags.positive_int("--chunk", args.chunk)
     given = flags.robot_from(args.robot)
     robot = Robot() if given is None else given.robot
     if args.horizon is None:
@@ -98,7 +85,14 @@ def robot_and_horizon(args: Any) -> tuple[Any, Any, float]:
     scaled = args.horizon is None and horizon > 6
     scaled = " (6 s × (60 + 10 L) / v_max, rounded up to 0.1 s)" if scaled else ""
     flags.say_robot(given, f"; horizon {horizon:.4g} s{scaled}")
-    return given, robot, horizon
+    return given, {
+        "velocity": velocity,
+        "chunk": chunk,
+        "progress": not args.no_progress,
+        "x64": not args.float32,
+        "robot": robot,
+        "horizon": horizon,
+    }
 
 
 def _interrupted(finished: dict[str, tuple[int, int]], chunks: Path | None) -> str:

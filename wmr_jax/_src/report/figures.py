@@ -180,14 +180,9 @@ def plot_wheel_speeds(
     for j, name in enumerate(labels):
         ax.plot(t, wheel_speeds[:, j], linestyle, lw=1.2, label=name)
     if v_max is not None:
-        for sign in (1, -1):
-            ax.axhline(
-                sign * v_max,
-                color="r",
-                ls="--",
-                lw=1,
-                label=f"±V_max = ±{v_max:g} cm/s" if sign > 0 else None,
-            )
+        limit = {"color": "r", "ls": "--", "lw": 1}
+        ax.axhline(v_max, label=f"±V_max = ±{v_max:g} cm/s", **limit)
+        ax.axhline(-v_max, **limit)
     ax.set_xlabel("t [s]")
     ax.set_ylabel("rim speed [cm/s]")
     ax.grid(alpha=0.3)

@@ -161,15 +161,10 @@ def paper_summary_table(summary: dict[str, Any], v_max: float) -> str:
                 "ideal vs non-ideal path gap, max / mean (cm)": (
                     f"{number(s['max_deviation_cm'])} / {number(s['mean_deviation_cm'])}"
                 ),
-                "arrival ideal / non-ideal (s)": (
-                    f"{number(s['ideal_arrival_s'])} / {number(s['nonideal_arrival_s'])}"
-                ),
-                "zig-zag ideal / non-ideal": (
-                    f"{number(s['ideal_zigzag'])} / {number(s['nonideal_zigzag'])}"
-                ),
-                f"samples with a wheel command > {v_max:g} cm/s": (
-                    f"{percent(s['ideal_saturated_fraction'])} / "
-                    f"{percent(s['nonideal_saturated_fraction'])}"
+                "arrival ideal / non-ideal (s)": _pair(s, "arrival_s"),
+                "zig-zag ideal / non-ideal": _pair(s, "zigzag"),
+                f"samples with a wheel command > {v_max:g} cm/s": _pair(
+                    s, "saturated_fraction", percent
                 ),
             }
         )
@@ -179,6 +174,11 @@ def paper_summary_table(summary: dict[str, Any], v_max: float) -> str:
             "PaperRuns.summary, or paper_table.json's 'summary'"
         )
     return markdown_table(rows)
+
+
+def _pair(s: dict[str, float], key: str, fmt: Any = number) -> str:
+    """``ideal_<key> / nonideal_<key>`` of a summary entry's numbers, each as ``fmt``."""
+    return f"{fmt(s['ideal_' + key])} / {fmt(s['nonideal_' + key])}"
 
 
 # The numbers of a ``PaperRuns.summary`` entry that ``paper_summary_table`` shows.
