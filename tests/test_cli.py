@@ -108,8 +108,14 @@ def _write(tmp_path, name, text):
             ["tune", "--out", "{dir}", "--robust", "--schedule"],
             "--schedule is not allowed with --robust, which tunes a gain schedule already",
         ),
-        (["tune", "--out", "{dir}", "--compare", "--gradient-cost"], "allowed: one of them"),
-        (["tune", "--out", "{dir}", "--gradient-cost", "--iters", "5"], "--iters is not allowed"),
+        (
+            ["tune", "--out", "{dir}", "--compare", "--checkpoint-every", "5"],
+            "--checkpoint-every is not allowed with --compare, which does not use it",
+        ),
+        (
+            ["tune", "--out", "{dir}", "--robust", "--compare", "--horizon", "5"],
+            "--horizon is not allowed with --robust, which does not use it",
+        ),
         (["tune", "--out", "{dir}", "--eval-poses", "1000000000000"], "--eval-poses '1000"),
         (["tune", "--out", "{dir}", "--poses", "1e12"], "--poses '1e12' is not allowed"),
         (["tune", "--out", "{dir}", "--horizon", "1e-12"], "horizon = 1e-12 s is shorter"),

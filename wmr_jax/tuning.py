@@ -14,8 +14,6 @@ from wmr_jax._src.studies.optimal import TimeBounds as TimeBounds
 from wmr_jax._src.studies.optimal import bound_ratios as bound_ratios
 from wmr_jax._src.studies.optimal import time_bounds as time_bounds
 from wmr_jax._src.tuning.compare import compare as compare
-from wmr_jax._src.tuning.cost import GradientCost as GradientCost
-from wmr_jax._src.tuning.cost import gradient_cost as gradient_cost
 from wmr_jax._src.tuning.estimation import robust_gains as robust_gains
 from wmr_jax._src.tuning.evaluation import EVAL_POSES as EVAL_POSES
 from wmr_jax._src.tuning.evaluation import EVAL_SEED as EVAL_SEED

@@ -131,8 +131,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         # tune (plain or --compare) and sweep can continue; tune --robust cannot.
-        modes = ("robust", "gradient_cost")
-        resumable = hasattr(args, "resume") and not any(getattr(args, m, False) for m in modes)
+        resumable = hasattr(args, "resume") and not getattr(args, "robust", False)
         hint = " (the same command with --resume keeps what it finished)" if resumable else ""
         if args.command == "bench" and args.json is not None:
             hint = f" ({args.json} holds the batch sizes it finished)"

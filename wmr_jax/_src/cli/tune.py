@@ -102,11 +102,6 @@ _MODE_FLAGS = {
         "budget; a price robust_compare.json recorded gives them as many candidates on any "
         "machine (default: measured)",
     ),
-    "--gradient-cost": (
-        None,
-        "instead of tuning, measure the gradient's time and peak memory (4096 poses x 150 "
-        "steps, with and without remat) into DIR/gradient_cost.json",
-    ),
 }
 
 
@@ -155,42 +150,23 @@ def _check_modes(args: Any) -> None:
             raise ValueError(f"{flag} is not allowed without --robust, whose problem it sets")
     if args.price is not None and not (args.robust and args.compare):
         raise ValueError("--price is not allowed without --robust --compare, which it budgets")
-    modes = [m for m in ("robust", "compare", "gradient_cost") if getattr(args, m)]
-    if args.robust and args.compare:  # the robust comparison (--knots sizes its schedule)
-        modes.remove("compare")
-        if args.seed is not None:
-            raise ValueError("--seed is not allowed with --robust --compare, which runs seeds 0-2")
-    if len(modes) > 1:
-        a, b = (f"--{m.replace('_', '-')}" for m in modes[:2])
-        raise ValueError(f"{a} is not allowed with {b}; allowed: one of them")
-    mode = modes[0] if modes else None
+    # --robust --compare is the robust comparison (--knots sizes its schedule).
+    mode = "robust" if args.robust else "compare" if args.compare else None
+    if args.robust and args.compare and args.seed is not None:
+        raise ValueError("--seed is not allowed with --robust --compare, which runs seeds 0-2")
     if args.knots is not None and not args.schedule and not args.robust:
         raise ValueError("--knots is not allowed without --schedule, whose tables it sizes")
     unused = {
         "robust": ("schedule", "horizon", "eval_poses", "checkpoint_every", "no_random_search"),
         "compare": ("seed", "checkpoint_every", "no_random_search"),
-        "gradient_cost": (*(field for _, field, _, _ in _FLAGS), "schedule", "resume", "robot"),
     }.get(mode, ())
     for name in unused:
         if getattr(args, name) not in (None, False):
-            flag, other = f"--{name.replace('_', '-')}", f"--{mode.replace('_', '-')}"
+            flag, other = f"--{name.replace('_', '-')}", f"--{mode}"
             why = "which does not use it"
             if (mode, name) == ("robust", "schedule"):
                 why = "which tunes a gain schedule already (and fixed gains with --fixed)"
             raise ValueError(f"{flag} is not allowed with {other}, {why}")
-
-
-def _gradient_cost(out: Path) -> int:
-    from wmr_jax._src.tuning.cost import write_gradient_costs
-
-    for c in write_gradient_costs(out):
-        print(
-            f"{c.poses} poses x {c.steps} steps, remat={c.remat}: forward {c.forward_s:.3f} s, "
-            f"gradient {c.gradient_s:.3f} s ({c.gradient_s / c.forward_s:.1f}x); peak memory "
-            f"forward {c.forward_peak_bytes / 2**20:.1f} MiB, "
-            f"gradient {c.gradient_peak_bytes / 2**20:.1f} MiB"
-        )
-    return 0
 
 
 def _shown(params: Any) -> list[str]:
@@ -239,7 +215,7 @@ def _robot_horizon(args: Any, config: Any, robot: Any) -> Any:
     """The config with ``robot``'s studies' horizon unless ``--horizon`` is given."""
     from wmr_jax._src.studies.robustness import study_horizon
 
-    if robot is None or args.horizon is not None or args.gradient_cost:
+    if robot is None or args.horizon is not None:
         return config
     horizon = study_horizon(robot)
     if horizon != config.horizon:
@@ -267,8 +243,6 @@ def run(args: Any) -> int:
         return tune_robust.run(args)
     out = flags.output_dir("--out", args.out)
     config = _config_from(args, problem="schedule" if args.schedule else "fixed")
-    if args.gradient_cost:
-        return _gradient_cost(out)
     given = flags.robot_from(args.robot)
     if given is not None and given.note:
         print(given.note)
