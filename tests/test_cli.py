@@ -298,7 +298,7 @@ def test_tune_robust_writes_its_gains_before_judging_them(tmp_path, monkeypatch)
     # interruption there used to lose the tuned gains.
     from wmr_jax._src.tuning import robust
 
-    def fake(config, *, progress_fn, on_tuned):
+    def fake(config, *, progress_fn, on_tuned, **_):
         on_tuned(w.Gains(kr=70.0), [1.0, 0.9])
         raise KeyboardInterrupt
 

@@ -423,7 +423,7 @@ def test_robust_command_tunes_on_the_robot_it_is_given(tmp_path, capsys, monkeyp
     burger = w.ROBOTS["turtlebot3-burger"]
     argv = ["tune", "--robust", "--out", str(tmp_path), "--iters", "2", "--fixed"]
     assert main([*argv, "--robot", "turtlebot3-burger"]) == 0
-    assert seen == [{"robot": burger}]
+    assert seen == [{"robot": burger, "state": None}]
     saved = json.loads((tmp_path / "tuned_gains.json").read_text())
     assert saved["kind"] == "fixed" and "estimator" not in saved
     out = capsys.readouterr().out
@@ -431,9 +431,8 @@ def test_robust_command_tunes_on_the_robot_it_is_given(tmp_path, capsys, monkeyp
     assert w.load_tuned(tmp_path / "tuned_gains.json").robot == burger
     record = json.loads((tmp_path / "robust_evaluation.json").read_text())
     assert record["robot"]["v_max"] == pytest.approx(22.72)
-    # The paper robot is tune_robust's default: nothing is handed on.
     assert main(argv) == 0
-    assert seen[-1] == {}
+    assert seen[-1] == {"robot": w.Robot(), "state": None}
 
 
 def test_sensor_noise_sets_the_training_draws_and_is_recorded(tmp_path, monkeypatch):
@@ -534,6 +533,55 @@ def test_the_hybrid_polishes_the_kept_iterate_for_its_share_of_the_time(monkeypa
     assert 0 < budget == pytest.approx(result.tune_cpu_s / 3, rel=0.05)
     assert shape == (config.search_poses, 3) and noise == config.noise and std == 0.3
     assert result.loop.params == polished.params and result.gains == polished.params
+
+
+def test_an_interrupted_robust_run_resumes_from_its_checkpoint(tmp_path, monkeypatch):
+    """The fixed problem's checkpoint: the iterations go on bit for bit, and the
+    hybrid's polish starts from the kept iterate even when an earlier session ran it."""
+    from wmr_jax._src.tuning import robust, robust_run
+
+    starts = []
+
+    def fake_black_box(method, key, refs, budget_s, robot, dt, joint, noise, *, start, std):
+        starts.append(np.asarray(start))
+        return robust.concrete_loop(joint.from_logits(start, robot)), 1, 0.0, 0.0
+
+    class Stop(Exception):
+        pass
+
+    def stop_at_3(state):
+        if state.iteration == 3:
+            raise Stop
+
+    monkeypatch.setattr(robust, "black_box", fake_black_box)
+    config = small_config(iters=4, validate_every=1, tuner="hybrid")
+    scores = [2.0, 0.5, 1.0, 3.0, 4.0]  # iterations 0 to 4: the kept one is 1
+    whole, cut = tmp_path / "whole", tmp_path / "cut"
+    whole.mkdir(), cut.mkdir()
+    _scores(monkeypatch, scores)
+    first, _ = robust_run.tune(whole, config, w.Robot(), checkpoint_every=2, say=print)
+    assert first.best_iteration == 1
+    _scores(monkeypatch, scores)
+    with pytest.raises(Stop):
+        robust_run.tune(cut, config, w.Robot(), checkpoint_every=2, progress_fn=stop_at_3)
+    assert not (cut / "tuned_gains.json").exists()
+    _scores(monkeypatch, scores[3:])  # iteration 2's state: scored from iteration 3 on
+    said = []
+    again, _ = robust_run.tune(cut, config, w.Robot(), resume=True, say=said.append)
+    assert said[0] == f"--resume: continuing after iteration 2 of {cut / 'checkpoint.npz'}"
+    assert again.best_iteration == 1
+    np.testing.assert_array_equal(starts[1], starts[0])
+    assert again.history["loss"].tolist() == first.history["loss"].tolist()
+    assert (cut / "tuned_gains.json").read_bytes() == (whole / "tuned_gains.json").read_bytes()
+    # A checkpoint of other settings is refused, naming the difference.
+    with pytest.raises(ValueError, match=r"checkpoint .* is of another run \(iters = 4 there, 5"):
+        robust_run.tune(cut, small_config(iters=5), w.Robot(), resume=True)
+    # Without a checkpoint it starts over, and says so.
+    (cut / "checkpoint.npz").unlink()
+    _scores(monkeypatch, scores)
+    with pytest.raises(Stop):
+        robust_run.tune(cut, config, w.Robot(), resume=True, progress_fn=stop_at_3, say=said.append)
+    assert said[-1] == f"--resume: no checkpoint.npz in {cut}; starting from the first iteration"
 
 
 def test_polish_keeps_its_start_without_budget_and_improves_on_it_with_one(monkeypatch):

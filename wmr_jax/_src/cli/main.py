@@ -130,9 +130,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"wmr-jax: error: {os_reason(str(err))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        # tune (plain or --compare) and sweep can continue; tune --robust cannot.
-        resumable = hasattr(args, "resume") and not getattr(args, "robust", False)
-        hint = " (the same command with --resume keeps what it finished)" if resumable else ""
+        # tune (any mode) and sweep can continue.
+        hint = " (the same command with --resume keeps what it finished)"
+        hint = hint if hasattr(args, "resume") else ""
         if args.command == "bench" and args.json is not None:
             hint = f" ({args.json} holds the batch sizes it finished)"
         print(f"wmr-jax: interrupted{hint}", file=sys.stderr)

@@ -152,12 +152,15 @@ def _check_modes(args: Any) -> None:
         raise ValueError("--price is not allowed without --robust --compare, which it budgets")
     # --robust --compare is the robust comparison (--knots sizes its schedule).
     mode = "robust" if args.robust else "compare" if args.compare else None
-    if args.robust and args.compare and args.seed is not None:
-        raise ValueError("--seed is not allowed with --robust --compare, which runs seeds 0-2")
+    if args.robust and args.compare:
+        for flag, value in (("--seed", args.seed), ("--checkpoint-every", args.checkpoint_every)):
+            if value is not None:
+                why = "runs seeds 0-2" if flag == "--seed" else "keeps each seed, not checkpoints"
+                raise ValueError(f"{flag} is not allowed with --robust --compare, which {why}")
     if args.knots is not None and not args.schedule and not args.robust:
         raise ValueError("--knots is not allowed without --schedule, whose tables it sizes")
     unused = {
-        "robust": ("schedule", "horizon", "eval_poses", "checkpoint_every", "no_random_search"),
+        "robust": ("schedule", "horizon", "eval_poses", "no_random_search"),
         "compare": ("seed", "checkpoint_every", "no_random_search"),
     }.get(mode, ())
     for name in unused:

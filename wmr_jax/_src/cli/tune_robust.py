@@ -7,6 +7,7 @@ seeds 0–2 against CMA-ES and random search into ``robust_compare.{json,md}``.
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 from wmr_jax._src.cli import flags
@@ -86,16 +87,14 @@ def config_from(args: Any) -> Any:
     return RobustConfig(**changes).validate()
 
 
-def _robot(args: Any) -> tuple[Any, dict[str, Any]]:
-    """``--robot``'s robot (else the paper's) and the keywords handing on another robot."""
+def _robot(args: Any) -> Any:
+    """``--robot``'s robot, else the paper's."""
     from wmr_jax._src.model.params import Robot
-    from wmr_jax._src.model.robots import same_robot
 
     given = flags.robot_from(getattr(args, "robot", None))
     if given is not None and given.note:
         print(given.note)
-    robot = Robot() if given is None else given.robot
-    return robot, ({} if same_robot(robot, Robot()) else {"robot": robot})
+    return Robot() if given is None else given.robot
 
 
 def _around_identified(config: Any, args: Any) -> Any:
@@ -130,24 +129,24 @@ def run(args: Any) -> int:
     """Run ``wmr-jax tune --robust``; return the exit status."""
     out = flags.output_dir("--out", getattr(args, "out", None))
     config = config_from(args)
-    robot, on_robot = _robot(args)
+    robot = _robot(args)
     config = _around_identified(config, args)
     if getattr(args, "compare", False):
         return _compare(out, config, robot, resume=bool(getattr(args, "resume", False)))
 
     from wmr_jax._src.model.robots import describe_robot
     from wmr_jax._src.studies.robustness import study_horizon
-    from wmr_jax._src.tuning.robust import tune_robust
-    from wmr_jax._src.tuning.robust_run import described, finished, save_tuned, write_evaluation
+    from wmr_jax._src.tuning.robust_run import described, finished, tune
 
-    if getattr(args, "resume", False):
-        if finished(out, config, robot):
-            print(
-                f"--resume: {out} holds this run finished (tuned_gains.json, "
-                "robust_evaluation.json); nothing to resume. Without --resume it tunes again"
-            )
-            return 0
-        print("tune --robust keeps no checkpoint: --resume runs it again from the start")
+    every = getattr(args, "checkpoint_every", None)
+    every = 25 if every is None else flags.positive_int("--checkpoint-every", every)
+    resume = bool(getattr(args, "resume", False))
+    if resume and finished(out, config, robot):
+        print(
+            f"--resume: {out} holds this run finished (tuned_gains.json, "
+            "robust_evaluation.json); nothing to resume. Without --resume it tunes again"
+        )
+        return 0
     print(
         f"tuning the {described(config)} through the disturbances on the robot "
         f"{describe_robot(robot)}, horizon {study_horizon(robot):g} s",
@@ -159,13 +158,10 @@ def run(args: Any) -> int:
         if i == 1 or i % 25 == 0 or i == config.iters:
             print(f"iteration {i}/{config.iters}: loss {state.losses[-1]:.3f} s", flush=True)
 
-    def keep(loop: Any, losses: list[float]) -> None:
-        # Written before the evaluation: an interruption there loses no tuning.
-        save_tuned(out, loop, losses, robot)
-        print(f"tuned_gains.json, robust_loss.json -> {out} (now judging them)", flush=True)
-
-    result = tune_robust(config, progress_fn=progress, on_tuned=keep, **on_robot)
-    table = write_evaluation(out, config, robot, result)
+    say = functools.partial(print, flush=True)
+    result, table = tune(
+        out, config, robot, resume=resume, checkpoint_every=every, progress_fn=progress, say=say
+    )
     print(f"robust_evaluation.md/json -> {out}")
     print(table, end="")
     if config.around is not None:  # trained around an identified robot, judged as any loop

@@ -536,23 +536,15 @@ def tune_robust(
     check_callable("on_tuned", on_tuned)
     robot = validate_one_robot(robot, "tuning")
     problem, run = robust_problem(config, robot), trainer.run_text(config, robot)
-    iterates = {0: problem.z0}
-
-    def progress(state: TrainState) -> None:
-        iterates[state.iteration] = state.z  # the polish starts from the kept one
-        if progress_fn is not None:
-            progress_fn(state)
-
-    tuned, best, history, state = trainer.fit(problem, run, state, progress)
+    tuned, best, history, state = trainer.fit(problem, run, state, progress_fn)
     tuned, cpu = tuned._replace(robot=robot), state.elapsed_s
     joint, dt = joint_problem(config), DEFAULT_DT
     search_refs = search_poses(config)
     polished = 0
     if config.tuner == "hybrid":
         # CMA-ES on the hard-law score from the kept iterate, scored first so
-        # never worse on the search poses; a run resumed after its kept
-        # iterate starts from its last.
-        start, share, began = iterates.get(best, state.z), config.polish_share, clock()
+        # never worse on the search poses.
+        start, share, began = trainer.kept_logits(state, best), config.polish_share, clock()
         tuned, polished, *_ = black_box(
             "cma-es", jax.random.fold_in(jax.random.key(config.seed), 20), search_refs,
             cpu * share / (1.0 - share), robot, dt, joint, config.noise, start=start,

@@ -36,6 +36,53 @@ def save_tuned(out: Path, loop: Any, losses: list[float], robot: Robot) -> None:
     io.atomic_write_json(out / "robust_loss.json", {"loss": losses})
 
 
+def tune(
+    out: Path,
+    config: RobustConfig,
+    robot: Robot,
+    *,
+    resume: bool = False,
+    checkpoint_every: int = 25,
+    progress_fn: Callable[[Any], Any] | None = None,
+    say: Callable[[str], Any] = print,
+) -> tuple[Any, str]:
+    """``tune_robust`` of a checked ``config`` with its files in ``out``; the result and its table.
+
+    A checkpoint every ``checkpoint_every`` iterations and at the last (the
+    fixed problem's ``checkpoint.npz``), ``tuned_gains.json`` and
+    ``robust_loss.json`` once tuned, then ``robust_evaluation.{json,md}``.
+    ``resume``: continue from the checkpoint, which must be of the same
+    settings, robot and code; the iterations go on bit for bit, and what
+    follows them (the hybrid's polish, the searches) runs whole.
+    """
+    from wmr_jax._src.tuning.run import CHECKPOINT_NAME, load_checkpoint, save_checkpoint
+
+    robot = validate_one_robot(robot, "tuning")
+    run, checkpoint, state = trainer.run_text(config, robot), out / CHECKPOINT_NAME, None
+    if resume and checkpoint.exists():
+        fresh = trainer.start_state(robust.robust_problem(config, robot), run)
+        state = load_checkpoint(checkpoint, fresh, json.loads(run))
+        say(f"--resume: continuing after iteration {state.iteration} of {checkpoint}")
+    elif resume:  # a mistyped --out would otherwise start over without a word
+        say(f"--resume: no {CHECKPOINT_NAME} in {out}; starting from the first iteration")
+
+    def progress(state: Any) -> None:
+        if state.iteration % checkpoint_every == 0 or state.iteration == config.iters:
+            save_checkpoint(checkpoint, state, json.loads(run))
+        if progress_fn is not None:
+            progress_fn(state)
+
+    def keep(loop: Any, losses: list[float]) -> None:
+        # Written before the evaluation: an interruption there loses no tuning.
+        save_tuned(out, loop, losses, robot)
+        say(f"tuned_gains.json, robust_loss.json -> {out} (now judging them)")
+
+    result = robust.tune_robust(
+        config, robot=robot, state=state, progress_fn=progress, on_tuned=keep
+    )
+    return result, write_evaluation(out, config, robot, result)
+
+
 def write_evaluation(out: Path, config: RobustConfig, robot: Robot, result: Any) -> str:
     """Write ``robust_evaluation.json`` and ``.md`` of a robust result; return the table."""
     from wmr_jax._src.model.robots import robot_json

@@ -19,7 +19,7 @@ from wmr_jax._src import io
 from wmr_jax._src.tuning import trainer, training
 
 CHECKPOINT_NAME = "checkpoint.npz"
-CHECKPOINT_FORMAT = 3
+CHECKPOINT_FORMAT = 4
 
 
 def load_checkpoint(path: Path, fresh: Any, identity: dict[str, Any]) -> Any:
@@ -59,6 +59,13 @@ def load_checkpoint(path: Path, fresh: Any, identity: dict[str, Any]) -> Any:
         return trainer.restore_state(arrays, fresh)
     except ValueError as err:
         raise ValueError(f"--resume: checkpoint {path}: {err}; {advice}") from None
+
+
+def save_checkpoint(path: Path, state: Any, identity: dict[str, Any]) -> None:
+    """Write ``state`` with the run's identity to ``path``, checksummed and atomically."""
+    io.save_arrays(
+        path, trainer.state_arrays(state), {"format": CHECKPOINT_FORMAT, "identity": identity}
+    )
 
 
 def finished(out: Path, config: Any, robot: Any) -> bool:
@@ -106,9 +113,8 @@ def _progress(
             loss=f"{state.losses[-1]:.3f}s", T=f"{state.temperatures[-1]:.3g}", refresh=False
         )
         last = state.iteration == config.iters
-        if last or state.iteration % config.checkpoint_every == 0:  # checksummed, atomically
-            meta = {"format": CHECKPOINT_FORMAT, "identity": identity}
-            io.save_arrays(checkpoint, trainer.state_arrays(state), meta)
+        if last or state.iteration % config.checkpoint_every == 0:
+            save_checkpoint(checkpoint, state, identity)
         if last:
             bar.close()  # before the random search and the evaluation
         if user_fn is not None:

@@ -83,6 +83,9 @@ class TrainState(NamedTuple):
             refused. Empty (a state built by hand): not checked.
         validated: ``(iteration, score s)`` of each validation score so far, in order.
         start: the start's parameters as a row.
+        lowest_z: the logits of the iterate of the lowest validation score so
+            far (the later of equal ones), ``None`` before the first: with
+            ``z`` they are every iterate ``best_iteration`` can keep.
     """
 
     iteration: int
@@ -95,6 +98,7 @@ class TrainState(NamedTuple):
     run: str = ""
     validated: tuple[tuple[int, float], ...] = ()
     start: tuple[float, ...] = ()
+    lowest_z: Any = None
 
 
 class TuneResult(NamedTuple):
@@ -227,7 +231,15 @@ def _scored(problem: TrainingProblem, state: TrainState) -> TrainState:
     """``state`` with its current iterate's validation score appended."""
     row = state.gains[-1] if state.iteration else state.start
     score = problem.score(problem.from_row(row))
-    return state._replace(validated=state.validated + ((state.iteration, score),))
+    lowest = state.lowest_z
+    if lowest is None or score <= min(v for _, v in state.validated):
+        lowest = state.z
+    return state._replace(validated=state.validated + ((state.iteration, score),), lowest_z=lowest)
+
+
+def kept_logits(state: TrainState, best: int) -> jax.Array:
+    """The logits of iterate ``best`` (``best_iteration`` of ``state.validated``)."""
+    return state.z if best == state.iteration else state.lowest_z
 
 
 def iterate(
@@ -376,6 +388,8 @@ def state_arrays(state: TrainState) -> dict[str, np.ndarray]:
         "elapsed_s": np.asarray(state.elapsed_s, dtype=float),
         "validated": np.asarray(state.validated, dtype=float).reshape(-1, 2),
         "start": np.asarray(state.start, dtype=float),
+        # Before the first score there is none: z stands in, and is not read back.
+        "lowest_z": np.asarray(state.z if state.lowest_z is None else state.lowest_z),
         **{f"opt_{i}": np.asarray(leaf) for i, leaf in enumerate(leaves)},
     }
 
@@ -412,6 +426,8 @@ def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainStat
             ),
             start=tuple(float(x) for x in np.asarray(arrays["start"], float).reshape(-1)),
         )
+        lowest = jnp.asarray(arrays["lowest_z"], dtype=fresh.z.dtype).reshape(fresh.z.shape)
+        state = state._replace(lowest_z=lowest if state.validated else None)
     except (KeyError, TypeError, ValueError, IndexError) as err:
         # IndexError: an array of no axes where rows were saved.
         raise ValueError(f"the saved state is incomplete ({type(err).__name__}: {err})") from None
@@ -424,6 +440,7 @@ def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainStat
     temperatures = np.asarray(state.temperatures, dtype=float)
     validated = np.asarray(state.validated, dtype=float).reshape(-1, 2)
     values = [state.z, *restored, np.asarray(state.losses), gains, temperatures, validated]
+    values += [] if state.lowest_z is None else [state.lowest_z]
     values.append(np.asarray(state.start, dtype=float))
     if not all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in values):
         raise ValueError("the saved state holds non-finite values (NaN or inf)")
