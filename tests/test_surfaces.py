@@ -403,10 +403,11 @@ def _checkpoint_args(tmp_path):
     ("meta", "message"),
     [
         ([2, {}], r"has metadata of the wrong shape \(\[2, \{\}\]"),
-        ({"format": 2, "identity": {}}, r"has an unknown format \(format = 2; allowed: 3\)"),
-        ({"format": 3, "identity": "run"}, r"metadata of the wrong shape \(identity = 'run'"),
-        ({"format": 3, "identity": {"config": [], "robot": {}}}, r"identity = \{'config': \[\]"),
-        ({"format": 3, "identity": {"config": {}}}, r"with a 'config' and a 'robot' object"),
+        # Format 3 held no logits of the lowest-scored iterate.
+        ({"format": 3, "identity": {}}, r"has an unknown format \(format = 3; allowed: 4\)"),
+        ({"format": 4, "identity": "run"}, r"metadata of the wrong shape \(identity = 'run'"),
+        ({"format": 4, "identity": {"config": [], "robot": {}}}, r"identity = \{'config': \[\]"),
+        ({"format": 4, "identity": {"config": {}}}, r"with a 'config' and a 'robot' object"),
     ],
 )
 def test_resume_refuses_a_checkpoint_whose_metadata_has_the_wrong_shape(

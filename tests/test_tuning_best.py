@@ -81,6 +81,11 @@ def test_a_resumed_run_keeps_the_scores_it_had(monkeypatch):
     arrays = tuning.state_arrays(states[2])  # after iteration 3: scores at 0 and 2
     resumed_state = tuning.restore_state(arrays, tuning.init_state(TINY))
     assert [i for i, _ in resumed_state.validated] == [0, 2]
+    # The logits of the lower of the two scores (the later of equal ones) come back.
+    lowest = min(v for _, v in resumed_state.validated)
+    at = max(i for i, v in resumed_state.validated if v == lowest)
+    want = tuning.init_state(TINY).z if at == 0 else states[at - 1].z
+    np.testing.assert_array_equal(np.asarray(resumed_state.lowest_z), np.asarray(want))
     resumed = _train(TINY, state=resumed_state)
     assert resumed.best_iteration == whole.best_iteration
     assert resumed.history["validation"].tolist() == whole.history["validation"].tolist()
