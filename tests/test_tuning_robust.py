@@ -533,6 +533,14 @@ def test_the_hybrid_polishes_the_kept_iterate_for_its_share_of_the_time(monkeypa
     assert 0 < budget == pytest.approx(result.tune_cpu_s / 3, rel=0.05)
     assert shape == (config.search_poses, 3) and noise == config.noise and std == 0.3
     assert result.loop.params == polished.params and result.gains == polished.params
+    # The last iterate, kept within the margin of a lower score, is the one polished.
+    _scores(monkeypatch, [1.0, 0.5, 2.0, 0.504])
+    logits.clear()
+    again = tuning.tune_robust(
+        config, progress_fn=lambda state: logits.setdefault(state.iteration, state.z)
+    )
+    assert again.best_iteration == 3
+    np.testing.assert_array_equal(calls[-1][0], np.asarray(logits[3]))
 
 
 def test_an_interrupted_robust_run_resumes_from_its_checkpoint(tmp_path, monkeypatch):
