@@ -46,6 +46,24 @@ def test_robust_tuning_keeps_the_iterate_of_the_best_validation_score(monkeypatc
     assert note is None or ("\n" not in note and note.startswith("warning: the tuned loop"))
 
 
+def test_each_validation_scores_the_iterate_of_its_iteration(monkeypatch):
+    from wmr_jax._src.tuning import robust
+
+    scored = []
+    monkeypatch.setattr(
+        robust, "robust_score", lambda closed, *_, **__: scored.append(closed.params) or 1.0
+    )
+    result = tuning.tune_robust(small_config(validate_every=1))
+    rows = result.history["gains"]  # the iterate after each iteration, as a row
+    got = [np.asarray([float(getattr(p, f)) for f in tuning.GAIN_FIELDS]) for p in scored]
+    assert len(got) == 4
+    first = tuning.robust_gains(tuning.FIXED.start_logits(w.Robot()), w.Robot())
+    np.testing.assert_allclose(got[0], [float(getattr(first, f)) for f in tuning.GAIN_FIELDS])
+    for i in range(3):  # iteration i + 1: its own iterate, not the start
+        np.testing.assert_array_equal(got[i + 1], rows[i])
+    assert not np.allclose(got[3], got[0])
+
+
 def test_the_robust_loss_and_its_step_run_on_their_own():
     """The robust problem is a trainer problem: its loss and one optimiser step, called alone."""
     import jax
