@@ -90,6 +90,12 @@ def test_a_resumed_run_keeps_the_scores_it_had(monkeypatch):
     assert resumed.best_iteration == whole.best_iteration
     assert resumed.history["validation"].tolist() == whole.history["validation"].tolist()
     assert tuning.gains_as_dict(resumed.gains) == tuning.gains_as_dict(whole.gains)
+    # A state saved before its first score (init_state's) holds none, and runs as a fresh one.
+    fresh = tuning.init_state(TINY)
+    unscored = tuning.restore_state(tuning.state_arrays(fresh), fresh)
+    assert unscored.lowest_z is None and not unscored.validated
+    again = _train(TINY, state=unscored)
+    assert again.history["validation"].tolist() == whole.history["validation"].tolist()
 
 
 def _evaluation(mean, success=1.0):
