@@ -164,7 +164,7 @@ def _kind_of(values: dict[str, Any], where: str) -> str:
     kind = values.get("kind")
     controller = values.get("controller")
     if kind is None and controller is None:
-        return "fixed"  # a file from before the schedules: Gains field names only
+        return "fixed"  # Gains field names only, as in a file written by hand
     by_name = {c.name: k for k, (c, _) in _KINDS.items()}
     if kind is None:
         kind = by_name.get(controller)
@@ -179,7 +179,7 @@ def _kind_of(values: dict[str, Any], where: str) -> str:
 def _in_library_units(values: dict[str, Any], fields: tuple, where: str) -> dict[str, Any]:
     """``values`` with its angles in radians, after checking its ``"units"`` are the library's."""
     if "units" not in values:
-        return values  # a file from before units were recorded: the library's
+        return values  # no units given (a file written by hand): the library's
     units = values["units"]
     if not isinstance(units, dict):
         raise ValueError(
