@@ -55,7 +55,7 @@ _MODE_FLAGS = {
     "--resume": (
         None,
         "continue from DIR/checkpoint.npz (same settings) instead of starting over; with "
-        "--compare, keep the seeds DIR/compare.json already holds",
+        "--compare, keep the seeds DIR/compare.json (robust_compare.json) already holds",
     ),
     "--schedule": (
         None,
