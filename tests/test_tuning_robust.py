@@ -599,6 +599,8 @@ def test_an_interrupted_robust_run_resumes_from_its_checkpoint(tmp_path, monkeyp
     np.testing.assert_array_equal(starts[1], starts[0])
     assert again.history["loss"].tolist() == first.history["loss"].tolist()
     assert (cut / "tuned_gains.json").read_bytes() == (whole / "tuned_gains.json").read_bytes()
+    with np.load(cut / "checkpoint.npz") as data:  # every 25 iterations, and at the last
+        assert int(data["iteration"]) == 4
     # A checkpoint of other settings is refused, naming the difference.
     with pytest.raises(ValueError, match=r"checkpoint .* is of another run \(iters = 4 there, 5"):
         robust_run.tune(cut, small_config(iters=5), w.Robot(), resume=True)
