@@ -380,6 +380,18 @@ def test_a_heading_in_degrees_is_warned_and_one_in_radians_is_not():
             w.rollout(jnp.array([40.0, 20.0, theta]), w.Gains(kr=60.0, k_theta=10.0), steps=3)
 
 
+def test_a_study_warns_of_a_heading_in_degrees_once():
+    """The entry points a study calls check its references again: Python's default
+    filter still shows the warning once."""
+    refs = np.array([[30.0, 30.0, 90.0], [20.0, -10.0, 0.5]])
+    loop = w.ClosedLoop("shim-sung", w.Gains(kr=60.0, k_theta=10.0))
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("default")
+        w.studies.evaluate_loop(loop, refs, horizon=1.0)
+    degrees = [str(r.message) for r in said if "most likely degrees" in str(r.message)]
+    assert len(degrees) == 1 and degrees[0].startswith("refs has heading 90 rad"), degrees
+
+
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class _NoGains:

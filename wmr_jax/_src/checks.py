@@ -499,11 +499,12 @@ def _degrees(theta: Any, xp: Any) -> Any:
 
 
 # Where a warning about an argument points: the first frame outside the package
-# (Python 3.12+; before, the entry point's own line).
+# (Python 3.12+). Before, at this module: one place for every entry point that
+# checks the argument again, so that Python's default filter shows it once.
 _CALLER = (
     {"skip_file_prefixes": (str(Path(__file__).resolve().parents[1]),)}
     if sys.version_info >= (3, 12)
-    else {"stacklevel": 4}
+    else {"stacklevel": 1}
 )
 
 
