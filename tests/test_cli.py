@@ -116,6 +116,11 @@ def _write(tmp_path, name, text):
             ["tune", "--out", "{dir}", "--robust", "--compare", "--horizon", "5"],
             "--horizon is not allowed with --robust, which does not use it",
         ),
+        (
+            ["tune", "--out", "{dir}", "--robust", "--compare", "--checkpoint-every", "5"],
+            "--checkpoint-every is not allowed with --robust --compare, which keeps each seed",
+        ),
+        (["tune", "--out", "{dir}", "--robust", "--checkpoint-every", "0"], "'0' is not allowed"),
         (["tune", "--out", "{dir}", "--eval-poses", "1000000000000"], "--eval-poses '1000"),
         (["tune", "--out", "{dir}", "--poses", "1e12"], "--poses '1e12' is not allowed"),
         (["tune", "--out", "{dir}", "--horizon", "1e-12"], "horizon = 1e-12 s is shorter"),
