@@ -604,6 +604,17 @@ def test_an_interrupted_robust_run_resumes_from_its_checkpoint(tmp_path, monkeyp
     # A checkpoint of other settings is refused, naming the difference.
     with pytest.raises(ValueError, match=r"checkpoint .* is of another run \(iters = 4 there, 5"):
         robust_run.tune(cut, small_config(iters=5), w.Robot(), resume=True)
+    # A checkpoint of plain tune's is another kind of run: said in a few words.
+    from wmr_jax._src.tuning import run as tune_run
+
+    plain = tuning.TuneConfig(iters=2)
+    identity = tuning.run_identity(plain)
+    tune_run.save_checkpoint(cut / "checkpoint.npz", tuning.init_state(plain), identity)
+    with pytest.raises(
+        ValueError,
+        match=r"another run \(a run of tune \(fixed\) there, tune --robust now\); allowed",
+    ):
+        robust_run.tune(cut, config, w.Robot(), resume=True)
     # Without a checkpoint it starts over, and says so.
     (cut / "checkpoint.npz").unlink()
     _scores(monkeypatch, scores)

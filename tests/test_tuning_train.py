@@ -149,6 +149,15 @@ def test_resume_without_a_checkpoint_says_it_starts_over(tmp_path, capsys):
     assert "--resume" not in capsys.readouterr().out
 
 
+def test_how_often_a_run_checkpoints_is_not_part_of_the_run(tmp_path):
+    every = SMALL.replace(checkpoint_every=1)
+    with pytest.raises(_Stop):
+        tuning.tune(tmp_path, every, progress=False, progress_fn=_stop_after(2))
+    tuning.tune(tmp_path, SMALL, progress=False, resume=True)  # every 2 iterations now
+    assert tuning_run.finished(tmp_path, every.replace(checkpoint_every=5), None)
+    assert not tuning_run.finished(tmp_path, every.replace(seed=1), None)
+
+
 def test_resume_refuses_other_settings_and_damaged_checkpoints(tmp_path, capsys):
     every = SMALL.replace(checkpoint_every=1)
     with pytest.raises(_Stop):

@@ -96,7 +96,8 @@ def finished(out: Path, config: Any, robot: Any) -> bool:
         and meta.get("identity") == identity
         and iteration == config.iters
         and isinstance(saved, dict)
-        and saved.get("config") == json.loads(json.dumps(config.as_dict()))
+        and isinstance(saved.get("config"), dict)
+        and trainer.identity_config(saved["config"]) == trainer.identity_config(config)
         and saved.get("robot") == json.loads(json.dumps(robot_json(robot)))
         and (out / "tuned_gains.json").exists()
     )

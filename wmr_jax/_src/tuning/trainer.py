@@ -324,11 +324,23 @@ def verdict(result: TuneResult, validation_poses: int) -> dict[str, Any]:
     }
 
 
+def identity_config(config: Any) -> dict[str, Any]:
+    """The settings that decide a run's result as JSON reads them: all but how often it
+    checkpoints. ``config``: a tuning config, or its fields as read from a file."""
+    values = config if isinstance(config, dict) else json.loads(json.dumps(config.as_dict()))
+    return {k: v for k, v in values.items() if k != "checkpoint_every"}
+
+
 def run_text(config: Any, robot: Robot) -> str:
     """The identity of a run as canonical JSON text: settings, robot, code version."""
     robot_values = {f.name: float(getattr(robot, f.name)) for f in dataclasses.fields(Robot)}
-    identity = {"config": config.as_dict(), "robot": robot_values, "code": code_version()}
+    identity = {"config": identity_config(config), "robot": robot_values, "code": code_version()}
     return json.dumps(identity, sort_keys=True)
+
+
+def _command(config: dict[str, Any]) -> str:
+    """The command whose settings ``config`` holds (a run identity's, as read)."""
+    return "tune --robust" if "law" in config else f"tune ({config.get('problem')})"
 
 
 def differences(saved: dict[str, Any], now: dict[str, Any]) -> str:
@@ -336,6 +348,8 @@ def differences(saved: dict[str, Any], now: dict[str, Any]) -> str:
     there, here = saved.get("config", {}), now["config"]
     if not isinstance(there, dict):
         there = {}
+    if there and _command(there) != _command(here):  # another problem: its fields differ too
+        return f"a run of {_command(there)} there, {_command(here)} now"
     diffs = [
         f"{key} = {there.get(key)!r} there, {here.get(key)!r} now"
         for key in dict.fromkeys([*here, *there])
