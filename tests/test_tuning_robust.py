@@ -599,6 +599,11 @@ def test_an_interrupted_robust_run_resumes_from_its_checkpoint(tmp_path, monkeyp
     np.testing.assert_array_equal(starts[1], starts[0])
     assert again.history["loss"].tolist() == first.history["loss"].tolist()
     assert (cut / "tuned_gains.json").read_bytes() == (whole / "tuned_gains.json").read_bytes()
+    resumed = json.loads((cut / "robust_evaluation.json").read_text())["resumed_at_iteration"]
+    assert resumed == 2
+    assert (
+        json.loads((whole / "robust_evaluation.json").read_text())["resumed_at_iteration"] is None
+    )
     with np.load(cut / "checkpoint.npz") as data:  # every 25 iterations, and at the last
         assert int(data["iteration"]) == 4
     # A checkpoint of other settings is refused, naming the difference.

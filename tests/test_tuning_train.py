@@ -109,7 +109,10 @@ def test_cli_writes_the_results_and_a_resumed_run_gives_the_same_gains(tmp_path,
     with np.load(cut / tuning.CHECKPOINT_NAME) as data:
         assert int(data["iteration"]) == 2
     assert not (cut / "tuned_gains.json").exists()
+    capsys.readouterr()
     assert main(["tune", "--out", str(cut), *SMALL_FLAGS, "--resume"]) == 0
+    said = f"--resume: continuing after iteration 2 of {cut / tuning.CHECKPOINT_NAME}\n"
+    assert capsys.readouterr().out.startswith(said)
     # The same computation on the same inputs, restored bit for bit.
     assert (cut / "tuned_gains.json").read_bytes() == (whole / "tuned_gains.json").read_bytes()
     resumed = json.loads((cut / "evaluation.json").read_text())

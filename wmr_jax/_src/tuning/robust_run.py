@@ -80,11 +80,17 @@ def tune(
     result = robust.tune_robust(
         config, robot=robot, state=state, progress_fn=progress, on_tuned=keep
     )
-    return result, write_evaluation(out, config, robot, result)
+    resumed_at = state.iteration if state is not None and state.iteration else None
+    return result, write_evaluation(out, config, robot, result, resumed_at)
 
 
-def write_evaluation(out: Path, config: RobustConfig, robot: Robot, result: Any) -> str:
-    """Write ``robust_evaluation.json`` and ``.md`` of a robust result; return the table."""
+def write_evaluation(
+    out: Path, config: RobustConfig, robot: Robot, result: Any, resumed_at: int | None = None
+) -> str:
+    """Write ``robust_evaluation.json`` and ``.md`` of a robust result; return the table.
+
+    ``resumed_at``: the iteration the tuning resumed from (``None``: it ran them all).
+    """
     from wmr_jax._src.model.robots import robot_json
     from wmr_jax._src.report.robustness import robustness_table
 
@@ -92,6 +98,8 @@ def write_evaluation(out: Path, config: RobustConfig, robot: Robot, result: Any)
         "config": dataclasses.asdict(config),
         "robot": robot_json(robot),
         "tune_cpu_s": result.tune_cpu_s,
+        # A resumed run's CPU time holds one more compilation per resume.
+        "resumed_at_iteration": resumed_at,
         "law": "hard (temperature None)",
         # The sensor tuned for: the training's noise up to twice it, the table's at it.
         "noise": {"xy cm": config.noise_xy, "theta degrees": config.noise_theta},

@@ -250,6 +250,7 @@ def tune(
     checkpoint = out / CHECKPOINT_NAME
     if resume and checkpoint.exists():
         state = load_checkpoint(checkpoint, state, identity)
+        print(f"--resume: continuing after iteration {state.iteration} of {checkpoint}")
     elif resume:  # a mistyped --out would otherwise start over without a word
         print(f"--resume: no {CHECKPOINT_NAME} in {out}; starting from the first iteration")
     # The progress bars: the iterations, the random search, the evaluation.
