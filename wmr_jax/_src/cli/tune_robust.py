@@ -139,7 +139,7 @@ def run(args: Any) -> int:
     from wmr_jax._src.tuning.robust_run import described, finished, tune
 
     every = getattr(args, "checkpoint_every", None)
-    every = 25 if every is None else flags.positive_int("--checkpoint-every", every)
+    every = None if every is None else flags.positive_int("--checkpoint-every", every)
     resume = bool(getattr(args, "resume", False))
     if resume and finished(out, config, robot):
         print(

@@ -42,33 +42,36 @@ def tune(
     robot: Robot,
     *,
     resume: bool = False,
-    checkpoint_every: int = 25,
+    checkpoint_every: int | None = None,
     progress_fn: Callable[[Any], Any] | None = None,
     say: Callable[[str], Any] = print,
 ) -> tuple[Any, str]:
     """``tune_robust`` of a checked ``config`` with its files in ``out``; the result and its table.
 
-    A checkpoint every ``checkpoint_every`` iterations and at the last (the
+    A checkpoint every ``checkpoint_every`` iterations (``None``:
+    ``trainer.CHECKPOINT_EVERY``) and at the last (the
     fixed problem's ``checkpoint.npz``), ``tuned_gains.json`` and
     ``robust_loss.json`` once tuned, then ``robust_evaluation.{json,md}``.
     ``resume``: continue from the checkpoint, which must be of the same
     settings, robot and code; the iterations go on bit for bit, and what
     follows them (the hybrid's polish, the searches) runs whole.
     """
-    from wmr_jax._src.tuning.run import CHECKPOINT_NAME, load_checkpoint, save_checkpoint
+    from wmr_jax._src.tuning.run import CHECKPOINT_NAME, checkpointing, resumed_state
 
     robot = validate_one_robot(robot, "tuning")
     run, checkpoint, state = trainer.run_text(config, robot), out / CHECKPOINT_NAME, None
-    if resume and checkpoint.exists():
-        fresh = trainer.start_state(robust.robust_problem(config, robot), run)
-        state = load_checkpoint(checkpoint, fresh, json.loads(run))
-        say(f"--resume: continuing after iteration {state.iteration} of {checkpoint}")
-    elif resume:  # a mistyped --out would otherwise start over without a word
-        say(f"--resume: no {CHECKPOINT_NAME} in {out}; starting from the first iteration")
+    identity = json.loads(run)
+    if resume:
+
+        def fresh() -> Any:  # built only to restore into: the problem costs some draws
+            return trainer.start_state(robust.robust_problem(config, robot), run)
+
+        state = resumed_state(checkpoint, fresh, identity, say)
+    every = trainer.CHECKPOINT_EVERY if checkpoint_every is None else checkpoint_every
+    save = checkpointing(checkpoint, identity, every, config.iters)
 
     def progress(state: Any) -> None:
-        if state.iteration % checkpoint_every == 0 or state.iteration == config.iters:
-            save_checkpoint(checkpoint, state, json.loads(run))
+        save(state)
         if progress_fn is not None:
             progress_fn(state)
 

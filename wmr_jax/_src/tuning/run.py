@@ -68,6 +68,34 @@ def save_checkpoint(path: Path, state: Any, identity: dict[str, Any]) -> None:
     )
 
 
+def resumed_state(
+    checkpoint: Path, fresh: Callable[[], Any], identity: dict[str, Any], say: Callable = print
+) -> Any:
+    """``--resume``: the state ``checkpoint`` holds, in ``fresh()``'s structure; else ``None``.
+
+    Either is said in one line: a mistyped ``--out`` would otherwise start over without a word.
+    """
+    if not checkpoint.exists():
+        where = checkpoint.parent
+        say(f"--resume: no {CHECKPOINT_NAME} in {where}; starting from the first iteration")
+        return None
+    state = load_checkpoint(checkpoint, fresh(), identity)
+    say(f"--resume: continuing after iteration {state.iteration} of {checkpoint}")
+    return state
+
+
+def checkpointing(
+    checkpoint: Path, identity: dict[str, Any], every: int, iters: int
+) -> Callable[[Any], None]:
+    """A progress callback that saves the state every ``every`` iterations and at the last."""
+
+    def save(state: Any) -> None:
+        if state.iteration % every == 0 or state.iteration == iters:
+            save_checkpoint(checkpoint, state, identity)
+
+    return save
+
+
 def finished(out: Path, config: Any, robot: Any) -> bool:
     """Whether ``out`` holds this run finished, so that resuming it would redo nothing new.
 
@@ -107,16 +135,15 @@ def _progress(
     config: Any, checkpoint: Path, identity: dict[str, Any], bar: Any, user_fn: Callable | None
 ) -> Callable[[Any], None]:
     """The training's progress callback: the bar, the checkpoint, then the caller's."""
+    save = checkpointing(checkpoint, identity, config.checkpoint_every, config.iters)
 
     def report(state: Any) -> None:
         bar.update(1)
         bar.set_postfix(
             loss=f"{state.losses[-1]:.3f}s", T=f"{state.temperatures[-1]:.3g}", refresh=False
         )
-        last = state.iteration == config.iters
-        if last or state.iteration % config.checkpoint_every == 0:
-            save_checkpoint(checkpoint, state, identity)
-        if last:
+        save(state)
+        if state.iteration == config.iters:
             bar.close()  # before the random search and the evaluation
         if user_fn is not None:
             user_fn(state)
@@ -246,13 +273,10 @@ def tune(
     io.remove_stale_temporaries(out)
     robot = Robot() if robot is None else robot
     identity = training.run_identity(config, robot)
-    state = training.init_state(config, robot)
+    fresh = training.init_state(config, robot)
     checkpoint = out / CHECKPOINT_NAME
-    if resume and checkpoint.exists():
-        state = load_checkpoint(checkpoint, state, identity)
-        print(f"--resume: continuing after iteration {state.iteration} of {checkpoint}")
-    elif resume:  # a mistyped --out would otherwise start over without a word
-        print(f"--resume: no {CHECKPOINT_NAME} in {out}; starting from the first iteration")
+    state = resumed_state(checkpoint, lambda: fresh, identity) if resume else None
+    state = fresh if state is None else state
     # The progress bars: the iterations, the random search, the evaluation.
     bar = tqdm(
         total=config.iters,

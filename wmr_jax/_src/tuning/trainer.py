@@ -200,6 +200,9 @@ def _train_step(z, opt_state, batch, temperature, consts, *, loss, hyper):
 train_step = loops.jit_top_level(_train_step, static_argnames=("loss", "hyper"))
 
 
+# Iterations between checkpoints of the tuning commands, unless told otherwise.
+CHECKPOINT_EVERY = 25
+
 # How much lower an earlier iterate must score than the last to replace it:
 # the validation poses are a sample, and the last iterate, annealed to the
 # coldest temperature, is what the method aims at.

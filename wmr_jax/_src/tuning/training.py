@@ -92,7 +92,7 @@ class TuneConfig:
     temperature_end: float = 0.01
     horizon: float = HORIZON_S
     dt: float = simulation.DEFAULT_DT
-    checkpoint_every: int = 25
+    checkpoint_every: int = trainer.CHECKPOINT_EVERY
     eval_poses: int = EVAL_POSES
     eval_seed: int = EVAL_SEED
     random_search: bool = True
