@@ -2,6 +2,7 @@
 
 import json
 import logging
+import os
 
 import jax
 import numpy as np
@@ -137,6 +138,12 @@ def test_cli_writes_the_results_and_a_resumed_run_gives_the_same_gains(tmp_path,
     assert not tuning_run.finished(whole, SMALL, None)
     (whole / "kept.json").rename(whole / "tuned_gains.json")
     assert not tuning_run.finished(whole, SMALL.replace(iters=7), None)
+    assert not tuning_run.finished(whole, SMALL, w.Robot(half_track=10.0))  # another robot's
+    # A checkpoint newer than the evaluation: the run stopped after it, in its random
+    # search or evaluation, so resuming it has work left.
+    later = (whole / "evaluation.json").stat().st_mtime_ns + 10**9
+    os.utime(whole / tuning.CHECKPOINT_NAME, ns=(later, later))
+    assert not tuning_run.finished(whole, SMALL, None)
 
 
 def test_resume_without_a_checkpoint_says_it_starts_over(tmp_path, capsys):
