@@ -605,6 +605,38 @@ def test_simulate_on_an_identified_robot_warns_as_a_rollout_and_times_no_region(
     assert "--dt '-1' is not allowed" in capsys.readouterr().err
 
 
+def test_a_latency_identified_at_another_period_is_warned_of(tmp_path, capsys, monkeypatch):
+    """Latency counts samples of the log's period: at another period it lasts another time."""
+    import json
+    import warnings
+
+    from wmr_jax._src.cli import main as cli
+    from wmr_jax._src.identify.closed_loop import read_identified
+
+    identified, path = _identified_file(tmp_path, (1.0, 1.0), 2, (0.1, 0.01))
+    path.write_text(json.dumps({**identified, "dt": 0.04}))
+    monkeypatch.setattr(cli, "_shown_warnings", set())
+    argv = ["simulate", "--robot", str(path), "--ref", "30", "30", "0", "--steps", "5"]
+    assert cli.main(argv) == 0
+    assert (
+        f"wmr-jax: warning: --robot {path} was identified from logs at a period of 0.04 s and "
+        "these runs step at 0.033 s: its latency of 2 samples lasts 66 ms here against 80 ms "
+        "in the logs"
+    ) in capsys.readouterr().err
+    assert cli.main([*argv, "--dt", "0.04"]) == 0  # at the logs' period: nothing to say
+    assert "identified from logs" not in capsys.readouterr().err
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_identified(path, dt=0.04)
+        path.write_text(json.dumps({**identified, "dt": 0.04, "latency_samples": 0}))
+        read_identified(path)  # no latency: the period changes nothing
+    # identify --plan plans at the period the commands run at, unless told otherwise.
+    plan = tmp_path / "drive.csv"
+    assert cli.main(["identify", "--plan", str(plan), "--minutes", "0.05"]) == 0
+    times = np.loadtxt(plan, delimiter=",", skiprows=1)[:, 0]
+    np.testing.assert_allclose(np.diff(times), 0.033, atol=1e-6)
+
+
 def test_the_metres_check_leaves_turning_logs_with_stray_speeds_alone():
     from wmr_jax._src.cli.identify import _check_speed_unit
 

@@ -37,7 +37,10 @@ def add_arguments(parser: Any) -> None:
     )
     parser.add_argument("--minutes", metavar="MIN", help="length of the plan (default: 5)")
     parser.add_argument(
-        "--plan-dt", metavar="S", help="the plan's control period, s (default: 0.04)"
+        "--plan-dt",
+        metavar="S",
+        help="the plan's control period, s (default: 0.033, the period the commands run at: "
+        "a latency is identified in samples of the log's period)",
     )
     parser.add_argument("--seed", metavar="N", help="the plan's random seed (default: 0)")
 
@@ -136,8 +139,9 @@ def _plan(args: Any, robot: Any) -> int:
 
     from wmr_jax._src import io
     from wmr_jax._src.identify import plan
+    from wmr_jax._src.sim.rollout import DEFAULT_DT
 
-    defaults = {"minutes": "5", "plan_dt": "0.04", "seed": "0"}
+    defaults = {"minutes": "5", "plan_dt": f"{DEFAULT_DT:g}", "seed": "0"}
     text = {k: d if getattr(args, k) is None else getattr(args, k) for k, d in defaults.items()}
     minutes = flags.number("--minutes", text["minutes"], low=0, closed=False)
     dt = flags.period("--plan-dt", text["plan_dt"])

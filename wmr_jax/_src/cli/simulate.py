@@ -151,7 +151,7 @@ def run(args: Any) -> int:
     if args.steps is not None:
         steps = flags.positive_int("--steps", args.steps, 1, MAX_STEPS)
     velocity = flags.velocity_loop(args.velocity)
-    identified = loaded_identified(args.robot)
+    identified = loaded_identified(args.robot, dt)
     given = flags.robot_from(args.robot) if identified is None else identified[0]
     controller, gains, saved = _controller_and_gains(args)
     robot = flags.robot_for_gains(given, saved, "--gains", args.gains)

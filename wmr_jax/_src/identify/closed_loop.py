@@ -14,6 +14,8 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
+import math
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +28,7 @@ from wmr_jax._src.identify import model
 from wmr_jax._src.model.params import Robot
 from wmr_jax._src.sim import loops, metrics
 from wmr_jax._src.sim.metrics import PoseMetrics
-from wmr_jax._src.sim.rollout import Trajectory
+from wmr_jax._src.sim.rollout import DEFAULT_DT, Trajectory
 from wmr_jax._src.sim.sensing import loop as sensing_loop
 from wmr_jax._src.sim.sensing.disturbances import Disturbance
 
@@ -44,8 +46,12 @@ def is_identified(source: Any) -> bool:
     return isinstance(content, dict) and "wheel_scale" in content
 
 
-def read_identified(source: Any) -> tuple[Robot, dict[str, Any]]:
-    """Return ``(base robot, identified content)`` of an ``identified.json``, checked."""
+def read_identified(source: Any, dt: float = DEFAULT_DT) -> tuple[Robot, dict[str, Any]]:
+    """Return ``(base robot, identified content)`` of an ``identified.json``, checked.
+
+    ``dt``: the period of the runs to come. A latency identified in samples of
+    another period lasts another time in them, which is warned of.
+    """
     content = json.loads(Path(source).read_text())
     missing = [k for k in _KEYS if k not in content]
     if missing:
@@ -57,11 +63,22 @@ def read_identified(source: Any) -> tuple[Robot, dict[str, Any]]:
             f"--robot {source}: latency_samples = {latency!r} is not allowed; allowed: an "
             f"integer 0-{model.MAX_LATENCY}"
         )
+    logged = content.get("dt")
+    if latency and isinstance(logged, (int, float)) and not math.isclose(logged, dt, rel_tol=1e-6):
+        warnings.warn(
+            f"--robot {source} was identified from logs at a period of {logged:g} s and these "
+            f"runs step at {dt:g} s: its latency of {latency} samples lasts "
+            f"{1000 * latency * dt:.0f} ms here against {1000 * latency * logged:.0f} ms in the "
+            f"logs (log at {dt:g} s, identify --plan's default; simulate also takes --dt)",
+            stacklevel=2,
+        )
     return base, content
 
 
-def loaded_identified(source: Any) -> Any:
+def loaded_identified(source: Any, dt: float = DEFAULT_DT) -> Any:
     """``(LoadedRobot of the base, content)`` of an ``identify`` output, else ``None``.
+
+    ``dt``: the period of the runs to come (``read_identified``).
 
     The loaded robot's note says, in one line, that the runs are on the
     identified robot while the controller believes its base.
@@ -70,7 +87,7 @@ def loaded_identified(source: Any) -> Any:
 
     if not is_identified(source):
         return None
-    base, content = read_identified(source)
+    base, content = read_identified(source, dt)
     note = (
         f"the true robot is the one identified in {source} (wheel scales, half-track "
         f"{content['robot']['half_track']:.4g} cm, latency {content['latency_samples']}, "
