@@ -29,6 +29,9 @@ Every stage is kept in ``--out`` and skipped when its file is there
 
     python experiments/identified_vs_base.py [--robot paper] [--iters 80] [--poses 64] \\
         [--robust-iters 120] [--schedule-iters 0] [--refs 200] [--out results/identified_vs_base]
+
+With ``--log-only`` it writes the log and the truth and stops: ``--minutes 1``
+gives ``docs/data/example_log.csv``, the log a newcomer can identify first.
 """
 
 from __future__ import annotations
@@ -125,7 +128,20 @@ def main() -> None:
     parser.add_argument("--refs", type=int, default=200)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default="results/identified_vs_base")
+    parser.add_argument(
+        "--log-only",
+        action="store_true",
+        help="write the true robot's log.csv and truth.json, then stop (docs/data/example_log.csv "
+        "is the 1-minute one)",
+    )
     args = parser.parse_args()
+    if args.log_only:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        base = load_robot(args.robot)
+        write_log(base, out, args.robot, args.minutes, args.seed)
+        (out / "truth.json").write_text(json.dumps(true_content(base), indent=2) + "\n")
+        return
 
     from wmr_jax._src.tuning.evaluation import held_out_poses
     from wmr_jax._src.tuning.saved import load_tuned, tuned_json

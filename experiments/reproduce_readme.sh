@@ -10,7 +10,7 @@
 # that would move a committed figure fails the tests until the stage is rerun.
 # STAGE is any of: paper compare maps waypoints animate tune robustness
 # compare-tuning compare-sizes compare-robust compare-robust-price compare-robust-kernels
-# compare-robust-second tuner-load tuner-scaling law-derivative bench
+# compare-robust-second tuner-load tuner-scaling law-derivative example-log bench
 # (default: all but compare-robust-kernels and compare-robust-second, which
 # record the second machine of docs/robustness.md and are run by name; on 2
 # CPU cores, tune took 5 minutes, robustness 2 and compare-robust 18).
@@ -31,7 +31,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-results/readme}
 shift || true
-STAGES=${*:-paper compare maps waypoints animate tune robustness compare-tuning compare-sizes compare-robust compare-robust-price tuner-load tuner-scaling law-derivative bench}
+STAGES=${*:-paper compare maps waypoints animate tune robustness compare-tuning compare-sizes compare-robust compare-robust-price tuner-load tuner-scaling law-derivative example-log bench}
 mkdir -p "$OUT" docs/data
 
 for stage in $STAGES; do
@@ -121,6 +121,9 @@ for stage in $STAGES; do
       python experiments/law_derivative.py --json docs/data/law_derivative.json
       python experiments/law_derivative.py --poses 32 --estimators ekf \
         --json docs/data/law_derivative_32.json ;;
+    example-log)  # a simulated robot's 1-minute log for trying wmr-jax identify (tests/test_identify.py holds it)
+      python experiments/identified_vs_base.py --log-only --minutes 1 --out "$OUT/example-log"
+      cp "$OUT/example-log/log.csv" docs/data/example_log.csv ;;
     bench)
       wmr-jax bench --json "$OUT/bench.json" --wait-idle 60 ;;
     *) echo "unknown stage $stage" >&2; exit 2 ;;

@@ -648,3 +648,39 @@ def test_the_metres_check_leaves_turning_logs_with_stray_speeds_alone():
     commands[:30, 0] = 0.5  # 15 % of the samples, never above 0.5 cm/s: metres
     with pytest.raises(ValueError, match="spin.csv: its fastest v_cmd is 0.5 cm/s"):
         _check_speed_unit(log._replace(commands=commands), BASE, "paper")
+
+
+def test_the_example_log_identifies_its_truth_within_every_interval(tmp_path, capsys):
+    """The README's ``identify`` line: docs/data/example_log.csv, written by
+    ``experiments/identified_vs_base.py --log-only --minutes 1``, holds its true robot
+    in each printed 95 % interval, and the latency exactly."""
+    import importlib.util
+    import json
+    from pathlib import Path
+
+    from wmr_jax._src.cli.main import main
+
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location(
+        "identified_vs_base", root / "experiments" / "identified_vs_base.py"
+    )
+    experiment = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(experiment)
+    log = root / "docs" / "data" / "example_log.csv"
+    assert main(["identify", "--log", str(log), "--out", str(tmp_path)]) == 0
+    capsys.readouterr()
+    found = json.loads((tmp_path / "identified.json").read_text())
+    base = load_robot("paper")
+    truth = {
+        "wheel_scale_left": experiment.SCALE[0],
+        "wheel_scale_right": experiment.SCALE[1],
+        "half_track": float(base.half_track) * experiment.TRACK,
+        "speed_gain": float(base.speed_gain),
+        "sigma_xy": experiment.SIGMA_XY,
+        "sigma_theta": experiment.SIGMA_THETA,
+    }
+    for name, value in truth.items():
+        low, high = found["ci95"][name]
+        assert low <= value <= high, (name, low, value, high)
+    assert found["latency_samples"] == experiment.LATENCY
+    assert found["dt"] == pytest.approx(0.033)  # the period the commands run at: no warning
