@@ -236,19 +236,21 @@ def test_export_command_writes_the_files_and_refuses_bad_flags(tmp_path, robust_
     )
 
 
-def test_a_period_the_law_cannot_settle_at_is_warned_of(tmp_path, robust_file, capsys, monkeypatch):
-    # 33 for 0.033: milliseconds read as seconds.
+def test_a_period_the_law_cannot_settle_at_is_refused(tmp_path, robust_file, capsys, monkeypatch):
+    # 33 for 0.033: milliseconds read as seconds. A good export is left as it was.
     from wmr_jax._src.cli import main as cli
 
     monkeypatch.setattr(cli, "_shown_warnings", set())  # each distinct warning printed once
     out = tmp_path / "ctl"
-    assert main(["export", "--gains", robust_file, "--out", str(out), "--period", "33"]) == 0
-    err = capsys.readouterr().err
-    assert "warning: --period 33 is read in s; a value in milliseconds needs /1000" in err
-    assert "warning: --period 33 s: k_theta*dt = " in err
-    assert "cannot settle unless both are below 2" in err
     assert main(["export", "--gains", robust_file, "--out", str(out)]) == 0
     assert "cannot settle" not in (err := capsys.readouterr().err) and "milliseconds" not in err
+    written = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert main(["export", "--gains", robust_file, "--out", str(out), "--period", "33"]) == 2
+    err = capsys.readouterr().err
+    assert "warning: --period 33 is read in s; a value in milliseconds needs /1000" in err
+    assert f"error: --period 33 is not allowed for {robust_file}: k_theta*dt = " in err
+    assert "cannot settle unless both are below 2 (docs/model.md §4); allowed: a period" in err
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == written
 
 
 def test_gains_beyond_the_wheel_budget_are_warned_of_as_a_rollout_warns(

@@ -63,10 +63,11 @@ def run(args: Any) -> int:
     import warnings
 
     from wmr_jax._src.model.controllers import get_controller
-    from wmr_jax._src.model.params import Robot
+    from wmr_jax._src.model.params import Robot, SamplingWarning
 
     control = get_controller(loop.controller)
-    # The warnings a rollout of these gains gives: the wheel budget, then the period.
+    # What a rollout of these gains warns of: the wheel budget, then the period. A
+    # controller that cannot settle at its period is not written (it would drive a robot).
     checks = [("--gains", control.check_robot, Robot() if loop.robot is None else loop.robot)]
     checks.append((f"--period {period:g} s", control.check_sampling, period))
     for shown, check, against in checks:
@@ -76,6 +77,11 @@ def run(args: Any) -> int:
             warnings.simplefilter("always")
             check(loop.params, against)
         for record in caught:
+            if issubclass(record.category, SamplingWarning):
+                raise ValueError(
+                    f"--period {period:g} is not allowed for {args.gains}: {record.message}; "
+                    "allowed: a period at which both are (they grow with it)"
+                )
             warnings.warn(f"{shown}: {record.message}", record.category, 2)
     sources = c_sources(loop, real=real, period=period)
     for path in write_sources(out, sources, loop):
