@@ -553,7 +553,9 @@ def test_evaluate_c_judges_the_compiled_controller_as_the_file(tmp_path, robust_
     assert main(["evaluate", "--c", str(out), *common, "--estimator", "observer"]) == 2
     assert "--estimator is not allowed with --c" in capsys.readouterr().err
     assert main(["evaluate", "--c", str(tmp_path), *common]) == 2
-    assert "wmr_controller.json" in capsys.readouterr().err
+    assert "wmr_controller.json: there is no such file; allowed: a folder written by" in (
+        capsys.readouterr().err
+    )
     assert main(["evaluate", *common]) == 2
     assert "--gains is required" in capsys.readouterr().err
 

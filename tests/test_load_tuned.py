@@ -91,6 +91,14 @@ def test_bad_files_are_refused_in_one_line(tmp_path, content, message):
     assert str(err.value).startswith(f"{str(path)!r}"), "the message names the file first"
 
 
+def test_a_missing_file_or_a_folder_is_said_in_words(tmp_path):
+    missing = r"'[^']*nope\.json' cannot be read: there is no such file$"
+    with pytest.raises(ValueError, match=missing):
+        tuning.load_tuned(tmp_path / "nope.json")
+    with pytest.raises(ValueError, match=r"cannot be read: it is a folder$"):
+        tuning.load_tuned(tmp_path)
+
+
 def test_non_finite_parameters_are_never_written():
     with pytest.raises(ValueError, match="gains.kr = nan is not allowed; allowed: a finite"):
         tuning.tuned_json(w.Gains(kr=float("nan")))

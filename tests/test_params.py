@@ -47,7 +47,10 @@ def test_bad_gains_name_the_field(change, field):
         ({"dt": 0.0}, r"dt = 0\.0 is not allowed"),
         ({"dt": -0.1}, r"dt = -0\.1"),
         ({"dt": float("nan")}, r"dt = nan"),
-        ({"velocity": "perfect"}, r"velocity = 'perfect' is not allowed; allowed: \('ideal'"),
+        (
+            {"velocity": "perfect"},
+            r"velocity = 'perfect' is not allowed; allowed: 'ideal', 'nonideal'$",
+        ),
         ({"temperature": -1.0}, r"temperature = -1\.0"),
         ({"controller": "pid"}, r"controller = 'pid' is not known"),
     ],

@@ -6,12 +6,25 @@ import hashlib
 import io
 import json
 import os
+import re
 import tempfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+_ERRNO = re.compile(r"\[Errno (\d+)\] ([^:]*)(: .*)?$")
+
+
+def os_reason(text: Any) -> str:
+    """An ``OSError``'s text in plain words (``there is no such file``), without the path."""
+    text = " ".join(str(text).split())
+    found = _ERRNO.search(text)
+    if found is None:
+        return text
+    reason = {"2": "there is no such file", "21": "it is a folder"}.get(found[1])
+    return text[: found.start()] + (reason or found[2][:1].lower() + found[2][1:])
 
 
 def _write_atomically(path: str | os.PathLike, write: Callable[[Any], None]) -> Path:

@@ -13,6 +13,8 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
+from wmr_jax._src import io
+
 
 def positive_int(flag: str, text: Any, minimum: int = 1, maximum: int | None = None) -> int:
     """The integer value of a flag, in ``[minimum, maximum]``."""
@@ -269,18 +271,7 @@ def gains_from(args: Any) -> Any:
     return gains
 
 
-_ERRNO = re.compile(r"\[Errno (\d+)\] ([^:]*)(: .*)?$")
 _JSON_AT = re.compile(r"^(Expecting|Extra data|Unterminated|Invalid)\b.*?(line \d+ column \d+)")
-
-
-def os_reason(text: str) -> str:
-    """An ``OSError``'s text in the commands' words (``there is no such file``), no path."""
-    text = " ".join(str(text).split())
-    found = _ERRNO.search(text)
-    if found is None:
-        return text
-    reason = {"2": "there is no such file", "21": "it is a folder"}.get(found[1])
-    return text[: found.start()] + (reason or found[2][:1].lower() + found[2][1:])
 
 
 def tuned_file(flag: str, path: Any) -> Any:
@@ -300,7 +291,7 @@ def tuned_file(flag: str, path: Any) -> Any:
                 f"{flag} {head} is not a JSON gains file (not JSON at {parsed[2]}); allowed: "
                 "the tuned_gains.json of wmr-jax tune, or a JSON object of Gains fields"
             ) from None
-        raise ValueError(f"{flag} {head} cannot be read: {os_reason(reason)}") from None
+        raise ValueError(f"{flag} {head} cannot be read: {io.os_reason(reason)}") from None
 
 
 # The add_argument keywords of --float32 for a command that computes in float64 by default.

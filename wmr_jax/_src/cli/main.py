@@ -125,9 +125,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"wmr-jax: error: {err}", file=sys.stderr)
         return 2
     except OSError as err:  # a disk that fills or a folder that vanishes mid-run
-        from wmr_jax._src.cli.flags import os_reason
+        from wmr_jax._src.io import os_reason
 
-        print(f"wmr-jax: error: {os_reason(str(err))}", file=sys.stderr)
+        print(f"wmr-jax: error: {os_reason(err)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         # tune (any mode) and sweep can continue.

@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src import checks
+from wmr_jax._src import checks, io
 from wmr_jax._src.export.codegen import MAX_LATENCY
 from wmr_jax._src.export.compiled import CompiledController
 from wmr_jax._src.sim import loops, metrics, motion
@@ -183,7 +183,7 @@ def read_metadata(folder: str | os.PathLike) -> dict[str, Any]:
         values = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as err:
         raise ValueError(
-            f"--c {os.fspath(folder)!r} cannot be read: {METADATA}: {' '.join(str(err).split())}; "
+            f"--c {os.fspath(folder)!r} cannot be read: {METADATA}: {io.os_reason(err)}; "
             "allowed: a folder written by wmr-jax export"
         ) from None
     if not isinstance(values, dict) or (values.get("gains") or values.get("baseline")) is None:

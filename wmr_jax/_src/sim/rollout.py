@@ -129,14 +129,16 @@ def make_options(
     """Check the static options of a rollout and return them as ``Options``."""
     steps = check_int("steps", steps, 1, MAX_STEPS)
     if velocity not in VELOCITY_LOOPS:
-        raise ValueError(f"velocity = {velocity!r} is not allowed; allowed: {VELOCITY_LOOPS}")
+        allowed = ", ".join(map(repr, VELOCITY_LOOPS))
+        raise ValueError(f"velocity = {velocity!r} is not allowed; allowed: {allowed}")
     # The ideal loop has no sub-steps: any count passes (and is ignored).
     if velocity == "ideal":
         substeps = check_int("substeps", substeps, 1, MAX_STEPS)
     else:
         substeps = check_substeps(substeps)
     if wheel_limit not in WHEEL_LIMITS:
-        raise ValueError(f"wheel_limit = {wheel_limit!r} is not allowed; allowed: {WHEEL_LIMITS}")
+        allowed = ", ".join(map(repr, WHEEL_LIMITS))
+        raise ValueError(f"wheel_limit = {wheel_limit!r} is not allowed; allowed: {allowed}")
     controller = get_controller(controller)
     if temperature is not None:
         value = check_temperature("temperature", temperature)

@@ -104,10 +104,12 @@ def _check_config(config: BenchConfig) -> BenchConfig:
     check_int("seed", config.seed, 0, 2**32 - 1 - max(config.sizes))
     check_number("wait_idle", config.wait_idle, closed=True, unit="s")
     if config.dtype not in DTYPES:
-        raise ValueError(f"dtype = {config.dtype!r} is not allowed; allowed: {DTYPES}")
+        raise ValueError(
+            f"dtype = {config.dtype!r} is not allowed; allowed: {', '.join(map(repr, DTYPES))}"
+        )
     unknown = [c for c in config.cases if c not in CASES]
     if unknown:
-        raise ValueError(f"cases = {unknown!r} are not known; allowed: {CASES}")
+        raise ValueError(f"cases = {unknown!r} are not known; allowed: {', '.join(CASES)}")
     if config.robot is not None:
         validate_one_robot(config.robot, "the benchmark")
     return dataclasses.replace(config, cases=tuple(config.cases) or CASES)

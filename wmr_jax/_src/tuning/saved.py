@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from wmr_jax._src.checks import check_path, require_unbatched
-from wmr_jax._src.io import atomic_write_json, json_object_once
+from wmr_jax._src.io import atomic_write_json, json_object_once, os_reason
 from wmr_jax._src.model.controllers.schedule import SCHEDULE, SHAPE_FIELDS, TABLES, ScheduleParams
 from wmr_jax._src.model.controllers.shim_sung import SHIM_SUNG
 from wmr_jax._src.model.params import Gains, Robot, validate_one_robot
@@ -258,7 +258,7 @@ def load_tuned_and_tuning(path: str | os.PathLike) -> tuple[ClosedLoop, str | No
         values = json.loads(path.read_text(encoding="utf-8"), object_pairs_hook=json_object_once)
     except (OSError, UnicodeDecodeError, ValueError, RecursionError) as err:
         # RecursionError: arrays nested beyond Python's recursion limit.
-        raise ValueError(f"{where} cannot be read: {' '.join(str(err).split())}") from None
+        raise ValueError(f"{where} cannot be read: {os_reason(err)}") from None
     if not isinstance(values, dict):
         raise ValueError(f"{where} is not allowed; allowed: a JSON object")
     kind = _kind_of(values, where)
