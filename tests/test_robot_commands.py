@@ -164,7 +164,10 @@ def test_an_interrupted_sweep_with_resume_says_what_it_kept_and_reuses_it(
     argv = ["sweep", "--out", str(out), *SWEEP, "--no-progress", "--resume"]
     assert main(argv) == 130
     chunks = out / "chunks" / "shim-sung"
-    err = _errors(capsys.readouterr().err)
+    said, err = capsys.readouterr()
+    # Nothing to resume yet: said, as tune says it of a missing checkpoint.
+    assert f"--resume: no finished chunks in {out / 'chunks'}; starting from the first" in said
+    err = _errors(err)
     assert err == [
         f"wmr-jax: interrupted; kept in {out / 'chunks'}: {_chunks_text(1)} (the same "
         "command, with --resume, reuses them)"

@@ -156,6 +156,8 @@ def _run(args: Any, out: Path, chunks: Path | None, finished: dict) -> int:
                 "these settings (chunks of others are refused), the rest computed",
                 flush=True,
             )
+        else:  # a mistyped --out would otherwise start over without a word
+            print(f"--resume: no finished chunks in {chunks}; starting from the first", flush=True)
 
     library_names = {
         "n_poses": "--poses",
