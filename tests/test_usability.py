@@ -359,7 +359,9 @@ def test_bare_command_prints_the_help_with_status_2(capsys):
 
 def test_a_heading_in_degrees_is_warned_and_one_in_radians_is_not():
     """A whole number beyond 2π is most likely degrees; an unwrapped angle in radians is not."""
-    with pytest.warns(UserWarning, match=r"ref has heading 90 rad, a whole number beyond 2π"):
+    with pytest.warns(
+        w.HeadingUnitsWarning, match=r"ref has heading 90 rad, a whole number beyond"
+    ):
         w.rollout([40.0, 20.0, 90.0], w.Gains(kr=60.0, k_theta=10.0), steps=3)
     refs = [[40.0, 0.0, 0.5], [9.0, 9.0, -135.0], [1.0, 1.0, 120.0]]  # the widest is named
     for given in (refs, jnp.array(refs)):

@@ -13,7 +13,8 @@ The names here are the whole first screen (``docs/model.md`` is the model):
 * poses and measures: ``sample_poses``, ``paper_refs``, ``arrival_time``,
   ``success_rate``;
 * the NumPy oracle: ``reference_rollout``; tuned gains: ``load_tuned``;
-* warnings: ``WheelSpeedWarning``, ``SamplingWarning``, ``RobotUnitsWarning``.
+* warnings: ``WheelSpeedWarning``, ``SamplingWarning``, ``RobotUnitsWarning``,
+  ``HeadingUnitsWarning``.
 
 The rest lives in the families, imported on first use: ``controllers`` (the
 law's building blocks, the baselines, feasibility checks), ``dynamics`` (the
@@ -22,6 +23,7 @@ pose sets, the oracle's law, bounds), ``tuning``, ``report``, ``export``
 (C code) and ``cli``. ``wmr_jax._src`` is private.
 """
 
+from wmr_jax._src.checks import HeadingUnitsWarning as HeadingUnitsWarning
 from wmr_jax._src.model.controllers import Controller as Controller
 from wmr_jax._src.model.controllers import get_controller as get_controller
 from wmr_jax._src.model.controllers import register_controller as register_controller

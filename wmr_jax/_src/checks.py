@@ -508,6 +508,10 @@ _CALLER = (
 )
 
 
+class HeadingUnitsWarning(UserWarning):
+    """A heading in radians that is most likely degrees: a whole number beyond 2π, up to 360."""
+
+
 def _warn_if_degrees(name: str, code: float) -> None:
     """Warn of headings that look like degrees; ``code``: the largest of ``_degrees``."""
     if code:
@@ -515,7 +519,7 @@ def _warn_if_degrees(name: str, code: float) -> None:
         warnings.warn(
             f"{name} has heading {value:g} rad, a whole number beyond 2π, most likely degrees; "
             f"headings are radians: np.radians({value:g}) = {np.radians(value):.4f}",
-            UserWarning,
+            HeadingUnitsWarning,
             **_CALLER,
         )
 
