@@ -34,7 +34,7 @@ README = _read("README.md")
 # Pages whose Python blocks run here as written (docs/custom_controller.md's
 # runs in test_usability.py; docs/paper.md's takes 20 s, docs/robots.md's
 # read files a user writes first).
-QUICK_SNIPPETS = ["README.md", "docs/scale.md"]
+QUICK_SNIPPETS = ["README.md", "docs/scale.md", "docs/maps.md"]
 
 
 def _blocks(language, text=README):
