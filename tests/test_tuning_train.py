@@ -173,8 +173,12 @@ def test_resume_refuses_other_settings_and_damaged_checkpoints(tmp_path, capsys)
     with pytest.raises(_Stop):
         tuning.tune(tmp_path, every, progress=False, progress_fn=_stop_after(1))
     checkpoint = tmp_path / tuning.CHECKPOINT_NAME
-    with pytest.raises(ValueError, match="poses = 8 there, 9 now"):
+    with pytest.raises(ValueError, match=r"\(poses = 8 there, 9 now\); allowed: the same"):
         tuning.tune(tmp_path, every.replace(poses=9), resume=True)
+    # More iterations: another run, and why (the first iterations of a longer run differ).
+    longer = r"\(iters = 6 there, 9 now\) \(the step size and the temperature anneal over all"
+    with pytest.raises(ValueError, match=longer):
+        tuning.tune(tmp_path, every.replace(iters=9), resume=True)
 
     # Truncated (a disk full, a copy cut short): one clean line, never a traceback.
     checkpoint.write_bytes(checkpoint.read_bytes()[:-100])

@@ -50,9 +50,17 @@ def load_checkpoint(path: Path, fresh: Any, identity: dict[str, Any]) -> Any:
     # Compare as JSON, the way the identity was stored.
     now = json.loads(json.dumps(identity))
     if saved != now:
+        there, here = saved["config"], now["config"]
+        iters = there.keys() == here.keys() and there.get("iters") != here.get("iters")
+        why = (
+            " (the step size and the temperature anneal over all the iterations: another "
+            "number of them is another run)"
+            if iters
+            else ""
+        )
         raise ValueError(
             f"--resume: checkpoint {path} is of another run "
-            f"({trainer.differences(saved, now)}); "
+            f"({trainer.differences(saved, now)}){why}; "
             "allowed: the same settings, or a fresh --out"
         )
     try:
