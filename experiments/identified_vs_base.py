@@ -139,6 +139,7 @@ def main() -> None:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
         base = load_robot(args.robot)
+        (out / "log.csv").unlink(missing_ok=True)  # written anew at these minutes
         write_log(base, out, args.robot, args.minutes, args.seed)
         (out / "truth.json").write_text(json.dumps(true_content(base), indent=2) + "\n")
         return

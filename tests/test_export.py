@@ -14,6 +14,7 @@ import ctypes
 import json
 import re
 import subprocess
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -250,6 +251,19 @@ def test_a_period_the_law_cannot_settle_at_is_refused(tmp_path, robust_file, cap
     assert "warning: --period 33 is read in s; a value in milliseconds needs /1000" in err
     assert f"error: --period 33 is not allowed for {robust_file}: k_theta*dt = " in err
     assert "cannot settle unless both are below 2 (docs/model.md §4); allowed: a period" in err
+    # The longest period they settle at, to the 4 digits shown: the law's own check
+    # passes 0.1 % below it and warns 0.1 % above.
+    from wmr_jax._src.model.params import SamplingWarning
+
+    longest = float(re.search(r"allowed: a period below ([0-9.e-]+) s, at which", err)[1])
+    loop = w.load_tuned(robust_file)
+    check = get_controller(loop.controller).check_sampling
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check(loop.params, 0.999 * longest)
+    with pytest.warns(SamplingWarning):
+        check(loop.params, 1.001 * longest)
+    assert 0.033 < longest < 33
     assert {p.name: p.read_bytes() for p in out.iterdir()} == written
 
 

@@ -628,8 +628,18 @@ def test_a_latency_identified_at_another_period_is_warned_of(tmp_path, capsys, m
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         read_identified(path, dt=0.04)
+        path.write_text(json.dumps({**identified, "dt": 0.0333}))  # a 30 Hz tracker's
+        read_identified(path)  # 0.0333 and 0.033 s: one period, within 2 %
         path.write_text(json.dumps({**identified, "dt": 0.04, "latency_samples": 0}))
         read_identified(path)  # no latency: the period changes nothing
+    # At simulate --dt 0.02 the advice names that period.
+    path.write_text(json.dumps({**identified, "dt": 0.04}))
+    with pytest.warns(UserWarning, match=r"\(log at 0.02 s: identify --plan --plan-dt 0.02;"):
+        read_identified(path, dt=0.02)
+    for bad in ("0.04", float("nan"), float("inf"), 0, -0.04, True):
+        path.write_text(json.dumps({**identified, "dt": bad}))
+        with pytest.raises(ValueError, match=r": dt = .* is not allowed; allowed: the logs' pe"):
+            read_identified(path)
     # identify --plan plans at the period the commands run at, unless told otherwise.
     plan = tmp_path / "drive.csv"
     assert cli.main(["identify", "--plan", str(plan), "--minutes", "0.05"]) == 0

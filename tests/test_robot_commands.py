@@ -166,7 +166,7 @@ def test_an_interrupted_sweep_with_resume_says_what_it_kept_and_reuses_it(
     chunks = out / "chunks" / "shim-sung"
     said, err = capsys.readouterr()
     # Nothing to resume yet: said, as tune says it of a missing checkpoint.
-    assert f"--resume: no finished chunks in {out / 'chunks'}; starting from the first" in said
+    assert f"--resume: no finished chunks of shim-sung in {out / 'chunks'}; starting from" in said
     err = _errors(err)
     assert err == [
         f"wmr-jax: interrupted; kept in {out / 'chunks'}: {_chunks_text(1)} (the same "

@@ -139,6 +139,25 @@ def test_cli_writes_the_results_and_a_resumed_run_gives_the_same_gains(tmp_path,
     (whole / "kept.json").rename(whole / "tuned_gains.json")
     assert not tuning_run.finished(whole, SMALL.replace(iters=7), None)
     assert not tuning_run.finished(whole, SMALL, w.Robot(half_track=10.0))  # another robot's
+    # An evaluation of another robot beside this run's checkpoint: not this run's result.
+    report = (whole / "evaluation.json").read_text()
+    other = {**json.loads(report), "robot": {**json.loads(report)["robot"], "half_track": 10.0}}
+    (whole / "evaluation.json").write_text(json.dumps(other))
+    assert not tuning_run.finished(whole, SMALL, None)
+    (whole / "evaluation.json").write_text(report)
+    assert tuning_run.finished(whole, SMALL, None)
+    # A checkpoint of other code beside this run's evaluation: not finished either.
+    from wmr_jax._src import io
+
+    kept = (whole / tuning.CHECKPOINT_NAME).read_bytes()
+    arrays, meta = io.load_arrays(whole / tuning.CHECKPOINT_NAME)
+    meta["identity"]["code"] = "another version"
+    io.save_arrays(whole / tuning.CHECKPOINT_NAME, arrays, meta)
+    os.utime(whole / "evaluation.json")  # still written after the checkpoint
+    assert not tuning_run.finished(whole, SMALL, None)
+    (whole / tuning.CHECKPOINT_NAME).write_bytes(kept)
+    os.utime(whole / "evaluation.json")
+    assert tuning_run.finished(whole, SMALL, None)
     # A checkpoint newer than the evaluation: the run stopped after it, in its random
     # search or evaluation, so resuming it has work left.
     later = (whole / "evaluation.json").stat().st_mtime_ns + 10**9

@@ -45,6 +45,24 @@ def _object_size(folder: Path) -> tuple[int, int] | None:
         return size, code_bytes(folder / "wmr_controller.c", Path(tmp))
 
 
+def _longest_settling_period(check: Any, params: Any, period: float, category: type) -> float:
+    """The period below which ``check(params, dt)`` no longer warns ``category``: the
+    sampling margins grow with the period (docs/model.md §4), so a bisection finds it."""
+    import warnings
+
+    low, high = 0.0, period
+    for _ in range(60):
+        middle = (low + high) / 2
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            check(params, middle)
+        if any(issubclass(r.category, category) for r in caught):
+            high = middle
+        else:
+            low = middle
+    return low
+
+
 def run(args: Any) -> int:
     """Run ``wmr-jax export``; return the exit status."""
     from wmr_jax._src.export.codegen import REALS, c_sources, write_sources
@@ -78,9 +96,12 @@ def run(args: Any) -> int:
             check(loop.params, against)
         for record in caught:
             if issubclass(record.category, SamplingWarning):
+                given = "" if args.period is not None else " (the default)"
+                longest = _longest_settling_period(check, loop.params, period, SamplingWarning)
                 raise ValueError(
-                    f"--period {period:g} is not allowed for {args.gains}: {record.message}; "
-                    "allowed: a period at which both are (they grow with it)"
+                    f"--period {period:g}{given} is not allowed for {args.gains}: "
+                    f"{record.message}; allowed: a period below {longest:.4g} s, at which "
+                    "these gains settle (or gains tuned for this one)"
                 )
             warnings.warn(f"{shown}: {record.message}", record.category, 2)
     sources = c_sources(loop, real=real, period=period)

@@ -157,7 +157,9 @@ def _run(args: Any, out: Path, chunks: Path | None, finished: dict) -> int:
                 flush=True,
             )
         else:  # a mistyped --out would otherwise start over without a word
-            print(f"--resume: no finished chunks in {chunks}; starting from the first", flush=True)
+            of = ", ".join(names)
+            said = f"--resume: no finished chunks of {of} in {chunks}; starting from the first"
+            print(said, flush=True)
 
     library_names = {
         "n_poses": "--poses",

@@ -63,13 +63,20 @@ def read_identified(source: Any, dt: float = DEFAULT_DT) -> tuple[Robot, dict[st
             f"--robot {source}: latency_samples = {latency!r} is not allowed; allowed: an "
             f"integer 0-{model.MAX_LATENCY}"
         )
-    logged = content.get("dt")
-    if latency and isinstance(logged, (int, float)) and not math.isclose(logged, dt, rel_tol=1e-6):
+    logged = content.get("dt", dt)  # written by identify; a file without it is not judged
+    number = isinstance(logged, (int, float)) and not isinstance(logged, bool)
+    if not (number and math.isfinite(logged) and logged > 0):
+        raise ValueError(
+            f"--robot {source}: dt = {logged!r:.40} is not allowed; allowed: the logs' period, "
+            "a finite number of s > 0"
+        )
+    # Within 2 %: a tracker at 30 Hz (0.0333 s) and the 0.033 s period are one period.
+    if latency and not math.isclose(logged, dt, rel_tol=0.02):
         warnings.warn(
             f"--robot {source} was identified from logs at a period of {logged:g} s and these "
             f"runs step at {dt:g} s: its latency of {latency} samples lasts "
             f"{1000 * latency * dt:.0f} ms here against {1000 * latency * logged:.0f} ms in the "
-            f"logs (log at {dt:g} s, identify --plan's default; simulate also takes --dt)",
+            f"logs (log at {dt:g} s: identify --plan --plan-dt {dt:g}; simulate takes --dt)",
             stacklevel=2,
         )
     return base, content
