@@ -10,6 +10,7 @@ keep the identity they had before limits existed.
 """
 
 import json
+import math
 
 import jax
 import jax.numpy as jnp
@@ -136,7 +137,10 @@ def test_a_checkpoints_identity_holds_every_robot_field():
     # Every robot field, the settings and the code that computes (provenance.code_version);
     # how often the run checkpoints is no setting of its result.
     fields = list(w.Robot.__dataclass_fields__)
-    settings = {k: v for k, v in config.as_dict().items() if k != "checkpoint_every"}
+    # The horizon it runs: the robot's (the paper robot's 6 s) where the settings leave it.
+    run = config.for_robot(w.Robot()).as_dict()
+    assert config.horizon is None and run["horizon"] == 6.0
+    settings = {k: v for k, v in run.items() if k != "checkpoint_every"}
     assert len(settings) == len(config.as_dict()) - 1
     expected = {
         "config": settings,
@@ -144,15 +148,16 @@ def test_a_checkpoints_identity_holds_every_robot_field():
         "code": code_version(),
     }
     assert now == json.loads(json.dumps(expected))
-    assert trainer.run_text(config, w.Robot()) == json.dumps(expected, sort_keys=True)
+    resolved = config.for_robot(w.Robot())
+    assert trainer.run_text(resolved, w.Robot()) == json.dumps(expected, sort_keys=True)
     # A robot with a limit is another run; the limit it gives is in its identity.
     limited = tuning.run_identity(config, LIMITED)
     assert limited != now and limited["robot"]["angular_accel_max"] == SLOW_TURN
     state = training.init_state(config, w.Robot())
     with pytest.raises(ValueError, match="state is of another run"):
-        run = trainer.run_text(config, LIMITED)
+        run = trainer.run_text(config.for_robot(LIMITED), LIMITED)
         trainer.own_state(state, training.gain_problem(config, LIMITED), run)
-    run = trainer.run_text(config, w.Robot())
+    run = trainer.run_text(resolved, w.Robot())
     assert trainer.own_state(state, training.gain_problem(config, w.Robot()), run) is state
 
 
@@ -202,3 +207,27 @@ def test_tune_compare_runs_a_slow_robot_for_the_horizon_its_wheels_need(
     seen.clear()
     assert main([*argv, "--horizon", "12"]) == 130
     assert seen == {"fixed": 12.0}
+
+
+def test_the_python_tuner_and_pose_maps_run_a_slow_robot_over_its_horizon(monkeypatch):
+    """train and evaluate_poses default to the robot's study horizon, as the commands,
+    tune_robust and tuning.evaluate do: 6 s left a 22 cm/s robot's runs unfinished."""
+    from wmr_jax._src.studies import maps
+    from wmr_jax._src.studies.robustness import study_horizon
+
+    slow = w.Robot(half_track=8.0, v_max=22.0)
+    assert study_horizon(slow) == 38.2 and study_horizon(w.Robot()) == 6.0
+    config = training.TuneConfig(iters=1, poses=2)
+    assert config.horizon is None
+    assert training._checked(config, slow)[0].horizon == 38.2
+    assert training._checked(config, None)[0].horizon == 6.0
+    assert training._checked(config.replace(horizon=10.0), slow)[0].horizon == 10.0
+    assert training.gain_problem(config, slow).loss.spec == config.replace(
+        horizon=38.2
+    ).spec().for_robot(slow, 0.033)
+    seen = []
+    monkeypatch.setattr(maps, "sweep", lambda *a, steps, **k: seen.append(steps) or 1 / 0)
+    for robot, steps in ((slow, math.ceil(38.2 / 0.033)), (None, math.ceil(6.0 / 0.033))):
+        with pytest.raises(ZeroDivisionError):
+            maps.evaluate_poses(np.zeros((1, 3)) + [30.0, 0.0, 0.0], robot=robot)
+        assert seen.pop() == steps

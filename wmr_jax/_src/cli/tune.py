@@ -105,12 +105,12 @@ _MODE_FLAGS = {
 }
 
 
-def _horizon(args: Any, text: Any) -> float:
-    """``--horizon`` (warned of when it looks like milliseconds), else the problem's."""
+def _horizon(args: Any) -> float | None:
+    """``--horizon`` (warned of when it looks like milliseconds), else ``None``: the robot's."""
     if args.horizon is None:
-        return flags.number("--horizon", text, low=0.0, closed=False, unit="s")
+        return None
     given = flags.robot_from(args.robot)
-    return flags.horizon("--horizon", text, None if given is None else given.robot)
+    return flags.horizon("--horizon", args.horizon, None if given is None else given.robot)
 
 
 def _config_from(args: Any, *, problem: str) -> Any:
@@ -131,7 +131,7 @@ def _config_from(args: Any, *, problem: str) -> Any:
         iters=flags.positive_int("--iters", given("iters"), 1),
         poses=flags.positive_int("--poses", given("poses"), 1, MAX_SAMPLES),
         seed=flags.positive_int("--seed", given("seed"), 0, 2**32 - 1),
-        horizon=_horizon(args, given("horizon")),
+        horizon=_horizon(args),
         eval_poses=flags.positive_int("--eval-poses", given("eval_poses"), 1, MAX_SAMPLES),
         checkpoint_every=flags.positive_int("--checkpoint-every", given("checkpoint_every"), 1),
         random_search=not args.no_random_search,
@@ -201,13 +201,11 @@ def _compare(out: Path, args: Any, robot: Any) -> int:
     from wmr_jax._src.tuning.compare import run_comparison
 
     # Each problem over the robot's horizon, as a single tuning run has it.
-    schedule = _config_from(args, problem="schedule")
-    configs = {"schedule": _robot_horizon(args, schedule, robot)}
+    schedule = _robot_horizon(args, _config_from(args, problem="schedule"), robot)
+    configs = {"schedule": schedule}
     if not args.schedule:  # both problems, unless --schedule asks for the schedule alone
-        fixed = _config_from(args, problem="fixed")
-        if configs["schedule"].horizon != schedule.horizon:  # stretched (and said) above
-            fixed = fixed.replace(horizon=configs["schedule"].horizon).validate()
-        configs = {"fixed": fixed, **configs}
+        fixed = _config_from(args, problem="fixed").replace(horizon=schedule.horizon)
+        configs = {"fixed": fixed.validate(), **configs}
     rows = run_comparison(out, configs, robot=robot, resume=args.resume, progress=print)
     print(comparison_table(rows), end="")
     print(f"-> {out / 'compare.json'}, {out / 'compare.md'}")
@@ -215,18 +213,16 @@ def _compare(out: Path, args: Any, robot: Any) -> int:
 
 
 def _robot_horizon(args: Any, config: Any, robot: Any) -> Any:
-    """The config with ``robot``'s studies' horizon unless ``--horizon`` is given."""
-    from wmr_jax._src.studies.robustness import study_horizon
+    """The config with ``robot``'s studies' horizon unless ``--horizon`` is given (said)."""
+    from wmr_jax._src.model.params import Robot
+    from wmr_jax._src.sim.poses import HORIZON_S
 
-    if robot is None or args.horizon is not None:
-        return config
-    horizon = study_horizon(robot)
-    if horizon != config.horizon:
+    config = config.for_robot(Robot() if robot is None else robot)
+    if args.horizon is None and config.horizon != HORIZON_S:
         print(
-            f"horizon {horizon:g} s for this robot (the paper robot's {config.horizon:g} s, "
+            f"horizon {config.horizon:g} s for this robot (the paper robot's {HORIZON_S:g} s, "
             "stretched as its wheels need; --horizon sets another)"
         )
-        config = config.replace(horizon=horizon).validate()
     return config
 
 

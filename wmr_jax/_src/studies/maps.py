@@ -16,7 +16,14 @@ from wmr_jax._src.model.params import Robot, validate_one_robot
 from wmr_jax._src.model.robots import robot_json, robot_name
 from wmr_jax._src.sim import metrics
 from wmr_jax._src.sim.metrics import PoseMetrics
-from wmr_jax._src.sim.poses import EVAL_R_MAX, EVAL_R_MIN, MAX_SAMPLES, horizon_steps, sample_poses
+from wmr_jax._src.sim.poses import (
+    EVAL_R_MAX,
+    EVAL_R_MIN,
+    HORIZON_S,
+    MAX_SAMPLES,
+    horizon_steps,
+    sample_poses,
+)
 from wmr_jax._src.sim.rollout import DEFAULT_DT
 from wmr_jax._src.studies.robustness import mean_median, robot_defaults, study_horizon
 from wmr_jax._src.studies.sweep import sweep
@@ -131,7 +138,9 @@ def evaluate_poses(
         refs, controller, dt, robot, velocity, on_chunk: as ``wmr_jax.sweep``.
         params: as ``sweep``'s ``gains``.
         init: ``(3,)`` initial pose shared by every run.
-        steps: control periods; default the docs/model.md §6 horizon of 6 s.
+        steps: control periods; default the robot's study horizon
+            (``study_horizon``: 6 s for the paper robot, longer for a slower
+            one; 6 s for robots batched per run).
         chunk: poses per compiled call (the last chunk is padded to it).
         progress: show a progress bar (stderr).
         x64: compute in float64 (default), whatever JAX's default dtype: in
@@ -152,8 +161,10 @@ def evaluate_poses(
         raise ValueError(f"init has shape {np.shape(init)}; allowed: (3,), shared by every run")
     run = {"init": init, "dt": dt, "robot": robot, "velocity": velocity, "controller": controller}
     kept = {"out": cache, "resume": resume, "on_chunk": on_chunk, "progress": progress}
+    if steps is None:
+        one = robot is None or all(np.ndim(leaf) == 0 for leaf in jax.tree.leaves(robot))
+        steps = horizon_steps(dt, study_horizon(robot) if one else HORIZON_S)
     with jax.enable_x64(x64):
-        steps = horizon_steps(dt) if steps is None else steps
         out = sweep(refs_host, params, steps=steps, chunk_size=chunk, **run, **kept)
     final = np.stack([out["final_x"], out["final_y"]], axis=-1)
     return PoseMetrics(

@@ -102,7 +102,9 @@ def compare(
         ValueError: for bad settings, or without evosax (CMA-ES), before any run.
     """
     robot = validate_one_robot(robot, "tuning")
-    bases = _checked_plan(seeds, problems, configs)
+    bases = {
+        name: c.for_robot(robot) for name, c in _checked_plan(seeds, problems, configs).items()
+    }
     check_callable("progress", progress)
     _evosax_cma_es()  # refused now, not after the first gradient run
     rows, said = [], set()
@@ -267,6 +269,7 @@ def run_comparison(
     from wmr_jax._src.report.tuning import comparison_table
 
     robot = validate_one_robot(robot, "tuning")
+    configs = {name: config.for_robot(robot) for name, config in configs.items()}
     settings = comparison_settings(
         robot,
         seeds=list(COMPARE_SEEDS),

@@ -116,6 +116,7 @@ def finished(out: Path, config: Any, robot: Any) -> bool:
     from wmr_jax._src.model.robots import robot_json
 
     robot = validate_robot(Robot() if robot is None else robot)
+    config = config.for_robot(robot)
     checkpoint, report = out / CHECKPOINT_NAME, out / "evaluation.json"
     try:
         if report.stat().st_mtime_ns < checkpoint.stat().st_mtime_ns:
@@ -280,6 +281,7 @@ def tune(
     config = trainer.checked_config(config, training.TuneConfig)
     io.remove_stale_temporaries(out)
     robot = Robot() if robot is None else robot
+    config = config.for_robot(validate_robot(robot))  # the horizon its files record
     identity = training.run_identity(config, robot)
     fresh = training.init_state(config, robot)
     checkpoint = out / CHECKPOINT_NAME

@@ -62,7 +62,9 @@ class TuneConfig:
             batch median; ``None`` for a plain mean.
         temperature_start: smooth-law temperature of the first iteration.
         temperature_end: temperature of the last (annealed geometrically).
-        horizon: simulated time per run, s.
+        horizon: simulated time per run, s; ``None``: the robot's study horizon
+            (``studies.study_horizon``: 6 s for the paper robot, longer for a
+            slower one), as ``wmr-jax tune`` and ``tune_robust`` run it.
         dt: control period, s.
         checkpoint_every: iterations between checkpoints (of ``wmr-jax tune``).
         eval_poses: held-out poses of the before/after table.
@@ -90,7 +92,7 @@ class TuneConfig:
     pose_clip: float | None = 1.0
     temperature_start: float = 0.1
     temperature_end: float = 0.01
-    horizon: float = HORIZON_S
+    horizon: float | None = None
     dt: float = simulation.DEFAULT_DT
     checkpoint_every: int = trainer.CHECKPOINT_EVERY
     eval_poses: int = EVAL_POSES
@@ -135,6 +137,14 @@ class TuneConfig:
         """Return a copy with the given fields changed."""
         return dataclasses.replace(self, **changes)
 
+    def for_robot(self, robot: Robot) -> TuneConfig:
+        """These settings with a ``horizon`` of ``None`` set to ``robot``'s study horizon."""
+        if self.horizon is not None:
+            return self
+        from wmr_jax._src.studies.robustness import study_horizon  # it imports the tuning package
+
+        return self.replace(horizon=study_horizon(robot)).validate()
+
     def validate(self) -> TuneConfig:
         """Check every field; return ``self`` (``ValueError`` naming the field)."""
         trainer.check_loop(self)
@@ -158,9 +168,10 @@ class TuneConfig:
         return self
 
     def spec(self) -> LossSpec:
-        """The static loss settings of this configuration (checked)."""
+        """The static loss settings of this configuration (checked); a ``horizon`` of
+        ``None`` is the paper robot's here (``for_robot`` sets another robot's)."""
         return make_spec(
-            horizon=self.horizon,
+            horizon=HORIZON_S if self.horizon is None else self.horizon,
             dt=self.dt,
             velocity=self.velocity,
             substeps=self.substeps,
@@ -200,6 +211,7 @@ class GainLoss:
 
 def gain_problem(config: TuneConfig, robot: Robot) -> trainer.TrainingProblem:
     """The ``TrainingProblem`` of a checked ``config`` on a checked ``robot``."""
+    config = config.for_robot(robot)
     space, dtype = config.space, float_dtype()
     dt = jnp.asarray(config.dt, dtype)
     # The loss runs the loop the evaluation judges: the robot's speed limiter included.
@@ -234,8 +246,10 @@ def training_poses(seed: int, iteration: int, n: int) -> jax.Array:
 
 
 def _checked(config: TuneConfig | None, robot: Robot | None) -> tuple[TuneConfig, Robot]:
+    """The checked settings over the robot's horizon (unless given), and the robot."""
     config = trainer.checked_config(config, TuneConfig)
-    return config, as_float_tree(validate_one_robot(robot, "tuning"))
+    robot = validate_one_robot(robot, "tuning")
+    return config.for_robot(robot), as_float_tree(robot)
 
 
 def init_state(config: TuneConfig | None = None, robot: Robot | None = None) -> TrainState:
