@@ -637,6 +637,25 @@ def test_host_functions_say_they_need_values_inside_a_transformation(name, call)
         assert "\n" not in str(info.value)
 
 
+@pytest.mark.parametrize(
+    ("name", "call"),
+    [
+        ("temperature", lambda t: tuning.tuning_loss(w.Gains(), np.array([REF]), temperature=t)),
+        ("temperature", lambda t: w.rollout(REF, w.Gains(), steps=3, temperature=t).poses.sum()),
+        ("steps", lambda n: w.rollout(REF, w.Gains(), steps=n).poses.sum()),
+    ],
+)
+def test_a_traced_setting_is_named_as_one_the_program_is_compiled_for(name, call):
+    """A temperature or a step count under jax.jit: they said 'temperature =
+    JitTracer(...) is not allowed; allowed: a number', which hid the cause."""
+    value = 3 if name == "steps" else 0.05
+    with pytest.raises(ValueError) as info:
+        jax.jit(call)(value)
+    assert str(info.value).startswith(f"{name} is traced (inside jax.jit, vmap or grad)")
+    assert "pass it as a static argument" in str(info.value)
+    assert np.isfinite(jax.jit(call, static_argnums=0)(value))  # static: it runs
+
+
 def test_the_wheel_speed_bound_names_batches_of_two_sizes():
     with pytest.raises(ValueError, match=r"^batch sizes differ \(gains.kr: 2, robot.half_track: 3"):
         w.controllers.wheel_speed_bound(w.Gains(kr=[1.0, 2.0]), w.Robot(half_track=[1.0, 2.0, 3.0]))

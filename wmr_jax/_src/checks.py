@@ -100,8 +100,19 @@ def _holds_bool(value: Any) -> bool:
     return False
 
 
+def _refuse_traced(name: str, value: Any) -> None:
+    """A setting the program is compiled for cannot be a traced value: say so."""
+    if isinstance(value, jax.core.Tracer):
+        raise ValueError(
+            f"{name} is traced (inside jax.jit, vmap or grad); allowed: a concrete number: "
+            "the program is compiled for it (pass it as a static argument, e.g. "
+            "jax.jit(f, static_argnames=...), or close over it)"
+        )
+
+
 def check_int(name: str, value: Any, minimum: int = 1, maximum: int | None = None) -> int:
     """Return ``value`` as an ``int`` in ``[minimum, maximum]`` (not a bool)."""
+    _refuse_traced(name, value)
     ok = not isinstance(value, bool) and isinstance(value, (int, np.integer))
     if not ok or value < minimum or (maximum is not None and value > maximum):
         upper = "" if maximum is None else f" and <= {maximum}"
@@ -181,6 +192,7 @@ def check_number(
     unit: str = "",
 ) -> float:
     """Return ``value`` as a float in ``(low, high)``, or ``[low, high)`` if ``closed``."""
+    _refuse_traced(name, value)
     try:
         # Python would read True as 1 and "0.5" as 0.5.
         if isinstance(value, (bool, np.bool_, str, bytes)) or np.iscomplexobj(value):
