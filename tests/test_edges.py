@@ -656,6 +656,21 @@ def test_a_traced_setting_is_named_as_one_the_program_is_compiled_for(name, call
     assert np.isfinite(jax.jit(call, static_argnums=0)(value))  # static: it runs
 
 
+def test_a_traced_disturbance_is_named_as_checked_on_the_host():
+    """It said 'disturbance.noise = DynamicJaxprTracer ... allowed: real numbers'."""
+    refs = np.array([REF])
+    drawn = w.studies.sample_disturbance(jax.random.key(0), refs, 4, noise_xy=0.5)
+
+    def run(noise):
+        return w.studies.disturbed_rollout(drawn._replace(noise=noise), w.Gains())["poses"]
+
+    with pytest.raises(ValueError) as info:
+        jax.jit(run)(drawn.noise)
+    assert str(info.value).startswith("disturbance.noise is traced (inside jax.jit, vmap or")
+    assert "call this outside the transformation" in str(info.value)
+    assert np.all(np.isfinite(run(drawn.noise)))
+
+
 def test_the_wheel_speed_bound_names_batches_of_two_sizes():
     with pytest.raises(ValueError, match=r"^batch sizes differ \(gains.kr: 2, robot.half_track: 3"):
         w.controllers.wheel_speed_bound(w.Gains(kr=[1.0, 2.0]), w.Robot(half_track=[1.0, 2.0, 3.0]))

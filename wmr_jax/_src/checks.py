@@ -66,6 +66,12 @@ def real_array(name: str, value: Any, allowed: str, *, objects: bool = False) ->
     ``True`` as 1 and ``"1.5"`` as 1.5); ``objects``: also take an object
     array whose items convert (Python integers beyond int64).
     """
+    if is_traced(value):  # checked on the host, so before any transformation
+        raise ValueError(
+            f"{name} is traced (inside jax.jit, vmap or grad); allowed: concrete values: it "
+            "is checked on the host, so call this outside the transformation (rollout, "
+            "batch_rollout, final_poses and the metrics run inside one)"
+        )
     try:
         if value is None or array_kind(value) not in ("iufO" if objects else "iuf"):
             raise TypeError(value)
