@@ -123,7 +123,10 @@ def test_draws_do_not_depend_on_the_sessions_dtype():
 @pytest.mark.parametrize(
     ("change", "message"),
     [
-        ({"delay": np.float64(0.5)}, "disturbance.delay"),
+        ({"delay": np.float64(0.5)}, "disturbance.delay = 0.5 is not allowed; allowed: an int"),
+        # Many runs' delays are summarised, not printed whole.
+        ({"delay": np.full(4, 2.5)}, "disturbance.delay = array of shape (4,) (4 of 4 elements"),
+        ({"delay": np.zeros(3)}, "disturbance.delay has shape (3,); allowed: an integer"),
         ({"mismatch": np.zeros((4, 3))}, "disturbance.mismatch = array of shape (4, 3)"),
         ({"noise": np.zeros((4, 10, 2))}, "disturbance.noise has shape (4, 10, 2)"),
         ({"ref": np.zeros((4, 2))}, "disturbance.ref has shape (4, 2)"),

@@ -151,11 +151,10 @@ def checked_disturbance(disturbance: Disturbance) -> tuple[np.ndarray, ...]:
     checks.require_representable("disturbance.noise", noise, tiny_ok=True)
     steps = noise.shape[1]
     whole = np.isfinite(delay) & (delay >= 0) & (delay <= steps)
-    if delay.shape not in ((), (n,)) or not np.all(whole & (np.floor(delay) == delay)):
-        raise ValueError(
-            f"disturbance.delay = {delay!r} is not allowed; allowed: an integer number of "
-            f"samples 0 <= m <= {steps} (the steps), or ({n},) of them"
-        )
+    allowed = f"an integer number of samples 0 <= m <= {steps} (the steps), or ({n},) of them"
+    if delay.shape not in ((), (n,)):
+        raise ValueError(f"disturbance.delay has shape {delay.shape}; allowed: {allowed}")
+    checks.require("disturbance.delay", delay, whole & (np.floor(delay) == delay), allowed)
     return refs, noise, mismatch, delay
 
 
