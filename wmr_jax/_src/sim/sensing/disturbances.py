@@ -204,7 +204,9 @@ def sample_disturbance(
         noise_xy, ...: each level a scalar or one value per run ``(N,)``.
         noise_xy: σ of the x and y measurement noise, cm.
         noise_theta: σ of the heading measurement noise, rad.
-        latency: probability that a run has a one-sample latency.
+        latency: probability that a run has a one-sample latency (the standard
+            conditions'); for ``m`` samples in every run, replace the draw's
+            delay: ``spec._replace(delay=jnp.full_like(spec.delay, m))``.
         radius_mismatch: each wheel's radius error ``δ ~ U(−m, m)``.
         mass_mismatch: the body-mass error ``μ ~ U(−m, m)``.
 
