@@ -284,6 +284,12 @@ def test_a_new_controller_needs_no_special_case():
         with pytest.raises(ValueError, match=message):
             dataclasses.replace(custom, **changes)
     assert dataclasses.replace(custom, region=None, check_robot=None).region is None
+    # Its validate lets anything through; a bool or a string is still no gain (NumPy
+    # would run them as 1.0 and 3.0).
+    for bad, shown in ((True, "True"), ("3", "'3'")):
+        with pytest.raises(ValueError, match=rf"controller 'test-proportional': params.kr = "
+                           rf"{shown} is not allowed; allowed: real numbers"):  # fmt: skip
+            w.rollout(refs[0], w.Gains(kr=bad), controller=custom, steps=3)
     with pytest.raises(ValueError, match="backward = 'no' is not allowed"):
         baselines.driving_error(np.zeros(3), refs[0], backward="no")
     with pytest.raises(ValueError, match="warn = 'no' is not allowed"):

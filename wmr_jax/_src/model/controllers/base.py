@@ -25,6 +25,7 @@ from wmr_jax._src.checks import (
     described,
     float_dtype,
     is_traced,
+    real_array,
 )
 
 
@@ -56,6 +57,13 @@ class Pluggable:
                 f"{described(checked):.60}; allowed: the parameters it checked "
                 "(validate(params) -> params)"
             )
+        if not (getattr(self.validate, "__module__", None) or "").startswith("wmr_jax."):
+            # A validate of one's own may let a bool or a string through, which NumPy
+            # would read as 1.0 or 3.0: every concrete leaf must be real numbers.
+            for path, leaf in jax.tree_util.tree_leaves_with_path(checked):
+                if not isinstance(leaf, jax.core.Tracer):
+                    where = f"{self.KIND} {self.name!r}: params{jax.tree_util.keystr(path)}"
+                    real_array(where, leaf, "real numbers (no bools or strings)")
         return checked
 
     def default_params(self) -> Any:
