@@ -46,8 +46,9 @@ def test_bad_content_is_refused_naming_the_field():
     bad = {**CONTENT, "ci95": {**CONTENT["ci95"], "sigma_xy": [0.31, 0.4]}}
     with pytest.raises(ValueError, match="ci95.sigma_xy"):
         centred.around(bad)
-    with pytest.raises(ValueError, match="latency_samples"):
-        centred.around({**CONTENT, "latency_samples": 1.5})
+    for latency in (1.5, True, -1):  # true would have been one sample
+        with pytest.raises(ValueError, match=f"latency_samples = {latency!r} is not allowed"):
+            centred.around({**CONTENT, "latency_samples": latency})
     with pytest.raises(ValueError, match="ci95 is missing"):
         centred.around({k: v for k, v in CONTENT.items() if k != "ci95"})
 

@@ -640,6 +640,16 @@ def test_a_latency_identified_at_another_period_is_warned_of(tmp_path, capsys, m
         path.write_text(json.dumps({**identified, "dt": bad}))
         with pytest.raises(ValueError, match=r": dt = .* is not allowed; allowed: the logs' pe"):
             read_identified(path)
+    # The latency: a whole number of samples up to model.MAX_LATENCY; the keys identify writes.
+    for latency in (model.MAX_LATENCY + 1, -1, 2.0, True):
+        path.write_text(json.dumps({**identified, "latency_samples": latency}))
+        with pytest.raises(ValueError, match=rf"latency_samples = {latency!r} is not allowed; "):
+            read_identified(path)
+    path.write_text(json.dumps({**identified, "latency_samples": model.MAX_LATENCY}))
+    assert read_identified(path, dt=0.033)[1]["latency_samples"] == model.MAX_LATENCY
+    path.write_text(json.dumps({k: v for k, v in identified.items() if k != "noise"}))
+    with pytest.raises(ValueError, match=r"lacks noise; allowed: identify's output$"):
+        read_identified(path)
     # identify --plan plans at the period the commands run at, unless told otherwise.
     plan = tmp_path / "drive.csv"
     assert cli.main(["identify", "--plan", str(plan), "--minutes", "0.05"]) == 0

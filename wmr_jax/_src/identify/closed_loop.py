@@ -58,7 +58,8 @@ def read_identified(source: Any, dt: float = DEFAULT_DT) -> tuple[Robot, dict[st
         raise ValueError(f"--robot {source} lacks {', '.join(missing)}; allowed: identify's output")
     base = Robot(**{k: float(v) for k, v in content["base_robot"].items()})
     latency = content["latency_samples"]
-    if not isinstance(latency, int) or not 0 <= latency <= model.MAX_LATENCY:
+    whole = isinstance(latency, int) and not isinstance(latency, bool)  # JSON true is no count
+    if not whole or not 0 <= latency <= model.MAX_LATENCY:
         raise ValueError(
             f"--robot {source}: latency_samples = {latency!r} is not allowed; allowed: an "
             f"integer 0-{model.MAX_LATENCY}"

@@ -76,7 +76,7 @@ def around(content: Mapping[str, Any]) -> Centred:
             raise ValueError(f"{key} is missing; allowed: an identified.json of identify")
     scale, noise = content["wheel_scale"], content["noise"]
     m = content["latency_samples"]
-    if not isinstance(m, int) or m < 0:
+    if isinstance(m, bool) or not isinstance(m, int) or m < 0:
         raise ValueError(f"latency_samples = {m!r} is not allowed; allowed: an integer >= 0")
     profile = [float(c) for c in content.get("latency_profile", [])]
     latency = [m]
