@@ -180,6 +180,29 @@ def test_bad_inputs():
         map_study(10, controller_names=[])
 
 
+def test_a_map_of_gains_of_ones_own_runs_them_and_says_so():
+    """A researcher maps tuned gains, not only each controller's defaults."""
+    slow = w.Gains(kr=20.0, k_theta=3.0)
+    kw = {"headings_deg": (0.0,), "chunk": 16}
+    mine = map_study(
+        40, controller_names=["shim-sung", "aicardi"], params={"shim-sung": slow}, **kw
+    )
+    grid = mine.grid.refs
+    want = evaluate_poses(grid, slow, chunk=16)  # over the same horizon, the robot's
+    np.testing.assert_array_equal(mine.results["shim-sung"].arrival, want.arrival)
+    default = map_study(40, controller_names=["aicardi"], **kw)
+    np.testing.assert_array_equal(
+        mine.results["aicardi"].arrival, default.results["aicardi"].arrival
+    )
+    assert mine.summary["params_given"] == ["shim-sung"] and "params_given" not in default.summary
+    with pytest.raises(
+        ValueError, match=r"params = \['astolfi-corke'\] is not allowed; allowed: a"
+    ):
+        map_study(40, controller_names=["shim-sung"], params={"astolfi-corke": slow}, **kw)
+    with pytest.raises(ValueError, match=r"params = .* is not allowed; allowed: a dict of"):
+        map_study(40, controller_names=["shim-sung"], params=[slow], **kw)
+
+
 def test_a_single_heading_may_be_a_number():
     # pose_grid takes 90.0 as (90.0,); the study's summary has to as well.
     study = map_study(10, controller_names=["shim-sung"], headings_deg=90.0, chunk=16)

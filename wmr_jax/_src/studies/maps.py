@@ -271,6 +271,7 @@ def map_study(
     robot: Robot | None = None,
     horizon: float | None = None,
     on_chunk: Callable[[str, int, int], None] | None = None,
+    params: Mapping[str, Any] | None = None,
 ) -> MapStudy:
     """Run the pose-space maps of every controller: the same grid from ``(0, 0, 0)``.
 
@@ -284,11 +285,21 @@ def map_study(
         robot: the robot (one, a number per field); default ``Robot()``.
         horizon: simulated time per run, s; default ``study_horizon(robot)``.
         on_chunk: called as ``on_chunk(controller, done, total)`` after every chunk.
+        params: controller name → its parameters (tuned gains, say); a controller
+            not named runs its defaults for ``robot`` (``robot_defaults``). The
+            summary then lists the names given (``params_given``).
 
     Returns:
         A ``MapStudy``.
     """
     names = controllers.controller_names(controller_names)
+    params = {} if params is None else params
+    if not isinstance(params, Mapping) or not set(params) <= set(names):
+        unknown = sorted(set(params) - set(names)) if isinstance(params, Mapping) else params
+        raise ValueError(
+            f"params = {unknown!r:.60} is not allowed; allowed: a dict of controller name -> "
+            f"parameters, names among {', '.join(names)} (the controllers run)"
+        )
     cache = None if cache is None else checks.check_folder("cache", cache)
     checks.check_callable("on_chunk", on_chunk)
     robot = validate_one_robot(robot, "map_study")
@@ -303,10 +314,11 @@ def map_study(
             "on_chunk": told,
         }
 
-    runs = {name: (name, None) for name in names}
+    runs = {name: (name, params.get(name)) for name in names}
     results = _metrics(grid.refs, runs, robot, horizon, velocity, chunk, progress, x64, per_run)
     head = {
         "poses": int(len(grid.refs)),
+        **({"params_given": sorted(params)} if params else {}),
         "grid_side": int(len(grid.xs)),
         # As given (pose_grid checked them: a number or a nested list works too).
         "headings_deg": np.asarray(headings_deg, dtype=float).reshape(-1).tolist(),
