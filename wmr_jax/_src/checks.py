@@ -66,12 +66,7 @@ def real_array(name: str, value: Any, allowed: str, *, objects: bool = False) ->
     ``True`` as 1 and ``"1.5"`` as 1.5); ``objects``: also take an object
     array whose items convert (Python integers beyond int64).
     """
-    if is_traced(value):  # checked on the host, so before any transformation
-        raise ValueError(
-            f"{name} is traced (inside jax.jit, vmap or grad); allowed: concrete values: it "
-            "is checked on the host, so call this outside the transformation (rollout, "
-            "batch_rollout, final_poses and the metrics run inside one)"
-        )
+    refuse_traced(name, value, _ON_HOST)
     try:
         if value is None or array_kind(value) not in ("iufO" if objects else "iuf"):
             raise TypeError(value)
@@ -106,19 +101,19 @@ def _holds_bool(value: Any) -> bool:
     return False
 
 
-def _refuse_traced(name: str, value: Any) -> None:
-    """A setting the program is compiled for cannot be a traced value: say so."""
-    if isinstance(value, jax.core.Tracer):
-        raise ValueError(
-            f"{name} is traced (inside jax.jit, vmap or grad); allowed: a concrete number: "
-            "the program is compiled for it (pass it as a static argument, e.g. "
-            "jax.jit(f, static_argnames=...), or close over it)"
-        )
+_ON_HOST = "concrete values: it is checked on the host, so call this outside the transformation"
+_STATIC = "a concrete number, which the program is compiled for: pass it as a static argument"
+
+
+def refuse_traced(name: str, value: Any, allowed: str = _STATIC) -> None:
+    """Refuse a traced ``value`` where only a concrete one can be checked or compiled for."""
+    if is_traced(value):
+        raise ValueError(f"{name} is traced (inside jax.jit, vmap or grad); allowed: {allowed}")
 
 
 def check_int(name: str, value: Any, minimum: int = 1, maximum: int | None = None) -> int:
     """Return ``value`` as an ``int`` in ``[minimum, maximum]`` (not a bool)."""
-    _refuse_traced(name, value)
+    refuse_traced(name, value)
     ok = not isinstance(value, bool) and isinstance(value, (int, np.integer))
     if not ok or value < minimum or (maximum is not None and value > maximum):
         upper = "" if maximum is None else f" and <= {maximum}"
@@ -198,7 +193,7 @@ def check_number(
     unit: str = "",
 ) -> float:
     """Return ``value`` as a float in ``(low, high)``, or ``[low, high)`` if ``closed``."""
-    _refuse_traced(name, value)
+    refuse_traced(name, value)
     try:
         # Python would read True as 1 and "0.5" as 0.5.
         if isinstance(value, (bool, np.bool_, str, bytes)) or np.iscomplexobj(value):

@@ -36,12 +36,8 @@ def add_arguments(parser: Any) -> None:
         "--plan", metavar="OUT.csv", help="write a command plan to drive instead of fitting"
     )
     parser.add_argument("--minutes", metavar="MIN", help="length of the plan (default: 5)")
-    parser.add_argument(
-        "--plan-dt",
-        metavar="S",
-        help="the plan's control period, s (default: 0.033, the period the commands run at: "
-        "a latency is identified in samples of the log's period)",
-    )
+    period = "the plan's period, s (default: 0.033, the commands': latency counts its samples)"
+    parser.add_argument("--plan-dt", metavar="S", help=period)
     parser.add_argument("--seed", metavar="N", help="the plan's random seed (default: 0)")
 
 
