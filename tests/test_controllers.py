@@ -286,7 +286,8 @@ def test_a_new_controller_needs_no_special_case():
     assert dataclasses.replace(custom, region=None, check_robot=None).region is None
     # Its validate lets anything through; a bool or a string is still no gain (NumPy
     # would run them as 1.0 and 3.0).
-    for bad, shown in ((True, "True"), ("3", "'3'")):
+    flag = (jnp.array(True), r"Array\(True, dtype=bool\)")  # on the device: its dtype says
+    for bad, shown in ((True, "True"), ("3", "'3'"), flag):
         with pytest.raises(ValueError, match=rf"controller 'test-proportional': params.kr = "
                            rf"{shown} is not allowed; allowed: real numbers"):  # fmt: skip
             w.rollout(refs[0], w.Gains(kr=bad), controller=custom, steps=3)

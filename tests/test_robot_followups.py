@@ -225,6 +225,14 @@ def test_the_python_tuner_and_pose_maps_run_a_slow_robot_over_its_horizon(monkey
     assert training.gain_problem(config, slow).loss.spec == config.replace(
         horizon=38.2
     ).spec().for_robot(slow, 0.033)
+    # The searches take the same run options, a horizon of None included.
+    from wmr_jax._src.tuning.evaluation import check_run
+
+    assert check_run({**config.hard_run, "robot": slow})["horizon"] == 38.2
+    searched = tuning.random_search(
+        jax.random.key(1), np.array([[30.0, 0.0, 0.0]]), budget_s=0.0, chunk=2, **config.hard_run
+    )
+    assert searched.candidates == 2 and np.isfinite(searched.score)
     seen = []
     monkeypatch.setattr(maps, "sweep", lambda *a, steps, **k: seen.append(steps) or 1 / 0)
     for robot, steps in ((slow, math.ceil(38.2 / 0.033)), (None, math.ceil(6.0 / 0.033))):

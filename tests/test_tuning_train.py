@@ -246,7 +246,7 @@ def test_out_must_be_a_folder_and_help_shows_the_defaults(tmp_path, capsys):
         ("--poses", defaults.poses),
         ("--seed", defaults.seed),
         ("--velocity", defaults.velocity),
-        ("--horizon", defaults.horizon),
+        ("--horizon", "the robot's study horizon, 6 on the paper robot"),
         ("--eval-poses", defaults.eval_poses),
     ]:
         shown = f"(default: {value})"

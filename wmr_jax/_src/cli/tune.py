@@ -26,6 +26,7 @@ _FLAGS = (
 
 def add_arguments(parser: Any) -> None:
     """Add the flags of ``wmr-jax tune``."""
+    from wmr_jax._src.sim.poses import HORIZON_S
     from wmr_jax._src.tuning.robust import RobustConfig
     from wmr_jax._src.tuning.training import TuneConfig
 
@@ -34,6 +35,8 @@ def add_arguments(parser: Any) -> None:
     for flag, field, metavar, text in _FLAGS:
         # None stands for "not given": --schedule and --robust have defaults of their own.
         default = getattr(defaults, field)
+        if field == "horizon":  # None: the robot's (studies.study_horizon)
+            default = f"the robot's study horizon, {HORIZON_S:g} on the paper robot"
         if field in ("iters", "poses"):
             robust = getattr(RobustConfig(), field)
             scheduled = getattr(TuneConfig.for_problem("schedule"), field)

@@ -75,17 +75,23 @@ def run_options(values: dict[str, Any]) -> dict[str, Any]:
     return {name: values[name] for name in RUN_OPTIONS}
 
 
-def check_run(run: dict[str, Any]) -> None:
-    """Check the run options of a search (``RUN_OPTIONS``, names and values) before it starts."""
+def check_run(run: dict[str, Any]) -> dict[str, Any]:
+    """The run options of a search (``RUN_OPTIONS``, names and values) checked before it
+    starts; a ``horizon`` of ``None`` is the robot's study horizon, as ``evaluate`` has it."""
     unknown = sorted(set(run) - set(RUN_OPTIONS))
     if unknown:
         raise ValueError(f"unknown option {unknown[0]!r}; allowed: {', '.join(RUN_OPTIONS)}")
+    if run["horizon"] is None:
+        from wmr_jax._src.studies.robustness import study_horizon  # it imports the tuning package
+
+        run = {**run, "horizon": study_horizon(run["robot"])}
     simulation.make_options(
         steps=horizon_steps(run["dt"], run["horizon"]),
         velocity=run["velocity"],
         substeps=run["substeps"],
         wheel_limit=run["wheel_limit"],
     )
+    return run
 
 
 def hard_runs(

@@ -28,7 +28,6 @@ from wmr_jax._src.checks import (
 from wmr_jax._src.model.params import Gains, Robot, validate_one_robot
 from wmr_jax._src.sim import loops
 from wmr_jax._src.sim import rollout as simulation
-from wmr_jax._src.sim.poses import HORIZON_S
 from wmr_jax._src.tuning import cma
 from wmr_jax._src.tuning.evaluation import check_run, hard_runs, quiet_scoring, run_options
 from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS, unit_from_gains
@@ -67,7 +66,7 @@ def random_search(
     start: Gains = PAPER_FEASIBLE_GAINS,
     chunk: int = 16,
     dt: float = simulation.DEFAULT_DT,
-    horizon: float = HORIZON_S,
+    horizon: float | None = None,
     velocity: str = "ideal",
     substeps: int = loops.DEFAULT_SUBSTEPS,
     wheel_limit: str = "clip",
@@ -103,7 +102,7 @@ def random_search(
     check_callable("progress", progress)
     refs = as_poses("refs", refs, batch=True)
     run = run_options(locals())
-    check_run(run)
+    run = check_run(run)
     problem = get_problem(problem)
     if problem is not FIXED and start is not PAPER_FEASIBLE_GAINS:
         raise ValueError(
@@ -284,7 +283,7 @@ def robust_population_scores(
 # The run options of ``cma_es_search`` not given: ``random_search``'s defaults.
 _RUN_DEFAULTS = {
     "dt": simulation.DEFAULT_DT,
-    "horizon": HORIZON_S,
+    "horizon": None,
     "velocity": "ideal",
     "substeps": loops.DEFAULT_SUBSTEPS,
     "wheel_limit": "clip",
@@ -391,7 +390,7 @@ def cma_es_search(
     robot = validate_one_robot(robot, "tuning")
     refs = as_poses("refs", refs, batch=True)
     run = {**_RUN_DEFAULTS, **run, "robot": robot}
-    check_run(run)
+    run = check_run(run)
     _evosax_cma_es()
     start = jnp.asarray(problem.start_logits(robot), float_dtype())
     return _hard_law_search(

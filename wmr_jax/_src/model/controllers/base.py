@@ -60,10 +60,16 @@ class Pluggable:
         if not (getattr(self.validate, "__module__", None) or "").startswith("wmr_jax."):
             # A validate of one's own may let a bool or a string through, which NumPy
             # would read as 1.0 or 3.0: every concrete leaf must be real numbers.
+            allowed = "real numbers (no bools or strings; a flag is a static field)"
             for path, leaf in jax.tree_util.tree_leaves_with_path(checked):
-                if not isinstance(leaf, jax.core.Tracer):
-                    where = f"{self.KIND} {self.name!r}: params{jax.tree_util.keystr(path)}"
-                    real_array(where, leaf, "real numbers (no bools or strings)")
+                where = f"{self.KIND} {self.name!r}: params{jax.tree_util.keystr(path)}"
+                if isinstance(leaf, jax.Array) and not isinstance(leaf, jax.core.Tracer):
+                    if leaf.dtype.kind not in "iuf":  # its dtype: no copy from the device
+                        raise ValueError(
+                            f"{where} = {described(leaf)} is not allowed; allowed: {allowed}"
+                        )
+                elif not isinstance(leaf, jax.core.Tracer):
+                    real_array(where, leaf, allowed)
         return checked
 
     def default_params(self) -> Any:
