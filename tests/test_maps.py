@@ -180,8 +180,11 @@ def test_bad_inputs():
         map_study(10, controller_names=[])
 
 
-def test_a_map_of_gains_of_ones_own_runs_them_and_says_so():
+def test_a_map_of_gains_of_ones_own_runs_them_and_says_so(tmp_path, monkeypatch):
     """A researcher maps tuned gains, not only each controller's defaults."""
+    from wmr_jax import report
+    from wmr_jax._src.report import maps as report_maps
+
     slow = w.Gains(kr=20.0, k_theta=3.0)
     kw = {"headings_deg": (0.0,), "chunk": 16}
     mine = map_study(
@@ -195,6 +198,16 @@ def test_a_map_of_gains_of_ones_own_runs_them_and_says_so():
         mine.results["aicardi"].arrival, default.results["aicardi"].arrival
     )
     assert mine.summary["params_given"] == ["shim-sung"] and "params_given" not in default.summary
+    # The figures' titles and summary.md say whose parameters were given.
+    titles = []
+    monkeypatch.setattr(
+        report_maps, "map_figure", lambda path, *a, title, **k: titles.append(title)
+    )
+    monkeypatch.setattr(report_maps, "winner_figure", lambda path, *a, **k: path)
+    report.save_map_study(tmp_path, mine)
+    assert [t.split(":")[0] for t in titles] == ["shim-sung (parameters given)", "aicardi"]
+    summary = (tmp_path / "summary.md").read_text()
+    assert summary.endswith("Parameters given for shim-sung; the others ran their defaults.\n")
     with pytest.raises(
         ValueError, match=r"params = \['astolfi-corke'\] is not allowed; allowed: a"
     ):

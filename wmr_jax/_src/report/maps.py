@@ -338,11 +338,14 @@ def save_map_study(out_dir: str | Path, study: MapStudy) -> list[Path]:
     # Everything is checked, and the texts made, before the first file is written.
     _check_sizes(study.grid, study.results, "study.results")
     what = _describe(study.summary)
+    given = study.summary.get("params_given", []) if isinstance(study.summary, dict) else []
     summary_json = json_text(study.summary, "study.summary", indent=2, sort_keys=False) + "\n"
     summary_md = (
         f"Pose-space sweep: {what}; docs/model.md §6 metrics "
         "(arrival statistics over the successful runs)\n\n" + comparison_table(study.rows)
     )
+    if given:  # the rest ran their defaults for the robot
+        summary_md += f"\nParameters given for {', '.join(given)}; the others ran their defaults.\n"
     ranges = _ranges(study.results)
     # The robot the study ran (older summaries record none: the paper robot).
     robot = study.summary.get("robot") if isinstance(study.summary, dict) else None
@@ -360,7 +363,7 @@ def save_map_study(out_dir: str | Path, study: MapStudy) -> list[Path]:
             m,
             ranges,
             v_max=v_max,
-            title=f"{name}: {what} (red: not arrived)",
+            title=f"{name}{' (parameters given)' * (name in given)}: {what} (red: not arrived)",
         )
         for name, m in study.results.items()
     ]
