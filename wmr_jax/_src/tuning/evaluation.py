@@ -75,16 +75,22 @@ def run_options(values: dict[str, Any]) -> dict[str, Any]:
     return {name: values[name] for name in RUN_OPTIONS}
 
 
+def run_horizon(horizon: float | None, robot: Any) -> float:
+    """``horizon``, or where it is ``None`` the robot's ``studies.study_horizon``."""
+    if horizon is not None:
+        return horizon
+    from wmr_jax._src.studies.robustness import study_horizon  # it imports the tuning package
+
+    return study_horizon(robot)
+
+
 def check_run(run: dict[str, Any]) -> dict[str, Any]:
     """The run options of a search (``RUN_OPTIONS``, names and values) checked before it
     starts; a ``horizon`` of ``None`` is the robot's study horizon, as ``evaluate`` has it."""
     unknown = sorted(set(run) - set(RUN_OPTIONS))
     if unknown:
         raise ValueError(f"unknown option {unknown[0]!r}; allowed: {', '.join(RUN_OPTIONS)}")
-    if run["horizon"] is None:
-        from wmr_jax._src.studies.robustness import study_horizon  # it imports the tuning package
-
-        run = {**run, "horizon": study_horizon(run["robot"])}
+    run = {**run, "horizon": run_horizon(run["horizon"], run["robot"])}
     simulation.make_options(
         steps=horizon_steps(run["dt"], run["horizon"]),
         velocity=run["velocity"],
@@ -164,10 +170,7 @@ def evaluate(
         )
     if controller is None:
         controller = SCHEDULE if isinstance(gains, ScheduleParams) else SHIM_SUNG
-    if horizon is None:
-        from wmr_jax._src.studies.robustness import study_horizon  # it imports the tuning package
-
-        horizon = study_horizon(robot)
+    horizon = run_horizon(horizon, robot)
     traj, times, _ = hard_runs(refs, gains, **run_options(locals()), controller=controller)
     times = np.asarray(times)
     arrived = np.isfinite(times)

@@ -33,6 +33,7 @@ from wmr_jax._src.tuning.evaluation import (
     hard_runs,
     held_out_poses,
     quiet_scoring,
+    run_horizon,
 )
 from wmr_jax._src.tuning.loss import LossSpec, LossWeights, make_spec, robust_value_and_grad
 from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
@@ -141,9 +142,7 @@ class TuneConfig:
         """These settings with a ``horizon`` of ``None`` set to ``robot``'s study horizon."""
         if self.horizon is not None:
             return self
-        from wmr_jax._src.studies.robustness import study_horizon  # it imports the tuning package
-
-        return self.replace(horizon=study_horizon(robot)).validate()
+        return self.replace(horizon=run_horizon(None, robot)).validate()
 
     def validate(self) -> TuneConfig:
         """Check every field; return ``self`` (``ValueError`` naming the field)."""
