@@ -91,7 +91,7 @@ def run(args: Any) -> int:
     x64 = not args.float32
     from wmr_jax._src.identify.closed_loop import loaded_identified
 
-    identified = loaded_identified(getattr(args, "robot", None))
+    identified = loaded_identified(args.robot)
     if identified is not None and args.noise_curve:
         raise ValueError(
             f"--noise-curve is not allowed with --robot {args.robot}; allowed: the identified "
@@ -119,8 +119,7 @@ def run(args: Any) -> int:
             "ideal loop does not limit their wheel commands: robustness.json has each row's "
             "peak wheel speed; --velocity nonideal holds the wheels within V_max)"
         )
-    robot_file = getattr(args, "robot", None)
-    origin = f", from {robot_file}" if flags.is_robot_file(robot_file) else ""
+    origin = f", from {args.robot}" if flags.is_robot_file(args.robot) else ""
     shown = study_horizon(robot) if horizon is None else horizon
     print(f"robot {describe_robot(robot)}{origin}, horizon {shown:g} s{note}")
     study = {"seed": seed, "velocity": velocity, "n_runs": n_runs, "robot": robot, "x64": x64}
@@ -197,7 +196,7 @@ def _gain_sets(args: Any, identified: Any = None) -> tuple[dict[str, Any], Any]:
     from wmr_jax._src.tuning.parametrisation import paper_feasible_gains
     from wmr_jax._src.tuning.saved import TUNINGS
 
-    given = flags.robot_from(getattr(args, "robot", None)) if identified is None else identified[0]
+    given = flags.robot_from(args.robot) if identified is None else identified[0]
     if given is not None and given.note:
         print(given.note)
     loops = {}

@@ -87,16 +87,6 @@ def config_from(args: Any) -> Any:
     return RobustConfig(**changes).validate()
 
 
-def _robot(args: Any) -> Any:
-    """``--robot``'s robot, else the paper's."""
-    from wmr_jax._src.model.params import Robot
-
-    given = flags.robot_from(getattr(args, "robot", None))
-    if given is not None and given.note:
-        print(given.note)
-    return Robot() if given is None else given.robot
-
-
 def _around_identified(config: Any, args: Any) -> Any:
     """With ``--robot`` an ``identified.json``: training centred on it (``tuning/centred.py``)."""
     import math
@@ -127,20 +117,25 @@ def _around_identified(config: Any, args: Any) -> Any:
 
 def run(args: Any) -> int:
     """Run ``wmr-jax tune --robust``; return the exit status."""
-    out = flags.output_dir("--out", getattr(args, "out", None))
+    from wmr_jax._src.model.params import Robot
+
+    out = flags.output_dir("--out", args.out)
     config = config_from(args)
-    robot = _robot(args)
+    given = flags.robot_from(args.robot)
+    if given is not None and given.note:
+        print(given.note)
+    robot = Robot() if given is None else given.robot
     config = _around_identified(config, args)
-    if getattr(args, "compare", False):
-        return _compare(out, config, robot, resume=bool(getattr(args, "resume", False)))
+    if args.compare:
+        return _compare(out, config, robot, resume=args.resume)
 
     from wmr_jax._src.model.robots import describe_robot
     from wmr_jax._src.studies.robustness import study_horizon
     from wmr_jax._src.tuning.robust_run import described, finished, tune
 
-    every = getattr(args, "checkpoint_every", None)
+    every = args.checkpoint_every
     every = None if every is None else flags.positive_int("--checkpoint-every", every)
-    resume = bool(getattr(args, "resume", False))
+    resume = args.resume
     if resume and finished(out, config, robot):
         print(
             f"--resume: {out} holds this run finished (tuned_gains.json, "
