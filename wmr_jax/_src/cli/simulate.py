@@ -72,12 +72,9 @@ def _degrees(theta: float) -> float:
     return math.degrees(wrapped + 2 * math.pi if wrapped <= -math.pi else wrapped)
 
 
-# Steps of a run on the paper robot: 4.95 s at the default dt.
-DEFAULT_STEPS = 150
-
-
 def default_steps(robot: Any) -> int:
-    """``DEFAULT_STEPS`` stretched as the studies' horizon is on a slower robot."""
+    """``rollout``'s default steps stretched as the studies' horizon is on a slower robot."""
+    from wmr_jax._src.sim.loops import DEFAULT_STEPS
     from wmr_jax._src.sim.poses import HORIZON_S
     from wmr_jax._src.studies.robustness import study_horizon
 
