@@ -295,12 +295,9 @@ def writable_path(shown: str, value: Any, *, folder: bool) -> Path:
     if wrong:
         want, got = ("a folder", "a file") if folder else ("a file name", "a folder")
         raise ValueError(f"{shown} is not allowed; allowed: {want} (it is {got})")
-    for parent in path.parents:
-        if parent.exists():
-            if not parent.is_dir():
-                raise ValueError(f"{shown} is not allowed; {str(parent)!r} is a file, not a folder")
-            break
     existing = next(p for p in (path, *path.parents) if p.exists() or p == Path(p.anchor))
+    if existing != path and existing.exists() and not existing.is_dir():
+        raise ValueError(f"{shown} is not allowed; {str(existing)!r} is a file, not a folder")
     existing = existing if existing.is_dir() else existing.parent
     try:
         with tempfile.TemporaryFile(dir=existing):
