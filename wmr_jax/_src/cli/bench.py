@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import sys
 from typing import Any
 
@@ -106,11 +107,9 @@ def run(args: Any) -> int:
     out = None if args.json is None else flags.output_file("--json", args.json)
     given = flags.robot_from(args.robot)
     config = _config_from(args, None if given is None else given.robot)
-    cpu_devices = (
-        None
-        if args.cpu_devices is None
-        else flags.positive_int("--cpu-devices", args.cpu_devices, 1, MAX_CPU_DEVICES)
-    )
+    cpu_devices = args.cpu_devices
+    if cpu_devices is not None:
+        cpu_devices = flags.positive_int("--cpu-devices", cpu_devices, 1, MAX_CPU_DEVICES)
     use_cpu_devices(cpu_devices)
     detail = f"; {config.steps} control periods per run and the paper robot's poses (5-80 cm)"
     flags.say_robot(given, detail + ", as for any robot", gains=False)
@@ -122,10 +121,7 @@ def run(args: Any) -> int:
 
     # Each finished size is written at once: an interrupted run keeps them ("finished": false).
     partial = None if out is None else (lambda so_far: atomic_write_json(out, labelled(so_far)))
-
-    def log(line: str) -> None:
-        print(line, file=sys.stderr, flush=True)
-
+    log = functools.partial(print, file=sys.stderr, flush=True)
     result = labelled(bench.run_benchmark(config, log=log, on_size=partial))
     print(bench_table(result), end="")
     if out is not None:

@@ -174,16 +174,11 @@ def _read_npy(path: str) -> tuple[Any, list[str] | None]:
 
     try:
         with open(path, "rb") as f:
-            start = f.read(len(_NPY_MAGIC))
-            if start != _NPY_MAGIC:  # NumPy would take any other file for a pickle
-                raise _refs_error(
-                    path, "it is no .npy array (empty, another kind of file, or damaged)"
-                )
+            # NumPy would take any other file for a pickle.
+            is_npy = f.read(len(_NPY_MAGIC)) == _NPY_MAGIC
             f.seek(0)
-            arr = np.load(f, allow_pickle=False)
+            arr = np.load(f, allow_pickle=False) if is_npy else None
     except ValueError as err:
-        if str(err).startswith("--refs "):
-            raise
         if "allow_pickle" in str(err):
             raise _refs_error(
                 path, "it holds Python objects (a pickle); allowed: an array of numbers"
@@ -191,6 +186,8 @@ def _read_npy(path: str) -> tuple[Any, list[str] | None]:
         raise _unreadable(path, err) from None
     except (OSError, EOFError) as err:  # unreadable, truncated
         raise _unreadable(path, err) from None
+    if arr is None:
+        raise _refs_error(path, "it is no .npy array (empty, another kind of file, or damaged)")
     if arr.dtype.kind not in "iuf":
         raise _refs_error(path, f"its dtype is {arr.dtype}; allowed: real numbers")
     return arr.astype(float), None
@@ -233,13 +230,11 @@ def load_refs(path: str, *, x64: bool = True) -> tuple[Any, list[str]]:
             f"{labels[row]} = {refs[row].tolist()} is not finite; allowed: finite numbers{more}",
         )
     # The library's own limits (heading; distance, for the dtype), named as the flag.
-    from wmr_jax._src.checks import _FLOAT64_HINT
-
     try:
         with jax.enable_x64(x64):
             checks.as_poses("refs", refs, batch=True)
     except ValueError as err:
-        text = str(err).replace(_FLOAT64_HINT, ", or without --float32")
+        text = str(err).replace(checks._FLOAT64_HINT, ", or without --float32")
         raise _refs_error(path, text) from None
     return refs, labels
 

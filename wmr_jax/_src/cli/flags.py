@@ -9,6 +9,7 @@ import argparse
 import contextlib
 import math
 import re
+import warnings
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -58,16 +59,12 @@ def number(
 
 def output_dir(flag: str, text: str) -> Path:
     """A folder the command may write to (created later), or say why not."""
-    from wmr_jax._src.io import writable_path
-
-    return writable_path(f"{flag} {text!r}", text, folder=True)
+    return io.writable_path(f"{flag} {text!r}", text, folder=True)
 
 
 def output_file(flag: str, text: str, ending: str | None = None) -> Path:
     """A file path the command may write to, ending in ``ending`` if given, or say why not."""
-    from wmr_jax._src.io import writable_path
-
-    path = writable_path(f"{flag} {text!r}", text, folder=False)
+    path = io.writable_path(f"{flag} {text!r}", text, folder=False)
     if ending is not None and path.suffix.lower() != ending:
         raise ValueError(f"{flag} {text!r} is not allowed; allowed: a path ending in {ending}")
     return path
@@ -131,8 +128,6 @@ def controller_names(names: Sequence[str] | None) -> list[str]:
 
 def unit_slip(text: str) -> None:
     """Warn that a flag's value, taken as given, was most likely written in another unit."""
-    import warnings
-
     warnings.warn(text, UserWarning, stacklevel=3)
 
 
@@ -197,8 +192,7 @@ def gain_flag(args: Any, field: str) -> str:
 
 def given_gain_flags(args: Any) -> list[str]:
     """The gain flags given on the command line, as typed (a flag left alone keeps its float)."""
-    fields = [field for _, field, *_ in _GAIN_FLAGS]
-    return [gain_flag(args, f) for f in fields if isinstance(getattr(args, f, None), str)]
+    return [gain_flag(args, f) for f in GAIN_FLAG if isinstance(getattr(args, f, None), str)]
 
 
 def add_gain_flags(parser: Any) -> None:
