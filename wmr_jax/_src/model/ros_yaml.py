@@ -142,11 +142,9 @@ def robot_from_ros_yaml(content: str, where: str) -> tuple[Robot, str, dict[str,
     except (yaml.YAMLError, RecursionError) as err:
         mark = getattr(err, "problem_mark", None)
         problem = getattr(err, "problem", None)
-        text = (
-            str(err)
-            if problem is None or mark is None
-            else (f"{problem} (line {mark.line + 1}, column {mark.column + 1})")
-        )
+        text = str(err)
+        if problem is not None and mark is not None:
+            text = f"{problem} (line {mark.line + 1}, column {mark.column + 1})"
         raise ValueError(f"{where} cannot be read: {' '.join(text.split())}") from None
     if not isinstance(tree, dict):
         raise ValueError(
@@ -167,6 +165,7 @@ def robot_from_ros_yaml(content: str, where: str) -> tuple[Robot, str, dict[str,
             "allowed: one robot's"
         )
     path, block = found[0]
+    place = ".".join(path) or "(top level)"
     params = _flat(block, where=where)
     # A value the model reads, given as a mapping, would otherwise be flattened
     # under its name and ignored with the unknown keys.
@@ -232,9 +231,8 @@ def robot_from_ros_yaml(content: str, where: str) -> tuple[Robot, str, dict[str,
         close = difflib.get_close_matches(missing[0], unknown, n=1)
         hint = f" ({close[0]!r} is not a diff_drive_controller parameter)" if close else ""
         raise ValueError(
-            f"{where}: the diff_drive_controller parameters at "
-            f"'{'.'.join(path) or '(top level)'}' give no {missing[0]}{hint}; allowed: both "
-            "wheel_separation and wheel_radius, in metres"
+            f"{where}: the diff_drive_controller parameters at '{place}' give no "
+            f"{missing[0]}{hint}; allowed: both wheel_separation and wheel_radius, in metres"
         )
     ignored = [k for k in params if k not in used]
     robot = robot_from_values(values, where)
@@ -242,9 +240,8 @@ def robot_from_ros_yaml(content: str, where: str) -> tuple[Robot, str, dict[str,
     limits = ("accel_max", "angular_accel_max")
     kept = [name for name in ROBOT_FIELDS if name not in values and name not in limits]
     note = (
-        f"robot from {where}, diff_drive_controller parameters at "
-        f"'{'.'.join(path) or '(top level)'}': used {', '.join(used) or 'nothing'} -> "
-        f"{', '.join(shown) or 'no field'}"
+        f"robot from {where}, diff_drive_controller parameters at '{place}': used "
+        f"{', '.join(used) or 'nothing'} -> {', '.join(shown) or 'no field'}"
         + (
             "; the ideal loop's speed limiter applies these acceleration limits to its "
             "commands (docs/model.md §4.2.2)"

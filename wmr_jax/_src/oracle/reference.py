@@ -146,7 +146,6 @@ def _one_set(params: Any, validate: Any, name: str) -> Any:
     return params
 
 
-@_in_float64
 def reference_control(pose: Any, ref: Any, gains: Gains) -> tuple[float, float]:
     """Return the command ``(v cm/s, ω rad/s)`` for one pose (Eq. 6, 7)."""
     out = reference_diagnostics(pose, ref, gains)

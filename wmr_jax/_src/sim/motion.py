@@ -56,12 +56,10 @@ def split_command(pose: SplitPose, ref, params, options: Options) -> jax.Array:
 def _jacobian_command(pose: SplitPose, ref, params, options: Options) -> jax.Array:
     """``split_command`` whose derivative in the pose and reference is their Jacobian.
 
-    JAX's own derivative of the law is a chain of operations that XLA:CPU
-    repeats in every kernel of a backward step that reads it, which dominates
-    the gradient when an estimator makes the law's input depend on the whole
-    carry. Here the Jacobian of ``(v, ω)`` in the pose and the reference is
-    formed once per step (one reverse pass per component); the parameters and
-    the temperature keep JAX's derivative. The values are ``split_command``'s.
+    XLA:CPU repeats JAX's own derivative of the law in every kernel of a backward
+    step that reads it; here the Jacobian of ``(v, ω)`` is formed once per step
+    (one reverse pass per component). The parameters and temperature keep JAX's
+    derivative; the values are ``split_command``'s.
     """
     dtype = pose.theta.dtype
     hard = options.temperature is None

@@ -169,7 +169,6 @@ def _common_batch(refs, params, init, robot):
 def _which_controller(params: Any) -> str:
     """What to pass instead of ``params``, when it is the loop of a tuned file or its params."""
     from wmr_jax._src.model.controllers import registered_names
-    from wmr_jax._src.model.controllers.base import get_controller
     from wmr_jax._src.sim.sensing.loop import ClosedLoop
 
     if isinstance(params, ClosedLoop):  # load_tuned's loop: its law's parameters, its controller

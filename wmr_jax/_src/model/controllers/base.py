@@ -258,12 +258,9 @@ def _where(function: Callable, err: BaseException) -> str:
     code = getattr(function, "__code__", None)
     if code is None:
         return ""
-    lines = [
-        f
-        for f in traceback.walk_tb(err.__traceback__)
-        if f[0].f_code.co_filename == code.co_filename
-    ]
-    return f" at {Path(code.co_filename).name}:{lines[-1][1]}" if lines else ""
+    frames = traceback.walk_tb(err.__traceback__)
+    lines = [line for frame, line in frames if frame.f_code.co_filename == code.co_filename]
+    return f" at {Path(code.co_filename).name}:{lines[-1]}" if lines else ""
 
 
 _REGISTRY: dict[str, Controller] = {}

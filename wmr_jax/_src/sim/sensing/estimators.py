@@ -303,7 +303,6 @@ OBSERVER = Estimator(
     "observer", ObserverParams, validate_observer, _observer_start, _observer_update
 )
 EKF = Estimator("ekf", EKFParams, validate_ekf, _ekf_start, _ekf_update)
-# The package's own, which the tuners, the C export and the NumPy reference know.
 BUILT_IN = {e.name: e for e in (OBSERVER, EKF)}
 # Every estimator known by name: the built-in ones, then register_estimator's.
 ESTIMATORS = dict(BUILT_IN)
@@ -354,12 +353,10 @@ def resolve_estimator(value: Any) -> tuple[Estimator | None, Any]:
         return None, None
     if isinstance(value, str) and value in ESTIMATORS:
         value = ESTIMATORS[value]
+    known = ESTIMATORS.values()
     estimator = value if isinstance(value, Estimator) else None
-    for match in (
-        lambda e: type(value) is e.params_type,
-        lambda e: isinstance(value, e.params_type),
-    ):
-        estimator = estimator or next((e for e in ESTIMATORS.values() if match(e)), None)
+    estimator = estimator or next((e for e in known if type(value) is e.params_type), None)
+    estimator = estimator or next((e for e in known if isinstance(value, e.params_type)), None)
     if estimator is None:
         classes = ", ".join(e.params_type.__name__ for e in ESTIMATORS.values())
         raise ValueError(
@@ -422,35 +419,28 @@ def _check_state_once(estimator: Estimator, structure: Any, dtype: str) -> None:
     robot = jax.tree.map(lambda _: real, Robot())
     ref = jax.ShapeDtypeStruct((3,), dtype)
     measured = Measurement(turn, turn, real, real)
+    pose_kinds = jax.tree.map(_kind, pose)
     allowed = (
         "allowed: a state whose pose is the estimate, a SplitPose, of the same shapes and dtypes "
         "from start and update, e.g. a NamedTuple State(pose) (docs/custom_controller.md)"
     )
     name = f"estimator {estimator.name!r}"
+    signature = f"allowed: {_START} -> state, {_UPDATE} -> state (docs/custom_controller.md)"
     calls = (
         (_START, estimator.start, (pose, params, robot)),
-        (
-            _UPDATE,
-            estimator.update,
-            (pose, turn, measured, ref, params, robot, real),
-        ),
+        (_UPDATE, estimator.update, (pose, turn, measured, ref, params, robot, real)),
     )
     state = ()
     for call, function, args in calls:
         try:
             out = jax.eval_shape(function, *state, *args)
         except Exception as err:  # any error of the estimator, reported in one line
-            signature = (
-                f"allowed: {_START} -> state, {_UPDATE} -> state (docs/custom_controller.md)"
-            )
             raise call_error(f"{name}: {call}", function, err, signature) from None
         got = getattr(out, "pose", None)
         if isinstance(out, motion.SplitPose) or got is None:
             what = "a bare SplitPose" if isinstance(out, motion.SplitPose) else type(out).__name__
             raise ValueError(f"{name}: {call} returned {what}, without a .pose; {allowed}")
-        if not isinstance(got, motion.SplitPose) or jax.tree.map(_kind, got) != jax.tree.map(
-            _kind, pose
-        ):
+        if not isinstance(got, motion.SplitPose) or jax.tree.map(_kind, got) != pose_kinds:
             raise ValueError(
                 f"{name}: {call} returned a state whose pose is {_shown_kinds(got)}; {allowed}"
             )

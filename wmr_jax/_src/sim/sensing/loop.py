@@ -54,8 +54,7 @@ def disturbed_run(
 ) -> tuple[jax.Array, Any, Any]:
     """``loops.scan_closed_loop`` of one pose toward ``spec.ref`` under ``spec`` (no batch axes).
 
-    Returns:
-        ``(final true pose (3,), acc, (poses, outputs, estimates) or None)``.
+    Returns ``(final true pose (3,), acc, (poses, outputs, estimates) or None)``.
     """
     return loops.scan_closed_loop(
         spec.ref, params, init, robot, dt, options, disturbance=spec, **kwargs
@@ -165,24 +164,15 @@ def disturbed_metrics(
         )
         out = _disturbed_jit(*args, options=options)
         result = PoseMetrics(**{f: np.asarray(out[f]) for f in PoseMetrics._fields})
-        checks.require_finite_runs(
-            np.isfinite(result.final_distance),
-            args[-1].dtype,
-            allowed=options.controller.finite_allowed(
-                "disturbances, gains and dt that keep the sampled law stable (docs/model.md §4, §7)"
-            )
-            + _estimator_finite(options.estimator),
+        allowed = options.controller.finite_allowed(
+            "disturbances, gains and dt that keep the sampled law stable (docs/model.md §4, §7)"
         )
+        estimator = options.estimator
+        if estimator is not None and not estimator.own:
+            allowed += f", and estimates of {estimator.name!r} that stay finite"
+        finite = np.isfinite(result.final_distance)
+        checks.require_finite_runs(finite, args[-1].dtype, allowed=allowed)
         return result
-
-
-def _estimator_finite(estimator: Any) -> str:
-    """What a refused non-finite run also asks of an estimator of one's own."""
-    return (
-        ""
-        if estimator is None or estimator.own
-        else f", and estimates of {estimator.name!r} that stay finite"
-    )
 
 
 # What disturbed_rollout keeps per run and period: the pose, v, ω and the
