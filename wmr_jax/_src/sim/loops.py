@@ -55,10 +55,9 @@ class Options:
         remat: recompute each step in the backward pass instead of storing it.
         accel_limit: the robot's speed limiter (ideal loop; docs/model.md §4.2.2).
         max_delay: the longest latency of a disturbed run, samples (docs/model.md §7).
-        law_derivative: ``"traced"``: JAX differentiates the law's operations;
-            ``"jacobian"``: the law's Jacobian in the pose and the reference,
-            formed once per step: a faster gradient with the EKF, a slower one
-            without it (docs/robustness.md).
+        law_derivative: ``"traced"`` (JAX differentiates the law's operations) or
+            ``"jacobian"`` (the law's Jacobian in pose and reference, formed once per
+            step: a faster gradient with the EKF, slower without; docs/robustness.md).
     """
 
     steps: int = DEFAULT_STEPS

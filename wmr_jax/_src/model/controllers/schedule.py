@@ -43,8 +43,6 @@ R_KNOT = 81.0  # cm, the last knot: just beyond the 80 cm of the evaluation set 
 TABLES = ("kr", "k_theta", "k_turn")
 SHAPE_FIELDS = ("phi_m", "r_m", "r_a", "r_e", "alpha")
 
-_ROBOT = Robot()
-
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
@@ -71,8 +69,8 @@ class ScheduleParams(Parameters):
     r_a: Any = 20.0
     r_e: Any = 1.0
     alpha: Any = 0.25
-    v_max: Any = float(_ROBOT.v_max)
-    half_track: Any = float(_ROBOT.half_track)
+    v_max: Any = float(Robot.v_max)  # the paper robot's
+    half_track: Any = float(Robot.half_track)
     _TABLES = TABLES
 
     @classmethod
