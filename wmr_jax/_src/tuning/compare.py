@@ -15,8 +15,10 @@ from typing import Any
 
 import jax
 
+from wmr_jax._src import io, provenance
 from wmr_jax._src.checks import check_callable, check_int
 from wmr_jax._src.model.params import Robot, validate_one_robot
+from wmr_jax._src.model.robots import describe_robot, robot_from_values, robot_json
 from wmr_jax._src.sim.poses import sample_poses
 from wmr_jax._src.studies.optimal import time_bounds
 from wmr_jax._src.studies.robustness import named_warnings
@@ -241,11 +243,8 @@ def _json_type(value: Any) -> str:
 
 def comparison_settings(robot: Robot, **fields: Any) -> dict[str, Any]:
     """What a resumed comparison must match: ``fields``, the robot and the code (JSON as read)."""
-    from wmr_jax._src.model.robots import robot_json
-    from wmr_jax._src.provenance import code_version
-
     settings = {"format": COMPARE_FORMAT, **fields, "robot": robot_json(robot)}
-    return json.loads(json.dumps({**settings, "code": code_version()}))
+    return json.loads(json.dumps({**settings, "code": provenance.code_version()}))
 
 
 def run_comparison(
@@ -265,7 +264,6 @@ def run_comparison(
     Returns:
         All rows, kept and new.
     """
-    from wmr_jax._src import io
     from wmr_jax._src.report.tuning import comparison_table
 
     robot = validate_one_robot(robot, "tuning")
@@ -297,8 +295,6 @@ def _compare_rows(
     out: Path, settings: dict[str, Any], resume: bool, problems: dict[str, int]
 ) -> list[dict[str, Any]]:
     """The rows of ``out/compare.json`` to keep (``--resume``), checked whole before any run."""
-    from wmr_jax._src import io
-
     record, manifest = out / "compare.json", out / "compare_settings.json"
     if not (resume and record.exists()):
         # A new comparison: an earlier one's rows, which record no settings of
@@ -358,8 +354,6 @@ def _settings_difference(saved: dict[str, Any], now: dict[str, Any]) -> str:
 
 def _robot_text(values: Any) -> str:
     """A ``compare_settings.json`` robot in words."""
-    from wmr_jax._src.model.robots import describe_robot, robot_from_values
-
     try:
         return describe_robot(robot_from_values(values, "robot"))
     except ValueError:

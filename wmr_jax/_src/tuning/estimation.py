@@ -22,8 +22,7 @@ from wmr_jax._src.sim.sensing.estimators import (
     resolve_estimator,
 )
 from wmr_jax._src.sim.sensing.loop import ClosedLoop
-from wmr_jax._src.tuning.parametrisation import checked_point
-from wmr_jax._src.tuning.problems import FIXED, Problem
+from wmr_jax._src.tuning.problems import FIXED, Cube, Problem
 
 _GAIN = (1e-3, 1.0)  # the observer's gains, linear in u
 # Log-uniform boxes of the filter's covariances (their effect is on a log scale):
@@ -200,7 +199,7 @@ def estimator_from_json(values: Any, where: str, *, whole: bool = False) -> Any:
 
 
 @dataclasses.dataclass(frozen=True)
-class JointProblem:
+class JointProblem(Cube):
     """A controller's cube and its estimator's, searched as one (hashable: static under jit).
 
     Attributes:
@@ -224,18 +223,12 @@ class JointProblem:
         estimate = self.estimator.from_unit(u[n:]) if self.estimator else None
         return ClosedLoop(self.problem.controller, params, estimate)
 
-    def from_logits(self, z: Any, robot: Robot) -> ClosedLoop:
-        """The closed loop of logits ``z`` (``u = σ(z)``, any real ``(dim,)``)."""
-        z = checked_point("z", z, self.dim, unit=False)
-        return self.from_unit(1.0 / (1.0 + jnp.exp(-z)), robot)
-
-    def start_logits(self, robot: Robot) -> np.ndarray:
-        """Logits of the start: the problem's start and the estimator's defaults."""
+    def start(self, robot: Robot) -> np.ndarray:
+        """The start in the cube: the problem's start and the estimator's defaults."""
         parts = [self.problem.start(robot)]
         if self.estimator:
             parts.append(self.estimator.start())
-        u = np.concatenate(parts)
-        return np.log(u) - np.log1p(-u)
+        return np.concatenate(parts)
 
     @property
     def options_estimator(self) -> Any:

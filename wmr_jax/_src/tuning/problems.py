@@ -29,8 +29,22 @@ from wmr_jax._src.sim.rollout import DEFAULT_DT
 from wmr_jax._src.tuning import parametrisation as fixed
 
 
+class Cube:
+    """The logits of a searched cube, for any class with ``dim``, ``from_unit`` and ``start``."""
+
+    def from_logits(self, z: Any, robot: Robot) -> Any:
+        """``from_unit`` of the logits ``z`` (``u = σ(z)``, any real ``(..., dim)``)."""
+        z = fixed.checked_point("z", z, self.dim, unit=False)
+        return self.from_unit(1.0 / (1.0 + jnp.exp(-z)), robot)
+
+    def start_logits(self, robot: Robot) -> np.ndarray:
+        """Logits of ``start(robot)``, finite."""
+        u = self.start(robot)
+        return np.log(u) - np.log1p(-u)
+
+
 @dataclasses.dataclass(frozen=True)
-class Problem:
+class Problem(Cube):
     """A tuning problem (hashable: a static ``jit`` argument).
 
     Attributes:
@@ -52,16 +66,6 @@ class Problem:
     columns: tuple[str, ...]
     row: Callable[[Any], tuple[float, ...]]
     from_row: Callable[[Any], Any]
-
-    def from_logits(self, z: Any, robot: Robot) -> Any:
-        """Params of the logits ``z`` (``u = σ(z)``, any real ``(..., dim)``)."""
-        z = fixed.checked_point("z", z, self.dim, unit=False)
-        return self.from_unit(1.0 / (1.0 + jnp.exp(-z)), robot)
-
-    def start_logits(self, robot: Robot) -> np.ndarray:
-        """Logits of ``start(robot)``, finite."""
-        u = self.start(robot)
-        return np.log(u) - np.log1p(-u)
 
 
 FIXED = Problem(

@@ -73,26 +73,23 @@ class RobustConfig:
         poses: reference poses per standard condition per iteration (ideal loop).
         nonideal_poses: poses of the randomised non-ideal group per iteration (0: none).
         search_poses: poses per condition that random search and CMA-ES score on.
-        compare: also run random search and CMA-ES (off by default, as in ``tune --robust``),
-            each scoring as many candidates as the tuning's compute buys (``iteration_price``).
+        compare: also run random search and CMA-ES, each scoring as many
+            candidates as the tuning's compute buys (``iteration_price``).
         price: with ``compare``, the candidates one iteration is worth in the
-            searches' budget (``None``: measured, ``iteration_price``); a
-            recorded price gives them as many candidates on any machine.
-        law: ``"schedule"`` (the gain schedule, default) or ``"fixed"`` (the 7
-            gains): the controller's searched set.
-        estimator: ``"ekf"`` (default), ``"observer"``, or ``None`` (raw
-            feedback), tuned together with the controller.
-        knots: knots per table of the schedule.
-        observer_knots: knots per gain table of the observer.
+            searches' budget (``None``: measured, ``iteration_price``; a recorded
+            one gives the same budget on any machine).
+        law: ``"schedule"`` (the gain schedule) or ``"fixed"`` (the 7 gains).
+        estimator: ``"ekf"``, ``"observer"``, or ``None`` (raw feedback),
+            tuned together with the controller.
+        knots, observer_knots: knots per table of the schedule, of the observer.
         noise_xy: the sensor's position noise σ_xy, cm: the training draws up to
             twice it per run; the validation, searches and evaluation judge at it.
         noise_theta: the sensor's heading noise σ_θ, degrees (as ``noise_xy``).
-        around: ``centred.Centred`` ranges of an identified robot: the
-            training draws its runs from them instead of the standard
-            conditions (``centred.for_config``); ``None``: the standard ones.
-        tuner: ``"gradient"`` (default): the gradient iterations alone;
-            ``"hybrid"``: the iterations, then CMA-ES from their result
-            (``black_box``) on the hard-law score (docs/robustness.md).
+        around: ``centred.Centred`` ranges of an identified robot that the
+            training draws its runs from (``centred.for_config``); ``None``:
+            the standard conditions.
+        tuner: ``"gradient"``: the gradient iterations alone; ``"hybrid"``:
+            then CMA-ES from their result on the hard-law score (``black_box``).
         polish_share: the polish's share of the hybrid's CPU time
             (``search.clock``), in (0, 1): it runs for
             ``share / (1 − share)`` times the iterations' CPU time.
@@ -324,8 +321,7 @@ class RobustLoss:
         noise: ``(σ_xy cm, σ_θ degrees)`` of the sensor (``RobustConfig.noise``;
             ``None``: the standard 0.5 cm, 1°), or a ``centred.Centred`` whose
             ranges every run is drawn from (``RobustConfig.around``).
-        law_derivative: ``loops.Options.law_derivative`` of every run: ``"jacobian"``
-            halves the gradient's time with the EKF on large batches (docs/robustness.md).
+        law_derivative: ``loops.Options.law_derivative`` of every run (docs/robustness.md).
     """
 
     steps: int
@@ -424,9 +420,8 @@ def iteration_price(problem, state, scores, rounds=5):
     """Candidates one gradient iteration costs: its CPU time over one candidate's scoring.
 
     A compiled iteration (``trainer.train_step`` at ``state``) and the scoring
-    of a generation of 8 candidates (``scores``) are timed in turn,
-    ``rounds`` times each after one call of each that compiles them, so that
-    the machine's load falls on both alike; the ratio of the medians.
+    of a generation (``scores``) are timed in turn, ``rounds`` times each
+    after compiling, so that the machine's load falls on both alike.
     """
     dtype = float_dtype()
     temperature = jnp.asarray(problem.temperature_end, dtype)
@@ -439,7 +434,7 @@ def iteration_price(problem, state, scores, rounds=5):
         )  # fmt: skip
         jax.block_until_ready(out)
 
-    iteration()  # both compiled before the timing
+    iteration()
     scores(generation)
     per_iteration, per_generation = [], []
     for _ in range(rounds):
@@ -458,10 +453,9 @@ def black_box(
 ):  # fmt: skip
     """Random search or CMA-ES on the logits for ``budget_s`` CPU seconds (``search.clock``).
 
-    8 candidates per generation (random search: uniform in the cube), scored
-    by ``robust_score`` on ``refs`` under the same draws; the start (default
-    the problem's; CMA-ES's mean, step ``std``) is scored first, in the budget.
-    ``candidates``: a budget in candidates scored instead of ``budget_s``.
+    Candidates scored by ``robust_score`` on ``refs`` under the same draws;
+    the start (default the problem's; CMA-ES's mean, step ``std``) is scored
+    first. ``candidates``: a budget in candidates instead of ``budget_s``.
 
     Returns:
         ``(ClosedLoop, candidates scored, CPU s, wall s)``.
@@ -542,9 +536,10 @@ def tune_robust(
     search_refs = search_poses(config)
     polished = 0
     if config.tuner == "hybrid":
-        # CMA-ES on the hard-law score from the kept iterate, scored first so
-        # never worse on the search poses.
-        start, share, began = trainer.kept_logits(state, best), config.polish_share, clock()
+        # CMA-ES on the hard-law score from the kept iterate (the last, or the
+        # lowest scored), scored first so never worse on the search poses.
+        start = state.z if best == state.iteration else state.lowest_z
+        share, began = config.polish_share, clock()
         tuned, polished, *_ = black_box(
             "cma-es", jax.random.fold_in(jax.random.key(config.seed), 20), search_refs,
             cpu * share / (1.0 - share), robot, dt, joint, config.noise, start=start,
@@ -556,9 +551,8 @@ def tune_robust(
     sets = {"paper": paper_feasible_gains(robot), "robust-tuned": tuned}
     searches, budget = {}, None
     if config.compare:
-        # Equal compute: the searches score as many candidates as the
-        # gradient's iterations (priced by timing both in turn, so that the load
-        # falls on both alike, or at the given price), its validations and polish.
+        # Equal compute: as many candidates as the gradient's iterations (at
+        # the measured or given price), its validations and polish.
         measured = iteration_price(
             problem, state, _scorer(search_refs, jax.random.key(0), robot, dt, joint, config.noise)
         )  # fmt: skip

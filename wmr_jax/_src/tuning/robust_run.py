@@ -12,10 +12,13 @@ from typing import Any
 
 from wmr_jax._src import io
 from wmr_jax._src.model.params import Robot, validate_one_robot
+from wmr_jax._src.model.robots import robot_json
 from wmr_jax._src.tuning import robust, trainer
 from wmr_jax._src.tuning.compare import COMPARE_SEEDS, comparison_settings
 from wmr_jax._src.tuning.evaluation import EVAL_SEED, held_out_poses, poses_digest
 from wmr_jax._src.tuning.robust import RobustConfig
+from wmr_jax._src.tuning.run import CHECKPOINT_NAME, checkpointing, resumed_state
+from wmr_jax._src.tuning.saved import tuned_json, write_tuned
 
 COLUMNS = ["condition", "gains", "feedback", "success", "mean arrival s", "median arrival s"]
 
@@ -30,8 +33,6 @@ def described(config: RobustConfig) -> str:
 
 def save_tuned(out: Path, loop: Any, losses: list[float], robot: Robot) -> None:
     """Write ``tuned_gains.json`` (the loop and its robot) and ``robust_loss.json``."""
-    from wmr_jax._src.tuning.saved import tuned_json, write_tuned
-
     write_tuned(out, tuned_json(loop, robot=robot, tuning="robust"))
     io.atomic_write_json(out / "robust_loss.json", {"loss": losses})
 
@@ -56,8 +57,6 @@ def tune(
     settings, robot and code; the iterations go on bit for bit, and what
     follows them (the hybrid's polish, the searches) runs whole.
     """
-    from wmr_jax._src.tuning.run import CHECKPOINT_NAME, checkpointing, resumed_state
-
     robot = validate_one_robot(robot, "tuning")
     run, checkpoint, state = trainer.run_text(config, robot), out / CHECKPOINT_NAME, None
     identity = json.loads(run)
@@ -94,7 +93,6 @@ def write_evaluation(
 
     ``resumed_at``: the iteration the tuning resumed from (``None``: it ran them all).
     """
-    from wmr_jax._src.model.robots import robot_json
     from wmr_jax._src.report.robustness import robustness_table
 
     record = {
@@ -123,8 +121,6 @@ def finished(out: Path, config: RobustConfig, robot: Robot) -> bool:
         ValueError: one line, if ``out``'s ``robust_evaluation.json`` is of other
             settings or another robot, naming what differs.
     """
-    from wmr_jax._src.model.robots import robot_json
-
     path = out / "robust_evaluation.json"
     if not path.exists():
         return False

@@ -16,7 +16,14 @@ from typing import Any
 import numpy as np
 
 from wmr_jax._src import io
+from wmr_jax._src.checks import check_bool, check_callable, check_folder
+from wmr_jax._src.model.params import Robot, check_feasible, validate_robot
+from wmr_jax._src.model.robots import ROBOT_UNITS, robot_json
+from wmr_jax._src.report.progress import bar as tqdm
+from wmr_jax._src.studies.optimal import time_bounds
 from wmr_jax._src.tuning import trainer, training
+from wmr_jax._src.tuning.evaluation import held_out_poses, report_ratios
+from wmr_jax._src.tuning.saved import tuned_json, write_tuned
 
 CHECKPOINT_NAME = "checkpoint.npz"
 CHECKPOINT_FORMAT = 4
@@ -112,9 +119,6 @@ def finished(out: Path, config: Any, robot: Any) -> bool:
     stopped in its random search or evaluation has none newer, and is resumed), and
     its ``tuned_gains.json`` is there.
     """
-    from wmr_jax._src.model.params import Robot, validate_robot
-    from wmr_jax._src.model.robots import robot_json
-
     robot = validate_robot(Robot() if robot is None else robot)
     config = config.for_robot(robot)
     checkpoint, report = out / CHECKPOINT_NAME, out / "evaluation.json"
@@ -162,9 +166,6 @@ def _progress(
 
 def held_out_bounds(config: Any, robot: Any) -> Any:
     """The time-optimal yardsticks (docs/model.md §8) of the held-out poses of ``config``."""
-    from wmr_jax._src.studies.optimal import time_bounds
-    from wmr_jax._src.tuning.evaluation import held_out_poses
-
     refs = held_out_poses(config.eval_poses, config.eval_seed)
     return time_bounds(refs, robot=robot, dt=config.dt)
 
@@ -180,11 +181,7 @@ def write_results(
         ValueError: one line, if the tuned parameters are not all finite
             (nothing is written then).
     """
-    from wmr_jax._src.model.params import check_feasible
-    from wmr_jax._src.model.robots import ROBOT_UNITS, robot_json
     from wmr_jax._src.report.tuning import tuning_curve
-    from wmr_jax._src.tuning.evaluation import report_ratios
-    from wmr_jax._src.tuning.saved import tuned_json, write_tuned
 
     # Each file records the robot: its gains are tuned within that robot's wheel budget.
     tuned = tuned_json(result.gains, robot=robot, tuning="nominal")
@@ -270,10 +267,6 @@ def tune(
         ValueError: one line, for bad settings or a damaged checkpoint or one
             of another run.
     """
-    from wmr_jax._src.checks import check_bool, check_callable, check_folder
-    from wmr_jax._src.model.params import Robot, validate_robot
-    from wmr_jax._src.report.progress import bar as tqdm
-
     out = check_folder("out_dir", out_dir)
     check_bool("resume", resume)
     check_bool("progress", progress)

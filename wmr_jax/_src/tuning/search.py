@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import inspect
 import math
 import os
 import time
@@ -101,8 +102,7 @@ def random_search(
     chunk = check_int("chunk", chunk, 1)
     check_callable("progress", progress)
     refs = as_poses("refs", refs, batch=True)
-    run = run_options(locals())
-    run = check_run(run)
+    run = check_run(run_options(locals()))
     problem = get_problem(problem)
     if problem is not FIXED and start is not PAPER_FEASIBLE_GAINS:
         raise ValueError(
@@ -281,13 +281,9 @@ def robust_population_scores(
 
 
 # The run options of ``cma_es_search`` not given: ``random_search``'s defaults.
-_RUN_DEFAULTS = {
-    "dt": simulation.DEFAULT_DT,
-    "horizon": None,
-    "velocity": "ideal",
-    "substeps": loops.DEFAULT_SUBSTEPS,
-    "wheel_limit": "clip",
-}
+_RUN_DEFAULTS = run_options(
+    {name: p.default for name, p in inspect.signature(random_search).parameters.items()}
+)
 
 
 def evosax_available() -> bool:
@@ -313,11 +309,8 @@ def _evosax_cma_es() -> Any:
 def _strategy(cls: Any, population: int, shape: tuple[int, ...], dtype: str) -> Any:
     """One evosax strategy per class, population and shape, for every search of the process.
 
-    evosax compiles ``init``, ``ask`` and ``tell`` per strategy object (it is
-    their static argument): a new object per search would compile them again
-    inside each search's budget, where the gradient tuner's compiled step
-    serves every seed after the first (docs/tuning.md). The start only
-    gives the shape; ``init`` takes the mean.
+    evosax compiles ``init``, ``ask`` and ``tell`` per strategy object: a new
+    object per search would compile them again inside each search's budget.
     """
     return cls(population_size=population, solution=jnp.zeros(shape, dtype))
 

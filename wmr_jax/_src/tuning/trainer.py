@@ -240,11 +240,6 @@ def _scored(problem: TrainingProblem, state: TrainState) -> TrainState:
     return state._replace(validated=state.validated + ((state.iteration, score),), lowest_z=lowest)
 
 
-def kept_logits(state: TrainState, best: int) -> jax.Array:
-    """The logits of iterate ``best`` (``best_iteration`` of ``state.validated``)."""
-    return state.z if best == state.iteration else state.lowest_z
-
-
 def iterate(
     problem: TrainingProblem, state: TrainState, progress_fn: Callable | None = None
 ) -> TrainState:
@@ -455,10 +450,9 @@ def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainStat
             f"{len(state.losses)}, {len(state.temperatures)} and {len(state.gains)} rows"
         )
     temperatures = np.asarray(state.temperatures, dtype=float)
-    validated = np.asarray(state.validated, dtype=float).reshape(-1, 2)
-    values = [state.z, *restored, np.asarray(state.losses), gains, temperatures, validated]
-    values += [] if state.lowest_z is None else [state.lowest_z]
-    values.append(np.asarray(state.start, dtype=float))
+    values = [state.z, *restored, state.losses, gains, temperatures, state.validated, state.start]
+    if state.lowest_z is not None:
+        values.append(state.lowest_z)
     if not all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in values):
         raise ValueError("the saved state holds non-finite values (NaN or inf)")
     if not (np.all(temperatures > 0) and np.isfinite(state.elapsed_s) and state.elapsed_s >= 0):
