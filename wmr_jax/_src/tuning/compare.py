@@ -149,7 +149,6 @@ def compare(
                         "minimises": minimised(config, method),
                         "held_out": held_digest,
                         **ev._asdict(),
-                        # A ratio of a run that never arrived: null, and why.
                         **report_ratios(ev.mean_arrival, bounds),
                     }
                 )

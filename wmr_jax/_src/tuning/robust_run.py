@@ -31,12 +31,6 @@ def described(config: RobustConfig) -> str:
     return f"{law} with {sensing}, for {noise}"
 
 
-def save_tuned(out: Path, loop: Any, losses: list[float], robot: Robot) -> None:
-    """Write ``tuned_gains.json`` (the loop and its robot) and ``robust_loss.json``."""
-    write_tuned(out, tuned_json(loop, robot=robot, tuning="robust"))
-    io.atomic_write_json(out / "robust_loss.json", {"loss": losses})
-
-
 def tune(
     out: Path,
     config: RobustConfig,
@@ -50,8 +44,7 @@ def tune(
     """``tune_robust`` of a checked ``config`` with its files in ``out``; the result and its table.
 
     A checkpoint every ``checkpoint_every`` iterations (``None``:
-    ``trainer.CHECKPOINT_EVERY``) and at the last (the
-    fixed problem's ``checkpoint.npz``), ``tuned_gains.json`` and
+    ``trainer.CHECKPOINT_EVERY``) and at the last, ``tuned_gains.json`` and
     ``robust_loss.json`` once tuned, then ``robust_evaluation.{json,md}``.
     ``resume``: continue from the checkpoint, which must be of the same
     settings, robot and code; the iterations go on bit for bit, and what
@@ -76,7 +69,8 @@ def tune(
 
     def keep(loop: Any, losses: list[float]) -> None:
         # Written before the evaluation: an interruption there loses no tuning.
-        save_tuned(out, loop, losses, robot)
+        write_tuned(out, tuned_json(loop, robot=robot, tuning="robust"))
+        io.atomic_write_json(out / "robust_loss.json", {"loss": losses})
         say(f"tuned_gains.json, robust_loss.json -> {out} (now judging them)")
 
     result = robust.tune_robust(
@@ -105,7 +99,6 @@ def write_evaluation(
         # The sensor tuned for: the training's noise up to twice it, the table's at it.
         "noise": {"xy cm": config.noise_xy, "theta degrees": config.noise_theta},
         "rows": result.rows,
-        # The iterate kept: the best hard-law score on the validation poses.
         **trainer.verdict(result, config.validation_poses),
     }
     io.atomic_write_json(out / "robust_evaluation.json", record)

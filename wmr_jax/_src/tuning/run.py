@@ -194,9 +194,7 @@ def write_results(
     bounds = held_out_bounds(config, robot)
     rows = {name: dict(ev._asdict()) for name, ev in result.evaluation.items()}
     for row in rows.values():
-        # A ratio that needs a run that never arrived is null, with the reason beside it.
         row.update(report_ratios(row["mean_arrival"], bounds, paper))
-        # Within the robot's V_max, to 1e-6.
         row["peak_wheel_speed_ok"] = row["peak_wheel_speed"] <= float(robot.v_max) * (1 + 1e-6)
     report = {
         "problem": result.problem,
@@ -208,7 +206,6 @@ def write_results(
         "tuned_gains": tuned,
         # Fixed gains: k_r + L k_θ ≤ V_max; a schedule meets |v| + L|ω| ≤ V_max by construction.
         "feasible": result.problem != "fixed" or bool(check_feasible(result.gains, robot)),
-        # Every row's; each row says its own (peak_wheel_speed_ok there).
         "peak_wheel_speed_ok": all(row["peak_wheel_speed_ok"] for row in rows.values()),
         "robot": robot_json(robot),
         "robot_units": dict(ROBOT_UNITS),
@@ -219,7 +216,6 @@ def write_results(
         # A resumed run's tuning time holds one more compilation per resume.
         "resumed_at_iteration": resumed_at,
         "random_search_candidates": None if search is None else search.candidates,
-        # The iterate kept: the best hard-law score on the validation poses.
         **trainer.verdict(result, config.validation_poses),
         "config": config.as_dict(),
     }

@@ -44,8 +44,7 @@ class TrainingProblem(NamedTuple):
         loss: ``loss(z, batch, temperature, consts) -> (loss s, gradient (dim,))``,
             traceable and hashable (static in the compiled step).
         consts: traced arguments of ``loss`` shared by every iteration (robot, dt).
-        batch: ``batch(iteration)``, the iteration's draw, a pure function of
-            the seed and the iteration.
+        batch: ``batch(iteration)``, the iteration's draw (a pure function of it).
         row: ``row(z)``, the parameters of ``z`` as a flat tuple of floats.
         from_row: ``from_row(row)``, the parameters a result holds.
         score: ``score(params)``, the hard-law validation score, s.
@@ -122,10 +121,8 @@ class TuneResult(NamedTuple):
             gains, the tuned loop and the searches' loops, else ``None``.
         searches: the robust problem's ``{method: (ClosedLoop, candidates, CPU s,
             wall s)}``, else ``None``.
-        budget: the robust comparison's equal compute, ``{"price": candidates
-            one gradient iteration costs (measured, or ``RobustConfig.price``),
-            "measured_price": as measured, "candidates": each search's
-            budget}``, else ``None``.
+        budget: the robust comparison's ``{"price", "measured_price",
+            "candidates"}`` (``robust_run.compare_seed``), else ``None``.
     """
 
     gains: Any
@@ -179,11 +176,8 @@ def checked_config(config: Any, kind: type) -> Any:
 
 
 def optimizer(hyper: Hyper) -> optax.GradientTransformation:
-    """``clip_by_global_norm`` then Adam, its step cosine-decayed to a tenth.
-
-    Large steps while the temperature is high and the landscape smooth, small
-    ones once it is close to the hard law.
-    """
+    """``clip_by_global_norm`` then Adam, its step cosine-decayed to a tenth: large
+    steps while the landscape is smooth, small ones near the hard law."""
     schedule = optax.cosine_decay_schedule(hyper.learning_rate, hyper.iters, alpha=0.1)
     return optax.chain(optax.clip_by_global_norm(hyper.grad_clip), optax.adam(schedule))
 
@@ -195,8 +189,7 @@ def _train_step(z, opt_state, batch, temperature, consts, *, loss, hyper):
     return optax.apply_updates(z, updates), opt_state, value
 
 
-# ``train_step(z, opt_state, batch, temperature, consts, loss=, hyper=)``:
-# one compiled optimiser step of any problem, ``(z, opt_state, loss)``.
+# One compiled optimiser step of any problem: ``(z, opt_state, loss)``.
 train_step = loops.jit_top_level(_train_step, static_argnames=("loss", "hyper"))
 
 
@@ -285,10 +278,8 @@ def fit(
     """Train ``problem`` from ``state`` (default its start) to its last iteration.
 
     ``run``: the run's identity (``run_text``), which ``state`` must share.
-    Returns ``(parameters kept, their iteration, history, last state)``.
-
-    Raises:
-        ValueError: for a state of another run or problem, or of no iteration.
+    Returns ``(parameters kept, their iteration, history, last state)``;
+    ``ValueError`` for a state of another run or problem, or of no iteration.
     """
     state = start_state(problem, run) if state is None else own_state(state, problem, run)
     state = iterate(problem, state, progress_fn)

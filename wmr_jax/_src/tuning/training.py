@@ -54,8 +54,7 @@ class TuneConfig:
     Attributes:
         velocity: ``"ideal"`` or ``"nonideal"`` velocity loop (``docs/model.md §4``).
         iters: Adam iterations.
-        poses: reference poses per iteration, a fresh batch each time
-            (``docs/model.md §6``).
+        poses: reference poses per iteration, a fresh batch each time.
         seed: seed of the training poses and of the random search.
         learning_rate: Adam's initial step in logit space (cosine-decayed).
         grad_clip: ``clip_by_global_norm`` threshold of the batch gradient.
@@ -63,9 +62,8 @@ class TuneConfig:
             batch median; ``None`` for a plain mean.
         temperature_start: smooth-law temperature of the first iteration.
         temperature_end: temperature of the last (annealed geometrically).
-        horizon: simulated time per run, s; ``None``: the robot's study horizon
-            (``studies.study_horizon``: 6 s for the paper robot, longer for a
-            slower one), as ``wmr-jax tune`` and ``tune_robust`` run it.
+        horizon: simulated time per run, s; ``None``: the robot's study
+            horizon (``studies.study_horizon``).
         dt: control period, s.
         checkpoint_every: iterations between checkpoints (of ``wmr-jax tune``).
         eval_poses: held-out poses of the before/after table.
@@ -202,10 +200,9 @@ class GainLoss:
 
     def __call__(self, z, refs, temperature, consts):
         init, robot, dt = consts
-        loss, grad, _ = robust_value_and_grad(
+        return robust_value_and_grad(
             z, refs, init, robot, dt, self.spec, temperature, self.pose_clip, self.problem
-        )
-        return loss, grad
+        )[:2]
 
 
 def gain_problem(config: TuneConfig, robot: Robot) -> trainer.TrainingProblem:
@@ -252,10 +249,8 @@ def _checked(config: TuneConfig | None, robot: Robot | None) -> tuple[TuneConfig
 
 
 def init_state(config: TuneConfig | None = None, robot: Robot | None = None) -> TrainState:
-    """Return the state before the first iteration: the paper's feasible gains, Adam at rest.
-
-    A schedule starts from them as constant tables; ``ValueError`` names a bad field.
-    """
+    """Return the state before the first iteration: the paper's feasible gains (a
+    schedule: as constant tables), Adam at rest. ``ValueError`` names a bad field."""
     config, robot = _checked(config, robot)
     return trainer.start_state(gain_problem(config, robot), trainer.run_text(config, robot))
 
@@ -288,8 +283,7 @@ def train(
 
     The robust batch gradient of ``tuning_loss``, from the paper's feasible gains;
     then the paper's, the tuned and a random search's gains (same CPU time) are
-    judged on held-out poses. Writes no files and draws nothing (an exception
-    ``progress_fn`` raises stops the run).
+    judged on held-out poses. Writes no files and draws nothing.
 
     Args:
         config: the settings; default ``TuneConfig()``.
@@ -297,7 +291,8 @@ def train(
         state: continue from this state (from ``init_state`` or a
             ``progress_fn`` call of a run with the same ``config`` and
             ``robot``); the result is that of an uninterrupted run.
-        progress_fn: called with the ``TrainState`` after each iteration.
+        progress_fn: called with the ``TrainState`` after each iteration (an
+            exception it raises stops the run).
         search_progress: called with the number of candidates the random
             search scored, after each chunk of them.
         eval_progress: called with the row's name after each hard-law evaluation.
