@@ -104,13 +104,11 @@ def compare(
         ValueError: for bad settings, or without evosax (CMA-ES), before any run.
     """
     robot = validate_one_robot(robot, "tuning")
-    bases = {
-        name: c.for_robot(robot) for name, c in _checked_plan(seeds, problems, configs).items()
-    }
+    bases = [c.for_robot(robot) for c in _checked_plan(seeds, problems, configs).values()]
     check_callable("progress", progress)
     _evosax_cma_es()  # refused now, not after the first gradient run
     rows, said = [], set()
-    for base in bases.values():
+    for base in bases:
         problem = base.space  # for a schedule, of base.knots knots
         held_out = held_out_poses(base.eval_poses, base.eval_seed)
         bounds = time_bounds(held_out, robot=robot, dt=base.dt)

@@ -332,13 +332,12 @@ def _prepared(gains: Any, refs: Any, temperature: Any, options: dict[str, Any]) 
     controller = SCHEDULE if isinstance(gains, ScheduleParams) else SHIM_SUNG
     if temperature is not None:
         temperature = simulation.check_temperature("temperature", temperature)
+        temperature = jnp.asarray(temperature, float_dtype())
     spec = make_spec(**{name: o[name] for name in _STATIC_OPTIONS}, controller=controller)
     args = simulation.prepare(
         refs, gains, o["init"], o["robot"], o["dt"], spec.options(), batch=True
     )
     spec = spec.for_robot(args[3], args[4])
-    if temperature is not None:
-        temperature = jnp.asarray(temperature, float_dtype())
     return spec, temperature, args
 
 

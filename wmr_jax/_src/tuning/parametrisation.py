@@ -69,8 +69,6 @@ _UNIT_CLIP = 1e-3
 
 def _log_r_m() -> tuple[float, float]:
     """The box of ``log R_m`` (log cm), scaled by the evaluation radius (``EVAL_R_MAX``)."""
-    if EVAL_R_MAX == _BOX_RADIUS:  # the box as chosen, bit for bit
-        return _LOG_R_M
     shift = math.log(EVAL_R_MAX / _BOX_RADIUS)
     return (_LOG_R_M[0] + shift, _LOG_R_M[1] + shift)
 

@@ -114,8 +114,7 @@ def turn_gain_max(robot: Robot) -> Any:
 def _schedule_problem(knots: int) -> Problem:
     columns = tuple(f"{table}[{k}]" for table in TABLES for k in range(knots)) + _SHAPE_COLUMNS
 
-    def from_unit(u: Any, robot: Robot | None = None) -> ScheduleParams:
-        robot = Robot() if robot is None else robot
+    def from_unit(u: Any, robot: Robot) -> ScheduleParams:
         u = fixed.checked_point("u", u, 3 * knots + 5, unit=True)
         omega_max = turn_gain_max(robot)
         tables = {

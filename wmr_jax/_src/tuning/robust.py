@@ -421,7 +421,8 @@ def iteration_price(problem, state, scores, rounds=5):
 
     A compiled iteration (``trainer.train_step`` at ``state``) and the scoring
     of a generation (``scores``) are timed in turn, ``rounds`` times each
-    after compiling, so that the machine's load falls on both alike.
+    after compiling, so that the machine's load falls on both alike; the
+    ratio of the medians.
     """
     dtype = float_dtype()
     temperature = jnp.asarray(problem.temperature_end, dtype)
@@ -453,9 +454,10 @@ def black_box(
 ):  # fmt: skip
     """Random search or CMA-ES on the logits for ``budget_s`` CPU seconds (``search.clock``).
 
-    Candidates scored by ``robust_score`` on ``refs`` under the same draws;
-    the start (default the problem's; CMA-ES's mean, step ``std``) is scored
-    first. ``candidates``: a budget in candidates instead of ``budget_s``.
+    ``GENERATION`` candidates per generation (random search: uniform in the
+    cube), scored by ``robust_score`` on ``refs`` under the same draws; the
+    start (default the problem's; CMA-ES's mean, step ``std``) is scored first,
+    in the budget. ``candidates``: a budget in candidates instead of ``budget_s``.
 
     Returns:
         ``(ClosedLoop, candidates scored, CPU s, wall s)``.

@@ -44,7 +44,7 @@ def tune(
     """``tune_robust`` of a checked ``config`` with its files in ``out``; the result and its table.
 
     A checkpoint every ``checkpoint_every`` iterations (``None``:
-    ``trainer.CHECKPOINT_EVERY``) and at the last, ``tuned_gains.json`` and
+    ``trainer.CHECKPOINT_EVERY``) and at the last (``checkpoint.npz``), ``tuned_gains.json`` and
     ``robust_loss.json`` once tuned, then ``robust_evaluation.{json,md}``.
     ``resume``: continue from the checkpoint, which must be of the same
     settings, robot and code; the iterations go on bit for bit, and what

@@ -269,8 +269,10 @@ def tune(
     check_callable("progress_fn", progress_fn)
     config = trainer.checked_config(config, training.TuneConfig)
     io.remove_stale_temporaries(out)
-    robot = Robot() if robot is None else robot
-    config = config.for_robot(validate_robot(robot))  # the horizon its files record
+    # The robot as given, not rounded to the session's float32: the files
+    # record it, and a preset read back must still be that preset.
+    robot = validate_robot(Robot() if robot is None else robot)
+    config = config.for_robot(robot)  # the horizon its files record
     identity = training.run_identity(config, robot)
     fresh = training.init_state(config, robot)
     checkpoint = out / CHECKPOINT_NAME
@@ -302,11 +304,7 @@ def tune(
             eval_progress=lambda _name: (search_bar.close(), eval_bar.update(1)),
         )
     finally:
-        bar.close()
-        search_bar.close()
-        eval_bar.close()
-    # The robot as given, not rounded to the session's float32: the file
-    # records it, and a preset read back must still be that preset.
-    resumed_at = state.iteration if state.iteration else None
-    write_results(out, config, validate_robot(robot), result, resumed_at)
+        for each in (bar, search_bar, eval_bar):
+            each.close()
+    write_results(out, config, robot, result, state.iteration or None)
     return result
