@@ -349,31 +349,29 @@ class _SizeBench:
 
         return [self.row(case, self.time({case: (call, True)})[case], velocity=velocity)]
 
-    def loss_rows(
-        self,
-        loss: Callable,
-        forward_row: tuple[str, dict],
-        case: str,
-        beside: tuple[str, Callable[[], Any]] | None = None,
-    ) -> list[dict]:
-        """Time ``loss(gains, refs)``, its derivative along the gains and its gradient together.
-
-        ``1 + jvp_over_forward`` is the gradient's floor. ``beside``: ``(case, call)`` timed
-        with them. Returns the rows ``[beside,] forward, jvp_<case>, <case>``.
-        """
-        forward = loops.jit_top_level(loss)
-        gradient = loops.jit_top_level(jax.value_and_grad(loss))
+    def gain_derivatives(self, loss: Callable) -> list[Callable[[], Any]]:
+        """Calls of ``loss(gains, refs)``, its derivative along the gains and its gradient."""
 
         def along_gains(gains, refs):
             return jax.jvp(lambda g: loss(g, refs), (gains,), (gains,))
 
-        directional = loops.jit_top_level(along_gains)
-        gains, refs = self.gains, self.refs
-        group = {
-            "forward": (lambda: forward(gains, refs), True),
-            "directional": (lambda: directional(gains, refs), True),
-            "gradient": (lambda: gradient(gains, refs), True),
-        }
+        jitted = [loops.jit_top_level(f) for f in (loss, along_gains, jax.value_and_grad(loss))]
+        return [lambda f=f: f(self.gains, self.refs) for f in jitted]
+
+    def loss_rows(
+        self,
+        calls: list[Callable[[], Any]],
+        forward_row: tuple[str, dict],
+        case: str,
+        beside: tuple[str, Callable[[], Any]] | None = None,
+    ) -> list[dict]:
+        """Time a loss, its derivative along one direction and its gradient (``calls``) together.
+
+        ``1 + jvp_over_forward`` is the gradient's floor. ``beside``: ``(case, call)`` timed
+        with them. Returns the rows ``[beside,] forward, jvp_<case>, <case>``.
+        """
+        names = ("forward", "directional", "gradient")
+        group = {name: (call, True) for name, call in zip(names, calls, strict=True)}
         if beside is not None:
             group["beside"] = (beside[1], True)
         t = self.time(group)
@@ -397,7 +395,7 @@ class _SizeBench:
             return jnp.mean(err[:, 0] ** 2 + err[:, 1] ** 2 + (1.0 - jnp.cos(err[:, 2])))
 
         row = ("final_pose_loss", {"of": "mean squared error"})
-        return self.loss_rows(loss, row, "grad_final_pose_loss")
+        return self.loss_rows(self.gain_derivatives(loss), row, "grad_final_pose_loss")
 
     def tuning_loss(self) -> list[dict]:
         """``wmr_jax.tuning.tuning_loss`` and its gradient, beside the relaxed law it wraps."""
@@ -418,7 +416,8 @@ class _SizeBench:
 
         row = ("tuning_loss", {"temperature": TUNING_TEMPERATURE})
         # Beside the loss, the relaxed law alone: what the loss adds to it.
-        return self.loss_rows(loss, row, "grad_tuning_loss", ("final_poses_relaxed", relaxed))
+        calls = self.gain_derivatives(loss)
+        return self.loss_rows(calls, row, "grad_tuning_loss", ("final_poses_relaxed", relaxed))
 
     def robust_loss(self) -> list[dict]:
         """The robust tuner's loss (schedule, EKF), its ``RobustLoss`` gradient, a logit jvp."""
@@ -442,19 +441,11 @@ class _SizeBench:
         def directional(z, args):
             return jax.jvp(lambda z: forward(z, args), (z,), (jnp.ones_like(z),))
 
-        calls = {"forward": forward, "directional": directional}
-        jitted = {name: loops.jit_top_level(f) for name, f in calls.items()}
-        jitted["gradient"] = loops.jit_top_level(loss)
-        group = {name: (lambda f=f: f(z, args), True) for name, f in jitted.items()}
-        group["gradient"] = (lambda: jitted["gradient"](z, *args), True)
-        t = self.time(group)
-        over = {name: t[name].run_s / t["forward"].run_s for name in group}
+        jitted = [loops.jit_top_level(f) for f in (forward, directional, loss)]
+        calls = [lambda f=f: f(z, args) for f in jitted[:2]]
+        calls.append(lambda: jitted[2](z, *args))  # the RobustLoss takes them unpacked
         runs = self.n * len(robust.disturbances.STANDARD_CONDITIONS) + len(batch[2])
-        return [
-            self.row("robust_loss", t["forward"], runs=runs),
-            self.row("jvp_robust_loss", t["directional"], jvp_over_forward=over["directional"]),
-            self.row("grad_robust_loss", t["gradient"], grad_over_forward=over["gradient"]),
-        ]
+        return self.loss_rows(calls, ("robust_loss", {"runs": runs}), "grad_robust_loss")
 
 
 def code_bytes(source: Any, build: Any) -> int | None:
