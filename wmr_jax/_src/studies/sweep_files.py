@@ -85,12 +85,12 @@ def fingerprint(settings: dict[str, Any]) -> str:
 _CHUNK_META = ("fingerprint", "refs_digest")
 
 
-def _shape_of(meta: Any) -> str:
-    """What a chunk's metadata is, in a few words, for the warning that refuses it."""
-    if isinstance(meta, dict):
-        missing = [key for key in _CHUNK_META if not isinstance(meta.get(key), str)]
-        return f"without a text {' or '.join(missing)}"
-    return f"that is no JSON object ({json.dumps(meta)[:40]})"
+def _metadata_fault(meta: Any) -> str | None:
+    """What is wrong with a chunk's metadata, in a few words, or ``None`` if nothing is."""
+    if not isinstance(meta, dict):
+        return f"that is no JSON object ({json.dumps(meta)[:40]})"
+    missing = [key for key in _CHUNK_META if not isinstance(meta.get(key), str)]
+    return f"without a text {' or '.join(missing)}" if missing else None
 
 
 class ChunkStore:
@@ -148,12 +148,10 @@ class ChunkStore:
         except io.DamagedFileError as err:
             warnings.warn(f"{' '.join(str(err).split())}; recomputing that chunk", stacklevel=4)
             return None
-        if not isinstance(meta, dict) or not all(
-            isinstance(meta.get(key), str) for key in _CHUNK_META
-        ):
-            # A valid checksum over metadata this sweep never writes.
+        fault = _metadata_fault(meta)
+        if fault is not None:  # a valid checksum over metadata this sweep never writes
             warnings.warn(
-                f"{self.path(i)} has metadata {_shape_of(meta)}; allowed: an object with "
+                f"{self.path(i)} has metadata {fault}; allowed: an object with "
                 f"{' and '.join(_CHUNK_META)}; recomputing it",
                 stacklevel=4,
             )
