@@ -17,12 +17,7 @@ import numpy as np
 
 from wmr_jax._src import checks
 from wmr_jax._src.model import controllers
-from wmr_jax._src.model.params import (
-    Robot,
-    SamplingWarning,
-    WheelSpeedWarning,
-    validate_one_robot,
-)
+from wmr_jax._src.model.params import Robot, SamplingWarning, WheelSpeedWarning, validate_one_robot
 from wmr_jax._src.model.robots import same_robot
 from wmr_jax._src.sim.metrics import PoseMetrics
 from wmr_jax._src.sim.poses import HORIZON_S, horizon_steps
@@ -180,7 +175,7 @@ def monte_carlo(
 
     Args:
         key: ``jax.random`` key; the same key gives the same numbers.
-        controller: a ``Controller`` or its registered name.
+        controller, velocity, dt, x64, robot: as ``disturbed_metrics``.
         params: its parameters; default ``robot_defaults(controller, robot)``.
         n_runs: Monte Carlo runs per noise level.
         noise_xy: σ of the x and y measurement noise per level, cm.
@@ -189,13 +184,8 @@ def monte_carlo(
         mass_mismatch: bound of the relative body-mass error (non-ideal loop),
             ``[0, 1)``.
         latency: apply each command one sample late.
-        velocity: ``"ideal"`` or ``"nonideal"``.
-        dt: control period, s.
-        x64: compute in float64 (see ``disturbed_metrics``).
-        estimator: ``None`` (raw feedback), ``"observer"``, ``"ekf"`` or their
-            parameters (docs/model.md §9), or one's own (as ``disturbed_metrics``);
-            parameters with one value per run hold ``n_runs``, the same at every level.
-        robot: the robot; default ``Robot()``.
+        estimator: as ``disturbed_metrics`` (``None``: raw feedback); parameters with
+            one value per run hold ``n_runs``, the same at every level.
         horizon: simulated time per run, s; default ``study_horizon(robot)``.
 
     Returns:

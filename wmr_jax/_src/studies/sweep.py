@@ -333,16 +333,9 @@ def sweep(
         refs: ``(N, 3)`` reference poses ``[x cm, y cm, θ rad]``: an array,
             or a memmap (read a chunk at a time).
         gains: the controller's parameters (default: its defaults); leaves
-            scalar, or ``(N,)`` for one value per pose.
-        init: ``(3,)`` initial pose, or ``(N, 3)``.
-        dt: control period, s.
-        steps: control periods per run (static).
-        robot: robot parameters (leaves scalar or ``(N,)``); default ``Robot()``.
-        velocity: ``"ideal"`` or ``"nonideal"`` velocity loop (docs/model.md §4).
-        controller: a ``Controller`` or its name; default Shim–Sung.
-        temperature: ``None`` for the hard law, else its smooth relaxation.
-        substeps: inner steps per period (non-ideal loop).
-        wheel_limit: ``"clip"`` or ``"scale"`` (non-ideal loop).
+            scalar, or ``(N,)`` for one value per pose (the robot's too).
+        init, dt, steps, robot, velocity, controller, temperature, substeps,
+            wheel_limit: as ``wmr_jax.final_poses``; ``steps`` per run.
         tol_r: arrival distance tolerance, cm (docs/model.md §6).
         tol_theta: arrival heading tolerance, rad, ``< π/2``.
         v_dead_band: speeds with ``|v| ≤`` this (cm/s) carry no sign (zig-zags).
