@@ -9,6 +9,7 @@ under the same load: compare ratios of one run, not rates across runs.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import resource
 import warnings
@@ -231,14 +232,14 @@ class _SizeBench:
 
     def baselines(self, *, scalar: bool) -> tuple[list[dict], list[dict]]:
         """Rows of ``final_poses`` (and sharded), then of the baselines, timed interleaved."""
-        cases, gains, steps, refs = self.config.cases, self.gains, self.steps, self.refs
-        robot = self.robot
+        cases, gains, steps, robot = self.config.cases, self.gains, self.steps, self.robot
+
+        def final_poses_of(refs: Any) -> tuple[Callable[[], Any], bool]:
+            return (lambda: rollout.final_poses(refs, gains, steps=steps, robot=robot), True)
+
         group: dict[str, tuple[Callable[[], Any], bool]] = {}
         if "final_poses" in cases:
-            group["final_poses"] = (
-                lambda: rollout.final_poses(refs, gains, steps=steps, robot=robot),
-                True,
-            )
+            group["final_poses"] = final_poses_of(self.refs)
         if "numpy_batch" in cases:
             group["numpy_batch"] = (
                 lambda: numpy_final_poses(self.refs_np, gains, steps=steps),
@@ -255,11 +256,7 @@ class _SizeBench:
             group["scalar_reference"] = (scalar_runs, False)
         devices = jax.local_devices()
         if "final_poses_sharded" in cases and len(devices) > 1:
-            spread = shard(self.refs_np, devices)
-            group["final_poses_sharded"] = (
-                lambda: rollout.final_poses(spread.array, gains, steps=steps, robot=robot),
-                True,
-            )
+            group["final_poses_sharded"] = final_poses_of(shard(self.refs_np, devices).array)
         t = self.time(group) if group else {}
         first, last = [], []
         if "final_poses" in t:
@@ -288,10 +285,7 @@ class _SizeBench:
             args, options = prepare_disturbed(
                 spec, self.gains, "shim-sung", estimator, start, 0.033, self.robot, "ideal"
             )
-            group[name] = (
-                lambda args=args, options=options: _disturbed_jit(*args, options=options),
-                True,
-            )
+            group[name] = (functools.partial(_disturbed_jit, *args, options=options), True)
         t = self.time(group)
         raw = t["raw"].run_s
         return [
