@@ -74,13 +74,8 @@ def bench_table(result: dict[str, Any]) -> str:
             f"result = {result!r:.80} is not allowed; allowed: what run_benchmark returned "
             f"(a dict with {', '.join(keys)}, and one row or more)"
         )
-    for part, needed in (
-        (
-            "environment",
-            ("device", "backend", "devices", "cpu_cores", "cpu", "jax", "jaxlib", "numpy"),
-        ),
-        ("config", ("dtype", "steps", "repeats")),
-    ):
+    shown = ("device", "backend", "devices", "cpu_cores", "cpu", "jax", "jaxlib", "numpy")
+    for part, needed in (("environment", shown), ("config", ("dtype", "steps", "repeats"))):
         missing = [k for k in needed if k not in result[part]]
         if missing:
             raise ValueError(

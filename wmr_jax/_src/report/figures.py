@@ -147,15 +147,9 @@ def _mark_backwards(ax: Any, paths: Sequence[np.ndarray], refs: np.ndarray) -> N
     turn = np.angle(np.exp(1j * (ends[:, 2] - refs[: len(ends), 2])))
     back = close & (np.abs(turn) > np.pi / 2)
     if back.any():
-        ax.plot(
-            *refs[: len(ends)][back, :2].T,
-            "o",
-            mfc="none",
-            mec="tab:purple",
-            ms=16,
-            mew=1.5,
-            label="arrived backwards (θ = θ_r ± 180°)",
-        )
+        ring = {"mfc": "none", "mec": "tab:purple", "ms": 16, "mew": 1.5}
+        label = "arrived backwards (θ = θ_r ± 180°)"
+        ax.plot(*refs[: len(ends)][back, :2].T, "o", **ring, label=label)
 
 
 def plot_wheel_speeds(

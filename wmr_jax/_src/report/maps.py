@@ -256,26 +256,15 @@ def map_figure(
             fig.colorbar(image, ax=axes[row, :].tolist(), shrink=0.85, pad=0.01).set_label(
                 label, fontsize=8
             )
+        cells = f"{_CONTOUR_CELL_CM:g} cm cells"
+        over = f"peak wheel speed > V_max = {v_max:g} cm/s on most poses ({cells})"
         legend = [
-            Patch(
-                facecolor="0.55",
-                edgecolor="w",
-                hatch="////",
-                label=f"peak wheel speed > V_max = {v_max:g} cm/s on most poses "
-                f"({_CONTOUR_CELL_CM:g} cm cells)",
-            ),
+            Patch(facecolor="0.55", edgecolor="w", hatch="////", label=over),
             plt.Line2D([], [], marker="s", ls="", color=(0.85, 0.1, 0.1), label="not arrived"),
             plt.Line2D([], [], marker=(3, 0, -90), ls="", color="k", label="robot at (0, 0, 0°)"),
         ]
-        fig.legend(
-            handles=legend,
-            loc="outside lower center",
-            ncol=3,
-            fontsize=7,
-            facecolor="0.55",
-            labelcolor="k",
-            framealpha=1,
-        )
+        box = {"facecolor": "0.55", "labelcolor": "k", "framealpha": 1}
+        fig.legend(handles=legend, loc="outside lower center", ncol=3, fontsize=7, **box)
         fig.suptitle(title, fontsize=10)
         save_figure(fig, path, dpi=100)
     return Path(path)
@@ -356,23 +345,14 @@ def save_map_study(out_dir: str | Path, study: MapStudy) -> list[Path]:
     drawn |= {"winner.png"} if len(study.results) > 1 else set()
     for name in sorted(earlier - drawn):
         (out / name).unlink(missing_ok=True)
-    written = [
-        map_figure(
-            out / f"maps_{name}.png",
-            study.grid,
-            m,
-            ranges,
-            v_max=v_max,
-            title=f"{name}{' (parameters given)' * (name in given)}: {what} (red: not arrived)",
-        )
-        for name, m in study.results.items()
-    ]
+    written = []
+    for name, m in study.results.items():
+        title = f"{name}{' (parameters given)' * (name in given)}: {what} (red: not arrived)"
+        path = out / f"maps_{name}.png"
+        written.append(map_figure(path, study.grid, m, ranges, v_max=v_max, title=title))
     if len(study.results) > 1:
-        written.append(
-            winner_figure(
-                out / "winner.png", study.grid, study.results, title=f"First to arrive ({what})"
-            )
-        )
+        title = f"First to arrive ({what})"
+        written.append(winner_figure(out / "winner.png", study.grid, study.results, title=title))
     written.append(atomic_write_text(out / "summary.json", summary_json))
     written.append(atomic_write_text(out / "summary.md", summary_md))
     return written

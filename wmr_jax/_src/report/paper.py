@@ -36,12 +36,8 @@ def _fig6(path: Path, curve: dict[str, Any], r_e: float = 1.0) -> None:
         ax.semilogy(curve["phi_m_deg"], curve["bound_cm"])
         mark_deg, mark_cm = curve["mark_deg"], curve["mark_cm"]
         ax.plot([mark_deg], [mark_cm], "ro")
-        ax.annotate(
-            f"Φ_m = {mark_deg:g}°: {mark_cm:.2f} cm",
-            (mark_deg, mark_cm),
-            textcoords="offset points",
-            xytext=(-110, 10),
-        )
+        text = f"Φ_m = {mark_deg:g}°: {mark_cm:.2f} cm"
+        ax.annotate(text, (mark_deg, mark_cm), textcoords="offset points", xytext=(-110, 10))
         ax.axhline(r_e, color="0.4", ls="--", lw=1, label=f"default R_e = {r_e:g} cm (a choice)")
         ax.legend(loc="lower right", fontsize=8)
         ax.set_xlabel("Φ_m [deg]")
@@ -182,16 +178,10 @@ def _pair(s: dict[str, float], key: str, fmt: Any = number) -> str:
 
 
 # The numbers of a ``PaperRuns.summary`` entry that ``paper_summary_table`` shows.
-_SUMMARY_NUMBERS = (
-    "k_r + L k_theta",
-    "max_deviation_cm",
-    "mean_deviation_cm",
-    "ideal_arrival_s",
-    "nonideal_arrival_s",
-    "ideal_zigzag",
-    "nonideal_zigzag",
-    "ideal_saturated_fraction",
-    "nonideal_saturated_fraction",
+_SUMMARY_NUMBERS = ("k_r + L k_theta", "max_deviation_cm", "mean_deviation_cm") + tuple(
+    f"{loop}_{key}"
+    for key in ("arrival_s", "zigzag", "saturated_fraction")
+    for loop in ("ideal", "nonideal")
 )
 
 

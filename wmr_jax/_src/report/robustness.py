@@ -176,8 +176,7 @@ def write_robustness(
     def head(rows: list[dict[str, Any]], meta: dict[str, Any]) -> str:
         return (
             f"Robustness Monte Carlo ({velocity} loop, {feedback}seed {seed}, {n_runs} runs "
-            "per row, "
-            f"horizon {horizon:g} s{_robot_text(meta)})\n\n"
+            f"per row, horizon {horizon:g} s{_robot_text(meta)})\n\n"
         )
 
     title = (

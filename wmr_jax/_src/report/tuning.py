@@ -20,12 +20,7 @@ from wmr_jax._src.tuning.parametrisation import (
     gains_as_dict,
     paper_feasible_gains,
 )
-from wmr_jax._src.tuning.problems import (
-    MAX_TUNED_KNOTS,
-    PROBLEMS,
-    get_problem,
-    schedule_problem,
-)
+from wmr_jax._src.tuning.problems import MAX_TUNED_KNOTS, PROBLEMS, get_problem, schedule_problem
 from wmr_jax._src.tuning.robust import condition_score
 
 # Each parameter's symbol and the unit a person types it in (Φ_m in degrees, as

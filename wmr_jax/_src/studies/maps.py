@@ -88,12 +88,9 @@ def pose_grid(
     if degrees.size == 0:
         raise ValueError("headings_deg = () is not allowed; allowed: at least one heading")
     checks.require("headings_deg", degrees, np.isfinite(degrees), "finite degrees")
-    checks.require(
-        "headings_deg",
-        degrees,
-        np.abs(np.radians(degrees)) <= checks.MAX_HEADING,
-        f"|heading| <= {math.degrees(checks.MAX_HEADING):.3g} degrees",
-    )
+    within = np.abs(np.radians(degrees)) <= checks.MAX_HEADING
+    limit = f"|heading| <= {math.degrees(checks.MAX_HEADING):.3g} degrees"
+    checks.require("headings_deg", degrees, within, limit)
     turns = np.mod(degrees, 360.0)  # one heading, however many turns it is written with
     repeated = [float(d) for i, d in enumerate(degrees) if np.any(turns[:i] == turns[i])]
     if repeated:
@@ -308,11 +305,8 @@ def map_study(
 
     def per_run(name: str) -> dict[str, Any]:
         told = None if on_chunk is None else (lambda done, total: on_chunk(name, done, total))
-        return {
-            "cache": None if cache is None else cache / name,
-            "resume": resume,
-            "on_chunk": told,
-        }
+        cached = None if cache is None else cache / name
+        return {"cache": cached, "resume": resume, "on_chunk": told}
 
     runs = {name: (name, params.get(name)) for name in names}
     results = _metrics(grid.refs, runs, robot, horizon, velocity, chunk, progress, x64, per_run)

@@ -90,23 +90,13 @@ def _chain_single(spec, params, init, robot, dt, options: Options) -> ChainRun:
         run_start = jnp.where(last & ok, jnp.where(run_start < 0, k, run_start), -1)
         return k + 1, leg + reached.astype(leg.dtype), reached_at, run_start
 
-    start = (
-        jnp.zeros((), jnp.int32),
-        jnp.zeros((), jnp.int32),
-        jnp.full((n_legs,), -1, jnp.int32),
-        jnp.full((), -1, jnp.int32),
-    )
+    def aim(acc):
+        return waypoints[acc[1]]
+
+    zero, never = jnp.zeros((), jnp.int32), jnp.full((), -1, jnp.int32)
+    start = (zero, zero, jnp.full((n_legs,), -1, jnp.int32), never)
     _, (_, _, reached_at, run_start), (poses, out) = loops.scan_closed_loop(
-        waypoints[0],
-        params,
-        init,
-        robot,
-        dt,
-        options,
-        aim=lambda acc: waypoints[acc[1]],
-        fold=fold,
-        acc=start,
-        record=True,
+        waypoints[0], params, init, robot, dt, options, aim=aim, fold=fold, acc=start, record=True
     )
     arrival = _period_end(reached_at.at[-1].set(run_start), dt, waypoints.dtype)
     # The leg of period k: the waypoints reached before it.
@@ -258,19 +248,14 @@ def chain_rollout(
         waypoints: ``(K, 3)`` poses ``[x cm, y cm, θ rad]``, visited in order.
         params: the controller's parameters (its defaults if ``None``).
         init: ``(3,)`` initial pose.
-        dt: control period, s.
         steps: control periods in all (static).
-        robot: robot parameters; default ``Robot()``.
-        velocity: ``"ideal"`` or ``"nonideal"`` (static).
-        controller: a ``Controller`` or its registered name (static).
+        dt, robot, velocity, controller, substeps, wheel_limit: as ``wmr_jax.rollout``.
         tol_r: arrival distance at the last waypoint, cm.
         tol_theta: arrival folded-heading error at the last waypoint, rad, ``< π/2``.
         pass_tol_r: distance at which an intermediate waypoint counts as
             reached, cm; default ``tol_r``.
         pass_tol_theta: heading tolerance there, rad, ``≤ π/2`` (``π/2``
             ignores the heading); default ``tol_theta``.
-        substeps: inner steps of the non-ideal loop (static).
-        wheel_limit: ``"clip"`` or ``"scale"``, non-ideal loop (static).
 
     Returns:
         A ``ChainRun``; ``arrival`` has one entry per waypoint.
