@@ -253,9 +253,8 @@ def map_figure(
                 ax = axes[row, h]
                 image = _draw_metric(ax, grid, m, field, cmap, ranges[field], h, v_max)
                 _decorate(ax, grid, h, top=row == 0, bottom=row == n_rows - 1, left=h == 0)
-            fig.colorbar(image, ax=axes[row, :].tolist(), shrink=0.85, pad=0.01).set_label(
-                label, fontsize=8
-            )
+            bar = fig.colorbar(image, ax=axes[row, :].tolist(), shrink=0.85, pad=0.01)
+            bar.set_label(label, fontsize=8)
         cells = f"{_CONTOUR_CELL_CM:g} cm cells"
         over = f"peak wheel speed > V_max = {v_max:g} cm/s on most poses ({cells})"
         legend = [

@@ -56,15 +56,8 @@ def _paths_figure(path: Path, title: str, refs: np.ndarray, runs: list[tuple]) -
     """Draw several sets of paths ``(label, trajectory, line style, colour)`` on one plot."""
     with closed_after(figsize=(6.5, 6.5)) as (fig, ax):
         for i, (label, traj, style, color) in enumerate(runs):
-            plot_paths(
-                ax,
-                np.asarray(traj.poses),
-                refs,
-                label=label,
-                linestyle=style,
-                color=color,
-                mark_refs=i == len(runs) - 1,
-            )
+            paths, last = np.asarray(traj.poses), i == len(runs) - 1
+            plot_paths(ax, paths, refs, label=label, linestyle=style, color=color, mark_refs=last)
         ax.plot([0], [0], "ko", ms=5)
         ax.set_title(title, fontsize=10)
         # Under the axes, covering no path. One colour per path: the entries name the

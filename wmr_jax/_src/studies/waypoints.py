@@ -189,13 +189,7 @@ def _shared_by_every_run(
 
 
 def _options(steps, velocity, controller, substeps, wheel_limit) -> Options:
-    return simulation.make_options(
-        steps=steps,
-        velocity=velocity,
-        controller=controller,
-        substeps=substeps,
-        wheel_limit=wheel_limit,
-    )
+    return simulation.make_options(**locals())  # each by its name, as the rollouts do
 
 
 # The batched entry point beside each single-run one, for the message that
