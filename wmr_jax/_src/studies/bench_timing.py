@@ -6,6 +6,7 @@ time of other processes during each call is recorded beside it.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 import platform
@@ -71,9 +72,8 @@ def time_group(
     """
     import jax
 
-    first: dict[str, float | None] = {}
+    first: dict[str, float | None] = dict.fromkeys(calls)
     for name, (call, compiled) in calls.items():
-        first[name] = None
         if compiled:
             start = time.perf_counter()
             jax.block_until_ready(call())
@@ -116,14 +116,11 @@ def environment() -> dict[str, Any]:
 
     devices = jax.devices()
     cpu_model = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    cpu_model = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
+    with contextlib.suppress(OSError), open("/proc/cpuinfo", encoding="utf-8") as f:
+        for line in f:
+            if line.startswith("model name"):
+                cpu_model = line.split(":", 1)[1].strip()
+                break
     return {
         "jax": jax.__version__,
         "jaxlib": jaxlib.__version__,
