@@ -6,6 +6,7 @@ that count as arrived only because the horizon ends.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 import os
@@ -91,18 +92,11 @@ def robustness_table(rows: Sequence[dict[str, Any]], columns: Sequence[str]) -> 
 def _cell(row: dict[str, Any], column: str) -> Any:
     """A cell as the table shows it: a percentage, ``none arrived`` for no arrival, or as is."""
     if column in _PERCENT_KEYS:
-        return _percent(row[column])
-    if column.endswith(" s") and row[column] == math.inf:  # an arrival time of no run
+        with contextlib.suppress(TypeError, ValueError):  # a damaged cell is shown as it is
+            return percent(float(row[column]))
+    elif column.endswith(" s") and row[column] == math.inf:  # an arrival time of no run
         return "none before the horizon" if "not at horizon" in column else "none arrived"
     return row[column]
-
-
-def _percent(value: Any) -> Any:
-    """A fraction as a percentage; anything else (a damaged cell) as it is."""
-    try:
-        return percent(float(value))
-    except (TypeError, ValueError):
-        return value
 
 
 def _late_share(row: dict[str, Any]) -> float:

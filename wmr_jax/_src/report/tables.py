@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Iterable, Mapping
 from typing import Any
@@ -61,11 +62,9 @@ def json_number(name: str, value: Any) -> float:
         if value in _JSON_FLOATS:
             return _JSON_FLOATS[value]
     elif not isinstance(value, (bool, np.bool_)):
-        try:
+        with contextlib.suppress(TypeError, ValueError):
             if np.ndim(value) == 0 and not np.iscomplexobj(value):
                 return float(value)
-        except (TypeError, ValueError):
-            pass
     raise ValueError(
         f'{name} = {value!r:.80} is not allowed; allowed: a number, or "inf", "-inf", "nan" '
         "or None (as atomic_write_json writes them)"
