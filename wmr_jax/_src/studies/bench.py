@@ -159,7 +159,7 @@ def run_benchmark(
         # The paper's gains trip the wheel-speed warning on every call.
         warnings.simplefilter("ignore")
         for n in config.sizes:
-            bench = _SizeBench(config, n, Gains())
+            bench = _SizeBench(config, n)
             for row in bench.rows(scalar=n == max(config.sizes)):
                 rows.append(row)
                 rate = row.get("robot_steps_per_s")
@@ -189,8 +189,8 @@ def _results(config: BenchConfig, rows: list[dict], *, finished: bool) -> dict:
 class _SizeBench:
     """The cases of one batch size ``n``, each a step that returns its rows."""
 
-    def __init__(self, config: BenchConfig, n: int, gains: Any) -> None:
-        self.config, self.n, self.gains, self.steps = config, n, gains, config.steps
+    def __init__(self, config: BenchConfig, n: int) -> None:
+        self.config, self.n, self.gains, self.steps = config, n, Gains(), config.steps
         self.robot = config.robot
         dtype = np.float32 if config.dtype == "float32" else np.float64
         self.refs_np = np.asarray(sample_poses(config.seed + n, n), dtype=dtype)
