@@ -306,6 +306,40 @@ def pytest_runtest_setup(item):
         jax.clear_caches()
 
 
+def _map_limit() -> int | None:
+    """The kernel's limit on a process's memory mappings (Linux), else ``None``."""
+    try:
+        return int(Path("/proc/sys/vm/max_map_count").read_text())
+    except (OSError, ValueError):
+        return None
+
+
+_MAP_LIMIT = _map_limit()
+
+
+def _mappings() -> int:
+    with open("/proc/self/maps", "rb") as maps:
+        return sum(1 for _ in maps)
+
+
+def pytest_runtest_teardown(item, nextitem):
+    """At the end of a file, drop JAX's compiled programs once they near the mapping limit.
+
+    XLA:CPU maps each program it compiles or loads into memory as three
+    mappings, and JAX's caches keep every program alive. A run of the whole
+    suite in one process (``-n 0``) comes to hold some 22,000 programs,
+    beyond Linux's default of 65,530 mappings, where the next compilation
+    ends the process with a segmentation fault. Past half the limit the
+    caches are cleared between files; later tests trace their programs
+    again and load them from the compilation cache.
+    """
+    if _MAP_LIMIT is None or (nextitem is not None and nextitem.path == item.path):
+        return
+    if _mappings() > _MAP_LIMIT // 2:
+        jax.clear_caches()
+        gc.collect()
+
+
 # ------------------------------------------------------------ CPU-time record
 #
 # WMR_JAX_TEST_CPU=FILE appends one line per test to FILE, tab-separated: the
