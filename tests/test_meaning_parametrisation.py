@@ -109,6 +109,21 @@ def test_gains_from_logits_is_gains_from_unit_of_the_sigmoid():
     p.gains_from_logits(jnp.asarray([math.inf, -math.inf, 0, 0, 0, 0, 0]))
 
 
+def test_both_problems_map_a_point_on_the_paper_robot_when_given_no_robot():
+    """``from_unit`` of the fixed and the schedule problem: no robot, or None, is ``Robot()``."""
+    from wmr_jax import tuning
+
+    other = w.Robot(half_track=8.0, v_max=22.0)
+    for problem in (tuning.FIXED, tuning.SCHEDULED):
+        u = np.full(problem.dim, 0.5)
+        paper = jax.tree.leaves(problem.from_unit(u, w.Robot()))
+        for given in (problem.from_unit(u), problem.from_unit(u, None)):
+            np.testing.assert_array_equal(jax.tree.leaves(given), paper)
+        # The robot is used: another robot's budget gives other parameters.
+        moved = jax.tree.leaves(problem.from_unit(u, other))
+        assert any(not np.array_equal(a, b) for a, b in zip(moved, paper, strict=True))
+
+
 def test_gains_as_dict_is_floats_in_field_order():
     d = p.gains_as_dict(w.Gains(kr=np.float32(3.5), r_e=jnp.asarray(0.5)))
     assert list(d) == list(p.GAIN_FIELDS)

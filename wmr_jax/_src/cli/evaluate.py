@@ -174,11 +174,16 @@ def _read_npy(path: str) -> tuple[Any, list[str] | None]:
 
     try:
         with open(path, "rb") as f:
-            # NumPy would take any other file for a pickle.
-            is_npy = f.read(len(_NPY_MAGIC)) == _NPY_MAGIC
+            start = f.read(len(_NPY_MAGIC))
+            if start != _NPY_MAGIC:  # NumPy would take any other file for a pickle
+                raise _refs_error(
+                    path, "it is no .npy array (empty, another kind of file, or damaged)"
+                )
             f.seek(0)
-            arr = np.load(f, allow_pickle=False) if is_npy else None
+            arr = np.load(f, allow_pickle=False)
     except ValueError as err:
+        if str(err).startswith("--refs "):
+            raise
         if "allow_pickle" in str(err):
             raise _refs_error(
                 path, "it holds Python objects (a pickle); allowed: an array of numbers"
@@ -186,8 +191,6 @@ def _read_npy(path: str) -> tuple[Any, list[str] | None]:
         raise _unreadable(path, err) from None
     except (OSError, EOFError) as err:  # unreadable, truncated
         raise _unreadable(path, err) from None
-    if arr is None:
-        raise _refs_error(path, "it is no .npy array (empty, another kind of file, or damaged)")
     if arr.dtype.kind not in "iuf":
         raise _refs_error(path, f"its dtype is {arr.dtype}; allowed: real numbers")
     return arr.astype(float), None

@@ -33,7 +33,7 @@ class Cube:
     """The logits of a searched cube, for any class with ``dim``, ``from_unit`` and ``start``."""
 
     def from_logits(self, z: Any, robot: Robot) -> Any:
-        """``from_unit`` of the logits ``z`` (``u = σ(z)``, any real ``(..., dim)``)."""
+        """``from_unit`` of the logits ``z`` (``u = σ(z)``; real, shaped as ``from_unit`` takes)."""
         z = fixed.checked_point("z", z, self.dim, unit=False)
         return self.from_unit(1.0 / (1.0 + jnp.exp(-z)), robot)
 
@@ -114,7 +114,8 @@ def turn_gain_max(robot: Robot) -> Any:
 def _schedule_problem(knots: int) -> Problem:
     columns = tuple(f"{table}[{k}]" for table in TABLES for k in range(knots)) + _SHAPE_COLUMNS
 
-    def from_unit(u: Any, robot: Robot) -> ScheduleParams:
+    def from_unit(u: Any, robot: Robot | None = None) -> ScheduleParams:
+        robot = Robot() if robot is None else robot
         u = fixed.checked_point("u", u, 3 * knots + 5, unit=True)
         omega_max = turn_gain_max(robot)
         tables = {
