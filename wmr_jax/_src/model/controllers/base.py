@@ -62,14 +62,15 @@ class Pluggable:
             # would read as 1.0 or 3.0: every concrete leaf must be real numbers.
             allowed = "real numbers (no bools or strings; a flag is a static field)"
             for path, leaf in jax.tree_util.tree_leaves_with_path(checked):
+                if isinstance(leaf, jax.core.Tracer):
+                    continue  # no value to check under a transformation
                 where = f"{self.KIND} {self.name!r}: params{jax.tree_util.keystr(path)}"
-                if isinstance(leaf, jax.Array) and not isinstance(leaf, jax.core.Tracer):
-                    if leaf.dtype.kind not in "iuf":  # its dtype: no copy from the device
-                        raise ValueError(
-                            f"{where} = {described(leaf)} is not allowed; allowed: {allowed}"
-                        )
-                elif not isinstance(leaf, jax.core.Tracer):
+                if not isinstance(leaf, jax.Array):
                     real_array(where, leaf, allowed)
+                elif leaf.dtype.kind not in "iuf":  # its dtype: no copy from the device
+                    raise ValueError(
+                        f"{where} = {described(leaf)} is not allowed; allowed: {allowed}"
+                    )
         return checked
 
     def default_params(self) -> Any:
