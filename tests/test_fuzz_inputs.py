@@ -16,7 +16,6 @@ import collections
 import json
 import math
 import os
-import tempfile
 import warnings
 from pathlib import Path
 
@@ -88,7 +87,14 @@ def fuzz_pair(examples, **strategies):
     return make
 
 
-_FOLDER = Path(tempfile.mkdtemp(prefix="wmr-fuzz-"))
+_FOLDER = Path()  # the module's folder for the files it writes (``_folder``)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _folder(tmp_path_factory):
+    """A folder of pytest's, which it removes with its old runs' (not one per import)."""
+    global _FOLDER
+    _FOLDER = tmp_path_factory.mktemp("fuzz-files")
 
 
 def _robot_fields():
