@@ -346,8 +346,11 @@ def batched(single: Callable) -> Callable:
     """Lift ``single(ref, params, init, robot, dt, options)`` to batched inputs.
 
     A leading axis on ``ref``/``init`` or any leaf of ``params``/``robot`` is
-    mapped over; the others are shared.
+    mapped over; the others are shared. ``single`` is traced once per run's
+    shapes and options, not again for each batch size.
     """
+
+    one = jax.jit(single, static_argnums=5)
 
     def run(ref, params, init, robot, dt, options):
         in_axes = (
@@ -357,7 +360,7 @@ def batched(single: Callable) -> Callable:
             batch_axes(robot, 0),
             None,
         )
-        return jax.vmap(lambda *a: single(*a, options), in_axes=in_axes)(
+        return jax.vmap(lambda *a: one(*a, options), in_axes=in_axes)(
             ref, params, init, robot, dt
         )
 

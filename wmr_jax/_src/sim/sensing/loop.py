@@ -101,6 +101,8 @@ def batched_disturbed(single):
     ``params``, ``estimate`` and ``robot`` leaves may carry it too.
     """
 
+    one = jax.jit(single, static_argnums=6)  # traced once per run's shapes (``loops.batched``)
+
     def run(spec, params, estimate, init, robot, dt, options):
         spec_axes = type(spec)(0, 0, 0, 0 if jnp.ndim(spec.delay) == 1 else None)
         in_axes = (
@@ -111,7 +113,7 @@ def batched_disturbed(single):
             loops.batch_axes(robot, 0),
             None,
         )
-        return jax.vmap(lambda *a: single(*a, options), in_axes=in_axes)(
+        return jax.vmap(lambda *a: one(*a, options), in_axes=in_axes)(
             spec, params, estimate, init, robot, dt
         )
 
