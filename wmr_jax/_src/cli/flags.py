@@ -62,11 +62,12 @@ def output_dir(flag: str, text: str) -> Path:
     return io.writable_path(f"{flag} {text!r}", text, folder=True)
 
 
-def output_file(flag: str, text: str, ending: str | None = None) -> Path:
-    """A file path the command may write to, ending in ``ending`` if given, or say why not."""
+def output_file(flag: str, text: str, *endings: str) -> Path:
+    """A file path the command may write to, ending in one of ``endings`` if any, or say why not."""
     path = io.writable_path(f"{flag} {text!r}", text, folder=False)
-    if ending is not None and path.suffix.lower() != ending:
-        raise ValueError(f"{flag} {text!r} is not allowed; allowed: a path ending in {ending}")
+    if endings and path.suffix.lower() not in endings:
+        allowed = ", ".join(endings)
+        raise ValueError(f"{flag} {text!r} is not allowed; allowed: a path ending in {allowed}")
     return path
 
 
@@ -74,14 +75,7 @@ def image_file(flag: str, text: str) -> Path:
     """A writable path whose ending names an image format matplotlib can save."""
     from wmr_jax._src.report.figures import image_formats
 
-    path = output_file(flag, text)
-    formats = image_formats()
-    if path.suffix.lower().lstrip(".") not in formats:
-        raise ValueError(
-            f"{flag} {text!r} is not allowed; allowed: a path ending in "
-            + ", ".join(f".{f}" for f in formats)
-        )
-    return path
+    return output_file(flag, text, *(f".{f}" for f in image_formats()))
 
 
 def choice(flag: str, text: str, allowed: Sequence[str]) -> str:
