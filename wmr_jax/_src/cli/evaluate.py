@@ -10,7 +10,6 @@ from typing import Any
 from wmr_jax._src.cli import flags
 
 _CONDITIONS = ("nominal", "latency", "noise", "both")
-_REF_SUFFIXES = (".npy", ".csv")
 # The runs keep their noise for the whole horizon (3 floats per reference and
 # period): this many reference-periods are ~5 GB, as `robustness --runs 10^6`.
 _MAX_SAMPLES = 2 * 10**8
@@ -174,16 +173,11 @@ def _read_npy(path: str) -> tuple[Any, list[str] | None]:
 
     try:
         with open(path, "rb") as f:
-            start = f.read(len(_NPY_MAGIC))
-            if start != _NPY_MAGIC:  # NumPy would take any other file for a pickle
-                raise _refs_error(
-                    path, "it is no .npy array (empty, another kind of file, or damaged)"
-                )
-            f.seek(0)
-            arr = np.load(f, allow_pickle=False)
+            arr = None  # NumPy would take any file but a .npy for a pickle
+            if f.read(len(_NPY_MAGIC)) == _NPY_MAGIC:
+                f.seek(0)
+                arr = np.load(f, allow_pickle=False)
     except ValueError as err:
-        if str(err).startswith("--refs "):
-            raise
         if "allow_pickle" in str(err):
             raise _refs_error(
                 path, "it holds Python objects (a pickle); allowed: an array of numbers"
@@ -191,6 +185,8 @@ def _read_npy(path: str) -> tuple[Any, list[str] | None]:
         raise _unreadable(path, err) from None
     except (OSError, EOFError) as err:  # unreadable, truncated
         raise _unreadable(path, err) from None
+    if arr is None:
+        raise _refs_error(path, "it is no .npy array (empty, another kind of file, or damaged)")
     if arr.dtype.kind not in "iuf":
         raise _refs_error(path, f"its dtype is {arr.dtype}; allowed: real numbers")
     return arr.astype(float), None
@@ -209,11 +205,11 @@ def load_refs(path: str, *, x64: bool = True) -> tuple[Any, list[str]]:
     file = Path(path)
     if file.is_dir():
         raise _refs_error(path, "it is a folder; allowed: a .npy or .csv file")
-    if file.suffix.lower() not in _REF_SUFFIXES:
+    reader = {".npy": _read_npy, ".csv": _read_csv}.get(file.suffix.lower())
+    if reader is None:
         raise ValueError(f"--refs {path!r} is not allowed; allowed: a file ending in .npy or .csv")
     if not file.exists():
-        raise ValueError(f"--refs {path!r} cannot be read: there is no such file")
-    reader = _read_npy if file.suffix.lower() == ".npy" else _read_csv
+        raise _unreadable(path, "there is no such file")
     refs, labels = reader(path)
     if refs.ndim == 1 and refs.shape[0] == 3:
         refs = refs[None, :]
@@ -242,7 +238,7 @@ def load_refs(path: str, *, x64: bool = True) -> tuple[Any, list[str]]:
     return refs, labels
 
 
-def unit_warnings(path: str, refs: Any, reach: float | None = None) -> list[str]:
+def unit_warnings(path: str, refs: Any, reach: float) -> list[str]:
     """Warnings for references that look like metres or degrees (legal, so not refused).
 
     ``reach``: the farthest a robot can drive within the horizon, cm (``V_max`` times
@@ -260,7 +256,7 @@ def unit_warnings(path: str, refs: Any, reach: float | None = None) -> list[str]
             f"(the farthest {float(distance.max()):.3g} cm), inside the arrival tolerance; the "
             "columns are read as x cm, y cm, theta rad (a file in metres needs x and y times 100)"
         )
-    if reach is not None and float(distance.min()) > reach:
+    if float(distance.min()) > reach:
         out.append(
             f"--refs {path!r}: every reference lies beyond {reach:.4g} cm, as far as V_max "
             f"drives within the horizon (the nearest {float(distance.min()):.4g} cm): a robot "
@@ -340,30 +336,34 @@ def _seconds(value: float | None) -> str:
 _SHOWN_FAILURES = 5
 
 
-def _failed(result: dict[str, Any], labels: list[str] | None) -> str:
+def _failed(result: dict[str, Any], labels: list[str]) -> str:
     """Where the references that did not arrive are in ``--refs``; the first few named."""
     failed = [i for i, r in enumerate(result["per_reference"]) if not r["success"]]
     if not failed:
         return "none"
-    names = [labels[i] if labels else f"row {i} (from 0)" for i in failed[:_SHOWN_FAILURES]]
+    names = [labels[i] for i in failed[:_SHOWN_FAILURES]]
     more = len(failed) - len(names)
     return ", ".join(names) + (f" and {more} more (--per-ref lists them all)" if more else "")
 
 
-def summary_rows(result: dict[str, Any], labels: list[str] | None = None) -> list[dict[str, str]]:
+def summary_rows(result: dict[str, Any], labels: list[str]) -> list[dict[str, str]]:
     """The printed table of a result: one quantity a row; ``labels`` name the references."""
     from wmr_jax._src.model.robots import describe_robot, robot_from_values
 
+    mismatch = result["mismatch"]
+    off = f"{100 * mismatch:.3g} %"
+    identified = result["condition"] == "identified"  # fitted wheel scales, not a ± bound
+    wheels = ("wheel-radius mismatch", f"±{100 * mismatch:g} %")
     robot = base = describe_robot(robot_from_values(result["robot"], "robot"))
     if result.get("robot_file"):
         robot += f", from {result['robot_file']}"
-    if result["condition"] == "identified":
+    if identified:
         robot = (
             f"runs on the robot identified in {result.get('robot_file', 'identified.json')} "
             f"(wheel scales, half-track, wheel lag, latency, tracker noise); the loop believes "
             f"its base: {base}"
         )
-    mismatch = result["mismatch"]
+        wheels = ("wheel scales", f"the identified ones (up to {off} off the model)")
     versus = "none arrived"
     if result["vs_turn_drive_turn"] is not None:
         versus = (
@@ -378,11 +378,10 @@ def summary_rows(result: dict[str, Any], labels: list[str] | None = None) -> lis
         peak += " at the rims, wheel-radius mismatch included"
         if result["peak_wheel_speed_ok"]:
             bound = result["v_max"] * (1.0 + mismatch)
-            off = f"{100 * mismatch:.3g} %"
             within += (
                 f" (the identified wheels, up to {off} off the model, turn that into up to "
                 f"{bound:.4g} cm/s at their rims)"
-                if result["condition"] == "identified"  # the fitted scales, not a ± bound
+                if identified
                 else f" (a wheel up to {off} larger than modelled turns that into up to "
                 f"{bound:.4g} cm/s at its rim)"
             )
@@ -398,7 +397,7 @@ def summary_rows(result: dict[str, Any], labels: list[str] | None = None) -> lis
         ("robot", robot),
         ("references (n)", str(result["n"])),
         ("condition", result["condition"]),
-        _mismatch_row(result),
+        wheels,
         ("seed", str(result["seed"])),
         ("horizon", f"{result['horizon_s']:g} s"),
         ("velocity loop", result["velocity"]),
@@ -441,14 +440,6 @@ def hint(result: dict[str, Any], args: Any) -> str:
         f"hint: {why}; wmr-jax tune --robust{robot} --out DIR tunes gains and an estimator "
         f"for it (docs/robustness.md), {after}"
     )
-
-
-def _mismatch_row(result: dict[str, Any]) -> tuple[str, str]:
-    """The wheels' row: a ± bound drawn per run, or an identified robot's fitted scales."""
-    if result["condition"] == "identified":
-        off = f"{100 * result['mismatch']:.3g} %"
-        return ("wheel scales", f"the identified ones (up to {off} off the model)")
-    return ("wheel-radius mismatch", f"±{100 * result['mismatch']:g} %")
 
 
 def per_ref_csv(result: dict[str, Any], labels: list[str]) -> str:
