@@ -195,47 +195,49 @@ def robustness_figure(rows: Sequence[dict[str, Any]], *, title: str) -> Any:
     names = list(dict.fromkeys(r["controller"] for r in rows))
     conditions = list(dict.fromkeys(r["condition"] for r in rows))
     first = [r for r in rows if (r["controller"], r["condition"]) == (names[0], conditions[0])]
+    lines = []
+    for c, name in enumerate(names):
+        for i, label in enumerate(conditions):
+            sel = [r for r in rows if r["controller"] == name and r["condition"] == label]
+            style = {"linestyle": _STYLES[i % len(_STYLES)], "color": plt.get_cmap("tab10")(c)}
+            lines.append((f"{name}, {label}", style, sel))
+    degrees = ", ".join(f"{r['noise theta deg']:g}" for r in first)
+    x_axis = f"measurement noise σ_xy [cm] (σ_θ = {degrees}°)"
+    limits = ((-0.02, 1.02), (0.0, _horizon_of(rows)))
+    return _lines_figure(rows, lines, "median arrival s", x_axis, limits, title, (0.75, 7), 4.2)
+
+
+def _lines_figure(rows, lines, arrival, x_axis, limits, title, legend, height) -> Any:
+    """Success and ``arrival`` against σ_xy, one line per ``(label, style, rows)`` of ``lines``.
+
+    ``limits``: each panel's y range; ``legend``: ``(right, fontsize)``, the axes fitted
+    left of ``right`` (a share of the width), the legend, x mark included, right of it.
+    """
 
     def draw(fig, axes):
-        lines = []
-        for c, name in enumerate(names):
-            for i, label in enumerate(conditions):
-                sel = [r for r in rows if r["controller"] == name and r["condition"] == label]
-                style = {"linestyle": _STYLES[i % len(_STYLES)], "color": plt.get_cmap("tab10")(c)}
-                lines.append((f"{name}, {label}", style, sel))
-        degrees = ", ".join(f"{r['noise theta deg']:g}" for r in first)
-        _draw_lines(axes, lines, "median arrival s", f"(σ_θ = {degrees}°)", "measurement noise")
-        axes[0].set_ylim(-0.02, 1.02)
-        axes[1].set_ylim(0.0, _horizon_of(rows))
+        for label, style, sel in lines:
+            x = [r["noise xy cm"] for r in sel]
+            late = _late_points(sel)
+            _plot_marked(axes[0], x, [r["success"] for r in sel], late, label=label, **style)
+            # Over the runs that arrive only; absent (not drawn) where none does.
+            _plot_marked(axes[1], x, [_arrived_time(r, arrival) for r in sel], late, **style)
+        shown = f"{arrival.removesuffix(' s')} of the runs that arrive [s]"
+        for ax, label, (low, high) in zip(axes, ("success rate", shown), limits, strict=True):
+            ax.set_xlabel(x_axis)
+            ax.set_ylabel(label)
+            ax.grid(alpha=0.3)
+            ax.set_ylim(low, high)
         fig.suptitle(title, fontsize=9)
-        _legend_outside(fig, axes, rows, 0.75, fontsize=7)
+        right, fontsize = legend
+        fig.tight_layout(rect=(0, 0, right, 1))
+        handles, labels = axes[0].get_legend_handles_labels()
+        if _late_points(rows):
+            handles.append(plt.Line2D([], [], color="grey", marker="x", linestyle="none"))
+            labels.append("x: half or more of the\nsuccesses only settle\nat the horizon")
+        outside = {"loc": "center left", "bbox_to_anchor": (right, 0.5)}
+        fig.legend(handles, labels, fontsize=fontsize, **outside)
 
-    return built(draw, 1, 2, figsize=(11, 4.2))
-
-
-def _draw_lines(axes, lines, arrival: str, sigma_theta: str, noise: str) -> None:
-    """Success and ``arrival`` against σ_xy, one line per ``(label, style, rows)`` of ``lines``."""
-    for label, style, sel in lines:
-        x = [r["noise xy cm"] for r in sel]
-        late = _late_points(sel)
-        _plot_marked(axes[0], x, [r["success"] for r in sel], late, label=label, **style)
-        # Over the runs that arrive only; absent (not drawn) where none does.
-        _plot_marked(axes[1], x, [_arrived_time(r, arrival) for r in sel], late, **style)
-    shown = f"{arrival.removesuffix(' s')} of the runs that arrive [s]"
-    for ax, label in zip(axes, ("success rate", shown), strict=True):
-        ax.set_xlabel(f"{noise} σ_xy [cm] {sigma_theta}")
-        ax.set_ylabel(label)
-        ax.grid(alpha=0.3)
-
-
-def _legend_outside(fig, axes, rows, right: float, fontsize: int) -> None:
-    """Fit the axes left of ``right`` (a share of the width), the legend, x mark included, right."""
-    fig.tight_layout(rect=(0, 0, right, 1))
-    handles, labels = axes[0].get_legend_handles_labels()
-    if _late_points(rows):
-        handles.append(plt.Line2D([], [], color="grey", marker="x", linestyle="none"))
-        labels.append("x: half or more of the\nsuccesses only settle\nat the horizon")
-    fig.legend(handles, labels, fontsize=fontsize, loc="center left", bbox_to_anchor=(right, 0.5))
+    return built(draw, 1, 2, figsize=(11, height))
 
 
 def _late_points(rows: Sequence[dict[str, Any]]) -> list[int]:
@@ -372,25 +374,16 @@ def noise_curve_figure(rows: Sequence[dict[str, Any]]) -> Any:
     """Draw success and mean arrival against σ_xy, one line per loop (legend outside)."""
     rows = require_rows("rows", rows)
     markdown_table(rows, ["gains", "feedback", "noise xy cm", "success", "mean arrival s"])
-    names = list(dict.fromkeys(r["gains"] for r in rows))
-
-    def draw(fig, axes):
-        lines = []
-        for j, name in enumerate(names):
-            mine = sorted((r for r in rows if r["gains"] == name), key=lambda r: r["noise xy cm"])
-            style = "--" if mine[0]["feedback"] == "raw" else "-"
-            colour = plt.get_cmap("tab10")(j)
-            lines.append(
-                (f"{name} ({mine[0]['feedback']})", {"linestyle": style, "color": colour}, mine)
-            )
-        _draw_lines(axes, lines, "mean arrival s", "(σ_θ = 2°/cm)", "pose noise")
-        axes[0].set_ylim(0, 1.05)
-        axes[1].set_ylim(bottom=0)
-        fig.suptitle(
-            f"Noise-level curve: ±{100 * float(rows[0]['mismatch']):g} % wheel radius per run, "
-            "hard law, ideal loop; dashed: raw feedback, solid: estimator",
-            fontsize=9,
-        )
-        _legend_outside(fig, axes, rows, 0.78, fontsize=8)
-
-    return built(draw, 1, 2, figsize=(11, 4.0))
+    lines = []
+    for j, name in enumerate(dict.fromkeys(r["gains"] for r in rows)):
+        mine = sorted((r for r in rows if r["gains"] == name), key=lambda r: r["noise xy cm"])
+        style = {"linestyle": "--" if mine[0]["feedback"] == "raw" else "-"}
+        style["color"] = plt.get_cmap("tab10")(j)
+        lines.append((f"{name} ({mine[0]['feedback']})", style, mine))
+    title = (
+        f"Noise-level curve: ±{100 * float(rows[0]['mismatch']):g} % wheel radius per run, "
+        "hard law, ideal loop; dashed: raw feedback, solid: estimator"
+    )
+    x_axis = "pose noise σ_xy [cm] (σ_θ = 2°/cm)"
+    limits = ((0, 1.05), (0, None))
+    return _lines_figure(rows, lines, "mean arrival s", x_axis, limits, title, (0.78, 8), 4.0)
