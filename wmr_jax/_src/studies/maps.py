@@ -340,9 +340,8 @@ def _horizon(horizon: float | None, robot: Robot) -> float:
     """The horizon asked for, checked, or the robot's default (``study_horizon``)."""
     if horizon is None:
         return study_horizon(robot)
-    horizon = checks.check_number("horizon", horizon, unit="s")
-    horizon_steps(DEFAULT_DT, horizon)  # at least a period, at most MAX_STEPS of them
-    return horizon
+    horizon_steps(DEFAULT_DT, horizon)  # a number of s, at least a period, at most MAX_STEPS
+    return float(horizon)
 
 
 def _metrics(refs, runs, robot, horizon, velocity, chunk, progress, x64, per_run=None):

@@ -312,8 +312,6 @@ def robustness_study(
     """
     seed = checks.check_int("seed", seed, 0, 2**32 - 1)
     names = controllers.controller_names(controller_names)
-    resolve_estimator(estimator)  # refused before any run
-    study_steps(robot, horizon, DEFAULT_DT)  # and the robot and the horizon
     keys = jax.random.split(jax.random.PRNGKey(seed), len(ROBUSTNESS_CONDITIONS))
     shared = {"n_runs": n_runs, "noise_xy": noise_xy, "noise_deg": noise_deg, "x64": x64}
     shared.update(velocity=velocity, estimator=estimator, robot=robot, horizon=horizon)
