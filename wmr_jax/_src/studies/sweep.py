@@ -265,9 +265,7 @@ def _run_chunks(
     for i in range(job.chunks):
         chunk = _chunk_inputs(job, i)
         digest = None if store is None else _chunk_digest(job, chunk)
-        loaded = None
-        if store is not None and resume:
-            loaded = store.load(i, digest, chunk.hi - chunk.lo, job)
+        loaded = store.load(i, digest, chunk.hi - chunk.lo, job) if store and resume else None
         if loaded is not None:
             keep(chunk, digest, loaded, computed=False)
             continue
