@@ -258,13 +258,13 @@ def test_an_interrupted_compare_keeps_its_finished_seeds_and_resumes(tmp_path, m
     argv = ["tune", "--out", str(out), "--compare", "--iters", "1"]
     assert main(argv) == 130
     assert "interrupted (the same command with --resume keeps" in capsys.readouterr().err
-    kept = json.loads((out / "compare.json").read_text())
+    kept = json.loads((out / "compare.json").read_text())["rows"]
     assert len(kept) == 12 and {r["problem"] for r in kept} == {"fixed", "schedule"}
     calls.clear()
     calls.append(None)  # the next call is the 2nd: not interrupted
     assert main([*argv, "--resume"]) == 0
     assert calls[1:] == [("schedule", 1), ("schedule", 2)]
-    assert len(json.loads((out / "compare.json").read_text())) == 18
+    assert len(json.loads((out / "compare.json").read_text())["rows"]) == 18
     assert "fixed seed 0: kept from" in capsys.readouterr().out
     # Other settings are refused, naming the difference.
     assert main(["tune", "--out", str(out), "--compare", "--iters", "2", "--resume"]) == 2
@@ -295,7 +295,7 @@ def test_compare_with_schedule_compares_that_schedule_alone(tmp_path, monkeypatc
     # Resumed as another comparison, it names what differs (it raised AttributeError).
     assert main(["tune", "--out", str(tmp_path), "--compare", "--resume"]) == 2
     err = capsys.readouterr().err
-    assert "fixed: not compared there; schedule: knots = 3 there, 10 now" in err, err
+    assert "configs.fixed only now; configs.schedule.knots = 3 there, 10 now" in err, err
 
 
 def test_tune_robust_writes_its_gains_before_judging_them(tmp_path, monkeypatch):

@@ -249,18 +249,29 @@ def _whole(problem="fixed", seed=0, **changes):
     return [_row(problem, seed, m, **changes) for m in ("gradient", "cma-es", "random search")]
 
 
-def _as_written(rows):
-    """``rows`` as ``tune --compare`` writes them: each object sealed with its checksum."""
-    if not isinstance(rows, list):
-        return rows
-    return [io.sealed(row) if isinstance(row, dict) else row for row in rows]
+def _first_run_then_stop(calls):
+    """A stand-in ``compare`` whose first run returns its rows; the next is interrupted."""
+
+    def fake(*, seeds, problems, configs, progress, robot=None):
+        calls.append((problems[0], seeds[0]))
+        if len(calls) > 1:
+            raise KeyboardInterrupt
+        return _whole(problems[0], seeds[0])
+
+    return fake
+
+
+def _write_rows(record, rows):
+    """``rows`` into ``record`` beside its settings, sealed as ``tune --compare`` writes them."""
+    settings = json.loads(record.read_text())["settings"]
+    record.write_text(json.dumps(io.sealed({"settings": settings, "rows": rows})))
 
 
 @pytest.mark.parametrize(
     ("rows", "message"),
     [
-        ({"rows": []}, r"compare.json is a JSON object; allowed: an array of comparison rows"),
-        ([["fixed", 0, "gradient"]], r"compare.json row 0 has no checksum"),
+        ({"rows": []}, r"compare.json rows are a JSON object; allowed: an array of comparison"),
+        ([["fixed", 0, "gradient"]], r"compare.json row 0 is a JSON array; allowed: an object"),
         (
             [{"problem": "fixed", "seed": 0, "method": "gradient"}],
             r"row 0 has no 'mean_arrival'",
@@ -282,16 +293,11 @@ def test_resume_refuses_a_malformed_compare_json_before_any_work(
     from wmr_jax._src.tuning import compare as compare_module
 
     calls = []
-
-    def fake(**kwargs):
-        calls.append(kwargs)
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(compare_module, "compare", fake)
+    monkeypatch.setattr(compare_module, "compare", _first_run_then_stop(calls))
     argv = ["tune", "--out", str(tmp_path), "--compare", "--iters", "1"]
-    assert main(argv) == 130  # writes compare_settings.json, then stops
+    assert main(argv) == 130  # writes compare.json after its first run, then stops
     capsys.readouterr()
-    (tmp_path / "compare.json").write_text(json.dumps(_as_written(rows)))
+    _write_rows(tmp_path / "compare.json", rows)
     calls.clear()
     assert main([*argv, "--resume"]) == 2
     err = capsys.readouterr().err
@@ -302,16 +308,14 @@ def test_resume_refuses_a_malformed_compare_json_before_any_work(
 
 
 @pytest.mark.parametrize(
-    ("settings", "record", "message"),
+    ("record", "message"),
     [
-        ("[1, 2]", "[]", r"compare_settings.json is a JSON array; allowed: an object"),
-        (None, "[{", r"compare.json cannot be read"),
-        (None, '[{"problem": "fixed", "problem": "x"}]', r"the key 'problem' is given twice"),
+        ("[1, 2]", r"compare.json holds no comparison settings"),
+        ("[{", r"compare.json cannot be read"),
+        ('[{"problem": "fixed", "problem": "x"}]', r"the key 'problem' is given twice"),
     ],
 )
-def test_resume_refuses_unreadable_comparison_files(
-    tmp_path, monkeypatch, capsys, settings, record, message
-):
+def test_resume_refuses_unreadable_comparison_files(tmp_path, monkeypatch, capsys, record, message):
     from wmr_jax._src.tuning import compare as compare_module
 
     def fake(**kwargs):
@@ -321,8 +325,6 @@ def test_resume_refuses_unreadable_comparison_files(
     argv = ["tune", "--out", str(tmp_path), "--compare", "--iters", "1"]
     assert main(argv) == 130
     capsys.readouterr()
-    if settings is not None:
-        (tmp_path / "compare_settings.json").write_text(settings)
     (tmp_path / "compare.json").write_text(record)
     assert main([*argv, "--resume"]) == 2
     err = capsys.readouterr().err
@@ -333,17 +335,14 @@ def test_resume_keeps_whole_rows_of_runs_that_never_arrived(tmp_path, monkeypatc
     """Rows read back with "inf" and null ratios are kept, and the table says none arrived."""
     from wmr_jax._src.tuning import compare as compare_module
 
-    def stop(**kwargs):
-        raise KeyboardInterrupt
-
     def fake(*, seeds, problems, configs, progress, robot=None):
         return _whole(problems[0], seeds[0])
 
-    monkeypatch.setattr(compare_module, "compare", stop)
+    monkeypatch.setattr(compare_module, "compare", _first_run_then_stop([]))
     argv = ["tune", "--out", str(tmp_path), "--compare", "--schedule", "--iters", "1"]
-    assert main(argv) == 130  # writes compare_settings.json, then stops
+    assert main(argv) == 130  # writes compare.json after its first run, then stops
     kept = _whole("schedule", 0, mean_arrival="inf", vs_lower_bound=None)
-    (tmp_path / "compare.json").write_text(json.dumps(_as_written(kept)))
+    _write_rows(tmp_path / "compare.json", kept)
     monkeypatch.setattr(compare_module, "compare", fake)
     assert main([*argv, "--resume"]) == 0
     printed = capsys.readouterr().out
@@ -354,10 +353,10 @@ def test_resume_keeps_whole_rows_of_runs_that_never_arrived(tmp_path, monkeypatc
 @pytest.mark.parametrize(
     ("edit", "message"),
     [
-        (lambda rows: rows[1].update(mean_arrival=0.45), r"compare.json row 1 was changed after"),
-        (lambda rows: rows[2].update(seed=1), r"compare.json row 2 was changed after"),
-        (lambda rows: rows[0].pop("sha256"), r"compare.json row 0 has no checksum"),
-        (lambda rows: rows.reverse(), None),  # order, layout and key order are not content
+        (lambda saved: saved["rows"][1].update(mean_arrival=0.45), r"compare.json was changed"),
+        (lambda saved: saved["rows"][2].update(seed=1), r"compare.json was changed after"),
+        (lambda saved: saved.pop("sha256"), r"compare.json has no checksum"),
+        (lambda saved: None, None),  # layout and key order are not content
     ],
 )
 def test_resume_keeps_no_row_whose_values_changed_after_they_were_written(
@@ -377,10 +376,10 @@ def test_resume_keeps_no_row_whose_values_changed_after_they_were_written(
     argv = ["tune", "--out", str(tmp_path), "--compare", "--schedule", "--iters", "1"]
     assert main(argv) == 130  # seed 0 written by the command, seed 1 interrupted
     record = tmp_path / "compare.json"
-    rows = json.loads(record.read_text())
-    assert [row["seed"] for row in rows] == [0, 0, 0] and all("sha256" in row for row in rows)
-    edit(rows)
-    record.write_text(json.dumps(rows, indent=4, sort_keys=True))
+    saved = json.loads(record.read_text())
+    assert [row["seed"] for row in saved["rows"]] == [0, 0, 0] and "sha256" in saved
+    edit(saved)
+    record.write_text(json.dumps(saved, indent=4, sort_keys=True))
     capsys.readouterr()
     calls.clear()
     interrupt[0] = False
@@ -455,7 +454,7 @@ def test_editing_only_the_metadata_of_a_saved_file_is_detected(tmp_path, monkeyp
 
 
 def test_a_new_comparison_leaves_no_rows_of_an_earlier_one_to_resume(tmp_path, monkeypatch, capsys):
-    """Rows record no settings of their own: a new comparison's settings must not sit beside them.
+    """A new comparison removes an earlier one's files before its first run ends.
 
     A comparison of one horizon, then one of another cut before its first
     seed ended: ``--resume`` of the second kept the first's rows as its own.
@@ -480,5 +479,5 @@ def test_a_new_comparison_leaves_no_rows_of_an_earlier_one_to_resume(tmp_path, m
     assert main([*argv, "--horizon", "2", "--resume"]) == 0
     printed = capsys.readouterr().out
     assert "kept from" not in printed
-    rows = json.loads((tmp_path / "compare.json").read_text())
+    rows = json.loads((tmp_path / "compare.json").read_text())["rows"]
     assert {row["mean_arrival"] for row in rows} == {2.0}

@@ -307,7 +307,7 @@ def test_a_robust_comparison_of_the_wall_time_format_is_not_resumed(tmp_path, mo
     saved = json.loads(path.read_text())
     saved["settings"]["format"] = 2  # rows whose budgets were wall time
     path.write_text(json.dumps(saved))
-    with pytest.raises(ValueError, match=r"holds another comparison \(other format\)"):
+    with pytest.raises(ValueError, match=r"is of another comparison \(format = 2 there, 3 now\)"):
         robust_run.run_comparison(tmp_path, config, resume=True, progress=None)
 
 

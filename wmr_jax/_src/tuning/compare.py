@@ -18,14 +18,13 @@ import jax
 from wmr_jax._src import io, provenance
 from wmr_jax._src.checks import check_callable, check_int
 from wmr_jax._src.model.params import Robot, validate_one_robot
-from wmr_jax._src.model.robots import describe_robot, robot_from_values, robot_json
+from wmr_jax._src.model.robots import robot_json
 from wmr_jax._src.sim.poses import sample_poses
 from wmr_jax._src.studies.optimal import time_bounds
 from wmr_jax._src.studies.robustness import named_warnings
 from wmr_jax._src.tuning.evaluation import evaluate, held_out_poses, poses_digest, report_ratios
 from wmr_jax._src.tuning.problems import get_problem
 from wmr_jax._src.tuning.search import _evosax_cma_es, cma_es_search, random_search
-from wmr_jax._src.tuning.trainer import differences
 from wmr_jax._src.tuning.training import TuneConfig, train
 
 # The methods compared, in the order of each (problem, seed)'s rows.
@@ -163,12 +162,25 @@ def compare(
     return rows
 
 
-def minimised(config: TuneConfig, method: str) -> str:
-    """What ``method`` minimises in ``compare`` of ``config``, in words."""
+def minimised(config: Any, method: str) -> str:
+    """What ``method`` minimises in a comparison of ``config`` (a tuning or robust config)."""
+    robust = hasattr(config, "search_poses")
+    if method == "gradient" and robust:
+        return (
+            f"relaxed surrogate: soft arrival of the smooth law (temperature "
+            f"{config.temperature_start:g} to {config.temperature_end:g}), mean over "
+            f"{config.poses} + {config.nonideal_poses} fresh poses per iteration under "
+            "conditions sampled anew (noise up to twice the sensor's, latency, mismatch)"
+        )
     if method == "gradient":
         return (
             "relaxed surrogate: soft arrival of the smooth law (annealed temperature) "
             f"on {config.poses} fresh training poses per iteration"
+        )
+    if robust:
+        return (
+            "robust_score: hard law, mean arrival (failures at twice the horizon) over the "
+            f"5 standard conditions on {config.search_poses} fixed search poses, one draw"
         )
     return (
         "hard law: mean arrival (failures at twice the horizon) on "
@@ -190,7 +202,7 @@ def saved_rows(
         return ValueError(f"{where} {text}")
 
     if not isinstance(rows, list):
-        raise bad(f"is a JSON {_json_type(rows)}; allowed: an array of comparison rows")
+        raise bad(f"rows are a JSON {_json_type(rows)}; allowed: an array of comparison rows")
     runs: dict[tuple[str, int], list[str]] = {}
     for i, row in enumerate(rows):
         if not isinstance(row, dict):
@@ -254,9 +266,7 @@ def run_comparison(
 ) -> list[dict[str, Any]]:
     """``compare`` for seeds 0–2 of each problem in ``configs``, into ``out/compare.{json,md}``.
 
-    Each (problem, seed) is written, sealed with a checksum, once its three
-    methods are done, beside ``compare_settings.json``: with ``resume`` an
-    interrupted comparison of the same settings, robot and code keeps them.
+    Each (problem, seed) is kept as ``resumable`` keeps a run.
 
     Returns:
         All rows, kept and new.
@@ -271,87 +281,93 @@ def run_comparison(
         configs={name: config.as_dict() for name, config in configs.items()},
     )
     problems = {name: config.space.dim for name, config in configs.items()}
-    rows = _compare_rows(out, settings, resume, problems)
-    done = {(row["problem"], row["seed"]) for row in rows}
-    for name, config in configs.items():
-        for seed in COMPARE_SEEDS:
-            if (name, seed) in done:
-                if progress is not None:
-                    progress(f"{name} seed {seed}: kept from {out / 'compare.json'}")
-                continue
-            rows += compare(
-                seeds=(seed,), problems=(name,), configs={name: config}, robot=robot,
-                progress=progress,
-            )  # fmt: skip
-            io.atomic_write_json(out / "compare.json", [io.sealed(row) for row in rows])
-    io.atomic_write_text(out / "compare.md", comparison_table(rows))
+
+    def run(name: str, seed: int) -> list[dict[str, Any]]:
+        return compare(
+            seeds=(seed,), problems=(name,), configs={name: configs[name]}, robot=robot,
+            progress=progress,
+        )  # fmt: skip
+
+    return resumable(
+        out / "compare.json",
+        settings,
+        {f"{name} seed {seed}": (name, seed) for name in configs for seed in COMPARE_SEEDS},
+        run,
+        run_of=lambda row: f"{row['problem']} seed {row['seed']}",
+        check=lambda rows, where: saved_rows(rows, where, problems, COMPARE_SEEDS),
+        table=comparison_table,
+        resume=resume,
+        progress=progress,
+    )
+
+
+def resumable(
+    path: Path,
+    settings: dict[str, Any],
+    runs: dict[str, Any],
+    run: Callable[..., list[dict[str, Any]]],
+    *,
+    run_of: Callable[[dict[str, Any]], str],
+    check: Callable[[Any, str], list[dict[str, Any]]],
+    table: Callable[[list[dict[str, Any]]], str],
+    resume: bool,
+    progress: Callable[[str], Any] | None,
+) -> list[dict[str, Any]]:
+    """The rows of ``run(*runs[name])`` for each name in ``runs``, into ``path`` and its ``.md``.
+
+    ``path`` holds ``{"settings", "rows"}`` sealed with a checksum, written
+    after each run. With ``resume``, the runs of an interrupted comparison
+    of the same ``settings`` (robot and code included) are kept, checked
+    whole before any run (``check(rows, where)``); without, an earlier
+    comparison's files are removed first. ``run_of(row)``: the name of the run of ``row``.
+    """
+    say = progress if progress is not None else (lambda _line: None)
+    if resume and path.exists():
+        rows = _kept_rows(path, settings, check)
+    else:
+        rows = []
+        for stale in (path, path.with_suffix(".md")):
+            stale.unlink(missing_ok=True)
+    done = {run_of(row) for row in rows}
+    for name, args in runs.items():
+        if name in done:
+            say(f"{name}: kept from {path}")
+            continue
+        rows += run(*args)
+        io.atomic_write_json(path, io.sealed({"settings": settings, "rows": rows}))
+    io.atomic_write_text(path.with_suffix(".md"), table(rows))
     return rows
 
 
-def _compare_rows(
-    out: Path, settings: dict[str, Any], resume: bool, problems: dict[str, int]
-) -> list[dict[str, Any]]:
-    """The rows of ``out/compare.json`` to keep (``--resume``), checked whole before any run."""
-    record, manifest = out / "compare.json", out / "compare_settings.json"
-    if not (resume and record.exists()):
-        # A new comparison: an earlier one's rows, which record no settings of
-        # their own, must not stay beside these settings for a --resume to keep.
-        for stale in (record, out / "compare.md"):
-            stale.unlink(missing_ok=True)
-        io.atomic_write_json(manifest, settings)
-        return []
+def _kept_rows(path: Path, settings: dict[str, Any], check: Callable) -> list[dict[str, Any]]:
+    """The rows of a saved comparison of ``settings`` at ``path``, else say why none are kept."""
     advice = "allowed: the same settings, or a fresh --out"
-    texts = {}
-    for path in (manifest, record):
-        try:
-            texts[path] = json.loads(
-                path.read_text(encoding="utf-8"), object_pairs_hook=io.json_object_once
-            )
-        except (OSError, UnicodeDecodeError, ValueError, RecursionError) as err:
-            reason = " ".join(str(err).split())
-            raise ValueError(f"--resume: {path} cannot be read ({reason}); {advice}") from None
-    saved, rows = texts[manifest], texts[record]
-    if not isinstance(saved, dict):
-        raise ValueError(
-            f"--resume: {manifest} is a JSON {_json_type(saved)}; allowed: an object (the "
-            f"settings wmr-jax tune --compare writes), or a fresh --out"
-        )
-    if saved != settings:
-        diff = _settings_difference(saved, settings)
-        raise ValueError(f"--resume: {record} is of another comparison ({diff}); {advice}")
     try:
-        if isinstance(rows, list):  # values changed since they were written are not kept
-            rows = [io.unsealed(row, f"{record} row {i}") for i, row in enumerate(rows)]
-        return saved_rows(rows, str(record), problems, tuple(settings["seeds"]))
+        saved = json.loads(path.read_text(encoding="utf-8"), object_pairs_hook=io.json_object_once)
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as err:
+        reason = " ".join(str(err).split())
+        raise ValueError(f"--resume: {path} cannot be read ({reason}); {advice}") from None
+    there = saved.get("settings") if isinstance(saved, dict) else None
+    if not isinstance(there, dict):
+        raise ValueError(f"--resume: {path} holds no comparison settings; {advice}")
+    if there != settings:
+        diff = "; ".join(_differences(there, settings))
+        raise ValueError(f"--resume: {path} is of another comparison ({diff}); {advice}")
+    try:  # values changed since they were written are not kept
+        return check(io.unsealed(saved, str(path)).get("rows"), str(path))
     except ValueError as err:
         raise ValueError(f"--resume: {err}; remove it, or use a fresh --out") from None
 
 
-def _settings_difference(saved: dict[str, Any], now: dict[str, Any]) -> str:
-    """Name the problems whose settings differ between two ``compare_settings.json``."""
-    saved_configs = saved.get("configs", {})
-    saved_configs = saved_configs if isinstance(saved_configs, dict) else {}
-    parts = [
-        f"{name}: {differences({'config': saved_configs.get(name)}, {'config': config})}"
-        if name in saved_configs
-        else f"{name}: not compared there"
-        for name, config in now["configs"].items()
-        if saved_configs.get(name) != config
-    ]
-    parts += [f"{name}: not compared now" for name in saved_configs if name not in now["configs"]]
-    saved_robot = saved.get("robot")
-    if saved_robot != now.get("robot"):
-        parts.append(
-            f"robot: {_robot_text(saved_robot)} there, {_robot_text(now.get('robot'))} now"
-        )
-    if saved.get("code") != now.get("code"):
-        parts.append(f"computed by wmr_jax {saved.get('code')}, this is {now.get('code')}")
-    return "; ".join(parts) or "its format or seeds differ"
-
-
-def _robot_text(values: Any) -> str:
-    """A ``compare_settings.json`` robot in words."""
-    try:
-        return describe_robot(robot_from_values(values, "robot"))
-    except ValueError:
-        return "a damaged robot entry"
+def _differences(saved: dict[str, Any], now: dict[str, Any], at: str = "") -> list[str]:
+    """What differs between two comparisons' settings, each as ``key = … there, … now``."""
+    out = []
+    for key in dict.fromkeys([*now, *saved]):
+        name, there, here = f"{at}{key}", saved.get(key), now.get(key)
+        if key not in saved or key not in now:
+            out.append(f"{name} only {'now' if key in now else 'there'}")
+        elif isinstance(there, dict) and isinstance(here, dict):
+            out += _differences(there, here, f"{name}.")
+        elif there != here:
+            out.append(f"{name} = {there!r:.40} there, {here!r:.40} now")
+    return out

@@ -14,7 +14,12 @@ from wmr_jax._src import io
 from wmr_jax._src.model.params import Robot, validate_one_robot
 from wmr_jax._src.model.robots import robot_json
 from wmr_jax._src.tuning import robust, trainer
-from wmr_jax._src.tuning.compare import COMPARE_SEEDS, comparison_settings
+from wmr_jax._src.tuning.compare import (
+    COMPARE_SEEDS,
+    comparison_settings,
+    minimised,
+    resumable,
+)
 from wmr_jax._src.tuning.evaluation import EVAL_SEED, held_out_poses, poses_digest
 from wmr_jax._src.tuning.robust import RobustConfig
 from wmr_jax._src.tuning.run import CHECKPOINT_NAME, checkpointing, resumed_state
@@ -132,51 +137,6 @@ def finished(out: Path, config: RobustConfig, robot: Robot) -> bool:
     return (out / "tuned_gains.json").exists()
 
 
-def _kept_rows(path: Any, settings: dict[str, Any], resume: bool) -> list[dict[str, Any]]:
-    """The rows of an earlier ``--compare`` of the same settings (``--resume``), else none."""
-    if not resume or not path.exists():
-        return []
-    try:
-        saved = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as err:
-        raise ValueError(f"--resume: {str(path)!r} cannot be read: {err}") from None
-    if not isinstance(saved, dict) or saved.get("settings") != settings:
-        theirs = saved.get("settings") if isinstance(saved, dict) else None
-        theirs = theirs if isinstance(theirs, dict) else {}
-        keys = dict.fromkeys([*settings, *theirs])
-        differ = [k for k in keys if theirs.get(k) != settings.get(k)]
-        raise ValueError(
-            f"--resume: {str(path)!r} holds another comparison (other {', '.join(differ)}); "
-            "allowed: the same flags and code as the run that wrote it, or another --out"
-        )
-    try:  # values changed since they were written are not kept
-        saved = io.unsealed(saved, repr(str(path)))
-    except ValueError as err:
-        raise ValueError(f"--resume: {err}; allowed: remove it, or another --out") from None
-    rows = saved.get("rows")
-    good = isinstance(rows, list) and all(
-        isinstance(r, dict) and r.get("seed") in COMPARE_SEEDS for r in rows
-    )
-    if not good:
-        raise ValueError(f"--resume: {str(path)!r} has malformed rows; allowed: another --out")
-    return rows
-
-
-def minimised(config: RobustConfig, method: str) -> str:
-    """What ``method`` minimises in a robust comparison of ``config``, in words."""
-    if method == "gradient":
-        return (
-            f"relaxed surrogate: soft arrival of the smooth law (temperature "
-            f"{config.temperature_start:g} to {config.temperature_end:g}), mean over "
-            f"{config.poses} + {config.nonideal_poses} fresh poses per iteration under "
-            "conditions sampled anew (noise up to twice the sensor's, latency, mismatch)"
-        )
-    return (
-        "robust_score: hard law, mean arrival (failures at twice the horizon) over the "
-        f"5 standard conditions on {config.search_poses} fixed search poses, one draw"
-    )
-
-
 def compare_seed(config: RobustConfig, seed: int, robot: Robot) -> list[dict[str, Any]]:
     """One seed of the robust comparison: ``tune_robust`` with its searches, as rows.
 
@@ -230,29 +190,35 @@ def run_comparison(
 ) -> list[dict[str, Any]]:
     """Gradient, CMA-ES and random search at equal compute, seeds 0–2 (``compare_seed``).
 
-    Each seed's rows are written as it finishes: a resumed comparison keeps
-    only rows of the same settings, robot and code.
-
-    Returns:
-        The rows (kept and new), also written to ``robust_compare.json`` and ``.md``.
+    Returns the rows (kept and new), also written to ``robust_compare.{json,md}``,
+    each seed kept as ``compare.resumable`` keeps a run.
     """
     from wmr_jax._src.report.tuning import robust_comparison_table
 
     robot = validate_one_robot(robot, "tuning")
-    path = out / "robust_compare.json"
-    settings = comparison_settings(robot, config=dataclasses.asdict(config))
-    rows = _kept_rows(path, settings, resume)
-    if not resume:  # a new comparison: nothing of an earlier one stays beside its rows
-        for stale in (path, out / "robust_compare.md"):
-            stale.unlink(missing_ok=True)
-    done = {row["seed"] for row in rows}
     say = progress if progress is not None else (lambda _line: None)
-    for seed in COMPARE_SEEDS:
-        if seed in done:
-            say(f"seed {seed}: kept from {path}")
-            continue
+
+    def seed_rows(seed: int) -> list[dict[str, Any]]:
         say(f"seed {seed}: tuning the {described(config)}, then the searches")
-        rows += compare_seed(config, seed, robot)
-        io.atomic_write_json(path, io.sealed({"settings": settings, "rows": rows}))
-    io.atomic_write_text(out / "robust_compare.md", robust_comparison_table(rows))
+        return compare_seed(config, seed, robot)
+
+    return resumable(
+        out / "robust_compare.json",
+        comparison_settings(robot, config=dataclasses.asdict(config)),
+        {f"seed {seed}": (seed,) for seed in COMPARE_SEEDS},
+        seed_rows,
+        run_of=lambda row: f"seed {row['seed']}",
+        check=_checked_rows,
+        table=robust_comparison_table,
+        resume=resume,
+        progress=progress,
+    )
+
+
+def _checked_rows(rows: Any, where: str) -> list[dict[str, Any]]:
+    """The rows of a saved robust comparison, if each is an object of one of its seeds."""
+    if not isinstance(rows, list) or not all(
+        isinstance(r, dict) and r.get("seed") in COMPARE_SEEDS for r in rows
+    ):
+        raise ValueError(f"{where} has malformed rows")
     return rows
