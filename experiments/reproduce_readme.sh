@@ -34,6 +34,12 @@ shift || true
 STAGES=${*:-paper compare maps waypoints animate tune robustness compare-tuning compare-sizes compare-robust compare-robust-price tuner-load tuner-scaling law-derivative example-log bench}
 mkdir -p "$OUT" docs/data
 
+# The rows of a tune --compare record (its settings name this machine's code).
+rows() {
+  python -c 'import json, sys; rows = json.load(open(sys.argv[1]))["rows"]
+open(sys.argv[2], "w").write(json.dumps(rows, indent=2) + "\n")' "$1" "$2"
+}
+
 for stage in $STAGES; do
   echo "== $stage" >&2
   case $stage in
@@ -71,12 +77,12 @@ for stage in $STAGES; do
       cp "$OUT/robustness-standard/standard_conditions.json" docs/data/standard_conditions.json ;;
     compare-tuning)  # gradient vs CMA-ES vs random search, 3 seeds (2-7 minutes)
       wmr-jax tune --out "$OUT/tune-compare" --compare
-      cp "$OUT/tune-compare/compare.json" docs/data/tune_compare.json ;;
+      rows "$OUT/tune-compare/compare.json" docs/data/tune_compare.json ;;
     compare-sizes)  # the same on schedules of 30 and 60 knots (13 minutes on a fast 2-core machine)
       wmr-jax tune --out "$OUT/tune-compare-k30" --compare --schedule --knots 30
-      cp "$OUT/tune-compare-k30/compare.json" docs/data/tune_compare_k30.json
+      rows "$OUT/tune-compare-k30/compare.json" docs/data/tune_compare_k30.json
       wmr-jax tune --out "$OUT/tune-compare-k60" --compare --schedule --knots 60
-      cp "$OUT/tune-compare-k60/compare.json" docs/data/tune_compare_k60.json ;;
+      rows "$OUT/tune-compare-k60/compare.json" docs/data/tune_compare_k60.json ;;
     compare-robust)  # the joint robust problem: gradient vs CMA-ES vs random search, 3 seeds
       wmr-jax tune --out "$OUT/tune-robust-compare" --robust --compare ;;
     compare-robust-price)  # the same at a given price: as many candidates on any machine (OpenBLAS's Haswell kernels)

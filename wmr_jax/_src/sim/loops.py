@@ -360,9 +360,7 @@ def batched(single: Callable) -> Callable:
             batch_axes(robot, 0),
             None,
         )
-        return jax.vmap(lambda *a: one(*a, options), in_axes=in_axes)(
-            ref, params, init, robot, dt
-        )
+        return jax.vmap(lambda *a: one(*a, options), in_axes=in_axes)(ref, params, init, robot, dt)
 
     return run
 
