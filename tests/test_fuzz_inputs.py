@@ -87,7 +87,7 @@ def fuzz_pair(examples, **strategies):
     return make
 
 
-_FOLDER = Path()  # the module's folder for the files it writes (``_folder``)
+_FOLDER: Path | None = None  # the module's folder for the files it writes (``_folder``)
 
 
 @pytest.fixture(scope="module", autouse=True)

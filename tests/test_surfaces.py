@@ -356,6 +356,8 @@ def test_resume_keeps_whole_rows_of_runs_that_never_arrived(tmp_path, monkeypatc
         (lambda saved: saved["rows"][1].update(mean_arrival=0.45), r"compare.json was changed"),
         (lambda saved: saved["rows"][2].update(seed=1), r"compare.json was changed after"),
         (lambda saved: saved.pop("sha256"), r"compare.json has no checksum"),
+        (lambda saved: saved["rows"].reverse(), r"compare.json was changed after"),
+        (lambda saved: saved.pop("rows"), r"compare.json holds no rows"),
         (lambda saved: None, None),  # layout and key order are not content
     ],
 )
@@ -392,6 +394,23 @@ def test_resume_keeps_no_row_whose_values_changed_after_they_were_written(
     assert code == 2 and not calls, "the comparison started"
     assert err.count("\n") == 1 and re.search(message, err), err
     assert "remove it, or use a fresh --out" in err
+
+
+def test_resume_on_another_robot_names_both_robots_in_words(tmp_path, monkeypatch, capsys):
+    from wmr_jax._src.model.robots import describe_robot
+    from wmr_jax._src.tuning import compare as compare_module
+
+    monkeypatch.setattr(compare_module, "compare", _first_run_then_stop([]))
+    argv = ["tune", "--out", str(tmp_path), "--compare", "--iters", "1"]
+    assert main(argv) == 130
+    capsys.readouterr()
+    assert main([*argv, "--robot", "turtlebot3-burger", "--resume"]) == 2
+    err = capsys.readouterr().err
+    paper, burger = (describe_robot(w.ROBOTS[n]) for n in ("paper", "turtlebot3-burger"))
+    # The horizon is the robot's too (its study horizon), then the robot in words.
+    assert "is of another comparison (configs.fixed.horizon = 6.0 there, 37.0 now;" in err, err
+    assert f"; robot: {paper} there, {burger} now); allowed: the same settings" in err, err
+    assert err.count("\n") == 1 and "half_track" not in err, err
 
 
 def _checkpoint_args(tmp_path):

@@ -18,12 +18,13 @@ import jax
 from wmr_jax._src import io, provenance
 from wmr_jax._src.checks import check_callable, check_int
 from wmr_jax._src.model.params import Robot, validate_one_robot
-from wmr_jax._src.model.robots import robot_json
+from wmr_jax._src.model.robots import describe_robot, robot_from_values, robot_json
 from wmr_jax._src.sim.poses import sample_poses
 from wmr_jax._src.studies.optimal import time_bounds
 from wmr_jax._src.studies.robustness import named_warnings
 from wmr_jax._src.tuning.evaluation import evaluate, held_out_poses, poses_digest, report_ratios
 from wmr_jax._src.tuning.problems import get_problem
+from wmr_jax._src.tuning.robust import RobustConfig
 from wmr_jax._src.tuning.search import _evosax_cma_es, cma_es_search, random_search
 from wmr_jax._src.tuning.training import TuneConfig, train
 
@@ -164,7 +165,7 @@ def compare(
 
 def minimised(config: Any, method: str) -> str:
     """What ``method`` minimises in a comparison of ``config`` (a tuning or robust config)."""
-    robust = hasattr(config, "search_poses")
+    robust = isinstance(config, RobustConfig)
     if method == "gradient" and robust:
         return (
             f"relaxed surrogate: soft arrival of the smooth law (temperature "
@@ -342,21 +343,24 @@ def resumable(
 def _kept_rows(path: Path, settings: dict[str, Any], check: Callable) -> list[dict[str, Any]]:
     """The rows of a saved comparison of ``settings`` at ``path``, else say why none are kept."""
     advice = "allowed: the same settings, or a fresh --out"
+    damaged = "remove it, or use a fresh --out"
     try:
         saved = json.loads(path.read_text(encoding="utf-8"), object_pairs_hook=io.json_object_once)
     except (OSError, UnicodeDecodeError, ValueError, RecursionError) as err:
         reason = " ".join(str(err).split())
-        raise ValueError(f"--resume: {path} cannot be read ({reason}); {advice}") from None
+        raise ValueError(f"--resume: {path} cannot be read ({reason}); {damaged}") from None
     there = saved.get("settings") if isinstance(saved, dict) else None
     if not isinstance(there, dict):
         raise ValueError(f"--resume: {path} holds no comparison settings; {advice}")
     if there != settings:
         diff = "; ".join(_differences(there, settings))
         raise ValueError(f"--resume: {path} is of another comparison ({diff}); {advice}")
+    if "rows" not in saved:
+        raise ValueError(f"--resume: {path} holds no rows; {damaged}")
     try:  # values changed since they were written are not kept
-        return check(io.unsealed(saved, str(path)).get("rows"), str(path))
+        return check(io.unsealed(saved, str(path))["rows"], str(path))
     except ValueError as err:
-        raise ValueError(f"--resume: {err}; remove it, or use a fresh --out") from None
+        raise ValueError(f"--resume: {err}; {damaged}") from None
 
 
 def _differences(saved: dict[str, Any], now: dict[str, Any], at: str = "") -> list[str]:
@@ -366,8 +370,18 @@ def _differences(saved: dict[str, Any], now: dict[str, Any], at: str = "") -> li
         name, there, here = f"{at}{key}", saved.get(key), now.get(key)
         if key not in saved or key not in now:
             out.append(f"{name} only {'now' if key in now else 'there'}")
+        elif name == "robot" and there != here:
+            out.append(f"robot: {_robot_text(there)} there, {_robot_text(here)} now")
         elif isinstance(there, dict) and isinstance(here, dict):
             out += _differences(there, here, f"{name}.")
         elif there != here:
             out.append(f"{name} = {there!r:.40} there, {here!r:.40} now")
     return out
+
+
+def _robot_text(values: Any) -> str:
+    """A saved comparison's robot in words."""
+    try:
+        return describe_robot(robot_from_values(values, "robot"))
+    except ValueError:
+        return "a damaged robot entry"
