@@ -157,9 +157,22 @@ def test_bad_disturbances_are_rejected(change, message):
         ({"latency": "no"}, "latency = 'no' is not allowed"),
         # The ideal loop has no mass: a mass mismatch there would change nothing.
         ({"mass_mismatch": 0.2}, "mass_mismatch = 0.2 is not allowed with velocity = 'ideal'"),
+        # The runs' own settings, refused before any disturbance is drawn.
+        ({"velocity": "foo"}, "velocity = 'foo' is not allowed"),
+        ({"x64": "yes"}, "x64 = 'yes' is not allowed"),
+        ({"params": w.Gains(kr=-1.0)}, "gains.kr = -1.0 is not allowed"),
+        ({"params": "abc"}, "gains is a str; allowed: a Gains"),
+        ({"dt": -1.0}, "dt = -1.0 is not allowed"),
+        ({"estimator": "kalman"}, "'kalman'"),
     ],
 )
-def test_bad_monte_carlo_options(kwargs, message):
+def test_bad_monte_carlo_options(kwargs, message, monkeypatch):
+    from wmr_jax._src.studies import robustness
+
+    def drawn(*args, **kwargs):
+        raise AssertionError("disturbances drawn before the settings were checked")
+
+    monkeypatch.setattr(robustness, "draw_disturbances", drawn)
     with pytest.raises(ValueError, match="allowed") as info:
         studies.monte_carlo(jax.random.PRNGKey(0), **kwargs)
     assert message in str(info.value)
