@@ -178,6 +178,27 @@ def test_bad_monte_carlo_options(kwargs, message, monkeypatch):
     assert message in str(info.value)
 
 
+@pytest.mark.parametrize(
+    "study",
+    [
+        lambda refs, gains: studies.standard_conditions({"a": gains}, refs, jax.random.key(0)),
+        lambda refs, gains: studies.noise_curve({"a": gains}, refs, jax.random.key(0)),
+        lambda refs, gains: studies.evaluate_loop(gains, refs),
+    ],
+    ids=["standard_conditions", "noise_curve", "evaluate_loop"],
+)
+def test_the_studies_refuse_a_loops_gains_before_any_draw(study, monkeypatch):
+    from wmr_jax._src.studies import conditions
+
+    def drawn(*args, **kwargs):
+        raise AssertionError("disturbances drawn before the loops were checked")
+
+    monkeypatch.setattr(conditions, "_unit_draws", drawn)
+    refs = np.array([[30.0, 0.0, 0.0], [0.0, 30.0, 1.0]])
+    with pytest.raises(ValueError, match=r"gains.kr = -1.0 is not allowed; allowed: kr > 0"):
+        study(refs, w.Gains(kr=-1.0))
+
+
 def test_levels_may_be_arrays_and_keys_must_be_keys():
     key = jax.random.key(0)
     rows = studies.monte_carlo(key, n_runs=2, noise_xy=np.array([0.0]), noise_deg=np.array([1.0]))

@@ -21,7 +21,7 @@ from wmr_jax._src.sim.sensing.disturbances import (
     sample_disturbance,
 )
 from wmr_jax._src.sim.sensing.estimators import resolve_estimator
-from wmr_jax._src.sim.sensing.loop import ClosedLoop, disturbed_metrics
+from wmr_jax._src.sim.sensing.loop import ClosedLoop, check_settings, disturbed_metrics
 from wmr_jax._src.studies.optimal import time_bounds
 from wmr_jax._src.studies.robustness import (
     _scaled,
@@ -54,11 +54,28 @@ def _unit_draws(key: jax.Array, refs: np.ndarray, steps: int, mismatch: float):
     return np.asarray(unit.noise, dtype=float), factors
 
 
-def _runs(refs: Any, key: jax.Array, robot: Robot, horizon: Any, dt: float, mismatch: float, x64):
-    """What every study here runs: ``(refs (N, 3), unit noise, wheel factors, horizon s)``."""
+def _runs(
+    refs: Any,
+    key: jax.Array,
+    robot: Robot,
+    horizon: Any,
+    dt: float,
+    mismatch: float,
+    x64: Any,
+    loops: Mapping[str, ClosedLoop] | None = None,
+    velocity: str = "ideal",
+):
+    """What every study here runs: ``(refs (N, 3), unit noise, wheel factors, horizon s)``.
+
+    The ``loops`` the study runs are checked first, before anything is drawn.
+    """
     steps, horizon = study_steps(robot, horizon, dt)
     with jax.enable_x64(checks.check_bool("x64", x64)):  # not rounded to float32 first
         refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
+    for loop in (loops or {}).values():
+        check_settings(
+            loop.params, loop.controller, loop.estimator, dt, robot, velocity, steps, x64
+        )
     noise, factors = _unit_draws(key, refs, steps, mismatch)
     return refs, noise, factors, horizon
 
@@ -135,7 +152,7 @@ def standard_conditions(
             for i, (v, u) in enumerate(zip(noise, ("cm", "degrees"), strict=True))
         )
     sets, robot = _loops(params_by_name, "params_by_name", controller, estimator, robot)
-    refs, unit, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
+    refs, unit, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64, sets)
     rows, said = [], set()
     for label, sxy, sdeg, latency, wheels in _standard_table(factors, noise):
         spec = _scaled(refs, unit, wheels, sxy, sdeg, latency)
@@ -260,7 +277,9 @@ def evaluate_loop(
     seed = checks.check_int("seed", seed, 0, 2**32 - 1)
     robot = _study_robot(robot, {"loop": loop}, "evaluate_loop")
     key = jax.random.key(seed)
-    refs, noise, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
+    refs, noise, factors, horizon = _runs(
+        refs, key, robot, horizon, dt, mismatch, x64, {"loop": loop}, velocity
+    )
     if identified is None:
         spec = _scaled(refs, noise, factors, *labels[condition])
         _, m = _judged(spec, loop, dt, robot, x64, horizon, velocity)
@@ -386,7 +405,7 @@ def noise_curve(
     mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
     latency = checks.check_bool("latency", latency)
     sets, robot = _loops(loops_by_name, "loops_by_name", controllers.SHIM_SUNG, None, robot)
-    refs, noise, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64)
+    refs, noise, factors, horizon = _runs(refs, key, robot, horizon, dt, mismatch, x64, sets)
     rows, said = [], set()
     for name, loop in sets.items():
         for sxy in levels:

@@ -24,7 +24,7 @@ from wmr_jax._src.sim.poses import HORIZON_S, horizon_steps
 from wmr_jax._src.sim.rollout import DEFAULT_DT
 from wmr_jax._src.sim.sensing.disturbances import Disturbance, draw_disturbances
 from wmr_jax._src.sim.sensing.estimators import resolve_estimator
-from wmr_jax._src.sim.sensing.loop import disturbed_metrics, prepare_disturbed
+from wmr_jax._src.sim.sensing.loop import check_settings, disturbed_metrics
 
 DEFAULT_NOISE_XY = (0.0, 0.25, 0.5, 1.0, 2.0)  # σ of x and y, cm
 DEFAULT_NOISE_DEG = (0.0, 0.5, 1.0, 2.0, 4.0)  # σ of θ, degrees, paired with the above
@@ -207,15 +207,7 @@ def monte_carlo(
     estimator_used, _ = resolve_estimator(estimator)
     steps, horizon = study_steps(robot, horizon, dt)
     params = robot_defaults(name, robot) if params is None else params
-    # Every setting of the runs is refused before the draws, as the runs would:
-    # the same checks on one run standing still at a reference (their warnings
-    # are the runs' to give).
-    still = Disturbance(
-        np.array([[30.0, 0.0, 0.0]]), np.zeros((1, steps, 3)), np.ones((1, 3)), np.float64(0.0)
-    )
-    with jax.enable_x64(checks.check_bool("x64", x64)), warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        prepare_disturbed(still, params, name, estimator, (0.0, 0.0, 0.0), dt, robot, velocity)
+    check_settings(params, name, estimator, dt, robot, velocity, steps, x64)  # before the draws
     refs, unit, mismatch = draw_disturbances(
         key, n_runs, steps, radius_mismatch=radius_mismatch, mass_mismatch=mass_mismatch
     )

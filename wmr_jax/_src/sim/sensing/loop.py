@@ -7,6 +7,7 @@ batches are bounded in memory.
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from typing import Any, NamedTuple
 
 import jax
@@ -222,6 +223,22 @@ def prepare_disturbed(
         estimate = checks.drop_shared_axes(jax.tree.map(lambda v: jnp.asarray(v, dtype), estimate))
         options = dataclasses.replace(options, estimator=estimator)
     return (spec, params, estimate, init, robot, dt), options
+
+
+def check_settings(params, controller, estimator, dt, robot, velocity, steps, x64) -> None:
+    """Refuse the settings of disturbed runs as ``disturbed_metrics`` would, with no run.
+
+    ``prepare_disturbed``'s checks on one run standing still at a reference,
+    for a study to call before it draws its disturbances; their warnings are
+    the runs' to give.
+    """
+    still = Disturbance(
+        np.array([[30.0, 0.0, 0.0]]), np.zeros((1, steps, 3)), np.ones((1, 3)), np.float64(0.0)
+    )
+    with jax.enable_x64(checks.check_bool("x64", x64)), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        init = (0.0, 0.0, 0.0)
+        prepare_disturbed(still, params, controller, estimator, init, dt, robot, velocity)
 
 
 def _disturbed_trajectory(spec, params, estimate, init, robot, dt, options):
