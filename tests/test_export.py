@@ -810,3 +810,19 @@ def test_baseline_closed_loop_in_the_wheel_loop(tmp_path):
     c_m = export.compiled_metrics(compiled, spec, loop, robot=robot, velocity="nonideal")
     assert jax_m.success.mean() > 0.5
     np.testing.assert_array_equal(c_m.arrival, jax_m.arrival)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        # A string is no bool: "no" would have built with the sanitizers.
+        ({"sanitize": "no"}, "sanitize = 'no' is not allowed; allowed: True or False"),
+        ({"contract": 2}, "contract = 2 is not allowed; allowed: True or False"),
+        ({"optimise": "-Obogus"}, "optimise = '-Obogus' is not allowed; allowed: -O0, -O1"),
+        ({"build": 3}, "build = 3 is not allowed; allowed: a path"),
+    ],
+)
+def test_compile_controller_refuses_bad_options_before_compiling(tmp_path, kwargs, message):
+    with pytest.raises(ValueError, match=re.escape(message)):
+        export.compile_controller(tmp_path, **kwargs)
+    assert not any(tmp_path.iterdir())

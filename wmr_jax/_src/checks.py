@@ -501,7 +501,8 @@ def as_poses(
         return None
     host = host.copy()
     host[..., 2] = reduce_heading(host[..., 2])
-    return jnp.asarray(host, dtype=float_dtype())
+    # Rounded on the host and put on the device: no program compiled per shape.
+    return jax.device_put(host.astype(float_dtype()))
 
 
 def _degrees(theta: Any, xp: Any) -> Any:

@@ -20,10 +20,12 @@ from typing import Any
 
 import numpy as np
 
+from wmr_jax._src.checks import check_bool
 from wmr_jax._src.export.codegen import HEADER, SOURCE
 
 # The flags the exported files must compile cleanly with.
 CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror")
+OPTIMISE = ("-O0", "-O1", "-O2", "-O3", "-Os")  # the optimisation flags compile_controller takes
 # Multiply-adds fused where the CPU has them, as XLA:CPU compiles the JAX step.
 CONTRACT = ("-march=native", "-ffp-contract=fast")
 SANITIZE = ("-fsanitize=address,undefined", "-fno-omit-frame-pointer", "-fno-sanitize-recover=all")
@@ -155,7 +157,7 @@ def compile_controller(
         folder: the folder ``wmr-jax export`` wrote.
         build: where to put the library (default: a temporary folder, removed
             with the returned controller).
-        optimise: the optimisation flag.
+        optimise: the optimisation flag, one of ``OPTIMISE``.
         sanitize: build with ``-fsanitize=address,undefined`` (the library
             then needs the sanitizer's runtime loaded first: see the tests).
         contract: fuse multiplications and additions into FMAs for this
@@ -165,9 +167,18 @@ def compile_controller(
             every operation; it differs from the JAX step in the last bits.
 
     Raises:
-        ValueError: for a folder without the exported files, or no C compiler.
+        ValueError: for a bad argument, a folder without the exported files,
+            or no C compiler.
         RuntimeError: the compiler's message, if the files do not compile.
     """
+    sanitize, contract = check_bool("sanitize", sanitize), check_bool("contract", contract)
+    for name, value in (("folder", folder), ("build", build)):
+        if not (isinstance(value, (str, os.PathLike)) or (name == "build" and value is None)):
+            raise ValueError(f"{name} = {value!r:.80} is not allowed; allowed: a path")
+    if not (isinstance(optimise, str) and optimise in OPTIMISE):
+        raise ValueError(
+            f"optimise = {optimise!r:.80} is not allowed; allowed: {', '.join(OPTIMISE)}"
+        )
     folder = Path(folder)
     for name in (HEADER, SOURCE):
         if not (folder / name).is_file():
