@@ -70,12 +70,14 @@ def _runs(
     The ``loops`` the study runs are checked first, before anything is drawn.
     """
     steps, horizon = study_steps(robot, horizon, dt)
-    with jax.enable_x64(checks.check_bool("x64", x64)):  # not rounded to float32 first
-        refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
+    # First: the check hides its warnings, which resets Python's record of
+    # those already shown (a warning about refs would be shown twice).
     for loop in (loops or {}).values():
         check_settings(
             loop.params, loop.controller, loop.estimator, dt, robot, velocity, steps, x64
         )
+    with jax.enable_x64(checks.check_bool("x64", x64)):  # not rounded to float32 first
+        refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
     noise, factors = _unit_draws(key, refs, steps, mismatch)
     return refs, noise, factors, horizon
 

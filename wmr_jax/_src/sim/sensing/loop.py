@@ -230,7 +230,8 @@ def check_settings(params, controller, estimator, dt, robot, velocity, steps, x6
 
     ``prepare_disturbed``'s checks on one run standing still at a reference,
     for a study to call before it draws its disturbances; their warnings are
-    the runs' to give.
+    the runs' to give. Call it before anything warns: hiding its warnings
+    resets Python's record of the warnings already shown.
     """
     still = Disturbance(
         np.array([[30.0, 0.0, 0.0]]), np.zeros((1, steps, 3)), np.ones((1, 3)), np.float64(0.0)
