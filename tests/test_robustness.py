@@ -199,6 +199,37 @@ def test_the_studies_refuse_a_loops_gains_before_any_draw(study, monkeypatch):
         study(refs, w.Gains(kr=-1.0))
 
 
+_REFS = np.array([[30.0, 0.0, 0.0], [0.0, 30.0, 1.0]])
+
+
+@pytest.mark.parametrize(
+    ("study", "message"),
+    [
+        (lambda: studies.robustness_study(velocity="foo"), "velocity = 'foo' is not allowed"),
+        (lambda: studies.robustness_study(n_runs=2**62), "n_runs = 4611686018427387904"),
+        (lambda: studies.robustness_study(x64="yes"), "x64 = 'yes' is not allowed"),
+        (lambda: studies.robustness_study(estimator="kalman"), "'kalman'"),
+        (lambda: studies.evaluate_loop(w.Gains(), _REFS, velocity="foo"), "velocity = 'foo'"),
+        (lambda: studies.evaluate_loop(w.Gains(), _REFS, dt=-1.0), "dt = -1.0 is not allowed"),
+        (
+            lambda: studies.standard_conditions({"a": w.Gains()}, _REFS, 7),
+            "key = 7 is not allowed; allowed: a jax.random key",
+        ),
+    ],
+)
+def test_the_studies_refuse_bad_settings_before_they_make_a_key(study, message, monkeypatch):
+    """Nothing is drawn, and no key made, for a study that would be refused."""
+
+    def made(*args, **kwargs):
+        raise AssertionError("a key was made or split before the settings were checked")
+
+    for name in ("key", "PRNGKey", "split"):
+        monkeypatch.setattr(jax.random, name, made)
+    with pytest.raises(ValueError, match="allowed") as info:
+        study()
+    assert message in str(info.value)
+
+
 def test_levels_may_be_arrays_and_keys_must_be_keys():
     key = jax.random.key(0)
     rows = studies.monte_carlo(key, n_runs=2, noise_xy=np.array([0.0]), noise_deg=np.array([1.0]))

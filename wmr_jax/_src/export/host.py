@@ -260,7 +260,7 @@ def evaluate_compiled(
     robot = conditions._study_robot(robot, {"loop": loop}, "evaluate_compiled")
     dt = compiled.period
     refs, noise, factors, horizon = conditions._runs(
-        refs, jax.random.key(seed), robot, horizon, dt, mismatch, True
+        refs, None, robot, horizon, dt, mismatch, True, {"loop": loop}, velocity, seed
     )
     spec = conditions._scaled(refs, noise, factors, *labels[condition])
     m = compiled_metrics(compiled, spec, loop, dt=dt, robot=robot, velocity=velocity)

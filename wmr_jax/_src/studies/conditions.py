@@ -56,7 +56,7 @@ def _unit_draws(key: jax.Array, refs: np.ndarray, steps: int, mismatch: float):
 
 def _runs(
     refs: Any,
-    key: jax.Array,
+    key: jax.Array | None,
     robot: Robot,
     horizon: Any,
     dt: float,
@@ -64,11 +64,15 @@ def _runs(
     x64: Any,
     loops: Mapping[str, ClosedLoop] | None = None,
     velocity: str = "ideal",
+    seed: int | None = None,
 ):
     """What every study here runs: ``(refs (N, 3), unit noise, wheel factors, horizon s)``.
 
+    ``key``: a ``jax.random`` key, or ``None`` for one of ``seed`` (checked).
     The ``loops`` the study runs are checked first, before anything is drawn.
     """
+    if seed is None:
+        checks.check_key("key", key)
     steps, horizon = study_steps(robot, horizon, dt)
     # First: the check hides its warnings, which resets Python's record of
     # those already shown (a warning about refs would be shown twice).
@@ -78,6 +82,7 @@ def _runs(
         )
     with jax.enable_x64(checks.check_bool("x64", x64)):  # not rounded to float32 first
         refs = np.asarray(checks.as_poses("refs", refs, batch=True), dtype=float)
+    key = key if seed is None else jax.random.key(seed)
     noise, factors = _unit_draws(key, refs, steps, mismatch)
     return refs, noise, factors, horizon
 
@@ -278,9 +283,8 @@ def evaluate_loop(
     mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
     seed = checks.check_int("seed", seed, 0, 2**32 - 1)
     robot = _study_robot(robot, {"loop": loop}, "evaluate_loop")
-    key = jax.random.key(seed)
     refs, noise, factors, horizon = _runs(
-        refs, key, robot, horizon, dt, mismatch, x64, {"loop": loop}, velocity
+        refs, None, robot, horizon, dt, mismatch, x64, {"loop": loop}, velocity, seed
     )
     if identified is None:
         spec = _scaled(refs, noise, factors, *labels[condition])

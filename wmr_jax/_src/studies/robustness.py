@@ -151,6 +151,31 @@ def summary_row(m: PoseMetrics, horizon: float | None = None) -> dict[str, Any]:
     return row
 
 
+def _checked(
+    n_runs, noise_xy, noise_deg, radius_mismatch, mass_mismatch, latency,
+    controller, params, velocity, dt, x64, estimator, robot, horizon,
+):  # fmt: skip
+    """``monte_carlo``'s settings checked, before anything is drawn.
+
+    Returns ``(n_runs, noise_xy, noise_deg, latency, controller name, params, steps, horizon)``.
+    """
+    n_runs = checks.check_int("n_runs", n_runs, 1, 2**31 - 1)
+    noise_xy, noise_deg = check_levels(noise_xy, noise_deg)
+    latency = checks.check_bool("latency", latency)
+    for name, value in (("radius_mismatch", radius_mismatch), ("mass_mismatch", mass_mismatch)):
+        checks.check_number(name, value, high=1.0, closed=True)
+    if mass_mismatch > 0 and velocity == "ideal":
+        raise ValueError(
+            f"mass_mismatch = {mass_mismatch!r} is not allowed with velocity = 'ideal', whose "
+            "robot has no mass; allowed: 0, or velocity = 'nonideal'"
+        )
+    name = controllers.get_controller(controller).name
+    steps, horizon = study_steps(robot, horizon, dt)
+    params = robot_defaults(name, robot) if params is None else params
+    check_settings(params, name, estimator, dt, robot, velocity, steps, x64)
+    return n_runs, noise_xy, noise_deg, latency, name, params, steps, horizon
+
+
 def monte_carlo(
     key: jax.Array,
     *,
@@ -192,22 +217,12 @@ def monte_carlo(
         One row per noise level: the condition, ``summary_row`` with the
         horizon, and the peak wheel speed of any run (cm/s).
     """
-    n_runs = checks.check_int("n_runs", n_runs)
     checks.check_key("key", key)
-    noise_xy, noise_deg = check_levels(noise_xy, noise_deg)
-    latency = checks.check_bool("latency", latency)
-    for name, value in (("radius_mismatch", radius_mismatch), ("mass_mismatch", mass_mismatch)):
-        checks.check_number(name, value, high=1.0, closed=True)
-    if mass_mismatch > 0 and velocity == "ideal":
-        raise ValueError(
-            f"mass_mismatch = {mass_mismatch!r} is not allowed with velocity = 'ideal', whose "
-            "robot has no mass; allowed: 0, or velocity = 'nonideal'"
-        )
-    name = controllers.get_controller(controller).name
+    n_runs, noise_xy, noise_deg, latency, name, params, steps, horizon = _checked(
+        n_runs, noise_xy, noise_deg, radius_mismatch, mass_mismatch, latency,
+        controller, params, velocity, dt, x64, estimator, robot, horizon,
+    )  # fmt: skip
     estimator_used, _ = resolve_estimator(estimator)
-    steps, horizon = study_steps(robot, horizon, dt)
-    params = robot_defaults(name, robot) if params is None else params
-    check_settings(params, name, estimator, dt, robot, velocity, steps, x64)  # before the draws
     refs, unit, mismatch = draw_disturbances(
         key, n_runs, steps, radius_mismatch=radius_mismatch, mass_mismatch=mass_mismatch
     )
@@ -313,6 +328,11 @@ def robustness_study(
     """
     seed = checks.check_int("seed", seed, 0, 2**32 - 1)
     names = controllers.controller_names(controller_names)
+    for name in names:  # every run's settings refused before the first draw
+        _checked(
+            n_runs, noise_xy, noise_deg, 0.0, 0.0, False,
+            name, None, velocity, DEFAULT_DT, x64, estimator, robot, horizon,
+        )  # fmt: skip
     keys = jax.random.split(jax.random.PRNGKey(seed), len(ROBUSTNESS_CONDITIONS))
     shared = {"n_runs": n_runs, "noise_xy": noise_xy, "noise_deg": noise_deg, "x64": x64}
     shared.update(velocity=velocity, estimator=estimator, robot=robot, horizon=horizon)
