@@ -76,9 +76,9 @@ def sample_poses(
     Raises:
         ValueError: for a bad seed, count, distance range or dtype.
     """
-    if not isinstance(key, jax.Array):
-        key = jax.random.key(check_int("seed", key, 0, 2**32 - 1))
-    elif not jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key) and key.shape != (2,):
+    seed = None if isinstance(key, jax.Array) else check_int("seed", key, 0, 2**32 - 1)
+    typed = seed is None and jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)
+    if seed is None and not typed and key.shape != (2,):
         # A seed as a JAX array, e.g. traced inside jit: JAX would fail on it as a key.
         raise ValueError(
             f"key = an array of shape {key.shape} and dtype {key.dtype} is not allowed; "
@@ -103,6 +103,7 @@ def sample_poses(
             "dtype = float64 is not allowed while JAX computes in float32; allowed: float32, "
             "or float64 after jax.config.update('jax_enable_x64', True)"
         )
+    key = key if seed is None else jax.random.key(seed)  # once every argument is checked
     poses = _draw(key, n, jnp.float32(r_min), jnp.float32(r_max))
     return poses.astype(dtype)
 

@@ -24,7 +24,7 @@ from wmr_jax._src.sim.poses import (
     horizon_steps,
     sample_poses,
 )
-from wmr_jax._src.sim.rollout import DEFAULT_DT
+from wmr_jax._src.sim.rollout import DEFAULT_DT, make_options
 from wmr_jax._src.studies.robustness import mean_median, robot_defaults, study_horizon
 from wmr_jax._src.studies.sweep import sweep
 
@@ -418,6 +418,11 @@ def compare_controllers(
                 "registered controller"
             )
         runs[name] = (name, None)
+    # The runs' options refused before the poses are drawn, as evaluate_poses words them.
+    checks.check_int("chunk", chunk)
+    checks.check_bool("x64", x64)
+    checks.check_bool("progress", progress)
+    make_options(velocity=velocity)
     refs = np.asarray(sample_poses(seed, n_poses), dtype=float)
     results = _metrics(refs, runs, robot, horizon, velocity, chunk, progress, x64)
     return _summary({"poses": n_poses, "seed": seed}, results, robot, horizon, velocity, x64)

@@ -24,7 +24,7 @@ from wmr_jax._src.model.params import Gains, Robot
 from wmr_jax._src.sim import loops
 from wmr_jax._src.sim import rollout as simulation
 from wmr_jax._src.sim.metrics import arrival_time
-from wmr_jax._src.sim.poses import horizon_steps, sample_poses
+from wmr_jax._src.sim.poses import MAX_SAMPLES, horizon_steps, sample_poses
 
 # The options of a hard-law run that ``evaluate`` and ``random_search`` take.
 RUN_OPTIONS = ("robot", "dt", "horizon", "velocity", "substeps", "wheel_limit")
@@ -54,6 +54,7 @@ class Evaluation(NamedTuple):
 def held_out_poses(n: int = EVAL_POSES, eval_seed: int = EVAL_SEED) -> jax.Array:
     """Return the ``n`` held-out reference poses of the before/after table, ``(n, 3)``."""
     eval_seed = check_int("eval_seed", eval_seed, 0, 2**32 - 1)
+    check_int("n", n, 0, MAX_SAMPLES)  # before the key
     return sample_poses(jax.random.fold_in(jax.random.key(eval_seed), 1), n)
 
 

@@ -191,6 +191,8 @@ def gains_from_logits(z: jax.Array, robot: Robot | None = None) -> Gains:
         robot: gives ``L`` (cm) and ``V_max`` (cm/s); default ``Robot()``.
     """
     z = checked_point("z", z, len(GAIN_FIELDS), unit=False)
+    if not is_traced(robot):  # refused before the sigmoid runs
+        robot = validate_one_robot(robot, "gains_from_logits")
     return gains_from_unit(jax.nn.sigmoid(z), robot)
 
 

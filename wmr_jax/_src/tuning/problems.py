@@ -14,7 +14,7 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src.checks import check_int
+from wmr_jax._src.checks import check_int, is_traced
 from wmr_jax._src.model.controllers.base import Controller
 from wmr_jax._src.model.controllers.schedule import (
     KNOTS,
@@ -24,7 +24,7 @@ from wmr_jax._src.model.controllers.schedule import (
     ScheduleParams,
 )
 from wmr_jax._src.model.controllers.shim_sung import SHIM_SUNG
-from wmr_jax._src.model.params import Gains, Robot
+from wmr_jax._src.model.params import Gains, Robot, validate_one_robot
 from wmr_jax._src.sim.rollout import DEFAULT_DT
 from wmr_jax._src.tuning import parametrisation as fixed
 
@@ -35,6 +35,8 @@ class Cube:
     def from_logits(self, z: Any, robot: Robot) -> Any:
         """``from_unit`` of the logits ``z`` (``u = σ(z)``; real, shaped as ``from_unit`` takes)."""
         z = fixed.checked_point("z", z, self.dim, unit=False)
+        if not is_traced(robot):  # refused before the logistic runs
+            robot = validate_one_robot(robot, "from_logits")
         return self.from_unit(1.0 / (1.0 + jnp.exp(-z)), robot)
 
     def start_logits(self, robot: Robot) -> np.ndarray:

@@ -529,6 +529,7 @@ def tune_robust(
     """
     config = trainer.checked_config(config, RobustConfig)
     check_callable("progress_fn", progress_fn)
+    trainer.check_state(state)
     check_callable("on_tuned", on_tuned)
     robot = validate_one_robot(robot, "tuning")
     problem, run = robust_problem(config, robot), trainer.run_text(config, robot)

@@ -29,6 +29,7 @@ from wmr_jax._src.checks import (
 from wmr_jax._src.model.params import Gains, Robot, validate_one_robot
 from wmr_jax._src.sim import loops
 from wmr_jax._src.sim import rollout as simulation
+from wmr_jax._src.sim.poses import MAX_SAMPLES
 from wmr_jax._src.tuning import cma
 from wmr_jax._src.tuning.evaluation import check_run, hard_runs, quiet_scoring, run_options
 from wmr_jax._src.tuning.parametrisation import PAPER_FEASIBLE_GAINS, unit_from_gains
@@ -99,7 +100,7 @@ def random_search(
     check_key("key", key)
     robot = validate_one_robot(robot, "tuning")
     budget_s = check_number("budget_s", budget_s, closed=True, high=1e9, unit="s")
-    chunk = check_int("chunk", chunk, 1)
+    chunk = check_int("chunk", chunk, 1, MAX_SAMPLES)
     check_callable("progress", progress)
     refs = as_poses("refs", refs, batch=True)
     run = check_run(run_options(locals()))
@@ -376,7 +377,7 @@ def cma_es_search(
     """
     check_key("key", key)
     budget_s = check_number("budget_s", budget_s, closed=True, high=1e9, unit="s")
-    population = check_int("population", population, 2)
+    population = check_int("population", population, 2, MAX_SAMPLES)
     std_init = check_number("std_init", std_init)
     check_callable("progress", progress)
     problem = get_problem(problem)

@@ -351,13 +351,18 @@ def differences(saved: dict[str, Any], now: dict[str, Any]) -> str:
     return "; ".join(diffs) or "the format differs"
 
 
-def own_state(state: Any, problem: TrainingProblem, run: str) -> TrainState:
-    """``state`` if it can continue the run ``run`` of ``problem``, else say why not."""
-    if not isinstance(state, TrainState):
+def check_state(state: Any) -> None:
+    """Refuse a ``state`` that is neither ``None`` nor a ``TrainState`` (before any draw)."""
+    if state is not None and not isinstance(state, TrainState):
         raise ValueError(
             f"state = {state!r:.80} is not allowed; allowed: a TrainState (init_state, or "
             "one handed to progress_fn)"
         )
+
+
+def own_state(state: Any, problem: TrainingProblem, run: str) -> TrainState:
+    """``state`` if it can continue the run ``run`` of ``problem``, else say why not."""
+    check_state(state)
     dim = np.shape(problem.z0)
     if np.shape(state.z) != dim:
         raise ValueError(

@@ -23,7 +23,7 @@ from wmr_jax._src.model.controllers.schedule import KNOTS
 from wmr_jax._src.model.params import Robot, validate_one_robot
 from wmr_jax._src.sim import loops
 from wmr_jax._src.sim import rollout as simulation
-from wmr_jax._src.sim.poses import HORIZON_S, sample_poses
+from wmr_jax._src.sim.poses import HORIZON_S, MAX_SAMPLES, sample_poses
 from wmr_jax._src.tuning import trainer
 from wmr_jax._src.tuning.evaluation import (
     EVAL_POSES,
@@ -237,6 +237,7 @@ def training_poses(seed: int, iteration: int, n: int) -> jax.Array:
     """The batch of iteration ``iteration``: a pure function of ``(seed, iteration)``, resumable."""
     seed = check_int("seed", seed, 0, 2**32 - 1)
     iteration = check_int("iteration", iteration, 0, 2**31 - 1)
+    check_int("n", n, 0, MAX_SAMPLES)  # before the key
     stream = jax.random.fold_in(jax.random.key(seed), 0)
     return sample_poses(jax.random.fold_in(stream, iteration), n)
 
@@ -305,6 +306,7 @@ def train(
     """
     config, robot = _checked(config, robot)
     check_callable("progress_fn", progress_fn)
+    trainer.check_state(state)
     check_callable("search_progress", search_progress)
     check_callable("eval_progress", eval_progress)
     problem, identity = gain_problem(config, robot), trainer.run_text(config, robot)

@@ -165,7 +165,7 @@ _LEVEL_LIMITS = {"noise_xy": 1e6, "noise_theta": 2 * math.pi, "latency": 1.0}
 def _check_draw(key: Any, steps: Any, n: int | None, **levels: Any) -> None:
     """Check a draw's key, length and levels (scalars or ``(n,)``) where concrete."""
     checks.check_key("key", key)
-    checks.check_int("steps", steps)
+    checks.check_int("steps", steps, 1, checks.MAX_STEPS)
     for name, value in levels.items():
         if checks.is_traced(value):
             continue
@@ -214,12 +214,7 @@ def sample_disturbance(
         A ``Disturbance``: ``noise (N, steps, 3)`` Gaussian, independent per
         sample; ``mismatch (N, 3)``; ``delay (N,)`` in {0, 1}.
     """
-    if not checks.is_traced(refs):
-        checked = checks.as_poses("refs", refs, batch=True)
-        # Draw in the poses' own float dtype, else JAX's default one.
-        own = getattr(refs, "dtype", None)
-        floating = own is not None and jnp.issubdtype(own, jnp.floating)
-        refs = jnp.asarray(refs) if floating else checked
+    checked = None if checks.is_traced(refs) else checks.as_poses("refs", refs, batch=True)
     _check_draw(
         key,
         steps,
@@ -230,6 +225,11 @@ def sample_disturbance(
         radius_mismatch=radius_mismatch,
         mass_mismatch=mass_mismatch,
     )
+    if checked is not None:
+        # Draw in the poses' own float dtype, else JAX's default one.
+        own = getattr(refs, "dtype", None)
+        floating = own is not None and jnp.issubdtype(own, jnp.floating)
+        refs = jnp.asarray(refs) if floating else checked
     refs = jnp.asarray(refs)
     n, dtype = refs.shape[0], refs.dtype
     k_noise, k_mis, k_delay = jax.random.split(key, 3)
@@ -259,7 +259,7 @@ def draw_disturbances(
     Returns:
         ``(refs (n, 3), unit noise (n, steps, 3) ~ N(0, 1), mismatch (n, 3))``.
     """
-    n = checks.check_int("n", n)
+    n = checks.check_int("n", n, 1, 2**31 - 1)
     _check_draw(key, steps, n, radius_mismatch=radius_mismatch, mass_mismatch=mass_mismatch)
     k_ref, k_rest = jax.random.split(key)
     refs = sample_poses(k_ref, n, dtype=jnp.float32)
