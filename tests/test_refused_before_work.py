@@ -93,3 +93,16 @@ def test_compare_controllers_refuses_its_run_options_before_drawing_poses(
     with pytest.raises(ValueError, match="allowed") as info:
         studies.compare_controllers(n_poses=4, **kwargs)
     assert message in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"z": np.zeros(3)}, r"z has shape (3,); allowed: (7,) for 'fixed'"),
+        ({"z": np.zeros(7), "pose_clip": -1.0}, "pose_clip = -1.0 is not allowed"),
+    ],
+)
+def test_robust_gradient_refuses_its_logits_and_cap_by_name(kwargs, message):
+    with pytest.raises(ValueError, match="allowed") as info:
+        tuning.robust_gradient(refs=REFS, temperature=0.1, **kwargs)
+    assert message in str(info.value)

@@ -467,9 +467,11 @@ def robust_gradient(
     if not isinstance(z, jax.core.Tracer):
         host = real_array("z", z, f"({problem.dim},) real logits")
         require("z", host, np.isfinite(host), "finite logits")
-    z = as_float_tree(jnp.asarray(z))
-    if z.shape != (problem.dim,):
-        raise ValueError(f"z has shape {z.shape}; allowed: ({problem.dim},) for {problem.name!r}")
+    if np.shape(z) != (problem.dim,):
+        raise ValueError(
+            f"z has shape {np.shape(z)}; allowed: ({problem.dim},) for {problem.name!r}"
+        )
     if pose_clip is not None:
-        pose_clip = jnp.asarray(check_number("pose_clip", pose_clip), float_dtype())
+        pose_clip = np.asarray(check_number("pose_clip", pose_clip), float_dtype())
+    z = as_float_tree(z if isinstance(z, jax.Array) else np.asarray(z))
     return _robust_jit(z, refs, init, robot, dt, spec, temperature, pose_clip, problem)
