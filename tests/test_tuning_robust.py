@@ -243,7 +243,7 @@ def test_the_observer_is_tuned_with_gains_in_range():
     [
         (dict(law="fixd"), "law = 'fixd' is not allowed"),
         (dict(estimator="kalman"), "estimator = 'kalman' is not allowed"),
-        (dict(observer_knots=1), "knots = 1"),
+        (dict(observer_knots=1), "observer_knots = 1 is not allowed"),
         (dict(tuner="cma-es"), "tuner = 'cma-es' is not allowed; allowed: 'gradient' or 'hybrid'"),
         (dict(polish_share=1.0), "polish_share = 1.0 is not allowed"),
         (dict(polish_share=0.0), "polish_share = 0.0 is not allowed"),

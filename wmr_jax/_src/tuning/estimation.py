@@ -92,10 +92,13 @@ class EstimatorBox:
 
 
 def estimator_box(name: str, knots: int = OBSERVER_KNOTS) -> EstimatorBox:
-    """The cube of estimator ``name`` (``"observer"``: two tables of ``knots``; ``"ekf"``: 3)."""
+    """The cube of estimator ``name`` (``"observer"``: two tables of ``knots``; ``"ekf"``: 3).
+
+    ``knots`` is ``RobustConfig.observer_knots``, and refused by that name.
+    """
     if name not in ("observer", "ekf"):
         raise ValueError(f"estimator = {name!r} is not allowed; allowed: 'observer' or 'ekf'")
-    knots = check_int("knots", knots, 2, 50)
+    knots = check_int("observer_knots", knots, 2, 50)
     if name == "observer":
         return EstimatorBox("observer", 2 * knots, knots)
     return EstimatorBox("ekf", len(_EKF_LOG))
