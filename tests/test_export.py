@@ -818,11 +818,22 @@ def test_baseline_closed_loop_in_the_wheel_loop(tmp_path):
         # A string is no bool: "no" would have built with the sanitizers.
         ({"sanitize": "no"}, "sanitize = 'no' is not allowed; allowed: True or False"),
         ({"contract": 2}, "contract = 2 is not allowed; allowed: True or False"),
-        ({"optimise": "-Obogus"}, "optimise = '-Obogus' is not allowed; allowed: -O0, -O1"),
+        ({"optimise": "-Obogus"}, "optimise = '-Obogus' is not allowed; allowed: -O, -O0"),
         ({"build": 3}, "build = 3 is not allowed; allowed: a path"),
+        ({"folder": 3}, "folder = 3 is not allowed; allowed: a path"),
     ],
 )
-def test_compile_controller_refuses_bad_options_before_compiling(tmp_path, kwargs, message):
+def test_compile_controller_refuses_bad_options_before_compiling(
+    tmp_path, monkeypatch, kwargs, message
+):
+    from wmr_jax._src.export import codegen, compiled
+
+    def compiled_anyway(*args, **kwargs):
+        raise AssertionError("the compiler ran with a bad option")
+
+    monkeypatch.setattr(compiled, "_run", compiled_anyway)
+    for name in (codegen.HEADER, codegen.SOURCE):  # an exported folder, as far as it looks
+        (tmp_path / name).write_text("")
+    kwargs = {"folder": tmp_path, "build": tmp_path / "build", **kwargs}
     with pytest.raises(ValueError, match=re.escape(message)):
-        export.compile_controller(tmp_path, **kwargs)
-    assert not any(tmp_path.iterdir())
+        export.compile_controller(**kwargs)

@@ -394,6 +394,20 @@ def test_a_study_warns_of_a_heading_in_degrees_once():
     assert len(degrees) == 1 and degrees[0].startswith("refs has heading 90 rad"), degrees
 
 
+def test_studies_called_again_do_not_repeat_warnings_already_shown():
+    """A study checks its runs ahead of them without touching Python's record of
+    the warnings shown: called again, nothing already shown is shown again."""
+    refs = np.array([[30.0, 30.0, 90.0], [20.0, -10.0, 0.5]])
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("default")
+        warnings.warn("the caller's own", UserWarning, stacklevel=1)
+        for _ in range(3):
+            w.studies.evaluate_loop(w.Gains(), refs, horizon=1.0)
+            w.studies.monte_carlo(jax.random.key(0), n_runs=2, noise_xy=[0.0], noise_deg=[0.0])
+    shown = sorted(type(r.message).__name__ for r in said)
+    assert shown == ["HeadingUnitsWarning", "UserWarning", "WheelSpeedWarning"], shown
+
+
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class _NoGains:

@@ -224,3 +224,18 @@ def test_batched_parameters_in_a_single_chain_point_to_the_batched_entry_point()
         studies.chain_rollout(WP[:2], w.Gains(kr=[60.0, 70.0]), steps=3)
     with pytest.raises(ValueError, match=r"robot.v_max .* use batch_track_rollout for a batch"):
         studies.track_rollout(np.zeros((3, 3)), robot=w.Robot(v_max=[125.0, 100.0]))
+
+
+def test_chains_and_tracks_run_inside_a_callers_jit_and_grad():
+    """Waypoints and references traced by a caller's jit (or grad) run as given."""
+    import jax
+
+    wp = np.array([[20.0, 0.0, 0.0], [30.0, 10.0, 1.0]])
+    refs = np.stack([np.linspace(5.0, 20.0, 30), np.zeros(30), np.zeros(30)], axis=-1)
+    eager = studies.chain_rollout(wp, steps=50).arrival
+    traced = jax.jit(lambda x: studies.chain_rollout(x, steps=50).arrival)(wp)
+    np.testing.assert_array_equal(traced, eager)
+    error = studies.track_rollout(refs).error
+    np.testing.assert_array_equal(jax.jit(lambda r: studies.track_rollout(r).error)(refs), error)
+    grad = jax.grad(lambda r: studies.track_rollout(r).error.sum())(refs)
+    assert grad.shape == refs.shape and np.isfinite(np.asarray(grad)).all()

@@ -25,7 +25,8 @@ from wmr_jax._src.export.codegen import HEADER, SOURCE
 
 # The flags the exported files must compile cleanly with.
 CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror")
-OPTIMISE = ("-O0", "-O1", "-O2", "-O3", "-Os")  # the optimisation flags compile_controller takes
+# The optimisation flags compile_controller takes (GCC's and Clang's).
+OPTIMISE = ("-O", "-O0", "-O1", "-O2", "-O3", "-Os", "-Oz", "-Og", "-Ofast")
 # Multiply-adds fused where the CPU has them, as XLA:CPU compiles the JAX step.
 CONTRACT = ("-march=native", "-ffp-contract=fast")
 SANITIZE = ("-fsanitize=address,undefined", "-fno-omit-frame-pointer", "-fno-sanitize-recover=all")

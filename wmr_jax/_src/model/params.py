@@ -15,6 +15,7 @@ from typing import Any
 import jax
 import numpy as np
 
+from wmr_jax._src import quiet
 from wmr_jax._src.checks import (
     Parameters,
     check_bool,
@@ -201,7 +202,7 @@ def feasible(gains: Gains, robot: Robot, *, warn: bool, stacklevel: int) -> np.n
     kr, k_theta, half_track, v_max = (v.astype(np.float64) for v in values)
     bound = kr + half_track * k_theta
     ok = bound <= v_max * (1 + 4 * ulp)
-    if warn and not np.all(ok):
+    if warn and not np.all(ok) and quiet.warns():
         worst = float(np.max(bound))
         # The defaults are the paper's Fig. 7 gains, which break the bound on purpose.
         default = all(
@@ -251,6 +252,8 @@ def sampled(gains: Gains, dt: float, *, stacklevel: int) -> bool:
     heading, distance = (float(np.max(m)) for m in _margins(wide, np.float64(dt)))
     if heading < 2 and distance < 2:
         return True
+    if not quiet.warns():
+        return False
     warnings.warn(
         f"k_theta*dt = {heading:.3g} and k_r*pi*dt/(2*R_m) = {distance:.3g}: the sampled law "
         "overshoots and cannot settle unless both are below 2 (docs/model.md §4)",

@@ -20,7 +20,7 @@ from wmr_jax._src.model import controllers
 from wmr_jax._src.model.params import Robot, SamplingWarning, WheelSpeedWarning, validate_one_robot
 from wmr_jax._src.model.robots import same_robot
 from wmr_jax._src.sim.metrics import PoseMetrics
-from wmr_jax._src.sim.poses import HORIZON_S, horizon_steps
+from wmr_jax._src.sim.poses import HORIZON_S, MAX_SAMPLES, horizon_steps
 from wmr_jax._src.sim.rollout import DEFAULT_DT
 from wmr_jax._src.sim.sensing.disturbances import Disturbance, draw_disturbances
 from wmr_jax._src.sim.sensing.estimators import resolve_estimator
@@ -159,7 +159,7 @@ def _checked(
 
     Returns ``(n_runs, noise_xy, noise_deg, latency, controller name, params, steps, horizon)``.
     """
-    n_runs = checks.check_int("n_runs", n_runs, 1, 2**31 - 1)
+    n_runs = checks.check_int("n_runs", n_runs, 1, MAX_SAMPLES)
     noise_xy, noise_deg = check_levels(noise_xy, noise_deg)
     latency = checks.check_bool("latency", latency)
     for name, value in (("radius_mismatch", radius_mismatch), ("mass_mismatch", mass_mismatch)):

@@ -154,6 +154,8 @@ def _pose_stack(name: str, value: Any, ndim: int, allowed: str) -> jax.Array:
     if len(shape) != ndim or shape[-1] != 3 or 0 in shape:
         raise ValueError(f"{name} has shape {shape}; allowed: {allowed} [x cm, y cm, theta rad]")
     flat = checks.as_poses(name, np.reshape(value, (-1, 3)), batch=True)
+    if checks.is_traced(flat):  # inside a caller's jit or grad
+        return flat.reshape(shape)
     return jax.device_put(np.asarray(flat).reshape(shape))  # shaped on the host: no program
 
 

@@ -190,9 +190,9 @@ def gains_from_logits(z: jax.Array, robot: Robot | None = None) -> Gains:
         z: ``(..., 7)`` logits of a point of the unit cube.
         robot: gives ``L`` (cm) and ``V_max`` (cm/s); default ``Robot()``.
     """
-    z = checked_point("z", z, len(GAIN_FIELDS), unit=False)
-    if not is_traced(robot):  # refused before the sigmoid runs
+    if not is_traced(robot):  # refused before z is converted
         robot = validate_one_robot(robot, "gains_from_logits")
+    z = checked_point("z", z, len(GAIN_FIELDS), unit=False)
     return gains_from_unit(jax.nn.sigmoid(z), robot)
 
 

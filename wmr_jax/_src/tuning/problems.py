@@ -34,9 +34,9 @@ class Cube:
 
     def from_logits(self, z: Any, robot: Robot) -> Any:
         """``from_unit`` of the logits ``z`` (``u = σ(z)``; real, shaped as ``from_unit`` takes)."""
-        z = fixed.checked_point("z", z, self.dim, unit=False)
-        if not is_traced(robot):  # refused before the logistic runs
+        if not is_traced(robot):  # refused before z is converted
             robot = validate_one_robot(robot, "from_logits")
+        z = fixed.checked_point("z", z, self.dim, unit=False)
         return self.from_unit(1.0 / (1.0 + jnp.exp(-z)), robot)
 
     def start_logits(self, robot: Robot) -> np.ndarray:

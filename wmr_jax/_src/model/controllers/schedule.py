@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from wmr_jax._src import quiet
 from wmr_jax._src.checks import (
     Parameters,
     batch_sizes,
@@ -188,7 +189,7 @@ def _check_robot(params: ScheduleParams, robot: Robot) -> None:
     # The bound holds for the params' v_max and L; warn if the robot's are tighter.
     tighter = np.asarray(robot.v_max) < np.asarray(params.v_max) * (1 - 1e-6)
     other_l = ~np.isclose(np.asarray(robot.half_track), np.asarray(params.half_track))
-    if np.any(tighter) or np.any(other_l):
+    if (np.any(tighter) or np.any(other_l)) and quiet.warns():
         warnings.warn(
             "the schedule bounds |v| + L|omega| by its own v_max and half_track, which differ "
             "from the robot's: wheel commands may saturate (docs/model.md §3)",

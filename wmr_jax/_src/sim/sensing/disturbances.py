@@ -17,7 +17,7 @@ from wmr_jax._src.model import dynamics
 from wmr_jax._src.model.controllers import shim_sung as law
 from wmr_jax._src.model.params import Robot
 from wmr_jax._src.sim import motion
-from wmr_jax._src.sim.poses import sample_poses
+from wmr_jax._src.sim.poses import MAX_SAMPLES, sample_poses
 
 # The standard conditions of docs/model.md §7, with the nominal model first:
 # (label, σ_xy cm, σ_θ degrees, one-sample latency). Ideal loop.
@@ -259,7 +259,7 @@ def draw_disturbances(
     Returns:
         ``(refs (n, 3), unit noise (n, steps, 3) ~ N(0, 1), mismatch (n, 3))``.
     """
-    n = checks.check_int("n", n, 1, 2**31 - 1)
+    n = checks.check_int("n", n, 1, MAX_SAMPLES)
     _check_draw(key, steps, n, radius_mismatch=radius_mismatch, mass_mismatch=mass_mismatch)
     k_ref, k_rest = jax.random.split(key)
     refs = sample_poses(k_ref, n, dtype=jnp.float32)

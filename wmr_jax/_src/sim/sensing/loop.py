@@ -7,14 +7,13 @@ batches are bounded in memory.
 from __future__ import annotations
 
 import dataclasses
-import warnings
 from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from wmr_jax._src import checks
+from wmr_jax._src import checks, quiet
 from wmr_jax._src.model import controllers
 from wmr_jax._src.model.params import Robot
 from wmr_jax._src.sim import loops, metrics
@@ -229,15 +228,13 @@ def check_settings(params, controller, estimator, dt, robot, velocity, steps, x6
     """Refuse the settings of disturbed runs as ``disturbed_metrics`` would, with no run.
 
     ``prepare_disturbed``'s checks on one run standing still at a reference,
-    for a study to call before it draws its disturbances; their warnings are
-    the runs' to give. Call it before anything warns: hiding its warnings
-    resets Python's record of the warnings already shown.
+    for a study to call before it draws its disturbances; the package's
+    warnings are the runs' to give (``quiet``).
     """
     still = Disturbance(
         np.array([[30.0, 0.0, 0.0]]), np.zeros((1, steps, 3)), np.ones((1, 3)), np.float64(0.0)
     )
-    with jax.enable_x64(checks.check_bool("x64", x64)), warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with jax.enable_x64(checks.check_bool("x64", x64)), quiet.quiet():
         init = (0.0, 0.0, 0.0)
         prepare_disturbed(still, params, controller, estimator, init, dt, robot, velocity)
 
