@@ -74,8 +74,6 @@ def _runs(
     if seed is None:
         checks.check_key("key", key)
     steps, horizon = study_steps(robot, horizon, dt)
-    # First: the check hides its warnings, which resets Python's record of
-    # those already shown (a warning about refs would be shown twice).
     for loop in (loops or {}).values():
         check_settings(
             loop.params, loop.controller, loop.estimator, dt, robot, velocity, steps, x64

@@ -149,8 +149,7 @@ def evaluate_poses(
     Returns:
         ``PoseMetrics`` of ``(N,)`` NumPy arrays, in the order of ``refs``.
     """
-    chunk = checks.check_int("chunk", chunk)
-    x64, progress = checks.check_bool("x64", x64), checks.check_bool("progress", progress)
+    chunk, x64, progress = _run_flags(chunk, x64, progress)
     with jax.enable_x64(x64):  # checked, and kept for the distance below, in the run's dtype
         refs_host = np.asarray(checks.as_poses("refs", refs, batch=True))
     cache = None if cache is None else checks.check_folder("cache", cache)
@@ -344,6 +343,12 @@ def _horizon(horizon: float | None, robot: Robot) -> float:
     return float(horizon)
 
 
+def _run_flags(chunk: Any, x64: Any, progress: Any) -> tuple[int, bool, bool]:
+    """``evaluate_poses``' ``chunk``, ``x64`` and ``progress``, checked."""
+    chunk = checks.check_int("chunk", chunk)
+    return chunk, checks.check_bool("x64", x64), checks.check_bool("progress", progress)
+
+
 def _metrics(refs, runs, robot, horizon, velocity, chunk, progress, x64, per_run=None):
     """Each run's metrics over ``refs``: ``runs`` maps a label to (controller, params or None)."""
     same = {"robot": robot, "velocity": velocity, "chunk": chunk, "progress": progress, "x64": x64}
@@ -418,10 +423,7 @@ def compare_controllers(
                 "registered controller"
             )
         runs[name] = (name, None)
-    # The runs' options refused before the poses are drawn, as evaluate_poses words them.
-    checks.check_int("chunk", chunk)
-    checks.check_bool("x64", x64)
-    checks.check_bool("progress", progress)
+    _run_flags(chunk, x64, progress)  # the runs' options, refused before the poses are drawn
     make_options(velocity=velocity)
     refs = np.asarray(sample_poses(seed, n_poses), dtype=float)
     results = _metrics(refs, runs, robot, horizon, velocity, chunk, progress, x64)
