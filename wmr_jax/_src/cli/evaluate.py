@@ -557,10 +557,12 @@ def run_compiled(args: Any) -> int:
     out, per_ref, settings = _settings(args)
     given = flags.robot_from(args.robot)
     refs, labels = load_refs(args.refs)
-    loop, meta = exported_loop(args.c)
+    with flags.as_flags({"folder": "--c"}):
+        loop, meta = exported_loop(args.c)
     robot = flags.robot_for_gains(given, loop.robot, "--c", args.c)
     horizon = _horizon(args, refs, robot)
-    compiled = compile_controller(args.c)
+    with flags.as_flags({"folder": "--c"}):
+        compiled = compile_controller(args.c)
     with flags.as_flags(_AS_FLAGS):
         result = evaluate_compiled(compiled, loop, refs, horizon=horizon, robot=robot, **settings)
     result = {**result, "c_folder": str(args.c), "gains": meta["gains"], "refs_file": args.refs}

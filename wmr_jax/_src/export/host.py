@@ -183,11 +183,11 @@ def read_metadata(folder: str | os.PathLike) -> dict[str, Any]:
         values = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as err:
         raise ValueError(
-            f"--c {os.fspath(folder)!r} cannot be read: {METADATA}: {io.os_reason(err)}; "
+            f"folder {os.fspath(folder)!r} cannot be read: {METADATA}: {io.os_reason(err)}; "
             "allowed: a folder written by wmr-jax export"
         ) from None
     if not isinstance(values, dict) or (values.get("gains") or values.get("baseline")) is None:
-        raise ValueError(f"--c {os.fspath(folder)!r}: {METADATA} holds no gains")
+        raise ValueError(f"folder {os.fspath(folder)!r}: {METADATA} holds no gains")
     return values
 
 
@@ -211,7 +211,7 @@ def exported_loop(folder: str | os.PathLike) -> tuple[ClosedLoop, dict[str, Any]
             return load_tuned(path), meta
         except ValueError as err:
             message = str(err).replace(repr(str(path)), METADATA)
-            raise ValueError(f"--c {os.fspath(folder)!r}: {message}") from None
+            raise ValueError(f"folder {os.fspath(folder)!r}: {message}") from None
 
 
 def _baseline_loop(values: Any, folder: Any) -> ClosedLoop:
@@ -220,7 +220,7 @@ def _baseline_loop(values: Any, folder: Any) -> ClosedLoop:
     from wmr_jax._src.model.robots import robot_from_values
     from wmr_jax._src.tuning.estimation import estimator_from_json
 
-    where = f"--c {os.fspath(folder)!r}: {METADATA}"
+    where = f"folder {os.fspath(folder)!r}: {METADATA}"
     try:
         controller = get_controller(values["controller"])
         params = controller.validate(controller.params_type(**values["params"]))
