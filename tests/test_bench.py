@@ -85,6 +85,24 @@ def test_bench_command_writes_table_and_json(tmp_path, capsys):
     assert kept["finished"] is False and kept["rows"] == []
 
 
+def test_page_faults_count_the_memory_a_call_takes_fresh_from_the_kernel():
+    """A call that writes into 128 MiB of new pages faults them in; one reusing memory does not."""
+    from wmr_jax._src.studies.bench_timing import time_group
+
+    size, huge_page = 128 << 20, 2 << 20
+    kept = np.ones(size // 8)
+    timings = time_group(
+        {
+            "fresh": (lambda: np.ones(size // 8), False),  # a new mapping each call
+            "reused": (lambda: kept.fill(2.0), False),
+        },
+        repeats=3,
+    )
+    # At least one fault per page, however large the kernel makes them (4 KiB or 2 MiB).
+    assert timings["fresh"].page_faults >= 0.9 * size / huge_page
+    assert timings["reused"].page_faults < 10
+
+
 def test_both_losses_and_their_gradients_are_timed():
     """Each loss is timed with its gradient, not skipped, and their ratios are reported."""
     cases = ("final_poses", "final_poses_nonideal", "grad_final_pose_loss", "grad_tuning_loss")

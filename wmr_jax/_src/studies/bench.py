@@ -135,8 +135,8 @@ def run_benchmark(
         ``{"environment", "config", "robot", "robot_label", "rows", "ratios",
         "peak_rss_mb", "finished"}`` (``finished`` True here); each row has
         ``case``, ``n``, ``steps``, ``run_s``, ``compile_s``,
-        ``robot_steps_per_s``, ``runs_s``, ``others_cpu``
-        (cores), or ``skipped`` with a reason; ``ratios`` maps ``"N=<n>"`` to
+        ``robot_steps_per_s``, ``runs_s``, ``others_cpu`` (cores),
+        ``page_faults`` (per call), or ``skipped`` with a reason; ``ratios`` maps ``"N=<n>"`` to
         the speed-ups of ``final_poses`` over the baselines and the cost of
         each derivative over its forward pass.
     """
@@ -210,6 +210,7 @@ class _SizeBench:
                 robot_steps_per_s=n * self.steps / timing.run_s if timing.run_s > 0 else None,
                 runs_s=timing.runs_s,
                 others_cpu=timing.others_cpu,
+                page_faults=timing.page_faults,
             )
         return {**row, **extra}
 

@@ -41,12 +41,15 @@ class Timing:
         compile_s: extra time of the first call (trace and compile), s.
         runs_s: every timed call, s.
         others_cpu: CPU other processes used meanwhile, cores (Linux, else ``None``).
+        page_faults: minor page faults of this process per timed call: memory
+            the call got fresh from the kernel rather than reused (docs/scale.md).
     """
 
     run_s: float
     compile_s: float | None
     runs_s: list[float]
     others_cpu: float | None
+    page_faults: float
 
 
 def _wait_for_idle(limit_s: float, *, threshold: float = 0.1, window_s: float = 0.3) -> None:
@@ -82,6 +85,7 @@ def time_group(
     # CPU time of other processes while each case ran, summed over its calls:
     # /proc/stat counts in 10 ms ticks, too coarse for one short call.
     others: dict[str, list[float]] = {name: [0.0, 0.0] for name in calls}
+    faults = dict.fromkeys(calls, 0)
     for _ in range(repeats):
         if wait_idle > 0:
             _wait_for_idle(wait_idle)
@@ -91,8 +95,10 @@ def time_group(
                 # case XLA's worker threads are asleep, and waking them costs.
                 jax.block_until_ready(call())
             before, start = _others_cpu_seconds(), time.perf_counter()
+            faulted = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
             jax.block_until_ready(call())
             wall = time.perf_counter() - start
+            faults[name] += resource.getrusage(resource.RUSAGE_SELF).ru_minflt - faulted
             after = _others_cpu_seconds()
             runs[name].append(wall)
             if before is not None and after is not None:
@@ -105,7 +111,7 @@ def time_group(
         compile_s = None if first[name] is None else max(0.0, first[name] - run)
         cpu, wall = others[name]
         share = min(cores, cpu / wall) if wall > 0 and _others_cpu_seconds() is not None else None
-        timings[name] = Timing(run, compile_s, runs[name], share)
+        timings[name] = Timing(run, compile_s, runs[name], share, faults[name] / repeats)
     return timings
 
 
