@@ -94,8 +94,8 @@ def time_group(
                 # Steady state, as in a loop of calls: right after another
                 # case XLA's worker threads are asleep, and waking them costs.
                 jax.block_until_ready(call())
-            before, start = _others_cpu_seconds(), time.perf_counter()
             faulted = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+            before, start = _others_cpu_seconds(), time.perf_counter()
             jax.block_until_ready(call())
             wall = time.perf_counter() - start
             faults[name] += resource.getrusage(resource.RUSAGE_SELF).ru_minflt - faulted
