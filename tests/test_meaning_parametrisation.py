@@ -240,7 +240,10 @@ def test_gains_below_the_box_are_moved_onto_its_lower_faces():
         (lambda: p.gains_from_logits(np.zeros(7), w.Robot(v_max=math.nan)), r"robot.v_max = nan"),
         (lambda: p.gains_from_unit(np.full(7, 0.5), w.Robot(half_track=0.0)), r"robot.half_track"),
         (lambda: p.unit_from_gains(w.Gains(), w.Robot(v_max=math.nan)), r"robot.v_max = nan"),
-        (lambda: p.gains_from_unit(np.full(7, 0.5), "paper"), r"robot is a str; allowed: a"),
+        (
+            lambda: p.gains_from_unit(np.full(7, 0.5), "paper"),
+            r"robot = 'paper' is not allowed; allowed: a Robot \(wmr_jax.load_robot\('paper'\)",
+        ),
         (
             lambda: p.gains_from_unit(np.full(7, 0.5), w.Robot(v_max=[100.0, 120.0])),
             r"robot.v_max has shape \(2,\); allowed: one robot",

@@ -134,7 +134,11 @@ def test_run_table_rows_are_each_runs_metrics():
     for args, kwargs, message in (
         ((batch, refs[:1]), {}, r"refs has shape \(1, 3\); allowed: \(2, 3\), one per run"),
         ((batch, refs), {"robot": w.Robot(v_max=-1.0)}, r"robot.v_max = -1.0"),
-        ((batch, refs), {"robot": "x"}, r"robot is a str"),
+        (
+            (batch, refs),
+            {"robot": "x"},
+            r"robot = 'x' is not allowed; allowed: a Robot \(wmr_jax.load_robot",
+        ),
         ((a, REF), {}, r"poses of shape \(3, 3\) is not allowed; allowed: a Trajectory of"),
     ):
         with pytest.raises(ValueError, match=message):

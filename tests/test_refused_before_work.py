@@ -40,8 +40,14 @@ def no_keys(monkeypatch):
         (lambda: w.sample_poses(3, 4, dtype="int8"), "dtype = 'int8' is not allowed"),
         (lambda: tuning.held_out_poses(-1), "n = -1 is not allowed"),
         (lambda: tuning.training_poses(0, 0, HUGE), f"n = {HUGE} is not allowed"),
-        (lambda: tuning.gains_from_logits(np.zeros(7), robot="x"), "robot is a str"),
-        (lambda: tuning.robust_gains(np.zeros(7), robot="x"), "robot is a str"),
+        (
+            lambda: tuning.gains_from_logits(np.zeros(7), robot="x"),
+            "robot = 'x' is not allowed; allowed: a Robot (wmr_jax.load_robot",
+        ),
+        (
+            lambda: tuning.robust_gains(np.zeros(7), robot="x"),
+            "robot = 'x' is not allowed; allowed: a Robot (wmr_jax.load_robot",
+        ),
         (lambda: training.train(tuning.TuneConfig(iters=2), state="x"), "state = 'x'"),
         (lambda: robust.tune_robust(tuning.RobustConfig(iters=2), state="x"), "state = 'x'"),
     ],

@@ -63,6 +63,19 @@ def test_presets_load_and_validate():
         w.dynamics.robot_preset("burger")
 
 
+def test_a_robot_given_by_name_or_path_in_python_points_to_load_robot(tmp_path):
+    """The commands' --robot takes a name or file; in Python the refusal says how to read one."""
+    path = tmp_path / "robot.json"
+    path.write_text('{"half_track": 8.0, "v_max": 22.0}')
+    for given in ("turtlebot3-burger", path):
+        expected = re.escape(f"wmr_jax.load_robot({str(given)!r}) reads that preset or file")
+        with pytest.raises(
+            ValueError, match=rf"^robot = .* is not allowed; allowed: a Robot \({expected}\)$"
+        ):
+            w.final_poses([[30.0, 0.0, 0.0]], robot=given)
+        assert w.load_robot(given).v_max in (w.ROBOTS["turtlebot3-burger"].v_max, 22.0)
+
+
 def test_a_json_subset_keeps_the_other_defaults(tmp_path):
     path = _file(tmp_path, "bot.json", '{"v_max": 40, "half_track": 10.5}')
     robot = w.load_robot(path)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import warnings
 from typing import Any
 
@@ -138,6 +139,9 @@ _POSITIVE_ROBOT_FIELDS = tuple(
 
 def validate_robot(robot: Robot) -> Robot:
     """Check the robot's parameters are physical; return it unchanged."""
+    if isinstance(robot, (str, os.PathLike)):  # what the commands' --robot takes
+        hint = f"wmr_jax.load_robot({os.fspath(robot)!r}) reads that preset or file"
+        raise ValueError(f"robot = {os.fspath(robot)!r} is not allowed; allowed: a Robot ({hint})")
     r = field_values(robot, Robot, "robot")
     for name in _POSITIVE_ROBOT_FIELDS:
         if r[name] is not None:
