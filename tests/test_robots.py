@@ -228,6 +228,16 @@ def test_load_tuned_reads_the_robot_back_and_checks_it(tmp_path):
     pioneer = w.ROBOTS["pioneer-3dx"]
     path.write_text(json.dumps(tuning.tuned_json(w.Gains(kr=30.0), robot=pioneer)))
     assert same_robot(w.load_tuned(path).robot, pioneer)
+    # A robot in metres inside the file is flagged as a --robot file's would be, and runs.
+    metres = w.Robot(half_track=0.08, v_max=0.22)
+    in_metres = tuning.tuned_json(w.Gains(kr=0.1, k_theta=1.0), robot=metres)
+    path.write_text(json.dumps(in_metres))
+    with pytest.warns(w.RobotUnitsWarning) as caught:
+        assert w.load_tuned(path).robot.half_track == 0.08
+    assert [str(c.message).split(" is outside")[0] for c in caught] == [
+        f"{str(path)!r}: robot: half_track = 0.08 cm",
+        f"{str(path)!r}: robot: v_max = 0.22 cm/s",
+    ]
     path.write_text(json.dumps(tuning.tuned_json(w.Gains(kr=30.0))))  # as before robots
     assert w.load_tuned(path).robot is None
     values = tuning.tuned_json(w.Gains(kr=30.0), robot=pioneer)

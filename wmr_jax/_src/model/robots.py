@@ -80,7 +80,7 @@ def implausible(values: dict[str, Any]) -> list[tuple[str, Any, tuple[float, flo
     return found
 
 
-def _warn_unit_slips(robot: Robot, where: str, ros: bool) -> None:
+def warn_unit_slips(robot: Robot, where: str, ros: bool) -> None:
     """Warn (``RobotUnitsWarning``) for each size or speed of a file outside ``PLAUSIBLE``."""
     convention = (
         "a ROS file gives metres and m/s: wheel_separation 0.16 for 16 cm"
@@ -319,7 +319,7 @@ def read_robot(source: Any) -> LoadedRobot:
         raise ValueError(f"{where} cannot be read: {' '.join(str(err).split())}") from None
     if path.suffix.lower() == ".json":
         robot, identified = _robot_from_json(content, where)
-        _warn_unit_slips(robot, where, ros=False)
+        warn_unit_slips(robot, where, ros=False)
         if identified:
             note = (
                 f"{text}: the identified robot (its half-track and wheel-loop gain); its "
@@ -331,7 +331,7 @@ def read_robot(source: Any) -> LoadedRobot:
     from wmr_jax._src.model.ros_yaml import robot_from_ros_yaml
 
     robot, note, accelerations = robot_from_ros_yaml(content, where)
-    _warn_unit_slips(robot, where, ros=True)
+    warn_unit_slips(robot, where, ros=True)
     return LoadedRobot(robot, text, note, accelerations)
 
 

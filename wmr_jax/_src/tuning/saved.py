@@ -26,6 +26,7 @@ from wmr_jax._src.model.robots import (
     is_number,
     robot_from_values,
     robot_json,
+    warn_unit_slips,
 )
 from wmr_jax._src.sim.sensing.loop import ClosedLoop
 from wmr_jax._src.tuning.estimation import estimator_from_json, estimator_json
@@ -289,6 +290,7 @@ def load_tuned_and_tuning(path: str | os.PathLike) -> tuple[ClosedLoop, str | No
         check_units(values["robot_units"], where)
     if "robot" in values:
         robot = robot_from_values(values["robot"], f"{where}: robot")
+        warn_unit_slips(robot, f"{where}: robot", ros=False)
     if not holds_gains:
         raise _no_gains(values, where)
     numbers = {k: v for k, v in values.items() if k not in named}
