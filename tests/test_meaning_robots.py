@@ -210,6 +210,45 @@ def test_a_ros_file_without_both_wheel_sizes_is_refused(tmp_path, block, missing
     )
 
 
+@pytest.mark.parametrize(
+    ("given", "typo", "meant"),
+    [
+        ("linear:\n  x:\n    max_velocty: 0.22\n", "linear.x.max_velocty", "linear.x.max_velocity"),
+        (
+            "angular.z.max_acceleraton: 3.0\n",
+            "angular.z.max_acceleraton",
+            "angular.z.max_acceleration",
+        ),
+        (
+            "linear.x.has_velocity_limit: true\n",
+            "linear.x.has_velocity_limit",
+            "linear.x.has_velocity_limits",
+        ),
+        (
+            "wheel_separation_multiplyer: 1.02\n",
+            "wheel_separation_multiplyer",
+            "wheel_separation_multiplier",
+        ),
+    ],
+)
+def test_a_misspelt_ros_parameter_is_refused_not_ignored(tmp_path, given, typo, meant):
+    sizes = "wheel_separation: 0.16\nwheel_radius: 0.033\n"
+    with pytest.raises(ValueError) as info:
+        _read(tmp_path, "r.yaml", sizes + given)
+    assert str(info.value) == (
+        f"'{tmp_path / 'r.yaml'}': {typo} is not a diff_drive_controller parameter, and "
+        f"would be ignored; allowed: {meant}"
+    )
+    # The limiter's parameters the model leaves out, and the exact names, are read as before.
+    known = (
+        "linear:\n  x:\n    max_velocity: 0.22\n    min_velocity: -0.22\n"
+        "    max_deceleration: 1.0\n    max_acceleration: 2.0\n"
+        "angular.z.min_acceleration: -3.0\n"
+    )
+    robot = _read(tmp_path, "k.yaml", sizes + known).robot
+    assert (robot.v_max, robot.accel_max) == pytest.approx((22.0, 200.0))
+
+
 def test_sizes_and_speeds_in_the_wrong_unit_warn_and_run_as_given(tmp_path):
     # A ROS file written in cm: a robot 16 m wide with 3.3 m wheels, at 22 m/s.
     ros = "wheel_separation: 16\nwheel_radius: 3.3\nlinear:\n  x:\n    max_velocity: 22\n"

@@ -133,6 +133,35 @@ def _multiplier(params: dict[str, Any], keys: tuple[str, ...], where: str) -> tu
     return sum(v for _, v in given) / len(given), [k for k, _ in given]
 
 
+# The parameters read besides _BLOCK_KEYS, and the speed limiter's that are
+# known but not modelled (ignored as such, never taken for a misspelling).
+_READ = (
+    "wheel_separation_multiplier",
+    *(f"{side}wheel_radius_multiplier" for side in ("", "left_", "right_")),
+    *(
+        f"{axis}.{name}_{kind}{'_limits' if name == 'has' else ''}"
+        for axis in ("linear.x", "angular.z")
+        for name in ("max", "has")
+        for kind in ("velocity", "acceleration")
+    ),
+)
+_NOT_MODELLED = ("min_velocity", "min_acceleration", "max_deceleration", "max_jerk", "min_jerk")
+
+
+def _refuse_misspelt(ignored: list[str], params: dict[str, Any], where: str) -> None:
+    """Refuse an ignored key that is a near miss of a parameter read and not given."""
+    absent = [key for key in _READ if key not in params]
+    for key in ignored:
+        if key.rsplit(".", 1)[-1].startswith(_NOT_MODELLED):
+            continue
+        close = difflib.get_close_matches(key, absent, n=1, cutoff=0.9)
+        if close:
+            raise ValueError(
+                f"{where}: {key} is not a diff_drive_controller parameter, and would be "
+                f"ignored; allowed: {close[0]}"
+            )
+
+
 def robot_from_ros_yaml(content: str, where: str) -> tuple[Robot, str, dict[str, float]]:
     """The robot of a ``diff_drive_controller`` parameter file, the note of its fields, limits."""
     import yaml
@@ -235,6 +264,7 @@ def robot_from_ros_yaml(content: str, where: str) -> tuple[Robot, str, dict[str,
             f"{missing[0]}{hint}; allowed: both wheel_separation and wheel_radius, in metres"
         )
     ignored = [k for k in params if k not in used]
+    _refuse_misspelt(ignored, params, where)
     robot = robot_from_values(values, where)
     # No acceleration limit given is none (the paper robot's 0), not a value kept.
     limits = ("accel_max", "angular_accel_max")
