@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 import wmr_jax as w
-from wmr_jax import export
+from wmr_jax import export, tuning
 from wmr_jax._src.cli.main import main
 from wmr_jax._src.model.controllers import get_controller
 from wmr_jax._src.model.controllers.schedule import ScheduleParams, knot_radii
@@ -208,6 +208,30 @@ def test_files_compile_clean_and_stand_alone(
         kinds = {line.split()[-2] for line in nm.stdout.splitlines() if len(line.split()) == 3}
         assert not kinds & set("BbDdCc"), nm.stdout  # no data, bss or common symbols
     assert f"typedef {real} wmr_real;" in sources.header
+
+
+def test_an_exported_folder_is_named_in_what_its_loop_says(tmp_path, capsys):
+    """exported_loop reads the saved gains as load_tuned does, naming the folder and its file."""
+    metres = w.Robot(half_track=0.08, v_max=0.22)
+    gains = tmp_path / "m.json"
+    gains.write_text(json.dumps(tuning.tuned_json(w.Gains(kr=0.1, k_theta=1.0), robot=metres)))
+    out = tmp_path / "ctl"
+    assert main(["export", "--gains", str(gains), "--out", str(out)]) == 0
+    assert f"warning: {str(gains)!r}: robot: half_track = 0.08 cm" in capsys.readouterr().err
+    where = f"folder {str(out)!r}: wmr_controller.json"
+    with pytest.warns(w.RobotUnitsWarning) as caught:
+        loop, _ = export.exported_loop(out)
+    assert loop.robot.half_track == 0.08
+    assert [str(c.message).split(" is outside")[0] for c in caught] == [
+        f"{where}: robot: half_track = 0.08 cm",
+        f"{where}: robot: v_max = 0.22 cm/s",
+    ]
+    meta = json.loads((out / "wmr_controller.json").read_text())
+    meta["gains"]["kr"] = "fast"
+    (out / "wmr_controller.json").write_text(json.dumps(meta))
+    with pytest.warns(w.RobotUnitsWarning), pytest.raises(ValueError) as info:
+        export.exported_loop(out)
+    assert str(info.value) == f"{where}: kr = 'fast' is not allowed; allowed: a number"
 
 
 def test_export_command_writes_the_files_and_refuses_bad_flags(tmp_path, robust_file, capsys):

@@ -213,7 +213,11 @@ def test_a_ros_file_without_both_wheel_sizes_is_refused(tmp_path, block, missing
 @pytest.mark.parametrize(
     ("given", "typo", "meant"),
     [
-        ("linear:\n  x:\n    max_velocty: 0.22\n", "linear.x.max_velocty", "linear.x.max_velocity"),
+        (
+            "linear:\n  x:\n    max_velcoity: 0.22\n",
+            "linear.x.max_velcoity",
+            "linear.x.max_velocity",
+        ),
         (
             "angular.z.max_acceleraton: 3.0\n",
             "angular.z.max_acceleraton",
@@ -239,14 +243,33 @@ def test_a_misspelt_ros_parameter_is_refused_not_ignored(tmp_path, given, typo, 
         f"'{tmp_path / 'r.yaml'}': {typo} is not a diff_drive_controller parameter, and "
         f"would be ignored; allowed: {meant}"
     )
-    # The limiter's parameters the model leaves out, and the exact names, are read as before.
-    known = (
-        "linear:\n  x:\n    max_velocity: 0.22\n    min_velocity: -0.22\n"
-        "    max_deceleration: 1.0\n    max_acceleration: 2.0\n"
-        "angular.z.min_acceleration: -3.0\n"
+
+
+def test_ros_parameters_the_model_leaves_out_are_ignored_not_taken_for_misspellings(tmp_path):
+    sizes = "wheel_separation: 0.16\nwheel_radius: 0.033\n"
+    # The limiter's other limits without the ones the model reads: each is one
+    # letter or so from an absent parameter that is read (min_ / max_, de- / ac-).
+    others = "".join(
+        f"{axis}.{name}: 1.0\n"
+        for axis in ("linear.x", "angular.z")
+        for name in ("min_velocity", "min_acceleration", "max_deceleration", "max_jerk", "min_jerk")
     )
-    robot = _read(tmp_path, "k.yaml", sizes + known).robot
-    assert (robot.v_max, robot.accel_max) == pytest.approx((22.0, 200.0))
+    # Further from any of them: ignored as well (the reverse limits, the jerk flag).
+    others += "linear.x.max_acceleration_reverse: 1.0\nangular.z.has_jerk_limits: false\n"
+    read = _read(tmp_path, "others.yaml", sizes + others)
+    assert read.robot.v_max == w.Robot().v_max and read.accelerations == {}
+    assert "ignored: linear.x.min_velocity, linear.x.min_acceleration" in read.note
+    # Limits on one axis only, flags included: the other axis's names are absent.
+    angular = (
+        "angular:\n  z:\n    has_velocity_limits: true\n    has_acceleration_limits: true\n"
+        "    max_velocity: 2.84\n    max_acceleration: 3.2\n"
+    )
+    read = _read(tmp_path, "angular.yaml", sizes + angular)
+    assert read.robot.v_max == pytest.approx(2.84 * 8.0)
+    # A near miss of a parameter that is given is only ignored: the name meant is there.
+    both = "linear.x.max_velocity: 0.22\nlinear.y.max_velocity: 0.5\n"
+    read = _read(tmp_path, "both.yaml", sizes + both)
+    assert read.robot.v_max == pytest.approx(22.0) and "ignored: linear.y.max_velocity" in read.note
 
 
 def test_sizes_and_speeds_in_the_wrong_unit_warn_and_run_as_given(tmp_path):

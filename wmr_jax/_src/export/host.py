@@ -197,27 +197,18 @@ def exported_loop(folder: str | os.PathLike) -> tuple[ClosedLoop, dict[str, Any]
     Raises:
         ValueError: one line naming the folder, for a missing or bad file.
     """
-    import tempfile
-
-    from wmr_jax._src.tuning.saved import load_tuned
+    from wmr_jax._src.tuning.saved import tuned_from_values
 
     meta = read_metadata(folder)
     if meta.get("baseline") is not None:
         return _baseline_loop(meta["baseline"], folder), meta
-    with tempfile.TemporaryDirectory() as tmp:  # load_tuned's checks, on the saved gains
-        path = Path(tmp, "tuned_gains.json")
-        path.write_text(json.dumps(meta["gains"]), encoding="utf-8")
-        try:
-            return load_tuned(path), meta
-        except ValueError as err:
-            message = str(err).replace(repr(str(path)), METADATA)
-            raise ValueError(f"folder {os.fspath(folder)!r}: {message}") from None
+    return tuned_from_values(meta["gains"], f"folder {os.fspath(folder)!r}: {METADATA}")[0], meta
 
 
 def _baseline_loop(values: Any, folder: Any) -> ClosedLoop:
     """The baseline loop a ``wmr_controller.json`` records (``codegen._baseline_json``)."""
     from wmr_jax._src.model.controllers import get_controller
-    from wmr_jax._src.model.robots import robot_from_values
+    from wmr_jax._src.model.robots import robot_from_values, warn_unit_slips
     from wmr_jax._src.tuning.estimation import estimator_from_json
 
     where = f"folder {os.fspath(folder)!r}: {METADATA}"
@@ -230,6 +221,8 @@ def _baseline_loop(values: Any, folder: Any) -> ClosedLoop:
         robot = None if robot is None else robot_from_values(robot, where)
     except (KeyError, TypeError) as err:
         raise ValueError(f"{where} holds no loop ({err})") from None
+    if robot is not None:
+        warn_unit_slips(robot, f"{where}: robot", ros=False)
     return ClosedLoop(controller, params, estimator, robot)
 
 

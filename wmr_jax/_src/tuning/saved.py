@@ -260,6 +260,11 @@ def load_tuned_and_tuning(path: str | os.PathLike) -> tuple[ClosedLoop, str | No
     except (OSError, UnicodeDecodeError, ValueError, RecursionError) as err:
         # RecursionError: arrays nested beyond Python's recursion limit.
         raise ValueError(f"{where} cannot be read: {os_reason(err)}") from None
+    return tuned_from_values(values, where)
+
+
+def tuned_from_values(values: Any, where: str) -> tuple[ClosedLoop, str | None]:
+    """``load_tuned_and_tuning`` of a ``tuned_gains.json``'s content; ``where`` names it."""
     if not isinstance(values, dict):
         raise ValueError(f"{where} is not allowed; allowed: a JSON object")
     kind = _kind_of(values, where)

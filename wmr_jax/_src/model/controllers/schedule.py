@@ -35,7 +35,14 @@ from wmr_jax._src.model.controllers.shim_sung import (
     direction_flag,
     polar_error,
 )
-from wmr_jax._src.model.params import Gains, Robot, WheelSpeedWarning, sampled, validate_gains
+from wmr_jax._src.model.params import (
+    Gains,
+    Robot,
+    WheelSpeedWarning,
+    sampled,
+    validate_gains,
+    validate_robot,
+)
 
 KNOTS = 10  # knots per table by default
 # Each knot is a term of the compiled law: many more no longer compile.
@@ -81,8 +88,8 @@ class ScheduleParams(Parameters):
         """Constant tables equal to ``gains`` (``k_turn = k_θ``): the fixed-gain law."""
         if not isinstance(gains, Gains):
             raise ValueError(f"gains is a {type(gains).__name__}; allowed: a wmr_jax.Gains")
-        if not isinstance(robot, (Robot, type(None))):
-            raise ValueError(f"robot is a {type(robot).__name__}; allowed: a wmr_jax.Robot")
+        if robot is not None:
+            validate_robot(robot)
         knots = check_int("knots", knots, 2, MAX_KNOTS)
         robot = Robot() if robot is None else robot
         return cls(
