@@ -226,6 +226,12 @@ def test_an_exported_folder_is_named_in_what_its_loop_says(tmp_path, capsys):
         f"{where}: robot: half_track = 0.08 cm",
         f"{where}: robot: v_max = 0.22 cm/s",
     ]
+    # A baseline's folder records its robot in its own block: flagged the same way.
+    controller, params = _BASELINES[0]
+    baseline = w.ClosedLoop(controller, params, None, metres)
+    export.write_sources(tmp_path / "b", export.c_sources(baseline), baseline)
+    with pytest.warns(w.RobotUnitsWarning, match=f"^folder {str(tmp_path / 'b')!r}: wmr_contr"):
+        assert export.exported_loop(tmp_path / "b")[0].robot.v_max == 0.22
     meta = json.loads((out / "wmr_controller.json").read_text())
     meta["gains"]["kr"] = "fast"
     (out / "wmr_controller.json").write_text(json.dumps(meta))
