@@ -134,6 +134,7 @@ def run(args: Any) -> int:
     """Run ``wmr-jax simulate``; return the exit status."""
     import numpy as np
 
+    from wmr_jax._src.checks import position_limit
     from wmr_jax._src.identify.closed_loop import identified_rollout, loaded_identified
     from wmr_jax._src.model.params import Robot, SamplingWarning
     from wmr_jax._src.model.robots import describe_robot, same_robot
@@ -180,6 +181,13 @@ def run(args: Any) -> int:
         flags.unit_slip(
             f"--ref lies {gap:.3g} cm from the start, inside the arrival tolerance "
             f"({DEFAULT_TOL_R:g} cm); x and y are read as cm (metres need times 100)"
+        )
+    reach = float(np.max(np.abs(np.asarray(traj.poses)[:, :2])))
+    if not reach <= position_limit():  # NaN too: the metrics could not judge the run
+        cause = "the warning above says why" if unsettled else "see docs/model.md §4.2.1"
+        raise ValueError(
+            f"the run diverged: the robot got {reach:.3g} cm from the origin ({cause}); "
+            "allowed: gains and a --dt the sampled law settles with"
         )
     t_arrive = float(metrics.arrival_time(traj, np.asarray(ref), dt=dt))
     per_region = np.asarray(metrics.region_time(traj, dt=dt))
