@@ -258,9 +258,11 @@ def sampled(gains: Gains, dt: float, *, stacklevel: int) -> bool:
         return True
     if not quiet.warns():
         return False
+    # A period of a second or more is most likely milliseconds given as seconds.
+    ms = f"; dt = {dt:g} is in s (a period in milliseconds needs /1000)" if dt >= 1 else ""
     warnings.warn(
         f"k_theta*dt = {heading:.3g} and k_r*pi*dt/(2*R_m) = {distance:.3g}: the sampled law "
-        "overshoots and cannot settle unless both are below 2 (docs/model.md §4)",
+        f"overshoots and cannot settle unless both are below 2 (docs/model.md §4){ms}",
         SamplingWarning,
         stacklevel=stacklevel,
     )
