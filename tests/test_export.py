@@ -280,7 +280,10 @@ def test_a_period_the_law_cannot_settle_at_is_refused(tmp_path, robust_file, cap
     err = capsys.readouterr().err
     assert "warning: --period 33 is read in s; a value in milliseconds needs /1000" in err
     assert f"error: --period 33 is not allowed for {robust_file}: k_theta*dt = " in err
-    assert "cannot settle unless both are below 2 (docs/model.md §4); allowed: a period" in err
+    assert (
+        "cannot settle unless both are below 2 (docs/model.md §4); dt = 33 is in s (a period "
+        "in milliseconds needs /1000); allowed: a period"
+    ) in err
     # The longest period they settle at, to the 4 digits shown: the law's own check
     # passes 0.1 % below it and warns 0.1 % above.
     from wmr_jax._src.model.params import SamplingWarning
