@@ -56,4 +56,12 @@ def run(args: Any) -> int:
         f"{comparison['poses']:,} random poses (seed {comparison['seed']}) -> {out}/comparison.md"
     )
     print(comparison_table(comparison["rows"]), end="")
+    over = [row["controller"] for row in comparison["rows"] if row["over V_max"] > 0]
+    if over and settings["velocity"] == "ideal":
+        v_max = comparison["robot"]["v_max"]
+        print(
+            f"note: {len(over)} of the {len(comparison['rows'])} runs ask a wheel for more than "
+            f"V_max = {v_max:g} cm/s (runs over V_max), which the ideal loop follows as asked; "
+            "--velocity nonideal holds each wheel within V_max (docs/model.md §4.3)"
+        )
     return 0
