@@ -81,11 +81,13 @@ def test_a_run_that_leaves_the_range_is_an_error_not_nans():
 def test_gains_the_sampled_law_cannot_follow_warn():
     with pytest.warns(w.SamplingWarning, match=r"k_theta\*dt = 3\.3"):
         w.rollout(REF, w.Gains(k_theta=100.0), steps=STEPS)
-    with pytest.warns(w.SamplingWarning, match=r"k_theta\*dt = 1e\+03") as caught:
+    with pytest.warns(w.SamplingWarning, match=r"k_theta\*dt = 1e\+03"):
         w.rollout(REF, dt=100.0, steps=STEPS)
     # A period of a second or more: most likely milliseconds, said so; not below.
+    with pytest.warns(w.SamplingWarning) as caught:
+        w.rollout(REF, dt=1.0, steps=STEPS)
     (said,) = [str(c.message) for c in caught if c.category is w.SamplingWarning]
-    assert said.endswith("§4); dt = 100 is in s (a period in milliseconds needs /1000)")
+    assert said.endswith("§4); dt = 1 is in s (a period in milliseconds needs /1000)")
     with pytest.warns(w.SamplingWarning) as caught:
         w.rollout(REF, dt=0.99, steps=STEPS)
     (said,) = [str(c.message) for c in caught if c.category is w.SamplingWarning]
