@@ -115,6 +115,16 @@ def test_a_checkpoint_with_nan_or_wrong_lengths_is_refused():
         tuning.restore_state({**good, "z": np.full_like(good["z"], np.nan)}, fresh)
     with pytest.raises(ValueError, match="inconsistent"):
         tuning.restore_state({**good, "iteration": np.asarray(2)}, fresh)
+    # Arguments swapped or missing: named, not an AttributeError.
+    allowed = "is not allowed; allowed: a TrainState (init_state, or one handed to progress_fn)"
+    for call, named in (
+        (lambda: tuning.state_arrays(None), "state = None"),
+        (lambda: tuning.state_arrays(good), "state = {'iteration'"),
+        (lambda: tuning.restore_state(good, config), "fresh = TuneConfig("),
+    ):
+        with pytest.raises(ValueError) as info:
+            call()
+        assert str(info.value).startswith(named) and str(info.value).endswith(allowed)
 
 
 def test_a_fixed_gain_file_written_by_tune_must_be_whole(tmp_path):

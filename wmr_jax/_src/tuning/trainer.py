@@ -351,11 +351,11 @@ def differences(saved: dict[str, Any], now: dict[str, Any]) -> str:
     return "; ".join(diffs) or "the format differs"
 
 
-def check_state(state: Any) -> None:
-    """Refuse a ``state`` that is neither ``None`` nor a ``TrainState`` (before any draw)."""
-    if state is not None and not isinstance(state, TrainState):
+def check_state(state: Any, name: str = "state", *, optional: bool = True) -> None:
+    """Refuse a ``state`` that is not a ``TrainState`` (nor ``None``, if ``optional``)."""
+    if not (isinstance(state, TrainState) or (optional and state is None)):
         raise ValueError(
-            f"state = {state!r:.80} is not allowed; allowed: a TrainState (init_state, or "
+            f"{name} = {state!r:.80} is not allowed; allowed: a TrainState (init_state, or "
             "one handed to progress_fn)"
         )
 
@@ -386,6 +386,7 @@ def own_state(state: Any, problem: TrainingProblem, run: str) -> TrainState:
 
 def state_arrays(state: TrainState) -> dict[str, np.ndarray]:
     """Return ``state`` as named NumPy arrays, exactly (for a checkpoint file)."""
+    check_state(state, optional=False)
     leaves = jax.tree.leaves(state.opt_state)
     return {
         "iteration": np.asarray(state.iteration),
@@ -408,6 +409,7 @@ def restore_state(arrays: dict[str, np.ndarray], fresh: TrainState) -> TrainStat
     Never trusted: non-finite values, disagreeing counts or lengths, and rows not
     as long as ``fresh``'s start are refused in one line (``ValueError``).
     """
+    check_state(fresh, "fresh", optional=False)
     leaves, treedef = jax.tree.flatten(fresh.opt_state)
     try:
         restored = [
