@@ -650,6 +650,27 @@ def test_a_latency_identified_at_another_period_is_warned_of(tmp_path, capsys, m
     path.write_text(json.dumps({k: v for k, v in identified.items() if k != "noise"}))
     with pytest.raises(ValueError, match=r"lacks noise; allowed: identify's output$"):
         read_identified(path)
+    # Every number a run reads, checked in the file before any run, by its dotted name.
+    for block, name, bad, allowed in (
+        ("wheel_scale", "left", 0.0, "> 0"),
+        ("wheel_scale", "right", "1", "> 0"),
+        ("robot", "half_track", -8.0, "> 0"),
+        ("robot", "speed_gain", float("inf"), "> 0"),
+        ("noise", "sigma_xy", -0.1, ">= 0"),
+        ("noise", "sigma_theta", None, ">= 0"),
+    ):
+        path.write_text(json.dumps({**identified, block: {**identified[block], name: bad}}))
+        with pytest.raises(ValueError) as info:
+            read_identified(path)
+        assert str(info.value) == (
+            f"--robot {path}: {block}.{name} = {bad!r} is not allowed; allowed: a finite "
+            f"number {allowed}"
+        )
+    path.write_text(json.dumps({**identified, "noise": {**identified["noise"], "sigma_xy": 0}}))
+    assert read_identified(path)[1]["noise"]["sigma_xy"] == 0  # no tracker noise: allowed
+    path.write_text(json.dumps({**identified, "base_robot": {"half_track": -1}}))
+    with pytest.raises(ValueError, match=r": base_robot: half_track = -1 is not allowed"):
+        read_identified(path)
     # identify --plan plans at the period the commands run at, unless told otherwise.
     plan = tmp_path / "drive.csv"
     assert cli.main(["identify", "--plan", str(plan), "--minutes", "0.05"]) == 0

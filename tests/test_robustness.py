@@ -212,6 +212,10 @@ _REFS = np.array([[30.0, 0.0, 0.0], [0.0, 30.0, 1.0]])
         (lambda: studies.evaluate_loop(w.Gains(), _REFS, velocity="foo"), "velocity = 'foo'"),
         (lambda: studies.evaluate_loop(w.Gains(), _REFS, dt=-1.0), "dt = -1.0 is not allowed"),
         (
+            lambda: studies.evaluate_loop(w.Gains(), _REFS, identified={"robot": {}}),
+            "identified lacks base_robot, wheel_scale, latency_samples, noise; allowed: identify",
+        ),
+        (
             lambda: studies.standard_conditions({"a": w.Gains()}, _REFS, 7),
             "key = 7 is not allowed; allowed: a jax.random key",
         ),

@@ -16,6 +16,7 @@ import functools
 import json
 import math
 import warnings
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +47,43 @@ def is_identified(source: Any) -> bool:
     return isinstance(content, dict) and "wheel_scale" in content
 
 
+def check_identified(content: Any, where: str) -> Robot:
+    """Check the content of an ``identified.json`` (before any run); return its base robot.
+
+    ``where`` names it in the one-line ``ValueError``.
+    """
+    from wmr_jax._src.model.robots import robot_from_values
+
+    if not isinstance(content, Mapping):
+        raise ValueError(f"{where} is a {type(content).__name__}; allowed: identify's output")
+    missing = [k for k in _KEYS if k not in content]
+    if missing:
+        raise ValueError(f"{where} lacks {', '.join(missing)}; allowed: identify's output")
+    latency = content["latency_samples"]
+    whole = isinstance(latency, int) and not isinstance(latency, bool)  # JSON true is no count
+    if not whole or not 0 <= latency <= model.MAX_LATENCY:
+        raise ValueError(
+            f"{where}: latency_samples = {latency!r} is not allowed; allowed: an "
+            f"integer 0-{model.MAX_LATENCY}"
+        )
+    for block, names, low in (
+        ("wheel_scale", ("left", "right"), "> 0"),
+        ("robot", ("half_track", "speed_gain"), "> 0"),
+        ("noise", ("sigma_xy", "sigma_theta"), ">= 0"),
+    ):
+        values = content[block]
+        for name in names:
+            value = values.get(name) if isinstance(values, Mapping) else None
+            number = isinstance(value, (int, float)) and not isinstance(value, bool)
+            bound = number and math.isfinite(value) and (value >= 0 if low == ">= 0" else value > 0)
+            if not bound:
+                raise ValueError(
+                    f"{where}: {block}.{name} = {value!r:.40} is not allowed; allowed: a finite "
+                    f"number {low}"
+                )
+    return robot_from_values(content["base_robot"], f"{where}: base_robot")
+
+
 def read_identified(source: Any, dt: float = DEFAULT_DT) -> tuple[Robot, dict[str, Any]]:
     """Return ``(base robot, identified content)`` of an ``identified.json``, checked.
 
@@ -53,17 +91,8 @@ def read_identified(source: Any, dt: float = DEFAULT_DT) -> tuple[Robot, dict[st
     another period lasts another time in them, which is warned of.
     """
     content = json.loads(Path(source).read_text())
-    missing = [k for k in _KEYS if k not in content]
-    if missing:
-        raise ValueError(f"--robot {source} lacks {', '.join(missing)}; allowed: identify's output")
-    base = Robot(**{k: float(v) for k, v in content["base_robot"].items()})
+    base = check_identified(content, f"--robot {source}")
     latency = content["latency_samples"]
-    whole = isinstance(latency, int) and not isinstance(latency, bool)  # JSON true is no count
-    if not whole or not 0 <= latency <= model.MAX_LATENCY:
-        raise ValueError(
-            f"--robot {source}: latency_samples = {latency!r} is not allowed; allowed: an "
-            f"integer 0-{model.MAX_LATENCY}"
-        )
     logged = content.get("dt", dt)  # written by identify; a file without it is not judged
     number = isinstance(logged, (int, float)) and not isinstance(logged, bool)
     if not (number and math.isfinite(logged) and logged > 0):

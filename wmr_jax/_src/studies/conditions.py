@@ -281,6 +281,10 @@ def evaluate_loop(
     mismatch = checks.check_number("mismatch", mismatch, high=1.0, closed=True)
     seed = checks.check_int("seed", seed, 0, 2**32 - 1)
     robot = _study_robot(robot, {"loop": loop}, "evaluate_loop")
+    if identified is not None:
+        from wmr_jax._src.identify.closed_loop import check_identified
+
+        check_identified(identified, "identified")
     refs, noise, factors, horizon = _runs(
         refs, None, robot, horizon, dt, mismatch, x64, {"loop": loop}, velocity, seed
     )
