@@ -51,10 +51,10 @@ def test_simulate_says_a_run_diverged_not_that_a_pose_is_too_far(capsys):
     assert main(["simulate", "--ref", "30", "30", "0", "--k-r", "1e300"]) == 2
     err = capsys.readouterr().err.splitlines()
     assert "cannot settle" in err[-2]
-    reach = float(err[-1].split("the robot got ")[1].split(" cm")[0])
+    reach = float(err[-1].split("the robot reached x or y = ±")[1].split(" cm")[0])
     assert reach > 1e153  # beyond float64's range for squared distances, float32's too
     assert err[-1] == (
-        f"wmr-jax: error: the run diverged: the robot got {reach:.3g} cm from the origin (the "
+        f"wmr-jax: error: the run diverged: the robot reached x or y = ±{reach:.3g} cm (the "
         "warning above says why); allowed: gains and a --dt the sampled law settles with"
     )
 

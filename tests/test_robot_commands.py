@@ -287,11 +287,11 @@ def test_compare_runs_the_robot_and_records_it(tmp_path, capsys, monkeypatch):
     assert stored["robot_label"] == "turtlebot3-burger" and stored["horizon_s"] == horizon
     assert all(row["over V_max"] == 1.0 for row in stored["rows"])
     assert printed.endswith(
-        "note: 5 of the 5 runs ask a wheel for more than V_max = 22.72 cm/s (runs over V_max), "
-        "which the ideal loop follows as asked; --velocity nonideal holds each wheel within "
-        "V_max (docs/model.md §4.3)\n"
+        "note: 5 of the 5 rows have runs over V_max = 22.72 cm/s: the ideal loop follows each "
+        "wheel command as asked; --velocity nonideal holds each wheel within V_max "
+        "(docs/model.md §4.3)\n"
     )
-    # The paper robot's 125 cm/s holds the same runs: nothing to say. Nor in the non-ideal loop.
+    # Peaks of 50 cm/s, within the paper robot's 125: nothing to say. Nor in the non-ideal loop.
     assert main(argv) == 0
     assert "note:" not in capsys.readouterr().out
     assert main([*argv, "--robot", "turtlebot3-burger", "--velocity", "nonideal"]) == 0

@@ -60,8 +60,8 @@ def run(args: Any) -> int:
     if over and settings["velocity"] == "ideal":
         v_max = comparison["robot"]["v_max"]
         print(
-            f"note: {len(over)} of the {len(comparison['rows'])} runs ask a wheel for more than "
-            f"V_max = {v_max:g} cm/s (runs over V_max), which the ideal loop follows as asked; "
-            "--velocity nonideal holds each wheel within V_max (docs/model.md §4.3)"
+            f"note: {len(over)} of the {len(comparison['rows'])} rows have runs over V_max = "
+            f"{v_max:g} cm/s: the ideal loop follows each wheel command as asked; --velocity "
+            "nonideal holds each wheel within V_max (docs/model.md §4.3)"
         )
     return 0

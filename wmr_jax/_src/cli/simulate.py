@@ -186,7 +186,7 @@ def run(args: Any) -> int:
     if not reach <= position_limit():  # NaN too: the metrics could not judge the run
         cause = "the warning above says why" if unsettled else "see docs/model.md §4.2.1"
         raise ValueError(
-            f"the run diverged: the robot got {reach:.3g} cm from the origin ({cause}); "
+            f"the run diverged: the robot reached x or y = ±{reach:.3g} cm ({cause}); "
             "allowed: gains and a --dt the sampled law settles with"
         )
     t_arrive = float(metrics.arrival_time(traj, np.asarray(ref), dt=dt))
