@@ -73,6 +73,8 @@ def test_a_robot_given_by_name_or_path_in_python_points_to_load_robot(tmp_path):
             ValueError, match=rf"^robot = .* is not allowed; allowed: a Robot \({expected}\)$"
         ):
             w.final_poses([[30.0, 0.0, 0.0]], robot=given)
+        with pytest.raises(ValueError, match=expected):
+            tuning.ScheduleParams.from_gains(w.Gains(), robot=given)
         assert w.load_robot(given).v_max in (w.ROBOTS["turtlebot3-burger"].v_max, 22.0)
 
 
